@@ -1,0 +1,359 @@
+"""Simulation configuration: the schema, YAML presets, ``--set`` overrides, validation.
+
+A configuration is a nested mapping (YAML) whose every leaf is described in
+``SCHEMA`` with its unit, range and meaning. Presets live in ``config/fruits``;
+``load_config`` merges, in order, the embedded defaults, a fruit preset or a file,
+and ``dotted.key=value`` overrides, and validates the result. Unknown keys and values
+out of range raise ``ConfigError`` naming the key.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import yaml
+
+from gripper_sim.errors import ConfigError
+
+DEFAULT_FRUIT = 'apple'
+
+
+@dataclass(frozen=True)
+class Key:
+    """One configuration leaf.
+
+    Attributes:
+        default: value used when nothing sets it (None where ``nullable``).
+        unit: SI unit, '' for dimensionless, '-' for text or flags.
+        description: what it means, for the README and error messages.
+        kind: 'float', 'int', 'bool', 'str' or 'list'.
+        low, high: inclusive range for numbers.
+        choices: allowed values for text.
+        nullable: None is allowed (meaning: derive it, see description).
+        open_low: the lower bound itself is not allowed (e.g. > 0).
+    """
+
+    default: Any
+    unit: str
+    description: str
+    kind: str = 'float'
+    low: float | None = None
+    high: float | None = None
+    choices: tuple = ()
+    nullable: bool = False
+    open_low: bool = False
+
+
+SCHEMA: dict[str, Key] = {
+    'dimension': Key(2, '-', 'model dimension; 2 = planar x-z model', 'int', 2, 2),
+    # --- fruit
+    'fruit.name': Key('apple', '-', 'name shown in outputs', 'str'),
+    'fruit.model': Key('shell', '-', 'shell: skin ring + enclosed-area pressure; '
+                       'solid: triangle-meshed neo-Hookean flesh (+ optional skin ring)',
+                       'str', choices=('shell', 'solid')),
+    'fruit.shape.type': Key('circle', '-', 'rest outline', 'str', choices=('circle',)),
+    'fruit.shape.diameter': Key(0.0635, 'm', 'outline diameter', low=0.005, high=0.5),
+    'fruit.depth': Key(None, 'm', 'out-of-plane depth b that turns the planar model '
+                       'into N and kg; null = 2/3 of the diameter, which gives a disk '
+                       'the mass of the sphere', low=1e-4, high=1.0, nullable=True,
+                       open_low=True),
+    'fruit.density': Key(1000.0, 'kg/m^3', 'flesh density', low=50.0, high=5000.0),
+    'fruit.nodes': Key(64, '-', 'skin (outline) node count', 'int', 8, 4096),
+    'fruit.flesh.youngs_modulus': Key(2.0e6, 'Pa', 'flesh Young modulus E',
+                                      low=1e3, high=1e10),
+    'fruit.flesh.poisson_ratio': Key(0.385, '', 'flesh Poisson ratio nu', low=0.0,
+                                     high=0.49),
+    'fruit.flesh.mesh_grading': Key(1.25, '', 'solid model: ratio of successive ring '
+                                    'spacings from the skin inwards (1 = uniform)',
+                                    low=1.0, high=2.0),
+    'fruit.skin.enabled': Key(True, '-', 'solid model: add the skin ring on the '
+                              'boundary (the shell model always has it)', 'bool'),
+    'fruit.skin.youngs_modulus': Key(10.0e6, 'Pa', 'skin Young modulus E_s',
+                                     low=1e3, high=1e11),
+    'fruit.skin.thickness': Key(0.0005, 'm', 'skin thickness t', low=1e-6, high=0.05),
+    'fruit.pressure.turgor': Key(0.0, 'Pa', 'shell model: internal pressure at the '
+                                 'rest area (gauge)', low=0.0, high=1e7),
+    'fruit.pressure.bulk_modulus': Key(None, 'Pa', 'shell model: area bulk modulus K, '
+                                       'p = turgor - K (A - A0) / A0; null = plane-strain '
+                                       'bulk modulus of the flesh, E / (2 (1 + nu) '
+                                       '(1 - 2 nu))', low=0.0, high=1e10, nullable=True),
+    'fruit.damping.mass': Key(0.0, '1/s', 'Rayleigh mass-proportional damping alpha',
+                              low=0.0, high=1e4),
+    'fruit.damping.stiffness': Key(0.0, 's', 'Rayleigh stiffness-proportional damping '
+                                   'beta (skin stretching and bending)',
+                                   low=0.0, high=1.0),
+    'fruit.bruise_pressure': Key(0.26e6, 'Pa', 'contact pressure above which the '
+                                 'fruit bruises', low=0.0, high=1e9),
+    'fruit.failure_stress': Key(0.29e6, 'Pa', 'flesh failure stress (crushing)',
+                                low=0.0, high=1e9),
+    'fruit.initial_height': Key(None, 'm', 'height of the fruit centre; null = resting '
+                                'on the table (or 0 without a table)', low=-10.0,
+                                high=10.0, nullable=True),
+    # --- gripper
+    'gripper.initial_gap': Key(None, 'm', 'jaw gap at start; null = diameter + 10 mm',
+                               low=0.0, high=1.0, nullable=True),
+    'gripper.max_gap': Key(0.2, 'm', 'largest gap the jaws can open to', low=0.001,
+                           high=2.0),
+    'gripper.jaw_height': Key(0.04, 'm', 'length of the jaw face along z', low=1e-3,
+                              high=1.0),
+    'gripper.jaw_thickness': Key(0.01, 'm', 'jaw thickness along x (nodes deeper '
+                                 'than this behind the face are not in contact)',
+                                 low=1e-4, high=0.5),
+    'gripper.initial_lift': Key(None, 'm', 'height of the jaw centre at start; null = '
+                                'the fruit centre height', low=-10.0, high=10.0,
+                                nullable=True),
+    'gripper.close_speed': Key(0.02, 'm/s', 'default gap closing rate', low=1e-5,
+                               high=1.0, open_low=True),
+    'gripper.max_speed': Key(0.2, 'm/s', 'largest gap rate a command may ask for',
+                             low=1e-5, high=5.0),
+    'gripper.lift_speed': Key(0.05, 'm/s', 'default lift speed', low=1e-5, high=2.0),
+    'gripper.max_force': Key(200.0, 'N', 'largest grip force a command may ask for',
+                             low=0.0, high=1e5, open_low=True),
+    'gripper.force_time_constant': Key(0.02, 's', 'time constant of the built-in grip '
+                                       'force regulator', low=1e-4, high=10.0),
+    # --- contact
+    'contact.jaw.static_friction': Key(0.5, '', 'static friction coefficient '
+                                       'fruit-jaw mu_s (rubber pad, estimate)',
+                                       low=0.0, high=5.0),
+    'contact.jaw.kinetic_friction': Key(0.4, '', 'kinetic friction coefficient '
+                                        'fruit-jaw mu_k (<= mu_s)', low=0.0, high=5.0),
+    'contact.table.static_friction': Key(0.5, '', 'static friction fruit-table',
+                                         low=0.0, high=5.0),
+    'contact.table.kinetic_friction': Key(0.4, '', 'kinetic friction fruit-table',
+                                          low=0.0, high=5.0),
+    'contact.restitution': Key(0.0, '', 'normal restitution coefficient e of node '
+                               'impacts on the table and walls', low=0.0, high=1.0),
+    'contact.release_threshold': Key(1e-6, 'N', 'hysteresis: a contact is released '
+                                     'only once its reaction pulls by more than this',
+                                     low=0.0, high=1.0),
+    'contact.max_correction_speed': Key(0.05, 'm/s', 'fastest rate at which an '
+                                        'existing penetration is removed', low=1e-6,
+                                        high=10.0),
+    # --- world
+    'world.gravity': Key(9.81, 'm/s^2', 'gravity, acting along -z', low=0.0, high=100.0),
+    'world.table': Key(True, '-', 'a table (floor) at table_height', 'bool'),
+    'world.table_height': Key(0.0, 'm', 'height of the table surface', low=-10.0,
+                              high=10.0),
+    'world.walls': Key(False, '-', 'two vertical walls at x = +/- wall_half_width',
+                       'bool'),
+    'world.wall_half_width': Key(0.5, 'm', 'wall position', low=1e-3, high=100.0),
+    # --- solver
+    'sim.dt': Key(1e-3, 's', 'physics time step', low=1e-7, high=0.1, open_low=True),
+    'sim.newton_tolerance': Key(1e-6, 'm/s', 'Newton stops when the infinity norm of '
+                                'the update divided by dt is below this', low=1e-14,
+                                high=1.0, open_low=True),
+    'sim.max_newton_iterations': Key(25, '-', 'Newton iterations before the step is '
+                                     'halved', 'int', 1, 1000),
+    'sim.max_halvings': Key(6, '-', 'times a failing step is halved before giving up',
+                            'int', 0, 30),
+    'sim.max_contact_passes': Key(6, '-', 'predictor-corrector passes per step',
+                                  'int', 1, 50),
+}
+
+
+def package_config_dir() -> Path:
+    """Directory holding the YAML presets (``config/`` in the source tree or share/)."""
+    here = Path(__file__).resolve().parent
+    candidates = [here.parent / 'config', here / 'config']
+    prefix = os.environ.get('AMENT_PREFIX_PATH', '')
+    candidates += [Path(p) / 'share' / 'gripper_sim' / 'config' for p in prefix.split(':') if p]
+    for candidate in candidates:
+        if (candidate / 'fruits').is_dir():
+            return candidate
+    return candidates[0]
+
+
+def available_fruits() -> list[str]:
+    """Names of the fruit presets in ``config/fruits``."""
+    return sorted(p.stem for p in (package_config_dir() / 'fruits').glob('*.yaml'))
+
+
+def defaults() -> dict:
+    """The embedded defaults as a nested dict."""
+    return unflatten({key: copy.deepcopy(spec.default) for key, spec in SCHEMA.items()})
+
+
+def flatten(tree: Mapping, prefix: str = '') -> dict[str, Any]:
+    """Nested mapping to ``{'a.b.c': value}``."""
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        dotted = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(flatten(value, dotted + '.'))
+        else:
+            flat[dotted] = value
+    return flat
+
+
+def unflatten(flat: Mapping[str, Any]) -> dict:
+    """``{'a.b.c': value}`` to a nested dict."""
+    tree: dict = {}
+    for dotted, value in flat.items():
+        node = tree
+        parts = dotted.split('.')
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value
+    return tree
+
+
+def _coerce(key: str, value: Any) -> Any:
+    spec = SCHEMA[key]
+    if value is None:
+        if spec.nullable:
+            return None
+        raise ConfigError(f"config key '{key}' must not be null ({spec.description})")
+    try:
+        if spec.kind == 'float':
+            if isinstance(value, bool):
+                raise ValueError
+            number = float(value)
+        elif spec.kind == 'int':
+            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+                raise ValueError
+            number = int(value)
+        elif spec.kind == 'bool':
+            if isinstance(value, bool):
+                return value
+            text = str(value).strip().lower()
+            if text in ('true', 'yes', 'on', '1'):
+                return True
+            if text in ('false', 'no', 'off', '0'):
+                return False
+            raise ValueError
+        else:
+            text = str(value)
+            if spec.choices and text not in spec.choices:
+                raise ConfigError(f"config key '{key}' must be one of "
+                                  f"{', '.join(spec.choices)}, got '{text}'")
+            return text
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"config key '{key}' must be a {spec.kind}, got {value!r}") from err
+    if not math.isfinite(number):
+        raise ConfigError(f"config key '{key}' must be finite, got {value!r}")
+    unit = f' {spec.unit}' if spec.unit not in ('', '-') else ''
+    if spec.low is not None and (number < spec.low or (spec.open_low and number <= spec.low)):
+        relation = '>' if spec.open_low else '>='
+        raise ConfigError(f"config key '{key}' = {number}{unit} is out of range: "
+                          f'it must be {relation} {spec.low}{unit}')
+    if spec.high is not None and number > spec.high:
+        raise ConfigError(f"config key '{key}' = {number}{unit} is out of range: "
+                          f'it must be <= {spec.high}{unit}')
+    return number
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``'fruit.nodes=96'`` to ``('fruit.nodes', 96)`` (value parsed as YAML)."""
+    if '=' not in text:
+        raise ConfigError(f"override '{text}' must look like dotted.key=value")
+    key, _, raw = text.partition('=')
+    key = key.strip()
+    if key not in SCHEMA:
+        raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError as err:
+        raise ConfigError(f"override '{text}': value is not valid YAML") from err
+    return key, value
+
+
+def _suggest(key: str) -> str:
+    import difflib
+    close = difflib.get_close_matches(key, SCHEMA.keys(), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ''
+
+
+def read_yaml(path: str | os.PathLike) -> dict:
+    """Read a YAML mapping, turning every failure into a ConfigError."""
+    try:
+        text = Path(path).read_text(encoding='utf-8')
+    except OSError as err:
+        raise ConfigError(f"cannot read config file '{path}': {err.strerror}") from err
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ConfigError(f"config file '{path}' is not valid YAML: {err}") from err
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"config file '{path}' must hold a mapping of keys")
+    return dict(data)
+
+
+def fruit_preset_path(name: str) -> Path:
+    """Path of the preset for fruit ``name``; ConfigError if there is none."""
+    path = package_config_dir() / 'fruits' / f'{name}.yaml'
+    if not path.is_file():
+        known = ', '.join(available_fruits()) or 'none installed'
+        raise ConfigError(f"unknown fruit '{name}' (known fruits: {known})")
+    return path
+
+
+def validate(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """Check every key is known and in range; returns the coerced flat mapping."""
+    result: dict[str, Any] = {}
+    for key, value in flat.items():
+        if key not in SCHEMA:
+            raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
+        result[key] = _coerce(key, value)
+    if result['contact.jaw.kinetic_friction'] > result['contact.jaw.static_friction']:
+        raise ConfigError("config key 'contact.jaw.kinetic_friction' must not exceed "
+                          "'contact.jaw.static_friction'")
+    if result['contact.table.kinetic_friction'] > result['contact.table.static_friction']:
+        raise ConfigError("config key 'contact.table.kinetic_friction' must not exceed "
+                          "'contact.table.static_friction'")
+    return result
+
+
+def load_config(fruit: str | None = None, config_file: str | os.PathLike | None = None,
+                overrides: Iterable[str] | Mapping[str, Any] = ()) -> dict[str, Any]:
+    """Build a validated flat configuration ``{'dotted.key': value}``.
+
+    Args:
+        fruit: preset name in ``config/fruits`` (default: the default fruit, unless a
+            file is given).
+        config_file: a YAML file of keys (nested or dotted), merged after the preset.
+        overrides: ``['key=value', ...]`` strings or a ``{key: value}`` mapping,
+            applied last.
+
+    Raises:
+        ConfigError: unknown fruit or key, bad YAML, value out of range.
+    """
+    flat = flatten(defaults())
+    if fruit is not None or config_file is None:
+        flat.update(_preset(fruit or DEFAULT_FRUIT))
+    if config_file is not None:
+        data = read_yaml(config_file)
+        if 'fruit' in data and isinstance(data['fruit'], str):
+            flat.update(_preset(data.pop('fruit')))
+        flat.update(_checked_flatten(data, str(config_file)))
+    if isinstance(overrides, Mapping):
+        items = list(overrides.items())
+    else:
+        items = [parse_override(text) for text in overrides]
+    for key, value in items:
+        if key not in SCHEMA:
+            raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
+        flat[key] = value
+    return validate(flat)
+
+
+def _preset(name: str) -> dict[str, Any]:
+    return _checked_flatten(read_yaml(fruit_preset_path(name)), f'fruit preset {name}')
+
+
+def _checked_flatten(data: Mapping, source: str) -> dict[str, Any]:
+    flat = flatten(data)
+    for key in flat:
+        if key not in SCHEMA:
+            raise ConfigError(f"unknown config key '{key}' in {source}{_suggest(key)}")
+    return flat
+
+
+def to_yaml(flat: Mapping[str, Any]) -> str:
+    """A flat configuration as nested YAML text (for recording and reproducing runs)."""
+    return yaml.safe_dump(unflatten(dict(flat)), sort_keys=True)

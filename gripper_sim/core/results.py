@@ -1,0 +1,126 @@
+"""What one physics step reports: the per-step outputs every observer receives.
+
+Coordinates are planar for the 2D model: column 0 is x (jaw closing axis), column 1
+is z (up). Forces are in N (the out-of-plane depth is already applied), lengths in m.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class JawWrench:
+    """Net contact wrench the fruit exerts on one jaw, in the jaw frame.
+
+    The jaw frames are parallel to the world frame with their origin at the centre of
+    the jaw face.
+
+    Attributes:
+        force: (3,) N, (fx, fy, fz).
+        torque: (3,) N m, about the jaw frame origin.
+    """
+
+    force: np.ndarray
+    torque: np.ndarray
+
+
+@dataclass(frozen=True)
+class Deformation:
+    """Deformation and contact measures of the fruit.
+
+    Attributes:
+        compression: m, rest width along x minus current width along x.
+        compression_ratio: compression over the rest width.
+        max_skin_strain: largest engineering strain of a skin segment (signed by
+            magnitude: the value of largest |strain|).
+        contact_length: m, total length of fruit surface in contact with the jaws.
+        peak_contact_pressure: Pa, largest contact pressure at a jaw or table node.
+        node_pressure: (n_surface,) Pa, contact pressure at each surface node.
+    """
+
+    compression: float
+    compression_ratio: float
+    max_skin_strain: float
+    contact_length: float
+    peak_contact_pressure: float
+    node_pressure: np.ndarray
+
+
+@dataclass(frozen=True)
+class Energies:
+    """Energies in J: kinetic, elastic (all internal energies) and gravitational."""
+
+    kinetic: float
+    elastic: float
+    gravitational: float
+
+    @property
+    def total(self) -> float:
+        return self.kinetic + self.elastic + self.gravitational
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """Everything one step produces.
+
+    Attributes:
+        time: s, simulation time at the end of the step.
+        step: number of steps taken since the last reset.
+        positions: (n_nodes, 2) m, node positions (x, z).
+        velocities: (n_nodes, 2) m/s.
+        contact_forces: (n_nodes, 2) N, force each obstacle exerts on each node.
+        contact_obstacle: (n_nodes,) int, index into ``obstacle_names`` of the obstacle
+            a node touches, -1 for none.
+        contact_sticking: (n_nodes,) bool, node in static (stuck) contact.
+        obstacle_names: names of the obstacles, e.g. ('left_jaw', 'right_jaw', 'table').
+        surface: (n_surface,) int, indices of the surface (skin) nodes in outline order.
+        left_wrench, right_wrench: net wrench the fruit exerts on each jaw.
+        left_jaw_x, right_jaw_x: m, x of each jaw face.
+        jaw_velocity: m/s, closing speed of each jaw (positive when closing).
+        lift: m, height of the gripper (jaw centre) above the world origin.
+        lift_velocity: m/s.
+        gap: m, jaw separation.
+        grip_force: N, mean contact normal force of the two jaws.
+        slip_distance: m, vertical motion of the fruit centroid relative to the jaws
+            since both jaws first gripped it (0 before that).
+        slipping: fruit slides relative to the jaws in this step.
+        centroid: (2,) m, mass-weighted centroid of the fruit.
+        energies: kinetic, elastic and gravitational energy.
+        deformation: compression, strain and contact measures.
+        newton_iterations: Newton iterations used (all sub-steps and corrections).
+        substeps: number of sub-steps this step took (1 unless step halving happened).
+    """
+
+    time: float
+    step: int
+    positions: np.ndarray
+    velocities: np.ndarray
+    contact_forces: np.ndarray
+    contact_obstacle: np.ndarray
+    contact_sticking: np.ndarray
+    obstacle_names: tuple
+    surface: np.ndarray
+    left_wrench: JawWrench
+    right_wrench: JawWrench
+    left_jaw_x: float
+    right_jaw_x: float
+    jaw_velocity: float
+    lift: float
+    lift_velocity: float
+    gap: float
+    grip_force: float
+    slip_distance: float
+    slipping: bool
+    centroid: np.ndarray
+    energies: Energies
+    deformation: Deformation
+    newton_iterations: int
+    substeps: int
+
+    def in_contact_with(self, name: str) -> bool:
+        """Whether any node touches the obstacle called ``name``."""
+        if name not in self.obstacle_names:
+            return False
+        return bool(np.any(self.contact_obstacle == self.obstacle_names.index(name)))

@@ -1,0 +1,27 @@
+"""Error types of gripper_sim: one per concern, each with a message that says what to do."""
+
+
+class GripperSimError(Exception):
+    """Base class of every error gripper_sim raises on purpose."""
+
+
+class ConfigError(GripperSimError):
+    """A configuration file, preset name or ``--set`` override is invalid."""
+
+
+class CommandError(GripperSimError):
+    """A jaw, force or lift command is out of range (NaN, negative, too large)."""
+
+
+class ConvergenceError(GripperSimError):
+    """The implicit solver could not converge even after halving the step.
+
+    Attributes:
+        residual_history: infinity norms of the scaled Newton updates, last attempt.
+        time: simulation time (s) at which the step failed.
+    """
+
+    def __init__(self, message: str, residual_history=(), time: float = float('nan')):
+        super().__init__(message)
+        self.residual_history = list(residual_history)
+        self.time = time
