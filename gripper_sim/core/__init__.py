@@ -1,0 +1,1 @@
+"""The physics core: fruit models, energies, contact, time stepping. Knows nothing of ROS."""
