@@ -111,6 +111,8 @@ SCHEMA: dict[str, Key] = {
     'gripper.max_speed': Key(0.2, 'm/s', 'largest gap rate a command may ask for',
                              low=1e-5, high=5.0),
     'gripper.lift_speed': Key(0.05, 'm/s', 'default lift speed', low=1e-5, high=2.0),
+    'gripper.lift_acceleration': Key(0.5, 'm/s^2', 'acceleration limit of the lift '
+                                     '(trapezoidal speed profile)', low=1e-3, high=100.0),
     'gripper.max_force': Key(200.0, 'N', 'largest grip force a command may ask for',
                              low=0.0, high=1e5, open_low=True),
     'gripper.force_time_constant': Key(0.02, 's', 'time constant of the built-in grip '

@@ -1,0 +1,72 @@
+"""The energy protocol and the triplet assembly helper."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Evaluation:
+    """Value, gradient and Hessian of an energy at one configuration.
+
+    Attributes:
+        value: J.
+        gradient: (n_dof,) N.
+        rows, cols, vals: Hessian triplets, N/m.
+        low_rank: list of (c, u), each adding ``c * outer(u, u)`` to the Hessian.
+    """
+
+    value: float
+    gradient: np.ndarray
+    rows: np.ndarray
+    cols: np.ndarray
+    vals: np.ndarray
+    low_rank: list = field(default_factory=list)
+
+
+class Energy:
+    """Base energy: zero everywhere (the do-nothing extension point)."""
+
+    #: whether the energy is elastic (counted in the elastic energy output)
+    elastic = True
+
+    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
+        empty = np.zeros(0, dtype=np.int64)
+        return Evaluation(0.0, np.zeros_like(q), empty, empty, np.zeros(0))
+
+    def value(self, q: np.ndarray) -> float:
+        return self.evaluate(q, hessian=False).value
+
+    def gradient(self, q: np.ndarray) -> np.ndarray:
+        return self.evaluate(q, hessian=False).gradient
+
+    def hessian(self, q: np.ndarray) -> np.ndarray:
+        """Dense Hessian (n_dof, n_dof), for tests and small problems."""
+        ev = self.evaluate(q)
+        dense = np.zeros((q.size, q.size))
+        np.add.at(dense, (ev.rows, ev.cols), ev.vals)
+        for c, u in ev.low_rank:
+            dense += c * np.outer(u, u)
+        return dense
+
+
+def element_dofs(nodes: np.ndarray) -> np.ndarray:
+    """(n_elem, k) node indices to (n_elem, 2k) dof indices [x, z] per node."""
+    dofs = np.empty((nodes.shape[0], 2 * nodes.shape[1]), dtype=np.int64)
+    dofs[:, 0::2] = 2 * nodes
+    dofs[:, 1::2] = 2 * nodes + 1
+    return dofs
+
+
+def scatter_gradient(n_dof: int, dofs: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """Sum element gradients (n_elem, m) into a (n_dof,) vector."""
+    return np.bincount(dofs.ravel(), weights=local.ravel(), minlength=n_dof)
+
+
+def hessian_triplets(dofs: np.ndarray, local: np.ndarray):
+    """Element Hessians (n_elem, m, m) to IJV triplets."""
+    m = dofs.shape[1]
+    rows = np.repeat(dofs, m, axis=1).ravel()
+    cols = np.tile(dofs, (1, m)).ravel()
+    return rows, cols, local.ravel()
