@@ -1,0 +1,369 @@
+"""Reading rosbag2-style MCAP files: topics, counts, metadata and messages.
+
+Every failure of the underlying libraries (bad magic, truncated file, broken chunk,
+CRC mismatch, undecodable message) is turned into a ``RecordingError`` that names the
+file and says what to do; a reader never writes to the file it reads.
+"""
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator
+
+import yaml
+from mcap.exceptions import McapError
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Schema
+from mcap.stream_reader import MAGIC_SIZE, CRCValidationError
+
+from gripper_sim.recording import qos as qos_mod
+from gripper_sim.recording.errors import RecordingError
+
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, offset start, crc
+
+try:  # zstandard raises its own error class on a broken frame
+    from zstandard import ZstdError as _ZstdError
+except ImportError:  # pragma: no cover - zstandard is a dependency
+    _ZstdError = McapError
+
+#: Errors of the mcap stack that mean "this file is damaged".
+READ_ERRORS: tuple[type[BaseException], ...] = (
+    McapError, CRCValidationError, struct.error, zlib.error, _ZstdError, EOFError,
+    UnicodeDecodeError, ValueError, KeyError, IndexError, MemoryError, OverflowError)
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """One topic (MCAP channel) of a file.
+
+    Attributes:
+        name: topic name.
+        type: schema name, ``pkg/msg/Type`` for ROS 2 files.
+        message_count: messages on the topic.
+        message_encoding: 'cdr' for ROS 2.
+        schema_encoding: 'ros2msg' for ROS 2.
+        offered_qos_profiles: QoS profile dicts (see ``qos``), [] when none stored.
+        type_hash: ``RIHS01_...`` or ''.
+        channel_id: MCAP channel id.
+    """
+
+    name: str
+    type: str
+    message_count: int
+    message_encoding: str
+    schema_encoding: str
+    offered_qos_profiles: list = field(default_factory=list, compare=False)
+    type_hash: str = ''
+    channel_id: int = 0
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One message as stored: CDR bytes and integer-ns times."""
+
+    topic: str
+    type: str
+    log_time: int
+    publish_time: int
+    sequence: int
+    data: bytes
+
+
+def check_mcap_start(path: Path) -> None:
+    """Raise a clear RecordingError if ``path`` is missing, empty or not MCAP."""
+    if not path.exists():
+        raise RecordingError(f'{path}: no such file')
+    if path.is_dir():
+        raise RecordingError(f'{path} is a directory; give the .mcap file inside it')
+    try:
+        with open(path, 'rb') as f:
+            head = f.read(16)
+    except OSError as err:
+        raise RecordingError(f'cannot read {path}: {err.strerror}') from err
+    if not head:
+        raise RecordingError(f'{path} is empty (0 bytes): not an MCAP recording')
+    if not head.startswith(MCAP_MAGIC):
+        if head.startswith(b'SQLite format 3'):
+            msg = (f'{path} is a rosbag2 SQLite (.db3) file, not MCAP; convert it with '
+                   "'ros2 bag convert' or record with MCAP storage")
+        elif len(head) < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(head):
+            msg = f'{path} is truncated to {len(head)} bytes: it holds no recording'
+        else:
+            msg = f'{path} is not an MCAP file (it does not start with the MCAP magic bytes)'
+        raise RecordingError(msg)
+
+
+def has_footer(path: Path) -> bool:
+    """Whether the file ends with a footer record and the closing magic."""
+    size = path.stat().st_size
+    if size < MAGIC_SIZE * 2 + FOOTER_RECORD_SIZE:
+        return False
+    with open(path, 'rb') as f:
+        f.seek(size - MAGIC_SIZE - FOOTER_RECORD_SIZE)
+        tail = f.read()
+    return tail[0] == 0x02 and tail[-MAGIC_SIZE:] == MCAP_MAGIC
+
+
+class BagReader:
+    """Reads one MCAP file written by rosbag2, by ``BagWriter`` or by any MCAP writer.
+
+    Use as a context manager::
+
+        with BagReader(path) as bag:
+            print(bag.topics, bag.duration_ns)
+            for msg in bag.messages(['/chatter']):
+                ...
+
+    Raises (on open):
+        RecordingError: missing, empty, non-MCAP, truncated (suggests ``recover``) or
+            corrupt file.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self._file: Any = None
+        self._reader: SeekingReader | None = None
+        self._schemas: dict[int, Schema] = {}
+        self._channels: dict[int, Channel] = {}
+        self._counts: dict[int, int] = {}
+        self._topics: dict[str, TopicInfo] = {}
+        self.profile = ''
+        self.library = ''
+        self.start_time = 0
+        self.end_time = 0
+        self.message_count = 0
+        self.chunk_count = 0
+        self.compression: set[str] = set()
+        self.metadata: list[tuple[str, dict[str, str]]] = []
+
+    # ------------------------------------------------------------------ lifecycle
+    def __enter__(self) -> BagReader:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def open(self) -> None:
+        if self._file is not None:
+            raise RecordingError(f'{self.path}: reader is already open')
+        check_mcap_start(self.path)
+        if not has_footer(self.path):
+            msg = (f'{self.path} is truncated or was not closed (no MCAP footer): the '
+                   'recorder was probably killed; rebuild a readable file with '
+                   f"'gripper-sim recover {self.path} FIXED.mcap'")
+            raise RecordingError(msg)
+        try:
+            self._file = open(self.path, 'rb')  # noqa: SIM115 - closed in close()
+        except OSError as err:
+            raise RecordingError(f'cannot read {self.path}: {err.strerror}') from err
+        try:
+            self._load()
+        except RecordingError:
+            self.close()
+            raise
+        except READ_ERRORS as err:
+            self.close()
+            raise self._corrupt(err) from err
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+        self._file = None
+        self._reader = None
+
+    def _corrupt(self, err: BaseException) -> RecordingError:
+        detail = str(err) or type(err).__name__
+        return RecordingError(f'{self.path} is corrupt ({detail}); if it was cut short, try '
+                              f"'gripper-sim recover {self.path} FIXED.mcap'")
+
+    def _load(self) -> None:
+        reader = SeekingReader(self._file, validate_crcs=True)
+        self._reader = reader
+        header = reader.get_header()
+        self.profile, self.library = header.profile, header.library
+        summary = reader.get_summary()
+        if summary is None or summary.statistics is None:
+            self._scan_without_summary()
+        else:
+            self._schemas = dict(summary.schemas)
+            self._channels = dict(summary.channels)
+            stats = summary.statistics
+            self._counts = dict(stats.channel_message_counts)
+            self.message_count = stats.message_count
+            self.start_time = stats.message_start_time
+            self.end_time = stats.message_end_time
+            self.chunk_count = stats.chunk_count
+            self.compression = {c.compression for c in summary.chunk_indexes}
+        self.metadata = [(m.name, dict(m.metadata)) for m in reader.iter_metadata()]
+        for cid, channel in sorted(self._channels.items()):
+            schema = self._schemas.get(channel.schema_id)
+            profiles: list = []
+            text = channel.metadata.get('offered_qos_profiles', '')
+            try:
+                profiles = qos_mod.from_yaml(text)
+            except RecordingError:
+                profiles = []
+            self._topics[channel.topic] = TopicInfo(
+                name=channel.topic,
+                type=schema.name if schema is not None else '',
+                message_count=self._counts.get(cid, 0),
+                message_encoding=channel.message_encoding,
+                schema_encoding=schema.encoding if schema is not None else '',
+                offered_qos_profiles=profiles,
+                type_hash=channel.metadata.get('topic_type_hash', ''),
+                channel_id=cid)
+
+    def _scan_without_summary(self) -> None:
+        """Files without a summary: count by reading every record once."""
+        from mcap.records import Chunk, Message
+        from mcap.stream_reader import StreamReader
+
+        self._file.seek(0)
+        start = end = None
+        for record in StreamReader(self._file, validate_crcs=True, emit_chunks=True).records:
+            if isinstance(record, Chunk):
+                self.chunk_count += 1
+                self.compression.add(record.compression)
+                from mcap.stream_reader import breakup_chunk
+                inner = breakup_chunk(record, validate_crc=True)
+            else:
+                inner = [record]
+            for rec in inner:
+                if isinstance(rec, Schema):
+                    self._schemas[rec.id] = rec
+                elif isinstance(rec, Channel):
+                    self._channels[rec.id] = rec
+                elif isinstance(rec, Message):
+                    self._counts[rec.channel_id] = self._counts.get(rec.channel_id, 0) + 1
+                    self.message_count += 1
+                    start = rec.log_time if start is None else min(start, rec.log_time)
+                    end = rec.log_time if end is None else max(end, rec.log_time)
+        self.start_time = start or 0
+        self.end_time = end or 0
+
+    def _require_open(self) -> SeekingReader:
+        if self._reader is None:
+            raise RecordingError(f'{self.path}: reader is not open')
+        return self._reader
+
+    # ------------------------------------------------------------------ contents
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topics by name."""
+        return dict(self._topics)
+
+    @property
+    def duration_ns(self) -> int:
+        return max(0, self.end_time - self.start_time) if self.message_count else 0
+
+    def metadata_named(self, name: str) -> dict[str, str] | None:
+        """The last Metadata record called ``name``, or None."""
+        found = None
+        for rec_name, data in self.metadata:
+            if rec_name == name:
+                found = data
+        return found
+
+    def bag_metadata(self) -> dict | None:
+        """The parsed rosbag2 ``serialized_metadata`` YAML, or None if absent."""
+        rec = self.metadata_named('rosbag2')
+        if not rec or 'serialized_metadata' not in rec:
+            return None
+        try:
+            data = yaml.safe_load(rec['serialized_metadata'])
+        except yaml.YAMLError as err:
+            raise RecordingError(f'{self.path}: rosbag2 metadata is not valid YAML: '
+                                 f'{err}') from err
+        return data if isinstance(data, dict) else None
+
+    def check_topics(self, topics: Iterable[str] | None) -> list[str] | None:
+        """Validate requested topic names; None means all topics."""
+        if topics is None:
+            return None
+        wanted = list(topics)
+        missing = [t for t in wanted if t not in self._topics]
+        if missing:
+            have = ', '.join(sorted(self._topics)) or 'none'
+            msg = (f"{self.path} has no topic {', '.join(repr(m) for m in missing)} "
+                   f'(topics: {have})')
+            raise RecordingError(msg)
+        return wanted
+
+    def messages(self, topics: Iterable[str] | None = None, *, start: int | None = None,
+                 end: int | None = None) -> Iterator[RawMessage]:
+        """Messages in log-time order.
+
+        Args:
+            topics: topic names (all if None); an unknown name raises RecordingError.
+            start: first log time included, ns.
+            end: log times before this are included, ns.
+        """
+        reader = self._require_open()
+        wanted = self.check_topics(topics)
+        types = {c.id: (self._schemas[c.schema_id].name if c.schema_id in self._schemas
+                        else '') for c in self._channels.values()}
+        iterator = reader.iter_messages(topics=wanted, start_time=start, end_time=end,
+                                        log_time_order=True)
+        while True:
+            try:
+                item = next(iterator)
+            except StopIteration:
+                return
+            except READ_ERRORS as err:
+                raise self._corrupt(err) from err
+            _schema, channel, message = item
+            yield RawMessage(topic=channel.topic, type=types.get(channel.id, ''),
+                             log_time=message.log_time, publish_time=message.publish_time,
+                             sequence=message.sequence, data=message.data)
+
+    def decoder(self, topic: str) -> Callable[[bytes], Any]:
+        """A function decoding the CDR bytes of ``topic`` with its stored ros2msg schema.
+
+        Uses ``mcap-ros2-support``'s decoder: works from the file alone, without ROS.
+        """
+        from mcap_ros2.decoder import DecoderFactory
+
+        info = self._topics.get(topic)
+        if info is None:
+            self.check_topics([topic])
+        assert info is not None
+        channel = self._channels[info.channel_id]
+        schema = self._schemas.get(channel.schema_id)
+        if channel.message_encoding != 'cdr' or schema is None or \
+                schema.encoding != 'ros2msg':
+            msg = (f"{self.path}: topic '{topic}' is not a ROS 2 CDR topic with a ros2msg "
+                   f"schema (encoding '{channel.message_encoding}', schema "
+                   f"'{schema.encoding if schema else 'none'}')")
+            raise RecordingError(msg)
+        try:
+            decode = DecoderFactory().decoder_for('cdr', schema)
+        except READ_ERRORS as err:
+            msg = f"{self.path}: the schema of '{topic}' ({schema.name}) cannot be parsed: {err}"
+            raise RecordingError(msg) from err
+        if decode is None:
+            raise RecordingError(f"{self.path}: no decoder for topic '{topic}'")
+
+        def safe_decode(data: bytes) -> Any:
+            try:
+                return decode(data)
+            except READ_ERRORS as err:
+                msg = (f"{self.path}: a message on '{topic}' does not decode as "
+                       f'{schema.name}: {err}')
+                raise RecordingError(msg) from err
+        return safe_decode
+
+    def decoded_messages(self, topics: Iterable[str] | None = None, *,
+                         start: int | None = None,
+                         end: int | None = None) -> Iterator[tuple[RawMessage, Any]]:
+        """(raw message, decoded message) pairs in log-time order."""
+        decoders: dict[str, Callable[[bytes], Any]] = {}
+        for raw in self.messages(topics, start=start, end=end):
+            dec = decoders.get(raw.topic)
+            if dec is None:
+                dec = decoders[raw.topic] = self.decoder(raw.topic)
+            yield raw, dec(raw.data)
