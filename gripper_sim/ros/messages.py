@@ -1,0 +1,449 @@
+"""Pure conversion of a ``StepResult`` to the ROS messages the node publishes.
+
+No node, no publishing: the ``gripper_sim`` node and the offline MCAP writer both call
+``build_messages`` so that a live run and an offline recording carry the same topics
+with the same contents.
+
+Conventions (REP 103): SI units; the planar model lives in the x-z plane of the world
+frame and is published as 3D data with y = 0. Frames: ``world`` for the fruit, the
+markers and the table; ``left_jaw`` / ``right_jaw`` for the jaw wrenches (parallel to
+``world``, origin at the centre of the jaw face).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from builtin_interfaces.msg import Duration, Time
+from geometry_msgs.msg import Point, WrenchStamped
+from gripper_sim_interfaces.msg import FruitState
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState, PointCloud2, PointField
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from gripper_sim.core.results import StepResult
+
+WORLD_FRAME = 'world'
+LEFT_JAW_FRAME = 'left_jaw'
+RIGHT_JAW_FRAME = 'right_jaw'
+JOINT_NAMES = ('left_jaw_joint', 'right_jaw_joint', 'lift_joint')
+DEFAULT_NODE_NAME = 'gripper_sim'
+
+# suffix -> (name as the node creates it, ROS type). Names starting with '~/' are
+# private to the node, 'joint_states' is relative to its namespace, '/clock' absolute.
+TOPICS: dict[str, tuple[str, str]] = {
+    'fruit/nodes': ('~/fruit/nodes', 'sensor_msgs/msg/PointCloud2'),
+    'fruit/state': ('~/fruit/state', 'gripper_sim_interfaces/msg/FruitState'),
+    'left_jaw/wrench': ('~/left_jaw/wrench', 'geometry_msgs/msg/WrenchStamped'),
+    'right_jaw/wrench': ('~/right_jaw/wrench', 'geometry_msgs/msg/WrenchStamped'),
+    'joint_states': ('joint_states', 'sensor_msgs/msg/JointState'),
+    'markers': ('~/markers', 'visualization_msgs/msg/MarkerArray'),
+    'clock': ('/clock', 'rosgraph_msgs/msg/Clock'),
+}
+
+MESSAGE_CLASSES = {
+    'fruit/nodes': PointCloud2,
+    'fruit/state': FruitState,
+    'left_jaw/wrench': WrenchStamped,
+    'right_jaw/wrench': WrenchStamped,
+    'joint_states': JointState,
+    'markers': MarkerArray,
+    'clock': Clock,
+}
+
+# Point cloud layout: six float32 fields, 24 bytes a point.
+POINT_FIELDS = ('x', 'y', 'z', 'fx', 'fy', 'fz')
+POINT_STEP = 4 * len(POINT_FIELDS)
+
+ARROW_SCALE = 0.005          # m of arrow per N of jaw force
+CONTACT_LINE_SCALE = 0.01    # m of line per N of node contact force
+OUTLINE_WIDTH = 0.001        # m
+
+
+def resolved_topic(suffix: str, node_name: str = DEFAULT_NODE_NAME,
+                   namespace: str = '/') -> str:
+    """Fully qualified name of topic ``suffix`` for a node ``node_name`` in ``namespace``.
+
+    >>> resolved_topic('fruit/state')
+    '/gripper_sim/fruit/state'
+    >>> resolved_topic('joint_states', namespace='/robot')
+    '/robot/joint_states'
+    """
+    name = TOPICS[suffix][0]
+    ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    if name.startswith('/'):
+        return name
+    if name.startswith('~/'):
+        return f'{ns}/{node_name}/{name[2:]}'
+    return f'{ns}/{name}'
+
+
+def time_msg(stamp: Any) -> Time:
+    """A ``builtin_interfaces/Time`` from a Time message, integer ns or float seconds."""
+    if isinstance(stamp, Time):
+        return stamp
+    if isinstance(stamp, (int, np.integer)):
+        ns = int(stamp)
+    else:
+        ns = int(round(float(stamp) * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def result_is_finite(result: StepResult) -> bool:
+    """Whether every published quantity of ``result`` is finite (never publish NaN)."""
+    arrays = (result.positions, result.velocities, result.contact_forces, result.centroid,
+              result.left_wrench.force, result.left_wrench.torque,
+              result.right_wrench.force, result.right_wrench.torque,
+              result.deformation.node_pressure)
+    scalars = (result.time, result.left_jaw_x, result.right_jaw_x, result.jaw_velocity,
+               result.lift, result.lift_velocity, result.gap, result.grip_force,
+               result.slip_distance, result.energies.kinetic, result.energies.elastic,
+               result.energies.gravitational, result.deformation.compression,
+               result.deformation.compression_ratio, result.deformation.max_skin_strain,
+               result.deformation.contact_length,
+               result.deformation.peak_contact_pressure)
+    return (all(bool(np.all(np.isfinite(a))) for a in arrays)
+            and all(math.isfinite(float(s)) for s in scalars))
+
+
+@dataclass
+class MessageContext:
+    """What the messages need beyond one step result: geometry, thresholds, history.
+
+    Build it once per run with ``from_config`` and call ``observe`` after every step
+    (``build_messages`` also calls it): ``bruised``, ``crushed`` and
+    ``bruised_fraction`` are latched over the run, and ``reset`` clears them.
+
+    Attributes:
+        dimension: model dimension (2 = planar x-z).
+        rest_width: m, fruit rest diameter.
+        depth: m, out-of-plane depth of the planar model (turns length into area).
+        bruise_pressure: Pa, contact pressure above which the fruit bruises.
+        failure_stress: Pa, flesh failure stress (compared with peak contact pressure).
+        jaw_height, jaw_thickness: m, jaw face length along z and thickness along x.
+        table: whether there is a table, at ``table_height`` (m).
+        gripper_centre_x: m, x of the gripper centre the jaw joints are measured from.
+    """
+
+    dimension: int = 2
+    rest_width: float = 0.0635
+    depth: float = 0.0635 * 2.0 / 3.0
+    bruise_pressure: float = 0.26e6
+    failure_stress: float = 0.29e6
+    jaw_height: float = 0.04
+    jaw_thickness: float = 0.01
+    table: bool = True
+    table_height: float = 0.0
+    gripper_centre_x: float = 0.0
+    bruised: bool = field(default=False, init=False)
+    crushed: bool = field(default=False, init=False)
+    _node_bruised: np.ndarray | None = field(default=None, init=False, repr=False)
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any],
+                    initial: StepResult | None = None) -> 'MessageContext':
+        """Context of a run of configuration ``config`` (flat, from ``load_config``).
+
+        Args:
+            config: the flat configuration of the simulation.
+            initial: the result of the initial state (``Simulation.last`` before any
+                step); the gripper centre is the midpoint of its jaw faces.
+        """
+        diameter = float(config.get('fruit.shape.diameter', cls.rest_width))
+        depth = config.get('fruit.depth')
+        centre = 0.0
+        if initial is not None:
+            centre = 0.5 * (float(initial.left_jaw_x) + float(initial.right_jaw_x))
+        return cls(
+            dimension=int(config.get('dimension', 2)),
+            rest_width=diameter,
+            depth=float(depth) if depth is not None else diameter * 2.0 / 3.0,
+            bruise_pressure=float(config.get('fruit.bruise_pressure', cls.bruise_pressure)),
+            failure_stress=float(config.get('fruit.failure_stress', cls.failure_stress)),
+            jaw_height=float(config.get('gripper.jaw_height', cls.jaw_height)),
+            jaw_thickness=float(config.get('gripper.jaw_thickness', cls.jaw_thickness)),
+            table=bool(config.get('world.table', True)),
+            table_height=float(config.get('world.table_height', 0.0)),
+            gripper_centre_x=centre,
+        )
+
+    def reset(self) -> None:
+        """Forget the run history (after a simulation reset)."""
+        self.bruised = False
+        self.crushed = False
+        self._node_bruised = None
+
+    def observe(self, result: StepResult) -> None:
+        """Latch bruising and crushing from ``result`` into the run history."""
+        deformation = result.deformation
+        if deformation.peak_contact_pressure > self.bruise_pressure:
+            self.bruised = True
+        if deformation.peak_contact_pressure > self.failure_stress:
+            self.crushed = True
+        over = np.asarray(deformation.node_pressure) > self.bruise_pressure
+        if self._node_bruised is None or self._node_bruised.shape != over.shape:
+            self._node_bruised = over.copy()
+        else:
+            self._node_bruised |= over
+
+    @property
+    def bruised_fraction(self) -> float:
+        """Fraction of the surface nodes that have been above the bruise pressure."""
+        if self._node_bruised is None or self._node_bruised.size == 0:
+            return 0.0
+        return float(np.count_nonzero(self._node_bruised)) / self._node_bruised.size
+
+
+def _xyz(planar: np.ndarray) -> tuple[float, float, float]:
+    """(x, z) in the plane to (x, 0, z) in the world."""
+    return float(planar[0]), 0.0, float(planar[1])
+
+
+def _left_is_negative(result: StepResult) -> bool:
+    return result.left_jaw_x <= result.right_jaw_x
+
+
+def jaw_normal_forces(result: StepResult) -> tuple[float, float]:
+    """Contact normal force (N) the fruit pushes each jaw outwards with (left, right)."""
+    outward_left = -1.0 if _left_is_negative(result) else 1.0
+    left = float(result.left_wrench.force[0]) * outward_left
+    right = float(result.right_wrench.force[0]) * -outward_left
+    return left, right
+
+
+def point_cloud(result: StepResult, header: Header) -> PointCloud2:
+    """One point per fruit node: fields x y z fx fy fz (float32; m and N; y = 0)."""
+    n = result.positions.shape[0]
+    data = np.zeros((n, len(POINT_FIELDS)), dtype=np.float32)
+    data[:, 0] = result.positions[:, 0]
+    data[:, 2] = result.positions[:, 1]
+    data[:, 3] = result.contact_forces[:, 0]
+    data[:, 5] = result.contact_forces[:, 1]
+    msg = PointCloud2()
+    msg.header = header
+    msg.height = 1
+    msg.width = n
+    msg.fields = [PointField(name=name, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+                  for i, name in enumerate(POINT_FIELDS)]
+    msg.is_bigendian = False
+    msg.point_step = POINT_STEP
+    msg.row_step = POINT_STEP * n
+    msg.data = data.tobytes()
+    msg.is_dense = True
+    return msg
+
+
+def read_point_cloud(msg: PointCloud2) -> np.ndarray:
+    """The (n, 6) float32 array x y z fx fy fz of a cloud made by ``point_cloud``."""
+    names = [f.name for f in msg.fields]
+    if names != list(POINT_FIELDS) or msg.point_step != POINT_STEP:
+        raise ValueError(f'not a gripper_sim node cloud: fields {names}')
+    return np.frombuffer(bytes(msg.data), dtype='<f4').reshape(-1, len(POINT_FIELDS))
+
+
+def fruit_state(result: StepResult, context: MessageContext, header: Header) -> FruitState:
+    deformation = result.deformation
+    msg = FruitState()
+    msg.header = header
+    msg.dimension = int(context.dimension)
+    msg.node_count = int(result.positions.shape[0])
+    msg.compression = float(deformation.compression)
+    msg.compression_ratio = float(deformation.compression_ratio)
+    msg.max_skin_strain = float(deformation.max_skin_strain)
+    msg.contact_length = float(deformation.contact_length)
+    # The planar model is a slab of depth b: its contact area is length x depth.
+    msg.contact_area = float(deformation.contact_length) * context.depth
+    msg.peak_contact_pressure = float(deformation.peak_contact_pressure)
+    msg.elastic_energy = float(result.energies.elastic)
+    msg.kinetic_energy = float(result.energies.kinetic)
+    msg.gravitational_energy = float(result.energies.gravitational)
+    msg.centroid = Point(x=float(result.centroid[0]), y=0.0, z=float(result.centroid[1]))
+    msg.grip_force = float(result.grip_force)
+    msg.gap = float(result.gap)
+    msg.slip_distance = float(result.slip_distance)
+    msg.left_jaw_contact = result.in_contact_with('left_jaw')
+    msg.right_jaw_contact = result.in_contact_with('right_jaw')
+    msg.slipping = bool(result.slipping)
+    msg.bruised = context.bruised
+    msg.bruised_fraction = context.bruised_fraction
+    msg.crushed = context.crushed
+    return msg
+
+
+def jaw_wrench(result: StepResult, side: str, stamp: Time) -> WrenchStamped:
+    """Net wrench the fruit exerts on jaw ``side`` ('left' or 'right'), in its frame."""
+    wrench = result.left_wrench if side == 'left' else result.right_wrench
+    msg = WrenchStamped()
+    msg.header = Header(stamp=stamp, frame_id=LEFT_JAW_FRAME if side == 'left'
+                        else RIGHT_JAW_FRAME)
+    force, torque = wrench.force, wrench.torque
+    msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in force)
+    msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in torque)
+    return msg
+
+
+def joint_state(result: StepResult, context: MessageContext, stamp: Time) -> JointState:
+    """Jaw joints: m from the gripper centre (positive = open); lift: height (m).
+
+    Effort: the contact normal force on each jaw (N, positive when the fruit pushes
+    the jaw open), and for ``lift_joint`` the vertical load the fruit puts on the
+    jaws (N, positive when the gripper carries the fruit's weight).
+    """
+    centre = context.gripper_centre_x
+    if _left_is_negative(result):
+        left_pos, right_pos = centre - result.left_jaw_x, result.right_jaw_x - centre
+    else:
+        left_pos, right_pos = result.left_jaw_x - centre, centre - result.right_jaw_x
+    left_force, right_force = jaw_normal_forces(result)
+    load = -float(result.left_wrench.force[2] + result.right_wrench.force[2])
+    msg = JointState()
+    msg.header = Header(stamp=stamp, frame_id='')
+    msg.name = list(JOINT_NAMES)
+    msg.position = [float(left_pos), float(right_pos), float(result.lift)]
+    opening = -float(result.jaw_velocity)
+    msg.velocity = [opening, opening, float(result.lift_velocity)]
+    msg.effort = [left_force, right_force, load]
+    return msg
+
+
+def pressure_colour(pressure: float, bruise_pressure: float) -> ColorRGBA:
+    """Green at zero pressure, yellow at half the bruise pressure, red at and above it."""
+    scale = bruise_pressure if bruise_pressure > 0 else 1.0
+    s = min(max(pressure / scale, 0.0), 1.0)
+    if s < 0.5:
+        return ColorRGBA(r=float(0.2 + 1.6 * s), g=0.8, b=0.2, a=1.0)
+    return ColorRGBA(r=1.0, g=float(0.8 * (2.0 - 2.0 * s)), b=0.2, a=1.0)
+
+
+def _marker(header: Header, ns: str, marker_id: int, kind: int) -> Marker:
+    marker = Marker()
+    marker.header = header
+    marker.ns = ns
+    marker.id = marker_id
+    marker.type = kind
+    marker.action = Marker.ADD
+    marker.pose.orientation.w = 1.0
+    marker.lifetime = Duration()
+    return marker
+
+
+def _deleted(header: Header, ns: str, marker_id: int) -> Marker:
+    marker = _marker(header, ns, marker_id, Marker.ARROW)
+    marker.action = Marker.DELETE
+    return marker
+
+
+def markers(result: StepResult, context: MessageContext, header: Header) -> MarkerArray:
+    """Fruit outline coloured by contact pressure, jaws, table, force arrows."""
+    array = MarkerArray()
+    surface = np.asarray(result.surface, dtype=int)
+    pressure = np.asarray(result.deformation.node_pressure, dtype=float)
+
+    outline = _marker(header, 'fruit_outline', 0, Marker.LINE_STRIP)
+    outline.scale.x = OUTLINE_WIDTH
+    loop = list(surface) + list(surface[:1])
+    outline.points = [Point(x=x, y=y, z=z) for x, y, z in
+                      (_xyz(result.positions[i]) for i in loop)]
+    colours = [pressure_colour(p, context.bruise_pressure) for p in pressure]
+    outline.colors = (colours + colours[:1]) if len(colours) == len(surface) else []
+    outline.color = ColorRGBA(r=0.2, g=0.8, b=0.2, a=1.0)
+    array.markers.append(outline)
+
+    outward_left = -1.0 if _left_is_negative(result) else 1.0
+    depth = max(context.depth, 1e-3)
+    jaws = (('left', result.left_jaw_x, outward_left, result.left_wrench),
+            ('right', result.right_jaw_x, -outward_left, result.right_wrench))
+    for marker_id, (_, face_x, outward, wrench) in enumerate(jaws):
+        jaw = _marker(header, 'jaws', marker_id, Marker.CUBE)
+        jaw.pose.position.x = float(face_x + outward * context.jaw_thickness / 2.0)
+        jaw.pose.position.z = float(result.lift)
+        jaw.scale.x = context.jaw_thickness
+        jaw.scale.y = depth
+        jaw.scale.z = context.jaw_height
+        jaw.color = ColorRGBA(r=0.45, g=0.45, b=0.5, a=0.8)
+        array.markers.append(jaw)
+
+        force = np.asarray(wrench.force, dtype=float)
+        if float(np.linalg.norm(force)) < 1e-9:
+            array.markers.append(_deleted(header, 'jaw_forces', marker_id))
+            continue
+        arrow = _marker(header, 'jaw_forces', marker_id, Marker.ARROW)
+        start = Point(x=float(face_x), y=0.0, z=float(result.lift))
+        arrow.points = [start, Point(x=start.x + ARROW_SCALE * force[0],
+                                     y=ARROW_SCALE * force[1],
+                                     z=start.z + ARROW_SCALE * force[2])]
+        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.002, 0.004, 0.004
+        arrow.color = ColorRGBA(r=0.9, g=0.3, b=0.1, a=1.0)
+        array.markers.append(arrow)
+
+    if context.table:
+        table = _marker(header, 'table', 0, Marker.CUBE)
+        span = max(0.3, 4.0 * context.rest_width)
+        table.pose.position.z = context.table_height - 0.005
+        table.scale.x, table.scale.y, table.scale.z = span, 2.0 * depth, 0.01
+        table.color = ColorRGBA(r=0.55, g=0.4, b=0.25, a=1.0)
+        array.markers.append(table)
+
+    touching = np.flatnonzero(np.asarray(result.contact_obstacle) >= 0)
+    if touching.size:
+        lines = _marker(header, 'contact_forces', 0, Marker.LINE_LIST)
+        lines.scale.x = 0.0005
+        lines.color = ColorRGBA(r=0.1, g=0.3, b=0.9, a=1.0)
+        for i in touching:
+            x, y, z = _xyz(result.positions[i])
+            fx, _, fz = _xyz(result.contact_forces[i])
+            lines.points.append(Point(x=x, y=y, z=z))
+            lines.points.append(Point(x=x + CONTACT_LINE_SCALE * fx, y=y,
+                                      z=z + CONTACT_LINE_SCALE * fz))
+        array.markers.append(lines)
+    else:
+        array.markers.append(_deleted(header, 'contact_forces', 0))
+    return array
+
+
+def build_messages(result: StepResult, context: MessageContext | Mapping[str, Any],
+                   stamp: Any = None, topics: Iterable[str] | None = None) -> dict[str, Any]:
+    """Every message the node publishes for ``result``, keyed by topic suffix.
+
+    Args:
+        result: the step to convert.
+        context: a ``MessageContext`` (keeps the run history: use one per run), or a
+            flat configuration mapping (a fresh context, no history beyond ``result``).
+        stamp: header stamp in sim time: a ``builtin_interfaces/Time``, integer ns
+            or float s; None = ``result.time``.
+        topics: suffixes to build (keys of ``TOPICS``); None = all.
+
+    Returns:
+        ``{suffix: message}`` with suffixes from ``TOPICS`` ('fruit/nodes',
+        'fruit/state', 'left_jaw/wrench', 'right_jaw/wrench', 'joint_states',
+        'markers', 'clock'); ``resolved_topic(suffix)`` gives the topic name.
+    """
+    if not isinstance(context, MessageContext):
+        context = MessageContext.from_config(context)
+    context.observe(result)
+    wanted = set(TOPICS) if topics is None else set(topics)
+    unknown = wanted - set(TOPICS)
+    if unknown:
+        raise ValueError(f"unknown topic suffix(es): {', '.join(sorted(unknown))}")
+    time = time_msg(result.time if stamp is None else stamp)
+    world = Header(stamp=time, frame_id=WORLD_FRAME)
+    out: dict[str, Any] = {}
+    if 'fruit/nodes' in wanted:
+        out['fruit/nodes'] = point_cloud(result, world)
+    if 'fruit/state' in wanted:
+        out['fruit/state'] = fruit_state(result, context, world)
+    if 'left_jaw/wrench' in wanted:
+        out['left_jaw/wrench'] = jaw_wrench(result, 'left', time)
+    if 'right_jaw/wrench' in wanted:
+        out['right_jaw/wrench'] = jaw_wrench(result, 'right', time)
+    if 'joint_states' in wanted:
+        out['joint_states'] = joint_state(result, context, time)
+    if 'markers' in wanted:
+        out['markers'] = markers(result, context, world)
+    if 'clock' in wanted:
+        out['clock'] = Clock(clock=time)
+    return out
