@@ -266,7 +266,9 @@ class BagWriter:
     def add_topic(self, name: str, type_name: str, *,
                   offered_qos_profiles: Iterable[Mapping[str, Any]] | None = None,
                   type_hash: str | None = None, definition: str | None = None,
-                  schema_encoding: str = 'ros2msg') -> TopicEntry:
+                  schema_encoding: str = 'ros2msg',
+                  message_encoding: str = 'cdr',
+                  channel_metadata: Mapping[str, str] | None = None) -> TopicEntry:
         """Register a topic (idempotent for the same name and type).
 
         Args:
@@ -277,12 +279,16 @@ class BagWriter:
             type_hash: RIHS01 hash; default: looked up from the installed type description.
             definition: schema text; default: built from the installed .msg files.
             schema_encoding: 'ros2msg' (default) or 'ros2idl' with ``definition``.
+            message_encoding: 'cdr' (default; the only one ROS 2 tools play).
+            channel_metadata: channel metadata to store verbatim (e.g. copied from another
+                file); overrides ``offered_qos_profiles`` and ``type_hash``.
 
         Raises:
             RecordingError: the name is taken by another type, or no definition is found.
         """
-        type_name = schemas.full_type_name(type_name)
-        if not name.startswith('/'):
+        if schema_encoding in ('ros2msg', 'ros2idl'):
+            type_name = schemas.full_type_name(type_name)
+        if not name.startswith('/') and message_encoding == 'cdr':
             raise RecordingError(f"topic name '{name}' must be absolute (start with '/')")
         with self._lock:
             writer = self._require_open()
@@ -300,13 +306,21 @@ class BagWriter:
                 schema_id = writer.register_schema(type_name, schema_encoding,
                                                    definition.encode('utf-8'))
                 self._schema_ids[type_name] = schema_id
-            if type_hash is None:
-                type_hash = schemas.type_hash(type_name) or ''
-            profiles = [qos_mod.normalize(p) for p in (offered_qos_profiles
-                                                       or [qos_mod.default_profile()])]
-            metadata = {'offered_qos_profiles': qos_mod.to_yaml(profiles),
-                        'topic_type_hash': type_hash}
-            channel_id = writer.register_channel(name, 'cdr', schema_id, metadata)
+            if channel_metadata is not None:
+                metadata = {str(k): str(v) for k, v in channel_metadata.items()}
+                try:
+                    profiles = qos_mod.from_yaml(metadata.get('offered_qos_profiles', ''))
+                except RecordingError:
+                    profiles = []
+                type_hash = metadata.get('topic_type_hash', '')
+            else:
+                if type_hash is None:
+                    type_hash = schemas.type_hash(type_name) or ''
+                profiles = [qos_mod.normalize(p) for p in (offered_qos_profiles
+                                                           or [qos_mod.default_profile()])]
+                metadata = {'offered_qos_profiles': qos_mod.to_yaml(profiles),
+                            'topic_type_hash': type_hash}
+            channel_id = writer.register_channel(name, message_encoding, schema_id, metadata)
             entry = TopicEntry(name=name, type=type_name, channel_id=channel_id,
                                offered_qos_profiles=profiles, type_hash=type_hash)
             self._topics[name] = entry

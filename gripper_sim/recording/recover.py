@@ -1,0 +1,217 @@
+"""Rebuild a readable, indexed MCAP file from a truncated or damaged one.
+
+A recorder killed with SIGKILL leaves a file with a header, whole chunks (the writer
+closes a chunk at least every ``flush_interval``), perhaps half a chunk, and no summary
+or footer. ``recover`` reads the data section record by record, keeps every schema,
+channel, message and metadata record of every chunk that is whole and passes its CRC,
+stops at the first cut record, and writes all of it to a new file with a fresh summary,
+statistics and rosbag2 metadata. The input file is only ever opened for reading.
+"""
+from __future__ import annotations
+
+import io
+import os
+import struct
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.stream_reader import breakup_chunk
+
+from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.reader import MCAP_MAGIC, READ_ERRORS, check_mcap_start
+from gripper_sim.recording.writer import BagWriter
+
+_KNOWN_OPCODES = {int(op) for op in Opcode}
+_MAX_RECORD = 4 * 2**30
+
+
+@dataclass
+class RecoverReport:
+    """What ``recover`` found and kept.
+
+    Attributes:
+        messages: messages written to the output.
+        topics: topic name -> messages kept.
+        chunks: whole chunks read.
+        damaged_chunks: chunks skipped because they failed to decompress or their CRC.
+        complete: the input had a data-end record (it was not cut short).
+        stopped_at: byte offset where reading stopped.
+        input_size: bytes in the input.
+        reason: why reading stopped before the end, '' when it reached the end.
+        start_time, end_time: log-time range of the kept messages, ns.
+    """
+
+    messages: int = 0
+    topics: dict = field(default_factory=dict)
+    chunks: int = 0
+    damaged_chunks: int = 0
+    complete: bool = False
+    stopped_at: int = 0
+    input_size: int = 0
+    reason: str = ''
+    start_time: int = 0
+    end_time: int = 0
+
+
+@dataclass
+class _Scan:
+    header: Header | None = None
+    records: list = field(default_factory=list)
+    report: RecoverReport = field(default_factory=RecoverReport)
+
+
+def _parse(opcode: int, body: bytes):
+    stream = ReadDataStream(io.BytesIO(body))
+    if opcode == Opcode.HEADER:
+        return Header.read(stream)
+    if opcode == Opcode.SCHEMA:
+        return Schema.read(stream)
+    if opcode == Opcode.CHANNEL:
+        return Channel.read(stream)
+    if opcode == Opcode.MESSAGE:
+        return Message.read(stream, len(body))
+    if opcode == Opcode.CHUNK:
+        return Chunk.read(stream)
+    if opcode == Opcode.METADATA:
+        return Metadata.read(stream)
+    return None  # indexes, attachments, summary records: rebuilt or not needed
+
+
+def scan(path: str | os.PathLike) -> _Scan:
+    """Read the data section of ``path`` as far as it is whole."""
+    path = Path(path)
+    check_mcap_start(path)
+    result = _Scan()
+    report = result.report
+    report.input_size = path.stat().st_size
+    with open(path, 'rb') as f:
+        f.read(len(MCAP_MAGIC))
+        offset = len(MCAP_MAGIC)
+        while True:
+            head = f.read(9)
+            if len(head) == 0:
+                report.reason = 'the file ends without a data-end record (not closed)'
+                break
+            if len(head) < 9:
+                report.reason = f'a record header is cut at byte {offset}'
+                break
+            opcode, length = struct.unpack('<BQ', head)
+            if opcode not in _KNOWN_OPCODES and opcode < 0x80:
+                report.reason = f'unreadable data at byte {offset} (opcode {opcode:#x})'
+                break
+            if opcode == Opcode.DATA_END or opcode == Opcode.FOOTER:
+                report.complete = True
+                break
+            if length > min(_MAX_RECORD, report.input_size - offset - 9):
+                report.reason = (f'the record at byte {offset} is cut: it needs {length} '
+                                 f'bytes, {report.input_size - offset - 9} are left')
+                break
+            body = f.read(length)
+            try:
+                record = _parse(opcode, body)
+            except READ_ERRORS as err:
+                report.reason = f'unreadable record at byte {offset}: {err}'
+                break
+            if isinstance(record, Header):
+                result.header = record
+            elif isinstance(record, Chunk):
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except READ_ERRORS:
+                    report.damaged_chunks += 1
+                else:
+                    report.chunks += 1
+                    result.records.extend(inner)
+            elif record is not None:
+                result.records.append(record)
+            offset += 9 + length
+        report.stopped_at = offset
+    return result
+
+
+def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
+            overwrite: bool = False) -> RecoverReport:
+    """Write every whole message of ``src`` into a new, indexed file ``dst``.
+
+    Raises:
+        RecordingError: ``src`` is missing, empty or not MCAP; ``dst`` is ``src``, exists
+            (without ``overwrite``) or cannot be written; nothing could be recovered.
+    """
+    src, dst = Path(src), Path(dst)
+    check_mcap_start(src)
+    if dst.exists() and (os.path.samefile(src, dst)):
+        raise RecordingError(f'output {dst} is the input file; give another name (the input '
+                             'is never modified)')
+    if dst.exists() and not overwrite:
+        raise RecordingError(f'{dst} already exists; choose another name or remove it')
+    result = scan(src)
+    report = result.report
+    if result.header is None:
+        raise RecordingError(f'{src} has no readable MCAP header: nothing to recover')
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    dst_dir = dst.parent if str(dst.parent) else Path('.')
+    if not dst_dir.is_dir():
+        raise RecordingError(f'{dst}: directory {dst_dir} does not exist')
+    fd, tmp_name = tempfile.mkstemp(prefix=f'.{dst.name}.', suffix='.part', dir=dst_dir)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        with BagWriter(tmp, overwrite=True) as bag:
+            for record in result.records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Metadata):
+                    if record.name != 'rosbag2':
+                        bag.add_metadata(record.name, dict(record.metadata))
+                elif isinstance(record, Message):
+                    channel = channels.get(record.channel_id)
+                    if channel is None:
+                        continue  # its channel record was in a lost chunk
+                    if not bag.has_topic(channel.topic):
+                        schema = schemas.get(channel.schema_id)
+                        bag.add_topic(
+                            channel.topic, schema.name if schema else '',
+                            definition=schema.data.decode('utf-8') if schema else '',
+                            schema_encoding=schema.encoding if schema else '',
+                            message_encoding=channel.message_encoding,
+                            channel_metadata=channel.metadata)
+                    bag.write(channel.topic, record.data, log_time=record.log_time,
+                              publish_time=record.publish_time, sequence=record.sequence)
+                    report.topics[channel.topic] = report.topics.get(channel.topic, 0) + 1
+                    if report.messages == 0:
+                        report.start_time = report.end_time = record.log_time
+                    report.start_time = min(report.start_time, record.log_time)
+                    report.end_time = max(report.end_time, record.log_time)
+                    report.messages += 1
+        if report.messages == 0:
+            why = f' ({report.reason})' if report.reason else ''
+            raise RecordingError(f'{src} holds no whole message{why}: nothing to recover')
+        os.replace(tmp, dst)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return report
+
+
+def iter_report_lines(report: RecoverReport, src: Path, dst: Path) -> Iterator[str]:
+    """Human-readable lines describing a recovery."""
+    state = 'complete' if report.complete else 'cut short'
+    yield f'input:  {src} ({report.input_size} bytes, {state})'
+    if report.reason:
+        yield f'        stopped at byte {report.stopped_at}: {report.reason}'
+    yield (f'output: {dst}: {report.messages} messages from {report.chunks} chunks'
+           + (f', {report.damaged_chunks} damaged chunks skipped'
+              if report.damaged_chunks else ''))
+    if report.messages:
+        span = (report.end_time - report.start_time) / 1e9
+        yield f'        {span:.3f} s of messages'
+    for topic, count in sorted(report.topics.items()):
+        yield f'        {topic}: {count}'
