@@ -25,7 +25,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 from mcap.writer import CompressionType, IndexType, Writer
 
@@ -148,6 +148,7 @@ class BagWriter:
             written to the operating system, even if not full.
         compression: 'zstd' (default), 'lz4' or 'none'.
         library: the header's library string.
+        clock: monotonic seconds for the flush policy (tests pass a fake one).
 
     Thread-safe: ``write`` may be called from several threads.
     """
@@ -155,7 +156,8 @@ class BagWriter:
     def __init__(self, path: str | os.PathLike, *, overwrite: bool = False,
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_interval: float = DEFAULT_FLUSH_INTERVAL,
-                 compression: str = 'zstd', library: str = LIBRARY):
+                 compression: str = 'zstd', library: str = LIBRARY,
+                 clock: Callable[[], float] = time.monotonic):
         self.path = Path(path)
         self._overwrite = overwrite
         if chunk_size <= 0:
@@ -171,6 +173,7 @@ class BagWriter:
             msg = f"compression must be 'zstd', 'lz4' or 'none', got {compression!r}"
             raise RecordingError(msg) from None
         self._library = library
+        self._clock = clock
         self._lock = threading.RLock()
         self._stream: Any = None
         self._writer: Writer | None = None
@@ -183,7 +186,7 @@ class BagWriter:
         self._bytes_written = 0
         self._start_ns: int | None = None
         self._end_ns = 0
-        self._last_flush = time.monotonic()
+        self._last_flush = 0.0
         self._pending = 0
 
     # ------------------------------------------------------------------ lifecycle
@@ -230,7 +233,7 @@ class BagWriter:
                 enable_crcs=True)
             self._writer.start(profile=PROFILE, library=self._library)
             self._stream.flush()
-            self._last_flush = time.monotonic()
+            self._last_flush = self._clock()
 
     def close(self) -> None:
         """Write the rosbag2 metadata record, the summary and the footer; close the file.
@@ -374,7 +377,7 @@ class BagWriter:
                 self._start_ns = log_time
             if log_time > self._end_ns:
                 self._end_ns = log_time
-            if time.monotonic() - self._last_flush >= self._flush_interval:
+            if self._clock() - self._last_flush >= self._flush_interval:
                 self._flush_locked()
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
@@ -407,7 +410,7 @@ class BagWriter:
         except OSError as err:
             raise RecordingError(f'cannot write {self.path}: {err.strerror}') from err
         self._pending = 0
-        self._last_flush = time.monotonic()
+        self._last_flush = self._clock()
 
     def flush(self) -> None:
         """Close the open chunk and hand everything to the operating system now."""
@@ -419,7 +422,7 @@ class BagWriter:
         """Flush when messages are pending and ``flush_interval`` has passed; True if so."""
         with self._lock:
             if (self._writer is not None and self._pending
-                    and time.monotonic() - self._last_flush >= self._flush_interval):
+                    and self._clock() - self._last_flush >= self._flush_interval):
                 self._flush_locked()
                 return True
             return False

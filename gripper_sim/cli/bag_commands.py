@@ -1,0 +1,241 @@
+"""CLI verbs for recordings: ``record``, ``replay``, ``info``, ``analyze``, ``recover``.
+
+Each handler imports what it needs when it runs (rclpy only for ``record`` and
+``replay``), so ``info``, ``analyze`` and ``recover`` work from a file alone.
+Bad input raises ``RecordingError``; ``main`` prints it as ``error: ...`` and exits 2.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be a positive number")
+    return value
+
+
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be zero or positive")
+    return value
+
+
+def _remap(text: str) -> tuple[str, str]:
+    if ':=' not in text:
+        raise argparse.ArgumentTypeError(f"remap '{text}' must look like /old:=/new")
+    old, new = text.split(':=', 1)
+    if not old or not new:
+        raise argparse.ArgumentTypeError(f"remap '{text}' must look like /old:=/new")
+    return old, new
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        'record', help='record live topics to a rosbag2-compatible MCAP file',
+        description='Subscribe (raw) to live topics of any node and write them to MCAP as '
+                    'rosbag2 does. Ctrl-C or --duration ends the recording cleanly.')
+    p.add_argument('topics', nargs='*', metavar='TOPIC', help='topics to record')
+    p.add_argument('-o', '--output', required=True, metavar='FILE.mcap',
+                   help='file to create (never overwritten)')
+    p.add_argument('-a', '--all', action='store_true',
+                   help='record every topic, including ones that appear while recording')
+    p.add_argument('-d', '--duration', type=_positive_float, metavar='S',
+                   help='stop after S seconds (wall clock)')
+    p.add_argument('--flush-interval', type=_positive_float, default=0.5, metavar='S',
+                   help='close and write a chunk at least every S seconds (default 0.5): '
+                        'a killed recorder loses at most about this much')
+    p.add_argument('--max-messages', type=int, metavar='N',
+                   help='stop after N messages')
+    p.set_defaults(handler=_record)
+
+    p = subparsers.add_parser(
+        'replay', help='republish the messages of an MCAP recording',
+        description='Publish the raw messages of a recording with their original relative '
+                    'timing and QoS.')
+    p.add_argument('file', metavar='FILE.mcap')
+    p.add_argument('-r', '--rate', type=_positive_float, default=1.0,
+                   help='playback speed factor (default 1)')
+    p.add_argument('-l', '--loop', action='store_true', help='play again and again')
+    p.add_argument('--topics', nargs='+', metavar='TOPIC', help='only these topics')
+    p.add_argument('--start', type=_non_negative_float, default=0.0, metavar='S',
+                   help='skip the first S seconds of the recording')
+    p.add_argument('--clock', nargs='?', type=_positive_float, const=100.0, metavar='HZ',
+                   help='publish /clock from the recording time (default 100 Hz) so nodes '
+                        'with use_sim_time follow the replay')
+    p.add_argument('--remap', action='append', type=_remap, default=[], metavar='OLD:=NEW',
+                   help='publish topic OLD as NEW (repeatable)')
+    p.add_argument('--wait-for-subscribers', type=_non_negative_float, default=0.0,
+                   metavar='S', help='before playing, wait up to S seconds until every '
+                   'replayed topic has a subscriber')
+    p.set_defaults(handler=_replay)
+
+    p = subparsers.add_parser('info', help='topics, types, counts and duration of a recording')
+    p.add_argument('file', metavar='FILE.mcap')
+    p.add_argument('--json', action='store_true', help='print JSON')
+    p.set_defaults(handler=_info)
+
+    p = subparsers.add_parser(
+        'analyze', help='time series, summary and figures of a recorded grasp',
+        description='Read FruitState and jaw wrenches from a recording (no ROS graph needed) '
+                    'and write a CSV time series, a summary JSON and PNG figures.')
+    p.add_argument('file', metavar='FILE.mcap')
+    p.add_argument('-o', '--output-dir', default=None, metavar='DIR',
+                   help='where to write (default: FILE without .mcap, plus _analysis)')
+    p.add_argument('--namespace', default=None,
+                   help='topic prefix of the sim node, e.g. /gripper_sim (default: found)')
+    p.add_argument('--no-figures', action='store_true', help='write CSV and JSON only')
+    p.set_defaults(handler=_analyze)
+
+    p = subparsers.add_parser(
+        'recover', help='rebuild a readable file from a truncated or killed recording',
+        description='Copy every whole message of IN into a new indexed file OUT. IN is '
+                    'only read, never modified.')
+    p.add_argument('input', metavar='IN.mcap')
+    p.add_argument('output', metavar='OUT.mcap')
+    p.add_argument('-f', '--force', action='store_true', help='replace OUT if it exists')
+    p.set_defaults(handler=_recover)
+
+
+# ---------------------------------------------------------------------- helpers
+def _format_size(n: int) -> str:
+    size = float(n)
+    for unit in ('B', 'KiB', 'MiB', 'GiB'):
+        if size < 1024 or unit == 'GiB':
+            return f'{size:.1f} {unit}' if unit != 'B' else f'{n} B'
+        size /= 1024
+    return f'{n} B'
+
+
+def _format_time(ns: int) -> str:
+    seconds = ns / 1e9
+    try:
+        when = datetime.fromtimestamp(ns // 1_000_000_000, tz=timezone.utc)
+        text = when.strftime('%b %d %Y %H:%M:%S')
+    except (OverflowError, OSError, ValueError):
+        text = '?'
+    return f'{text}.{ns % 1_000_000_000:09d} UTC ({seconds:.9f})'
+
+
+def info_dict(path: str) -> dict:
+    """What ``info`` prints, as a dict."""
+    from gripper_sim.recording.reader import BagReader
+
+    with BagReader(path) as bag:
+        bag_meta = bag.bag_metadata() or {}
+        return {
+            'file': str(bag.path),
+            'size': bag.path.stat().st_size,
+            'profile': bag.profile,
+            'library': bag.library,
+            'ros_distro': bag_meta.get('ros_distro', ''),
+            'compression': sorted(c for c in bag.compression if c),
+            'chunks': bag.chunk_count,
+            'messages': bag.message_count,
+            'start_ns': bag.start_time,
+            'end_ns': bag.end_time,
+            'duration_s': bag.duration_ns / 1e9,
+            'topics': [{'name': t.name, 'type': t.type, 'count': t.message_count,
+                        'serialization_format': t.message_encoding,
+                        'type_hash': t.type_hash,
+                        'qos': t.offered_qos_profiles}
+                       for t in bag.topics.values()],
+            'metadata': [name for name, _ in bag.metadata],
+        }
+
+
+def _info(args: argparse.Namespace) -> int:
+    data = info_dict(args.file)
+    if args.json:
+        print(json.dumps(data, indent=2))
+        return 0
+    lines = [
+        f"Files:             {data['file']}",
+        f"Bag size:          {_format_size(data['size'])}",
+        'Storage id:        mcap',
+        f"Profile:           {data['profile'] or '(none)'}   library: {data['library']}",
+        f"ROS Distro:        {data['ros_distro'] or 'unknown'}",
+        f"Duration:          {data['duration_s']:.9f}s",
+    ]
+    if data['messages']:
+        lines += [f"Start:             {_format_time(data['start_ns'])}",
+                  f"End:               {_format_time(data['end_ns'])}"]
+    lines += [
+        f"Messages:          {data['messages']}",
+        f"Chunks:            {data['chunks']} ({', '.join(data['compression']) or 'none'})",
+    ]
+    topics = data['topics']
+    if topics:
+        width = max(len(t['name']) for t in topics)
+        for i, t in enumerate(topics):
+            lead = 'Topic information: ' if i == 0 else ' ' * 19
+            lines.append(f"{lead}Topic: {t['name']:<{width}} | Type: {t['type']} | "
+                         f"Count: {t['count']} | Serialization Format: "
+                         f"{t['serialization_format']}")
+    else:
+        lines.append('Topic information: (no topics)')
+    if data['metadata']:
+        lines.append(f"Metadata records:  {', '.join(data['metadata'])}")
+    print('\n'.join(lines))
+    return 0
+
+
+def _recover(args: argparse.Namespace) -> int:
+    from gripper_sim.recording.recover import iter_report_lines, recover
+
+    report = recover(args.input, args.output, overwrite=args.force)
+    for line in iter_report_lines(report, Path(args.input), Path(args.output)):
+        print(line)
+    return 0
+
+
+def _record(args: argparse.Namespace) -> int:
+    from gripper_sim.recording.errors import RecordingError
+    from gripper_sim.recording.recorder import run_record
+
+    if not args.all and not args.topics:
+        raise RecordingError('give topics to record or --all')
+    if args.max_messages is not None and args.max_messages <= 0:
+        raise RecordingError('--max-messages must be positive')
+    summary = run_record(args.output, topics=args.topics, all_topics=args.all,
+                         duration=args.duration, flush_interval=args.flush_interval,
+                         max_messages=args.max_messages)
+    print(summary, file=sys.stderr)
+    return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from gripper_sim.recording.replay import run_replay
+
+    summary = run_replay(args.file, rate=args.rate, loop=args.loop, topics=args.topics,
+                         start=args.start, clock_hz=args.clock, remaps=dict(args.remap),
+                         wait_for_subscribers=args.wait_for_subscribers)
+    print(summary, file=sys.stderr)
+    return 0
+
+
+def _analyze(args: argparse.Namespace) -> int:
+    from gripper_sim.recording.analysis import analyze
+
+    out_dir = args.output_dir
+    if out_dir is None:
+        path = Path(args.file)
+        out_dir = str(path.with_name(path.stem + '_analysis'))
+    result = analyze(args.file, out_dir, namespace=args.namespace,
+                     figures=not args.no_figures)
+    for line in result.describe():
+        print(line)
+    return 0
