@@ -121,13 +121,12 @@ def _format_size(n: int) -> str:
 
 
 def _format_time(ns: int) -> str:
-    seconds = ns / 1e9
     try:
         when = datetime.fromtimestamp(ns // 1_000_000_000, tz=timezone.utc)
         text = when.strftime('%b %d %Y %H:%M:%S')
     except (OverflowError, OSError, ValueError):
         text = '?'
-    return f'{text}.{ns % 1_000_000_000:09d} UTC ({seconds:.9f})'
+    return f'{text}.{ns % 1_000_000_000:09d} UTC ({ns // 1_000_000_000}.{ns % 1_000_000_000:09d})'
 
 
 def info_dict(path: str) -> dict:
@@ -135,6 +134,7 @@ def info_dict(path: str) -> dict:
     from gripper_sim.recording.reader import BagReader
 
     with BagReader(path) as bag:
+        checked = bag.verify()
         bag_meta = bag.bag_metadata() or {}
         return {
             'file': str(bag.path),
@@ -144,6 +144,7 @@ def info_dict(path: str) -> dict:
             'ros_distro': bag_meta.get('ros_distro', ''),
             'compression': sorted(c for c in bag.compression if c),
             'chunks': bag.chunk_count,
+            'chunks_verified': checked,
             'messages': bag.message_count,
             'start_ns': bag.start_time,
             'end_ns': bag.end_time,
@@ -175,7 +176,8 @@ def _info(args: argparse.Namespace) -> int:
                   f"End:               {_format_time(data['end_ns'])}"]
     lines += [
         f"Messages:          {data['messages']}",
-        f"Chunks:            {data['chunks']} ({', '.join(data['compression']) or 'none'})",
+        f"Chunks:            {data['chunks']} ({', '.join(data['compression']) or 'none'}),"
+        f" {data['chunks_verified']} verified",
     ]
     topics = data['topics']
     if topics:

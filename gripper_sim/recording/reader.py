@@ -246,6 +246,31 @@ class BagReader:
         self.start_time = start or 0
         self.end_time = end or 0
 
+    def verify(self) -> int:
+        """Decompress every chunk and check its CRC; return the number of chunks checked.
+
+        Raises:
+            RecordingError: a chunk is damaged.
+        """
+        reader = self._require_open()
+        from mcap.records import Chunk
+        from mcap.stream_reader import breakup_chunk
+
+        summary = reader.get_summary()
+        if summary is None:
+            return self.chunk_count  # already read in full by _scan_without_summary
+        checked = 0
+        try:
+            for index in summary.chunk_indexes:
+                self._file.seek(index.chunk_start_offset + 1 + 8)
+                from mcap.data_stream import ReadDataStream
+                chunk = Chunk.read(ReadDataStream(self._file))
+                breakup_chunk(chunk, validate_crc=True)
+                checked += 1
+        except READ_ERRORS as err:
+            raise self._corrupt(err) from err
+        return checked
+
     def _require_open(self) -> SeekingReader:
         if self._reader is None:
             raise RecordingError(f'{self.path}: reader is not open')
