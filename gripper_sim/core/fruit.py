@@ -87,6 +87,7 @@ def build_fruit(config) -> FruitModel:
     rest_area = shapes.polygon_area(outline)
     energies: list[Energy] = []
     pressure = flesh = None
+    turgor = config['fruit.pressure.turgor'] if config['fruit.model'] == 'shell' else 0.0
     if config['fruit.model'] == 'shell':
         positions = outline
         triangles = np.zeros((0, 3), dtype=np.int64)
@@ -95,7 +96,6 @@ def build_fruit(config) -> FruitModel:
         masses = rho * rest_area * depth * share / share.sum()
         with_skin = True
         k = bulk_modulus(config)
-        turgor = config['fruit.pressure.turgor']
         if k > 0 or turgor > 0:
             pressure = EnclosedAreaPressure(surface, rest_area, depth, turgor, k)
             energies.append(pressure)
@@ -111,6 +111,11 @@ def build_fruit(config) -> FruitModel:
     if with_skin:
         rest_lengths = np.linalg.norm(positions[skin_edges[:, 1]] - positions[skin_edges[:, 0]],
                                       axis=1)
+        if pressure is not None and turgor > 0:
+            # prestress: the skin carries the hoop tension p0 b R of the turgor at the
+            # configured shape, so that shape is the equilibrium (R from the perimeter)
+            radius = rest_lengths.sum() / (2 * np.pi)
+            rest_lengths = rest_lengths / (1.0 + turgor * depth * radius / ea)
         stretching = Stretching(skin_edges, rest_lengths, ea)
         energies = [stretching, RingBending(surface, positions, ei)] + energies
     return FruitModel(

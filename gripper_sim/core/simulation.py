@@ -1,9 +1,45 @@
-"""The simulation facade: fruit + gripper + world, stepped in time. (API stub, being implemented.)"""
+"""The simulation facade: fruit + gripper + world, stepped in time.
+
+One step, in a fixed order: the gripper kinematics advance (constraints move), the
+predictor-corrector loop solves the implicit Euler step with the current contact set
+and updates the set until it is consistent, the state is committed, measures are taken
+and observers are called.
+"""
 from __future__ import annotations
 
+import math
+from dataclasses import replace
 from typing import Any, Callable, Mapping
 
-from gripper_sim.core.results import StepResult
+import numpy as np
+
+from gripper_sim.core import contact as cm
+from gripper_sim.core.energies import Gravity
+from gripper_sim.core.fruit import FruitModel, build_fruit
+from gripper_sim.core.gripper import GripperKinematics, GripperState
+from gripper_sim.core.measures import deformation
+from gripper_sim.core.obstacles import FlatFace
+from gripper_sim.core.results import Energies, JawWrench, StepResult
+from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
+                                      StepConstraints)
+from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
+
+LEFT, RIGHT = 0, 1
+
+#: configuration keys that may change while the simulation runs
+DYNAMIC_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction',
+                'contact.table.static_friction', 'contact.table.kinetic_friction',
+                'contact.restitution', 'gripper.close_speed', 'gripper.lift_speed')
+
+
+def _finite(name: str, value: Any) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError) as err:
+        raise CommandError(f'{name} must be a number, got {value!r}') from err
+    if not math.isfinite(number):
+        raise CommandError(f'{name} must be finite, got {number}')
+    return number
 
 
 class Simulation:
@@ -17,33 +53,423 @@ class Simulation:
     """
 
     def __init__(self, config: Mapping[str, Any]):
-        raise NotImplementedError
+        self.config = dict(config)
+        self.fruit: FruitModel = build_fruit(self.config)
+        self.dt = float(self.config['sim.dt'])
+        c = self.config
+        rest = self.fruit.rest_positions
+        if c['fruit.initial_height'] is not None:
+            centre_z = c['fruit.initial_height']
+        elif c['world.table']:
+            centre_z = c['world.table_height'] - rest[:, 1].min()
+        else:
+            centre_z = 0.0
+        self.initial_positions = rest + np.array([0.0, centre_z])
+        self.initial_gap = (c['gripper.initial_gap'] if c['gripper.initial_gap'] is not None
+                            else min(self.fruit.rest_width + 0.01, c['gripper.max_gap']))
+        if self.initial_gap > c['gripper.max_gap']:
+            raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
+        self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
+                             else centre_z)
+        self.gravity = Gravity(self.fruit.masses, c['world.gravity'])
+        self.solver = ImplicitEulerSolver(
+            self.fruit.masses, list(self.fruit.energies) + [self.gravity],
+            damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
+            tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'])
+        self.kinematics = GripperKinematics(
+            c['gripper.max_gap'], c['gripper.lift_acceleration'],
+            c['gripper.force_time_constant'],
+            initial_stiffness=c['fruit.flesh.youngs_modulus'] * self.fruit.depth)
+        self._observers: list[Callable[[StepResult], None]] = []
+        self.reset()
 
-    dt: float            # s, physics step
-    time: float          # s, simulation time
-    config: dict         # the flat configuration in use
-
+    # ------------------------------------------------------------------ commands
     def command_gap(self, gap: float, speed: float | None = None) -> None:
         """Position mode: move the jaws to gap ``gap`` (m) at gap rate ``speed`` (m/s)."""
+        gap = _finite('gap', gap)
+        if gap < 0 or gap > self.config['gripper.max_gap']:
+            raise CommandError(f"gap {gap} m is out of range [0, "
+                               f"{self.config['gripper.max_gap']}] m")
+        speed = self._speed(speed, self.config['gripper.close_speed'])
+        self._grip = replace(self._grip, mode='position', target_gap=gap, speed=speed)
 
     def command_force(self, force: float, speed: float | None = None) -> None:
         """Force mode: close until the mean jaw normal force is ``force`` (N), hold it."""
+        force = _finite('force', force)
+        limit = self.config['gripper.max_force']
+        if force <= 0 or force > limit:
+            raise CommandError(f'force {force} N is out of range (0, {limit}] N')
+        speed = self._speed(speed, self.config['gripper.close_speed'])
+        self._grip = replace(self._grip, mode='force', target_force=force, speed=speed)
 
     def command_open(self, speed: float | None = None) -> None:
-        """Position mode to the initial gap."""
+        """Position mode back to the initial gap."""
+        self.command_gap(self.initial_gap, speed)
+        self._slip_reference = None
 
     def command_lift(self, height: float, speed: float | None = None) -> None:
         """Move the gripper (jaw centre) to height ``height`` (m)."""
+        height = _finite('lift height', height)
+        low = (self.config['world.table_height'] + 0.5 * self.config['gripper.jaw_height']
+               if self.config['world.table'] else -10.0)
+        high = low + 10.0 if not self.config['world.table'] else low + 2.0
+        if height < low - 1e-12 or height > high:
+            raise CommandError(f'lift height {height} m is out of range [{low:.4g}, '
+                               f'{high:.4g}] m (the jaws may not go below the table)')
+        speed = self._speed(speed, self.config['gripper.lift_speed'])
+        self._grip = replace(self._grip, target_lift=height, lift_speed=speed)
 
-    def step(self) -> StepResult:
-        """Advance one step of ``dt``; raises ConvergenceError (state unchanged) on failure."""
+    def hold(self) -> None:
+        """Stop the jaws where they are (position mode at the current gap)."""
+        self._grip = replace(self._grip, mode='position', target_gap=self._grip.gap)
+
+    def mark_slip_reference(self) -> None:
+        """Measure slip from the fruit's present position relative to the jaws."""
+        self._slip_reference = float(self._last.centroid[1] - self._grip.lift)
+
+    def set_parameter(self, key: str, value: Any) -> None:
+        """Change a dynamic configuration key while running (see DYNAMIC_KEYS)."""
+        from gripper_sim.configuration import validate
+        if key not in DYNAMIC_KEYS:
+            raise ConfigError(f"config key '{key}' cannot change while running")
+        trial = dict(self.config)
+        trial[key] = value
+        self.config = validate(trial)
+        self._faces_template = self._make_faces()
+
+    def _speed(self, speed, default: float) -> float:
+        if speed is None or speed == 0:
+            return default
+        speed = _finite('speed', speed)
+        limit = self.config['gripper.max_speed']
+        if speed <= 0 or speed > limit:
+            raise CommandError(f'speed {speed} m/s is out of range (0, {limit}] m/s')
+        return speed
+
+    # ------------------------------------------------------------------ state
+    @property
+    def time(self) -> float:
+        return self._time
+
+    @property
+    def gripper_state(self) -> GripperState:
+        return self._grip
 
     @property
     def last(self) -> StepResult:
-        """The most recent step result (a result of the initial state before any step)."""
-
-    def reset(self) -> None:
-        """Back to the initial state and commands, time 0."""
+        """The most recent step result (the initial state before any step)."""
+        return self._last
 
     def add_observer(self, callback: Callable[[StepResult], None]) -> None:
         """Call ``callback(result)`` after every step."""
+        self._observers.append(callback)
+
+    def reset(self) -> None:
+        """Back to the initial state and commands, time 0."""
+        n = self.fruit.n_nodes
+        self.q = self.initial_positions.copy()
+        self.v = np.zeros((n, 2))
+        self.contacts = cm.ContactState.empty(n)
+        self.contact_forces = np.zeros((n, 2))
+        self._time = 0.0
+        self._step = 0
+        self._slip_reference: float | None = None
+        self._faces_template = self._make_faces()
+        self._grip = GripperState(
+            gap=self.initial_gap, gap_rate=0.0, lift=self.initial_lift, lift_rate=0.0,
+            mode='position', target_gap=self.initial_gap, target_force=0.0,
+            speed=self.config['gripper.close_speed'], target_lift=self.initial_lift,
+            lift_speed=self.config['gripper.lift_speed'],
+            stiffness=self.kinematics.initial_stiffness)
+        self._jaw_force = (0.0, 0.0)
+        self._last = self._measure(0, 1)
+
+    # ------------------------------------------------------------------ geometry
+    def _make_faces(self) -> list[FlatFace]:
+        c = self.config
+        jaw = dict(half_length=0.5 * c['gripper.jaw_height'], thickness=c['gripper.jaw_thickness'],
+                   static_friction=c['contact.jaw.static_friction'],
+                   kinetic_friction=c['contact.jaw.kinetic_friction'])
+        faces = [FlatFace('left_jaw', np.zeros(2), np.array([1.0, 0.0]), **jaw),
+                 FlatFace('right_jaw', np.zeros(2), np.array([-1.0, 0.0]), **jaw)]
+        ground = dict(static_friction=c['contact.table.static_friction'],
+                      kinetic_friction=c['contact.table.kinetic_friction'],
+                      restitution=c['contact.restitution'])
+        if c['world.table']:
+            faces.append(FlatFace('table', np.array([0.0, c['world.table_height']]),
+                                  np.array([0.0, 1.0]), **ground))
+        if c['world.walls']:
+            w = c['world.wall_half_width']
+            faces.append(FlatFace('left_wall', np.array([-w, 0.0]), np.array([1.0, 0.0]),
+                                  **ground))
+            faces.append(FlatFace('right_wall', np.array([w, 0.0]), np.array([-1.0, 0.0]),
+                                  **ground))
+        return faces
+
+    def _faces(self, grip: GripperState) -> list[FlatFace]:
+        faces = [replace(f) for f in self._faces_template]
+        faces[LEFT].origin = np.array([-0.5 * grip.gap, grip.lift])
+        faces[LEFT].velocity = np.array([-0.5 * grip.gap_rate, grip.lift_rate])
+        faces[RIGHT].origin = np.array([0.5 * grip.gap, grip.lift])
+        faces[RIGHT].velocity = np.array([0.5 * grip.gap_rate, grip.lift_rate])
+        return faces
+
+    @property
+    def obstacle_names(self) -> tuple:
+        return tuple(f.name for f in self._faces_template)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self) -> StepResult:
+        """Advance one step of ``dt``.
+
+        Raises:
+            ConvergenceError: the step failed even after halving; the state is unchanged.
+        """
+        saved = (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
+                 self._jaw_force)
+        try:
+            iterations, substeps = self._advance(self.dt, 0)
+        except ConvergenceError:
+            (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
+             self._jaw_force) = saved
+            raise
+        self._step += 1
+        self._last = self._measure(iterations, substeps)
+        for callback in self._observers:
+            callback(self._last)
+        return self._last
+
+    def run(self, duration: float) -> StepResult:
+        """Step for ``duration`` seconds; returns the last result."""
+        for _ in range(max(1, int(round(duration / self.dt)))):
+            self.step()
+        return self._last
+
+    def _advance(self, dt: float, depth: int) -> tuple[int, int]:
+        try:
+            return self._substep(dt), 1
+        except NewtonFailure as failure:
+            if depth >= self.config['sim.max_halvings']:
+                msg = (f'the solver did not converge at t = {self._time:.6g} s even with the '
+                       f'step halved {depth} times ({failure}); try a smaller sim.dt or '
+                       f'slower jaws')
+                raise ConvergenceError(msg, failure.history, self._time) from failure
+        it1, s1 = self._advance(0.5 * dt, depth + 1)
+        it2, s2 = self._advance(0.5 * dt, depth + 1)
+        return it1 + it2, s1 + s2
+
+    def _substep(self, dt: float) -> int:
+        left_n, right_n = self._jaw_force
+        grip_force = 0.5 * (left_n + right_n)
+        both = left_n > 0 and right_n > 0
+        grip_new = self.kinematics.advance(self._grip, dt, grip_force, both)
+        old_faces, new_faces = self._faces(self._grip), self._faces(grip_new)
+        x_n, v_n = self.q, self.v
+        q_n = x_n.ravel()
+        x_pred = x_n + dt * v_n
+        contacts = self.contacts.copy()
+        n = self.fruit.n_nodes
+        released = np.zeros(n, bool)
+        toggled = np.zeros(n, bool)
+        iterations = 0
+        for _ in range(self.config['sim.max_contact_passes']):
+            q_start, constraints = self._constraints(contacts, x_n, x_pred, old_faces,
+                                                     new_faces, dt)
+            solution = self.solver.solve(q_n, v_n.ravel(), dt, q_start.ravel(), constraints)
+            iterations += solution.iterations
+            x = solution.q.reshape(-1, 2)
+            reaction = solution.reaction.reshape(-1, 2)
+            if not self._update_contacts(contacts, x, x_n, v_n, reaction, old_faces, new_faces,
+                                         dt, released, toggled):
+                break
+        v = (x - x_n) / dt
+        forces = np.zeros((n, 2))
+        for index, face in enumerate(new_faces):
+            nodes = np.flatnonzero(contacts.obstacle == index)
+            if not nodes.size:
+                continue
+            nrm, tan = face.normal, face.tangent
+            v_t = v[nodes] @ tan
+            stuck = contacts.mode[nodes] == cm.STICK
+            v_t[stuck] = face.velocity @ tan
+            v_n_new = np.full(nodes.size, face.velocity @ nrm) + contacts.bounce_speed[nodes]
+            v[nodes] = v_n_new[:, None] * nrm + v_t[:, None] * tan
+            forces[nodes] = reaction[nodes]
+        impacts = np.flatnonzero(contacts.mode == cm.IMPACT)
+        contacts.release(impacts)
+        self.q, self.v, self.contacts, self.contact_forces = x, v, contacts, forces
+        self._grip = grip_new
+        self._time += dt
+        self._jaw_force = tuple(
+            float(np.sum(forces[contacts.obstacle == side] @ new_faces[side].normal))
+            for side in (LEFT, RIGHT))
+        return iterations
+
+    def _constraints(self, contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces,
+                     dt: float):
+        """Start positions (n, 2) with held nodes at their targets, and the step filters."""
+        n = self.fruit.n_nodes
+        start = x_pred.copy()
+        filters = np.tile(np.eye(2), (n, 1, 1))
+        fr_nodes, fr_tangents, fr_bounds, fr_speed = [], [], [], []
+        v_corr = self.config['contact.max_correction_speed']
+        for index, face in enumerate(new_faces):
+            nodes = np.flatnonzero(contacts.obstacle == index)
+            if not nodes.size:
+                continue
+            nrm, tan = face.normal, face.tangent
+            mode = contacts.mode[nodes]
+            penetration = np.maximum(0.0, -old_faces[index].gap(x_n[nodes]))
+            target = -np.maximum(0.0, penetration - v_corr * dt)
+            impact = mode == cm.IMPACT
+            target[impact] = contacts.impact_gap[nodes[impact]]
+            start[nodes] += (target - face.gap(start[nodes]))[:, None] * nrm
+            stuck = mode == cm.STICK
+            if np.any(stuck):
+                held = nodes[stuck]
+                along = x_n[held] @ tan + dt * (face.velocity @ tan)
+                start[held] += (along - start[held] @ tan)[:, None] * tan
+                filters[held] = 0.0
+            normal_only = nodes[~stuck]
+            filters[normal_only] = np.eye(2) - np.outer(nrm, nrm)
+            sliding = nodes[mode == cm.SLIP]
+            if sliding.size and face.kinetic_friction > 0:
+                fr_nodes.append(sliding)
+                fr_tangents.append(np.tile(tan, (sliding.size, 1)))
+                fr_bounds.append(face.kinetic_friction * np.maximum(
+                    contacts.normal_force[sliding], 0.0))
+                fr_speed.append(np.full(sliding.size, face.velocity @ tan))
+        if fr_nodes:
+            con = StepConstraints(filters, np.concatenate(fr_nodes), np.concatenate(fr_tangents),
+                                  np.concatenate(fr_bounds), np.concatenate(fr_speed))
+        else:
+            con = StepConstraints(filters, np.zeros(0, np.int64), np.zeros((0, 2)),
+                                  np.zeros(0), np.zeros(0))
+        return start, con
+
+    def _update_contacts(self, contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces,
+                         new_faces, dt, released, toggled) -> bool:
+        """Correct the contact set after a solve; True if it changed (solve again)."""
+        changed = False
+        threshold = self.config['contact.release_threshold']
+        for index, face in enumerate(new_faces):
+            nodes = np.flatnonzero(contacts.obstacle == index)
+            if not nodes.size:
+                continue
+            nrm, tan = face.normal, face.tangent
+            r_n = reaction[nodes] @ nrm
+            r_t = reaction[nodes] @ tan
+            mode = contacts.mode[nodes]
+            pulling = (r_n < -threshold) & (mode != cm.IMPACT)
+            if np.any(pulling):
+                contacts.release(nodes[pulling])
+                released[nodes[pulling]] = True
+                changed = True
+            keep = ~pulling
+            stuck = keep & (mode == cm.STICK)
+            to_slip = stuck & (np.abs(r_t) > face.static_friction * r_n) & ~toggled[nodes]
+            if np.any(to_slip):
+                contacts.mode[nodes[to_slip]] = cm.SLIP
+                toggled[nodes[to_slip]] = True
+                changed = True
+            sliding = keep & (mode == cm.SLIP)
+            if np.any(sliding):
+                rel = ((x[nodes] - x_n[nodes]) / dt - face.velocity) @ tan
+                to_stick = (sliding & (np.abs(rel) < 2 * FRICTION_SMOOTHING)
+                            & ~toggled[nodes] & (face.static_friction > 0))
+                if np.any(to_stick):
+                    contacts.mode[nodes[to_stick]] = cm.STICK
+                    toggled[nodes[to_stick]] = True
+                    changed = True
+                lag = contacts.normal_force[nodes]
+                stale = sliding & ~to_stick & (np.abs(r_n - lag) > 0.02 * np.abs(lag) + 1e-9)
+                if np.any(stale) and face.kinetic_friction > 0:
+                    changed = True
+            contacts.normal_force[nodes[keep]] = r_n[keep]
+        if self._add_penetrating(contacts, x, x_n, v_n, old_faces, new_faces, dt, released):
+            changed = True
+        return changed
+
+    def _add_penetrating(self, contacts, x, x_n, v_n, old_faces, new_faces, dt, released) -> bool:
+        surface = self.fruit.surface
+        candidates = surface[(contacts.obstacle[surface] < 0) & ~released[surface]]
+        if not candidates.size:
+            return False
+        depth = np.zeros(candidates.size)
+        chosen = -np.ones(candidates.size, np.int64)
+        for index, face in enumerate(new_faces):
+            gap = face.gap(x[candidates])
+            inside = face.covers(x[candidates]) & (gap < 0) & (-gap > depth)
+            depth[inside] = -gap[inside]
+            chosen[inside] = index
+        hit = chosen >= 0
+        if not np.any(hit):
+            return False
+        v_min = max(5.0 * self.config['world.gravity'] * dt, 1e-3)
+        for node, index in zip(candidates[hit], chosen[hit]):
+            face, old = new_faces[index], old_faces[index]
+            contacts.obstacle[node] = index
+            contacts.mode[node] = cm.STICK if face.static_friction > 0 else cm.SLIP
+            contacts.normal_force[node] = 0.0
+            if face.restitution > 0:
+                gap_start = float(old.gap(x_n[node]))
+                gap_end = float(face.gap(x[node]))
+                tau = min(max(gap_start / (gap_start - gap_end), 0.0), 1.0) if gap_start > 0 \
+                    else 0.0
+                v_start = float((v_n[node] - face.velocity) @ face.normal)
+                v_end = float(((x[node] - x_n[node]) / dt - face.velocity) @ face.normal)
+                approach = -(v_start + tau * (v_end - v_start))
+                if approach > v_min:
+                    bounce = face.restitution * approach
+                    contacts.mode[node] = cm.IMPACT
+                    contacts.bounce_speed[node] = bounce
+                    contacts.impact_gap[node] = bounce * (1.0 - tau) * dt
+        return True
+
+    # ------------------------------------------------------------------ outputs
+    def _measure(self, iterations: int, substeps: int) -> StepResult:
+        x, v, forces = self.q, self.v, self.contact_forces
+        fruit, grip = self.fruit, self._grip
+        faces = self._faces(grip)
+        normal = np.zeros(fruit.n_nodes)
+        wrenches = []
+        for side in (LEFT, RIGHT):
+            nodes = np.flatnonzero(self.contacts.obstacle == side)
+            on_jaw = -forces[nodes].sum(axis=0)
+            r = x[nodes] - faces[side].origin
+            torque_y = float(np.sum(r[:, 1] * -forces[nodes, 0] - r[:, 0] * -forces[nodes, 1]))
+            wrenches.append(JawWrench(np.array([on_jaw[0], 0.0, on_jaw[1]]),
+                                      np.array([0.0, torque_y, 0.0])))
+        for index, face in enumerate(faces):
+            nodes = np.flatnonzero(self.contacts.obstacle == index)
+            normal[nodes] = forces[nodes] @ face.normal
+        left_n = float(np.sum(normal[self.contacts.obstacle == LEFT]))
+        right_n = float(np.sum(normal[self.contacts.obstacle == RIGHT]))
+        jaw_contact = (self.contacts.obstacle == LEFT) | (self.contacts.obstacle == RIGHT)
+        masses = fruit.masses
+        centroid = masses @ x / masses.sum()
+        centroid_velocity = masses @ v / masses.sum()
+        both = bool(np.any(self.contacts.obstacle == LEFT) and
+                    np.any(self.contacts.obstacle == RIGHT))
+        relative_z = float(centroid[1] - grip.lift)
+        if both and self._slip_reference is None:
+            self._slip_reference = relative_z
+        slip = 0.0 if self._slip_reference is None else abs(self._slip_reference - relative_z)
+        slipping = bool(np.any(jaw_contact) and
+                        abs(centroid_velocity[1] - grip.lift_rate) > 1e-3)
+        elastic = sum(e.value(x.ravel()) for e in fruit.energies)
+        energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
+                            elastic=float(elastic),
+                            gravitational=float(self.gravity.value(x.ravel())))
+        return StepResult(
+            time=self._time, step=self._step, positions=x.copy(), velocities=v.copy(),
+            contact_forces=forces.copy(), contact_obstacle=self.contacts.obstacle.copy(),
+            contact_sticking=self.contacts.mode == cm.STICK,
+            obstacle_names=self.obstacle_names, surface=fruit.surface,
+            left_wrench=wrenches[LEFT], right_wrench=wrenches[RIGHT],
+            left_jaw_x=-0.5 * grip.gap, right_jaw_x=0.5 * grip.gap,
+            jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
+            gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
+            slipping=slipping, centroid=centroid, energies=energies,
+            deformation=deformation(fruit, x, normal, jaw_contact),
+            newton_iterations=iterations, substeps=substeps)

@@ -1,0 +1,160 @@
+"""A grasp as a step-driven state machine: close to a force, settle, lift, hold, release.
+
+Used by the offline ``pick`` command and by the node's Grasp action alike: after every
+``sim.step()`` call ``update(result)``; it issues the simulation's commands itself.
+"""
+from __future__ import annotations
+
+import math
+
+from gripper_sim.core.results import StepResult
+from gripper_sim.core.simulation import Simulation
+from gripper_sim.errors import CommandError
+
+CLOSING, SQUEEZING, LIFTING, HOLDING, RELEASING, DONE = (
+    'closing', 'squeezing', 'lifting', 'holding', 'releasing', 'done')
+
+#: fraction of the target force at which closing ends
+FORCE_REACHED = 0.97
+#: time (s) the grip force is held on the table before lifting
+SETTLE_TIME = 0.2
+#: slip (m) of the fruit relative to the jaws beyond which the grasp slipped
+SLIP_TOLERANCE = 1e-3
+
+
+class GraspSequence:
+    """Args:
+        sim: the simulation to drive.
+        target_force: N, grip force to close to (> 0).
+        close_speed: m/s gap closing rate (None or 0 = configured default).
+        lift_height: m to lift after closing (>= 0).
+        hold_time: s to hold after lifting (>= 0).
+        release: lower back and open the jaws at the end.
+
+    Raises:
+        CommandError: a goal value is NaN, negative or out of range.
+    """
+
+    def __init__(self, sim: Simulation, target_force: float, close_speed: float | None = None,
+                 lift_height: float = 0.0, hold_time: float = 0.0, release: bool = False):
+        for name, value in (('lift_height', lift_height), ('hold_time', hold_time)):
+            if not math.isfinite(value) or value < 0:
+                raise CommandError(f'{name} must be finite and >= 0, got {value}')
+        self.sim = sim
+        self.start_lift = sim.gripper_state.lift
+        self.lift_height = float(lift_height)
+        self.hold_time = float(hold_time)
+        self.release = bool(release)
+        self.target_force = float(target_force)
+        sim.command_force(target_force, close_speed)
+        if lift_height > 0:
+            sim.command_lift(self.start_lift + lift_height)  # validates the range
+            sim.command_lift(self.start_lift)
+        self.phase = CLOSING
+        self.phase_start = sim.time
+        speed = sim.gripper_state.speed
+        self.closing_deadline = sim.time + 2.0 + 2.0 * sim.gripper_state.gap / speed
+        self.outcome: str | None = None
+        self.message = ''
+        self.dropped_at: float | None = None
+        self.max_grip_force = 0.0
+        self.max_compression = 0.0
+        self.max_contact_pressure = 0.0
+        self.slip_distance = 0.0
+        self.bruised = False
+        self.final_gap = sim.gripper_state.gap
+
+    @property
+    def done(self) -> bool:
+        return self.phase == DONE
+
+    def _enter(self, phase: str) -> None:
+        self.phase = phase
+        self.phase_start = self.sim.time
+
+    def _finish(self, outcome: str, message: str) -> None:
+        if self.outcome is None:
+            self.outcome, self.message = outcome, message
+        if self.release and self.phase != RELEASING and outcome != 'failed':
+            self.sim.command_lift(self.start_lift)
+            self._enter(RELEASING)
+        else:
+            self.sim.hold()
+            self._enter(DONE)
+
+    def update(self, result: StepResult) -> str:
+        """Advance the state machine after a step; returns the phase."""
+        sim = self.sim
+        self.max_grip_force = max(self.max_grip_force, result.grip_force)
+        self.max_compression = max(self.max_compression, result.deformation.compression)
+        self.max_contact_pressure = max(self.max_contact_pressure,
+                                        result.deformation.peak_contact_pressure)
+        self.bruised = self.max_contact_pressure > sim.config['fruit.bruise_pressure']
+        self.final_gap = result.gap
+        elapsed = sim.time - self.phase_start
+        gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
+        if self.phase in (LIFTING, HOLDING):
+            self.slip_distance = result.slip_distance
+            if not gripped:
+                self.dropped_at = sim.time
+                self._finish('dropped', f'the fruit dropped at t = {sim.time:.3f} s')
+                return self.phase
+        if self.phase == CLOSING:
+            if result.grip_force >= FORCE_REACHED * self.target_force:
+                self._enter(SQUEEZING)
+            elif sim.time > self.closing_deadline or result.gap <= 0.0:
+                self._finish('failed', f'the grip force did not reach {self.target_force} N '
+                             f'(reached {self.max_grip_force:.3g} N)')
+        elif self.phase == SQUEEZING:
+            if elapsed >= SETTLE_TIME:
+                if self.lift_height > 0:
+                    sim.mark_slip_reference()
+                    sim.command_lift(self.start_lift + self.lift_height)
+                    self._enter(LIFTING)
+                else:
+                    self._enter(HOLDING)
+        elif self.phase == LIFTING:
+            grip = sim.gripper_state
+            if grip.lift == grip.target_lift and grip.lift_rate == 0.0:
+                self._enter(HOLDING)
+        elif self.phase == HOLDING:
+            if elapsed >= self.hold_time - 0.5 * sim.dt:
+                if self.slip_distance > SLIP_TOLERANCE:
+                    self._finish('slipped', f'the fruit slipped {self.slip_distance * 1e3:.2f}'
+                                 ' mm relative to the jaws')
+                else:
+                    self._finish('held', 'the fruit was held')
+        elif self.phase == RELEASING:
+            grip = sim.gripper_state
+            if grip.lift == grip.target_lift and grip.lift_rate == 0.0:
+                if grip.mode != 'position' or grip.target_gap != sim.initial_gap:
+                    sim.command_open()
+                elif abs(grip.gap - sim.initial_gap) < 1e-9:
+                    self._enter(DONE)
+        return self.phase
+
+    def summary(self) -> dict:
+        """The grasp's result, with the fields of the Grasp action's result."""
+        success = self.outcome == 'held'
+        message = self.message
+        if self.bruised:
+            message += (f'; bruised: peak contact pressure {self.max_contact_pressure:.4g} Pa '
+                        f"above {self.sim.config['fruit.bruise_pressure']:.4g} Pa")
+        return dict(success=success, outcome=self.outcome or 'running',
+                    slipped=self.outcome in ('slipped', 'dropped'), bruised=self.bruised,
+                    message=message, max_grip_force=self.max_grip_force,
+                    final_gap=self.final_gap, max_compression=self.max_compression,
+                    max_contact_pressure=self.max_contact_pressure,
+                    slip_distance=self.slip_distance, dropped_at=self.dropped_at)
+
+
+def run_grasp(sim: Simulation, sequence: GraspSequence, on_step=None,
+              time_limit: float = 120.0) -> dict:
+    """Step until the sequence is done (or ``time_limit`` s of simulation); its summary."""
+    end = sim.time + time_limit
+    while not sequence.done and sim.time < end:
+        result = sim.step()
+        sequence.update(result)
+        if on_step is not None:
+            on_step(result, sequence.phase)
+    return sequence.summary()

@@ -1,0 +1,90 @@
+"""Prescribed kinematics of the two jaws and the lift, and their controllers.
+
+The jaws close symmetrically about x = 0. In position mode the gap moves towards a
+target at a rate limit; in force mode a regulator moves it so that the grip force
+(mean normal force of the two jaws) reaches a target and stays there. The lift moves
+the jaw centre height towards a target with a trapezoidal speed profile.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+
+@dataclass(frozen=True)
+class GripperState:
+    """Attributes:
+        gap: m, jaw separation.  gap_rate: m/s (negative while closing).
+        lift: m, jaw centre height.  lift_rate: m/s.
+        mode: 'position' or 'force'.
+        target_gap: m.  target_force: N.  speed: m/s gap rate limit.
+        target_lift: m.  lift_speed: m/s.
+        stiffness: N/m, the force regulator's running estimate of d force / d gap.
+        measured_force, measured_gap: N and m at the previous advance (for the estimate).
+    """
+
+    gap: float
+    gap_rate: float
+    lift: float
+    lift_rate: float
+    mode: str
+    target_gap: float
+    target_force: float
+    speed: float
+    target_lift: float
+    lift_speed: float
+    stiffness: float
+    measured_force: float = 0.0
+    measured_gap: float = float('nan')
+
+
+class GripperKinematics:
+    """Advances the jaws and lift by one step given the last measured grip force.
+
+    Args:
+        max_gap: m.  lift_acceleration: m/s^2.  force_time_constant: s.
+        initial_stiffness: N/m, first guess of the contact stiffness.
+    """
+
+    def __init__(self, max_gap: float, lift_acceleration: float, force_time_constant: float,
+                 initial_stiffness: float):
+        self.max_gap = max_gap
+        self.lift_acceleration = lift_acceleration
+        self.tau = force_time_constant
+        self.initial_stiffness = initial_stiffness
+
+    def advance(self, state: GripperState, dt: float, grip_force: float,
+                both_in_contact: bool) -> GripperState:
+        """The state after ``dt`` (s); ``grip_force`` (N) measured at the current state."""
+        stiffness = state.stiffness
+        if state.mode == 'force':
+            if both_in_contact and abs(state.gap - state.measured_gap) > 1e-9:
+                measured = -(grip_force - state.measured_force) / (state.gap - state.measured_gap)
+                if measured > 0:
+                    stiffness = min(max(0.7 * stiffness + 0.3 * measured,
+                                        1e-3 * self.initial_stiffness),
+                                    1e3 * self.initial_stiffness)
+            if grip_force <= 0.0:
+                rate = -state.speed
+            else:
+                rate = -(state.target_force - grip_force) / (stiffness * max(self.tau, dt))
+                rate = min(max(rate, -state.speed), state.speed)
+        else:
+            rate = (state.target_gap - state.gap) / dt
+            rate = min(max(rate, -state.speed), state.speed)
+        gap = min(max(state.gap + rate * dt, 0.0), self.max_gap)
+        rate = (gap - state.gap) / dt
+        lift, lift_rate = self._advance_lift(state, dt)
+        return replace(state, gap=gap, gap_rate=rate, lift=lift, lift_rate=lift_rate,
+                       stiffness=stiffness, measured_force=grip_force, measured_gap=state.gap)
+
+    def _advance_lift(self, state: GripperState, dt: float) -> tuple[float, float]:
+        distance = state.target_lift - state.lift
+        a = self.lift_acceleration
+        # fastest speed from which we can still stop at the target
+        v_stop = math.copysign(min(state.lift_speed, math.sqrt(2 * a * abs(distance))),
+                               distance)
+        rate = state.lift_rate + min(max(v_stop - state.lift_rate, -a * dt), a * dt)
+        if abs(distance) <= max(abs(rate) * dt, 1e-12):
+            return state.target_lift, 0.0
+        return state.lift + rate * dt, rate

@@ -1,0 +1,234 @@
+"""Implicit (backward) Euler time stepping solved with Newton-Raphson.
+
+One step from (q_n, v_n) over dt minimises the incremental potential
+    Phi(q) = |q - q_n - dt v_n|^2_M / (2 dt^2) + sum E(q) + D_friction(q) + D_damping(q)
+whose stationarity is backward Euler, M (v_{n+1} - v_n) / dt = F(q_{n+1}). Constrained
+degrees of freedom follow the modified mass method (Baraff & Witkin 1998): a per-node
+filter S_i (identity for free nodes, I - n n^T for a node held along its contact
+normal n, zero for a stuck node) removes them from the Newton system
+    (S K S + I - S) dq = -S g,
+and the iterate starts with them at their prescribed values (the z vector). The
+reaction an obstacle exerts on a constrained node is the residual g there.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from gripper_sim.core.energies.base import Energy
+
+#: regularisation speed (m/s) of the kinetic friction law |s| ~ sqrt(s^2 + eps^2)
+FRICTION_SMOOTHING = 1e-4
+
+
+class NewtonFailure(Exception):
+    """Newton did not converge on this step (the caller halves the step)."""
+
+    def __init__(self, message: str, history: list[float]):
+        super().__init__(message)
+        self.history = history
+
+
+@dataclass
+class StepConstraints:
+    """Per-node filters and kinetic friction of one step.
+
+    Attributes:
+        filters: (n_nodes, 2, 2) the S_i blocks.
+        friction_nodes: (k,) nodes sliding on an obstacle.
+        friction_tangents: (k, 2) unit tangents of their obstacles.
+        friction_bounds: (k,) N, mu_k times the (lagged) normal reaction.
+        friction_obstacle_speed: (k,) m/s, obstacle speed along the tangent.
+    """
+
+    filters: np.ndarray
+    friction_nodes: np.ndarray
+    friction_tangents: np.ndarray
+    friction_bounds: np.ndarray
+    friction_obstacle_speed: np.ndarray
+
+    @classmethod
+    def free(cls, n_nodes: int) -> 'StepConstraints':
+        return cls(np.tile(np.eye(2), (n_nodes, 1, 1)), np.zeros(0, np.int64),
+                   np.zeros((0, 2)), np.zeros(0), np.zeros(0))
+
+
+@dataclass
+class StepSolution:
+    """Attributes:
+        q: (n_dof,) m, positions at the end of the step.
+        reaction: (n_dof,) N, the residual without friction: the force obstacles must
+            exert on each node (only meaningful at constrained nodes).
+        iterations: Newton iterations.
+        history: infinity norms of dq / dt per iteration (m/s).
+    """
+
+    q: np.ndarray
+    reaction: np.ndarray
+    iterations: int
+    history: list
+
+
+class ImplicitEulerSolver:
+    """Args:
+        masses: (n_nodes,) kg.
+        energies: internal and external potential energies.
+        damping_mass: Rayleigh alpha (1/s).  damping_stiffness: Rayleigh beta (s),
+            applied to the Hessian of the elastic energies.
+        tolerance: m/s, stop when max |dq| / dt falls below it.
+        max_iterations: Newton iterations before NewtonFailure.
+    """
+
+    def __init__(self, masses: np.ndarray, energies: list[Energy], damping_mass: float = 0.0,
+                 damping_stiffness: float = 0.0, tolerance: float = 1e-6,
+                 max_iterations: int = 25):
+        self.m = np.repeat(np.asarray(masses, dtype=float), 2)
+        self.energies = list(energies)
+        self.alpha = damping_mass
+        self.beta = damping_stiffness
+        self.tolerance = tolerance
+        self.max_iterations = max_iterations
+        self.n = self.m.size
+
+    def _evaluate(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+        """Phi, its gradient, the gradient of the friction part, and the Hessian parts."""
+        inertia = q - q_n - dt * v_n
+        phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
+        grad = self.m * inertia / dt ** 2
+        rows, cols, vals, low_rank = [], [], [], []
+        elastic_rows, elastic_cols, elastic_vals = [], [], []
+        for energy in self.energies:
+            ev = energy.evaluate(q, hessian=hessian or self.beta > 0)
+            if not np.isfinite(ev.value):
+                return np.inf, None, None, None
+            phi += ev.value
+            grad += ev.gradient
+            if hessian or self.beta > 0:
+                rows.append(ev.rows)
+                cols.append(ev.cols)
+                vals.append(ev.vals)
+                low_rank.extend(ev.low_rank)
+                if energy.elastic:
+                    elastic_rows.append(ev.rows)
+                    elastic_cols.append(ev.cols)
+                    elastic_vals.append(ev.vals)
+        dq = q - q_n
+        if self.alpha > 0:
+            phi += 0.5 * self.alpha * float(np.sum(self.m * dq ** 2)) / dt
+            grad += self.alpha * self.m * dq / dt
+        if self.beta > 0 and elastic_rows:
+            c = sp.coo_matrix((np.concatenate(elastic_vals),
+                               (np.concatenate(elastic_rows), np.concatenate(elastic_cols))),
+                              shape=(self.n, self.n)).tocsr()
+            cdq = c @ dq
+            phi += 0.5 * self.beta * float(dq @ cdq) / dt
+            grad += self.beta * cdq / dt
+        fric_grad = np.zeros(self.n)
+        fric_diag = None
+        k = con.friction_nodes
+        if k.size:
+            x = q.reshape(-1, 2)[k]
+            x_n = q_n.reshape(-1, 2)[k]
+            s = np.sum((x - x_n) * con.friction_tangents, axis=1) / dt - \
+                con.friction_obstacle_speed
+            root = np.sqrt(s ** 2 + FRICTION_SMOOTHING ** 2)
+            phi += float(np.sum(con.friction_bounds * dt * root))
+            local = (con.friction_bounds * s / root)[:, None] * con.friction_tangents
+            np.add.at(fric_grad, 2 * k, local[:, 0])
+            np.add.at(fric_grad, 2 * k + 1, local[:, 1])
+            grad += fric_grad
+            fric_diag = (con.friction_bounds * FRICTION_SMOOTHING ** 2 / root ** 3 / dt)
+        if not hessian:
+            return phi, grad, fric_grad, None
+        diag = self.m / dt ** 2 + (self.alpha * self.m / dt if self.alpha > 0 else 0.0)
+        all_rows = np.concatenate(rows + [np.arange(self.n)])
+        all_cols = np.concatenate(cols + [np.arange(self.n)])
+        all_vals = np.concatenate(vals + [np.broadcast_to(diag, (self.n,))])
+        if self.beta > 0 and elastic_rows:
+            all_rows = np.concatenate([all_rows] + elastic_rows)
+            all_cols = np.concatenate([all_cols] + elastic_cols)
+            all_vals = np.concatenate([all_vals] + [self.beta / dt * v for v in elastic_vals])
+        if k.size:
+            t = con.friction_tangents
+            blocks = fric_diag[:, None, None] * t[:, :, None] * t[:, None, :]
+            dofs = np.stack([2 * k, 2 * k + 1], axis=1)
+            all_rows = np.concatenate([all_rows, np.repeat(dofs, 2, axis=1).ravel()])
+            all_cols = np.concatenate([all_cols, np.tile(dofs, (1, 2)).ravel()])
+            all_vals = np.concatenate([all_vals, blocks.ravel()])
+        hess = sp.csc_matrix((all_vals, (all_rows, all_cols)), shape=(self.n, self.n))
+        return phi, grad, fric_grad, (hess, low_rank)
+
+    def _filter_matrix(self, filters: np.ndarray) -> sp.csc_matrix:
+        n_nodes = filters.shape[0]
+        base = 2 * np.arange(n_nodes)
+        rows = np.stack([base, base, base + 1, base + 1], axis=1).ravel()
+        cols = np.stack([base, base + 1, base, base + 1], axis=1).ravel()
+        return sp.csc_matrix((filters.reshape(-1), (rows, cols)), shape=(self.n, self.n))
+
+    def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
+              con: StepConstraints) -> StepSolution:
+        """Newton iterations from ``q_start`` (constrained dofs already at their targets).
+
+        Raises:
+            NewtonFailure: no convergence within ``max_iterations``, or no descent.
+        """
+        s = self._filter_matrix(con.filters)
+        eye = sp.identity(self.n, format='csc')
+        complement = eye - s
+        q = q_start.copy()
+        history: list[float] = []
+        phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=True)
+        if not np.isfinite(phi):
+            raise NewtonFailure('start of step is infeasible (inverted element)', history)
+        for iteration in range(1, self.max_iterations + 1):
+            hess, low_rank = parts
+            g_f = s @ grad
+            a = (s @ hess @ s + complement).tocsc()
+            try:
+                dq = _solve_with_low_rank(a, -g_f, [(c, s @ u) for c, u in low_rank])
+            except RuntimeError as err:  # singular factor
+                raise NewtonFailure(f'singular Newton matrix: {err}', history) from err
+            slope = float(g_f @ dq)
+            if not np.all(np.isfinite(dq)) or slope > 0:
+                raise NewtonFailure('Newton direction is not a descent direction', history)
+            step = 1.0
+            residual = float(np.max(np.abs(g_f)))
+            if float(np.max(np.abs(dq))) / dt < self.tolerance:
+                q = q + dq
+                _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con, hessian=False)
+                history.append(float(np.max(np.abs(dq))) / dt)
+                return StepSolution(q, grad - fric_grad, iteration, history)
+            for _ in range(30):
+                trial = q + step * dq
+                phi_trial, grad_t, _, _ = self._evaluate(trial, q_n, v_n, dt, con, hessian=False)
+                if np.isfinite(phi_trial) and (
+                        phi_trial <= phi + 1e-4 * step * slope
+                        or float(np.max(np.abs(s @ grad_t))) < 0.5 * residual):
+                    break
+                step *= 0.5
+            else:
+                raise NewtonFailure('line search failed', history)
+            q, phi, grad = trial, phi_trial, grad_t
+            norm = float(np.max(np.abs(step * dq))) / dt
+            history.append(norm)
+            if norm < self.tolerance:
+                _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con, hessian=False)
+                return StepSolution(q, grad - fric_grad, iteration, history)
+            phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=True)
+        raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
+
+
+def _solve_with_low_rank(a: sp.csc_matrix, rhs: np.ndarray, low_rank) -> np.ndarray:
+    """Solve (A + sum c u u^T) x = rhs by one sparse LU and the Woodbury identity."""
+    lu = spla.splu(a)
+    x = lu.solve(rhs)
+    if not low_rank:
+        return x
+    u = np.stack([vec for _, vec in low_rank], axis=1)
+    c = np.array([coef for coef, _ in low_rank])
+    a_inv_u = lu.solve(u) if u.shape[1] > 1 else lu.solve(u[:, 0])[:, None]
+    small = np.diag(1.0 / c) + u.T @ a_inv_u
+    return x - a_inv_u @ np.linalg.solve(small, u.T @ x)
