@@ -212,7 +212,7 @@ def jaw_normal_forces(result: StepResult) -> tuple[float, float]:
     outward_left = -1.0 if _left_is_negative(result) else 1.0
     left = float(result.left_wrench.force[0]) * outward_left
     right = float(result.right_wrench.force[0]) * -outward_left
-    return left, right
+    return left + 0.0, right + 0.0   # + 0.0: no negative zero
 
 
 def point_cloud(result: StepResult, header: Header) -> PointCloud2:
@@ -299,7 +299,7 @@ def joint_state(result: StepResult, context: MessageContext, stamp: Time) -> Joi
     else:
         left_pos, right_pos = result.left_jaw_x - centre, centre - result.right_jaw_x
     left_force, right_force = jaw_normal_forces(result)
-    load = -float(result.left_wrench.force[2] + result.right_wrench.force[2])
+    load = -float(result.left_wrench.force[2] + result.right_wrench.force[2]) + 0.0
     msg = JointState()
     msg.header = Header(stamp=stamp, frame_id='')
     msg.name = list(JOINT_NAMES)

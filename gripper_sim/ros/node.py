@@ -1,0 +1,480 @@
+"""The ``gripper_sim`` node: a thin ROS 2 adapter around ``gripper_sim.core.Simulation``.
+
+Physics runs in its own thread at the configured dt, paced to ``real_time_factor``
+(0 = as fast as possible), and publishes every ``1 / publish_rate`` s of sim time.
+Callbacks only validate and enqueue: a command takes effect on the next physics step.
+One lock guards the simulation; action servers hook in as step listeners.
+
+See the README section "ROS interface" for every topic, service, action and parameter.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import threading
+import time
+from collections import deque
+from typing import Any, Callable
+
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool, Trigger
+
+from gripper_sim_interfaces.srv import Step
+
+from gripper_sim.core.results import StepResult
+from gripper_sim.core.simulation import Simulation
+from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
+from gripper_sim.ros import messages
+from gripper_sim.ros.messages import MessageContext, build_messages
+from gripper_sim.ros.params import PHYSICS_PREFIX, SimParameters, physics_changes
+
+NODE_NAME = 'gripper_sim'
+MAX_STEPS_PER_REQUEST = 1_000_000
+# Falling further behind real time than this re-anchors the pacing instead of racing.
+MAX_LAG = 0.25   # s of wall time
+
+
+def command_problem(value: float, what: str, unit: str, allow_negative: bool = False
+                    ) -> str | None:
+    """Why a commanded value is unusable, or None (finite, and >= 0 unless allowed)."""
+    if not isinstance(value, (int, float)) or not math.isfinite(value):
+        return f'{what} must be a finite number of {unit}, got {value}'
+    if value < 0 and not allow_negative:
+        return f'{what} must not be negative, got {value} {unit}'
+    return None
+
+
+class JawOwner:
+    """What an action that drives the jaws implements so the node can stop it."""
+
+    kind = 'action'
+
+    def abort(self, reason: str) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class SimNode(Node):
+    """The simulator node.
+
+    Args:
+        fruit, config_file: take precedence over the parameters of the same name.
+        simulation_factory: builds the simulation from the flat configuration.
+        start: start the physics thread (tests may drive ``advance`` by hand).
+        **kwargs: passed to ``rclpy.node.Node`` (e.g. ``parameter_overrides``).
+
+    Raises:
+        ConfigError: a parameter or the configuration is invalid.
+    """
+
+    def __init__(self, *, fruit: str | None = None, config_file: str | None = None,
+                 simulation_factory: Callable[[dict], Any] = Simulation, start: bool = True,
+                 **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self.params = SimParameters(self, fruit=fruit, config_file=config_file)
+        self.lock = threading.RLock()
+        self.sim = simulation_factory(dict(self.params.config))
+        self.message_context = MessageContext.from_config(self.params.config, initial=self.sim.last)
+        self._commands: deque[tuple[str, Callable[[], None]]] = deque()
+        self._step_listeners: list[Callable[[StepResult], None]] = []
+        self._observers: list[Callable[[StepResult], None]] = []
+        self._publish_observers: list[Callable[[dict, int], None]] = []
+        self._jaw_owner: JawOwner | None = None
+        self._owner_guard = threading.Lock()
+        self._paused = False
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._rtf = float(self.params.get('real_time_factor'))
+        self._publish_clock = bool(self.params.get('publish_clock'))
+        self._publish_every = 1
+        self._set_publish_rate(float(self.params.get('publish_rate')))
+        self._anchor = (time.monotonic(), self.sim.time)
+        self.failures = 0
+        self.steps_taken = 0
+        self.publish_count = 0
+        self.params.on_change(self._on_parameters_changed)
+        self.add_on_set_parameters_callback(self._check_runtime_physics)
+
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self._topic_publishers = {
+            suffix: self.create_publisher(messages.MESSAGE_CLASSES[suffix], name,
+                                          1 if suffix == 'clock' else qos)
+            for suffix, (name, _) in messages.TOPICS.items()}
+
+        commands = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(Float64, '~/jaw/gap_command', self._on_gap, qos,
+                                 callback_group=commands)
+        self.create_subscription(Float64, '~/jaw/force_command', self._on_force, qos,
+                                 callback_group=commands)
+        self.create_subscription(Float64, '~/lift/command', self._on_lift, qos,
+                                 callback_group=commands)
+        services = MutuallyExclusiveCallbackGroup()
+        self.create_service(Trigger, '~/reset', self._on_reset, callback_group=services)
+        self.create_service(SetBool, '~/pause', self._on_pause, callback_group=services)
+        self.create_service(Step, '~/step', self._on_step, callback_group=services)
+        self.create_service(Trigger, '~/jaw/open', self._on_open, callback_group=services)
+
+        # Imported here: the servers import this module for JawOwner.
+        from gripper_sim.ros.grasp_server import GraspServer
+        from gripper_sim.ros.gripper_command_server import GripperCommandServer
+        self.grasp_server = GraspServer(self)
+        self.gripper_command_server = GripperCommandServer(self)
+
+        config = self.params.config
+        self.get_logger().info(
+            f"ready: fruit '{config['fruit.name']}' ({config['fruit.model']} model, "
+            f"{config['fruit.nodes']} nodes), dt {self.sim.dt:g} s, publishing every "
+            f'{self._publish_every} steps ({1.0 / (self._publish_every * self.sim.dt):g} Hz '
+            f'sim time), real-time factor {self._rtf:g}')
+        self._publish(self.sim.last)
+        self._thread = threading.Thread(target=self._run, name='physics', daemon=True)
+        if start:
+            self._thread.start()
+
+    # ------------------------------------------------------------------ hooks
+    def add_observer(self, callback: Callable[[StepResult], None]) -> None:
+        """Call ``callback(result)`` after every physics step (physics thread).
+
+        The hook for in-node recording; keep it fast, it runs in the physics loop.
+        """
+        self._observers.append(callback)
+
+    def add_publish_observer(self, callback: Callable[[dict, int], None]) -> None:
+        """Call ``callback({suffix: msg}, stamp_ns)`` with every batch the node publishes."""
+        self._publish_observers.append(callback)
+
+    def add_step_listener(self, callback: Callable[[StepResult], None]) -> None:
+        """Call ``callback(result)`` after every step, under ``lock`` (actions)."""
+        with self.lock:
+            self._step_listeners.append(callback)
+
+    def remove_step_listener(self, callback: Callable[[StepResult], None]) -> None:
+        with self.lock:
+            if callback in self._step_listeners:
+                self._step_listeners.remove(callback)
+
+    def claim_jaws(self, owner: JawOwner, preempt_kind: str | None = None) -> str | None:
+        """Make ``owner`` the only driver of the jaws; the reason it cannot, or None.
+
+        An active owner of kind ``preempt_kind`` is aborted (preempted) instead.
+        """
+        with self._owner_guard:
+            current = self._jaw_owner
+            if current is not None:
+                if preempt_kind is None or current.kind != preempt_kind:
+                    return f'a {current.kind} goal is already driving the jaws'
+                current.abort(f'preempted by a new {owner.kind} goal')
+            self._jaw_owner = owner
+            return None
+
+    def release_jaws(self, owner: JawOwner) -> None:
+        with self._owner_guard:
+            if self._jaw_owner is owner:
+                self._jaw_owner = None
+
+    @property
+    def jaw_owner(self) -> JawOwner | None:
+        return self._jaw_owner
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    def hold_jaws(self) -> None:
+        """Stop the jaws and the lift where they are (call with ``lock`` held)."""
+        last = self.sim.last
+        try:
+            if hasattr(self.sim, 'hold'):
+                self.sim.hold()
+            else:
+                self.sim.command_gap(float(last.gap))
+            self.sim.command_lift(float(last.lift))
+        except CommandError as err:
+            self.get_logger().warning(f'could not hold the jaws in place: {err}')
+
+    def enqueue(self, description: str, command: Callable[[], None]) -> None:
+        """Run ``command()`` in the physics thread before the next step."""
+        self._commands.append((description, command))
+        self._wake.set()
+
+    # --------------------------------------------------------------- physics
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            if self._paused:
+                self._wake.wait(0.5)
+                self._wake.clear()
+                continue
+            try:
+                self.advance()
+            except Exception as err:   # never let the physics thread die silently
+                self.get_logger().error(f'physics step raised {type(err).__name__}: {err}; '
+                                        'resetting the simulation')
+                self._recover(f'{type(err).__name__}: {err}')
+                continue
+            rtf = self._rtf
+            if rtf <= 0.0:
+                continue
+            wall0, sim0 = self._anchor
+            delay = wall0 + (self.sim.time - sim0) / rtf - time.monotonic()
+            if delay > 0.002:
+                self._wake.wait(delay)
+                self._wake.clear()
+            elif delay < -MAX_LAG:
+                self._anchor = (time.monotonic(), self.sim.time)
+
+    def advance(self) -> StepResult | None:
+        """Apply queued commands and take one physics step; None if the step failed."""
+        batch = None
+        with self.lock:
+            self._apply_commands()
+            try:
+                result = self.sim.step()
+            except ConvergenceError as err:
+                self._recover(f'solver did not converge at t = {self.sim.time:.4f} s: {err}')
+                return None
+            if not messages.result_is_finite(result):
+                self._recover(f'step produced non-finite values at t = {result.time:.4f} s')
+                return None
+            self.steps_taken += 1
+            self.message_context.observe(result)
+            for listener in list(self._step_listeners):
+                listener(result)
+            if result.step % self._publish_every == 0:
+                batch = result
+        for observer in self._observers:
+            observer(result)
+        if batch is not None:
+            self._publish(batch)
+        return result
+
+    def _apply_commands(self) -> None:
+        while self._commands:
+            description, command = self._commands.popleft()
+            try:
+                command()
+            except (CommandError, ConfigError) as err:
+                self.get_logger().warning(f'{description} rejected: {err}')
+
+    def _recover(self, reason: str) -> None:
+        """Log a failed step, abort the goals, reset: nothing non-finite is published."""
+        self.failures += 1
+        self.get_logger().error(f'{reason}; nothing was published for this step. '
+                                'Recovering: resetting the simulation to t = 0 and '
+                                'aborting the active goal')
+        self._reset(f'the simulation was reset after a failed step ({reason})')
+
+    def _reset(self, reason: str) -> None:
+        with self._owner_guard:
+            owner = self._jaw_owner
+        if owner is not None:
+            owner.abort(reason)
+        with self.lock:
+            self._commands.clear()
+            self.sim.reset()
+            self.message_context.reset()
+            self._anchor = (time.monotonic(), self.sim.time)
+            initial = self.sim.last
+        self._publish(initial)
+
+    def _publish(self, result: StepResult) -> None:
+        stamp = messages.time_msg(result.time)
+        wanted = [suffix for suffix, pub in self._topic_publishers.items()
+                  if (suffix != 'clock' or self._publish_clock)
+                  and (self._publish_observers or pub.get_subscription_count() > 0)]
+        if not wanted:
+            return
+        batch = build_messages(result, self.message_context, stamp, topics=wanted)
+        for suffix, msg in batch.items():
+            self._topic_publishers[suffix].publish(msg)
+        self.publish_count += 1
+        if self._publish_observers:
+            ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+            for observer in self._publish_observers:
+                observer(batch, ns)
+
+    # ------------------------------------------------------------ parameters
+    def _set_publish_rate(self, rate: float) -> None:
+        self._publish_every = max(1, int(round(1.0 / (rate * self.sim.dt))))
+
+    def _check_runtime_physics(self, parameters):
+        from rcl_interfaces.msg import SetParametersResult
+        changes = physics_changes({p.name: p.value for p in parameters})
+        if changes and not hasattr(self.sim, 'set_parameter'):
+            reason = (f"this simulation core cannot change {', '.join(sorted(changes))} "
+                      'while running; set it at start-up')
+            self.get_logger().warning(f'parameter change rejected: {reason}')
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _on_parameters_changed(self, changes: dict[str, Any]) -> None:
+        if 'publish_rate' in changes:
+            self._set_publish_rate(float(changes['publish_rate']))
+        if 'real_time_factor' in changes:
+            self._rtf = float(changes['real_time_factor'])
+            self._anchor = (time.monotonic(), self.sim.time)
+            self._wake.set()
+        if 'publish_clock' in changes:
+            self._publish_clock = bool(changes['publish_clock'])
+        physics = physics_changes(changes)
+        for key, value in physics.items():
+            self.enqueue(f'parameter change {PHYSICS_PREFIX}{key} = {value}',
+                         lambda key=key, value=value: self.sim.set_parameter(key, value))
+        self.get_logger().info(f'parameters changed: {changes}')
+
+    def set_parameters(self, parameter_list):
+        results = super().set_parameters(parameter_list)
+        self._log_rejections(parameter_list, results)
+        return results
+
+    def set_parameters_atomically(self, parameter_list):
+        result = super().set_parameters_atomically(parameter_list)
+        self._log_rejections(parameter_list, [result] * len(parameter_list))
+        return result
+
+    def _log_rejections(self, parameter_list, results) -> None:
+        logged = set()
+        for parameter, result in zip(parameter_list, results):
+            if not result.successful and result.reason not in logged:
+                logged.add(result.reason)
+                if not result.reason.startswith(('parameter ', 'this simulation core')):
+                    # rclpy's own checks (range, type, read-only) are not logged by it
+                    self.get_logger().warning(
+                        f"parameter change of '{parameter.name}' rejected: {result.reason}")
+
+    # ---------------------------------------------------------------- topics
+    def _jaw_command(self, description: str, value: float, unit: str,
+                     command: Callable[[float], None], allow_negative: bool = False) -> None:
+        problem = command_problem(value, description, unit, allow_negative)
+        if problem is None and self._jaw_owner is not None:
+            problem = (f'{description} ignored: a {self._jaw_owner.kind} goal is driving the '
+                       'jaws (cancel it first)')
+        if problem is not None:
+            self.get_logger().warning(f'rejected: {problem}')
+            return
+        self.enqueue(f'{description} {value:g} {unit}', lambda: command(value))
+
+    def _on_gap(self, msg: Float64) -> None:
+        self._jaw_command('gap command', msg.data, 'm', self.sim.command_gap)
+
+    def _on_force(self, msg: Float64) -> None:
+        self._jaw_command('force command', msg.data, 'N', self.sim.command_force)
+
+    def _on_lift(self, msg: Float64) -> None:
+        self._jaw_command('lift command', msg.data, 'm', self.sim.command_lift,
+                          allow_negative=True)
+
+    # -------------------------------------------------------------- services
+    def _on_reset(self, request, response):
+        self._reset('the simulation was reset (~/reset)')
+        response.success = True
+        response.message = 'simulation reset to t = 0'
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_pause(self, request, response):
+        self._paused = bool(request.data)
+        if not self._paused:
+            self._anchor = (time.monotonic(), self.sim.time)
+        self._wake.set()
+        response.success = True
+        state = 'paused' if self._paused else 'running'
+        response.message = f'{state} at t = {self.sim.time:.6f} s'
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_step(self, request, response):
+        if not self._paused:
+            response.success = False
+            response.message = 'refused: the simulation is running; pause it first (~/pause)'
+        elif request.steps < 1 or request.steps > MAX_STEPS_PER_REQUEST:
+            response.success = False
+            response.message = (f'refused: steps must be in [1, {MAX_STEPS_PER_REQUEST}], '
+                                f'got {request.steps}')
+        else:
+            response.success = True
+            response.message = f'advanced {request.steps} steps'
+            for done in range(request.steps):
+                if self.advance() is None:
+                    response.success = False
+                    response.message = (f'step {done + 1} of {request.steps} failed; the '
+                                        'simulation was reset (see the log)')
+                    break
+        if not response.success:
+            self.get_logger().warning(f'step request {response.message}')
+        response.sim_time = float(self.sim.time)
+        return response
+
+    def _on_open(self, request, response):
+        if self._jaw_owner is not None:
+            response.success = False
+            response.message = (f'refused: a {self._jaw_owner.kind} goal is driving the '
+                                'jaws (cancel it first)')
+            self.get_logger().warning(f'open request {response.message}')
+        else:
+            self.enqueue('open command', self.sim.command_open)
+            response.success = True
+            response.message = 'opening the jaws to the initial gap'
+        return response
+
+    # ------------------------------------------------------------- lifecycle
+    def stop(self) -> None:
+        """Stop the physics thread and abort the active goal."""
+        self._stop.set()
+        self._wake.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+        with self._owner_guard:
+            owner = self._jaw_owner
+        if owner is not None:
+            owner.abort('the simulator is shutting down')
+
+    def destroy_node(self):
+        self.stop()
+        return super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the node: console script ``sim_node``, ``gripper-sim node``, ``python -m``.
+
+    Args:
+        args: the full command line (default ``sys.argv``): ``[--fruit NAME]
+            [--config FILE] [--ros-args ...]``; the two options take precedence over
+            the ``fruit`` and ``config_file`` parameters.
+
+    Returns:
+        0 after a clean shutdown, 2 if the configuration or a parameter is invalid.
+    """
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    argv = list(sys.argv if args is None else args)
+    parser = argparse.ArgumentParser(prog='sim_node', description='The gripper_sim node.')
+    parser.add_argument('--fruit', help='fruit preset name')
+    parser.add_argument('--config', help='YAML configuration file')
+    options = parser.parse_args(remove_ros_args(argv)[1:])
+    rclpy.init(args=argv)
+    node = None
+    try:
+        try:
+            node = SimNode(fruit=options.fruit, config_file=options.config)
+        except ConfigError as err:
+            rclpy.logging.get_logger(NODE_NAME).error(f'cannot start: {err}')
+            return 2
+        executor = MultiThreadedExecutor(num_threads=4)
+        rclpy.spin(node, executor=executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

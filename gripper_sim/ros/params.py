@@ -1,0 +1,258 @@
+"""Parameters of the ``gripper_sim`` node: declarations, descriptors, validation.
+
+Every physics configuration key of ``gripper_sim.configuration.SCHEMA`` is a parameter
+named ``physics.<key>`` (in a parameters file: ``physics: {fruit: {nodes: 96}}``),
+declared with its unit, range and description. Structural keys are read-only (they
+shape the model: set them at start-up with ``--ros-args -p`` or ``--params-file``);
+the keys in ``DYNAMIC_PHYSICS_KEYS`` can change while the node runs. The node's own
+parameters are in ``NODE_PARAMETERS``.
+
+Start-up precedence: embedded defaults < ``fruit`` preset < ``config_file`` <
+``physics.*`` parameter overrides. A value out of range, at start-up or later, is
+rejected with a reason naming the parameter, its range and its unit.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from gripper_sim import configuration
+from gripper_sim.errors import ConfigError
+
+PHYSICS_PREFIX = 'physics.'
+
+# Physics keys that may change while the node runs (the rest are read-only): the
+# ones the core can change between steps.
+try:
+    from gripper_sim.core.simulation import DYNAMIC_KEYS as DYNAMIC_PHYSICS_KEYS
+except ImportError:   # a core without run-time changes: friction is what users tune
+    DYNAMIC_PHYSICS_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction',
+                            'contact.table.static_friction',
+                            'contact.table.kinetic_friction')
+
+
+@dataclass(frozen=True)
+class NodeParameter:
+    """One parameter of the node itself (not a physics key)."""
+
+    name: str
+    default: Any
+    unit: str
+    description: str
+    low: float | None = None
+    high: float | None = None
+    read_only: bool = False
+    open_low: bool = False
+
+
+NODE_PARAMETERS: tuple[NodeParameter, ...] = (
+    NodeParameter('fruit', '', '-', "fruit preset name ('' = the default fruit, or the "
+                  'one the config file names)', read_only=True),
+    NodeParameter('config_file', '', '-', "YAML configuration file ('' = none); merged "
+                  'after the fruit preset', read_only=True),
+    NodeParameter('publish_rate', 100.0, 'Hz', 'state publishing rate, in sim time',
+                  0.0, 1000.0, open_low=True),
+    NodeParameter('real_time_factor', 1.0, '', 'sim seconds per wall second; 0 = as fast '
+                  'as possible', 0.0, 1000.0),
+    NodeParameter('publish_clock', True, '-', 'publish /clock (sim time) at publish_rate'),
+    NodeParameter('max_effort', 10.0, 'N', 'GripperCommand: force limit used when a goal '
+                  'has max_effort 0', 0.0, 1e5, open_low=True),
+    NodeParameter('goal_tolerance', 0.001, 'm', 'GripperCommand: the goal is reached when '
+                  '|gap - position| is below this', 0.0, 0.1, open_low=True),
+    NodeParameter('allow_stalling', False, '-', 'GripperCommand: a stall ends the goal '
+                  'with success (true) or abort (false)'),
+    NodeParameter('stall_velocity_threshold', 0.001, 'm/s', 'GripperCommand: a stall '
+                  'is a mean gap rate below this over stall_timeout', 0.0, 1.0,
+                  open_low=True),
+    NodeParameter('stall_timeout', 1.0, 's', 'GripperCommand: stall window, sim time',
+                  0.0, 60.0, open_low=True),
+)
+
+
+def _range_text(low, high, unit, open_low=False) -> str:
+    unit = f' {unit}' if unit not in ('', '-') else ''
+    lower = '(' if open_low else '['
+    return f'{lower}{low}, {high}]{unit}'
+
+
+def _descriptor(name: str, value: Any, description: str, unit: str, low=None, high=None,
+                read_only=False, open_low=False) -> ParameterDescriptor:
+    text = description
+    if unit not in ('', '-'):
+        text += f' [{unit}]'
+    if low is not None and high is not None:
+        text += f'; range {_range_text(low, high, unit, open_low)}'
+    descriptor = ParameterDescriptor(name=name, description=text, read_only=read_only)
+    if isinstance(value, bool) or low is None or high is None:
+        return descriptor
+    if isinstance(value, int):
+        descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high),
+                                                 step=1)]
+    else:
+        descriptor.floating_point_range = [FloatingPointRange(
+            from_value=float(low), to_value=float(high), step=0.0)]
+    return descriptor
+
+
+_KIND_TYPES = {
+    'float': Parameter.Type.DOUBLE,
+    'int': Parameter.Type.INTEGER,
+    'bool': Parameter.Type.BOOL,
+    'str': Parameter.Type.STRING,
+}
+
+
+def physics_descriptor(key: str) -> ParameterDescriptor:
+    """Descriptor of parameter ``physics.<key>`` from the configuration schema."""
+    spec = configuration.SCHEMA[key]
+    description = spec.description
+    if spec.nullable:
+        description += ' (leave unset to derive it)'
+    if spec.choices:
+        description += f" (one of: {', '.join(spec.choices)})"
+    sample = {'float': 0.0, 'int': 0, 'bool': False, 'str': ''}[spec.kind]
+    return _descriptor(PHYSICS_PREFIX + key, sample, description, spec.unit, spec.low,
+                       spec.high, read_only=key not in DYNAMIC_PHYSICS_KEYS,
+                       open_low=spec.open_low)
+
+
+def _physics_names(text: str) -> str:
+    """A configuration error message in terms of ``physics.*`` parameter names."""
+    text = text.replace('config key ', 'parameter ')
+    for key in configuration.SCHEMA:
+        text = text.replace(f"'{key}'", f"'{PHYSICS_PREFIX}{key}'")
+    return text
+
+
+def _node_range_problem(name: str, value: Any) -> str | None:
+    """Open lower bounds, which a ParameterDescriptor range cannot express."""
+    for spec in NODE_PARAMETERS:
+        if spec.name == name and spec.open_low and isinstance(value, (int, float)) \
+                and not isinstance(value, bool) and value <= spec.low:
+            return (f"parameter '{name}' = {value} is out of range: it must be in "
+                    f'{_range_text(spec.low, spec.high, spec.unit, True)}')
+    return None
+
+
+def _finite_problem(name: str, value: Any) -> str | None:
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"parameter '{name}' must be finite, got {value}"
+    return None
+
+
+class SimParameters:
+    """Declares the node's parameters, builds the physics configuration, validates changes.
+
+    Args:
+        node: the node to declare on.
+        fruit, config_file: values that take precedence over the parameters of the same
+            name (the ``gripper-sim node --fruit/--config`` options).
+
+    Attributes:
+        config: the validated flat physics configuration in use.
+
+    Raises:
+        ConfigError: the fruit, file or a ``physics.*`` override is invalid (the
+            message names the key, its range and unit).
+    """
+
+    def __init__(self, node: Node, fruit: str | None = None, config_file: str | None = None):
+        self._node = node
+        self._listeners: list[Callable[[dict[str, Any]], None]] = []
+        for spec in NODE_PARAMETERS:
+            self._declare_checked(spec.name, spec.default, _descriptor(
+                spec.name, spec.default, spec.description, spec.unit, spec.low, spec.high,
+                spec.read_only, spec.open_low), spec.unit, spec.low, spec.high)
+        fruit = fruit or node.get_parameter('fruit').value or None
+        config_file = config_file or node.get_parameter('config_file').value or None
+        base = configuration.load_config(fruit=fruit, config_file=config_file)
+        overrides: dict[str, Any] = {}
+        for key, spec in configuration.SCHEMA.items():
+            name = PHYSICS_PREFIX + key
+            default = base[key]
+            descriptor = physics_descriptor(key)
+            if default is None:
+                value = self._declare_checked(name, _KIND_TYPES[spec.kind], descriptor,
+                                              spec.unit, spec.low, spec.high)
+            else:
+                value = self._declare_checked(name, default, descriptor, spec.unit,
+                                              spec.low, spec.high)
+            if value is not None and value != default:
+                overrides[key] = value
+        self.config = configuration.load_config(fruit=fruit, config_file=config_file,
+                                                overrides=overrides)
+        self.fruit = fruit or configuration.DEFAULT_FRUIT
+        node.add_on_set_parameters_callback(self._validate)
+        node.add_post_set_parameters_callback(self._applied)
+
+    def _declare_checked(self, name, value, descriptor, unit, low, high):
+        try:
+            parameter = self._node.declare_parameter(name, value, descriptor)
+        except Exception as err:   # rclpy: InvalidParameterValue / InvalidParameterType
+            given = getattr(self._node, '_parameter_overrides', {}).get(name)
+            shown = given.value if given is not None else value
+            bounds = (f': it must be in {_range_text(low, high, unit)}'
+                      if low is not None and high is not None else '')
+            raise ConfigError(f"parameter '{name}' = {shown!r} is invalid{bounds} "
+                              f'({type(err).__name__})') from err
+        value = parameter.value
+        problem = _finite_problem(name, value) or _node_range_problem(name, value)
+        if problem:
+            raise ConfigError(problem)
+        return value
+
+    def get(self, name: str) -> Any:
+        """Current value of node parameter ``name``."""
+        return self._node.get_parameter(name).value
+
+    def on_change(self, listener: Callable[[dict[str, Any]], None]) -> None:
+        """Call ``listener({name: value})`` after accepted parameter changes."""
+        self._listeners.append(listener)
+
+    def _validate(self, parameters: list[Parameter]) -> SetParametersResult:
+        candidate = dict(self.config)
+        for parameter in parameters:
+            name, value = parameter.name, parameter.value
+            problem = _finite_problem(name, value) or _node_range_problem(name, value)
+            if problem:
+                return self._reject(problem)
+            if name.startswith(PHYSICS_PREFIX):
+                key = name[len(PHYSICS_PREFIX):]
+                if key in configuration.SCHEMA:
+                    if parameter.type_ == Parameter.Type.NOT_SET:
+                        return self._reject(f"parameter '{name}' cannot be unset")
+                    candidate[key] = value
+        try:
+            configuration.validate(candidate)
+        except ConfigError as err:
+            return self._reject(_physics_names(str(err)))
+        return SetParametersResult(successful=True)
+
+    def _reject(self, reason: str) -> SetParametersResult:
+        self._node.get_logger().warning(f'parameter change rejected: {reason}')
+        return SetParametersResult(successful=False, reason=reason)
+
+    def _applied(self, parameters: list[Parameter]) -> None:
+        changes: dict[str, Any] = {}
+        for parameter in parameters:
+            if parameter.name.startswith(PHYSICS_PREFIX):
+                key = parameter.name[len(PHYSICS_PREFIX):]
+                if key in configuration.SCHEMA:
+                    self.config[key] = parameter.value
+            changes[parameter.name] = parameter.value
+        for listener in self._listeners:
+            listener(changes)
+
+
+def physics_changes(changes: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``physics.*`` entries of ``changes`` as ``{config key: value}``."""
+    return {name[len(PHYSICS_PREFIX):]: value for name, value in changes.items()
+            if name.startswith(PHYSICS_PREFIX)}
+
+
