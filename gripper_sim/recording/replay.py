@@ -1,0 +1,225 @@
+"""Replay: republish the raw messages of a recording with their original timing and QoS.
+
+Messages go out in log-time order, the n-th at ``start + (log_time - t0) / rate`` of
+the wall clock, as the CDR bytes that were recorded (no deserialization). Each topic's
+publisher offers the QoS its recorded publishers offered (see ``qos.adapt_for_replay``).
+With ``clock_hz``, ``/clock`` carries the recording's time so that nodes running with
+``use_sim_time`` follow the replay (a recorded ``/clock`` topic is then not replayed).
+"""
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
+
+from gripper_sim.recording import qos as qos_mod
+from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.reader import BagReader
+from gripper_sim.recording.recorder import import_message_class
+
+CLOCK_TOPIC = '/clock'
+PUBLISHER_DEPTH = 100
+
+
+@dataclass
+class ReplayStats:
+    messages: int = 0
+    loops: int = 0
+    per_topic: dict = field(default_factory=dict)
+    clock_messages: int = 0
+    wall_time: float = 0.0
+    max_lateness: float = 0.0  # s, worst delay of a publish behind its schedule
+
+
+class Player:
+    """Publishes a recording on ``node``.
+
+    Args:
+        node: an rclpy node to create the publishers on.
+        bag: an open ``BagReader``.
+        rate: speed factor (2 = twice as fast).
+        topics: topics to replay (None = all that can be).
+        start: s of the recording to skip.
+        clock_hz: publish ``/clock`` at this rate (None = not).
+        remaps: ``{recorded topic: published topic}``.
+    """
+
+    def __init__(self, node: Any, bag: BagReader, *, rate: float = 1.0,
+                 topics: Iterable[str] | None = None, start: float = 0.0,
+                 clock_hz: float | None = None, remaps: Mapping[str, str] | None = None):
+        if not rate > 0:
+            raise RecordingError(f'rate must be positive, got {rate}')
+        if start < 0:
+            raise RecordingError(f'start must not be negative, got {start}')
+        if clock_hz is not None and not clock_hz > 0:
+            raise RecordingError(f'clock rate must be positive, got {clock_hz}')
+        self.node = node
+        self.bag = bag
+        self.rate = float(rate)
+        self.clock_hz = clock_hz
+        self.stats = ReplayStats()
+        self.stop = threading.Event()
+        remaps = dict(remaps or {})
+        explicit = topics is not None
+        selected = bag.check_topics(topics) or list(bag.topics)
+        unknown_remaps = set(remaps) - set(bag.topics)
+        if unknown_remaps:
+            raise RecordingError(f"--remap of topics not in {bag.path}: "
+                                 f"{', '.join(sorted(unknown_remaps))}")
+        if clock_hz is not None and CLOCK_TOPIC in selected and \
+                remaps.get(CLOCK_TOPIC, CLOCK_TOPIC) == CLOCK_TOPIC:
+            selected.remove(CLOCK_TOPIC)  # the replay's own clock replaces it
+        self.publishers: dict[str, Any] = {}
+        self.skipped: list[str] = []
+        for topic in selected:
+            info = bag.topics[topic]
+            if info.message_encoding != 'cdr':
+                if explicit:
+                    raise RecordingError(f"topic '{topic}' is not CDR-encoded and cannot be "
+                                         'replayed on ROS 2')
+                self.skipped.append(topic)
+                continue
+            try:
+                msg_class = import_message_class(info.type)
+            except RecordingError as err:
+                if explicit:
+                    raise RecordingError(f"cannot replay '{topic}': {err}") from err
+                node.get_logger().warning(f"skipping '{topic}': {err}")
+                self.skipped.append(topic)
+                continue
+            offer = qos_mod.adapt_for_replay(info.offered_qos_profiles)
+            if offer['durability'] != 'transient_local':
+                offer['depth'] = max(offer['depth'], PUBLISHER_DEPTH)  # no loss in bursts
+            profile = qos_mod.to_rclpy(offer)
+            self.publishers[topic] = node.create_publisher(
+                msg_class, remaps.get(topic, topic), profile)
+        if not self.publishers:
+            raise RecordingError(f'{bag.path}: nothing to replay')
+        self.clock_publisher = None
+        if clock_hz is not None:
+            from rclpy.qos import QoSProfile
+            from rosgraph_msgs.msg import Clock
+            self._clock_class = Clock
+            self.clock_publisher = node.create_publisher(Clock, CLOCK_TOPIC,
+                                                         QoSProfile(depth=10))
+        self.t0 = bag.start_time + int(round(start * 1e9))
+        if bag.message_count and self.t0 > bag.end_time:
+            raise RecordingError(f'--start {start} s is past the end of {bag.path} '
+                                 f'({bag.duration_ns / 1e9:.3f} s long)')
+
+    def wait_for_subscribers(self, timeout: float) -> bool:
+        """Wait (up to ``timeout`` s) until every publisher has a subscriber."""
+        deadline = time.monotonic() + timeout
+        while not self.stop.is_set():
+            if all(p.get_subscription_count() > 0 for p in self.publishers.values()):
+                return True
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.02)
+        return False
+
+    def _publish_clock(self, bag_ns: int) -> None:
+        msg = self._clock_class()
+        msg.clock.sec, msg.clock.nanosec = divmod(int(bag_ns), 1_000_000_000)
+        self.clock_publisher.publish(msg)
+        self.stats.clock_messages += 1
+
+    def _wait_until(self, wall_target: float, wall0: float) -> None:
+        """Sleep until ``wall_target`` (monotonic s), publishing /clock ticks meanwhile."""
+        while not self.stop.is_set():
+            now = time.monotonic()
+            if self.clock_publisher is not None:
+                due = self._next_clock
+                if due <= now:
+                    self._publish_clock(self.t0 + int((now - wall0) * self.rate * 1e9))
+                    self._next_clock = max(due + 1.0 / self.clock_hz, now)
+                    continue
+            if now >= wall_target:
+                return
+            wake = wall_target
+            if self.clock_publisher is not None:
+                wake = min(wake, self._next_clock)
+            time.sleep(min(max(wake - now, 0.0), 0.05))
+
+    def play_once(self) -> None:
+        """Play the recording (from ``start``) once."""
+        wall0 = time.monotonic()
+        self._next_clock = wall0
+        topics = list(self.publishers)
+        for msg in self.bag.messages(topics, start=self.t0):
+            target = wall0 + (msg.log_time - self.t0) / 1e9 / self.rate
+            self._wait_until(target, wall0)
+            if self.stop.is_set():
+                return
+            self.stats.max_lateness = max(self.stats.max_lateness, time.monotonic() - target)
+            self.publishers[msg.topic].publish(msg.data)
+            self.stats.messages += 1
+            self.stats.per_topic[msg.topic] = self.stats.per_topic.get(msg.topic, 0) + 1
+        self.stats.loops += 1
+
+    def play(self, *, loop: bool = False) -> ReplayStats:
+        started = time.monotonic()
+        while not self.stop.is_set():
+            self.play_once()
+            if not loop:
+                break
+        self.stats.wall_time = time.monotonic() - started
+        return self.stats
+
+    def drain(self, timeout: float = 2.0) -> None:
+        """Give reliable subscribers time to receive the last messages."""
+        from rclpy.duration import Duration
+        for pub in self.publishers.values():
+            try:
+                pub.wait_for_all_acked(Duration(seconds=timeout))
+            except Exception:  # noqa: BLE001 - best effort; not all rmw support it
+                pass
+
+
+def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
+               topics: Iterable[str] | None = None, start: float = 0.0,
+               clock_hz: float | None = None, remaps: Mapping[str, str] | None = None,
+               wait_for_subscribers: float = 0.0) -> str:
+    """Replay ``path`` until done (or Ctrl-C/SIGTERM with ``loop``); return a summary."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    with BagReader(path) as bag:
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        node = None
+        player = None
+
+        def request_stop(_signum: int, _frame: Any) -> None:
+            if player is not None:
+                player.stop.set()
+
+        previous = {sig: signal.signal(sig, request_stop)
+                    for sig in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            import os
+            node = rclpy.create_node(f'gripper_sim_replay_{os.getpid()}')
+            player = Player(node, bag, rate=rate, topics=topics, start=start,
+                            clock_hz=clock_hz, remaps=remaps)
+            if wait_for_subscribers > 0 and not player.wait_for_subscribers(
+                    wait_for_subscribers):
+                lonely = [t for t, p in player.publishers.items()
+                          if p.get_subscription_count() == 0]
+                node.get_logger().warning(
+                    f"no subscriber after {wait_for_subscribers} s on: {', '.join(lonely)}")
+            stats = player.play(loop=loop)
+            player.drain()
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+    text = (f'replayed {stats.messages} messages on {len(stats.per_topic)} topics in '
+            f'{stats.wall_time:.2f} s')
+    if loop:
+        text += f' ({stats.loops} loops)'
+    if player is not None and player.skipped:
+        text += f" (skipped: {', '.join(player.skipped)})"
+    return text
