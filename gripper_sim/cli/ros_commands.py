@@ -1,0 +1,366 @@
+"""ROS verbs of ``gripper-sim``: node, jaw, lift, grasp, status, controller.
+
+Every handler imports rclpy lazily (offline verbs run without ROS). Discovery defaults
+to LOCALHOST when ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is unset.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+
+DEFAULT_NODE = '/gripper_sim'
+WARN = 30   # rcl_interfaces/Log level
+
+
+def _finite(minimum: float | None = 0.0, positive: bool = False, what: str = 'value'):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError as err:
+            raise argparse.ArgumentTypeError(f'{what} must be a number, got {text!r}') from err
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f'{what} must be finite, got {text}')
+        if positive and value <= 0:
+            raise argparse.ArgumentTypeError(f'{what} must be > 0, got {text}')
+        if minimum is not None and value < minimum:
+            raise argparse.ArgumentTypeError(f'{what} must be >= {minimum:g}, got {text}')
+        return value
+    return parse
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--node', default=DEFAULT_NODE,
+                        help=f'simulator node to talk to (default {DEFAULT_NODE})')
+    parser.add_argument('--timeout', type=_finite(positive=True, what='--timeout'),
+                        default=15.0, help='seconds to wait for the node (default 15)')
+
+
+def register(subparsers) -> None:
+    node = subparsers.add_parser(
+        'node', help='run the gripper_sim ROS 2 node',
+        description='Run the simulator node. Anything after --ros-args goes to ROS '
+                    '(e.g. --ros-args -p real_time_factor:=0.0 --params-file p.yaml).')
+    node.add_argument('--fruit', help='fruit preset name')
+    node.add_argument('--config', help='YAML configuration file')
+    node.set_defaults(handler=_node, accepts_extra=True)
+
+    jaw = subparsers.add_parser('jaw', help='command the jaws of a running node')
+    jaw_verbs = jaw.add_subparsers(dest='jaw_verb', metavar='{gap,force,open}')
+    jaw_verbs.required = True
+    gap = jaw_verbs.add_parser('gap', help='position mode: move to a gap (m)')
+    gap.add_argument('value', type=_finite(what='gap'), help='jaw gap, m')
+    _common(gap)
+    gap.set_defaults(handler=_jaw, topic='jaw/gap_command', unit='m', what='gap')
+    force = jaw_verbs.add_parser('force', help='force mode: close to a grip force (N)')
+    force.add_argument('value', type=_finite(positive=True, what='force'), help='force, N')
+    _common(force)
+    force.set_defaults(handler=_jaw, topic='jaw/force_command', unit='N', what='force')
+    opener = jaw_verbs.add_parser('open', help='open the jaws to the initial gap')
+    _common(opener)
+    opener.set_defaults(handler=_open)
+
+    lift = subparsers.add_parser('lift', help='move the gripper to a height (m)')
+    lift.add_argument('value', type=_finite(minimum=None, what='height'), help='height, m')
+    _common(lift)
+    lift.set_defaults(handler=_jaw, topic='lift/command', unit='m', what='lift')
+
+    grasp = subparsers.add_parser('grasp', help='run a Grasp goal; exit 0 on success')
+    grasp.add_argument('--force', required=True, type=_finite(positive=True, what='--force'),
+                       help='grip force to close to, N')
+    grasp.add_argument('--lift', type=_finite(what='--lift'), default=0.0,
+                       help='lift height after closing, m (default 0)')
+    grasp.add_argument('--hold', type=_finite(what='--hold'), default=0.0,
+                       help='hold time after lifting, s (default 0)')
+    grasp.add_argument('--close-speed', type=_finite(what='--close-speed'), default=0.0,
+                       help='jaw closing speed, m/s (default: the node default)')
+    grasp.add_argument('--release', action='store_true', help='open the jaws at the end')
+    grasp.add_argument('--quiet', action='store_true', help='no feedback lines')
+    _common(grasp)
+    grasp.set_defaults(handler=_grasp)
+
+    status = subparsers.add_parser('status', help='print the fruit state')
+    status.add_argument('--follow', action='store_true', help='keep printing (Ctrl-C stops)')
+    status.add_argument('--rate', type=_finite(positive=True, what='--rate'), default=2.0,
+                        help='lines per second with --follow (default 2)')
+    _common(status)
+    status.set_defaults(handler=_status)
+
+    controller = subparsers.add_parser(
+        'controller', help='run the example PI grip force controller node')
+    controller.add_argument('--force', type=_finite(positive=True, what='--force'),
+                            default=None, help='grip force setpoint, N')
+    controller.add_argument('--node', default=None, help='simulator node')
+    controller.set_defaults(handler=_controller, accepts_extra=True)
+
+
+# ----------------------------------------------------------------- helpers
+def _default_environment() -> None:
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if 'FASTRTPS_DEFAULT_PROFILES_FILE' not in os.environ:
+        from gripper_sim.ros.process import fastdds_profile
+        os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = fastdds_profile()
+
+
+class _Session:
+    """An rclpy context with one node, spun by hand."""
+
+    def __init__(self, name: str):
+        _default_environment()
+        import rclpy
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        from rclpy.signals import SignalHandlerOptions
+        # Ctrl-C raises KeyboardInterrupt here (rclpy would shut the context down
+        # first, and a Grasp goal could no longer be canceled).
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.context,
+                                      start_parameter_services=False)
+        from rclpy.executors import SingleThreadedExecutor
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.rejections: list[str] = []
+        self._target_name = None
+
+    def spin_until(self, condition, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            self.executor.spin_once(timeout_sec=min(0.05, remaining))
+        return True
+
+    def watch_rejections(self, node_path: str) -> None:
+        """Collect the target node's warnings from /rosout (the reasons for rejections)."""
+        from rcl_interfaces.msg import Log
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        self._target_name = node_path.strip('/').replace('/', '.')
+        since = self.node.get_clock().now().nanoseconds
+
+        def on_log(msg):
+            stamp = msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec
+            if (msg.name == self._target_name and msg.level >= WARN and stamp >= since
+                    - 50_000_000):
+                self.rejections.append(msg.msg)
+        self.node.create_subscription(Log, '/rosout', on_log, QoSProfile(
+            depth=100, reliability=ReliabilityPolicy.RELIABLE))
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self) -> '_Session':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _error(text: str) -> int:
+    print(f'error: {text}', file=sys.stderr)
+    return 1
+
+
+def _no_node(what: str, node_path: str, timeout: float) -> int:
+    return _error(f'no {what} answered within {timeout:g} s: is `gripper-sim node` running '
+                  f'as {node_path} with the same ROS_DOMAIN_ID '
+                  f"({os.environ.get('ROS_DOMAIN_ID', '0')})?")
+
+
+# ----------------------------------------------------------------- handlers
+def _node(args) -> int:
+    from gripper_sim.ros.node import main
+    argv = ['gripper-sim node']
+    if args.fruit:
+        argv += ['--fruit', args.fruit]
+    if args.config:
+        argv += ['--config', args.config]
+    return main(argv + list(args.extra))
+
+
+def _controller(args) -> int:
+    from gripper_sim.ros.controller import main
+    argv = ['gripper-sim controller']
+    if args.force is not None:
+        argv += ['--force', repr(args.force)]
+    if args.node:
+        argv += ['--sim-node', args.node]
+    return main(argv + list(args.extra))
+
+
+def _jaw(args) -> int:
+    """Publish one command, confirm delivery, then show the node acting on it."""
+    from rclpy.duration import Duration
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64
+    node_path = args.node.rstrip('/')
+    topic = f'{node_path}/{args.topic}'
+    with _Session('gripper_sim_cli') as session:
+        session.watch_rejections(node_path)
+        joints: list[JointState] = []
+        session.node.create_subscription(JointState, 'joint_states', joints.append, 10)
+        publisher = session.node.create_publisher(
+            Float64, topic, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        if not session.spin_until(lambda: publisher.get_subscription_count() > 0,
+                                  args.timeout):
+            return _no_node(f'subscriber on {topic}', node_path, args.timeout)
+        session.spin_until(lambda: bool(joints), 2.0)
+        before = _measure(joints[-1], args.what) if joints else None
+        publisher.publish(Float64(data=float(args.value)))
+        if not publisher.wait_for_all_acked(Duration(seconds=args.timeout)):
+            return _error(f'{args.what} command on {topic} was not acknowledged within '
+                          f'{args.timeout:g} s')
+        print(f'{args.what} command {args.value:g} {args.unit} delivered to {topic}')
+        count = len(joints)
+        progress = [None]
+
+        def acted() -> bool:
+            if session.rejections:
+                return True
+            if len(joints) > count:
+                now = _measure(joints[-1], args.what)
+                if before is None or abs(now - before) > 1e-6 or \
+                        abs(now - args.value) < 1e-4:
+                    progress[0] = now
+                    return True
+            return False
+        session.spin_until(acted, 3.0)
+        if session.rejections:
+            return _error(f'the node rejected it: {session.rejections[0]}')
+        if progress[0] is not None and args.what != 'force':
+            print(f'{args.what} now {progress[0]:.4f} m (moving towards {args.value:g} m)')
+        elif progress[0] is not None:
+            print(f'jaw contact force now {progress[0]:.3f} N')
+        else:
+            print('no motion seen yet (is the simulation paused?)')
+    return 0
+
+
+def _measure(msg, what: str) -> float:
+    names = list(msg.name)
+    if what == 'lift':
+        return msg.position[names.index('lift_joint')]
+    if what == 'force':
+        return 0.5 * (msg.effort[names.index('left_jaw_joint')]
+                      + msg.effort[names.index('right_jaw_joint')])
+    return msg.position[names.index('left_jaw_joint')] + \
+        msg.position[names.index('right_jaw_joint')]
+
+
+def _open(args) -> int:
+    from std_srvs.srv import Trigger
+    node_path = args.node.rstrip('/')
+    with _Session('gripper_sim_cli') as session:
+        client = session.node.create_client(Trigger, f'{node_path}/jaw/open')
+        if not session.spin_until(client.service_is_ready, args.timeout):
+            return _no_node(f'service {node_path}/jaw/open', node_path, args.timeout)
+        future = client.call_async(Trigger.Request())
+        if not session.spin_until(future.done, args.timeout):
+            return _error('the node did not answer the open request')
+        response = future.result()
+        print(response.message)
+        return 0 if response.success else 1
+
+
+def _grasp(args) -> int:
+    from rclpy.action import ActionClient
+    from gripper_sim_interfaces.action import Grasp
+    node_path = args.node.rstrip('/')
+    with _Session('gripper_sim_grasp_cli') as session:
+        session.watch_rejections(node_path)
+        client = ActionClient(session.node, Grasp, f'{node_path}/grasp')
+        if not session.spin_until(client.server_is_ready, args.timeout):
+            return _no_node(f'Grasp action server {node_path}/grasp', node_path, args.timeout)
+        goal = Grasp.Goal(target_force=args.force, close_speed=args.close_speed,
+                          lift_height=args.lift, hold_time=args.hold, release=args.release)
+        printed = {'phase': None, 'wall': 0.0}
+
+        def on_feedback(message):
+            if args.quiet:
+                return
+            fb = message.feedback
+            now = time.monotonic()
+            if fb.phase != printed['phase'] or now - printed['wall'] >= 0.25:
+                printed.update(phase=fb.phase, wall=now)
+                print(f'  {fb.phase:<10} gap {fb.gap * 1e3:7.2f} mm  grip {fb.grip_force:6.2f} N'
+                      f'  compression {fb.compression * 1e3:6.3f} mm', flush=True)
+        print(f'grasp: {args.force:g} N, lift {args.lift:g} m, hold {args.hold:g} s'
+              + (', release' if args.release else ''), flush=True)
+        sent = client.send_goal_async(goal, feedback_callback=on_feedback)
+        if not session.spin_until(sent.done, args.timeout):
+            return _error('the Grasp server did not answer the goal request')
+        handle = sent.result()
+        if not handle.accepted:
+            session.spin_until(lambda: bool(session.rejections), 3.0)
+            reason = session.rejections[0] if session.rejections else \
+                'no reason received (see the node log)'
+            return _error(f'goal rejected: {reason}')
+        result_future = handle.get_result_async()
+        try:
+            while not result_future.done():
+                session.executor.spin_once(timeout_sec=0.1)
+        except KeyboardInterrupt:
+            print('canceling the goal...', flush=True)
+            cancel = handle.cancel_goal_async()
+            session.spin_until(cancel.done, 10.0)
+            session.spin_until(result_future.done, 10.0)
+            if result_future.done():
+                _print_result(result_future.result().result)
+            return 130
+        result = result_future.result().result
+        _print_result(result)
+        return 0 if result.success else 1
+
+
+def _print_result(result) -> None:
+    print(f"result: {'SUCCESS' if result.success else 'FAILED'}: {result.message}")
+    print(f'  slipped {result.slipped}, bruised {result.bruised}, slip distance '
+          f'{result.slip_distance * 1e3:.3f} mm')
+    print(f'  max grip force {result.max_grip_force:.3f} N, final gap '
+          f'{result.final_gap * 1e3:.2f} mm, max compression '
+          f'{result.max_compression * 1e3:.3f} mm, max contact pressure '
+          f'{result.max_contact_pressure / 1e3:.1f} kPa', flush=True)
+
+
+def format_state(msg) -> str:
+    """A FruitState as a few readable lines."""
+    t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+    contact = ('both jaws' if msg.left_jaw_contact and msg.right_jaw_contact else
+               'left jaw' if msg.left_jaw_contact else
+               'right jaw' if msg.right_jaw_contact else 'no jaw')
+    flags = [name for name, on in (('SLIPPING', msg.slipping), ('BRUISED', msg.bruised),
+                                   ('CRUSHED', msg.crushed)) if on]
+    return (f't {t:8.3f} s  gap {msg.gap * 1e3:7.2f} mm  grip {msg.grip_force:6.2f} N  '
+            f'compression {msg.compression * 1e3:6.3f} mm ({msg.compression_ratio:.2%})  '
+            f'peak pressure {msg.peak_contact_pressure / 1e3:7.1f} kPa  contact {contact}  '
+            f'centroid z {msg.centroid.z * 1e3:6.2f} mm  slip {msg.slip_distance * 1e3:.3f} mm'
+            + (f"  {' '.join(flags)}" if flags else ''))
+
+
+def _status(args) -> int:
+    from gripper_sim_interfaces.msg import FruitState
+    node_path = args.node.rstrip('/')
+    with _Session('gripper_sim_status_cli') as session:
+        states: list = []
+        session.node.create_subscription(FruitState, f'{node_path}/fruit/state',
+                                         states.append, 10)
+        if not session.spin_until(lambda: bool(states), args.timeout):
+            return _no_node(f'FruitState on {node_path}/fruit/state', node_path, args.timeout)
+        print(format_state(states[-1]), flush=True)
+        if not args.follow:
+            return 0
+        period = 1.0 / args.rate
+        try:
+            while True:
+                states.clear()
+                next_line = time.monotonic() + period
+                session.spin_until(lambda: time.monotonic() >= next_line, period + 1.0)
+                if states:
+                    print(format_state(states[-1]), flush=True)
+        except KeyboardInterrupt:
+            return 0
