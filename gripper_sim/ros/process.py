@@ -45,9 +45,9 @@ def fastdds_profile() -> str:
     return str(path)
 
 
-def pick_domain_id() -> int:
-    """A domain id in [10, 99] derived from the process id (distinct per test run)."""
-    return 10 + os.getpid() % 90
+def pick_domain_id(offset: int = 0) -> int:
+    """A domain id in [10, 99] from the process id (distinct per run; ``offset`` per use)."""
+    return 10 + (os.getpid() + offset) % 90
 
 
 def ros_environment(domain_id: int | None = None,

@@ -1,0 +1,206 @@
+"""A client of a running ``gripper_sim`` node, for the integration tests and the benchmark.
+
+Everything waits by condition (matching, a received message) with a timeout, never by
+a fixed sleep. The client has its own rclpy context, so several can coexist in a
+process and none disturbs another's shutdown.
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+from typing import Any, Callable
+
+import rclpy
+from rclpy.action import ActionClient
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from geometry_msgs.msg import WrenchStamped
+from gripper_sim_interfaces.action import Grasp, GripperCommand
+from gripper_sim_interfaces.msg import FruitState
+from gripper_sim_interfaces.srv import Step
+from rcl_interfaces.msg import Log, Parameter as ParameterMsg
+from rcl_interfaces.srv import SetParameters
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState, PointCloud2
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
+
+from gripper_sim.ros.process import apply_ros_environment
+
+RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class TimeoutError_(AssertionError):
+    """A condition did not come true in time (an AssertionError: pytest shows it)."""
+
+
+class SimClient:
+    """Subscribes to every topic of the node and offers its commands, services, actions.
+
+    Attributes:
+        latest: ``{suffix: last message}`` for 'fruit/state', 'fruit/nodes',
+            'left_jaw/wrench', 'right_jaw/wrench', 'joint_states', 'markers', 'clock'.
+        counts: messages received per suffix.
+        states: the last 2000 FruitState messages.
+        logs: /rosout messages of the node (warnings and above).
+    """
+
+    def __init__(self, domain_id: int, node_path: str = '/gripper_sim',
+                 name: str = 'gripper_sim_test_client'):
+        apply_ros_environment(domain_id)
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.path = node_path.rstrip('/')
+        self.latest: dict[str, Any] = {}
+        self.counts: dict[str, int] = {}
+        self.states: deque = deque(maxlen=2000)
+        self.logs: list[Log] = []
+        node_name = self.path.strip('/').replace('/', '.')
+        topics = {
+            'fruit/state': (FruitState, f'{self.path}/fruit/state'),
+            'fruit/nodes': (PointCloud2, f'{self.path}/fruit/nodes'),
+            'left_jaw/wrench': (WrenchStamped, f'{self.path}/left_jaw/wrench'),
+            'right_jaw/wrench': (WrenchStamped, f'{self.path}/right_jaw/wrench'),
+            'joint_states': (JointState, '/joint_states'),
+            'markers': (MarkerArray, f'{self.path}/markers'),
+            'clock': (Clock, '/clock'),
+        }
+        for suffix, (kind, topic) in topics.items():
+            self.node.create_subscription(kind, topic, self._store(suffix),
+                                          1 if suffix == 'clock' else RELIABLE)
+
+        def on_log(msg: Log) -> None:
+            if msg.name == node_name and msg.level >= 30:
+                self.logs.append(msg)
+        self.node.create_subscription(Log, '/rosout', on_log,
+                                      QoSProfile(depth=200,
+                                                 reliability=ReliabilityPolicy.RELIABLE))
+        self.publishers = {
+            what: self.node.create_publisher(Float64, f'{self.path}/{topic}', RELIABLE)
+            for what, topic in (('gap', 'jaw/gap_command'), ('force', 'jaw/force_command'),
+                                ('lift', 'lift/command'))}
+        self.reset_client = self.node.create_client(Trigger, f'{self.path}/reset')
+        self.pause_client = self.node.create_client(SetBool, f'{self.path}/pause')
+        self.step_client = self.node.create_client(Step, f'{self.path}/step')
+        self.open_client = self.node.create_client(Trigger, f'{self.path}/jaw/open')
+        self.param_client = self.node.create_client(SetParameters,
+                                                    f'{self.path}/set_parameters')
+        self.grasp = ActionClient(self.node, Grasp, f'{self.path}/grasp')
+        self.gripper_cmd = ActionClient(self.node, GripperCommand, f'{self.path}/gripper_cmd')
+
+    def _store(self, suffix: str) -> Callable[[Any], None]:
+        def store(msg) -> None:
+            self.latest[suffix] = msg
+            self.counts[suffix] = self.counts.get(suffix, 0) + 1
+            if suffix == 'fruit/state':
+                self.states.append(msg)
+        return store
+
+    # ----------------------------------------------------------------- waiting
+    def spin_until(self, condition: Callable[[], Any], timeout: float = 30.0,
+                   what: str = 'condition') -> Any:
+        """Spin until ``condition()`` is truthy; returns it; AssertionError on timeout."""
+        deadline = time.monotonic() + timeout
+        while True:
+            value = condition()
+            if value:
+                return value
+            if time.monotonic() > deadline:
+                raise TimeoutError_(f'timed out after {timeout:g} s waiting for {what}')
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        """Until every service, both actions and the state topic are matched."""
+        clients = (self.reset_client, self.pause_client, self.step_client, self.open_client,
+                   self.param_client)
+        self.spin_until(lambda: all(c.service_is_ready() for c in clients)
+                        and self.grasp.server_is_ready() and self.gripper_cmd.server_is_ready()
+                        and all(p.get_subscription_count() > 0
+                                for p in self.publishers.values())
+                        and 'fruit/state' in self.latest, timeout, 'the node to be ready')
+
+    def sim_time(self) -> float:
+        stamp = self.latest['fruit/state'].header.stamp
+        return stamp.sec + stamp.nanosec * 1e-9
+
+    def wait_sim_time(self, seconds: float, timeout: float = 60.0) -> None:
+        """Until the node's published sim time has advanced by ``seconds``."""
+        start = self.spin_until(lambda: 'fruit/state' in self.latest, timeout) and \
+            self.sim_time()
+        self.spin_until(lambda: self.sim_time() >= start + seconds - 1e-9, timeout,
+                        f'{seconds} s of sim time')
+
+    def wait_log(self, text: str, timeout: float = 20.0, since: int = 0) -> Log:
+        """Until the node logged a warning containing ``text`` (at index >= ``since``)."""
+        def found():
+            return next((m for m in self.logs[since:] if text in m.msg), None)
+        return self.spin_until(found, timeout, f'node log containing {text!r}')
+
+    # ---------------------------------------------------------------- commands
+    def publish(self, what: str, value: float) -> None:
+        publisher = self.publishers[what]
+        self.spin_until(lambda: publisher.get_subscription_count() > 0, 30.0,
+                        f'a subscriber for the {what} command')
+        publisher.publish(Float64(data=float(value)))
+
+    def call(self, client, request, timeout: float = 60.0):
+        self.spin_until(client.service_is_ready, timeout, f'service {client.srv_name}')
+        future = client.call_async(request)
+        self.spin_until(future.done, timeout, f'a response from {client.srv_name}')
+        return future.result()
+
+    def reset(self):
+        return self.call(self.reset_client, Trigger.Request())
+
+    def pause(self, on: bool = True):
+        return self.call(self.pause_client, SetBool.Request(data=on))
+
+    def step(self, steps: int):
+        return self.call(self.step_client, Step.Request(steps=steps))
+
+    def set_parameters(self, **values) -> list:
+        """Set node parameters (``physics__x`` for ``physics.x``); the SetParametersResults."""
+        request = SetParameters.Request()
+        request.parameters = [Parameter(name.replace('__', '.'), value=value).to_parameter_msg()
+                              for name, value in values.items()]
+        return list(self.call(self.param_client, request).results)
+
+    # ----------------------------------------------------------------- actions
+    def send_goal(self, client: ActionClient, goal, feedback: list | None = None,
+                  timeout: float = 30.0):
+        """Send ``goal``; returns the goal handle (check ``.accepted``)."""
+        self.spin_until(client.server_is_ready, timeout, 'the action server')
+        callback = (lambda msg: feedback.append(msg.feedback)) if feedback is not None else None
+        future = client.send_goal_async(goal, feedback_callback=callback)
+        return self.spin_until(lambda: future.done() and future.result(), timeout,
+                               'the goal response')
+
+    def result(self, handle, timeout: float = 120.0):
+        """Wait for the result of an accepted goal: ``(status, result)``."""
+        future = handle.get_result_async()
+        self.spin_until(future.done, timeout, 'the action result')
+        response = future.result()
+        return response.status, response.result
+
+    def cancel(self, handle, timeout: float = 30.0):
+        future = handle.cancel_goal_async()
+        self.spin_until(future.done, timeout, 'the cancel response')
+        return future.result()
+
+    def close(self) -> None:
+        self.grasp.destroy()
+        self.gripper_cmd.destroy()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def param_value(msg: ParameterMsg) -> Any:
+    """The Python value of an ``rcl_interfaces/Parameter`` message."""
+    return Parameter.from_parameter_msg(msg).value

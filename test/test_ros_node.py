@@ -1,0 +1,233 @@
+"""The gripper_sim node in a subprocess, driven through real rclpy clients.
+
+Topics and types, jaw commands by topic, pause/step/reset, parameters, and every kind
+of bad input rejected with a logged reason while the node keeps running.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from gripper_sim.ros import messages
+from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
+from gripper_sim.ros.testing import SimClient
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+DOMAIN = pick_domain_id(0)
+EXPECTED_TYPES = {
+    '/gripper_sim/fruit/nodes': 'sensor_msgs/msg/PointCloud2',
+    '/gripper_sim/fruit/state': 'gripper_sim_interfaces/msg/FruitState',
+    '/gripper_sim/left_jaw/wrench': 'geometry_msgs/msg/WrenchStamped',
+    '/gripper_sim/right_jaw/wrench': 'geometry_msgs/msg/WrenchStamped',
+    '/joint_states': 'sensor_msgs/msg/JointState',
+    '/gripper_sim/markers': 'visualization_msgs/msg/MarkerArray',
+    '/clock': 'rosgraph_msgs/msg/Clock',
+    '/gripper_sim/jaw/gap_command': 'std_msgs/msg/Float64',
+    '/gripper_sim/jaw/force_command': 'std_msgs/msg/Float64',
+    '/gripper_sim/lift/command': 'std_msgs/msg/Float64',
+}
+
+
+@pytest.fixture(scope='module')
+def running(tmp_path_factory):
+    log = tmp_path_factory.mktemp('node') / 'node.log'
+    process = node_process({'real_time_factor': 0.0}, env=ros_environment(DOMAIN),
+                           log_path=log).start()
+    client = SimClient(DOMAIN)
+    try:
+        client.wait_ready(timeout=120)
+        yield process, client
+    finally:
+        client.close()
+        code = process.stop()
+        text = process.log()
+        assert 'Traceback' not in text, text
+        assert code == 0, text
+
+
+@pytest.fixture
+def client(running):
+    process, client = running
+    assert process.running, process.log()
+    client.pause(False)
+    client.reset()
+    client.spin_until(lambda: client.sim_time() < 0.05, 30, 'the reset state')
+    return client
+
+
+def gap_of(client):
+    return client.latest['fruit/state'].gap
+
+
+def test_every_topic_is_published_with_its_type_and_sane_values(client):
+    client.wait_sim_time(0.05)
+    client.spin_until(lambda: all(s in client.latest for s in messages.TOPICS), 60,
+                      'a message on every topic')
+    types = dict(client.node.get_topic_names_and_types())
+    for topic, kind in EXPECTED_TYPES.items():
+        assert kind in types.get(topic, []), (topic, types.get(topic))
+
+    state = client.latest['fruit/state']
+    assert state.header.frame_id == 'world' and state.node_count == 64
+    assert state.gap == pytest.approx(0.0635 + 0.010, abs=1e-6)   # initial gap
+    assert 0.0 <= state.kinetic_energy < 1e-3 and math.isfinite(state.elastic_energy)
+    assert state.centroid.z == pytest.approx(0.0635 / 2, abs=2e-3)  # resting on the table
+
+    cloud = client.latest['fruit/nodes']
+    points = messages.read_point_cloud(cloud)
+    assert cloud.header.frame_id == 'world' and points.shape == (64, 6)
+    assert np.all(np.isfinite(points)) and np.all(points[:, 1] == 0.0)
+    radii = np.hypot(points[:, 0], points[:, 2] - state.centroid.z)
+    assert np.all(np.abs(radii - 0.0635 / 2) < 2e-3)
+
+    joints = client.latest['joint_states']
+    assert list(joints.name) == ['left_jaw_joint', 'right_jaw_joint', 'lift_joint']
+    assert joints.position[0] + joints.position[1] == pytest.approx(state.gap, abs=1e-9)
+    assert client.latest['left_jaw/wrench'].header.frame_id == 'left_jaw'
+    assert client.latest['right_jaw/wrench'].header.frame_id == 'right_jaw'
+    namespaces = {m.ns for m in client.latest['markers'].markers}
+    assert {'fruit_outline', 'jaws', 'table', 'jaw_forces'} <= namespaces
+
+    # sim time stamps: /clock and the headers advance together
+    first = client.latest['clock'].clock
+    client.wait_sim_time(0.1)
+    later = client.latest['clock'].clock
+    assert (later.sec, later.nanosec) > (first.sec, first.nanosec)
+
+
+def test_closing_by_topic_raises_the_wrench_and_the_joint_effort(client):
+    assert abs(client.latest['left_jaw/wrench'].wrench.force.x) < 1e-6
+    client.publish('gap', 0.058)
+    client.spin_until(lambda: abs(client.latest['left_jaw/wrench'].wrench.force.x) > 1.0
+                      and abs(client.latest['right_jaw/wrench'].wrench.force.x) > 1.0,
+                      60, 'the jaw wrenches to rise')
+    left, right = client.latest['left_jaw/wrench'], client.latest['right_jaw/wrench']
+    assert left.wrench.force.x < 0 < right.wrench.force.x   # the fruit pushes the jaws out
+    client.spin_until(lambda: gap_of(client) < 0.0581, 60, 'the gap to close')
+    joints = client.latest['joint_states']
+    assert joints.effort[0] > 1.0 and joints.effort[1] > 1.0
+    assert client.latest['fruit/state'].left_jaw_contact
+
+
+def test_force_command_settles_at_the_force_and_lift_moves_the_gripper(client):
+    client.publish('force', 5.0)
+    client.spin_until(lambda: abs(client.latest['fruit/state'].grip_force - 5.0) < 0.1,
+                      60, 'a 5 N grip')
+    lift0 = client.latest['joint_states'].position[2]
+    client.publish('lift', lift0 + 0.01)
+    client.spin_until(lambda: client.latest['joint_states'].position[2] > lift0 + 0.009,
+                      60, 'the lift to rise')
+    assert client.latest['fruit/state'].centroid.z > 0.0635 / 2 + 0.005   # fruit came along
+
+
+def test_pause_step_and_reset(client):
+    refused = client.step(10)
+    assert not refused.success and 'pause' in refused.message
+    client.publish('gap', 0.06)
+    paused = client.pause(True)
+    assert paused.success
+    client.wait_sim_time(0.0)
+    t0 = client.step(1).sim_time          # a reference point while paused
+    response = client.step(25)
+    assert response.success
+    assert response.sim_time == pytest.approx(t0 + 0.025, abs=1e-9)
+    client.spin_until(lambda: client.sim_time() >= response.sim_time - 0.01 - 1e-9, 30,
+                      'the stepped state to be published')
+    assert not client.step(0).success
+    reset = client.reset()
+    assert reset.success
+    client.spin_until(lambda: client.sim_time() == 0.0, 30, 'the t = 0 state')
+    assert gap_of(client) == pytest.approx(0.0735, abs=1e-6)
+    # still paused after a reset: time does not move until stepped
+    assert client.step(3).sim_time == pytest.approx(0.003, abs=1e-9)
+    client.pause(False)
+    client.wait_sim_time(0.05)
+
+
+@pytest.mark.parametrize('what, value', [
+    ('gap', float('nan')), ('gap', -0.01), ('gap', float('inf')), ('gap', 5.0),
+    ('force', float('nan')), ('force', -3.0), ('force', 1e9), ('lift', float('nan')),
+])
+def test_bad_commands_are_rejected_with_a_reason_and_the_node_keeps_running(
+        client, what, value):
+    since = len(client.logs)
+    gap_before = gap_of(client)
+    client.publish(what, value)
+    log = client.wait_log('rejected', since=since)
+    assert what in log.msg
+    client.wait_sim_time(0.05)                          # still stepping
+    assert gap_of(client) == pytest.approx(gap_before, abs=1e-9)   # nothing moved
+    state = client.latest['fruit/state']
+    assert math.isfinite(state.gap) and math.isfinite(state.grip_force)
+
+
+def test_parameters_are_validated_with_reasons(client):
+    since = len(client.logs)
+    ok, = client.set_parameters(physics__contact__jaw__static_friction=0.8)
+    assert ok.successful
+    too_high, = client.set_parameters(physics__contact__jaw__kinetic_friction=0.9)
+    assert not too_high.successful and 'must not exceed' in too_high.reason
+    for name, value in (('publish_rate', -5.0), ('publish_rate', 0.0),
+                        ('real_time_factor', float('nan')),
+                        ('physics__contact__jaw__static_friction', 7.0)):
+        result, = client.set_parameters(**{name: value})
+        assert not result.successful and result.reason, (name, value)
+    read_only, = client.set_parameters(physics__fruit__nodes=32)
+    assert not read_only.successful and 'read-only' in read_only.reason
+    wrong_type, = client.set_parameters(publish_rate='fast')
+    assert not wrong_type.successful
+    client.wait_log('rejected', since=since)
+    client.wait_sim_time(0.05)
+    restore, = client.set_parameters(physics__contact__jaw__static_friction=0.5)
+    assert restore.successful
+
+
+def test_publish_rate_is_a_live_parameter(client):
+    ok, = client.set_parameters(publish_rate=50.0)
+    assert ok.successful
+    try:
+        client.wait_sim_time(0.05)
+        start_count, start_time = client.counts['fruit/state'], client.sim_time()
+        client.wait_sim_time(1.0)
+        rate = (client.counts['fruit/state'] - start_count) / (client.sim_time() - start_time)
+        assert rate == pytest.approx(50.0, rel=0.1)
+    finally:
+        client.set_parameters(publish_rate=100.0)
+
+
+def test_a_bad_start_up_parameter_fails_cleanly(tmp_path):
+    process = node_process({'physics.sim.dt': 5.0}, env=ros_environment(DOMAIN + 1),
+                           log_path=tmp_path / 'bad.log').start()
+    process.process.wait(120)
+    text = process.log()
+    assert process.process.returncode == 2, text
+    assert "cannot start: parameter 'physics.sim.dt'" in text and 'Traceback' not in text
+
+
+def test_an_unknown_fruit_fails_cleanly(tmp_path):
+    process = node_process(fruit='durian', env=ros_environment(DOMAIN + 1),
+                           log_path=tmp_path / 'fruit.log').start()
+    process.process.wait(120)
+    text = process.log()
+    assert process.process.returncode == 2 and "unknown fruit 'durian'" in text, text
+    assert 'Traceback' not in text
+
+
+def test_params_file_sets_structural_parameters(tmp_path):
+    params = tmp_path / 'params.yaml'
+    params.write_text('gripper_sim:\n  ros__parameters:\n    publish_rate: 50.0\n'
+                      '    physics:\n      fruit:\n        nodes: 32\n')
+    domain = pick_domain_id(2)
+    process = node_process(env=ros_environment(domain), log_path=tmp_path / 'p.log',
+                           extra=['--params-file', str(params),
+                                  '-p', 'real_time_factor:=0.0']).start()
+    client = SimClient(domain, name='params_file_client')
+    try:
+        client.spin_until(lambda: 'fruit/nodes' in client.latest
+                          and 'fruit/state' in client.latest, 120, 'the node cloud and state')
+        assert client.latest['fruit/nodes'].width == 32
+        assert client.latest['fruit/state'].node_count == 32
+    finally:
+        client.close()
+        assert process.stop() == 0, process.log()
