@@ -126,7 +126,8 @@ def _format_time(ns: int) -> str:
         text = when.strftime('%b %d %Y %H:%M:%S')
     except (OverflowError, OSError, ValueError):
         text = '?'
-    return f'{text}.{ns % 1_000_000_000:09d} UTC ({ns // 1_000_000_000}.{ns % 1_000_000_000:09d})'
+    sec, frac = divmod(ns, 1_000_000_000)
+    return f'{text}.{frac:09d} UTC ({sec}.{frac:09d})'
 
 
 def info_dict(path: str) -> dict:
