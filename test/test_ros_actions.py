@@ -1,0 +1,218 @@
+"""Grasp and GripperCommand actions against the node in a subprocess."""
+import math
+
+import pytest
+from action_msgs.msg import GoalStatus
+
+from gripper_sim_interfaces.action import Grasp, GripperCommand
+from gripper_sim_interfaces.msg import GripperCommand as GripperCommandMsg
+from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
+from gripper_sim.ros.testing import SimClient
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+DOMAIN = pick_domain_id(10)
+INITIAL_GAP = 0.0735      # apple: diameter 63.5 mm + 10 mm
+
+
+@pytest.fixture(scope='module')
+def running(tmp_path_factory):
+    log = tmp_path_factory.mktemp('actions') / 'node.log'
+    process = node_process({'real_time_factor': 0.0}, env=ros_environment(DOMAIN),
+                           log_path=log).start()
+    client = SimClient(DOMAIN, name='actions_test_client')
+    try:
+        client.wait_ready(timeout=120)
+        yield process, client
+    finally:
+        client.close()
+        code = process.stop()
+        text = process.log()
+        assert 'Traceback' not in text, text
+        assert code == 0, text
+
+
+@pytest.fixture
+def client(running):
+    process, client = running
+    assert process.running, process.log()
+    client.pause(False)
+    client.reset()
+    client.spin_until(lambda: client.sim_time() < 0.05, 30, 'the reset state')
+    return client
+
+
+def grasp_goal(force, lift=0.0, hold=0.0, release=False, close_speed=0.0):
+    return Grasp.Goal(target_force=force, close_speed=close_speed, lift_height=lift,
+                      hold_time=hold, release=release)
+
+
+def gripper_goal(position, max_effort=0.0):
+    return GripperCommand.Goal(command=GripperCommandMsg(position=position,
+                                                         max_effort=max_effort))
+
+
+def test_grasp_succeeds_with_real_feedback(client):
+    feedback = []
+    start = client.sim_time()
+    handle = client.send_goal(client.grasp, grasp_goal(8.0, lift=0.02, hold=0.3), feedback)
+    assert handle.accepted
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    assert result.success and not result.slipped and not result.bruised
+    assert result.max_grip_force == pytest.approx(8.0, rel=0.1)
+    assert 0.0 < result.max_compression < 0.01
+    assert result.final_gap < INITIAL_GAP - 0.005
+    assert result.slip_distance < 1e-3
+    phases = [f.phase for f in feedback]
+    for phase in ('closing', 'squeezing', 'lifting', 'holding'):
+        assert phase in phases
+    assert phases.index('closing') < phases.index('lifting') < phases.index('holding')
+    # feedback carries the real state, at >= 10 Hz of sim time
+    assert max(f.grip_force for f in feedback) > 7.0
+    assert min(f.gap for f in feedback) < INITIAL_GAP - 0.005
+    duration = client.sim_time() - start
+    assert len(feedback) >= 10 * duration * 0.9
+    # the fruit is up in the air, held
+    assert client.latest['fruit/state'].centroid.z > 0.0635 / 2 + 0.015
+
+
+def test_a_weak_grasp_slips(client):
+    handle = client.send_goal(client.grasp, grasp_goal(0.4, lift=0.03, hold=0.3))
+    assert handle.accepted
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_ABORTED
+    assert not result.success and result.slipped, result.message
+    assert result.slip_distance > 1e-3
+
+
+def test_a_second_grasp_is_rejected_with_a_reason_and_cancel_holds_the_jaws(client):
+    feedback = []
+    first = client.send_goal(client.grasp, grasp_goal(6.0, lift=0.02, hold=30.0), feedback)
+    assert first.accepted
+    client.spin_until(lambda: any(f.phase in ('lifting', 'holding') for f in feedback), 120,
+                      'the first grasp to lift')
+    since = len(client.logs)
+    second = client.send_goal(client.grasp, grasp_goal(5.0))
+    assert not second.accepted
+    log = client.wait_log('Grasp goal rejected', since=since)
+    assert 'already running' in log.msg
+    # a GripperCommand goal may not take the jaws either
+    third = client.send_goal(client.gripper_cmd, gripper_goal(0.05, 5.0))
+    assert not third.accepted
+
+    cancel = client.cancel(first)
+    assert cancel.return_code == 0   # ERROR_NONE
+    status, result = client.result(first)
+    assert status == GoalStatus.STATUS_CANCELED
+    assert 'canceled' in result.message and not result.success
+    # the jaws are held: gap and lift stay where the cancel left them
+    client.wait_sim_time(0.05)
+    gap = client.latest['fruit/state'].gap
+    lift = client.latest['joint_states'].position[2]
+    client.wait_sim_time(0.3)
+    assert client.latest['fruit/state'].gap == pytest.approx(gap, abs=2e-5)
+    assert client.latest['joint_states'].position[2] == pytest.approx(lift, abs=2e-5)
+    assert client.latest['fruit/state'].grip_force > 3.0   # still gripping
+
+    # the server is free again
+    again = client.send_goal(client.grasp, grasp_goal(6.0))
+    assert again.accepted
+    status, _ = client.result(again)
+    assert status == GoalStatus.STATUS_SUCCEEDED
+
+
+@pytest.mark.parametrize('goal', [
+    grasp_goal(float('nan')), grasp_goal(-2.0), grasp_goal(0.0), grasp_goal(1e7),
+    grasp_goal(5.0, lift=-0.1), grasp_goal(5.0, hold=float('inf')),
+    grasp_goal(5.0, close_speed=50.0),
+], ids=['nan-force', 'negative-force', 'zero-force', 'huge-force', 'negative-lift',
+        'inf-hold', 'fast-close'])
+def test_out_of_range_grasp_goals_are_rejected_with_a_reason(client, goal):
+    since = len(client.logs)
+    handle = client.send_goal(client.grasp, goal)
+    assert not handle.accepted
+    log = client.wait_log('Grasp goal rejected', since=since)
+    assert 'must' in log.msg
+    client.wait_sim_time(0.05)    # the node keeps running
+
+
+def test_gripper_command_reaches_a_free_gap(client):
+    feedback = []
+    handle = client.send_goal(client.gripper_cmd, gripper_goal(0.068, 10.0), feedback)
+    assert handle.accepted
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_SUCCEEDED
+    assert result.reached_goal and not result.stalled
+    assert result.position == pytest.approx(0.068, abs=0.001)
+    assert result.effort == pytest.approx(0.0, abs=1e-6)   # no contact yet: real zero
+    assert feedback and all(math.isfinite(f.position) for f in feedback)
+
+
+def test_gripper_command_stalls_on_the_fruit_with_the_real_effort(client):
+    feedback = []
+    handle = client.send_goal(client.gripper_cmd, gripper_goal(0.040, 5.0), feedback)
+    assert handle.accepted
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_ABORTED   # allow_stalling is false
+    assert result.stalled and not result.reached_goal
+    assert result.effort == pytest.approx(5.0, rel=0.05)
+    assert 0.05 < result.position < 0.0635
+    assert feedback[-1].stalled and max(f.effort for f in feedback) > 4.5
+
+
+def test_gripper_command_with_allow_stalling_succeeds_on_a_stall(client):
+    ok, = client.set_parameters(allow_stalling=True)
+    assert ok.successful
+    try:
+        handle = client.send_goal(client.gripper_cmd, gripper_goal(0.040, 4.0))
+        status, result = client.result(handle)
+        assert status == GoalStatus.STATUS_SUCCEEDED and result.stalled
+    finally:
+        client.set_parameters(allow_stalling=False)
+
+
+def test_a_new_gripper_command_preempts_the_active_one(client):
+    client.pause(True)    # keep the first goal running until the second arrives
+    first = client.send_goal(client.gripper_cmd, gripper_goal(0.040, 5.0))
+    assert first.accepted
+    second = client.send_goal(client.gripper_cmd, gripper_goal(0.070, 5.0))
+    assert second.accepted
+    status, result = client.result(first)
+    assert status == GoalStatus.STATUS_ABORTED and not result.reached_goal
+    client.pause(False)
+    status, result = client.result(second)
+    assert status == GoalStatus.STATUS_SUCCEEDED and result.reached_goal
+
+
+def test_gripper_command_cancel_holds_the_jaws(client):
+    feedback = []
+    ok, = client.set_parameters(real_time_factor=0.5)   # slow: cancel well before the goal
+    assert ok.successful
+    try:
+        handle = client.send_goal(client.gripper_cmd, gripper_goal(0.066, 5.0), feedback)
+        assert handle.accepted
+        client.spin_until(lambda: feedback and feedback[-1].position < 0.072, 60,
+                          'the jaws to start closing')
+        client.cancel(handle)
+        status, result = client.result(handle)
+    finally:
+        client.set_parameters(real_time_factor=0.0)
+    assert status == GoalStatus.STATUS_CANCELED
+    client.wait_sim_time(0.05)
+    gap = client.latest['fruit/state'].gap
+    client.wait_sim_time(0.3)
+    assert client.latest['fruit/state'].gap == pytest.approx(gap, abs=1e-6)
+    assert gap > 0.066 + 0.0005    # stopped before the goal
+
+
+@pytest.mark.parametrize('goal', [
+    gripper_goal(float('nan'), 5.0), gripper_goal(-0.01, 5.0), gripper_goal(3.0, 5.0),
+    gripper_goal(0.05, -1.0), gripper_goal(0.05, float('inf')),
+], ids=['nan-gap', 'negative-gap', 'huge-gap', 'negative-effort', 'inf-effort'])
+def test_out_of_range_gripper_commands_are_rejected(client, goal):
+    since = len(client.logs)
+    handle = client.send_goal(client.gripper_cmd, goal)
+    assert not handle.accepted
+    client.wait_log('GripperCommand goal rejected', since=since)
+    client.wait_sim_time(0.05)
