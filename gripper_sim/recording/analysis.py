@@ -411,8 +411,8 @@ def plot_outlines(bag: BagReader, topic: str, series: TimeSeries, summary: dict,
         pts = np.array([[p.x, p.z] for p in marker.points])
         strains.append(_segment_strain(pts, rest))
     limit = max(1e-6, max(float(np.max(np.abs(s))) for s in strains))
-    fig, axes = plt.subplots(2, len(outlines), figsize=(3.2 * len(outlines), 6.4), dpi=110,
-                             squeeze=False)
+    fig, axes = plt.subplots(2, len(outlines), figsize=(3.2 * len(outlines) + 1.2, 6.6),
+                             dpi=110, squeeze=False, layout='constrained')
     all_pts = np.vstack([[[p.x, p.z] for p in m.points] for _, _, m in outlines])
     pad = 0.1 * float(np.ptp(all_pts, axis=0).max() or 0.01)
     lo, hi = all_pts.min(axis=0) - pad, all_pts.max(axis=0) + pad
@@ -443,9 +443,17 @@ def plot_outlines(bag: BagReader, topic: str, series: TimeSeries, summary: dict,
             a.tick_params(labelsize=7)
         if col == 0:
             ax.set_ylabel('skin strain\nz (mm)', fontsize=9)
-            ax2.set_ylabel('contact pressure\n(green 0, red >= bruise)\nz (mm)', fontsize=9)
+            ax2.set_ylabel('contact pressure\nz (mm)', fontsize=9)
     if line_sets is not None:
-        fig.colorbar(line_sets, ax=list(axes[0]), label='segment strain', shrink=0.8)
+        fig.colorbar(line_sets, ax=list(axes[0]), label='skin segment strain', shrink=0.9)
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LinearSegmentedColormap, Normalize
+    # the node's marker colours: green at 0, yellow at half, red at the bruise pressure
+    pressure_map = LinearSegmentedColormap.from_list(
+        'bruise', [(0.2, 0.8, 0.2), (1.0, 0.8, 0.2), (1.0, 0.0, 0.2)])
+    bruise_kpa = summary.get('bruise_threshold_pa', DEFAULT_BRUISE_PRESSURE) / 1e3
+    fig.colorbar(ScalarMappable(Normalize(0.0, bruise_kpa), pressure_map),
+                 ax=list(axes[1]), label='contact pressure (kPa)', shrink=0.9)
     fig.suptitle('Fruit outline at key moments', fontsize=11)
     fig.savefig(path)
     plt.close(fig)
