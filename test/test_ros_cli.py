@@ -1,0 +1,140 @@
+"""The ROS verbs of ``gripper-sim`` against a node in a subprocess."""
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
+from gripper_sim.ros.testing import SimClient
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+DOMAIN = pick_domain_id(40)
+ENV = ros_environment(DOMAIN)
+
+
+def cli(*args, timeout=180, env=ENV):
+    return subprocess.run([sys.executable, '-m', 'gripper_sim.cli.main', *args], env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope='module')
+def running(tmp_path_factory):
+    log = tmp_path_factory.mktemp('cli') / 'node.log'
+    process = node_process({'real_time_factor': 0.0}, env=ENV, log_path=log).start()
+    client = SimClient(DOMAIN, name='cli_test_client')
+    try:
+        client.wait_ready(timeout=120)
+        yield process, client
+    finally:
+        client.close()
+        assert process.stop() == 0, process.log()
+
+
+@pytest.fixture
+def client(running):
+    process, client = running
+    assert process.running, process.log()
+    client.pause(False)
+    client.reset()
+    client.spin_until(lambda: client.sim_time() < 0.05, 30, 'the reset state')
+    return client
+
+
+def test_jaw_gap_is_delivered_and_acted_on(client):
+    run = cli('jaw', 'gap', '0.06')
+    assert run.returncode == 0, run.stderr
+    assert 'delivered to /gripper_sim/jaw/gap_command' in run.stdout
+    assert 'gap now' in run.stdout
+    client.spin_until(lambda: client.latest['fruit/state'].gap < 0.0605, 60, 'the jaws')
+
+
+def test_jaw_force_open_and_lift(client):
+    run = cli('jaw', 'force', '4')
+    assert run.returncode == 0, run.stderr
+    client.spin_until(lambda: abs(client.latest['fruit/state'].grip_force - 4.0) < 0.1, 60,
+                      'a 4 N grip')
+    run = cli('lift', '0.05')
+    assert run.returncode == 0, run.stderr
+    client.spin_until(lambda: client.latest['joint_states'].position[2] > 0.049, 60, 'lift')
+    run = cli('jaw', 'open')
+    assert run.returncode == 0 and 'opening' in run.stdout, run.stderr
+    client.spin_until(lambda: client.latest['fruit/state'].gap > 0.0734, 60, 'open jaws')
+
+
+@pytest.mark.parametrize('args, message', [
+    (('jaw', 'gap', 'nan'), 'gap must be finite'),
+    (('jaw', 'gap', '-0.01'), 'gap must be >= 0'),
+    (('jaw', 'force', '-2'), 'force must be > 0'),
+    (('grasp', '--force', 'inf'), '--force must be finite'),
+    (('lift', 'abc'), 'height must be a number'),
+])
+def test_bad_arguments_are_refused_before_sending(args, message):
+    run = cli(*args)
+    assert run.returncode == 2
+    assert message in run.stderr and 'Traceback' not in run.stderr
+
+
+def test_a_command_the_node_rejects_fails_with_its_reason(client):
+    run = cli('jaw', 'gap', '5')
+    assert run.returncode == 1
+    assert 'the node rejected it' in run.stderr and 'out of range' in run.stderr
+
+
+def test_grasp_prints_feedback_and_succeeds(client):
+    run = cli('grasp', '--force', '8', '--lift', '0.01', '--hold', '0.2')
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert 'closing' in run.stdout and 'lifting' in run.stdout
+    assert 'result: SUCCESS' in run.stdout
+
+
+def test_weak_grasp_exits_1(client):
+    run = cli('grasp', '--force', '0.4', '--lift', '0.03', '--hold', '0.2', '--quiet')
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert 'result: FAILED' in run.stdout and 'slipped True' in run.stdout
+
+
+def test_ctrl_c_cancels_the_grasp(client):
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'gripper_sim.cli.main', 'grasp', '--force', '6', '--lift',
+         '0.01', '--hold', '60'], env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+    try:
+        lines = []
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            line = process.stdout.readline()
+            lines.append(line)
+            if 'holding' in line or not line:
+                break
+        assert any('holding' in line for line in lines), ''.join(lines)
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 130, out + err
+    assert 'canceling the goal' in out and 'canceled during holding' in out
+    assert 'Traceback' not in err
+
+
+def test_status_prints_the_fruit_state(client):
+    run = cli('status')
+    assert run.returncode == 0, run.stderr
+    assert 'gap' in run.stdout and 'grip' in run.stdout and 'mm' in run.stdout
+
+
+def test_no_node_fails_clearly():
+    env = ros_environment(pick_domain_id(41))
+    run = cli('status', '--timeout', '2', env=env)
+    assert run.returncode == 1
+    assert 'no FruitState' in run.stderr and 'ROS_DOMAIN_ID' in run.stderr
+
+
+def test_node_verb_refuses_an_unknown_fruit():
+    run = cli('node', '--fruit', 'durian', env=ros_environment(pick_domain_id(42)))
+    assert run.returncode == 2
+    assert "unknown fruit 'durian'" in run.stdout + run.stderr
+    assert 'Traceback' not in run.stderr
