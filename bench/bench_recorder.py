@@ -76,55 +76,80 @@ def full_rate_batch(step: int, dt: float) -> dict[str, bytes]:
     return {messages.resolved_topic(s): serialize_message(m) for s, m in batch.items()}
 
 
-def bench_writer(seconds: float) -> None:
+def real_run(sim_seconds: float):
+    """Results of a real simulation (default apple, force grip then lift), every step."""
     from gripper_sim.configuration import load_config
+    from gripper_sim.core.simulation import Simulation
+
+    sim = Simulation(load_config())
+    results = [sim.last]
+    sim.command_force(8.0)
+    while sim.time < sim_seconds / 2:
+        results.append(sim.step())
+    sim.command_lift(0.08)
+    while sim.time < sim_seconds:
+        results.append(sim.step())
+    return sim, results
+
+
+def bench_writer(seconds: float, sim_seconds: float) -> None:
+    from rclpy.serialization import serialize_message
+
     from gripper_sim.recording.offline import SimRecorder
     from gripper_sim.recording.reader import BagReader
     from gripper_sim.recording.writer import BagWriter
+    from gripper_sim.ros import messages
 
-    dt = float(load_config()['sim.dt'])
-    batch = full_rate_batch(1, dt)
+    wall = time.perf_counter()
+    sim, results = real_run(sim_seconds)
+    physics = (time.perf_counter() - wall) / len(results)
+    dt = sim.dt
+    context = messages.MessageContext.from_config(sim.config, initial=results[0])
+    batches = []
+    for r in results:
+        batch = messages.build_messages(r, context)
+        batches.append({messages.resolved_topic(k): serialize_message(m)
+                        for k, m in batch.items()})
     with tempfile.TemporaryDirectory() as tmp:
+        # 1. the whole in-node / offline path on a real run: convert, serialize, write
+        path = Path(tmp) / 'sim.mcap'
+        start = time.perf_counter()
+        with SimRecorder(path, sim.config, initial=results[0]) as rec:
+            for r in results[1:]:
+                rec.on_step(r)
+        elapsed = time.perf_counter() - start
+        size = path.stat().st_size
+        n = len(results)
+        payload = sum(len(d) for b in batches for d in b.values())
+        print(f'[writer] real run: {results[-1].time:.2f} s of sim time, {n} steps at dt = '
+              f'{dt * 1e3:g} ms, physics {physics * 1e3:.2f} ms per step')
+        print(f'[writer]   SimRecorder (build_messages + serialize + write, every step): '
+              f'{1e3 * elapsed / n:.2f} ms per step = {n / elapsed:,.0f} steps/s')
+        print(f'[writer]   file size per simulated second at full physics rate '
+              f'({1 / dt:.0f} steps/s, 7 topics): {size / results[-1].time / 1e6:.2f} MB '
+              f'(payload {payload / results[-1].time / 1e6:.2f} MB, zstd chunks '
+              f'{size / payload:.2f} of it)')
+
+        # 2. BagWriter alone on the pre-serialized full-rate output
         path = Path(tmp) / 'writer.mcap'
         steps = 0
         payload = 0
         with BagWriter(path) as bag:
-            from gripper_sim.ros import messages
             for suffix, (_, type_name) in messages.TOPICS.items():
                 bag.add_topic(messages.resolved_topic(suffix), type_name)
             start = time.perf_counter()
             while time.perf_counter() - start < seconds:
                 t = steps * int(dt * 1e9)
-                for topic, data in batch.items():
+                for topic, data in batches[steps % len(batches)].items():
                     bag.write(topic, data, log_time=t)
                     payload += len(data)
                 steps += 1
             elapsed = time.perf_counter() - start
-        size = path.stat().st_size
         with BagReader(path) as bag:
-            assert bag.message_count == steps * len(batch)
-        sim_seconds = steps * dt
-        print(f'[writer] BagWriter, pre-serialized full-rate output ({len(batch)} topics/step, '
-              f'{payload / steps / 1e3:.1f} kB/step)')
-        print(f'[writer]   {steps * len(batch) / elapsed:,.0f} messages/s, '
-              f'{payload / elapsed / 1e6:.1f} MB/s of payload, {steps / elapsed:,.0f} steps/s')
-        print(f'[writer]   file: {size / sim_seconds / 1e6:.2f} MB per simulated second at '
-              f'1/dt = {1 / dt:.0f} Hz (zstd chunks; payload {payload / sim_seconds / 1e6:.2f} '
-              'MB/s)')
-
-        # the whole offline/in-node path: convert + serialize + write every step
-        path2 = Path(tmp) / 'sim.mcap'
-        results = [synthetic_result(k, dt) for k in range(200)]
-        with SimRecorder(path2, load_config()) as rec:
-            start = time.perf_counter()
-            n = 0
-            while time.perf_counter() - start < seconds:
-                rec.on_step(results[n % len(results)])
-                n += 1
-            elapsed = time.perf_counter() - start
-        print(f'[writer] SimRecorder (build_messages + serialize + write, every step): '
-              f'{n / elapsed:,.0f} steps/s = {1e3 * elapsed / n:.2f} ms per step '
-              f'({n * dt / elapsed:.2f}x real time at dt = {dt * 1e3:g} ms)')
+            assert bag.message_count == steps * len(batches[0])
+        print(f'[writer]   BagWriter alone, pre-serialized: '
+              f'{steps * len(batches[0]) / elapsed:,.0f} messages/s, '
+              f'{payload / elapsed / 1e6:.1f} MB/s, {steps / elapsed:,.0f} steps/s')
 
 
 def _env(domain: int) -> dict[str, str]:
@@ -266,12 +291,14 @@ def main() -> None:
                         choices=['all', 'writer', 'live', 'node', 'publish'])
     parser.add_argument('--seconds', type=float, default=5.0)
     parser.add_argument('--steps-per-second', type=float, default=1000.0)
+    parser.add_argument('--sim-seconds', type=float, default=0.6,
+                        help='simulated seconds of the real run used by "writer"')
     args = parser.parse_args()
     if args.what == 'publish':
         publisher_main(args)
         return
     if args.what in ('all', 'writer'):
-        bench_writer(args.seconds)
+        bench_writer(args.seconds, args.sim_seconds)
     if args.what in ('all', 'live'):
         bench_live(args.seconds, args.steps_per_second)
         if args.what == 'all':
