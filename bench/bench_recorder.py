@@ -275,7 +275,7 @@ def bench_node(seconds: float) -> None:
     steps = np.diff(np.asarray(stamps))
     dt = float(np.median(steps))
     expected = int(round((stamps[-1] - stamps[0]) / dt)) + 1
-    print(f'[node] gripper_sim node, publish_rate 1000 Hz, real_time_factor 0, record --all')
+    print('[node] gripper_sim node, publish_rate 1000 Hz, real_time_factor 0, record --all')
     print(f'[node]   recorded {total:,} messages on {len(counts)} topics in {duration:.2f} s '
           f'({total / max(duration, 1e-9):,.0f} msg/s, {payload / max(duration, 1e-9) / 1e6:.2f}'
           ' MB/s)')
