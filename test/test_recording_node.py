@@ -1,0 +1,118 @@
+"""Recording the real ``gripper_sim`` node: ``analyze`` reproduces what the node reported.
+
+A node process grips the fruit; this test subscribes to the node's FruitState topic
+live while a ``gripper-sim record`` process records it. The peak grip force and
+compression that ``analyze`` finds in the file equal those seen live over the same
+span of sim time, exactly (the same float64 values travel both ways).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+pytest.importorskip('gripper_sim_interfaces.msg')
+
+from gripper_sim_interfaces.msg import FruitState  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from std_msgs.msg import Float64  # noqa: E402
+
+from gripper_sim.recording.analysis import analyze  # noqa: E402
+from gripper_sim.recording.reader import BagReader  # noqa: E402
+from gripper_sim.ros.process import RosProcess, node_process, ros_environment  # noqa: E402
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+TIMEOUT = 120.0
+STATE = '/gripper_sim/fruit/state'
+_ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',
+             'FASTRTPS_DEFAULT_PROFILES_FILE')
+
+
+@contextlib.contextmanager
+def ros_node(domain: int, name: str):
+    env = ros_environment(domain)
+    saved = {k: os.environ.get(k) for k in _ENV_KEYS}
+    for key in _ENV_KEYS:
+        os.environ[key] = env[key]
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node(name, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        yield node, executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+def spin_until(executor, condition, timeout: float = TIMEOUT, what: str = '') -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        executor.spin_once(timeout_sec=0.05)
+    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+
+
+def test_analyze_reproduces_the_peaks_the_node_reported_live(tmp_path):
+    domain = 100 + (os.getpid() * 13 + 5) % 100
+    env = ros_environment(domain)
+    out = tmp_path / 'grasp.mcap'
+    node_proc = node_process({'real_time_factor': 0.0, 'publish_rate': 200.0}, env=env,
+                             log_path=tmp_path / 'node.log')
+    with node_proc, ros_node(domain, 'live_observer') as (node, executor):
+        assert node_proc.wait_for_log('ready', timeout=TIMEOUT), node_proc.log()
+        live: list[FruitState] = []
+        node.create_subscription(FruitState, STATE, live.append,
+                                 QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+        force = node.create_publisher(Float64, '/gripper_sim/jaw/force_command', 10)
+        recorder = RosProcess('gripper_sim.cli.main',
+                              ['record', '-o', str(out), STATE, '/gripper_sim/left_jaw/wrench',
+                               '/gripper_sim/right_jaw/wrench', '/gripper_sim/markers'],
+                              env=env, log_path=tmp_path / 'record.log')
+        with recorder:
+            spin_until(executor, lambda: node.count_subscribers(STATE) >= 2 and live,
+                       what='the recorder and this test to receive the state')
+            spin_until(executor, lambda: recorder.log().count("recording '") == 4,
+                       what='the recorder to subscribe to all four topics')
+            spin_until(executor, lambda: force.get_subscription_count() > 0,
+                       what='the node to subscribe to force commands')
+            force.publish(Float64(data=4.0))
+            spin_until(executor, lambda: max(m.grip_force for m in live) >= 3.0,
+                       what='a grip of 3 N')
+            grip_at = live[-1].header.stamp
+            spin_until(executor, lambda: live[-1].header.stamp.sec * 10**9 +
+                       live[-1].header.stamp.nanosec >=
+                       grip_at.sec * 10**9 + grip_at.nanosec + 100_000_000,
+                       what='0.1 s of sim time holding the grip')
+            assert recorder.stop(timeout=TIMEOUT) == 0, recorder.log()
+        # the live subscriber keeps what was in flight when the recorder stopped
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.05)
+
+    result = analyze(out, tmp_path / 'analysis')
+    with BagReader(out) as bag:
+        recorded = [m for _, m in bag.decoded_messages([STATE])]
+    stamp = (lambda m: m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)
+    first, last = stamp(recorded[0]), stamp(recorded[-1])
+    window = [m for m in live if first <= stamp(m) <= last]
+    assert [stamp(m) for m in window] == [stamp(m) for m in recorded]  # nothing dropped
+    s = result.summary
+    assert s['samples'] == len(window)
+    assert s['peak_grip_force_n'] == max(m.grip_force for m in window)
+    assert s['peak_compression_m'] == max(m.compression for m in window)
+    assert s['peak_grip_force_n'] >= 3.0
+    assert s['peak_left_force_n'] is not None and s['peak_right_force_n'] is not None
+    assert (tmp_path / 'analysis' / 'outline_snapshots.png').is_file()
