@@ -4,7 +4,8 @@
 ``StepResult`` with ``gripper_sim.ros.messages.build_messages`` (the node's own
 conversion), serializes the messages and writes them under the node's topic names
 (``/gripper_sim/fruit/state``, ...). Log and publish times are the sim time of the step
-in integer ns, the same as the messages' header stamps and ``/clock``. The
+in integer ns, the same as the messages' header stamps and ``/clock`` (after a reset of
+the simulation, shifted so that log times keep increasing). The
 configuration used is stored as a Metadata record ``gripper_sim_config`` (key ``yaml``)
 when the file is opened, so a run can be reproduced from its recording.
 
@@ -79,6 +80,7 @@ class SimRecorder:
         self.failures = 0
         self._lock = threading.Lock()
         self._last_time_ns: int | None = None
+        self._offset = 0
         self.last_error: str = ''
 
     @property
@@ -136,9 +138,12 @@ class SimRecorder:
     __call__ = on_step
 
     def reset(self) -> None:
-        """The simulation was reset: time restarts, so later samples may go back in time."""
+        """The simulation was reset (its time restarts at 0); the history is cleared.
+
+        Log times stay increasing across resets: samples after a reset are logged
+        1 ms after the last one (their header stamps keep the sim time).
+        """
         self.context.reset()
-        self._last_time_ns = None
 
     def _write(self, result: Any) -> None:
         messages = self._messages
@@ -157,14 +162,19 @@ class SimRecorder:
         with self._lock:
             if not self.writer.is_open:
                 return
+            stamp_ns = int(stamp_ns)
+            if self._last_time_ns is not None and stamp_ns + self._offset < self._last_time_ns:
+                # time went back (a reset): keep the log in order, 1 ms after the last sample
+                self._offset = self._last_time_ns + 1_000_000 - stamp_ns
+            log_time = stamp_ns + self._offset
             for suffix, msg in batch.items():
                 topic = self.topic_names.get(suffix)
                 if topic is None:
                     continue
-                self.writer.write(topic, serialize_message(msg), log_time=int(stamp_ns),
-                                  publish_time=int(stamp_ns))
+                self.writer.write(topic, serialize_message(msg), log_time=log_time,
+                                  publish_time=log_time)
             self.samples += 1
-            self._last_time_ns = stamp_ns
+            self._last_time_ns = log_time
             self.writer.flush_if_due()
 
     def describe(self) -> str:

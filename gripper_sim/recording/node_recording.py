@@ -1,0 +1,139 @@
+"""In-node recording: the ``gripper_sim`` node writes its own MCAP at full physics rate.
+
+``NodeRecording`` hooks one step observer into the node (``node.add_observer``) and
+forwards every physics step to the active ``SimRecorder``, if any, so recording can
+start and stop any number of times. It writes every step (not only what is
+published), with the node's topic names, its ``MessageContext`` (so bruising history
+matches what the node publishes) and the configuration as a Metadata record.
+
+What the node needs (``gripper_sim/ros/node.py``)::
+
+    from gripper_sim.recording.node_recording import NodeRecording
+    self.recording = NodeRecording(self)            # after message_context exists
+    path = self.get_parameter('record_path').value  # '' = not recording
+    if path:
+        self.recording.start(path)
+    # ~/record (std_srvs/SetBool): data=True starts (to record_path, or a new
+    # timestamped file when it is empty or already used), data=False stops:
+    ok, message = self.recording.start() / self.recording.stop()
+    # on reset:  self.recording.on_reset();  in destroy_node: self.recording.stop()
+
+The node object must offer ``add_observer``, ``message_context``, ``params.config``
+(or ``sim.config``), ``get_name()`` and ``get_namespace()``.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.offline import SimRecorder
+
+
+def default_path(directory: str | os.PathLike = '.') -> Path:
+    """A new file name ``gripper_sim_YYYYmmdd_HHMMSS.mcap`` in ``directory``."""
+    stamp = time.strftime('%Y%m%d_%H%M%S')
+    path = Path(directory) / f'gripper_sim_{stamp}.mcap'
+    k = 1
+    while path.exists():
+        path = Path(directory) / f'gripper_sim_{stamp}_{k}.mcap'
+        k += 1
+    return path
+
+
+class NodeRecording:
+    """Start/stop recording of a sim node's every step.
+
+    Args:
+        node: the ``SimNode``.
+        every: record every n-th physics step (1 = full physics rate).
+    """
+
+    def __init__(self, node: Any, *, every: int = 1):
+        self.node = node
+        self.every = every
+        self._lock = threading.Lock()
+        self._recorder: SimRecorder | None = None
+        self.last_path: Path | None = None
+        node.add_observer(self._on_step)
+
+    @property
+    def active(self) -> bool:
+        rec = self._recorder
+        return rec is not None and rec.is_open
+
+    @property
+    def path(self) -> Path | None:
+        rec = self._recorder
+        return rec.path if rec is not None else None
+
+    def _config(self) -> dict:
+        params = getattr(self.node, 'params', None)
+        config = getattr(params, 'config', None)
+        if config is None:
+            config = getattr(getattr(self.node, 'sim', None), 'config', {})
+        return dict(config)
+
+    def start(self, path: str | os.PathLike | None = None) -> tuple[bool, str]:
+        """Start recording to ``path`` (default: a new timestamped file); (ok, message)."""
+        with self._lock:
+            if self.active:
+                return False, f'already recording to {self._recorder.path}'
+            target = Path(path) if path else default_path()
+            if target.suffix != '.mcap':
+                target = target.with_suffix(target.suffix + '.mcap') if target.suffix \
+                    else target.with_suffix('.mcap')
+            initial = None
+            sim = getattr(self.node, 'sim', None)
+            if sim is not None:
+                initial = getattr(sim, 'last', None)
+            try:
+                rec = SimRecorder(
+                    target, self._config(), initial=initial,
+                    context=getattr(self.node, 'message_context', None),
+                    node_name=self.node.get_name(), namespace=self.node.get_namespace(),
+                    every=self.every, source='node')
+                rec.open()
+            except RecordingError as err:
+                return False, str(err)
+            self._recorder = rec
+            self.last_path = rec.path
+            return True, f'recording every step to {rec.path}'
+
+    def stop(self) -> tuple[bool, str]:
+        """Stop and finish the file; (ok, message)."""
+        with self._lock:
+            rec = self._recorder
+            if rec is None or not rec.is_open:
+                return False, 'not recording'
+            self._recorder = None
+        try:
+            rec.close()
+        except RecordingError as err:
+            return False, str(err)
+        return True, rec.describe()
+
+    def on_reset(self) -> None:
+        """The node reset its simulation: keep recording, with log times still increasing."""
+        rec = self._recorder
+        if rec is not None:
+            rec.reset()
+
+    def _on_step(self, result: Any) -> None:
+        rec = self._recorder
+        if rec is None:
+            return
+        try:
+            rec.on_step(result)
+        except RecordingError as err:
+            self._recorder = None
+            logger = getattr(self.node, 'get_logger', None)
+            if logger is not None:
+                logger().error(f'in-node recording stopped: {err}')
+            try:
+                rec.close()
+            except RecordingError:
+                pass

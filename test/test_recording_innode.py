@@ -1,0 +1,109 @@
+"""In-node recording (``NodeRecording``) on the real SimNode, stepped by hand."""
+from __future__ import annotations
+
+import os
+
+import pytest
+import yaml
+
+rclpy = pytest.importorskip('rclpy')
+pytest.importorskip('gripper_sim_interfaces.msg')
+
+from gripper_sim.configuration import to_yaml  # noqa: E402
+from gripper_sim.recording.node_recording import NodeRecording  # noqa: E402
+from gripper_sim.recording.offline import CONFIG_METADATA  # noqa: E402
+from gripper_sim.recording.reader import BagReader  # noqa: E402
+from gripper_sim.ros import messages  # noqa: E402
+from gripper_sim.ros.process import ros_environment  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+_ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',
+             'FASTRTPS_DEFAULT_PROFILES_FILE')
+
+
+@pytest.fixture
+def sim_node():
+    from gripper_sim.ros.node import SimNode
+    domain = 100 + (os.getpid() * 11 + 3) % 100
+    env = ros_environment(domain)
+    saved = {k: os.environ.get(k) for k in _ENV_KEYS}
+    for key in _ENV_KEYS:
+        os.environ[key] = env[key]
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = SimNode(start=False, context=context,
+                   parameter_overrides=[rclpy.parameter.Parameter('real_time_factor',
+                                                                  value=0.0)])
+    try:
+        yield node
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+def test_every_physics_step_is_recorded_and_recording_restarts(sim_node, tmp_path):
+    recording = NodeRecording(sim_node)
+    ok, message = recording.start(tmp_path / 'first.mcap')
+    assert ok, message
+    assert not recording.start(tmp_path / 'other.mcap')[0]  # one at a time
+    with sim_node.lock:
+        sim_node.sim.command_force(3.0)
+    results = [sim_node.advance() for _ in range(40)]
+    assert all(r is not None for r in results)
+    ok, message = recording.stop()
+    assert ok and 'first.mcap' in message
+    assert recording.stop() == (False, 'not recording')
+    for _ in range(5):
+        sim_node.advance()            # not recorded
+    ok, _ = recording.start(tmp_path / 'second.mcap')
+    assert ok
+    more = [sim_node.advance() for _ in range(10)]
+    recording.stop()
+
+    state_topic = messages.resolved_topic('fruit/state', sim_node.get_name(),
+                                          sim_node.get_namespace())
+    with BagReader(tmp_path / 'first.mcap') as bag:
+        assert set(bag.topics) == {messages.resolved_topic(s, sim_node.get_name(),
+                                                           sim_node.get_namespace())
+                                   for s in messages.TOPICS}
+        states = [m for _, m in bag.decoded_messages([state_topic])]
+        config = yaml.safe_load(bag.metadata_named(CONFIG_METADATA)['yaml'])
+        assert bag.metadata_named(CONFIG_METADATA)['source'] == 'node'
+    # the initial state, then every physics step, whatever the publish rate
+    assert len(states) == len(results) + 1
+    assert [s.grip_force for s in states[1:]] == [r.grip_force for r in results]
+    assert config == yaml.safe_load(to_yaml(sim_node.params.config))
+    with BagReader(tmp_path / 'second.mcap') as bag:
+        states = [m for _, m in bag.decoded_messages([state_topic])]
+    assert [s.gap for s in states[1:]] == [r.gap for r in more]
+
+
+def test_start_reports_bad_paths_and_reset_keeps_log_order(sim_node, tmp_path):
+    recording = NodeRecording(sim_node)
+    ok, message = recording.start(tmp_path / 'missing_dir' / 'x.mcap')
+    assert not ok and 'does not exist' in message
+    (tmp_path / 'taken.mcap').write_bytes(b'keep me')
+    ok, message = recording.start(tmp_path / 'taken.mcap')
+    assert not ok and 'already exists' in message
+    assert (tmp_path / 'taken.mcap').read_bytes() == b'keep me'
+    ok, _ = recording.start(tmp_path / 'reset.mcap')
+    assert ok
+    for _ in range(5):
+        sim_node.advance()
+    with sim_node.lock:
+        sim_node.sim.reset()
+    recording.on_reset()
+    for _ in range(5):
+        sim_node.advance()
+    recording.stop()
+    with BagReader(tmp_path / 'reset.mcap') as bag:
+        raw = list(bag.messages(['/clock']))
+    log_times = [m.log_time for m in raw]
+    assert len(raw) == 11 and log_times == sorted(log_times)
+    assert len(set(log_times)) == len(log_times)
