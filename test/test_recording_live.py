@@ -17,6 +17,7 @@ rclpy = pytest.importorskip('rclpy')
 
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from rclpy.duration import Duration  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
@@ -332,3 +333,30 @@ def test_replay_and_record_reject_bad_input(tmp_path):
         log = proc.log()
         assert proc.process.returncode == 2, log
         assert 'error: ' in log and text in log and 'Traceback' not in log, log
+
+
+def test_replay_loop_repeats_until_interrupted(tmp_path):
+    domain = _domain()
+    src = tmp_path / 'short.mcap'
+    with BagWriter(src) as bag:
+        bag.add_topic('/tick', 'std_msgs/msg/String')
+        for k in range(5):
+            bag.write('/tick', serialize_message(String(data=f't{k}')),
+                      log_time=1_000_000_000 + k * 20_000_000)
+    with ros_node(domain, 'loop_listener') as node:
+        got: list[str] = []
+        node.create_subscription(String, '/tick', lambda m: got.append(m.data), 100)
+        executor = SingleThreadedExecutor(context=node.context)
+        executor.add_node(node)
+        replay = cli(domain, tmp_path, 'replay', str(src), '--loop',
+                     '--wait-for-subscribers', '30', name='replay_loop')
+        with replay:
+            deadline = time.monotonic() + TIMEOUT
+            while len(got) < 12 and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            assert len(got) >= 12, replay.log()
+            assert replay.running  # still looping
+            stop_cleanly(replay)
+        assert 'loops' in replay.log()
+        executor.shutdown()
+    assert got[:10] == [f't{k}' for k in range(5)] * 2
