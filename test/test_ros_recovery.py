@@ -69,12 +69,15 @@ def test_a_failed_step_is_reported_resets_and_publishes_nothing_non_finite(conte
     try:
         published = []
         node.add_publish_observer(lambda batch, stamp: published.append(batch))
+        resets = []
+        node.add_reset_listener(resets.append)
         owner = Owner()
         assert node.claim_jaws(owner) is None
         node.sim.command_gap(0.06)
         results = [node.advance() for _ in range(8)]
         assert results[4] is None and all(r is not None for r in results[:4] + results[5:])
         assert node.failures == 1
+        assert len(resets) == 1 and resets[0].time == 0.0   # the recorder's hook
         assert len(owner.reasons) == 1 and 'failed step' in owner.reasons[0]
         # reset to t = 0 and went on: 3 steps after the failure
         assert node.sim.time == pytest.approx(0.003)

@@ -86,6 +86,7 @@ class SimNode(Node):
         self._step_listeners: list[Callable[[StepResult], None]] = []
         self._observers: list[Callable[[StepResult], None]] = []
         self._publish_observers: list[Callable[[dict, int], None]] = []
+        self._reset_listeners: list[Callable[[StepResult], None]] = []
         self._jaw_owner: JawOwner | None = None
         self._owner_guard = threading.Lock()
         self._paused = False
@@ -149,6 +150,10 @@ class SimNode(Node):
     def add_publish_observer(self, callback: Callable[[dict, int], None]) -> None:
         """Call ``callback({suffix: msg}, stamp_ns)`` with every batch the node publishes."""
         self._publish_observers.append(callback)
+
+    def add_reset_listener(self, callback: Callable[[StepResult], None]) -> None:
+        """Call ``callback(initial_result)`` after every reset (``~/reset`` or recovery)."""
+        self._reset_listeners.append(callback)
 
     def add_step_listener(self, callback: Callable[[StepResult], None]) -> None:
         """Call ``callback(result)`` after every step, under ``lock`` (actions)."""
@@ -281,6 +286,8 @@ class SimNode(Node):
             self.message_context.reset()
             self._anchor = (time.monotonic(), self.sim.time)
             initial = self.sim.last
+        for listener in self._reset_listeners:
+            listener(initial)
         self._publish(initial)
 
     def _publish(self, result: StepResult) -> None:
