@@ -138,3 +138,18 @@ def test_node_verb_refuses_an_unknown_fruit():
     assert run.returncode == 2
     assert "unknown fruit 'durian'" in run.stdout + run.stderr
     assert 'Traceback' not in run.stderr
+
+
+def test_status_follow_prints_lines_until_ctrl_c(client):
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'gripper_sim.cli.main', 'status', '--follow', '--rate', '5'],
+        env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        lines = [process.stdout.readline() for _ in range(3)]
+        assert all('gap' in line for line in lines), lines
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0 and 'Traceback' not in err, err

@@ -21,6 +21,7 @@ def test_controller_settles_the_grip_force_within_5_percent(tmp_path):
     try:
         client.wait_ready(120)
         controller.start()
+
         # settled: every state over 1 s of sim time within 5 % of the setpoint
         def settled():
             states = list(client.states)

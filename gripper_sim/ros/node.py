@@ -81,7 +81,8 @@ class SimNode(Node):
         self.params = SimParameters(self, fruit=fruit, config_file=config_file)
         self.lock = threading.RLock()
         self.sim = simulation_factory(dict(self.params.config))
-        self.message_context = MessageContext.from_config(self.params.config, initial=self.sim.last)
+        self.message_context = MessageContext.from_config(self.params.config,
+                                                          initial=self.sim.last)
         self._commands: deque[tuple[str, Callable[[], None]]] = deque()
         self._step_listeners: list[Callable[[StepResult], None]] = []
         self._observers: list[Callable[[StepResult], None]] = []

@@ -254,5 +254,3 @@ def physics_changes(changes: Mapping[str, Any]) -> dict[str, Any]:
     """The ``physics.*`` entries of ``changes`` as ``{config key: value}``."""
     return {name[len(PHYSICS_PREFIX):]: value for name, value in changes.items()
             if name.startswith(PHYSICS_PREFIX)}
-
-
