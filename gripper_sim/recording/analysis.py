@@ -170,7 +170,9 @@ def read_time_series(bag: BagReader, topics: dict[str, str | None]) -> TimeSerie
     rows: list[list[float]] = []
     log_times: list[int] = []
     stamps: list[int] = []
-    for raw, s in bag.decoded_messages([topics['state']]):
+    state_topic = topics['state']
+    assert state_topic is not None
+    for raw, s in bag.decoded_messages([state_topic]):
         stamp = _stamp_ns(s.header)
         rows.append([
             stamp / 1e9, s.gap, s.grip_force,
@@ -421,7 +423,7 @@ def plot_outlines(bag: BagReader, topic: str, series: TimeSeries, summary: dict,
         pts = np.array([[p.x, p.z] for p in marker.points]) * 1e3
         segments = np.stack([pts[:-1], pts[1:]], axis=1)
         ax = axes[0][col]
-        line_sets = LineCollection(segments, cmap='coolwarm', linewidths=3)
+        line_sets = LineCollection(list(segments), cmap='coolwarm', linewidths=3)
         line_sets.set_array(strain)
         line_sets.set_clim(-limit, limit)
         ax.add_collection(line_sets)
@@ -430,7 +432,8 @@ def plot_outlines(bag: BagReader, topic: str, series: TimeSeries, summary: dict,
         colours = [(c.r, c.g, c.b) for c in marker.colors] if marker.colors else None
         if colours and len(colours) == len(pts):
             seg_colours = colours[:-1]
-            ax2.add_collection(LineCollection(segments, colors=seg_colours, linewidths=3))
+            ax2.add_collection(LineCollection(list(segments), colors=seg_colours,
+                                              linewidths=3))
         else:
             ax2.plot(pts[:, 0], pts[:, 1], color='tab:green', lw=3)
         ax2.set_title(f'peak p = {series["peak_contact_pressure_pa"][row] / 1e3:.0f} kPa',

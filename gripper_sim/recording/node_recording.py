@@ -80,7 +80,7 @@ class NodeRecording:
     def start(self, path: str | os.PathLike | None = None) -> tuple[bool, str]:
         """Start recording to ``path`` (default: a new timestamped file); (ok, message)."""
         with self._lock:
-            if self.active:
+            if self._recorder is not None and self._recorder.is_open:
                 return False, f'already recording to {self._recorder.path}'
             target = Path(path) if path else default_path()
             if target.suffix != '.mcap':

@@ -26,13 +26,14 @@ MCAP_MAGIC = b'\x89MCAP0\r\n'
 FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, offset start, crc
 
 try:  # zstandard raises its own error class on a broken frame
-    from zstandard import ZstdError as _ZstdError
+    import zstandard
+    _ZSTD_ERRORS: tuple[type[BaseException], ...] = (zstandard.ZstdError,)
 except ImportError:  # pragma: no cover - zstandard is a dependency
-    _ZstdError = McapError
+    _ZSTD_ERRORS = ()
 
 #: Errors of the mcap stack that mean "this file is damaged".
 READ_ERRORS: tuple[type[BaseException], ...] = (
-    McapError, CRCValidationError, struct.error, zlib.error, _ZstdError, EOFError,
+    McapError, CRCValidationError, struct.error, zlib.error, *_ZSTD_ERRORS, EOFError,
     UnicodeDecodeError, ValueError, KeyError, IndexError, MemoryError, OverflowError)
 
 

@@ -104,6 +104,7 @@ class Player:
             self._clock_class = Clock
             self.clock_publisher = node.create_publisher(Clock, CLOCK_TOPIC,
                                                          QoSProfile(depth=10))
+        self._next_clock = 0.0
         self.t0 = bag.start_time + int(round(start * 1e9))
         if bag.message_count and self.t0 > bag.end_time:
             raise RecordingError(f'--start {start} s is past the end of {bag.path} '
@@ -121,6 +122,7 @@ class Player:
         return False
 
     def _publish_clock(self, bag_ns: int) -> None:
+        assert self.clock_publisher is not None
         msg = self._clock_class()
         msg.clock.sec, msg.clock.nanosec = divmod(int(bag_ns), 1_000_000_000)
         self.clock_publisher.publish(msg)
@@ -130,7 +132,7 @@ class Player:
         """Sleep until ``wall_target`` (monotonic s), publishing /clock ticks meanwhile."""
         while not self.stop.is_set():
             now = time.monotonic()
-            if self.clock_publisher is not None:
+            if self.clock_publisher is not None and self.clock_hz is not None:
                 due = self._next_clock
                 if due <= now:
                     self._publish_clock(self.t0 + int((now - wall0) * self.rate * 1e9))
