@@ -96,14 +96,13 @@ def test_start_reports_bad_paths_and_reset_keeps_log_order(sim_node, tmp_path):
     assert ok
     for _ in range(5):
         sim_node.advance()
-    with sim_node.lock:
-        sim_node.sim.reset()
-    recording.on_reset()
+    sim_node._reset('test reset')  # the path ~/reset and failure recovery take
     for _ in range(5):
         sim_node.advance()
     recording.stop()
     with BagReader(tmp_path / 'reset.mcap') as bag:
         raw = list(bag.messages(['/clock']))
     log_times = [m.log_time for m in raw]
-    assert len(raw) == 11 and log_times == sorted(log_times)
+    # initial, 5 steps, the state after the reset, 5 steps
+    assert len(raw) == 12 and log_times == sorted(log_times)
     assert len(set(log_times)) == len(log_times)

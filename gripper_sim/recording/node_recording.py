@@ -16,7 +16,8 @@ What the node needs (``gripper_sim/ros/node.py``)::
     # ~/record (std_srvs/SetBool): data=True starts (to record_path, or a new
     # timestamped file when it is empty or already used), data=False stops:
     ok, message = self.recording.start() / self.recording.stop()
-    # on reset:  self.recording.on_reset();  in destroy_node: self.recording.stop()
+    # in destroy_node: self.recording.stop()
+    # (resets are followed through the node's add_reset_listener hook)
 
 The node object must offer ``add_observer``, ``message_context``, ``params.config``
 (or ``sim.config``), ``get_name()`` and ``get_namespace()``.
@@ -59,6 +60,8 @@ class NodeRecording:
         self._recorder: SimRecorder | None = None
         self.last_path: Path | None = None
         node.add_observer(self._on_step)
+        if hasattr(node, 'add_reset_listener'):
+            node.add_reset_listener(self._on_reset)
 
     @property
     def active(self) -> bool:
@@ -121,6 +124,17 @@ class NodeRecording:
         rec = self._recorder
         if rec is not None:
             rec.reset()
+
+    def _on_reset(self, initial: Any) -> None:
+        """Reset listener: the history restarts and the initial state is written."""
+        rec = self._recorder
+        if rec is None:
+            return
+        rec.reset()
+        try:
+            rec.write_result(initial)
+        except RecordingError:
+            pass
 
     def _on_step(self, result: Any) -> None:
         rec = self._recorder

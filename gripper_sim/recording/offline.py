@@ -120,7 +120,7 @@ class SimRecorder:
                 self.writer.close()
                 raise
         if self.initial is not None:
-            self._write(self.initial)
+            self.write_result(self.initial)
 
     def close(self) -> None:
         """Finish the file (idempotent)."""
@@ -133,7 +133,7 @@ class SimRecorder:
         self.steps_seen += 1
         if (self.steps_seen - 1) % self.every:
             return
-        self._write(result)
+        self.write_result(result)
 
     __call__ = on_step
 
@@ -145,7 +145,8 @@ class SimRecorder:
         """
         self.context.reset()
 
-    def _write(self, result: Any) -> None:
+    def write_result(self, result: Any) -> None:
+        """Write one result now, whatever ``every`` (e.g. the state after a reset)."""
         messages = self._messages
         if not messages.result_is_finite(result):
             self.failures += 1
