@@ -360,3 +360,29 @@ def test_replay_loop_repeats_until_interrupted(tmp_path):
         assert 'loops' in replay.log()
         executor.shutdown()
     assert got[:10] == [f't{k}' for k in range(5)] * 2
+
+
+def test_replay_clock_drives_a_use_sim_time_node(tmp_path):
+    domain = _domain()
+    src = tmp_path / 'original.mcap'
+    _synthetic_bag(src)
+    t0 = 1_700_000_000_000_000_000
+    with ros_node(domain, 'sim_time_listener') as node:
+        node.set_parameters([rclpy.parameter.Parameter('use_sim_time', value=True)])
+        executor = SingleThreadedExecutor(context=node.context)
+        executor.add_node(node)
+        seen: list[int] = []
+        replay = cli(domain, tmp_path, 'replay', str(src), '--clock', '100', '--topics', '/a',
+                     name='replay_clock')
+        with replay:
+            deadline = time.monotonic() + TIMEOUT
+            while replay.running and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.02)
+                seen.append(node.get_clock().now().nanoseconds)
+            assert replay.process.wait(TIMEOUT) == 0, replay.log()
+        executor.shutdown()
+    followed = [t for t in seen if t >= t0]
+    assert len(followed) > 10, 'the node never followed the replayed /clock'
+    assert followed == sorted(followed)
+    assert followed[-1] - followed[0] >= 1_000_000_000  # most of the 2 s recording
+    assert followed[-1] <= t0 + 2_100_000_000
