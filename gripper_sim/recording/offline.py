@@ -181,3 +181,7 @@ class SimRecorder:
     def describe(self) -> str:
         return (f'wrote {self.samples} samples ({self.writer.message_count} messages) to '
                 f'{self.path}')
+
+
+#: The name the offline CLI (``squeeze``/``pick --out``) uses.
+OfflineRecorder = SimRecorder
