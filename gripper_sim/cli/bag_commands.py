@@ -205,8 +205,21 @@ def _recover(args: argparse.Namespace) -> int:
     return 0
 
 
+def _require_rclpy(verb: str) -> None:
+    from gripper_sim.recording.errors import RecordingError
+    try:
+        import rclpy  # noqa: F401
+    except ImportError as err:
+        msg = (f"'{verb}' needs ROS 2 (rclpy), which cannot be imported here ({err}); run it "
+               "in the project's environment (see Set-up). 'info', 'analyze' and 'recover' "
+               'work without ROS.')
+        raise RecordingError(msg) from err
+
+
 def _record(args: argparse.Namespace) -> int:
     from gripper_sim.recording.errors import RecordingError
+
+    _require_rclpy('record')
     from gripper_sim.recording.recorder import run_record
 
     if not args.all and not args.topics:
@@ -221,6 +234,7 @@ def _record(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    _require_rclpy('replay')
     from gripper_sim.recording.replay import run_replay
 
     summary = run_replay(args.file, rate=args.rate, loop=args.loop, topics=args.topics,
