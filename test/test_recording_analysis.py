@@ -244,3 +244,27 @@ def test_finite_check_skips_nan_steps(tmp_path):
     path = tmp_path / 'nan.mcap'
     rec = record(path, results + [bad], config())
     assert rec.failures == 1 and rec.samples == len(results)
+
+
+def test_info_analyze_and_recover_never_import_ros(tmp_path):
+    """They work from the file alone: no rclpy, no ROS message packages imported."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    path = tmp_path / 'noros.mcap'
+    record(path, squeeze_results(n=30), config())
+    code = (
+        'import sys\n'
+        'from gripper_sim.cli.main import main\n'
+        f'assert main(["info", {str(path)!r}]) == 0\n'
+        f'assert main(["analyze", {str(path)!r}, "-o", {str(tmp_path / "o")!r}]) == 0\n'
+        f'assert main(["recover", {str(path)!r}, {str(tmp_path / "r.mcap")!r}]) == 0\n'
+        'ros = sorted(m for m in sys.modules if m.split(".")[0] in '
+        '("rclpy", "gripper_sim_interfaces", "std_msgs", "geometry_msgs", "rosidl_parser"))\n'
+        'assert not ros, ros\n'
+        'print("no ROS imported")\n')
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          cwd=root, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert 'no ROS imported' in done.stdout

@@ -19,7 +19,10 @@ pytest.importorskip('gripper_sim_interfaces.msg')
 from gripper_sim_interfaces.msg import FruitState  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from geometry_msgs.msg import WrenchStamped  # noqa: E402
+from rclpy.serialization import deserialize_message  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from gripper_sim.recording.analysis import analyze  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
@@ -103,12 +106,33 @@ def test_analyze_reproduces_the_peaks_the_node_reported_live(tmp_path):
             executor.spin_once(timeout_sec=0.05)
 
     result = analyze(out, tmp_path / 'analysis')
+    classes = {STATE: FruitState, '/gripper_sim/left_jaw/wrench': WrenchStamped,
+               '/gripper_sim/right_jaw/wrench': WrenchStamped,
+               '/gripper_sim/markers': MarkerArray}
     with BagReader(out) as bag:
-        recorded = [m for _, m in bag.decoded_messages([STATE])]
+        assert set(bag.topics) == set(classes)
+        for topic, cls in classes.items():
+            raw = list(bag.messages([topic]))
+            assert raw, topic
+            decoded = [d for _, d in bag.decoded_messages([topic])]  # mcap-ros2-support
+            by_rclpy = [deserialize_message(m.data, cls) for m in raw]
+            assert len(decoded) == len(by_rclpy) == bag.topics[topic].message_count
+            log_times = [m.log_time for m in raw]
+            assert log_times == sorted(log_times)
+            if cls is MarkerArray:
+                by_rclpy = [m.markers[0] for m in by_rclpy]
+                decoded = [d.markers[0] for d in decoded]
+            stamps = [(m.header.stamp.sec, m.header.stamp.nanosec) for m in by_rclpy]
+            assert stamps == sorted(stamps)
+            assert stamps == [(d.header.stamp.sec, d.header.stamp.nanosec) for d in decoded]
+        recorded = [deserialize_message(m.data, FruitState) for m in bag.messages([STATE])]
+        decoded_states = [d for _, d in bag.decoded_messages([STATE])]
     stamp = (lambda m: m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)
     first, last = stamp(recorded[0]), stamp(recorded[-1])
     window = [m for m in live if first <= stamp(m) <= last]
-    assert [stamp(m) for m in window] == [stamp(m) for m in recorded]  # nothing dropped
+    assert window == recorded  # every message equals what the node published
+    assert [d.grip_force for d in decoded_states] == [m.grip_force for m in window]
+    assert [d.compression for d in decoded_states] == [m.compression for m in window]
     s = result.summary
     assert s['samples'] == len(window)
     assert s['peak_grip_force_n'] == max(m.grip_force for m in window)
