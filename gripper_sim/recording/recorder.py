@@ -82,7 +82,7 @@ class Recorder:
         self._lock = threading.Lock()
         self._discovery_timer = node.create_timer(discovery_period, self.discover)
         self._flush_timer = node.create_timer(
-            max(0.05, writer._flush_interval / 4), writer.flush_if_due)
+            max(0.05, writer.flush_interval / 4), writer.flush_if_due)
         self.discover()
 
     def _absolute(self, topic: str) -> str:

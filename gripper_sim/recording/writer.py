@@ -429,6 +429,11 @@ class BagWriter:
 
     # ------------------------------------------------------------------ statistics
     @property
+    def flush_interval(self) -> float:
+        """Seconds after which a non-empty chunk is written out."""
+        return self._flush_interval
+
+    @property
     def message_count(self) -> int:
         return self._message_count
 
