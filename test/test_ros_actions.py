@@ -216,3 +216,26 @@ def test_out_of_range_gripper_commands_are_rejected(client, goal):
     assert not handle.accepted
     client.wait_log('GripperCommand goal rejected', since=since)
     client.wait_sim_time(0.05)
+
+
+def test_stopping_the_node_aborts_the_goal_and_delivers_its_result(tmp_path):
+    domain = pick_domain_id(11)
+    process = node_process({'real_time_factor': 0.0}, env=ros_environment(domain),
+                           log_path=tmp_path / 'node.log').start()
+    client = SimClient(domain, name='shutdown_test_client')
+    try:
+        client.wait_ready(120)
+        feedback = []
+        handle = client.send_goal(client.grasp, grasp_goal(6.0, hold=100.0), feedback)
+        assert handle.accepted
+        client.spin_until(lambda: feedback, 60, 'feedback')
+        future = handle.get_result_async()
+        assert process.stop() == 0
+        client.spin_until(future.done, 30, 'the result of the interrupted goal')
+        response = future.result()
+        assert response.status == GoalStatus.STATUS_ABORTED
+        assert 'shutting down' in response.result.message
+    finally:
+        client.close()
+        process.stop()
+    assert 'Traceback' not in process.log(), process.log()

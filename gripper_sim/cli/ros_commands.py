@@ -302,8 +302,15 @@ def _grasp(args) -> int:
             return _error(f'goal rejected: {reason}')
         result_future = handle.get_result_async()
         try:
+            gone_since = None
             while not result_future.done():
                 session.executor.spin_once(timeout_sec=0.1)
+                if client.server_is_ready():
+                    gone_since = None
+                elif gone_since is None:
+                    gone_since = time.monotonic()
+                elif time.monotonic() - gone_since > 5.0:
+                    return _error('the node went away before the goal finished')
         except KeyboardInterrupt:
             print('canceling the goal...', flush=True)
             cancel = handle.cancel_goal_async()

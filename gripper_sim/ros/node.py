@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import sys
 import threading
 import time
@@ -23,6 +24,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
@@ -90,6 +92,7 @@ class SimNode(Node):
         self._reset_listeners: list[Callable[[StepResult], None]] = []
         self._jaw_owner: JawOwner | None = None
         self._owner_guard = threading.Lock()
+        self._owner_changed = threading.Condition(self._owner_guard)
         self._paused = False
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -181,9 +184,10 @@ class SimNode(Node):
             return None
 
     def release_jaws(self, owner: JawOwner) -> None:
-        with self._owner_guard:
+        with self._owner_changed:
             if self._jaw_owner is owner:
                 self._jaw_owner = None
+                self._owner_changed.notify_all()
 
     @property
     def jaw_owner(self) -> JawOwner | None:
@@ -432,16 +436,18 @@ class SimNode(Node):
         return response
 
     # ------------------------------------------------------------- lifecycle
-    def stop(self) -> None:
-        """Stop the physics thread and abort the active goal."""
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop the physics thread; abort the active goal and let its result go out."""
         self._stop.set()
         self._wake.set()
         if self._thread.is_alive():
-            self._thread.join(timeout=5.0)
+            self._thread.join(timeout=timeout)
         with self._owner_guard:
             owner = self._jaw_owner
         if owner is not None:
             owner.abort('the simulator is shutting down')
+            with self._owner_changed:
+                self._owner_changed.wait_for(lambda: self._jaw_owner is None, timeout)
 
     def destroy_node(self):
         self.stop()
@@ -458,6 +464,10 @@ def main(args: list[str] | None = None) -> int:
 
     Returns:
         0 after a clean shutdown, 2 if the configuration or a parameter is invalid.
+
+    The Jazzy main idiom, with one change: SIGINT/SIGTERM set a flag instead of
+    shutting the context down at once, so an active goal is aborted and its result
+    delivered before the node goes.
     """
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     argv = list(sys.argv if args is None else args)
@@ -465,20 +475,32 @@ def main(args: list[str] | None = None) -> int:
     parser.add_argument('--fruit', help='fruit preset name')
     parser.add_argument('--config', help='YAML configuration file')
     options = parser.parse_args(remove_ros_args(argv)[1:])
-    rclpy.init(args=argv)
+    # Our own SIGINT/SIGTERM handling instead of rclpy's, which shuts the context down
+    # at once: an active goal must still get its (aborted) result out before we stop.
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    stopping = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stopping.set())
     node = None
+    executor = MultiThreadedExecutor(num_threads=4)
     try:
         try:
             node = SimNode(fruit=options.fruit, config_file=options.config)
         except ConfigError as err:
             rclpy.logging.get_logger(NODE_NAME).error(f'cannot start: {err}')
             return 2
-        executor = MultiThreadedExecutor(num_threads=4)
-        rclpy.spin(node, executor=executor)
+        executor.add_node(node)
+        while not stopping.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         if node is not None:
+            node.stop()
+            # deliver the aborted goal's result to its client, then go
+            deadline = time.monotonic() + 1.0
+            while time.monotonic() < deadline and rclpy.ok():
+                executor.spin_once(timeout_sec=0.05)
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
