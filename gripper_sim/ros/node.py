@@ -42,6 +42,7 @@ NODE_NAME = 'gripper_sim'
 MAX_STEPS_PER_REQUEST = 1_000_000
 # Falling further behind real time than this re-anchors the pacing instead of racing.
 MAX_LAG = 0.25   # s of wall time
+SPEED_WINDOW = 5.0   # s of wall time over which the achieved real-time factor is measured
 
 
 def command_problem(value: float, what: str, unit: str, allow_negative: bool = False
@@ -101,6 +102,9 @@ class SimNode(Node):
         self._publish_every = 1
         self._set_publish_rate(float(self.params.get('publish_rate')))
         self._anchor = (time.monotonic(), self.sim.time)
+        self._speed_window = self._anchor
+        self._speed_warned = -math.inf
+        self.achieved_rtf = math.nan
         self.failures = 0
         self.steps_taken = 0
         self.publish_count = 0
@@ -229,6 +233,7 @@ class SimNode(Node):
                 self._recover(f'{type(err).__name__}: {err}')
                 continue
             rtf = self._rtf
+            self._watch_speed(rtf)
             if rtf <= 0.0:
                 continue
             wall0, sim0 = self._anchor
@@ -238,6 +243,23 @@ class SimNode(Node):
                 self._wake.clear()
             elif delay < -MAX_LAG:
                 self._anchor = (time.monotonic(), self.sim.time)
+
+    def _watch_speed(self, rtf: float) -> None:
+        """Measure the achieved real-time factor; warn when it misses the target."""
+        now, sim_now = time.monotonic(), self.sim.time
+        wall0, sim0 = self._speed_window
+        if now - wall0 < SPEED_WINDOW:
+            return
+        self._speed_window = (now, sim_now)
+        if sim_now < sim0:   # reset in between
+            return
+        self.achieved_rtf = (sim_now - sim0) / (now - wall0)
+        if 0.0 < rtf and self.achieved_rtf < 0.9 * rtf and now - self._speed_warned > 60.0:
+            self._speed_warned = now
+            self.get_logger().warning(
+                f'running at {self.achieved_rtf:.2f}x real time, below real_time_factor '
+                f'{rtf:g}: the physics cannot keep up (fewer nodes or a larger '
+                'physics.sim.dt would)')
 
     def advance(self) -> StepResult | None:
         """Apply queued commands and take one physics step; None if the step failed."""
