@@ -53,8 +53,9 @@ SCHEMA: dict[str, Key] = {
     # --- fruit
     'fruit.name': Key('apple', '-', 'name shown in outputs', 'str'),
     'fruit.model': Key('shell', '-', 'shell: skin ring + enclosed-area pressure; '
-                       'solid: triangle-meshed neo-Hookean flesh (+ optional skin ring)',
-                       'str', choices=('shell', 'solid')),
+                       'solid: triangle-meshed neo-Hookean flesh (+ optional skin ring); '
+                       'point: a single point mass (contact and bouncing checks)',
+                       'str', choices=('shell', 'solid', 'point')),
     'fruit.shape.type': Key('circle', '-', 'rest outline', 'str', choices=('circle',)),
     'fruit.shape.diameter': Key(0.0635, 'm', 'outline diameter', low=0.005, high=0.5),
     'fruit.depth': Key(None, 'm', 'out-of-plane depth b that turns the planar model '
@@ -90,6 +91,10 @@ SCHEMA: dict[str, Key] = {
                                  'fruit bruises', low=0.0, high=1e9),
     'fruit.failure_stress': Key(0.29e6, 'Pa', 'flesh failure stress (crushing)',
                                 low=0.0, high=1e9),
+    'fruit.initial_velocity.x': Key(0.0, 'm/s', 'initial velocity of every node, x',
+                                    low=-100.0, high=100.0),
+    'fruit.initial_velocity.z': Key(0.0, 'm/s', 'initial velocity of every node, z',
+                                    low=-100.0, high=100.0),
     'fruit.initial_height': Key(None, 'm', 'height of the fruit centre; null = resting '
                                 'on the table (or 0 without a table)', low=-10.0,
                                 high=10.0, nullable=True),

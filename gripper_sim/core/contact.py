@@ -31,6 +31,8 @@ class ContactState:
         normal_force: (n_nodes,) N, last normal reaction (friction bound lag).
         bounce_speed: (n_nodes,) m/s, outgoing normal speed of an IMPACT node.
         impact_gap: (n_nodes,) m, gap an IMPACT node ends its step at.
+        secondary: (n_nodes,) int, a second obstacle whose face also holds the node
+            (a corner, e.g. wall and table), frictionless, -1 if none.
     """
 
     obstacle: np.ndarray
@@ -38,15 +40,18 @@ class ContactState:
     normal_force: np.ndarray
     bounce_speed: np.ndarray
     impact_gap: np.ndarray
+    secondary: np.ndarray
 
     @classmethod
     def empty(cls, n_nodes: int) -> 'ContactState':
         return cls(-np.ones(n_nodes, np.int64), np.zeros(n_nodes, np.int64),
-                   np.zeros(n_nodes), np.zeros(n_nodes), np.zeros(n_nodes))
+                   np.zeros(n_nodes), np.zeros(n_nodes), np.zeros(n_nodes),
+                   -np.ones(n_nodes, np.int64))
 
     def copy(self) -> 'ContactState':
         return ContactState(self.obstacle.copy(), self.mode.copy(), self.normal_force.copy(),
-                            self.bounce_speed.copy(), self.impact_gap.copy())
+                            self.bounce_speed.copy(), self.impact_gap.copy(),
+                            self.secondary.copy())
 
     def release(self, nodes) -> None:
         self.obstacle[nodes] = -1
@@ -54,6 +59,7 @@ class ContactState:
         self.normal_force[nodes] = 0.0
         self.bounce_speed[nodes] = 0.0
         self.impact_gap[nodes] = 0.0
+        self.secondary[nodes] = -1
 
     @property
     def held(self) -> np.ndarray:

@@ -88,6 +88,14 @@ def build_fruit(config) -> FruitModel:
     energies: list[Energy] = []
     pressure = flesh = None
     turgor = config['fruit.pressure.turgor'] if config['fruit.model'] == 'shell' else 0.0
+    if config['fruit.model'] == 'point':
+        mass = rho * rest_area * depth
+        return FruitModel(
+            rest_positions=np.zeros((1, 2)), masses=np.array([mass]),
+            surface=np.zeros(1, np.int64), skin_edges=np.zeros((0, 2), np.int64),
+            energies=(), stretching=None, pressure=None, flesh=None,
+            triangles=np.zeros((0, 3), np.int64), depth=depth, rest_width=0.0,
+            axial_stiffness=0.0, bending_stiffness=0.0)
     if config['fruit.model'] == 'shell':
         positions = outline
         triangles = np.zeros((0, 3), dtype=np.int64)

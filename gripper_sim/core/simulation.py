@@ -15,9 +15,10 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.energies import Gravity
+from gripper_sim.core.fast import FastPath
 from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics, GripperState
-from gripper_sim.core.measures import deformation
+from gripper_sim.core.measures import deformation, face_contact_length
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.results import Energies, JawWrench, StepResult
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
@@ -47,12 +48,15 @@ class Simulation:
 
     Args:
         config: validated flat configuration from ``gripper_sim.configuration.load_config``.
+        fast: step with the numba kernels (``gripper_sim.core.fast``) when they cover the
+            fruit model; None (default) = whenever numba is installed, False = always the
+            generic numpy/scipy path (the reference), True = require the fast path.
 
     Commands take effect on the next step. Invalid commands raise ``CommandError``
     and leave the simulation unchanged.
     """
 
-    def __init__(self, config: Mapping[str, Any]):
+    def __init__(self, config: Mapping[str, Any], fast: bool | None = None):
         self.config = dict(config)
         self.fruit: FruitModel = build_fruit(self.config)
         self.dt = float(self.config['sim.dt'])
@@ -81,6 +85,9 @@ class Simulation:
             c['gripper.force_time_constant'],
             initial_stiffness=c['fruit.flesh.youngs_modulus'] * self.fruit.depth)
         self._observers: list[Callable[[StepResult], None]] = []
+        self._fast = FastPath.create(self) if fast is not False else None
+        if fast and self._fast is None:
+            raise ConfigError('the fast path needs numba and a shell or point fruit model')
         self.reset()
 
     # ------------------------------------------------------------------ commands
@@ -168,7 +175,8 @@ class Simulation:
         """Back to the initial state and commands, time 0."""
         n = self.fruit.n_nodes
         self.q = self.initial_positions.copy()
-        self.v = np.zeros((n, 2))
+        self.v = np.tile([self.config['fruit.initial_velocity.x'],
+                          self.config['fruit.initial_velocity.z']], (n, 1)).astype(float)
         self.contacts = cm.ContactState.empty(n)
         self.contact_forces = np.zeros((n, 2))
         self._time = 0.0
@@ -259,6 +267,11 @@ class Simulation:
         return it1 + it2, s1 + s2
 
     def _substep(self, dt: float) -> int:
+        if self._fast is not None:
+            return self._fast.substep(dt)
+        return self._substep_reference(dt)
+
+    def _substep_reference(self, dt: float) -> int:
         left_n, right_n = self._jaw_force
         grip_force = 0.5 * (left_n + right_n)
         both = left_n > 0 and right_n > 0
@@ -295,6 +308,9 @@ class Simulation:
             v_n_new = np.full(nodes.size, face.velocity @ nrm) + contacts.bounce_speed[nodes]
             v[nodes] = v_n_new[:, None] * nrm + v_t[:, None] * tan
             forces[nodes] = reaction[nodes]
+        for node in np.flatnonzero(contacts.secondary >= 0):
+            face = new_faces[contacts.secondary[node]]
+            v[node] += (face.velocity @ face.normal - v[node] @ face.normal) * face.normal
         impacts = np.flatnonzero(contacts.mode == cm.IMPACT)
         contacts.release(impacts)
         self.q, self.v, self.contacts, self.contact_forces = x, v, contacts, forces
@@ -339,6 +355,11 @@ class Simulation:
                 fr_bounds.append(face.kinetic_friction * np.maximum(
                     contacts.normal_force[sliding], 0.0))
                 fr_speed.append(np.full(sliding.size, face.velocity @ tan))
+        for node in np.flatnonzero(contacts.secondary >= 0):
+            face = new_faces[contacts.secondary[node]]
+            nrm = face.normal
+            start[node] += (0.0 - face.gap(start[node])) * nrm
+            filters[node] = filters[node] - np.outer(nrm, nrm) @ filters[node]
         if fr_nodes:
             con = StepConstraints(filters, np.concatenate(fr_nodes), np.concatenate(fr_tangents),
                                   np.concatenate(fr_bounds), np.concatenate(fr_speed))
@@ -386,9 +407,30 @@ class Simulation:
                 if np.any(stale) and face.kinetic_friction > 0:
                     changed = True
             contacts.normal_force[nodes[keep]] = r_n[keep]
+        for node in np.flatnonzero(contacts.secondary >= 0):
+            face = new_faces[contacts.secondary[node]]
+            if reaction[node] @ face.normal < -threshold:
+                contacts.secondary[node] = -1
+                changed = True
+        if self._add_corners(contacts, x, new_faces):
+            changed = True
         if self._add_penetrating(contacts, x, x_n, v_n, old_faces, new_faces, dt, released):
             changed = True
         return changed
+
+    def _add_corners(self, contacts, x, new_faces) -> bool:
+        """Held nodes pushed into a second face (a corner) get it as a secondary hold."""
+        held = np.flatnonzero((contacts.obstacle >= 0) & (contacts.secondary < 0))
+        added = False
+        for index, face in enumerate(new_faces):
+            nodes = held[contacts.obstacle[held] != index]
+            inside = nodes[face.covers(x[nodes]) & (face.gap(x[nodes]) < 0)]
+            if inside.size:
+                contacts.secondary[inside] = index
+                contacts.mode[inside[contacts.mode[inside] == cm.STICK]] = cm.SLIP
+                held = np.setdiff1d(held, inside)
+                added = True
+        return added
 
     def _add_penetrating(self, contacts, x, x_n, v_n, old_faces, new_faces, dt, released) -> bool:
         surface = self.fruit.surface
@@ -428,6 +470,11 @@ class Simulation:
 
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult:
+        if self._fast is not None:
+            return self._fast.measure(iterations, substeps)
+        return self._measure_reference(iterations, substeps)
+
+    def _measure_reference(self, iterations: int, substeps: int) -> StepResult:
         x, v, forces = self.q, self.v, self.contact_forces
         fruit, grip = self.fruit, self._grip
         faces = self._faces(grip)
@@ -471,5 +518,7 @@ class Simulation:
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
             slipping=slipping, centroid=centroid, energies=energies,
-            deformation=deformation(fruit, x, normal, jaw_contact),
+            deformation=deformation(fruit, x, normal, jaw_contact, sum(
+                face_contact_length(fruit, x, faces[side], self.contacts.obstacle == side)
+                for side in (LEFT, RIGHT))),
             newton_iterations=iterations, substeps=substeps)

@@ -186,14 +186,21 @@ class ImplicitEulerSolver:
         for iteration in range(1, self.max_iterations + 1):
             hess, low_rank = parts
             g_f = s @ grad
-            a = (s @ hess @ s + complement).tocsc()
-            try:
-                dq = _solve_with_low_rank(a, -g_f, [(c, s @ u) for c, u in low_rank])
-            except RuntimeError as err:  # singular factor
-                raise NewtonFailure(f'singular Newton matrix: {err}', history) from err
-            slope = float(g_f @ dq)
-            if not np.all(np.isfinite(dq)) or slope > 0:
-                raise NewtonFailure('Newton direction is not a descent direction', history)
+            filtered = s @ hess @ s
+            inertia = sp.diags(s.diagonal() * self.m / dt ** 2)
+            for shift in (0.0, 1.0, 10.0, 100.0, 1000.0):
+                # an indefinite Hessian (buckling skin, compressed flesh) may give an
+                # ascent direction: add inertia-like diagonal terms until it descends
+                a = (filtered + complement + shift * inertia).tocsc()
+                try:
+                    dq = _solve_with_low_rank(a, -g_f, [(c, s @ u) for c, u in low_rank])
+                except RuntimeError:  # singular factor
+                    continue
+                slope = float(g_f @ dq)
+                if np.all(np.isfinite(dq)) and slope <= 0:
+                    break
+            else:
+                raise NewtonFailure('no descent direction found', history)
             step = 1.0
             residual = float(np.max(np.abs(g_f)))
             if float(np.max(np.abs(dq))) / dt < self.tolerance:

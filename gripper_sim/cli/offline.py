@@ -1,0 +1,233 @@
+"""Offline verbs (no ROS graph): ``squeeze``, ``pick`` and ``fruits``."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from contextlib import ExitStack
+
+from gripper_sim.configuration import available_fruits, load_config, parse_override
+from gripper_sim.errors import GripperSimError
+
+#: longest simulated time (s) a squeeze may take before it is called off
+SQUEEZE_TIME_LIMIT = 600.0
+
+
+def positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number > 0")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number >= 0")
+    return value
+
+
+def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+    """--fruit / --config / --set, shared by every verb that builds a simulation."""
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits)')
+    source.add_argument('--config', metavar='FILE', help='YAML configuration file')
+    parser.add_argument('--set', metavar='KEY=VALUE', action='append', default=[],
+                        dest='overrides', help='override a configuration key (repeatable)')
+
+
+def config_from_args(args, forced: dict | None = None) -> dict:
+    """The validated configuration the arguments ask for.
+
+    ``forced`` holds defaults of the verb (e.g. gravity off for squeeze) that apply
+    unless the user set that key with --set.
+    """
+    user = dict(parse_override(text) for text in args.overrides)
+    merged = dict(forced or {})
+    merged.update(user)
+    return load_config(fruit=args.fruit, config_file=args.config, overrides=merged)
+
+
+def register(subparsers) -> None:
+    squeeze = subparsers.add_parser(
+        'squeeze', help='plate compression test (ASAE S368 style) of a fruit',
+        description='Close rigid flat jaws slowly on the fruit until a force or a gap is '
+                    'reached. Gravity and the table are off unless set with --set.')
+    add_config_arguments(squeeze)
+    target = squeeze.add_mutually_exclusive_group(required=True)
+    target.add_argument('--to-force', type=positive_float, metavar='N',
+                        help='stop when the mean jaw normal force reaches N newtons')
+    target.add_argument('--to-gap', type=non_negative_float, metavar='M',
+                        help='stop when the jaw gap reaches M metres')
+    squeeze.add_argument('--speed', type=positive_float, metavar='M_PER_S', default=0.005,
+                         help='gap closing rate, m/s (default 0.005)')
+    _add_output_arguments(squeeze)
+    squeeze.set_defaults(handler=run_squeeze)
+
+    pick = subparsers.add_parser(
+        'pick', help='close to a grip force, lift and hold the fruit',
+        description='Close the jaws on the fruit resting on the table to a grip force, '
+                    'lift it and hold it; reports held, slipped or dropped.')
+    add_config_arguments(pick)
+    pick.add_argument('--force', type=positive_float, required=True, metavar='N',
+                      help='grip force (mean jaw normal force), N')
+    pick.add_argument('--lift', type=non_negative_float, default=0.05, metavar='M',
+                      help='lift height, m (default 0.05)')
+    pick.add_argument('--hold', type=non_negative_float, default=1.0, metavar='S',
+                      help='hold time after lifting, s (default 1)')
+    pick.add_argument('--speed', type=positive_float, metavar='M_PER_S', default=None,
+                      help='gap closing rate, m/s (default: gripper.close_speed)')
+    _add_output_arguments(pick)
+    pick.set_defaults(handler=run_pick)
+
+    fruits = subparsers.add_parser('fruits', help='list the fruit presets')
+    fruits.add_argument('--json', action='store_true', help='print JSON')
+    fruits.set_defaults(handler=run_fruits)
+
+
+def _add_output_arguments(parser) -> None:
+    parser.add_argument('--json', action='store_true',
+                        help='print one JSON object with the time series and summary')
+    parser.add_argument('--out', metavar='FILE.mcap',
+                        help='record every step to an MCAP file, as the node would publish')
+
+
+class _Series:
+    """Collects the time series every verb reports."""
+
+    def __init__(self):
+        self.time, self.gap, self.force = [], [], []
+        self.peak_force = self.peak_compression = self.peak_pressure = 0.0
+
+    def __call__(self, result) -> None:
+        self.time.append(round(result.time, 9))
+        self.gap.append(result.gap)
+        self.force.append(result.grip_force)
+        self.peak_force = max(self.peak_force, result.grip_force)
+        self.peak_compression = max(self.peak_compression, result.deformation.compression)
+        self.peak_pressure = max(self.peak_pressure, result.deformation.peak_contact_pressure)
+
+    def arrays(self) -> dict:
+        return dict(time=self.time, gap=self.gap, force=self.force)
+
+
+def _start_recording(stack: ExitStack, args, sim) -> None:
+    if not args.out:
+        return
+    from gripper_sim.recording.offline import SimRecorder
+    from gripper_sim.recording.errors import RecordingError
+    try:
+        recorder = stack.enter_context(SimRecorder(args.out, sim.config, initial=sim.last))
+    except RecordingError as err:
+        raise GripperSimError(str(err)) from err
+    sim.add_observer(recorder.on_step)
+
+
+def run_squeeze(args) -> int:
+    from gripper_sim.core.simulation import Simulation
+    config = config_from_args(args, {'world.gravity': 0.0, 'world.table': False})
+    if args.to_force is not None and args.to_force > config['gripper.max_force']:
+        raise GripperSimError(f"--to-force {args.to_force} N exceeds gripper.max_force "
+                              f"{config['gripper.max_force']} N")
+    if args.speed > config['gripper.max_speed']:
+        raise GripperSimError(f"--speed {args.speed} m/s exceeds gripper.max_speed "
+                              f"{config['gripper.max_speed']} m/s")
+    sim = Simulation(config)
+    if args.to_gap is not None and args.to_gap >= sim.initial_gap:
+        raise GripperSimError(f'--to-gap {args.to_gap} m is not below the initial gap '
+                              f'{sim.initial_gap:.4g} m')
+    series = _Series()
+    sim.add_observer(series)
+    with ExitStack() as stack:
+        _start_recording(stack, args, sim)
+        sim.command_gap(args.to_gap if args.to_gap is not None else 0.0, args.speed)
+        reached = False
+        while sim.time < SQUEEZE_TIME_LIMIT:
+            result = sim.step()
+            if args.to_force is not None and result.grip_force >= args.to_force:
+                reached = True
+                break
+            if args.to_gap is not None and result.gap <= args.to_gap + 1e-12:
+                reached = True
+                break
+            if result.gap <= 0.0:
+                break
+    if not reached:
+        raise GripperSimError(f'the squeeze did not reach the target (peak force '
+                              f'{series.peak_force:.4g} N, final gap {sim.last.gap:.4g} m)')
+    summary = dict(fruit=config['fruit.name'], model=config['fruit.model'],
+                   peak_force=series.peak_force, peak_compression=series.peak_compression,
+                   peak_contact_pressure=series.peak_pressure, final_gap=sim.last.gap,
+                   duration=sim.time, steps=sim.last.step,
+                   bruised=series.peak_pressure > config['fruit.bruise_pressure'])
+    if args.json:
+        json.dump(dict(series.arrays(), summary=summary), sys.stdout)
+        sys.stdout.write('\n')
+    else:
+        print(f"squeeze of {config['fruit.name']} ({config['fruit.model']} model), "
+              f'{sim.time:.3f} s simulated in {sim.last.step} steps')
+        print(f'  peak force           {summary["peak_force"]:.4g} N')
+        print(f'  peak compression     {summary["peak_compression"] * 1e3:.4g} mm')
+        print(f'  peak contact pressure {summary["peak_contact_pressure"] / 1e3:.4g} kPa'
+              + ('  (above the bruise threshold)' if summary['bruised'] else ''))
+        print(f'  final gap            {summary["final_gap"] * 1e3:.4g} mm')
+    return 0
+
+
+def run_pick(args) -> int:
+    from gripper_sim.core.grasp import GraspSequence, run_grasp
+    from gripper_sim.core.simulation import Simulation
+    config = config_from_args(args)
+    sim = Simulation(config)
+    series = _Series()
+    sim.add_observer(series)
+    with ExitStack() as stack:
+        _start_recording(stack, args, sim)
+        sequence = GraspSequence(sim, args.force, args.speed, args.lift, args.hold)
+        summary = run_grasp(sim, sequence)
+    if args.json:
+        json.dump(dict(outcome=summary['outcome'], slip_distance=summary['slip_distance'],
+                       **series.arrays(), summary=summary), sys.stdout)
+        sys.stdout.write('\n')
+    else:
+        print(f"pick of {config['fruit.name']} at {args.force:g} N: {summary['outcome']}")
+        print(f"  {summary['message']}")
+        print(f"  slip relative to the jaws  {summary['slip_distance'] * 1e3:.3f} mm")
+        print(f"  peak grip force            {summary['max_grip_force']:.4g} N")
+        print(f"  peak compression           {summary['max_compression'] * 1e3:.4g} mm")
+        print(f"  peak contact pressure      {summary['max_contact_pressure'] / 1e3:.4g} kPa")
+    return 0 if summary['outcome'] == 'held' else 1
+
+
+def run_fruits(args) -> int:
+    rows = []
+    for name in available_fruits():
+        config = load_config(fruit=name)
+        rows.append(dict(name=name, model=config['fruit.model'],
+                         diameter=config['fruit.shape.diameter'],
+                         density=config['fruit.density'],
+                         youngs_modulus=config['fruit.flesh.youngs_modulus'],
+                         poisson_ratio=config['fruit.flesh.poisson_ratio'],
+                         jaw_friction=config['contact.jaw.static_friction'],
+                         bruise_pressure=config['fruit.bruise_pressure']))
+    if args.json:
+        json.dump(rows, sys.stdout)
+        sys.stdout.write('\n')
+        return 0
+    print(f"{'fruit':12s} {'model':6s} {'diam mm':>8s} {'rho kg/m3':>10s} {'E MPa':>7s} "
+          f"{'nu':>5s} {'mu jaw':>7s} {'bruise kPa':>10s}")
+    for r in rows:
+        print(f"{r['name']:12s} {r['model']:6s} {r['diameter'] * 1e3:8.1f} {r['density']:10.0f} "
+              f"{r['youngs_modulus'] / 1e6:7.2f} {r['poisson_ratio']:5.2f} "
+              f"{r['jaw_friction']:7.2f} {r['bruise_pressure'] / 1e3:10.0f}")
+    return 0
+
+
+
