@@ -1,0 +1,326 @@
+"""The fast path of ``Simulation`` for ring (shell) and point fruit models.
+
+``FastPath`` runs a whole step - contact constraints, Newton, contact set updates -
+in one numba kernel (``gripper_sim.core.kernels.substep``) and the step's measures in
+another, instead of the generic numpy/scipy path (per-energy triplets, sparse LU). It
+gives the same results as that reference path (test/test_fast_path.py) and is chosen
+automatically by ``Simulation`` when numba is installed and the fruit's energies are
+the ring energies (stretching, bending, enclosed-area pressure) and gravity; the solid
+(neo-Hookean) model keeps the generic path. ``GRIPPER_SIM_FAST=0`` in the environment
+turns the fast path off.
+
+numba's compiled kernels are cached on disk (``cache=True``); ``warm_cache()`` compiles
+them once, e.g. at install time: ``python -m gripper_sim.core.fast``.
+"""
+from __future__ import annotations
+
+import os
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from gripper_sim.core import contact as cm
+from gripper_sim.core.energies import EnclosedAreaPressure, RingBending, Stretching
+from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
+from gripper_sim.core.stepper import NewtonFailure
+
+try:  # numba is optional: without it every model takes the generic path
+    from gripper_sim.core import kernels
+except ImportError:  # pragma: no cover - depends on the environment
+    kernels = None
+
+if TYPE_CHECKING:
+    from gripper_sim.core.simulation import Simulation
+
+#: failure messages of the reference solver (stepper.ImplicitEulerSolver.solve)
+_FAILURES = {1: 'start of step is infeasible (inverted element)',
+             2: 'no descent direction found', 3: 'line search failed'}
+
+
+def available() -> bool:
+    """Whether numba (and so the fast path) can be used here."""
+    return kernels is not None and os.environ.get('GRIPPER_SIM_FAST', '1') != '0'
+
+
+def _empty_model(n_dof: int):
+    return dict(edges=np.zeros((0, 2), np.int64), spar=np.zeros((0, 2)),
+                triples=np.zeros((0, 3), np.int64), bpar=np.zeros((0, 2)),
+                ring=np.zeros(0, np.int64), press=np.zeros(4))
+
+
+def ring_model(fruit, energies) -> dict | None:
+    """Kernel arrays of the fruit's energies, or None if the kernels do not cover them.
+
+    Args:
+        fruit: the FruitModel.  energies: the fruit's internal energies.
+
+    Returns:
+        dict with edges (n_e, 2), spar (n_e, 2) [L, EA/L], triples (n_t, 3),
+        bpar (n_t, 2) [phi0, k], ring (n_r,), press (4,) [A0, b, p0, K], pos (n,)
+        band positions and nbw (node half-bandwidth).
+    """
+    if fruit.flesh is not None:
+        return None
+    n = fruit.n_nodes
+    model = _empty_model(2 * n)
+    seen = set()
+    for energy in energies:
+        kind = type(energy)
+        if kind in seen or kind not in (Stretching, RingBending, EnclosedAreaPressure):
+            return None
+        seen.add(kind)
+        if kind is Stretching:
+            model['edges'] = np.ascontiguousarray(energy.edges, dtype=np.int64)
+            model['spar'] = np.ascontiguousarray(
+                np.stack([energy.rest, energy.ea / energy.rest], axis=1))
+        elif kind is RingBending:
+            model['triples'] = np.ascontiguousarray(energy.triples, dtype=np.int64)
+            model['bpar'] = np.ascontiguousarray(np.stack([energy.phi0, energy.k], axis=1))
+        else:
+            model['ring'] = np.ascontiguousarray(energy.ring, dtype=np.int64)
+            model['press'] = np.array([energy.a0, energy.b, energy.p0, energy.k])
+    # band order: the outline interleaved (0, N-1, 1, N-2, ...); a model whose energies
+    # touch nodes off the outline is not a ring model
+    surface = np.asarray(fruit.surface, dtype=np.int64)
+    if n == 1:
+        pos = np.zeros(1, np.int64)
+    else:
+        if len(surface) != n or set(surface.tolist()) != set(range(n)):
+            return None
+        pos = np.empty(n, np.int64)
+        pos[surface] = kernels.band_order(n) if kernels is not None else np.arange(n)
+    pairs = [model['edges'], model['triples'][:, [0, 1]], model['triples'][:, [1, 2]],
+             model['triples'][:, [0, 2]]]
+    ring = model['ring']
+    if len(ring):
+        pairs.append(np.stack([ring, np.roll(ring, -1)], axis=1))
+    nbw = 0
+    for pair in pairs:
+        if len(pair):
+            if pair.min() < 0 or pair.max() >= n:
+                return None
+            nbw = max(nbw, int(np.max(np.abs(pos[pair[:, 0]] - pos[pair[:, 1]]))))
+    model['pos'] = pos
+    model['nbw'] = nbw
+    return model
+
+
+class FastPath:
+    """Steps and measures a ``Simulation`` with the numba kernels.
+
+    Built by ``Simulation.__init__`` through ``FastPath.create``; holds only constant
+    arrays and scratch space - the state stays in the simulation's attributes.
+    """
+
+    def __init__(self, sim: 'Simulation', model: dict):
+        fruit = sim.fruit
+        n = fruit.n_nodes
+        self.sim = sim
+        self.model = model
+        solver = sim.solver
+        self.masses2 = np.ascontiguousarray(solver.m, dtype=float)
+        self.masses = np.ascontiguousarray(fruit.masses, dtype=float)
+        self.gravity_grad = np.ascontiguousarray(sim.gravity.grad, dtype=float)
+        self.surface = np.ascontiguousarray(fruit.surface, dtype=np.int64)
+        self.skin_edges = np.ascontiguousarray(fruit.skin_edges, dtype=np.int64).reshape(-1, 2)
+        rest = fruit.rest_positions
+        seg0 = rest[self.skin_edges[:, 1]] - rest[self.skin_edges[:, 0]]
+        self.rest_segments = np.ascontiguousarray(np.hypot(seg0[:, 0], seg0[:, 1]))
+        self.fpar = np.zeros(7)
+        self.fpar[kernels.F_ALPHA] = solver.alpha
+        self.fpar[kernels.F_BETA] = solver.beta
+        self.fpar[kernels.F_TOL] = solver.tolerance
+        self.ipar = np.array([solver.max_iterations, 1], np.int64)
+        self.history = np.zeros(solver.max_iterations)
+        self.out = np.zeros(4)
+        self.measures = np.zeros(kernels.M_SIZE)
+        self.jaw_origins = np.zeros((2, 2))
+        self.n = n
+        self._template = None
+        self.face_par = np.zeros((0, 7))
+        self.face_dyn = np.zeros((0, 6))
+        self._energy_args = (model['edges'], model['spar'], model['triples'], model['bpar'],
+                             model['ring'], model['press'], self.gravity_grad)
+        #: accumulated wall time (s) per part, see ``timers``
+        self.timers = {'kinematics': 0.0, 'kernel': 0.0, 'measures': 0.0}
+        self.timing = False
+
+    @classmethod
+    def create(cls, sim: 'Simulation') -> 'FastPath | None':
+        """The fast path for ``sim``, or None when it does not apply."""
+        if not available():
+            return None
+        model = ring_model(sim.fruit, sim.fruit.energies)
+        if model is None:
+            return None
+        return cls(sim, model)
+
+    # ------------------------------------------------------------------ faces
+    def _face_arrays(self):
+        template = self.sim._faces_template
+        if template is not self._template:
+            self.face_par = np.array([[f.normal[0], f.normal[1], f.half_length, f.thickness,
+                                       f.static_friction, f.kinetic_friction, f.restitution]
+                                      for f in template], dtype=float).reshape(-1, 7)
+            dyn = np.zeros((len(template), 6))
+            for k, f in enumerate(template):
+                dyn[k, 0:2] = f.origin
+                dyn[k, 2:4] = f.origin
+                dyn[k, 4:6] = f.velocity
+            self.face_dyn = dyn
+            self._template = template
+        return self.face_par, self.face_dyn
+
+    # ------------------------------------------------------------------ stepping
+    def substep(self, dt: float) -> int:
+        """``Simulation._substep`` on the kernels; returns Newton iterations.
+
+        Raises:
+            NewtonFailure: as the reference solver (the caller halves the step).
+        """
+        sim = self.sim
+        timing = self.timing
+        if timing:
+            t0 = time.perf_counter()
+        left_n, right_n = sim._jaw_force
+        grip = sim._grip
+        grip_new = sim.kinematics.advance(grip, dt, 0.5 * (left_n + right_n),
+                                          left_n > 0 and right_n > 0)
+        face_par, face_dyn = self._face_arrays()
+        # jaw faces: origin at the start (old) and end (new) of the step, new velocity
+        half, half_new = 0.5 * grip.gap, 0.5 * grip_new.gap
+        vx = 0.5 * grip_new.gap_rate
+        face_dyn[0, 0] = -half
+        face_dyn[0, 1] = grip.lift
+        face_dyn[0, 2] = -half_new
+        face_dyn[0, 3] = grip_new.lift
+        face_dyn[0, 4] = -vx
+        face_dyn[0, 5] = grip_new.lift_rate
+        face_dyn[1, 0] = half
+        face_dyn[1, 1] = grip.lift
+        face_dyn[1, 2] = half_new
+        face_dyn[1, 3] = grip_new.lift
+        face_dyn[1, 4] = vx
+        face_dyn[1, 5] = grip_new.lift_rate
+        config = sim.config
+        fpar = self.fpar
+        fpar[0] = dt
+        fpar[4] = sim.gravity.g
+        fpar[5] = config['contact.release_threshold']
+        fpar[6] = config['contact.max_correction_speed']
+        self.ipar[1] = config['sim.max_contact_passes']
+        c = sim.contacts
+        obstacle, mode, secondary = c.obstacle.copy(), c.mode.copy(), c.secondary.copy()
+        normal_force, bounce, impact = (c.normal_force.copy(), c.bounce_speed.copy(),
+                                        c.impact_gap.copy())
+        n = self.n
+        x, v, forces = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, 2))
+        x_n = np.ascontiguousarray(sim.q, dtype=float)
+        v_n = np.ascontiguousarray(sim.v, dtype=float)
+        model = self.model
+        edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
+        if timing:
+            t1 = time.perf_counter()
+        status = kernels.substep(
+            x_n, v_n, obstacle, mode, normal_force, bounce, impact, secondary, face_par,
+            face_dyn, self.masses2, self.surface, model['pos'], model['nbw'], edges, spar,
+            triples, bpar, ring, press, gravity_grad, fpar, self.ipar, x, v, forces,
+            self.history, self.out)
+        if timing:
+            t2 = time.perf_counter()
+        out = self.out
+        if status != kernels.OK:
+            history = [float(h) for h in self.history[:int(out[1])]]
+            if status == kernels.UNSUPPORTED:
+                return sim._substep_reference(dt)
+            message = _FAILURES.get(
+                status, f'no convergence in {sim.solver.max_iterations} iterations')
+            raise NewtonFailure(message, history)
+        sim.q, sim.v, sim.contact_forces = x, v, forces
+        sim.contacts = cm.ContactState(obstacle, mode, normal_force, bounce, impact,
+                                       secondary)
+        sim._grip = grip_new
+        sim._time += dt
+        sim._jaw_force = (float(out[2]), float(out[3]))
+        if timing:
+            t3 = time.perf_counter()
+            self.timers['kinematics'] += (t1 - t0) + (t3 - t2)
+            self.timers['kernel'] += t2 - t1
+        return int(out[0])
+
+    # ------------------------------------------------------------------ outputs
+    def measure(self, iterations: int, substeps: int) -> StepResult:
+        """``Simulation._measure`` from the measures kernel."""
+        if self.timing:
+            t0 = time.perf_counter()
+        sim = self.sim
+        fruit, grip = sim.fruit, sim._grip
+        x, v, forces = sim.q, sim.v, sim.contact_forces
+        obstacle = sim.contacts.obstacle
+        face_par, _ = self._face_arrays()
+        origins = self.jaw_origins
+        origins[0, 0] = -0.5 * grip.gap
+        origins[0, 1] = grip.lift
+        origins[1, 0] = 0.5 * grip.gap
+        origins[1, 1] = grip.lift
+        normal = np.empty(self.n)
+        pressure = np.empty(len(self.surface))
+        out = self.measures
+        model = self.model
+        edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
+        kernels.step_measures(
+            np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float),
+            np.ascontiguousarray(forces, dtype=float), obstacle, self.masses, self.surface,
+            self.skin_edges, self.rest_segments, face_par, origins, fruit.depth, edges, spar,
+            triples, bpar, ring, press, gravity_grad, normal, pressure, out)
+        (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, cvz, any_left, any_right,
+         kinetic, elastic, gravitational, width, max_strain, contact_length,
+         peak) = out.tolist()[:kernels.M_SIZE]
+        both = any_left > 0 and any_right > 0
+        relative_z = cz - grip.lift
+        if both and sim._slip_reference is None:
+            sim._slip_reference = relative_z
+        slip = 0.0 if sim._slip_reference is None else abs(sim._slip_reference - relative_z)
+        slipping = bool((any_left > 0 or any_right > 0) and abs(cvz - grip.lift_rate) > 1e-3)
+        compression = fruit.rest_width - width
+        ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
+        result = StepResult(
+            time=sim._time, step=sim._step, positions=x.copy(), velocities=v.copy(),
+            contact_forces=forces.copy(), contact_obstacle=obstacle.copy(),
+            contact_sticking=sim.contacts.mode == cm.STICK,
+            obstacle_names=sim.obstacle_names, surface=fruit.surface,
+            left_wrench=JawWrench(np.array([lfx, 0.0, lfz]), np.array([0.0, lty, 0.0])),
+            right_wrench=JawWrench(np.array([rfx, 0.0, rfz]), np.array([0.0, rty, 0.0])),
+            left_jaw_x=-0.5 * grip.gap, right_jaw_x=0.5 * grip.gap,
+            jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
+            gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
+            slipping=slipping, centroid=np.array([cx, cz]),
+            energies=Energies(kinetic=kinetic, elastic=elastic, gravitational=gravitational),
+            deformation=Deformation(compression=compression, compression_ratio=ratio,
+                                    max_skin_strain=max_strain, contact_length=contact_length,
+                                    peak_contact_pressure=peak, node_pressure=pressure),
+            newton_iterations=iterations, substeps=substeps)
+        if self.timing:
+            self.timers['measures'] += time.perf_counter() - t0
+        return result
+
+
+def warm_cache() -> float:
+    """Compile (or load) every kernel by stepping a small shell and point fruit; seconds."""
+    from gripper_sim.configuration import load_config
+    from gripper_sim.core.simulation import Simulation
+    start = time.perf_counter()
+    for model in ('shell', 'point'):
+        sim = Simulation(load_config(overrides=[f'fruit.model={model}', 'fruit.nodes=16']))
+        sim.command_force(1.0)
+        for _ in range(3):
+            sim.step()
+    return time.perf_counter() - start
+
+
+if __name__ == '__main__':  # pragma: no cover - install-time helper
+    if not available():
+        print('numba is not installed: the fast path is off')
+    else:
+        print(f'fast-path kernels compiled and cached in {warm_cache():.1f} s')

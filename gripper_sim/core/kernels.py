@@ -1,0 +1,1142 @@
+"""Numba array kernels of the fast path for the ring (shell) and point fruit models.
+
+Free functions ``@njit(cache=True)`` on arrays with preallocated outputs; the Python
+glue is ``gripper_sim.core.fast``. Each kernel computes the same thing as a numpy
+reference elsewhere in the core, in the same order of operations where it matters:
+
+- ``ring_stretching``, ``ring_bending``, ``ring_pressure``: the energies of
+  ``energies/stretching.py``, ``energies/bending.py``, ``energies/pressure.py``;
+- ``newton_solve``: ``ImplicitEulerSolver.solve`` (stepper.py);
+- ``contact_constraints``, ``update_contacts``, ``substep``: ``Simulation._constraints``,
+  ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
+- ``step_measures``: the numbers ``Simulation._measure`` and ``measures.deformation``
+  report.
+
+Layout. Positions are flat, q = [x0, z0, x1, z1, ...] (m). Hessians are kept as a
+symmetric node-block band: ``band[p, d]`` (2, 2) is the block of the node at band
+position p (row) and the node at position p - d (column), d = 0 .. nbw; ``pos[i]``
+is the band position of node i. A ring numbered 0, N-1, 1, N-2, ... (interleaved,
+see ``band_order``) has nbw = 4 for stretching + bending + pressure, so the Newton
+matrix is a scalar band of half-width 2 nbw + 1 = 9 whatever N is, factorised by a
+banded LDL^T in O(N) time.
+
+Faces (rigid obstacles) are rows of two arrays: ``face_par`` (n_faces, 7)
+[normal x, normal z, half_length, thickness, static friction, kinetic friction,
+restitution] and ``face_dyn`` (n_faces, 6) [origin at the start of the step (x, z),
+origin at the end (x, z), velocity (x, z)].
+
+Import this module only where numba is installed (``gripper_sim.core.fast`` checks).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: contact modes, as in contact.py
+FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
+
+#: substep / newton_solve status codes
+OK = 0
+INFEASIBLE_START = 1
+NO_DESCENT = 2
+LINE_SEARCH_FAILED = 3
+NO_CONVERGENCE = 4
+UNSUPPORTED = 5  # a non-symmetric contact filter (oblique faces): use the reference path
+
+#: regularisation speed (m/s) of the kinetic friction law, as stepper.FRICTION_SMOOTHING
+FRICTION_SMOOTHING = 1e-4
+
+#: shifts of the inertia-like diagonal tried when the Newton matrix gives no descent
+SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
+
+# fpar layout of ``substep`` / ``newton_solve``
+F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR = range(7)
+# ipar layout
+I_MAX_IT, I_MAX_PASSES = range(2)
+
+
+def band_order(n_nodes: int) -> np.ndarray:
+    """(n_nodes,) int64, band position of each node of a ring 0 .. n-1 (interleaved order).
+
+    Positions 0, 1, 2, 3, ... hold nodes 0, n-1, 1, n-2, ...: ring neighbours are at
+    most 2 positions apart and next-but-one neighbours at most 4.
+    """
+    pos = np.empty(n_nodes, np.int64)
+    for k in range(n_nodes):
+        if 2 * k < n_nodes:
+            pos[k] = 2 * k
+        else:
+            pos[k] = 2 * (n_nodes - 1 - k) + 1
+    return pos
+
+
+# ---------------------------------------------------------------------- band helpers
+@njit(cache=True)
+def _add_diag(band, pos, i, h00, h01, h10, h11):
+    p = pos[i]
+    band[p, 0, 0, 0] += h00
+    band[p, 0, 0, 1] += h01
+    band[p, 0, 1, 0] += h10
+    band[p, 0, 1, 1] += h11
+
+
+@njit(cache=True)
+def _add_off(band, pos, i, j, h00, h01, h10, h11):
+    """Add the block H_ij (rows node i, columns node j, i != j) and so its transpose."""
+    pi, pj = pos[i], pos[j]
+    if pi > pj:
+        d = pi - pj
+        band[pi, d, 0, 0] += h00
+        band[pi, d, 0, 1] += h01
+        band[pi, d, 1, 0] += h10
+        band[pi, d, 1, 1] += h11
+    else:
+        d = pj - pi
+        band[pj, d, 0, 0] += h00
+        band[pj, d, 0, 1] += h10
+        band[pj, d, 1, 0] += h01
+        band[pj, d, 1, 1] += h11
+
+
+@njit(cache=True)
+def band_matvec(band, order, v, out):
+    """out = B v for a symmetric node-block band (n, nbw+1, 2, 2), v and out (2n,)."""
+    n = band.shape[0]
+    nbw = band.shape[1] - 1
+    out[:] = 0.0
+    for p in range(n):
+        i = order[p]
+        for d in range(min(p, nbw) + 1):
+            j = order[p - d]
+            b = band[p, d]
+            out[2 * i] += b[0, 0] * v[2 * j] + b[0, 1] * v[2 * j + 1]
+            out[2 * i + 1] += b[1, 0] * v[2 * j] + b[1, 1] * v[2 * j + 1]
+            if d > 0:
+                out[2 * j] += b[0, 0] * v[2 * i] + b[1, 0] * v[2 * i + 1]
+                out[2 * j + 1] += b[0, 1] * v[2 * i] + b[1, 1] * v[2 * i + 1]
+
+
+@njit(cache=True)
+def band_to_dense(band, order, out):
+    """Expand a node-block band into a dense (2n, 2n) matrix ``out`` (for tests)."""
+    n = band.shape[0]
+    nbw = band.shape[1] - 1
+    out[:, :] = 0.0
+    for p in range(n):
+        i = order[p]
+        for d in range(min(p, nbw) + 1):
+            j = order[p - d]
+            for a in range(2):
+                for b in range(2):
+                    out[2 * i + a, 2 * j + b] = band[p, d, a, b]
+                    out[2 * j + b, 2 * i + a] = band[p, d, a, b]
+
+
+# ---------------------------------------------------------------------- energies
+@njit(cache=True)
+def ring_stretching(q, edges, spar, pos, hessian, grad, band):
+    """Skin stretching E = sum EA (l - L)^2 / (2 L) (energies/stretching.py).
+
+    Args:
+        q: (2n,) m.  edges: (n_edge, 2) nodes.  spar: (n_edge, 2) [L (m), EA / L (N/m)].
+        pos: (n,) band positions.  hessian: also add the Hessian into ``band``.
+        grad: (2n,) N, output (overwritten).  band: (n, nbw+1, 2, 2) N/m, added to.
+
+    Returns:
+        the energy, J.
+    """
+    grad[:] = 0.0
+    value = 0.0
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        ex = q[2 * j] - q[2 * i]
+        ez = q[2 * j + 1] - q[2 * i + 1]
+        length = math.hypot(ex, ez)
+        stretch = length - spar[e, 0]
+        k = spar[e, 1]
+        value += k * stretch ** 2
+        ux, uz = ex / length, ez / length
+        ks = k * stretch
+        fx, fz = ks * ux, ks * uz
+        grad[2 * i] += -fx
+        grad[2 * i + 1] += -fz
+        grad[2 * j] += fx
+        grad[2 * j + 1] += fz
+        if hessian:
+            ratio = stretch / length
+            b00 = k * (ux * ux + ratio * (1.0 - ux * ux))
+            b01 = k * (ux * uz + ratio * (0.0 - ux * uz))
+            b11 = k * (uz * uz + ratio * (1.0 - uz * uz))
+            _add_diag(band, pos, i, b00, b01, b01, b11)
+            _add_diag(band, pos, j, b00, b01, b01, b11)
+            _add_off(band, pos, i, j, -b00, -b01, -b01, -b11)
+    return 0.5 * value
+
+
+@njit(cache=True)
+def ring_bending(q, triples, bpar, pos, hessian, grad, band):
+    """Ring bending E = sum k (phi - phi0)^2 / 2 (energies/bending.py).
+
+    Args:
+        triples: (n_t, 3) nodes (previous, middle, next).
+        bpar: (n_t, 2) [phi0 (rad), k = EI / l (N m)].
+        Others as ``ring_stretching``.
+    """
+    grad[:] = 0.0
+    value = 0.0
+    jac = np.empty(6)
+    nodes = np.empty(3, np.int64)
+    ca = (-1.0, 1.0, 0.0)
+    cb = (0.0, -1.0, 1.0)
+    for t in range(triples.shape[0]):
+        i0, i1, i2 = triples[t, 0], triples[t, 1], triples[t, 2]
+        ax = q[2 * i1] - q[2 * i0]
+        az = q[2 * i1 + 1] - q[2 * i0 + 1]
+        bx = q[2 * i2] - q[2 * i1]
+        bz = q[2 * i2 + 1] - q[2 * i1 + 1]
+        cross = ax * bz - az * bx
+        dot = ax * bx + az * bz
+        dphi = math.atan2(cross, dot) - bpar[t, 0]
+        dphi = (dphi + np.pi) % (2 * np.pi) - np.pi
+        k = bpar[t, 1]
+        value += k * dphi ** 2
+        r2a = ax ** 2 + az ** 2
+        r2b = bx ** 2 + bz ** 2
+        gax, gaz = -(-az / r2a), -(ax / r2a)
+        gbx, gbz = -bz / r2b, bx / r2b
+        jac[0], jac[1] = -gax, -gaz
+        jac[2], jac[3] = gax - gbx, gaz - gbz
+        jac[4], jac[5] = gbx, gbz
+        kd = k * dphi
+        for m in range(3):
+            node = triples[t, m]
+            grad[2 * node] += kd * jac[2 * m]
+            grad[2 * node + 1] += kd * jac[2 * m + 1]
+        if hessian:
+            r4a = (ax ** 2 + az ** 2) ** 2
+            r4b = (bx ** 2 + bz ** 2) ** 2
+            ha00 = -(2 * ax * az / r4a)
+            ha11 = -ha00
+            ha01 = -((az ** 2 - ax ** 2) / r4a)
+            hb00 = 2 * bx * bz / r4b
+            hb11 = -hb00
+            hb01 = (bz ** 2 - bx ** 2) / r4b
+            nodes[0], nodes[1], nodes[2] = i0, i1, i2
+            for r in range(3):
+                for c in range(r + 1):
+                    wa = ca[r] * ca[c]
+                    wb = cb[r] * cb[c]
+                    h00 = wa * ha00 + wb * hb00
+                    h01 = wa * ha01 + wb * hb01
+                    h11 = wa * ha11 + wb * hb11
+                    l00 = k * (jac[2 * r] * jac[2 * c] + dphi * h00)
+                    l01 = k * (jac[2 * r] * jac[2 * c + 1] + dphi * h01)
+                    l10 = k * (jac[2 * r + 1] * jac[2 * c] + dphi * h01)
+                    l11 = k * (jac[2 * r + 1] * jac[2 * c + 1] + dphi * h11)
+                    if r == c:
+                        _add_diag(band, pos, nodes[r], l00, l01, l10, l11)
+                    else:
+                        _add_off(band, pos, nodes[r], nodes[c], l00, l01, l10, l11)
+    return 0.5 * value
+
+
+@njit(cache=True)
+def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
+    """Enclosed-area pressure (energies/pressure.py).
+
+    Args:
+        ring: (n_r,) nodes counter-clockwise (empty: no pressure).
+        press: (4,) [A0 (m^2), depth b (m), turgor p0 (Pa), bulk modulus K (Pa)].
+        area_grad: (2n,) output, dA/dq (the rank-one direction u).
+        Others as ``ring_stretching``.
+
+    Returns:
+        (energy J, rank-one coefficient c = b K / A0 (0 if none)); the Hessian is the
+        band part plus c u u^T.
+    """
+    grad[:] = 0.0
+    area_grad[:] = 0.0
+    n = ring.shape[0]
+    if n == 0:
+        return 0.0, 0.0
+    a0, b, p0, kb = press[0], press[1], press[2], press[3]
+    area = 0.0
+    for r in range(n):
+        i = ring[r]
+        j = ring[(r + 1) % n]
+        area += q[2 * i] * q[2 * j + 1] - q[2 * j] * q[2 * i + 1]
+    da = 0.5 * area - a0
+    value = b * (-p0 * da + 0.5 * kb * da ** 2 / a0)
+    de_da = b * (-p0 + kb * da / a0)
+    for r in range(n):
+        i = ring[r]
+        prv = ring[(r - 1) % n]
+        nxt = ring[(r + 1) % n]
+        area_grad[2 * i] = 0.5 * (q[2 * nxt + 1] - q[2 * prv + 1])
+        area_grad[2 * i + 1] = 0.5 * (q[2 * prv] - q[2 * nxt])
+    for m in range(q.shape[0]):
+        grad[m] = de_da * area_grad[m]
+    if hessian:
+        h = de_da * 0.5
+        for r in range(n):
+            i = ring[r]
+            nxt = ring[(r + 1) % n]
+            _add_off(band, pos, i, nxt, 0.0, h, -h, 0.0)
+    c = b * kb / a0 if kb > 0 else 0.0
+    return value, c
+
+
+@njit(cache=True)
+def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hessian,
+              grads, band, area_grad):
+    """All ring energies and gravity: grads (4, 2n) per energy, band = elastic Hessian.
+
+    Returns (values (4,) J: stretching, bending, pressure, gravity; rank-one c).
+    """
+    values = np.empty(4)
+    if hessian:
+        band[:] = 0.0
+    values[0] = ring_stretching(q, edges, spar, pos, hessian, grads[0], band)
+    values[1] = ring_bending(q, triples, bpar, pos, hessian, grads[1], band)
+    vp, c = ring_pressure(q, ring, press, pos, hessian, grads[2], band, area_grad)
+    values[2] = vp
+    vg = 0.0
+    for m in range(q.shape[0]):
+        vg += gravity_grad[m] * q[m]
+        grads[3, m] = gravity_grad[m]
+    values[3] = vg
+    return values, c
+
+
+# ---------------------------------------------------------------------- Newton
+@njit(cache=True)
+def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
+              fr_speed, n_fr, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
+              hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq):
+    """Phi of stepper.ImplicitEulerSolver._evaluate, its gradient (into ``grad``) and the
+    friction gradient (into ``fric_grad``); the elastic band Hessian into ``band``.
+
+    Returns (phi, rank-one c).
+    """
+    n2 = q.shape[0]
+    need_band = hessian or beta > 0
+    phi_in = 0.0
+    for m in range(n2):
+        inert = q[m] - q_n[m] - dt * v_n[m]
+        phi_in += masses2[m] * inert ** 2
+        grad[m] = masses2[m] * inert / dt ** 2
+    phi = 0.5 * phi_in / dt ** 2
+    values, c = _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
+                          need_band, grads, band, area_grad)
+    for e in range(4):
+        phi += values[e]
+        for m in range(n2):
+            grad[m] += grads[e, m]
+    if not math.isfinite(phi):
+        return np.inf, c
+    for m in range(n2):
+        dq_tmp[m] = q[m] - q_n[m]
+    if alpha > 0:
+        acc = 0.0
+        for m in range(n2):
+            acc += masses2[m] * dq_tmp[m] ** 2
+        phi += 0.5 * alpha * acc / dt
+        for m in range(n2):
+            grad[m] += alpha * masses2[m] * dq_tmp[m] / dt
+    if beta > 0 and edges.shape[0] + triples.shape[0] + ring.shape[0] > 0:
+        order = np.empty(pos.shape[0], np.int64)
+        for i in range(pos.shape[0]):
+            order[pos[i]] = i
+        band_matvec(band, order, dq_tmp, cdq)
+        acc = 0.0
+        for m in range(n2):
+            acc += dq_tmp[m] * cdq[m]
+        phi += 0.5 * beta * acc / dt
+        for m in range(n2):
+            grad[m] += beta * cdq[m] / dt
+    fric_grad[:] = 0.0
+    if n_fr > 0:
+        acc = 0.0
+        for f in range(n_fr):
+            k = fr_nodes[f]
+            s = ((q[2 * k] - q_n[2 * k]) * fr_t[f, 0]
+                 + (q[2 * k + 1] - q_n[2 * k + 1]) * fr_t[f, 1]) / dt - fr_speed[f]
+            root = math.sqrt(s ** 2 + FRICTION_SMOOTHING ** 2)
+            acc += fr_bound[f] * dt * root
+            w = fr_bound[f] * s / root
+            fric_grad[2 * k] += w * fr_t[f, 0]
+            fric_grad[2 * k + 1] += w * fr_t[f, 1]
+        phi += acc
+        for m in range(n2):
+            grad[m] += fric_grad[m]
+    return phi, c
+
+
+@njit(cache=True)
+def _filtered_max(filters, g):
+    """max |S g| over dofs."""
+    out = 0.0
+    for i in range(filters.shape[0]):
+        a = filters[i, 0, 0] * g[2 * i] + filters[i, 0, 1] * g[2 * i + 1]
+        b = filters[i, 1, 0] * g[2 * i] + filters[i, 1, 1] * g[2 * i + 1]
+        out = max(out, abs(a), abs(b))
+    return out
+
+
+@njit(cache=True)
+def _ldl_band(ab):
+    """In-place LDL^T of a symmetric scalar band ab[i, d] = A[i, i - d].
+
+    Afterwards ab[i, 0] = D_i and ab[i, d] = L[i, i - d]. Returns False on a zero or
+    non-finite pivot (the reference's 'singular factor').
+    """
+    n, w1 = ab.shape
+    bw = w1 - 1
+    for i in range(n):
+        lo = max(0, i - bw)
+        for j in range(lo, i):
+            s = ab[i, i - j]
+            for k in range(max(lo, j - bw), j):
+                s -= ab[i, i - k] * ab[k, 0] * ab[j, j - k]
+            ab[i, i - j] = s / ab[j, 0]
+        s = ab[i, 0]
+        for k in range(lo, i):
+            s -= ab[i, i - k] ** 2 * ab[k, 0]
+        if s == 0.0 or not math.isfinite(s):
+            return False
+        ab[i, 0] = s
+    return True
+
+
+@njit(cache=True)
+def _ldl_solve(ab, x):
+    """Solve (L D L^T) y = x in place after ``_ldl_band``."""
+    n, w1 = ab.shape
+    bw = w1 - 1
+    for i in range(n):
+        s = x[i]
+        for k in range(max(0, i - bw), i):
+            s -= ab[i, i - k] * x[k]
+        x[i] = s
+    for i in range(n):
+        x[i] /= ab[i, 0]
+    for i in range(n - 1, -1, -1):
+        s = x[i]
+        for k in range(i + 1, min(n, i + bw + 1)):
+            s -= ab[k, k - i] * x[k]
+        x[i] = s
+
+
+@njit(cache=True)
+def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
+                   fr_speed, n_fr, q, q_n, pos, order, shift, ab):
+    """Scalar band ab of S H S + I - S + shift diag(S) m / dt^2 in band order.
+
+    H = (m/dt^2 + alpha m/dt) I + (1 + beta/dt) C + friction, C = ``band``.
+    """
+    n = band.shape[0]
+    nbw = band.shape[1] - 1
+    ab[:, :] = 0.0
+    scale = 1.0 + (beta / dt if beta > 0 else 0.0)
+    for p in range(n):
+        i = order[p]
+        si = filters[i]
+        for d in range(min(p, nbw) + 1):
+            j = order[p - d]
+            sj = filters[j]
+            h = band[p, d]
+            h00, h01, h10, h11 = (scale * h[0, 0], scale * h[0, 1], scale * h[1, 0],
+                                  scale * h[1, 1])
+            if d == 0:
+                diag0 = masses2[2 * i] / dt ** 2 + (alpha * masses2[2 * i] / dt
+                                                    if alpha > 0 else 0.0)
+                diag1 = masses2[2 * i + 1] / dt ** 2 + (alpha * masses2[2 * i + 1] / dt
+                                                        if alpha > 0 else 0.0)
+                h00 += diag0
+                h11 += diag1
+            # S_i H S_j
+            t00 = si[0, 0] * h00 + si[0, 1] * h10
+            t01 = si[0, 0] * h01 + si[0, 1] * h11
+            t10 = si[1, 0] * h00 + si[1, 1] * h10
+            t11 = si[1, 0] * h01 + si[1, 1] * h11
+            a00 = t00 * sj[0, 0] + t01 * sj[1, 0]
+            a01 = t00 * sj[0, 1] + t01 * sj[1, 1]
+            a10 = t10 * sj[0, 0] + t11 * sj[1, 0]
+            a11 = t10 * sj[0, 1] + t11 * sj[1, 1]
+            r = 2 * p
+            if d == 0:
+                ab[r, 0] += a00
+                ab[r + 1, 1] += a10
+                ab[r + 1, 0] += a11
+            else:
+                ab[r, 2 * d] += a00
+                ab[r, 2 * d - 1] += a01
+                ab[r + 1, 2 * d + 1] += a10
+                ab[r + 1, 2 * d] += a11
+    # friction blocks  S_i (g t t^T) S_i
+    for f in range(n_fr):
+        k = fr_nodes[f]
+        s = ((q[2 * k] - q_n[2 * k]) * fr_t[f, 0]
+             + (q[2 * k + 1] - q_n[2 * k + 1]) * fr_t[f, 1]) / dt - fr_speed[f]
+        root = math.sqrt(s ** 2 + FRICTION_SMOOTHING ** 2)
+        g = fr_bound[f] * FRICTION_SMOOTHING ** 2 / root ** 3 / dt
+        tx, tz = fr_t[f, 0], fr_t[f, 1]
+        sk = filters[k]
+        # S t
+        ux = sk[0, 0] * tx + sk[0, 1] * tz
+        uz = sk[1, 0] * tx + sk[1, 1] * tz
+        # (S t)(t^T S)
+        vx = tx * sk[0, 0] + tz * sk[1, 0]
+        vz = tx * sk[0, 1] + tz * sk[1, 1]
+        r = 2 * pos[k]
+        ab[r, 0] += g * ux * vx
+        ab[r + 1, 1] += g * uz * vx
+        ab[r + 1, 0] += g * uz * vz
+    # I - S + shift diag(S) m / dt^2
+    for i in range(n):
+        si = filters[i]
+        r = 2 * pos[i]
+        ab[r, 0] += 1.0 - si[0, 0] + shift * si[0, 0] * masses2[2 * i] / dt ** 2
+        ab[r + 1, 1] += 0.0 - si[1, 0]
+        ab[r + 1, 0] += 1.0 - si[1, 1] + shift * si[1, 1] * masses2[2 * i + 1] / dt ** 2
+
+
+@njit(cache=True)
+def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
+                 masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press,
+                 gravity_grad, pos, nbw, q_out, reaction_out, history):
+    """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
+
+    Args:
+        q_n, v_n: (2n,) m and m/s at the start of the step.  dt: s.
+        q_start: (2n,) m, constrained dofs at their targets.
+        filters: (n, 2, 2) S_i (must be symmetric).
+        fr_nodes (k,), fr_t (k, 2), fr_bound (k,) N, fr_speed (k,) m/s: kinetic friction.
+        masses2: (2n,) kg per dof.  alpha (1/s), beta (s): Rayleigh damping.
+        tol: m/s.  max_it: iterations.
+        edges, spar, triples, bpar, ring, press: the energies (see ring_*).
+        gravity_grad: (2n,) N, the constant gradient of gravity.
+        pos: (n,) band positions; nbw: node half-bandwidth.
+        q_out, reaction_out: (2n,) outputs. history: (max_it,) output, m/s.
+
+    Returns:
+        (status, iterations, len(history)); status OK or a failure code.
+    """
+    n2 = q_n.shape[0]
+    n = n2 // 2
+    n_fr = fr_nodes.shape[0]
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[pos[i]] = i
+    for i in range(n):
+        if filters[i, 0, 1] != filters[i, 1, 0]:
+            return UNSUPPORTED, 0, 0
+    band = np.zeros((n, nbw + 1, 2, 2))
+    grads = np.empty((4, n2))
+    grad = np.empty(n2)
+    grad_t = np.empty(n2)
+    fric_grad = np.empty(n2)
+    area_grad = np.zeros(n2)
+    tmp = np.empty(n2)
+    cdq = np.empty(n2)
+    g_f = np.empty(n2)
+    dq = np.empty(n2)
+    x = np.empty(n2)
+    y = np.empty(n2)
+    u = np.empty(n2)
+    trial = np.empty(n2)
+    ab = np.empty((n2, 2 * nbw + 2))
+    q = q_out
+    q[:] = q_start
+    n_hist = 0
+    phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
+                       fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                       gravity_grad, pos, True, grad, fric_grad, grads, band, area_grad, tmp,
+                       cdq)
+    if not math.isfinite(phi):
+        return INFEASIBLE_START, 0, n_hist
+    for iteration in range(1, max_it + 1):
+        for i in range(n):
+            for a in range(2):
+                g_f[2 * i + a] = (filters[i, a, 0] * grad[2 * i]
+                                  + filters[i, a, 1] * grad[2 * i + 1])
+                u[2 * i + a] = (filters[i, a, 0] * area_grad[2 * i]
+                                + filters[i, a, 1] * area_grad[2 * i + 1])
+        found = False
+        slope = 0.0
+        for shift in SHIFTS:
+            _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                           fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab)
+            if not _ldl_band(ab):
+                continue
+            for i in range(n):
+                p = pos[i]
+                x[2 * p] = -g_f[2 * i]
+                x[2 * p + 1] = -g_f[2 * i + 1]
+            _ldl_solve(ab, x)
+            if c != 0.0:
+                for i in range(n):
+                    p = pos[i]
+                    y[2 * p] = u[2 * i]
+                    y[2 * p + 1] = u[2 * i + 1]
+                _ldl_solve(ab, y)
+                ux = 0.0
+                uy = 0.0
+                for i in range(n):
+                    p = pos[i]
+                    ux += u[2 * i] * x[2 * p] + u[2 * i + 1] * x[2 * p + 1]
+                    uy += u[2 * i] * y[2 * p] + u[2 * i + 1] * y[2 * p + 1]
+                w = ux / (1.0 / c + uy)
+                for m in range(n2):
+                    x[m] -= y[m] * w
+            finite = True
+            slope = 0.0
+            for i in range(n):
+                p = pos[i]
+                dq[2 * i] = x[2 * p]
+                dq[2 * i + 1] = x[2 * p + 1]
+            for m in range(n2):
+                if not math.isfinite(dq[m]):
+                    finite = False
+                slope += g_f[m] * dq[m]
+            if finite and slope <= 0:
+                found = True
+                break
+        if not found:
+            return NO_DESCENT, iteration, n_hist
+        step = 1.0
+        residual = 0.0
+        dq_max = 0.0
+        for m in range(n2):
+            residual = max(residual, abs(g_f[m]))
+            dq_max = max(dq_max, abs(dq[m]))
+        if dq_max / dt < tol:
+            for m in range(n2):
+                q[m] = q[m] + dq[m]
+            _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
+                      fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                      gravity_grad, pos, False, grad, fric_grad, grads, band, area_grad, tmp,
+                      cdq)
+            history[n_hist] = dq_max / dt
+            n_hist += 1
+            for m in range(n2):
+                reaction_out[m] = grad[m] - fric_grad[m]
+            return OK, iteration, n_hist
+        accepted = False
+        phi_trial = 0.0
+        for _ in range(30):
+            for m in range(n2):
+                trial[m] = q[m] + step * dq[m]
+            phi_trial, _c = _evaluate(trial, q_n, v_n, dt, masses2, alpha, beta, filters,
+                                      fr_nodes, fr_t, fr_bound, fr_speed, n_fr, edges, spar,
+                                      triples, bpar, ring, press, gravity_grad, pos, False,
+                                      grad_t, fric_grad, grads, band, area_grad, tmp, cdq)
+            if math.isfinite(phi_trial) and (
+                    phi_trial <= phi + 1e-4 * step * slope
+                    or _filtered_max(filters, grad_t) < 0.5 * residual):
+                accepted = True
+                break
+            step *= 0.5
+        if not accepted:
+            return LINE_SEARCH_FAILED, iteration, n_hist
+        q[:] = trial
+        phi = phi_trial
+        grad[:] = grad_t
+        norm = 0.0
+        for m in range(n2):
+            norm = max(norm, abs(step * dq[m]))
+        norm /= dt
+        history[n_hist] = norm
+        n_hist += 1
+        if norm < tol:
+            _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
+                      fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                      gravity_grad, pos, False, grad, fric_grad, grads, band, area_grad, tmp,
+                      cdq)
+            for m in range(n2):
+                reaction_out[m] = grad[m] - fric_grad[m]
+            return OK, iteration, n_hist
+        phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
+                           fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                           gravity_grad, pos, True, grad, fric_grad, grads, band, area_grad,
+                           tmp, cdq)
+    return NO_CONVERGENCE, max_it, n_hist
+
+
+# ---------------------------------------------------------------------- contact
+@njit(cache=True)
+def _gap(face_par, origin_x, origin_z, f, px, pz):
+    return (px - origin_x) * face_par[f, 0] + (pz - origin_z) * face_par[f, 1]
+
+
+@njit(cache=True)
+def _covers(face_par, origin_x, origin_z, f, px, pz):
+    nx, nz = face_par[f, 0], face_par[f, 1]
+    tx, tz = -nz, nx
+    along = abs((px - origin_x) * tx + (pz - origin_z) * tz)
+    return along <= face_par[f, 2] and (px - origin_x) * nx + (pz - origin_z) * nz > -face_par[
+        f, 3]
+
+
+@njit(cache=True)
+def contact_constraints(obstacle, mode, normal_force, impact_gap, secondary, x_n, x_pred,
+                        face_par, face_dyn, dt, v_corr, start, filters, fr_nodes, fr_t,
+                        fr_bound, fr_speed):
+    """Start positions and step filters, as ``Simulation._constraints``.
+
+    Args:
+        obstacle, mode, normal_force, impact_gap, secondary: (n,) the contact state.
+        x_n, x_pred: (n, 2) m, positions at the start of the step and predicted.
+        Outputs: start (n, 2), filters (n, 2, 2), fr_nodes (n,), fr_t (n, 2),
+        fr_bound (n,), fr_speed (n,).
+
+    Returns:
+        the number of friction entries.
+    """
+    n = x_n.shape[0]
+    n_fr = 0
+    for i in range(n):
+        start[i, 0] = x_pred[i, 0]
+        start[i, 1] = x_pred[i, 1]
+        filters[i, 0, 0] = 1.0
+        filters[i, 0, 1] = 0.0
+        filters[i, 1, 0] = 0.0
+        filters[i, 1, 1] = 1.0
+    for f in range(face_par.shape[0]):
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        tx, tz = -nz, nx
+        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
+        for i in range(n):
+            if obstacle[i] != f:
+                continue
+            md = mode[i]
+            penetration = max(0.0, -_gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f,
+                                         x_n[i, 0], x_n[i, 1]))
+            target = -max(0.0, penetration - v_corr * dt)
+            if md == IMPACT:
+                target = impact_gap[i]
+            corr = target - _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, start[i, 0],
+                                 start[i, 1])
+            start[i, 0] += corr * nx
+            start[i, 1] += corr * nz
+            if md == STICK:
+                along = (x_n[i, 0] * tx + x_n[i, 1] * tz) + dt * (vx * tx + vz * tz)
+                corr = along - (start[i, 0] * tx + start[i, 1] * tz)
+                start[i, 0] += corr * tx
+                start[i, 1] += corr * tz
+                filters[i, 0, 0] = 0.0
+                filters[i, 0, 1] = 0.0
+                filters[i, 1, 0] = 0.0
+                filters[i, 1, 1] = 0.0
+            else:
+                filters[i, 0, 0] = 1.0 - nx * nx
+                filters[i, 0, 1] = 0.0 - nx * nz
+                filters[i, 1, 0] = 0.0 - nz * nx
+                filters[i, 1, 1] = 1.0 - nz * nz
+            if md == SLIP and face_par[f, 5] > 0:
+                fr_nodes[n_fr] = i
+                fr_t[n_fr, 0] = tx
+                fr_t[n_fr, 1] = tz
+                fr_bound[n_fr] = face_par[f, 5] * max(normal_force[i], 0.0)
+                fr_speed[n_fr] = vx * tx + vz * tz
+                n_fr += 1
+    for i in range(n):
+        f = secondary[i]
+        if f < 0:
+            continue
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        corr = 0.0 - _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, start[i, 0],
+                          start[i, 1])
+        start[i, 0] += corr * nx
+        start[i, 1] += corr * nz
+        s00, s01, s10, s11 = filters[i, 0, 0], filters[i, 0, 1], filters[i, 1, 0], filters[
+            i, 1, 1]
+        filters[i, 0, 0] = s00 - (nx * nx * s00 + nx * nz * s10)
+        filters[i, 0, 1] = s01 - (nx * nx * s01 + nx * nz * s11)
+        filters[i, 1, 0] = s10 - (nz * nx * s00 + nz * nz * s10)
+        filters[i, 1, 1] = s11 - (nz * nx * s01 + nz * nz * s11)
+    return n_fr
+
+
+@njit(cache=True)
+def _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, i):
+    obstacle[i] = -1
+    mode[i] = FREE
+    normal_force[i] = 0.0
+    bounce_speed[i] = 0.0
+    impact_gap[i] = 0.0
+    secondary[i] = -1
+
+
+@njit(cache=True)
+def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, x,
+                    x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
+                    released, toggled):
+    """Correct the contact set after a solve, as ``Simulation._update_contacts``
+    (with ``_add_corners`` and ``_add_penetrating``). Returns True if it changed.
+    """
+    n = x.shape[0]
+    n_faces = face_par.shape[0]
+    changed = False
+    for f in range(n_faces):
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        tx, tz = -nz, nx
+        mu_s, mu_k = face_par[f, 4], face_par[f, 5]
+        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
+        for i in range(n):
+            if obstacle[i] != f:
+                continue
+            r_n = reaction[i, 0] * nx + reaction[i, 1] * nz
+            r_t = reaction[i, 0] * tx + reaction[i, 1] * tz
+            md = mode[i]
+            if r_n < -threshold and md != IMPACT:
+                _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, i)
+                released[i] = True
+                changed = True
+                continue
+            if md == STICK and abs(r_t) > mu_s * r_n and not toggled[i]:
+                mode[i] = SLIP
+                toggled[i] = True
+                changed = True
+            if md == SLIP:
+                rel = (((x[i, 0] - x_n[i, 0]) / dt - vx) * tx
+                       + ((x[i, 1] - x_n[i, 1]) / dt - vz) * tz)
+                to_stick = abs(rel) < 2 * FRICTION_SMOOTHING and not toggled[i] and mu_s > 0
+                if to_stick:
+                    mode[i] = STICK
+                    toggled[i] = True
+                    changed = True
+                lag = normal_force[i]
+                if not to_stick and abs(r_n - lag) > 0.02 * abs(lag) + 1e-9 and mu_k > 0:
+                    changed = True
+            normal_force[i] = r_n
+    for i in range(n):
+        f = secondary[i]
+        if f < 0:
+            continue
+        if reaction[i, 0] * face_par[f, 0] + reaction[i, 1] * face_par[f, 1] < -threshold:
+            secondary[i] = -1
+            changed = True
+    # corners: held nodes pushed into a second face
+    held = np.zeros(n, np.bool_)
+    for i in range(n):
+        held[i] = obstacle[i] >= 0 and secondary[i] < 0
+    for f in range(n_faces):
+        ox, oz = face_dyn[f, 2], face_dyn[f, 3]
+        for i in range(n):
+            if not held[i] or obstacle[i] == f:
+                continue
+            if _covers(face_par, ox, oz, f, x[i, 0], x[i, 1]) and _gap(
+                    face_par, ox, oz, f, x[i, 0], x[i, 1]) < 0:
+                secondary[i] = f
+                if mode[i] == STICK:
+                    mode[i] = SLIP
+                held[i] = False
+                changed = True
+    # penetrating free surface nodes
+    hit_any = False
+    for s in range(surface.shape[0]):
+        i = surface[s]
+        if obstacle[i] >= 0 or released[i]:
+            continue
+        depth = 0.0
+        chosen = -1
+        for f in range(n_faces):
+            ox, oz = face_dyn[f, 2], face_dyn[f, 3]
+            gap = _gap(face_par, ox, oz, f, x[i, 0], x[i, 1])
+            if _covers(face_par, ox, oz, f, x[i, 0], x[i, 1]) and gap < 0 and -gap > depth:
+                depth = -gap
+                chosen = f
+        if chosen < 0:
+            continue
+        hit_any = True
+        f = chosen
+        obstacle[i] = f
+        mode[i] = STICK if face_par[f, 4] > 0 else SLIP
+        normal_force[i] = 0.0
+        e = face_par[f, 6]
+        if e > 0:
+            nx, nz = face_par[f, 0], face_par[f, 1]
+            vx, vz = face_dyn[f, 4], face_dyn[f, 5]
+            gap_start = _gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f, x_n[i, 0], x_n[i, 1])
+            gap_end = _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, x[i, 0], x[i, 1])
+            tau = min(max(gap_start / (gap_start - gap_end), 0.0), 1.0) if gap_start > 0 \
+                else 0.0
+            v_start = (v_n[i, 0] - vx) * nx + (v_n[i, 1] - vz) * nz
+            v_end = (((x[i, 0] - x_n[i, 0]) / dt - vx) * nx
+                     + ((x[i, 1] - x_n[i, 1]) / dt - vz) * nz)
+            approach = -(v_start + tau * (v_end - v_start))
+            if approach > v_min:
+                bounce = e * approach
+                mode[i] = IMPACT
+                bounce_speed[i] = bounce
+                impact_gap[i] = bounce * (1.0 - tau) * dt
+    return changed or hit_any
+
+
+@njit(cache=True)
+def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, secondary,
+            face_par, face_dyn, masses2, surface, pos, nbw, edges, spar, triples, bpar, ring,
+            press, gravity_grad, fpar, ipar, x_out, v_out, forces_out, history, out):
+    """One implicit Euler step with predictor-corrector contact, as ``Simulation._substep``.
+
+    The contact arrays (n,) are updated in place (pass copies); x_out, v_out, forces_out
+    (n, 2) receive the new state and contact forces (N); history (max_it,) the Newton
+    history of the last solve; out (4,) [iterations, len(history), left jaw normal
+    force N, right jaw normal force N].
+
+    Returns:
+        a status code (OK, or the failure of the last solve).
+    """
+    n = x_n.shape[0]
+    dt = fpar[F_DT]
+    x_pred = np.empty((n, 2))
+    for i in range(n):
+        x_pred[i, 0] = x_n[i, 0] + dt * v_n[i, 0]
+        x_pred[i, 1] = x_n[i, 1] + dt * v_n[i, 1]
+    q_n = x_n.reshape(2 * n)  # x_n is C-contiguous
+    v_flat = v_n.reshape(2 * n)
+    released = np.zeros(n, np.bool_)
+    toggled = np.zeros(n, np.bool_)
+    start = np.empty((n, 2))
+    filters = np.empty((n, 2, 2))
+    fr_nodes = np.empty(n, np.int64)
+    fr_t = np.empty((n, 2))
+    fr_bound = np.empty(n)
+    fr_speed = np.empty(n)
+    q = np.empty(2 * n)
+    reaction = np.empty(2 * n)
+    v_min = max(5.0 * fpar[F_GRAVITY] * dt, 1e-3)
+    iterations = 0
+    n_hist = 0
+    for _ in range(ipar[I_MAX_PASSES]):
+        n_fr = contact_constraints(obstacle, mode, normal_force, impact_gap, secondary, x_n,
+                                   x_pred, face_par, face_dyn, dt, fpar[F_VCORR], start,
+                                   filters, fr_nodes, fr_t, fr_bound, fr_speed)
+        status, its, n_hist = newton_solve(
+            q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
+            fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
+            fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press,
+            gravity_grad, pos, nbw, q, reaction, history)
+        out[1] = n_hist
+        if status != OK:
+            return status
+        iterations += its
+        x = q.reshape((n, 2))
+        r = reaction.reshape((n, 2))
+        if not update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap,
+                               secondary, x, x_n, v_n, r, face_par, face_dyn, surface, dt,
+                               fpar[F_RELEASE], v_min, released, toggled):
+            break
+    x = q.reshape((n, 2))
+    r = reaction.reshape((n, 2))
+    for i in range(n):
+        x_out[i, 0] = x[i, 0]
+        x_out[i, 1] = x[i, 1]
+        v_out[i, 0] = (x[i, 0] - x_n[i, 0]) / dt
+        v_out[i, 1] = (x[i, 1] - x_n[i, 1]) / dt
+        forces_out[i, 0] = 0.0
+        forces_out[i, 1] = 0.0
+    for f in range(face_par.shape[0]):
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        tx, tz = -nz, nx
+        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
+        for i in range(n):
+            if obstacle[i] != f:
+                continue
+            v_t = v_out[i, 0] * tx + v_out[i, 1] * tz
+            if mode[i] == STICK:
+                v_t = vx * tx + vz * tz
+            v_nn = (vx * nx + vz * nz) + bounce_speed[i]
+            v_out[i, 0] = v_nn * nx + v_t * tx
+            v_out[i, 1] = v_nn * nz + v_t * tz
+            forces_out[i, 0] = r[i, 0]
+            forces_out[i, 1] = r[i, 1]
+    for i in range(n):
+        f = secondary[i]
+        if f < 0:
+            continue
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
+        dv = (vx * nx + vz * nz) - (v_out[i, 0] * nx + v_out[i, 1] * nz)
+        v_out[i, 0] += dv * nx
+        v_out[i, 1] += dv * nz
+    for i in range(n):
+        if mode[i] == IMPACT:
+            _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, i)
+    for side in range(2):
+        acc = 0.0
+        nx, nz = face_par[side, 0], face_par[side, 1]
+        for i in range(n):
+            if obstacle[i] == side:
+                acc += forces_out[i, 0] * nx + forces_out[i, 1] * nz
+        out[2 + side] = acc
+    out[0] = iterations
+    return OK
+
+
+# ---------------------------------------------------------------------- measures
+#: layout of the ``step_measures`` output
+(M_LEFT_FX, M_LEFT_FZ, M_LEFT_TY, M_RIGHT_FX, M_RIGHT_FZ, M_RIGHT_TY, M_LEFT_N, M_RIGHT_N,
+ M_CX, M_CZ, M_CVX, M_CVZ, M_ANY_LEFT, M_ANY_RIGHT, M_KINETIC, M_ELASTIC, M_GRAVITY,
+ M_WIDTH, M_MAX_STRAIN, M_CONTACT_LENGTH, M_PEAK_PRESSURE, M_SIZE) = range(22)
+
+
+@njit(cache=True)
+def _separation_offset(x, ring, start, step, nx, nz, ox, oz):
+    """measures._separation_offset for a face of normal (nx, nz) through (ox, oz)."""
+    n = ring.shape[0]
+    node0 = ring[start % n]
+    f1 = ring[(start + step) % n]
+    f2 = ring[(start + 2 * step) % n]
+    g1 = (x[f1, 0] - ox) * nx + (x[f1, 1] - oz) * nz
+    g2 = (x[f2, 0] - ox) * nx + (x[f2, 1] - oz) * nz
+    tx, tz = -nz, nx
+    h0 = abs((x[f1, 0] - x[node0, 0]) * tx + (x[f1, 1] - x[node0, 1]) * tz)
+    h1 = abs((x[f2, 0] - x[f1, 0]) * tx + (x[f2, 1] - x[f1, 1]) * tz)
+    if g1 <= 0 or g2 <= g1 or h1 <= 0:
+        return 0.5 * h0
+    s1 = h1 / (math.sqrt(g2 / g1) - 1.0)
+    return min(max(h0 - s1, 0.0), h0)
+
+
+@njit(cache=True)
+def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
+    """measures.face_contact_length for the face ``side``."""
+    n = ring.shape[0]
+    if n < 5:
+        return 0.0
+    tx, tz = -nz, nx
+    top = -1
+    bottom = -1
+    a_top = 0.0
+    a_bottom = 0.0
+    for r in range(n):
+        i = ring[r]
+        if obstacle[i] != side:
+            continue
+        along = x[i, 0] * tx + x[i, 1] * tz
+        if top < 0 or along > a_top:
+            top, a_top = r, along
+        if bottom < 0 or along < a_bottom:
+            bottom, a_bottom = r, along
+    if top < 0:
+        return 0.0
+    length = a_top - a_bottom
+    for k in range(2):
+        end = top if k == 0 else bottom
+        if obstacle[ring[(end + 1) % n]] != side:
+            length += _separation_offset(x, ring, end, 1, nx, nz, ox, oz)
+        elif obstacle[ring[(end - 1) % n]] != side:
+            length += _separation_offset(x, ring, end, -1, nx, nz, ox, oz)
+    return length
+
+
+@njit(cache=True)
+def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
+                  face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press,
+                  gravity_grad, normal_out, pressure_out, out):
+    """The numbers of ``Simulation._measure`` and ``measures.deformation``.
+
+    Args:
+        x, v, forces: (n, 2) positions m, velocities m/s, contact forces N.
+        obstacle: (n,) holding obstacle per node.  masses: (n,) kg.
+        surface: (n_s,) outline nodes.  skin_edges: (n_e, 2).  rest_segments: (n_e,) m,
+        skin segment lengths of the rest shape.  face_par: see the module doc.
+        jaw_origins: (2, 2) m, left and right jaw face centres.  depth: m.
+        edges .. gravity_grad: the energies (as ``newton_solve``).
+        normal_out: (n,) N, normal contact force per node.  pressure_out: (n_s,) Pa.
+        out: (M_SIZE,) the scalars, see the M_* indices.
+    """
+    n = x.shape[0]
+    out[:] = 0.0
+    normal_out[:] = 0.0
+    for side in range(2):
+        fx = 0.0
+        fz = 0.0
+        ty = 0.0
+        ox, oz = jaw_origins[side, 0], jaw_origins[side, 1]
+        for i in range(n):
+            if obstacle[i] != side:
+                continue
+            fx += forces[i, 0]
+            fz += forces[i, 1]
+            ty += (x[i, 1] - oz) * -forces[i, 0] - (x[i, 0] - ox) * -forces[i, 1]
+            out[M_ANY_LEFT + side] = 1.0
+        out[3 * side] = -fx
+        out[3 * side + 1] = -fz
+        out[3 * side + 2] = ty
+    for i in range(n):
+        f = obstacle[i]
+        if f >= 0:
+            normal_out[i] = forces[i, 0] * face_par[f, 0] + forces[i, 1] * face_par[f, 1]
+            if f < 2:
+                out[M_LEFT_N + f] += normal_out[i]
+    m_sum = 0.0
+    for i in range(n):
+        m_sum += masses[i]
+    cx = cz = cvx = cvz = kin = 0.0
+    for i in range(n):
+        cx += masses[i] * x[i, 0]
+        cz += masses[i] * x[i, 1]
+        cvx += masses[i] * v[i, 0]
+        cvz += masses[i] * v[i, 1]
+        kin += masses[i] * (v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1])
+    out[M_CX], out[M_CZ] = cx / m_sum, cz / m_sum
+    out[M_CVX], out[M_CVZ] = cvx / m_sum, cvz / m_sum
+    out[M_KINETIC] = 0.5 * kin
+    q = x.reshape(2 * n)
+    grad = np.empty(2 * n)
+    area_grad = np.empty(2 * n)
+    band = np.empty((0, 1, 2, 2))
+    pos = np.zeros(n, np.int64)
+    elastic = ring_stretching(q, edges, spar, pos, False, grad, band)
+    elastic += ring_bending(q, triples, bpar, pos, False, grad, band)
+    vp, _c = ring_pressure(q, ring, press, pos, False, grad, band, area_grad)
+    out[M_ELASTIC] = elastic + vp
+    grav = 0.0
+    for m in range(2 * n):
+        grav += gravity_grad[m] * q[m]
+    out[M_GRAVITY] = grav
+    # deformation
+    ns = surface.shape[0]
+    lo = np.inf
+    hi = -np.inf
+    for s in range(ns):
+        lo = min(lo, x[surface[s], 0])
+        hi = max(hi, x[surface[s], 0])
+    out[M_WIDTH] = hi - lo
+    best = 0.0
+    strain_max = 0.0
+    for e in range(skin_edges.shape[0]):
+        i, j = skin_edges[e, 0], skin_edges[e, 1]
+        strain = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1]) / rest_segments[e] - 1.0
+        if e == 0 or abs(strain) > best:
+            best = abs(strain)
+            strain_max = strain
+    out[M_MAX_STRAIN] = strain_max
+    n_e = skin_edges.shape[0]
+    peak = 0.0
+    for s in range(ns):
+        trib = 0.0
+        if n_e > 0:
+            i, j = skin_edges[s, 0], skin_edges[s, 1]
+            seg = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1])
+            k = (s - 1) % n_e
+            i, j = skin_edges[k, 0], skin_edges[k, 1]
+            prev = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1])
+            trib = 0.5 * (seg + prev)
+        p = 0.0
+        if trib > 0:
+            p = max(normal_out[surface[s]], 0.0) / (trib * depth)
+        pressure_out[s] = p
+        peak = max(peak, p)
+    out[M_PEAK_PRESSURE] = peak
+    length = 0.0
+    for side in range(2):
+        length += _face_contact_length(x, surface, obstacle, side, face_par[side, 0],
+                                       face_par[side, 1], jaw_origins[side, 0],
+                                       jaw_origins[side, 1])
+    out[M_CONTACT_LENGTH] = length
