@@ -1,0 +1,76 @@
+"""The offline CLI as a user runs it: JSON outputs and clear errors on bad input."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def gripper_sim(*args, timeout=600):
+    env = dict(os.environ)
+    env['PYTHONPATH'] = str(ROOT) + os.pathsep + env.get('PYTHONPATH', '')
+    return subprocess.run([sys.executable, '-m', 'gripper_sim.cli.main', *args],
+                          capture_output=True, text=True, timeout=timeout, env=env,
+                          stdin=subprocess.DEVNULL)
+
+
+def test_squeeze_json_reports_series_and_summary():
+    run = gripper_sim('squeeze', '--to-force', '4', '--speed', '0.01', '--json')
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    n = len(data['time'])
+    assert n > 10 and len(data['gap']) == n and len(data['force']) == n
+    assert data['force'][-1] >= 4.0
+    assert all(b < a for a, b in zip(data['gap'], data['gap'][1:]))
+    summary = data['summary']
+    assert summary['peak_force'] == pytest.approx(max(data['force']))
+    assert 0 < summary['peak_compression'] < 0.01
+    assert summary['peak_contact_pressure'] > 0
+
+
+def test_squeeze_to_gap_stops_at_the_gap():
+    run = gripper_sim('squeeze', '--to-gap', '0.062', '--speed', '0.01', '--json')
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert data['gap'][-1] == pytest.approx(0.062, abs=1e-6)
+    assert data['force'][-1] > 0
+
+
+def test_pick_json_reports_outcome():
+    run = gripper_sim('pick', '--force', '3', '--lift', '0.02', '--hold', '0.3', '--json')
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert data['outcome'] == 'held'
+    assert 0 <= data['slip_distance'] < 1e-3
+    assert max(data['force']) == pytest.approx(3.0, rel=0.05)
+
+
+@pytest.mark.parametrize('args,message', [
+    (['squeeze', '--fruit', 'banana', '--to-force', '5'], "unknown fruit 'banana'"),
+    (['squeeze', '--set', 'fruit.nodez=30', '--to-force', '5'], "unknown config key"),
+    (['squeeze', '--set', 'fruit.nodes=0', '--to-force', '5'], "'fruit.nodes'"),
+    (['squeeze', '--to-force', '-3'], 'must be a finite number > 0'),
+    (['squeeze', '--to-force', 'nan'], 'must be a finite number > 0'),
+    (['pick', '--force', '-1'], 'must be a finite number > 0'),
+    (['pick', '--force', 'inf'], 'must be a finite number > 0'),
+    (['squeeze', '--set', 'sim.dt=abc', '--to-force', '5'], "'sim.dt'"),
+    (['squeeze', '--config', '/nonexistent.yaml', '--to-force', '5'], 'cannot read'),
+])
+def test_bad_input_gives_a_clear_error(args, message):
+    run = gripper_sim(*args, timeout=120)
+    assert run.returncode != 0
+    assert message in run.stderr
+    assert 'Traceback' not in run.stderr + run.stdout
+
+
+def test_malformed_config_file_is_reported(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('fruit: {model: [unclosed\n')
+    run = gripper_sim('squeeze', '--config', str(bad), '--to-force', '5', timeout=120)
+    assert run.returncode != 0
+    assert 'not valid YAML' in run.stderr
+    assert 'Traceback' not in run.stderr
