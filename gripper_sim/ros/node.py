@@ -17,12 +17,15 @@ import sys
 import threading
 import time
 from collections import deque
+from pathlib import Path
 from typing import Any, Callable
 
 import rclpy
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
@@ -110,6 +113,7 @@ class SimNode(Node):
         self.publish_count = 0
         self.params.on_change(self._on_parameters_changed)
         self.add_on_set_parameters_callback(self._check_runtime_physics)
+        self._init_recording()
 
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._topic_publishers = {
@@ -129,6 +133,7 @@ class SimNode(Node):
         self.create_service(SetBool, '~/pause', self._on_pause, callback_group=services)
         self.create_service(Step, '~/step', self._on_step, callback_group=services)
         self.create_service(Trigger, '~/jaw/open', self._on_open, callback_group=services)
+        self.create_service(SetBool, '~/record', self._on_record, callback_group=services)
 
         # Imported here: the servers import this module for JawOwner.
         from gripper_sim.ros.grasp_server import GraspServer
@@ -143,13 +148,14 @@ class SimNode(Node):
             f'{self._publish_every} steps ({1.0 / (self._publish_every * self.sim.dt):g} Hz '
             f'sim time), real-time factor {self._rtf:g}')
         self._publish(self.sim.last)
+        self._start_recording_at_startup()
         self._thread = threading.Thread(target=self._run, name='physics', daemon=True)
         if start:
             self._thread.start()
 
     # ------------------------------------------------------------------ hooks
     def add_observer(self, callback: Callable[[StepResult], None]) -> None:
-        """Call ``callback(result)`` after every physics step (physics thread).
+        """Call ``callback(result)`` after every physics step (physics thread, under ``lock``).
 
         The hook for in-node recording; keep it fast, it runs in the physics loop.
         """
@@ -160,7 +166,9 @@ class SimNode(Node):
         self._publish_observers.append(callback)
 
     def add_reset_listener(self, callback: Callable[[StepResult], None]) -> None:
-        """Call ``callback(initial_result)`` after every reset (``~/reset`` or recovery)."""
+        """Call ``callback(initial_result)`` after every reset (``~/reset`` or recovery).
+
+        Called under ``lock``, before the next step."""
         self._reset_listeners.append(callback)
 
     def add_step_listener(self, callback: Callable[[StepResult], None]) -> None:
@@ -280,8 +288,10 @@ class SimNode(Node):
                 listener(result)
             if result.step % self._publish_every == 0:
                 batch = result
-        for observer in self._observers:
-            observer(result)
+            # Under the lock, so a recording started or stopped (also under the lock)
+            # holds exactly the steps taken in between, none twice.
+            for observer in self._observers:
+                observer(result)
         if batch is not None:
             self._publish(batch)
         return result
@@ -313,8 +323,8 @@ class SimNode(Node):
             self.message_context.reset()
             self._anchor = (time.monotonic(), self.sim.time)
             initial = self.sim.last
-        for listener in self._reset_listeners:
-            listener(initial)
+            for listener in self._reset_listeners:
+                listener(initial)
         self._publish(initial)
 
     def _publish(self, result: StepResult) -> None:
@@ -338,7 +348,6 @@ class SimNode(Node):
         self._publish_every = max(1, int(round(1.0 / (rate * self.sim.dt))))
 
     def _check_runtime_physics(self, parameters):
-        from rcl_interfaces.msg import SetParametersResult
         changes = physics_changes({p.name: p.value for p in parameters})
         if changes and not hasattr(self.sim, 'set_parameter'):
             reason = (f"this simulation core cannot change {', '.join(sorted(changes))} "
@@ -381,6 +390,154 @@ class SimNode(Node):
                     # rclpy's own checks (range, type, read-only) are not logged by it
                     self.get_logger().warning(
                         f"parameter change of '{parameter.name}' rejected: {result.reason}")
+
+    # ------------------------------------------------------------- recording
+    def _init_recording(self) -> None:
+        """In-node recording (``record_path``, ``~/record``): every physics step to MCAP."""
+        self._record_lock = threading.RLock()
+        self._record_param_internal = False   # the node itself is updating record_path
+        self.recording = None
+        self._recording_unavailable = ''
+        try:
+            from gripper_sim.recording.node_recording import NodeRecording
+            self.recording = NodeRecording(self)
+        except ImportError as err:   # e.g. the mcap library is missing
+            self._recording_unavailable = f'in-node recording is unavailable: {err}'
+        # Registered last: it starts or stops the recording, so every other check of
+        # the same change has already accepted it.
+        self.add_on_set_parameters_callback(self._check_record_path)
+
+    def _start_recording_at_startup(self) -> None:
+        path = str(self.params.get('record_path'))
+        if not path:
+            return
+        ok, message = self._start_recording(path)
+        if ok:
+            self.get_logger().info(message)
+            return
+        self.get_logger().error(f"record_path '{path}' refused: {message}; running "
+                                'without recording')
+        self._set_record_path('')
+
+    def _recording_target(self, path: str) -> Path:
+        """The file ``NodeRecording.start(path)`` would create (``.mcap`` appended)."""
+        target = Path(path).expanduser().absolute()
+        if target.suffix != '.mcap':
+            target = target.with_name(target.name + '.mcap')
+        return target
+
+    def _record_path_problem(self, path: str) -> str | None:
+        """Why recording to ``path`` cannot start, or None (checked before switching)."""
+        if self.recording is None:
+            return self._recording_unavailable
+        target = self._recording_target(path)
+        parent = target.parent
+        if target.is_dir():
+            return f'{target} is a directory; give a file name ending in .mcap'
+        if target.exists():
+            return (f'{target} already exists; choose another name or remove it '
+                    '(recordings are never overwritten)')
+        if not parent.is_dir():
+            return f'{target}: directory {parent} does not exist'
+        if not os.access(parent, os.W_OK | os.X_OK):
+            return f'cannot create {target}: directory {parent} is not writable'
+        return None
+
+    def _start_recording(self, path: str) -> tuple[bool, str]:
+        """Start recording to ``path``; (ok, message)."""
+        if self.recording is None:
+            return False, self._recording_unavailable
+        path = str(self._recording_target(path))
+        # Under the simulation lock: the file starts with the state of the last step
+        # taken and then holds every following step, none twice.
+        with self.lock:
+            return self.recording.start(path)
+
+    def _stop_recording(self) -> tuple[bool, str]:
+        if self.recording is None:
+            return False, 'not recording'
+        with self.lock:
+            return self.recording.stop()
+
+    def _set_record_path(self, value: str) -> None:
+        """Make the ``record_path`` parameter say what is being recorded."""
+        with self._record_lock:
+            self._record_param_internal = True
+            try:
+                self.set_parameters([Parameter('record_path', value=value)])
+            finally:
+                self._record_param_internal = False
+
+    def _check_record_path(self, parameters) -> SetParametersResult:
+        """Start, switch or stop the recording when ``record_path`` changes."""
+        value = next((p.value for p in parameters if p.name == 'record_path'), None)
+        if value is None:
+            return SetParametersResult(successful=True)
+        with self._record_lock:   # the node's own update holds it: others wait here
+            if self._record_param_internal:
+                return SetParametersResult(successful=True)
+            recording = self.recording
+            active = recording is not None and recording.active
+            if not value:
+                if active:
+                    _, message = self._stop_recording()
+                    self.get_logger().info(f'recording stopped: {message}')
+                return SetParametersResult(successful=True)
+            if active and recording is not None and recording.path is not None and \
+                    recording.path.resolve() == self._recording_target(value).resolve():
+                return SetParametersResult(successful=True)   # already recording there
+            problem = self._record_path_problem(value)
+            if problem is None:
+                if active:
+                    _, message = self._stop_recording()
+                    self.get_logger().info(f'recording stopped: {message}')
+                ok, message = self._start_recording(value)
+                if ok:
+                    self.get_logger().info(message)
+                    return SetParametersResult(successful=True)
+                problem = message
+            reason = f"parameter 'record_path' = '{value}' refused: {problem}"
+            self.get_logger().warning(f'parameter change rejected: {reason}')
+            return SetParametersResult(successful=False, reason=reason)
+
+    def _on_record(self, request, response):
+        """``~/record``: true = start (to ``record_path`` or a timestamped file), false = stop."""
+        with self._record_lock:
+            if request.data:
+                if self.recording is None:
+                    response.success, response.message = False, self._recording_unavailable
+                elif self.recording.active:
+                    response.success = False
+                    response.message = (f'already recording to {self.recording.path}; '
+                                        'stop it first')
+                else:
+                    from gripper_sim.recording.node_recording import default_path
+                    path = str(self.params.get('record_path')) or \
+                        str(default_path(Path.cwd()))
+                    response.success, response.message = self._start_recording(path)
+                    if response.success:
+                        self._set_record_path(str(self.recording.path))
+            else:
+                response.success, response.message = self._stop_recording()
+                if response.success:
+                    response.message = f'recording stopped: {response.message}'
+                if self.params.get('record_path'):
+                    self._set_record_path('')
+        # (separate calls: an rclpy log call site must keep one severity)
+        if response.success:
+            self.get_logger().info(f'~/record: {response.message}')
+        else:
+            self.get_logger().warning(f'~/record: {response.message}')
+        return response
+
+    def _finish_recording(self) -> None:
+        recording = getattr(self, 'recording', None)
+        if recording is not None and recording.active:
+            ok, message = recording.stop()
+            if ok:
+                self.get_logger().info(f'recording stopped: {message}')
+            else:
+                self.get_logger().error(f'recording could not be finished: {message}')
 
     # ---------------------------------------------------------------- topics
     def _jaw_command(self, description: str, value: float, unit: str,
@@ -473,6 +630,7 @@ class SimNode(Node):
 
     def destroy_node(self):
         self.stop()
+        self._finish_recording()
         return super().destroy_node()
 
 
