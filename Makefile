@@ -90,7 +90,9 @@ demo: install
 	source scripts/env.sh && scripts/demo
 
 test: install
-	source scripts/env.sh && $(PY) -m pytest $(PYTEST_ARGS)
+	source scripts/env.sh; $(PY) -m pytest $(PYTEST_ARGS) || { status=$$?; \
+		[ $$status -ne 5 ] || echo 'make test: pytest collected no tests (exit 5)'; \
+		exit $$status; }
 
 bench: install
 	source scripts/env.sh && scripts/bench
