@@ -1,0 +1,98 @@
+"""Membrane stretching of the skin: constant-strain triangles, St. Venant-Kirchhoff.
+
+Each triangle maps its rest shape (in its own plane, 2D coordinates with the
+2x2 matrix D_m of rest edge vectors) to the current one with the 3x2 deformation
+gradient F = D_s D_m^-1, D_s = [x1 - x0, x2 - x0]. With the Green strain
+E = (F^T F - I) / 2 and the plane-stress Lame constants of the skin
+    mu = E_s / (2 (1 + nu)),  lambda* = E_s nu / (1 - nu^2),
+the energy is W = t A_0 [lambda*/2 tr(E)^2 + mu tr(E^2)], the second Piola-Kirchhoff
+stress S = lambda* tr(E) I + 2 mu E, the first P = F S (Bonet & Wood, Nonlinear
+Continuum Mechanics, ch. 6, Saint Venant-Kirchhoff; membrane = plane stress), and
+    dP_ai / dF_bj = d_ab S_ij + lambda* F_ai F_bj + mu d_ij (F F^T)_ab + mu F_aj F_bi.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
+                                            scatter_gradient)
+from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
+
+
+class Membrane(Energy):
+    """Args:
+        triangles: (n_tri, 3) node indices.
+        rest_positions: (n_nodes, 3) m, the stress-free shape.
+        youngs_modulus: E_s, Pa.  poisson_ratio: nu (-).  thickness: t, m.
+    """
+
+    def __init__(self, triangles, rest_positions, youngs_modulus: float,
+                 poisson_ratio: float, thickness: float):
+        self.tri = np.asarray(triangles, dtype=np.int64)
+        x0 = np.asarray(rest_positions, dtype=float)
+        e1 = x0[self.tri[:, 1]] - x0[self.tri[:, 0]]
+        e2 = x0[self.tri[:, 2]] - x0[self.tri[:, 0]]
+        normal = np.cross(e1, e2)
+        area2 = np.linalg.norm(normal, axis=1)
+        if np.any(area2 <= 0):
+            raise ValueError('degenerate skin triangle')
+        t1 = e1 / np.linalg.norm(e1, axis=1)[:, None]
+        t2 = np.cross(normal / area2[:, None], t1)
+        dm = np.empty((len(self.tri), 2, 2))
+        dm[:, 0, 0] = np.einsum('ij,ij->i', e1, t1)
+        dm[:, 1, 0] = 0.0
+        dm[:, 0, 1] = np.einsum('ij,ij->i', e2, t1)
+        dm[:, 1, 1] = np.einsum('ij,ij->i', e2, t2)
+        self.dm_inv = np.linalg.inv(dm)
+        self.area = 0.5 * area2
+        self.weight = thickness * self.area  # m^3
+        self.mu = youngs_modulus / (2 * (1 + poisson_ratio))
+        self.lam = youngs_modulus * poisson_ratio / (1 - poisson_ratio ** 2)
+        self.dofs = element_dofs3(self.tri)
+        # dF_(a,i) / dx_(node k, comp b) = d_ab dN_k/dX_i with dN/dX = [-1 -1; 1 0; 0 1] D_m^-1
+        grad_n = np.einsum('kc,ecj->ekj', np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]]),
+                           self.dm_inv)  # (n, 3 nodes, 2)
+        self.grad_n = grad_n
+
+    def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
+        """(n_tri, 3, 2)."""
+        x = q.reshape(-1, 3)
+        return np.einsum('eka,ekj->eaj', x[self.tri], self.grad_n)
+
+    def strains(self, q: np.ndarray) -> np.ndarray:
+        """(n_tri,) largest principal engineering strain of each triangle (-)."""
+        f = self.deformation_gradients(q)
+        c = np.einsum('eai,eaj->eij', f, f)
+        tr, det = c[:, 0, 0] + c[:, 1, 1], c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] ** 2
+        disc = np.sqrt(np.maximum(0.25 * tr ** 2 - det, 0.0))
+        lam_max = 0.5 * tr + disc
+        lam_min = np.maximum(0.5 * tr - disc, 0.0)
+        big = np.sqrt(lam_max) - 1.0
+        small = np.sqrt(lam_min) - 1.0
+        return np.where(np.abs(big) >= np.abs(small), big, small)
+
+    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
+        f = self.deformation_gradients(q)
+        c = np.einsum('eai,eaj->eij', f, f)
+        e = 0.5 * (c - np.eye(2))
+        tr = e[:, 0, 0] + e[:, 1, 1]
+        mu, lam = self.mu, self.lam
+        psi = 0.5 * lam * tr ** 2 + mu * np.einsum('eij,eij->e', e, e)
+        value = float(np.sum(self.weight * psi))
+        s = 2 * mu * e + (lam * tr)[:, None, None] * np.eye(2)
+        p = np.einsum('eai,eij->eaj', f, s)  # (n, 3, 2)
+        # dW/dx_(k, a) = w P_aj dN_k/dX_j
+        local = self.weight[:, None, None] * np.einsum('eaj,ekj->eka', p, self.grad_n)
+        grad = scatter_gradient(q.size, self.dofs, local.reshape(len(self.tri), 9))
+        if not hessian:
+            return Evaluation(value, grad, *empty_triplets())
+        ffT = np.einsum('eaj,ebj->eab', f, f)
+        eye3, eye2 = np.eye(3), np.eye(2)
+        cmat = (np.einsum('ab,eij->eaibj', eye3, s)
+                + lam * np.einsum('eai,ebj->eaibj', f, f)
+                + mu * np.einsum('ij,eab->eaibj', eye2, ffT)
+                + mu * np.einsum('eaj,ebi->eaibj', f, f))
+        # H_(k a)(l b) = w sum_ij dN_k/dX_i C_(a i)(b j) dN_l/dX_j
+        h = np.einsum('e,eki,eaibj,elj->ekalb', self.weight, self.grad_n, cmat, self.grad_n)
+        return Evaluation(value, grad, *hessian_triplets(self.dofs,
+                                                         h.reshape(len(self.tri), 9, 9)))

@@ -1,0 +1,85 @@
+"""Compressible neo-Hookean flesh on linear tetrahedra.
+
+With F = D_s D_m^-1 (3x3; D columns x_k - x_0, k = 1..3), J = det F and the Lame
+parameters mu, lambda of the flesh (E, nu), the energy density (J/m^3) is
+    psi = mu/2 (tr(F^T F) - 3) - mu ln J + lambda/2 (ln J)^2
+(Bonet & Wood, Nonlinear Continuum Mechanics, eq. 6.28), the first Piola-Kirchhoff
+stress P = mu (F - F^-T) + lambda ln J F^-T, and
+    dP_ij / dF_mn = mu d_im d_jn + (mu - lambda ln J) Finv_ni Finv_jm
+                    + lambda Finv_ji Finv_nm.
+An inverted element (J <= 0) has infinite energy, which the line search backs away from.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
+                                            scatter_gradient)
+from gripper_sim.core.energies.neohookean import lame_parameters
+from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
+
+
+class NeoHookeanTets(Energy):
+    """Args:
+        tetrahedra: (n_tet, 4) node indices, positively oriented at rest.
+        rest_positions: (n_nodes, 3) m.
+        youngs_modulus: Pa.  poisson_ratio: -.
+    """
+
+    def __init__(self, tetrahedra, rest_positions, youngs_modulus: float,
+                 poisson_ratio: float):
+        self.tet = np.asarray(tetrahedra, dtype=np.int64)
+        x0 = np.asarray(rest_positions, dtype=float)
+        dm = np.stack([x0[self.tet[:, k]] - x0[self.tet[:, 0]] for k in (1, 2, 3)], axis=2)
+        det = np.linalg.det(dm)
+        if np.any(det <= 0):
+            raise ValueError('tetrahedra must be positively oriented with positive volume')
+        self.dm_inv = np.linalg.inv(dm)
+        self.volume = det / 6.0
+        self.mu, self.lam = lame_parameters(youngs_modulus, poisson_ratio)
+        self.dofs = element_dofs3(self.tet)
+        # dF_ij / dx_(k, i) = dN_k/dX_j, dN/dX = [-1 -1 -1; I] D_m^-1   (n, 4, 3)
+        shape = np.vstack([-np.ones((1, 3)), np.eye(3)])
+        self.grad_n = np.einsum('kc,ecj->ekj', shape, self.dm_inv)
+
+    def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
+        """(n_tet, 3, 3)."""
+        x = q.reshape(-1, 3)
+        return np.einsum('eki,ekj->eij', x[self.tet], self.grad_n)
+
+    def von_mises(self, q: np.ndarray) -> np.ndarray:
+        """(n_tet,) Pa, von Mises stress of the Cauchy stress (damage measure)."""
+        f = self.deformation_gradients(q)
+        j = np.linalg.det(f)
+        b = f @ np.swapaxes(f, 1, 2)
+        lnj = np.log(np.maximum(j, 1e-12))
+        sigma = (self.mu * (b - np.eye(3)) + (self.lam * lnj)[:, None, None] * np.eye(3)) \
+            / j[:, None, None]
+        dev = sigma - np.trace(sigma, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
+        return np.sqrt(1.5 * np.einsum('eij,eij->e', dev, dev))
+
+    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
+        f = self.deformation_gradients(q)
+        j = np.linalg.det(f)
+        if np.any(j <= 0):
+            return Evaluation(np.inf, np.full(q.size, np.nan), *empty_triplets())
+        lnj = np.log(j)
+        mu, lam = self.mu, self.lam
+        psi = 0.5 * mu * (np.einsum('eij,eij->e', f, f) - 3) - mu * lnj + 0.5 * lam * lnj ** 2
+        value = float(np.sum(psi * self.volume))
+        finv = np.linalg.inv(f)
+        finv_t = np.swapaxes(finv, 1, 2)
+        piola = mu * (f - finv_t) + (lam * lnj)[:, None, None] * finv_t
+        local = self.volume[:, None, None] * np.einsum('eij,ekj->eki', piola, self.grad_n)
+        n = len(self.tet)
+        grad = scatter_gradient(q.size, self.dofs, local.reshape(n, 12))
+        if not hessian:
+            return Evaluation(value, grad, *empty_triplets())
+        eye = np.eye(3)
+        c = (mu * np.einsum('im,jn->ijmn', eye, eye)[None]
+             + (mu - lam * lnj)[:, None, None, None, None]
+             * np.einsum('eni,ejm->eijmn', finv, finv)
+             + lam * np.einsum('eji,enm->eijmn', finv, finv))
+        # H_(k i)(l m) = V sum_jn dN_k/dX_j C_(ij)(mn) dN_l/dX_n
+        h = np.einsum('e,ekj,eijmn,eln->ekilm', self.volume, self.grad_n, c, self.grad_n)
+        return Evaluation(value, grad, *hessian_triplets(self.dofs, h.reshape(n, 12, 12)))

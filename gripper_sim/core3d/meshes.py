@@ -1,0 +1,310 @@
+"""Surface and volume meshes of the 3D fruit.
+
+Every body here is star-shaped about its centre, so one surface mesher serves them
+all: a geodesic sphere (an icosahedron whose edges are cut into ``frequency`` parts,
+10 f^2 + 2 vertices), optionally graded towards the two jaw contact points on the
+x axis, then mapped radially onto the body (sphere, ellipsoid, or a solid of
+revolution about z given by a profile curve). Tetrahedra come from TetGen (Si 2015,
+ACM TOMS 41(2):11) through its Python wrapper ``tetgen``, with the surface kept as
+given, so surface vertices are nodes 0..n_surface-1 of the volume mesh.
+
+Shapes: positions (n, 3) m, triangles (n_tri, 3) counter-clockwise seen from outside
+(outward normals), tetrahedra (n_tet, 4) with positive volume
+((x1 - x0) x (x2 - x0)) . (x3 - x0) > 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gripper_sim.errors import ConfigError
+
+#: the pin of the meshing library the solid model was validated with
+TETGEN_REQUIREMENT = 'tetgen==0.8.4'
+
+
+@dataclass(frozen=True)
+class SurfaceMesh:
+    """Attributes:
+        positions: (n, 3) m.
+        triangles: (n_tri, 3) outward oriented.
+    """
+
+    positions: np.ndarray
+    triangles: np.ndarray
+
+
+@dataclass(frozen=True)
+class VolumeMesh:
+    """Attributes:
+        positions: (n, 3) m; nodes 0..n_surface-1 are the surface vertices.
+        tetrahedra: (n_tet, 4) positively oriented.
+        triangles: (n_tri, 3) the outward boundary triangles.
+        n_surface: number of surface vertices.
+    """
+
+    positions: np.ndarray
+    tetrahedra: np.ndarray
+    triangles: np.ndarray
+    n_surface: int
+
+
+def _icosahedron() -> tuple[np.ndarray, np.ndarray]:
+    phi = (1 + 5 ** 0.5) / 2
+    v = np.array([[-1, phi, 0], [1, phi, 0], [-1, -phi, 0], [1, -phi, 0],
+                  [0, -1, phi], [0, 1, phi], [0, -1, -phi], [0, 1, -phi],
+                  [phi, 0, -1], [phi, 0, 1], [-phi, 0, -1], [-phi, 0, 1]], dtype=float)
+    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
+                  [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
+                  [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
+                  [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]], dtype=np.int64)
+    return v / np.linalg.norm(v, axis=1)[:, None], f
+
+
+def geodesic_sphere(frequency: int) -> SurfaceMesh:
+    """Unit sphere: each icosahedron face cut into frequency^2 triangles, projected out.
+
+    Returns 10 f^2 + 2 vertices and 20 f^2 triangles.
+    """
+    if frequency < 1:
+        raise ValueError('frequency must be >= 1')
+    v, faces = _icosahedron()
+    f = int(frequency)
+    ii, jj = np.meshgrid(np.arange(f + 1), np.arange(f + 1), indexing='ij')
+    keep = ii + jj <= f
+    ii, jj = ii[keep], jj[keep]
+    local = -np.ones((f + 1, f + 1), np.int64)
+    local[ii, jj] = np.arange(ii.size)
+    # sub-triangles of one face in (i, j) lattice coordinates, same orientation
+    up = [(local[i, j], local[i + 1, j], local[i, j + 1])
+          for i in range(f) for j in range(f - i)]
+    down = [(local[i + 1, j], local[i + 1, j + 1], local[i, j + 1])
+            for i in range(f) for j in range(f - i - 1)]
+    sub = np.array(up + down, dtype=np.int64)
+    points, tris = [], []
+    for n, (a, b, c) in enumerate(faces):
+        p = (v[a] + (ii / f)[:, None] * (v[b] - v[a]) + (jj / f)[:, None] * (v[c] - v[a]))
+        points.append(p)
+        tris.append(sub + n * ii.size)
+    points = np.vstack(points)
+    tris = np.vstack(tris)
+    # merge the copies of edge and corner points that neighbouring faces share
+    key = np.round(points * (64 * f), 0).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    unit = points[first]
+    unit /= np.linalg.norm(unit, axis=1)[:, None]
+    tris = inverse[tris]
+    if len(unit) != 10 * f * f + 2:
+        raise RuntimeError('geodesic sphere: vertex merge failed')
+    return SurfaceMesh(unit, _orient_outward(unit, tris))
+
+
+def _orient_outward(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Flip triangles whose normal points towards the centroid (star-shaped bodies)."""
+    p = points[tris]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    centre = points.mean(axis=0)
+    inward = np.einsum('ij,ij->i', normal, p.mean(axis=1) - centre) < 0
+    tris = tris.copy()
+    tris[inward] = tris[inward][:, [0, 2, 1]]
+    return tris
+
+
+def grade_towards_poles(unit: np.ndarray, refinement: float) -> np.ndarray:
+    """Move points of the unit sphere towards the poles +/- x (the jaw contact points).
+
+    With phi the angle to the nearer pole, phi' = (pi/2) g(2 phi / pi) with the cubic
+    g(s) = r s + 2 (1 - r) s^2 - (1 - r) s^3 (g(0) = 0, g'(0) = r, g(1) = 1,
+    g'(1) = 1): the spacing at the poles shrinks by ``refinement`` r, the equator keeps
+    its spacing, and g is monotonic for 0 < r <= 1, so no triangle flips.
+    """
+    r = float(refinement)
+    if not 0 < r <= 1:
+        raise ValueError('refinement must be in (0, 1]')
+    if r == 1.0:
+        return unit.copy()
+    ax = np.abs(unit[:, 0])
+    phi = np.arccos(np.clip(ax, -1.0, 1.0))
+    s = phi / (0.5 * np.pi)
+    new_phi = 0.5 * np.pi * (r * s + 2 * (1 - r) * s ** 2 - (1 - r) * s ** 3)
+    perp = unit.copy()
+    perp[:, 0] = 0.0
+    norm = np.linalg.norm(perp, axis=1)
+    out = unit.copy()
+    moving = norm > 1e-12
+    out[moving, 0] = np.sign(unit[moving, 0]) * np.cos(new_phi[moving])
+    out[moving, 1:] = perp[moving, 1:] / norm[moving, None] * np.sin(new_phi[moving])[:, None]
+    return out
+
+
+def profile_radius_function(profile: np.ndarray):
+    """The polar radius rho(theta) about the profile's centre of a solid of revolution.
+
+    Args:
+        profile: (k, 2) m, points (r, z) of the meridian from the bottom (r = 0) to the
+            top (r = 0), r >= 0 in between.
+
+    Returns:
+        (centre_z, rho) with rho a function of theta (rad from +z), vectorised.
+
+    Raises:
+        ConfigError: fewer than 3 points, r < 0, ends off the axis, or a profile that
+            is not star-shaped about its centre (theta must grow monotonically).
+    """
+    p = np.asarray(profile, dtype=float)
+    key = "config key 'fruit.body.profile'"
+    if p.ndim != 2 or p.shape[1] != 2 or len(p) < 3:
+        raise ConfigError(f'{key} must be a list of at least 3 [r, z] pairs (m)')
+    if np.any(p[:, 0] < 0) or abs(p[0, 0]) > 1e-12 or abs(p[-1, 0]) > 1e-12:
+        raise ConfigError(f'{key}: r must be >= 0 and the first and last points on the '
+                          'axis (r = 0)')
+    if p[-1, 1] <= p[0, 1]:
+        raise ConfigError(f'{key} must run from the bottom (lowest z) to the top')
+    centre = 0.5 * (p[0, 1] + p[-1, 1])
+    theta = np.arctan2(p[:, 0], p[:, 1] - centre)  # pi at the bottom, 0 at the top
+    if np.any(np.diff(theta) >= 0) or np.any(np.hypot(p[:, 0], p[:, 1] - centre) <= 0):
+        raise ConfigError(f'{key} is not star-shaped about its centre (its polar angle '
+                          'must fall monotonically from the bottom to the top)')
+    a = np.stack([p[:-1, 0], p[:-1, 1] - centre], axis=1)
+    b = np.stack([p[1:, 0], p[1:, 1] - centre], axis=1)
+    t_hi, t_lo = theta[:-1], theta[1:]
+
+    def rho(t):
+        """Distance from the centre to the profile along the ray at polar angle t."""
+        t = np.clip(np.asarray(t, dtype=float), 0.0, np.pi)
+        k = np.clip(np.searchsorted(-t_lo, -t, side='left'), 0, len(a) - 1)
+        u = np.stack([np.sin(t), np.cos(t)], axis=-1)  # ray direction (r, z)
+        d = b[k] - a[k]
+        # a + s d = rho u  ->  rho = (a x d) / (u x d), 2D cross products
+        return (a[k, 0] * d[:, 1] - a[k, 1] * d[:, 0]) / (u[:, 0] * d[:, 1] - u[:, 1] * d[:, 0])
+
+    return centre, rho
+
+
+def body_surface(kind: str, frequency: int, refinement: float, *, radius: float,
+                 semi_axes: tuple[float, float, float] | None = None,
+                 profile: np.ndarray | None = None) -> SurfaceMesh:
+    """The surface mesh of a body centred at the origin.
+
+    Args:
+        kind: 'sphere' (radius), 'ellipsoid' (semi_axes along x, y, z) or
+            'revolution' (profile (k, 2) of (r, z) about the z axis).
+        frequency: geodesic frequency (10 f^2 + 2 vertices).
+        refinement: mesh size at the jaw contact points (+/- x) over the mean.
+    """
+    sphere = geodesic_sphere(frequency)
+    unit = grade_towards_poles(sphere.positions, refinement)
+    if kind == 'sphere':
+        points = radius * unit
+    elif kind == 'ellipsoid':
+        points = unit * np.asarray(semi_axes, dtype=float)[None, :]
+    elif kind == 'revolution':
+        centre, rho = profile_radius_function(profile)
+        theta = np.arccos(np.clip(unit[:, 2], -1.0, 1.0))
+        points = rho(theta)[:, None] * unit
+        points[:, 2] += centre
+        points[:, 2] -= 0.5 * (points[:, 2].max() + points[:, 2].min())
+    else:
+        raise ConfigError(f"config key 'fruit.body.type': unknown body '{kind}'")
+    return SurfaceMesh(points, _orient_outward(points, sphere.triangles))
+
+
+def mean_edge_length(mesh: SurfaceMesh) -> float:
+    p = mesh.positions[mesh.triangles]
+    return float(np.mean(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2)))
+
+
+def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
+                   radius_edge_ratio: float = 1.5, min_dihedral: float = 10.0) -> VolumeMesh:
+    """Tetrahedra filling a closed surface, with TetGen (the surface is kept as given).
+
+    Args:
+        max_volume: m^3 per tetrahedron; None = that of a regular tetrahedron whose
+            edge is twice the mean surface edge (a coarser interior, graded from the
+            surface by TetGen's quality bound).
+        radius_edge_ratio, min_dihedral: TetGen's quality bounds (-q).
+
+    Raises:
+        ConfigError: the tetgen package is missing.
+    """
+    try:
+        import tetgen
+    except ImportError as err:
+        msg = (f'the 3D solid model needs the TetGen mesher: pip install '
+               f'{TETGEN_REQUIREMENT}')
+        raise ConfigError(msg) from err
+    if max_volume is None:
+        h = 2.0 * mean_edge_length(surface)
+        max_volume = h ** 3 / (6 * 2 ** 0.5)
+    gen = tetgen.TetGen(np.ascontiguousarray(surface.positions, dtype=float),
+                        np.ascontiguousarray(surface.triangles, dtype=np.int32))
+    nodes, elems, _, _ = gen.tetrahedralize(quality=True, nobisect=True,
+                                             minratio=radius_edge_ratio,
+                                             mindihedral=min_dihedral,
+                                             maxvolume=float(max_volume))
+    nodes = np.asarray(nodes, dtype=float)
+    elems = np.asarray(elems, dtype=np.int64)[:, :4]
+    n_s = len(surface.positions)
+    if not np.allclose(nodes[:n_s], surface.positions, rtol=0, atol=1e-12):
+        raise RuntimeError('TetGen changed the surface vertices')
+    vol = signed_volumes(nodes, elems)
+    elems[vol < 0] = elems[vol < 0][:, [0, 2, 1, 3]]
+    return VolumeMesh(nodes, elems, surface.triangles.copy(), n_s)
+
+
+def signed_volumes(positions: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """(n_tet,) m^3, ((x1 - x0) x (x2 - x0)) . (x3 - x0) / 6."""
+    p = positions[tets]
+    return np.einsum('ij,ij->i', np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]),
+                     p[:, 3] - p[:, 0]) / 6.0
+
+
+def enclosed_volume(positions: np.ndarray, triangles: np.ndarray) -> float:
+    """m^3 enclosed by a closed outward surface (divergence theorem)."""
+    p = positions[triangles]
+    return float(np.einsum('ij,ij->', p[:, 0], np.cross(p[:, 1], p[:, 2])) / 6.0)
+
+
+def hinges(triangles: np.ndarray) -> np.ndarray:
+    """(n_edge, 4) hinges (p0, p1, p2, p3) of a closed manifold surface.
+
+    Triangle A = (p0, p1, p2) and triangle B = (p1, p0, p3) in their outward orders.
+
+    Raises:
+        ValueError: an edge does not have exactly two triangles with opposite senses.
+    """
+    t = np.asarray(triangles, dtype=np.int64)
+    a = t.ravel()
+    b = np.roll(t, -1, axis=1).ravel()
+    opposite = np.roll(t, -2, axis=1).ravel()
+    n = int(t.max()) + 1
+    directed = a * n + b
+    order = np.argsort(directed)
+    if np.any(np.diff(directed[order]) == 0):
+        raise ValueError('surface is not an oriented manifold (repeated directed edge)')
+    forward = a < b
+    reverse_key = b * n + a
+    pos = np.searchsorted(directed[order], reverse_key[forward])
+    pos = np.minimum(pos, len(order) - 1)
+    twin = order[pos]
+    if np.any(directed[twin] != reverse_key[forward]):
+        raise ValueError('surface is not closed (an edge has one triangle)')
+    return np.stack([a[forward], b[forward], opposite[forward], opposite[twin]], axis=1)
+
+
+def surface_edges(triangles: np.ndarray) -> np.ndarray:
+    """(n_edge, 2) unique undirected edges of a triangle mesh."""
+    t = np.asarray(triangles, dtype=np.int64)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    e.sort(axis=1)
+    return np.unique(e, axis=0)
+
+
+def vertex_areas(positions: np.ndarray, triangles: np.ndarray, n_nodes: int) -> np.ndarray:
+    """(n_nodes,) m^2, a third of the area of every triangle at each vertex."""
+    p = positions[triangles]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    return np.bincount(triangles.ravel(), weights=np.repeat(area / 3.0, 3),
+                       minlength=n_nodes)

@@ -1,0 +1,187 @@
+"""3D meshes and energies: finite-difference checks and closed-form checks."""
+import numpy as np
+import pytest
+
+from gripper_sim.core3d.energies import (EnclosedVolumePressure, Gravity3D, HingeBending,
+                                         Membrane, NeoHookeanTets, dihedral_angles)
+from gripper_sim.core3d.meshes import (body_surface, enclosed_volume, geodesic_sphere,
+                                       hinges, signed_volumes)
+
+RNG = np.random.default_rng(7)
+RADIUS = 0.03
+
+
+def _perturbed(x0, scale):
+    return (x0 + RNG.normal(scale=scale, size=x0.shape)).ravel()
+
+
+def _cube_tets():
+    """Five positively oriented tetrahedra of a 2 cm cube (no mesher needed)."""
+    corners = 0.02 * np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)],
+                              dtype=float)
+    tets = np.array([[0, 1, 2, 4], [3, 2, 1, 7], [5, 4, 7, 1], [6, 7, 4, 2],
+                     [1, 2, 4, 7]])
+    vol = signed_volumes(corners, tets)
+    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
+    return corners, tets
+
+
+def _energies():
+    sphere = geodesic_sphere(2)
+    x0 = RADIUS * sphere.positions
+    tri = sphere.triangles
+    corners, tets = _cube_tets()
+    return [
+        ('membrane', Membrane(tri, x0, 10e6, 0.4, 5e-4), _perturbed(x0, 1e-3)),
+        ('hinge-bending', HingeBending(hinges(tri), x0, 1e-4), _perturbed(x0, 1e-3)),
+        ('volume-pressure', EnclosedVolumePressure(tri, enclosed_volume(x0, tri), 3e4, 3e6),
+         _perturbed(x0, 1e-3)),
+        ('neo-hookean-tets', NeoHookeanTets(tets, corners, 2e6, 0.38),
+         _perturbed(corners, 1e-3)),
+        ('gravity', Gravity3D(np.full(len(x0), 0.01), 9.81), _perturbed(x0, 1e-3)),
+    ]
+
+
+CASES = _energies()
+IDS = [c[0] for c in CASES]
+
+
+@pytest.mark.parametrize('name,energy,q', CASES, ids=IDS)
+def test_gradient_matches_central_differences(name, energy, q):
+    h = 1e-7
+    grad = energy.gradient(q)
+    fd = np.array([(energy.value(q + h * e) - energy.value(q - h * e)) / (2 * h)
+                   for e in np.eye(q.size)])
+    assert np.max(np.abs(grad)) > 1e-6, 'gradient is trivially zero'
+    assert np.max(np.abs(grad - fd)) <= 1e-6 * np.max(np.abs(grad))
+
+
+@pytest.mark.parametrize('name,energy,q', CASES[:4], ids=IDS[:4])
+def test_hessian_matches_central_differences(name, energy, q):
+    h = 1e-7
+    hess = energy.hessian(q)
+    fd = np.array([(energy.gradient(q + h * e) - energy.gradient(q - h * e)) / (2 * h)
+                   for e in np.eye(q.size)])
+    assert np.max(np.abs(hess)) > 1e-3, 'Hessian is trivially zero'
+    assert np.max(np.abs(hess - fd)) <= 1e-6 * np.max(np.abs(hess))
+    assert np.allclose(hess, hess.T, atol=1e-9 * np.max(np.abs(hess)))
+
+
+def test_energies_vanish_at_rest_and_under_rigid_motion():
+    sphere = geodesic_sphere(2)
+    x0 = RADIUS * sphere.positions
+    tri = sphere.triangles
+    corners, tets = _cube_tets()
+    angle = 0.7
+    rot = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
+                    [0, 0, 1]])
+    shift = np.array([0.01, -0.02, 0.03])
+    for energy, rest in ((Membrane(tri, x0, 10e6, 0.4, 5e-4), x0),
+                         (HingeBending(hinges(tri), x0, 1e-4), x0),
+                         (NeoHookeanTets(tets, corners, 2e6, 0.38), corners)):
+        scale = energy.value((1.01 * rest).ravel())
+        assert scale > 0
+        for x in (rest, rest @ rot.T + shift):
+            assert energy.value(x.ravel()) == pytest.approx(0.0, abs=1e-12 * scale + 1e-18)
+            assert np.max(np.abs(energy.gradient(x.ravel()))) < 1e-9
+
+
+def test_inverted_tetrahedron_has_infinite_energy():
+    corners, tets = _cube_tets()
+    flesh = NeoHookeanTets(tets, corners, 2e6, 0.38)
+    mirrored = corners * np.array([-1.0, 1.0, 1.0])
+    assert flesh.value(mirrored.ravel()) == np.inf
+
+
+def _flat_sheet(n=24, a=1e-3):
+    """A regular (equilateral) triangle sheet in the x-y plane, n x n vertices."""
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing='ij')
+    x = a * (i + 0.5 * (j % 2))
+    y = a * np.sqrt(3) / 2 * j
+    pts = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    idx = np.arange(n * n).reshape(n, n)
+    tris = []
+    for jj in range(n - 1):
+        for ii in range(n - 1):
+            a0, a1, b0, b1 = idx[ii, jj], idx[ii + 1, jj], idx[ii, jj + 1], idx[ii + 1, jj + 1]
+            if jj % 2 == 0:
+                tris += [(a0, a1, b0), (a1, b1, b0)]
+            else:
+                tris += [(a0, a1, b1), (a0, b1, b0)]
+    return pts, np.array(tris)
+
+
+def _interior_hinges(tris):
+    t = np.asarray(tris)
+    edges = {}
+    for k, tri in enumerate(t):
+        for m in range(3):
+            edges.setdefault((tri[m], tri[(m + 1) % 3]), (k, tri[(m + 2) % 3]))
+    out = []
+    for (a, b), (_, c) in edges.items():
+        if (b, a) in edges and a < b:
+            out.append((a, b, c, edges[(b, a)][1]))
+    return np.array(out)
+
+
+@pytest.mark.parametrize('direction', ['x', 'y'])
+def test_hinge_energy_of_a_rolled_sheet_matches_plate_bending(direction):
+    """A flat sheet rolled to curvature kappa stores D kappa^2 / 2 per unit area."""
+    pts, tris = _flat_sheet()
+    h = _interior_hinges(tris)
+    d = 2e-4
+    energy = HingeBending(h, pts, d)
+    kappa = 5.0  # 1/m: 0.2 m radius, the sheet spans 24 mm
+    axis = 0 if direction == 'x' else 1
+    s = pts[:, axis]
+    rolled = pts.copy()
+    rolled[:, axis] = np.sin(kappa * s) / kappa
+    rolled[:, 2] = (1 - np.cos(kappa * s)) / kappa
+    # the area the hinges represent: a third of each of their two triangles
+    p = pts[tris]
+    tri_area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    hinge_area = len(h) * 2 * tri_area.mean() / 3
+    expected = 0.5 * d * kappa ** 2 * hinge_area
+    assert energy.value(rolled.ravel()) == pytest.approx(expected, rel=0.03)
+
+
+def test_geodesic_sphere_counts_and_convexity():
+    for f in (1, 3, 8):
+        mesh = geodesic_sphere(f)
+        assert len(mesh.positions) == 10 * f * f + 2
+        assert len(mesh.triangles) == 20 * f * f
+        assert np.allclose(np.linalg.norm(mesh.positions, axis=1), 1.0)
+        theta = dihedral_angles(mesh.positions, hinges(mesh.triangles))
+        assert np.all(theta > 0), 'outward orientation: every hinge of a sphere is convex'
+
+
+@pytest.mark.parametrize('refinement', [1.0, 0.3])
+def test_graded_sphere_keeps_orientation_and_refines_the_poles(refinement):
+    mesh = body_surface('sphere', 6, refinement, radius=RADIUS)
+    x, tri = mesh.positions, mesh.triangles
+    assert enclosed_volume(x, tri) == pytest.approx(4 / 3 * np.pi * RADIUS ** 3, rel=0.03)
+    theta = dihedral_angles(x, hinges(tri))
+    assert np.all(theta > 0)
+    p = x[tri]
+    centre = p.mean(axis=1)
+    size = np.linalg.norm(p[:, 1] - p[:, 0], axis=1)
+    near_pole = np.argsort(-np.abs(centre[:, 0]))[:24]  # the fans around the two poles
+    ratio = size[near_pole].mean() / size.mean()
+    if refinement == 1.0:
+        assert 0.8 < ratio < 1.2
+    else:
+        assert ratio < 0.6
+
+
+def test_ellipsoid_and_revolution_bodies():
+    axes = (0.03, 0.025, 0.02)
+    mesh = body_surface('ellipsoid', 6, 1.0, radius=0.03, semi_axes=axes)
+    assert np.allclose(np.ptp(mesh.positions, axis=0) / 2, axes, rtol=1e-3)
+    assert enclosed_volume(mesh.positions, mesh.triangles) == pytest.approx(
+        4 / 3 * np.pi * np.prod(axes), rel=0.03)
+    # a cone-topped cylinder: r = 10 mm for z in [0, 20] mm, apex at z = 30 mm
+    profile = np.array([[0, 0], [0.01, 0], [0.01, 0.02], [0, 0.03]])
+    body = body_surface('revolution', 8, 1.0, radius=0.01, profile=profile)
+    volume = np.pi * 0.01 ** 2 * 0.02 + np.pi * 0.01 ** 2 * 0.01 / 3
+    assert enclosed_volume(body.positions, body.triangles) == pytest.approx(volume, rel=0.05)
+    assert np.ptp(body.positions[:, 2]) == pytest.approx(0.03, rel=1e-6)
