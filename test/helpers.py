@@ -1,10 +1,16 @@
-"""Shared set-ups of the mechanics tests."""
+"""Shared set-ups of the mechanics tests (also used by bench/validation_report.py)."""
+import numpy as np
+
 from gripper_sim.configuration import load_config
+from gripper_sim.core.grasp import GraspSequence, run_grasp
 from gripper_sim.core.simulation import Simulation
 
 #: quasi-static settings: light fruit, mass damping, large step, no gravity, no table
 QUASI_STATIC = ['world.gravity=0', 'world.table=false', 'fruit.density=50',
                 'fruit.damping.mass=20', 'sim.dt=0.01', 'fruit.depth=0.01']
+
+RING_COEFFICIENT = np.pi / 4 - 2 / np.pi  # 0.14878 (Roark; validation.md section 1)
+RESTITUTION = 0.8
 
 
 def quasi_static_sim(radius: float, *overrides: str) -> Simulation:
@@ -12,3 +18,73 @@ def quasi_static_sim(radius: float, *overrides: str) -> Simulation:
         f'fruit.shape.diameter={2 * radius}', f'gripper.initial_gap={2 * radius + 1e-4}',
         *overrides])
     return Simulation(config)
+
+
+def hollow_ring_error(radius, skin_modulus, thickness, nodes, deflection_ratio=0.005):
+    """Relative error of the ring's compression against 0.14878 P R^3 / EI."""
+    sim = quasi_static_sim(radius, f'fruit.skin.youngs_modulus={skin_modulus}',
+                           f'fruit.skin.thickness={thickness}', f'fruit.nodes={nodes}',
+                           'fruit.pressure.turgor=0', 'fruit.pressure.bulk_modulus=0')
+    dv = deflection_ratio * radius
+    sim.command_gap(2 * radius - dv, speed=dv / 0.5)
+    result = sim.run(3.0)
+    load = result.grip_force
+    assert load > 0
+    predicted = RING_COEFFICIENT * load * radius ** 3 / sim.fruit.bending_stiffness
+    return result.deformation.compression / predicted - 1.0
+
+
+def membrane(approach_ratio, nodes=256, radius=0.03, depth=0.01):
+    """(grip force, pressure x contact length per jaw x depth, contact length per jaw)."""
+    sim = quasi_static_sim(radius, 'fruit.skin.youngs_modulus=1e9', 'fruit.skin.thickness=1e-5',
+                           f'fruit.nodes={nodes}', 'fruit.pressure.turgor=2e4',
+                           'fruit.pressure.bulk_modulus=0')
+    approach = approach_ratio * radius
+    sim.command_gap(2 * radius - 2 * approach, speed=2 * approach / 0.5)
+    result = sim.run(3.0)
+    pressure = sim.fruit.pressure.pressure(result.positions.ravel())
+    contact_per_jaw = result.deformation.contact_length / 2
+    return result.grip_force, pressure * contact_per_jaw * depth, contact_per_jaw
+
+
+def hertz_half_widths(force, nodes=512, radius=0.03, modulus=1e6, poisson=0.3, depth=0.01):
+    """(measured contact half-width, Hertz half-width sqrt(4 F' R / (pi E*))), m."""
+    sim = quasi_static_sim(radius, 'fruit.model=solid', 'fruit.skin.enabled=false',
+                           f'fruit.nodes={nodes}', f'fruit.flesh.youngs_modulus={modulus}',
+                           f'fruit.flesh.poisson_ratio={poisson}')
+    sim.command_force(force, speed=0.004)
+    result = sim.run(1.5)
+    assert abs(result.grip_force / force - 1) < 1e-3
+    plane_strain_modulus = modulus / (1 - poisson ** 2)
+    hertz = np.sqrt(4 * result.grip_force / depth * radius / (np.pi * plane_strain_modulus))
+    return result.deformation.contact_length / 4, hertz  # two jaws, full width each
+
+
+def bouncing_node(dt):
+    """The seed's bouncing node: dropped from 1 m, moving sideways between walls."""
+    config = load_config(overrides=[
+        'fruit.model=point', f'sim.dt={dt}', f'contact.restitution={RESTITUTION}',
+        'fruit.initial_height=1.0', 'gripper.initial_lift=5', 'world.walls=true',
+        'world.wall_half_width=0.3', 'fruit.initial_velocity.x=0.5',
+        'contact.table.static_friction=0', 'contact.table.kinetic_friction=0'])
+    return Simulation(config)
+
+
+def bounce_apex_ratios(dt, count=4):
+    """Ratios of successive apex heights of the bouncing node."""
+    sim = bouncing_node(dt)
+    z = np.array([sim.step().positions[0, 1] for _ in range(int(6.0 / dt))])
+    inner = z[1:-1]
+    apex = inner[(inner > z[:-2]) & (inner >= z[2:]) & (inner > 0.01)]
+    return apex[1:count + 1] / apex[:count]
+
+
+def pick(ratio, mu=0.5, lift=0.02, hold=1.0):
+    """Grip so that 2 mu N = ratio m g, lift and hold; (sim, summary)."""
+    config = load_config(overrides=[f'contact.jaw.static_friction={mu}',
+                                    f'contact.jaw.kinetic_friction={mu}'])
+    sim = Simulation(config)
+    weight = sim.fruit.total_mass * config['world.gravity']
+    force = ratio * weight / (2 * mu)
+    sequence = GraspSequence(sim, force, lift_height=lift, hold_time=hold)
+    return sim, run_grasp(sim, sequence)
