@@ -9,6 +9,7 @@ out of range raise ``ConfigError`` naming the key.
 from __future__ import annotations
 
 import copy
+import json
 import math
 import os
 from dataclasses import dataclass
@@ -56,8 +57,26 @@ SCHEMA: dict[str, Key] = {
                        'solid: triangle-meshed neo-Hookean flesh (+ optional skin ring); '
                        'point: a single point mass (contact and bouncing checks)',
                        'str', choices=('shell', 'solid', 'point')),
-    'fruit.shape.type': Key('circle', '-', 'rest outline', 'str', choices=('circle',)),
-    'fruit.shape.diameter': Key(0.0635, 'm', 'outline diameter', low=0.005, high=0.5),
+    'fruit.shape.type': Key('circle', '-', 'rest outline: circle; ellipse; egg (ovoid); '
+                            'points (closed polygon through fruit.shape.points); spline '
+                            '(periodic cubic spline through fruit.shape.points)', 'str',
+                            choices=('circle', 'ellipse', 'egg', 'points', 'spline')),
+    'fruit.shape.diameter': Key(0.0635, 'm', 'outline diameter (circle); width along the '
+                                "shape's own x axis (ellipse, egg); not used by points/spline",
+                                low=0.005, high=0.5),
+    'fruit.shape.height': Key(None, 'm', "ellipse, egg: extent along the shape's own z "
+                              'axis; null = the diameter', low=0.005, high=0.5,
+                              nullable=True),
+    'fruit.shape.taper': Key(0.15, '', 'egg: asymmetry k of the ovoid x = a cos t (1 - k '
+                             'sin t), z = b sin t (0 = ellipse; the narrow end is up)',
+                             low=0.0, high=0.45),
+    'fruit.shape.points': Key('', 'm', 'points, spline: the outline as a list of [x, z] '
+                              'pairs (YAML list, stored as its JSON text), in order around '
+                              'the outline; at least 3 (points) or 4 (spline) distinct pairs; '
+                              'it must not cross itself', 'str'),
+    'fruit.shape.angle': Key(0.0, 'deg', 'rotation of the outline about its centroid, '
+                             'counter-clockwise in the x-z plane (0: own x axis along the '
+                             'jaw closing axis)', low=-360.0, high=360.0),
     'fruit.depth': Key(None, 'm', 'out-of-plane depth b that turns the planar model '
                        'into N and kg; null = 2/3 of the diameter, which gives a disk '
                        'the mass of the sphere', low=1e-4, high=1.0, nullable=True,
@@ -91,6 +110,10 @@ SCHEMA: dict[str, Key] = {
                                  'fruit bruises', low=0.0, high=1e9),
     'fruit.failure_stress': Key(0.29e6, 'Pa', 'flesh failure stress (crushing)',
                                 low=0.0, high=1e9),
+    'fruit.failure_strain': Key(None, '', 'whole-fruit compression (width loss over the '
+                                'rest width) at which the flesh fails (crushing); null = '
+                                'not checked', low=0.0, high=1.0, nullable=True,
+                                open_low=True),
     'fruit.initial_velocity.x': Key(0.0, 'm/s', 'initial velocity of every node, x',
                                     low=-100.0, high=100.0),
     'fruit.initial_velocity.z': Key(0.0, 'm/s', 'initial velocity of every node, z',
@@ -122,6 +145,33 @@ SCHEMA: dict[str, Key] = {
                              low=0.0, high=1e5, open_low=True),
     'gripper.force_time_constant': Key(0.02, 's', 'time constant of the built-in grip '
                                        'force regulator', low=1e-4, high=10.0),
+    'gripper.transport_speed': Key(0.1, 'm/s', 'default speed of the sideways transport '
+                                   '(x translation of both jaws)', low=1e-5, high=5.0,
+                                   open_low=True),
+    'gripper.transport_acceleration': Key(1.0, 'm/s^2', 'acceleration limit of the '
+                                          'transport (trapezoidal speed profile)',
+                                          low=1e-3, high=100.0),
+    'gripper.finger.name': Key('flat', '-', 'name of the finger shown in outputs', 'str'),
+    'gripper.finger.type': Key('flat', '-', 'jaw face profile in the x-z plane: flat; arc '
+                               '(concave circular arc of radius gripper.finger.radius); '
+                               'vgroove (a V of opening gripper.finger.groove_angle)', 'str',
+                               choices=('flat', 'arc', 'vgroove')),
+    'gripper.finger.radius': Key(0.05, 'm', 'arc: radius of the concave face (its chord is '
+                                 'gripper.jaw_height)', low=1e-3, high=10.0),
+    'gripper.finger.groove_angle': Key(120.0, 'deg', 'vgroove: opening angle between the '
+                                       'two flanks (180 = flat)', low=30.0, high=179.0),
+    'gripper.finger.segments': Key(8, '-', 'arc: number of flat facets the arc is made '
+                                   'of', 'int', 2, 64),
+    'gripper.finger.pad.enabled': Key(False, '-', 'a soft elastic pad (silicone-like) on '
+                                      'the jaw face', 'bool'),
+    'gripper.finger.pad.thickness': Key(0.003, 'm', 'pad thickness t', low=0.0, high=0.05,
+                                        open_low=True),
+    'gripper.finger.pad.youngs_modulus': Key(1.0e6, 'Pa', 'pad Young modulus E_p '
+                                             '(silicone rubber ~0.1-3 MPa, estimate)',
+                                             low=1e3, high=1e9),
+    'gripper.finger.pad.poisson_ratio': Key(0.45, '', 'pad Poisson ratio nu_p (< 0.5: the '
+                                            'elastic-foundation pad model needs a '
+                                            'compressible layer)', low=0.0, high=0.475),
     # --- contact
     'contact.jaw.static_friction': Key(0.5, '', 'static friction coefficient '
                                        'fruit-jaw mu_s (rubber pad, estimate)',
@@ -132,6 +182,9 @@ SCHEMA: dict[str, Key] = {
                                          low=0.0, high=5.0),
     'contact.table.kinetic_friction': Key(0.4, '', 'kinetic friction fruit-table',
                                           low=0.0, high=5.0),
+    'contact.pad.friction': Key(0.8, '', 'friction coefficient fruit-soft pad (smoothed '
+                                'Coulomb, one coefficient; silicone 0.5-1.0, estimate)',
+                                low=0.0, high=5.0),
     'contact.restitution': Key(0.0, '', 'normal restitution coefficient e of node '
                                'impacts on the table and walls', low=0.0, high=1.0),
     'contact.release_threshold': Key(1e-6, 'N', 'hysteresis: a contact is released '
@@ -233,7 +286,12 @@ def _coerce(key: str, value: Any) -> Any:
                 return False
             raise ValueError
         else:
-            text = str(value)
+            if isinstance(value, (list, tuple)):
+                # a list (e.g. fruit.shape.points) is kept as its JSON text, so that every
+                # value stays a scalar (a ROS parameter, a recording's config dump)
+                text = json.dumps(value)
+            else:
+                text = str(value)
             if spec.choices and text not in spec.choices:
                 raise ConfigError(f"config key '{key}' must be one of "
                                   f"{', '.join(spec.choices)}, got '{text}'")
@@ -291,6 +349,20 @@ def read_yaml(path: str | os.PathLike) -> dict:
     return dict(data)
 
 
+def available_fingers() -> list[str]:
+    """Names of the finger presets in ``config/fingers``."""
+    return sorted(p.stem for p in (package_config_dir() / 'fingers').glob('*.yaml'))
+
+
+def finger_preset_path(name: str) -> Path:
+    """Path of the preset for finger ``name``; ConfigError if there is none."""
+    path = package_config_dir() / 'fingers' / f'{name}.yaml'
+    if not path.is_file():
+        known = ', '.join(available_fingers()) or 'none installed'
+        raise ConfigError(f"unknown finger '{name}' (known fingers: {known})")
+    return path
+
+
 def fruit_preset_path(name: str) -> Path:
     """Path of the preset for fruit ``name``; ConfigError if there is none."""
     path = package_config_dir() / 'fruits' / f'{name}.yaml'
@@ -313,30 +385,53 @@ def validate(flat: Mapping[str, Any]) -> dict[str, Any]:
     if result['contact.table.kinetic_friction'] > result['contact.table.static_friction']:
         raise ConfigError("config key 'contact.table.kinetic_friction' must not exceed "
                           "'contact.table.static_friction'")
+    _check_shape(result)
     return result
 
 
+def _check_shape(config: Mapping[str, Any]) -> None:
+    """The outline can be built (no self-crossing, ...) and suits the fruit model."""
+    kind = config.get('fruit.shape.type', 'circle')
+    if kind == 'circle':
+        return
+    from gripper_sim.core.shapes import outline_from_config
+    outline_from_config(config)
+    if config.get('fruit.model') == 'shell' and config.get('fruit.pressure.turgor', 0) > 0:
+        raise ConfigError(f"config key 'fruit.shape.type' = {kind}: the shell model holds "
+                          'only a circular outline under turgor (a pressurised membrane '
+                          "is round); use 'fruit.model' = solid for this shape, or set "
+                          "'fruit.pressure.turgor' = 0")
+
+
 def load_config(fruit: str | None = None, config_file: str | os.PathLike | None = None,
-                overrides: Iterable[str] | Mapping[str, Any] = ()) -> dict[str, Any]:
+                overrides: Iterable[str] | Mapping[str, Any] = (),
+                finger: str | None = None) -> dict[str, Any]:
     """Build a validated flat configuration ``{'dotted.key': value}``.
 
     Args:
         fruit: preset name in ``config/fruits`` (default: the default fruit, unless a
             file is given).
-        config_file: a YAML file of keys (nested or dotted), merged after the preset.
+        config_file: a YAML file of keys (nested or dotted), merged after the presets;
+            its top-level ``fruit: NAME`` / ``finger: NAME`` select presets.
         overrides: ``['key=value', ...]`` strings or a ``{key: value}`` mapping,
             applied last.
+        finger: preset name in ``config/fingers`` (``gripper.finger.*`` keys), merged
+            after the fruit preset.
 
     Raises:
-        ConfigError: unknown fruit or key, bad YAML, value out of range.
+        ConfigError: unknown fruit, finger or key, bad YAML, value out of range.
     """
     flat = flatten(defaults())
     if fruit is not None or config_file is None:
         flat.update(_preset(fruit or DEFAULT_FRUIT))
+    if finger is not None:
+        flat.update(_finger_preset(finger))
     if config_file is not None:
         data = read_yaml(config_file)
         if 'fruit' in data and isinstance(data['fruit'], str):
             flat.update(_preset(data.pop('fruit')))
+        if 'finger' in data and isinstance(data['finger'], str):
+            flat.update(_finger_preset(data.pop('finger')))
         flat.update(_checked_flatten(data, str(config_file)))
     if isinstance(overrides, Mapping):
         items = list(overrides.items())
@@ -351,6 +446,10 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
 
 def _preset(name: str) -> dict[str, Any]:
     return _checked_flatten(read_yaml(fruit_preset_path(name)), f'fruit preset {name}')
+
+
+def _finger_preset(name: str) -> dict[str, Any]:
+    return _checked_flatten(read_yaml(finger_preset_path(name)), f'finger preset {name}')
 
 
 def _checked_flatten(data: Mapping, source: str) -> dict[str, Any]:

@@ -7,6 +7,8 @@ import math
 import sys
 from contextlib import ExitStack
 
+import numpy as np
+
 from gripper_sim.configuration import available_fruits, load_config, parse_override
 from gripper_sim.errors import GripperSimError
 
@@ -207,26 +209,41 @@ def run_pick(args) -> int:
 
 
 def run_fruits(args) -> int:
+    from gripper_sim.core.fruit import build_fruit
     rows = []
     for name in available_fruits():
         config = load_config(fruit=name)
+        fruit = build_fruit(config)
+        outline = fruit.rest_positions[fruit.surface]
         rows.append(dict(name=name, model=config['fruit.model'],
+                         shape=config['fruit.shape.type'],
                          diameter=config['fruit.shape.diameter'],
+                         width=float(np.ptp(outline[:, 0])),
+                         height=float(np.ptp(outline[:, 1])),
+                         mass=fruit.total_mass,
                          density=config['fruit.density'],
                          youngs_modulus=config['fruit.flesh.youngs_modulus'],
                          poisson_ratio=config['fruit.flesh.poisson_ratio'],
                          jaw_friction=config['contact.jaw.static_friction'],
-                         bruise_pressure=config['fruit.bruise_pressure']))
+                         pad_friction=config['contact.pad.friction'],
+                         table_friction=config['contact.table.static_friction'],
+                         bruise_pressure=config['fruit.bruise_pressure'],
+                         failure_stress=config['fruit.failure_stress'],
+                         failure_strain=config['fruit.failure_strain']))
     if args.json:
         json.dump(rows, sys.stdout)
         sys.stdout.write('\n')
         return 0
-    print(f"{'fruit':12s} {'model':6s} {'diam mm':>8s} {'rho kg/m3':>10s} {'E MPa':>7s} "
-          f"{'nu':>5s} {'mu jaw':>7s} {'bruise kPa':>10s}")
+    print(f"{'fruit':11s} {'model':5s} {'shape':7s} {'w x h mm':>11s} {'mass g':>6s} "
+          f"{'E MPa':>6s} {'nu':>4s} {'mu jaw':>6s} {'mu pad':>6s} {'bruise kPa':>10s} "
+          f"{'fail kPa':>8s}")
     for r in rows:
-        print(f"{r['name']:12s} {r['model']:6s} {r['diameter'] * 1e3:8.1f} {r['density']:10.0f} "
-              f"{r['youngs_modulus'] / 1e6:7.2f} {r['poisson_ratio']:5.2f} "
-              f"{r['jaw_friction']:7.2f} {r['bruise_pressure'] / 1e3:10.0f}")
+        size = f"{r['width'] * 1e3:.0f} x {r['height'] * 1e3:.0f}"
+        print(f"{r['name']:11s} {r['model']:5s} {r['shape']:7s} {size:>11s} "
+              f"{r['mass'] * 1e3:6.0f} {r['youngs_modulus'] / 1e6:6.2f} "
+              f"{r['poisson_ratio']:4.2f} {r['jaw_friction']:6.2f} {r['pad_friction']:6.2f} "
+              f"{r['bruise_pressure'] / 1e3:10.0f} {r['failure_stress'] / 1e3:8.0f}")
+    print('sources and estimates: the comments in config/fruits/NAME.yaml')
     return 0
 
 

@@ -58,11 +58,19 @@ class FruitModel:
         return float(self.masses.sum())
 
 
-def fruit_depth(config) -> float:
-    """Out-of-plane depth b (m): configured, or 2/3 of the diameter (sphere mass)."""
+def fruit_depth(config, outline: np.ndarray | None = None) -> float:
+    """Out-of-plane depth b (m): configured, or 2/3 of the diameter (sphere mass).
+
+    For shapes other than the circle the diameter is that of the circle of the same
+    area (``shapes.equivalent_diameter``).
+    """
     if config['fruit.depth'] is not None:
         return float(config['fruit.depth'])
-    return 2.0 * config['fruit.shape.diameter'] / 3.0
+    if config.get('fruit.shape.type', 'circle') == 'circle':
+        return 2.0 * config['fruit.shape.diameter'] / 3.0
+    if outline is None:
+        outline = shapes.outline_from_config(config)
+    return 2.0 * shapes.equivalent_diameter(config, outline) / 3.0
 
 
 def bulk_modulus(config) -> float:
@@ -76,7 +84,7 @@ def bulk_modulus(config) -> float:
 def build_fruit(config) -> FruitModel:
     """Build the fruit model that ``config`` (flat, validated) describes."""
     outline = shapes.outline_from_config(config)
-    depth = fruit_depth(config)
+    depth = fruit_depth(config, outline)
     rho = config['fruit.density']
     e_skin, t_skin = config['fruit.skin.youngs_modulus'], config['fruit.skin.thickness']
     ea = e_skin * t_skin * depth
