@@ -168,7 +168,7 @@ def run_squeeze(args) -> int:
                    peak_force=series.peak_force, peak_compression=series.peak_compression,
                    peak_contact_pressure=series.peak_pressure, final_gap=sim.last.gap,
                    duration=sim.time, steps=sim.last.step,
-                   bruised=series.peak_pressure > config['fruit.bruise_pressure'])
+                   bruised=sim.last.damage.bruised, damage=sim.last.damage.as_dict())
     if args.json:
         json.dump(dict(series.arrays(), summary=summary), sys.stdout)
         sys.stdout.write('\n')
@@ -178,7 +178,12 @@ def run_squeeze(args) -> int:
         print(f'  peak force           {summary["peak_force"]:.4g} N')
         print(f'  peak compression     {summary["peak_compression"] * 1e3:.4g} mm')
         print(f'  peak contact pressure {summary["peak_contact_pressure"] / 1e3:.4g} kPa'
-              + ('  (above the bruise threshold)' if summary['bruised'] else ''))
+              ' (planar line contact)')
+        damage = summary['damage']
+        print(f'  damage: peak pressure {damage["peak_pressure"] / 1e3:.4g} kPa (Hertz), '
+              + ('bruised' if damage['bruised'] else 'not bruised')
+              + f' ({damage["bruised_fraction"] * 100:.1f} % of the outline)'
+              + (', crushed' if damage['crushed'] else ''))
         print(f'  final gap            {summary["final_gap"] * 1e3:.4g} mm')
     return 0
 
@@ -204,7 +209,11 @@ def run_pick(args) -> int:
         print(f"  slip relative to the jaws  {summary['slip_distance'] * 1e3:.3f} mm")
         print(f"  peak grip force            {summary['max_grip_force']:.4g} N")
         print(f"  peak compression           {summary['max_compression'] * 1e3:.4g} mm")
-        print(f"  peak contact pressure      {summary['max_contact_pressure'] / 1e3:.4g} kPa")
+        print(f"  peak contact pressure      {summary['max_contact_pressure'] / 1e3:.4g} kPa "
+              '(planar line contact)')
+        print(f"  damage                     peak {summary['peak_damage_pressure'] / 1e3:.4g} "
+              f"kPa (Hertz), bruised {summary['bruised']} "
+              f"({summary['bruised_fraction'] * 100:.1f} %), crushed {summary['crushed']}")
     return 0 if summary['outcome'] == 'held' else 1
 
 

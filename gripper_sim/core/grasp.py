@@ -62,6 +62,7 @@ class GraspSequence:
         self.max_contact_pressure = 0.0
         self.slip_distance = 0.0
         self.bruised = False
+        self.damage = sim.last.damage
         self.final_gap = sim.gripper_state.gap
 
     @property
@@ -89,7 +90,11 @@ class GraspSequence:
         self.max_compression = max(self.max_compression, result.deformation.compression)
         self.max_contact_pressure = max(self.max_contact_pressure,
                                         result.deformation.peak_contact_pressure)
-        self.bruised = self.max_contact_pressure > sim.config['fruit.bruise_pressure']
+        if result.damage is not None:  # the Hertz estimate of gripper_sim.core.damage
+            self.damage = result.damage
+            self.bruised = result.damage.bruised
+        else:
+            self.bruised = self.max_contact_pressure > sim.config['fruit.bruise_pressure']
         self.final_gap = result.gap
         elapsed = sim.time - self.phase_start
         gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
@@ -137,15 +142,22 @@ class GraspSequence:
         """The grasp's result, with the fields of the Grasp action's result."""
         success = self.outcome == 'held'
         message = self.message
+        damage = self.damage
+        peak = damage.peak_pressure if damage is not None else self.max_contact_pressure
         if self.bruised:
-            message += (f'; bruised: peak contact pressure {self.max_contact_pressure:.4g} Pa '
+            message += (f'; bruised: peak contact pressure {peak:.4g} Pa '
                         f"above {self.sim.config['fruit.bruise_pressure']:.4g} Pa")
+        if damage is not None and damage.crushed:
+            message += '; crushed: the flesh failed'
         return dict(success=success, outcome=self.outcome or 'running',
                     slipped=self.outcome in ('slipped', 'dropped'), bruised=self.bruised,
                     message=message, max_grip_force=self.max_grip_force,
                     final_gap=self.final_gap, max_compression=self.max_compression,
                     max_contact_pressure=self.max_contact_pressure,
-                    slip_distance=self.slip_distance, dropped_at=self.dropped_at)
+                    slip_distance=self.slip_distance, dropped_at=self.dropped_at,
+                    crushed=bool(damage.crushed) if damage is not None else False,
+                    bruised_fraction=damage.bruised_fraction if damage is not None else 0.0,
+                    peak_damage_pressure=peak)
 
 
 def run_grasp(sim: Simulation, sequence: GraspSequence, on_step=None,

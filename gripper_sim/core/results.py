@@ -6,8 +6,12 @@ is z (up). Forces are in N (the out-of-plane depth is already applied), lengths 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from gripper_sim.core.damage import Damage
 
 
 @dataclass(frozen=True)
@@ -91,6 +95,8 @@ class StepResult:
         deformation: compression, strain and contact measures.
         newton_iterations: Newton iterations used (all sub-steps and corrections).
         substeps: number of sub-steps this step took (1 unless step halving happened).
+        damage: bruising and crushing so far (``gripper_sim.core.damage.Damage``); None
+            where a producer does not compute it.
     """
 
     time: float
@@ -118,6 +124,7 @@ class StepResult:
     deformation: Deformation
     newton_iterations: int
     substeps: int
+    damage: 'Damage | None' = None
 
     def in_contact_with(self, name: str) -> bool:
         """Whether any node touches the obstacle called ``name``."""

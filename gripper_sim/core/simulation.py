@@ -14,6 +14,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from gripper_sim.core import contact as cm
+from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast import FastPath
 from gripper_sim.core.fruit import FruitModel, build_fruit
@@ -190,6 +191,10 @@ class Simulation:
             lift_speed=self.config['gripper.lift_speed'],
             stiffness=self.kinematics.initial_stiffness)
         self._jaw_force = (0.0, 0.0)
+        self._damage = DamageTracker(
+            self.fruit, self.config, face_groups=self._face_groups(),
+            face_curvature=[0.0] * len(self._faces_template),
+            face_padded=[False] * len(self._faces_template))
         self._last = self._measure(0, 1)
 
     # ------------------------------------------------------------------ geometry
@@ -221,6 +226,10 @@ class Simulation:
         faces[RIGHT].origin = np.array([0.5 * grip.gap, grip.lift])
         faces[RIGHT].velocity = np.array([0.5 * grip.gap_rate, grip.lift_rate])
         return faces
+
+    def _face_groups(self) -> list[int]:
+        """Per obstacle, the body it belongs to (its index, faces of a jaw share one)."""
+        return list(range(len(self._faces_template)))
 
     @property
     def obstacle_names(self) -> tuple:
@@ -471,8 +480,24 @@ class Simulation:
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult:
         if self._fast is not None:
-            return self._fast.measure(iterations, substeps)
-        return self._measure_reference(iterations, substeps)
+            result = self._fast.measure(iterations, substeps)
+        else:
+            result = self._measure_reference(iterations, substeps)
+        return replace(result, damage=self._assess_damage(result))
+
+    def _assess_damage(self, result: StepResult):
+        """Bruising and crushing after this step (``gripper_sim.core.damage``)."""
+        normals = np.array([f.normal for f in self._faces_template]).reshape(-1, 2)
+        obstacle = result.contact_obstacle
+        held = obstacle >= 0
+        normal = np.zeros(len(obstacle))
+        normal[held] = np.einsum('ij,ij->i', result.contact_forces[held], normals[obstacle[held]])
+        stress = 0.0
+        if self.fruit.flesh is not None:
+            stress = float(np.max(self.fruit.flesh.von_mises(result.positions.ravel()),
+                                  initial=0.0))
+        return self._damage.update(result.positions, normal, obstacle,
+                                   result.deformation.compression_ratio, stress)
 
     def _measure_reference(self, iterations: int, substeps: int) -> StepResult:
         x, v, forces = self.q, self.v, self.contact_forces
