@@ -14,6 +14,7 @@ them once, e.g. at install time: ``python -m gripper_sim.core.fast``.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from typing import TYPE_CHECKING
@@ -75,7 +76,12 @@ def ring_model(fruit, energies) -> dict | None:
             model['spar'] = np.ascontiguousarray(
                 np.stack([energy.rest, energy.ea / energy.rest], axis=1))
         elif kind is RingBending:
-            model['triples'] = np.ascontiguousarray(energy.triples, dtype=np.int64)
+            triples = np.ascontiguousarray(energy.triples, dtype=np.int64)
+            # the kernel shares edge terms between neighbouring triples of a closed ring
+            if len(triples) < 3 or not np.array_equal(triples[:, :2],
+                                                      np.roll(triples, 1, axis=0)[:, 1:]):
+                return None
+            model['triples'] = triples
             model['bpar'] = np.ascontiguousarray(np.stack([energy.phi0, energy.k], axis=1))
         else:
             model['ring'] = np.ascontiguousarray(energy.ring, dtype=np.int64)
@@ -127,23 +133,25 @@ class FastPath:
         rest = fruit.rest_positions
         seg0 = rest[self.skin_edges[:, 1]] - rest[self.skin_edges[:, 0]]
         self.rest_segments = np.ascontiguousarray(np.hypot(seg0[:, 0], seg0[:, 1]))
-        self.fpar = np.zeros(7)
+        self.fpar = np.zeros(8)
         self.fpar[kernels.F_ALPHA] = solver.alpha
         self.fpar[kernels.F_BETA] = solver.beta
         self.fpar[kernels.F_TOL] = solver.tolerance
         self.ipar = np.array([solver.max_iterations, 1], np.int64)
         self.history = np.zeros(solver.max_iterations)
-        self.out = np.zeros(4)
+        self.out = np.zeros(8)
         self.measures = np.zeros(kernels.M_SIZE)
-        self.jaw_origins = np.zeros((2, 2))
+        #: work done so far (see kernels.C_*): solves, evaluations, factorisations
+        self.counts = np.zeros(kernels.C_SIZE, np.int64)
         self.n = n
         self._template = None
         self.face_par = np.zeros((0, 7))
         self.face_dyn = np.zeros((0, 6))
         self._energy_args = (model['edges'], model['spar'], model['triples'], model['bpar'],
                              model['ring'], model['press'], self.gravity_grad)
-        #: accumulated wall time (s) per part, see ``timers``
-        self.timers = {'kinematics': 0.0, 'kernel': 0.0, 'measures': 0.0}
+        #: wall time (s) spent per part while ``timing`` is True
+        self.timers = {'glue': 0.0, 'kernel': 0.0, 'measures': 0.0}
+        self._measured = None
         self.timing = False
 
     @classmethod
@@ -188,27 +196,13 @@ class FastPath:
         grip_new = sim.kinematics.advance(grip, dt, 0.5 * (left_n + right_n),
                                           left_n > 0 and right_n > 0)
         face_par, face_dyn = self._face_arrays()
-        # jaw faces: origin at the start (old) and end (new) of the step, new velocity
-        half, half_new = 0.5 * grip.gap, 0.5 * grip_new.gap
-        vx = 0.5 * grip_new.gap_rate
-        face_dyn[0, 0] = -half
-        face_dyn[0, 1] = grip.lift
-        face_dyn[0, 2] = -half_new
-        face_dyn[0, 3] = grip_new.lift
-        face_dyn[0, 4] = -vx
-        face_dyn[0, 5] = grip_new.lift_rate
-        face_dyn[1, 0] = half
-        face_dyn[1, 1] = grip.lift
-        face_dyn[1, 2] = half_new
-        face_dyn[1, 3] = grip_new.lift
-        face_dyn[1, 4] = vx
-        face_dyn[1, 5] = grip_new.lift_rate
         config = sim.config
         fpar = self.fpar
         fpar[0] = dt
         fpar[4] = sim.gravity.g
         fpar[5] = config['contact.release_threshold']
         fpar[6] = config['contact.max_correction_speed']
+        fpar[7] = sim.fruit.depth
         self.ipar[1] = config['sim.max_contact_passes']
         c = sim.contacts
         obstacle, mode, secondary = c.obstacle.copy(), c.mode.copy(), c.secondary.copy()
@@ -216,67 +210,64 @@ class FastPath:
                                         c.impact_gap.copy())
         n = self.n
         x, v, forces = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, 2))
-        x_n = np.ascontiguousarray(sim.q, dtype=float)
-        v_n = np.ascontiguousarray(sim.v, dtype=float)
+        normal, pressure = np.empty(n), np.empty(len(self.surface))
+        x_n = sim.q if sim.q.flags.c_contiguous else np.ascontiguousarray(sim.q)
+        v_n = sim.v if sim.v.flags.c_contiguous else np.ascontiguousarray(sim.v)
         model = self.model
         edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
         if timing:
             t1 = time.perf_counter()
         status = kernels.substep(
             x_n, v_n, obstacle, mode, normal_force, bounce, impact, secondary, face_par,
-            face_dyn, self.masses2, self.surface, model['pos'], model['nbw'], edges, spar,
-            triples, bpar, ring, press, gravity_grad, fpar, self.ipar, x, v, forces,
-            self.history, self.out)
+            face_dyn, (grip.gap, grip.lift, grip_new.gap, grip_new.lift, grip_new.gap_rate,
+                       grip_new.lift_rate),
+            self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
+            model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
+            fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
+            self.measures, self.counts)
         if timing:
             t2 = time.perf_counter()
         out = self.out
         if status != kernels.OK:
-            history = [float(h) for h in self.history[:int(out[1])]]
+            self._measured = None
             if status == kernels.UNSUPPORTED:
                 return sim._substep_reference(dt)
+            history = [float(h) for h in self.history[:int(out[1])]]
             message = _FAILURES.get(
                 status, f'no convergence in {sim.solver.max_iterations} iterations')
             raise NewtonFailure(message, history)
         sim.q, sim.v, sim.contact_forces = x, v, forces
-        sim.contacts = cm.ContactState(obstacle, mode, normal_force, bounce, impact,
-                                       secondary)
+        sim.contacts = _build(cm.ContactState, dict(
+            obstacle=obstacle, mode=mode, normal_force=normal_force, bounce_speed=bounce,
+            impact_gap=impact, secondary=secondary))
         sim._grip = grip_new
         sim._time += dt
         sim._jaw_force = (float(out[2]), float(out[3]))
+        self._measured = (x, normal, pressure, self.measures.tolist())
         if timing:
             t3 = time.perf_counter()
-            self.timers['kinematics'] += (t1 - t0) + (t3 - t2)
+            self.timers['glue'] += (t1 - t0) + (t3 - t2)
             self.timers['kernel'] += t2 - t1
         return int(out[0])
 
     # ------------------------------------------------------------------ outputs
     def measure(self, iterations: int, substeps: int) -> StepResult:
-        """``Simulation._measure`` from the measures kernel."""
+        """``Simulation._measure``, from the numbers the substep kernel measured at its end
+        (or from the measures kernel when the state did not come from a substep)."""
         if self.timing:
             t0 = time.perf_counter()
         sim = self.sim
         fruit, grip = sim.fruit, sim._grip
         x, v, forces = sim.q, sim.v, sim.contact_forces
-        obstacle = sim.contacts.obstacle
-        face_par, _ = self._face_arrays()
-        origins = self.jaw_origins
-        origins[0, 0] = -0.5 * grip.gap
-        origins[0, 1] = grip.lift
-        origins[1, 0] = 0.5 * grip.gap
-        origins[1, 1] = grip.lift
-        normal = np.empty(self.n)
-        pressure = np.empty(len(self.surface))
-        out = self.measures
-        model = self.model
-        edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
-        kernels.step_measures(
-            np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(v, dtype=float),
-            np.ascontiguousarray(forces, dtype=float), obstacle, self.masses, self.surface,
-            self.skin_edges, self.rest_segments, face_par, origins, fruit.depth, edges, spar,
-            triples, bpar, ring, press, gravity_grad, normal, pressure, out)
+        contacts = sim.contacts
+        measured = self._measured
+        if measured is not None and measured[0] is x:
+            _, normal, pressure, values = measured
+        else:
+            values, normal, pressure = self._measure_kernel()
         (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, cvz, any_left, any_right,
          kinetic, elastic, gravitational, width, max_strain, contact_length,
-         peak) = out.tolist()[:kernels.M_SIZE]
+         peak) = values
         both = any_left > 0 and any_right > 0
         relative_z = cz - grip.lift
         if both and sim._slip_reference is None:
@@ -285,25 +276,80 @@ class FastPath:
         slipping = bool((any_left > 0 or any_right > 0) and abs(cvz - grip.lift_rate) > 1e-3)
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
-        result = StepResult(
+        half = 0.5 * grip.gap
+        result = _build(StepResult, dict(
             time=sim._time, step=sim._step, positions=x.copy(), velocities=v.copy(),
-            contact_forces=forces.copy(), contact_obstacle=obstacle.copy(),
-            contact_sticking=sim.contacts.mode == cm.STICK,
+            contact_forces=forces.copy(), contact_obstacle=contacts.obstacle.copy(),
+            contact_sticking=contacts.mode == cm.STICK,
             obstacle_names=sim.obstacle_names, surface=fruit.surface,
-            left_wrench=JawWrench(np.array([lfx, 0.0, lfz]), np.array([0.0, lty, 0.0])),
-            right_wrench=JawWrench(np.array([rfx, 0.0, rfz]), np.array([0.0, rty, 0.0])),
-            left_jaw_x=-0.5 * grip.gap, right_jaw_x=0.5 * grip.gap,
+            left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
+                                               torque=np.array([0.0, lty, 0.0]))),
+            right_wrench=_build(JawWrench, dict(force=np.array([rfx, 0.0, rfz]),
+                                                torque=np.array([0.0, rty, 0.0]))),
+            left_jaw_x=-half, right_jaw_x=half,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
             slipping=slipping, centroid=np.array([cx, cz]),
-            energies=Energies(kinetic=kinetic, elastic=elastic, gravitational=gravitational),
-            deformation=Deformation(compression=compression, compression_ratio=ratio,
-                                    max_skin_strain=max_strain, contact_length=contact_length,
-                                    peak_contact_pressure=peak, node_pressure=pressure),
-            newton_iterations=iterations, substeps=substeps)
+            energies=_build(Energies, dict(kinetic=kinetic, elastic=elastic,
+                                           gravitational=gravitational)),
+            deformation=_build(Deformation, dict(
+                compression=compression, compression_ratio=ratio, max_skin_strain=max_strain,
+                contact_length=contact_length, peak_contact_pressure=peak,
+                node_pressure=pressure)),
+            newton_iterations=iterations, substeps=substeps))
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
+
+    def _measure_kernel(self):
+        sim = self.sim
+        grip = sim._grip
+        face_par, _ = self._face_arrays()
+        origins = np.array([[-0.5 * grip.gap, grip.lift], [0.5 * grip.gap, grip.lift]])
+        normal = np.empty(self.n)
+        pressure = np.empty(len(self.surface))
+        out = np.empty(kernels.M_SIZE)
+        edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
+        kernels.step_measures(
+            np.ascontiguousarray(sim.q, dtype=float), np.ascontiguousarray(sim.v, dtype=float),
+            np.ascontiguousarray(sim.contact_forces, dtype=float), sim.contacts.obstacle,
+            self.masses, self.surface, self.skin_edges, self.rest_segments, face_par, origins,
+            sim.fruit.depth, edges, spar, triples, bpar, ring, press, gravity_grad, False,
+            np.zeros(4), normal, pressure, out)
+        return out.tolist(), normal, pressure
+
+
+def _frozen_builder(cls):
+    """A fast constructor for a (frozen) dataclass: a frozen ``__init__`` sets each field
+    through ``object.__setattr__``, ~10 us for a StepResult; filling ``__dict__`` gives
+    the same object in well under 1 us. Fields left out take their defaults. Falls back
+    to ``cls(**fields)`` for a class with a ``__post_init__``, slots or default
+    factories, and for unknown field names.
+    """
+    fields = dataclasses.fields(cls)
+    names = frozenset(f.name for f in fields)
+    defaults = {f.name: f.default for f in fields if f.default is not dataclasses.MISSING}
+    plain = (not hasattr(cls, '__post_init__') and not hasattr(cls, '__slots__')
+             and all(f.default_factory is dataclasses.MISSING for f in fields))
+    required = names - frozenset(defaults)
+
+    def build(values: dict):
+        if not plain or not names.issuperset(values) or (
+                len(values) != len(names) and not required.issubset(values)):
+            return cls(**values)
+        obj = object.__new__(cls)
+        obj.__dict__.update(defaults)
+        obj.__dict__.update(values)
+        return obj
+    return build
+
+
+_BUILDERS = {cls: _frozen_builder(cls) for cls in (StepResult, JawWrench, Energies,
+                                                   Deformation, cm.ContactState)}
+
+
+def _build(cls, fields: dict):
+    return _BUILDERS[cls](fields)
 
 
 def warm_cache() -> float:

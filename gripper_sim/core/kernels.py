@@ -17,8 +17,8 @@ symmetric node-block band: ``band[p, d]`` (2, 2) is the block of the node at ban
 position p (row) and the node at position p - d (column), d = 0 .. nbw; ``pos[i]``
 is the band position of node i. A ring numbered 0, N-1, 1, N-2, ... (interleaved,
 see ``band_order``) has nbw = 4 for stretching + bending + pressure, so the Newton
-matrix is a scalar band of half-width 2 nbw + 1 = 9 whatever N is, factorised by a
-banded LDL^T in O(N) time.
+matrix (same block band) is factorised by a block LDL^T in O(N) time, with the
+rank-one pressure term added by Sherman-Morrison.
 
 Faces (rigid obstacles) are rows of two arrays: ``face_par`` (n_faces, 7)
 [normal x, normal z, half_length, thickness, static friction, kinetic friction,
@@ -52,9 +52,12 @@ FRICTION_SMOOTHING = 1e-4
 SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
 
 # fpar layout of ``substep`` / ``newton_solve``
-F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR = range(7)
+F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
 # ipar layout
 I_MAX_IT, I_MAX_PASSES = range(2)
+#: work counters: Newton solves (contact passes), energy evaluations with and without
+#: the Hessian, Newton matrix factorisations
+C_SOLVES, C_HESSIAN_EVALS, C_EVALS, C_FACTORS, C_SIZE = range(5)
 
 
 def band_order(n_nodes: int) -> np.ndarray:
@@ -73,7 +76,7 @@ def band_order(n_nodes: int) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- band helpers
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _add_diag(band, pos, i, h00, h01, h10, h11):
     p = pos[i]
     band[p, 0, 0, 0] += h00
@@ -82,7 +85,7 @@ def _add_diag(band, pos, i, h00, h01, h10, h11):
     band[p, 0, 1, 1] += h11
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _add_off(band, pos, i, j, h00, h01, h10, h11):
     """Add the block H_ij (rows node i, columns node j, i != j) and so its transpose."""
     pi, pj = pos[i], pos[j]
@@ -100,7 +103,7 @@ def _add_off(band, pos, i, j, h00, h01, h10, h11):
         band[pj, d, 1, 1] += h11
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def band_matvec(band, order, v, out):
     """out = B v for a symmetric node-block band (n, nbw+1, 2, 2), v and out (2n,)."""
     n = band.shape[0]
@@ -110,15 +113,16 @@ def band_matvec(band, order, v, out):
         i = order[p]
         for d in range(min(p, nbw) + 1):
             j = order[p - d]
-            b = band[p, d]
-            out[2 * i] += b[0, 0] * v[2 * j] + b[0, 1] * v[2 * j + 1]
-            out[2 * i + 1] += b[1, 0] * v[2 * j] + b[1, 1] * v[2 * j + 1]
+            b00, b01, b10, b11 = band[p, d, 0, 0], band[p, d, 0, 1], band[p, d, 1, 0], band[
+                p, d, 1, 1]
+            out[2 * i] += b00 * v[2 * j] + b01 * v[2 * j + 1]
+            out[2 * i + 1] += b10 * v[2 * j] + b11 * v[2 * j + 1]
             if d > 0:
-                out[2 * j] += b[0, 0] * v[2 * i] + b[1, 0] * v[2 * i + 1]
-                out[2 * j + 1] += b[0, 1] * v[2 * i] + b[1, 1] * v[2 * i + 1]
+                out[2 * j] += b00 * v[2 * i] + b10 * v[2 * i + 1]
+                out[2 * j + 1] += b01 * v[2 * i] + b11 * v[2 * i + 1]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def band_to_dense(band, order, out):
     """Expand a node-block band into a dense (2n, 2n) matrix ``out`` (for tests)."""
     n = band.shape[0]
@@ -135,7 +139,7 @@ def band_to_dense(band, order, out):
 
 
 # ---------------------------------------------------------------------- energies
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def ring_stretching(q, edges, spar, pos, hessian, grad, band):
     """Skin stretching E = sum EA (l - L)^2 / (2 L) (energies/stretching.py).
 
@@ -153,7 +157,7 @@ def ring_stretching(q, edges, spar, pos, hessian, grad, band):
         i, j = edges[e, 0], edges[e, 1]
         ex = q[2 * j] - q[2 * i]
         ez = q[2 * j + 1] - q[2 * i + 1]
-        length = math.hypot(ex, ez)
+        length = math.sqrt(ex * ex + ez * ez)
         stretch = length - spar[e, 0]
         k = spar[e, 1]
         value += k * stretch ** 2
@@ -175,74 +179,88 @@ def ring_stretching(q, edges, spar, pos, hessian, grad, band):
     return 0.5 * value
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def ring_bending(q, triples, bpar, pos, hessian, grad, band):
     """Ring bending E = sum k (phi - phi0)^2 / 2 (energies/bending.py).
 
     Args:
-        triples: (n_t, 3) nodes (previous, middle, next).
+        triples: (n_t, 3) nodes (previous, middle, next) of a closed ring in order:
+            triples[t, 0:2] == triples[t - 1, 1:3] (as RingBending builds them).
         bpar: (n_t, 2) [phi0 (rad), k = EI / l (N m)].
         Others as ``ring_stretching``.
     """
     grad[:] = 0.0
-    value = 0.0
-    jac = np.empty(6)
-    nodes = np.empty(3, np.int64)
-    ca = (-1.0, 1.0, 0.0)
-    cb = (0.0, -1.0, 1.0)
-    for t in range(triples.shape[0]):
-        i0, i1, i2 = triples[t, 0], triples[t, 1], triples[t, 2]
-        ax = q[2 * i1] - q[2 * i0]
-        az = q[2 * i1 + 1] - q[2 * i0 + 1]
+    nt = triples.shape[0]
+    if nt == 0:
+        return 0.0
+    # per edge b_t = x[t2] - x[t1]: d atan2 / d b and its Hessian; a_t = b_{t-1}
+    ex = np.empty(nt)
+    ez = np.empty(nt)
+    gx = np.empty(nt)
+    gz = np.empty(nt)
+    for t in range(nt):
+        i1, i2 = triples[t, 1], triples[t, 2]
         bx = q[2 * i2] - q[2 * i1]
         bz = q[2 * i2 + 1] - q[2 * i1 + 1]
+        r2 = bx ** 2 + bz ** 2
+        ex[t], ez[t] = bx, bz
+        gx[t], gz[t] = -bz / r2, bx / r2
+    value = 0.0
+    for t in range(nt):
+        a = t - 1 if t > 0 else nt - 1
+        ax, az, bx, bz = ex[a], ez[a], ex[t], ez[t]
         cross = ax * bz - az * bx
         dot = ax * bx + az * bz
         dphi = math.atan2(cross, dot) - bpar[t, 0]
-        dphi = (dphi + np.pi) % (2 * np.pi) - np.pi
+        y = dphi + np.pi
+        if 0.0 <= y < 2 * np.pi:
+            dphi = y - np.pi
+        else:
+            dphi = y % (2 * np.pi) - np.pi
         k = bpar[t, 1]
         value += k * dphi ** 2
-        r2a = ax ** 2 + az ** 2
-        r2b = bx ** 2 + bz ** 2
-        gax, gaz = -(-az / r2a), -(ax / r2a)
-        gbx, gbz = -bz / r2b, bx / r2b
-        jac[0], jac[1] = -gax, -gaz
-        jac[2], jac[3] = gax - gbx, gaz - gbz
-        jac[4], jac[5] = gbx, gbz
+        gax, gaz = -gx[a], -gz[a]
+        gbx, gbz = gx[t], gz[t]
+        j0, j1 = -gax, -gaz
+        j2, j3 = gax - gbx, gaz - gbz
+        j4, j5 = gbx, gbz
         kd = k * dphi
-        for m in range(3):
-            node = triples[t, m]
-            grad[2 * node] += kd * jac[2 * m]
-            grad[2 * node + 1] += kd * jac[2 * m + 1]
+        i0, i1, i2 = triples[t, 0], triples[t, 1], triples[t, 2]
+        grad[2 * i0] += kd * j0
+        grad[2 * i0 + 1] += kd * j1
+        grad[2 * i1] += kd * j2
+        grad[2 * i1 + 1] += kd * j3
+        grad[2 * i2] += kd * j4
+        grad[2 * i2 + 1] += kd * j5
         if hessian:
             r4a = (ax ** 2 + az ** 2) ** 2
             r4b = (bx ** 2 + bz ** 2) ** 2
+            # ha = -H(a), hb = H(b), H(v) = [[2 vx vz, vz^2 - vx^2], [., -2 vx vz]] / |v|^4
             ha00 = -(2 * ax * az / r4a)
-            ha11 = -ha00
             ha01 = -((az ** 2 - ax ** 2) / r4a)
             hb00 = 2 * bx * bz / r4b
-            hb11 = -hb00
             hb01 = (bz ** 2 - bx ** 2) / r4b
-            nodes[0], nodes[1], nodes[2] = i0, i1, i2
-            for r in range(3):
-                for c in range(r + 1):
-                    wa = ca[r] * ca[c]
-                    wb = cb[r] * cb[c]
-                    h00 = wa * ha00 + wb * hb00
-                    h01 = wa * ha01 + wb * hb01
-                    h11 = wa * ha11 + wb * hb11
-                    l00 = k * (jac[2 * r] * jac[2 * c] + dphi * h00)
-                    l01 = k * (jac[2 * r] * jac[2 * c + 1] + dphi * h01)
-                    l10 = k * (jac[2 * r + 1] * jac[2 * c] + dphi * h01)
-                    l11 = k * (jac[2 * r + 1] * jac[2 * c + 1] + dphi * h11)
-                    if r == c:
-                        _add_diag(band, pos, nodes[r], l00, l01, l10, l11)
-                    else:
-                        _add_off(band, pos, nodes[r], nodes[c], l00, l01, l10, l11)
+            # dphi-weighted parts of the blocks (p,p) ha, (i,p) -ha, (i,i) ha + hb,
+            # (n,i) -hb, (n,n) hb, (n,p) 0
+            pa00, pa01 = kd * ha00, kd * ha01
+            pb00, pb01 = kd * hb00, kd * hb01
+            _add_diag(band, pos, i0, k * (j0 * j0) + pa00, k * (j0 * j1) + pa01,
+                      k * (j1 * j0) + pa01, k * (j1 * j1) - pa00)
+            _add_diag(band, pos, i1, k * (j2 * j2) + (pa00 + pb00),
+                      k * (j2 * j3) + (pa01 + pb01), k * (j3 * j2) + (pa01 + pb01),
+                      k * (j3 * j3) - (pa00 + pb00))
+            _add_diag(band, pos, i2, k * (j4 * j4) + pb00, k * (j4 * j5) + pb01,
+                      k * (j5 * j4) + pb01, k * (j5 * j5) - pb00)
+            _add_off(band, pos, i1, i0, k * (j2 * j0) - pa00, k * (j2 * j1) - pa01,
+                     k * (j3 * j0) - pa01, k * (j3 * j1) + pa00)
+            _add_off(band, pos, i2, i1, k * (j4 * j2) - pb00, k * (j4 * j3) - pb01,
+                     k * (j5 * j2) - pb01, k * (j5 * j3) + pb00)
+            _add_off(band, pos, i2, i0, k * (j4 * j0), k * (j4 * j1), k * (j5 * j0),
+                     k * (j5 * j1))
     return 0.5 * value
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
     """Enclosed-area pressure (energies/pressure.py).
 
@@ -288,14 +306,12 @@ def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
     return value, c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hessian,
-              grads, band, area_grad):
-    """All ring energies and gravity: grads (4, 2n) per energy, band = elastic Hessian.
-
-    Returns (values (4,) J: stretching, bending, pressure, gravity; rank-one c).
+              grads, band, area_grad, values):
+    """All ring energies and gravity: grads (4, 2n) per energy, band = elastic Hessian,
+    values (4,) J: stretching, bending, pressure, gravity. Returns the rank-one c.
     """
-    values = np.empty(4)
     if hessian:
         band[:] = 0.0
     values[0] = ring_stretching(q, edges, spar, pos, hessian, grads[0], band)
@@ -307,16 +323,17 @@ def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hes
         vg += gravity_grad[m] * q[m]
         grads[3, m] = gravity_grad[m]
     values[3] = vg
-    return values, c
+    return c
 
 
 # ---------------------------------------------------------------------- Newton
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
               fr_speed, n_fr, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
-              hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq):
+              hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values):
     """Phi of stepper.ImplicitEulerSolver._evaluate, its gradient (into ``grad``) and the
-    friction gradient (into ``fric_grad``); the elastic band Hessian into ``band``.
+    friction gradient (into ``fric_grad``); the elastic band Hessian into ``band``, the
+    energies (4,) into ``values``.
 
     Returns (phi, rank-one c).
     """
@@ -328,8 +345,8 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         phi_in += masses2[m] * inert ** 2
         grad[m] = masses2[m] * inert / dt ** 2
     phi = 0.5 * phi_in / dt ** 2
-    values, c = _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
-                          need_band, grads, band, area_grad)
+    c = _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
+                  need_band, grads, band, area_grad, values)
     for e in range(4):
         phi += values[e]
         for m in range(n2):
@@ -374,7 +391,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
     return phi, c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _filtered_max(filters, g):
     """max |S g| over dofs."""
     out = 0.0
@@ -385,97 +402,179 @@ def _filtered_max(filters, g):
     return out
 
 
-@njit(cache=True)
-def _ldl_band(ab):
-    """In-place LDL^T of a symmetric scalar band ab[i, d] = A[i, i - d].
+@njit(cache=True, error_model='numpy')
+def _ldl_blocks(ab):
+    """In-place block LDL^T of a symmetric node-block band ab (n, nbw+1, 2, 2).
 
-    Afterwards ab[i, 0] = D_i and ab[i, d] = L[i, i - d]. Returns False on a zero or
-    non-finite pivot (the reference's 'singular factor').
+    ab[p, d] is the block (p, p - d); afterwards ab[p, 0] holds D_p^-1 and ab[p, d] the
+    block L[p, p - d]. The 2x2 blocks keep four independent sums in every inner loop.
+    Returns False on a singular or non-finite pivot block (the reference's 'singular
+    factor').
     """
-    n, w1 = ab.shape
-    bw = w1 - 1
-    for i in range(n):
-        lo = max(0, i - bw)
-        for j in range(lo, i):
-            s = ab[i, i - j]
-            for k in range(max(lo, j - bw), j):
-                s -= ab[i, i - k] * ab[k, 0] * ab[j, j - k]
-            ab[i, i - j] = s / ab[j, 0]
-        s = ab[i, 0]
-        for k in range(lo, i):
-            s -= ab[i, i - k] ** 2 * ab[k, 0]
-        if s == 0.0 or not math.isfinite(s):
+    n = ab.shape[0]
+    nbw = ab.shape[1] - 1
+    w = np.empty((nbw + 1, 2, 2))  # w[p - k] = L[p, k] D_k of the current row
+    for p in range(n):
+        lo = max(0, p - nbw)
+        for j in range(lo, p):
+            dj = p - j
+            s00 = ab[p, dj, 0, 0]
+            s01 = ab[p, dj, 0, 1]
+            s10 = ab[p, dj, 1, 0]
+            s11 = ab[p, dj, 1, 1]
+            for k in range(max(lo, j - nbw), j):
+                a = p - k
+                b = j - k
+                # S -= W L_jk^T
+                s00 -= w[a, 0, 0] * ab[j, b, 0, 0] + w[a, 0, 1] * ab[j, b, 0, 1]
+                s01 -= w[a, 0, 0] * ab[j, b, 1, 0] + w[a, 0, 1] * ab[j, b, 1, 1]
+                s10 -= w[a, 1, 0] * ab[j, b, 0, 0] + w[a, 1, 1] * ab[j, b, 0, 1]
+                s11 -= w[a, 1, 0] * ab[j, b, 1, 0] + w[a, 1, 1] * ab[j, b, 1, 1]
+            w[dj, 0, 0] = s00
+            w[dj, 0, 1] = s01
+            w[dj, 1, 0] = s10
+            w[dj, 1, 1] = s11
+            i00, i01, i10, i11 = ab[j, 0, 0, 0], ab[j, 0, 0, 1], ab[j, 0, 1, 0], ab[j, 0, 1, 1]
+            ab[p, dj, 0, 0] = s00 * i00 + s01 * i10
+            ab[p, dj, 0, 1] = s00 * i01 + s01 * i11
+            ab[p, dj, 1, 0] = s10 * i00 + s11 * i10
+            ab[p, dj, 1, 1] = s10 * i01 + s11 * i11
+        d00 = ab[p, 0, 0, 0]
+        d01 = ab[p, 0, 1, 0]
+        d11 = ab[p, 0, 1, 1]
+        for k in range(lo, p):
+            a = p - k
+            d00 -= w[a, 0, 0] * ab[p, a, 0, 0] + w[a, 0, 1] * ab[p, a, 0, 1]
+            d01 -= w[a, 1, 0] * ab[p, a, 0, 0] + w[a, 1, 1] * ab[p, a, 0, 1]
+            d11 -= w[a, 1, 0] * ab[p, a, 1, 0] + w[a, 1, 1] * ab[p, a, 1, 1]
+        det = d00 * d11 - d01 * d01
+        if det == 0.0 or not math.isfinite(det):
             return False
-        ab[i, 0] = s
+        ab[p, 0, 0, 0] = d11 / det
+        ab[p, 0, 0, 1] = -d01 / det
+        ab[p, 0, 1, 0] = -d01 / det
+        ab[p, 0, 1, 1] = d00 / det
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _ldl_solve(ab, x):
-    """Solve (L D L^T) y = x in place after ``_ldl_band``."""
-    n, w1 = ab.shape
-    bw = w1 - 1
-    for i in range(n):
-        s = x[i]
-        for k in range(max(0, i - bw), i):
-            s -= ab[i, i - k] * x[k]
-        x[i] = s
-    for i in range(n):
-        x[i] /= ab[i, 0]
-    for i in range(n - 1, -1, -1):
-        s = x[i]
-        for k in range(i + 1, min(n, i + bw + 1)):
-            s -= ab[k, k - i] * x[k]
-        x[i] = s
+    """Solve (L D L^T) y = x in place after ``_ldl_blocks``; x (2n,) in band order."""
+    n = ab.shape[0]
+    nbw = ab.shape[1] - 1
+    for p in range(n):
+        s0, s1 = x[2 * p], x[2 * p + 1]
+        for k in range(max(0, p - nbw), p):
+            a = p - k
+            s0 -= ab[p, a, 0, 0] * x[2 * k] + ab[p, a, 0, 1] * x[2 * k + 1]
+            s1 -= ab[p, a, 1, 0] * x[2 * k] + ab[p, a, 1, 1] * x[2 * k + 1]
+        x[2 * p], x[2 * p + 1] = s0, s1
+    for p in range(n):
+        s0, s1 = x[2 * p], x[2 * p + 1]
+        x[2 * p] = ab[p, 0, 0, 0] * s0 + ab[p, 0, 0, 1] * s1
+        x[2 * p + 1] = ab[p, 0, 1, 0] * s0 + ab[p, 0, 1, 1] * s1
+    for p in range(n - 1, -1, -1):
+        s0, s1 = x[2 * p], x[2 * p + 1]
+        for k in range(p + 1, min(n, p + nbw + 1)):
+            a = k - p
+            s0 -= ab[k, a, 0, 0] * x[2 * k] + ab[k, a, 1, 0] * x[2 * k + 1]
+            s1 -= ab[k, a, 0, 1] * x[2 * k] + ab[k, a, 1, 1] * x[2 * k + 1]
+        x[2 * p], x[2 * p + 1] = s0, s1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
+def _ldl_solve2(ab, x, y):
+    """``_ldl_solve`` for two right-hand sides at once (x and y, in place)."""
+    n = ab.shape[0]
+    nbw = ab.shape[1] - 1
+    for p in range(n):
+        s0, s1 = x[2 * p], x[2 * p + 1]
+        r0, r1 = y[2 * p], y[2 * p + 1]
+        for k in range(max(0, p - nbw), p):
+            a = p - k
+            l00, l01, l10, l11 = ab[p, a, 0, 0], ab[p, a, 0, 1], ab[p, a, 1, 0], ab[p, a, 1, 1]
+            s0 -= l00 * x[2 * k] + l01 * x[2 * k + 1]
+            s1 -= l10 * x[2 * k] + l11 * x[2 * k + 1]
+            r0 -= l00 * y[2 * k] + l01 * y[2 * k + 1]
+            r1 -= l10 * y[2 * k] + l11 * y[2 * k + 1]
+        x[2 * p], x[2 * p + 1] = s0, s1
+        y[2 * p], y[2 * p + 1] = r0, r1
+    for p in range(n):
+        i00, i01, i10, i11 = ab[p, 0, 0, 0], ab[p, 0, 0, 1], ab[p, 0, 1, 0], ab[p, 0, 1, 1]
+        s0, s1 = x[2 * p], x[2 * p + 1]
+        x[2 * p] = i00 * s0 + i01 * s1
+        x[2 * p + 1] = i10 * s0 + i11 * s1
+        r0, r1 = y[2 * p], y[2 * p + 1]
+        y[2 * p] = i00 * r0 + i01 * r1
+        y[2 * p + 1] = i10 * r0 + i11 * r1
+    for p in range(n - 1, -1, -1):
+        s0, s1 = x[2 * p], x[2 * p + 1]
+        r0, r1 = y[2 * p], y[2 * p + 1]
+        for k in range(p + 1, min(n, p + nbw + 1)):
+            a = k - p
+            l00, l01, l10, l11 = ab[k, a, 0, 0], ab[k, a, 0, 1], ab[k, a, 1, 0], ab[k, a, 1, 1]
+            s0 -= l00 * x[2 * k] + l10 * x[2 * k + 1]
+            s1 -= l01 * x[2 * k] + l11 * x[2 * k + 1]
+            r0 -= l00 * y[2 * k] + l10 * y[2 * k + 1]
+            r1 -= l01 * y[2 * k] + l11 * y[2 * k + 1]
+        x[2 * p], x[2 * p + 1] = s0, s1
+        y[2 * p], y[2 * p + 1] = r0, r1
+
+
+@njit(cache=True, error_model='numpy')
 def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
                    fr_speed, n_fr, q, q_n, pos, order, shift, ab):
-    """Scalar band ab of S H S + I - S + shift diag(S) m / dt^2 in band order.
+    """Node-block band ab (n, nbw+1, 2, 2) of S H S + I - S + shift diag(S) m / dt^2.
 
     H = (m/dt^2 + alpha m/dt) I + (1 + beta/dt) C + friction, C = ``band``.
     """
     n = band.shape[0]
     nbw = band.shape[1] - 1
-    ab[:, :] = 0.0
     scale = 1.0 + (beta / dt if beta > 0 else 0.0)
+    kind = np.empty(n, np.int64)  # 0: S = 0, 1: S = I, 2: other
+    for i in range(n):
+        f00, f01, f10, f11 = filters[i, 0, 0], filters[i, 0, 1], filters[i, 1, 0], filters[
+            i, 1, 1]
+        if f00 == 0.0 and f01 == 0.0 and f10 == 0.0 and f11 == 0.0:
+            kind[i] = 0
+        elif f00 == 1.0 and f01 == 0.0 and f10 == 0.0 and f11 == 1.0:
+            kind[i] = 1
+        else:
+            kind[i] = 2
     for p in range(n):
         i = order[p]
-        si = filters[i]
-        for d in range(min(p, nbw) + 1):
+        for d in range(nbw + 1):
+            if d > p or kind[i] == 0 or kind[order[p - d]] == 0:
+                ab[p, d, 0, 0] = 0.0
+                ab[p, d, 0, 1] = 0.0
+                ab[p, d, 1, 0] = 0.0
+                ab[p, d, 1, 1] = 0.0
+                continue
             j = order[p - d]
-            sj = filters[j]
-            h = band[p, d]
-            h00, h01, h10, h11 = (scale * h[0, 0], scale * h[0, 1], scale * h[1, 0],
-                                  scale * h[1, 1])
+            h00 = scale * band[p, d, 0, 0]
+            h01 = scale * band[p, d, 0, 1]
+            h10 = scale * band[p, d, 1, 0]
+            h11 = scale * band[p, d, 1, 1]
             if d == 0:
-                diag0 = masses2[2 * i] / dt ** 2 + (alpha * masses2[2 * i] / dt
-                                                    if alpha > 0 else 0.0)
-                diag1 = masses2[2 * i + 1] / dt ** 2 + (alpha * masses2[2 * i + 1] / dt
-                                                        if alpha > 0 else 0.0)
-                h00 += diag0
-                h11 += diag1
-            # S_i H S_j
-            t00 = si[0, 0] * h00 + si[0, 1] * h10
-            t01 = si[0, 0] * h01 + si[0, 1] * h11
-            t10 = si[1, 0] * h00 + si[1, 1] * h10
-            t11 = si[1, 0] * h01 + si[1, 1] * h11
-            a00 = t00 * sj[0, 0] + t01 * sj[1, 0]
-            a01 = t00 * sj[0, 1] + t01 * sj[1, 1]
-            a10 = t10 * sj[0, 0] + t11 * sj[1, 0]
-            a11 = t10 * sj[0, 1] + t11 * sj[1, 1]
-            r = 2 * p
-            if d == 0:
-                ab[r, 0] += a00
-                ab[r + 1, 1] += a10
-                ab[r + 1, 0] += a11
-            else:
-                ab[r, 2 * d] += a00
-                ab[r, 2 * d - 1] += a01
-                ab[r + 1, 2 * d + 1] += a10
-                ab[r + 1, 2 * d] += a11
-    # friction blocks  S_i (g t t^T) S_i
+                h00 += masses2[2 * i] / dt ** 2 + (alpha * masses2[2 * i] / dt
+                                                   if alpha > 0 else 0.0)
+                h11 += masses2[2 * i + 1] / dt ** 2 + (alpha * masses2[2 * i + 1] / dt
+                                                       if alpha > 0 else 0.0)
+            if kind[i] == 1 and kind[j] == 1:
+                ab[p, d, 0, 0] = h00
+                ab[p, d, 0, 1] = h01
+                ab[p, d, 1, 0] = h10
+                ab[p, d, 1, 1] = h11
+            else:  # S_i H S_j
+                t00 = filters[i, 0, 0] * h00 + filters[i, 0, 1] * h10
+                t01 = filters[i, 0, 0] * h01 + filters[i, 0, 1] * h11
+                t10 = filters[i, 1, 0] * h00 + filters[i, 1, 1] * h10
+                t11 = filters[i, 1, 0] * h01 + filters[i, 1, 1] * h11
+                ab[p, d, 0, 0] = t00 * filters[j, 0, 0] + t01 * filters[j, 1, 0]
+                ab[p, d, 0, 1] = t00 * filters[j, 0, 1] + t01 * filters[j, 1, 1]
+                ab[p, d, 1, 0] = t10 * filters[j, 0, 0] + t11 * filters[j, 1, 0]
+                ab[p, d, 1, 1] = t10 * filters[j, 0, 1] + t11 * filters[j, 1, 1]
+    # friction blocks  S_k (g t t^T) S_k
     for f in range(n_fr):
         k = fr_nodes[f]
         s = ((q[2 * k] - q_n[2 * k]) * fr_t[f, 0]
@@ -483,31 +582,36 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
         root = math.sqrt(s ** 2 + FRICTION_SMOOTHING ** 2)
         g = fr_bound[f] * FRICTION_SMOOTHING ** 2 / root ** 3 / dt
         tx, tz = fr_t[f, 0], fr_t[f, 1]
-        sk = filters[k]
-        # S t
-        ux = sk[0, 0] * tx + sk[0, 1] * tz
-        uz = sk[1, 0] * tx + sk[1, 1] * tz
-        # (S t)(t^T S)
-        vx = tx * sk[0, 0] + tz * sk[1, 0]
-        vz = tx * sk[0, 1] + tz * sk[1, 1]
-        r = 2 * pos[k]
-        ab[r, 0] += g * ux * vx
-        ab[r + 1, 1] += g * uz * vx
-        ab[r + 1, 0] += g * uz * vz
+        ux = filters[k, 0, 0] * tx + filters[k, 0, 1] * tz  # S t
+        uz = filters[k, 1, 0] * tx + filters[k, 1, 1] * tz
+        vx = tx * filters[k, 0, 0] + tz * filters[k, 1, 0]  # S^T t
+        vz = tx * filters[k, 0, 1] + tz * filters[k, 1, 1]
+        p = pos[k]
+        ab[p, 0, 0, 0] += g * ux * vx
+        ab[p, 0, 0, 1] += g * ux * vz
+        ab[p, 0, 1, 0] += g * uz * vx
+        ab[p, 0, 1, 1] += g * uz * vz
     # I - S + shift diag(S) m / dt^2
     for i in range(n):
-        si = filters[i]
-        r = 2 * pos[i]
-        ab[r, 0] += 1.0 - si[0, 0] + shift * si[0, 0] * masses2[2 * i] / dt ** 2
-        ab[r + 1, 1] += 0.0 - si[1, 0]
-        ab[r + 1, 0] += 1.0 - si[1, 1] + shift * si[1, 1] * masses2[2 * i + 1] / dt ** 2
+        p = pos[i]
+        ab[p, 0, 0, 0] += 1.0 - filters[i, 0, 0] + shift * filters[i, 0, 0] * masses2[
+            2 * i] / dt ** 2
+        ab[p, 0, 0, 1] += 0.0 - filters[i, 0, 1]
+        ab[p, 0, 1, 0] += 0.0 - filters[i, 1, 0]
+        ab[p, 0, 1, 1] += 1.0 - filters[i, 1, 1] + shift * filters[i, 1, 1] * masses2[
+            2 * i + 1] / dt ** 2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
                  masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press,
-                 gravity_grad, pos, nbw, q_out, reaction_out, history):
+                 gravity_grad, pos, nbw, q_out, reaction_out, history, values, counts):
     """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
+
+    The same iterates as the reference: the evaluations the reference repeats at a point
+    it has already evaluated (the Hessian after an accepted line-search step, the
+    gradient after convergence) are taken from the line search's evaluation instead,
+    which then includes the Hessian whenever the iteration will go on.
 
     Args:
         q_n, v_n: (2n,) m and m/s at the start of the step.  dt: s.
@@ -520,6 +624,8 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         gravity_grad: (2n,) N, the constant gradient of gravity.
         pos: (n,) band positions; nbw: node half-bandwidth.
         q_out, reaction_out: (2n,) outputs. history: (max_it,) output, m/s.
+        values: (4,) output, J: stretching, bending, pressure and gravity at q_out.
+        counts: (C_SIZE,) int64, work counters added to (see C_*).
 
     Returns:
         (status, iterations, len(history)); status OK or a failure code.
@@ -547,14 +653,16 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     y = np.empty(n2)
     u = np.empty(n2)
     trial = np.empty(n2)
-    ab = np.empty((n2, 2 * nbw + 2))
+    ab = np.empty((n, nbw + 1, 2, 2))
     q = q_out
     q[:] = q_start
     n_hist = 0
+    counts[C_SOLVES] += 1
+    counts[C_HESSIAN_EVALS] += 1
     phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                        fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
                        gravity_grad, pos, True, grad, fric_grad, grads, band, area_grad, tmp,
-                       cdq)
+                       cdq, values)
     if not math.isfinite(phi):
         return INFEASIBLE_START, 0, n_hist
     for iteration in range(1, max_it + 1):
@@ -569,19 +677,21 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         for shift in SHIFTS:
             _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
                            fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab)
-            if not _ldl_band(ab):
+            counts[C_FACTORS] += 1
+            if not _ldl_blocks(ab):
                 continue
             for i in range(n):
                 p = pos[i]
                 x[2 * p] = -g_f[2 * i]
                 x[2 * p + 1] = -g_f[2 * i + 1]
-            _ldl_solve(ab, x)
-            if c != 0.0:
+            if c == 0.0:
+                _ldl_solve(ab, x)
+            else:
                 for i in range(n):
                     p = pos[i]
                     y[2 * p] = u[2 * i]
                     y[2 * p + 1] = u[2 * i + 1]
-                _ldl_solve(ab, y)
+                _ldl_solve2(ab, x, y)
                 ux = 0.0
                 uy = 0.0
                 for i in range(n):
@@ -615,10 +725,11 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         if dq_max / dt < tol:
             for m in range(n2):
                 q[m] = q[m] + dq[m]
+            counts[C_EVALS] += 1
             _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                       fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
                       gravity_grad, pos, False, grad, fric_grad, grads, band, area_grad, tmp,
-                      cdq)
+                      cdq, values)
             history[n_hist] = dq_max / dt
             n_hist += 1
             for m in range(n2):
@@ -626,13 +737,22 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
             return OK, iteration, n_hist
         accepted = False
         phi_trial = 0.0
+        c_trial = 0.0
+        norm = 0.0
         for _ in range(30):
             for m in range(n2):
                 trial[m] = q[m] + step * dq[m]
-            phi_trial, _c = _evaluate(trial, q_n, v_n, dt, masses2, alpha, beta, filters,
-                                      fr_nodes, fr_t, fr_bound, fr_speed, n_fr, edges, spar,
-                                      triples, bpar, ring, press, gravity_grad, pos, False,
-                                      grad_t, fric_grad, grads, band, area_grad, tmp, cdq)
+            norm = 0.0
+            for m in range(n2):
+                norm = max(norm, abs(step * dq[m]))
+            norm /= dt
+            # the Hessian is needed at the trial point only if Newton goes on from it
+            counts[C_EVALS if norm < tol else C_HESSIAN_EVALS] += 1
+            phi_trial, c_trial = _evaluate(
+                trial, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
+                fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                gravity_grad, pos, not norm < tol, grad_t, fric_grad, grads, band, area_grad,
+                tmp, cdq, values)
             if math.isfinite(phi_trial) and (
                     phi_trial <= phi + 1e-4 * step * slope
                     or _filtered_max(filters, grad_t) < 0.5 * residual):
@@ -643,35 +763,24 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
             return LINE_SEARCH_FAILED, iteration, n_hist
         q[:] = trial
         phi = phi_trial
+        c = c_trial
         grad[:] = grad_t
-        norm = 0.0
-        for m in range(n2):
-            norm = max(norm, abs(step * dq[m]))
-        norm /= dt
         history[n_hist] = norm
         n_hist += 1
         if norm < tol:
-            _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                      fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
-                      gravity_grad, pos, False, grad, fric_grad, grads, band, area_grad, tmp,
-                      cdq)
             for m in range(n2):
                 reaction_out[m] = grad[m] - fric_grad[m]
             return OK, iteration, n_hist
-        phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                           fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
-                           gravity_grad, pos, True, grad, fric_grad, grads, band, area_grad,
-                           tmp, cdq)
     return NO_CONVERGENCE, max_it, n_hist
 
 
 # ---------------------------------------------------------------------- contact
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _gap(face_par, origin_x, origin_z, f, px, pz):
     return (px - origin_x) * face_par[f, 0] + (pz - origin_z) * face_par[f, 1]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _covers(face_par, origin_x, origin_z, f, px, pz):
     nx, nz = face_par[f, 0], face_par[f, 1]
     tx, tz = -nz, nx
@@ -680,7 +789,7 @@ def _covers(face_par, origin_x, origin_z, f, px, pz):
         f, 3]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def contact_constraints(obstacle, mode, normal_force, impact_gap, secondary, x_n, x_pred,
                         face_par, face_dyn, dt, v_corr, start, filters, fr_nodes, fr_t,
                         fr_bound, fr_speed):
@@ -760,7 +869,7 @@ def contact_constraints(obstacle, mode, normal_force, impact_gap, secondary, x_n
     return n_fr
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, i):
     obstacle[i] = -1
     mode[i] = FREE
@@ -770,7 +879,7 @@ def _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, 
     secondary[i] = -1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, x,
                     x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
                     released, toggled):
@@ -876,22 +985,46 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, seco
     return changed or hit_any
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, secondary,
-            face_par, face_dyn, masses2, surface, pos, nbw, edges, spar, triples, bpar, ring,
-            press, gravity_grad, fpar, ipar, x_out, v_out, forces_out, history, out):
-    """One implicit Euler step with predictor-corrector contact, as ``Simulation._substep``.
+            face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
+            nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out,
+            v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts):
+    """One implicit Euler step with predictor-corrector contact, as ``Simulation._substep``,
+    and the measures of its end state, as ``Simulation._measure`` (``step_measures``).
 
-    The contact arrays (n,) are updated in place (pass copies); x_out, v_out, forces_out
-    (n, 2) receive the new state and contact forces (N); history (max_it,) the Newton
-    history of the last solve; out (4,) [iterations, len(history), left jaw normal
-    force N, right jaw normal force N].
+    Args:
+        x_n, v_n: (n, 2) state at the start of the step.
+        obstacle .. secondary: (n,) the contact state, updated in place (pass copies).
+        face_par, face_dyn: the faces (see the module doc); rows 0 and 1 of face_dyn
+            (the jaws) are set here from ``grip``.
+        grip: (gap, lift) at the start, (gap, lift, gap rate, lift rate) at the end, m
+            and m/s.
+        masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
+            ``step_measures``; pos, nbw and edges .. gravity_grad: see ``newton_solve``.
+        fpar: (8,) [dt, alpha, beta, tolerance, gravity, release threshold, correction
+            speed, depth].  ipar: (2,) [max Newton iterations, max contact passes].
+        x_out, v_out, forces_out: (n, 2) the new state and contact forces (N).
+        history: (max_it,) Newton history of the last solve.
+        out: (8,) [iterations, len(history), left jaw normal force N, right jaw normal
+            force N, then the stretching, bending, pressure and gravity energies J].
+        normal_out, pressure_out, meas_out: the outputs of ``step_measures``.
+        counts: (C_SIZE,) int64, work counters added to (see C_*).
 
     Returns:
         a status code (OK, or the failure of the last solve).
     """
     n = x_n.shape[0]
     dt = fpar[F_DT]
+    gap0, lift0, gap1, lift1, gap_rate, lift_rate = grip
+    for side in range(2):
+        sign = -1.0 if side == 0 else 1.0
+        face_dyn[side, 0] = sign * (0.5 * gap0)
+        face_dyn[side, 1] = lift0
+        face_dyn[side, 2] = sign * (0.5 * gap1)
+        face_dyn[side, 3] = lift1
+        face_dyn[side, 4] = sign * (0.5 * gap_rate)
+        face_dyn[side, 5] = lift_rate
     x_pred = np.empty((n, 2))
     for i in range(n):
         x_pred[i, 0] = x_n[i, 0] + dt * v_n[i, 0]
@@ -908,6 +1041,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
     fr_speed = np.empty(n)
     q = np.empty(2 * n)
     reaction = np.empty(2 * n)
+    values = np.zeros(4)
     v_min = max(5.0 * fpar[F_GRAVITY] * dt, 1e-3)
     iterations = 0
     n_hist = 0
@@ -919,7 +1053,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
             fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press,
-            gravity_grad, pos, nbw, q, reaction, history)
+            gravity_grad, pos, nbw, q, reaction, history, values, counts)
         out[1] = n_hist
         if status != OK:
             return status
@@ -974,6 +1108,16 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
                 acc += forces_out[i, 0] * nx + forces_out[i, 1] * nz
         out[2 + side] = acc
     out[0] = iterations
+    for e in range(4):
+        out[4 + e] = values[e]
+    jaw_origins = np.empty((2, 2))
+    for side in range(2):
+        jaw_origins[side, 0] = face_dyn[side, 2]
+        jaw_origins[side, 1] = face_dyn[side, 3]
+    step_measures(x_out, v_out, forces_out, obstacle, masses, surface, skin_edges,
+                  rest_segments, face_par, jaw_origins, fpar[F_DEPTH], edges, spar, triples,
+                  bpar, ring, press, gravity_grad, True, values, normal_out, pressure_out,
+                  meas_out)
     return OK
 
 
@@ -984,7 +1128,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
  M_WIDTH, M_MAX_STRAIN, M_CONTACT_LENGTH, M_PEAK_PRESSURE, M_SIZE) = range(22)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _separation_offset(x, ring, start, step, nx, nz, ox, oz):
     """measures._separation_offset for a face of normal (nx, nz) through (ox, oz)."""
     n = ring.shape[0]
@@ -1002,7 +1146,7 @@ def _separation_offset(x, ring, start, step, nx, nz, ox, oz):
     return min(max(h0 - s1, 0.0), h0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
     """measures.face_contact_length for the face ``side``."""
     n = ring.shape[0]
@@ -1034,10 +1178,10 @@ def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
     return length
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
                   face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press,
-                  gravity_grad, normal_out, pressure_out, out):
+                  gravity_grad, known, energies, normal_out, pressure_out, out):
     """The numbers of ``Simulation._measure`` and ``measures.deformation``.
 
     Args:
@@ -1047,6 +1191,8 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         skin segment lengths of the rest shape.  face_par: see the module doc.
         jaw_origins: (2, 2) m, left and right jaw face centres.  depth: m.
         edges .. gravity_grad: the energies (as ``newton_solve``).
+        known: the energies at x are ``energies`` (4,) [stretching, bending, pressure,
+        gravity] J, as ``substep`` reports them; else they are computed.
         normal_out: (n,) N, normal contact force per node.  pressure_out: (n_s,) Pa.
         out: (M_SIZE,) the scalars, see the M_* indices.
     """
@@ -1087,19 +1233,23 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
     out[M_CX], out[M_CZ] = cx / m_sum, cz / m_sum
     out[M_CVX], out[M_CVZ] = cvx / m_sum, cvz / m_sum
     out[M_KINETIC] = 0.5 * kin
-    q = x.reshape(2 * n)
-    grad = np.empty(2 * n)
-    area_grad = np.empty(2 * n)
-    band = np.empty((0, 1, 2, 2))
-    pos = np.zeros(n, np.int64)
-    elastic = ring_stretching(q, edges, spar, pos, False, grad, band)
-    elastic += ring_bending(q, triples, bpar, pos, False, grad, band)
-    vp, _c = ring_pressure(q, ring, press, pos, False, grad, band, area_grad)
-    out[M_ELASTIC] = elastic + vp
-    grav = 0.0
-    for m in range(2 * n):
-        grav += gravity_grad[m] * q[m]
-    out[M_GRAVITY] = grav
+    if known:
+        out[M_ELASTIC] = (energies[0] + energies[1]) + energies[2]
+        out[M_GRAVITY] = energies[3]
+    else:
+        q = x.reshape(2 * n)
+        grad = np.empty(2 * n)
+        area_grad = np.empty(2 * n)
+        band = np.empty((0, 1, 2, 2))
+        pos = np.zeros(n, np.int64)
+        elastic = ring_stretching(q, edges, spar, pos, False, grad, band)
+        elastic += ring_bending(q, triples, bpar, pos, False, grad, band)
+        vp, _c = ring_pressure(q, ring, press, pos, False, grad, band, area_grad)
+        out[M_ELASTIC] = elastic + vp
+        grav = 0.0
+        for m in range(2 * n):
+            grav += gravity_grad[m] * q[m]
+        out[M_GRAVITY] = grav
     # deformation
     ns = surface.shape[0]
     lo = np.inf

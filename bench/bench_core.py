@@ -1,0 +1,276 @@
+"""Benchmark of the 2D physics core on a grasp-and-lift. Prints figures; asserts nothing.
+
+For the default fruit (shell model, 64 skin nodes) and the solid model (a meshed disk of
+about 200 nodes), a grasp-and-lift - close to 3 N, settle, lift 5 cm, hold 1 s - is run
+on one core: wall time per simulated second, the real-time factor (simulated seconds
+per wall second), mean Newton iterations per step, and where the time goes:
+
+- assembly: energies, gradients and Hessians, and building the Newton matrix;
+- solve: factorising the Newton matrix and solving with it (with the rank-one term);
+- contact: contact constraints, contact-set updates and the rest of a step's passes;
+- measures: the step's outputs (StepResult);
+- other: gripper kinematics, the grasp state machine, Python glue.
+
+Fast path (numba, shell and point models): glue, kernel and measures are timed with
+perf_counter around each part; the kernel's own split comes from its work counters
+(evaluations, factorisations) times the cost of each operation timed alone at the end
+state. Generic path (solid model): fractions of a cProfile run applied to the plain
+run's wall time. Wall times are the best of ``--repeat`` runs (the machine is shared:
+the load average is printed too). Usage::
+
+    python bench/bench_core.py [--repeat N] [--hold S] [--models shell,solid]
+        [--set key=value ...]
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import os
+import pstats
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from gripper_sim.configuration import load_config  # noqa: E402
+from gripper_sim.core import fast  # noqa: E402
+from gripper_sim.core.grasp import GraspSequence, run_grasp  # noqa: E402
+from gripper_sim.core.simulation import Simulation  # noqa: E402
+
+FORCE, LIFT = 3.0, 0.05
+
+
+def grasp(sim: Simulation, hold: float) -> tuple[float, float, int, int, dict]:
+    """One grasp-and-lift from the initial state: (wall s, cpu s, steps, iterations, summary)."""
+    sim.reset()
+    iterations = [0]
+
+    def count(result, _phase):
+        iterations[0] += result.newton_iterations
+
+    sequence = GraspSequence(sim, FORCE, lift_height=LIFT, hold_time=hold)
+    wall, cpu = time.perf_counter(), time.process_time()
+    summary = run_grasp(sim, sequence, on_step=count)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    return wall, cpu, sim._step, iterations[0], summary
+
+
+def _op_loops():
+    """numba loops timing single kernel operations (compiled on first use)."""
+    from numba import njit
+
+    from gripper_sim.core import kernels as k
+
+    @njit(cache=True)
+    def evaluations(reps, hessian, q, q_n, v_n, dt, m2, alpha, beta, filters, frn, frt, frb,
+                    frs, edges, spar, triples, bpar, ring, press, grav, pos, nbw):
+        n2 = q.shape[0]
+        band = np.zeros((n2 // 2, nbw + 1, 2, 2))
+        grads = np.empty((4, n2))
+        out = np.empty((6, n2))
+        values = np.empty(4)
+        acc = 0.0
+        for _ in range(reps):
+            phi, c = k._evaluate(q, q_n, v_n, dt, m2, alpha, beta, filters, frn, frt, frb,
+                                 frs, frn.shape[0], edges, spar, triples, bpar, ring, press,
+                                 grav, pos, hessian, out[0], out[1], grads, band, out[2],
+                                 out[3], out[4], values)
+            acc += phi
+        return acc
+
+    @njit(cache=True)
+    def factorisations(reps, q, q_n, dt, m2, alpha, beta, filters, frn, frt, frb, frs, edges,
+                       spar, triples, bpar, ring, press, grav, pos, nbw, solves):
+        n2 = q.shape[0]
+        n = n2 // 2
+        band = np.zeros((n, nbw + 1, 2, 2))
+        grads = np.empty((4, n2))
+        area = np.empty(n2)
+        values = np.empty(4)
+        k._energies(q, edges, spar, triples, bpar, ring, press, grav, pos, True, grads, band,
+                    area, values)
+        order = np.empty(n, np.int64)
+        for i in range(n):
+            order[pos[i]] = i
+        ab = np.empty((n, nbw + 1, 2, 2))
+        x = np.ones(n2)
+        y = np.ones(n2)
+        ok = 0
+        for _ in range(reps):
+            if solves:
+                k._ldl_solve2(ab, x, y)
+            else:
+                k._newton_matrix(band, m2, dt, alpha, beta, filters, frn, frt, frb, frs,
+                                 frn.shape[0], q, q_n, pos, order, 0.0, ab)
+                ok += k._ldl_blocks(ab)
+        return ok
+
+    return evaluations, factorisations
+
+
+def _best_time(fn, reps: int) -> float:
+    """Seconds per call of fn(reps) / reps, best of 5."""
+    fn(10)
+    best = np.inf
+    for _ in range(5):
+        start = time.process_time()
+        fn(reps)
+        best = min(best, (time.process_time() - start) / reps)
+    return best
+
+
+def kernel_split(sim: Simulation) -> dict:
+    """Seconds per operation at the current state: evaluations, factorisation, solve."""
+    from gripper_sim.core import kernels as k
+    evaluations, factorisations = _op_loops()
+    path = sim._fast
+    n, dt = sim.fruit.n_nodes, sim.dt
+    x_n, v_n = sim.q, sim.v
+    c = sim.contacts
+    start, filters = np.empty((n, 2)), np.empty((n, 2, 2))
+    frn, frt = np.empty(n, np.int64), np.empty((n, 2))
+    frb, frs = np.empty(n), np.empty(n)
+    face_par, face_dyn = path._face_arrays()
+    n_fr = k.contact_constraints(c.obstacle, c.mode, c.normal_force, c.impact_gap,
+                                 c.secondary, x_n, x_n + dt * v_n, face_par, face_dyn, dt,
+                                 0.05, start, filters, frn, frt, frb, frs)
+    frn, frt = frn[:n_fr].copy(), frt[:n_fr].copy()
+    frb, frs = frb[:n_fr].copy(), frs[:n_fr].copy()
+    model = path.model
+    energy = (model['edges'], model['spar'], model['triples'], model['bpar'], model['ring'],
+              model['press'], path.gravity_grad, model['pos'], model['nbw'])
+    q = x_n.ravel().copy()
+    common = (q, x_n.ravel(), v_n.ravel(), dt, path.masses2, path.fpar[k.F_ALPHA],
+              path.fpar[k.F_BETA], filters, frn, frt, frb, frs) + energy
+    fac = (q, x_n.ravel(), dt, path.masses2, path.fpar[k.F_ALPHA], path.fpar[k.F_BETA],
+           filters, frn, frt, frb, frs) + energy
+    return dict(
+        hessian_eval=_best_time(lambda r: evaluations(r, True, *common), 2000),
+        eval=_best_time(lambda r: evaluations(r, False, *common), 2000),
+        factor=_best_time(lambda r: factorisations(r, *fac, False), 2000),
+        solve=_best_time(lambda r: factorisations(r, *fac, True), 2000))
+
+
+def profile_generic(sim: Simulation, hold: float) -> dict:
+    """Fractions of time in the generic path's parts, from a cProfile run."""
+    profiler = cProfile.Profile()
+    profiler.enable()
+    grasp(sim, hold)
+    profiler.disable()
+    stats = pstats.Stats(profiler).stats
+
+    def cumulative(name: str, file_part: str) -> float:
+        return sum(v[3] for key, v in stats.items()
+                   if key[2] == name and file_part in key[0])
+
+    total = cumulative('run_grasp', 'grasp.py')
+    evaluate = cumulative('_evaluate', 'stepper.py')
+    solve = cumulative('solve', 'stepper.py') - evaluate
+    contact = (cumulative('_substep_reference', 'simulation.py')
+               - cumulative('solve', 'stepper.py') - cumulative('advance', 'gripper.py'))
+    measures = cumulative('_measure_reference', 'simulation.py')
+    return dict(assembly=evaluate / total, solve=solve / total, contact=contact / total,
+                measures=measures / total,
+                other=1.0 - (evaluate + solve + contact + measures) / total)
+
+
+def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> dict:
+    config = load_config(overrides=[f'fruit.model={name}'] + overrides)
+    sim = Simulation(config)
+    grasp(sim, 0.01)  # warm up: numba cache load, first-call costs
+    runs = [grasp(sim, hold) for _ in range(repeat if sim._fast is not None else 1)]
+    wall, cpu, steps, iterations, summary = min(runs, key=lambda r: r[0])
+    sim_time = steps * sim.dt
+    row = dict(model=name, nodes=sim.fruit.n_nodes, path='fast' if sim._fast else 'generic',
+               steps=steps, sim_time=sim_time, wall_per_sim=wall / sim_time,
+               cpu_per_sim=cpu / sim_time, rtf=sim_time / wall, us_per_step=wall / steps * 1e6,
+               iterations=iterations / steps, outcome=summary['outcome'])
+    if sim._fast is not None:
+        path = sim._fast
+        path.timing = True
+        path.timers = dict.fromkeys(path.timers, 0.0)
+        path.counts[:] = 0
+        t_wall, t_cpu = grasp(sim, hold)[:2]
+        path.timing = False
+        # the timers are wall clock; on a shared machine the process also waits, so put
+        # everything in CPU time (the op costs below are CPU time on a quiet loop)
+        ratio = t_cpu / t_wall
+        timers = {key: value * ratio for key, value in path.timers.items()}
+        counts = path.counts.copy()
+        ops = kernel_split(sim)
+        from gripper_sim.core import kernels as k
+        assembly = (counts[k.C_HESSIAN_EVALS] * ops['hessian_eval']
+                    + counts[k.C_EVALS] * ops['eval'])
+        solve = counts[k.C_FACTORS] * (ops['factor'] + ops['solve'])
+        kernel = timers['kernel']
+        scale = 1.0
+        if assembly + solve > kernel:  # op costs timed on a quiet core: keep within kernel
+            scale = kernel / (assembly + solve)
+        assembly, solve = assembly * scale, solve * scale
+        contact = kernel - assembly - solve
+        row['split'] = dict(assembly=assembly / t_cpu, solve=solve / t_cpu,
+                            contact=contact / t_cpu, measures=timers['measures'] / t_cpu,
+                            other=1.0 - (kernel + timers['measures']) / t_cpu)
+        row['ops_us'] = {key: value * 1e6 for key, value in ops.items()}
+        row['counts_per_step'] = dict(
+            passes=counts[k.C_SOLVES] / steps, hessian_evals=counts[k.C_HESSIAN_EVALS] / steps,
+            evals=counts[k.C_EVALS] / steps, factorisations=counts[k.C_FACTORS] / steps)
+        row['glue_us'] = timers['glue'] / steps * 1e6
+        row['kernel_us'] = kernel / steps * 1e6
+    else:
+        row['split'] = profile_generic(sim, hold)
+    return row
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--repeat', type=int, default=3, help='runs per model (best wall)')
+    parser.add_argument('--hold', type=float, default=1.0, help='hold time after lifting, s')
+    parser.add_argument('--models', default='shell,solid')
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                        help='configuration override for every model')
+    args = parser.parse_args(argv)
+    print(f'numba fast path: {"available" if fast.available() else "NOT available"}; '
+          f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')
+    print(f'grasp-and-lift: close to {FORCE} N, lift {LIFT * 100:.0f} cm, hold {args.hold} s; '
+          f'best of {args.repeat}')
+    rows = [bench_model(name, args.set, args.repeat, args.hold)
+            for name in args.models.split(',')]
+    print()
+    print(f'{"model":<6} {"nodes":>5} {"path":<7} {"steps":>5} {"us/step":>8} '
+          f'{"wall s/sim s":>12} {"RTF":>7} {"cpu s/sim s":>11} {"cpu RTF":>7} '
+          f'{"Newton it/step":>14} outcome')
+    for r in rows:
+        print(f'{r["model"]:<6} {r["nodes"]:>5} {r["path"]:<7} {r["steps"]:>5} '
+              f'{r["us_per_step"]:>8.1f} {r["wall_per_sim"]:>12.4f} {r["rtf"]:>7.1f} '
+              f'{r["cpu_per_sim"]:>11.4f} {1 / r["cpu_per_sim"]:>7.1f} '
+              f'{r["iterations"]:>14.2f} {r["outcome"]}')
+    print('(RTF = simulated s per wall s; cpu = this process\'s CPU time, what an idle core '
+          'would give)')
+    print()
+    print('where the time goes (share of a grasp-and-lift, CPU us per step):')
+    print(f'{"model":<6} {"assembly":>14} {"solve":>14} {"contact":>14} {"measures":>14} '
+          f'{"other":>14}')
+    for r in rows:
+        cpu_us = r['cpu_per_sim'] * r['sim_time'] / r['steps'] * 1e6
+        cells = ' '.join(
+            f'{100 * r["split"][key]:>5.1f}% {cpu_us * r["split"][key]:>6.1f}us'
+            for key in ('assembly', 'solve', 'contact', 'measures', 'other'))
+        print(f'{r["model"]:<6} {cells}')
+    for r in rows:
+        if 'ops_us' in r:
+            ops = ', '.join(f'{key} {value:.2f}' for key, value in r['ops_us'].items())
+            per = ', '.join(f'{key} {value:.2f}' for key, value in r['counts_per_step'].items())
+            print(f'\n{r["model"]} kernel operations, us each: {ops}')
+            print(f'{r["model"]} per step: {per}; whole kernel {r["kernel_us"]:.1f} us, '
+                  f'Python glue around it {r["glue_us"]:.1f} us (kinematics, state copies, '
+                  f'dispatch)')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,212 @@
+"""The numba fast path against the generic numpy/scipy reference path.
+
+Kernels against the numpy energies (value, gradient, Hessian), the Newton kernel
+against ImplicitEulerSolver.solve, and whole trajectories of Simulation(fast=True)
+against Simulation(fast=False): positions within 1e-9 relative every step, the same
+contact sets, modes and Newton iteration counts.
+"""
+import numpy as np
+import pytest
+
+from gripper_sim.configuration import load_config
+from gripper_sim.core import fast
+from gripper_sim.core.fruit import build_fruit
+from gripper_sim.core.grasp import GraspSequence
+from gripper_sim.core.simulation import Simulation
+from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+
+pytestmark = pytest.mark.skipif(not fast.available(), reason='numba is not installed')
+
+if fast.available():
+    from gripper_sim.core import kernels
+
+SHELL = ['fruit.nodes=24']
+
+
+def _shell(*overrides):
+    config = load_config(overrides=list(overrides))
+    fruit = build_fruit(config)
+    model = fast.ring_model(fruit, fruit.energies)
+    assert model is not None
+    return fruit, model
+
+
+def _perturbed(fruit, scale=2e-3, seed=0):
+    rng = np.random.default_rng(seed)
+    return (fruit.rest_positions + rng.normal(scale=scale, size=fruit.rest_positions.shape)
+            ).ravel()
+
+
+def _dense(model, band):
+    n = band.shape[0]
+    out = np.zeros((2 * n, 2 * n))
+    kernels.band_to_dense(band, np.argsort(model['pos']), out)
+    return out
+
+
+@pytest.mark.parametrize('nodes', [8, 24, 64])
+def test_band_order_keeps_the_ring_in_a_narrow_band(nodes):
+    fruit, model = _shell(f'fruit.nodes={nodes}')
+    assert sorted(model['pos']) == list(range(nodes))
+    assert model['nbw'] <= 4
+
+
+@pytest.mark.parametrize('name', ['stretching', 'bending', 'pressure'])
+def test_energy_kernels_match_the_numpy_energies(name):
+    fruit, model = _shell('fruit.nodes=24', 'fruit.pressure.turgor=3e4')
+    q = _perturbed(fruit)
+    n = fruit.n_nodes
+    grad = np.zeros(2 * n)
+    band = np.zeros((n, model['nbw'] + 1, 2, 2))
+    area_grad = np.zeros(2 * n)
+    energy = {'stretching': fruit.stretching, 'pressure': fruit.pressure,
+              'bending': fruit.energies[1]}[name]
+    if name == 'stretching':
+        value = kernels.ring_stretching(q, model['edges'], model['spar'], model['pos'], True,
+                                        grad, band)
+        c = 0.0
+    elif name == 'bending':
+        value = kernels.ring_bending(q, model['triples'], model['bpar'], model['pos'], True,
+                                     grad, band)
+        c = 0.0
+    else:
+        value, c = kernels.ring_pressure(q, model['ring'], model['press'], model['pos'], True,
+                                         grad, band, area_grad)
+        assert c > 0
+    hessian = _dense(model, band) + c * np.outer(area_grad, area_grad)
+    reference = energy.hessian(q)
+    assert abs(value) > 0 and np.max(np.abs(grad)) > 0
+    assert value == pytest.approx(energy.value(q), rel=1e-12, abs=1e-18)
+    np.testing.assert_allclose(grad, energy.gradient(q), rtol=1e-10,
+                               atol=1e-12 * np.max(np.abs(grad)))
+    np.testing.assert_allclose(hessian, reference, rtol=1e-9,
+                               atol=1e-11 * np.max(np.abs(reference)))
+
+
+def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction():
+    fruit, model = _shell('fruit.nodes=24', 'fruit.pressure.turgor=3e4',
+                          'fruit.damping.mass=5', 'fruit.damping.stiffness=1e-4')
+    from gripper_sim.core.energies import Gravity
+    gravity = Gravity(fruit.masses, 9.81)
+    solver = ImplicitEulerSolver(fruit.masses, list(fruit.energies) + [gravity],
+                                 damping_mass=5.0, damping_stiffness=1e-4, tolerance=1e-9)
+    n = fruit.n_nodes
+    q_n = _perturbed(fruit, 5e-4)
+    rng = np.random.default_rng(3)
+    v_n = rng.normal(scale=0.01, size=q_n.size)
+    dt = 1e-3
+    con = StepConstraints.free(n)
+    start = q_n + dt * v_n
+    # node 0 stuck, nodes 1 and 2 on a face of normal +x with kinetic friction
+    con.filters[0] = 0.0
+    for node in (1, 2):
+        con.filters[node] = np.eye(2) - np.outer([1.0, 0.0], [1.0, 0.0])
+    con = StepConstraints(con.filters, np.array([1, 2]), np.array([[0.0, 1.0], [0.0, 1.0]]),
+                          np.array([0.3, 0.5]), np.array([0.01, 0.01]))
+    reference = solver.solve(q_n, v_n, dt, start, con)
+    q = np.zeros(2 * n)
+    reaction = np.zeros(2 * n)
+    history = np.zeros(solver.max_iterations)
+    status, iterations, n_hist = kernels.newton_solve(
+        q_n, v_n, dt, start, con.filters, con.friction_nodes, con.friction_tangents,
+        con.friction_bounds, con.friction_obstacle_speed, solver.m, 5.0, 1e-4, 1e-9,
+        solver.max_iterations, model['edges'], model['spar'], model['triples'],
+        model['bpar'], model['ring'], model['press'], gravity.grad, model['pos'],
+        model['nbw'], q, reaction, history, np.zeros(4), np.zeros(kernels.C_SIZE, np.int64))
+    assert status == kernels.OK
+    assert iterations == reference.iterations
+    np.testing.assert_allclose(q, reference.q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(reaction, reference.reaction, rtol=1e-7,
+                               atol=1e-9 * np.max(np.abs(reference.reaction)))
+    np.testing.assert_allclose(history[:n_hist], reference.history, rtol=1e-5, atol=1e-9)
+
+
+def _compare(fast_sim, ref_sim, steps, drive=None):
+    """Step both; assert the same trajectory. Returns the number of contact steps."""
+    assert fast_sim._fast is not None and ref_sim._fast is None
+    in_contact = 0
+    sequences = [drive(s) for s in (fast_sim, ref_sim)] if drive else None
+    for k in range(steps):
+        a, b = fast_sim.step(), ref_sim.step()
+        if sequences:
+            for seq, r in zip(sequences, (a, b)):
+                seq.update(r)
+            assert sequences[0].phase == sequences[1].phase, k
+        scale = max(np.max(np.abs(b.positions)), 1e-3)
+        assert np.max(np.abs(a.positions - b.positions)) <= 1e-9 * scale, k
+        np.testing.assert_array_equal(a.contact_obstacle, b.contact_obstacle, err_msg=str(k))
+        np.testing.assert_array_equal(a.contact_sticking, b.contact_sticking, err_msg=str(k))
+        np.testing.assert_array_equal(fast_sim.contacts.secondary, ref_sim.contacts.secondary)
+        assert a.newton_iterations == b.newton_iterations, k
+        assert a.substeps == b.substeps
+        vscale = max(np.max(np.abs(b.velocities)), 1e-3)
+        assert np.max(np.abs(a.velocities - b.velocities)) <= 1e-6 * vscale, k
+        fscale = max(np.max(np.abs(b.contact_forces)), 1e-3)
+        assert np.max(np.abs(a.contact_forces - b.contact_forces)) <= 1e-6 * fscale, k
+        for name in ('time', 'gap', 'lift', 'grip_force', 'slip_distance', 'left_jaw_x',
+                     'jaw_velocity', 'lift_velocity'):
+            assert getattr(a, name) == pytest.approx(getattr(b, name), rel=1e-6, abs=1e-9), \
+                (k, name)
+        assert a.slipping == b.slipping
+        np.testing.assert_allclose(a.centroid, b.centroid, rtol=1e-9, atol=1e-12)
+        for wa, wb in ((a.left_wrench, b.left_wrench), (a.right_wrench, b.right_wrench)):
+            np.testing.assert_allclose(wa.force, wb.force, rtol=1e-6, atol=1e-6 * fscale)
+            np.testing.assert_allclose(wa.torque, wb.torque, rtol=1e-6, atol=1e-7 * fscale)
+        for name in ('kinetic', 'elastic', 'gravitational'):
+            assert getattr(a.energies, name) == pytest.approx(
+                getattr(b.energies, name), rel=1e-6, abs=1e-9), (k, name)
+        da, db = a.deformation, b.deformation
+        for name in ('compression', 'compression_ratio', 'max_skin_strain', 'contact_length'):
+            assert getattr(da, name) == pytest.approx(getattr(db, name), rel=1e-6,
+                                                      abs=1e-9), (k, name)
+        assert da.peak_contact_pressure == pytest.approx(db.peak_contact_pressure, rel=1e-6,
+                                                         abs=1e-3)
+        np.testing.assert_allclose(da.node_pressure, db.node_pressure, rtol=1e-6, atol=1e-3)
+        in_contact += bool(np.any(a.contact_obstacle >= 0))
+    return in_contact
+
+
+def test_grasp_and_lift_trajectory_matches_the_reference_path():
+    overrides = ['gripper.initial_gap=0.0645', 'gripper.close_speed=0.05',
+                 'gripper.lift_acceleration=5', 'gripper.lift_speed=0.05']
+    config = load_config(overrides=overrides)
+    fast_sim, ref_sim = Simulation(config, fast=True), Simulation(config, fast=False)
+    phases = []
+
+    def drive(sim):
+        seq = GraspSequence(sim, 3.0, lift_height=0.005, hold_time=0.05)
+        phases.append(seq)
+        return seq
+
+    assert _compare(fast_sim, ref_sim, 450, drive) > 300
+    assert phases[0].phase in ('lifting', 'holding', 'done')
+    assert fast_sim.last.lift > fast_sim.initial_lift + 1e-3
+
+
+def test_damped_shell_dropped_on_the_table_matches_the_reference_path():
+    config = load_config(overrides=['fruit.nodes=32', 'fruit.initial_height=0.045',
+                                    'fruit.damping.mass=2', 'fruit.damping.stiffness=1e-4',
+                                    'contact.restitution=0.3', 'fruit.initial_velocity.x=0.1'])
+    assert _compare(Simulation(config, fast=True), Simulation(config, fast=False), 250) > 50
+
+
+def test_bouncing_point_in_a_corner_matches_the_reference_path():
+    config = load_config(overrides=[
+        'fruit.model=point', 'contact.restitution=0.5', 'fruit.initial_height=0.005',
+        'gripper.initial_lift=5', 'world.walls=true', 'world.wall_half_width=0.05',
+        'fruit.initial_velocity.x=0.6', 'contact.table.static_friction=0',
+        'contact.table.kinetic_friction=0'])
+    fast_sim = Simulation(config, fast=True)
+    assert _compare(fast_sim, Simulation(config, fast=False), 1500) > 100
+    assert fast_sim.contacts.secondary[0] >= 0  # held by the table and pushed into a wall
+
+
+def test_solid_model_keeps_the_generic_path():
+    config = load_config(overrides=['fruit.model=solid'])
+    assert Simulation(config)._fast is None
+    with pytest.raises(Exception, match='fast path'):
+        Simulation(config, fast=True)
+
+
+def test_shell_model_takes_the_fast_path_by_default():
+    assert Simulation(load_config())._fast is not None
