@@ -1,9 +1,10 @@
 """Prescribed kinematics of the two jaws and the lift, and their controllers.
 
-The jaws close symmetrically about x = 0. In position mode the gap moves towards a
-target at a rate limit; in force mode a regulator moves it so that the grip force
-(mean normal force of the two jaws) reaches a target and stays there. The lift moves
-the jaw centre height towards a target with a trapezoidal speed profile.
+The jaws close symmetrically about the gripper centre x. In position mode the gap moves
+towards a target at a rate limit; in force mode a regulator moves it so that the grip
+force (mean normal force of the two jaws) reaches a target and stays there. The lift
+moves the jaw centre height towards a target with a trapezoidal speed profile, and the
+transport moves the gripper centre sideways (x) the same way.
 """
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ class GripperState:
         target_lift: m.  lift_speed: m/s.
         stiffness: N/m, the force regulator's running estimate of d force / d gap.
         measured_force, measured_gap: N and m at the previous advance (for the estimate).
+        x: m, gripper centre along x (the transport axis).  x_rate: m/s.
+        target_x: m.  x_speed: m/s, transport speed limit.
     """
 
     gap: float
@@ -36,6 +39,10 @@ class GripperState:
     stiffness: float
     measured_force: float = 0.0
     measured_gap: float = float('nan')
+    x: float = 0.0
+    x_rate: float = 0.0
+    target_x: float = 0.0
+    x_speed: float = 0.1
 
 
 class GripperKinematics:
@@ -44,14 +51,16 @@ class GripperKinematics:
     Args:
         max_gap: m.  lift_acceleration: m/s^2.  force_time_constant: s.
         initial_stiffness: N/m, first guess of the contact stiffness.
+        transport_acceleration: m/s^2, of the sideways transport.
     """
 
     def __init__(self, max_gap: float, lift_acceleration: float, force_time_constant: float,
-                 initial_stiffness: float):
+                 initial_stiffness: float, transport_acceleration: float = 1.0):
         self.max_gap = max_gap
         self.lift_acceleration = lift_acceleration
         self.tau = force_time_constant
         self.initial_stiffness = initial_stiffness
+        self.transport_acceleration = transport_acceleration
 
     def advance(self, state: GripperState, dt: float, grip_force: float,
                 both_in_contact: bool) -> GripperState:
@@ -75,8 +84,14 @@ class GripperKinematics:
         gap = min(max(state.gap + rate * dt, 0.0), self.max_gap)
         rate = (gap - state.gap) / dt
         lift, lift_rate = self._advance_lift(state, dt)
+        if state.x != state.target_x or state.x_rate != 0.0:
+            x, x_rate = trapezoid(state.x, state.x_rate, state.target_x, state.x_speed,
+                                  self.transport_acceleration, dt)
+        else:
+            x, x_rate = state.x, 0.0
         return replace(state, gap=gap, gap_rate=rate, lift=lift, lift_rate=lift_rate,
-                       stiffness=stiffness, measured_force=grip_force, measured_gap=state.gap)
+                       stiffness=stiffness, measured_force=grip_force, measured_gap=state.gap,
+                       x=x, x_rate=x_rate)
 
     def _advance_lift(self, state: GripperState, dt: float) -> tuple[float, float]:
         distance = state.target_lift - state.lift
@@ -88,3 +103,17 @@ class GripperKinematics:
         if abs(distance) <= max(abs(rate) * dt, 1e-12):
             return state.target_lift, 0.0
         return state.lift + rate * dt, rate
+
+
+def trapezoid(position: float, rate: float, target: float, speed: float,
+              acceleration: float, dt: float) -> tuple[float, float]:
+    """One step of a move to ``target`` at speed and acceleration limits (as the lift).
+
+    Returns the new position (m) and rate (m/s).
+    """
+    distance = target - position
+    v_stop = math.copysign(min(speed, math.sqrt(2 * acceleration * abs(distance))), distance)
+    rate = rate + min(max(v_stop - rate, -acceleration * dt), acceleration * dt)
+    if abs(distance) <= max(abs(rate) * dt, 1e-12):
+        return target, 0.0
+    return position + rate * dt, rate

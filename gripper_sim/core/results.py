@@ -97,6 +97,8 @@ class StepResult:
         substeps: number of sub-steps this step took (1 unless step halving happened).
         damage: bruising and crushing so far (``gripper_sim.core.damage.Damage``); None
             where a producer does not compute it.
+        gripper_x: m, x of the gripper centre (the sideways transport axis).
+        gripper_x_velocity: m/s.
     """
 
     time: float
@@ -125,6 +127,8 @@ class StepResult:
     newton_iterations: int
     substeps: int
     damage: 'Damage | None' = None
+    gripper_x: float = 0.0
+    gripper_x_velocity: float = 0.0
 
     def in_contact_with(self, name: str) -> bool:
         """Whether any node touches the obstacle called ``name``."""

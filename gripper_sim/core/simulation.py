@@ -84,7 +84,8 @@ class Simulation:
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
             c['gripper.force_time_constant'],
-            initial_stiffness=c['fruit.flesh.youngs_modulus'] * self.fruit.depth)
+            initial_stiffness=c['fruit.flesh.youngs_modulus'] * self.fruit.depth,
+            transport_acceleration=c['gripper.transport_acceleration'])
         self._observers: list[Callable[[StepResult], None]] = []
         self._fast = FastPath.create(self) if fast is not False else None
         if fast and self._fast is None:
@@ -126,6 +127,15 @@ class Simulation:
                                f'{high:.4g}] m (the jaws may not go below the table)')
         speed = self._speed(speed, self.config['gripper.lift_speed'])
         self._grip = replace(self._grip, target_lift=height, lift_speed=speed)
+
+    def command_transport(self, x: float, speed: float | None = None) -> None:
+        """Move the gripper centre (both jaws) sideways to ``x`` (m) at ``speed`` (m/s)."""
+        x = _finite('transport x', x)
+        limit = (self.config['world.wall_half_width'] if self.config['world.walls'] else 10.0)
+        if abs(x) > limit:
+            raise CommandError(f'transport x {x} m is out of range [-{limit:g}, {limit:g}] m')
+        speed = self._speed(speed, self.config['gripper.transport_speed'])
+        self._grip = replace(self._grip, target_x=x, x_speed=speed)
 
     def hold(self) -> None:
         """Stop the jaws where they are (position mode at the current gap)."""
@@ -189,7 +199,8 @@ class Simulation:
             mode='position', target_gap=self.initial_gap, target_force=0.0,
             speed=self.config['gripper.close_speed'], target_lift=self.initial_lift,
             lift_speed=self.config['gripper.lift_speed'],
-            stiffness=self.kinematics.initial_stiffness)
+            stiffness=self.kinematics.initial_stiffness,
+            x_speed=self.config['gripper.transport_speed'])
         self._jaw_force = (0.0, 0.0)
         self._damage = DamageTracker(
             self.fruit, self.config, face_groups=self._face_groups(),
@@ -221,10 +232,10 @@ class Simulation:
 
     def _faces(self, grip: GripperState) -> list[FlatFace]:
         faces = [replace(f) for f in self._faces_template]
-        faces[LEFT].origin = np.array([-0.5 * grip.gap, grip.lift])
-        faces[LEFT].velocity = np.array([-0.5 * grip.gap_rate, grip.lift_rate])
-        faces[RIGHT].origin = np.array([0.5 * grip.gap, grip.lift])
-        faces[RIGHT].velocity = np.array([0.5 * grip.gap_rate, grip.lift_rate])
+        faces[LEFT].origin = np.array([grip.x - 0.5 * grip.gap, grip.lift])
+        faces[LEFT].velocity = np.array([grip.x_rate - 0.5 * grip.gap_rate, grip.lift_rate])
+        faces[RIGHT].origin = np.array([grip.x + 0.5 * grip.gap, grip.lift])
+        faces[RIGHT].velocity = np.array([grip.x_rate + 0.5 * grip.gap_rate, grip.lift_rate])
         return faces
 
     def _face_groups(self) -> list[int]:
@@ -276,9 +287,14 @@ class Simulation:
         return it1 + it2, s1 + s2
 
     def _substep(self, dt: float) -> int:
-        if self._fast is not None:
+        if self._fast is not None and self._fast_applies():
             return self._fast.substep(dt)
         return self._substep_reference(dt)
+
+    def _fast_applies(self) -> bool:
+        """The fast path knows jaws centred at x = 0 only: not while transported."""
+        grip = self._grip
+        return grip.x == 0.0 and grip.x_rate == 0.0 and grip.target_x == 0.0
 
     def _substep_reference(self, dt: float) -> int:
         left_n, right_n = self._jaw_force
@@ -479,11 +495,14 @@ class Simulation:
 
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult:
-        if self._fast is not None:
+        if self._fast is not None and self._fast_applies():
             result = self._fast.measure(iterations, substeps)
         else:
             result = self._measure_reference(iterations, substeps)
-        return replace(result, damage=self._assess_damage(result))
+        grip = self._grip
+        return replace(result, damage=self._assess_damage(result),
+                       left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
+                       gripper_x=grip.x, gripper_x_velocity=grip.x_rate)
 
     def _assess_damage(self, result: StepResult):
         """Bruising and crushing after this step (``gripper_sim.core.damage``)."""
