@@ -14,6 +14,7 @@ from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core.grasp import GraspSequence
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+from gripper_sim.errors import ConvergenceError
 
 pytestmark = pytest.mark.skipif(not fast.available(), reason='numba is not installed')
 
@@ -199,6 +200,50 @@ def test_bouncing_point_in_a_corner_matches_the_reference_path():
     fast_sim = Simulation(config, fast=True)
     assert _compare(fast_sim, Simulation(config, fast=False), 1500) > 100
     assert fast_sim.contacts.secondary[0] >= 0  # held by the table and pushed into a wall
+
+
+def test_step_halving_and_convergence_failure_match_the_reference_path():
+    # three Newton iterations at most and a fast impact: steps are halved (the
+    # NewtonFailure path) and at last the solver gives up, at the same step on both paths
+    config = load_config(overrides=['fruit.nodes=32', 'sim.max_newton_iterations=3',
+                                    'gripper.initial_gap=0.0645', 'gripper.close_speed=0.1'])
+    sims = Simulation(config, fast=True), Simulation(config, fast=False)
+    for sim in sims:
+        sim.command_force(5.0)
+    halved = 0
+    for step in range(200):
+        outcomes = []
+        for sim in sims:
+            try:
+                outcomes.append(sim.step())
+            except ConvergenceError as err:
+                outcomes.append(str(err))
+        if isinstance(outcomes[0], str) or isinstance(outcomes[1], str):
+            assert outcomes[0] == outcomes[1]
+            break
+        a, b = outcomes
+        assert a.substeps == b.substeps and a.newton_iterations == b.newton_iterations
+        np.testing.assert_allclose(a.positions, b.positions, rtol=0,
+                                   atol=1e-9 * np.max(np.abs(b.positions)))
+        halved += a.substeps > 1
+    else:
+        pytest.fail('the solver never gave up')
+    assert halved >= 1
+    assert sims[0].time == sims[1].time  # the failed step left both states unchanged
+
+
+def test_parameter_changes_while_running_match_the_reference_path():
+    config = load_config(overrides=['fruit.nodes=32', 'gripper.initial_gap=0.0645',
+                                    'gripper.close_speed=0.05'])
+    sims = Simulation(config, fast=True), Simulation(config, fast=False)
+    for sim in sims:
+        sim.command_force(3.0)
+    assert _compare(*sims, 150) > 50
+    for sim in sims:
+        sim.set_parameter('contact.jaw.kinetic_friction', 0.05)
+        sim.set_parameter('contact.jaw.static_friction', 0.1)
+        sim.command_lift(sim.gripper_state.lift + 0.01)
+    assert _compare(*sims, 150) > 50
 
 
 def test_solid_model_keeps_the_generic_path():
