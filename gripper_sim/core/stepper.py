@@ -9,6 +9,11 @@ normal n, zero for a stuck node) removes them from the Newton system
     (S K S + I - S) dq = -S g,
 and the iterate starts with them at their prescribed values (the z vector). The
 reaction an obstacle exerts on a constrained node is the residual g there.
+
+The stepper is dimension-generic (``dim`` = 2: q = [x0, z0, ...]; 3: q = [x0, y0, z0, ...]).
+Kinetic friction of a sliding node is the dissipation potential mu_k R_n dt |s_t|_eps,
+|s|_eps = sqrt(|s|^2 + eps^2), with s_t its slip velocity relative to the obstacle along
+one tangent (2D) or in the tangent plane (3D: a Coulomb cone, the smoothed norm).
 """
 from __future__ import annotations
 
@@ -37,11 +42,13 @@ class StepConstraints:
     """Per-node filters and kinetic friction of one step.
 
     Attributes:
-        filters: (n_nodes, 2, 2) the S_i blocks.
+        filters: (n_nodes, dim, dim) the S_i blocks.
         friction_nodes: (k,) nodes sliding on an obstacle.
-        friction_tangents: (k, 2) unit tangents of their obstacles.
+        friction_tangents: (k, 2) unit tangents of their obstacles (2D), or (k, 2, 3)
+            two orthonormal tangents spanning each obstacle's plane (3D).
         friction_bounds: (k,) N, mu_k times the (lagged) normal reaction.
-        friction_obstacle_speed: (k,) m/s, obstacle speed along the tangent.
+        friction_obstacle_speed: (k,) m/s, obstacle speed along the tangent (2D), or
+            (k, 2) its components along the two tangents (3D).
     """
 
     filters: np.ndarray
@@ -51,9 +58,12 @@ class StepConstraints:
     friction_obstacle_speed: np.ndarray
 
     @classmethod
-    def free(cls, n_nodes: int) -> 'StepConstraints':
-        return cls(np.tile(np.eye(2), (n_nodes, 1, 1)), np.zeros(0, np.int64),
-                   np.zeros((0, 2)), np.zeros(0), np.zeros(0))
+    def free(cls, n_nodes: int, dim: int = 2) -> 'StepConstraints':
+        if dim == 2:
+            return cls(np.tile(np.eye(2), (n_nodes, 1, 1)), np.zeros(0, np.int64),
+                       np.zeros((0, 2)), np.zeros(0), np.zeros(0))
+        return cls(np.tile(np.eye(dim), (n_nodes, 1, 1)), np.zeros(0, np.int64),
+                   np.zeros((0, dim - 1, dim)), np.zeros(0), np.zeros((0, dim - 1)))
 
 
 @dataclass
@@ -80,12 +90,14 @@ class ImplicitEulerSolver:
             applied to the Hessian of the elastic energies.
         tolerance: m/s, stop when max |dq| / dt falls below it.
         max_iterations: Newton iterations before NewtonFailure.
+        dim: 2 (planar) or 3, the coordinates per node.
     """
 
     def __init__(self, masses: np.ndarray, energies: list[Energy], damping_mass: float = 0.0,
                  damping_stiffness: float = 0.0, tolerance: float = 1e-6,
-                 max_iterations: int = 25):
-        self.m = np.repeat(np.asarray(masses, dtype=float), 2)
+                 max_iterations: int = 25, dim: int = 2):
+        self.dim = int(dim)
+        self.m = np.repeat(np.asarray(masses, dtype=float), self.dim)
         self.energies = list(energies)
         self.alpha = damping_mass
         self.beta = damping_stiffness
@@ -129,7 +141,11 @@ class ImplicitEulerSolver:
         fric_grad = np.zeros(self.n)
         fric_diag = None
         k = con.friction_nodes
-        if k.size:
+        if k.size and con.friction_tangents.ndim == 3:
+            phi_f, fric_diag = self._cone_friction(q, q_n, dt, con, fric_grad)
+            phi += phi_f
+            grad += fric_grad
+        elif k.size:
             x = q.reshape(-1, 2)[k]
             x_n = q_n.reshape(-1, 2)[k]
             s = np.sum((x - x_n) * con.friction_tangents, axis=1) / dt - \
@@ -151,7 +167,13 @@ class ImplicitEulerSolver:
             all_rows = np.concatenate([all_rows] + elastic_rows)
             all_cols = np.concatenate([all_cols] + elastic_cols)
             all_vals = np.concatenate([all_vals] + [self.beta / dt * v for v in elastic_vals])
-        if k.size:
+        if k.size and con.friction_tangents.ndim == 3:
+            d = self.dim
+            dofs = d * k[:, None] + np.arange(d)[None, :]
+            all_rows = np.concatenate([all_rows, np.repeat(dofs, d, axis=1).ravel()])
+            all_cols = np.concatenate([all_cols, np.tile(dofs, (1, d)).ravel()])
+            all_vals = np.concatenate([all_vals, fric_diag.ravel()])
+        elif k.size:
             t = con.friction_tangents
             blocks = fric_diag[:, None, None] * t[:, :, None] * t[:, None, :]
             dofs = np.stack([2 * k, 2 * k + 1], axis=1)
@@ -161,8 +183,39 @@ class ImplicitEulerSolver:
         hess = sp.csc_matrix((all_vals, (all_rows, all_cols)), shape=(self.n, self.n))
         return phi, grad, fric_grad, (hess, low_rank)
 
+    def _cone_friction(self, q, q_n, dt, con: StepConstraints, fric_grad):
+        """Friction in a tangent plane (3D): adds its gradient into ``fric_grad``.
+
+        With T (2, 3) the tangents and s = T (x - x_n) / dt - v_obstacle (m/s), the
+        potential b dt sqrt(|s|^2 + eps^2) has the gradient b T^T s / root and the
+        Hessian (b / dt) T^T (I / root - s s^T / root^3) T, positive semi-definite.
+
+        Returns:
+            (potential in J, (k, 3, 3) Hessian blocks in N/m).
+        """
+        d = self.dim
+        k = con.friction_nodes
+        t = con.friction_tangents
+        dx = q.reshape(-1, d)[k] - q_n.reshape(-1, d)[k]
+        s = np.einsum('kad,kd->ka', t, dx) / dt - con.friction_obstacle_speed
+        root = np.sqrt(np.sum(s * s, axis=1) + FRICTION_SMOOTHING ** 2)
+        b = con.friction_bounds
+        local = np.einsum('ka,kad->kd', (b / root)[:, None] * s, t)
+        for c in range(d):
+            np.add.at(fric_grad, d * k + c, local[:, c])
+        inner = (np.eye(s.shape[1])[None] / root[:, None, None]
+                 - s[:, :, None] * s[:, None, :] / root[:, None, None] ** 3)
+        blocks = (b / dt)[:, None, None] * np.einsum('kad,kab,kbe->kde', t, inner, t)
+        return float(np.sum(b * dt * root)), blocks
+
     def _filter_matrix(self, filters: np.ndarray) -> sp.csc_matrix:
         n_nodes = filters.shape[0]
+        if self.dim != 2:
+            d = self.dim
+            base = d * np.arange(n_nodes)
+            rows = (base[:, None] + np.repeat(np.arange(d), d)[None, :]).ravel()
+            cols = (base[:, None] + np.tile(np.arange(d), d)[None, :]).ravel()
+            return sp.csc_matrix((filters.reshape(-1), (rows, cols)), shape=(self.n, self.n))
         base = 2 * np.arange(n_nodes)
         rows = np.stack([base, base, base + 1, base + 1], axis=1).ravel()
         cols = np.stack([base, base + 1, base, base + 1], axis=1).ravel()
