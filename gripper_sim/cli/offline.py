@@ -89,9 +89,29 @@ def register(subparsers) -> None:
     _add_output_arguments(pick)
     pick.set_defaults(handler=run_pick)
 
+    run = subparsers.add_parser(
+        'run', help='run a pick-and-place scenario (config/scenarios/*.yaml)',
+        description='Approach, close, squeeze, lift, transport sideways, lower onto the '
+                    'table, open and retreat, as the scenario file says; reports placed, '
+                    'dropped (and when), slipped, bruised or crushed. Exit 0 if placed.')
+    run.add_argument('scenario', metavar='SCENARIO',
+                     help='a scenario file, or the name of one in config/scenarios')
+    _add_fruit_finger_arguments(run)
+    run.add_argument('--force', type=positive_float, metavar='N', default=None,
+                     help="grip force, N (overrides the scenario's close.force; force mode)")
+    _add_output_arguments(run)
+    run.set_defaults(handler=run_scenario_verb)
+
     fruits = subparsers.add_parser('fruits', help='list the fruit presets')
     fruits.add_argument('--json', action='store_true', help='print JSON')
     fruits.set_defaults(handler=run_fruits)
+
+
+def _add_fruit_finger_arguments(parser) -> None:
+    """--fruit / --config / --finger / --set of the scenario verbs."""
+    add_config_arguments(parser)
+    parser.add_argument('--finger', metavar='NAME',
+                        help='finger preset (config/fingers: see gripper-sim fingers)')
 
 
 def _add_output_arguments(parser) -> None:
@@ -256,4 +276,42 @@ def run_fruits(args) -> int:
     return 0
 
 
-
+def run_scenario_verb(args) -> int:
+    from gripper_sim.core.scenario import load_scenario, run_scenario, scenario_config
+    from gripper_sim.core.simulation import Simulation
+    scenario = load_scenario(args.scenario)
+    if args.force is not None:
+        scenario = scenario.with_values(close__mode='force', close__force=args.force)
+    config = scenario_config(scenario, fruit=args.fruit, finger=args.finger,
+                             config_file=args.config, overrides=args.overrides)
+    if scenario['close.mode'] == 'force' and scenario['close.force'] > config['gripper.max_force']:
+        raise GripperSimError(f"grip force {scenario['close.force']} N exceeds "
+                              f"gripper.max_force {config['gripper.max_force']} N")
+    sim = Simulation(config)
+    series = _Series()
+    sim.add_observer(series)
+    with ExitStack() as stack:
+        _start_recording(stack, args, sim)
+        summary = run_scenario(sim, scenario)
+    summary = dict(scenario=scenario['name'], fruit=config['fruit.name'],
+                   finger=config['gripper.finger.name'], **summary)
+    if args.json:
+        json.dump(dict(outcome=summary['outcome'], **series.arrays(), summary=summary),
+                  sys.stdout)
+        sys.stdout.write('\n')
+    else:
+        how = (f"{scenario['close.force']:g} N" if scenario['close.mode'] == 'force'
+               else f"gap {scenario['close.gap']:g} m")
+        print(f"{scenario['name']}: {config['fruit.name']} with the "
+              f"{config['gripper.finger.name']} finger at {how}: {summary['outcome']}")
+        if summary['message']:
+            print(f"  {summary['message']}")
+        phases = ', '.join(f'{name} {t:.2f}' for name, t in summary['phase_times'].items())
+        print(f'  phases (s): {phases}')
+        print(f"  slip in the jaws           {summary['slip_distance'] * 1e3:.3f} mm")
+        print(f"  peak grip force            {summary['max_grip_force']:.4g} N")
+        damage = summary['damage']
+        print(f"  peak contact pressure      {damage['peak_pressure'] / 1e3:.4g} kPa (Hertz); "
+              f"bruised {damage['bruised']} ({damage['bruised_fraction'] * 100:.1f} %), "
+              f"crushed {damage['crushed']}")
+    return 0 if summary['outcome'] == 'placed' else 1
