@@ -50,7 +50,9 @@ class Key:
 
 
 SCHEMA: dict[str, Key] = {
-    'dimension': Key(2, '-', 'model dimension; 2 = planar x-z model', 'int', 2, 2),
+    'dimension': Key(2, '-', 'model dimension; 2 = planar x-z model (per unit depth); '
+                     '3 = the 3D model (surface or tetrahedral meshes, see fruit.mesh.*)',
+                     'int', 2, 3),
     # --- fruit
     'fruit.name': Key('apple', '-', 'name shown in outputs', 'str'),
     'fruit.model': Key('shell', '-', 'shell: skin ring + enclosed-area pressure; '
@@ -90,11 +92,26 @@ SCHEMA: dict[str, Key] = {
     'fruit.flesh.mesh_grading': Key(1.25, '', 'solid model: ratio of successive ring '
                                     'spacings from the skin inwards (1 = uniform)',
                                     low=1.0, high=2.0),
+    'fruit.shape.width': Key(None, 'm', '3D: extent of the body along y (along the jaw '
+                             'faces); null = the outline revolved about z (circle: a '
+                             'sphere)', low=0.005, high=0.5, nullable=True),
+    'fruit.mesh.subdivisions': Key(8, '-', '3D: geodesic frequency f of the surface mesh '
+                                   '(10 f^2 + 2 surface vertices; 8 gives 642)', 'int', 1,
+                                   40),
+    'fruit.mesh.jaw_refinement': Key(0.5, '', '3D: surface mesh spacing at the two jaw '
+                                     'contact points (+/- x) over the uniform spacing '
+                                     '(1 = uniform)', low=0.1, high=1.0),
+    'fruit.mesh.max_tet_volume': Key(None, 'm^3', '3D solid model: largest tetrahedron '
+                                     '(TetGen); null = a regular tetrahedron of twice the '
+                                     'mean surface edge', low=0.0, high=1e-2, nullable=True,
+                                     open_low=True),
     'fruit.skin.enabled': Key(True, '-', 'solid model: add the skin ring on the '
                               'boundary (the shell model always has it)', 'bool'),
     'fruit.skin.youngs_modulus': Key(10.0e6, 'Pa', 'skin Young modulus E_s',
                                      low=1e3, high=1e11),
     'fruit.skin.thickness': Key(0.0005, 'm', 'skin thickness t', low=1e-6, high=0.05),
+    'fruit.skin.poisson_ratio': Key(0.3, '', '3D: skin Poisson ratio (membrane and plate '
+                                    'bending of the skin shell)', low=0.0, high=0.49),
     'fruit.pressure.turgor': Key(0.0, 'Pa', 'shell model: internal pressure at the '
                                  'rest area (gauge)', low=0.0, high=1e7),
     'fruit.pressure.bulk_modulus': Key(None, 'Pa', 'shell model: area bulk modulus K, '
@@ -128,6 +145,8 @@ SCHEMA: dict[str, Key] = {
                            high=2.0),
     'gripper.jaw_height': Key(0.04, 'm', 'length of the jaw face along z', low=1e-3,
                               high=1.0),
+    'gripper.jaw_width': Key(0.04, 'm', '3D: width of the jaw face along y', low=1e-3,
+                             high=1.0),
     'gripper.jaw_thickness': Key(0.01, 'm', 'jaw thickness along x (nodes deeper '
                                  'than this behind the face are not in contact)',
                                  low=1e-4, high=0.5),
