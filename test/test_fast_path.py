@@ -145,7 +145,8 @@ def _compare(fast_sim, ref_sim, steps, drive=None):
         fscale = max(np.max(np.abs(b.contact_forces)), 1e-3)
         assert np.max(np.abs(a.contact_forces - b.contact_forces)) <= 1e-6 * fscale, k
         for name in ('time', 'gap', 'lift', 'grip_force', 'slip_distance', 'left_jaw_x',
-                     'jaw_velocity', 'lift_velocity'):
+                     'right_jaw_x', 'jaw_velocity', 'lift_velocity', 'gripper_x',
+                     'gripper_x_velocity'):
             assert getattr(a, name) == pytest.approx(getattr(b, name), rel=1e-6, abs=1e-9), \
                 (k, name)
         assert a.slipping == b.slipping
@@ -163,6 +164,16 @@ def _compare(fast_sim, ref_sim, steps, drive=None):
         assert da.peak_contact_pressure == pytest.approx(db.peak_contact_pressure, rel=1e-6,
                                                          abs=1e-3)
         np.testing.assert_allclose(da.node_pressure, db.node_pressure, rtol=1e-6, atol=1e-3)
+        ga, gb = a.damage, b.damage
+        assert (ga is None) == (gb is None)
+        if ga is not None:
+            assert (ga.bruised, ga.crushed, len(ga.contacts)) == (
+                gb.bruised, gb.crushed, len(gb.contacts)), k
+            for name in ('bruised_length', 'pressure', 'peak_pressure', 'flesh_stress'):
+                assert getattr(ga, name) == pytest.approx(getattr(gb, name), rel=1e-6,
+                                                          abs=1e-6), (k, name)
+            np.testing.assert_allclose(ga.node_pressure, gb.node_pressure, rtol=1e-6,
+                                       atol=1e-3)
         in_contact += bool(np.any(a.contact_obstacle >= 0))
     return in_contact
 
@@ -243,7 +254,9 @@ def test_parameter_changes_while_running_match_the_reference_path():
         sim.set_parameter('contact.jaw.kinetic_friction', 0.05)
         sim.set_parameter('contact.jaw.static_friction', 0.1)
         sim.command_lift(sim.gripper_state.lift + 0.01)
+        sim.command_transport(0.01)  # sideways: the jaws leave x = 0
     assert _compare(*sims, 150) > 50
+    assert sims[0].last.gripper_x > 1e-4
 
 
 def test_solid_model_keeps_the_generic_path():

@@ -219,8 +219,8 @@ class FastPath:
             t1 = time.perf_counter()
         status = kernels.substep(
             x_n, v_n, obstacle, mode, normal_force, bounce, impact, secondary, face_par,
-            face_dyn, (grip.gap, grip.lift, grip_new.gap, grip_new.lift, grip_new.gap_rate,
-                       grip_new.lift_rate),
+            face_dyn, (grip.gap, grip.lift, grip.x, grip_new.gap, grip_new.lift, grip_new.x,
+                       grip_new.gap_rate, grip_new.lift_rate, grip_new.x_rate),
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
             model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
@@ -252,8 +252,9 @@ class FastPath:
 
     # ------------------------------------------------------------------ outputs
     def measure(self, iterations: int, substeps: int) -> StepResult:
-        """``Simulation._measure``, from the numbers the substep kernel measured at its end
-        (or from the measures kernel when the state did not come from a substep)."""
+        """``Simulation._measure`` (damage included), from the numbers the substep kernel
+        measured at its end (or from the measures kernel when the state did not come
+        from a substep)."""
         if self.timing:
             t0 = time.perf_counter()
         sim = self.sim
@@ -277,8 +278,10 @@ class FastPath:
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
+        positions = x.copy()
+        damage = sim._assess_damage_of(positions, normal, contacts.obstacle, ratio)
         result = _build(StepResult, dict(
-            time=sim._time, step=sim._step, positions=x.copy(), velocities=v.copy(),
+            time=sim._time, step=sim._step, positions=positions, velocities=v.copy(),
             contact_forces=forces.copy(), contact_obstacle=contacts.obstacle.copy(),
             contact_sticking=contacts.mode == cm.STICK,
             obstacle_names=sim.obstacle_names, surface=fruit.surface,
@@ -286,7 +289,7 @@ class FastPath:
                                                torque=np.array([0.0, lty, 0.0]))),
             right_wrench=_build(JawWrench, dict(force=np.array([rfx, 0.0, rfz]),
                                                 torque=np.array([0.0, rty, 0.0]))),
-            left_jaw_x=-half, right_jaw_x=half,
+            left_jaw_x=grip.x - half, right_jaw_x=grip.x + half,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
             slipping=slipping, centroid=np.array([cx, cz]),
@@ -296,7 +299,8 @@ class FastPath:
                 compression=compression, compression_ratio=ratio, max_skin_strain=max_strain,
                 contact_length=contact_length, peak_contact_pressure=peak,
                 node_pressure=pressure)),
-            newton_iterations=iterations, substeps=substeps))
+            newton_iterations=iterations, substeps=substeps, damage=damage,
+            gripper_x=grip.x, gripper_x_velocity=grip.x_rate))
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
@@ -305,7 +309,8 @@ class FastPath:
         sim = self.sim
         grip = sim._grip
         face_par, _ = self._face_arrays()
-        origins = np.array([[-0.5 * grip.gap, grip.lift], [0.5 * grip.gap, grip.lift]])
+        origins = np.array([[grip.x - 0.5 * grip.gap, grip.lift],
+                            [grip.x + 0.5 * grip.gap, grip.lift]])
         normal = np.empty(self.n)
         pressure = np.empty(len(self.surface))
         out = np.empty(kernels.M_SIZE)

@@ -998,8 +998,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
         obstacle .. secondary: (n,) the contact state, updated in place (pass copies).
         face_par, face_dyn: the faces (see the module doc); rows 0 and 1 of face_dyn
             (the jaws) are set here from ``grip``.
-        grip: (gap, lift) at the start, (gap, lift, gap rate, lift rate) at the end, m
-            and m/s.
+        grip: (gap, lift, x) at the start, (gap, lift, x, gap rate, lift rate, x rate)
+            at the end, m and m/s (x: the gripper centre on the transport axis).
         masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
             ``step_measures``; pos, nbw and edges .. gravity_grad: see ``newton_solve``.
         fpar: (8,) [dt, alpha, beta, tolerance, gravity, release threshold, correction
@@ -1016,14 +1016,14 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
     """
     n = x_n.shape[0]
     dt = fpar[F_DT]
-    gap0, lift0, gap1, lift1, gap_rate, lift_rate = grip
+    gap0, lift0, x0, gap1, lift1, x1, gap_rate, lift_rate, x_rate = grip
     for side in range(2):
         sign = -1.0 if side == 0 else 1.0
-        face_dyn[side, 0] = sign * (0.5 * gap0)
+        face_dyn[side, 0] = x0 + sign * (0.5 * gap0)
         face_dyn[side, 1] = lift0
-        face_dyn[side, 2] = sign * (0.5 * gap1)
+        face_dyn[side, 2] = x1 + sign * (0.5 * gap1)
         face_dyn[side, 3] = lift1
-        face_dyn[side, 4] = sign * (0.5 * gap_rate)
+        face_dyn[side, 4] = x_rate + sign * (0.5 * gap_rate)
         face_dyn[side, 5] = lift_rate
     x_pred = np.empty((n, 2))
     for i in range(n):

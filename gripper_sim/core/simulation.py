@@ -287,14 +287,9 @@ class Simulation:
         return it1 + it2, s1 + s2
 
     def _substep(self, dt: float) -> int:
-        if self._fast is not None and self._fast_applies():
+        if self._fast is not None:
             return self._fast.substep(dt)
         return self._substep_reference(dt)
-
-    def _fast_applies(self) -> bool:
-        """The fast path knows jaws centred at x = 0 only: not while transported."""
-        grip = self._grip
-        return grip.x == 0.0 and grip.x_rate == 0.0 and grip.target_x == 0.0
 
     def _substep_reference(self, dt: float) -> int:
         left_n, right_n = self._jaw_force
@@ -495,10 +490,9 @@ class Simulation:
 
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult:
-        if self._fast is not None and self._fast_applies():
-            result = self._fast.measure(iterations, substeps)
-        else:
-            result = self._measure_reference(iterations, substeps)
+        if self._fast is not None:  # all fields at once, damage included
+            return self._fast.measure(iterations, substeps)
+        result = self._measure_reference(iterations, substeps)
         grip = self._grip
         return replace(result, damage=self._assess_damage(result),
                        left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
@@ -511,12 +505,16 @@ class Simulation:
         held = obstacle >= 0
         normal = np.zeros(len(obstacle))
         normal[held] = np.einsum('ij,ij->i', result.contact_forces[held], normals[obstacle[held]])
+        return self._assess_damage_of(result.positions, normal, obstacle,
+                                      result.deformation.compression_ratio)
+
+    def _assess_damage_of(self, positions, normal, obstacle, compression_ratio: float):
+        """``_assess_damage`` from positions (n, 2) m, normal reactions (n,) N, holding
+        obstacles (n,) and the compression ratio."""
         stress = 0.0
         if self.fruit.flesh is not None:
-            stress = float(np.max(self.fruit.flesh.von_mises(result.positions.ravel()),
-                                  initial=0.0))
-        return self._damage.update(result.positions, normal, obstacle,
-                                   result.deformation.compression_ratio, stress)
+            stress = float(np.max(self.fruit.flesh.von_mises(positions.ravel()), initial=0.0))
+        return self._damage.update(positions, normal, obstacle, compression_ratio, stress)
 
     def _measure_reference(self, iterations: int, substeps: int) -> StepResult:
         x, v, forces = self.q, self.v, self.contact_forces
