@@ -268,3 +268,18 @@ def test_solid_model_keeps_the_generic_path():
 
 def test_shell_model_takes_the_fast_path_by_default():
     assert Simulation(load_config())._fast is not None
+
+
+def test_faces_the_kernels_do_not_model_fall_back_to_the_reference_path(monkeypatch):
+    original = Simulation._faces
+
+    def table_moves_with_the_gripper(self, grip):
+        faces = original(self, grip)
+        faces[2].origin = faces[2].origin + np.array([0.0, 1e-3 * grip.lift])
+        return faces
+
+    monkeypatch.setattr(Simulation, '_faces', table_moves_with_the_gripper)
+    sim = Simulation(load_config())
+    assert sim._fast is not None and not sim._fast.applies()
+    sim.step()  # the reference path
+    assert sim._fast.counts.sum() == 0

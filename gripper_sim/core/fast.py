@@ -145,6 +145,8 @@ class FastPath:
         self.counts = np.zeros(kernels.C_SIZE, np.int64)
         self.n = n
         self._template = None
+        self._checked = None
+        self._applies = False
         self.face_par = np.zeros((0, 7))
         self.face_dyn = np.zeros((0, 6))
         self._energy_args = (model['edges'], model['spar'], model['triples'], model['bpar'],
@@ -165,6 +167,43 @@ class FastPath:
         return cls(sim, model)
 
     # ------------------------------------------------------------------ faces
+    def applies(self) -> bool:
+        """Whether the kernels model the simulation's obstacles: faces 0 and 1 the jaws,
+        moving with the gripper as ``Simulation._faces`` moves them, the others fixed
+        (table, walls). Checked once per face set (``set_parameter`` makes a new one)."""
+        template = self.sim._faces_template
+        if template is not self._checked:
+            self._applies = self._faces_match(template)
+            self._checked = template
+        return self._applies
+
+    def _faces_match(self, template) -> bool:
+        sim = self.sim
+        if len(template) < 2:
+            return False
+        try:  # an arbitrary gripper state: do the faces move as the kernel moves them?
+            grip = dataclasses.replace(sim._grip, gap=0.031, lift=0.17, x=0.013,
+                                       gap_rate=-0.007, lift_rate=0.011, x_rate=0.005)
+            faces = sim._faces(grip)
+        except (TypeError, ValueError, AttributeError):
+            return False
+        if len(faces) != len(template):
+            return False
+        for k, (face, rest) in enumerate(zip(faces, template)):
+            if k < 2:
+                sign = -1.0 if k == 0 else 1.0
+                origin = (grip.x + sign * (0.5 * grip.gap), grip.lift)
+                velocity = (grip.x_rate + sign * (0.5 * grip.gap_rate), grip.lift_rate)
+            else:
+                origin, velocity = tuple(rest.origin), tuple(rest.velocity)
+            if not (np.allclose(face.origin, origin, rtol=0, atol=1e-15)
+                    and np.allclose(face.velocity, velocity, rtol=0, atol=1e-15)
+                    and np.array_equal(face.normal, rest.normal)
+                    and face.half_length == rest.half_length
+                    and face.thickness == rest.thickness):
+                return False
+        return True
+
     def _face_arrays(self):
         template = self.sim._faces_template
         if template is not self._template:

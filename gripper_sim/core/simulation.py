@@ -287,7 +287,7 @@ class Simulation:
         return it1 + it2, s1 + s2
 
     def _substep(self, dt: float) -> int:
-        if self._fast is not None:
+        if self._fast is not None and self._fast.applies():
             return self._fast.substep(dt)
         return self._substep_reference(dt)
 
@@ -490,7 +490,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult:
-        if self._fast is not None:  # all fields at once, damage included
+        if self._fast is not None and self._fast.applies():  # all fields, damage included
             return self._fast.measure(iterations, substeps)
         result = self._measure_reference(iterations, substeps)
         grip = self._grip
