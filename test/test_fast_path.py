@@ -174,6 +174,13 @@ def _compare(fast_sim, ref_sim, steps, drive=None):
                                                           abs=1e-6), (k, name)
             np.testing.assert_allclose(ga.node_pressure, gb.node_pressure, rtol=1e-6,
                                        atol=1e-3)
+            for ca, cb in zip(ga.contacts, gb.contacts):
+                assert ca.body == cb.body
+                for name in ('load', 'radius', 'peak_pressure', 'equivalent_radius',
+                             'modulus'):
+                    assert getattr(ca, name) == pytest.approx(getattr(cb, name), rel=1e-6,
+                                                              abs=1e-9), (k, name)
+                np.testing.assert_allclose(ca.centre, cb.centre, rtol=0, atol=1e-9)
         in_contact += bool(np.any(a.contact_obstacle >= 0))
     return in_contact
 
@@ -245,7 +252,7 @@ def test_step_halving_and_convergence_failure_match_the_reference_path():
 
 def test_parameter_changes_while_running_match_the_reference_path():
     config = load_config(overrides=['fruit.nodes=32', 'gripper.initial_gap=0.0645',
-                                    'gripper.close_speed=0.05'])
+                                    'gripper.close_speed=0.05', 'fruit.bruise_pressure=5e4'])
     sims = Simulation(config, fast=True), Simulation(config, fast=False)
     for sim in sims:
         sim.command_force(3.0)
@@ -257,6 +264,7 @@ def test_parameter_changes_while_running_match_the_reference_path():
         sim.command_transport(0.01)  # sideways: the jaws leave x = 0
     assert _compare(*sims, 150) > 50
     assert sims[0].last.gripper_x > 1e-4
+    assert sims[0].last.damage.bruised_length > 0  # low bruise threshold: the cover grows
 
 
 def test_solid_model_keeps_the_generic_path():

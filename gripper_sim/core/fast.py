@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gripper_sim.core import contact as cm
+from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
 from gripper_sim.core.energies import EnclosedAreaPressure, RingBending, Stretching
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
 from gripper_sim.core.stepper import NewtonFailure
@@ -146,6 +147,7 @@ class FastPath:
         self.n = n
         self._template = None
         self._checked = None
+        self._tracker = None
         self._applies = False
         self.face_par = np.zeros((0, 7))
         self.face_dyn = np.zeros((0, 6))
@@ -318,7 +320,7 @@ class FastPath:
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
         positions = x.copy()
-        damage = sim._assess_damage_of(positions, normal, contacts.obstacle, ratio)
+        damage = self._damage(positions, normal, contacts.obstacle, ratio)
         result = _build(StepResult, dict(
             time=sim._time, step=sim._step, positions=positions, velocities=v.copy(),
             contact_forces=forces.copy(), contact_obstacle=contacts.obstacle.copy(),
@@ -343,6 +345,52 @@ class FastPath:
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
+
+    def _damage(self, positions, normal, obstacle, ratio):
+        """``Simulation._assess_damage`` with the per-step part of ``DamageTracker.update``
+        in the ``damage_update`` kernel (the tracker keeps the state)."""
+        sim = self.sim
+        tracker = sim._damage
+        if type(tracker) is not DamageTracker or sim.fruit.flesh is not None:
+            return sim._assess_damage_of(positions, normal, obstacle, ratio)
+        if self._tracker is not tracker:
+            self._tracker = tracker
+            self._damage_args = (
+                np.ascontiguousarray(tracker.ring, dtype=np.int64),
+                np.asarray(tracker.groups, dtype=np.int64),
+                np.asarray(tracker.curvature, dtype=float),
+                np.asarray(tracker.padded, dtype=float),
+                np.ascontiguousarray(tracker.rest_curvature, dtype=float))
+            self._patches = np.zeros((len(tracker.ring), kernels.P_SIZE))
+        ring, groups, curvature, padded, rest_curvature = self._damage_args
+        covered = tracker.covered.copy()
+        node_pressure = np.empty(len(ring))
+        count = kernels.damage_update(
+            positions, normal, obstacle, ring, groups, curvature, padded, rest_curvature,
+            tracker.bruise_pressure, tracker.rigid_modulus, tracker.pad_modulus, covered,
+            node_pressure, self._patches)
+        tracker.covered = covered
+        patches = tuple(
+            _build(Contact, dict(body=int(b), load=load, centre=np.array([cx, cz]), radius=a,
+                                 peak_pressure=p0, equivalent_radius=re, modulus=modulus))
+            for b, load, cx, cz, a, p0, re, modulus in self._patches[:count].tolist())
+        # the rest of DamageTracker.update
+        pressure = max((c.peak_pressure for c in patches), default=0.0)
+        stress = max(TRESCA_OVER_P0 * pressure, 0.0)
+        tracker.peak_pressure = max(tracker.peak_pressure, pressure)
+        tracker.peak_flesh_stress = max(tracker.peak_flesh_stress, stress)
+        if tracker.peak_flesh_stress > tracker.failure_stress:
+            tracker.crushed = True
+        if tracker.failure_strain is not None and ratio > tracker.failure_strain:
+            tracker.crushed = True
+        length = float(covered.sum())
+        perimeter = tracker.perimeter
+        return _build(Damage, dict(
+            bruised=tracker.peak_pressure > tracker.bruise_pressure, bruised_length=length,
+            bruised_fraction=length / perimeter if perimeter > 0 else 0.0, pressure=pressure,
+            peak_pressure=tracker.peak_pressure, flesh_stress=stress,
+            peak_flesh_stress=tracker.peak_flesh_stress, crushed=tracker.crushed,
+            node_pressure=node_pressure, contacts=patches))
 
     def _measure_kernel(self):
         sim = self.sim
@@ -389,7 +437,8 @@ def _frozen_builder(cls):
 
 
 _BUILDERS = {cls: _frozen_builder(cls) for cls in (StepResult, JawWrench, Energies,
-                                                   Deformation, cm.ContactState)}
+                                                   Deformation, cm.ContactState, Contact,
+                                                   Damage)}
 
 
 def _build(cls, fields: dict):

@@ -1290,3 +1290,138 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
                                        face_par[side, 1], jaw_origins[side, 0],
                                        jaw_origins[side, 1])
     out[M_CONTACT_LENGTH] = length
+
+
+# ---------------------------------------------------------------------- damage
+#: columns of the ``damage_update`` patch table
+(P_BODY, P_LOAD, P_CX, P_CZ, P_RADIUS, P_PEAK, P_RE, P_MODULUS, P_SIZE) = range(9)
+
+
+@njit(cache=True, error_model='numpy')
+def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_curvature,
+                  bruise_pressure, rigid_modulus, pad_modulus, covered, node_pressure,
+                  patches):
+    """The per-step part of ``DamageTracker.update`` (damage.py): contact patches by
+    Hertz, per-node pressure and the bruised cover.
+
+    Args:
+        x: (n, 2) m.  normal: (n,) N, normal reactions.  obstacle: (n,) holding obstacle.
+        ring: (n_s,) outline nodes.  groups: (n_faces,) body id per obstacle.
+        curvature: (n_faces,) 1/m.  padded: (n_faces,) 1.0 where a pad covers the face.
+        rest_curvature: (n_s,) 1/m.  bruise_pressure, rigid_modulus, pad_modulus: Pa.
+        covered: (n_s,) m, bruised length per outline position, updated in place.
+        node_pressure: (n_s,) Pa, output.  patches: (n_s, P_SIZE) output rows.
+
+    Returns:
+        the number of patches.
+    """
+    n = ring.shape[0]
+    node_pressure[:] = 0.0
+    body = np.empty(n, np.int64)
+    any_held = False
+    for r in range(n):
+        o = obstacle[ring[r]]
+        body[r] = groups[o] if o >= 0 else -1
+        any_held = any_held or body[r] >= 0
+    if not any_held:
+        return 0
+    start = 0
+    uniform = True
+    for r in range(n):
+        if body[r] != body[0]:
+            uniform = False
+    if not uniform:
+        for r in range(n):
+            if body[r] != body[(r - 1) % n]:
+                start = r
+                break
+    seg = np.empty(n)
+    for r in range(n):
+        i, j = ring[r], ring[(r + 1) % n]
+        seg[r] = math.sqrt((x[j, 0] - x[i, 0]) ** 2 + (x[j, 1] - x[i, 1]) ** 2)
+    run = np.empty(n, np.int64)
+    n_patches = 0
+    k = 0
+    while k < n:
+        r0 = (start + k) % n
+        b = body[r0]
+        length = 0
+        while k < n and body[(start + k) % n] == b:
+            run[length] = (start + k) % n
+            length += 1
+            k += 1
+        if b < 0:
+            continue
+        load = 0.0
+        cx = 0.0
+        cz = 0.0
+        for m in range(length):
+            node = ring[run[m]]
+            f = max(normal[node], 0.0)
+            load += f
+            cx += f * x[node, 0]
+            cz += f * x[node, 1]
+        if load <= 0:
+            continue
+        cx /= load
+        cz /= load
+        near = run[0]
+        best = np.inf
+        face_k = 0.0
+        pad = 0.0
+        for m in range(length):
+            node = ring[run[m]]
+            dist = math.sqrt((x[node, 0] - cx) ** 2 + (x[node, 1] - cz) ** 2)
+            if dist < best:
+                best = dist
+                near = run[m]
+            face_k += curvature[obstacle[node]]
+            pad += padded[obstacle[node]]
+        face_k /= length
+        k1 = rest_curvature[near]
+        if k1 <= 0:
+            k1 = 1e-3
+        k1_eff = max(k1 + face_k, 1e-3 * k1)
+        re = 1.0 / math.sqrt(k1_eff * k1)
+        modulus = pad_modulus if pad / length >= 0.5 else rigid_modulus
+        a = (3.0 * load * re / (4.0 * modulus)) ** (1.0 / 3.0)
+        p0 = 3.0 * load / (2.0 * math.pi * a * a)
+        row = patches[n_patches]
+        row[P_BODY], row[P_LOAD], row[P_CX], row[P_CZ] = b, load, cx, cz
+        row[P_RADIUS], row[P_PEAK], row[P_RE], row[P_MODULUS] = a, p0, re, modulus
+        n_patches += 1
+        for m in range(length):
+            node = ring[run[m]]
+            s = math.sqrt((x[node, 0] - cx) ** 2 + (x[node, 1] - cz) ** 2)
+            node_pressure[run[m]] = p0 * math.sqrt(max(0.0, 1.0 - (s / a) ** 2))
+        if p0 > bruise_pressure and n >= 3:
+            _cover(x, ring, near, cx, cz, seg,
+                   a * math.sqrt(1.0 - (bruise_pressure / p0) ** 2), covered)
+    return n_patches
+
+
+@njit(cache=True, error_model='numpy')
+def _cover(x, ring, near, cx, cz, seg, radius, covered):
+    """DamageTracker._cover: the outline within ``radius`` (m, along it) of the centre."""
+    n = ring.shape[0]
+    rel = np.zeros(n)
+    ahead = n // 2
+    acc = 0.0
+    for k in range(ahead):
+        acc += seg[(near + k) % n]
+        rel[(near + 1 + k) % n] = acc
+    acc = 0.0
+    for k in range(n - 1 - ahead):
+        r = (near - 1 - k) % n
+        acc += seg[r]
+        rel[r] = -acc
+    i0, i1, i2 = ring[(near - 1) % n], ring[near], ring[(near + 1) % n]
+    tx, tz = x[i2, 0] - x[i0, 0], x[i2, 1] - x[i0, 1]
+    norm = max(math.sqrt(tx * tx + tz * tz), 1e-300)
+    tx, tz = tx / norm, tz / norm
+    offset = (cx - x[i1, 0]) * tx + (cz - x[i1, 1]) * tz
+    for r in range(n):
+        lo = rel[r] - 0.5 * seg[(r - 1) % n]
+        hi = rel[r] + 0.5 * seg[r]
+        cover = max(min(hi, offset + radius) - max(lo, offset - radius), 0.0)
+        covered[r] = max(covered[r], cover)
