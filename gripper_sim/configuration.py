@@ -405,6 +405,9 @@ def validate(flat: Mapping[str, Any]) -> dict[str, Any]:
         raise ConfigError("config key 'contact.table.kinetic_friction' must not exceed "
                           "'contact.table.static_friction'")
     _check_shape(result)
+    if result.get('gripper.finger.type') == 'arc':
+        from gripper_sim.core.fingers import check_finger
+        check_finger(result)
     return result
 
 

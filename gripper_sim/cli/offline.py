@@ -102,6 +102,24 @@ def register(subparsers) -> None:
     _add_output_arguments(run)
     run.set_defaults(handler=run_scenario_verb)
 
+    window = subparsers.add_parser(
+        'window', help='the grasp window: grip forces that hold without bruising',
+        description='Find by simulation the smallest grip force that holds the fruit '
+                    "through the scenario's lift and transport, and the largest force "
+                    'that does not bruise it; prints the safe window or says there is none.')
+    _add_fruit_finger_arguments(window)
+    window.add_argument('--scenario', default='pick_and_place', metavar='SCENARIO',
+                        help='scenario giving the close speed, lift and transport '
+                             '(default: pick_and_place)')
+    window.add_argument('--tolerance', type=positive_float, default=None, metavar='REL',
+                        help='relative width at which the bisections stop (default 0.03)')
+    window.add_argument('--json', action='store_true', help='print one JSON object')
+    window.set_defaults(handler=run_window)
+
+    fingers = subparsers.add_parser('fingers', help='list the finger presets')
+    fingers.add_argument('--json', action='store_true', help='print JSON')
+    fingers.set_defaults(handler=run_fingers)
+
     fruits = subparsers.add_parser('fruits', help='list the fruit presets')
     fruits.add_argument('--json', action='store_true', help='print JSON')
     fruits.set_defaults(handler=run_fruits)
@@ -315,3 +333,65 @@ def run_scenario_verb(args) -> int:
               f"bruised {damage['bruised']} ({damage['bruised_fraction'] * 100:.1f} %), "
               f"crushed {damage['crushed']}")
     return 0 if summary['outcome'] == 'placed' else 1
+
+
+def run_window(args) -> int:
+    from gripper_sim.core.scenario import load_scenario, scenario_config
+    from gripper_sim.core.window import TOLERANCE, grasp_window
+    scenario = load_scenario(args.scenario)
+    config = scenario_config(scenario, fruit=args.fruit, finger=args.finger,
+                             config_file=args.config, overrides=args.overrides)
+    tolerance = args.tolerance if args.tolerance is not None else TOLERANCE
+    if tolerance >= 1:
+        raise GripperSimError(f'--tolerance {tolerance} must be below 1')
+
+    def progress(trial):
+        if not args.json:
+            print(f'  trial {trial.force:8.3f} N: {trial.outcome:8s} slip '
+                  f'{trial.slip_distance * 1e3:6.3f} mm, peak pressure '
+                  f'{trial.peak_pressure / 1e3:7.1f} kPa ({trial.wall_time:.1f} s)', flush=True)
+
+    if not args.json:
+        print(f"grasp window of {config['fruit.name']} with the {config['gripper.finger.name']} "
+              f"finger ({scenario['name']}: lift {scenario['lift.height']:g} m, transport "
+              f"{scenario['transport.distance']:g} m)", flush=True)
+    window = grasp_window(config, scenario, tolerance, progress)
+    if args.json:
+        json.dump(window.as_dict(), sys.stdout)
+        sys.stdout.write('\n')
+        return 0
+    limit = config['gripper.max_force']
+    low = ('none up to gripper.max_force' if window.min_force is None
+           else f'{window.min_force:.3g} N')
+    high = (f'none up to gripper.max_force ({limit:g} N)' if window.max_force == math.inf
+            else 'bruised at every force tried' if window.max_force is None
+            else f'{window.max_force:.3g} N')
+    print(f'  holds from      {low}   (m g / (2 mu) = {window.min_estimate:.3g} N, '
+          f'm = {window.mass * 1e3:.0f} g, mu = {window.friction:g})')
+    print(f'  bruises above   {high}   (Hertz estimate {window.max_estimate:.3g} N)')
+    if window.exists:
+        top = 'gripper.max_force' if window.max_force == math.inf else \
+            f'{window.max_force:.3g} N'
+        print(f'  safe window     {window.min_force:.3g} N .. {top}')
+    else:
+        print('  safe window     none')
+    print(f'  {len(window.trials)} simulations in {window.wall_time:.1f} s')
+    return 0
+
+
+def run_fingers(args) -> int:
+    from gripper_sim.configuration import available_fingers, finger_preset_path, read_yaml
+    from gripper_sim.configuration import flatten as flat_keys
+    rows = []
+    for name in available_fingers():
+        keys = flat_keys(read_yaml(finger_preset_path(name)))
+        rows.append(dict(name=name, **{k: v for k, v in keys.items()}))
+    if args.json:
+        json.dump(rows, sys.stdout)
+        sys.stdout.write('\n')
+        return 0
+    for row in rows:
+        settings = ', '.join(f'{k.replace("gripper.finger.", "")}={v}'
+                             for k, v in row.items() if k != 'name')
+        print(f"{row['name']:12s} {settings}")
+    return 0

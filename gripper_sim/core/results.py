@@ -131,7 +131,9 @@ class StepResult:
     gripper_x_velocity: float = 0.0
 
     def in_contact_with(self, name: str) -> bool:
-        """Whether any node touches the obstacle called ``name``."""
-        if name not in self.obstacle_names:
-            return False
-        return bool(np.any(self.contact_obstacle == self.obstacle_names.index(name)))
+        """Whether any node touches the obstacle called ``name`` (or one of its faces,
+        named ``name.part``, e.g. ``left_jaw.upper`` of a V-groove finger)."""
+        if name in self.obstacle_names:
+            return bool(np.any(self.contact_obstacle == self.obstacle_names.index(name)))
+        parts = [i for i, n in enumerate(self.obstacle_names) if n.startswith(name + '.')]
+        return bool(parts) and bool(np.any(np.isin(self.contact_obstacle, parts)))

@@ -8,7 +8,7 @@ configuration overrides (``set``), and the parameters of each phase:
     squeeze    hold the grip for ``squeeze.time`` on the table
     lift       up by ``lift.height``
     transport  sideways (x) by ``transport.distance``
-    lower      back down to the grasp height, onto the table
+    lower      back down until the fruit is ``PLACE_CLEARANCE`` above the table
     open       the jaws back to their initial gap
     retreat    up by ``retreat.height``
     settle     wait ``settle.time`` and look where the fruit is
@@ -42,6 +42,8 @@ from gripper_sim.errors import ConfigError
 SLIP_TOLERANCE = 1e-3
 #: slip (m) beyond which the fruit is lost: dropped
 DROP_SLIP = 0.01
+#: height (m) above the table at which the lowered fruit is let go
+PLACE_CLEARANCE = 5e-4
 #: fraction of the target force at which closing ends (as grasp.py)
 FORCE_REACHED = 0.97
 
@@ -339,7 +341,7 @@ class PickAndPlace:
                           f'{self.max_grip_force:.3g} N)')
         elif self.phase == 'squeeze':
             if elapsed >= sc['squeeze.time'] - 0.5 * sim.dt:
-                if self._past_until('squeeze'):
+                if self._past_until('lift'):
                     self._end(None, '')
                 else:
                     sim.mark_slip_reference()
@@ -347,7 +349,7 @@ class PickAndPlace:
                     self._enter('lift')
         elif self.phase == 'lift':
             if self._lift_reached():
-                if self._past_until('lift'):
+                if self._past_until('transport'):
                     self._enter('hold')
                 else:
                     sim.command_transport(self.start_x + sc['transport.distance'],
@@ -356,10 +358,13 @@ class PickAndPlace:
         elif self.phase == 'transport':
             grip = sim.gripper_state
             if grip.x == grip.target_x and grip.x_rate == 0.0:
-                if self._past_until('transport'):
+                if self._past_until('lower'):
                     self._enter('hold')
                 else:
-                    sim.command_lift(self.grasp_lift, sc['lower.speed'])
+                    # down to where the fruit (which may have slid in the jaws) just meets
+                    # the table again, plus PLACE_CLEARANCE: never pressed into the table
+                    sim.command_lift(self.grasp_lift + result.slip_distance + PLACE_CLEARANCE,
+                                     sc['lower.speed'])
                     self._enter('lower')
         elif self.phase == 'hold':
             self.max_slip = max(self.max_slip, result.slip_distance)

@@ -14,6 +14,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from gripper_sim.core import contact as cm
+from gripper_sim.core import fingers
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast import FastPath
@@ -21,6 +22,7 @@ from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics, GripperState
 from gripper_sim.core.measures import deformation, face_contact_length
 from gripper_sim.core.obstacles import FlatFace
+from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.results import Energies, JawWrench, StepResult
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
                                       StepConstraints)
@@ -77,8 +79,12 @@ class Simulation:
         self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
                              else centre_z)
         self.gravity = Gravity(self.fruit.masses, c['world.gravity'])
+        self._facets = fingers.left_facets(c)
+        self._plain_jaws = c['gripper.finger.type'] == 'flat' and not c['gripper.finger.pad.enabled']
+        self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
         self.solver = ImplicitEulerSolver(
-            self.fruit.masses, list(self.fruit.energies) + [self.gravity],
+            self.fruit.masses, list(self.fruit.energies) + [self.gravity]
+            + ([self._pad] if self._pad is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'])
         self.kinematics = GripperKinematics(
@@ -87,9 +93,11 @@ class Simulation:
             initial_stiffness=c['fruit.flesh.youngs_modulus'] * self.fruit.depth,
             transport_acceleration=c['gripper.transport_acceleration'])
         self._observers: list[Callable[[StepResult], None]] = []
-        self._fast = FastPath.create(self) if fast is not False else None
+        self._fast = (FastPath.create(self) if fast is not False and self._plain_jaws
+                      else None)
         if fast and self._fast is None:
-            raise ConfigError('the fast path needs numba and a shell or point fruit model')
+            raise ConfigError('the fast path needs numba, a shell or point fruit model and '
+                              'a flat finger without a pad')
         self.reset()
 
     # ------------------------------------------------------------------ commands
@@ -204,8 +212,13 @@ class Simulation:
         self._jaw_force = (0.0, 0.0)
         self._damage = DamageTracker(
             self.fruit, self.config, face_groups=self._face_groups(),
-            face_curvature=[0.0] * len(self._faces_template),
-            face_padded=[False] * len(self._faces_template))
+            face_curvature=self._face_curvatures(),
+            face_padded=[self._pad is not None and i < len(self._face_side)
+                         for i in range(len(self._faces_template))])
+        if self._pad is not None:
+            self._pad.begin_step(self.q, self._pad_faces(self._grip),
+                                 self._pad_faces(self._grip), self.dt)
+            self._pad.finish_step(self.q.ravel())
         self._last = self._measure(0, 1)
 
     # ------------------------------------------------------------------ geometry
@@ -214,8 +227,12 @@ class Simulation:
         jaw = dict(half_length=0.5 * c['gripper.jaw_height'], thickness=c['gripper.jaw_thickness'],
                    static_friction=c['contact.jaw.static_friction'],
                    kinetic_friction=c['contact.jaw.kinetic_friction'])
-        faces = [FlatFace('left_jaw', np.zeros(2), np.array([1.0, 0.0]), **jaw),
-                 FlatFace('right_jaw', np.zeros(2), np.array([-1.0, 0.0]), **jaw)]
+        if self._plain_jaws:
+            faces = [FlatFace('left_jaw', np.zeros(2), np.array([1.0, 0.0]), **jaw),
+                     FlatFace('right_jaw', np.zeros(2), np.array([-1.0, 0.0]), **jaw)]
+            self._face_side, self._face_offsets = [LEFT, RIGHT], [np.zeros(2), np.zeros(2)]
+        else:
+            faces, self._face_side, self._face_offsets = self._jaw_facet_faces(jaw)
         ground = dict(static_friction=c['contact.table.static_friction'],
                       kinetic_friction=c['contact.table.kinetic_friction'],
                       restitution=c['contact.restitution'])
@@ -232,15 +249,62 @@ class Simulation:
 
     def _faces(self, grip: GripperState) -> list[FlatFace]:
         faces = [replace(f) for f in self._faces_template]
-        faces[LEFT].origin = np.array([grip.x - 0.5 * grip.gap, grip.lift])
-        faces[LEFT].velocity = np.array([grip.x_rate - 0.5 * grip.gap_rate, grip.lift_rate])
-        faces[RIGHT].origin = np.array([grip.x + 0.5 * grip.gap, grip.lift])
-        faces[RIGHT].velocity = np.array([grip.x_rate + 0.5 * grip.gap_rate, grip.lift_rate])
+        if self._plain_jaws:
+            faces[LEFT].origin = np.array([grip.x - 0.5 * grip.gap, grip.lift])
+            faces[LEFT].velocity = np.array([grip.x_rate - 0.5 * grip.gap_rate, grip.lift_rate])
+            faces[RIGHT].origin = np.array([grip.x + 0.5 * grip.gap, grip.lift])
+            faces[RIGHT].velocity = np.array([grip.x_rate + 0.5 * grip.gap_rate,
+                                              grip.lift_rate])
+            return faces
+        for index, side in enumerate(self._face_side):
+            sign = -1.0 if side == LEFT else 1.0
+            faces[index].origin = np.array([grip.x + sign * 0.5 * grip.gap, grip.lift]) \
+                + self._face_offsets[index]
+            faces[index].velocity = np.array([grip.x_rate + sign * 0.5 * grip.gap_rate,
+                                              grip.lift_rate])
         return faces
 
+    def _jaw_facet_faces(self, jaw: dict):
+        """The jaw faces of a shaped finger or a padded one (``gripper_sim.core.fingers``):
+        faces, the jaw side of each, and each one's offset from its jaw's origin."""
+        faces, sides, offsets = [], [], []
+        back = self.config['gripper.finger.pad.thickness'] if self._pad is not None else 0.0
+        for side, name in ((LEFT, 'left_jaw'), (RIGHT, 'right_jaw')):
+            for facet in self._facets:
+                f = facet if side == LEFT else facet.mirrored()
+                label = f'{name}.{f.name}' if f.name else name
+                faces.append(FlatFace(label, np.zeros(2), f.normal.copy(),
+                                      **dict(jaw, half_length=f.half_length)))
+                sides.append(side)
+                offsets.append(f.offset - back * f.normal)  # the rigid jaw behind the pad
+        return faces, sides, offsets
+
+    def _jaw_faces(self, side: int) -> list[int]:
+        """Indices of the faces of the jaw ``side`` (LEFT or RIGHT)."""
+        return [i for i, s in enumerate(self._face_side) if s == side]
+
     def _face_groups(self) -> list[int]:
-        """Per obstacle, the body it belongs to (its index, faces of a jaw share one)."""
-        return list(range(len(self._faces_template)))
+        """Per obstacle, the body it belongs to (faces of a jaw share one)."""
+        n = len(self._faces_template)
+        return [self._face_side[i] if i < len(self._face_side) else i for i in range(n)]
+
+    def _face_curvatures(self) -> list[float]:
+        n = len(self._faces_template)
+        jaw = [f.curvature for f in self._facets] * 2 if not self._plain_jaws else [0.0, 0.0]
+        return jaw + [0.0] * (n - len(jaw))
+
+    def _make_pad(self) -> PadLayer:
+        from gripper_sim.core.measures import tributary_lengths
+        c = self.config
+        return PadLayer(self.fruit.surface, tributary_lengths(self.fruit, self.fruit.rest_positions),
+                        self.fruit.depth, c['gripper.finger.pad.thickness'],
+                        c['gripper.finger.pad.youngs_modulus'],
+                        c['gripper.finger.pad.poisson_ratio'], c['contact.pad.friction'],
+                        self.fruit.n_nodes)
+
+    def _pad_faces(self, grip: GripperState) -> list:
+        faces = self._faces(grip)
+        return [(faces[i], side, i) for i, side in enumerate(self._face_side)]
 
     @property
     def obstacle_names(self) -> tuple:
@@ -289,7 +353,18 @@ class Simulation:
     def _substep(self, dt: float) -> int:
         if self._fast is not None and self._fast.applies():
             return self._fast.substep(dt)
-        return self._substep_reference(dt)
+        if self._pad is None:
+            return self._substep_reference(dt)
+        left_n, right_n = self._jaw_force
+        grip_new = self.kinematics.advance(self._grip, dt, 0.5 * (left_n + right_n),
+                                           left_n > 0 and right_n > 0)
+        self._pad.begin_step(self.q, self._pad_faces(self._grip), self._pad_faces(grip_new), dt)
+        iterations = self._substep_reference(dt)
+        self._pad.finish_step(self.q.ravel())
+        hard = self._jaw_force
+        self._jaw_force = (hard[0] + float(self._pad.side_force[0]),
+                           hard[1] + float(self._pad.side_force[1]))
+        return iterations
 
     def _substep_reference(self, dt: float) -> int:
         left_n, right_n = self._jaw_force
@@ -336,9 +411,14 @@ class Simulation:
         self.q, self.v, self.contacts, self.contact_forces = x, v, contacts, forces
         self._grip = grip_new
         self._time += dt
-        self._jaw_force = tuple(
-            float(np.sum(forces[contacts.obstacle == side] @ new_faces[side].normal))
-            for side in (LEFT, RIGHT))
+        if self._plain_jaws:
+            self._jaw_force = tuple(
+                float(np.sum(forces[contacts.obstacle == side] @ new_faces[side].normal))
+                for side in (LEFT, RIGHT))
+        else:  # the jaw's force along its closing axis, summed over its faces
+            self._jaw_force = tuple(
+                sign * float(np.sum(forces[np.isin(contacts.obstacle, self._jaw_faces(side)), 0]))
+                for side, sign in ((LEFT, 1.0), (RIGHT, -1.0)))
         return iterations
 
     def _constraints(self, contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces,
@@ -493,10 +573,50 @@ class Simulation:
         if self._fast is not None and self._fast.applies():  # all fields, damage included
             return self._fast.measure(iterations, substeps)
         result = self._measure_reference(iterations, substeps)
+        if self._pad is not None:
+            result = self._with_pad(result)
         grip = self._grip
         return replace(result, damage=self._assess_damage(result),
                        left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
                        gripper_x=grip.x, gripper_x_velocity=grip.x_rate)
+
+    def _with_pad(self, result: StepResult) -> StepResult:
+        """The step result with the pads' forces on the fruit added (``core.pad``)."""
+        pad, grip = self._pad, self._grip
+        x = result.positions
+        forces = result.contact_forces + pad.forces
+        obstacle = result.contact_obstacle.copy()
+        on_pad = (obstacle < 0) & (pad.holder >= 0)
+        obstacle[on_pad] = pad.holder[on_pad]
+        wrenches = []
+        for side, sign, hard in ((LEFT, -1.0, result.left_wrench),
+                                 (RIGHT, 1.0, result.right_wrench)):
+            nodes = np.flatnonzero(np.isin(pad.holder, self._jaw_faces(side)))
+            f = pad.forces[nodes]
+            r = x[nodes] - np.array([grip.x + sign * 0.5 * grip.gap, grip.lift])
+            torque = float(np.sum(r[:, 1] * -f[:, 0] - r[:, 0] * -f[:, 1]))
+            wrenches.append(JawWrench(hard.force - np.array([f[:, 0].sum(), 0.0, f[:, 1].sum()]),
+                                      hard.torque + np.array([0.0, torque, 0.0])))
+        grip_force = 0.5 * (-wrenches[LEFT].force[0] + wrenches[RIGHT].force[0])
+        normals = np.array([f.normal for f in self._faces_template]).reshape(-1, 2)
+        held = obstacle >= 0
+        normal = np.zeros(len(obstacle))
+        normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
+        jaw = np.isin(obstacle, self._jaw_faces(LEFT) + self._jaw_faces(RIGHT))
+        from gripper_sim.core.measures import tributary_lengths
+        trib = tributary_lengths(self.fruit, x)
+        pad_length = float(np.sum(trib[on_pad[self.fruit.surface]]))
+        shape = deformation(self.fruit, x, normal, jaw,
+                            result.deformation.contact_length + pad_length)
+        both = bool(np.any(np.isin(obstacle, self._jaw_faces(LEFT)))
+                    and np.any(np.isin(obstacle, self._jaw_faces(RIGHT))))
+        relative_z = float(result.centroid[1] - grip.lift)
+        if both and self._slip_reference is None:
+            self._slip_reference = relative_z
+        slip = 0.0 if self._slip_reference is None else abs(self._slip_reference - relative_z)
+        return replace(result, contact_forces=forces, contact_obstacle=obstacle,
+                       left_wrench=wrenches[LEFT], right_wrench=wrenches[RIGHT],
+                       grip_force=grip_force, deformation=shape, slip_distance=slip)
 
     def _assess_damage(self, result: StepResult):
         """Bruising and crushing after this step (``gripper_sim.core.damage``)."""
@@ -522,24 +642,34 @@ class Simulation:
         faces = self._faces(grip)
         normal = np.zeros(fruit.n_nodes)
         wrenches = []
+        obstacle = self.contacts.obstacle
+        if self._plain_jaws:
+            on_side = [obstacle == LEFT, obstacle == RIGHT]
+        else:
+            on_side = [np.isin(obstacle, self._jaw_faces(side)) for side in (LEFT, RIGHT)]
         for side in (LEFT, RIGHT):
-            nodes = np.flatnonzero(self.contacts.obstacle == side)
+            nodes = np.flatnonzero(on_side[side])
             on_jaw = -forces[nodes].sum(axis=0)
-            r = x[nodes] - faces[side].origin
+            sign = -1.0 if side == LEFT else 1.0
+            r = x[nodes] - (faces[side].origin if self._plain_jaws else
+                            np.array([grip.x + sign * 0.5 * grip.gap, grip.lift]))
             torque_y = float(np.sum(r[:, 1] * -forces[nodes, 0] - r[:, 0] * -forces[nodes, 1]))
             wrenches.append(JawWrench(np.array([on_jaw[0], 0.0, on_jaw[1]]),
                                       np.array([0.0, torque_y, 0.0])))
         for index, face in enumerate(faces):
             nodes = np.flatnonzero(self.contacts.obstacle == index)
             normal[nodes] = forces[nodes] @ face.normal
-        left_n = float(np.sum(normal[self.contacts.obstacle == LEFT]))
-        right_n = float(np.sum(normal[self.contacts.obstacle == RIGHT]))
-        jaw_contact = (self.contacts.obstacle == LEFT) | (self.contacts.obstacle == RIGHT)
+        if self._plain_jaws:
+            left_n = float(np.sum(normal[self.contacts.obstacle == LEFT]))
+            right_n = float(np.sum(normal[self.contacts.obstacle == RIGHT]))
+        else:  # each jaw's force along the closing axis
+            left_n = float(np.sum(forces[on_side[LEFT], 0]))
+            right_n = -float(np.sum(forces[on_side[RIGHT], 0]))
+        jaw_contact = on_side[LEFT] | on_side[RIGHT]
         masses = fruit.masses
         centroid = masses @ x / masses.sum()
         centroid_velocity = masses @ v / masses.sum()
-        both = bool(np.any(self.contacts.obstacle == LEFT) and
-                    np.any(self.contacts.obstacle == RIGHT))
+        both = bool(np.any(on_side[LEFT]) and np.any(on_side[RIGHT]))
         relative_z = float(centroid[1] - grip.lift)
         if both and self._slip_reference is None:
             self._slip_reference = relative_z
@@ -561,6 +691,6 @@ class Simulation:
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
             slipping=slipping, centroid=centroid, energies=energies,
             deformation=deformation(fruit, x, normal, jaw_contact, sum(
-                face_contact_length(fruit, x, faces[side], self.contacts.obstacle == side)
-                for side in (LEFT, RIGHT))),
+                face_contact_length(fruit, x, faces[index], self.contacts.obstacle == index)
+                for index in range(len(self._face_side)))),
             newton_iterations=iterations, substeps=substeps)

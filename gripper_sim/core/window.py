@@ -1,0 +1,221 @@
+"""The grasp window: the grip forces that hold a fruit without bruising it, by simulation.
+
+- Minimum force: the smallest grip force at which the fruit goes through the
+  scenario's close, squeeze, lift, transport and a hold (``squeeze.time``) without
+  slipping more than ``scenario.SLIP_TOLERANCE`` in the jaws. Found by bisection
+  over full simulations, from a bracket seeded with the rigid-flat-jaw estimate
+  m g / (2 mu_s) (validation.md section 6) and widened until it brackets.
+- Maximum force: the largest grip force at which the same run leaves the fruit
+  unbruised (``damage.bruised`` false), by bisection seeded with the Hertz force at
+  which the peak pressure reaches the bruise threshold,
+  F = p_b^3 pi^3 R^2 / (6 E*^2) (validation.md section 3).
+- The window is [minimum, maximum] when minimum <= maximum, else there is none.
+
+Each trial is a fresh simulation starting with the jaws open at the grasp height (the
+scenario's approach skipped). A trial stops early once its answer is known (slipped,
+dropped or bruised).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+from gripper_sim.core.damage import contact_modulus
+from gripper_sim.core.scenario import Scenario, run_scenario
+from gripper_sim.errors import GripperSimError
+
+#: relative width of the final bisection brackets
+TOLERANCE = 0.03
+#: how many times a bracket end may be halved or doubled looking for a bracket
+MAX_WIDENINGS = 8
+
+
+@dataclass
+class Trial:
+    """One simulated grasp: the force (N), what happened and the run's measures."""
+
+    force: float
+    held: bool
+    bruised: bool
+    outcome: str
+    slip_distance: float
+    peak_pressure: float
+    wall_time: float
+
+
+@dataclass
+class GraspWindow:
+    """Result of ``grasp_window``.
+
+    Attributes:
+        min_force: N, smallest force that held (None: none up to gripper.max_force).
+        max_force: N, largest force that did not bruise (None: even the smallest force
+            tried bruised; inf: nothing bruised up to gripper.max_force).
+        min_estimate, max_estimate: N, the closed-form seeds (m g / 2 mu; Hertz).
+        trials: every simulated grasp, in order.
+        wall_time: s, time to compute the window.
+    """
+
+    fruit: str
+    finger: str
+    min_force: float | None
+    max_force: float | None
+    min_estimate: float
+    max_estimate: float
+    mass: float
+    friction: float
+    tolerance: float
+    trials: list = field(default_factory=list)
+    wall_time: float = 0.0
+
+    @property
+    def exists(self) -> bool:
+        """There is a force that holds without bruising."""
+        return (self.min_force is not None and self.max_force is not None
+                and self.min_force <= self.max_force)
+
+    def as_dict(self) -> dict:
+        def number(value):
+            if value is None:
+                return None
+            return 'inf' if math.isinf(value) else value
+        return dict(fruit=self.fruit, finger=self.finger, min_force=number(self.min_force),
+                    max_force=number(self.max_force), window=self.exists,
+                    min_estimate=self.min_estimate, max_estimate=self.max_estimate,
+                    mass=self.mass, friction=self.friction, tolerance=self.tolerance,
+                    wall_time=self.wall_time, trials=[vars(t) for t in self.trials])
+
+
+def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
+    """(m g / (2 mu_s) in N, the Hertz bruise force in N, the mass in kg)."""
+    from gripper_sim.core.fruit import build_fruit
+    fruit = build_fruit(config)
+    mass = fruit.total_mass
+    mu = config['contact.jaw.static_friction']
+    if config['gripper.finger.pad.enabled']:
+        mu = config['contact.pad.friction']
+    weight = mass * config['world.gravity']
+    hold = weight / (2 * mu) if mu > 0 else math.inf
+    # the outline's radius of curvature where it meets the jaws (the points of largest |x|)
+    surface = fruit.rest_positions[fruit.surface]
+    i = int(abs(surface[:, 0]).argmax())
+    n = len(surface)
+    a, b, c = surface[(i - 1) % n], surface[i], surface[(i + 1) % n]
+    side = [math.dist(a, b), math.dist(b, c), math.dist(a, c)]
+    area2 = abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+    radius = side[0] * side[1] * side[2] / (2 * area2) if area2 > 0 else 0.5 * fruit.rest_width
+    e_star = contact_modulus(config['fruit.flesh.youngs_modulus'],
+                             config['fruit.flesh.poisson_ratio'])
+    p_b = config['fruit.bruise_pressure']
+    bruise = p_b ** 3 * math.pi ** 3 * radius ** 2 / (6 * e_star ** 2)
+    return hold, bruise, mass
+
+
+def grasp_window(config: Mapping[str, Any], scenario: Scenario,
+                 tolerance: float = TOLERANCE,
+                 progress: Callable[[Trial], None] | None = None) -> GraspWindow:
+    """Find the grasp window of the fruit and finger of ``config`` in ``scenario``.
+
+    Args:
+        config: the configuration of the runs (``scenario.scenario_config``).
+        scenario: gives the close speed, squeeze time, lift and transport.
+        tolerance: relative width at which a bisection stops.
+        progress: called with each trial as it finishes.
+    """
+    from gripper_sim.core.simulation import Simulation
+    start = time.perf_counter()
+    config = dict(config)
+    limit = float(config['gripper.max_force'])
+    hold_estimate, bruise_estimate, mass = estimates(config)
+    lift = scenario['approach.height']
+    config['gripper.initial_lift'] = config['gripper.initial_lift'] - lift \
+        if config.get('gripper.initial_lift') is not None else None
+    base = scenario.with_values(approach__height=0.0)
+    trials: list[Trial] = []
+    cache: dict[tuple[str, float], Trial] = {}
+
+    def trial(force: float, kind: str) -> Trial:
+        key = (kind, round(force, 12))
+        if key in cache:
+            return cache[key]
+        t0 = time.perf_counter()
+        sim = Simulation(config)
+        run = run_scenario(sim, base.with_values(close__mode='force', close__force=force),
+                           until='transport', stop_on_slip=(kind == 'hold'),
+                           stop_on_bruise=(kind == 'bruise'))
+        damage = run['damage'] or {}
+        result = Trial(force=force, held=run['outcome'] in ('held', 'bruised', 'crushed')
+                       and not run['dropped'] and run['slip_distance'] <= _slip_limit(),
+                       bruised=bool(run['bruised']), outcome=run['outcome'],
+                       slip_distance=run['slip_distance'],
+                       peak_pressure=float(damage.get('peak_pressure', 0.0)),
+                       wall_time=time.perf_counter() - t0)
+        if kind == 'bruise' and result.bruised:
+            result.held = False  # stopped at the bruise: holding was not tried to the end
+        cache[key] = result
+        trials.append(result)
+        if progress is not None:
+            progress(result)
+        return result
+
+    min_force = _bisect(lambda f: trial(f, 'hold').held, min(hold_estimate, limit), limit,
+                        tolerance, want_smallest=True)
+    max_force = _bisect(lambda f: not trial(f, 'bruise').bruised,
+                        min(bruise_estimate, limit), limit, tolerance, want_smallest=False)
+    mu = (config['contact.pad.friction'] if config['gripper.finger.pad.enabled']
+          else config['contact.jaw.static_friction'])
+    return GraspWindow(fruit=str(config['fruit.name']), finger=str(config['gripper.finger.name']),
+                       min_force=min_force, max_force=max_force, min_estimate=hold_estimate,
+                       max_estimate=bruise_estimate, mass=mass, friction=mu,
+                       tolerance=tolerance, trials=trials,
+                       wall_time=time.perf_counter() - start)
+
+
+def _slip_limit() -> float:
+    from gripper_sim.core.scenario import SLIP_TOLERANCE
+    return SLIP_TOLERANCE
+
+
+def _bisect(ok: Callable[[float], bool], seed: float, limit: float, tolerance: float,
+            want_smallest: bool) -> float | None:
+    """The boundary of the forces where ``ok`` holds, to ``tolerance``.
+
+    want_smallest: ``ok`` holds above the boundary (the minimum force); returns the
+    smallest force found ok, None if none up to ``limit``. Otherwise ``ok`` holds
+    below it (the maximum force); returns the largest force found ok, ``inf`` if ok
+    at ``limit``, None if not even at the smallest force tried.
+    """
+    if not seed > 0:
+        raise GripperSimError('the grasp window needs a positive force estimate')
+    lo, hi = 0.8 * seed, min(1.25 * seed, limit)
+    if lo >= hi:
+        lo = 0.8 * hi
+    good_high = want_smallest
+    # widen until ok(lo) != ok(hi) with the good side where it should be
+    for _ in range(MAX_WIDENINGS):
+        ok_lo = ok(lo)
+        if ok_lo == good_high:  # lo is already on the high side: move it down
+            hi, lo = lo, lo / 2
+            continue
+        break
+    else:
+        return lo if want_smallest else None
+    for _ in range(MAX_WIDENINGS):
+        ok_hi = ok(hi)
+        if ok_hi != good_high:  # hi is still on the low side: move it up
+            if hi >= limit:
+                return None if want_smallest else math.inf
+            lo, hi = hi, min(2 * hi, limit)
+            continue
+        break
+    else:
+        return None if want_smallest else math.inf
+    while (hi - lo) > tolerance * hi:
+        mid = 0.5 * (lo + hi)
+        if ok(mid) == good_high:
+            hi = mid
+        else:
+            lo = mid
+    return hi if want_smallest else lo
