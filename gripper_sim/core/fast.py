@@ -148,6 +148,8 @@ class FastPath:
         self._template = None
         self._checked = None
         self._tracker = None
+        self._names_of = None
+        self._names_cache: tuple = ()
         self._applies = False
         self.face_par = np.zeros((0, 7))
         self.face_dyn = np.zeros((0, 6))
@@ -325,7 +327,7 @@ class FastPath:
             time=sim._time, step=sim._step, positions=positions, velocities=v.copy(),
             contact_forces=forces.copy(), contact_obstacle=contacts.obstacle.copy(),
             contact_sticking=contacts.mode == cm.STICK,
-            obstacle_names=sim.obstacle_names, surface=fruit.surface,
+            obstacle_names=self._names(), surface=fruit.surface,
             left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
                                                torque=np.array([0.0, lty, 0.0]))),
             right_wrench=_build(JawWrench, dict(force=np.array([rfx, 0.0, rfz]),
@@ -345,6 +347,14 @@ class FastPath:
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
+
+    def _names(self) -> tuple:
+        """``Simulation.obstacle_names``, kept per face set."""
+        template = self.sim._faces_template
+        if self._names_of is not template:
+            self._names_cache = self.sim.obstacle_names
+            self._names_of = template
+        return self._names_cache
 
     def _damage(self, positions, normal, obstacle, ratio):
         """``Simulation._assess_damage`` with the per-step part of ``DamageTracker.update``
@@ -415,24 +425,25 @@ def _frozen_builder(cls):
     """A fast constructor for a (frozen) dataclass: a frozen ``__init__`` sets each field
     through ``object.__setattr__``, ~10 us for a StepResult; filling ``__dict__`` gives
     the same object in well under 1 us. Fields left out take their defaults. Falls back
-    to ``cls(**fields)`` for a class with a ``__post_init__``, slots or default
-    factories, and for unknown field names.
+    to ``cls(**fields)`` (which raises) for missing or unknown fields, and for a class
+    with a ``__post_init__``, slots or default factories.
     """
     fields = dataclasses.fields(cls)
-    names = frozenset(f.name for f in fields)
+    size = len(fields)
     defaults = {f.name: f.default for f in fields if f.default is not dataclasses.MISSING}
     plain = (not hasattr(cls, '__post_init__') and not hasattr(cls, '__slots__')
              and all(f.default_factory is dataclasses.MISSING for f in fields))
-    required = names - frozenset(defaults)
+    new = object.__new__
 
     def build(values: dict):
-        if not plain or not names.issuperset(values) or (
-                len(values) != len(names) and not required.issubset(values)):
-            return cls(**values)
-        obj = object.__new__(cls)
-        obj.__dict__.update(defaults)
-        obj.__dict__.update(values)
-        return obj
+        if plain:
+            obj = new(cls)
+            state = obj.__dict__
+            state.update(defaults)
+            state.update(values)
+            if len(state) == size:  # no field missing, none unknown
+                return obj
+        return cls(**values)
     return build
 
 

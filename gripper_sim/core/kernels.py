@@ -633,6 +633,8 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     n2 = q_n.shape[0]
     n = n2 // 2
     n_fr = fr_nodes.shape[0]
+    # flags as variables, not literals: one compiled _evaluate for all call sites
+    yes, no = np.bool_(True), np.bool_(False)
     order = np.empty(n, np.int64)
     for i in range(n):
         order[pos[i]] = i
@@ -661,7 +663,7 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     counts[C_HESSIAN_EVALS] += 1
     phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                        fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
-                       gravity_grad, pos, True, grad, fric_grad, grads, band, area_grad, tmp,
+                       gravity_grad, pos, yes, grad, fric_grad, grads, band, area_grad, tmp,
                        cdq, values)
     if not math.isfinite(phi):
         return INFEASIBLE_START, 0, n_hist
@@ -728,7 +730,7 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
             counts[C_EVALS] += 1
             _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                       fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
-                      gravity_grad, pos, False, grad, fric_grad, grads, band, area_grad, tmp,
+                      gravity_grad, pos, no, grad, fric_grad, grads, band, area_grad, tmp,
                       cdq, values)
             history[n_hist] = dq_max / dt
             n_hist += 1
@@ -951,7 +953,7 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, seco
         if obstacle[i] >= 0 or released[i]:
             continue
         depth = 0.0
-        chosen = -1
+        chosen = np.int64(-1)  # not a literal: one compiled _gap
         for f in range(n_faces):
             ox, oz = face_dyn[f, 2], face_dyn[f, 3]
             gap = _gap(face_par, ox, oz, f, x[i, 0], x[i, 1])
@@ -1116,7 +1118,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
         jaw_origins[side, 1] = face_dyn[side, 3]
     step_measures(x_out, v_out, forces_out, obstacle, masses, surface, skin_edges,
                   rest_segments, face_par, jaw_origins, fpar[F_DEPTH], edges, spar, triples,
-                  bpar, ring, press, gravity_grad, True, values, normal_out, pressure_out,
+                  bpar, ring, press, gravity_grad, np.bool_(True), values, normal_out,
+                  pressure_out,
                   meas_out)
     return OK
 
@@ -1153,8 +1156,8 @@ def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
     if n < 5:
         return 0.0
     tx, tz = -nz, nx
-    top = -1
-    bottom = -1
+    top = np.int64(-1)  # not literals: one compiled _separation_offset
+    bottom = np.int64(-1)
     a_top = 0.0
     a_bottom = 0.0
     for r in range(n):
@@ -1169,12 +1172,13 @@ def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
     if top < 0:
         return 0.0
     length = a_top - a_bottom
+    forward, backward = np.int64(1), np.int64(-1)
     for k in range(2):
         end = top if k == 0 else bottom
         if obstacle[ring[(end + 1) % n]] != side:
-            length += _separation_offset(x, ring, end, 1, nx, nz, ox, oz)
+            length += _separation_offset(x, ring, end, forward, nx, nz, ox, oz)
         elif obstacle[ring[(end - 1) % n]] != side:
-            length += _separation_offset(x, ring, end, -1, nx, nz, ox, oz)
+            length += _separation_offset(x, ring, end, backward, nx, nz, ox, oz)
     return length
 
 
@@ -1238,13 +1242,14 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         out[M_GRAVITY] = energies[3]
     else:
         q = x.reshape(2 * n)
+        no = np.bool_(False)
         grad = np.empty(2 * n)
         area_grad = np.empty(2 * n)
         band = np.empty((0, 1, 2, 2))
         pos = np.zeros(n, np.int64)
-        elastic = ring_stretching(q, edges, spar, pos, False, grad, band)
-        elastic += ring_bending(q, triples, bpar, pos, False, grad, band)
-        vp, _c = ring_pressure(q, ring, press, pos, False, grad, band, area_grad)
+        elastic = ring_stretching(q, edges, spar, pos, no, grad, band)
+        elastic += ring_bending(q, triples, bpar, pos, no, grad, band)
+        vp, _c = ring_pressure(q, ring, press, pos, no, grad, band, area_grad)
         out[M_ELASTIC] = elastic + vp
         grav = 0.0
         for m in range(2 * n):
