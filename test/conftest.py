@@ -42,17 +42,31 @@ def domain_in_use(domain_id: int, participants: int = 4) -> bool:
     return False
 
 
-def pick_domain_id() -> int:
-    """A domain id in 1..101 no one on this machine uses, starting from our pid's."""
-    requested = os.environ.get('GRIPPER_SIM_TEST_DOMAIN_ID')
-    if requested:
-        return int(requested)
-    start = os.getpid() % len(DOMAIN_IDS)
+_handed_out: set[int] = set()
+
+
+def free_domain_id() -> int:
+    """A domain id in 1..101 that no process on this machine is using and that this
+    session has not handed out before; the search starts from our pid, so concurrent
+    test sessions start far apart."""
+    start = (os.getpid() + len(_handed_out)) % len(DOMAIN_IDS)
     for offset in range(len(DOMAIN_IDS)):
         candidate = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
-        if not domain_in_use(candidate):
-            return candidate
-    return DOMAIN_IDS[start]
+        if candidate not in _handed_out and not domain_in_use(candidate):
+            break
+    else:
+        candidate = DOMAIN_IDS[start]
+    _handed_out.add(candidate)
+    return candidate
+
+
+def pick_domain_id() -> int:
+    """The session's domain: GRIPPER_SIM_TEST_DOMAIN_ID if set, else a free one."""
+    requested = os.environ.get('GRIPPER_SIM_TEST_DOMAIN_ID')
+    if requested:
+        _handed_out.add(int(requested))
+        return int(requested)
+    return free_domain_id()
 
 
 def env_sh(domain_id: int) -> dict[str, str]:
@@ -81,6 +95,17 @@ def pytest_report_header(config):
     return (f'ROS: ROS_DOMAIN_ID={SESSION_DOMAIN_ID}, ROS_AUTOMATIC_DISCOVERY_RANGE='
             f"{os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}, FASTRTPS_DEFAULT_PROFILES_FILE="
             f"{os.environ['FASTRTPS_DEFAULT_PROFILES_FILE']}")
+
+
+@pytest.fixture(scope='session')
+def new_domain_id():
+    """``new_domain_id()`` -> a ROS domain id no process uses and no test got before.
+
+    Session-scoped, so module-scoped fixtures can use it too: give each node under
+    test a domain of its own, e.g.
+    ``env = dict(os.environ, ROS_DOMAIN_ID=str(new_domain_id()))``.
+    """
+    return free_domain_id
 
 
 @pytest.fixture
