@@ -8,30 +8,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be a positive number")
-    return value
-
-
-def _non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-    if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be zero or positive")
-    return value
+from gripper_sim.cli.arguments import non_negative_float, positive_float
 
 
 def _remap(text: str) -> tuple[str, str]:
@@ -53,9 +34,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help='file to create (never overwritten)')
     p.add_argument('-a', '--all', action='store_true',
                    help='record every topic, including ones that appear while recording')
-    p.add_argument('-d', '--duration', type=_positive_float, metavar='S',
+    p.add_argument('-d', '--duration', type=positive_float, metavar='S',
                    help='stop after S seconds (wall clock)')
-    p.add_argument('--flush-interval', type=_positive_float, default=0.5, metavar='S',
+    p.add_argument('--flush-interval', type=positive_float, default=0.5, metavar='S',
                    help='close and write a chunk at least every S seconds (default 0.5): '
                         'a killed recorder loses at most about this much')
     p.add_argument('--max-messages', type=int, metavar='N',
@@ -67,18 +48,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description='Publish the raw messages of a recording with their original relative '
                     'timing and QoS.')
     p.add_argument('file', metavar='FILE.mcap')
-    p.add_argument('-r', '--rate', type=_positive_float, default=1.0,
+    p.add_argument('-r', '--rate', type=positive_float, default=1.0,
                    help='playback speed factor (default 1)')
     p.add_argument('-l', '--loop', action='store_true', help='play again and again')
     p.add_argument('--topics', nargs='+', metavar='TOPIC', help='only these topics')
-    p.add_argument('--start', type=_non_negative_float, default=0.0, metavar='S',
+    p.add_argument('--start', type=non_negative_float, default=0.0, metavar='S',
                    help='skip the first S seconds of the recording')
-    p.add_argument('--clock', nargs='?', type=_positive_float, const=100.0, metavar='HZ',
+    p.add_argument('--clock', nargs='?', type=positive_float, const=100.0, metavar='HZ',
                    help='publish /clock from the recording time (default 100 Hz) so nodes '
                         'with use_sim_time follow the replay')
     p.add_argument('--remap', action='append', type=_remap, default=[], metavar='OLD:=NEW',
                    help='publish topic OLD as NEW (repeatable)')
-    p.add_argument('--wait-for-subscribers', type=_non_negative_float, default=0.0,
+    p.add_argument('--wait-for-subscribers', type=non_negative_float, default=0.0,
                    metavar='S', help='before playing, wait up to S seconds until every '
                    'replayed topic has a subscriber')
     p.set_defaults(handler=_replay)

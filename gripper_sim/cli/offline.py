@@ -9,31 +9,12 @@ from contextlib import ExitStack
 
 import numpy as np
 
+from gripper_sim.cli.arguments import non_negative_float, positive_float
 from gripper_sim.configuration import available_fruits, load_config, parse_override
 from gripper_sim.errors import GripperSimError
 
 #: longest simulated time (s) a squeeze may take before it is called off
 SQUEEZE_TIME_LIMIT = 600.0
-
-
-def positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number > 0")
-    return value
-
-
-def non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-    if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number >= 0")
-    return value
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:

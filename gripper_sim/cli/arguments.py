@@ -1,0 +1,31 @@
+"""argparse validators shared by the verbs: numbers that must be finite and in range."""
+from __future__ import annotations
+
+import argparse
+import math
+
+
+def _finite(text: str, requirement: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number {requirement}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0."""
+    value = _finite(text, '> 0')
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number > 0")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """A finite number >= 0."""
+    value = _finite(text, '>= 0')
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number >= 0")
+    return value
