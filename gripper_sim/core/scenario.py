@@ -108,28 +108,30 @@ def available_scenarios() -> list[str]:
 
 def _coerce(key: str, value: Any, source: str) -> Any:
     spec = SCENARIO_SCHEMA[key]
-    where = f"scenario key '{key}'" + (f' in {source}' if source else '')
+    where = f"scenario key '{key}'"
+    origin = f' (in {source})' if source else ''
     if value is None:
         if spec.nullable:
             return None
-        raise ConfigError(f'{where} must not be null ({spec.description})')
+        raise ConfigError(f'{where} must not be null ({spec.description}){origin}')
     if spec.kind == 'str':
         text = str(value)
         if spec.choices and text not in spec.choices:
-            raise ConfigError(f"{where} must be one of {', '.join(spec.choices)}, got '{text}'")
+            raise ConfigError(f"{where} must be one of {', '.join(spec.choices)}, got "
+                              f"'{text}'{origin}")
         return text
     if isinstance(value, bool):
-        raise ConfigError(f'{where} must be a number, got {value!r}')
+        raise ConfigError(f'{where} must be a number, got {value!r}{origin}')
     try:
         number = float(value)
     except (TypeError, ValueError) as err:
-        raise ConfigError(f'{where} must be a number, got {value!r}') from err
+        raise ConfigError(f'{where} must be a number, got {value!r}{origin}') from err
     unit = f' {spec.unit}' if spec.unit not in ('', '-') else ''
     if not math.isfinite(number) or number < spec.low or number > spec.high or (
             spec.open_low and number <= spec.low):
         relation = '>' if spec.open_low else '>='
         raise ConfigError(f'{where} = {value!r}{unit} is out of range: it must be '
-                          f'{relation} {spec.low:g}{unit} and <= {spec.high:g}{unit}')
+                          f'{relation} {spec.low:g}{unit} and <= {spec.high:g}{unit}{origin}')
     return number
 
 

@@ -4,7 +4,8 @@
   scenario's close, squeeze, lift, transport and a hold (``squeeze.time``) without
   slipping more than ``scenario.SLIP_TOLERANCE`` in the jaws. Found by bisection
   over full simulations, from a bracket seeded with the rigid-flat-jaw estimate
-  m g / (2 mu_s) (validation.md section 6) and widened until it brackets.
+  m g / (2 mu_s) (validation.md section 6) and m g / (2 mu_k), widened until it
+  brackets.
 - Maximum force: the largest grip force at which the same run leaves the fruit
   unbruised (``damage.bruised`` false), by bisection seeded with the Hertz force at
   which the peak pressure reaches the bruise threshold,
@@ -160,12 +161,17 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
             progress(result)
         return result
 
-    min_force = _bisect(lambda f: trial(f, 'hold').held, min(hold_estimate, limit), limit,
-                        tolerance, want_smallest=True)
-    max_force = _bisect(lambda f: not trial(f, 'bruise').bruised,
-                        min(bruise_estimate, limit), limit, tolerance, want_smallest=False)
     mu = (config['contact.pad.friction'] if config['gripper.finger.pad.enabled']
           else config['contact.jaw.static_friction'])
+    # a slide that starts (e.g. as the table lets go) goes on at kinetic friction: the
+    # minimum lies between m g / (2 mu_s) and m g / (2 mu_k)
+    mu_k = (mu if config['gripper.finger.pad.enabled']
+            else config['contact.jaw.kinetic_friction'])
+    kinetic = hold_estimate * mu / mu_k if mu_k > 0 else 2 * hold_estimate
+    min_force = _bisect(lambda f: trial(f, 'hold').held, 0.8 * hold_estimate,
+                        1.15 * kinetic, limit, tolerance, want_smallest=True)
+    max_force = _bisect(lambda f: not trial(f, 'bruise').bruised, 0.8 * bruise_estimate,
+                        1.25 * bruise_estimate, limit, tolerance, want_smallest=False)
     return GraspWindow(fruit=str(config['fruit.name']), finger=str(config['gripper.finger.name']),
                        min_force=min_force, max_force=max_force, min_estimate=hold_estimate,
                        max_estimate=bruise_estimate, mass=mass, friction=mu,
@@ -178,18 +184,19 @@ def _slip_limit() -> float:
     return SLIP_TOLERANCE
 
 
-def _bisect(ok: Callable[[float], bool], seed: float, limit: float, tolerance: float,
-            want_smallest: bool) -> float | None:
-    """The boundary of the forces where ``ok`` holds, to ``tolerance``.
+def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
+            tolerance: float, want_smallest: bool) -> float | None:
+    """The boundary of the forces where ``ok`` holds, to ``tolerance``, from the
+    bracket guess [low, high] (widened as needed, up to ``limit``).
 
     want_smallest: ``ok`` holds above the boundary (the minimum force); returns the
     smallest force found ok, None if none up to ``limit``. Otherwise ``ok`` holds
     below it (the maximum force); returns the largest force found ok, ``inf`` if ok
     at ``limit``, None if not even at the smallest force tried.
     """
-    if not seed > 0:
-        raise GripperSimError('the grasp window needs a positive force estimate')
-    lo, hi = 0.8 * seed, min(1.25 * seed, limit)
+    if not low > 0 or not math.isfinite(high):
+        raise GripperSimError('the grasp window needs a positive, finite force estimate')
+    lo, hi = min(low, limit), min(high, limit)
     if lo >= hi:
         lo = 0.8 * hi
     good_high = want_smallest
