@@ -91,9 +91,10 @@ class Damage:
 
     def as_dict(self) -> dict:
         """The scalar fields, for JSON."""
-        return dict(bruised=self.bruised, bruised_length=self.bruised_length,
-                    bruised_fraction=self.bruised_fraction, peak_pressure=self.peak_pressure,
-                    peak_flesh_stress=self.peak_flesh_stress, crushed=self.crushed)
+        return dict(bruised=bool(self.bruised), bruised_length=float(self.bruised_length),
+                    bruised_fraction=float(self.bruised_fraction),
+                    peak_pressure=float(self.peak_pressure),
+                    peak_flesh_stress=float(self.peak_flesh_stress), crushed=bool(self.crushed))
 
 
 def contact_modulus(youngs_modulus: float, poisson_ratio: float,

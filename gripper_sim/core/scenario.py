@@ -439,12 +439,15 @@ class PickAndPlace:
                             f'{damage.bruised_fraction * 100:.1f} % of the outline')
         if crushed:
             messages.append(f'crushed: flesh stress {damage.peak_flesh_stress:.4g} Pa')
-        return dict(outcome=outcome, placed=self.placed, dropped=dropped,
-                    dropped_at=self.dropped_at, dropped_phase=self.dropped_phase,
-                    slipped=slipped, slip_distance=self.max_slip, bruised=bruised,
+        return dict(outcome=outcome, placed=bool(self.placed), dropped=dropped,
+                    dropped_at=None if self.dropped_at is None else float(self.dropped_at),
+                    dropped_phase=self.dropped_phase, slipped=bool(slipped),
+                    slip_distance=float(self.max_slip), bruised=bruised,
                     crushed=crushed, message='; '.join(messages),
-                    max_grip_force=self.max_grip_force,
-                    damage=damage.as_dict() if damage is not None else None,
+                    max_grip_force=float(self.max_grip_force),
+                    damage=({k: (v if isinstance(v, bool) else float(v))
+                             for k, v in damage.as_dict().items()}
+                            if damage is not None else None),
                     final_centroid=[float(v) for v in self.last.centroid],
                     phase_times=dict(self.phase_times), duration=self.sim.time)
 

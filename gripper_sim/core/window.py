@@ -83,9 +83,10 @@ class GraspWindow:
                 return None
             return 'inf' if math.isinf(value) else value
         return dict(fruit=self.fruit, finger=self.finger, min_force=number(self.min_force),
-                    max_force=number(self.max_force), window=self.exists,
-                    min_estimate=self.min_estimate, max_estimate=self.max_estimate,
-                    mass=self.mass, friction=self.friction, tolerance=self.tolerance,
+                    max_force=number(self.max_force), window=bool(self.exists),
+                    min_estimate=float(self.min_estimate),
+                    max_estimate=float(self.max_estimate), mass=float(self.mass),
+                    friction=float(self.friction), tolerance=self.tolerance,
                     wall_time=self.wall_time, trials=[vars(t) for t in self.trials])
 
 
@@ -147,10 +148,10 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
                            until='transport', stop_on_slip=(kind == 'hold'),
                            stop_on_bruise=(kind == 'bruise'))
         damage = run['damage'] or {}
-        result = Trial(force=force, held=run['outcome'] in ('held', 'bruised', 'crushed')
-                       and not run['dropped'] and run['slip_distance'] <= _slip_limit(),
-                       bruised=bool(run['bruised']), outcome=run['outcome'],
-                       slip_distance=run['slip_distance'],
+        held = (run['outcome'] in ('held', 'bruised', 'crushed') and not run['dropped']
+                and run['slip_distance'] <= _slip_limit())
+        result = Trial(force=float(force), held=bool(held), bruised=bool(run['bruised']),
+                       outcome=str(run['outcome']), slip_distance=float(run['slip_distance']),
                        peak_pressure=float(damage.get('peak_pressure', 0.0)),
                        wall_time=time.perf_counter() - t0)
         if kind == 'bruise' and result.bruised:
