@@ -148,6 +148,9 @@ class FastPath:
         self._template = None
         self._checked = None
         self._tracker = None
+        self._no_damage = (np.zeros((0, 3)), np.zeros(0), np.zeros(3), np.zeros(0),
+                           np.zeros(0), np.zeros(0), np.zeros((0, kernels.P_SIZE)),
+                           np.zeros(3))
         self._names_of = None
         self._names_cache: tuple = ()
         self._applies = False
@@ -258,6 +261,7 @@ class FastPath:
         v_n = sim.v if sim.v.flags.c_contiguous else np.ascontiguousarray(sim.v)
         model = self.model
         edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
+        damage = self._damage_inputs()
         if timing:
             t1 = time.perf_counter()
         status = kernels.substep(
@@ -267,7 +271,7 @@ class FastPath:
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
             model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
-            self.measures, self.counts)
+            self.measures, self.counts, *damage)
         if timing:
             t2 = time.perf_counter()
         out = self.out
@@ -286,7 +290,7 @@ class FastPath:
         sim._grip = grip_new
         sim._time += dt
         sim._jaw_force = (float(out[2]), float(out[3]))
-        self._measured = (x, normal, pressure, self.measures.tolist())
+        self._measured = (x, normal, pressure, self.measures.tolist(), damage)
         if timing:
             t3 = time.perf_counter()
             self.timers['glue'] += (t1 - t0) + (t3 - t2)
@@ -305,8 +309,9 @@ class FastPath:
         x, v, forces = sim.q, sim.v, sim.contact_forces
         contacts = sim.contacts
         measured = self._measured
+        damage_of_x = None
         if measured is not None and measured[0] is x:
-            _, normal, pressure, values = measured
+            _, normal, pressure, values, damage_of_x = measured
         else:
             values, normal, pressure = self._measure_kernel()
         (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, cvz, any_left, any_right,
@@ -322,7 +327,7 @@ class FastPath:
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
         positions = x.copy()
-        damage = self._damage(positions, normal, contacts.obstacle, ratio)
+        damage = self._damage(positions, normal, contacts.obstacle, ratio, damage_of_x)
         result = _build(StepResult, dict(
             time=sim._time, step=sim._step, positions=positions, velocities=v.copy(),
             contact_forces=forces.copy(), contact_obstacle=contacts.obstacle.copy(),
@@ -356,36 +361,56 @@ class FastPath:
             self._names_of = template
         return self._names_cache
 
-    def _damage(self, positions, normal, obstacle, ratio):
-        """``Simulation._assess_damage`` with the per-step part of ``DamageTracker.update``
-        in the ``damage_update`` kernel (the tracker keeps the state)."""
+    def _damage_inputs(self) -> tuple:
+        """Arguments of the substep kernel's damage part (empty ones skip it)."""
         sim = self.sim
         tracker = sim._damage
-        if type(tracker) is not DamageTracker or sim.fruit.flesh is not None:
-            return sim._assess_damage_of(positions, normal, obstacle, ratio)
+        n_s = len(self.surface)
+        if (type(tracker) is not DamageTracker or sim.fruit.flesh is not None
+                or len(tracker.groups) != len(sim._faces_template)
+                or not np.array_equal(tracker.ring, self.surface)):
+            self._tracker = None
+            return self._no_damage
         if self._tracker is not tracker:
             self._tracker = tracker
-            self._damage_args = (
-                np.ascontiguousarray(tracker.ring, dtype=np.int64),
-                np.asarray(tracker.groups, dtype=np.int64),
-                np.asarray(tracker.curvature, dtype=float),
-                np.asarray(tracker.padded, dtype=float),
-                np.ascontiguousarray(tracker.rest_curvature, dtype=float))
-            self._patches = np.zeros((len(tracker.ring), kernels.P_SIZE))
-        ring, groups, curvature, padded, rest_curvature = self._damage_args
-        covered = tracker.covered.copy()
-        node_pressure = np.empty(len(ring))
-        count = kernels.damage_update(
-            positions, normal, obstacle, ring, groups, curvature, padded, rest_curvature,
-            tracker.bruise_pressure, tracker.rigid_modulus, tracker.pad_modulus, covered,
-            node_pressure, self._patches)
+            self._damage_face = np.array([tracker.groups, tracker.curvature, tracker.padded],
+                                         dtype=float).T.copy().reshape(-1, 3)
+            self._damage_rest = np.ascontiguousarray(tracker.rest_curvature, dtype=float)
+            self._damage_par = np.array([tracker.bruise_pressure, tracker.rigid_modulus,
+                                         tracker.pad_modulus])
+        return (self._damage_face, self._damage_rest, self._damage_par, tracker.covered,
+                np.empty(n_s), np.empty(n_s), np.zeros((n_s, kernels.P_SIZE)), np.zeros(3))
+
+    def _damage(self, positions, normal, obstacle, ratio, computed=None):
+        """``Simulation._assess_damage``: the per-step part of ``DamageTracker.update`` from
+        the substep kernel (``computed``: its damage arguments, for the state it ended
+        in) or else the ``damage_update`` kernel; the tracker keeps the state."""
+        sim = self.sim
+        tracker = sim._damage
+        if self._tracker is not tracker and self._damage_inputs() is self._no_damage:
+            return sim._assess_damage_of(positions, normal, obstacle, ratio)
+        if self._tracker is None:
+            return sim._assess_damage_of(positions, normal, obstacle, ratio)
+        if (computed is not None and computed[3] is tracker.covered
+                and computed[0] is self._damage_face):
+            _, _, _, _, covered, node_pressure, table, d_out = computed
+            count, pressure, length = int(d_out[0]), float(d_out[1]), float(d_out[2])
+        else:
+            covered = tracker.covered.copy()
+            node_pressure = np.empty(len(self.surface))
+            table = np.zeros((len(self.surface), kernels.P_SIZE))
+            face = self._damage_face
+            count, pressure, length = kernels.damage_update(
+                positions, normal, obstacle, self.surface, face[:, 0].astype(np.int64),
+                np.ascontiguousarray(face[:, 1]), np.ascontiguousarray(face[:, 2]),
+                self._damage_rest, tracker.bruise_pressure, tracker.rigid_modulus,
+                tracker.pad_modulus, covered, node_pressure, table)
         tracker.covered = covered
         patches = tuple(
             _build(Contact, dict(body=int(b), load=load, centre=np.array([cx, cz]), radius=a,
                                  peak_pressure=p0, equivalent_radius=re, modulus=modulus))
-            for b, load, cx, cz, a, p0, re, modulus in self._patches[:count].tolist())
+            for b, load, cx, cz, a, p0, re, modulus in table[:count].tolist())
         # the rest of DamageTracker.update
-        pressure = max((c.peak_pressure for c in patches), default=0.0)
         stress = max(TRESCA_OVER_P0 * pressure, 0.0)
         tracker.peak_pressure = max(tracker.peak_pressure, pressure)
         tracker.peak_flesh_stress = max(tracker.peak_flesh_stress, stress)
@@ -393,7 +418,6 @@ class FastPath:
             tracker.crushed = True
         if tracker.failure_strain is not None and ratio > tracker.failure_strain:
             tracker.crushed = True
-        length = float(covered.sum())
         perimeter = tracker.perimeter
         return _build(Damage, dict(
             bruised=tracker.peak_pressure > tracker.bruise_pressure, bruised_length=length,

@@ -313,7 +313,9 @@ def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hes
     values (4,) J: stretching, bending, pressure, gravity. Returns the rank-one c.
     """
     if hessian:
-        band[:] = 0.0
+        flat = band.reshape(band.size)  # a flat loop: ~10x faster than band[:] = 0 in 4-D
+        for m in range(flat.shape[0]):
+            flat[m] = 0.0
     values[0] = ring_stretching(q, edges, spar, pos, hessian, grads[0], band)
     values[1] = ring_bending(q, triples, bpar, pos, hessian, grads[1], band)
     vp, c = ring_pressure(q, ring, press, pos, hessian, grads[2], band, area_grad)
@@ -991,7 +993,8 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, seco
 def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, secondary,
             face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
             nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out,
-            v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts):
+            v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts,
+            d_face, d_rest, d_par, covered_in, covered_out, d_pressure, patches, d_out):
     """One implicit Euler step with predictor-corrector contact, as ``Simulation._substep``,
     and the measures of its end state, as ``Simulation._measure`` (``step_measures``).
 
@@ -1012,6 +1015,12 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
             force N, then the stretching, bending, pressure and gravity energies J].
         normal_out, pressure_out, meas_out: the outputs of ``step_measures``.
         counts: (C_SIZE,) int64, work counters added to (see C_*).
+        d_face .. d_out: damage of the end state by ``damage_update``, skipped when
+            d_rest is empty: d_face (n_faces, 3) [body id, curvature 1/m, padded],
+            d_rest (n_s,) rest curvature 1/m, d_par (3,) [bruise pressure, rigid and pad
+            contact moduli] Pa, covered_in (n_s,) m the bruised cover so far, outputs
+            covered_out (n_s,), d_pressure (n_s,) Pa, patches (n_s, P_SIZE) and d_out (3,)
+            [patches, largest peak pressure Pa, bruised length m].
 
     Returns:
         a status code (OK, or the failure of the last solve).
@@ -1119,8 +1128,23 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
     step_measures(x_out, v_out, forces_out, obstacle, masses, surface, skin_edges,
                   rest_segments, face_par, jaw_origins, fpar[F_DEPTH], edges, spar, triples,
                   bpar, ring, press, gravity_grad, np.bool_(True), values, normal_out,
-                  pressure_out,
-                  meas_out)
+                  pressure_out, meas_out)
+    if d_rest.shape[0] > 0:
+        n_faces = d_face.shape[0]
+        groups = np.empty(n_faces, np.int64)
+        curvature = np.empty(n_faces)
+        padded = np.empty(n_faces)
+        for f in range(n_faces):
+            groups[f] = np.int64(d_face[f, 0])
+            curvature[f] = d_face[f, 1]
+            padded[f] = d_face[f, 2]
+        covered_out[:] = covered_in
+        count, pressure, length = damage_update(
+            x_out, normal_out, obstacle, surface, groups, curvature, padded, d_rest,
+            d_par[0], d_par[1], d_par[2], covered_out, d_pressure, patches)
+        d_out[0] = count
+        d_out[1] = pressure
+        d_out[2] = length
     return OK
 
 
@@ -1318,7 +1342,7 @@ def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_cur
         node_pressure: (n_s,) Pa, output.  patches: (n_s, P_SIZE) output rows.
 
     Returns:
-        the number of patches.
+        (number of patches, largest peak pressure Pa, bruised length sum(covered) m).
     """
     n = ring.shape[0]
     node_pressure[:] = 0.0
@@ -1329,7 +1353,7 @@ def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_cur
         body[r] = groups[o] if o >= 0 else -1
         any_held = any_held or body[r] >= 0
     if not any_held:
-        return 0
+        return 0, 0.0, _total(covered)
     start = 0
     uniform = True
     for r in range(n):
@@ -1402,7 +1426,16 @@ def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_cur
         if p0 > bruise_pressure and n >= 3:
             _cover(x, ring, near, cx, cz, seg,
                    a * math.sqrt(1.0 - (bruise_pressure / p0) ** 2), covered)
-    return n_patches
+    pressure = 0.0
+    for m in range(n_patches):
+        pressure = max(pressure, patches[m, P_PEAK])
+    return n_patches, pressure, _total(covered)
+
+
+@njit(cache=True, error_model='numpy')
+def _total(values):
+    """sum(values)."""
+    return np.sum(values)
 
 
 @njit(cache=True, error_model='numpy')
