@@ -39,6 +39,7 @@ PY_PKGS := numpy scipy pyyaml numba mcap mcap-ros2-support zstandard matplotlib 
 REQ_HASH := $(shell cat requirements.txt setup.py setup.cfg 2>/dev/null | sha1sum | cut -c1-12)
 VENV_STAMP := $(STAMPS)/venv-$(REQ_HASH)
 IFACE_STAMP := $(STAMPS)/interfaces
+KERNEL_STAMP := $(STAMPS)/kernels
 
 .PHONY: help venv interfaces install demo test bench lock clean
 
@@ -84,7 +85,14 @@ $(IFACE_STAMP): $(VENV_STAMP) $(IFACE_SRCS) scripts/fix_ros_cmake_exports.py
 	AMENT_PREFIX_PATH=$(CURDIR)/$(VENV) $(PY) -c 'from gripper_sim_interfaces.msg import FruitState; from gripper_sim_interfaces.action import Grasp; from gripper_sim_interfaces.srv import Step; print("interfaces ok")'
 	touch $@
 
-install: venv interfaces
+# numba compiles the fast-path kernels once and caches them next to the sources: do it
+# at install time so a user's first run does not pay the compile.
+$(KERNEL_STAMP): $(VENV_STAMP) gripper_sim/core/kernels.py gripper_sim/core/fast.py
+	@echo "== kernels: compiling the numba fast path into its cache (~20-60 s, once)"
+	$(PY) -m gripper_sim.core.fast
+	touch $@
+
+install: venv interfaces $(KERNEL_STAMP)
 
 demo: install
 	source scripts/env.sh && scripts/demo
