@@ -148,6 +148,8 @@ class FastPath:
         self._template = None
         self._checked = None
         self._tracker = None
+        self._tracker_seen = None
+        self._damage_faces = None
         self._no_damage = (np.zeros((0, 3)), np.zeros(0), np.zeros(3), np.zeros(0),
                            np.zeros(0), np.zeros(0), np.zeros((0, kernels.P_SIZE)),
                            np.zeros(3))
@@ -365,21 +367,27 @@ class FastPath:
         """Arguments of the substep kernel's damage part (empty ones skip it)."""
         sim = self.sim
         tracker = sim._damage
-        n_s = len(self.surface)
-        if (type(tracker) is not DamageTracker or sim.fruit.flesh is not None
-                or len(tracker.groups) != len(sim._faces_template)
-                or not np.array_equal(tracker.ring, self.surface)):
-            self._tracker = None
+        if tracker is not self._tracker_seen or sim._faces_template is not self._damage_faces:
+            # checked once per tracker (reset makes a new one) and face set
+            self._tracker_seen = tracker
+            self._damage_faces = sim._faces_template
+            if (type(tracker) is not DamageTracker or sim.fruit.flesh is not None
+                    or len(tracker.groups) != len(sim._faces_template)
+                    or not np.array_equal(tracker.ring, self.surface)):
+                self._tracker = None
+            else:
+                self._tracker = tracker
+                self._damage_face = np.array(
+                    [tracker.groups, tracker.curvature, tracker.padded],
+                    dtype=float).T.copy().reshape(-1, 3)
+                self._damage_rest = np.ascontiguousarray(tracker.rest_curvature, dtype=float)
+                self._damage_par = np.array([tracker.bruise_pressure, tracker.rigid_modulus,
+                                             tracker.pad_modulus])
+        if self._tracker is None:
             return self._no_damage
-        if self._tracker is not tracker:
-            self._tracker = tracker
-            self._damage_face = np.array([tracker.groups, tracker.curvature, tracker.padded],
-                                         dtype=float).T.copy().reshape(-1, 3)
-            self._damage_rest = np.ascontiguousarray(tracker.rest_curvature, dtype=float)
-            self._damage_par = np.array([tracker.bruise_pressure, tracker.rigid_modulus,
-                                         tracker.pad_modulus])
+        n_s = len(self.surface)
         return (self._damage_face, self._damage_rest, self._damage_par, tracker.covered,
-                np.empty(n_s), np.empty(n_s), np.zeros((n_s, kernels.P_SIZE)), np.zeros(3))
+                np.empty(n_s), np.empty(n_s), np.empty((n_s, kernels.P_SIZE)), np.empty(3))
 
     def _damage(self, positions, normal, obstacle, ratio, computed=None):
         """``Simulation._assess_damage``: the per-step part of ``DamageTracker.update`` from
@@ -387,9 +395,7 @@ class FastPath:
         in) or else the ``damage_update`` kernel; the tracker keeps the state."""
         sim = self.sim
         tracker = sim._damage
-        if self._tracker is not tracker and self._damage_inputs() is self._no_damage:
-            return sim._assess_damage_of(positions, normal, obstacle, ratio)
-        if self._tracker is None:
+        if self._damage_inputs() is self._no_damage:
             return sim._assess_damage_of(positions, normal, obstacle, ratio)
         if (computed is not None and computed[3] is tracker.covered
                 and computed[0] is self._damage_face):
