@@ -109,7 +109,52 @@ def _op_loops():
                 ok += k._ldl_blocks(ab)
         return ok
 
-    return evaluations, factorisations
+    @njit(cache=True)
+    def contact_passes(reps, obstacle, mode, normal_force, bounce, impact, secondary, x_n, v_n,
+                       reaction, face_par, face_dyn, surface, dt, v_corr, threshold, v_min):
+        n = x_n.shape[0]
+        start, filters = np.empty((n, 2)), np.empty((n, 2, 2))
+        frn, frt = np.empty(n, np.int64), np.empty((n, 2))
+        frb, frs = np.empty(n), np.empty(n)
+        released, toggled = np.zeros(n, np.bool_), np.zeros(n, np.bool_)
+        changed = 0
+        for _ in range(reps):
+            o, m, nf = obstacle.copy(), mode.copy(), normal_force.copy()
+            b, i, s = bounce.copy(), impact.copy(), secondary.copy()
+            k.contact_constraints(o, m, nf, i, s, x_n, x_n, face_par, face_dyn, dt, v_corr,
+                                  start, filters, frn, frt, frb, frs)
+            changed += k.update_contacts(o, m, nf, b, i, s, x_n, x_n, v_n, reaction, face_par,
+                                         face_dyn, surface, dt, threshold, v_min, released,
+                                         toggled)
+        return changed
+
+    @njit(cache=True)
+    def measures(reps, x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
+                 face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, grav,
+                 d_face, d_rest, d_par, covered):
+        n, ns = x.shape[0], surface.shape[0]
+        normal, pressure, out = np.empty(n), np.empty(ns), np.empty(k.M_SIZE)
+        values = np.zeros(4)
+        d_pressure, patches = np.empty(ns), np.empty((ns, k.P_SIZE))
+        groups = np.empty(d_face.shape[0], np.int64)
+        for f in range(d_face.shape[0]):
+            groups[f] = np.int64(d_face[f, 0])
+        curvature = d_face[:, 1].copy()
+        padded = d_face[:, 2].copy()
+        total = 0.0
+        for _ in range(reps):
+            k.step_measures(x, v, forces, obstacle, masses, surface, skin_edges,
+                            rest_segments, face_par, jaw_origins, depth, edges, spar, triples,
+                            bpar, ring, press, grav, np.bool_(True), values, normal, pressure,
+                            out)
+            if d_rest.shape[0]:
+                work = covered.copy()
+                total += k.damage_update(x, normal, obstacle, surface, groups, curvature,
+                                         padded, d_rest, d_par[0], d_par[1], d_par[2], work,
+                                         d_pressure, patches)[1]
+        return total
+
+    return evaluations, factorisations, contact_passes, measures
 
 
 def _best_time(fn, reps: int) -> float:
@@ -126,7 +171,7 @@ def _best_time(fn, reps: int) -> float:
 def kernel_split(sim: Simulation) -> dict:
     """Seconds per operation at the current state: evaluations, factorisation, solve."""
     from gripper_sim.core import kernels as k
-    evaluations, factorisations = _op_loops()
+    evaluations, factorisations, contact_passes, measures = _op_loops()
     path = sim._fast
     n, dt = sim.fruit.n_nodes, sim.dt
     x_n, v_n = sim.q, sim.v
@@ -148,11 +193,22 @@ def kernel_split(sim: Simulation) -> dict:
               path.fpar[k.F_BETA], filters, frn, frt, frb, frs) + energy
     fac = (q, x_n.ravel(), dt, path.masses2, path.fpar[k.F_ALPHA], path.fpar[k.F_BETA],
            filters, frn, frt, frb, frs) + energy
+    contact = (c.obstacle, c.mode, c.normal_force, c.bounce_speed, c.impact_gap, c.secondary,
+               x_n, v_n, sim.contact_forces, face_par, face_dyn, path.surface, dt,
+               sim.config['contact.max_correction_speed'],
+               sim.config['contact.release_threshold'], max(5 * sim.gravity.g * dt, 1e-3))
+    damage = path._damage_inputs()
+    origins = np.ascontiguousarray(face_dyn[:2, 2:4])
+    meas = (x_n, v_n, sim.contact_forces, c.obstacle, path.masses, path.surface,
+            path.skin_edges, path.rest_segments, face_par, origins, sim.fruit.depth,
+            *energy[:7], *damage[:4])
     return dict(
         hessian_eval=_best_time(lambda r: evaluations(r, True, *common), 2000),
         eval=_best_time(lambda r: evaluations(r, False, *common), 2000),
         factor=_best_time(lambda r: factorisations(r, *fac, False), 2000),
-        solve=_best_time(lambda r: factorisations(r, *fac, True), 2000))
+        solve=_best_time(lambda r: factorisations(r, *fac, True), 2000),
+        contact_pass=_best_time(lambda r: contact_passes(r, *contact), 2000),
+        kernel_measures=_best_time(lambda r: measures(r, *meas), 2000))
 
 
 def profile_generic(sim: Simulation, hold: float) -> dict:
@@ -206,15 +262,19 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
         assembly = (counts[k.C_HESSIAN_EVALS] * ops['hessian_eval']
                     + counts[k.C_EVALS] * ops['eval'])
         solve = counts[k.C_FACTORS] * (ops['factor'] + ops['solve'])
+        contact = counts[k.C_SOLVES] * ops['contact_pass']
+        substeps = counts[k.C_SUBSTEPS]
+        kernel_measures = substeps * ops['kernel_measures']
         kernel = timers['kernel']
-        scale = 1.0
-        if assembly + solve > kernel:  # op costs timed on a quiet core: keep within kernel
-            scale = kernel / (assembly + solve)
-        assembly, solve = assembly * scale, solve * scale
-        contact = kernel - assembly - solve
+        parts = assembly + solve + contact + kernel_measures
+        scale = min(1.0, kernel / parts)  # op costs timed in a loop: keep within the kernel
+        assembly, solve, contact, kernel_measures = (
+            assembly * scale, solve * scale, contact * scale, kernel_measures * scale)
+        measures = timers['measures'] + kernel_measures
         row['split'] = dict(assembly=assembly / t_cpu, solve=solve / t_cpu,
-                            contact=contact / t_cpu, measures=timers['measures'] / t_cpu,
-                            other=1.0 - (kernel + timers['measures']) / t_cpu)
+                            contact=contact / t_cpu, measures=measures / t_cpu,
+                            other=1.0 - (assembly + solve + contact + measures) / t_cpu)
+        row['kernel_rest_us'] = (kernel - parts * scale) / steps * 1e6
         row['ops_us'] = {key: value * 1e6 for key, value in ops.items()}
         row['counts_per_step'] = dict(
             passes=counts[k.C_SOLVES] / steps, hessian_evals=counts[k.C_HESSIAN_EVALS] / steps,
@@ -266,9 +326,12 @@ def main(argv=None) -> int:
             ops = ', '.join(f'{key} {value:.2f}' for key, value in r['ops_us'].items())
             per = ', '.join(f'{key} {value:.2f}' for key, value in r['counts_per_step'].items())
             print(f'\n{r["model"]} kernel operations, us each: {ops}')
-            print(f'{r["model"]} per step: {per}; whole kernel {r["kernel_us"]:.1f} us, '
-                  f'Python glue around it {r["glue_us"]:.1f} us (kinematics, state copies, '
-                  f'dispatch)')
+            print(f'{r["model"]} per step: {per}; whole kernel {r["kernel_us"]:.1f} us, of '
+                  f'which {r["kernel_rest_us"]:.1f} us dispatch and Newton bookkeeping; Python '
+                  f'glue around it {r["glue_us"]:.1f} us (gripper kinematics, state copies)')
+            print(f'{r["model"]} "other" = that glue and bookkeeping, Simulation.step and the '
+                  f'grasp state machine; "measures" = StepResult, damage (Python objects and '
+                  f'kernel)')
     return 0
 
 

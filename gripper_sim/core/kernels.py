@@ -56,8 +56,8 @@ F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
 # ipar layout
 I_MAX_IT, I_MAX_PASSES = range(2)
 #: work counters: Newton solves (contact passes), energy evaluations with and without
-#: the Hessian, Newton matrix factorisations
-C_SOLVES, C_HESSIAN_EVALS, C_EVALS, C_FACTORS, C_SIZE = range(5)
+#: the Hessian, Newton matrix factorisations, substeps
+C_SOLVES, C_HESSIAN_EVALS, C_EVALS, C_FACTORS, C_SUBSTEPS, C_SIZE = range(6)
 
 
 def band_order(n_nodes: int) -> np.ndarray:
@@ -1027,6 +1027,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
     """
     n = x_n.shape[0]
     dt = fpar[F_DT]
+    counts[C_SUBSTEPS] += 1
     gap0, lift0, x0, gap1, lift1, x1, gap_rate, lift_rate, x_rate = grip
     for side in range(2):
         sign = -1.0 if side == 0 else 1.0
