@@ -349,6 +349,8 @@ def run_window(args) -> int:
             else f'{window.max_force:.3g} N')
     print(f'  holds from      {low}   (m g / (2 mu) = {window.min_estimate:.3g} N, '
           f'm = {window.mass * 1e3:.0f} g, mu = {window.friction:g})')
+    if window.min_force_no_slip is not None:
+        print(f'  slips < 1 mm    from {window.min_force_no_slip:.3g} N or less (tried)')
     print(f'  bruises above   {high}   (Hertz estimate {window.max_estimate:.3g} N)')
     if window.exists:
         top = 'gripper.max_force' if window.max_force == math.inf else \

@@ -428,6 +428,8 @@ class PickAndPlace:
             outcome = 'slipped'
         elif self.placed:
             outcome = 'placed'
+        elif slipped and self.until != 'settle' and self.reached_grip:
+            outcome = 'slipped'
         elif self.outcome is None and self.until != 'settle' and self.reached_grip:
             outcome = 'held'
         else:
@@ -445,6 +447,7 @@ class PickAndPlace:
                     slip_distance=float(self.max_slip), bruised=bruised,
                     crushed=crushed, message='; '.join(messages),
                     max_grip_force=float(self.max_grip_force),
+                    sliding=bool(self.last.slipping),
                     damage=({k: (v if isinstance(v, bool) else float(v))
                              for k, v in damage.as_dict().items()}
                             if damage is not None else None),
