@@ -80,7 +80,8 @@ class Simulation:
                              else centre_z)
         self.gravity = Gravity(self.fruit.masses, c['world.gravity'])
         self._facets = fingers.left_facets(c)
-        self._plain_jaws = c['gripper.finger.type'] == 'flat' and not c['gripper.finger.pad.enabled']
+        self._plain_jaws = (c['gripper.finger.type'] == 'flat'
+                            and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
         self.solver = ImplicitEulerSolver(
             self.fruit.masses, list(self.fruit.energies) + [self.gravity]
@@ -296,7 +297,8 @@ class Simulation:
     def _make_pad(self) -> PadLayer:
         from gripper_sim.core.measures import tributary_lengths
         c = self.config
-        return PadLayer(self.fruit.surface, tributary_lengths(self.fruit, self.fruit.rest_positions),
+        rest = self.fruit.rest_positions
+        return PadLayer(self.fruit.surface, tributary_lengths(self.fruit, rest),
                         self.fruit.depth, c['gripper.finger.pad.thickness'],
                         c['gripper.finger.pad.youngs_modulus'],
                         c['gripper.finger.pad.poisson_ratio'], c['contact.pad.friction'],
