@@ -464,10 +464,15 @@ def _frozen_builder(cls):
     plain = (not hasattr(cls, '__post_init__') and not hasattr(cls, '__slots__')
              and all(f.default_factory is dataclasses.MISSING for f in fields))
     new = object.__new__
+    set_attribute = object.__setattr__
 
     def build(values: dict):
+        """``values`` (a fresh dict the caller gives away) becomes the instance dict."""
         if plain:
             obj = new(cls)
+            if len(values) == size:  # every field given (the fast paths do)
+                set_attribute(obj, '__dict__', values)
+                return obj
             state = obj.__dict__
             state.update(defaults)
             state.update(values)

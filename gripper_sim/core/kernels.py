@@ -726,19 +726,9 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         for m in range(n2):
             residual = max(residual, abs(g_f[m]))
             dq_max = max(dq_max, abs(dq[m]))
-        if dq_max / dt < tol:
-            for m in range(n2):
-                q[m] = q[m] + dq[m]
-            counts[C_EVALS] += 1
-            _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                      fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
-                      gravity_grad, pos, no, grad, fric_grad, grads, band, area_grad, tmp,
-                      cdq, values)
-            history[n_hist] = dq_max / dt
-            n_hist += 1
-            for m in range(n2):
-                reaction_out[m] = grad[m] - fric_grad[m]
-            return OK, iteration, n_hist
+        # a step below the tolerance is taken whole, without a line search (the first
+        # trial below, accepted as it is): q + dq, then the reaction there
+        small = dq_max / dt < tol
         accepted = False
         phi_trial = 0.0
         c_trial = 0.0
@@ -757,7 +747,7 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
                 fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
                 gravity_grad, pos, not norm < tol, grad_t, fric_grad, grads, band, area_grad,
                 tmp, cdq, values)
-            if math.isfinite(phi_trial) and (
+            if small or math.isfinite(phi_trial) and (
                     phi_trial <= phi + 1e-4 * step * slope
                     or _filtered_max(filters, grad_t) < 0.5 * residual):
                 accepted = True
