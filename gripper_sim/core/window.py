@@ -114,10 +114,20 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     side = [math.dist(a, b), math.dist(b, c), math.dist(a, c)]
     area2 = abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
     radius = side[0] * side[1] * side[2] / (2 * area2) if area2 > 0 else 0.5 * fruit.rest_width
+    pad = config['gripper.finger.pad.enabled']
     e_star = contact_modulus(config['fruit.flesh.youngs_modulus'],
-                             config['fruit.flesh.poisson_ratio'])
+                             config['fruit.flesh.poisson_ratio'],
+                             config['gripper.finger.pad.youngs_modulus'] if pad else None,
+                             config['gripper.finger.pad.poisson_ratio'])
+    in_plane = radius
+    if config['gripper.finger.type'] == 'arc':  # a concave face conforms: 1/R - 1/Rf
+        in_plane = 1.0 / max(1.0 / radius - 1.0 / config['gripper.finger.radius'],
+                             1e-3 / radius)
+    re = math.sqrt(in_plane * radius)
     p_b = config['fruit.bruise_pressure']
-    bruise = p_b ** 3 * math.pi ** 3 * radius ** 2 / (6 * e_star ** 2)
+    bruise = p_b ** 3 * math.pi ** 3 * re ** 2 / (6 * e_star ** 2)
+    if config['gripper.finger.type'] == 'vgroove':  # two flanks share a jaw's force
+        bruise *= 2 * math.sin(math.radians(0.5 * config['gripper.finger.groove_angle']))
     return hold, bruise, mass
 
 
