@@ -44,19 +44,23 @@ from gripper_sim.core.simulation import Simulation  # noqa: E402
 FORCE, LIFT = 3.0, 0.05
 
 
-def grasp(sim: Simulation, hold: float) -> tuple[float, float, int, int, dict]:
-    """One grasp-and-lift from the initial state: (wall s, cpu s, steps, iterations, summary)."""
+def grasp(sim: Simulation, hold: float) -> tuple[float, float, int, int, dict, np.ndarray]:
+    """One grasp-and-lift from the initial state: (wall s, cpu s, steps, iterations, summary,
+    wall s of each step with its grasp update)."""
     sim.reset()
     iterations = [0]
+    stamps = []
+    clock = time.perf_counter
 
     def count(result, _phase):
         iterations[0] += result.newton_iterations
+        stamps.append(clock())
 
     sequence = GraspSequence(sim, FORCE, lift_height=LIFT, hold_time=hold)
     wall, cpu = time.perf_counter(), time.process_time()
     summary = run_grasp(sim, sequence, on_step=count)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-    return wall, cpu, sim._step, iterations[0], summary
+    return wall, cpu, sim._step, iterations[0], summary, np.diff(stamps)
 
 
 def _op_loops():
@@ -239,12 +243,16 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
     sim = Simulation(config)
     grasp(sim, 0.01)  # warm up: numba cache load, first-call costs
     runs = [grasp(sim, hold) for _ in range(repeat if sim._fast is not None else 1)]
-    wall, cpu, steps, iterations, summary = min(runs, key=lambda r: r[0])
+    wall, cpu, steps, iterations, summary, per_step = min(runs, key=lambda r: r[0])
     sim_time = steps * sim.dt
+    # the typical step, less exposed to other processes than the total: median and the
+    # 10th percentile of single steps (each with its grasp update)
+    median, p10 = np.median(per_step), np.percentile(per_step, 10)
     row = dict(model=name, nodes=sim.fruit.n_nodes, path='fast' if sim._fast else 'generic',
                steps=steps, sim_time=sim_time, wall_per_sim=wall / sim_time,
                cpu_per_sim=cpu / sim_time, rtf=sim_time / wall, us_per_step=wall / steps * 1e6,
-               iterations=iterations / steps, outcome=summary['outcome'])
+               iterations=iterations / steps, outcome=summary['outcome'],
+               median_us=median * 1e6, p10_us=p10 * 1e6)
     if sim._fast is not None:
         path = sim._fast
         path.timing = True
@@ -311,6 +319,11 @@ def main(argv=None) -> int:
               f'{r["iterations"]:>14.2f} {r["outcome"]}')
     print('(RTF = simulated s per wall s; cpu = this process\'s CPU time, what an idle core '
           'would give)')
+    for r in rows:
+        print(f'{r["model"]}: single steps (with the grasp update): median '
+              f'{r["median_us"]:.1f} us (RTF {r["sim_time"] / r["steps"] / r["median_us"] * 1e6:.1f}), '
+              f'10th percentile {r["p10_us"]:.1f} us '
+              f'(RTF {r["sim_time"] / r["steps"] / r["p10_us"] * 1e6:.1f})')
     print()
     print('where the time goes (share of a grasp-and-lift, CPU us per step):')
     print(f'{"model":<6} {"assembly":>14} {"solve":>14} {"contact":>14} {"measures":>14} '
