@@ -166,8 +166,11 @@ class GraspServer:
             summary = dict(run.sequence.summary())
             phase = run.sequence.phase
             canceled = goal_handle.is_cancel_requested and not run.sequence.done
-            if canceled or run.abort_reason or run.error:
-                node.hold_jaws()   # stop the motion, hold the jaws where they are
+            # Stop the motion, hold the jaws where they are. Not after an abort: that
+            # came with a reset (or the shutdown), and holding now could override a
+            # command sent since the reset.
+            if run.abort_reason is None and (canceled or run.error):
+                node.hold_jaws()
         result = self._result(summary)
         if run.abort_reason or run.error:
             why = run.abort_reason or f'grasp sequence failed: {run.error}'

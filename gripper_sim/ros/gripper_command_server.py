@@ -180,8 +180,8 @@ class GripperCommandServer:
             last = node.sim.last
             canceled = (goal_handle.is_cancel_requested and run.abort_reason is None
                         and not (run.reached or run.stalled))
-            if canceled or run.error:
-                node.hold_jaws()
+            if run.abort_reason is None and (canceled or run.error):
+                node.hold_jaws()   # not after an abort: a reset or a newer goal moved on
         result = self._result(run, last)
         state = f'gap {last.gap:.4f} m, effort {last.grip_force:.2f} N'
         if run.abort_reason or run.error:

@@ -11,6 +11,7 @@ markers and the table; ``left_jaw`` / ``right_jaw`` for the jaw wrenches (parall
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
@@ -176,6 +177,18 @@ class MessageContext:
         self.bruised = False
         self.crushed = False
         self._node_bruised = None
+
+    def snapshot(self) -> 'MessageContext':
+        """A copy of the run history as it is now, for building messages later.
+
+        The node builds a step's messages outside its simulation lock while the
+        physics goes on (or a reset clears the history): they read this copy.
+        """
+        copy = dataclasses.replace(self)
+        copy.bruised, copy.crushed = self.bruised, self.crushed
+        if self._node_bruised is not None:
+            copy._node_bruised = self._node_bruised.copy()
+        return copy
 
     def observe(self, result: StepResult) -> None:
         """Latch bruising and crushing from ``result`` into the run history."""

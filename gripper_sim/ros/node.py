@@ -3,7 +3,10 @@
 Physics runs in its own thread at the configured dt, paced to ``real_time_factor``
 (0 = as fast as possible), and publishes every ``1 / publish_rate`` s of sim time.
 Callbacks only validate and enqueue: a command takes effect on the next physics step.
-One lock guards the simulation; action servers hook in as step listeners.
+One lock guards the simulation (``SimLock``: the physics thread lets a waiting callback
+have it before its next step); action servers hook in as step listeners. Published
+batches go out in step order: a state older than one already published (e.g. a step
+that finished just before a reset) is dropped, never published after it.
 
 See the README section "ROS interface" for every topic, service, action and parameter.
 """
@@ -46,6 +49,8 @@ MAX_STEPS_PER_REQUEST = 1_000_000
 # Falling further behind real time than this re-anchors the pacing instead of racing.
 MAX_LAG = 0.25   # s of wall time
 SPEED_WINDOW = 5.0   # s of wall time over which the achieved real-time factor is measured
+# The physics thread waits at most this long for callbacks waiting for the lock.
+LOCK_YIELD_TIMEOUT = 0.5   # s
 
 
 def command_problem(value: float, what: str, unit: str, allow_negative: bool = False
@@ -56,6 +61,63 @@ def command_problem(value: float, what: str, unit: str, allow_negative: bool = F
     if value < 0 and not allow_negative:
         return f'{what} must not be negative, got {value} {unit}'
     return None
+
+
+class SimLock:
+    """The simulation lock: re-entrant, and fair to the threads that wait for it.
+
+    The physics thread steps back to back at ``real_time_factor`` 0 (or whenever it
+    cannot keep up), releasing the lock only for a moment between steps. A plain lock
+    then nearly always goes straight back to it: a callback waiting for the lock
+    (``~/reset``, ``~/pause``, an action, a recording switch) could wait for seconds or
+    for ever. The physics thread calls ``yield_to_waiters`` before each step, so a
+    thread already waiting gets the lock first. Use it like ``threading.RLock``.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()
+        self._state = threading.Condition(threading.Lock())
+        self._waiting = 0
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        if self._lock.acquire(False):   # free, or held by this thread
+            return True
+        if not blocking:
+            return False
+        with self._state:
+            self._waiting += 1
+        try:
+            return self._lock.acquire(True, timeout)
+        finally:
+            with self._state:
+                self._waiting -= 1
+                if not self._waiting:
+                    self._state.notify_all()
+
+    def release(self) -> None:
+        self._lock.release()
+
+    def __enter__(self) -> 'SimLock':
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+    @property
+    def waiting(self) -> int:
+        """How many threads are blocked waiting for the lock."""
+        return self._waiting
+
+    def yield_to_waiters(self, timeout: float) -> None:
+        """Until every thread waiting for the lock got it (at most ``timeout`` s).
+
+        Call it without holding the lock (it would be a deadlock otherwise, bounded by
+        ``timeout``).
+        """
+        with self._state:
+            if self._waiting:
+                self._state.wait_for(lambda: not self._waiting, timeout)
 
 
 class JawOwner:
@@ -85,7 +147,11 @@ class SimNode(Node):
                  **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self.params = SimParameters(self, fruit=fruit, config_file=config_file)
-        self.lock = threading.RLock()
+        self.lock = SimLock()
+        # Publishing: one batch at a time, in step order (see _publish).
+        self._publish_lock = threading.Lock()
+        self._sequence = 0          # +1 per step and per reset, under ``lock``
+        self._published = -1        # sequence number of the last batch published
         self.sim = simulation_factory(dict(self.params.config))
         self.message_context = MessageContext.from_config(self.params.config,
                                                           initial=self.sim.last)
@@ -147,7 +213,7 @@ class SimNode(Node):
             f"{config['fruit.nodes']} nodes), dt {self.sim.dt:g} s, publishing every "
             f'{self._publish_every} steps ({1.0 / (self._publish_every * self.sim.dt):g} Hz '
             f'sim time), real-time factor {self._rtf:g}')
-        self._publish(self.sim.last)
+        self._publish(self.sim.last, self.message_context.snapshot(), self._sequence)
         self._start_recording_at_startup()
         self._thread = threading.Thread(target=self._run, name='physics', daemon=True)
         if start:
@@ -233,8 +299,10 @@ class SimNode(Node):
                 self._wake.wait(0.5)
                 self._wake.clear()
                 continue
+            # A callback waiting for the lock (reset, pause, an action) goes first.
+            self.lock.yield_to_waiters(LOCK_YIELD_TIMEOUT)
             try:
-                self.advance()
+                self.advance(unless_paused=True)
             except Exception as err:   # never let the physics thread die silently
                 self.get_logger().error(f'physics step raised {type(err).__name__}: {err}; '
                                         'resetting the simulation')
@@ -269,10 +337,17 @@ class SimNode(Node):
                 f'{rtf:g}: the physics cannot keep up (fewer nodes or a larger '
                 'physics.sim.dt would)')
 
-    def advance(self) -> StepResult | None:
-        """Apply queued commands and take one physics step; None if the step failed."""
+    def advance(self, *, unless_paused: bool = False) -> StepResult | None:
+        """Apply queued commands and take one physics step; None if the step failed.
+
+        Args:
+            unless_paused: take no step (None) if the node is paused, checked under the
+                lock (the physics thread: no step starts after ``~/pause`` answered).
+        """
         batch = None
         with self.lock:
+            if unless_paused and self._paused:
+                return None
             self._apply_commands()
             try:
                 result = self.sim.step()
@@ -283,17 +358,19 @@ class SimNode(Node):
                 self._recover(f'step produced non-finite values at t = {result.time:.4f} s')
                 return None
             self.steps_taken += 1
+            self._sequence += 1
             self.message_context.observe(result)
             for listener in list(self._step_listeners):
                 listener(result)
             if result.step % self._publish_every == 0:
-                batch = result
+                # built outside the lock from a copy of the run history as of this step
+                batch = (result, self.message_context.snapshot(), self._sequence)
             # Under the lock, so a recording started or stopped (also under the lock)
             # holds exactly the steps taken in between, none twice.
             for observer in self._observers:
                 observer(result)
         if batch is not None:
-            self._publish(batch)
+            self._publish(*batch)
         return result
 
     def _apply_commands(self) -> None:
@@ -322,26 +399,38 @@ class SimNode(Node):
             self.sim.reset()
             self.message_context.reset()
             self._anchor = (time.monotonic(), self.sim.time)
+            self._sequence += 1
             initial = self.sim.last
+            batch = (initial, self.message_context.snapshot(), self._sequence)
             for listener in self._reset_listeners:
                 listener(initial)
-        self._publish(initial)
+        self._publish(*batch)
 
-    def _publish(self, result: StepResult) -> None:
-        stamp = messages.time_msg(result.time)
-        wanted = [suffix for suffix, pub in self._topic_publishers.items()
-                  if (suffix != 'clock' or self._publish_clock)
-                  and (self._publish_observers or pub.get_subscription_count() > 0)]
-        if not wanted:
-            return
-        batch = build_messages(result, self.message_context, stamp, topics=wanted)
-        for suffix, msg in batch.items():
-            self._topic_publishers[suffix].publish(msg)
-        self.publish_count += 1
-        if self._publish_observers:
-            ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-            for observer in self._publish_observers:
-                observer(batch, ns)
+    def _publish(self, result: StepResult, context: MessageContext, sequence: int) -> None:
+        """Publish the batch of step ``sequence``, unless a later one is already out.
+
+        Called outside the simulation lock, from the physics thread, ``~/step`` and
+        ``~/reset``: without the check a step that finished just before a reset could
+        go out after the reset state (and a client would never see t = 0).
+        """
+        with self._publish_lock:
+            if sequence <= self._published:
+                return
+            self._published = sequence
+            stamp = messages.time_msg(result.time)
+            wanted = [suffix for suffix, pub in self._topic_publishers.items()
+                      if (suffix != 'clock' or self._publish_clock)
+                      and (self._publish_observers or pub.get_subscription_count() > 0)]
+            if not wanted:
+                return
+            batch = build_messages(result, context, stamp, topics=wanted)
+            for suffix, msg in batch.items():
+                self._topic_publishers[suffix].publish(msg)
+            self.publish_count += 1
+            if self._publish_observers:
+                ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+                for observer in self._publish_observers:
+                    observer(batch, ns)
 
     # ------------------------------------------------------------ parameters
     def _set_publish_rate(self, rate: float) -> None:
@@ -570,13 +659,16 @@ class SimNode(Node):
         return response
 
     def _on_pause(self, request, response):
-        self._paused = bool(request.data)
-        if not self._paused:
-            self._anchor = (time.monotonic(), self.sim.time)
+        # Under the lock: once this answers "paused", the physics thread takes no step.
+        with self.lock:
+            self._paused = bool(request.data)
+            if not self._paused:
+                self._anchor = (time.monotonic(), self.sim.time)
+            sim_time = self.sim.time
         self._wake.set()
         response.success = True
         state = 'paused' if self._paused else 'running'
-        response.message = f'{state} at t = {self.sim.time:.6f} s'
+        response.message = f'{state} at t = {sim_time:.6f} s'
         self.get_logger().info(response.message)
         return response
 
