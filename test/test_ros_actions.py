@@ -36,9 +36,9 @@ def running(tmp_path_factory):
 def client(running):
     process, client = running
     assert process.running, process.log()
-    client.pause(False)
-    client.reset()
-    client.spin_until(lambda: client.sim_time() < 0.05, 30, 'the reset state')
+    # reset while paused: a fast node would otherwise have moved on (and its reset
+    # state dropped from the history) before the client sees it
+    client.restart()
     return client
 
 
@@ -53,11 +53,20 @@ def gripper_goal(position, max_effort=0.0):
 
 
 def test_grasp_succeeds_with_real_feedback(client):
-    feedback = []
-    start = client.sim_time()
-    handle = client.send_goal(client.grasp, grasp_goal(8.0, lift=0.02, hold=0.3), feedback)
-    assert handle.accepted
-    status, result = client.result(handle)
+    # At real time, as a user's client sees it: as fast as possible the node can send
+    # feedback faster than this client reads (the depth-10 history drops the surplus),
+    # and be well past the goal's end before the client sees its result.
+    assert client.set_parameters(real_time_factor=1.0)[0].successful
+    try:
+        feedback = []
+        start = client.sim_time()
+        handle = client.send_goal(client.grasp, grasp_goal(8.0, lift=0.02, hold=0.3),
+                                  feedback)
+        assert handle.accepted
+        status, result = client.result(handle)
+        duration = client.sim_time() - start
+    finally:
+        client.set_parameters(real_time_factor=0.0)
     assert status == GoalStatus.STATUS_SUCCEEDED, result.message
     assert result.success and not result.slipped and not result.bruised
     assert result.max_grip_force == pytest.approx(8.0, rel=0.1)
@@ -71,7 +80,6 @@ def test_grasp_succeeds_with_real_feedback(client):
     # feedback carries the real state, at >= 10 Hz of sim time
     assert max(f.grip_force for f in feedback) > 7.0
     assert min(f.gap for f in feedback) < INITIAL_GAP - 0.005
-    duration = client.sim_time() - start
     assert len(feedback) >= 10 * duration * 0.9
     # the fruit is up in the air, held
     assert client.latest['fruit/state'].centroid.z > 0.0635 / 2 + 0.015
@@ -88,7 +96,9 @@ def test_a_weak_grasp_slips(client):
 
 def test_a_second_grasp_is_rejected_with_a_reason_and_cancel_holds_the_jaws(client):
     feedback = []
-    first = client.send_goal(client.grasp, grasp_goal(6.0, lift=0.02, hold=30.0), feedback)
+    # held far longer than the exchanges below take, however fast the node steps
+    first = client.send_goal(client.grasp, grasp_goal(6.0, lift=0.02, hold=3000.0),
+                             feedback)
     assert first.accepted
     client.spin_until(lambda: any(f.phase in ('lifting', 'holding') for f in feedback), 120,
                       'the first grasp to lift')
@@ -158,7 +168,9 @@ def test_gripper_command_stalls_on_the_fruit_with_the_real_effort(client):
     assert result.stalled and not result.reached_goal
     assert result.effort == pytest.approx(5.0, rel=0.05)
     assert 0.05 < result.position < 0.0635
-    assert feedback[-1].stalled and max(f.effort for f in feedback) > 4.5
+    # the last feedback reports the stall (it may arrive here after the result)
+    client.spin_until(lambda: feedback and feedback[-1].stalled, 30, 'the stalled feedback')
+    assert max(f.effort for f in feedback) > 4.5
 
 
 def test_gripper_command_with_allow_stalling_succeeds_on_a_stall(client):
@@ -174,8 +186,11 @@ def test_gripper_command_with_allow_stalling_succeeds_on_a_stall(client):
 
 def test_a_new_gripper_command_preempts_the_active_one(client):
     client.pause(True)    # keep the first goal running until the second arrives
-    first = client.send_goal(client.gripper_cmd, gripper_goal(0.040, 5.0))
+    started = []
+    first = client.send_goal(client.gripper_cmd, gripper_goal(0.040, 5.0), started)
     assert first.accepted
+    # executing (it has the jaws: its first feedback went out), then the second goal
+    client.spin_until(lambda: started, 30, "the first goal's feedback")
     second = client.send_goal(client.gripper_cmd, gripper_goal(0.070, 5.0))
     assert second.accepted
     status, result = client.result(first)
@@ -186,19 +201,20 @@ def test_a_new_gripper_command_preempts_the_active_one(client):
 
 
 def test_gripper_command_cancel_holds_the_jaws(client):
+    # Paused and stepped by hand: canceled part-way to the goal, however fast the node
+    # steps and however slowly this client's cancel gets there.
+    client.pause(True)
     feedback = []
-    ok, = client.set_parameters(real_time_factor=0.5)   # slow: cancel well before the goal
-    assert ok.successful
-    try:
-        handle = client.send_goal(client.gripper_cmd, gripper_goal(0.066, 5.0), feedback)
-        assert handle.accepted
-        client.spin_until(lambda: feedback and feedback[-1].position < 0.072, 60,
-                          'the jaws to start closing')
-        client.cancel(handle)
-        status, result = client.result(handle)
-    finally:
-        client.set_parameters(real_time_factor=0.0)
+    handle = client.send_goal(client.gripper_cmd, gripper_goal(0.066, 5.0), feedback)
+    assert handle.accepted
+    client.spin_until(lambda: feedback, 30, "the goal's first feedback")   # it drives
+    client.step(150)      # 0.15 s at 0.02 m/s: 3 mm of the 7.5 mm to the goal
+    client.spin_until(lambda: feedback[-1].position < 0.072, 60, 'the jaws to start closing')
+    client.cancel(handle)
+    status, result = client.result(handle)
     assert status == GoalStatus.STATUS_CANCELED
+    assert result.position > 0.066 + 0.0005 and not result.reached_goal
+    client.pause(False)
     client.wait_sim_time(0.05)
     gap = client.latest['fruit/state'].gap
     client.wait_sim_time(0.3)
@@ -226,7 +242,7 @@ def test_stopping_the_node_aborts_the_goal_and_delivers_its_result(tmp_path):
     try:
         client.wait_ready(120)
         feedback = []
-        handle = client.send_goal(client.grasp, grasp_goal(6.0, hold=100.0), feedback)
+        handle = client.send_goal(client.grasp, grasp_goal(6.0, hold=3000.0), feedback)
         assert handle.accepted
         client.spin_until(lambda: feedback, 60, 'feedback')
         future = handle.get_result_async()

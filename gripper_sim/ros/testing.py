@@ -129,6 +129,38 @@ class SimClient:
         stamp = self.latest['fruit/state'].header.stamp
         return stamp.sec + stamp.nanosec * 1e-9
 
+    def stamp_ns(self, suffix: str) -> int | None:
+        """Sim-time stamp (ns) of the latest message on ``suffix``; None if none yet."""
+        msg = self.latest.get(suffix)
+        if msg is None:
+            return None
+        if suffix == 'clock':
+            stamp = msg.clock
+        elif suffix == 'markers':
+            if not msg.markers:
+                return None
+            stamp = msg.markers[0].header.stamp
+        else:
+            stamp = msg.header.stamp
+        return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+    def restart(self, run: bool = True, timeout: float = 60.0) -> None:
+        """Reset the node; return once every topic seen so far shows the t = 0 state.
+
+        Paused around the reset: the reset state is then the last one the node
+        publishes, so every topic here ends on it however fast the node steps. (Reset
+        while running, a fast node is many steps past t = 0, and the reset state long
+        gone from a depth-10 history, before this client looks.) Then running again,
+        unless ``run`` is false.
+        """
+        self.pause(True)
+        self.reset()
+        topics = list(self.latest)
+        self.spin_until(lambda: all(self.stamp_ns(s) == 0 for s in topics), timeout,
+                        f"the reset state (t = 0) on {', '.join(topics)}")
+        if run:
+            self.pause(False)
+
     def wait_sim_time(self, seconds: float, timeout: float = 60.0) -> None:
         """Until the node's published sim time has advanced by ``seconds``."""
         start = self.spin_until(lambda: 'fruit/state' in self.latest, timeout) and \
