@@ -53,7 +53,7 @@ def test_rigid_flat_finger_minimum_is_m_g_over_2_mu():
 def test_fruit_is_placed_inside_its_window_and_not_outside(fruit):
     scenario = load_scenario('pick_and_place')
     config = scenario_config(scenario, fruit=fruit)
-    window = grasp_window(config, scenario, tolerance=0.1)
+    window = grasp_window(config, scenario, tolerance=0.25)
     assert window.exists, window.as_dict()
     assert math.isfinite(window.max_force), 'no bruising up to gripper.max_force'
     inside = math.sqrt(window.min_force * window.max_force)

@@ -16,7 +16,10 @@ configuration overrides (``set``), and the parameters of each phase:
 Outcomes: ``placed`` (on the table, clear of the jaws, within a quarter of its width of
 the target, at rest), ``dropped`` (the fruit left both jaws or fell more than
 ``DROP_SLIP`` behind them between lift and open; ``dropped_at`` says when, the run then
-ends), ``slipped`` (placed, but it slid more than ``SLIP_TOLERANCE`` in the jaws),
+ends), ``slipped`` (placed, but it slid more than ``SLIP_TOLERANCE`` at its contacts
+with the jaws: ``slip_distance``, the jaw-contact nodes' downward velocity relative to
+the jaws integrated, which leaves out the fruit's elastic sag; the centroid's drop
+relative to the jaws is ``centroid_drop``),
 ``bruised``, ``crushed`` (``gripper_sim.core.damage``), or ``failed`` (the grip never
 reached its target, or the fruit was not found on the table at the end). One word
 summarises a run, in this order of precedence: crushed, dropped, bruised, slipped,
@@ -261,6 +264,9 @@ class PickAndPlace:
         self.dropped_at: float | None = None
         self.dropped_phase: str | None = None
         self.max_slip = 0.0
+        self.slide = 0.0
+        self.max_drop = 0.0
+        self._jaw_faces = None
         self.max_grip_force = 0.0
         self.placed = False
         self.reached_grip = False
@@ -303,23 +309,39 @@ class PickAndPlace:
     def _past_until(self, phase: str) -> bool:
         return PHASES.index(phase) > PHASES.index(self.until)
 
+    def _slide(self, result) -> None:
+        """Accumulate how far the fruit slid down the jaws at its contacts (m): the mean
+        vertical velocity of the jaw-contact nodes relative to the jaws, integrated. A
+        stuck node moves with its jaw, so only sliding counts, not the fruit's own sag."""
+        if self._jaw_faces is None:
+            self._jaw_faces = [i for i, name in enumerate(result.obstacle_names)
+                               if name.split('.')[0] in ('left_jaw', 'right_jaw')]
+        dt = result.time - self.last.time
+        nodes = np.isin(result.contact_obstacle, self._jaw_faces)
+        if dt > 0 and np.any(nodes):
+            relative = float(np.mean(result.velocities[nodes, 1])) - result.lift_velocity
+            self.slide = max(0.0, self.slide - relative * dt)
+            self.max_slip = max(self.max_slip, self.slide)
+
     def update(self, result) -> str:
         """Advance after a step; returns the phase."""
         sim, sc = self.sim, self.scenario
+        if self.phase in ('lift', 'transport', 'lower', 'hold'):
+            self._slide(result)
         self.last = result
         self.max_grip_force = max(self.max_grip_force, result.grip_force)
         elapsed = sim.time - self.phase_start
         gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
         if self.phase in ('lift', 'transport', 'lower'):
-            self.max_slip = max(self.max_slip, result.slip_distance)
+            self.max_drop = max(self.max_drop, result.slip_distance)
             if not gripped or result.slip_distance > DROP_SLIP:
                 self.dropped_at = sim.time
                 self.dropped_phase = self.phase
                 self._end('dropped', f'the fruit dropped at t = {sim.time:.3f} s during '
                           f'the {self.phase}')
                 return self.phase
-            if self.stop_on_slip and result.slip_distance > SLIP_TOLERANCE:
-                self._end('slipped', f'the fruit slipped {result.slip_distance * 1e3:.2f} '
+            if self.stop_on_slip and self.max_slip > SLIP_TOLERANCE:
+                self._end('slipped', f'the fruit slipped {self.max_slip * 1e3:.2f} '
                           f'mm in the jaws during the {self.phase}')
                 return self.phase
         if self.stop_on_bruise and result.damage is not None and result.damage.bruised:
@@ -369,7 +391,7 @@ class PickAndPlace:
                                      sc['lower.speed'])
                     self._enter('lower')
         elif self.phase == 'hold':
-            self.max_slip = max(self.max_slip, result.slip_distance)
+            self.max_drop = max(self.max_drop, result.slip_distance)
             if not gripped or result.slip_distance > DROP_SLIP:
                 self.dropped_at = sim.time
                 self.dropped_phase = 'hold'
@@ -444,7 +466,8 @@ class PickAndPlace:
         return dict(outcome=outcome, placed=bool(self.placed), dropped=dropped,
                     dropped_at=None if self.dropped_at is None else float(self.dropped_at),
                     dropped_phase=self.dropped_phase, slipped=bool(slipped),
-                    slip_distance=float(self.max_slip), bruised=bruised,
+                    slip_distance=float(self.max_slip),
+                    centroid_drop=float(self.max_drop), bruised=bruised,
                     crushed=crushed, message='; '.join(messages),
                     max_grip_force=float(self.max_grip_force),
                     sliding=bool(self.last.slipping),
