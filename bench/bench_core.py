@@ -320,10 +320,10 @@ def main(argv=None) -> int:
     print('(RTF = simulated s per wall s; cpu = this process\'s CPU time, what an idle core '
           'would give)')
     for r in rows:
+        dt_us = r['sim_time'] / r['steps'] * 1e6
         print(f'{r["model"]}: single steps (with the grasp update): median '
-              f'{r["median_us"]:.1f} us (RTF {r["sim_time"] / r["steps"] / r["median_us"] * 1e6:.1f}), '
-              f'10th percentile {r["p10_us"]:.1f} us '
-              f'(RTF {r["sim_time"] / r["steps"] / r["p10_us"] * 1e6:.1f})')
+              f'{r["median_us"]:.1f} us (RTF {dt_us / r["median_us"]:.1f}), 10th percentile '
+              f'{r["p10_us"]:.1f} us (RTF {dt_us / r["p10_us"]:.1f})')
     print()
     print('where the time goes (share of a grasp-and-lift, CPU us per step):')
     print(f'{"model":<6} {"assembly":>14} {"solve":>14} {"contact":>14} {"measures":>14} '

@@ -635,8 +635,8 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     n2 = q_n.shape[0]
     n = n2 // 2
     n_fr = fr_nodes.shape[0]
-    # flags as variables, not literals: one compiled _evaluate for all call sites
-    yes, no = np.bool_(True), np.bool_(False)
+    # a flag as a variable, not a literal: one compiled _evaluate for all call sites
+    yes = np.bool_(True)
     order = np.empty(n, np.int64)
     for i in range(n):
         order[pos[i]] = i
