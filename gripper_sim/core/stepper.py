@@ -91,12 +91,15 @@ class ImplicitEulerSolver:
         tolerance: m/s, stop when max |dq| / dt falls below it.
         max_iterations: Newton iterations before NewtonFailure.
         dim: 2 (planar) or 3, the coordinates per node.
+        lu_options: keyword arguments for ``scipy.sparse.linalg.splu`` (None: its
+            defaults), e.g. a symmetric ordering for the larger 3D systems.
     """
 
     def __init__(self, masses: np.ndarray, energies: list[Energy], damping_mass: float = 0.0,
                  damping_stiffness: float = 0.0, tolerance: float = 1e-6,
-                 max_iterations: int = 25, dim: int = 2):
+                 max_iterations: int = 25, dim: int = 2, lu_options: dict | None = None):
         self.dim = int(dim)
+        self.lu_options = lu_options
         self.m = np.repeat(np.asarray(masses, dtype=float), self.dim)
         self.energies = list(energies)
         self.alpha = damping_mass
@@ -246,7 +249,8 @@ class ImplicitEulerSolver:
                 # ascent direction: add inertia-like diagonal terms until it descends
                 a = (filtered + complement + shift * inertia).tocsc()
                 try:
-                    dq = _solve_with_low_rank(a, -g_f, [(c, s @ u) for c, u in low_rank])
+                    dq = _solve_with_low_rank(a, -g_f, [(c, s @ u) for c, u in low_rank],
+                                              self.lu_options)
                 except RuntimeError:  # singular factor
                     continue
                 slope = float(g_f @ dq)
@@ -281,9 +285,10 @@ class ImplicitEulerSolver:
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
 
 
-def _solve_with_low_rank(a: sp.csc_matrix, rhs: np.ndarray, low_rank) -> np.ndarray:
+def _solve_with_low_rank(a: sp.csc_matrix, rhs: np.ndarray, low_rank,
+                         lu_options: dict | None = None) -> np.ndarray:
     """Solve (A + sum c u u^T) x = rhs by one sparse LU and the Woodbury identity."""
-    lu = spla.splu(a)
+    lu = spla.splu(a) if lu_options is None else spla.splu(a, **lu_options)
     x = lu.solve(rhs)
     if not low_rank:
         return x
