@@ -9,7 +9,11 @@ With turgor the skin is prestressed so that the configured shape is (close to) t
 equilibrium: a sphere of radius R under p0 carries the membrane tension p0 R / 2, which
 equibiaxial SVK gives at the stretch lambda^2 = 1 + p0 R (1 - nu_s) / (E_s t), so the
 stress-free skin is the configured one shrunk by 1 / lambda (R: the radius of the
-sphere of equal volume, exact for spheres, approximate otherwise).
+sphere of equal volume, exact for spheres, approximate otherwise). On a discrete,
+non-uniform mesh (and for other shapes) the discrete tension and pressure forces do not
+balance exactly at the configured shape, so the shell is then relaxed to its free
+equilibrium (form finding: quasi-static implicit Euler steps, no contact, no gravity),
+which becomes the rest shape the simulation starts from.
 """
 from __future__ import annotations
 
@@ -146,6 +150,34 @@ def _meridian(outline: np.ndarray) -> np.ndarray:
     return profile
 
 
+def _relax(positions: np.ndarray, masses: np.ndarray, energies, steps: int = 40):
+    """The free equilibrium (n, 3) of the shell near ``positions``, centred as given.
+
+    Raises:
+        ConfigError: no equilibrium found (e.g. a skin too soft for its turgor).
+    """
+    from gripper_sim.core.stepper import ImplicitEulerSolver, NewtonFailure, StepConstraints
+    solver = ImplicitEulerSolver(masses, list(energies), damping_mass=100.0, tolerance=1e-9,
+                                 max_iterations=30, dim=3)
+    q = positions.ravel().copy()
+    size = float(np.ptp(positions))
+    free = StepConstraints.free(len(masses), dim=3)
+    dt = 0.05
+    for _ in range(steps):
+        try:
+            q_new = solver.solve(q, np.zeros_like(q), dt, q, free).q
+        except NewtonFailure as err:
+            raise ConfigError("config keys 'fruit.pressure.turgor' / 'fruit.skin.*': the "
+                              f'pressurised skin has no equilibrium near its shape ({err})'
+                              ) from err
+        moved = float(np.max(np.abs(q_new - q)))
+        q = q_new
+        if moved < 1e-7 * size:
+            break
+    x = q.reshape(-1, 3)
+    return x - (masses @ x) / masses.sum() + (masses @ positions) / masses.sum()
+
+
 def build_fruit3d(config) -> FruitModel3D:
     """Build the 3D fruit model that ``config`` (flat, validated) describes.
 
@@ -196,6 +228,10 @@ def build_fruit3d(config) -> FruitModel3D:
         membrane = Membrane(body.triangles, skin_rest, e_s, nu_s, t_s)
         bending = HingeBending(meshes.hinges(body.triangles), positions, d_s)
         energies = [membrane, bending] + energies
+    if model == 'shell' and pressure is not None:
+        positions = _relax(positions, masses, energies)
+        pressure.v0 = meshes.enclosed_volume(positions, body.triangles)
+        rest_volume = pressure.v0
     return FruitModel3D(
         rest_positions=positions, masses=masses, surface=np.arange(len(body.positions)),
         triangles=body.triangles, tetrahedra=tets,

@@ -1,9 +1,9 @@
 """Surface and volume meshes of the 3D fruit.
 
 Every body here is star-shaped about its centre, so one surface mesher serves them
-all: a geodesic sphere (an icosahedron whose edges are cut into ``frequency`` parts,
-10 f^2 + 2 vertices), optionally graded towards the two jaw contact points on the
-x axis, then mapped radially onto the body (sphere, ellipsoid, or a solid of
+all: a unit sphere mesh, uniform (a geodesic sphere, an icosahedron whose edges are cut
+into ``frequency`` parts, 10 f^2 + 2 vertices) or in rings about the x axis, fine at
+the two jaw contact points (``ring_sphere``), then mapped radially onto the body (sphere, ellipsoid, or a solid of
 revolution about z given by a profile curve). Tetrahedra come from TetGen (Si 2015,
 ACM TOMS 41(2):11) through its Python wrapper ``tetgen``, with the surface kept as
 given, so surface vertices are nodes 0..n_surface-1 of the volume mesh.
@@ -17,11 +17,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from gripper_sim.errors import ConfigError
 
 #: the pin of the meshing library the solid model was validated with
 TETGEN_REQUIREMENT = 'tetgen==0.8.4'
+#: arc (rad) between neighbouring vertices of the unit icosahedron
+GEODESIC_EDGE = 1.1071487177940904
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,11 @@ def _icosahedron() -> tuple[np.ndarray, np.ndarray]:
                   [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
                   [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
                   [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]], dtype=np.int64)
+    # turn about y so that the vertices (phi, 0, 1) and (-phi, 0, -1) lie on the x axis:
+    # the jaw contact points are mesh vertices (the first contact is at a vertex)
+    angle = np.arctan2(1.0, phi)
+    c, s = np.cos(angle), np.sin(angle)
+    v = v @ np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
     return v / np.linalg.norm(v, axis=1)[:, None], f
 
 
@@ -112,31 +120,48 @@ def _orient_outward(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
     return tris
 
 
-def grade_towards_poles(unit: np.ndarray, refinement: float) -> np.ndarray:
-    """Move points of the unit sphere towards the poles +/- x (the jaw contact points).
+#: half-angle (rad) of the cap about each jaw contact point meshed at the finest spacing
+JAW_CAP = 0.3
+#: growth of the ring spacing per ring outside the caps
+RING_GROWTH = 1.2
 
-    With phi the angle to the nearer pole, phi' = (pi/2) g(2 phi / pi) with the cubic
-    g(s) = r s + 2 (1 - r) s^2 - (1 - r) s^3 (g(0) = 0, g'(0) = r, g(1) = 1,
-    g'(1) = 1): the spacing at the poles shrinks by ``refinement`` r, the equator keeps
-    its spacing, and g is monotonic for 0 < r <= 1, so no triangle flips.
+
+def ring_sphere(coarse: float, fine: float, cap: float = JAW_CAP,
+                growth: float = RING_GROWTH) -> SurfaceMesh:
+    """Unit sphere meshed in rings about the x axis, fine at the poles +/- x.
+
+    Rings of constant polar angle phi (from the nearer pole) are spaced ``fine`` (rad of
+    arc) within ``cap`` of each pole, then the spacing grows by ``growth`` per ring up
+    to ``coarse``; each ring has round(2 pi sin(phi) / spacing) vertices (at least 6),
+    alternate rings staggered by half a step; the hemisphere x < 0 mirrors x > 0. The
+    triangles are the points' convex hull (their spherical Delaunay triangulation).
     """
-    r = float(refinement)
-    if not 0 < r <= 1:
-        raise ValueError('refinement must be in (0, 1]')
-    if r == 1.0:
-        return unit.copy()
-    ax = np.abs(unit[:, 0])
-    phi = np.arccos(np.clip(ax, -1.0, 1.0))
-    s = phi / (0.5 * np.pi)
-    new_phi = 0.5 * np.pi * (r * s + 2 * (1 - r) * s ** 2 - (1 - r) * s ** 3)
-    perp = unit.copy()
-    perp[:, 0] = 0.0
-    norm = np.linalg.norm(perp, axis=1)
-    out = unit.copy()
-    moving = norm > 1e-12
-    out[moving, 0] = np.sign(unit[moving, 0]) * np.cos(new_phi[moving])
-    out[moving, 1:] = perp[moving, 1:] / norm[moving, None] * np.sin(new_phi[moving])[:, None]
-    return out
+    if not 0 < fine <= coarse:
+        raise ValueError('need 0 < fine <= coarse')
+    phis, spacing, phi = [0.0], fine, 0.0
+    while phi < 0.5 * np.pi:
+        if phi >= cap:
+            spacing = min(coarse, spacing * growth)
+        phi += spacing
+        phis.append(phi)
+    phis = np.array(phis)
+    if len(phis) > 2 and phis[-1] - 0.5 * np.pi > 0.5 * (phis[-1] - phis[-2]):
+        phis = phis[:-1]
+    phis *= 0.5 * np.pi / phis[-1]
+    steps = np.diff(phis)
+    local = np.concatenate([[steps[0]], 0.5 * (steps[:-1] + steps[1:]), [steps[-1]]])
+    points = [np.array([[1.0, 0.0, 0.0]])]
+    for k in range(1, len(phis)):
+        count = max(6, int(round(2 * np.pi * np.sin(phis[k]) / local[k])))
+        theta = 2 * np.pi * (np.arange(count) + 0.5 * (k % 2)) / count
+        points.append(np.stack([np.full(count, np.cos(phis[k])), np.sin(phis[k]) * np.cos(theta),
+                                np.sin(phis[k]) * np.sin(theta)], axis=1))
+    north = np.vstack(points)
+    south = north[:len(north) - len(points[-1])] * np.array([-1.0, 1.0, 1.0])
+    unit = np.vstack([north, south])
+    # points on a sphere: their convex hull is the spherical Delaunay triangulation
+    tris = ConvexHull(unit).simplices.astype(np.int64)
+    return SurfaceMesh(unit, _orient_outward(unit, tris))
 
 
 def profile_radius_function(profile: np.ndarray):
@@ -191,11 +216,19 @@ def body_surface(kind: str, frequency: int, refinement: float, *, radius: float,
     Args:
         kind: 'sphere' (radius), 'ellipsoid' (semi_axes along x, y, z) or
             'revolution' (profile (k, 2) of (r, z) about the z axis).
-        frequency: geodesic frequency (10 f^2 + 2 vertices).
-        refinement: mesh size at the jaw contact points (+/- x) over the mean.
+        frequency: geodesic frequency f: 10 f^2 + 2 vertices when ``refinement`` is 1;
+            otherwise the coarsest ring spacing is that of the geodesic sphere.
+        refinement: spacing at the jaw contact points (+/- x) over the coarsest one;
+            below 1 the surface is a ``ring_sphere``.
     """
-    sphere = geodesic_sphere(frequency)
-    unit = grade_towards_poles(sphere.positions, refinement)
+    if not 0 < refinement <= 1:
+        raise ValueError('refinement must be in (0, 1]')
+    if refinement == 1.0:
+        sphere = geodesic_sphere(frequency)
+    else:
+        coarse = GEODESIC_EDGE / frequency
+        sphere = ring_sphere(coarse, refinement * coarse)
+    unit = sphere.positions
     if kind == 'sphere':
         points = radius * unit
     elif kind == 'ellipsoid':
@@ -240,7 +273,7 @@ def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
         max_volume = h ** 3 / (6 * 2 ** 0.5)
     gen = tetgen.TetGen(np.ascontiguousarray(surface.positions, dtype=float),
                         np.ascontiguousarray(surface.triangles, dtype=np.int32))
-    nodes, elems, _, _ = gen.tetrahedralize(quality=True, nobisect=True,
+    nodes, elems, _, _ = gen.tetrahedralize(quality=True, nobisect=True, fixedvolume=True,
                                              minratio=radius_edge_ratio,
                                              mindihedral=min_dihedral,
                                              maxvolume=float(max_volume))

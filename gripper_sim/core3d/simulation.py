@@ -40,6 +40,11 @@ DYNAMIC_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction',
                 'contact.table.static_friction', 'contact.table.kinetic_friction',
                 'contact.restitution', 'gripper.close_speed', 'gripper.lift_speed')
 
+#: SuperLU settings for the 3D Newton systems (symmetric pattern: minimum degree on
+#: A^T + A and diagonal pivots, about twice as fast as the defaults here)
+LU_OPTIONS = dict(permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
+                  options=dict(SymmetricMode=True))
+
 _Y = np.array([0.0, 1.0, 0.0])
 _Z = np.array([0.0, 0.0, 1.0])
 _X = np.array([1.0, 0.0, 0.0])
@@ -122,7 +127,7 @@ class Simulation3D:
             self.fruit.masses, list(self.fruit.energies) + [self.gravity],
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
-            dim=3)
+            dim=3, lu_options=LU_OPTIONS)
         # first guess of d force / d gap for the force regulator (it adapts): a Hertz
         # contact of the flesh at a 1 % approach
         radius = 0.5 * self.fruit.rest_width

@@ -93,6 +93,7 @@ class Membrane(Energy):
                 + mu * np.einsum('ij,eab->eaibj', eye2, ffT)
                 + mu * np.einsum('eaj,ebi->eaibj', f, f))
         # H_(k a)(l b) = w sum_ij dN_k/dX_i C_(a i)(b j) dN_l/dX_j
-        h = np.einsum('e,eki,eaibj,elj->ekalb', self.weight, self.grad_n, cmat, self.grad_n)
+        h = np.einsum('e,eki,eaibj,elj->ekalb', self.weight, self.grad_n, cmat, self.grad_n,
+                      optimize=True)
         return Evaluation(value, grad, *hessian_triplets(self.dofs,
                                                          h.reshape(len(self.tri), 9, 9)))

@@ -81,5 +81,6 @@ class NeoHookeanTets(Energy):
              * np.einsum('eni,ejm->eijmn', finv, finv)
              + lam * np.einsum('eji,enm->eijmn', finv, finv))
         # H_(k i)(l m) = V sum_jn dN_k/dX_j C_(ij)(mn) dN_l/dX_n
-        h = np.einsum('e,ekj,eijmn,eln->ekilm', self.volume, self.grad_n, c, self.grad_n)
+        h = np.einsum('e,ekj,eijmn,eln->ekilm', self.volume, self.grad_n, c, self.grad_n,
+                      optimize=True)
         return Evaluation(value, grad, *hessian_triplets(self.dofs, h.reshape(n, 12, 12)))
