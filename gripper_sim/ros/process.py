@@ -62,6 +62,9 @@ def ros_environment(domain_id: int | None = None,
     env.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', fastdds_profile())
     env['PYTHONUNBUFFERED'] = '1'
+    # A process that hangs on stop gets SIGABRT before SIGKILL: its log then shows where
+    # every thread was (faulthandler).
+    env.setdefault('PYTHONFAULTHANDLER', '1')
     return env
 
 
@@ -126,20 +129,22 @@ class RosProcess:
         return self.process is not None and self.process.poll() is None
 
     def stop(self, timeout: float = 20.0) -> int | None:
-        """SIGINT (a clean ROS shutdown), then SIGTERM / SIGKILL if it hangs."""
+        """SIGINT (a clean ROS shutdown), then SIGTERM, SIGABRT, SIGKILL if it hangs.
+
+        SIGABRT makes a Python process started with ``ros_environment()`` write the
+        traceback of every thread to its log (``PYTHONFAULTHANDLER``) before it goes.
+        """
         if self.process is None:
             return None
         if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.process.terminate()
+            for signum, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 5.0),
+                                 (signal.SIGABRT, 5.0), (signal.SIGKILL, None)):
+                self.process.send_signal(signum)
                 try:
-                    self.process.wait(5.0)
+                    self.process.wait(wait)
+                    break
                 except subprocess.TimeoutExpired:
-                    self.process.kill()
-                    self.process.wait()
+                    continue
         return self.process.returncode
 
     def __enter__(self) -> 'RosProcess':
