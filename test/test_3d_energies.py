@@ -161,7 +161,7 @@ def test_graded_sphere_keeps_orientation_and_refines_the_poles(refinement):
     x, tri = mesh.positions, mesh.triangles
     assert enclosed_volume(x, tri) == pytest.approx(4 / 3 * np.pi * RADIUS ** 3, rel=0.03)
     theta = dihedral_angles(x, hinges(tri))
-    assert np.all(theta > 0)
+    assert np.all(theta > -1e-9), 'a convex triangulation (flat where points are co-circular)'
     p = x[tri]
     centre = p.mean(axis=1)
     size = np.linalg.norm(p[:, 1] - p[:, 0], axis=1)
@@ -176,7 +176,9 @@ def test_graded_sphere_keeps_orientation_and_refines_the_poles(refinement):
 def test_ellipsoid_and_revolution_bodies():
     axes = (0.03, 0.025, 0.02)
     mesh = body_surface('ellipsoid', 6, 1.0, radius=0.03, semi_axes=axes)
-    assert np.allclose(np.ptp(mesh.positions, axis=0) / 2, axes, rtol=1e-3)
+    extent = np.ptp(mesh.positions, axis=0) / 2
+    assert extent[0] == pytest.approx(axes[0], rel=1e-9)  # vertices on the jaw axis
+    assert np.allclose(extent[1:], axes[1:], rtol=0.02)
     assert enclosed_volume(mesh.positions, mesh.triangles) == pytest.approx(
         4 / 3 * np.pi * np.prod(axes), rel=0.03)
     # a cone-topped cylinder: r = 10 mm for z in [0, 20] mm, apex at z = 30 mm
