@@ -19,4 +19,4 @@ def test_core_imports_without_rclpy():
 def test_readme_documents_every_config_key():
     readme = (ROOT / 'README.md').read_text()
     missing = [key for key in SCHEMA if f'`{key}`' not in readme]
-    assert not missing, f'README lacks {missing}: run python -m gripper_sim.config_doc'
+    assert not missing, f'README lacks {missing}: run python scripts/update_readme_config.py'
