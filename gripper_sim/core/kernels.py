@@ -10,7 +10,8 @@ reference elsewhere in the core, in the same order of operations where it matter
 - ``contact_constraints``, ``update_contacts``, ``substep``: ``Simulation._constraints``,
   ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
 - ``step_measures``: the numbers ``Simulation._measure`` and ``measures.deformation``
-  report.
+  report;
+- ``damage_update``: the per-step part of ``damage.DamageTracker.update``.
 
 Layout. Positions are flat, q = [x0, z0, x1, z1, ...] (m). Hessians are kept as a
 symmetric node-block band: ``band[p, d]`` (2, 2) is the block of the node at band
