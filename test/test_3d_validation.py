@@ -1,0 +1,109 @@
+"""3D model: configuration, friction cone, resting contact, friction hold/slip, Hertz."""
+import numpy as np
+import pytest
+
+from gripper_sim.configuration import load_config
+from gripper_sim.core import make_simulation
+from gripper_sim.core.grasp import GraspSequence, run_grasp
+from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+from gripper_sim.core3d.simulation import Simulation3D
+from gripper_sim.errors import ConfigError
+
+#: a coarse uniform shell (162 nodes): enough for global balances and friction
+COARSE = ['dimension=3', 'fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=1']
+
+
+def test_dimension_3_selects_the_3d_model():
+    sim = make_simulation(load_config(overrides=COARSE))
+    assert isinstance(sim, Simulation3D)
+    assert sim.q.shape == (162, 3)
+    result = sim.step()
+    assert result.positions.shape == (162, 3) and result.centroid.shape == (3,)
+    assert result.triangles.shape == (320, 3)
+
+
+@pytest.mark.parametrize('override,key', [('fruit.model=point', 'fruit.model'),
+                                          ('dimension=4', 'dimension'),
+                                          ('fruit.mesh.jaw_refinement=0', 'fruit.mesh.jaw_refinement'),
+                                          ('fruit.mesh.subdivisions=0', 'fruit.mesh.subdivisions')])
+def test_bad_3d_configuration_names_the_key(override, key):
+    with pytest.raises(ConfigError, match=key.replace('.', r'\.')):
+        make_simulation(load_config(overrides=COARSE + [override]))
+
+
+def test_cone_friction_gradient_and_hessian_match_finite_differences():
+    """The tangent-plane friction potential b dt sqrt(|s_t|^2 + eps^2) of the stepper."""
+    rng = np.random.default_rng(3)
+    n = 4
+    solver = ImplicitEulerSolver(np.full(n, 0.01), [], dim=3)
+    nodes = np.array([0, 2, 3])
+    tangents = np.array([[[1, 0, 0], [0, 1, 0]], [[0, 1, 0], [0, 0, 1]],
+                         [[0.6, 0.8, 0], [0, 0, 1]]], dtype=float)
+    con = StepConstraints(np.tile(np.eye(3), (n, 1, 1)), nodes, tangents,
+                          np.array([0.5, 1.0, 2.0]), rng.normal(scale=1e-3, size=(3, 2)))
+    q_n = rng.normal(size=3 * n)
+    q = q_n + rng.normal(scale=1e-6, size=3 * n)  # slip speeds ~ 1e-4 m/s, the smoothing
+    dt = 0.01
+
+    def parts(x):
+        grad = np.zeros(3 * n)
+        phi, blocks = solver._cone_friction(x, q_n, dt, con, grad)
+        return phi, grad, blocks
+
+    phi, grad, blocks = parts(q)
+    h = 1e-10
+    fd_grad = np.array([(parts(q + h * e)[0] - parts(q - h * e)[0]) / (2 * h)
+                        for e in np.eye(3 * n)])
+    assert np.max(np.abs(grad)) > 0.1
+    assert np.allclose(grad, fd_grad, rtol=1e-5, atol=1e-6 * np.max(np.abs(grad)))
+    hess = np.zeros((3 * n, 3 * n))
+    for k, node in enumerate(nodes):
+        hess[3 * node:3 * node + 3, 3 * node:3 * node + 3] = blocks[k]
+    fd_hess = np.array([(parts(q + h * e)[1] - parts(q - h * e)[1]) / (2 * h)
+                        for e in np.eye(3 * n)])
+    assert np.allclose(hess, fd_hess, rtol=1e-4, atol=1e-5 * np.max(np.abs(hess)))
+    assert np.all(np.linalg.eigvalsh(hess) > -1e-9 * np.max(np.abs(hess)))
+
+
+def test_fruit_resting_on_the_table_is_carried_by_its_weight():
+    sim = make_simulation(load_config(overrides=COARSE + ['sim.dt=0.01',
+                                                          'fruit.damping.mass=20']))
+    sim.run(0.5)
+    result = sim.run(0.1)
+    table = result.contact_obstacle == result.obstacle_names.index('table')
+    weight = sim.fruit.total_mass * sim.config['world.gravity']
+    assert np.sum(result.contact_forces[table, 2]) == pytest.approx(weight, rel=0.01)
+    tangential = np.linalg.norm(np.sum(result.contact_forces[table, :2], axis=0))
+    assert tangential <= sim.config['contact.table.static_friction'] * weight  # inside the cone
+    assert np.max(np.abs(result.velocities)) < 1e-4
+
+
+def _pick(ratio):
+    """Grip so that 2 mu N = ratio m g, lift 2 cm, hold 1 s (the 2D friction test in 3D)."""
+    config = load_config(overrides=COARSE + ['sim.dt=0.005', 'contact.jaw.static_friction=0.5',
+                                             'contact.jaw.kinetic_friction=0.5'])
+    sim = make_simulation(config)
+    weight = sim.fruit.total_mass * config['world.gravity']
+    sequence = GraspSequence(sim, ratio * weight / (2 * 0.5), lift_height=0.02, hold_time=1.0)
+    slips = []
+    summary = run_grasp(sim, sequence,
+                        on_step=lambda r, phase: slips.append(r.slip_distance)
+                        if phase == 'holding' else None)
+    return sim, summary, slips
+
+
+@pytest.mark.slow
+def test_fruit_is_held_by_the_friction_cone_when_friction_exceeds_weight():
+    sim, summary, slips = _pick(1.2)
+    assert summary['outcome'] == 'held'
+    assert summary['slip_distance'] < 1e-3
+    assert slips[-1] - slips[0] < 1e-4, 'creep during the 1 s hold (static friction)'
+    assert sim.last.centroid[2] > sim.initial_positions[:, 2].mean() + 0.015
+
+
+@pytest.mark.slow
+def test_fruit_slips_through_the_friction_cone_when_friction_is_below_weight():
+    sim, summary, _ = _pick(0.8)
+    assert summary['outcome'] in ('slipped', 'dropped')
+    assert summary['slip_distance'] > 5e-3
+    assert sim.last.centroid[2] < sim.initial_positions[:, 2].mean() + 0.005
