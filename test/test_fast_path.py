@@ -336,3 +336,10 @@ def test_damage_kernel_matches_the_damage_tracker(seed):
                  contact.equivalent_radius, contact.modulus], rtol=1e-12)
             np.testing.assert_allclose(row[[kernels.P_CX, kernels.P_CZ]], contact.centre,
                                        rtol=0, atol=1e-15)
+
+
+def test_a_padded_finger_keeps_the_generic_path():
+    config = load_config(overrides=['gripper.finger.pad.enabled=true'])
+    sim = Simulation(config)
+    assert sim._fast is None
+    sim.step()

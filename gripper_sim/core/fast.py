@@ -176,6 +176,11 @@ class FastPath:
         """The fast path for ``sim``, or None when it does not apply."""
         if not available():
             return None
+        solver_energies = list(sim.solver.energies)
+        expected = list(sim.fruit.energies) + [sim.gravity]
+        if len(solver_energies) != len(expected) or any(
+                a is not b for a, b in zip(solver_energies, expected)):
+            return None  # another energy in the step (e.g. a pad layer): not modelled here
         model = ring_model(sim.fruit, sim.fruit.energies)
         if model is None:
             return None
