@@ -152,7 +152,7 @@ def _start_recording(stack: ExitStack, args, sim) -> None:
 
 
 def run_squeeze(args) -> int:
-    from gripper_sim.core.simulation import Simulation
+    from gripper_sim.core import make_simulation as Simulation
     config = config_from_args(args, {'world.gravity': 0.0, 'world.table': False})
     if args.to_force is not None and args.to_force > config['gripper.max_force']:
         raise GripperSimError(f"--to-force {args.to_force} N exceeds gripper.max_force "
@@ -209,7 +209,7 @@ def run_squeeze(args) -> int:
 
 def run_pick(args) -> int:
     from gripper_sim.core.grasp import GraspSequence, run_grasp
-    from gripper_sim.core.simulation import Simulation
+    from gripper_sim.core import make_simulation as Simulation
     config = config_from_args(args)
     sim = Simulation(config)
     series = _Series()
@@ -277,7 +277,7 @@ def run_fruits(args) -> int:
 
 def run_scenario_verb(args) -> int:
     from gripper_sim.core.scenario import load_scenario, run_scenario, scenario_config
-    from gripper_sim.core.simulation import Simulation
+    from gripper_sim.core import make_simulation as Simulation
     scenario = load_scenario(args.scenario)
     if args.force is not None:
         scenario = scenario.with_values(close__mode='force', close__force=args.force)
