@@ -12,9 +12,13 @@ import math
 from dataclasses import dataclass, replace
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class GripperState:
-    """Attributes:
+    """The gripper's kinematic state; treated as immutable (new states come from
+    ``dataclasses.replace`` or the constructor), but not frozen: a frozen dataclass
+    costs several microseconds to build, on every physics step.
+
+    Attributes:
         gap: m, jaw separation.  gap_rate: m/s (negative while closing).
         lift: m, jaw centre height.  lift_rate: m/s.
         mode: 'position' or 'force'.
@@ -89,9 +93,10 @@ class GripperKinematics:
                                   self.transport_acceleration, dt)
         else:
             x, x_rate = state.x, 0.0
-        return replace(state, gap=gap, gap_rate=rate, lift=lift, lift_rate=lift_rate,
-                       stiffness=stiffness, measured_force=grip_force, measured_gap=state.gap,
-                       x=x, x_rate=x_rate)
+        return GripperState(gap, rate, lift, lift_rate, state.mode, state.target_gap,
+                            state.target_force, state.speed, state.target_lift,
+                            state.lift_speed, stiffness, grip_force, state.gap, x, x_rate,
+                            state.target_x, state.x_speed)
 
     def _advance_lift(self, state: GripperState, dt: float) -> tuple[float, float]:
         distance = state.target_lift - state.lift
