@@ -106,3 +106,34 @@ def test_fruit_slips_through_the_friction_cone_when_friction_is_below_weight():
     assert summary['outcome'] in ('slipped', 'dropped')
     assert summary['slip_distance'] > 5e-3
     assert sim.last.centroid[2] < sim.initial_positions[:, 2].mean() + 0.005
+
+
+def _cli(*args):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ)
+    env['PYTHONPATH'] = str(root) + os.pathsep + env.get('PYTHONPATH', '')
+    return subprocess.run([sys.executable, '-m', 'gripper_sim.cli.main', *args],
+                          capture_output=True, text=True, timeout=900, env=env,
+                          stdin=subprocess.DEVNULL)
+
+
+def test_cli_squeeze_in_3d_reaches_the_force():
+    import json
+    run = _cli('squeeze', '--to-force', '2', '--speed', '0.02', '--json', '--set', 'dimension=3',
+               '--set', 'fruit.mesh.subdivisions=3', '--set', 'fruit.mesh.jaw_refinement=1',
+               '--set', 'sim.dt=0.01')
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert data['force'][-1] >= 2.0
+    assert data['summary']['peak_compression'] > 0
+
+
+def test_cli_rejects_the_point_model_in_3d_naming_the_key():
+    run = _cli('pick', '--force', '3', '--set', 'dimension=3', '--set', 'fruit.model=point')
+    assert run.returncode != 0
+    assert "config key 'fruit.model'" in run.stderr + run.stdout
+    assert 'Traceback' not in run.stderr
