@@ -105,6 +105,7 @@ def test_closing_by_topic_raises_the_wrench_and_the_joint_effort(client):
     left, right = client.latest['left_jaw/wrench'], client.latest['right_jaw/wrench']
     assert left.wrench.force.x < 0 < right.wrench.force.x   # the fruit pushes the jaws out
     client.spin_until(lambda: gap_of(client) < 0.0581, 60, 'the gap to close')
+    client.catch_up(['joint_states'])   # the joint states of that step, or a later one
     joints = client.latest['joint_states']
     assert joints.effort[0] > 1.0 and joints.effort[1] > 1.0
     assert client.latest['fruit/state'].left_jaw_contact
@@ -118,6 +119,7 @@ def test_force_command_settles_at_the_force_and_lift_moves_the_gripper(client):
     client.publish('lift', lift0 + 0.01)
     client.spin_until(lambda: client.latest['joint_states'].position[2] > lift0 + 0.009,
                       60, 'the lift to rise')
+    client.catch_up(['fruit/state'], since='joint_states')
     assert client.latest['fruit/state'].centroid.z > 0.0635 / 2 + 0.005   # fruit came along
 
 

@@ -144,6 +144,16 @@ class SimClient:
             stamp = msg.header.stamp
         return stamp.sec * 1_000_000_000 + stamp.nanosec
 
+    def catch_up(self, suffixes, since: str = 'fruit/state', timeout: float = 30.0) -> None:
+        """Until the latest message on each of ``suffixes`` is as recent as ``since``'s.
+
+        Every topic arrives on its own: when a condition on one topic came true, another
+        topic's latest message may still be from an earlier step.
+        """
+        stamp = self.stamp_ns(since)
+        self.spin_until(lambda: all((self.stamp_ns(s) or -1) >= stamp for s in suffixes),
+                        timeout, f"{', '.join(suffixes)} as recent as {since}")
+
     def restart(self, run: bool = True, timeout: float = 60.0) -> None:
         """Reset the node; return once every topic seen so far shows the t = 0 state.
 
