@@ -137,3 +137,55 @@ def test_cli_rejects_the_point_model_in_3d_naming_the_key():
     assert run.returncode != 0
     assert "config key 'fruit.model'" in run.stderr + run.stdout
     assert 'Traceback' not in run.stderr
+
+
+def _hertz_errors(refinement):
+    """Solid sphere between two plates, quasi-static (large dt, light, damped).
+
+    The jaws keep their default friction (sticking contact nodes): frictionless plates
+    leave the sphere free to turn about x, which costs many more Newton iterations,
+    and change the Hertz force by a few per cent only.
+
+    Returns {D/R: (force error, contact radius error)} against Hertz:
+    F = (sqrt(2)/3) E* sqrt(R) D^(3/2), a = sqrt(R D / 2) (validation.md section 3).
+    """
+    pytest.importorskip('tetgen', reason='the 3D solid model needs tetgen==0.8.4')
+    radius, modulus, poisson = 0.03, 1e6, 0.3
+    config = load_config(overrides=[
+        'dimension=3', 'fruit.model=solid', 'fruit.skin.enabled=false',
+        'fruit.mesh.subdivisions=4', f'fruit.mesh.jaw_refinement={refinement}',
+        'world.gravity=0', 'world.table=false', 'fruit.density=50', 'fruit.damping.mass=20',
+        'sim.dt=0.05', 'sim.max_contact_passes=30', f'fruit.shape.diameter={2 * radius}',
+        f'gripper.initial_gap={2 * radius}', f'fruit.flesh.youngs_modulus={modulus}',
+        f'fruit.flesh.poisson_ratio={poisson}'])
+    sim = make_simulation(config)
+    width = sim.fruit.rest_width
+    assert width == pytest.approx(2 * radius, rel=1e-9)
+    errors = {}
+    for ratio in (0.02, 0.05):
+        travel = ratio * radius
+        sim.command_gap(width - travel, 0.005 * radius / 0.05)
+        while sim.gripper_state.gap > width - travel + 1e-12:
+            sim.step()
+        result = sim.run(0.1)
+        hertz = (np.sqrt(2) / 3 * modulus / (1 - poisson ** 2) * np.sqrt(radius)
+                 * travel ** 1.5)
+        a = np.mean(result.deformation.jaw_contact_radii)
+        errors[ratio] = (result.grip_force / hertz - 1, a / np.sqrt(radius * travel / 2) - 1)
+    return errors
+
+
+@pytest.mark.slow
+def test_hertz_sphere_between_plates_converges_with_contact_resolution():
+    """Linear tetrahedra are too stiff and converge from above, slowly: at D/R = 0.02 the
+    force error halves (~+45 % to ~+21 %) when the spacing at the contact drops from 0.3
+    to 0.2 of the coarse one. On the finer mesh the contact radius is within 15 %
+    (+8 % and -2 % at D/R = 0.02 and 0.05)."""
+    coarse = _hertz_errors(0.3)
+    fine = _hertz_errors(0.2)
+    for errors in (coarse, fine):
+        assert all(force > 0 for force, _ in errors.values()), 'FE contact is stiff'
+    assert all(abs(radius) < 0.15 for _, radius in fine.values())
+    assert fine[0.02][0] < 0.75 * coarse[0.02][0]
+    assert fine[0.05][0] <= coarse[0.05][0]
+    assert max(force for force, _ in fine.values()) < 0.30

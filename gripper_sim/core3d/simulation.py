@@ -69,10 +69,15 @@ class Deformation3D(Deformation):
         contact_area: m^2, surface area in contact with the two jaws (the vertex areas,
             a third of each adjacent triangle, of the held surface nodes).
         jaw_contact_areas: (2,) m^2, left and right jaw.
+        jaw_contact_radii: (2,) m, radius of each jaw's contact patch: where the gap of
+            the first free surface nodes around the patch extrapolates to zero (a smooth
+            surface leaves a flat face as gap ~ (rho - a)^2: sqrt(gap) is fitted linearly
+            in the distance rho from the patch centre); sqrt(A / pi) if that fails.
     """
 
     contact_area: float = 0.0
     jaw_contact_areas: tuple = (0.0, 0.0)
+    jaw_contact_radii: tuple = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -604,6 +609,10 @@ class Simulation3D:
         max_strain = float(strains[np.argmax(np.abs(strains))]) if strains.size else 0.0
         areas = meshes.vertex_areas(x, fruit.triangles, fruit.n_nodes)
         jaw_areas = (float(areas[on_left].sum()), float(areas[on_right].sum()))
+        faces = self._faces(self._grip)
+        radii = tuple(self._patch_radius(x, faces[side], held, area)
+                      for side, held, area in ((LEFT, on_left, jaw_areas[0]),
+                                               (RIGHT, on_right, jaw_areas[1])))
         with np.errstate(divide='ignore', invalid='ignore'):
             pressure = np.where(areas[surface] > 0,
                                 np.maximum(normal[surface], 0.0) / areas[surface], 0.0)
@@ -612,4 +621,27 @@ class Simulation3D:
             max_skin_strain=max_strain,
             contact_length=sum(2 * math.sqrt(a / math.pi) for a in jaw_areas),
             peak_contact_pressure=float(pressure.max(initial=0.0)), node_pressure=pressure,
-            contact_area=sum(jaw_areas), jaw_contact_areas=jaw_areas)
+            contact_area=sum(jaw_areas), jaw_contact_areas=jaw_areas, jaw_contact_radii=radii)
+
+    def _patch_radius(self, x, face: Plate, held: np.ndarray, area: float) -> float:
+        """Contact patch radius (m) on one plate, see ``Deformation3D``."""
+        if not np.any(held):
+            return 0.0
+        fallback = math.sqrt(area / math.pi)
+        surface = self.fruit.surface
+        centre = x[held].mean(axis=0)
+        rho = np.linalg.norm((x[surface] - centre) @ face.tangents.T, axis=1)
+        gap = face.gap(x[surface])
+        is_held = held[surface]
+        r1 = float(rho[is_held].max())
+        edges = self.fruit.skin_edges
+        near = held[edges[:, 0]] | held[edges[:, 1]]
+        h = float(np.median(np.linalg.norm(x[edges[near, 1]] - x[edges[near, 0]], axis=1)))
+        ring = (~is_held) & (gap > 0) & (rho > r1) & (rho < r1 + 2.5 * h) & \
+            (np.abs(gap) < 0.5 * self.fruit.rest_width)
+        if np.count_nonzero(ring) < 3:
+            return fallback
+        slope, intercept = np.polyfit(rho[ring], np.sqrt(gap[ring]), 1)
+        if slope <= 0:
+            return fallback
+        return float(min(max(-intercept / slope, r1), r1 + h))
