@@ -49,13 +49,15 @@ def test_preset_builds_with_the_keys_of_the_issue(name):
         assert low * 0.95 <= fruit.total_mass * 1e3 <= high * 1.06, fruit.total_mass
 
 
-def test_strawberry_is_a_spline_outline_taller_than_wide():
+def test_strawberry_is_a_spline_profile_lying_on_its_side():
     config = load_config(fruit='strawberry')
-    fruit = build_fruit(config)
-    outline = fruit.rest_positions[fruit.surface]
-    assert config['fruit.shape.type'] == 'spline'
+    assert config['fruit.shape.type'] == 'spline' and config['fruit.model'] == 'solid'
+    upright = build_fruit(dict(config, **{'fruit.shape.angle': 0.0}))
+    outline = upright.rest_positions[upright.surface]
     width, height = np.ptp(outline[:, 0]), np.ptp(outline[:, 1])
-    assert 0.025 <= width <= 0.035 and height > width
+    assert 0.025 <= width <= 0.035 and height > width  # the drawn berry is taller than wide
+    lying = build_fruit(config)
+    assert lying.rest_width == pytest.approx(height, rel=1e-3)  # laid on its side
 
 
 def test_fruits_verb_lists_key_figures():
