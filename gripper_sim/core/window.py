@@ -15,8 +15,9 @@
 - The window is [minimum, maximum] when minimum <= maximum, else there is none.
 
 Each trial is a fresh simulation starting with the jaws open at the grasp height (the
-scenario's approach skipped). A trial stops early once its answer is known (slipped,
-dropped or bruised).
+scenario's approach skipped). A trial stops early once its answer is known (dropped or
+bruised). A trial whose solver fails (``ConvergenceError``) counts as neither holding
+nor safe, so that force stays out of the window.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from typing import Any, Callable, Mapping
 
 from gripper_sim.core.damage import contact_modulus
 from gripper_sim.core.scenario import Scenario, run_scenario
-from gripper_sim.errors import GripperSimError
+from gripper_sim.errors import ConvergenceError, GripperSimError
 
 #: relative width of the final bisection brackets
 TOLERANCE = 0.03
@@ -160,8 +161,14 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
             return cache[key]
         t0 = time.perf_counter()
         sim = Simulation(config)
-        run = run_scenario(sim, base.with_values(close__mode='force', close__force=force),
-                           until='transport', stop_on_bruise=(kind == 'bruise'))
+        try:
+            run = run_scenario(sim, base.with_values(close__mode='force', close__force=force),
+                               until='transport', stop_on_bruise=(kind == 'bruise'))
+        except ConvergenceError as err:
+            # a force the solver cannot follow is kept out of the window: not held, and
+            # counted as damaging
+            run = dict(outcome='solver failed', dropped=True, sliding=True, bruised=True,
+                       slip_distance=math.nan, damage=None, message=str(err))
         damage = run['damage'] or {}
         held = (run['outcome'] in ('held', 'slipped', 'bruised', 'crushed')
                 and not run['dropped'] and not run['sliding'])
