@@ -168,7 +168,7 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
             # a force the solver cannot follow is kept out of the window: not held, and
             # counted as damaging
             run = dict(outcome='solver failed', dropped=True, sliding=True, bruised=True,
-                       slip_distance=math.nan, damage=None, message=str(err))
+                       slip_distance=0.0, damage=None, message=str(err))
         damage = run['damage'] or {}
         held = (run['outcome'] in ('held', 'slipped', 'bruised', 'crushed')
                 and not run['dropped'] and not run['sliding'])
