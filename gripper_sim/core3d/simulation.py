@@ -3,7 +3,8 @@
 Same commands, observers and step order as the 2D ``gripper_sim.core.simulation``
 (gripper kinematics advance, predictor-corrector contact passes around the implicit
 Euler Newton solve, commit, measure, observers), with the 2D core's stepper
-(``ImplicitEulerSolver(dim=3)``), contact state and gripper kinematics.
+(``ImplicitEulerSolver(dim=3)``, through ``PatternCachingSolver`` which only assembles
+its Hessian faster), contact state and gripper kinematics.
 
 Contact in 3D (modified mass method, Baraff & Witkin 1998): a surface node held by a
 plate is STICK (all three directions prescribed: it moves with the plate), SLIP (the
@@ -24,13 +25,13 @@ import numpy as np
 from gripper_sim.core import contact as cm
 from gripper_sim.core.gripper import GripperKinematics, GripperState
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
-from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
-                                      StepConstraints)
+from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.core3d import meshes
 from gripper_sim.core3d.damage import DamageTracker3D
 from gripper_sim.core3d.energies import Gravity3D
 from gripper_sim.core3d.fruit import FruitModel3D, build_fruit3d
 from gripper_sim.core3d.obstacles import Plate
+from gripper_sim.core3d.solver import PatternCachingSolver
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
 
 LEFT, RIGHT = 0, 1
@@ -128,7 +129,7 @@ class Simulation3D:
         self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
                              else centre_z)
         self.gravity = Gravity3D(self.fruit.masses, c['world.gravity'])
-        self.solver = ImplicitEulerSolver(
+        self.solver = PatternCachingSolver(
             self.fruit.masses, list(self.fruit.energies) + [self.gravity],
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
