@@ -187,3 +187,27 @@ def test_ellipsoid_and_revolution_bodies():
     volume = np.pi * 0.01 ** 2 * 0.02 + np.pi * 0.01 ** 2 * 0.01 / 3
     assert enclosed_volume(body.positions, body.triangles) == pytest.approx(volume, rel=0.05)
     assert np.ptp(body.positions[:, 2]) == pytest.approx(0.03, rel=1e-6)
+
+
+def test_strawberry_outline_revolved_has_the_pappus_volume():
+    """The 3D body of a 2D outline is that outline revolved about z: its volume is
+    2 pi x_c A of the right half-outline (Pappus), x_c its centroid's distance from the axis."""
+    from gripper_sim.configuration import load_config
+    from gripper_sim.core import shapes
+    from gripper_sim.core3d.fruit import _meridian, body_from_config
+    config = load_config(fruit='strawberry', overrides=['dimension=3', 'fruit.shape.angle=0',
+                                                       'fruit.mesh.subdivisions=10',
+                                                       'fruit.mesh.jaw_refinement=1'])
+    outline = shapes.outline_from_config(config)
+    half = _meridian(outline)  # (r, z) from the bottom to the top, both ends on the axis
+    r, z = half[:, 0], half[:, 1]
+    # area and first moment about the axis of the region between the meridian and the axis
+    nr, nz = np.roll(r, -1), np.roll(z, -1)
+    cross = r * nz - nr * z
+    area = 0.5 * np.sum(cross)
+    moment = np.sum((r + nr) * cross) / 6.0
+    pappus = abs(2 * np.pi * moment)
+    assert abs(area) > 0
+    body = body_from_config(config)
+    assert enclosed_volume(body.positions, body.triangles) == pytest.approx(pappus, rel=0.03)
+    assert np.all(dihedral_angles(body.positions, hinges(body.triangles)) > -np.pi / 2)
