@@ -3,8 +3,8 @@
 Every body here is star-shaped about its centre, so one surface mesher serves them
 all: a unit sphere mesh, uniform (a geodesic sphere, an icosahedron whose edges are cut
 into ``frequency`` parts, 10 f^2 + 2 vertices) or in rings about the x axis, fine at
-the two jaw contact points (``ring_sphere``), then mapped radially onto the body (sphere, ellipsoid, or a solid of
-revolution about z given by a profile curve). Tetrahedra come from TetGen (Si 2015,
+the two jaw contact points (``ring_sphere``), then mapped radially onto the body
+(sphere, ellipsoid, or a solid of revolution about z given by a profile curve). Tetrahedra come from TetGen (Si 2015,
 ACM TOMS 41(2):11) through its Python wrapper ``tetgen``, with the surface kept as
 given, so surface vertices are nodes 0..n_surface-1 of the volume mesh.
 
