@@ -194,7 +194,7 @@ def profile_radius_function(profile: np.ndarray):
                           'must fall monotonically from the bottom to the top)')
     a = np.stack([p[:-1, 0], p[:-1, 1] - centre], axis=1)
     b = np.stack([p[1:, 0], p[1:, 1] - centre], axis=1)
-    t_hi, t_lo = theta[:-1], theta[1:]
+    t_lo = theta[1:]  # each segment k spans polar angles [t_lo[k], theta[k]]
 
     def rho(t):
         """Distance from the centre to the profile along the ray at polar angle t."""
