@@ -253,7 +253,10 @@ class PickAndPlace:
         self.until = until
         self.stop_on_slip = stop_on_slip
         self.stop_on_bruise = stop_on_bruise
-        self.start_x = sim.gripper_state.x
+        # aim at the middle of the fruit's extent along the closing axis (where a camera
+        # would put the gripper), which for an uneven outline is not its centroid
+        surface = sim.last.positions[sim.fruit.surface]
+        self.start_x = 0.5 * float(surface[:, 0].min() + surface[:, 0].max())
         self.start_lift = sim.gripper_state.lift
         self.grasp_lift = self.start_lift - scenario['approach.height']
         self.phase = 'approach'
@@ -273,7 +276,9 @@ class PickAndPlace:
         self.last = sim.last
         self.closing_deadline = math.inf
         sim.command_lift(self.grasp_lift, scenario['approach.speed'])
-        if scenario['approach.height'] <= 0:
+        if self.start_x != sim.gripper_state.x:
+            sim.command_transport(self.start_x, scenario['approach.speed'])
+        if scenario['approach.height'] <= 0 and self._x_reached():
             self._start_close()
 
     @property
@@ -284,6 +289,10 @@ class PickAndPlace:
         self.phase = phase
         self.phase_start = self.sim.time
         self.phase_times[phase] = self.sim.time
+
+    def _x_reached(self) -> bool:
+        grip = self.sim.gripper_state
+        return grip.x == grip.target_x and grip.x_rate == 0.0
 
     def _lift_reached(self) -> bool:
         grip = self.sim.gripper_state
@@ -344,11 +353,12 @@ class PickAndPlace:
                 self._end('slipped', f'the fruit slipped {self.max_slip * 1e3:.2f} '
                           f'mm in the jaws during the {self.phase}')
                 return self.phase
-        if self.stop_on_bruise and result.damage is not None and result.damage.bruised:
-            self._end('bruised', f'the fruit bruised at t = {sim.time:.3f} s')
+        if self.stop_on_bruise and result.damage is not None and (
+                result.damage.bruised or result.damage.crushed):
+            self._end('bruised', f'the fruit was damaged at t = {sim.time:.3f} s')
             return self.phase
         if self.phase == 'approach':
-            if self._lift_reached():
+            if self._lift_reached() and self._x_reached():
                 self._start_close()
         elif self.phase == 'close':
             if sc['close.mode'] == 'force':

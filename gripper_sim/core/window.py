@@ -9,7 +9,7 @@
   m g / (2 mu_s) (validation.md section 6) and m g / (2 mu_k), widened until it
   brackets.
 - Maximum force: the largest grip force at which the same run leaves the fruit
-  unbruised (``damage.bruised`` false), by bisection seeded with the Hertz force at
+  undamaged (neither bruised nor crushed), by bisection seeded with the Hertz force at
   which the peak pressure reaches the bruise threshold,
   F = p_b^3 pi^3 R^2 / (6 E*^2) (validation.md section 3).
 - The window is [minimum, maximum] when minimum <= maximum, else there is none.
@@ -176,8 +176,9 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
                        outcome=str(run['outcome']), slip_distance=float(run['slip_distance']),
                        peak_pressure=float(damage.get('peak_pressure', 0.0)),
                        wall_time=time.perf_counter() - t0)
-        if kind == 'bruise' and result.bruised:
-            result.held = False  # stopped at the bruise: holding was not tried to the end
+        if kind == 'bruise' and (result.bruised or run.get('crushed')):
+            result.bruised = True  # damaged: bruised, or crushed without a bruise
+            result.held = False  # stopped at the damage: holding was not tried to the end
         cache[key] = result
         trials.append(result)
         if progress is not None:
