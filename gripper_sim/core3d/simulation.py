@@ -111,6 +111,12 @@ class Simulation3D:
         self.config = dict(config)
         if int(self.config.get('dimension', 2)) != 3:
             raise ConfigError("config key 'dimension' must be 3 for the 3D simulation")
+        if self.config.get('gripper.finger.type', 'flat') != 'flat':
+            raise ConfigError("config key 'gripper.finger.type': the 3D model has flat jaw "
+                              'plates only (arc and vgroove fingers are 2D for now)')
+        if self.config.get('gripper.finger.pad.enabled', False):
+            raise ConfigError("config key 'gripper.finger.pad.enabled': soft pads are 2D "
+                              'only for now (dimension: 2)')
         self.fruit: FruitModel3D = build_fruit3d(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config
