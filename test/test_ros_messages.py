@@ -183,3 +183,94 @@ def test_time_conversion_is_exact_for_integer_nanoseconds():
     assert (stamp.sec, stamp.nanosec) == (12, 345_678_901)
     assert messages.time_msg(0.1).nanosec == 100_000_000
     assert not math.isnan(messages.time_msg(0.0).sec)
+
+
+# ---------------------------------------------------------------- 3D (StepResult3D)
+
+BRUISE_3D = 2.0e4    # Pa: low, so the 3 N squeeze below bruises part of the patch
+
+
+@pytest.fixture(scope='module')
+def squeezed_3d():
+    """A real 3D step: the apple (coarse mesh) squeezed to 3 N by the flat jaws."""
+    from gripper_sim.configuration import load_config
+    from gripper_sim.core import make_simulation
+    config = load_config(overrides={
+        'dimension': 3, 'fruit.mesh.subdivisions': 3, 'gripper.initial_gap': 0.0645,
+        'gripper.close_speed': 0.05, 'sim.dt': 0.002, 'fruit.bruise_pressure': BRUISE_3D})
+    sim = make_simulation(config)
+    context = MessageContext.from_config(config, initial=sim.last)
+    sim.command_force(3.0)
+    for _ in range(60):
+        result = sim.step()
+    return result, context
+
+
+def independent_pressure(result):
+    """(n,) Pa: normal contact force over vertex area (2/3 of nothing off contact)."""
+    from gripper_sim.core3d.meshes import vertex_areas
+    normals = {0: np.array([1.0, 0, 0]), 1: np.array([-1.0, 0, 0]), 2: np.array([0, 0, 1.0])}
+    areas = vertex_areas(result.positions, result.triangles, len(result.positions))
+    pressure = np.zeros(len(result.positions))
+    for i in np.flatnonzero(result.contact_obstacle >= 0):
+        normal = normals[int(result.contact_obstacle[i])]
+        pressure[i] = max(result.contact_forces[i] @ normal, 0.0) / areas[i]
+    return pressure
+
+
+def test_3d_mesh_marker_has_the_skin_triangles_coloured_red_where_bruising(squeezed_3d):
+    result, context = squeezed_3d
+    array = build_messages(result, context.snapshot())['markers']
+    by_ns = {m.ns: m for m in array.markers}
+    assert 'fruit_outline' not in by_ns
+    mesh = by_ns['fruit_mesh']
+    assert mesh.type == mesh.TRIANGLE_LIST and mesh.id == 0
+    assert mesh.header.frame_id == 'world'
+    corners = np.asarray(result.triangles).ravel()
+    assert len(mesh.points) == 3 * len(result.triangles) == len(mesh.colors)
+    drawn = np.array([(p.x, p.y, p.z) for p in mesh.points])
+    np.testing.assert_allclose(drawn, result.positions[corners], atol=1e-12)
+    pressure = independent_pressure(result)[corners]
+    red = np.array([c.r == 1.0 and c.g == 0.0 for c in mesh.colors])
+    assert np.any(pressure >= BRUISE_3D) and np.any((pressure > 0) & (pressure < BRUISE_3D))
+    np.testing.assert_array_equal(red, pressure >= BRUISE_3D * (1 + 1e-9))
+    untouched = pressure == 0
+    assert all(c.g == pytest.approx(0.8) for c, free in zip(mesh.colors, untouched) if free)
+    jaws = [m for m in array.markers if m.ns == 'jaws']
+    assert [j.scale.y for j in jaws] == [pytest.approx(context.jaw_width)] * 2
+
+
+def test_3d_wrench_torque_is_r_cross_f_about_the_jaw_face_centre(squeezed_3d):
+    result, context = squeezed_3d
+    msgs = build_messages(result, context.snapshot())
+    for side, index, face_x in (('left', 0, result.left_jaw_x),
+                                ('right', 1, result.right_jaw_x)):
+        held = result.contact_obstacle == index
+        on_jaw = -result.contact_forces[held]
+        r = result.positions[held] - np.array([face_x, 0.0, result.lift])
+        wrench = msgs[f'{side}_jaw/wrench'].wrench
+        torque = np.cross(r, on_jaw).sum(axis=0)
+        assert np.linalg.norm(torque) > 1e-5      # the fruit hangs below the jaw centre
+        np.testing.assert_allclose([wrench.torque.x, wrench.torque.y, wrench.torque.z],
+                                   torque, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose([wrench.force.x, wrench.force.y, wrench.force.z],
+                                   on_jaw.sum(axis=0), rtol=1e-6, atol=1e-9)
+    assert abs(msgs['left_jaw/wrench'].wrench.force.x) == pytest.approx(3.0, rel=0.1)
+
+
+def test_3d_cloud_and_fruit_state_carry_the_real_y_and_the_contact_area(squeezed_3d):
+    from gripper_sim.core3d.meshes import vertex_areas
+    result, context = squeezed_3d
+    msgs = build_messages(result, context.snapshot())
+    points = messages.read_point_cloud(msgs['fruit/nodes'])
+    assert np.ptp(points[:, 1]) > 0.05      # a real y spread: the fruit's width
+    np.testing.assert_allclose(points[:, :3], result.positions, atol=1e-6)
+    np.testing.assert_allclose(points[:, 3:], result.contact_forces, atol=1e-5)
+    state = msgs['fruit/state']
+    assert state.dimension == 3 and state.node_count == len(result.positions)
+    held = np.isin(result.contact_obstacle, (0, 1))
+    area = vertex_areas(result.positions, result.triangles, len(result.positions))[held].sum()
+    assert area > 0 and state.contact_area == pytest.approx(area, rel=1e-9)
+    masses_centroid_y = float(result.centroid[1])
+    assert state.centroid.y == pytest.approx(masses_centroid_y) and state.centroid.y != 0.0
+    assert state.centroid.z == pytest.approx(float(result.centroid[2]))

@@ -4,10 +4,16 @@ No node, no publishing: the ``gripper_sim`` node and the offline MCAP writer bot
 ``build_messages`` so that a live run and an offline recording carry the same topics
 with the same contents.
 
-Conventions (REP 103): SI units; the planar model lives in the x-z plane of the world
-frame and is published as 3D data with y = 0. Frames: ``world`` for the fruit, the
-markers and the table; ``left_jaw`` / ``right_jaw`` for the jaw wrenches (parallel to
-``world``, origin at the centre of the jaw face).
+Conventions (REP 103): SI units; the planar model (``dimension`` 2) lives in the x-z
+plane of the world frame and is published as 3D data with y = 0; the 3D model
+(``StepResult3D``: (n, 3) positions) is published as it is. Frames: ``world`` for the
+fruit, the markers and the table; ``left_jaw`` / ``right_jaw`` for the jaw wrenches
+(parallel to ``world``, origin at the centre of the jaw face).
+
+The fruit marker: a 2D result draws the outline (ns ``fruit_outline``, LINE_STRIP), a
+3D result the skin (ns ``fruit_mesh``, TRIANGLE_LIST, three points per skin triangle),
+both coloured per point by the contact pressure there (``pressure_colour``: red at and
+above the bruise pressure).
 """
 from __future__ import annotations
 
@@ -130,6 +136,7 @@ class MessageContext:
         bruise_pressure: Pa, contact pressure above which the fruit bruises.
         failure_stress: Pa, flesh failure stress (compared with peak contact pressure).
         jaw_height, jaw_thickness: m, jaw face length along z and thickness along x.
+        jaw_width: m, 3D jaw face width along y (the 2D jaws are drawn ``depth`` wide).
         table: whether there is a table, at ``table_height`` (m).
         gripper_centre_x: m, x of the gripper centre the jaw joints are measured from.
     """
@@ -141,6 +148,7 @@ class MessageContext:
     failure_stress: float = 0.29e6
     jaw_height: float = 0.04
     jaw_thickness: float = 0.01
+    jaw_width: float = 0.04
     table: bool = True
     table_height: float = 0.0
     gripper_centre_x: float = 0.0
@@ -171,6 +179,7 @@ class MessageContext:
             failure_stress=float(config.get('fruit.failure_stress', cls.failure_stress)),
             jaw_height=float(config.get('gripper.jaw_height', cls.jaw_height)),
             jaw_thickness=float(config.get('gripper.jaw_thickness', cls.jaw_thickness)),
+            jaw_width=float(config.get('gripper.jaw_width', cls.jaw_width)),
             table=bool(config.get('world.table', True)),
             table_height=float(config.get('world.table_height', 0.0)),
             gripper_centre_x=centre,
@@ -215,9 +224,35 @@ class MessageContext:
         return float(np.count_nonzero(self._node_bruised)) / self._node_bruised.size
 
 
-def _xyz(planar: np.ndarray) -> tuple[float, float, float]:
-    """(x, z) in the plane to (x, 0, z) in the world."""
-    return float(planar[0]), 0.0, float(planar[1])
+def is_3d(result: StepResult) -> bool:
+    """Whether ``result`` comes from the 3D model ((n, 3) positions)."""
+    return np.ndim(result.positions) == 2 and np.shape(result.positions)[1] == 3
+
+
+def world_xyz(vectors: np.ndarray) -> np.ndarray:
+    """(n, 3) float world vectors of (n, 2) planar (x, z) ones (y = 0) or (n, 3) ones."""
+    vectors = np.asarray(vectors, dtype=float)
+    if vectors.ndim == 2 and vectors.shape[1] == 3:
+        return vectors
+    out = np.zeros((vectors.shape[0], 3))
+    out[:, 0], out[:, 2] = vectors[:, 0], vectors[:, 1]
+    return out
+
+
+def node_pressure(result: StepResult) -> np.ndarray:
+    """(n_nodes,) Pa, contact pressure at every fruit node (0 off the surface).
+
+    The damage estimate's pressure (``result.damage.node_pressure``: the Hertz/ASAE
+    estimate in 2D, the resolved normal force over vertex area in 3D) when the step
+    has one, else the model's own ``deformation.node_pressure``.
+    """
+    source = result.damage if result.damage is not None else result.deformation
+    surface_pressure = np.asarray(source.node_pressure, dtype=float)
+    full = np.zeros(np.shape(result.positions)[0])
+    surface = np.asarray(result.surface, dtype=int)
+    if surface_pressure.shape == surface.shape:
+        full[surface] = surface_pressure
+    return full
 
 
 def _left_is_negative(result: StepResult) -> bool:
@@ -233,13 +268,11 @@ def jaw_normal_forces(result: StepResult) -> tuple[float, float]:
 
 
 def point_cloud(result: StepResult, header: Header) -> PointCloud2:
-    """One point per fruit node: fields x y z fx fy fz (float32; m and N; y = 0)."""
+    """One point per fruit node: fields x y z fx fy fz (float32; m and N; y = 0 in 2D)."""
     n = result.positions.shape[0]
     data = np.zeros((n, len(POINT_FIELDS)), dtype=np.float32)
-    data[:, 0] = result.positions[:, 0]
-    data[:, 2] = result.positions[:, 1]
-    data[:, 3] = result.contact_forces[:, 0]
-    data[:, 5] = result.contact_forces[:, 1]
+    data[:, 0:3] = world_xyz(result.positions)
+    data[:, 3:6] = world_xyz(result.contact_forces)
     msg = PointCloud2()
     msg.header = header
     msg.height = 1
@@ -263,22 +296,27 @@ def read_point_cloud(msg: PointCloud2) -> np.ndarray:
 
 
 def fruit_state(result: StepResult, context: MessageContext, header: Header) -> FruitState:
+    """The ``FruitState`` of ``result`` (see the .msg for the fields and units)."""
     deformation = result.deformation
     msg = FruitState()
     msg.header = header
-    msg.dimension = int(context.dimension)
+    msg.dimension = 3 if is_3d(result) else 2
     msg.node_count = int(result.positions.shape[0])
     msg.compression = float(deformation.compression)
     msg.compression_ratio = float(deformation.compression_ratio)
     msg.max_skin_strain = float(deformation.max_skin_strain)
     msg.contact_length = float(deformation.contact_length)
-    # The planar model is a slab of depth b: its contact area is length x depth.
-    msg.contact_area = float(deformation.contact_length) * context.depth
+    if hasattr(deformation, 'contact_area'):
+        msg.contact_area = float(deformation.contact_area)
+    else:
+        # The planar model is a slab of depth b: its contact area is length x depth.
+        msg.contact_area = float(deformation.contact_length) * context.depth
     msg.peak_contact_pressure = float(deformation.peak_contact_pressure)
     msg.elastic_energy = float(result.energies.elastic)
     msg.kinetic_energy = float(result.energies.kinetic)
     msg.gravitational_energy = float(result.energies.gravitational)
-    msg.centroid = Point(x=float(result.centroid[0]), y=0.0, z=float(result.centroid[1]))
+    x, y, z = world_xyz(np.reshape(result.centroid, (1, -1)))[0].tolist()
+    msg.centroid = Point(x=x, y=y, z=z)
     msg.grip_force = float(result.grip_force)
     msg.gap = float(result.gap)
     msg.slip_distance = float(result.slip_distance)
@@ -371,24 +409,43 @@ def _deleted(header: Header, ns: str, marker_id: int) -> Marker:
     return marker
 
 
-def markers(result: StepResult, context: MessageContext, header: Header) -> MarkerArray:
-    """Fruit outline coloured by contact pressure, jaws, table, force arrows."""
-    array = MarkerArray()
-    surface = np.asarray(result.surface, dtype=int)
-    pressure = np.asarray(result.deformation.node_pressure, dtype=float)
+def _points(xyz: np.ndarray) -> list[Point]:
+    """``Point``s of an (n, 3) array."""
+    return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(xyz, dtype=float).tolist()]
 
-    outline = _marker(header, 'fruit_outline', 0, Marker.LINE_STRIP)
-    outline.scale.x = OUTLINE_WIDTH
-    loop = np.concatenate([surface, surface[:1]])
-    outline.points = [Point(x=x, y=0.0, z=z)
-                      for x, z in np.asarray(result.positions, dtype=float)[loop].tolist()]
-    colours = _pressure_colours(pressure, context.bruise_pressure)
-    outline.colors = (colours + colours[:1]) if len(colours) == len(surface) else []
-    outline.color = ColorRGBA(r=0.2, g=0.8, b=0.2, a=1.0)
-    array.markers.append(outline)
+
+def fruit_marker(result: StepResult, context: MessageContext, header: Header) -> Marker:
+    """The fruit coloured by contact pressure: 2D outline or 3D skin (module docstring).
+
+    3D: ns ``fruit_mesh``, id 0, TRIANGLE_LIST whose points are the corners of
+    ``result.triangles`` in order (3 per triangle) and colours the pressure colour of
+    each corner's node. 2D: ns ``fruit_outline``, id 0, a closed LINE_STRIP.
+    """
+    pressure = node_pressure(result)
+    positions = world_xyz(result.positions)
+    if is_3d(result):
+        corners = np.asarray(result.triangles, dtype=int).ravel()
+        marker = _marker(header, 'fruit_mesh', 0, Marker.TRIANGLE_LIST)
+        marker.scale.x = marker.scale.y = marker.scale.z = 1.0
+    else:
+        surface = np.asarray(result.surface, dtype=int)
+        corners = np.concatenate([surface, surface[:1]])
+        marker = _marker(header, 'fruit_outline', 0, Marker.LINE_STRIP)
+        marker.scale.x = OUTLINE_WIDTH
+    marker.points = _points(positions[corners])
+    marker.colors = _pressure_colours(pressure[corners], context.bruise_pressure)
+    marker.color = ColorRGBA(r=0.2, g=0.8, b=0.2, a=1.0)
+    return marker
+
+
+def markers(result: StepResult, context: MessageContext, header: Header) -> MarkerArray:
+    """Fruit coloured by contact pressure, jaws, table, force arrows (frame ``world``)."""
+    array = MarkerArray()
+    array.markers.append(fruit_marker(result, context, header))
 
     outward_left = -1.0 if _left_is_negative(result) else 1.0
     depth = max(context.depth, 1e-3)
+    width = context.jaw_width if is_3d(result) else depth
     jaws = (('left', result.left_jaw_x, outward_left, result.left_wrench),
             ('right', result.right_jaw_x, -outward_left, result.right_wrench))
     for marker_id, (_, face_x, outward, wrench) in enumerate(jaws):
@@ -396,7 +453,7 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
         jaw.pose.position.x = float(face_x + outward * context.jaw_thickness / 2.0)
         jaw.pose.position.z = float(result.lift)
         jaw.scale.x = context.jaw_thickness
-        jaw.scale.y = depth
+        jaw.scale.y = width
         jaw.scale.z = context.jaw_height
         jaw.color = ColorRGBA(r=0.45, g=0.45, b=0.5, a=0.8)
         array.markers.append(jaw)
@@ -418,7 +475,7 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
         table = _marker(header, 'table', 0, Marker.CUBE)
         span = max(0.3, 4.0 * context.rest_width)
         table.pose.position.z = context.table_height - 0.005
-        table.scale.x, table.scale.y, table.scale.z = span, 2.0 * depth, 0.01
+        table.scale.x, table.scale.y, table.scale.z = span, max(2.0 * width, span / 2), 0.01
         table.color = ColorRGBA(r=0.55, g=0.4, b=0.25, a=1.0)
         array.markers.append(table)
 
@@ -427,12 +484,9 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
         lines = _marker(header, 'contact_forces', 0, Marker.LINE_LIST)
         lines.scale.x = 0.0005
         lines.color = ColorRGBA(r=0.1, g=0.3, b=0.9, a=1.0)
-        for i in touching:
-            x, y, z = _xyz(result.positions[i])
-            fx, _, fz = _xyz(result.contact_forces[i])
-            lines.points.append(Point(x=x, y=y, z=z))
-            lines.points.append(Point(x=x + CONTACT_LINE_SCALE * fx, y=y,
-                                      z=z + CONTACT_LINE_SCALE * fz))
+        start = world_xyz(result.positions)[touching]
+        end = start + CONTACT_LINE_SCALE * world_xyz(result.contact_forces)[touching]
+        lines.points = _points(np.stack([start, end], axis=1).reshape(-1, 3))
         array.markers.append(lines)
     else:
         array.markers.append(_deleted(header, 'contact_forces', 0))

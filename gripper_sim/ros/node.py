@@ -1,4 +1,5 @@
-"""The ``gripper_sim`` node: a thin ROS 2 adapter around ``gripper_sim.core.Simulation``.
+"""The ``gripper_sim`` node: a thin ROS 2 adapter around the physics core (``Simulation``, or
+``Simulation3D`` with the physics parameter ``dimension`` 3: ``core.make_simulation``).
 
 Physics runs in its own thread at the configured dt, paced to ``real_time_factor``
 (0 = as fast as possible), and publishes every ``1 / publish_rate`` s of sim time.
@@ -38,7 +39,7 @@ from std_srvs.srv import SetBool, Trigger
 from gripper_sim_interfaces.srv import Step
 
 from gripper_sim.core.results import StepResult
-from gripper_sim.core.simulation import Simulation
+from gripper_sim.core import make_simulation
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
 from gripper_sim.ros import messages
 from gripper_sim.ros.messages import MessageContext, build_messages
@@ -149,7 +150,7 @@ class SimNode(Node):
     """
 
     def __init__(self, *, fruit: str | None = None, config_file: str | None = None,
-                 simulation_factory: Callable[[dict], Any] = Simulation, start: bool = True,
+                 simulation_factory: Callable[[dict], Any] = make_simulation, start: bool = True,
                  **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self.params = SimParameters(self, fruit=fruit, config_file=config_file)
@@ -216,7 +217,8 @@ class SimNode(Node):
         config = self.params.config
         self.get_logger().info(
             f"ready: fruit '{config['fruit.name']}' ({config['fruit.model']} model, "
-            f"{config['fruit.nodes']} nodes), dt {self.sim.dt:g} s, publishing every "
+            f"{getattr(self.sim, 'dimension', 2)}D, {len(self.sim.last.positions)} nodes), "
+            f'dt {self.sim.dt:g} s, publishing every '
             f'{self._publish_every} steps ({1.0 / (self._publish_every * self.sim.dt):g} Hz '
             f'sim time), real-time factor {self._rtf:g}')
         self._publish(self.sim.last, self.message_context.snapshot(), self._sequence)
