@@ -25,9 +25,7 @@ def test_dimension_3_selects_the_3d_model():
 @pytest.mark.parametrize('override,key', [
     ('fruit.model=point', 'fruit.model'), ('dimension=4', 'dimension'),
     ('fruit.mesh.jaw_refinement=0', 'fruit.mesh.jaw_refinement'),
-    ('fruit.mesh.subdivisions=0', 'fruit.mesh.subdivisions'),
-    ('gripper.finger.type=vgroove', 'gripper.finger.type'),
-    ('gripper.finger.pad.enabled=true', 'gripper.finger.pad.enabled')])
+    ('fruit.mesh.subdivisions=0', 'fruit.mesh.subdivisions')])
 def test_bad_3d_configuration_names_the_key(override, key):
     with pytest.raises(ConfigError, match=key.replace('.', r'\.')):
         make_simulation(load_config(overrides=COARSE + [override]))

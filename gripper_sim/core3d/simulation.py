@@ -1,4 +1,4 @@
-"""The 3D simulation facade: a 3D fruit between two flat jaw plates, stepped in time.
+"""The 3D simulation facade: a 3D fruit between two jaws, stepped in time.
 
 Same commands, observers and step order as the 2D ``gripper_sim.core.simulation``
 (gripper kinematics advance, predictor-corrector contact passes around the implicit
@@ -13,6 +13,12 @@ smoothed Coulomb cone in the plate's tangent plane) or IMPACT (restitution). A s
 node starts slipping when its tangential reaction |R_t| exceeds mu_s R_n; a slipping
 node sticks again when its slip speed vanishes. Detection: a box test per plate (broad
 phase) and one vectorised gap test of every free surface node (narrow phase).
+
+Jaws: flat plates, or the 2D finger profiles (arc, vgroove) extruded along y as flat
+facets (``core3d.fingers3d``); a soft pad is an elastic-foundation energy on the jaw
+faces (``core3d.fingers_pad``). The grip force of shaped fingers is the force along the
+closing axis x, summed over a jaw's facets; wrench torques are about the centre of each
+jaw's front plane.
 """
 from __future__ import annotations
 
@@ -26,9 +32,10 @@ from gripper_sim.core import contact as cm
 from gripper_sim.core.gripper import GripperKinematics, GripperState
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
-from gripper_sim.core3d import meshes
+from gripper_sim.core3d import fingers3d, meshes
 from gripper_sim.core3d.damage import DamageTracker3D
 from gripper_sim.core3d.energies import Gravity3D
+from gripper_sim.core3d.fingers_pad import PadLayer3D
 from gripper_sim.core3d.fruit import FruitModel3D, build_fruit3d
 from gripper_sim.core3d.obstacles import Plate
 from gripper_sim.core3d.solver import PatternCachingSolver
@@ -73,7 +80,8 @@ class Deformation3D(Deformation):
         jaw_contact_radii: (2,) m, radius of each jaw's contact patch: where the gap of
             the first free surface nodes around the patch extrapolates to zero (a smooth
             surface leaves a flat face as gap ~ (rho - a)^2: sqrt(gap) is fitted linearly
-            in the distance rho from the patch centre); sqrt(A / pi) if that fails.
+            in the distance rho from the patch centre); sqrt(A / pi) if that fails and
+            for shaped or padded fingers.
     """
 
     contact_area: float = 0.0
@@ -96,7 +104,7 @@ class StepResult3D(StepResult):
 
 
 class Simulation3D:
-    """A parallel-jaw gripper (two flat plates) and a deformable 3D fruit.
+    """A parallel-jaw gripper (flat plates or shaped/padded fingers) and a 3D fruit.
 
     Args:
         config: validated flat configuration with ``dimension`` 3.
@@ -111,12 +119,6 @@ class Simulation3D:
         self.config = dict(config)
         if int(self.config.get('dimension', 2)) != 3:
             raise ConfigError("config key 'dimension' must be 3 for the 3D simulation")
-        if self.config.get('gripper.finger.type', 'flat') != 'flat':
-            raise ConfigError("config key 'gripper.finger.type': the 3D model has flat jaw "
-                              'plates only (arc and vgroove fingers are 2D for now)')
-        if self.config.get('gripper.finger.pad.enabled', False):
-            raise ConfigError("config key 'gripper.finger.pad.enabled': soft pads are 2D "
-                              'only for now (dimension: 2)')
         self.fruit: FruitModel3D = build_fruit3d(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config
@@ -135,8 +137,12 @@ class Simulation3D:
         self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
                              else centre_z)
         self.gravity = Gravity3D(self.fruit.masses, c['world.gravity'])
+        self._plain_jaws = (c['gripper.finger.type'] == 'flat'
+                            and not c['gripper.finger.pad.enabled'])
+        self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
         self.solver = PatternCachingSolver(
-            self.fruit.masses, list(self.fruit.energies) + [self.gravity],
+            self.fruit.masses, list(self.fruit.energies) + [self.gravity]
+            + ([self._pad] if self._pad is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
             dim=3, lu_options=LU_OPTIONS)
@@ -262,6 +268,10 @@ class Simulation3D:
             x_speed=self.config.get('gripper.transport_speed', 0.1))
         self._jaw_force = (0.0, 0.0)
         self._damage = DamageTracker3D(self.fruit, self.config)
+        if self._pad is not None:
+            self._pad.begin_step(self.q, self._pad_faces(self._grip),
+                                 self._pad_faces(self._grip), self.dt)
+            self._pad.finish_step(self.q.ravel())
         self._last = self._measure(0, 1)
 
     # ------------------------------------------------------------------ geometry
@@ -273,8 +283,13 @@ class Simulation3D:
                    static_friction=c['contact.jaw.static_friction'],
                    kinetic_friction=c['contact.jaw.kinetic_friction'])
         jaw_tangents = np.stack([_Y, _Z])
-        faces = [Plate('left_jaw', np.zeros(3), _X.copy(), jaw_tangents, **jaw),
-                 Plate('right_jaw', np.zeros(3), -_X, jaw_tangents, **jaw)]
+        if self._plain_jaws:
+            faces = [Plate('left_jaw', np.zeros(3), _X.copy(), jaw_tangents, **jaw),
+                     Plate('right_jaw', np.zeros(3), -_X, jaw_tangents, **jaw)]
+            self._face_side, self._face_offsets = [LEFT, RIGHT], [np.zeros(3), np.zeros(3)]
+        else:
+            pad = c['gripper.finger.pad.thickness'] if self._pad is not None else 0.0
+            faces, self._face_side, self._face_offsets = fingers3d.jaw_facet_plates(c, pad)
         ground = dict(static_friction=c['contact.table.static_friction'],
                       kinetic_friction=c['contact.table.kinetic_friction'],
                       restitution=c['contact.restitution'])
@@ -291,13 +306,35 @@ class Simulation3D:
 
     def _faces(self, grip: GripperState) -> list[Plate]:
         faces = [replace(f) for f in self._faces_template]
-        faces[LEFT].origin = np.array([grip.x - 0.5 * grip.gap, 0.0, grip.lift])
-        faces[LEFT].velocity = np.array([grip.x_rate - 0.5 * grip.gap_rate, 0.0,
-                                         grip.lift_rate])
-        faces[RIGHT].origin = np.array([grip.x + 0.5 * grip.gap, 0.0, grip.lift])
-        faces[RIGHT].velocity = np.array([grip.x_rate + 0.5 * grip.gap_rate, 0.0,
-                                          grip.lift_rate])
+        for index, side in enumerate(self._face_side):
+            sign = -1.0 if side == LEFT else 1.0
+            faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
+            faces[index].velocity = np.array([grip.x_rate + sign * 0.5 * grip.gap_rate, 0.0,
+                                              grip.lift_rate])
         return faces
+
+    @staticmethod
+    def _jaw_origin(grip: GripperState, side: int) -> np.ndarray:
+        """(3,) m, centre of the jaw's front plane (where the gap is measured)."""
+        sign = -1.0 if side == LEFT else 1.0
+        return np.array([grip.x + sign * 0.5 * grip.gap, 0.0, grip.lift])
+
+    def _jaw_faces(self, side: int) -> list[int]:
+        """Obstacle indices of the faces of jaw ``side`` (LEFT or RIGHT)."""
+        return [i for i, s in enumerate(self._face_side) if s == side]
+
+    def _make_pad(self) -> PadLayer3D:
+        c, fruit = self.config, self.fruit
+        areas = meshes.vertex_areas(fruit.rest_positions, fruit.triangles, fruit.n_nodes)
+        return PadLayer3D(fruit.surface, areas[fruit.surface],
+                          c['gripper.finger.pad.thickness'],
+                          c['gripper.finger.pad.youngs_modulus'],
+                          c['gripper.finger.pad.poisson_ratio'], c['contact.pad.friction'],
+                          fruit.n_nodes)
+
+    def _pad_faces(self, grip: GripperState) -> list:
+        faces = self._faces(grip)
+        return [(faces[i], side, i) for i, side in enumerate(self._face_side)]
 
     @property
     def obstacle_names(self) -> tuple:
@@ -344,6 +381,21 @@ class Simulation3D:
         return it1 + it2, s1 + s2
 
     def _substep(self, dt: float) -> int:
+        if self._pad is None:
+            return self._substep_hard(dt)
+        left_n, right_n = self._jaw_force
+        grip_new = self.kinematics.advance(self._grip, dt, 0.5 * (left_n + right_n),
+                                           left_n > 0 and right_n > 0)
+        self._pad.begin_step(self.q, self._pad_faces(self._grip), self._pad_faces(grip_new), dt)
+        iterations = self._substep_hard(dt)
+        self._pad.finish_step(self.q.ravel())
+        hard = self._jaw_force
+        self._jaw_force = (hard[0] + float(self._pad.side_force[0]),
+                           hard[1] + float(self._pad.side_force[1]))
+        return iterations
+
+    def _substep_hard(self, dt: float) -> int:
+        """One step with the hard contacts (the pads, if any, set up by the caller)."""
         left_n, right_n = self._jaw_force
         grip_force = 0.5 * (left_n + right_n)
         both = left_n > 0 and right_n > 0
@@ -387,10 +439,17 @@ class Simulation3D:
         self.q, self.v, self.contacts, self.contact_forces = x, v, contacts, forces
         self._grip = grip_new
         self._time += dt
-        self._jaw_force = tuple(
-            float(np.sum(forces[contacts.obstacle == side] @ new_faces[side].normal))
-            for side in (LEFT, RIGHT))
+        self._jaw_force = self._closing_forces(forces, contacts.obstacle, new_faces)
         return iterations
+
+    def _closing_forces(self, forces, obstacle, faces) -> tuple:
+        """(left, right) N, each jaw's hard-contact force on the fruit along its closing
+        axis (the plate normal for flat jaws), summed over its faces."""
+        if self._plain_jaws:
+            return tuple(float(np.sum(forces[obstacle == side] @ faces[side].normal))
+                         for side in (LEFT, RIGHT))
+        return tuple(sign * float(np.sum(forces[np.isin(obstacle, self._jaw_faces(side)), 0]))
+                     for side, sign in ((LEFT, 1.0), (RIGHT, -1.0)))
 
     def _constraints(self, contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces,
                      dt: float):
@@ -556,23 +615,30 @@ class Simulation3D:
         fruit, grip = self.fruit, self._grip
         faces = self._faces(grip)
         n = fruit.n_nodes
+        obstacle = self.contacts.obstacle.copy()
+        if self._pad is not None:
+            forces = forces + self._pad.forces
+            on_pad = (obstacle < 0) & (self._pad.holder >= 0)
+            obstacle[on_pad] = self._pad.holder[on_pad]
         normal = np.zeros(n)
         for index, face in enumerate(faces):
-            nodes = np.flatnonzero(self.contacts.obstacle == index)
+            nodes = np.flatnonzero(obstacle == index)
             normal[nodes] = forces[nodes] @ face.normal
+        sides = [np.isin(obstacle, self._jaw_faces(side)) for side in (LEFT, RIGHT)]
         wrenches = []
         for side in (LEFT, RIGHT):
-            nodes = np.flatnonzero(self.contacts.obstacle == side)
-            on_jaw = -forces[nodes]
-            r = x[nodes] - faces[side].origin
+            on_jaw = -forces[sides[side]]
+            r = x[sides[side]] - self._jaw_origin(grip, side)
             wrenches.append(JawWrench(on_jaw.sum(axis=0), np.cross(r, on_jaw).sum(axis=0)))
-        left_n = float(np.sum(normal[self.contacts.obstacle == LEFT]))
-        right_n = float(np.sum(normal[self.contacts.obstacle == RIGHT]))
+        if self._plain_jaws:
+            left_n = float(np.sum(normal[sides[LEFT]]))
+            right_n = float(np.sum(normal[sides[RIGHT]]))
+        else:  # along the closing axis
+            left_n, right_n = -wrenches[LEFT].force[0], wrenches[RIGHT].force[0]
         masses = fruit.masses
         centroid = masses @ x / masses.sum()
         centroid_velocity = masses @ v / masses.sum()
-        on_left = self.contacts.obstacle == LEFT
-        on_right = self.contacts.obstacle == RIGHT
+        on_left, on_right = sides
         both = bool(np.any(on_left) and np.any(on_right))
         relative_z = float(centroid[2] - grip.lift)
         if both and self._slip_reference is None:
@@ -590,7 +656,7 @@ class Simulation3D:
                                      deformation.compression_ratio)
         return StepResult3D(
             time=self._time, step=self._step, positions=x.copy(), velocities=v.copy(),
-            contact_forces=forces.copy(), contact_obstacle=self.contacts.obstacle.copy(),
+            contact_forces=forces.copy(), contact_obstacle=obstacle,
             contact_sticking=self.contacts.mode == cm.STICK,
             obstacle_names=self.obstacle_names, surface=fruit.surface,
             left_wrench=wrenches[LEFT], right_wrench=wrenches[RIGHT],
@@ -617,7 +683,8 @@ class Simulation3D:
         areas = meshes.vertex_areas(x, fruit.triangles, fruit.n_nodes)
         jaw_areas = (float(areas[on_left].sum()), float(areas[on_right].sum()))
         faces = self._faces(self._grip)
-        radii = tuple(self._patch_radius(x, faces[side], held, area)
+        radii = tuple(self._patch_radius(x, faces[side], held, area) if self._plain_jaws
+                      else math.sqrt(area / math.pi)
                       for side, held, area in ((LEFT, on_left, jaw_areas[0]),
                                                (RIGHT, on_right, jaw_areas[1])))
         with np.errstate(divide='ignore', invalid='ignore'):
