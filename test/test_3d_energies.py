@@ -67,6 +67,57 @@ def test_hessian_matches_central_differences(name, energy, q):
     assert np.allclose(hess, hess.T, atol=1e-9 * np.max(np.abs(hess)))
 
 
+def _kernel_evaluation(energy, q, hessian=True):
+    """(value, gradient, dense Hessian incl. low-rank terms) from ``evaluate_into``, with
+    a dense (n, n) matrix standing in for the CSC values (scatter = row * n + column)."""
+    n = q.size
+    grad = np.zeros(n)
+    data = np.zeros(n * n)
+    if energy.dofs is None:
+        scatter = np.zeros((0, 0), np.int64)
+    else:
+        m = energy.dofs.shape[1]
+        scatter = (np.repeat(energy.dofs, m, axis=1) * n + np.tile(energy.dofs, (1, m)))
+    value, low_rank = energy.evaluate_into(q, grad, data, scatter, hessian)
+    dense = data.reshape(n, n)
+    for c, u in low_rank:
+        dense = dense + c * np.outer(u, u)
+    return value, grad, dense
+
+
+@pytest.mark.parametrize('name,energy,q', CASES, ids=IDS)
+def test_numba_kernel_matches_the_numpy_reference(name, energy, q):
+    """The fast solver's kernels give the reference value, gradient and Hessian."""
+    value, grad, hess = _kernel_evaluation(energy, q)
+    assert value == pytest.approx(energy.value(q), rel=1e-12, abs=1e-18)
+    ref_grad = energy.gradient(q)
+    assert np.max(np.abs(grad - ref_grad)) <= 1e-12 * np.max(np.abs(ref_grad))
+    ref_hess = energy.hessian(q)
+    assert np.max(np.abs(hess - ref_hess)) <= 1e-12 * max(np.max(np.abs(ref_hess)), 1.0)
+    value_only, grad_only, untouched = _kernel_evaluation(energy, q, hessian=False)
+    assert value_only == value and np.array_equal(grad_only, grad)
+    assert not np.any(untouched)
+
+
+@pytest.mark.parametrize('name,energy,q', CASES[:4], ids=IDS[:4])
+def test_numba_kernel_hessian_matches_central_differences_of_its_gradient(name, energy, q):
+    h = 1e-7
+    _, _, hess = _kernel_evaluation(energy, q)
+    fd = np.array([(_kernel_evaluation(energy, q + h * e, False)[1]
+                    - _kernel_evaluation(energy, q - h * e, False)[1]) / (2 * h)
+                   for e in np.eye(q.size)])
+    assert np.max(np.abs(hess)) > 1e-3, 'Hessian is trivially zero'
+    assert np.max(np.abs(hess - fd)) <= 1e-6 * np.max(np.abs(hess))
+
+
+def test_numba_tet_kernel_rejects_an_inverted_element_without_adding_anything():
+    corners, tets = _cube_tets()
+    flesh = NeoHookeanTets(tets, corners, 2e6, 0.38)
+    mirrored = (corners * np.array([-1.0, 1.0, 1.0])).ravel()
+    value, grad, hess = _kernel_evaluation(flesh, mirrored)
+    assert value == np.inf and not np.any(grad) and not np.any(hess)
+
+
 def test_energies_vanish_at_rest_and_under_rigid_motion():
     sphere = geodesic_sphere(2)
     x0 = RADIUS * sphere.positions

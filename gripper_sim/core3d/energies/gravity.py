@@ -14,6 +14,8 @@ class Gravity3D(Energy):
     """
 
     elastic = False
+    #: no Hessian: nothing to scatter
+    dofs = None
 
     def __init__(self, masses: np.ndarray, g: float):
         self.g = float(g)
@@ -22,3 +24,9 @@ class Gravity3D(Energy):
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         return Evaluation(float(self.grad @ q), self.grad.copy(), *empty_triplets())
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter, hessian: bool = True):
+        """``evaluate`` for the fast solver: adds the gradient into ``grad``."""
+        grad += self.grad
+        return float(self.grad @ q), []

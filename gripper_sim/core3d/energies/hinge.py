@@ -142,3 +142,11 @@ class HingeBending(Energy):
         local = (2 * self.k)[:, None, None] * (dtheta[:, :, None] * dtheta[:, None, :]
                                                + dev[:, None, None] * d2theta)
         return Evaluation(value, grad, *hessian_triplets(self.dofs, local))
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
+        (n_hinge, 144))."""
+        from gripper_sim.core3d import kernels
+        return kernels.hinge_bending(q.reshape(-1, 3), self.hinges, self.theta0, self.k,
+                                     grad, data, scatter, hessian), []

@@ -52,7 +52,7 @@ class Membrane(Energy):
         # dF_(a,i) / dx_(node k, comp b) = d_ab dN_k/dX_i with dN/dX = [-1 -1; 1 0; 0 1] D_m^-1
         grad_n = np.einsum('kc,ecj->ekj', np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]]),
                            self.dm_inv)  # (n, 3 nodes, 2)
-        self.grad_n = grad_n
+        self.grad_n = np.ascontiguousarray(grad_n)
 
     def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
         """(n_tri, 3, 2)."""
@@ -97,3 +97,13 @@ class Membrane(Energy):
                       optimize=True)
         return Evaluation(value, grad, *hessian_triplets(self.dofs,
                                                          h.reshape(len(self.tri), 9, 9)))
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """The numba kernel of ``evaluate``: adds the gradient (N) into ``grad`` and the
+        Hessian (N/m) into the CSC values ``data`` at ``scatter`` (n_tri, 81); returns
+        (value in J, low-rank terms)."""
+        from gripper_sim.core3d import kernels
+        return kernels.membrane(q.reshape(-1, 3), self.tri, self.grad_n, self.weight,
+                                float(self.mu), float(self.lam), grad, data, scatter,
+                                hessian), []

@@ -40,7 +40,7 @@ class NeoHookeanTets(Energy):
         self.dofs = element_dofs3(self.tet)
         # dF_ij / dx_(k, i) = dN_k/dX_j, dN/dX = [-1 -1 -1; I] D_m^-1   (n, 4, 3)
         shape = np.vstack([-np.ones((1, 3)), np.eye(3)])
-        self.grad_n = np.einsum('kc,ecj->ekj', shape, self.dm_inv)
+        self.grad_n = np.ascontiguousarray(np.einsum('kc,ecj->ekj', shape, self.dm_inv))
 
     def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
         """(n_tet, 3, 3)."""
@@ -84,3 +84,12 @@ class NeoHookeanTets(Energy):
         h = np.einsum('e,ekj,eijmn,eln->ekilm', self.volume, self.grad_n, c, self.grad_n,
                       optimize=True)
         return Evaluation(value, grad, *hessian_triplets(self.dofs, h.reshape(n, 12, 12)))
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
+        (n_tet, 144)); value inf, nothing added, if an element is inverted."""
+        from gripper_sim.core3d import kernels
+        return kernels.neohookean_tets(q.reshape(-1, 3), self.tet, self.grad_n, self.volume,
+                                       float(self.mu), float(self.lam), grad, data, scatter,
+                                       hessian), []

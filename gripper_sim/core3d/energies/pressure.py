@@ -63,3 +63,19 @@ class EnclosedVolumePressure(Energy):
         low_rank = [(self.k / self.v0, gv)] if self.k > 0 else []
         return Evaluation(value, grad, *hessian_triplets(self.dofs, h.reshape(n, 9, 9)),
                           low_rank)
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
+        (n_tri, 81)); the rank-one term is returned as in ``evaluate``."""
+        from gripper_sim.core3d import kernels
+        x = q.reshape(-1, 3)
+        gv = np.empty(q.size)
+        dv = kernels.volume_and_gradient(x, self.tri, gv) - self.v0
+        value = -self.p0 * dv + 0.5 * self.k * dv ** 2 / self.v0
+        de_dv = -self.p0 + self.k * dv / self.v0
+        grad += de_dv * gv
+        if not hessian:
+            return value, []
+        kernels.volume_pressure_hessian(x, self.tri, de_dv, data, scatter)
+        return value, ([(self.k / self.v0, gv)] if self.k > 0 else [])

@@ -1,0 +1,459 @@
+"""Numba kernels of the 3D energies and of the Newton matrix filter.
+
+Free functions ``@njit(cache=True)`` on arrays. Each energy kernel computes the same
+value, gradient and Hessian as the numpy reference ``evaluate`` of its class in
+``gripper_sim.core3d.energies`` (test/test_3d_energies.py compares them), but adds the
+gradient into a preallocated (n_dof,) vector and each element Hessian entry straight
+into the ``data`` array of a fixed CSC matrix: ``scatter[e, r * m + c]`` is the
+position in ``data`` of the entry (row ``dofs[e, r]``, column ``dofs[e, c]``) of element
+e (m dofs per element). With ``hessian`` False only the value and the gradient are
+computed (line searches).
+
+Positions x are (n_nodes, 3) (m); element dofs are [x, y, z] of each element node in
+order, as ``energies.common.element_dofs3``. Import this module only where numba is
+installed (``gripper_sim.core3d.fast_solver`` checks).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _cross(a, b, out):
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True)
+def _cross_matrix(v, out):
+    """out (3, 3) = [v]x, with [v]x w = v x w."""
+    out[0, 0] = 0.0
+    out[0, 1] = -v[2]
+    out[0, 2] = v[1]
+    out[1, 0] = v[2]
+    out[1, 1] = 0.0
+    out[1, 2] = -v[0]
+    out[2, 0] = -v[1]
+    out[2, 1] = v[0]
+    out[2, 2] = 0.0
+
+
+@njit(cache=True)
+def membrane(x, tri, grad_n, weight, mu, lam, grad, data, scatter, hessian):
+    """St. Venant-Kirchhoff constant-strain triangles (``energies.membrane.Membrane``).
+
+    Args:
+        x: (n, 3) m.  tri: (n_tri, 3).  grad_n: (n_tri, 3, 2) dN_k/dX_j (1/m).
+        weight: (n_tri,) t A0 (m^3).  mu, lam: plane-stress Lame constants (Pa).
+        grad: (3 n,) N, added to.  data: CSC values (N/m), added to.
+        scatter: (n_tri, 81) positions in data.
+
+    Returns:
+        Energy (J).
+    """
+    value = 0.0
+    f = np.empty((3, 2))
+    s = np.empty((2, 2))
+    p = np.empty((3, 2))
+    ff = np.empty((3, 3))
+    cm = np.empty((3, 2, 3, 2))
+    for t in range(tri.shape[0]):
+        gn = grad_n[t]
+        for a in range(3):
+            for j in range(2):
+                acc = 0.0
+                for k in range(3):
+                    acc += x[tri[t, k], a] * gn[k, j]
+                f[a, j] = acc
+        c00 = f[0, 0] * f[0, 0] + f[1, 0] * f[1, 0] + f[2, 0] * f[2, 0]
+        c01 = f[0, 0] * f[0, 1] + f[1, 0] * f[1, 1] + f[2, 0] * f[2, 1]
+        c11 = f[0, 1] * f[0, 1] + f[1, 1] * f[1, 1] + f[2, 1] * f[2, 1]
+        e00, e01, e11 = 0.5 * (c00 - 1.0), 0.5 * c01, 0.5 * (c11 - 1.0)
+        tr = e00 + e11
+        w = weight[t]
+        value += w * (0.5 * lam * tr * tr + mu * (e00 * e00 + 2.0 * e01 * e01 + e11 * e11))
+        s[0, 0] = 2.0 * mu * e00 + lam * tr
+        s[0, 1] = 2.0 * mu * e01
+        s[1, 0] = s[0, 1]
+        s[1, 1] = 2.0 * mu * e11 + lam * tr
+        for a in range(3):
+            for j in range(2):
+                p[a, j] = f[a, 0] * s[0, j] + f[a, 1] * s[1, j]
+        for k in range(3):
+            dof = 3 * tri[t, k]
+            for a in range(3):
+                grad[dof + a] += w * (p[a, 0] * gn[k, 0] + p[a, 1] * gn[k, 1])
+        if not hessian:
+            continue
+        for a in range(3):
+            for b in range(3):
+                ff[a, b] = f[a, 0] * f[b, 0] + f[a, 1] * f[b, 1]
+        # C_(a i)(b j) = d_ab S_ij + lam F_ai F_bj + mu d_ij (F F^T)_ab + mu F_aj F_bi
+        for a in range(3):
+            for i in range(2):
+                for b in range(3):
+                    for j in range(2):
+                        v = lam * f[a, i] * f[b, j] + mu * f[a, j] * f[b, i]
+                        if a == b:
+                            v += s[i, j]
+                        if i == j:
+                            v += mu * ff[a, b]
+                        cm[a, i, b, j] = v
+        sc = scatter[t]
+        for k in range(3):
+            for a in range(3):
+                row = (3 * k + a) * 9
+                for l in range(3):
+                    for b in range(3):
+                        acc = 0.0
+                        for i in range(2):
+                            for j in range(2):
+                                acc += gn[k, i] * cm[a, i, b, j] * gn[l, j]
+                        data[sc[row + 3 * l + b]] += w * acc
+    return value
+
+
+@njit(cache=True)
+def hinge_bending(x, hinges, theta0, stiffness, grad, data, scatter, hessian):
+    """Discrete-shell hinges (``energies.hinge.HingeBending``): sum k (theta - theta0)^2.
+
+    Args:
+        x: (n, 3) m.  hinges: (n_hinge, 4) nodes (p0, p1, p2, p3).
+        theta0: (n_hinge,) rad.  stiffness: (n_hinge,) k (N m).
+        grad, data, scatter: as ``membrane`` (scatter (n_hinge, 144)).
+
+    Returns:
+        Energy (J).
+    """
+    value = 0.0
+    p = np.empty((4, 3))
+    e = np.empty(3)
+    eh = np.empty(3)
+    na = np.empty(3)
+    nb = np.empty(3)
+    tmp = np.empty(3)
+    tmp2 = np.empty(3)
+    ga = np.empty(3)
+    gb = np.empty(3)
+    ca = np.empty(4)
+    cb = np.empty(4)
+    dth = np.empty(12)
+    proj = np.empty((3, 3))
+    dca = np.zeros((4, 4, 3))
+    dcb = np.zeros((4, 4, 3))
+    ma = np.empty((3, 3))
+    mb = np.empty((3, 3))
+    dna = np.zeros((4, 3, 3))
+    dnb = np.zeros((4, 3, 3))
+    dga = np.empty((3, 4, 3))
+    dgb = np.empty((3, 4, 3))
+    cross = np.empty((3, 3))
+    w = np.empty((4, 3))
+    for h in range(hinges.shape[0]):
+        for i in range(4):
+            for c in range(3):
+                p[i, c] = x[hinges[h, i], c]
+        for c in range(3):
+            e[c] = p[1, c] - p[0, c]
+        length = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+        for c in range(3):
+            eh[c] = e[c] / length
+            tmp[c] = p[2, c] - p[0, c]
+            tmp2[c] = p[3, c] - p[0, c]
+        _cross(e, tmp, na)
+        _cross(tmp2, e, nb)
+        _cross(na, nb, tmp)
+        sin = tmp[0] * eh[0] + tmp[1] * eh[1] + tmp[2] * eh[2]
+        cos = na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]
+        theta = math.atan2(sin, cos)
+        na2 = na[0] * na[0] + na[1] * na[1] + na[2] * na[2]
+        nb2 = nb[0] * nb[0] + nb[1] * nb[1] + nb[2] * nb[2]
+        d21 = d20 = d31 = d30 = 0.0
+        for c in range(3):
+            ga[c] = na[c] / na2
+            gb[c] = nb[c] / nb2
+            d21 += (p[2, c] - p[1, c]) * eh[c]
+            d20 += (p[2, c] - p[0, c]) * eh[c]
+            d31 += (p[3, c] - p[1, c]) * eh[c]
+            d30 += (p[3, c] - p[0, c]) * eh[c]
+        ca[0], ca[1], ca[2], ca[3] = -d21, d20, -length, 0.0
+        cb[0], cb[1], cb[2], cb[3] = -d31, d30, 0.0, -length
+        for i in range(4):
+            for c in range(3):
+                dth[3 * i + c] = ca[i] * ga[c] + cb[i] * gb[c]
+        dev = theta - theta0[h]
+        dev = (dev + math.pi) % (2.0 * math.pi) - math.pi
+        k = stiffness[h]
+        value += k * dev * dev
+        for i in range(4):
+            dof = 3 * hinges[h, i]
+            for c in range(3):
+                grad[dof + c] += 2.0 * k * dev * dth[3 * i + c]
+        if not hessian:
+            continue
+        for a in range(3):
+            for b in range(3):
+                proj[a, b] = ((1.0 if a == b else 0.0) - eh[a] * eh[b]) / length
+        # w[0] = proj (p2 - p1), w[1] = proj (p2 - p0), w[2] = proj (p3 - p1), w[3] = proj (p3 - p0)
+        for a in range(3):
+            w[0, a] = w[1, a] = w[2, a] = w[3, a] = 0.0
+            for b in range(3):
+                w[0, a] += proj[a, b] * (p[2, b] - p[1, b])
+                w[1, a] += proj[a, b] * (p[2, b] - p[0, b])
+                w[2, a] += proj[a, b] * (p[3, b] - p[1, b])
+                w[3, a] += proj[a, b] * (p[3, b] - p[0, b])
+        dca[:] = 0.0
+        dcb[:] = 0.0
+        for c in range(3):
+            # c_A0 = -(p2 - p1).eh, c_A1 = (p2 - p0).eh, c_A2 = -|e|
+            dca[0, 1, c] = -w[0, c] + eh[c]
+            dca[0, 0, c] = w[0, c]
+            dca[0, 2, c] = -eh[c]
+            dca[1, 1, c] = w[1, c]
+            dca[1, 0, c] = -w[1, c] - eh[c]
+            dca[1, 2, c] = eh[c]
+            dca[2, 1, c] = -eh[c]
+            dca[2, 0, c] = eh[c]
+            # c_B0 = -(p3 - p1).eh, c_B1 = (p3 - p0).eh, c_B3 = -|e|
+            dcb[0, 1, c] = -w[2, c] + eh[c]
+            dcb[0, 0, c] = w[2, c]
+            dcb[0, 3, c] = -eh[c]
+            dcb[1, 1, c] = w[3, c]
+            dcb[1, 0, c] = -w[3, c] - eh[c]
+            dcb[1, 3, c] = eh[c]
+            dcb[3, 1, c] = -eh[c]
+            dcb[3, 0, c] = eh[c]
+        for a in range(3):
+            for b in range(3):
+                delta = 1.0 if a == b else 0.0
+                ma[a, b] = (delta - 2.0 * ga[a] * na[b]) / na2
+                mb[a, b] = (delta - 2.0 * gb[a] * nb[b]) / nb2
+        for c in range(3):
+            tmp[c] = p[2, c] - p[1, c]
+        _cross_matrix(tmp, cross)
+        dna[0] = cross
+        for c in range(3):
+            tmp[c] = p[2, c] - p[0, c]
+        _cross_matrix(tmp, cross)
+        dna[1] = -cross
+        _cross_matrix(e, cross)
+        dna[2] = cross
+        dnb[3] = -cross
+        for c in range(3):
+            tmp[c] = p[1, c] - p[3, c]
+        _cross_matrix(tmp, cross)
+        dnb[0] = cross
+        for c in range(3):
+            tmp[c] = p[3, c] - p[0, c]
+        _cross_matrix(tmp, cross)
+        dnb[1] = cross
+        for a in range(3):
+            for j in range(4):
+                for c in range(3):
+                    acc_a = 0.0
+                    acc_b = 0.0
+                    for b in range(3):
+                        acc_a += ma[a, b] * dna[j, b, c]
+                        acc_b += mb[a, b] * dnb[j, b, c]
+                    dga[a, j, c] = acc_a
+                    dgb[a, j, c] = acc_b
+        sc = scatter[h]
+        for i in range(4):
+            for a in range(3):
+                r = 3 * i + a
+                for j in range(4):
+                    for c in range(3):
+                        d2 = (ga[a] * dca[i, j, c] + gb[a] * dcb[i, j, c]
+                              + ca[i] * dga[a, j, c] + cb[i] * dgb[a, j, c])
+                        col = 3 * j + c
+                        data[sc[r * 12 + col]] += 2.0 * k * (dth[r] * dth[col] + dev * d2)
+    return value
+
+
+@njit(cache=True)
+def volume_and_gradient(x, tri, gv):
+    """Enclosed volume V (m^3) of the outward skin; dV/dx (m^2) written into gv (3 n,)."""
+    gv[:] = 0.0
+    volume = 0.0
+    c = np.empty(3)
+    for t in range(tri.shape[0]):
+        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
+        _cross(x[i1], x[i2], c)
+        volume += x[i0, 0] * c[0] + x[i0, 1] * c[1] + x[i0, 2] * c[2]
+        for a in range(3):
+            gv[3 * i0 + a] += c[a] / 6.0
+        _cross(x[i2], x[i0], c)
+        for a in range(3):
+            gv[3 * i1 + a] += c[a] / 6.0
+        _cross(x[i0], x[i1], c)
+        for a in range(3):
+            gv[3 * i2 + a] += c[a] / 6.0
+    return volume / 6.0
+
+
+@njit(cache=True)
+def volume_pressure_hessian(x, tri, de_dv, data, scatter):
+    """The sparse part dE/dV d2V/dx2 of the pressure Hessian, added into data.
+
+    d2V/dx_a dx_b = -[x_c]x / 6 for (a, b, c) cyclic, its transpose for (b, a).
+    """
+    cross = np.empty((3, 3))
+    for t in range(tri.shape[0]):
+        sc = scatter[t]
+        for a, b, c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+            _cross_matrix(x[tri[t, c]], cross)
+            for i in range(3):
+                for j in range(3):
+                    v = cross[i, j] * (-de_dv / 6.0)
+                    data[sc[(3 * a + i) * 9 + 3 * b + j]] += v
+                    data[sc[(3 * b + j) * 9 + 3 * a + i]] += v
+
+
+@njit(cache=True)
+def neohookean_tets(x, tet, grad_n, volume, mu, lam, grad, data, scatter, hessian):
+    """Compressible neo-Hookean tetrahedra (``energies.neohookean.NeoHookeanTets``).
+
+    Args:
+        x: (n, 3) m.  tet: (n_tet, 4).  grad_n: (n_tet, 4, 3) dN_k/dX_j (1/m).
+        volume: (n_tet,) rest volumes (m^3).  mu, lam: Lame parameters (Pa).
+        grad, data, scatter: as ``membrane`` (scatter (n_tet, 144)).
+
+    Returns:
+        Energy (J); inf (and nothing added) if an element is inverted (J <= 0).
+    """
+    n_tet = tet.shape[0]
+    # first pass: reject inverted elements before anything is added
+    f = np.empty((3, 3))
+    for t in range(n_tet):
+        gn = grad_n[t]
+        for i in range(3):
+            for j in range(3):
+                acc = 0.0
+                for k in range(4):
+                    acc += x[tet[t, k], i] * gn[k, j]
+                f[i, j] = acc
+        det = (f[0, 0] * (f[1, 1] * f[2, 2] - f[1, 2] * f[2, 1])
+               - f[0, 1] * (f[1, 0] * f[2, 2] - f[1, 2] * f[2, 0])
+               + f[0, 2] * (f[1, 0] * f[2, 1] - f[1, 1] * f[2, 0]))
+        if not det > 0.0:
+            return np.inf
+    value = 0.0
+    finv = np.empty((3, 3))
+    piola = np.empty((3, 3))
+    bk = np.empty((4, 3))
+    for t in range(n_tet):
+        gn = grad_n[t]
+        for i in range(3):
+            for j in range(3):
+                acc = 0.0
+                for k in range(4):
+                    acc += x[tet[t, k], i] * gn[k, j]
+                f[i, j] = acc
+        c00 = f[1, 1] * f[2, 2] - f[1, 2] * f[2, 1]
+        c01 = f[1, 2] * f[2, 0] - f[1, 0] * f[2, 2]
+        c02 = f[1, 0] * f[2, 1] - f[1, 1] * f[2, 0]
+        det = f[0, 0] * c00 + f[0, 1] * c01 + f[0, 2] * c02
+        finv[0, 0] = c00 / det
+        finv[1, 0] = c01 / det
+        finv[2, 0] = c02 / det
+        finv[0, 1] = (f[0, 2] * f[2, 1] - f[0, 1] * f[2, 2]) / det
+        finv[1, 1] = (f[0, 0] * f[2, 2] - f[0, 2] * f[2, 0]) / det
+        finv[2, 1] = (f[0, 1] * f[2, 0] - f[0, 0] * f[2, 1]) / det
+        finv[0, 2] = (f[0, 1] * f[1, 2] - f[0, 2] * f[1, 1]) / det
+        finv[1, 2] = (f[0, 2] * f[1, 0] - f[0, 0] * f[1, 2]) / det
+        finv[2, 2] = (f[0, 0] * f[1, 1] - f[0, 1] * f[1, 0]) / det
+        lnj = math.log(det)
+        ff = 0.0
+        for i in range(3):
+            for j in range(3):
+                ff += f[i, j] * f[i, j]
+        vol = volume[t]
+        value += vol * (0.5 * mu * (ff - 3.0) - mu * lnj + 0.5 * lam * lnj * lnj)
+        for i in range(3):
+            for j in range(3):
+                # P = mu (F - F^-T) + lam ln J F^-T
+                piola[i, j] = mu * (f[i, j] - finv[j, i]) + lam * lnj * finv[j, i]
+        for k in range(4):
+            dof = 3 * tet[t, k]
+            for i in range(3):
+                grad[dof + i] += vol * (piola[i, 0] * gn[k, 0] + piola[i, 1] * gn[k, 1]
+                                        + piola[i, 2] * gn[k, 2])
+        if not hessian:
+            continue
+        # H_(k i)(l m) = V [mu d_im (gn_k . gn_l) + (mu - lam ln J) B_l[i] B_k[m]
+        #                   + lam B_k[i] B_l[m]],   B_k[m] = sum_j gn[k, j] Finv[j, m]
+        for k in range(4):
+            for m in range(3):
+                bk[k, m] = gn[k, 0] * finv[0, m] + gn[k, 1] * finv[1, m] + gn[k, 2] * finv[2, m]
+        c2 = mu - lam * lnj
+        sc = scatter[t]
+        for k in range(4):
+            for l in range(4):
+                dot = gn[k, 0] * gn[l, 0] + gn[k, 1] * gn[l, 1] + gn[k, 2] * gn[l, 2]
+                for i in range(3):
+                    row = (3 * k + i) * 12 + 3 * l
+                    for m in range(3):
+                        v = c2 * bk[l, i] * bk[k, m] + lam * bk[k, i] * bk[l, m]
+                        if i == m:
+                            v += mu * dot
+                        data[sc[row + m]] += vol * v
+    return value
+
+
+@njit(cache=True)
+def filter_blocks(hdata, block_pos, block_nodes, filters, diag_extra, out):
+    """The Newton matrix S H S + (I - S) + diag(extra) on H's pattern, into ``out``.
+
+    Args:
+        hdata: CSC values of H (N/m).
+        block_pos: (n_blocks, 3, 3) positions in data of each 3x3 node block.
+        block_nodes: (n_blocks, 2) node (row, column) of each block.
+        filters: (n_nodes, 3, 3) the S_i.
+        diag_extra: (3 n,) added on the diagonal (the shifted inertia, N/m).
+        out: values of the filtered matrix, same pattern (written).
+    """
+    tmp = np.empty((3, 3))
+    for blk in range(block_pos.shape[0]):
+        i = block_nodes[blk, 0]
+        j = block_nodes[blk, 1]
+        pos = block_pos[blk]
+        si = filters[i]
+        sj = filters[j]
+        for a in range(3):
+            for c in range(3):
+                acc = 0.0
+                for b in range(3):
+                    acc += si[a, b] * hdata[pos[b, c]]
+                tmp[a, c] = acc
+        for a in range(3):
+            for c in range(3):
+                acc = 0.0
+                for b in range(3):
+                    acc += tmp[a, b] * sj[b, c]
+                out[pos[a, c]] = acc
+        if i == j:
+            for a in range(3):
+                for c in range(3):
+                    out[pos[a, c]] += (1.0 if a == c else 0.0) - si[a, c]
+                out[pos[a, a]] += diag_extra[3 * i + a]
+
+
+@njit(cache=True)
+def add_node_blocks(data, diag_block_pos, nodes, blocks):
+    """Add (k, 3, 3) blocks at the diagonal node blocks of ``nodes`` (k,) into data."""
+    for r in range(nodes.shape[0]):
+        pos = diag_block_pos[nodes[r]]
+        for a in range(3):
+            for c in range(3):
+                data[pos[a, c]] += blocks[r, a, c]
+
+
+@njit(cache=True)
+def add_diagonal(data, diag_pos, values):
+    """data[diag_pos[d]] += values[d] for every dof d."""
+    for d in range(values.shape[0]):
+        data[diag_pos[d]] += values[d]
