@@ -1,4 +1,7 @@
-"""Offline verbs (no ROS graph): ``squeeze``, ``pick`` and ``fruits``."""
+"""Offline verbs (no ROS graph): ``squeeze``, ``pick``, ``run``, ``window``, ``fingers``
+and ``fruits``. With ``--set dimension=3`` the simulation verbs run the 3D model
+(``gripper_sim.core.make_simulation``) and report contact areas (mm^2) and patch radii
+instead of contact lengths."""
 from __future__ import annotations
 
 import argparse
@@ -121,22 +124,77 @@ def _add_output_arguments(parser) -> None:
 
 
 class _Series:
-    """Collects the time series every verb reports."""
+    """Collects the time series every verb reports.
 
-    def __init__(self):
+    Contact size: in 2D the contact length (m, both jaws); in 3D the contact area
+    (m^2, both jaws, ``Deformation3D.contact_area``) and the larger of the two jaws'
+    patch radii (m), each at the step of peak grip force and at its largest.
+    """
+
+    def __init__(self, dimension: int = 2):
+        self.dimension = int(dimension)
         self.time, self.gap, self.force = [], [], []
         self.peak_force = self.peak_compression = self.peak_pressure = 0.0
+        self.peak_contact = 0.0
+        self.contact_at_peak_force = 0.0
+        self.patch_radius_at_peak_force = 0.0
+        self.peak_patch_radius = 0.0
 
     def __call__(self, result) -> None:
+        deformation = result.deformation
         self.time.append(round(result.time, 9))
         self.gap.append(result.gap)
         self.force.append(result.grip_force)
+        if self.dimension == 3:
+            contact = float(deformation.contact_area)
+            radius = float(max(deformation.jaw_contact_radii))
+        else:
+            contact, radius = float(deformation.contact_length), 0.0
+        if result.grip_force > self.peak_force or not self.time[:-1]:
+            self.contact_at_peak_force = contact
+            self.patch_radius_at_peak_force = radius
         self.peak_force = max(self.peak_force, result.grip_force)
-        self.peak_compression = max(self.peak_compression, result.deformation.compression)
-        self.peak_pressure = max(self.peak_pressure, result.deformation.peak_contact_pressure)
+        self.peak_compression = max(self.peak_compression, deformation.compression)
+        self.peak_pressure = max(self.peak_pressure, deformation.peak_contact_pressure)
+        self.peak_contact = max(self.peak_contact, contact)
+        self.peak_patch_radius = max(self.peak_patch_radius, radius)
 
     def arrays(self) -> dict:
         return dict(time=self.time, gap=self.gap, force=self.force)
+
+    def contact_summary(self) -> dict:
+        """JSON fields of the contact size (see the class docstring)."""
+        if self.dimension == 3:
+            return dict(dimension=3, peak_contact_area=self.peak_contact,
+                        contact_area_at_peak_force=self.contact_at_peak_force,
+                        peak_patch_radius=self.peak_patch_radius,
+                        patch_radius_at_peak_force=self.patch_radius_at_peak_force)
+        return dict(dimension=2, peak_contact_length=self.peak_contact,
+                    contact_length_at_peak_force=self.contact_at_peak_force)
+
+    def contact_lines(self, width: int) -> list[str]:
+        """Text lines of the contact size, labels padded to ``width``."""
+        if self.dimension == 3:
+            return [f"{'contact area':{width}s} {self.contact_at_peak_force * 1e6:.4g} mm^2 at "
+                    f'peak force (both jaws; largest {self.peak_contact * 1e6:.4g} mm^2)',
+                    f"{'contact patch radius':{width}s} "
+                    f'{self.patch_radius_at_peak_force * 1e3:.3g} mm at peak force (larger jaw)']
+        return [f"{'contact length':{width}s} {self.contact_at_peak_force * 1e3:.4g} mm at "
+                'peak force (both jaws, planar)']
+
+
+def _pressure_note(dimension: int) -> str:
+    """How the contact pressure was found, for the text output."""
+    return 'resolved over the contact patch' if dimension == 3 else 'planar line contact'
+
+
+def _damage_note(dimension: int) -> tuple[str, str]:
+    """(how the damage pressure was found, what the bruised fraction is a fraction of)."""
+    return ('resolved', 'surface area') if dimension == 3 else ('Hertz', 'outline')
+
+
+def _dimension(sim) -> int:
+    return int(getattr(sim, 'dimension', 2))
 
 
 def _start_recording(stack: ExitStack, args, sim) -> None:
@@ -164,7 +222,7 @@ def run_squeeze(args) -> int:
     if args.to_gap is not None and args.to_gap >= sim.initial_gap:
         raise GripperSimError(f'--to-gap {args.to_gap} m is not below the initial gap '
                               f'{sim.initial_gap:.4g} m')
-    series = _Series()
+    series = _Series(_dimension(sim))
     sim.add_observer(series)
     with ExitStack() as stack:
         _start_recording(stack, args, sim)
@@ -187,23 +245,28 @@ def run_squeeze(args) -> int:
                    peak_force=series.peak_force, peak_compression=series.peak_compression,
                    peak_contact_pressure=series.peak_pressure, final_gap=sim.last.gap,
                    duration=sim.time, steps=sim.last.step,
-                   bruised=sim.last.damage.bruised, damage=sim.last.damage.as_dict())
+                   bruised=sim.last.damage.bruised, damage=sim.last.damage.as_dict(),
+                   **series.contact_summary())
     if args.json:
         json.dump(dict(series.arrays(), summary=summary), sys.stdout)
         sys.stdout.write('\n')
     else:
-        print(f"squeeze of {config['fruit.name']} ({config['fruit.model']} model), "
+        dim = series.dimension
+        how, of_what = _damage_note(dim)
+        print(f"squeeze of {config['fruit.name']} ({config['fruit.model']} model, {dim}D), "
               f'{sim.time:.3f} s simulated in {sim.last.step} steps')
-        print(f'  peak force           {summary["peak_force"]:.4g} N')
-        print(f'  peak compression     {summary["peak_compression"] * 1e3:.4g} mm')
+        print(f'  peak force            {summary["peak_force"]:.4g} N')
+        print(f'  peak compression      {summary["peak_compression"] * 1e3:.4g} mm')
         print(f'  peak contact pressure {summary["peak_contact_pressure"] / 1e3:.4g} kPa'
-              ' (planar line contact)')
+              f' ({_pressure_note(dim)})')
+        for line in series.contact_lines(21):
+            print(f'  {line}')
         damage = summary['damage']
-        print(f'  damage: peak pressure {damage["peak_pressure"] / 1e3:.4g} kPa (Hertz), '
+        print(f'  damage: peak pressure {damage["peak_pressure"] / 1e3:.4g} kPa ({how}), '
               + ('bruised' if damage['bruised'] else 'not bruised')
-              + f' ({damage["bruised_fraction"] * 100:.1f} % of the outline)'
+              + f' ({damage["bruised_fraction"] * 100:.1f} % of the {of_what})'
               + (', crushed' if damage['crushed'] else ''))
-        print(f'  final gap            {summary["final_gap"] * 1e3:.4g} mm')
+        print(f'  final gap             {summary["final_gap"] * 1e3:.4g} mm')
     return 0
 
 
@@ -211,28 +274,40 @@ def run_pick(args) -> int:
     from gripper_sim.core.grasp import GraspSequence, run_grasp
     from gripper_sim.core import make_simulation as Simulation
     config = config_from_args(args)
+    if config['gripper.initial_lift'] is None and config['world.table']:
+        # the jaws start at the grasp height: the fruit's centre, or higher where a small
+        # fruit's centre would put the jaws into the table
+        from gripper_sim.core.scenario import grasp_height
+        config = config_from_args(args, {'gripper.initial_lift': grasp_height(config)})
     sim = Simulation(config)
-    series = _Series()
+    series = _Series(_dimension(sim))
     sim.add_observer(series)
     with ExitStack() as stack:
         _start_recording(stack, args, sim)
         sequence = GraspSequence(sim, args.force, args.speed, args.lift, args.hold)
         summary = run_grasp(sim, sequence)
+    summary.update(series.contact_summary())
     if args.json:
         json.dump(dict(outcome=summary['outcome'], slip_distance=summary['slip_distance'],
                        **series.arrays(), summary=summary), sys.stdout)
         sys.stdout.write('\n')
     else:
-        print(f"pick of {config['fruit.name']} at {args.force:g} N: {summary['outcome']}")
+        dim = series.dimension
+        how, of_what = _damage_note(dim)
+        print(f"pick of {config['fruit.name']} ({dim}D) at {args.force:g} N: "
+              f"{summary['outcome']}")
         print(f"  {summary['message']}")
         print(f"  slip relative to the jaws  {summary['slip_distance'] * 1e3:.3f} mm")
         print(f"  peak grip force            {summary['max_grip_force']:.4g} N")
         print(f"  peak compression           {summary['max_compression'] * 1e3:.4g} mm")
         print(f"  peak contact pressure      {summary['max_contact_pressure'] / 1e3:.4g} kPa "
-              '(planar line contact)')
+              f'({_pressure_note(dim)})')
+        for line in series.contact_lines(26):
+            print(f'  {line}')
         print(f"  damage                     peak {summary['peak_damage_pressure'] / 1e3:.4g} "
-              f"kPa (Hertz), bruised {summary['bruised']} "
-              f"({summary['bruised_fraction'] * 100:.1f} %), crushed {summary['crushed']}")
+              f"kPa ({how}), bruised {summary['bruised']} "
+              f"({summary['bruised_fraction'] * 100:.1f} % of the {of_what}), "
+              f"crushed {summary['crushed']}")
     return 0 if summary['outcome'] == 'held' else 1
 
 
@@ -287,13 +362,14 @@ def run_scenario_verb(args) -> int:
         raise GripperSimError(f"grip force {scenario['close.force']} N exceeds "
                               f"gripper.max_force {config['gripper.max_force']} N")
     sim = Simulation(config)
-    series = _Series()
+    series = _Series(_dimension(sim))
     sim.add_observer(series)
     with ExitStack() as stack:
         _start_recording(stack, args, sim)
         summary = run_scenario(sim, scenario)
     summary = dict(scenario=scenario['name'], fruit=config['fruit.name'],
-                   finger=config['gripper.finger.name'], **summary)
+                   finger=config['gripper.finger.name'], **summary,
+                   **series.contact_summary())
     if args.json:
         json.dump(dict(outcome=summary['outcome'], **series.arrays(), summary=summary),
                   sys.stdout)
@@ -301,7 +377,7 @@ def run_scenario_verb(args) -> int:
     else:
         how = (f"{scenario['close.force']:g} N" if scenario['close.mode'] == 'force'
                else f"gap {scenario['close.gap']:g} m")
-        print(f"{scenario['name']}: {config['fruit.name']} with the "
+        print(f"{scenario['name']}: {config['fruit.name']} ({series.dimension}D) with the "
               f"{config['gripper.finger.name']} finger at {how}: {summary['outcome']}")
         if summary['message']:
             print(f"  {summary['message']}")
@@ -309,10 +385,13 @@ def run_scenario_verb(args) -> int:
         print(f'  phases (s): {phases}')
         print(f"  slip in the jaws           {summary['slip_distance'] * 1e3:.3f} mm")
         print(f"  peak grip force            {summary['max_grip_force']:.4g} N")
+        for line in series.contact_lines(26):
+            print(f'  {line}')
         damage = summary['damage']
-        print(f"  peak contact pressure      {damage['peak_pressure'] / 1e3:.4g} kPa (Hertz); "
-              f"bruised {damage['bruised']} ({damage['bruised_fraction'] * 100:.1f} %), "
-              f"crushed {damage['crushed']}")
+        how, of_what = _damage_note(series.dimension)
+        print(f"  peak contact pressure      {damage['peak_pressure'] / 1e3:.4g} kPa ({how}); "
+              f"bruised {damage['bruised']} ({damage['bruised_fraction'] * 100:.1f} % of the "
+              f"{of_what}), crushed {damage['crushed']}")
     return 0 if summary['outcome'] == 'placed' else 1
 
 
@@ -333,8 +412,8 @@ def run_window(args) -> int:
                   f'{trial.peak_pressure / 1e3:7.1f} kPa ({trial.wall_time:.1f} s)', flush=True)
 
     if not args.json:
-        print(f"grasp window of {config['fruit.name']} with the {config['gripper.finger.name']} "
-              f"finger ({scenario['name']}: lift {scenario['lift.height']:g} m, transport "
+        print(f"grasp window of {config['fruit.name']} ({int(config['dimension'])}D) with the "
+              f"{config['gripper.finger.name']} finger ({scenario['name']}: lift {scenario['lift.height']:g} m, transport "
               f"{scenario['transport.distance']:g} m)", flush=True)
     window = grasp_window(config, scenario, tolerance, progress)
     if args.json:
@@ -351,7 +430,8 @@ def run_window(args) -> int:
           f'm = {window.mass * 1e3:.0f} g, mu = {window.friction:g})')
     if window.min_force_no_slip is not None:
         print(f'  slips < 1 mm    from {window.min_force_no_slip:.3g} N or less (tried)')
-    print(f'  bruises above   {high}   (Hertz estimate {window.max_estimate:.3g} N)')
+    print(f'  bruises above   {high}   (Hertz estimate {window.max_estimate:.3g} N'
+          + (', 3D: resolved pressure' if int(config['dimension']) == 3 else '') + ')')
     if window.exists:
         top = 'gripper.max_force' if window.max_force == math.inf else \
             f'{window.max_force:.3g} N'

@@ -27,6 +27,10 @@ placed, failed; the flags are all reported.
 
 The grasp height is the fruit's centre height on the table, raised where needed so
 that the jaws stay above the table (``gripper.jaw_height`` / 2 + 1 mm).
+
+The same machine drives the 2D ``Simulation`` and the 3D ``Simulation3D`` (``dimension:
+3``; ``gripper_sim.core.make_simulation`` picks one): it uses only their common commands
+and results, whose last coordinate column is the height.
 """
 from __future__ import annotations
 
@@ -189,14 +193,24 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str = '') -> Scenario
     return Scenario(values, flat_overrides, source)
 
 
+def rest_shape(config: Mapping[str, Any]):
+    """The fruit model of ``config`` (2D ``FruitModel`` or 3D ``FruitModel3D``, as
+    ``dimension`` says): its ``rest_positions`` are (n, 2) (x, z) or (n, 3) (x, y, z),
+    the last column always the height (m)."""
+    if int(config.get('dimension', 2)) == 3:
+        from gripper_sim.core3d.fruit import build_fruit3d
+        return build_fruit3d(config)
+    from gripper_sim.core.fruit import build_fruit
+    return build_fruit(config)
+
+
 def grasp_height(config: Mapping[str, Any]) -> float:
     """m: height of the jaw centre that grasps the fruit resting on the table."""
-    from gripper_sim.core.fruit import build_fruit
-    rest = build_fruit(config).rest_positions
+    rest = rest_shape(config).rest_positions
     if config['fruit.initial_height'] is not None:
         centre = float(config['fruit.initial_height'])
     elif config['world.table']:
-        centre = float(config['world.table_height'] - rest[:, 1].min())
+        centre = float(config['world.table_height'] - rest[:, -1].min())
     else:
         centre = 0.0
     if config['world.table']:
@@ -328,7 +342,8 @@ class PickAndPlace:
         dt = result.time - self.last.time
         nodes = np.isin(result.contact_obstacle, self._jaw_faces)
         if dt > 0 and np.any(nodes):
-            relative = float(np.mean(result.velocities[nodes, 1])) - result.lift_velocity
+            # the last column is the height: z of (x, z) in 2D, of (x, y, z) in 3D
+            relative = float(np.mean(result.velocities[nodes, -1])) - result.lift_velocity
             self.slide = max(0.0, self.slide - relative * dt)
             self.max_slip = max(self.max_slip, self.slide)
 
@@ -470,7 +485,9 @@ class PickAndPlace:
         if bruised:
             messages.append(f'bruised: peak contact pressure {damage.peak_pressure:.4g} Pa '
                             f"above {self.sim.config['fruit.bruise_pressure']:.4g} Pa, "
-                            f'{damage.bruised_fraction * 100:.1f} % of the outline')
+                            f'{damage.bruised_fraction * 100:.1f} % of the '
+                            + ('surface' if getattr(self.sim, 'dimension', 2) == 3
+                               else 'outline'))
         if crushed:
             messages.append(f'crushed: flesh stress {damage.peak_flesh_stress:.4g} Pa')
         return dict(outcome=outcome, placed=bool(self.placed), dropped=dropped,

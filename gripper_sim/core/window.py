@@ -26,6 +26,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
+import numpy as np
+
 from gripper_sim.core.damage import contact_modulus
 from gripper_sim.core.scenario import Scenario, run_scenario
 from gripper_sim.errors import ConvergenceError, GripperSimError
@@ -98,10 +100,24 @@ class GraspWindow:
 
 
 def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
-    """(m g / (2 mu_s) in N, the Hertz bruise force in N, the mass in kg)."""
+    """(m g / (2 mu_s) in N, the Hertz bruise force in N, the mass in kg).
+
+    The Hertz radius is from the 2D outline where it meets the jaws (radius of
+    curvature R in the x-z plane; for a planar contact R_e = R). In 3D (``dimension``
+    3) the mass is the 3D fruit's and R_e = sqrt(R R_y), R_y = b^2 / a the radius of
+    curvature along y at the jaw contact of a body of half-widths a (x) and b (y)
+    (exact for spheroids: R_y = a for a body of revolution about z).
+    """
     from gripper_sim.core.fruit import build_fruit
     fruit = build_fruit(config)
     mass = fruit.total_mass
+    radius_y = None
+    if int(config.get('dimension', 2)) == 3:
+        from gripper_sim.core3d.fruit import build_fruit3d
+        body = build_fruit3d(config)
+        mass = body.total_mass
+        half = 0.5 * np.ptp(body.rest_positions[body.surface], axis=0)
+        radius_y = float(half[1] ** 2 / half[0])
     mu = config['contact.jaw.static_friction']
     if config['gripper.finger.pad.enabled']:
         mu = config['contact.pad.friction']
@@ -124,7 +140,7 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     if config['gripper.finger.type'] == 'arc':  # a concave face conforms: 1/R - 1/Rf
         in_plane = 1.0 / max(1.0 / radius - 1.0 / config['gripper.finger.radius'],
                              1e-3 / radius)
-    re = math.sqrt(in_plane * radius)
+    re = math.sqrt(in_plane * (radius if radius_y is None else radius_y))
     p_b = config['fruit.bruise_pressure']
     bruise = p_b ** 3 * math.pi ** 3 * re ** 2 / (6 * e_star ** 2)
     if config['gripper.finger.type'] == 'vgroove':  # two flanks share a jaw's force
@@ -143,7 +159,7 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
         tolerance: relative width at which a bisection stops.
         progress: called with each trial as it finishes.
     """
-    from gripper_sim.core.simulation import Simulation
+    from gripper_sim.core import make_simulation as Simulation
     start = time.perf_counter()
     config = dict(config)
     limit = float(config['gripper.max_force'])
