@@ -147,6 +147,64 @@ def test_out_of_range_grasp_goals_are_rejected_with_a_reason(client, goal):
     client.wait_sim_time(0.05)    # the node keeps running
 
 
+def place_goal(force, transport=0.05, lift=0.02, retreat=0.01, release=True, hold=0.0):
+    return Grasp.Goal(target_force=force, lift_height=lift, hold_time=hold, release=release,
+                      place=True, transport_distance=transport, retreat_height=retreat)
+
+
+def test_a_place_goal_carries_the_fruit_sideways_and_puts_it_down(client):
+    # 5 N: inside the apple's window (1.7 - 16 N, README "Grasp window")
+    x0 = client.latest['fruit/state'].centroid.x
+    feedback = []
+    handle = client.send_goal(client.grasp, place_goal(5.0, transport=0.05), feedback)
+    assert handle.accepted
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.message
+    assert result.success and result.outcome == 'placed', result.message
+    assert not (result.slipped or result.bruised or result.crushed)
+    assert result.dropped_at == -1.0
+    assert result.max_grip_force == pytest.approx(5.0, rel=0.15)
+    assert 0.0 < result.peak_damage_pressure < 0.26e6        # below the apple's bruise
+    assert result.final_gap == pytest.approx(INITIAL_GAP, abs=1e-6)   # opened
+    order = ['closing', 'lifting', 'transporting', 'lowering', 'opening', 'retreating']
+    seen = [f.phase for f in feedback if f.phase in order]
+    changes = [p for i, p in enumerate(seen) if i == 0 or seen[i - 1] != p]
+    assert changes == order
+    client.spin_until(lambda: client.latest['fruit/state'].centroid.x > x0 + 0.04, 30,
+                      'the placed state')
+    state = client.latest['fruit/state']
+    assert state.centroid.x == pytest.approx(x0 + 0.05, abs=0.01)   # moved 5 cm
+    assert state.centroid.z == pytest.approx(0.0635 / 2, abs=0.003)  # back on the table
+    assert not state.left_jaw_contact and not state.right_jaw_contact
+
+
+def test_a_place_goal_too_weak_to_hold_reports_when_it_dropped(client):
+    handle = client.send_goal(client.grasp, place_goal(0.6))
+    assert handle.accepted
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_ABORTED
+    assert not result.success and result.outcome == 'dropped'
+    assert result.dropped_at > 0.0 and 'dropped at t =' in result.message
+
+
+@pytest.mark.parametrize('goal, reason', [
+    (place_goal(5.0, release=False), 'release must be true'),
+    (place_goal(5.0, transport=float('nan')), 'transport_distance must be finite'),
+    (place_goal(5.0, retreat=-0.01), 'retreat_height must be in'),
+    (place_goal(5.0, lift=0.0), 'lift_height > 0'),
+    (place_goal(5.0, hold=1.0), 'hold_time is not used'),
+    (place_goal(5.0, transport=9.0), 'transport_distance must be in'),
+    (Grasp.Goal(target_force=5.0, transport_distance=0.05), 'place options'),
+], ids=['no-release', 'nan-transport', 'negative-retreat', 'no-lift', 'hold', 'far',
+        'transport-without-place'])
+def test_bad_place_goals_are_rejected_with_a_clear_reason(client, goal, reason):
+    since = len(client.logs)
+    handle = client.send_goal(client.grasp, goal)
+    assert not handle.accepted
+    log = client.wait_log('Grasp goal rejected', since=since)
+    assert reason in log.msg
+
+
 def test_gripper_command_reaches_a_free_gap(client):
     feedback = []
     handle = client.send_goal(client.gripper_cmd, gripper_goal(0.068, 10.0), feedback)

@@ -90,6 +90,23 @@ def test_grasp_prints_feedback_and_succeeds(client):
     assert 'result: SUCCESS' in run.stdout
 
 
+def test_grasp_and_place_prints_the_outcome(client):
+    run = cli('grasp', '--force', '5', '--place', '--transport', '0.04', '--retreat')
+    assert run.returncode == 0, run.stdout + run.stderr
+    for phase in ('transporting', 'lowering', 'opening', 'retreating'):
+        assert phase in run.stdout
+    assert 'result: SUCCESS (placed)' in run.stdout
+    assert 'transport 0.04 m, retreat 0.02 m' in run.stdout
+
+
+def test_place_options_need_place_and_the_node_refuses_contradictions(client):
+    run = cli('grasp', '--force', '5', '--transport', '0.04')
+    assert run.returncode == 2 and 'need --place' in run.stderr
+    run = cli('grasp', '--force', '5', '--place', '--hold', '1')
+    assert run.returncode == 1
+    assert 'goal rejected' in run.stderr and 'hold_time is not used' in run.stderr
+
+
 def test_weak_grasp_exits_1(client):
     run = cli('grasp', '--force', '0.4', '--lift', '0.03', '--hold', '0.2', '--quiet')
     assert run.returncode == 1, run.stdout + run.stderr

@@ -274,3 +274,51 @@ def test_3d_cloud_and_fruit_state_carry_the_real_y_and_the_contact_area(squeezed
     masses_centroid_y = float(result.centroid[1])
     assert state.centroid.y == pytest.approx(masses_centroid_y) and state.centroid.y != 0.0
     assert state.centroid.z == pytest.approx(float(result.centroid[2]))
+
+
+# ------------------------------------------------- damage (StepResult.damage, 2D)
+
+def squeezed_apple_state(force=8.0, **overrides):
+    """FruitState and jaw wrench of the 2D apple squeezed to ``force`` N for 0.4 s."""
+    from gripper_sim.configuration import load_config
+    from gripper_sim.core import make_simulation
+    config = load_config(overrides=overrides)
+    sim = make_simulation(config)
+    context = MessageContext.from_config(config, initial=sim.last)
+    sim.command_force(force)
+    result = sim.run(0.6)
+    msgs = build_messages(result, context)
+    return msgs['fruit/state'], msgs['left_jaw/wrench'].wrench, config
+
+
+def hertz_p0(load, config):
+    """Peak Hertz pressure (Pa) of a round fruit of the config's diameter on a flat jaw."""
+    radius = config['fruit.shape.diameter'] / 2
+    modulus = config['fruit.flesh.youngs_modulus'] / (1 - config['fruit.flesh.poisson_ratio'] ** 2)
+    a = (3 * load * radius / (4 * modulus)) ** (1 / 3)
+    return 3 * load / (2 * np.pi * a * a), a
+
+
+def test_fruit_state_reports_the_hertz_damage_pressure_not_the_line_pressure():
+    state, wrench, config = squeezed_apple_state(8.0)
+    p0, _ = hertz_p0(abs(wrench.force.x), config)
+    assert state.damage_pressure == pytest.approx(p0, rel=0.05)
+    assert state.peak_damage_pressure >= state.damage_pressure
+    # the planar line pressure understates the round patch several times
+    assert state.peak_contact_pressure < 0.5 * state.damage_pressure
+    assert p0 < config['fruit.bruise_pressure']
+    assert not state.bruised and state.bruised_fraction == 0.0 and not state.crushed
+
+
+def test_fruit_state_is_bruised_and_crushed_by_the_damage_estimate():
+    state, wrench, config = squeezed_apple_state(8.0)
+    p0, a = hertz_p0(abs(wrench.force.x), config)
+    bruising = 0.8 * p0       # bruised, but below what the old line pressure would show
+    assert state.peak_contact_pressure < bruising
+    hurt, _, config = squeezed_apple_state(8.0, **{'fruit.bruise_pressure': bruising})
+    assert hurt.bruised and not hurt.crushed
+    # each jaw bruises the part of its patch above the threshold: 2 a sqrt(1 - 0.8^2)
+    patch = 2 * 2 * a * np.sqrt(1 - 0.8 ** 2) / (np.pi * config['fruit.shape.diameter'])
+    assert 0.5 * patch < hurt.bruised_fraction < 2.0 * patch
+    crushed, _, _ = squeezed_apple_state(8.0, **{'fruit.failure_stress': 0.5 * p0})
+    assert crushed.crushed          # Tresca 0.62 p0 above the failure stress

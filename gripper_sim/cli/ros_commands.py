@@ -70,13 +70,22 @@ def register(subparsers) -> None:
     grasp = subparsers.add_parser('grasp', help='run a Grasp goal; exit 0 on success')
     grasp.add_argument('--force', required=True, type=_finite(positive=True, what='--force'),
                        help='grip force to close to, N')
-    grasp.add_argument('--lift', type=_finite(what='--lift'), default=0.0,
-                       help='lift height after closing, m (default 0)')
+    grasp.add_argument('--lift', type=_finite(what='--lift'), default=None,
+                       help='lift height after closing, m (default 0; 0.03 with --place)')
     grasp.add_argument('--hold', type=_finite(what='--hold'), default=0.0,
                        help='hold time after lifting, s (default 0)')
     grasp.add_argument('--close-speed', type=_finite(what='--close-speed'), default=0.0,
                        help='jaw closing speed, m/s (default: the node default)')
     grasp.add_argument('--release', action='store_true', help='open the jaws at the end')
+    grasp.add_argument('--place', action='store_true',
+                       help='pick-and-place: lift, carry --transport m sideways, lower onto '
+                            'the table, open, retreat (implies --release)')
+    grasp.add_argument('--transport', type=_finite(minimum=None, what='--transport'),
+                       default=None, help='with --place: sideways travel along x, m, signed '
+                                          '(default 0.05)')
+    grasp.add_argument('--retreat', type=_finite(what='--retreat'), nargs='?', const=0.02,
+                       default=None, help='with --place: rise after opening, m (0.02 when '
+                                          'given without a value; default 0)')
     grasp.add_argument('--quiet', action='store_true', help='no feedback lines')
     _common(grasp)
     grasp.set_defaults(handler=_grasp)
@@ -276,8 +285,16 @@ def _grasp(args) -> int:
         client = ActionClient(session.node, Grasp, f'{node_path}/grasp')
         if not session.spin_until(client.server_is_ready, args.timeout):
             return _no_node(f'Grasp action server {node_path}/grasp', node_path, args.timeout)
+        if not args.place and (args.transport is not None or args.retreat is not None):
+            print('error: --transport and --retreat need --place', file=sys.stderr)
+            return 2
+        lift = args.lift if args.lift is not None else (0.03 if args.place else 0.0)
         goal = Grasp.Goal(target_force=args.force, close_speed=args.close_speed,
-                          lift_height=args.lift, hold_time=args.hold, release=args.release)
+                          lift_height=lift, hold_time=args.hold,
+                          release=args.release or args.place, place=args.place,
+                          transport_distance=(0.05 if args.transport is None
+                                              else args.transport) if args.place else 0.0,
+                          retreat_height=args.retreat or 0.0)
         printed = {'phase': None, 'wall': 0.0}
 
         def on_feedback(message):
@@ -289,8 +306,13 @@ def _grasp(args) -> int:
                 printed.update(phase=fb.phase, wall=now)
                 print(f'  {fb.phase:<10} gap {fb.gap * 1e3:7.2f} mm  grip {fb.grip_force:6.2f} N'
                       f'  compression {fb.compression * 1e3:6.3f} mm', flush=True)
-        print(f'grasp: {args.force:g} N, lift {args.lift:g} m, hold {args.hold:g} s'
-              + (', release' if args.release else ''), flush=True)
+        if args.place:
+            print(f'grasp and place: {args.force:g} N, lift {lift:g} m, transport '
+                  f'{goal.transport_distance:g} m, retreat {goal.retreat_height:g} m',
+                  flush=True)
+        else:
+            print(f'grasp: {args.force:g} N, lift {lift:g} m, hold {args.hold:g} s'
+                  + (', release' if args.release else ''), flush=True)
         sent = client.send_goal_async(goal, feedback_callback=on_feedback)
         if not session.spin_until(sent.done, args.timeout):
             return _error('the Grasp server did not answer the goal request')
@@ -325,13 +347,17 @@ def _grasp(args) -> int:
 
 
 def _print_result(result) -> None:
-    print(f"result: {'SUCCESS' if result.success else 'FAILED'}: {result.message}")
-    print(f'  slipped {result.slipped}, bruised {result.bruised}, slip distance '
-          f'{result.slip_distance * 1e3:.3f} mm')
+    print(f"result: {'SUCCESS' if result.success else 'FAILED'} ({result.outcome}): "
+          f'{result.message}')
+    dropped = f', dropped at t = {result.dropped_at:.3f} s' if result.dropped_at >= 0 else ''
+    print(f'  slipped {result.slipped}, bruised {result.bruised} '
+          f'({result.bruised_fraction:.1%} of the surface), crushed {result.crushed}, slip '
+          f'distance {result.slip_distance * 1e3:.3f} mm{dropped}')
     print(f'  max grip force {result.max_grip_force:.3f} N, final gap '
           f'{result.final_gap * 1e3:.2f} mm, max compression '
           f'{result.max_compression * 1e3:.3f} mm, max contact pressure '
-          f'{result.max_contact_pressure / 1e3:.1f} kPa', flush=True)
+          f'{result.max_contact_pressure / 1e3:.1f} kPa, peak damage pressure '
+          f'{result.peak_damage_pressure / 1e3:.1f} kPa', flush=True)
 
 
 def format_state(msg) -> str:
@@ -344,7 +370,8 @@ def format_state(msg) -> str:
                                    ('CRUSHED', msg.crushed)) if on]
     return (f't {t:8.3f} s  gap {msg.gap * 1e3:7.2f} mm  grip {msg.grip_force:6.2f} N  '
             f'compression {msg.compression * 1e3:6.3f} mm ({msg.compression_ratio:.2%})  '
-            f'peak pressure {msg.peak_contact_pressure / 1e3:7.1f} kPa  contact {contact}  '
+            f'peak pressure {msg.peak_contact_pressure / 1e3:7.1f} kPa (damage '
+            f'{msg.damage_pressure / 1e3:.1f} kPa)  contact {contact}  '
             f'centroid z {msg.centroid.z * 1e3:6.2f} mm  slip {msg.slip_distance * 1e3:.3f} mm'
             + (f"  {' '.join(flags)}" if flags else ''))
 

@@ -1,7 +1,8 @@
 """The ``~/grasp`` action (gripper_sim_interfaces/action/Grasp).
 
-The goal runs ``gripper_sim.core.grasp.GraspSequence``, updated after every physics
-step in the physics thread. Feedback goes out on every phase change and at least
+The goal runs ``gripper_sim.core.grasp.GraspSequence``, or with ``place`` the
+pick-and-place ``gripper_sim.core.scenario.PickAndPlace`` (``grasp_goal.GoalRun``),
+updated after every physics step in the physics thread. Feedback goes out on every phase change and at least
 every 0.05 s of sim time or of wall time (20 Hz at real time). One grasp at a time:
 a goal that arrives while one runs, or while a GripperCommand goal drives the jaws,
 is rejected and the reason is logged. Cancel stops the motion and holds the jaws
@@ -19,33 +20,12 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from gripper_sim_interfaces.action import Grasp
 
 from gripper_sim.errors import GripperSimError
+from gripper_sim.ros.grasp_goal import GoalRun, goal_problem
 from gripper_sim.ros.node import JawOwner
 
+__all__ = ['GraspServer', 'goal_problem']
+
 FEEDBACK_PERIOD = 0.05     # s, sim time and wall time
-MAX_LIFT_HEIGHT = 1.0      # m
-MAX_HOLD_TIME = 3600.0     # s
-
-
-def goal_problem(goal, config) -> str | None:
-    """Why a Grasp goal is out of range, or None. ``config`` is the flat configuration."""
-    fields = {'target_force': goal.target_force, 'close_speed': goal.close_speed,
-              'lift_height': goal.lift_height, 'hold_time': goal.hold_time}
-    for name, value in fields.items():
-        if not math.isfinite(value):
-            return f'{name} must be finite, got {value}'
-    max_force = config['gripper.max_force']
-    if not 0.0 < goal.target_force <= max_force:
-        return f'target_force must be in (0, {max_force:g}] N, got {goal.target_force:g} N'
-    max_speed = config['gripper.max_speed']
-    if not 0.0 <= goal.close_speed <= max_speed:
-        return (f'close_speed must be in [0, {max_speed:g}] m/s (0 = default), got '
-                f'{goal.close_speed:g} m/s')
-    if not 0.0 <= goal.lift_height <= MAX_LIFT_HEIGHT:
-        return (f'lift_height must be in [0, {MAX_LIFT_HEIGHT:g}] m, got '
-                f'{goal.lift_height:g} m')
-    if not 0.0 <= goal.hold_time <= MAX_HOLD_TIME:
-        return f'hold_time must be in [0, {MAX_HOLD_TIME:g}] s, got {goal.hold_time:g} s'
-    return None
 
 
 class _GraspRun(JawOwner):
@@ -111,7 +91,8 @@ class GraspServer:
         if reason is not None:
             node.get_logger().warning(f'Grasp goal aborted before it started: {reason}')
             goal_handle.abort()
-            return Grasp.Result(success=False, message=f'not started: {reason}')
+            return Grasp.Result(success=False, outcome='failed',
+                                message=f'not started: {reason}', dropped_at=-1.0)
         self._run = run
         try:
             return self._drive(run, goal)
@@ -124,8 +105,8 @@ class GraspServer:
     def _drive(self, run: _GraspRun, goal):
         node = self._node
         goal_handle = run.goal_handle
-        from gripper_sim.core.grasp import GraspSequence
-        close_speed = goal.close_speed or node.params.config['gripper.close_speed']
+        config = node.params.config
+        close_speed = goal.close_speed or config['gripper.close_speed']
 
         def on_step(result):
             if run.finished.is_set() or run.sequence is None:
@@ -142,16 +123,19 @@ class GraspServer:
 
         with node.lock:
             try:
-                run.sequence = GraspSequence(node.sim, goal.target_force, close_speed,
-                                             goal.lift_height, goal.hold_time, goal.release)
+                run.sequence = GoalRun(node.sim, goal, config)
             except GripperSimError as err:
                 node.get_logger().warning(f'Grasp goal aborted: {err}')
                 goal_handle.abort()
-                return Grasp.Result(success=False, message=f'not started: {err}')
+                return Grasp.Result(success=False, outcome='failed',
+                                    message=f'not started: {err}', dropped_at=-1.0)
             node.add_step_listener(on_step)
+        what = (f'place: transport {goal.transport_distance:g} m, retreat '
+                f'{goal.retreat_height:g} m' if goal.place else
+                f'hold {goal.hold_time:g} s, release {goal.release}')
         node.get_logger().info(
             f'Grasp goal accepted: {goal.target_force:g} N at {close_speed:g} m/s, lift '
-            f'{goal.lift_height:g} m, hold {goal.hold_time:g} s, release {goal.release}')
+            f'{goal.lift_height:g} m, {what}')
         self._feedback(run, node.sim.last)
         while not run.finished.wait(FEEDBACK_PERIOD):
             if goal_handle.is_cancel_requested:
@@ -163,7 +147,7 @@ class GraspServer:
 
         with node.lock:
             last = node.sim.last
-            summary = dict(run.sequence.summary())
+            summary = run.sequence.summary()
             phase = run.sequence.phase
             canceled = goal_handle.is_cancel_requested and not run.sequence.done
             # Stop the motion, hold the jaws where they are. Not after an abort: that
@@ -171,38 +155,28 @@ class GraspServer:
             # command sent since the reset.
             if run.abort_reason is None and (canceled or run.error):
                 node.hold_jaws()
-        result = self._result(summary)
+            result = run.sequence.result(summary)
         if run.abort_reason or run.error:
             why = run.abort_reason or f'grasp sequence failed: {run.error}'
             result.success = False
+            result.outcome = 'failed'
             result.message = f'aborted during {phase}: {why}'
             node.get_logger().warning(f'Grasp goal {result.message}')
             goal_handle.abort()
         elif canceled:
             result.success = False
+            result.outcome = 'canceled'
             result.message = (f'canceled during {phase}; jaws held at gap {last.gap:.4f} m, '
                               f'grip force {last.grip_force:.2f} N')
             node.get_logger().info(f'Grasp goal {result.message}')
             goal_handle.canceled()
         elif result.success:
-            node.get_logger().info(f'Grasp goal succeeded: {result.message}')
+            node.get_logger().info(f'Grasp goal succeeded ({result.outcome}): '
+                                   f'{result.message}')
             goal_handle.succeed()
         else:
-            node.get_logger().info(f'Grasp goal failed: {result.message}')
+            node.get_logger().info(f'Grasp goal failed ({result.outcome}): {result.message}')
             goal_handle.abort()
-        return result
-
-    @staticmethod
-    def _result(summary: dict) -> Grasp.Result:
-        result = Grasp.Result()
-        result.success = bool(summary.get('success', False))
-        result.slipped = bool(summary.get('slipped', False))
-        result.bruised = bool(summary.get('bruised', False))
-        result.message = str(summary.get('message', ''))
-        for name in ('max_grip_force', 'final_gap', 'max_compression',
-                     'max_contact_pressure', 'slip_distance'):
-            value = float(summary.get(name, 0.0))
-            setattr(result, name, value if math.isfinite(value) else 0.0)
         return result
 
     def _maybe_feedback(self, run: _GraspRun, result) -> None:

@@ -112,6 +112,10 @@ def result_is_finite(result: StepResult) -> bool:
                energies.gravitational, deformation.compression,
                deformation.compression_ratio, deformation.max_skin_strain,
                deformation.contact_length, deformation.peak_contact_pressure)
+    if result.damage is not None:
+        damage = result.damage
+        scalars += (damage.pressure, damage.peak_pressure, damage.peak_flesh_stress,
+                    damage.bruised_fraction)
     if not all(map(math.isfinite, scalars)):
         return False
     arrays = (result.positions, result.velocities, result.contact_forces, result.centroid,
@@ -126,8 +130,11 @@ class MessageContext:
     """What the messages need beyond one step result: geometry, thresholds, history.
 
     Build it once per run with ``from_config`` and call ``observe`` after every step
-    (``build_messages`` also calls it): ``bruised``, ``crushed`` and
-    ``bruised_fraction`` are latched over the run, and ``reset`` clears them.
+    (``build_messages`` also calls it). For a result without a damage estimate
+    (``result.damage`` None, e.g. a hand-made one) it latches its own from the model's
+    contact pressure: ``bruised``, ``crushed``, ``peak_pressure`` and
+    ``bruised_fraction`` over the run, cleared by ``reset``. Results of the core carry
+    ``damage`` and ``FruitState`` reports that instead.
 
     Attributes:
         dimension: model dimension (2 = planar x-z).
@@ -154,6 +161,7 @@ class MessageContext:
     gripper_centre_x: float = 0.0
     bruised: bool = field(default=False, init=False)
     crushed: bool = field(default=False, init=False)
+    peak_pressure: float = field(default=0.0, init=False)
     _node_bruised: np.ndarray | None = field(default=None, init=False, repr=False)
 
     @classmethod
@@ -189,6 +197,7 @@ class MessageContext:
         """Forget the run history (after a simulation reset)."""
         self.bruised = False
         self.crushed = False
+        self.peak_pressure = 0.0
         self._node_bruised = None
 
     def snapshot(self) -> 'MessageContext':
@@ -199,6 +208,7 @@ class MessageContext:
         """
         copy = dataclasses.replace(self)
         copy.bruised, copy.crushed = self.bruised, self.crushed
+        copy.peak_pressure = self.peak_pressure
         if self._node_bruised is not None:
             copy._node_bruised = self._node_bruised.copy()
         return copy
@@ -206,6 +216,7 @@ class MessageContext:
     def observe(self, result: StepResult) -> None:
         """Latch bruising and crushing from ``result`` into the run history."""
         deformation = result.deformation
+        self.peak_pressure = max(self.peak_pressure, float(deformation.peak_contact_pressure))
         if deformation.peak_contact_pressure > self.bruise_pressure:
             self.bruised = True
         if deformation.peak_contact_pressure > self.failure_stress:
@@ -323,9 +334,20 @@ def fruit_state(result: StepResult, context: MessageContext, header: Header) -> 
     msg.left_jaw_contact = result.in_contact_with('left_jaw')
     msg.right_jaw_contact = result.in_contact_with('right_jaw')
     msg.slipping = bool(result.slipping)
-    msg.bruised = context.bruised
-    msg.bruised_fraction = context.bruised_fraction
-    msg.crushed = context.crushed
+    damage = result.damage
+    if damage is not None:   # the core's damage estimate, cumulative since the reset
+        msg.damage_pressure = float(damage.pressure)
+        msg.peak_damage_pressure = float(damage.peak_pressure)
+        msg.peak_flesh_stress = float(damage.peak_flesh_stress)
+        msg.bruised = bool(damage.bruised)
+        msg.bruised_fraction = float(damage.bruised_fraction)
+        msg.crushed = bool(damage.crushed)
+    else:                    # a producer without one: the model's own contact pressure
+        msg.damage_pressure = float(deformation.peak_contact_pressure)
+        msg.peak_damage_pressure = context.peak_pressure
+        msg.bruised = context.bruised
+        msg.bruised_fraction = context.bruised_fraction
+        msg.crushed = context.crushed
     return msg
 
 
