@@ -413,8 +413,9 @@ def run_window(args) -> int:
 
     if not args.json:
         print(f"grasp window of {config['fruit.name']} ({int(config['dimension'])}D) with the "
-              f"{config['gripper.finger.name']} finger ({scenario['name']}: lift {scenario['lift.height']:g} m, transport "
-              f"{scenario['transport.distance']:g} m)", flush=True)
+              f"{config['gripper.finger.name']} finger ({scenario['name']}: lift "
+              f"{scenario['lift.height']:g} m, transport {scenario['transport.distance']:g} m)",
+              flush=True)
     window = grasp_window(config, scenario, tolerance, progress)
     if args.json:
         json.dump(window.as_dict(), sys.stdout)

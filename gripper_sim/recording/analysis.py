@@ -1,14 +1,26 @@
 """Offline analysis of a recorded grasp, from the MCAP file alone (no ROS graph).
 
-Reads the sim node's ``FruitState`` topic (and, when recorded, the two jaw wrenches and
-the marker outline), and writes:
+Reads the sim node's ``FruitState`` topic (and, when recorded, the two jaw wrenches, the
+markers and the node point cloud), and writes:
 
 - ``timeseries.csv``: one row per FruitState message (sim time, gap, grip force per jaw,
-  compression, max strain, peak contact pressure, slip, energies, flags);
+  compression, max strain, peak contact pressure, contact length and area, slip,
+  energies, centroid, damage flags);
 - ``summary.json``: peak force and compression, stiffness from the force-compression
-  curve, held/slipped, bruised, time above the bruise threshold;
-- ``force_vs_time.png``, ``force_vs_compression.png`` and ``outline_snapshots.png``
-  (the fruit outline at key moments coloured by skin strain and by contact pressure).
+  curve, contact size (length in 2D, area in 3D), held/slipped, damage (bruised,
+  bruised fraction, peak damage pressure, crushed), time above the bruise threshold;
+- ``force_vs_time.png``, ``force_vs_compression.png``; for a 2D run
+  ``outline_snapshots.png`` (the fruit outline at key moments coloured by skin strain
+  and by contact pressure); for a 3D run ``mesh_snapshots.png`` (the deformed skin at
+  key moments, from the ``fruit_mesh`` TRIANGLE_LIST marker, coloured by contact
+  pressure) and ``contact_patch.png`` (the jaw contact nodes of the point cloud at peak
+  force projected onto the jaw plane y-z, with their outline and area).
+
+Damage comes from the recorded ``FruitState`` fields (``bruised``, ``bruised_fraction``,
+``crushed``, ``peak_damage_pressure``: the simulation's damage estimate). A recording
+made before ``peak_damage_pressure`` existed lacks it: the summary says so
+(``peak_damage_pressure_pa`` null, ``damage_note``) and keeps the older rule for
+``bruised`` (the flag, or the peak contact pressure above the threshold).
 
 Messages are decoded with ``mcap-ros2-support``'s decoder from the schemas stored in
 the file, so the analysis runs without ROS installed.
@@ -32,6 +44,7 @@ from gripper_sim.recording.reader import BagReader
 FRUIT_STATE_TYPE = 'gripper_sim_interfaces/msg/FruitState'
 WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
+CLOUD_TYPE = 'sensor_msgs/msg/PointCloud2'
 CONFIG_METADATA = 'gripper_sim_config'
 DEFAULT_BRUISE_PRESSURE = 0.26e6  # Pa, the configuration default
 SLIP_THRESHOLD = 1e-3  # m of slip that counts as "slipped"
@@ -42,7 +55,10 @@ COLUMNS = (
     'slip_distance_m', 'slipping', 'left_jaw_contact', 'right_jaw_contact',
     'kinetic_energy_j', 'elastic_energy_j', 'gravitational_energy_j', 'total_energy_j',
     'centroid_x_m', 'centroid_z_m', 'bruised', 'bruised_fraction', 'crushed',
+    'dimension', 'contact_area_m2', 'centroid_y_m', 'peak_damage_pressure_pa',
 )
+#: the FruitState field older recordings lack (their column is empty)
+DAMAGE_PRESSURE_FIELD = 'peak_damage_pressure'
 
 
 def _stamp_ns(header: Any) -> int:
@@ -56,6 +72,12 @@ class TimeSeries:
     columns: dict[str, np.ndarray]
     log_times: np.ndarray
     stamps: np.ndarray
+    has_damage_pressure: bool = True
+
+    @property
+    def dimension(self) -> int:
+        """2 or 3: the model dimension the FruitState messages report."""
+        return int(np.max(self.columns['dimension'])) if len(self) else 2
 
     def __len__(self) -> int:
         return len(self.log_times)
@@ -80,9 +102,21 @@ class AnalysisResult:
                 return 'n/a'
             return f'{value * scale:.{digits}f} {unit}'
 
+        three_d = s.get('dimension') == 3
+        if three_d:
+            area = fmt(s['contact_area_at_peak_force_m2'], 'mm^2', 1e6, 1)
+            largest = fmt(s['peak_contact_area_m2'], 'mm^2', 1e6, 1)
+            contact = f'contact area:          {area} at peak force (largest {largest})'
+        else:
+            length = fmt(s['contact_length_at_peak_force_m'], 'mm', 1e3)
+            contact = f'contact length:        {length} at peak force'
+        damage = (f"damage:                bruised {s['bruised']} "
+                  f"({100 * s['bruised_fraction']:.1f} % of the "
+                  f"{'surface' if three_d else 'outline'}), peak damage pressure "
+                  f"{fmt(s['peak_damage_pressure_pa'], 'kPa', 1e-3, 1)}, crushed {s['crushed']}")
         lines = [
             f"analysed {s['samples']} FruitState messages on {s['fruit_state_topic']} "
-            f"({s['duration_s']:.3f} s of sim time)",
+            f"({s['duration_s']:.3f} s of sim time, {s.get('dimension', 2)}D model)",
             f"peak grip force:       {fmt(s['peak_grip_force_n'], 'N')} at "
             f"{fmt(s['time_of_peak_force_s'], 's')}",
             f"peak compression:      {fmt(s['peak_compression_m'], 'mm', 1e3)}",
@@ -91,9 +125,13 @@ class AnalysisResult:
             f"peak contact pressure: {fmt(s['peak_contact_pressure_pa'], 'kPa', 1e-3, 1)}",
             f"held: {s['held']}   slipped: {s['slipped']} (max slip "
             f"{fmt(s['max_slip_distance_m'], 'mm', 1e3)})",
-            f"bruised: {s['bruised']}   time above bruise threshold: "
+            contact,
+            damage,
+            f"time above bruise threshold (peak contact pressure): "
             f"{fmt(s['time_above_bruise_threshold_s'], 's')}",
         ]
+        if s.get('damage_note'):
+            lines.append(f"note: {s['damage_note']}")
         lines += [f'wrote {p}' for p in self.files]
         return lines
 
@@ -132,6 +170,7 @@ def find_topics(bag: BagReader, namespace: str | None = None) -> dict[str, str |
         'left': optional('left_jaw/wrench', WRENCH_TYPE),
         'right': optional('right_jaw/wrench', WRENCH_TYPE),
         'markers': optional('markers', MARKERS_TYPE),
+        'nodes': optional('fruit/nodes', CLOUD_TYPE),
     }
 
 
@@ -172,8 +211,13 @@ def read_time_series(bag: BagReader, topics: dict[str, str | None]) -> TimeSerie
     stamps: list[int] = []
     state_topic = topics['state']
     assert state_topic is not None
+    has_damage_pressure = True
     for raw, s in bag.decoded_messages([state_topic]):
         stamp = _stamp_ns(s.header)
+        damage_pressure = getattr(s, DAMAGE_PRESSURE_FIELD, None)
+        if damage_pressure is None:
+            has_damage_pressure = False
+            damage_pressure = math.nan
         rows.append([
             stamp / 1e9, s.gap, s.grip_force,
             jaw_force['left'].get(stamp, math.nan), jaw_force['right'].get(stamp, math.nan),
@@ -182,6 +226,7 @@ def read_time_series(bag: BagReader, topics: dict[str, str | None]) -> TimeSerie
             float(s.right_jaw_contact), s.kinetic_energy, s.elastic_energy,
             s.gravitational_energy, s.kinetic_energy + s.elastic_energy + s.gravitational_energy,
             s.centroid.x, s.centroid.z, float(s.bruised), s.bruised_fraction, float(s.crushed),
+            float(s.dimension or 2), s.contact_area, s.centroid.y, float(damage_pressure),
         ])
         log_times.append(raw.log_time)
         stamps.append(stamp)
@@ -190,7 +235,8 @@ def read_time_series(bag: BagReader, topics: dict[str, str | None]) -> TimeSerie
     data = np.asarray(rows, dtype=float)
     columns = {name: data[:, i] for i, name in enumerate(COLUMNS)}
     return TimeSeries(columns=columns, log_times=np.asarray(log_times, dtype=np.int64),
-                      stamps=np.asarray(stamps, dtype=np.int64))
+                      stamps=np.asarray(stamps, dtype=np.int64),
+                      has_damage_pressure=has_damage_pressure)
 
 
 # ---------------------------------------------------------------------- summary
@@ -249,7 +295,20 @@ def summarize(series: TimeSeries, *, bruise_pressure: float,
     held = bool(both[-1] and series['slipping'][-1] == 0 and end_slip < slip_threshold)
     left = series['left_force_n']
     right = series['right_force_n']
+    bruised_flag = bool(np.any(series['bruised'] > 0))
+    if series.has_damage_pressure:
+        damage_pressure = _finite_or_none(np.max(series['peak_damage_pressure_pa']))
+        bruised = bruised_flag
+        note = None
+    else:
+        damage_pressure = None
+        bruised = bruised_flag or bool(np.any(over))
+        note = (f'the FruitState messages of this recording have no '
+                f"'{DAMAGE_PRESSURE_FIELD}' field (recorded before it was added): the peak "
+                'damage pressure is not available; bruised is the recorded flag or the '
+                'peak contact pressure above the threshold')
     return {
+        'dimension': series.dimension,
         'samples': len(series),
         'duration_s': float(t[-1] - t[0]),
         'start_time_s': float(t[0]),
@@ -273,9 +332,16 @@ def summarize(series: TimeSeries, *, bruise_pressure: float,
         'max_slip_distance_m': max_slip,
         'final_slip_distance_m': end_slip,
         'slipping_time_s': slipping_time,
-        'bruised': bool(np.any(series['bruised'] > 0) or np.any(over)),
+        'peak_contact_length_m': float(np.max(series['contact_length_m'])),
+        'contact_length_at_peak_force_m': float(series['contact_length_m'][peak]),
+        'peak_contact_area_m2': float(np.max(series['contact_area_m2'])),
+        'contact_area_at_peak_force_m2': float(series['contact_area_m2'][peak]),
+        'bruised': bruised,
+        'bruised_fraction': float(np.max(series['bruised_fraction'])),
         'final_bruised_fraction': float(series['bruised_fraction'][-1]),
+        'peak_damage_pressure_pa': damage_pressure,
         'crushed': bool(np.any(series['crushed'] > 0)),
+        'damage_note': note,
         'bruise_threshold_pa': float(bruise_pressure),
         'time_above_bruise_threshold_s': float(np.sum(dt[over])),
         'first_contact_time_s': float(t[int(np.argmax(both))]) if np.any(both) else None,
@@ -293,18 +359,75 @@ def write_csv(series: TimeSeries, path: Path) -> None:
 
 
 # ---------------------------------------------------------------------- figures
-def _outline_at(bag: BagReader, topic: str, log_time: int, stamp: int) -> Any:
-    """The fruit outline marker nearest ``stamp``, read around ``log_time``."""
+def _outline_at(bag: BagReader, topic: str, log_time: int, stamp: int,
+                ns: str = 'fruit_outline') -> Any:
+    """The fruit marker (namespace ``ns``) nearest ``stamp``, read around ``log_time``."""
     best = None
     window = 200_000_000
     for _raw, msg in bag.decoded_messages([topic], start=max(0, log_time - window),
                                           end=log_time + window):
         for marker in msg.markers:
-            if marker.ns == 'fruit_outline' and marker.points:
+            if marker.ns == ns and marker.points:
                 dist = abs(_stamp_ns(marker.header) - stamp)
                 if best is None or dist < best[0]:
                     best = (dist, marker)
     return best[1] if best is not None else None
+
+
+def cloud_array(msg: Any) -> np.ndarray:
+    """(n, 6) x y z fx fy fz (m, N) of a decoded node ``PointCloud2`` (float32 fields)."""
+    names = ('x', 'y', 'z', 'fx', 'fy', 'fz')
+    offsets = {f.name: int(f.offset) for f in msg.fields if int(f.datatype) == 7}  # FLOAT32
+    if any(name not in offsets for name in names):
+        raise RecordingError(f"the node cloud has fields {sorted(offsets)}, not {names}")
+    raw = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    n = int(msg.width) * int(msg.height)
+    step = int(msg.point_step)
+    rows = raw[:n * step].reshape(n, step)
+    order = '>f4' if msg.is_bigendian else '<f4'
+    return np.column_stack([rows[:, offsets[name]:offsets[name] + 4].copy().view(order)[:, 0]
+                            for name in names]).astype(float)
+
+
+def _cloud_at(bag: BagReader, topic: str, log_time: int, stamp: int) -> np.ndarray | None:
+    """The node cloud (``cloud_array``) with the header stamp nearest ``stamp``."""
+    best = None
+    window = 200_000_000
+    for _raw, msg in bag.decoded_messages([topic], start=max(0, log_time - window),
+                                          end=log_time + window):
+        dist = abs(_stamp_ns(msg.header) - stamp)
+        if best is None or dist < best[0]:
+            best = (dist, msg)
+    return cloud_array(best[1]) if best is not None else None
+
+
+def jaw_contact_nodes(cloud: np.ndarray) -> dict[str, np.ndarray]:
+    """Indices of the cloud's nodes pressed by the left and the right jaw.
+
+    A node with a contact force f touches a jaw when the closing-axis component
+    dominates, |f_x| > |f_z| (the table pushes along z; a jaw's friction is below its
+    normal force for every friction coefficient below 1), the left jaw when f_x > 0
+    (it pushes the fruit towards +x).
+    """
+    force = cloud[:, 3:6]
+    touching = np.linalg.norm(force, axis=1) > 0
+    jaw = touching & (np.abs(force[:, 0]) > np.abs(force[:, 2]))
+    return {'left': np.flatnonzero(jaw & (force[:, 0] > 0)),
+            'right': np.flatnonzero(jaw & (force[:, 0] < 0))}
+
+
+def patch_outline(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Outline (closed, (k + 1, 2)) and area (m^2) of (n, 2) patch points (y, z): their
+    convex hull; for fewer than 3 points (or collinear ones) the points and area 0."""
+    if len(points) < 3:
+        return np.asarray(points, dtype=float), 0.0
+    from scipy.spatial import ConvexHull, QhullError
+    try:
+        hull = ConvexHull(points)
+    except QhullError:
+        return np.asarray(points, dtype=float), 0.0
+    loop = points[np.append(hull.vertices, hull.vertices[0])]
+    return loop, float(hull.volume)  # a 2D hull's "volume" is its area
 
 
 def key_moments(series: TimeSeries) -> list[tuple[str, int]]:
@@ -463,6 +586,123 @@ def plot_outlines(bag: BagReader, topic: str, series: TimeSeries, summary: dict,
     return True
 
 
+def _pressure_colour_map():
+    """The node's marker colours as a colormap: green at 0, yellow at half, red at the
+    bruise pressure (``gripper_sim.ros.messages.pressure_colour``)."""
+    from matplotlib.colors import LinearSegmentedColormap
+    return LinearSegmentedColormap.from_list(
+        'bruise', [(0.2, 0.8, 0.2), (1.0, 0.8, 0.2), (1.0, 0.0, 0.2)])
+
+
+def plot_mesh_snapshots(bag: BagReader, topic: str, series: TimeSeries, summary: dict,
+                        path: Path) -> bool:
+    """The 3D skin (``fruit_mesh`` TRIANGLE_LIST marker) at the key moments, each
+    triangle coloured by the mean marker colour of its corners (contact pressure)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    meshes = []
+    for label, row in key_moments(series):
+        marker = _outline_at(bag, topic, int(series.log_times[row]), int(series.stamps[row]),
+                             ns='fruit_mesh')
+        if marker is not None and len(marker.points) >= 3:
+            meshes.append((label, row, marker))
+    if not meshes:
+        return False
+    fig = plt.figure(figsize=(3.6 * len(meshes) + 1.0, 4.4), dpi=110)
+    all_pts = np.vstack([[[p.x, p.y, p.z] for p in m.points] for _, _, m in meshes]) * 1e3
+    centre = 0.5 * (all_pts.min(axis=0) + all_pts.max(axis=0))
+    half = 0.55 * float(np.ptp(all_pts, axis=0).max() or 10.0)
+    for col, (label, row, marker) in enumerate(meshes):
+        pts = np.array([[p.x, p.y, p.z] for p in marker.points]) * 1e3
+        n_tri = len(pts) // 3
+        triangles = pts[:3 * n_tri].reshape(n_tri, 3, 3)
+        ax = fig.add_subplot(1, len(meshes), col + 1, projection='3d')
+        if len(marker.colors) == len(marker.points):
+            rgb = np.array([[c.r, c.g, c.b] for c in marker.colors])[:3 * n_tri]
+            faces = rgb.reshape(n_tri, 3, 3).mean(axis=1)
+        else:
+            faces = np.tile([0.2, 0.8, 0.2], (n_tri, 1))
+        ax.add_collection3d(Poly3DCollection(list(triangles), facecolors=faces,
+                                             edgecolors=(0, 0, 0, 0.15), linewidths=0.2))
+        for axis, (set_lim, name) in enumerate(((ax.set_xlim, 'x'), (ax.set_ylim, 'y'),
+                                                (ax.set_zlim, 'z'))):
+            set_lim(centre[axis] - half, centre[axis] + half)
+        ax.set_box_aspect((1, 1, 1))
+        ax.view_init(elev=18, azim=-60)
+        ax.set_xlabel('x (mm)', fontsize=7)
+        ax.set_ylabel('y (mm)', fontsize=7)
+        ax.set_zlabel('z (mm)', fontsize=7)
+        ax.tick_params(labelsize=6)
+        ax.set_title(f'{label}, t = {series["time_s"][row]:.3f} s\n'
+                     f'F = {series["grip_force_n"][row]:.2f} N, peak p = '
+                     f'{series["peak_contact_pressure_pa"][row] / 1e3:.0f} kPa', fontsize=8)
+    bruise_kpa = summary.get('bruise_threshold_pa', DEFAULT_BRUISE_PRESSURE) / 1e3
+    fig.colorbar(ScalarMappable(Normalize(0.0, bruise_kpa), _pressure_colour_map()),
+                 ax=fig.axes, label='contact pressure (kPa)', shrink=0.7)
+    fig.suptitle('Deformed fruit skin at key moments (colour: contact pressure)', fontsize=10)
+    fig.savefig(path)
+    plt.close(fig)
+    return True
+
+
+def plot_contact_patch(bag: BagReader, topic: str, series: TimeSeries, summary: dict,
+                       path: Path) -> dict | None:
+    """The jaw contact patches at peak force: the nodes with a jaw contact force
+    (``jaw_contact_nodes``) projected onto the jaw plane y-z, coloured by their normal
+    force, with their convex outline and its area. Returns the patch areas (m^2) and
+    node counts per jaw, or None when no cloud is near the peak."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    row = int(np.argmax(series['grip_force_n']))
+    cloud = _cloud_at(bag, topic, int(series.log_times[row]), int(series.stamps[row]))
+    if cloud is None:
+        return None
+    sides = jaw_contact_nodes(cloud)
+    fig, axes = plt.subplots(1, 2, figsize=(9, 4.4), dpi=110, layout='constrained')
+    patches: dict[str, Any] = {}
+    picked = np.concatenate([sides['left'], sides['right']])
+    f_max = float(np.abs(cloud[picked, 3]).max()) if picked.size else 1.0
+    scatter = None
+    for ax, side in zip(axes, ('left', 'right')):
+        nodes = sides[side]
+        yz = cloud[nodes][:, [1, 2]]
+        outline, area = patch_outline(yz)
+        patches[side] = {'nodes': int(nodes.size), 'hull_area_m2': area}
+        if nodes.size:
+            scatter = ax.scatter(1e3 * yz[:, 0], 1e3 * yz[:, 1], c=np.abs(cloud[nodes, 3]),
+                                 cmap='viridis', vmin=0.0, vmax=f_max, s=28)
+            if len(outline) > 3:
+                ax.plot(1e3 * outline[:, 0], 1e3 * outline[:, 1], 'k-', lw=1)
+            centre = yz.mean(axis=0)
+            span = max(float(np.ptp(yz, axis=0).max()), 1e-3)
+            ax.set_xlim(1e3 * (centre[0] - span), 1e3 * (centre[0] + span))
+            ax.set_ylim(1e3 * (centre[1] - span), 1e3 * (centre[1] + span))
+        else:
+            ax.text(0.5, 0.5, 'no contact', ha='center', va='center',
+                    transform=ax.transAxes)
+        ax.set_aspect('equal')
+        ax.set_xlabel('y (mm)')
+        ax.set_ylabel('z (mm)')
+        ax.grid(alpha=0.3)
+        ax.set_title(f'{side} jaw: {nodes.size} nodes, outline area {area * 1e6:.1f} mm^2',
+                     fontsize=9)
+    if scatter is not None:
+        fig.colorbar(scatter, ax=list(axes), label='node normal force |f_x| (N)', shrink=0.8)
+    fig.suptitle(f'Contact patches at peak force ({series["grip_force_n"][row]:.2f} N, '
+                 f't = {series["time_s"][row]:.3f} s); contact area (vertex areas, both '
+                 f'jaws) {series["contact_area_m2"][row] * 1e6:.1f} mm^2', fontsize=9)
+    fig.savefig(path)
+    plt.close(fig)
+    return patches
+
+
 # ---------------------------------------------------------------------- entry point
 def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
             namespace: str | None = None, figures: bool = True,
@@ -491,7 +731,6 @@ def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
         write_csv(series, csv_path)
         result.files.append(csv_path)
         json_path = out / 'summary.json'
-        json_path.write_text(json.dumps(summary, indent=2) + '\n', encoding='utf-8')
         result.files.append(json_path)
         if figures:
             p = out / 'force_vs_time.png'
@@ -500,10 +739,23 @@ def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
             p = out / 'force_vs_compression.png'
             plot_force_vs_compression(series, summary, p)
             result.files.append(p)
-            if topics['markers'] is not None:
+            if series.dimension == 3:
+                if topics['markers'] is not None:
+                    p = out / 'mesh_snapshots.png'
+                    if plot_mesh_snapshots(bag, topics['markers'], series, summary, p):
+                        result.files.append(p)
+                if topics['nodes'] is not None:
+                    p = out / 'contact_patch.png'
+                    patches = plot_contact_patch(bag, topics['nodes'], series, summary, p)
+                    if patches is not None:
+                        result.files.append(p)
+                        summary['contact_patches_at_peak_force'] = patches
+            elif topics['markers'] is not None:
                 p = out / 'outline_snapshots.png'
                 if plot_outlines(bag, topics['markers'], series, summary, p):
                     result.files.append(p)
+        # last: the 3D contact patch figure adds its measured patches to the summary
+        json_path.write_text(json.dumps(summary, indent=2) + '\n', encoding='utf-8')
     return result
 
 
