@@ -322,3 +322,81 @@ def test_fruit_state_is_bruised_and_crushed_by_the_damage_estimate():
     assert 0.5 * patch < hurt.bruised_fraction < 2.0 * patch
     crushed, _, _ = squeezed_apple_state(8.0, **{'fruit.failure_stress': 0.5 * p0})
     assert crushed.crushed          # Tresca 0.62 p0 above the failure stress
+
+
+# ------------------------------------------------------- fingers and pads
+
+def finger_run(finger, seconds=0.3):
+    """Markers of the 2D apple at t = 0 and after closing for ``seconds`` with ``finger``."""
+    from gripper_sim.configuration import load_config
+    from gripper_sim.core import make_simulation
+    config = load_config(finger=finger)
+    sim = make_simulation(config)
+    context = MessageContext.from_config(config, initial=sim.last)
+    first = (sim.last, build_messages(sim.last, context.snapshot())['markers'])
+    sim.command_gap(0.05)
+    sim.command_lift(sim.last.lift + 0.004)
+    result = sim.run(seconds)
+    return config, first, (result, build_messages(result, context)['markers'])
+
+
+def by_key(array):
+    return {(m.ns, m.id): m for m in array.markers}
+
+
+def xyz(marker):
+    return np.array([(p.x, p.y, p.z) for p in marker.points])
+
+
+def test_arc_finger_outline_is_drawn_at_each_jaw_and_moves_with_it():
+    from gripper_sim.core.fingers import finger_outline
+    config, *runs = finger_run('arc')
+    radius, h = config['gripper.finger.radius'], config['gripper.jaw_height']
+    sagitta = radius - np.sqrt(radius ** 2 - h * h / 4)
+    moved = []
+    for result, array in runs:
+        markers = by_key(array)
+        for side, face_x, marker_id in (('left', result.left_jaw_x, 2),
+                                        ('right', result.right_jaw_x, 3)):
+            section = markers[('fingers', marker_id)]
+            assert section.type == section.LINE_STRIP
+            expected = finger_outline(config, side) + np.array([face_x, result.lift])
+            drawn = xyz(section)
+            np.testing.assert_allclose(drawn[:-1][:, [0, 2]], expected, atol=1e-9)
+            np.testing.assert_allclose(drawn[-1], drawn[0])          # closed
+            assert np.all(drawn[:, 1] == 0.0)
+            # the arc's deepest point is the sagitta behind the jaw's front plane
+            assert np.min(np.abs(drawn[:, 0] - face_x)[:len(expected) - 2]) == 0.0
+            depth = np.abs(drawn[:-3, 0] - face_x).max()
+            assert depth == pytest.approx(sagitta, rel=1e-6)
+            solid = markers[('fingers', marker_id - 2)]
+            assert solid.type == solid.TRIANGLE_LIST and len(solid.points) % 3 == 0
+            corners = xyz(solid)
+            assert corners[:, 1].max() == pytest.approx(config['fruit.depth'] / 2
+                                                         if config['fruit.depth'] else
+                                                         config['fruit.shape.diameter'] / 3)
+            moved.append(drawn)
+        assert ('pads', 0) not in markers
+    # the jaws closed and rose: the outlines followed them
+    left_before, right_before, left_after, right_after = moved
+    shift_left = left_after - left_before
+    assert shift_left[:, 0] == pytest.approx(runs[1][0].left_jaw_x - runs[0][0].left_jaw_x)
+    assert shift_left[:, 2] == pytest.approx(runs[1][0].lift - runs[0][0].lift)
+    assert shift_left[0, 0] > 0.002 and shift_left[0, 2] > 0.001
+
+
+def test_flat_jaws_have_no_finger_markers_and_a_pad_is_drawn_on_the_face():
+    _, _, (_, plain) = finger_run('flat', 0.01)
+    assert not [m for m in plain.markers if m.ns in ('fingers', 'pads')]
+    config, _, (result, padded) = finger_run('soft_pad', 0.01)
+    markers = by_key(padded)
+    t = config['gripper.finger.pad.thickness']
+    pad = xyz(markers[('pads', 0)])
+    # the pad fills [face - t, face] behind the left jaw's front plane
+    assert pad[:, 0].max() == pytest.approx(result.left_jaw_x)
+    assert pad[:, 0].min() == pytest.approx(result.left_jaw_x - t)
+    body = xyz(markers[('fingers', 0)])
+    assert body[:, 0].max() == pytest.approx(result.left_jaw_x - t)
+    jaw = markers[('jaws', 0)]
+    assert jaw.pose.position.x == pytest.approx(
+        result.left_jaw_x - t - config['gripper.jaw_thickness'] / 2)

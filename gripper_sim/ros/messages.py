@@ -33,6 +33,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from gripper_sim.core.results import StepResult
+from gripper_sim.ros.finger_markers import FingerGeometry, finger_geometry, finger_markers
 
 WORLD_FRAME = 'world'
 LEFT_JAW_FRAME = 'left_jaw'
@@ -146,6 +147,8 @@ class MessageContext:
         jaw_width: m, 3D jaw face width along y (the 2D jaws are drawn ``depth`` wide).
         table: whether there is a table, at ``table_height`` (m).
         gripper_centre_x: m, x of the gripper centre the jaw joints are measured from.
+        finger: the shaped finger / pad to draw (``finger_markers.finger_geometry``);
+            None for flat jaws without pads.
     """
 
     dimension: int = 2
@@ -159,6 +162,7 @@ class MessageContext:
     table: bool = True
     table_height: float = 0.0
     gripper_centre_x: float = 0.0
+    finger: FingerGeometry | None = None
     bruised: bool = field(default=False, init=False)
     crushed: bool = field(default=False, init=False)
     peak_pressure: float = field(default=0.0, init=False)
@@ -191,6 +195,7 @@ class MessageContext:
             table=bool(config.get('world.table', True)),
             table_height=float(config.get('world.table_height', 0.0)),
             gripper_centre_x=centre,
+            finger=finger_geometry(config),
         )
 
     def reset(self) -> None:
@@ -461,7 +466,8 @@ def fruit_marker(result: StepResult, context: MessageContext, header: Header) ->
 
 
 def markers(result: StepResult, context: MessageContext, header: Header) -> MarkerArray:
-    """Fruit coloured by contact pressure, jaws, table, force arrows (frame ``world``)."""
+    """Fruit coloured by contact pressure, jaws, shaped fingers and pads
+    (``finger_markers``), table, force arrows (frame ``world``)."""
     array = MarkerArray()
     array.markers.append(fruit_marker(result, context, header))
 
@@ -470,9 +476,11 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
     width = context.jaw_width if is_3d(result) else depth
     jaws = (('left', result.left_jaw_x, outward_left, result.left_wrench),
             ('right', result.right_jaw_x, -outward_left, result.right_wrench))
+    # the jaw plate sits behind a recessed face and a pad
+    recess = context.finger.recess if context.finger is not None else 0.0
     for marker_id, (_, face_x, outward, wrench) in enumerate(jaws):
         jaw = _marker(header, 'jaws', marker_id, Marker.CUBE)
-        jaw.pose.position.x = float(face_x + outward * context.jaw_thickness / 2.0)
+        jaw.pose.position.x = float(face_x + outward * (recess + context.jaw_thickness / 2.0))
         jaw.pose.position.z = float(result.lift)
         jaw.scale.x = context.jaw_thickness
         jaw.scale.y = width
@@ -492,6 +500,10 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
         arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.002, 0.004, 0.004
         arrow.color = ColorRGBA(r=0.9, g=0.3, b=0.1, a=1.0)
         array.markers.append(arrow)
+
+    array.markers.extend(finger_markers(
+        context.finger, header, [(float(face_x), -outward) for _, face_x, outward, _ in jaws],
+        float(result.lift), width))
 
     if context.table:
         table = _marker(header, 'table', 0, Marker.CUBE)
