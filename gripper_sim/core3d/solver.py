@@ -6,21 +6,132 @@ so neither do the triplets' positions: this subclass finds the CSC pattern once 
 sums each evaluation's values into it with one ``np.bincount``. Same incremental
 potential, gradient and Hessian as the base class (up to round-off in the summation
 order); the friction cone and everything else are inherited.
+
+The fast path (numba installed, no stiffness damping, every energy with an
+``evaluate_into`` kernel; ``GRIPPER_SIM_FAST=0`` turns it off) goes further:
+- the energies add their gradients and Hessians straight into the CSC values through
+  precomputed scatter indices (``core3d.kernels``), and the filter S H S + (I - S) is
+  one kernel over the 3x3 node blocks, on the same pattern;
+- the Newton systems are solved by conjugate gradients preconditioned with the last
+  LU factorisation (of an earlier Newton iteration or step: the matrix changes little
+  between them) plus the current rank-one terms by the Woodbury identity; the matrix is
+  factorised again only when CG is slow or meets negative curvature. CG stops at a
+  relative residual of ``CG_TOLERANCE``, well below what changes the Newton iterates
+  at the stepper's tolerance (test/test_3d_validation.py compares the two paths).
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
-from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+from gripper_sim.core.stepper import (ImplicitEulerSolver, NewtonFailure, StepConstraints,
+                                      StepSolution)
+
+try:  # numba is optional: without it the numpy reference path runs
+    from gripper_sim.core3d import kernels
+except ImportError:  # pragma: no cover - depends on the environment
+    kernels = None
+
+#: relative residual (infinity norms) at which the preconditioned CG stops
+CG_TOLERANCE = 1e-8
+#: CG iterations before the matrix is factorised afresh
+CG_MAX_ITERATIONS = 20
+#: a system that took more CG iterations than this gets a new factorisation next time
+CG_STALE_ITERATIONS = 8
+
+
+def nested_dissection(graph: sp.csr_matrix, leaf: int = 16) -> np.ndarray:
+    """Fill-reducing order (n,) of a graph's nodes by nested dissection.
+
+    Each part is split by a level set of a breadth-first search from a far node (no
+    edge skips a level, so the middle level separates the levels before and after it);
+    the two halves are ordered first, recursively, the separator last (George 1973,
+    "Nested dissection of a regular finite element mesh", SIAM J. Numer. Anal.).
+    """
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+    order: list[int] = []
+
+    def levels(sub, start):
+        dist = np.full(sub.shape[0], -1)
+        dist[start] = 0
+        frontier = np.array([start])
+        while frontier.size:
+            nxt = np.unique(sub[frontier].indices)
+            nxt = nxt[dist[nxt] < 0]
+            if nxt.size:
+                dist[nxt] = dist[frontier[0]] + 1
+            frontier = nxt
+        return dist
+
+    def dissect(nodes):
+        if nodes.size <= leaf:
+            order.extend(nodes.tolist())
+            return
+        sub = graph[nodes][:, nodes].tocsr()
+        n_comp, labels = connected_components(sub, directed=False)
+        if n_comp > 1:
+            for k in range(n_comp):
+                dissect(nodes[labels == k])
+            return
+        start = int(breadth_first_order(sub, 0, directed=False)[0][-1])  # a far node
+        dist = levels(sub, start)
+        counts = np.bincount(dist)
+        middle = int(np.searchsorted(np.cumsum(counts), 0.5 * nodes.size))
+        middle = min(max(middle, 1), len(counts) - 2) if len(counts) > 2 else -1
+        if middle < 0:
+            order.extend(nodes.tolist())
+            return
+        dissect(nodes[dist < middle])
+        dissect(nodes[dist > middle])
+        order.extend(nodes[dist == middle].tolist())
+
+    dissect(np.arange(graph.shape[0]))
+    return np.array(order, dtype=np.int64)
+
+
+class _PermutedLU:
+    """SuperLU of P A P^T (natural column order) standing for A^-1: x[perm] = LU^-1 b[perm]."""
+
+    def __init__(self, lu, perm: np.ndarray):
+        self.lu, self.perm = lu, perm
+        self.nnz = lu.L.nnz + lu.U.nnz
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        x = np.empty_like(b)
+        x[self.perm] = self.lu.solve(np.ascontiguousarray(b[self.perm]))
+        return x
+
+
+def fast_available() -> bool:
+    """Whether the numba kernels can be used (numba installed, GRIPPER_SIM_FAST != 0)."""
+    return kernels is not None and os.environ.get('GRIPPER_SIM_FAST', '1') != '0'
 
 
 class PatternCachingSolver(ImplicitEulerSolver):
     """``ImplicitEulerSolver`` whose energy Hessians keep one sparsity pattern."""
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args, fast: bool | None = None, **kwargs):
         super().__init__(*args, **kwargs)
         self._pattern = None  # (signature, inverse, indices, indptr, nnz)
+        if fast is None:
+            fast = fast_available()
+        self.fast = bool(fast and kernels is not None and self.beta == 0 and self.dim == 3
+                         and all(hasattr(e, 'evaluate_into') for e in self.energies))
+        #: counts of the fast path: Newton systems, LU factorisations, CG iterations
+        self.stats = dict(systems=0, factorisations=0, cg_iterations=0)
+        self._lu = None
+        self._stale = False
+        self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
+        if self.fast:
+            self._build_fast_pattern()
+
+    def reset(self) -> None:
+        """Forget the kept factorisation (a restarted simulation repeats its results)."""
+        self._lu = None
+        self._warm = None
 
     def _assemble(self, rows: list, cols: list, vals: list) -> sp.csc_matrix:
         signature = tuple(r.size for r in rows)
@@ -95,3 +206,244 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 (blocks.ravel(), (np.repeat(dofs, d, axis=1).ravel(),
                                   np.tile(dofs, (1, d)).ravel())), shape=(self.n, self.n))
         return phi, grad, fric_grad, (hess.tocsc(), low_rank)
+
+    # ------------------------------------------------------------------ fast path
+    def _build_fast_pattern(self) -> None:
+        """CSC pattern of every energy's elements plus the diagonal node blocks, the
+        scatter index of each energy, and the positions of the 3x3 node blocks."""
+        n = self.n
+        nodes = n // 3
+        diag = (3 * np.arange(nodes))[:, None] + np.arange(3)[None, :]
+        key_sets = [(np.tile(diag, (1, 3)) * n + np.repeat(diag, 3, axis=1)).ravel()]
+        element_keys = []
+        for energy in self.energies:
+            if energy.dofs is None:
+                element_keys.append(None)
+                continue
+            m = energy.dofs.shape[1]
+            keys = np.tile(energy.dofs, (1, m)) * n + np.repeat(energy.dofs, m, axis=1)
+            element_keys.append(keys)
+            key_sets.append(keys.ravel())
+        unique = np.unique(np.concatenate(key_sets))
+        self._indices = (unique % n).astype(np.int32)
+        self._indptr = np.searchsorted(unique // n, np.arange(n + 1)).astype(np.int32)
+        self._nnz = unique.size
+        self._scatter = [np.zeros((0, 0), np.int64) if keys is None else
+                         np.searchsorted(unique, keys).astype(np.int64)
+                         for keys in element_keys]
+        col_node, row_node = unique // n // 3, unique % n // 3
+        block_keys = np.unique(col_node * nodes + row_node)
+        bcol, brow = block_keys // nodes, block_keys % nodes
+        a = np.arange(3)
+        keys = ((3 * bcol[:, None, None] + a[None, None, :]) * n
+                + 3 * brow[:, None, None] + a[None, :, None])  # [block, row a, col c]
+        self._block_pos = np.searchsorted(unique, keys).astype(np.int64)
+        self._block_nodes = np.stack([brow, bcol], axis=1).astype(np.int64)
+        self._diag_block_pos = self._block_pos[brow == bcol][np.argsort(brow[brow == bcol])]
+        self._diag_pos = np.searchsorted(unique, np.arange(n) * n + np.arange(n))
+        # the nested-dissection order of the node graph, dof by dof, and the gather
+        # index that permutes the CSC values to the pattern of P A P^T
+        graph = sp.csr_matrix((np.ones(len(bcol)), (brow, bcol)), shape=(nodes, nodes))
+        node_order = nested_dissection(graph)
+        perm = (3 * node_order[:, None] + a[None, :]).ravel()
+        inverse = np.empty(n, np.int64)
+        inverse[perm] = np.arange(n)
+        col = np.repeat(np.arange(n), np.diff(self._indptr))
+        new_keys = inverse[col] * n + inverse[self._indices]
+        gather = np.argsort(new_keys)
+        self._perm = perm
+        self._perm_gather = gather
+        self._perm_indices = (new_keys[gather] % n).astype(np.int32)
+        self._perm_indptr = np.searchsorted(new_keys[gather] // n,
+                                            np.arange(n + 1)).astype(np.int32)
+        self._ordering = None  # 'mmd' or 'nd', chosen at the first factorisation
+
+    def _csc(self, data: np.ndarray) -> sp.csc_matrix:
+        return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
+
+    def _evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+        """As ``_evaluate``, with the Hessian as CSC values on the fixed pattern."""
+        inertia = q - q_n - dt * v_n
+        phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
+        grad = self.m * inertia / dt ** 2
+        data = np.zeros(self._nnz if hessian else 1)
+        low_rank = []
+        for energy, scatter in zip(self.energies, self._scatter):
+            value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
+            if not np.isfinite(value):
+                return np.inf, None, None, None
+            phi += value
+            low_rank.extend(terms)
+        if self.alpha > 0:
+            dq = q - q_n
+            phi += 0.5 * self.alpha * float(np.sum(self.m * dq ** 2)) / dt
+            grad += self.alpha * self.m * dq / dt
+        fric_grad = np.zeros(self.n)
+        k = con.friction_nodes
+        blocks = None
+        if k.size:
+            phi_f, blocks = self._cone_friction(q, q_n, dt, con, fric_grad)
+            phi += phi_f
+            grad += fric_grad
+        if not hessian:
+            return phi, grad, fric_grad, None
+        diag = self.m / dt ** 2 + (self.alpha * self.m / dt if self.alpha > 0 else 0.0)
+        kernels.add_diagonal(data, self._diag_pos, np.ascontiguousarray(diag, dtype=float))
+        if k.size:
+            kernels.add_node_blocks(data, self._diag_block_pos, k.astype(np.int64),
+                                    np.ascontiguousarray(blocks))
+        return phi, grad, fric_grad, (data, low_rank)
+
+    def _factorise(self, a: sp.csc_matrix):
+        """LU of A: with the solver's ordering (``lu_options``) or of P A P^T in the
+        nested-dissection order, whichever gave the sparser factors the first time."""
+        self.stats['factorisations'] += 1
+        if self._ordering != 'nd':
+            lu = spla.splu(a) if self.lu_options is None else spla.splu(a, **self.lu_options)
+            if self._ordering == 'mmd':
+                return lu
+        options = dict(self.lu_options or {}, permc_spec='NATURAL')
+        permuted = sp.csc_matrix((a.data[self._perm_gather], self._perm_indices,
+                                  self._perm_indptr), shape=a.shape)
+        nd = _PermutedLU(spla.splu(permuted, **options), self._perm)
+        if self._ordering is None:
+            self._ordering = 'nd' if nd.nnz < lu.L.nnz + lu.U.nnz else 'mmd'
+            return nd if self._ordering == 'nd' else lu
+        return nd
+
+    def _linear_solve(self, a: sp.csc_matrix, rhs: np.ndarray, low_rank, fresh: bool):
+        """dq with (A + sum c u u^T) dq = rhs: CG preconditioned by the kept LU, or a new
+        LU when CG does not converge fast (or ``fresh``). Raises RuntimeError (singular)."""
+        self.stats['systems'] += 1
+        if low_rank:
+            u = np.stack([vec for _, vec in low_rank], axis=1)
+            c = np.array([coef for coef, _ in low_rank])
+        else:
+            u, c = np.zeros((self.n, 0)), np.zeros(0)
+        if self._lu is not None and not fresh and not self._stale:
+            dq = self._pcg(a, rhs, u, c)
+            if dq is not None:
+                return dq
+        self._stale = False
+        self._lu = self._factorise(a)
+        lu = self._lu
+        x = lu.solve(rhs)
+        if not c.size:
+            return x
+        a_inv_u = lu.solve(u) if u.shape[1] > 1 else lu.solve(u[:, 0])[:, None]
+        small = np.diag(1.0 / c) + u.T @ a_inv_u
+        return x - a_inv_u @ np.linalg.solve(small, u.T @ x)
+
+    def _pcg(self, a, rhs, u, c):
+        """Preconditioned CG from zero; None if it fails to converge in time."""
+        lu = self._lu
+        if c.size:
+            a_inv_u = lu.solve(u) if u.shape[1] > 1 else lu.solve(u[:, 0])[:, None]
+            small_inv = np.linalg.inv(np.diag(1.0 / c) + u.T @ a_inv_u)
+
+            def precondition(r):
+                y = lu.solve(r)
+                return y - a_inv_u @ (small_inv @ (u.T @ y))
+        else:
+            precondition = lu.solve
+        limit = CG_TOLERANCE * float(np.max(np.abs(rhs)))
+        x = np.zeros_like(rhs)
+        r = rhs.copy()
+        z = precondition(r)
+        p = z.copy()
+        rz = float(r @ z)
+        for it in range(1, CG_MAX_ITERATIONS + 1):
+            ap = a @ p
+            if c.size:
+                ap += u @ (c * (u.T @ p))
+            curvature = float(p @ ap)
+            if not curvature > 0 or not np.isfinite(curvature):
+                self.stats['cg_iterations'] += it
+                return None
+            step = rz / curvature
+            x += step * p
+            r -= step * ap
+            if float(np.max(np.abs(r))) <= limit:
+                self.stats['cg_iterations'] += it
+                self._stale = it > CG_STALE_ITERATIONS
+                return x
+            z = precondition(r)
+            rz_new = float(r @ z)
+            p = z + (rz_new / rz) * p
+            rz = rz_new
+        self.stats['cg_iterations'] += CG_MAX_ITERATIONS
+        return None
+
+    def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
+              con: StepConstraints) -> StepSolution:
+        """``ImplicitEulerSolver.solve`` (same Newton iteration, line search and
+        shifts), on the fast path when it applies."""
+        if not self.fast:
+            return super().solve(q_n, v_n, dt, q_start, con)
+        filters = np.ascontiguousarray(con.filters, dtype=float)
+        n_nodes = filters.shape[0]
+        s_diag = np.einsum('naa->na', filters).ravel()
+
+        def filtered(vec):
+            return np.einsum('nab,nb->na', filters, vec.reshape(n_nodes, 3)).ravel()
+
+        q = q_start.copy()
+        history: list[float] = []
+        phi = np.inf
+        warm = self._warm
+        if warm is not None and warm[1] == dt and np.array_equal(warm[0], q_n):
+            # another contact pass of the same step: start from the last pass's solution
+            # in the free directions, the prescribed values in the held ones
+            q = q_start + filtered(warm[2] - q_start)
+            phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
+        if not np.isfinite(phi):
+            q = q_start.copy()
+            phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
+        if not np.isfinite(phi):
+            raise NewtonFailure('start of step is infeasible (inverted element)', history)
+        out = np.empty(self._nnz)
+        for iteration in range(1, self.max_iterations + 1):
+            hdata, low_rank = parts
+            g_f = filtered(grad)
+            low = [(coef, filtered(vec)) for coef, vec in low_rank]
+            for shift in (0.0, 1.0, 10.0, 100.0, 1000.0):
+                # an indefinite Hessian (buckling skin, compressed flesh) may give an
+                # ascent direction: add inertia-like diagonal terms until it descends
+                kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, filters,
+                                      shift * s_diag * self.m / dt ** 2, out)
+                try:
+                    dq = self._linear_solve(self._csc(out.copy()), -g_f, low, shift > 0)
+                except RuntimeError:  # singular factor
+                    continue
+                slope = float(g_f @ dq)
+                if np.all(np.isfinite(dq)) and slope <= 0:
+                    break
+            else:
+                raise NewtonFailure('no descent direction found', history)
+            step = 1.0
+            residual = float(np.max(np.abs(g_f)))
+            if float(np.max(np.abs(dq))) / dt < self.tolerance:
+                q = q + dq
+                _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
+                history.append(float(np.max(np.abs(dq))) / dt)
+                self._warm = (q_n.copy(), dt, q)
+                return StepSolution(q, grad - fric_grad, iteration, history)
+            for _ in range(30):
+                trial = q + step * dq
+                phi_trial, grad_t, _, _ = self._evaluate_fast(trial, q_n, v_n, dt, con, False)
+                if np.isfinite(phi_trial) and (
+                        phi_trial <= phi + 1e-4 * step * slope
+                        or float(np.max(np.abs(filtered(grad_t)))) < 0.5 * residual):
+                    break
+                step *= 0.5
+            else:
+                raise NewtonFailure('line search failed', history)
+            q, phi, grad = trial, phi_trial, grad_t
+            norm = float(np.max(np.abs(step * dq))) / dt
+            history.append(norm)
+            if norm < self.tolerance:
+                _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
+                self._warm = (q_n.copy(), dt, q)
+                return StepSolution(q, grad - fric_grad, iteration, history)
+            phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
+        raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
