@@ -250,6 +250,7 @@ class Simulation3D:
     def reset(self) -> None:
         """Back to the initial state and commands, time 0."""
         n = self.fruit.n_nodes
+        self.solver.reset()
         self.q = self.initial_positions.copy()
         self.v = np.tile([self.config['fruit.initial_velocity.x'], 0.0,
                           self.config['fruit.initial_velocity.z']], (n, 1)).astype(float)
