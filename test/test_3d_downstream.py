@@ -213,7 +213,8 @@ def test_run_a_short_scenario_in_3d(tmp_path, capsys):
     scenario.write_text(
         'name: short\nfruit: apple\napproach: {height: 0.005}\n'
         'close: {mode: force, force: 4.0, speed: 0.05}\nsqueeze: {time: 0.1}\n'
-        'lift: {height: 0.01}\ntransport: {distance: 0.02}\nretreat: {height: 0.005}\n'
+        'lift: {height: 0.01}\ntransport: {distance: 0.02}\n'
+        'retreat: {height: 0.06, speed: 0.2}\n'   # the jaws clear the fruit's top
         'settle: {time: 0.1}\n')
     assert main(['run', str(scenario), *COARSE, '--json']) == 0
     data = json.loads(capsys.readouterr().out)
