@@ -6,14 +6,18 @@ For each 3D model (the apple preset as a ~640-vertex shell, and as a ~2000-tetra
 solid) it runs the same grasp (close to a grip force of 2 mu N = 1.5 m g, settle, lift
 2 cm, hold 0.3 s) at a reference step and at larger steps, keeps the largest step whose
 peak grip force is within 2 % of the reference, and prints for it the simulated time
-over the wall time (the real-time factor; >= 1 is real time) and a breakdown of the wall
-time by part (energies and their Hessians, sparse assembly and filtering, LU solves,
-contact bookkeeping, measures). Single thread; figures vary with the machine's load.
+over the wall time (the real-time factor; >= 1 is real time), the CPU time per step
+(what the step costs on a quiet core), the linear algebra per step (Newton systems,
+LU factorisations, conjugate-gradient iterations) and a breakdown of the CPU time by
+part (energy kernels, LU factorisation, triangular solves, the rest of Newton, contact
+bookkeeping, measures). Single thread; wall figures vary with the machine's load, which
+is printed. ``GRIPPER_SIM_FAST=0`` runs the numpy reference path instead.
 """
 from __future__ import annotations
 
 import argparse
 import cProfile
+import os
 import pstats
 import sys
 import time
@@ -33,55 +37,57 @@ MODELS = {
               'fruit.mesh.max_tet_volume=1.5e-7'],
 }
 
-#: (function name suffix in the profile, part) for the time breakdown
+#: (function name in the profile, part) for the time breakdown
 PARTS = [
-    ('evaluate', 'energies (value, gradient, Hessian)'),
-    ('_solve_with_low_rank', 'LU factorisation and solves'),
     ('_constraints', 'contact: constraints'),
     ('_update_contacts', 'contact: update (stick/slip/release/detect)'),
     ('_measure', 'measures (wrenches, areas, damage)'),
 ]
+_FACTOR = '<built-in method scipy.sparse.linalg._dsolve._superlu.gstrf>'
+_TRISOLVE = "<method 'solve' of 'SuperLU' objects>"
 
 
 def grasp(overrides: list[str], dt: float, profile: bool = False):
+    """Run the grasp; (simulation, summary, wall s, CPU s, profiler or None)."""
     config = load_config(overrides=overrides + [f'sim.dt={dt}',
                                                 'contact.jaw.static_friction=0.5',
                                                 'contact.jaw.kinetic_friction=0.5'])
     sim = make_simulation(config)
     weight = sim.fruit.total_mass * config['world.gravity']
     sequence = GraspSequence(sim, 1.5 * weight, lift_height=0.02, hold_time=0.3)
-    profiler = cProfile.Profile() if profile else None
-    start = time.perf_counter()
+    profiler = cProfile.Profile(time.process_time) if profile else None
+    start, cpu = time.perf_counter(), time.process_time()
     if profiler:
         profiler.enable()
     summary = run_grasp(sim, sequence)
     if profiler:
         profiler.disable()
-    wall = time.perf_counter() - start
-    return sim, summary, wall, profiler
+    return (sim, summary, time.perf_counter() - start, time.process_time() - cpu, profiler)
 
 
-def breakdown(profiler, wall: float) -> list[tuple[str, float]]:
+def breakdown(profiler, total: float) -> list[tuple[str, float]]:
+    """(part, CPU s) of a profiled run whose CPU time was ``total``."""
     stats = pstats.Stats(profiler).stats
-    rows = []
-    cum = {}
-    for (filename, _, name), (_, _, _, cumtime, _) in stats.items():
-        if 'gripper_sim' not in filename:
-            continue
-        cum.setdefault(name, 0.0)
-        cum[name] = max(cum[name], cumtime)
-    energies = sum(t for (f, _, n), (_, _, _, t, _) in stats.items()
-                   if n == 'evaluate' and 'energies' in f)
-    solver_eval = cum.get('_evaluate', 0.0)
-    lu = cum.get('_solve_with_low_rank', 0.0)
-    solve = cum.get('solve', 0.0)
-    rows.append(('energies (value, gradient, Hessian)', energies))
-    rows.append(('assembly: triplets -> sparse, friction, damping', solver_eval - energies))
-    rows.append(('LU factorisation and solves (SuperLU)', lu))
-    rows.append(('Newton rest (filters S K S, line search)', solve - solver_eval - lu))
-    for name, label in PARTS[2:]:
+    cum: dict[str, float] = {}
+    own: dict[str, float] = {}
+    energies = 0.0
+    for (filename, _, name), (_, _, tottime, cumtime, _) in stats.items():
+        own[name] = own.get(name, 0.0) + tottime
+        if 'gripper_sim' in filename:
+            cum[name] = max(cum.get(name, 0.0), cumtime)
+            if name in ('evaluate', 'evaluate_into') and 'energies' in filename:
+                energies += cumtime
+    factor = own.get(_FACTOR, 0.0)
+    trisolve = own.get(_TRISOLVE, 0.0)
+    newton = cum.get('solve', 0.0)
+    rows = [('energy kernels (value, gradient, Hessian)', energies),
+            ('sparse LU factorisation (SuperLU)', factor),
+            ('triangular solves (CG preconditioner, direct)', trisolve),
+            ('Newton rest (filter S H S, CG, friction, search)',
+             newton - energies - factor - trisolve)]
+    for name, label in PARTS:
         rows.append((label, cum.get(name, 0.0)))
-    rows.append(('total wall (profiled)', wall))
+    rows.append(('total CPU (profiled)', total))
     return rows
 
 
@@ -89,32 +95,45 @@ def bench(model: str, quick: bool) -> None:
     overrides = MODELS[model]
     reference_dt = 0.005 if quick else 0.0025
     candidates = (0.02, 0.01) if quick else (0.02, 0.01, 0.005)
-    sim, ref, wall, _ = grasp(overrides, reference_dt)
+    sim, ref, wall, cpu, _ = grasp(overrides, reference_dt)
     fruit = sim.fruit
     print(f'\n{model}: {fruit.n_nodes} vertices ({len(fruit.surface)} on the surface), '
-          f'{len(fruit.tetrahedra)} tetrahedra, {fruit.total_mass * 1e3:.0f} g')
+          f'{len(fruit.tetrahedra)} tetrahedra, {fruit.total_mass * 1e3:.0f} g; solver: '
+          + ('fast (numba kernels, CG on a kept LU)' if getattr(sim.solver, 'fast', False)
+             else 'numpy reference'))
     print(f'  reference dt {reference_dt * 1e3:g} ms: outcome {ref["outcome"]}, peak grip '
           f'force {ref["max_grip_force"]:.4f} N, {sim.time:.2f} s simulated in {wall:.1f} s '
           f'(real-time factor {sim.time / wall:.3f})')
     chosen = None
     for dt in candidates:
-        sim, summary, wall, _ = grasp(overrides, dt)
+        sim, summary, wall, cpu, _ = grasp(overrides, dt)
         dev = summary['max_grip_force'] / ref['max_grip_force'] - 1
         ok = abs(dev) <= 0.02 and summary['outcome'] == ref['outcome']
         print(f'  dt {dt * 1e3:g} ms: outcome {summary["outcome"]}, peak grip force '
               f'{summary["max_grip_force"]:.4f} N ({dev * 100:+.2f} % vs reference), '
-              f'real-time factor {sim.time / wall:.3f}' + ('' if ok else '  (rejected)'))
+              f'real-time factor {sim.time / wall:.3f} (CPU {sim.time / cpu:.3f})'
+              + ('' if ok else '  (rejected)'))
         if ok:
             chosen = dt
             break
     if chosen is None:
         chosen = reference_dt
-    sim, summary, wall, profiler = grasp(overrides, chosen, profile=True)
+    sim, summary, wall, cpu, _ = grasp(overrides, chosen)
     steps = sim.last.step
-    print(f'  -> dt {chosen * 1e3:g} ms: real-time factor {sim.time / wall:.3f} under the '
-          f'profiler ({steps} steps, {wall / steps * 1e3:.1f} ms per step)')
-    for label, seconds in breakdown(profiler, wall):
-        print(f'     {label:50s} {seconds:7.2f} s  {seconds / wall * 100:5.1f} %')
+    load = os.getloadavg()[0]
+    print(f'  -> dt {chosen * 1e3:g} ms: real-time factor {sim.time / wall:.3f} '
+          f'({wall / steps * 1e3:.1f} ms wall per step at load {load:.1f} on '
+          f'{os.cpu_count()} cores); CPU {cpu / steps * 1e3:.1f} ms per step, i.e. '
+          f'{sim.time / cpu:.3f} x real time on a quiet core')
+    stats = getattr(sim.solver, 'stats', None)
+    if stats and stats.get('systems'):
+        print('     per step: ' + ', '.join(f'{stats[k] / steps:.2f} {label}' for k, label in (
+            ('passes', 'Newton solves (contact passes)'), ('systems', 'Newton systems'),
+            ('factorisations', 'LU factorisations'), ('cg_iterations', 'CG iterations'))))
+    sim, summary, wall, cpu, profiler = grasp(overrides, chosen, profile=True)
+    print(f'     CPU time by part (under the profiler, {cpu / steps * 1e3:.1f} ms per step):')
+    for label, seconds in breakdown(profiler, cpu):
+        print(f'     {label:50s} {seconds:7.2f} s  {seconds / cpu * 100:5.1f} %')
 
 
 def main(argv=None) -> int:

@@ -198,7 +198,7 @@ def hinge_bending(x, hinges, theta0, stiffness, grad, data, scatter, hessian):
         for a in range(3):
             for b in range(3):
                 proj[a, b] = ((1.0 if a == b else 0.0) - eh[a] * eh[b]) / length
-        # w[0] = proj (p2 - p1), w[1] = proj (p2 - p0), w[2] = proj (p3 - p1), w[3] = proj (p3 - p0)
+        # w[0..3] = proj (p2 - p1), proj (p2 - p0), proj (p3 - p1), proj (p3 - p0)
         for a in range(3):
             w[0, a] = w[1, a] = w[2, a] = w[3, a] = 0.0
             for b in range(3):

@@ -120,8 +120,9 @@ class PatternCachingSolver(ImplicitEulerSolver):
             fast = fast_available()
         self.fast = bool(fast and kernels is not None and self.beta == 0 and self.dim == 3
                          and all(hasattr(e, 'evaluate_into') for e in self.energies))
-        #: counts of the fast path: Newton systems, LU factorisations, CG iterations
-        self.stats = dict(systems=0, factorisations=0, cg_iterations=0)
+        #: counts of the fast path: Newton solves (contact passes), Newton systems, LU
+        #: factorisations, CG iterations
+        self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
         self._lu = None
         self._stale = False
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
@@ -380,6 +381,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         shifts), on the fast path when it applies."""
         if not self.fast:
             return super().solve(q_n, v_n, dt, q_start, con)
+        self.stats['passes'] += 1
         filters = np.ascontiguousarray(con.filters, dtype=float)
         n_nodes = filters.shape[0]
         s_diag = np.einsum('naa->na', filters).ravel()
