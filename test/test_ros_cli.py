@@ -83,6 +83,24 @@ def test_a_command_the_node_rejects_fails_with_its_reason(client):
     assert 'the node rejected it' in run.stderr and 'out of range' in run.stderr
 
 
+def test_jaw_commands_are_accepted_or_rejected_while_paused(client):
+    client.pause(True)
+    try:
+        run = cli('jaw', 'gap', '0.06')
+        assert run.returncode == 0, run.stderr
+        assert 'accepted; no new state' in run.stdout
+        # out of the core's range: refused by the simulation itself, while paused
+        run = cli('jaw', 'gap', '5')
+        assert run.returncode == 1
+        assert 'the node rejected it' in run.stderr and 'out of range' in run.stderr
+        # the accepted command acts at the next step
+        assert client.step(50).success
+        client.spin_until(lambda: client.latest['fruit/state'].gap < 0.0735 - 1e-4, 60,
+                          'the jaws to move on the next steps')
+    finally:
+        client.pause(False)
+
+
 def test_grasp_prints_feedback_and_succeeds(client):
     run = cli('grasp', '--force', '8', '--lift', '0.01', '--hold', '0.2')
     assert run.returncode == 0, run.stdout + run.stderr

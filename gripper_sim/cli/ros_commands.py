@@ -202,51 +202,54 @@ def _controller(args) -> int:
 
 
 def _jaw(args) -> int:
-    """Publish one command, confirm delivery, then show the node acting on it."""
+    """Publish one command, confirm delivery, wait for the node to accept or reject it
+    (``~/jaw/command_status``), then show the next state."""
     from rclpy.duration import Duration
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
-    from std_msgs.msg import Float64
+    from std_msgs.msg import Float64, String
     node_path = args.node.rstrip('/')
     topic = f'{node_path}/{args.topic}'
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
     with _Session('gripper_sim_cli') as session:
-        session.watch_rejections(node_path)
         joints: list[JointState] = []
         session.node.create_subscription(JointState, 'joint_states', joints.append, 10)
-        publisher = session.node.create_publisher(
-            Float64, topic, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        statuses: list[str] = []
+        status = session.node.create_subscription(
+            String, f'{node_path}/jaw/command_status', lambda m: statuses.append(m.data),
+            reliable)
+        publisher = session.node.create_publisher(Float64, topic, reliable)
         if not session.spin_until(lambda: publisher.get_subscription_count() > 0,
                                   args.timeout):
             return _no_node(f'subscriber on {topic}', node_path, args.timeout)
-        session.spin_until(lambda: bool(joints), 2.0)
-        before = _measure(joints[-1], args.what) if joints else None
+        if not session.spin_until(lambda: status.get_publisher_count() > 0, args.timeout):
+            return _no_node(f'publisher of {node_path}/jaw/command_status', node_path,
+                            args.timeout)
+        # the node's description of this command, e.g. 'gap command 0.06 m'
+        what = f'{args.what} command {args.value:g} {args.unit}'
         publisher.publish(Float64(data=float(args.value)))
         if not publisher.wait_for_all_acked(Duration(seconds=args.timeout)):
             return _error(f'{args.what} command on {topic} was not acknowledged within '
                           f'{args.timeout:g} s')
         print(f'{args.what} command {args.value:g} {args.unit} delivered to {topic}')
-        count = len(joints)
-        progress = [None]
 
-        def acted() -> bool:
-            if session.rejections:
-                return True
-            if len(joints) > count:
-                now = _measure(joints[-1], args.what)
-                if before is None or abs(now - before) > 1e-6 or \
-                        abs(now - args.value) < 1e-4:
-                    progress[0] = now
-                    return True
-            return False
-        session.spin_until(acted, 3.0)
-        if session.rejections:
-            return _error(f'the node rejected it: {session.rejections[0]}')
-        if progress[0] is not None and args.what != 'force':
-            print(f'{args.what} now {progress[0]:.4f} m (moving towards {args.value:g} m)')
-        elif progress[0] is not None:
-            print(f'jaw contact force now {progress[0]:.3f} N')
+        def answer() -> str | None:
+            return next((text for text in statuses if text.split(': ', 2)[1:2] == [what]),
+                        None)
+        if not session.spin_until(lambda: answer() is not None, args.timeout):
+            return _error(f'the node did not answer the {args.what} command within '
+                          f'{args.timeout:g} s')
+        reply = answer()
+        if reply.startswith('rejected'):
+            return _error(f'the node rejected it: {reply.split(": ", 2)[2]}')
+        count = len(joints)
+        if not session.spin_until(lambda: len(joints) > count, 1.0):
+            print('accepted; no new state within 1 s (is the simulation paused?)')
+        elif args.what == 'force':
+            print(f'accepted; jaw contact force now {_measure(joints[-1], args.what):.3f} N')
         else:
-            print('no motion seen yet (is the simulation paused?)')
+            print(f'accepted; {args.what} now {_measure(joints[-1], args.what):.4f} m '
+                  f'(moving towards {args.value:g} m)')
     return 0
 
 

@@ -33,7 +33,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, Trigger
 
 from gripper_sim_interfaces.srv import Step
@@ -162,7 +162,7 @@ class SimNode(Node):
         self.sim = simulation_factory(dict(self.params.config))
         self.message_context = MessageContext.from_config(self.params.config,
                                                           initial=self.sim.last)
-        self._commands: deque[tuple[str, Callable[[], None]]] = deque()
+        self._commands: deque[tuple[str, Callable[[], None], Any]] = deque()
         self._step_listeners: list[Callable[[StepResult], None]] = []
         self._observers: list[Callable[[StepResult], None]] = []
         self._publish_observers: list[Callable[[dict, int], None]] = []
@@ -193,6 +193,9 @@ class SimNode(Node):
             suffix: self.create_publisher(messages.MESSAGE_CLASSES[suffix], name,
                                           1 if suffix == 'clock' else qos)
             for suffix, (name, _) in messages.TOPICS.items()}
+        # One String per jaw/lift topic command: 'accepted: <command>' once applied,
+        # 'rejected: <command>: <reason>' (what `gripper-sim jaw` waits for).
+        self._command_status = self.create_publisher(String, '~/jaw/command_status', qos)
 
         commands = MutuallyExclusiveCallbackGroup()
         self.create_subscription(Float64, '~/jaw/gap_command', self._on_gap, qos,
@@ -297,15 +300,20 @@ class SimNode(Node):
         except CommandError as err:
             self.get_logger().warning(f'could not hold the jaws in place: {err}')
 
-    def enqueue(self, description: str, command: Callable[[], None]) -> None:
-        """Run ``command()`` in the physics thread before the next step."""
-        self._commands.append((description, command))
+    def enqueue(self, description: str, command: Callable[[], None],
+                on_done: Callable[[str | None], None] | None = None) -> None:
+        """Run ``command()`` in the physics thread before the next step (at once while
+        paused); then ``on_done(None)``, or ``on_done(reason)`` if the core refused it."""
+        self._commands.append((description, command, on_done))
         self._wake.set()
 
     # --------------------------------------------------------------- physics
     def _run(self) -> None:
         while not self._stop.is_set():
             if self._paused:
+                if self._commands:   # validated and set now; they act at the next step
+                    with self.lock:
+                        self._apply_commands()
                 self._wake.wait(0.5)
                 self._wake.clear()
                 continue
@@ -385,11 +393,16 @@ class SimNode(Node):
 
     def _apply_commands(self) -> None:
         while self._commands:
-            description, command = self._commands.popleft()
+            description, command, on_done = self._commands.popleft()
             try:
                 command()
             except (CommandError, ConfigError) as err:
                 self.get_logger().warning(f'{description} rejected: {err}')
+                if on_done is not None:
+                    on_done(str(err))
+            else:
+                if on_done is not None:
+                    on_done(None)
 
     def _recover(self, reason: str) -> None:
         """Log a failed step, abort the goals, reset: nothing non-finite is published."""
@@ -645,10 +658,16 @@ class SimNode(Node):
         if problem is None and self._jaw_owner is not None:
             problem = (f'{description} ignored: a {self._jaw_owner.kind} goal is driving the '
                        'jaws (cancel it first)')
+        what = f'{description} {value:g} {unit}'
         if problem is not None:
             self.get_logger().warning(f'rejected: {problem}')
+            self._command_status.publish(String(data=f'rejected: {what}: {problem}'))
             return
-        self.enqueue(f'{description} {value:g} {unit}', lambda: command(value))
+
+        def report(reason: str | None) -> None:
+            text = f'accepted: {what}' if reason is None else f'rejected: {what}: {reason}'
+            self._command_status.publish(String(data=text))
+        self.enqueue(what, lambda: command(value), report)
 
     def _on_gap(self, msg: Float64) -> None:
         self._jaw_command('gap command', msg.data, 'm', self.sim.command_gap)
