@@ -307,7 +307,7 @@ def _grasp(args) -> int:
             now = time.monotonic()
             if fb.phase != printed['phase'] or now - printed['wall'] >= 0.25:
                 printed.update(phase=fb.phase, wall=now)
-                print(f'  {fb.phase:<10} gap {fb.gap * 1e3:7.2f} mm  grip {fb.grip_force:6.2f} N'
+                print(f'  {fb.phase:<12} gap {fb.gap * 1e3:7.2f} mm  grip {fb.grip_force:6.2f} N'
                       f'  compression {fb.compression * 1e3:6.3f} mm', flush=True)
         if args.place:
             print(f'grasp and place: {args.force:g} N, lift {lift:g} m, transport '
