@@ -12,8 +12,10 @@ fruit, the markers and the table; ``left_jaw`` / ``right_jaw`` for the jaw wrenc
 
 The fruit marker: a 2D result draws the outline (ns ``fruit_outline``, LINE_STRIP), a
 3D result the skin (ns ``fruit_mesh``, TRIANGLE_LIST, three points per skin triangle),
-both coloured per point by the contact pressure there (``pressure_colour``: red at and
-above the bruise pressure).
+both coloured per point by the contact pressure there (``node_pressure``: the damage
+estimate's; ``pressure_colour``: red at and above the bruise pressure). Shaped fingers
+and pads: ``finger_markers``. ``FruitState`` damage fields come from the step's damage
+estimate (``StepResult.damage``).
 """
 from __future__ import annotations
 
