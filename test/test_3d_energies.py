@@ -89,7 +89,9 @@ def _kernel_evaluation(energy, q, hessian=True):
 def test_numba_kernel_matches_the_numpy_reference(name, energy, q):
     """The fast solver's kernels give the reference value, gradient and Hessian."""
     value, grad, hess = _kernel_evaluation(energy, q)
-    assert value == pytest.approx(energy.value(q), rel=1e-12, abs=1e-18)
+    assert value == pytest.approx(energy.evaluate(q, hessian=False).value, rel=1e-12,
+                                  abs=1e-18)
+    assert energy.value(q) == pytest.approx(value, rel=1e-12, abs=1e-18)
     ref_grad = energy.gradient(q)
     assert np.max(np.abs(grad - ref_grad)) <= 1e-12 * np.max(np.abs(ref_grad))
     ref_hess = energy.hessian(q)
@@ -108,6 +110,15 @@ def test_numba_kernel_hessian_matches_central_differences_of_its_gradient(name, 
                    for e in np.eye(q.size)])
     assert np.max(np.abs(hess)) > 1e-3, 'Hessian is trivially zero'
     assert np.max(np.abs(hess - fd)) <= 1e-6 * np.max(np.abs(hess))
+
+
+def test_numba_von_mises_matches_the_numpy_reference():
+    corners, tets = _cube_tets()
+    flesh = NeoHookeanTets(tets, corners, 2e6, 0.38)
+    q = _perturbed(corners, 2e-3)
+    ref = flesh.von_mises_reference(q)
+    assert np.all(ref > 1e3)
+    assert np.allclose(flesh.von_mises(q), ref, rtol=1e-12, atol=0.0)
 
 
 def test_numba_tet_kernel_rejects_an_inverted_element_without_adding_anything():
@@ -262,3 +273,38 @@ def test_strawberry_outline_revolved_has_the_pappus_volume():
     body = body_from_config(config)
     assert enclosed_volume(body.positions, body.triangles) == pytest.approx(pappus, rel=0.03)
     assert np.all(dihedral_angles(body.positions, hinges(body.triangles)) > -np.pi / 2)
+
+
+@pytest.mark.parametrize('model', [
+    ['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
+    ['fruit.model=solid', 'fruit.skin.enabled=false', 'fruit.mesh.subdivisions=3',
+     'fruit.mesh.max_tet_volume=1e-6']], ids=['shell', 'solid'])
+def test_fast_solver_follows_the_numpy_reference_path(model, monkeypatch):
+    """The same grasp on the fast path (numba kernels, CG on a kept LU, warm-started
+    contact passes) and on the reference path (numpy energies, one LU per Newton
+    iteration): the same contact sets and, to the Newton tolerance, the same motion."""
+    from gripper_sim.configuration import load_config
+    from gripper_sim.core import make_simulation
+    config = load_config(overrides=['dimension=3', 'sim.dt=0.01'] + model)
+    runs = []
+    steps = None
+    for fast in ('1', '0'):
+        monkeypatch.setenv('GRIPPER_SIM_FAST', fast)
+        sim = make_simulation(config)
+        assert sim.solver.fast == (fast == '1')
+        sim.command_force(2.0)
+        results = [sim.step()]
+        while steps is None and results[-1].grip_force < 0.5 and len(results) < 400:
+            results.append(sim.step())
+        # the fast run: 20 more steps once gripping; the reference: as many as it
+        for _ in range(20 if steps is None else steps - 1):
+            results.append(sim.step())
+        steps = len(results)
+        runs.append(results)
+    fast_run, reference = runs
+    assert max(r.grip_force for r in reference) > 1.0, 'the jaws never gripped'
+    tol = config['sim.newton_tolerance'] * config['sim.dt']  # m
+    for a, b in zip(fast_run, reference):
+        assert np.array_equal(a.contact_obstacle, b.contact_obstacle)
+        assert np.max(np.abs(a.positions - b.positions)) < 10 * tol
+        assert a.grip_force == pytest.approx(b.grip_force, rel=1e-4, abs=1e-6)

@@ -405,6 +405,40 @@ def neohookean_tets(x, tet, grad_n, volume, mu, lam, grad, data, scatter, hessia
 
 
 @njit(cache=True)
+def neohookean_von_mises(x, tet, grad_n, mu, lam, out):
+    """von Mises stress (Pa) of each tetrahedron's Cauchy stress into out (n_tet,), as
+    ``NeoHookeanTets.von_mises``: sigma = (mu (F F^T - I) + lam ln J I) / J."""
+    f = np.empty((3, 3))
+    sig = np.empty((3, 3))
+    for t in range(tet.shape[0]):
+        gn = grad_n[t]
+        for i in range(3):
+            for j in range(3):
+                acc = 0.0
+                for k in range(4):
+                    acc += x[tet[t, k], i] * gn[k, j]
+                f[i, j] = acc
+        det = (f[0, 0] * (f[1, 1] * f[2, 2] - f[1, 2] * f[2, 1])
+               - f[0, 1] * (f[1, 0] * f[2, 2] - f[1, 2] * f[2, 0])
+               + f[0, 2] * (f[1, 0] * f[2, 1] - f[1, 1] * f[2, 0]))
+        lnj = math.log(max(det, 1e-12))
+        for i in range(3):
+            for j in range(3):
+                b = f[i, 0] * f[j, 0] + f[i, 1] * f[j, 1] + f[i, 2] * f[j, 2]
+                if i == j:
+                    sig[i, j] = (mu * (b - 1.0) + lam * lnj) / det
+                else:
+                    sig[i, j] = mu * b / det
+        mean = (sig[0, 0] + sig[1, 1] + sig[2, 2]) / 3.0
+        acc = 0.0
+        for i in range(3):
+            for j in range(3):
+                d = sig[i, j] - (mean if i == j else 0.0)
+                acc += d * d
+        out[t] = math.sqrt(1.5 * acc)
+
+
+@njit(cache=True)
 def filter_blocks(hdata, block_pos, block_nodes, filters, diag_extra, out):
     """The Newton matrix S H S + (I - S) + diag(extra) on H's pattern, into ``out``.
 

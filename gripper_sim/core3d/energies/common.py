@@ -1,6 +1,8 @@
 """Helpers shared by the 3D energies: dof indices and cross-product matrices."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 
@@ -21,3 +23,27 @@ def cross_matrices(v: np.ndarray) -> np.ndarray:
 
 def empty_triplets():
     return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+
+
+def fast_kernels():
+    """``gripper_sim.core3d.kernels`` if numba is installed and GRIPPER_SIM_FAST is not
+    0, else None (the numpy reference path)."""
+    if os.environ.get('GRIPPER_SIM_FAST', '1') == '0':
+        return None
+    try:
+        from gripper_sim.core3d import kernels
+    except ImportError:  # pragma: no cover - depends on the environment
+        return None
+    return kernels
+
+
+class KernelValue:
+    """Mixin: ``value(q)`` through the energy's numba kernel (``evaluate_into``) when the
+    fast path is on (the per-step elastic energy output), else the numpy ``evaluate``."""
+
+    def value(self, q: np.ndarray) -> float:
+        if fast_kernels() is None:
+            return self.evaluate(q, hessian=False).value
+        value, _ = self.evaluate_into(q, np.zeros(q.size), np.zeros(1),
+                                      np.zeros((0, 0), np.int64), False)
+        return float(value)

@@ -16,10 +16,11 @@ import numpy as np
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
-from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
+from gripper_sim.core3d.energies.common import (KernelValue, element_dofs3, empty_triplets,
+                                                fast_kernels)
 
 
-class NeoHookeanTets(Energy):
+class NeoHookeanTets(KernelValue, Energy):
     """Args:
         tetrahedra: (n_tet, 4) node indices, positively oriented at rest.
         rest_positions: (n_nodes, 3) m.
@@ -49,6 +50,16 @@ class NeoHookeanTets(Energy):
 
     def von_mises(self, q: np.ndarray) -> np.ndarray:
         """(n_tet,) Pa, von Mises stress of the Cauchy stress (damage measure)."""
+        kernels = fast_kernels()
+        if kernels is None:
+            return self.von_mises_reference(q)
+        out = np.empty(len(self.tet))
+        kernels.neohookean_von_mises(q.reshape(-1, 3), self.tet, self.grad_n, float(self.mu),
+                                     float(self.lam), out)
+        return out
+
+    def von_mises_reference(self, q: np.ndarray) -> np.ndarray:
+        """``von_mises`` in numpy (the reference of the numba kernel)."""
         f = self.deformation_gradients(q)
         j = np.linalg.det(f)
         b = f @ np.swapaxes(f, 1, 2)
