@@ -74,3 +74,39 @@ def test_malformed_config_file_is_reported(tmp_path):
     assert run.returncode != 0
     assert 'not valid YAML' in run.stderr
     assert 'Traceback' not in run.stderr
+
+
+def test_force_grasp_closes_at_full_speed_while_one_jaw_pushes_the_fruit():
+    """A grip of 0.15 N on the strawberry resting on the table: the first jaw to touch
+    pushes the fruit along the table (a force of about mu m g that is no grip). The
+    jaws keep closing at the commanded speed until both touch, and the closing ends
+    only with both jaws at the force (it used to end on the first jaw's impact, or
+    crawl at (F - F_push) / (k tau) and time out)."""
+    from gripper_sim.configuration import load_config
+    from gripper_sim.core.grasp import CLOSING, GraspSequence, run_grasp
+    from gripper_sim.core.scenario import grasp_height
+    from gripper_sim.core.simulation import Simulation
+    config = load_config(fruit='strawberry')
+    config = load_config(fruit='strawberry',
+                         overrides={'gripper.initial_lift': grasp_height(config)})
+    sim = Simulation(config)
+    target, speed = 0.15, config['gripper.close_speed']
+    one_jaw_rates, transitions = [], []
+
+    def watch(result, phase):
+        left, right = result.in_contact_with('left_jaw'), result.in_contact_with('right_jaw')
+        if phase == CLOSING and left != right:
+            one_jaw_rates.append(sim.gripper_state.gap_rate)
+        if phase != CLOSING and not transitions:
+            transitions.append((left and right, result.grip_force, sim.time))
+
+    sequence = GraspSequence(sim, target, lift_height=0.0, hold_time=0.0)
+    summary = run_grasp(sim, sequence, on_step=watch, time_limit=5.0)
+    assert summary['outcome'] == 'held'
+    assert len(one_jaw_rates) > 10                       # the push did happen
+    assert one_jaw_rates == pytest.approx([-speed] * len(one_jaw_rates), rel=1e-12)
+    both, force, t_reached = transitions[0]
+    assert both and force >= 0.97 * target
+    # closing took about the time to close the free gap at full speed
+    free_gap = sim.initial_gap - sim.fruit.rest_width
+    assert t_reached < 1.5 * free_gap / speed + 0.2

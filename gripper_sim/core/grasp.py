@@ -105,7 +105,10 @@ class GraspSequence:
                 self._finish('dropped', f'the fruit dropped at t = {sim.time:.3f} s')
                 return self.phase
         if self.phase == CLOSING:
-            if result.grip_force >= FORCE_REACHED * self.target_force:
+            # both jaws: a single jaw's force (an impact, or pushing the fruit along the
+            # table) is not a grip
+            both = result.in_contact_with('left_jaw') and result.in_contact_with('right_jaw')
+            if both and result.grip_force >= FORCE_REACHED * self.target_force:
                 self._enter(SQUEEZING)
             elif sim.time > self.closing_deadline or result.gap <= 0.0:
                 self._finish('failed', f'the grip force did not reach {self.target_force} N '

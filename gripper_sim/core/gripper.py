@@ -77,7 +77,9 @@ class GripperKinematics:
                     stiffness = min(max(0.7 * stiffness + 0.3 * measured,
                                         1e-3 * self.initial_stiffness),
                                     1e3 * self.initial_stiffness)
-            if grip_force <= 0.0:
+            if grip_force <= 0.0 or not both_in_contact:
+                # one jaw alone only pushes the fruit (e.g. across the table): that force
+                # is no grip, so close at the commanded speed until both jaws touch
                 rate = -state.speed
             else:
                 rate = -(state.target_force - grip_force) / (stiffness * max(self.tau, dt))

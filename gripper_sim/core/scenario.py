@@ -377,7 +377,10 @@ class PickAndPlace:
                 self._start_close()
         elif self.phase == 'close':
             if sc['close.mode'] == 'force':
-                reached = result.grip_force >= FORCE_REACHED * sc['close.force']
+                # both jaws: one jaw's force (an impact, a push) is not a grip
+                reached = (result.in_contact_with('left_jaw')
+                           and result.in_contact_with('right_jaw')
+                           and result.grip_force >= FORCE_REACHED * sc['close.force'])
             else:
                 reached = abs(sim.gripper_state.gap - sc['close.gap']) < 1e-9
             if reached:
