@@ -223,3 +223,108 @@ def test_run_a_short_scenario_in_3d(tmp_path, capsys):
     assert s['slip_distance'] < 1e-3
     # placed 2 cm along x from where it started (within a quarter of its width)
     assert s['final_centroid'][0] == pytest.approx(0.02, abs=0.25 * 0.0635)
+
+
+LIVE_TOPICS = ('/gripper_sim/fruit/nodes', '/gripper_sim/markers', '/gripper_sim/fruit/state')
+
+
+def _wait(condition, timeout: float, what: str) -> None:
+    import time
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+
+
+def _same_payload(got: bytes, sent: bytes) -> bool:
+    """Equal CDR payloads: DDS may pad a sample with up to 3 zero bytes."""
+    extra = got[len(sent):]
+    return got[:len(sent)] == sent and len(extra) < 4 and not any(extra)
+
+
+def _check_3d_sample(bag: BagReader) -> int:
+    """The last cloud and fruit_mesh of ``bag`` with the same stamp are one 3D fruit:
+    every mesh corner is a cloud node, y is real; returns the FruitState count."""
+    states = [m for _, m in bag.decoded_messages(['/gripper_sim/fruit/state'])]
+    assert states and all(s.dimension == 3 for s in states)
+    clouds = {(m.header.stamp.sec, m.header.stamp.nanosec): cloud_array(m)
+              for _, m in bag.decoded_messages(['/gripper_sim/fruit/nodes'])}
+    meshes = {}
+    for _, array in bag.decoded_messages(['/gripper_sim/markers']):
+        for marker in array.markers:
+            if marker.ns == 'fruit_mesh':
+                meshes[(marker.header.stamp.sec, marker.header.stamp.nanosec)] = marker
+    stamp = max(set(clouds) & set(meshes))
+    cloud, mesh = clouds[stamp], meshes[stamp]
+    corners = np.array([(p.x, p.y, p.z) for p in mesh.points])
+    assert len(corners) % 3 == 0 and len(mesh.colors) == len(corners) > 3 * len(cloud)
+    distance = np.min(np.linalg.norm(corners[:, None, :] - cloud[None, :, :3], axis=2), axis=1)
+    assert distance.max() < 1e-6
+    assert np.ptp(cloud[:, 1]) > 0.9 * np.ptp(cloud[:, 0])
+    return len(states)
+
+
+@pytest.mark.slow
+def test_live_recording_of_the_3d_node_round_trips_through_info_and_replay(
+        tmp_path, new_domain_id, capsys):
+    """Record the 3D node live, check the file, replay it and record the replay: the
+    point cloud and mesh marker payloads come back byte for byte."""
+    from gripper_sim.ros.process import RosProcess, node_process, ros_environment
+    from gripper_sim.ros.testing import SimClient
+    domain = new_domain_id()
+    env = ros_environment(domain)
+
+    def cli(*args: str, name: str) -> RosProcess:
+        return RosProcess('gripper_sim.cli.main', list(args), env=env,
+                          log_path=tmp_path / f'{name}.log')
+
+    parameters = {'real_time_factor': 0.0, 'physics.dimension': 3,
+                  'physics.fruit.mesh.subdivisions': 3, 'physics.sim.dt': 0.002,
+                  'physics.gripper.initial_gap': 0.066}
+    live = tmp_path / 'live3d.mcap'
+    node = node_process(parameters, env=env, log_path=tmp_path / 'node.log').start()
+    client = SimClient(domain, name='downstream_3d_client')
+    try:
+        client.wait_ready(timeout=120)
+        client.restart(run=False)
+        recorder = cli('record', '-o', str(live), *LIVE_TOPICS, name='record_live')
+        with recorder:
+            _wait(lambda: recorder.log().count("recording '") == len(LIVE_TOPICS), 120,
+                  'the recorder to subscribe')
+            for _ in range(3):
+                assert client.step(10).success
+            client.spin_until(lambda: client.sim_time() >= 0.06 - 1e-9, 60, 'the steps')
+            client.catch_up(['fruit/nodes', 'markers'])
+            assert recorder.stop(timeout=60) == 0, recorder.log()
+    finally:
+        client.close()
+        code = node.stop()
+        assert 'Traceback' not in node.log() and code == 0, node.log()
+
+    assert main(['info', '--json', str(live)]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert {t['name'] for t in info['topics']} == set(LIVE_TOPICS)
+    with BagReader(live) as bag:
+        samples = _check_3d_sample(bag)
+        recorded = {t: [m.data for m in bag.messages([t])] for t in LIVE_TOPICS}
+    assert samples >= 5   # 0.06 s of sim time at the 100 Hz publish rate
+
+    replayed = tmp_path / 'replayed3d.mcap'
+    recorder = cli('record', '-o', str(replayed), *LIVE_TOPICS, name='record_replay')
+    with recorder:
+        replay = cli('replay', str(live), '--wait-for-subscribers', '60', name='replay')
+        with replay:
+            _wait(lambda: recorder.log().count("recording '") == len(LIVE_TOPICS), 120,
+                  'the recorder to subscribe to the replayed topics')
+            replay.process.wait(120)
+            assert replay.process.returncode == 0, replay.log()
+        _wait(lambda: replayed.exists(), 60, 'the replayed recording')
+        assert recorder.stop(timeout=60) == 0, recorder.log()
+    with BagReader(replayed) as bag:
+        _check_3d_sample(bag)
+        for topic, sent in recorded.items():
+            got = [m.data for m in bag.messages([topic])]
+            assert len(got) == len(sent), topic
+            assert all(_same_payload(g, s) for g, s in zip(got, sent)), topic
