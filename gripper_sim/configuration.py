@@ -105,6 +105,9 @@ SCHEMA: dict[str, Key] = {
                                      '(TetGen); null = a regular tetrahedron of twice the '
                                      'mean surface edge', low=0.0, high=1e-2, nullable=True,
                                      open_low=True),
+    'fruit.mesh.order': Key(1, '-', '3D solid model: 1 = linear (4-node) tetrahedra; 2 = '
+                            'quadratic (10-node) ones: far more accurate in contact (Hertz '
+                            'force), more nodes and slower', 'int', 1, 2),
     'fruit.skin.enabled': Key(True, '-', 'solid model: add the skin ring on the '
                               'boundary (the shell model always has it)', 'bool'),
     'fruit.skin.youngs_modulus': Key(10.0e6, 'Pa', 'skin Young modulus E_s',

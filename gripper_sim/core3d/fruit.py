@@ -25,7 +25,8 @@ from gripper_sim.core import shapes
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core3d import meshes
 from gripper_sim.core3d.energies import (EnclosedVolumePressure, HingeBending, Membrane,
-                                         NeoHookeanTets)
+                                         NeoHookeanTets, quadratic_tets)
+from gripper_sim.core3d.energies.quadratic_tets import QuadraticNeoHookeanTets
 from gripper_sim.errors import ConfigError
 
 
@@ -36,12 +37,13 @@ class FruitModel3D:
         masses: (n_nodes,) kg, lumped.
         surface: (n_surface,) node indices of the skin (surface) vertices.
         triangles: (n_tri, 3) outward skin triangles (node indices).
-        tetrahedra: (n_tet, 4) flesh tetrahedra (empty for the shell model).
+        tetrahedra: (n_tet, 4) flesh tetrahedra (empty for the shell model), or
+            (n_tet, 10) quadratic ones (``fruit.mesh.order`` 2).
         skin_edges: (n_edge, 2) unique surface edges.
         energies: internal (elastic) energies.
         membrane, bending: the skin energies, or None.
         pressure: the enclosed-volume pressure (shell model), or None.
-        flesh: the neo-Hookean tetrahedra (solid model), or None.
+        flesh: the neo-Hookean tetrahedra, linear or quadratic (solid model), or None.
         rest_width: m, extent of the rest shape along x.
         rest_volume: m^3, volume the skin encloses at rest.
         bending_stiffness: D of the skin, N m.
@@ -197,6 +199,7 @@ def build_fruit3d(config) -> FruitModel3D:
     energies: list[Energy] = []
     pressure = flesh = None
     tets = np.zeros((0, 4), np.int64)
+    surface, triangles = np.arange(len(body.positions)), body.triangles
     if model == 'shell':
         positions = body.positions
         n = len(positions)
@@ -209,13 +212,20 @@ def build_fruit3d(config) -> FruitModel3D:
             energies.append(pressure)
         with_skin = True
     else:
-        volume_mesh = meshes.tetrahedralize(body, config['fruit.mesh.max_tet_volume'])
+        order = int(config.get('fruit.mesh.order', 1))
+        volume_mesh = meshes.tetrahedralize(body, config['fruit.mesh.max_tet_volume'],
+                                            order=order)
         positions, tets = volume_mesh.positions, volume_mesh.tetrahedra
-        flesh = NeoHookeanTets(tets, positions, config['fruit.flesh.youngs_modulus'],
-                               config['fruit.flesh.poisson_ratio'])
+        surface, triangles = volume_mesh.surface_nodes, volume_mesh.triangles
+        e_f, nu_f = config['fruit.flesh.youngs_modulus'], config['fruit.flesh.poisson_ratio']
+        if order == 2:
+            flesh = QuadraticNeoHookeanTets(tets, positions, e_f, nu_f)
+            masses = quadratic_tets.lumped_masses(tets, flesh.volume, rho, len(positions))
+        else:
+            flesh = NeoHookeanTets(tets, positions, e_f, nu_f)
+            masses = np.bincount(tets.ravel(), weights=np.repeat(rho * flesh.volume / 4.0, 4),
+                                 minlength=len(positions))
         energies.append(flesh)
-        masses = np.bincount(tets.ravel(), weights=np.repeat(rho * flesh.volume / 4.0, 4),
-                             minlength=len(positions))
         turgor = 0.0
         with_skin = bool(config['fruit.skin.enabled'])
     membrane = bending = None
@@ -225,17 +235,17 @@ def build_fruit3d(config) -> FruitModel3D:
             radius = (3 * rest_volume / (4 * np.pi)) ** (1 / 3)
             stretch = np.sqrt(1 + turgor * radius * (1 - nu_s) / (e_s * t_s))
             skin_rest = positions / stretch
-        membrane = Membrane(body.triangles, skin_rest, e_s, nu_s, t_s)
-        bending = HingeBending(meshes.hinges(body.triangles), positions, d_s)
+        membrane = Membrane(triangles, skin_rest, e_s, nu_s, t_s)
+        bending = HingeBending(meshes.hinges(triangles), positions, d_s)
         energies = [membrane, bending] + energies
     if model == 'shell' and pressure is not None:
         positions = _relax(positions, masses, energies)
         pressure.v0 = meshes.enclosed_volume(positions, body.triangles)
         rest_volume = pressure.v0
     return FruitModel3D(
-        rest_positions=positions, masses=masses, surface=np.arange(len(body.positions)),
-        triangles=body.triangles, tetrahedra=tets,
-        skin_edges=meshes.surface_edges(body.triangles), energies=tuple(energies),
+        rest_positions=positions, masses=masses, surface=surface,
+        triangles=triangles, tetrahedra=tets,
+        skin_edges=meshes.surface_edges(triangles), energies=tuple(energies),
         membrane=membrane, bending=bending, pressure=pressure, flesh=flesh,
         rest_width=float(np.ptp(positions[:, 0])), rest_volume=rest_volume,
         bending_stiffness=d_s)

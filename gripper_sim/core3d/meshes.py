@@ -38,19 +38,28 @@ class SurfaceMesh:
     triangles: np.ndarray
 
 
+#: the edges (corner pairs) of a tetrahedron whose midpoints are nodes 4..9 of a
+#: quadratic (10-node) tetrahedron, in that order
+TET10_EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+
+
 @dataclass(frozen=True)
 class VolumeMesh:
     """Attributes:
         positions: (n, 3) m; nodes 0..n_surface-1 are the surface vertices.
-        tetrahedra: (n_tet, 4) positively oriented.
-        triangles: (n_tri, 3) the outward boundary triangles.
-        n_surface: number of surface vertices.
+        tetrahedra: (n_tet, 4) positively oriented, or (n_tet, 10) quadratic: the 4
+            corners then the midpoints of the edges ``TET10_EDGES``.
+        triangles: (n_tri, 3) the outward boundary triangles (for quadratic tetrahedra
+            each boundary face split into 4 at its edge midpoints).
+        n_surface: number of surface vertices (the corners).
+        surface_nodes: (n_s,) every node on the boundary (corners, then edge midpoints).
     """
 
     positions: np.ndarray
     tetrahedra: np.ndarray
     triangles: np.ndarray
     n_surface: int
+    surface_nodes: np.ndarray | None = None
 
 
 def _icosahedron() -> tuple[np.ndarray, np.ndarray]:
@@ -250,7 +259,8 @@ def mean_edge_length(mesh: SurfaceMesh) -> float:
 
 
 def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
-                   radius_edge_ratio: float = 1.5, min_dihedral: float = 10.0) -> VolumeMesh:
+                   radius_edge_ratio: float = 1.5, min_dihedral: float = 10.0,
+                   order: int = 1) -> VolumeMesh:
     """Tetrahedra filling a closed surface, with TetGen (the surface is kept as given).
 
     Args:
@@ -258,6 +268,8 @@ def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
             edge is twice the mean surface edge (a coarser interior, graded from the
             surface by TetGen's quality bound).
         radius_edge_ratio, min_dihedral: TetGen's quality bounds (-q).
+        order: 1 linear (4-node) or 2 quadratic (10-node, TetGen -o2: straight edges
+            with midpoint nodes) tetrahedra.
 
     Raises:
         ConfigError: the tetgen package is missing.
@@ -276,15 +288,48 @@ def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
     nodes, elems, _, _ = gen.tetrahedralize(quality=True, nobisect=True, fixedvolume=True,
                                              minratio=radius_edge_ratio,
                                              mindihedral=min_dihedral,
-                                             maxvolume=float(max_volume))
+                                             maxvolume=float(max_volume), order=int(order))
     nodes = np.asarray(nodes, dtype=float)
-    elems = np.asarray(elems, dtype=np.int64)[:, :4]
+    raw = np.asarray(elems, dtype=np.int64)
+    elems = raw[:, :4].copy()
     n_s = len(surface.positions)
     if not np.allclose(nodes[:n_s], surface.positions, rtol=0, atol=1e-12):
         raise RuntimeError('TetGen changed the surface vertices')
     vol = signed_volumes(nodes, elems)
     elems[vol < 0] = elems[vol < 0][:, [0, 2, 1, 3]]
-    return VolumeMesh(nodes, elems, surface.triangles.copy(), n_s)
+    if order == 1:
+        return VolumeMesh(nodes, elems, surface.triangles.copy(), n_s, np.arange(n_s))
+    return _quadratic(nodes, elems, raw[:, 4:10], surface.triangles, n_s)
+
+
+def _quadratic(nodes, corners, extra, triangles, n_s) -> VolumeMesh:
+    """The 10-node mesh: each element's midpoint nodes ``extra`` (n, 6) (TetGen's order)
+    put in the order of ``TET10_EDGES`` by position, the boundary faces split in 4."""
+    pairs = np.array(TET10_EDGES)
+    mid = 0.5 * (nodes[corners[:, pairs[:, 0]]] + nodes[corners[:, pairs[:, 1]]])  # (n,6,3)
+    dist = np.linalg.norm(mid[:, :, None, :] - nodes[extra][:, None, :, :], axis=3)
+    pick = np.argmin(dist, axis=2)
+    mids = np.take_along_axis(extra, pick, axis=1)
+    size = float(np.ptp(nodes))
+    if np.max(np.take_along_axis(dist, pick[:, :, None], axis=2)) > 1e-9 * size:
+        raise RuntimeError('TetGen quadratic nodes are not at the edge midpoints')
+    tets = np.hstack([corners, mids])
+    a = corners[:, pairs].reshape(-1, 2)
+    keys = np.minimum(a[:, 0], a[:, 1]) * len(nodes) + np.maximum(a[:, 0], a[:, 1])
+    keys, first = np.unique(keys, return_index=True)
+    edge_mid = mids.ravel()[first]
+
+    def midpoint(i, j):
+        k = np.minimum(i, j) * len(nodes) + np.maximum(i, j)
+        return edge_mid[np.searchsorted(keys, k)]
+
+    t = np.asarray(triangles, dtype=np.int64)
+    m01, m12, m20 = midpoint(t[:, 0], t[:, 1]), midpoint(t[:, 1], t[:, 2]), \
+        midpoint(t[:, 2], t[:, 0])
+    split = np.concatenate([np.stack([t[:, 0], m01, m20], 1), np.stack([m01, t[:, 1], m12], 1),
+                            np.stack([m20, m12, t[:, 2]], 1), np.stack([m01, m12, m20], 1)])
+    surface_nodes = np.concatenate([np.arange(n_s), np.unique(np.concatenate([m01, m12, m20]))])
+    return VolumeMesh(nodes, tets, split, n_s, surface_nodes)
 
 
 def signed_volumes(positions: np.ndarray, tets: np.ndarray) -> np.ndarray:
