@@ -328,3 +328,44 @@ def test_live_recording_of_the_3d_node_round_trips_through_info_and_replay(
             got = [m.data for m in bag.messages([topic])]
             assert len(got) == len(sent), topic
             assert all(_same_payload(g, s) for g, s in zip(got, sent)), topic
+
+
+@pytest.mark.slow
+def test_grasp_window_in_3d(tmp_path, capsys):
+    """The window search runs 3D trials: the smallest force that held is above the
+    Coulomb bound m g / (2 mu_s) of the 3D fruit's mass, and every trial's bruise flag
+    is the resolved peak pressure against the threshold."""
+    from gripper_sim.core3d.fruit import build_fruit3d
+    scenario = tmp_path / 'carry.yaml'
+    scenario.write_text('name: carry\nfruit: apple\nclose: {mode: force, speed: 0.05}\n'
+                        'squeeze: {time: 0.1}\nlift: {height: 0.01}\n'
+                        'transport: {distance: 0.01}\n')
+    bruise = 60e3
+    overrides = [*COARSE, '--set', f'fruit.bruise_pressure={bruise}']
+    assert main(['window', '--scenario', str(scenario), *overrides, '--tolerance', '0.3',
+                 '--json']) == 0
+    window = json.loads(capsys.readouterr().out)
+    config = configuration.load_config(fruit='apple', overrides={
+        'dimension': 3, 'fruit.mesh.subdivisions': 4, 'sim.dt': 0.005})
+    mass = build_fruit3d(config).total_mass
+    mu = config['contact.jaw.static_friction']
+    assert window['mass'] == pytest.approx(mass, rel=1e-12)
+    assert window['window'] is True
+    assert window['min_force'] >= mass * 9.81 / (2 * mu)
+    assert window['min_force'] <= window['max_force']
+    for trial in window['trials']:
+        if trial['outcome'] != 'solver failed':
+            assert trial['bruised'] == (trial['peak_pressure'] > bruise), trial
+    assert any(t['bruised'] for t in window['trials'])
+    assert any(not t['held'] and t['force'] < window['min_force'] for t in window['trials'])
+
+
+@pytest.mark.parametrize('verb', [['squeeze', '--to-force', '1'], ['pick', '--force', '1'],
+                                  ['run', 'pick_and_place'], ['window']])
+def test_what_the_3d_model_lacks_is_a_one_line_error(verb, capsys):
+    """The point-mass fruit is 2D only: every verb says so, exit 2, no traceback."""
+    assert main([*verb, *COARSE, '--set', 'fruit.model=point']) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert err.startswith('error: ') and len(err.splitlines()) == 1
+    assert 'fruit.model' in err and 'dimension' in err and 'Traceback' not in err
