@@ -37,6 +37,10 @@ except ImportError:  # pragma: no cover - depends on the environment
 
 #: relative residual (infinity norms) at which the preconditioned CG stops
 CG_TOLERANCE = 1e-8
+#: ... or when the preconditioned residual (the error estimate of dq) is below this
+#: fraction of the Newton tolerance (times dt): the last Newton iterations, whose dq
+#: are tiny, need no relative accuracy
+CG_ERROR_FRACTION = 1e-3
 #: CG iterations before the matrix is factorised afresh
 CG_MAX_ITERATIONS = 20
 #: a system that took more CG iterations than this gets a new factorisation next time
@@ -97,7 +101,10 @@ class _PermutedLU:
 
     def __init__(self, lu, perm: np.ndarray):
         self.lu, self.perm = lu, perm
-        self.nnz = lu.L.nnz + lu.U.nnz
+
+    @property
+    def nnz(self) -> int:
+        return self.lu.L.nnz + self.lu.U.nnz
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         x = np.empty_like(b)
@@ -124,6 +131,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         #: factorisations, CG iterations
         self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
         self._lu = None
+        self._woodbury = None  # (u, A^-1 u, (C^-1 + u^T A^-1 u)^-1) at the factorisation
         self._stale = False
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         if self.fast:
@@ -132,6 +140,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
     def reset(self) -> None:
         """Forget the kept factorisation (a restarted simulation repeats its results)."""
         self._lu = None
+        self._woodbury = None
         self._warm = None
 
     def _assemble(self, rows: list, cols: list, vals: list) -> sp.csc_matrix:
@@ -312,7 +321,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
             return nd if self._ordering == 'nd' else lu
         return nd
 
-    def _linear_solve(self, a: sp.csc_matrix, rhs: np.ndarray, low_rank, fresh: bool):
+    def _linear_solve(self, a: sp.csc_matrix, rhs: np.ndarray, low_rank, fresh: bool,
+                      dt: float):
         """dq with (A + sum c u u^T) dq = rhs: CG preconditioned by the kept LU, or a new
         LU when CG does not converge fast (or ``fresh``). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
@@ -322,23 +332,32 @@ class PatternCachingSolver(ImplicitEulerSolver):
         else:
             u, c = np.zeros((self.n, 0)), np.zeros(0)
         if self._lu is not None and not fresh and not self._stale:
-            dq = self._pcg(a, rhs, u, c)
+            dq = self._pcg(a, rhs, u, c, dt)
             if dq is not None:
                 return dq
         self._stale = False
-        self._lu = self._factorise(a)
-        lu = self._lu
+        self._lu = lu = self._factorise(a)
+        self._woodbury = None
         x = lu.solve(rhs)
         if not c.size:
             return x
         a_inv_u = lu.solve(u) if u.shape[1] > 1 else lu.solve(u[:, 0])[:, None]
         small = np.diag(1.0 / c) + u.T @ a_inv_u
+        # the preconditioner keeps these rank-one terms with the factorisation
+        self._woodbury = (u, a_inv_u, np.linalg.inv(small))
         return x - a_inv_u @ np.linalg.solve(small, u.T @ x)
 
-    def _pcg(self, a, rhs, u, c):
+    def _pcg(self, a, rhs, u, c, dt):
         """Preconditioned CG from zero; None if it fails to converge in time."""
         lu = self._lu
-        if c.size:
+        kept = self._woodbury
+        if kept is not None and kept[0].shape[1] == c.size:
+            u_kept, a_inv_u, small_inv = kept
+
+            def precondition(r):
+                y = lu.solve(r)
+                return y - a_inv_u @ (small_inv @ (u_kept.T @ y))
+        elif c.size:
             a_inv_u = lu.solve(u) if u.shape[1] > 1 else lu.solve(u[:, 0])[:, None]
             small_inv = np.linalg.inv(np.diag(1.0 / c) + u.T @ a_inv_u)
 
@@ -348,6 +367,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         else:
             precondition = lu.solve
         limit = CG_TOLERANCE * float(np.max(np.abs(rhs)))
+        error_limit = CG_ERROR_FRACTION * self.tolerance * dt
         x = np.zeros_like(rhs)
         r = rhs.copy()
         z = precondition(r)
@@ -369,6 +389,10 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 self._stale = it > CG_STALE_ITERATIONS
                 return x
             z = precondition(r)
+            if float(np.max(np.abs(z))) <= error_limit:
+                self.stats['cg_iterations'] += it
+                self._stale = it > CG_STALE_ITERATIONS
+                return x
             rz_new = float(r @ z)
             p = z + (rz_new / rz) * p
             rz = rz_new
@@ -414,7 +438,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, filters,
                                       shift * s_diag * self.m / dt ** 2, out)
                 try:
-                    dq = self._linear_solve(self._csc(out.copy()), -g_f, low, shift > 0)
+                    dq = self._linear_solve(self._csc(out.copy()), -g_f, low, shift > 0,
+                                            dt)
                 except RuntimeError:  # singular factor
                     continue
                 slope = float(g_f @ dq)
