@@ -2,11 +2,11 @@
 
 The goal runs ``gripper_sim.core.grasp.GraspSequence``, or with ``place`` the
 pick-and-place ``gripper_sim.core.scenario.PickAndPlace`` (``grasp_goal.GoalRun``),
-updated after every physics step in the physics thread. Feedback goes out on every phase change and at least
-every 0.05 s of sim time or of wall time (20 Hz at real time). One grasp at a time:
-a goal that arrives while one runs, or while a GripperCommand goal drives the jaws,
-is rejected and the reason is logged. Cancel stops the motion and holds the jaws
-where they are.
+updated after every physics step in the physics thread. Feedback goes out on every
+phase change and at least every 0.05 s of sim time or of wall time (20 Hz at real
+time). One grasp at a time: a goal that arrives while one runs, or while a
+GripperCommand goal drives the jaws, is rejected and the reason is logged. Cancel
+stops the motion and holds the jaws where they are.
 """
 from __future__ import annotations
 
