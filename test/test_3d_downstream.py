@@ -124,7 +124,7 @@ def test_damage_in_the_analysis_report_matches_the_last_step(tmp_path, dimension
     config = configuration.load_config(overrides=overrides)
     sim = make_simulation(config)
     path = tmp_path / 'bruise.mcap'
-    seen = []
+    seen = [sim.last]
     with SimRecorder(path, sim.config, initial=sim.last) as rec:
         sim.add_observer(rec.on_step)
         sim.add_observer(seen.append)
@@ -140,6 +140,12 @@ def test_damage_in_the_analysis_report_matches_the_last_step(tmp_path, dimension
     assert s['peak_damage_pressure_pa'] == pytest.approx(damage.peak_pressure, rel=1e-12)
     assert s['crushed'] is bool(damage.crushed)
     assert s['peak_damage_pressure_pa'] > config['fruit.bruise_pressure']
+    assert s['peak_flesh_stress_pa'] == pytest.approx(damage.peak_flesh_stress, rel=1e-12)
+    times = np.array([r.time for r in seen])
+    above = np.array([r.damage.pressure > config['fruit.bruise_pressure'] for r in seen])
+    dt = np.diff(times, append=times[-1])
+    assert s['time_above_bruise_threshold_s'] == pytest.approx(float(dt[above].sum()))
+    assert s['time_above_bruise_threshold_s'] > 0
     text = '\n'.join(analyze(path, tmp_path / 'b', figures=False).describe())
     assert 'bruised True' in text
     assert ('of the surface' if dimension == 3 else 'of the outline') in text

@@ -17,10 +17,12 @@ markers and the node point cloud), and writes:
   force projected onto the jaw plane y-z, with their outline and area).
 
 Damage comes from the recorded ``FruitState`` fields (``bruised``, ``bruised_fraction``,
-``crushed``, ``peak_damage_pressure``: the simulation's damage estimate). A recording
-made before ``peak_damage_pressure`` existed lacks it: the summary says so
-(``peak_damage_pressure_pa`` null, ``damage_note``) and keeps the older rule for
-``bruised`` (the flag, or the peak contact pressure above the threshold).
+``crushed``, ``damage_pressure``, ``peak_damage_pressure``, ``peak_flesh_stress``: the
+simulation's damage estimate, Hertz in 2D and resolved in 3D); the time above the
+bruise threshold counts the samples whose ``damage_pressure`` exceeds it. A recording
+made before these fields existed lacks them: the summary says so
+(``peak_damage_pressure_pa`` null, ``damage_note``) and falls back to the peak contact
+pressure (bruised: the flag, or the peak contact pressure above the threshold).
 
 Messages are decoded with ``mcap-ros2-support``'s decoder from the schemas stored in
 the file, so the analysis runs without ROS installed.
@@ -55,7 +57,8 @@ COLUMNS = (
     'slip_distance_m', 'slipping', 'left_jaw_contact', 'right_jaw_contact',
     'kinetic_energy_j', 'elastic_energy_j', 'gravitational_energy_j', 'total_energy_j',
     'centroid_x_m', 'centroid_z_m', 'bruised', 'bruised_fraction', 'crushed',
-    'dimension', 'contact_area_m2', 'centroid_y_m', 'peak_damage_pressure_pa',
+    'dimension', 'contact_area_m2', 'centroid_y_m', 'damage_pressure_pa',
+    'peak_damage_pressure_pa', 'peak_flesh_stress_pa',
 )
 #: the FruitState field older recordings lack (their column is empty)
 DAMAGE_PRESSURE_FIELD = 'peak_damage_pressure'
@@ -127,7 +130,7 @@ class AnalysisResult:
             f"{fmt(s['max_slip_distance_m'], 'mm', 1e3)})",
             contact,
             damage,
-            f"time above bruise threshold (peak contact pressure): "
+            f"time above bruise threshold (damage pressure): "
             f"{fmt(s['time_above_bruise_threshold_s'], 's')}",
         ]
         if s.get('damage_note'):
@@ -214,10 +217,11 @@ def read_time_series(bag: BagReader, topics: dict[str, str | None]) -> TimeSerie
     has_damage_pressure = True
     for raw, s in bag.decoded_messages([state_topic]):
         stamp = _stamp_ns(s.header)
-        damage_pressure = getattr(s, DAMAGE_PRESSURE_FIELD, None)
-        if damage_pressure is None:
+        peak_damage = getattr(s, DAMAGE_PRESSURE_FIELD, None)
+        if peak_damage is None:
             has_damage_pressure = False
-            damage_pressure = math.nan
+        damage = [getattr(s, name, None) for name in
+                  ('damage_pressure', DAMAGE_PRESSURE_FIELD, 'peak_flesh_stress')]
         rows.append([
             stamp / 1e9, s.gap, s.grip_force,
             jaw_force['left'].get(stamp, math.nan), jaw_force['right'].get(stamp, math.nan),
@@ -226,7 +230,8 @@ def read_time_series(bag: BagReader, topics: dict[str, str | None]) -> TimeSerie
             float(s.right_jaw_contact), s.kinetic_energy, s.elastic_energy,
             s.gravitational_energy, s.kinetic_energy + s.elastic_energy + s.gravitational_energy,
             s.centroid.x, s.centroid.z, float(s.bruised), s.bruised_fraction, float(s.crushed),
-            float(s.dimension or 2), s.contact_area, s.centroid.y, float(damage_pressure),
+            float(s.dimension or 2), s.contact_area, s.centroid.y,
+            *(math.nan if value is None else float(value) for value in damage),
         ])
         log_times.append(raw.log_time)
         stamps.append(stamp)
@@ -286,7 +291,11 @@ def summarize(series: TimeSeries, *, bruise_pressure: float,
     peak = int(np.argmax(force))
     dt = np.diff(t, append=t[-1])
     dt[dt < 0] = 0.0
-    over = series['peak_contact_pressure_pa'] > bruise_pressure
+    # the damage estimate's pressure (2D: Hertz, 3D: resolved); older recordings: the
+    # peak contact pressure
+    pressure = series['damage_pressure_pa'] if series.has_damage_pressure \
+        else series['peak_contact_pressure_pa']
+    over = pressure > bruise_pressure
     tangent, secant = stiffness(series)
     both = (series['left_jaw_contact'] > 0) & (series['right_jaw_contact'] > 0)
     max_slip = float(np.max(np.abs(series['slip_distance_m'])))
@@ -340,6 +349,8 @@ def summarize(series: TimeSeries, *, bruise_pressure: float,
         'bruised_fraction': float(np.max(series['bruised_fraction'])),
         'final_bruised_fraction': float(series['bruised_fraction'][-1]),
         'peak_damage_pressure_pa': damage_pressure,
+        'peak_flesh_stress_pa': _finite_or_none(np.max(series['peak_flesh_stress_pa']))
+        if series.has_damage_pressure else None,
         'crushed': bool(np.any(series['crushed'] > 0)),
         'damage_note': note,
         'bruise_threshold_pa': float(bruise_pressure),
