@@ -40,11 +40,15 @@ CG_TOLERANCE = 1e-8
 #: ... or when the preconditioned residual (the error estimate of dq) is below this
 #: fraction of the Newton tolerance (times dt): the last Newton iterations, whose dq
 #: are tiny, need no relative accuracy
-CG_ERROR_FRACTION = 1e-3
+CG_ERROR_FRACTION = 1e-5
 #: CG iterations before the matrix is factorised afresh
 CG_MAX_ITERATIONS = 20
 #: a system that took more CG iterations than this gets a new factorisation next time
 CG_STALE_ITERATIONS = 8
+#: after a Newton step below this multiple of the tolerance the next iteration reuses
+#: the Newton matrix (a chord step: near convergence the Hessian barely changes, and
+#: the step's size, which decides convergence, is as well estimated)
+HESSIAN_REUSE = 100.0
 
 
 def nested_dissection(graph: sp.csr_matrix, leaf: int = 16) -> np.ndarray:
@@ -428,18 +432,22 @@ class PatternCachingSolver(ImplicitEulerSolver):
         if not np.isfinite(phi):
             raise NewtonFailure('start of step is infeasible (inverted element)', history)
         out = np.empty(self._nnz)
+        reuse = False
+        matrix = low = None
         for iteration in range(1, self.max_iterations + 1):
-            hdata, low_rank = parts
             g_f = filtered(grad)
-            low = [(coef, filtered(vec)) for coef, vec in low_rank]
+            if not reuse:
+                hdata, low_rank = parts
+                low = [(coef, filtered(vec)) for coef, vec in low_rank]
             for shift in (0.0, 1.0, 10.0, 100.0, 1000.0):
                 # an indefinite Hessian (buckling skin, compressed flesh) may give an
                 # ascent direction: add inertia-like diagonal terms until it descends
-                kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, filters,
-                                      shift * s_diag * self.m / dt ** 2, out)
+                if not (reuse and shift == 0.0):
+                    kernels.filter_blocks(hdata, self._block_pos, self._block_nodes,
+                                          filters, shift * s_diag * self.m / dt ** 2, out)
+                    matrix = self._csc(out.copy())
                 try:
-                    dq = self._linear_solve(self._csc(out.copy()), -g_f, low, shift > 0,
-                                            dt)
+                    dq = self._linear_solve(matrix, -g_f, low, shift > 0, dt)
                 except RuntimeError:  # singular factor
                     continue
                 slope = float(g_f @ dq)
@@ -472,5 +480,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
                 self._warm = (q_n.copy(), dt, q)
                 return StepSolution(q, grad - fric_grad, iteration, history)
-            phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
+            reuse = not reuse and norm < HESSIAN_REUSE * self.tolerance
+            if not reuse:
+                phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
