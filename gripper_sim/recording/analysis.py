@@ -385,6 +385,29 @@ def _outline_at(bag: BagReader, topic: str, log_time: int, stamp: int,
     return best[1] if best is not None else None
 
 
+def _jaws_at(bag: BagReader, topic: str, log_time: int, stamp: int) -> list:
+    """The ``jaws`` CUBE markers of the marker array whose stamp is nearest ``stamp``."""
+    best = None
+    window = 200_000_000
+    for _raw, msg in bag.decoded_messages([topic], start=max(0, log_time - window),
+                                          end=log_time + window):
+        jaws = [m for m in msg.markers if m.ns == 'jaws' and int(m.type) == 1]  # CUBE
+        if jaws:
+            dist = abs(_stamp_ns(jaws[0].header) - stamp)
+            if best is None or dist < best[0]:
+                best = (dist, jaws)
+    return best[1] if best is not None else []
+
+
+def _jaw_face(marker: Any, centre_x: float) -> np.ndarray:
+    """(4, 3) m: corners of a jaw cube's face towards ``centre_x`` (a y-z rectangle)."""
+    p, size = marker.pose.position, marker.scale
+    x = p.x - np.sign(p.x - centre_x) * 0.5 * size.x
+    dy, dz = 0.5 * size.y, 0.5 * size.z
+    return np.array([[x, p.y - dy, p.z - dz], [x, p.y + dy, p.z - dz],
+                     [x, p.y + dy, p.z + dz], [x, p.y - dy, p.z + dz]])
+
+
 def cloud_array(msg: Any) -> np.ndarray:
     """(n, 6) x y z fx fy fz (m, N) of a decoded node ``PointCloud2`` (float32 fields)."""
     names = ('x', 'y', 'z', 'fx', 'fy', 'fz')
@@ -640,6 +663,13 @@ def plot_mesh_snapshots(bag: BagReader, topic: str, series: TimeSeries, summary:
             faces = np.tile([0.2, 0.8, 0.2], (n_tri, 1))
         ax.add_collection3d(Poly3DCollection(list(triangles), facecolors=faces,
                                              edgecolors=(0, 0, 0, 0.15), linewidths=0.2))
+        jaws = _jaws_at(bag, topic, int(series.log_times[row]), int(series.stamps[row]))
+        centre_x = float(pts[:, 0].mean()) * 1e-3
+        plates = [_jaw_face(jaw, centre_x) * 1e3 for jaw in jaws]
+        if plates:  # the jaw faces, see-through
+            ax.add_collection3d(Poly3DCollection(plates, facecolors=(0.4, 0.4, 0.5, 0.15),
+                                                 edgecolors=(0.2, 0.2, 0.3, 0.8),
+                                                 linewidths=0.8))
         for axis, (set_lim, name) in enumerate(((ax.set_xlim, 'x'), (ax.set_ylim, 'y'),
                                                 (ax.set_zlim, 'z'))):
             set_lim(centre[axis] - half, centre[axis] + half)
@@ -655,7 +685,8 @@ def plot_mesh_snapshots(bag: BagReader, topic: str, series: TimeSeries, summary:
     bruise_kpa = summary.get('bruise_threshold_pa', DEFAULT_BRUISE_PRESSURE) / 1e3
     fig.colorbar(ScalarMappable(Normalize(0.0, bruise_kpa), _pressure_colour_map()),
                  ax=fig.axes, label='contact pressure (kPa)', shrink=0.7)
-    fig.suptitle('Deformed fruit skin at key moments (colour: contact pressure)', fontsize=10)
+    fig.suptitle('Deformed fruit skin and jaw faces at key moments (colour: contact '
+                 'pressure)', fontsize=10)
     fig.savefig(path)
     plt.close(fig)
     return True
