@@ -230,3 +230,56 @@ def test_long_cylinder_force_per_length_agrees_between_2d_and_3d():
     assert np.ptp(result.positions[right, 2]) > 0.9 * jaw, 'contact along the whole plate'
     per_length_3d = -np.sum(result.contact_forces[right, 0]) / jaw
     assert per_length_3d == pytest.approx(per_length_2d, rel=0.15)
+
+
+def _pressed_membrane(skin_modulus, ratios=(0.02, 0.05)):
+    """A pressurised membrane sphere (shell model: turgor p, no bulk stiffness of the
+    contents, skin 0.1 mm thick) pressed between two plates by delta per plate.
+
+    Returns {delta/R: (F / (p pi a^2), F / (2 pi p R delta))}, a the contact patch
+    radius per plate, F the plate force from the contact reactions.
+    """
+    radius, turgor = 0.03, 2e4
+    config = load_config(overrides=[
+        'dimension=3', 'fruit.model=shell', 'world.gravity=0', 'world.table=false',
+        'fruit.density=50', 'fruit.damping.mass=20', 'sim.dt=0.05', 'sim.max_contact_passes=30',
+        f'fruit.shape.diameter={2 * radius}', f'fruit.pressure.turgor={turgor}',
+        'fruit.pressure.bulk_modulus=0', f'fruit.skin.youngs_modulus={skin_modulus}',
+        'fruit.skin.thickness=1e-4', 'fruit.mesh.subdivisions=8',
+        'fruit.mesh.jaw_refinement=0.5'])
+    sim = make_simulation(config)
+    width = sim.fruit.rest_width
+    out = {}
+    for ratio in ratios:
+        delta = ratio * radius
+        sim.command_gap(width - 2 * delta, 0.004)
+        while sim.gripper_state.gap > width - 2 * delta + 1e-12:
+            sim.step()
+        result = sim.run(0.2)
+        pressure = sim.fruit.pressure.pressure(sim.q.ravel())
+        assert pressure == pytest.approx(turgor)  # no bulk stiffness: constant pressure
+        a = np.mean(result.deformation.jaw_contact_radii)
+        force = np.sum(result.contact_forces[result.contact_obstacle == 0, 0])  # left plate
+        assert force == pytest.approx(result.grip_force, rel=1e-6)
+        out[ratio] = (force / (turgor * np.pi * a * a),
+                      force / (2 * np.pi * turgor * 0.5 * width * delta))
+    return out
+
+
+@pytest.mark.slow
+def test_pressurised_membrane_plate_force_is_pressure_times_contact_area(capsys):
+    """The flat contact patch carries the internal pressure: F = p pi a^2 (the 3D form of
+    the 2D ring's F = p c) when the skin's stiffness is small against its tension
+    (E_s t / (p R) = 0.17); a 10x stiffer skin (1.7) carries part of the load itself.
+    The cap-cut estimate F ~ 2 pi p R delta (a^2 = 2 R delta) is not reached: the
+    membrane ovalises, the contact area is ~1/4 of the cap cut (measured F / (2 pi p R
+    delta) ~ 0.2 for both skins)."""
+    soft = _pressed_membrane(1e6)
+    stiff = _pressed_membrane(1e7, ratios=(0.05,))
+    with capsys.disabled():
+        print('\n  pressurised membrane, F / (p pi a^2), F / (2 pi p R delta): soft '
+              + ', '.join(f'{r}: {v[0]:.3f}, {v[1]:.3f}' for r, v in soft.items())
+              + f'; stiff 0.05: {stiff[0.05][0]:.3f}, {stiff[0.05][1]:.3f}')
+    for ratio, (area_law, _) in soft.items():
+        assert area_law == pytest.approx(1.0, abs=0.10), ratio
+    assert abs(stiff[0.05][0] - 1) > 2 * abs(soft[0.05][0] - 1)
