@@ -262,15 +262,17 @@ def hinge_bending(x, hinges, theta0, stiffness, grad, data, scatter, hessian):
                     dga[a, j, c] = acc_a
                     dgb[a, j, c] = acc_b
         sc = scatter[h]
-        for i in range(4):
-            for a in range(3):
-                r = 3 * i + a
-                for j in range(4):
-                    for c in range(3):
-                        d2 = (ga[a] * dca[i, j, c] + gb[a] * dcb[i, j, c]
-                              + ca[i] * dga[a, j, c] + cb[i] * dgb[a, j, c])
-                        col = 3 * j + c
-                        data[sc[r * 12 + col]] += 2.0 * k * (dth[r] * dth[col] + dev * d2)
+        # the Hessian is symmetric: the upper triangle, mirrored
+        for r in range(12):
+            i, a = r // 3, r % 3
+            for col in range(r, 12):
+                j, c = col // 3, col % 3
+                d2 = (ga[a] * dca[i, j, c] + gb[a] * dcb[i, j, c]
+                      + ca[i] * dga[a, j, c] + cb[i] * dgb[a, j, c])
+                v = 2.0 * k * (dth[r] * dth[col] + dev * d2)
+                data[sc[r * 12 + col]] += v
+                if col != r:
+                    data[sc[col * 12 + r]] += v
     return value
 
 
