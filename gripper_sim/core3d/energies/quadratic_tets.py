@@ -106,11 +106,14 @@ class QuadraticNeoHookeanTets(Energy):
         grad = scatter_gradient(q.size, self.dofs, local.reshape(n, 30))
         if not hessian:
             return Evaluation(value, grad, *empty_triplets())
-        eye = np.eye(3)
-        c = (mu * np.einsum('im,jn->ijmn', eye, eye)[None, None]
-             + (mu - lam * lnj)[..., None, None, None, None]
-             * np.einsum('egni,egjm->egijmn', finv, finv)
-             + lam * np.einsum('egji,egnm->egijmn', finv, finv))
-        h = np.einsum('eg,egaj,egijmn,egbn->eaibm', w, self.grad_n, c, self.grad_n,
-                      optimize=True)
+        # with G = B F^-1 (B_aj = dN_a/dX_j) the tangent dP/dF of the class docstring of
+        # NeoHookeanTets contracts to
+        #   H_(a i)(b m) = sum_g w [mu (B B^T)_ab d_im + (mu - lam ln J) G_am G_bi
+        #                           + lam G_ai G_bm]
+        b = self.grad_n
+        g = np.einsum('egaj,egji->egai', b, finv)
+        bb = np.einsum('eg,egaj,egbj->eab', mu * w, b, b)
+        h = np.einsum('eg,egam,egbi->eaibm', (mu - lam * lnj) * w, g, g, optimize=True)
+        h += np.einsum('eg,egai,egbm->eaibm', lam * w, g, g, optimize=True)
+        h += bb[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
         return Evaluation(value, grad, *hessian_triplets(self.dofs, h.reshape(n, 30, 30)))
