@@ -326,7 +326,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         return nd
 
     def _linear_solve(self, a: sp.csc_matrix, rhs: np.ndarray, low_rank, fresh: bool,
-                      dt: float):
+                      dt: float, project=None):
         """dq with (A + sum c u u^T) dq = rhs: CG preconditioned by the kept LU, or a new
         LU when CG does not converge fast (or ``fresh``). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
@@ -336,7 +336,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         else:
             u, c = np.zeros((self.n, 0)), np.zeros(0)
         if self._lu is not None and not fresh and not self._stale:
-            dq = self._pcg(a, rhs, u, c, dt)
+            dq = self._pcg(a, rhs, u, c, dt, project)
             if dq is not None:
                 return dq
         self._stale = False
@@ -351,7 +351,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._woodbury = (u, a_inv_u, np.linalg.inv(small))
         return x - a_inv_u @ np.linalg.solve(small, u.T @ x)
 
-    def _pcg(self, a, rhs, u, c, dt):
+    def _pcg(self, a, rhs, u, c, dt, project=None):
         """Preconditioned CG from zero; None if it fails to converge in time."""
         lu = self._lu
         kept = self._woodbury
@@ -370,6 +370,14 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 return y - a_inv_u @ (small_inv @ (u.T @ y))
         else:
             precondition = lu.solve
+        if project is not None:
+            # the system lives in the range of S (its held directions are the identity
+            # and the right-hand side is zero there): the preconditioner S P^-1 S is
+            # exact on them even when P was factorised with another contact set
+            unprojected = precondition
+
+            def precondition(r):
+                return project(unprojected(project(r)))
         limit = CG_TOLERANCE * float(np.max(np.abs(rhs)))
         error_limit = CG_ERROR_FRACTION * self.tolerance * dt
         x = np.zeros_like(rhs)
@@ -447,7 +455,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
                                           filters, shift * s_diag * self.m / dt ** 2, out)
                     matrix = self._csc(out.copy())
                 try:
-                    dq = self._linear_solve(matrix, -g_f, low, shift > 0, dt)
+                    dq = self._linear_solve(matrix, -g_f, low, shift > 0, dt, filtered)
                 except RuntimeError:  # singular factor
                     continue
                 slope = float(g_f @ dq)
