@@ -27,6 +27,22 @@ def test_bisection_finds_a_boundary_outside_its_first_guess():
     assert _bisect(lambda f: False, 1.0, 2.0, 100.0, 0.01, want_smallest=True) is None
 
 
+def test_bisection_widens_all_the_way_to_the_limit():
+    """A first guess far below the boundary (the 3D shell bruises at ~1000 x its Hertz
+    estimate): the bracket doubles up to the limit instead of giving up after a few
+    widenings and calling everything below the limit safe."""
+    tried = []
+
+    def safe(force):
+        tried.append(force)
+        return force <= 50.0
+    found = _bisect(safe, 0.01, 0.02, 200.0, 0.01, want_smallest=False)
+    assert 50.0 * 0.99 <= found <= 50.0
+    assert _bisect(lambda f: True, 0.01, 0.02, 200.0, 0.01, want_smallest=False) == math.inf
+    holds_from = _bisect(lambda f: f >= 150.0, 0.01, 0.02, 200.0, 0.01, want_smallest=True)
+    assert 150.0 <= holds_from <= 150.0 * 1.01
+
+
 @pytest.mark.slow
 def test_rigid_flat_finger_minimum_is_m_g_over_2_mu():
     """validation.md section 6 (one friction coefficient: mu_k = mu_s = 0.5)."""

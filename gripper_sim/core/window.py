@@ -210,8 +210,12 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
     kinetic = hold_estimate * mu / mu_k if mu_k > 0 else 2 * hold_estimate
     min_force = _bisect(lambda f: trial(f, 'hold').held, 0.8 * hold_estimate,
                         1.15 * kinetic, limit, tolerance, want_smallest=True)
-    max_force = _bisect(lambda f: not trial(f, 'bruise').bruised, 0.8 * bruise_estimate,
-                        1.25 * bruise_estimate, limit, tolerance, want_smallest=False)
+    # the pressurised 3D shell spreads its contact (its pressure stays near the turgor,
+    # far from Hertz): start the search no lower than the holding force there
+    seed = (max(bruise_estimate, hold_estimate) if int(config.get('dimension', 2)) == 3
+            else bruise_estimate)
+    max_force = _bisect(lambda f: not trial(f, 'bruise').bruised, 0.8 * seed, 1.25 * seed,
+                        limit, tolerance, want_smallest=False)
     from gripper_sim.core.scenario import SLIP_TOLERANCE
     firm = [t.force for t in trials if t.held and t.slip_distance <= SLIP_TOLERANCE]
     return GraspWindow(fruit=str(config['fruit.name']), finger=str(config['gripper.finger.name']),
@@ -225,7 +229,8 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
 def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
             tolerance: float, want_smallest: bool) -> float | None:
     """The boundary of the forces where ``ok`` holds, to ``tolerance``, from the
-    bracket guess [low, high] (widened as needed, up to ``limit``).
+    bracket guess [low, high] (widened as needed: halved down at most ``MAX_WIDENINGS``
+    times, doubled up until ``limit``, so "none up to ``limit``" means ``limit`` was tried).
 
     want_smallest: ``ok`` holds above the boundary (the minimum force); returns the
     smallest force found ok, None if none up to ``limit``. Otherwise ``ok`` holds
@@ -247,7 +252,7 @@ def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
         break
     else:
         return lo if want_smallest else None
-    for _ in range(MAX_WIDENINGS):
+    while True:  # doubling, so at most log2(limit / hi) + 1 trials
         ok_hi = ok(hi)
         if ok_hi != good_high:  # hi is still on the low side: move it up
             if hi >= limit:
@@ -255,8 +260,6 @@ def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
             lo, hi = hi, min(2 * hi, limit)
             continue
         break
-    else:
-        return None if want_smallest else math.inf
     while (hi - lo) > tolerance * hi:
         mid = 0.5 * (lo + hi)
         if ok(mid) == good_high:
