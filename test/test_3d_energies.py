@@ -4,8 +4,9 @@ import pytest
 
 from gripper_sim.core3d.energies import (EnclosedVolumePressure, Gravity3D, HingeBending,
                                          Membrane, NeoHookeanTets, dihedral_angles)
-from gripper_sim.core3d.meshes import (body_surface, enclosed_volume, geodesic_sphere,
-                                       hinges, signed_volumes)
+from gripper_sim.core3d.energies.quadratic_tets import QuadraticNeoHookeanTets
+from gripper_sim.core3d.meshes import (TET10_EDGES, body_surface, enclosed_volume,
+                                       geodesic_sphere, hinges, signed_volumes)
 
 RNG = np.random.default_rng(7)
 RADIUS = 0.03
@@ -26,11 +27,31 @@ def _cube_tets():
     return corners, tets
 
 
+def _cube_tets10():
+    """The five cube tetrahedra as 10-node ones (corners, then the edge midpoints in the
+    order of ``meshes.TET10_EDGES``), midpoints shared between neighbours."""
+    corners, tets = _cube_tets()
+    points = list(corners)
+    mids = {}
+    rows = []
+    for tet in tets:
+        row = list(tet)
+        for i, j in TET10_EDGES:
+            key = tuple(sorted((tet[i], tet[j])))
+            if key not in mids:
+                mids[key] = len(points)
+                points.append(0.5 * (corners[key[0]] + corners[key[1]]))
+            row.append(mids[key])
+        rows.append(row)
+    return np.array(points), np.array(rows)
+
+
 def _energies():
     sphere = geodesic_sphere(2)
     x0 = RADIUS * sphere.positions
     tri = sphere.triangles
     corners, tets = _cube_tets()
+    points10, tets10 = _cube_tets10()
     return [
         ('membrane', Membrane(tri, x0, 10e6, 0.4, 5e-4), _perturbed(x0, 1e-3)),
         ('hinge-bending', HingeBending(hinges(tri), x0, 1e-4), _perturbed(x0, 1e-3)),
@@ -39,6 +60,8 @@ def _energies():
         ('neo-hookean-tets', NeoHookeanTets(tets, corners, 2e6, 0.38),
          _perturbed(corners, 1e-3)),
         ('gravity', Gravity3D(np.full(len(x0), 0.01), 9.81), _perturbed(x0, 1e-3)),
+        ('quadratic-tets', QuadraticNeoHookeanTets(tets10, points10, 2e6, 0.38),
+         _perturbed(points10, 5e-4)),
     ]
 
 
@@ -101,7 +124,7 @@ def test_numba_kernel_matches_the_numpy_reference(name, energy, q):
     assert not np.any(untouched)
 
 
-@pytest.mark.parametrize('name,energy,q', CASES[:4], ids=IDS[:4])
+@pytest.mark.parametrize('name,energy,q', CASES[:4] + CASES[5:], ids=IDS[:4] + IDS[5:])
 def test_numba_kernel_hessian_matches_central_differences_of_its_gradient(name, energy, q):
     h = 1e-7
     _, _, hess = _kernel_evaluation(energy, q)
@@ -275,10 +298,14 @@ def test_strawberry_outline_revolved_has_the_pappus_volume():
     assert np.all(dihedral_angles(body.positions, hinges(body.triangles)) > -np.pi / 2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('model', [
     ['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
     ['fruit.model=solid', 'fruit.skin.enabled=false', 'fruit.mesh.subdivisions=3',
-     'fruit.mesh.max_tet_volume=1e-6']], ids=['shell', 'solid'])
+     'fruit.mesh.max_tet_volume=1e-6'],
+    ['fruit.model=solid', 'fruit.skin.enabled=false', 'fruit.mesh.subdivisions=3',
+     'fruit.mesh.max_tet_volume=1e-6', 'fruit.mesh.order=2']],
+    ids=['shell', 'solid', 'solid-quadratic'])
 def test_fast_solver_follows_the_numpy_reference_path(model, monkeypatch):
     """The same grasp on the fast path (numba kernels, CG on a kept LU, warm-started
     contact passes) and on the reference path (numpy energies, one LU per Newton

@@ -407,6 +407,106 @@ def neohookean_tets(x, tet, grad_n, volume, mu, lam, grad, data, scatter, hessia
 
 
 @njit(cache=True)
+def neohookean_quadrature(x, elem, grad_n, weight, mu, lam, grad, data, scatter, hessian):
+    """Neo-Hookean elements integrated at quadrature points (the quadratic tetrahedra of
+    ``energies.quadratic_tets``); the density and tangent are those of
+    ``neohookean_tets``.
+
+    Args:
+        x: (n, 3) m.  elem: (n_elem, k) nodes.  grad_n: (n_elem, n_points, k, 3)
+        dN_a/dX_j (1/m) at the points.  weight: (n_elem, n_points) m^3.
+        mu, lam: Lame parameters (Pa).  grad, data: as ``membrane``;
+        scatter: (n_elem, (3 k)^2).
+
+    Returns:
+        Energy (J); inf (and nothing added) if J <= 0 at a point.
+    """
+    n_elem, n_pts, n_k = grad_n.shape[0], grad_n.shape[1], grad_n.shape[2]
+    f = np.empty((3, 3))
+    for e in range(n_elem):
+        for g in range(n_pts):
+            b = grad_n[e, g]
+            for i in range(3):
+                for j in range(3):
+                    acc = 0.0
+                    for a in range(n_k):
+                        acc += x[elem[e, a], i] * b[a, j]
+                    f[i, j] = acc
+            det = (f[0, 0] * (f[1, 1] * f[2, 2] - f[1, 2] * f[2, 1])
+                   - f[0, 1] * (f[1, 0] * f[2, 2] - f[1, 2] * f[2, 0])
+                   + f[0, 2] * (f[1, 0] * f[2, 1] - f[1, 1] * f[2, 0]))
+            if not det > 0.0:
+                return np.inf
+    m = 3 * n_k
+    value = 0.0
+    finv = np.empty((3, 3))
+    piola = np.empty((3, 3))
+    gk = np.empty((n_k, 3))
+    local = np.empty((m, m))
+    for e in range(n_elem):
+        if hessian:
+            local[:] = 0.0
+        for g in range(n_pts):
+            b = grad_n[e, g]
+            for i in range(3):
+                for j in range(3):
+                    acc = 0.0
+                    for a in range(n_k):
+                        acc += x[elem[e, a], i] * b[a, j]
+                    f[i, j] = acc
+            c00 = f[1, 1] * f[2, 2] - f[1, 2] * f[2, 1]
+            c01 = f[1, 2] * f[2, 0] - f[1, 0] * f[2, 2]
+            c02 = f[1, 0] * f[2, 1] - f[1, 1] * f[2, 0]
+            det = f[0, 0] * c00 + f[0, 1] * c01 + f[0, 2] * c02
+            finv[0, 0] = c00 / det
+            finv[1, 0] = c01 / det
+            finv[2, 0] = c02 / det
+            finv[0, 1] = (f[0, 2] * f[2, 1] - f[0, 1] * f[2, 2]) / det
+            finv[1, 1] = (f[0, 0] * f[2, 2] - f[0, 2] * f[2, 0]) / det
+            finv[2, 1] = (f[0, 1] * f[2, 0] - f[0, 0] * f[2, 1]) / det
+            finv[0, 2] = (f[0, 1] * f[1, 2] - f[0, 2] * f[1, 1]) / det
+            finv[1, 2] = (f[0, 2] * f[1, 0] - f[0, 0] * f[1, 2]) / det
+            finv[2, 2] = (f[0, 0] * f[1, 1] - f[0, 1] * f[1, 0]) / det
+            lnj = math.log(det)
+            ff = 0.0
+            for i in range(3):
+                for j in range(3):
+                    ff += f[i, j] * f[i, j]
+            w = weight[e, g]
+            value += w * (0.5 * mu * (ff - 3.0) - mu * lnj + 0.5 * lam * lnj * lnj)
+            for i in range(3):
+                for j in range(3):
+                    piola[i, j] = mu * (f[i, j] - finv[j, i]) + lam * lnj * finv[j, i]
+            for a in range(n_k):
+                dof = 3 * elem[e, a]
+                for i in range(3):
+                    grad[dof + i] += w * (piola[i, 0] * b[a, 0] + piola[i, 1] * b[a, 1]
+                                          + piola[i, 2] * b[a, 2])
+            if not hessian:
+                continue
+            for a in range(n_k):
+                for mm in range(3):
+                    gk[a, mm] = b[a, 0] * finv[0, mm] + b[a, 1] * finv[1, mm] \
+                        + b[a, 2] * finv[2, mm]
+            c2 = mu - lam * lnj
+            for a in range(n_k):
+                for bb in range(n_k):
+                    dot = b[a, 0] * b[bb, 0] + b[a, 1] * b[bb, 1] + b[a, 2] * b[bb, 2]
+                    for i in range(3):
+                        for mm in range(3):
+                            v = c2 * gk[bb, i] * gk[a, mm] + lam * gk[a, i] * gk[bb, mm]
+                            if i == mm:
+                                v += mu * dot
+                            local[3 * a + i, 3 * bb + mm] += w * v
+        if hessian:
+            sc = scatter[e]
+            for r in range(m):
+                for c in range(m):
+                    data[sc[r * m + c]] += local[r, c]
+    return value
+
+
+@njit(cache=True)
 def neohookean_von_mises(x, tet, grad_n, mu, lam, out):
     """von Mises stress (Pa) of each tetrahedron's Cauchy stress into out (n_tet,), as
     ``NeoHookeanTets.von_mises``: sigma = (mu (F F^T - I) + lam ln J I) / J."""

@@ -17,7 +17,7 @@ import numpy as np
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
-from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
+from gripper_sim.core3d.energies.common import KernelValue, element_dofs3, empty_triplets
 
 _EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
 _A, _B = 0.5854101966249685, 0.1381966011250105
@@ -45,7 +45,7 @@ def lumped_masses(tetrahedra: np.ndarray, volumes: np.ndarray, density: float,
     return np.bincount(tetrahedra.ravel(), weights=weights.ravel(), minlength=n_nodes)
 
 
-class QuadraticNeoHookeanTets(Energy):
+class QuadraticNeoHookeanTets(KernelValue, Energy):
     """Args:
         tetrahedra: (n_tet, 10) corners (positively oriented) then edge midpoints.
         rest_positions: (n_nodes, 3) m.
@@ -68,7 +68,7 @@ class QuadraticNeoHookeanTets(Energy):
         grad_l = np.einsum('kc,ecj->ekj', np.vstack([-np.ones((1, 3)), np.eye(3)]),
                            np.linalg.inv(dm))
         dndl = np.stack([shape_gradients_barycentric(p) for p in QUADRATURE])  # (4,10,4)
-        self.grad_n = np.einsum('gak,ekj->egaj', dndl, grad_l)  # (n, 4 points, 10, 3)
+        self.grad_n = np.ascontiguousarray(np.einsum('gak,ekj->egaj', dndl, grad_l))
         self.weight = np.repeat(self.volume[:, None] / 4.0, 4, axis=1)  # (n, 4)
 
     def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
@@ -117,3 +117,12 @@ class QuadraticNeoHookeanTets(Energy):
         h += np.einsum('eg,egai,egbm->eaibm', lam * w, g, g, optimize=True)
         h += bb[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
         return Evaluation(value, grad, *hessian_triplets(self.dofs, h.reshape(n, 30, 30)))
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
+        (n_tet, 900)); value inf, nothing added, if J <= 0 at a quadrature point."""
+        from gripper_sim.core3d import kernels
+        return kernels.neohookean_quadrature(q.reshape(-1, 3), self.tet, self.grad_n,
+                                             self.weight, float(self.mu), float(self.lam),
+                                             grad, data, scatter, hessian), []
