@@ -7,13 +7,13 @@ and observers are called.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from gripper_sim.core import contact as cm
+from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
 from gripper_sim.core import fingers
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
@@ -24,29 +24,13 @@ from gripper_sim.core.measures import deformation, face_contact_length
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.results import Energies, JawWrench, StepResult
-from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
-                                      StepConstraints)
-from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
+from gripper_sim.core.stepper import FRICTION_SMOOTHING, ImplicitEulerSolver, StepConstraints
+from gripper_sim.errors import ConfigError
 
 LEFT, RIGHT = 0, 1
 
-#: configuration keys that may change while the simulation runs
-DYNAMIC_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction',
-                'contact.table.static_friction', 'contact.table.kinetic_friction',
-                'contact.restitution', 'gripper.close_speed', 'gripper.lift_speed')
 
-
-def _finite(name: str, value: Any) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as err:
-        raise CommandError(f'{name} must be a number, got {value!r}') from err
-    if not math.isfinite(number):
-        raise CommandError(f'{name} must be finite, got {number}')
-    return number
-
-
-class Simulation:
+class Simulation(SimulationFacade):
     """A parallel-jaw gripper and a deformable fruit.
 
     Args:
@@ -101,96 +85,7 @@ class Simulation:
                               'a flat finger without a pad')
         self.reset()
 
-    # ------------------------------------------------------------------ commands
-    def command_gap(self, gap: float, speed: float | None = None) -> None:
-        """Position mode: move the jaws to gap ``gap`` (m) at gap rate ``speed`` (m/s)."""
-        gap = _finite('gap', gap)
-        if gap < 0 or gap > self.config['gripper.max_gap']:
-            raise CommandError(f"gap {gap} m is out of range [0, "
-                               f"{self.config['gripper.max_gap']}] m")
-        speed = self._speed(speed, self.config['gripper.close_speed'])
-        self._grip = replace(self._grip, mode='position', target_gap=gap, speed=speed)
-
-    def command_force(self, force: float, speed: float | None = None) -> None:
-        """Force mode: close until the mean jaw normal force is ``force`` (N), hold it."""
-        force = _finite('force', force)
-        limit = self.config['gripper.max_force']
-        if force <= 0 or force > limit:
-            raise CommandError(f'force {force} N is out of range (0, {limit}] N')
-        speed = self._speed(speed, self.config['gripper.close_speed'])
-        self._grip = replace(self._grip, mode='force', target_force=force, speed=speed)
-
-    def command_open(self, speed: float | None = None) -> None:
-        """Position mode back to the initial gap."""
-        self.command_gap(self.initial_gap, speed)
-        self._slip_reference = None
-
-    def command_lift(self, height: float, speed: float | None = None) -> None:
-        """Move the gripper (jaw centre) to height ``height`` (m)."""
-        height = _finite('lift height', height)
-        low = (self.config['world.table_height'] + 0.5 * self.config['gripper.jaw_height']
-               if self.config['world.table'] else -10.0)
-        high = low + 10.0 if not self.config['world.table'] else low + 2.0
-        if height < low - 1e-12 or height > high:
-            raise CommandError(f'lift height {height} m is out of range [{low:.4g}, '
-                               f'{high:.4g}] m (the jaws may not go below the table)')
-        speed = self._speed(speed, self.config['gripper.lift_speed'])
-        self._grip = replace(self._grip, target_lift=height, lift_speed=speed)
-
-    def command_transport(self, x: float, speed: float | None = None) -> None:
-        """Move the gripper centre (both jaws) sideways to ``x`` (m) at ``speed`` (m/s)."""
-        x = _finite('transport x', x)
-        limit = (self.config['world.wall_half_width'] if self.config['world.walls'] else 10.0)
-        if abs(x) > limit:
-            raise CommandError(f'transport x {x} m is out of range [-{limit:g}, {limit:g}] m')
-        speed = self._speed(speed, self.config['gripper.transport_speed'])
-        self._grip = replace(self._grip, target_x=x, x_speed=speed)
-
-    def hold(self) -> None:
-        """Stop the jaws where they are (position mode at the current gap)."""
-        self._grip = replace(self._grip, mode='position', target_gap=self._grip.gap)
-
-    def mark_slip_reference(self) -> None:
-        """Measure slip from the fruit's present position relative to the jaws."""
-        self._slip_reference = float(self._last.centroid[1] - self._grip.lift)
-
-    def set_parameter(self, key: str, value: Any) -> None:
-        """Change a dynamic configuration key while running (see DYNAMIC_KEYS)."""
-        from gripper_sim.configuration import validate
-        if key not in DYNAMIC_KEYS:
-            raise ConfigError(f"config key '{key}' cannot change while running")
-        trial = dict(self.config)
-        trial[key] = value
-        self.config = validate(trial)
-        self._faces_template = self._make_faces()
-
-    def _speed(self, speed, default: float) -> float:
-        if speed is None or speed == 0:
-            return default
-        speed = _finite('speed', speed)
-        limit = self.config['gripper.max_speed']
-        if speed <= 0 or speed > limit:
-            raise CommandError(f'speed {speed} m/s is out of range (0, {limit}] m/s')
-        return speed
-
     # ------------------------------------------------------------------ state
-    @property
-    def time(self) -> float:
-        return self._time
-
-    @property
-    def gripper_state(self) -> GripperState:
-        return self._grip
-
-    @property
-    def last(self) -> StepResult:
-        """The most recent step result (the initial state before any step)."""
-        return self._last
-
-    def add_observer(self, callback: Callable[[StepResult], None]) -> None:
-        """Call ``callback(result)`` after every step."""
-        self._observers.append(callback)
-
     def reset(self) -> None:
         """Back to the initial state and commands, time 0."""
         n = self.fruit.n_nodes
@@ -313,45 +208,6 @@ class Simulation:
         return tuple(f.name for f in self._faces_template)
 
     # ------------------------------------------------------------------ stepping
-    def step(self) -> StepResult:
-        """Advance one step of ``dt``.
-
-        Raises:
-            ConvergenceError: the step failed even after halving; the state is unchanged.
-        """
-        saved = (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
-                 self._jaw_force)
-        try:
-            iterations, substeps = self._advance(self.dt, 0)
-        except ConvergenceError:
-            (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
-             self._jaw_force) = saved
-            raise
-        self._step += 1
-        self._last = self._measure(iterations, substeps)
-        for callback in self._observers:
-            callback(self._last)
-        return self._last
-
-    def run(self, duration: float) -> StepResult:
-        """Step for ``duration`` seconds; returns the last result."""
-        for _ in range(max(1, int(round(duration / self.dt)))):
-            self.step()
-        return self._last
-
-    def _advance(self, dt: float, depth: int) -> tuple[int, int]:
-        try:
-            return self._substep(dt), 1
-        except NewtonFailure as failure:
-            if depth >= self.config['sim.max_halvings']:
-                msg = (f'the solver did not converge at t = {self._time:.6g} s even with the '
-                       f'step halved {depth} times ({failure}); try a smaller sim.dt or '
-                       f'slower jaws')
-                raise ConvergenceError(msg, failure.history, self._time) from failure
-        it1, s1 = self._advance(0.5 * dt, depth + 1)
-        it2, s2 = self._advance(0.5 * dt, depth + 1)
-        return it1 + it2, s1 + s2
-
     def _substep(self, dt: float) -> int:
         if self._fast is not None and self._fast.applies():
             return self._fast.substep(dt)

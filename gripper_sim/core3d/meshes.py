@@ -4,9 +4,11 @@ Every body here is star-shaped about its centre, so one surface mesher serves th
 all: a unit sphere mesh, uniform (a geodesic sphere, an icosahedron whose edges are cut
 into ``frequency`` parts, 10 f^2 + 2 vertices) or in rings about the x axis, fine at
 the two jaw contact points (``ring_sphere``), then mapped radially onto the body
-(sphere, ellipsoid, or a solid of revolution about z given by a profile curve). Tetrahedra come from TetGen (Si 2015,
-ACM TOMS 41(2):11) through its Python wrapper ``tetgen``, with the surface kept as
-given, so surface vertices are nodes 0..n_surface-1 of the volume mesh.
+(sphere, ellipsoid, or a solid of revolution about z given by a profile curve).
+Tetrahedra come from TetGen (Si 2015, ACM TOMS 41(2):11) through its Python wrapper
+``tetgen``, with the surface kept as given, so surface vertices are nodes
+0..n_surface-1 of the volume mesh; quadratic (10-node) tetrahedra add the edge
+midpoints (``tetrahedralize(order=2)``).
 
 Shapes: positions (n, 3) m, triangles (n_tri, 3) counter-clockwise seen from outside
 (outward normals), tetrahedra (n_tet, 4) with positive volume
@@ -286,9 +288,9 @@ def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
     gen = tetgen.TetGen(np.ascontiguousarray(surface.positions, dtype=float),
                         np.ascontiguousarray(surface.triangles, dtype=np.int32))
     nodes, elems, _, _ = gen.tetrahedralize(quality=True, nobisect=True, fixedvolume=True,
-                                             minratio=radius_edge_ratio,
-                                             mindihedral=min_dihedral,
-                                             maxvolume=float(max_volume), order=int(order))
+                                            minratio=radius_edge_ratio,
+                                            mindihedral=min_dihedral,
+                                            maxvolume=float(max_volume), order=int(order))
     nodes = np.asarray(nodes, dtype=float)
     raw = np.asarray(elems, dtype=np.int64)
     elems = raw[:, :4].copy()
@@ -324,8 +326,9 @@ def _quadratic(nodes, corners, extra, triangles, n_s) -> VolumeMesh:
         return edge_mid[np.searchsorted(keys, k)]
 
     t = np.asarray(triangles, dtype=np.int64)
-    m01, m12, m20 = midpoint(t[:, 0], t[:, 1]), midpoint(t[:, 1], t[:, 2]), \
-        midpoint(t[:, 2], t[:, 0])
+    m01 = midpoint(t[:, 0], t[:, 1])
+    m12 = midpoint(t[:, 1], t[:, 2])
+    m20 = midpoint(t[:, 2], t[:, 0])
     split = np.concatenate([np.stack([t[:, 0], m01, m20], 1), np.stack([m01, t[:, 1], m12], 1),
                             np.stack([m20, m12, t[:, 2]], 1), np.stack([m01, m12, m20], 1)])
     surface_nodes = np.concatenate([np.arange(n_s), np.unique(np.concatenate([m01, m12, m20]))])
