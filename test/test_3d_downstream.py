@@ -346,9 +346,11 @@ def test_grasp_window_in_3d(tmp_path, capsys):
     scenario.write_text('name: carry\nfruit: apple\nclose: {mode: force, speed: 0.05}\n'
                         'squeeze: {time: 0.1}\nlift: {height: 0.01}\n'
                         'transport: {distance: 0.01}\n')
-    bruise = 60e3
+    # the pressurised 3D shell spreads its contact as the force grows: the resolved peak
+    # pressure stays near 32 kPa up to ~8 N and passes 36 kPa only above ~16 N
+    bruise = 36e3
     overrides = [*COARSE, '--set', f'fruit.bruise_pressure={bruise}']
-    assert main(['window', '--scenario', str(scenario), *overrides, '--tolerance', '0.3',
+    assert main(['window', '--scenario', str(scenario), *overrides, '--tolerance', '0.5',
                  '--json']) == 0
     window = json.loads(capsys.readouterr().out)
     config = configuration.load_config(fruit='apple', overrides={
@@ -358,7 +360,7 @@ def test_grasp_window_in_3d(tmp_path, capsys):
     assert window['mass'] == pytest.approx(mass, rel=1e-12)
     assert window['window'] is True
     assert window['min_force'] >= mass * 9.81 / (2 * mu)
-    assert window['min_force'] <= window['max_force']
+    assert window['max_force'] != 'inf' and window['min_force'] <= window['max_force']
     for trial in window['trials']:
         if trial['outcome'] != 'solver failed':
             assert trial['bruised'] == (trial['peak_pressure'] > bruise), trial
