@@ -441,7 +441,9 @@ def jaw_contact_nodes(cloud: np.ndarray) -> dict[str, np.ndarray]:
     A node with a contact force f touches a jaw when the closing-axis component
     dominates, |f_x| > |f_z| (the table pushes along z; a jaw's friction is below its
     normal force for every friction coefficient below 1), the left jaw when f_x > 0
-    (it pushes the fruit towards +x).
+    (it pushes the fruit towards +x). Made for flat jaws: a V-groove flank tilts its
+    normal in x-z by (90 deg - half the groove angle), and at 45 deg or more its nodes
+    are not counted.
     """
     force = cloud[:, 3:6]
     touching = np.linalg.norm(force, axis=1) > 0
