@@ -344,10 +344,16 @@ class Simulation3D(SimulationFacade):
                     contacts.normal_force[sliding], 0.0))
                 fr_speed.append(np.broadcast_to(tan @ face.velocity, (sliding.size, 2)))
         for node in np.flatnonzero(contacts.secondary >= 0):
+            # the second face's normal gap, set by a move that keeps the first one's gap
+            # (along u = P n, P the node's filter); the filter stays a symmetric
+            # projector, now also orthogonal to n (at a V's edge: onto the edge line)
             face = new_faces[contacts.secondary[node]]
-            nrm = face.normal
-            start[node] += (0.0 - face.gap(start[node][None])[0]) * nrm
-            filters[node] = filters[node] - np.outer(nrm, nrm) @ filters[node]
+            u = filters[node] @ face.normal
+            uu = float(u @ u)
+            if uu < 1e-12:
+                continue
+            start[node] += (0.0 - face.gap(start[node][None])[0]) / uu * u
+            filters[node] = filters[node] - np.outer(u, u) / uu
         if fr_nodes:
             con = StepConstraints(filters, np.concatenate(fr_nodes), np.concatenate(fr_tangents),
                                   np.concatenate(fr_bounds), np.concatenate(fr_speed))
