@@ -579,6 +579,15 @@ def filter_blocks(hdata, block_pos, block_nodes, filters, diag_extra, out):
 
 
 @njit(cache=True)
+def apply_filters(filters, vec, out):
+    """out (3 n,) = S vec: each node's 3-vector times its filter (n, 3, 3)."""
+    for i in range(filters.shape[0]):
+        for a in range(3):
+            out[3 * i + a] = (filters[i, a, 0] * vec[3 * i] + filters[i, a, 1] * vec[3 * i + 1]
+                              + filters[i, a, 2] * vec[3 * i + 2])
+
+
+@njit(cache=True)
 def add_node_blocks(data, diag_block_pos, nodes, blocks):
     """Add (k, 3, 3) blocks at the diagonal node blocks of ``nodes`` (k,) into data."""
     for r in range(nodes.shape[0]):

@@ -428,11 +428,12 @@ class PatternCachingSolver(ImplicitEulerSolver):
             return super().solve(q_n, v_n, dt, q_start, con)
         self.stats['passes'] += 1
         filters = np.ascontiguousarray(con.filters, dtype=float)
-        n_nodes = filters.shape[0]
         s_diag = np.einsum('naa->na', filters).ravel()
 
         def filtered(vec):
-            return np.einsum('nab,nb->na', filters, vec.reshape(n_nodes, 3)).ravel()
+            out = np.empty(self.n)
+            kernels.apply_filters(filters, np.ascontiguousarray(vec), out)
+            return out
 
         q = q_start.copy()
         history: list[float] = []
