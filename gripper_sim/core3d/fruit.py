@@ -27,6 +27,7 @@ from gripper_sim.core3d import meshes
 from gripper_sim.core3d.energies import (EnclosedVolumePressure, HingeBending, Membrane,
                                          NeoHookeanTets, quadratic_tets)
 from gripper_sim.core3d.energies.quadratic_tets import QuadraticNeoHookeanTets
+from gripper_sim.core3d.energies.wrinkling_membrane import WrinklingMembrane
 from gripper_sim.errors import ConfigError
 
 
@@ -41,7 +42,8 @@ class FruitModel3D:
             (n_tet, 10) quadratic ones (``fruit.mesh.order`` 2).
         skin_edges: (n_edge, 2) unique surface edges.
         energies: internal (elastic) energies.
-        membrane, bending: the skin energies, or None.
+        membrane, bending: the skin energies (membrane: ``Membrane`` or, with
+            ``fruit.skin.wrinkling``, ``WrinklingMembrane``), or None.
         pressure: the enclosed-volume pressure (shell model), or None.
         flesh: the neo-Hookean tetrahedra, linear or quadratic (solid model), or None.
         rest_width: m, extent of the rest shape along x.
@@ -56,7 +58,7 @@ class FruitModel3D:
     tetrahedra: np.ndarray
     skin_edges: np.ndarray
     energies: tuple
-    membrane: Membrane | None
+    membrane: Membrane | WrinklingMembrane | None
     bending: HingeBending | None
     pressure: EnclosedVolumePressure | None
     flesh: NeoHookeanTets | None
@@ -235,7 +237,8 @@ def build_fruit3d(config) -> FruitModel3D:
             radius = (3 * rest_volume / (4 * np.pi)) ** (1 / 3)
             stretch = np.sqrt(1 + turgor * radius * (1 - nu_s) / (e_s * t_s))
             skin_rest = positions / stretch
-        membrane = Membrane(triangles, skin_rest, e_s, nu_s, t_s)
+        skin_energy = WrinklingMembrane if config['fruit.skin.wrinkling'] else Membrane
+        membrane = skin_energy(triangles, skin_rest, e_s, nu_s, t_s)
         bending = HingeBending(meshes.hinges(triangles), positions, d_s)
         energies = [membrane, bending] + energies
     if model == 'shell' and pressure is not None:
