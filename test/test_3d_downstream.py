@@ -290,6 +290,7 @@ def test_live_recording_of_the_3d_node_round_trips_through_info_and_replay(
                   'physics.fruit.mesh.subdivisions': 3, 'physics.sim.dt': 0.002,
                   'physics.gripper.initial_gap': 0.066}
     live = tmp_path / 'live3d.mcap'
+    in_node = tmp_path / 'innode3d.mcap'
     node = node_process(parameters, env=env, log_path=tmp_path / 'node.log').start()
     client = SimClient(domain, name='downstream_3d_client')
     try:
@@ -299,10 +300,14 @@ def test_live_recording_of_the_3d_node_round_trips_through_info_and_replay(
         with recorder:
             _wait(lambda: recorder.log().count("recording '") == len(LIVE_TOPICS), 120,
                   'the recorder to subscribe')
+            started, = client.set_parameters(record_path=str(in_node))   # in-node too
+            assert started.successful, started.reason
             for _ in range(3):
                 assert client.step(10).success
             client.spin_until(lambda: client.sim_time() >= 0.06 - 1e-9, 60, 'the steps')
             client.catch_up(['fruit/nodes', 'markers'])
+            stopped, = client.set_parameters(record_path='')
+            assert stopped.successful, stopped.reason
             assert recorder.stop(timeout=60) == 0, recorder.log()
     finally:
         client.close()
@@ -316,6 +321,12 @@ def test_live_recording_of_the_3d_node_round_trips_through_info_and_replay(
         samples = _check_3d_sample(bag)
         recorded = {t: [m.data for m in bag.messages([t])] for t in LIVE_TOPICS}
     assert samples >= 5   # 0.06 s of sim time at the 100 Hz publish rate
+    # the in-node recording holds every physics step (2 ms) and analyses as a 3D run
+    with BagReader(in_node) as bag:
+        assert _check_3d_sample(bag) >= 30
+    analysis = analyze(in_node, tmp_path / 'innode_analysis')
+    assert analysis.summary['dimension'] == 3
+    assert (tmp_path / 'innode_analysis' / 'mesh_snapshots.png').is_file()
 
     replayed = tmp_path / 'replayed3d.mcap'
     recorder = cli('record', '-o', str(replayed), *LIVE_TOPICS, name='record_replay')
