@@ -116,8 +116,9 @@ SCHEMA: dict[str, Key] = {
     'fruit.skin.poisson_ratio': Key(0.3, '', '3D: skin Poisson ratio (membrane and plate '
                                     'bending of the skin shell)', low=0.0, high=0.49),
     'fruit.skin.wrinkling': Key(False, '-', '3D: the skin wrinkles instead of carrying '
-                                'in-plane compression (tension-field membrane, relaxed '
-                                'energy; numpy path, slower)', 'bool'),
+                                'in-plane compression (tension-field membrane: relaxed '
+                                'SVK energy); for skins stiff in tension, E_s t >> p R',
+                                'bool'),
     'fruit.pressure.turgor': Key(0.0, 'Pa', 'shell model: internal pressure at the '
                                  'rest area (gauge)', low=0.0, high=1e7),
     'fruit.pressure.bulk_modulus': Key(None, 'Pa', 'shell model: area bulk modulus K, '

@@ -46,6 +46,30 @@ def test_gradient_and_hessian_match_central_differences(scale):
     assert eig.min() >= -1e-12 * eig.max()
 
 
+@pytest.mark.parametrize('scale', [0.99, 1.0, 1.01])
+def test_numba_kernel_matches_the_numpy_reference(scale):
+    """The fast solver's kernel (``evaluate_into``) gives the reference value, gradient
+    and Hessian for taut, wrinkled and slack triangles."""
+    pytest.importorskip('numba')
+    skin, _, x0 = _sphere_skin()
+    q = (scale * x0 + np.random.default_rng(5).normal(scale=3e-4, size=x0.shape)).ravel()
+    assert np.all(np.bincount(skin.states(q), minlength=3) > 0)
+    n = q.size
+    m = skin.dofs.shape[1]
+    scatter = np.repeat(skin.dofs, m, axis=1) * n + np.tile(skin.dofs, (1, m))
+    grad, data = np.zeros(n), np.zeros(n * n)
+    value, low_rank = skin.evaluate_into(q, grad, data, scatter, True)
+    ref = skin.evaluate(q)
+    assert low_rank == []
+    assert value == pytest.approx(ref.value, rel=1e-12)
+    assert np.max(np.abs(grad - ref.gradient)) <= 1e-12 * np.max(np.abs(ref.gradient))
+    ref_hess = sp.coo_matrix((ref.vals, (ref.rows, ref.cols)), shape=(n, n)).toarray()
+    assert np.max(np.abs(data.reshape(n, n) - ref_hess)) <= 1e-12 * np.max(np.abs(ref_hess))
+    grad_only, untouched = np.zeros(n), np.zeros(n * n)
+    value_only, _ = skin.evaluate_into(q, grad_only, untouched, scatter, False)
+    assert value_only == value and np.array_equal(grad_only, grad) and not np.any(untouched)
+
+
 def test_relaxed_energy_of_stretch_states():
     """Equibiaxial stretch: the ordinary energy; stretch along x with a lateral
     contraction beyond Poisson's: E_s / 2 E_1^2 t A, that of free uniaxial tension (SVK
