@@ -605,7 +605,8 @@ def add_diagonal(data, diag_pos, values):
 
 
 def warm_cache() -> float:
-    """Compile (or load) every kernel by stepping a small 3D shell and solid; seconds.
+    """Compile (or load) every kernel by stepping small 3D shells (plain and wrinkling skin)
+    and solids (linear and quadratic tetrahedra); seconds.
 
     ``python -m gripper_sim.core3d.kernels`` (``make install`` runs it) so that no user
     pays numba's compile time (~30 s of CPU) on a first run.
@@ -616,7 +617,9 @@ def warm_cache() -> float:
     from gripper_sim.core import make_simulation
     start = time.perf_counter()
     for model in (['fruit.model=shell', 'fruit.pressure.turgor=2e4'],
-                  ['fruit.model=solid', 'fruit.mesh.max_tet_volume=1e-6']):
+                  ['fruit.model=shell', 'fruit.pressure.turgor=2e4', 'fruit.skin.wrinkling=true'],
+                  ['fruit.model=solid', 'fruit.mesh.max_tet_volume=1e-6'],
+                  ['fruit.model=solid', 'fruit.mesh.max_tet_volume=1e-6', 'fruit.mesh.order=2']):
         sim = make_simulation(load_config(overrides=['dimension=3', 'fruit.mesh.subdivisions=3']
                                           + model))
         sim.command_force(1.0)
