@@ -281,9 +281,11 @@ def test_pressurised_membrane_plate_force_is_pressure_times_contact_area(capsys)
     """The flat contact patch carries the internal pressure: F = p pi a^2 (the 3D form of
     the 2D ring's F = p c) when the skin's stiffness is small against its tension
     (E_s t / (p R) = 0.17); a 10x stiffer skin (1.7) carries part of the load itself.
-    The cap-cut estimate F ~ 2 pi p R delta (a^2 = 2 R delta) is not reached: the
-    membrane ovalises, the contact area is ~1/4 of the cap cut (measured F / (2 pi p R
-    delta) ~ 0.2 for both skins)."""
+    Such soft skins do not reach the cap-cut law F ~ 2 pi p R delta (a^2 = 2 R delta):
+    the membrane ovalises, the contact area is ~1/4 of the cap cut (measured F / (2 pi
+    p R delta) ~ 0.2 for both). The law needs a skin stiff in tension that wrinkles
+    under compression: ``test_3d_wrinkling.py::
+    test_wrinkling_shell_on_a_plate_follows_the_cap_cut_law``."""
     soft = _pressed_membrane(1e6)
     stiff = _pressed_membrane(1e7, ratios=(0.05,))
     with capsys.disabled():
