@@ -79,7 +79,8 @@ def test_malformed_config_file_is_reported(tmp_path):
 def test_force_grasp_closes_at_full_speed_while_one_jaw_pushes_the_fruit():
     """A grip of 0.15 N on the strawberry resting on the table: the first jaw to touch
     pushes the fruit along the table (a force of about mu m g that is no grip). The
-    jaws keep closing at the commanded speed until both touch, and the closing ends
+    jaws keep closing at the commanded speed until the free jaw lands on the fruit
+    (``GripperKinematics.advance``: at most its clearance per step), and the closing ends
     only with both jaws at the force (it used to end on the first jaw's impact, or
     crawl at (F - F_push) / (k tau) and time out)."""
     from gripper_sim.configuration import load_config
@@ -104,7 +105,11 @@ def test_force_grasp_closes_at_full_speed_while_one_jaw_pushes_the_fruit():
     summary = run_grasp(sim, sequence, on_step=watch, time_limit=5.0)
     assert summary['outcome'] == 'held'
     assert len(one_jaw_rates) > 10                       # the push did happen
-    assert one_jaw_rates == pytest.approx([-speed] * len(one_jaw_rates), rel=1e-12)
+    # full speed until the free jaw is within one step of the fruit, where it lands on it
+    # instead of driving through its surface
+    full = [rate for rate in one_jaw_rates if rate == pytest.approx(-speed, rel=1e-12)]
+    assert len(full) >= len(one_jaw_rates) - 2
+    assert all(-speed * (1 + 1e-9) <= rate < 0 for rate in one_jaw_rates), one_jaw_rates[-5:]
     both, force, t_reached = transitions[0]
     assert both and force >= 0.97 * target
     # closing took about the time to close the free gap at full speed

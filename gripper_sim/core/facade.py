@@ -156,6 +156,29 @@ class SimulationFacade:
             self.step()
         return self._last
 
+    def _advance_gripper(self, dt: float) -> GripperState:
+        """The gripper state after ``dt`` (s), from the last step's jaw forces."""
+        left_n, right_n = self._jaw_force
+        return self.kinematics.advance(self._grip, dt, 0.5 * (left_n + right_n),
+                                       left_n > 0 and right_n > 0, self._jaw_clearance())
+
+    def _jaw_clearance(self) -> float:
+        """m, the distance along x from the fruit to the nearest jaw face (pad surface)
+        that does not touch it; inf when both jaws touch."""
+        left_n, right_n = self._jaw_force
+        if left_n > 0 and right_n > 0:
+            return math.inf
+        grip = self._grip
+        inset = (float(self.config['gripper.finger.pad.thickness'])
+                 if self.config.get('gripper.finger.pad.enabled', False) else 0.0)
+        x = self.q[:, 0]
+        gaps = []
+        if not left_n > 0:
+            gaps.append(float(x.min()) - (grip.x - 0.5 * grip.gap) - inset)
+        if not right_n > 0:
+            gaps.append((grip.x + 0.5 * grip.gap) - float(x.max()) - inset)
+        return min(gaps)
+
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:
         """Step ``dt``, halving it (recursively) while Newton fails; (iterations, substeps)."""
         try:

@@ -250,10 +250,8 @@ class FastPath:
         timing = self.timing
         if timing:
             t0 = time.perf_counter()
-        left_n, right_n = sim._jaw_force
         grip = sim._grip
-        grip_new = sim.kinematics.advance(grip, dt, 0.5 * (left_n + right_n),
-                                          left_n > 0 and right_n > 0)
+        grip_new = sim._advance_gripper(dt)
         face_par, face_dyn = self._face_arrays()
         config = sim.config
         fpar = self.fpar

@@ -213,9 +213,7 @@ class Simulation(SimulationFacade):
             return self._fast.substep(dt)
         if self._pad is None:
             return self._substep_reference(dt)
-        left_n, right_n = self._jaw_force
-        grip_new = self.kinematics.advance(self._grip, dt, 0.5 * (left_n + right_n),
-                                           left_n > 0 and right_n > 0)
+        grip_new = self._advance_gripper(dt)
         self._pad.begin_step(self.q, self._pad_faces(self._grip), self._pad_faces(grip_new), dt)
         iterations = self._substep_reference(dt)
         self._pad.finish_step(self.q.ravel())
@@ -225,10 +223,7 @@ class Simulation(SimulationFacade):
         return iterations
 
     def _substep_reference(self, dt: float) -> int:
-        left_n, right_n = self._jaw_force
-        grip_force = 0.5 * (left_n + right_n)
-        both = left_n > 0 and right_n > 0
-        grip_new = self.kinematics.advance(self._grip, dt, grip_force, both)
+        grip_new = self._advance_gripper(dt)
         old_faces, new_faces = self._faces(self._grip), self._faces(grip_new)
         x_n, v_n = self.q, self.v
         q_n = x_n.ravel()

@@ -242,9 +242,7 @@ class Simulation3D(SimulationFacade):
     def _substep(self, dt: float) -> int:
         if self._pad is None:
             return self._substep_hard(dt)
-        left_n, right_n = self._jaw_force
-        grip_new = self.kinematics.advance(self._grip, dt, 0.5 * (left_n + right_n),
-                                           left_n > 0 and right_n > 0)
+        grip_new = self._advance_gripper(dt)
         self._pad.begin_step(self.q, self._pad_faces(self._grip), self._pad_faces(grip_new), dt)
         iterations = self._substep_hard(dt)
         self._pad.finish_step(self.q.ravel())
@@ -255,10 +253,7 @@ class Simulation3D(SimulationFacade):
 
     def _substep_hard(self, dt: float) -> int:
         """One step with the hard contacts (the pads, if any, set up by the caller)."""
-        left_n, right_n = self._jaw_force
-        grip_force = 0.5 * (left_n + right_n)
-        both = left_n > 0 and right_n > 0
-        grip_new = self.kinematics.advance(self._grip, dt, grip_force, both)
+        grip_new = self._advance_gripper(dt)
         old_faces, new_faces = self._faces(self._grip), self._faces(grip_new)
         x_n, v_n = self.q, self.v
         q_n = x_n.ravel()
