@@ -163,20 +163,22 @@ class SimulationFacade:
                                        left_n > 0 and right_n > 0, self._jaw_clearance())
 
     def _jaw_clearance(self) -> float:
-        """m, the distance along x from the fruit to the nearest jaw face (pad surface)
-        that does not touch it; inf when both jaws touch."""
+        """m, the distance along x from the fruit to the nearest flat jaw face that does
+        not touch it; inf when both jaws touch, and for arc and V-groove fingers and soft
+        pads (the fruit enters their recess or layer: no plane gives their clearance)."""
         left_n, right_n = self._jaw_force
         if left_n > 0 and right_n > 0:
             return math.inf
+        if (self.config.get('gripper.finger.type', 'flat') != 'flat'
+                or self.config.get('gripper.finger.pad.enabled', False)):
+            return math.inf
         grip = self._grip
-        inset = (float(self.config['gripper.finger.pad.thickness'])
-                 if self.config.get('gripper.finger.pad.enabled', False) else 0.0)
         x = self.q[:, 0]
         gaps = []
         if not left_n > 0:
-            gaps.append(float(x.min()) - (grip.x - 0.5 * grip.gap) - inset)
+            gaps.append(float(x.min()) - (grip.x - 0.5 * grip.gap))
         if not right_n > 0:
-            gaps.append((grip.x + 0.5 * grip.gap) - float(x.max()) - inset)
+            gaps.append((grip.x + 0.5 * grip.gap) - float(x.max()))
         return min(gaps)
 
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:
