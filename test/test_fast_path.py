@@ -227,7 +227,7 @@ def test_step_halving_and_convergence_failure_match_the_reference_path():
                                     'gripper.initial_gap=0.0645', 'gripper.close_speed=0.1'])
     sims = Simulation(config, fast=True), Simulation(config, fast=False)
     for sim in sims:
-        sim.command_force(5.0)
+        sim.command_gap(0.03)  # position mode: the jaws hit the fruit at full speed
     halved = 0
     for step in range(200):
         outcomes = []
