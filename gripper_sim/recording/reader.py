@@ -333,7 +333,7 @@ class BagReader:
         wanted = self.check_topics(topics)
         types = {c.id: (self._schemas[c.schema_id].name if c.schema_id in self._schemas
                         else '') for c in self._channels.values()}
-        iterator = reader.iter_messages(topics=wanted, start_time=start, end_time=end,
+        iterator = reader.iter_messages(topics=wanted, starting_at=start, ending_before=end,
                                         log_time_order=True)
         while True:
             try:
