@@ -20,6 +20,45 @@ from gripper_sim.core3d.energies.common import (KernelValue, element_dofs3, empt
                                                 fast_kernels)
 
 
+def rest_tetrahedra(tetrahedra, rest_positions):
+    """Rest frames of tetrahedra whose first four nodes are the corners.
+
+    Args:
+        tetrahedra: (n_tet, k) node indices, corners positively oriented at rest.
+        rest_positions: (n_nodes, 3) m.
+
+    Returns:
+        (tet (n_tet, k) int64, D_m (n_tet, 3, 3) m with columns X_k - X_0 (k = 1..3),
+        rest volumes (n_tet,) m^3). Raises ValueError for an inverted or flat one.
+    """
+    tet = np.asarray(tetrahedra, dtype=np.int64)
+    x0 = np.asarray(rest_positions, dtype=float)
+    dm = np.stack([x0[tet[:, k]] - x0[tet[:, 0]] for k in (1, 2, 3)], axis=2)
+    det = np.linalg.det(dm)
+    if np.any(det <= 0):
+        raise ValueError('tetrahedra must be positively oriented with positive volume')
+    return tet, dm, det / 6.0
+
+
+def neohookean_response(f: np.ndarray, mu: float, lam: float):
+    """Density and stress of the module docstring at deformation gradients f (..., 3, 3).
+
+    Returns:
+        (psi (...) J/m^3, ln J (...), F^-1 (..., 3, 3), P (..., 3, 3) Pa), or None if
+        J <= 0 anywhere.
+    """
+    j = np.linalg.det(f)
+    if np.any(j <= 0):
+        return None
+    lnj = np.log(j)
+    psi = 0.5 * mu * (np.einsum('...ij,...ij->...', f, f) - 3) - mu * lnj \
+        + 0.5 * lam * lnj ** 2
+    finv = np.linalg.inv(f)
+    finv_t = np.swapaxes(finv, -1, -2)
+    piola = mu * (f - finv_t) + (lam * lnj)[..., None, None] * finv_t
+    return psi, lnj, finv, piola
+
+
 class NeoHookeanTets(KernelValue, Energy):
     """Args:
         tetrahedra: (n_tet, 4) node indices, positively oriented at rest.
@@ -29,14 +68,8 @@ class NeoHookeanTets(KernelValue, Energy):
 
     def __init__(self, tetrahedra, rest_positions, youngs_modulus: float,
                  poisson_ratio: float):
-        self.tet = np.asarray(tetrahedra, dtype=np.int64)
-        x0 = np.asarray(rest_positions, dtype=float)
-        dm = np.stack([x0[self.tet[:, k]] - x0[self.tet[:, 0]] for k in (1, 2, 3)], axis=2)
-        det = np.linalg.det(dm)
-        if np.any(det <= 0):
-            raise ValueError('tetrahedra must be positively oriented with positive volume')
+        self.tet, dm, self.volume = rest_tetrahedra(tetrahedra, rest_positions)
         self.dm_inv = np.linalg.inv(dm)
-        self.volume = det / 6.0
         self.mu, self.lam = lame_parameters(youngs_modulus, poisson_ratio)
         self.dofs = element_dofs3(self.tet)
         # dF_ij / dx_(k, i) = dN_k/dX_j, dN/dX = [-1 -1 -1; I] D_m^-1   (n, 4, 3)
@@ -70,17 +103,12 @@ class NeoHookeanTets(KernelValue, Energy):
         return np.sqrt(1.5 * np.einsum('eij,eij->e', dev, dev))
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        f = self.deformation_gradients(q)
-        j = np.linalg.det(f)
-        if np.any(j <= 0):
+        response = neohookean_response(self.deformation_gradients(q), self.mu, self.lam)
+        if response is None:
             return Evaluation(np.inf, np.full(q.size, np.nan), *empty_triplets())
-        lnj = np.log(j)
+        psi, lnj, finv, piola = response
         mu, lam = self.mu, self.lam
-        psi = 0.5 * mu * (np.einsum('eij,eij->e', f, f) - 3) - mu * lnj + 0.5 * lam * lnj ** 2
         value = float(np.sum(psi * self.volume))
-        finv = np.linalg.inv(f)
-        finv_t = np.swapaxes(finv, 1, 2)
-        piola = mu * (f - finv_t) + (lam * lnj)[:, None, None] * finv_t
         local = self.volume[:, None, None] * np.einsum('eij,ekj->eki', piola, self.grad_n)
         n = len(self.tet)
         grad = scatter_gradient(q.size, self.dofs, local.reshape(n, 12))

@@ -18,6 +18,7 @@ from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets
                                             scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
 from gripper_sim.core3d.energies.common import KernelValue, element_dofs3, empty_triplets
+from gripper_sim.core3d.energies.neohookean import neohookean_response, rest_tetrahedra
 
 _EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
 _A, _B = 0.5854101966249685, 0.1381966011250105
@@ -54,14 +55,7 @@ class QuadraticNeoHookeanTets(KernelValue, Energy):
 
     def __init__(self, tetrahedra, rest_positions, youngs_modulus: float,
                  poisson_ratio: float):
-        self.tet = np.asarray(tetrahedra, dtype=np.int64)
-        x0 = np.asarray(rest_positions, dtype=float)
-        c = self.tet[:, :4]
-        dm = np.stack([x0[c[:, k]] - x0[c[:, 0]] for k in (1, 2, 3)], axis=2)
-        det = np.linalg.det(dm)
-        if np.any(det <= 0):
-            raise ValueError('tetrahedra must be positively oriented with positive volume')
-        self.volume = det / 6.0
+        self.tet, dm, self.volume = rest_tetrahedra(tetrahedra, rest_positions)
         self.mu, self.lam = lame_parameters(youngs_modulus, poisson_ratio)
         self.dofs = element_dofs3(self.tet)
         # dL/dX (n, 4, 3): rows of [-1 -1 -1; I] D_m^-1
@@ -89,18 +83,12 @@ class QuadraticNeoHookeanTets(KernelValue, Energy):
         return np.sqrt(1.5 * np.einsum('eij,eij->e', dev, dev)).reshape(-1, 4).max(axis=1)
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        f = self.deformation_gradients(q)
-        j = np.linalg.det(f)
-        if np.any(j <= 0):
+        response = neohookean_response(self.deformation_gradients(q), self.mu, self.lam)
+        if response is None:
             return Evaluation(np.inf, np.full(q.size, np.nan), *empty_triplets())
-        lnj = np.log(j)
+        psi, lnj, finv, piola = response
         mu, lam, w = self.mu, self.lam, self.weight
-        psi = 0.5 * mu * (np.einsum('egij,egij->eg', f, f) - 3) - mu * lnj \
-            + 0.5 * lam * lnj ** 2
         value = float(np.sum(psi * w))
-        finv = np.linalg.inv(f)
-        finv_t = np.swapaxes(finv, 2, 3)
-        piola = mu * (f - finv_t) + (lam * lnj)[..., None, None] * finv_t
         local = np.einsum('eg,egij,egaj->eai', w, piola, self.grad_n)
         n = len(self.tet)
         grad = scatter_gradient(q.size, self.dofs, local.reshape(n, 30))

@@ -27,9 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
-                                            scatter_gradient)
-from gripper_sim.core3d.energies.common import KernelValue, empty_triplets
+from gripper_sim.core.energies.base import Energy, Evaluation
+from gripper_sim.core3d.energies.common import KernelValue
 from gripper_sim.core3d.energies.membrane import Membrane
 
 
@@ -42,7 +41,7 @@ class WrinklingMembrane(KernelValue, Energy):
         youngs_modulus: E_s, Pa.  poisson_ratio: nu (-).  thickness: t, m.
 
     ``evaluate`` is the numpy reference; ``evaluate_into`` the numba kernel of the 3D
-    solver's fast path (``_kernel`` below, compiled on first use and cached).
+    solver's fast path (``kernels.wrinkling_membrane``).
     """
 
     def __init__(self, triangles, rest_positions, youngs_modulus: float,
@@ -120,139 +119,18 @@ class WrinklingMembrane(KernelValue, Energy):
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         f = self.deformation_gradients(q)
         psi, s, c = self._stress(f, hessian)
-        value = float(np.sum(self.weight * psi))
-        p = np.einsum('eai,eij->eaj', f, s)
-        local = self.weight[:, None, None] * np.einsum('eaj,ekj->eka', p, self.grad_n)
-        grad = scatter_gradient(q.size, self.dofs, local.reshape(len(self.tri), 9))
-        if not hessian:
-            return Evaluation(value, grad, *empty_triplets())
-        cmat = (np.einsum('ab,eij->eaibj', np.eye(3), s)
-                + np.einsum('eak,ekilj,ebl->eaibj', f, c, f, optimize=True))
-        h = np.einsum('e,eki,eaibj,elj->ekalb', self.weight, self.grad_n, cmat, self.grad_n,
-                      optimize=True)
-        return Evaluation(value, grad, *hessian_triplets(self.dofs,
-                                                         h.reshape(len(self.tri), 9, 9)))
+        cmat = None
+        if hessian:
+            cmat = (np.einsum('ab,eij->eaibj', np.eye(3), s)
+                    + np.einsum('eak,ekilj,ebl->eaibj', f, c, f, optimize=True))
+        return self._geometry.assemble(q.size, f, psi, s, cmat)
 
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
-        """The numba kernel of ``evaluate``: adds the gradient (N) into ``grad`` and the
-        Hessian (N/m) into the CSC values ``data`` at ``scatter`` (n_tri, 81); returns
-        (value in J, low-rank terms)."""
-        return _kernel()(q.reshape(-1, 3), self.tri, self.grad_n, self.weight,
-                         float(self.mu), float(self.lam), self.youngs_modulus, self.nu,
-                         grad, data, scatter, hessian), []
-
-
-_COMPILED = []
-
-
-def _kernel():
-    """The compiled ``_wrinkling_kernel`` (numba imported only here)."""
-    if not _COMPILED:
-        from numba import njit
-        _COMPILED.append(njit(cache=True)(_wrinkling_kernel))
-    return _COMPILED[0]
-
-
-def _wrinkling_kernel(x, tri, grad_n, weight, mu, lam, young, nu, grad, data, scatter,
-                      hessian):
-    """Loop form of ``WrinklingMembrane.evaluate`` for numba, in the conventions of
-    ``gripper_sim.core3d.kernels`` (x (n, 3) m, scatter (n_tri, 81) positions in the CSC
-    ``data``, gradient and Hessian added to). Returns the energy (J)."""
-    value = 0.0
-    f = np.empty((3, 2))
-    s = np.empty((2, 2))
-    p = np.empty((3, 2))
-    tan = np.zeros((2, 2, 2, 2))
-    big_n = np.empty((2, 2))
-    big_m = np.empty((2, 2))
-    cm = np.empty((3, 2, 3, 2))
-    for t in range(tri.shape[0]):
-        gn = grad_n[t]
-        for a in range(3):
-            for j in range(2):
-                acc = 0.0
-                for k in range(3):
-                    acc += x[tri[t, k], a] * gn[k, j]
-                f[a, j] = acc
-        c00 = f[0, 0] * f[0, 0] + f[1, 0] * f[1, 0] + f[2, 0] * f[2, 0]
-        c01 = f[0, 0] * f[0, 1] + f[1, 0] * f[1, 1] + f[2, 0] * f[2, 1]
-        c11 = f[0, 1] * f[0, 1] + f[1, 1] * f[1, 1] + f[2, 1] * f[2, 1]
-        e00, e01, e11 = 0.5 * (c00 - 1.0), 0.5 * c01, 0.5 * (c11 - 1.0)
-        mean = 0.5 * (e00 + e11)
-        radius = np.hypot(0.5 * (e00 - e11), e01)
-        e1, e2 = mean + radius, mean - radius
-        taut = e2 >= -nu * e1
-        if not taut and e1 <= 0.0:
-            continue  # slack
-        w = weight[t]
-        if taut:
-            tr = e00 + e11
-            value += w * (0.5 * lam * tr * tr + mu * (e00 * e00 + 2.0 * e01 * e01
-                                                      + e11 * e11))
-            s[0, 0] = 2.0 * mu * e00 + lam * tr
-            s[0, 1] = 2.0 * mu * e01
-            s[1, 0] = s[0, 1]
-            s[1, 1] = 2.0 * mu * e11 + lam * tr
-        else:
-            phi = 0.5 * np.arctan2(2.0 * e01, e00 - e11)
-            n1x, n1y = np.cos(phi), np.sin(phi)
-            n2x, n2y = -n1y, n1x
-            big_n[0, 0], big_n[0, 1], big_n[1, 1] = n1x * n1x, n1x * n1y, n1y * n1y
-            big_n[1, 0] = big_n[0, 1]
-            big_m[0, 0], big_m[1, 1] = 2.0 * n1x * n2x, 2.0 * n1y * n2y
-            big_m[0, 1] = n1x * n2y + n2x * n1y
-            big_m[1, 0] = big_m[0, 1]
-            value += w * 0.5 * young * e1 * e1
-            for i in range(2):
-                for j in range(2):
-                    s[i, j] = young * e1 * big_n[i, j]
-        for a in range(3):
-            for j in range(2):
-                p[a, j] = f[a, 0] * s[0, j] + f[a, 1] * s[1, j]
-        for k in range(3):
-            dof = 3 * tri[t, k]
-            for a in range(3):
-                grad[dof + a] += w * (p[a, 0] * gn[k, 0] + p[a, 1] * gn[k, 1])
-        if not hessian:
-            continue
-        # tangent C_kilj = dS_ki / dE_lj of the element's state
-        rotation = 0.0 if taut else young * e1 / (2.0 * (e1 - e2))
-        for k in range(2):
-            for i in range(2):
-                for ll in range(2):
-                    for j in range(2):
-                        if taut:
-                            v = 0.0
-                            if k == i and ll == j:
-                                v += lam
-                            if k == ll and i == j:
-                                v += mu
-                            if k == j and i == ll:
-                                v += mu
-                        else:
-                            v = (young * big_n[k, i] * big_n[ll, j]
-                                 + rotation * big_m[k, i] * big_m[ll, j])
-                        tan[k, i, ll, j] = v
-        # dP_ai / dF_bj = d_ab S_ij + F_ak C_kilj F_bl
-        for a in range(3):
-            for i in range(2):
-                for b in range(3):
-                    for j in range(2):
-                        v = s[i, j] if a == b else 0.0
-                        for k in range(2):
-                            for ll in range(2):
-                                v += f[a, k] * tan[k, i, ll, j] * f[b, ll]
-                        cm[a, i, b, j] = v
-        sc = scatter[t]
-        for k in range(3):
-            for a in range(3):
-                row = (3 * k + a) * 9
-                for ll in range(3):
-                    for b in range(3):
-                        acc = 0.0
-                        for i in range(2):
-                            for j in range(2):
-                                acc += gn[k, i] * cm[a, i, b, j] * gn[ll, j]
-                        data[sc[row + 3 * ll + b]] += w * acc
-    return value
+        """The numba kernel ``kernels.wrinkling_membrane`` of ``evaluate`` (see
+        ``Membrane.evaluate_into``)."""
+        from gripper_sim.core3d import kernels
+        return kernels.wrinkling_membrane(q.reshape(-1, 3), self.tri, self.grad_n,
+                                          self.weight, float(self.mu), float(self.lam),
+                                          self.youngs_modulus, self.nu, grad, data, scatter,
+                                          hessian), []
