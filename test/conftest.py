@@ -10,6 +10,7 @@ using, so parallel test runs don't see each other. Subprocesses inherit it all; 
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import subprocess
@@ -119,3 +120,51 @@ def ros_env() -> dict[str, str]:
     for key in UNSET_KEYS:
         env.pop(key, None)
     return env
+
+
+@contextlib.contextmanager
+def _node_and_client(parameters: dict, domain_id: int, log_path, client_name: str | None = None,
+                     cwd=None, timeout: float = 120.0):
+    """The gripper_sim node in a subprocess and a ``SimClient`` that has seen it ready.
+
+    Args:
+        parameters: the node's ``-p name:=value`` parameters.
+        domain_id: ROS domain of the node and the client.
+        log_path: the node's log file.
+        client_name: the client's node name (default ``SimClient``'s).
+        cwd: working directory the node starts in (default this process's).
+        timeout: seconds for the node to come up.
+
+    Yields:
+        (process, client). On exit the client closes and the node stops; it must have
+        exited with code 0 and no traceback in its log.
+    """
+    from gripper_sim.ros.process import node_process, ros_environment
+    from gripper_sim.ros.testing import SimClient
+    process = node_process(parameters, env=ros_environment(domain_id), log_path=log_path)
+    here = os.getcwd()
+    if cwd is not None:
+        os.chdir(cwd)   # the child inherits it
+    try:
+        process.start()
+    finally:
+        os.chdir(here)
+    client = (SimClient(domain_id) if client_name is None
+              else SimClient(domain_id, name=client_name))
+    try:
+        client.wait_ready(timeout=timeout)
+        yield process, client
+    finally:
+        client.close()
+        code = process.stop()
+        text = process.log()
+        assert 'Traceback' not in text, text
+        assert code == 0, text
+
+
+@pytest.fixture(scope='session')
+def node_and_client():
+    """``with node_and_client(parameters, domain_id, log_path, ...) as (process, client)``:
+    a node subprocess and a ready client for module-scoped fixtures (see
+    ``_node_and_client`` for the arguments and the checks on exit)."""
+    return _node_and_client

@@ -8,7 +8,6 @@ metadata record, and that configuration run offline reproduces the recorded stat
 """
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
@@ -41,31 +40,17 @@ TIMEOUT = 120.0
 
 
 @pytest.fixture(scope='module')
-def running(tmp_path_factory):
+def running(tmp_path_factory, node_and_client):
     """The node, started in its own working directory (where timestamped files go)."""
     workdir = tmp_path_factory.mktemp('node_cwd')
     parameters = {'real_time_factor': 0.0,
                   **{f'physics.{key}': value for key, value in PHYSICS.items()}}
-    process = node_process(parameters, env=ros_environment(DOMAIN),
-                           log_path=workdir.parent / 'innode_node.log')
-    here = os.getcwd()
-    os.chdir(workdir)   # the child inherits it
-    try:
-        process.start()
-    finally:
-        os.chdir(here)
-    client = SimClient(DOMAIN, name='innode_recording_client')
-    record = client.node.create_client(SetBool, '/gripper_sim/record')
-    get_params = client.node.create_client(GetParameters, '/gripper_sim/get_parameters')
-    try:
-        client.wait_ready(timeout=TIMEOUT)
+    with node_and_client(parameters, DOMAIN, workdir.parent / 'innode_node.log',
+                         client_name='innode_recording_client', cwd=workdir,
+                         timeout=TIMEOUT) as (process, client):
+        record = client.node.create_client(SetBool, '/gripper_sim/record')
+        get_params = client.node.create_client(GetParameters, '/gripper_sim/get_parameters')
         yield process, client, record, get_params, workdir
-    finally:
-        client.close()
-        code = process.stop()
-        text = process.log()
-        assert 'Traceback' not in text, text
-        assert code == 0, text
 
 
 @pytest.fixture

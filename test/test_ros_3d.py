@@ -7,8 +7,7 @@ from action_msgs.msg import GoalStatus
 from gripper_sim_interfaces.action import Grasp, GripperCommand
 from gripper_sim_interfaces.msg import GripperCommand as GripperCommandMsg
 from gripper_sim.ros import messages
-from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
-from gripper_sim.ros.testing import SimClient
+from gripper_sim.ros.process import pick_domain_id
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -21,20 +20,11 @@ PARAMETERS = {'real_time_factor': 0.0, 'physics.dimension': 3,
 
 
 @pytest.fixture(scope='module')
-def client(tmp_path_factory):
+def client(tmp_path_factory, node_and_client):
     log = tmp_path_factory.mktemp('node3d') / 'node.log'
-    process = node_process(PARAMETERS, env=ros_environment(DOMAIN), log_path=log).start()
-    client = SimClient(DOMAIN, name='test_3d_client')
-    try:
-        client.wait_ready(timeout=120)
+    with node_and_client(PARAMETERS, DOMAIN, log, client_name='test_3d_client') as (_, client):
         client.restart(run=False)
         yield client
-    finally:
-        client.close()
-        code = process.stop()
-        text = process.log()
-        assert 'Traceback' not in text, text
-        assert code == 0, text
 
 
 def mesh_of(markers):

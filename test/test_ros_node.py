@@ -30,20 +30,10 @@ EXPECTED_TYPES = {
 
 
 @pytest.fixture(scope='module')
-def running(tmp_path_factory):
+def running(tmp_path_factory, node_and_client):
     log = tmp_path_factory.mktemp('node') / 'node.log'
-    process = node_process({'real_time_factor': 0.0}, env=ros_environment(DOMAIN),
-                           log_path=log).start()
-    client = SimClient(DOMAIN)
-    try:
-        client.wait_ready(timeout=120)
-        yield process, client
-    finally:
-        client.close()
-        code = process.stop()
-        text = process.log()
-        assert 'Traceback' not in text, text
-        assert code == 0, text
+    with node_and_client({'real_time_factor': 0.0}, DOMAIN, log) as process_and_client:
+        yield process_and_client
 
 
 @pytest.fixture
