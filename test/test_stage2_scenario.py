@@ -34,6 +34,25 @@ def test_default_scenario_places_the_apple_at_the_target():
     assert data['force'][-1] == 0.0
 
 
+def test_slip_distance_stays_at_its_held_value_after_the_release():
+    """Slip is motion relative to the jaws while they hold the fruit: once the jaws have
+    opened and retreated upwards it keeps its last held value instead of growing with
+    the retreat (it read 20 mm after a clean placement)."""
+    sim = Simulation(scenario_config(load_scenario('pick_and_place')))
+    results = []
+    summary = run_scenario(sim, load_scenario('pick_and_place'),
+                           on_step=lambda result, phase: results.append(result))
+    assert summary['outcome'] == 'placed'
+    held = [r for r in results if r.in_contact_with('left_jaw') or r.in_contact_with('right_jaw')]
+    free_after = results[results.index(held[-1]) + 1:]
+    assert len(free_after) > 10                          # the jaws were clear for a while
+    assert {r.slip_distance for r in free_after} == {held[-1].slip_distance}
+    lift_change = max(r.lift for r in free_after) - min(r.lift for r in free_after)
+    assert lift_change > 5e-3                            # the retreat did move the jaws up
+    # (the ~1 mm left is the jaws sliding down the fruit as the table takes it)
+    assert held[-1].slip_distance < 0.5 * lift_change
+
+
 def test_too_weak_a_grip_drops_the_fruit_and_says_when():
     scenario = load_scenario('pick_and_place')
     config = scenario_config(scenario, fruit='apple')

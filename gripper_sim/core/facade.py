@@ -91,6 +91,20 @@ class SimulationFacade:
     def mark_slip_reference(self) -> None:
         """Measure slip from the fruit's present position relative to the jaws."""
         self._slip_reference = float(self._last.centroid[-1] - self._grip.lift)
+        self._held_slip = 0.0
+
+    def _slip_distance(self, relative_z: float, both: bool, touching: bool) -> float:
+        """m, the fruit's vertical motion relative to the jaws since both jaws first held
+        it (or since ``mark_slip_reference``), from ``relative_z`` (m, centroid height over
+        the jaw centre). While no jaw touches the fruit (released, or dropped) it stays at
+        its last value: the fruit is then no longer moving in the jaws."""
+        if both and self._slip_reference is None:
+            self._slip_reference = relative_z
+        if self._slip_reference is None:
+            return 0.0
+        if touching:
+            self._held_slip = abs(self._slip_reference - relative_z)
+        return self._held_slip
 
     def set_parameter(self, key: str, value: Any) -> None:
         """Change a dynamic configuration key while running (see DYNAMIC_KEYS)."""

@@ -329,10 +329,7 @@ class FastPath:
          kinetic, elastic, gravitational, width, max_strain, contact_length,
          peak) = values
         both = any_left > 0 and any_right > 0
-        relative_z = cz - grip.lift
-        if both and sim._slip_reference is None:
-            sim._slip_reference = relative_z
-        slip = 0.0 if sim._slip_reference is None else abs(sim._slip_reference - relative_z)
+        slip = sim._slip_distance(cz - grip.lift, both, any_left > 0 or any_right > 0)
         slipping = bool((any_left > 0 or any_right > 0) and abs(cvz - grip.lift_rate) > 1e-3)
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0

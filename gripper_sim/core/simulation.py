@@ -97,6 +97,7 @@ class Simulation(SimulationFacade):
         self._time = 0.0
         self._step = 0
         self._slip_reference: float | None = None
+        self._held_slip = 0.0
         self._faces_template = self._make_faces()
         self._grip = GripperState(
             gap=self.initial_gap, gap_rate=0.0, lift=self.initial_lift, lift_rate=0.0,
@@ -461,12 +462,10 @@ class Simulation(SimulationFacade):
         pad_length = float(np.sum(trib[on_pad[self.fruit.surface]]))
         shape = deformation(self.fruit, x, normal, jaw,
                             result.deformation.contact_length + pad_length)
-        both = bool(np.any(np.isin(obstacle, self._jaw_faces(LEFT)))
-                    and np.any(np.isin(obstacle, self._jaw_faces(RIGHT))))
-        relative_z = float(result.centroid[1] - grip.lift)
-        if both and self._slip_reference is None:
-            self._slip_reference = relative_z
-        slip = 0.0 if self._slip_reference is None else abs(self._slip_reference - relative_z)
+        on_left = bool(np.any(np.isin(obstacle, self._jaw_faces(LEFT))))
+        on_right = bool(np.any(np.isin(obstacle, self._jaw_faces(RIGHT))))
+        slip = self._slip_distance(float(result.centroid[1] - grip.lift),
+                                   on_left and on_right, on_left or on_right)
         return replace(result, contact_forces=forces, contact_obstacle=obstacle,
                        left_wrench=wrenches[LEFT], right_wrench=wrenches[RIGHT],
                        grip_force=grip_force, deformation=shape, slip_distance=slip)
@@ -523,10 +522,8 @@ class Simulation(SimulationFacade):
         centroid = masses @ x / masses.sum()
         centroid_velocity = masses @ v / masses.sum()
         both = bool(np.any(on_side[LEFT]) and np.any(on_side[RIGHT]))
-        relative_z = float(centroid[1] - grip.lift)
-        if both and self._slip_reference is None:
-            self._slip_reference = relative_z
-        slip = 0.0 if self._slip_reference is None else abs(self._slip_reference - relative_z)
+        slip = self._slip_distance(float(centroid[1] - grip.lift), both,
+                                   bool(np.any(jaw_contact)))
         slipping = bool(np.any(jaw_contact) and
                         abs(centroid_velocity[1] - grip.lift_rate) > 1e-3)
         elastic = sum(e.value(x.ravel()) for e in fruit.energies)

@@ -156,6 +156,7 @@ class Simulation3D(SimulationFacade):
         self._time = 0.0
         self._step = 0
         self._slip_reference: float | None = None
+        self._held_slip = 0.0
         self._faces_template = self._make_faces()
         self._grip = GripperState(
             gap=self.initial_gap, gap_rate=0.0, lift=self.initial_lift, lift_rate=0.0,
@@ -500,11 +501,9 @@ class Simulation3D(SimulationFacade):
         centroid_velocity = masses @ v / masses.sum()
         on_left, on_right = sides
         both = bool(np.any(on_left) and np.any(on_right))
-        relative_z = float(centroid[2] - grip.lift)
-        if both and self._slip_reference is None:
-            self._slip_reference = relative_z
-        slip = 0.0 if self._slip_reference is None else abs(self._slip_reference - relative_z)
         jaw_contact = on_left | on_right
+        slip = self._slip_distance(float(centroid[2] - grip.lift), both,
+                                   bool(np.any(jaw_contact)))
         slipping = bool(np.any(jaw_contact) and
                         abs(centroid_velocity[2] - grip.lift_rate) > 1e-3)
         elastic = sum(e.value(x.ravel()) for e in fruit.energies)
