@@ -13,8 +13,8 @@ import json
 import numpy as np
 import pytest
 
-pytest.importorskip('rclpy')
-pytest.importorskip('gripper_sim_interfaces.msg')
+import rclpy  # noqa: F401
+import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim import configuration  # noqa: E402
 from gripper_sim.cli.main import main  # noqa: E402

@@ -82,7 +82,6 @@ def test_3d_curved_and_v_fingers_hold_a_round_fruit_where_the_flat_one_slips():
 
 def test_3d_soft_pad_lowers_the_peak_contact_pressure_at_equal_grip_force(capsys):
     """Solid apple at 5 N: the pad (an elastic foundation, E = 1 MPa) spreads the load."""
-    pytest.importorskip('tetgen', reason='the 3D solid model needs tetgen==0.8.4')
     solid = ['dimension=3', 'fruit.model=solid', 'fruit.skin.enabled=false',
              'fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=0.4', 'sim.dt=0.02']
     results = {}

@@ -150,7 +150,6 @@ def _hertz_errors(subdivisions, refinement, order=2):
     node into a plate over the approach) against Hertz:
     F = (sqrt(2)/3) E* sqrt(R) D^(3/2), a = sqrt(R D / 2) (validation.md section 3).
     """
-    pytest.importorskip('tetgen', reason='the 3D solid model needs tetgen==0.8.4')
     radius, modulus, poisson = 0.03, 1e6, 0.3
     config = load_config(overrides=[
         'dimension=3', 'fruit.model=solid', 'fruit.skin.enabled=false',
@@ -207,7 +206,6 @@ def test_long_cylinder_force_per_length_agrees_between_2d_and_3d():
     part) pressed on its side by 30 mm tall plates, against the plane-strain disk of the
     2D model, at the same plate travel D = 0.1 R. Measured: 3D +25 % at f = 8, +12 % at
     f = 12 (both models' linear elements are stiff; 3D converges towards 2D)."""
-    pytest.importorskip('tetgen', reason='the 3D solid model needs tetgen==0.8.4')
     import json
     radius, half, jaw = 0.015, 0.045, 0.03
     arc = np.linspace(0, np.pi, 9)

@@ -50,7 +50,6 @@ def test_gradient_and_hessian_match_central_differences(scale):
 def test_numba_kernel_matches_the_numpy_reference(scale):
     """The fast solver's kernel (``evaluate_into``) gives the reference value, gradient
     and Hessian for taut, wrinkled and slack triangles."""
-    pytest.importorskip('numba')
     skin, _, x0 = _sphere_skin()
     q = (scale * x0 + np.random.default_rng(5).normal(scale=3e-4, size=x0.shape)).ravel()
     assert np.all(np.bincount(skin.states(q), minlength=3) > 0)

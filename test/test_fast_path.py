@@ -16,10 +16,7 @@ from gripper_sim.core.simulation import Simulation
 from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
 from gripper_sim.errors import ConvergenceError
 
-pytestmark = pytest.mark.skipif(not fast.available(), reason='numba is not installed')
-
-if fast.available():
-    from gripper_sim.core import kernels
+from gripper_sim.core import kernels  # noqa: E402 - needs numba, pinned in requirements.txt
 
 SHELL = ['fruit.nodes=24']
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-pytest.importorskip('rclpy')
-pytest.importorskip('gripper_sim_interfaces.msg')
+import rclpy  # noqa: F401
+import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim.cli.main import main  # noqa: E402
 from gripper_sim.core.results import (Deformation, Energies, JawWrench,  # noqa: E402

@@ -13,7 +13,7 @@ import struct
 import pytest
 import yaml
 
-pytest.importorskip('rclpy')
+import rclpy  # noqa: F401
 
 from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import Point, WrenchStamped  # noqa: E402

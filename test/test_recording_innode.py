@@ -6,8 +6,8 @@ import os
 import pytest
 import yaml
 
-rclpy = pytest.importorskip('rclpy')
-pytest.importorskip('gripper_sim_interfaces.msg')
+import rclpy
+import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim.configuration import to_yaml  # noqa: E402
 from gripper_sim.recording.node_recording import NodeRecording  # noqa: E402

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-rclpy = pytest.importorskip('rclpy')
-pytest.importorskip('gripper_sim_interfaces.msg')
-mcap_reader = pytest.importorskip('mcap.reader')
+import rclpy
+import gripper_sim_interfaces.msg  # noqa: F401
+import mcap.reader as mcap_reader
 
 from gripper_sim_interfaces.msg import FruitState  # noqa: E402
 from rcl_interfaces.srv import GetParameters  # noqa: E402

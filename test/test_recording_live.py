@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-rclpy = pytest.importorskip('rclpy')
+import rclpy
 
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from rclpy.duration import Duration  # noqa: E402

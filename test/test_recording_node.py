@@ -13,8 +13,8 @@ import time
 
 import pytest
 
-rclpy = pytest.importorskip('rclpy')
-pytest.importorskip('gripper_sim_interfaces.msg')
+import rclpy
+import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim_interfaces.msg import FruitState  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
