@@ -53,7 +53,58 @@ class _PadFace:
     index: int
 
 
-class PadLayer(Energy):
+class PadState(Energy):
+    """What the 2D and 3D pads share: the foundation stiffness per surface node, the
+    step's pad faces, and the forces the pads exerted at the end of the last step.
+
+    Args:
+        surface: (n_s,) surface node indices.  area: (n_s,) m^2, rest area each surface
+        node presses the pad with.  thickness: m, pad thickness t.  youngs_modulus,
+        poisson_ratio: of the pad.  friction: mu, pad-fruit.  n_nodes: fruit nodes.
+        dim: 2 or 3.
+    """
+
+    elastic = False
+
+    def __init__(self, surface, area, thickness: float, youngs_modulus: float,
+                 poisson_ratio: float, friction: float, n_nodes: int, dim: int):
+        self.surface = np.asarray(surface, dtype=np.int64)
+        self.thickness = float(thickness)
+        self.modulus = foundation_modulus(youngs_modulus, poisson_ratio)
+        self.k = self.modulus * np.asarray(area, dtype=float) / self.thickness
+        self.mu = float(friction)
+        self.n_nodes = n_nodes
+        self.dim = dim
+        self.faces: list = []
+        self.active: list[np.ndarray] = []
+        self.lagged: list[np.ndarray] = []
+        self.x_start = np.zeros((n_nodes, dim))
+        self.dt = 1.0
+        self._clear_forces()
+
+    def _clear_forces(self) -> None:
+        """Zero ``forces`` (n_nodes, dim) N, ``normal_forces`` (n_nodes,) N, ``holder``
+        (n_nodes,) obstacle index pressing each node hardest (-1: none) and
+        ``side_force`` (2,) N, each jaw's push along the closing axis."""
+        self.forces = np.zeros((self.n_nodes, self.dim))
+        self.normal_forces = np.zeros(self.n_nodes)
+        self.holder = -np.ones(self.n_nodes, np.int64)
+        self.side_force = np.zeros(2)
+        self._best = np.zeros(self.n_nodes)
+
+    def _record(self, face, nodes: np.ndarray, force: np.ndarray, f_n: np.ndarray) -> None:
+        """Add one face's ``force`` (k, dim) N and normal force ``f_n`` (k,) N on
+        ``nodes`` (k,) to the recorded pad forces."""
+        self.forces[nodes] += force
+        self.normal_forces[nodes] += f_n
+        sign = 1.0 if face.side == 0 else -1.0
+        self.side_force[face.side] += sign * float(np.sum(force[:, 0]))
+        stronger = (f_n > 0) & (f_n > self._best[nodes])
+        self.holder[nodes[stronger]] = face.index
+        self._best[nodes[stronger]] = f_n[stronger]
+
+
+class PadLayer(PadState):
     """The pads of both jaws as one energy of the fruit node positions.
 
     Args:
@@ -65,25 +116,10 @@ class PadLayer(Energy):
         n_nodes: number of fruit nodes.
     """
 
-    elastic = False
-
     def __init__(self, surface, tributary, depth: float, thickness: float,
                  youngs_modulus: float, poisson_ratio: float, friction: float, n_nodes: int):
-        self.surface = np.asarray(surface, dtype=np.int64)
-        self.thickness = float(thickness)
-        self.modulus = foundation_modulus(youngs_modulus, poisson_ratio)
-        self.k = self.modulus * np.asarray(tributary, dtype=float) * depth / self.thickness
-        self.mu = float(friction)
-        self.n_nodes = n_nodes
-        self.faces: list[_PadFace] = []
-        self.active: list[np.ndarray] = []
-        self.lagged: list[np.ndarray] = []
-        self.x_start = np.zeros((n_nodes, 2))
-        self.dt = 1.0
-        self.forces = np.zeros((n_nodes, 2))
-        self.normal_forces = np.zeros(n_nodes)
-        self.holder = -np.ones(n_nodes, np.int64)
-        self.side_force = np.zeros(2)
+        super().__init__(surface, np.asarray(tributary, dtype=float) * depth, thickness,
+                         youngs_modulus, poisson_ratio, friction, n_nodes, dim=2)
 
     # ------------------------------------------------------------------ per step
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
@@ -115,24 +151,14 @@ class PadLayer(Energy):
     def finish_step(self, q: np.ndarray) -> None:
         """Record the pad forces on the fruit at the step's end positions ``q``."""
         x = q.reshape(-1, 2)
-        self.forces = np.zeros((self.n_nodes, 2))
-        self.normal_forces = np.zeros(self.n_nodes)
-        self.holder = -np.ones(self.n_nodes, np.int64)
-        self.side_force = np.zeros(2)
-        best = np.zeros(self.n_nodes)
+        self._clear_forces()
         for face, active, lagged in zip(self.faces, self.active, self.lagged):
             if not active.size:
                 continue
             nodes = self.surface[active]
             f_n, f_t = self._node_forces(x[nodes], face, active, lagged)
-            force = f_n[:, None] * face.normal + f_t[:, None] * face.tangent
-            self.forces[nodes] += force
-            self.normal_forces[nodes] += f_n
-            sign = 1.0 if face.side == 0 else -1.0
-            self.side_force[face.side] += sign * float(np.sum(force[:, 0]))
-            stronger = (f_n > 0) & (f_n > best[nodes])
-            self.holder[nodes[stronger]] = face.index
-            best[nodes[stronger]] = f_n[stronger]
+            self._record(face, nodes, f_n[:, None] * face.normal + f_t[:, None] * face.tangent,
+                         f_n)
 
     def _node_forces(self, x, face, active, lagged):
         """Normal (penalty) and tangential (friction) force on the nodes, N."""

@@ -258,24 +258,14 @@ class ImplicitEulerSolver:
                     break
             else:
                 raise NewtonFailure('no descent direction found', history)
-            step = 1.0
-            residual = float(np.max(np.abs(g_f)))
             if float(np.max(np.abs(dq))) / dt < self.tolerance:
                 q = q + dq
                 _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con, hessian=False)
                 history.append(float(np.max(np.abs(dq))) / dt)
                 return StepSolution(q, grad - fric_grad, iteration, history)
-            for _ in range(30):
-                trial = q + step * dq
-                phi_trial, grad_t, _, _ = self._evaluate(trial, q_n, v_n, dt, con, hessian=False)
-                if np.isfinite(phi_trial) and (
-                        phi_trial <= phi + 1e-4 * step * slope
-                        or float(np.max(np.abs(s @ grad_t))) < 0.5 * residual):
-                    break
-                step *= 0.5
-            else:
-                raise NewtonFailure('line search failed', history)
-            q, phi, grad = trial, phi_trial, grad_t
+            q, phi, grad, step = line_search(
+                lambda x: self._evaluate(x, q_n, v_n, dt, con, hessian=False)[:2],
+                q, dq, phi, slope, float(np.max(np.abs(g_f))), lambda g: s @ g, history)
             norm = float(np.max(np.abs(step * dq))) / dt
             history.append(norm)
             if norm < self.tolerance:
@@ -285,6 +275,50 @@ class ImplicitEulerSolver:
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
 
 
+def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: float,
+                residual: float, project, history: list[float]):
+    """Backtracking from the full Newton step ``dq``: the first of the steps 1, 1/2,
+    1/4, ... (30 halvings) with sufficient decrease (Armijo, 1e-4 of ``slope``) or a
+    projected gradient below half of ``residual``.
+
+    Args:
+        evaluate: x -> (phi, gradient) of the incremental potential (inf if infeasible).
+        project: gradient -> its free (filtered) part.
+
+    Returns:
+        (q + step dq, its phi, its gradient, step).
+
+    Raises:
+        NewtonFailure: no acceptable step.
+    """
+    step = 1.0
+    for _ in range(30):
+        trial = q + step * dq
+        phi_trial, grad_trial = evaluate(trial)
+        if np.isfinite(phi_trial) and (
+                phi_trial <= phi + 1e-4 * step * slope
+                or float(np.max(np.abs(project(grad_trial)))) < 0.5 * residual):
+            return trial, phi_trial, grad_trial, step
+        step *= 0.5
+    raise NewtonFailure('line search failed', history)
+
+
+def stack_low_rank(low_rank, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rank-one terms sum_j c_j u_j u_j^T as u (n, k) and c (k,); k may be 0."""
+    if not low_rank:
+        return np.zeros((n, 0)), np.zeros(0)
+    return (np.stack([vec for _, vec in low_rank], axis=1),
+            np.array([coef for coef, _ in low_rank]))
+
+
+def woodbury_terms(solve, u: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A^-1 u (n, k) and the capacitance matrix diag(1/c) + u^T A^-1 u (k, k) of the
+    Woodbury identity (A + u diag(c) u^T)^-1 = A^-1 - A^-1 u cap^-1 u^T A^-1, with
+    ``solve`` applying A^-1 to a vector."""
+    a_inv_u = solve(u) if u.shape[1] > 1 else solve(u[:, 0])[:, None]
+    return a_inv_u, np.diag(1.0 / c) + u.T @ a_inv_u
+
+
 def _solve_with_low_rank(a: sp.csc_matrix, rhs: np.ndarray, low_rank,
                          lu_options: dict | None = None) -> np.ndarray:
     """Solve (A + sum c u u^T) x = rhs by one sparse LU and the Woodbury identity."""
@@ -292,8 +326,6 @@ def _solve_with_low_rank(a: sp.csc_matrix, rhs: np.ndarray, low_rank,
     x = lu.solve(rhs)
     if not low_rank:
         return x
-    u = np.stack([vec for _, vec in low_rank], axis=1)
-    c = np.array([coef for coef, _ in low_rank])
-    a_inv_u = lu.solve(u) if u.shape[1] > 1 else lu.solve(u[:, 0])[:, None]
-    small = np.diag(1.0 / c) + u.T @ a_inv_u
-    return x - a_inv_u @ np.linalg.solve(small, u.T @ x)
+    u, c = stack_low_rank(low_rank, a.shape[0])
+    a_inv_u, capacitance = woodbury_terms(lu.solve, u, c)
+    return x - a_inv_u @ np.linalg.solve(capacitance, u.T @ x)

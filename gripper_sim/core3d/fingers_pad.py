@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gripper_sim.core.energies.base import Energy, Evaluation
-from gripper_sim.core.pad import _df1, _f0, _f1, foundation_modulus
+from gripper_sim.core.energies.base import Evaluation
+from gripper_sim.core.pad import PadState, _df1, _f0, _f1
 from gripper_sim.core.stepper import FRICTION_SMOOTHING
 
 
@@ -36,7 +36,7 @@ class _PadFace:
     index: int
 
 
-class PadLayer3D(Energy):
+class PadLayer3D(PadState):
     """The pads of both jaws as one energy of the fruit node positions (n_nodes * 3,).
 
     Args:
@@ -45,25 +45,10 @@ class PadLayer3D(Energy):
         friction: mu fruit-pad.  n_nodes: fruit nodes.
     """
 
-    elastic = False
-
     def __init__(self, surface, areas, thickness: float, youngs_modulus: float,
                  poisson_ratio: float, friction: float, n_nodes: int):
-        self.surface = np.asarray(surface, dtype=np.int64)
-        self.thickness = float(thickness)
-        self.modulus = foundation_modulus(youngs_modulus, poisson_ratio)
-        self.k = self.modulus * np.asarray(areas, dtype=float) / self.thickness
-        self.mu = float(friction)
-        self.n_nodes = n_nodes
-        self.faces: list[_PadFace] = []
-        self.active: list[np.ndarray] = []
-        self.lagged: list[np.ndarray] = []
-        self.x_start = np.zeros((n_nodes, 3))
-        self.dt = 1.0
-        self.forces = np.zeros((n_nodes, 3))
-        self.normal_forces = np.zeros(n_nodes)
-        self.holder = -np.ones(n_nodes, np.int64)
-        self.side_force = np.zeros(2)
+        super().__init__(surface, areas, thickness, youngs_modulus, poisson_ratio, friction,
+                         n_nodes, dim=3)
         dofs = 3 * self.surface[:, None] + np.arange(3)[None, :]
         self._rows = np.repeat(dofs, 3, axis=1).ravel()
         self._cols = np.tile(dofs, (1, 3)).ravel()
@@ -102,11 +87,7 @@ class PadLayer3D(Energy):
     def finish_step(self, q: np.ndarray) -> None:
         """Record the pad forces on the fruit at the step's end positions ``q``."""
         x = q.reshape(-1, 3)
-        self.forces = np.zeros((self.n_nodes, 3))
-        self.normal_forces = np.zeros(self.n_nodes)
-        self.holder = -np.ones(self.n_nodes, np.int64)
-        self.side_force = np.zeros(2)
-        best = np.zeros(self.n_nodes)
+        self._clear_forces()
         eps = FRICTION_SMOOTHING * self.dt
         for face, active, lagged in zip(self.faces, self.active, self.lagged):
             if not active.size:
@@ -117,14 +98,7 @@ class PadLayer3D(Energy):
             with np.errstate(divide='ignore', invalid='ignore'):
                 direction = np.where(a[:, None] > 0, u / a[:, None], 0.0)
             f_t = -(bound * _f1(a, eps))[:, None] * direction
-            force = f_n[:, None] * face.normal + f_t @ face.tangents
-            self.forces[nodes] += force
-            self.normal_forces[nodes] += f_n
-            sign = 1.0 if face.side == 0 else -1.0
-            self.side_force[face.side] += sign * float(np.sum(force[:, 0]))
-            stronger = (f_n > 0) & (f_n > best[nodes])
-            self.holder[nodes[stronger]] = face.index
-            best[nodes[stronger]] = f_n[stronger]
+            self._record(face, nodes, f_n[:, None] * face.normal + f_t @ face.tangents, f_n)
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         x = q.reshape(-1, 3)

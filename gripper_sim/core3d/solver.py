@@ -37,7 +37,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from gripper_sim.core.stepper import (ImplicitEulerSolver, NewtonFailure, StepConstraints,
-                                      StepSolution)
+                                      StepSolution, line_search, stack_low_rank,
+                                      woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
     from gripper_sim.core3d import kernels
@@ -339,11 +340,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         """dq with (A + sum c u u^T) dq = rhs: CG preconditioned by the kept LU, or a new
         LU when CG does not converge fast (or ``fresh``). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
-        if low_rank:
-            u = np.stack([vec for _, vec in low_rank], axis=1)
-            c = np.array([coef for coef, _ in low_rank])
-        else:
-            u, c = np.zeros((self.n, 0)), np.zeros(0)
+        u, c = stack_low_rank(low_rank, self.n)
         if self._lu is not None and not fresh and not self._stale:
             dq = self._pcg(a, rhs, u, c, dt, project)
             if dq is not None:
@@ -354,11 +351,10 @@ class PatternCachingSolver(ImplicitEulerSolver):
         x = lu.solve(rhs)
         if not c.size:
             return x
-        a_inv_u = lu.solve(u) if u.shape[1] > 1 else lu.solve(u[:, 0])[:, None]
-        small = np.diag(1.0 / c) + u.T @ a_inv_u
+        a_inv_u, capacitance = woodbury_terms(lu.solve, u, c)
         # the preconditioner keeps these rank-one terms with the factorisation
-        self._woodbury = (u, a_inv_u, np.linalg.inv(small))
-        return x - a_inv_u @ np.linalg.solve(small, u.T @ x)
+        self._woodbury = (u, a_inv_u, np.linalg.inv(capacitance))
+        return x - a_inv_u @ np.linalg.solve(capacitance, u.T @ x)
 
     def _pcg(self, a, rhs, u, c, dt, project=None):
         """Preconditioned CG from zero; None if it fails to converge in time."""
@@ -473,25 +469,15 @@ class PatternCachingSolver(ImplicitEulerSolver):
                     break
             else:
                 raise NewtonFailure('no descent direction found', history)
-            step = 1.0
-            residual = float(np.max(np.abs(g_f)))
             if float(np.max(np.abs(dq))) / dt < self.tolerance:
                 q = q + dq
                 _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
                 history.append(float(np.max(np.abs(dq))) / dt)
                 self._warm = (q_n.copy(), dt, q)
                 return StepSolution(q, grad - fric_grad, iteration, history)
-            for _ in range(30):
-                trial = q + step * dq
-                phi_trial, grad_t, _, _ = self._evaluate_fast(trial, q_n, v_n, dt, con, False)
-                if np.isfinite(phi_trial) and (
-                        phi_trial <= phi + 1e-4 * step * slope
-                        or float(np.max(np.abs(filtered(grad_t)))) < 0.5 * residual):
-                    break
-                step *= 0.5
-            else:
-                raise NewtonFailure('line search failed', history)
-            q, phi, grad = trial, phi_trial, grad_t
+            q, phi, grad, step = line_search(
+                lambda x: self._evaluate_fast(x, q_n, v_n, dt, con, False)[:2],
+                q, dq, phi, slope, float(np.max(np.abs(g_f))), filtered, history)
             norm = float(np.max(np.abs(step * dq))) / dt
             history.append(norm)
             if norm < self.tolerance:
