@@ -366,10 +366,14 @@ def hinge_bending(x, hinges, theta0, stiffness, grad, data, scatter, hessian):
         for c in range(3):
             tmp[c] = p[2, c] - p[0, c]
         _cross_matrix(tmp, cross)
-        dna[1] = -cross
+        for a in range(3):
+            for b in range(3):
+                dna[1, a, b] = -cross[a, b]
         _cross_matrix(e, cross)
-        dna[2] = cross
-        dnb[3] = -cross
+        for a in range(3):
+            for b in range(3):
+                dna[2, a, b] = cross[a, b]
+                dnb[3, a, b] = -cross[a, b]
         for c in range(3):
             tmp[c] = p[1, c] - p[3, c]
         _cross_matrix(tmp, cross)
