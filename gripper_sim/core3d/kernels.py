@@ -393,17 +393,24 @@ def hinge_bending(x, hinges, theta0, stiffness, grad, data, scatter, hessian):
                     dga[a, j, c] = acc_a
                     dgb[a, j, c] = acc_b
         sc = scatter[h]
-        # the Hessian is symmetric: the upper triangle, mirrored
-        for r in range(12):
-            i, a = r // 3, r % 3
-            for col in range(r, 12):
-                j, c = col // 3, col % 3
-                d2 = (ga[a] * dca[i, j, c] + gb[a] * dcb[i, j, c]
-                      + ca[i] * dga[a, j, c] + cb[i] * dgb[a, j, c])
-                v = 2.0 * k * (dth[r] * dth[col] + dev * d2)
-                data[sc[r * 12 + col]] += v
-                if col != r:
-                    data[sc[col * 12 + r]] += v
+        # the Hessian is symmetric: the upper triangle, mirrored, by 3x3 node blocks
+        twok = 2.0 * k
+        for i in range(4):
+            cai, cbi = ca[i], cb[i]
+            for j in range(i, 4):
+                for a in range(3):
+                    r = 3 * i + a
+                    gaa, gba, dr = ga[a], gb[a], dth[r]
+                    for c in range(3):
+                        if j == i and c < a:
+                            continue
+                        col = 3 * j + c
+                        v = twok * (dr * dth[col] + dev * (
+                            gaa * dca[i, j, c] + gba * dcb[i, j, c]
+                            + cai * dga[a, j, c] + cbi * dgb[a, j, c]))
+                        data[sc[r * 12 + col]] += v
+                        if col != r:
+                            data[sc[col * 12 + r]] += v
     return value
 
 
@@ -663,10 +670,24 @@ def filter_blocks(hdata, block_pos, block_nodes, filters, diag_extra, out):
         out: values of the filtered matrix, same pattern (written).
     """
     tmp = np.empty((3, 3))
+    free = np.ones(filters.shape[0], np.bool_)  # S_i = I (most nodes: no contact)
+    for i in range(filters.shape[0]):
+        for a in range(3):
+            for c in range(3):
+                if filters[i, a, c] != (1.0 if a == c else 0.0):
+                    free[i] = False
     for blk in range(block_pos.shape[0]):
         i = block_nodes[blk, 0]
         j = block_nodes[blk, 1]
         pos = block_pos[blk]
+        if free[i] and free[j]:
+            for a in range(3):
+                for c in range(3):
+                    out[pos[a, c]] = hdata[pos[a, c]]
+            if i == j:
+                for a in range(3):
+                    out[pos[a, a]] += diag_extra[3 * i + a]
+            continue
         si = filters[i]
         sj = filters[j]
         for a in range(3):

@@ -383,9 +383,19 @@ def surface_edges(triangles: np.ndarray) -> np.ndarray:
     return np.unique(e, axis=0)
 
 
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(k, 3) row-wise cross products of (k, 3) arrays (``np.cross`` without its
+    overhead of ~30 us a call, which counts in the per-step measures)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
 def vertex_areas(positions: np.ndarray, triangles: np.ndarray, n_nodes: int) -> np.ndarray:
     """(n_nodes,) m^2, a third of the area of every triangle at each vertex."""
-    p = positions[triangles]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    p0, p1, p2 = (positions[triangles[:, k]] for k in range(3))
+    area = 0.5 * np.sqrt(np.sum(cross_rows(p1 - p0, p2 - p0) ** 2, axis=1))
     return np.bincount(triangles.ravel(), weights=np.repeat(area / 3.0, 3),
                        minlength=n_nodes)

@@ -47,11 +47,14 @@ except ImportError:  # pragma: no cover - depends on the environment
     kernels = None
 
 #: relative residual (infinity norms) at which the preconditioned CG stops
-CG_TOLERANCE = 1e-2
+CG_TOLERANCE = 1e-1
 #: ... or when the preconditioned residual (the error estimate of dq) is below this
 #: fraction of the Newton tolerance (times dt): the last Newton iterations, whose dq
 #: are tiny, need no relative accuracy
 CG_ERROR_FRACTION = 1e-2
+#: ... the relative test only for a step this many times the Newton tolerance (times
+#: dt) or more: a smaller one may end the Newton iteration and must be accurate
+CG_RELATIVE_FLOOR = 10.0
 #: CG iterations before the matrix is factorised afresh
 CG_MAX_ITERATIONS = 20
 #: a system that took more CG iterations than this gets a new factorisation next time
@@ -423,6 +426,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         precondition = self._preconditioner(u, c, project)
         limit = CG_TOLERANCE * float(np.max(np.abs(rhs)))
         error_limit = CG_ERROR_FRACTION * self.tolerance * dt
+        step_floor = CG_RELATIVE_FLOOR * self.tolerance * dt
         x = np.zeros_like(rhs)
         r = rhs.copy()
         z = precondition(r)
@@ -439,7 +443,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
             x += step * p
             r -= step * ap
             residual = float(np.max(np.abs(r)))
-            if residual <= limit:
+            if residual <= limit and float(np.max(np.abs(x))) >= step_floor:
                 self.stats['cg_iterations'] += it
                 self._stale = it > CG_STALE_ITERATIONS
                 return x

@@ -57,13 +57,18 @@ class Membrane(KernelValue, Energy):
     def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
         """(n_tri, 3, 2)."""
         x = q.reshape(-1, 3)
-        return np.einsum('eka,ekj->eaj', x[self.tri], self.grad_n)
+        g = self.grad_n
+        return (x[self.tri[:, 0], :, None] * g[:, 0, None, :]
+                + x[self.tri[:, 1], :, None] * g[:, 1, None, :]
+                + x[self.tri[:, 2], :, None] * g[:, 2, None, :])
 
     def strains(self, q: np.ndarray) -> np.ndarray:
         """(n_tri,) largest principal engineering strain of each triangle (-)."""
         f = self.deformation_gradients(q)
-        c = np.einsum('eai,eaj->eij', f, f)
-        tr, det = c[:, 0, 0] + c[:, 1, 1], c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] ** 2
+        c00 = np.sum(f[:, :, 0] ** 2, axis=1)
+        c11 = np.sum(f[:, :, 1] ** 2, axis=1)
+        c01 = np.sum(f[:, :, 0] * f[:, :, 1], axis=1)
+        tr, det = c00 + c11, c00 * c11 - c01 ** 2
         disc = np.sqrt(np.maximum(0.25 * tr ** 2 - det, 0.0))
         lam_max = 0.5 * tr + disc
         lam_min = np.maximum(0.5 * tr - disc, 0.0)
