@@ -524,9 +524,21 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 history.append(float(np.max(np.abs(dq))) / dt)
                 self._warm = (q_n.copy(), dt, q)
                 return StepSolution(q, grad - fric_grad, iteration, history)
-            q, phi, grad, step = line_search(
-                lambda x: self._evaluate_fast(x, q_n, v_n, dt, con, False)[:2],
-                q, dq, phi, slope, float(np.max(np.abs(g_f))), filtered, history)
+            # a full step this large is followed by a new Hessian: the line search's
+            # first trial (usually taken) evaluates it with the gradient
+            full_step_hessian = (reuse or
+                                 float(np.max(np.abs(dq))) / dt >= HESSIAN_REUSE * self.tolerance)
+            first_trial = []
+
+            def evaluate(x):
+                if full_step_hessian and not first_trial:
+                    phi_x, grad_x, _, parts_x = self._evaluate_fast(x, q_n, v_n, dt, con, True)
+                    first_trial.append(parts_x)
+                    return phi_x, grad_x
+                return self._evaluate_fast(x, q_n, v_n, dt, con, False)[:2]
+
+            q, phi, grad, step = line_search(evaluate, q, dq, phi, slope,
+                                             float(np.max(np.abs(g_f))), filtered, history)
             norm = float(np.max(np.abs(step * dq))) / dt
             history.append(norm)
             if norm < self.tolerance:
@@ -535,5 +547,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 return StepSolution(q, grad - fric_grad, iteration, history)
             reuse = not reuse and norm < HESSIAN_REUSE * self.tolerance
             if not reuse:
-                phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
+                if step == 1.0 and first_trial:
+                    parts = first_trial[0]
+                else:
+                    phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, True)
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
