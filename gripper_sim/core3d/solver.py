@@ -13,19 +13,25 @@ iteration (same line search, shifts and stopping rule) with less work:
 - the energies add their gradients and Hessians straight into the CSC values through
   precomputed scatter indices (``core3d.kernels``), and S H S + (I - S) is one kernel
   over the 3x3 node blocks, on the same pattern;
-- each Newton system is solved by conjugate gradients preconditioned with the LU
-  factorisation kept from an earlier Newton iteration or step (the matrix changes
-  little between them), its rank-one terms by the Woodbury identity and the whole
-  projected by the step's filter S; a new LU is made only after CG needed more than
-  ``CG_STALE_ITERATIONS`` (or failed). CG stops at a relative residual of
-  ``CG_TOLERANCE`` or when its error estimate (the preconditioned residual) is below
-  ``CG_ERROR_FRACTION`` of the Newton tolerance;
-- SuperLU factorises P A P^T in a nested-dissection order of the node graph when that
-  gives sparser factors than its own minimum-degree order (the shell: half the time);
+- each Newton system is solved by conjugate gradients preconditioned with a
+  single-precision LU factorisation kept from an earlier Newton iteration or step (the
+  matrix changes little between them), its rank-one terms by the Woodbury identity and
+  the whole projected by the step's filter S; a new LU is made only after CG needed
+  more than ``CG_STALE_ITERATIONS`` (or would not converge in time), and CG runs after
+  it too, so the precision of the solution is that of CG, not of the factors;
+- CG is an inexact Newton solve (Dembo, Eisenstat & Steihaug 1982): it stops at a
+  relative residual of ``CG_TOLERANCE`` while the step is large, and otherwise when its
+  error estimate (the preconditioned residual) is below ``CG_ERROR_FRACTION`` of the
+  Newton tolerance, so the step that ends the iteration is accurate;
+- SuperLU factorises P A P^T in METIS's nested-dissection order of the node graph when
+  that gives sparser factors than its own minimum-degree order (the shell: half the
+  time);
 - a later contact pass of the same step starts from the previous pass's solution (in
   the directions the new filter leaves free), and after a Newton step below
-  ``HESSIAN_REUSE`` times the tolerance the next iteration reuses the Newton matrix.
-The fast path follows the reference path to ~1e-9 m over a grasp
+  ``HESSIAN_REUSE`` times the tolerance the next iteration reuses the Newton matrix;
+- the line search's first trial evaluates the Hessian with the gradient when a new
+  Hessian follows (the full step is usually taken).
+The fast path follows the reference path to the Newton tolerance over a grasp
 (test/test_3d_energies.py::test_fast_solver_follows_the_numpy_reference_path).
 """
 from __future__ import annotations
@@ -67,53 +73,17 @@ REFINEMENT_SWEEPS = 3
 HESSIAN_REUSE = 100.0
 
 
-def nested_dissection(graph: sp.csr_matrix, leaf: int = 16) -> np.ndarray:
-    """Fill-reducing order (n,) of a graph's nodes by nested dissection.
-
-    Each part is split by a level set of a breadth-first search from a far node (no
-    edge skips a level, so the middle level separates the levels before and after it);
-    the two halves are ordered first, recursively, the separator last (George 1973,
-    "Nested dissection of a regular finite element mesh", SIAM J. Numer. Anal.).
-    """
-    from scipy.sparse.csgraph import breadth_first_order, connected_components
-    order: list[int] = []
-
-    def levels(sub, start):
-        dist = np.full(sub.shape[0], -1)
-        dist[start] = 0
-        frontier = np.array([start])
-        while frontier.size:
-            nxt = np.unique(sub[frontier].indices)
-            nxt = nxt[dist[nxt] < 0]
-            if nxt.size:
-                dist[nxt] = dist[frontier[0]] + 1
-            frontier = nxt
-        return dist
-
-    def dissect(nodes):
-        if nodes.size <= leaf:
-            order.extend(nodes.tolist())
-            return
-        sub = graph[nodes][:, nodes].tocsr()
-        n_comp, labels = connected_components(sub, directed=False)
-        if n_comp > 1:
-            for k in range(n_comp):
-                dissect(nodes[labels == k])
-            return
-        start = int(breadth_first_order(sub, 0, directed=False)[0][-1])  # a far node
-        dist = levels(sub, start)
-        counts = np.bincount(dist)
-        middle = int(np.searchsorted(np.cumsum(counts), 0.5 * nodes.size))
-        middle = min(max(middle, 1), len(counts) - 2) if len(counts) > 2 else -1
-        if middle < 0:
-            order.extend(nodes.tolist())
-            return
-        dissect(nodes[dist < middle])
-        dissect(nodes[dist > middle])
-        order.extend(nodes[dist == middle].tolist())
-
-    dissect(np.arange(graph.shape[0]))
-    return np.array(order, dtype=np.int64)
+def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
+    """Fill-reducing order (n,) of a graph's nodes: METIS's multilevel nested dissection
+    (Karypis & Kumar 1998, SIAM J. Sci. Comput. 20(1)), whose separators leave ~6 %
+    fewer factor entries on the shell than SuperLU's minimum degree or level-set
+    bisection."""
+    import pymetis
+    graph = sp.csr_matrix(graph)
+    graph.setdiag(0)
+    graph.eliminate_zeros()
+    order, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(graph.indptr, graph.indices))
+    return np.asarray(order, dtype=np.int64)
 
 
 class _SinglePrecisionLU:
