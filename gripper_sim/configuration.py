@@ -236,7 +236,7 @@ SCHEMA: dict[str, Key] = {
                                      'halved', 'int', 1, 1000),
     'sim.max_halvings': Key(6, '-', 'times a failing step is halved before giving up',
                             'int', 0, 30),
-    'sim.max_contact_passes': Key(6, '-', 'predictor-corrector passes per step',
+    'sim.max_contact_passes': Key(10, '-', 'predictor-corrector passes per step',
                                   'int', 1, 50),
 }
 

@@ -877,7 +877,7 @@ def _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, 
 @njit(cache=True, error_model='numpy')
 def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, x,
                     x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
-                    released, toggled):
+                    released, slipped):
     """Correct the contact set after a solve, as ``Simulation._update_contacts``
     (with ``_add_corners`` and ``_add_penetrating``). Returns True if it changed.
     """
@@ -900,17 +900,16 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, seco
                 released[i] = True
                 changed = True
                 continue
-            if md == STICK and abs(r_t) > mu_s * r_n and not toggled[i]:
+            if md == STICK and abs(r_t) > mu_s * r_n:
                 mode[i] = SLIP
-                toggled[i] = True
+                slipped[i] = True
                 changed = True
             if md == SLIP:
                 rel = (((x[i, 0] - x_n[i, 0]) / dt - vx) * tx
                        + ((x[i, 1] - x_n[i, 1]) / dt - vz) * tz)
-                to_stick = abs(rel) < 2 * FRICTION_SMOOTHING and not toggled[i] and mu_s > 0
+                to_stick = abs(rel) < 2 * FRICTION_SMOOTHING and not slipped[i] and mu_s > 0
                 if to_stick:
                     mode[i] = STICK
-                    toggled[i] = True
                     changed = True
                 lag = normal_force[i]
                 if not to_stick and abs(r_n - lag) > 0.02 * abs(lag) + 1e-9 and mu_k > 0:
@@ -1035,7 +1034,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
     q_n = x_n.reshape(2 * n)  # x_n is C-contiguous
     v_flat = v_n.reshape(2 * n)
     released = np.zeros(n, np.bool_)
-    toggled = np.zeros(n, np.bool_)
+    slipped = np.zeros(n, np.bool_)
     start = np.empty((n, 2))
     filters = np.empty((n, 2, 2))
     fr_nodes = np.empty(n, np.int64)
@@ -1065,7 +1064,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
         r = reaction.reshape((n, 2))
         if not update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap,
                                secondary, x, x_n, v_n, r, face_par, face_dyn, surface, dt,
-                               fpar[F_RELEASE], v_min, released, toggled):
+                               fpar[F_RELEASE], v_min, released, slipped):
             break
     x = q.reshape((n, 2))
     r = reaction.reshape((n, 2))

@@ -232,7 +232,7 @@ class Simulation(SimulationFacade):
         contacts = self.contacts.copy()
         n = self.fruit.n_nodes
         released = np.zeros(n, bool)
-        toggled = np.zeros(n, bool)
+        slipped = np.zeros(n, bool)
         iterations = 0
         for _ in range(self.config['sim.max_contact_passes']):
             q_start, constraints = self._constraints(contacts, x_n, x_pred, old_faces,
@@ -242,7 +242,7 @@ class Simulation(SimulationFacade):
             x = solution.q.reshape(-1, 2)
             reaction = solution.reaction.reshape(-1, 2)
             if not self._update_contacts(contacts, x, x_n, v_n, reaction, old_faces, new_faces,
-                                         dt, released, toggled):
+                                         dt, released, slipped):
                 break
         v = (x - x_n) / dt
         forces = np.zeros((n, 2))
@@ -323,7 +323,7 @@ class Simulation(SimulationFacade):
         return start, con
 
     def _update_contacts(self, contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces,
-                         new_faces, dt, released, toggled) -> bool:
+                         new_faces, dt, released, slipped) -> bool:
         """Correct the contact set after a solve; True if it changed (solve again)."""
         changed = False
         threshold = self.config['contact.release_threshold']
@@ -342,19 +342,18 @@ class Simulation(SimulationFacade):
                 changed = True
             keep = ~pulling
             stuck = keep & (mode == cm.STICK)
-            to_slip = stuck & (np.abs(r_t) > face.static_friction * r_n) & ~toggled[nodes]
+            to_slip = stuck & (np.abs(r_t) > face.static_friction * r_n)
             if np.any(to_slip):
                 contacts.mode[nodes[to_slip]] = cm.SLIP
-                toggled[nodes[to_slip]] = True
+                slipped[nodes[to_slip]] = True
                 changed = True
             sliding = keep & (mode == cm.SLIP)
             if np.any(sliding):
                 rel = ((x[nodes] - x_n[nodes]) / dt - face.velocity) @ tan
                 to_stick = (sliding & (np.abs(rel) < 2 * FRICTION_SMOOTHING)
-                            & ~toggled[nodes] & (face.static_friction > 0))
+                            & ~slipped[nodes] & (face.static_friction > 0))
                 if np.any(to_stick):
                     contacts.mode[nodes[to_stick]] = cm.STICK
-                    toggled[nodes[to_stick]] = True
                     changed = True
                 lag = contacts.normal_force[nodes]
                 stale = sliding & ~to_stick & (np.abs(r_n - lag) > 0.02 * np.abs(lag) + 1e-9)

@@ -269,7 +269,7 @@ class Simulation3D(SimulationFacade):
         contacts = self.contacts.copy()
         n = self.fruit.n_nodes
         released = np.zeros(n, bool)
-        toggled = np.zeros(n, bool)
+        slipped = np.zeros(n, bool)
         iterations = 0
         for _ in range(self.config['sim.max_contact_passes']):
             q_start, constraints = self._constraints(contacts, x_n, x_pred, old_faces,
@@ -279,7 +279,7 @@ class Simulation3D(SimulationFacade):
             x = solution.q.reshape(-1, 3)
             reaction = solution.reaction.reshape(-1, 3)
             if not self._update_contacts(contacts, x, x_n, v_n, reaction, old_faces, new_faces,
-                                         dt, released, toggled):
+                                         dt, released, slipped):
                 break
         v = (x - x_n) / dt
         forces = np.zeros((n, 3))
@@ -366,7 +366,7 @@ class Simulation3D(SimulationFacade):
         return start, con
 
     def _update_contacts(self, contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces,
-                         new_faces, dt, released, toggled) -> bool:
+                         new_faces, dt, released, slipped) -> bool:
         """Correct the contact set after a solve; True if it changed (solve again)."""
         changed = False
         threshold = self.config['contact.release_threshold']
@@ -385,20 +385,19 @@ class Simulation3D(SimulationFacade):
                 changed = True
             keep = ~pulling
             stuck = keep & (mode == cm.STICK)
-            to_slip = stuck & (r_t > face.static_friction * r_n) & ~toggled[nodes]
+            to_slip = stuck & (r_t > face.static_friction * r_n)
             if np.any(to_slip):
                 contacts.mode[nodes[to_slip]] = cm.SLIP
-                toggled[nodes[to_slip]] = True
+                slipped[nodes[to_slip]] = True
                 changed = True
             sliding = keep & (mode == cm.SLIP)
             if np.any(sliding):
                 rel = np.linalg.norm(((x[nodes] - x_n[nodes]) / dt - face.velocity) @ tan.T,
                                      axis=1)
                 to_stick = (sliding & (rel < 2 * FRICTION_SMOOTHING)
-                            & ~toggled[nodes] & (face.static_friction > 0))
+                            & ~slipped[nodes] & (face.static_friction > 0))
                 if np.any(to_stick):
                     contacts.mode[nodes[to_stick]] = cm.STICK
-                    toggled[nodes[to_stick]] = True
                     changed = True
                 lag = contacts.normal_force[nodes]
                 stale = sliding & ~to_stick & (np.abs(r_n - lag) > 0.02 * np.abs(lag) + 1e-9)
