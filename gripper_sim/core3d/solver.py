@@ -349,8 +349,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
         dq = self._pcg(a, rhs, u, c, dt, project)
         if dq is not None:
             return dq
-        # CG met negative curvature (an indefinite matrix): the factorisation's own
-        # solution, refined against the double-precision matrix
+        # CG failed even on a fresh factorisation (negative curvature: an indefinite
+        # matrix): the factorisation's own solution, refined against the matrix
         precondition = self._preconditioner(u, c)
         dq = precondition(rhs)
         for _ in range(REFINEMENT_SWEEPS):
