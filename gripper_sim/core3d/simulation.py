@@ -500,8 +500,8 @@ class Simulation3D(SimulationFacade):
         for side in (LEFT, RIGHT):
             on_jaw = -forces[sides[side]]
             r = x[sides[side]] - self._jaw_origin(grip, side)
-            wrenches.append(JawWrench(on_jaw.sum(axis=0),
-                                       meshes.cross_rows(r, on_jaw).sum(axis=0)))
+            torque = meshes.cross_rows(r, on_jaw).sum(axis=0)
+            wrenches.append(JawWrench(on_jaw.sum(axis=0), torque))
         if self._plain_jaws:
             left_n = float(np.sum(normal[sides[LEFT]]))
             right_n = float(np.sum(normal[sides[RIGHT]]))

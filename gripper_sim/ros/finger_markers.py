@@ -134,8 +134,8 @@ def _to_world(local: np.ndarray, face_x: float, inward: float, lift: float) -> n
     return world
 
 
-def _marker(header: Header, ns: str, marker_id: int, kind: int, colour: ColorRGBA,
-            points: np.ndarray) -> Marker:
+def base_marker(header: Header, ns: str, marker_id: int, kind: int) -> Marker:
+    """An ADD marker of ``kind`` with the identity pose and no lifetime limit."""
     marker = Marker()
     marker.header = header
     marker.ns = ns
@@ -143,6 +143,12 @@ def _marker(header: Header, ns: str, marker_id: int, kind: int, colour: ColorRGB
     marker.type = kind
     marker.action = Marker.ADD
     marker.pose.orientation.w = 1.0
+    return marker
+
+
+def _marker(header: Header, ns: str, marker_id: int, kind: int, colour: ColorRGBA,
+            points: np.ndarray) -> Marker:
+    marker = base_marker(header, ns, marker_id, kind)
     marker.scale.x = OUTLINE_WIDTH if kind == Marker.LINE_STRIP else 1.0
     marker.scale.y = marker.scale.z = 1.0
     marker.color = colour

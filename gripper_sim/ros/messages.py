@@ -26,7 +26,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from builtin_interfaces.msg import Duration, Time
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, WrenchStamped
 from gripper_sim_interfaces.msg import FruitState
 from rosgraph_msgs.msg import Clock
@@ -35,7 +35,8 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from gripper_sim.core.results import StepResult
-from gripper_sim.ros.finger_markers import FingerGeometry, finger_geometry, finger_markers
+from gripper_sim.ros.finger_markers import (FingerGeometry, base_marker, finger_geometry,
+                                            finger_markers)
 
 WORLD_FRAME = 'world'
 LEFT_JAW_FRAME = 'left_jaw'
@@ -420,20 +421,8 @@ def _pressure_colours(pressure: np.ndarray, bruise_pressure: float) -> list[Colo
     return colours
 
 
-def _marker(header: Header, ns: str, marker_id: int, kind: int) -> Marker:
-    marker = Marker()
-    marker.header = header
-    marker.ns = ns
-    marker.id = marker_id
-    marker.type = kind
-    marker.action = Marker.ADD
-    marker.pose.orientation.w = 1.0
-    marker.lifetime = Duration()
-    return marker
-
-
 def _deleted(header: Header, ns: str, marker_id: int) -> Marker:
-    marker = _marker(header, ns, marker_id, Marker.ARROW)
+    marker = base_marker(header, ns, marker_id, Marker.ARROW)
     marker.action = Marker.DELETE
     return marker
 
@@ -454,12 +443,12 @@ def fruit_marker(result: StepResult, context: MessageContext, header: Header) ->
     positions = world_xyz(result.positions)
     if is_3d(result):
         corners = np.asarray(result.triangles, dtype=int).ravel()
-        marker = _marker(header, 'fruit_mesh', 0, Marker.TRIANGLE_LIST)
+        marker = base_marker(header, 'fruit_mesh', 0, Marker.TRIANGLE_LIST)
         marker.scale.x = marker.scale.y = marker.scale.z = 1.0
     else:
         surface = np.asarray(result.surface, dtype=int)
         corners = np.concatenate([surface, surface[:1]])
-        marker = _marker(header, 'fruit_outline', 0, Marker.LINE_STRIP)
+        marker = base_marker(header, 'fruit_outline', 0, Marker.LINE_STRIP)
         marker.scale.x = OUTLINE_WIDTH
     marker.points = _points(positions[corners])
     marker.colors = _pressure_colours(pressure[corners], context.bruise_pressure)
@@ -481,7 +470,7 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
     # the jaw plate sits behind a recessed face and a pad
     recess = context.finger.recess if context.finger is not None else 0.0
     for marker_id, (_, face_x, outward, wrench) in enumerate(jaws):
-        jaw = _marker(header, 'jaws', marker_id, Marker.CUBE)
+        jaw = base_marker(header, 'jaws', marker_id, Marker.CUBE)
         jaw.pose.position.x = float(face_x + outward * (recess + context.jaw_thickness / 2.0))
         jaw.pose.position.z = float(result.lift)
         jaw.scale.x = context.jaw_thickness
@@ -494,7 +483,7 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
         if float(np.linalg.norm(force)) < 1e-9:
             array.markers.append(_deleted(header, 'jaw_forces', marker_id))
             continue
-        arrow = _marker(header, 'jaw_forces', marker_id, Marker.ARROW)
+        arrow = base_marker(header, 'jaw_forces', marker_id, Marker.ARROW)
         start = Point(x=float(face_x), y=0.0, z=float(result.lift))
         arrow.points = [start, Point(x=start.x + ARROW_SCALE * force[0],
                                      y=ARROW_SCALE * force[1],
@@ -508,7 +497,7 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
         float(result.lift), width))
 
     if context.table:
-        table = _marker(header, 'table', 0, Marker.CUBE)
+        table = base_marker(header, 'table', 0, Marker.CUBE)
         span = max(0.3, 4.0 * context.rest_width)
         table.pose.position.z = context.table_height - 0.005
         table.scale.x, table.scale.y, table.scale.z = span, max(2.0 * width, span / 2), 0.01
@@ -517,7 +506,7 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
 
     touching = np.flatnonzero(np.asarray(result.contact_obstacle) >= 0)
     if touching.size:
-        lines = _marker(header, 'contact_forces', 0, Marker.LINE_LIST)
+        lines = base_marker(header, 'contact_forces', 0, Marker.LINE_LIST)
         lines.scale.x = 0.0005
         lines.color = ColorRGBA(r=0.1, g=0.3, b=0.9, a=1.0)
         start = world_xyz(result.positions)[touching]
