@@ -244,20 +244,11 @@ class ImplicitEulerSolver:
             g_f = s @ grad
             filtered = s @ hess @ s
             inertia = sp.diags(s.diagonal() * self.m / dt ** 2)
-            for shift in (0.0, 1.0, 10.0, 100.0, 1000.0):
-                # an indefinite Hessian (buckling skin, compressed flesh) may give an
-                # ascent direction: add inertia-like diagonal terms until it descends
-                a = (filtered + complement + shift * inertia).tocsc()
-                try:
-                    dq = _solve_with_low_rank(a, -g_f, [(c, s @ u) for c, u in low_rank],
-                                              self.lu_options)
-                except RuntimeError:  # singular factor
-                    continue
-                slope = float(g_f @ dq)
-                if np.all(np.isfinite(dq)) and slope <= 0:
-                    break
-            else:
-                raise NewtonFailure('no descent direction found', history)
+            low = [(c, s @ u) for c, u in low_rank]
+            dq, slope = descent_direction(
+                lambda shift: _solve_with_low_rank((filtered + complement + shift * inertia)
+                                                   .tocsc(), -g_f, low, self.lu_options),
+                g_f, history)
             if float(np.max(np.abs(dq))) / dt < self.tolerance:
                 q = q + dq
                 _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con, hessian=False)
@@ -273,6 +264,38 @@ class ImplicitEulerSolver:
                 return StepSolution(q, grad - fric_grad, iteration, history)
             phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=True)
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
+
+
+#: multiples of the (filtered) inertia M / dt^2 added to an indefinite Newton matrix
+DESCENT_SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
+
+
+def descent_direction(solve_shifted, gradient: np.ndarray, history: list[float]):
+    """The Newton step of the first shift in ``DESCENT_SHIFTS`` that descends.
+
+    An indefinite Hessian (buckling skin, compressed flesh) may give an ascent direction:
+    inertia-like diagonal terms are added until the step descends.
+
+    Args:
+        solve_shifted: shift -> the step dq (n,) of the matrix with ``shift`` times the
+            inertia added; may raise RuntimeError (a singular factor).
+        gradient: (n,) the filtered gradient.
+
+    Returns:
+        (dq, slope gradient . dq).
+
+    Raises:
+        NewtonFailure: no shift gave a finite descent direction.
+    """
+    for shift in DESCENT_SHIFTS:
+        try:
+            dq = solve_shifted(shift)
+        except RuntimeError:  # singular factor
+            continue
+        slope = float(gradient @ dq)
+        if np.all(np.isfinite(dq)) and slope <= 0:
+            return dq, slope
+    raise NewtonFailure('no descent direction found', history)
 
 
 def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: float,

@@ -44,8 +44,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from gripper_sim.core.stepper import (ImplicitEulerSolver, NewtonFailure, StepConstraints,
-                                      StepSolution, line_search, stack_low_rank,
-                                      woodbury_terms)
+                                      StepSolution, descent_direction, line_search,
+                                      stack_low_rank, woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
     from gripper_sim.core3d import kernels
@@ -472,22 +472,16 @@ class PatternCachingSolver(ImplicitEulerSolver):
             if not reuse:
                 hdata, low_rank = parts
                 low = [(coef, filtered(vec)) for coef, vec in low_rank]
-            for shift in (0.0, 1.0, 10.0, 100.0, 1000.0):
-                # an indefinite Hessian (buckling skin, compressed flesh) may give an
-                # ascent direction: add inertia-like diagonal terms until it descends
+
+            def solve_shifted(shift):
+                nonlocal matrix
                 if not (reuse and shift == 0.0):
                     kernels.filter_blocks(hdata, self._block_pos, self._block_nodes,
                                           filters, shift * s_diag * self.m / dt ** 2, out)
                     matrix = self._csc(out.copy())
-                try:
-                    dq = self._linear_solve(matrix, -g_f, low, shift > 0, dt, filtered)
-                except RuntimeError:  # singular factor
-                    continue
-                slope = float(g_f @ dq)
-                if np.all(np.isfinite(dq)) and slope <= 0:
-                    break
-            else:
-                raise NewtonFailure('no descent direction found', history)
+                return self._linear_solve(matrix, -g_f, low, shift > 0, dt, filtered)
+
+            dq, slope = descent_direction(solve_shifted, g_f, history)
             if float(np.max(np.abs(dq))) / dt < self.tolerance:
                 q = q + dq
                 _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
