@@ -362,20 +362,18 @@ class PatternCachingSolver(ImplicitEulerSolver):
         lu = self._lu
         kept = self._woodbury
         if kept is not None and kept[0].shape[1] == c.size:
-            u_kept, a_inv_u, small_inv = kept
-
-            def precondition(r):
-                y = lu.solve(r)
-                return y - a_inv_u @ (small_inv @ (u_kept.T @ y))
+            u_w, a_inv_u, small_inv = kept
         elif c.size:
-            a_inv_u = lu.solve(u) if u.shape[1] > 1 else lu.solve(u[:, 0])[:, None]
-            small_inv = np.linalg.inv(np.diag(1.0 / c) + u.T @ a_inv_u)
-
+            a_inv_u, capacitance = woodbury_terms(lu.solve, u, c)
+            u_w, small_inv = u, np.linalg.inv(capacitance)
+        else:
+            u_w = None
+        if u_w is None:
+            precondition = lu.solve
+        else:
             def precondition(r):
                 y = lu.solve(r)
-                return y - a_inv_u @ (small_inv @ (u.T @ y))
-        else:
-            precondition = lu.solve
+                return y - a_inv_u @ (small_inv @ (u_w.T @ y))
         if project is None:
             return precondition
         # the system lives in the range of S (its held directions are the identity and
