@@ -88,3 +88,22 @@ def pick(ratio, mu=0.5, lift=0.02, hold=1.0):
     force = ratio * weight / (2 * mu)
     sequence = GraspSequence(sim, force, lift_height=lift, hold_time=hold)
     return sim, run_grasp(sim, sequence)
+
+
+def kernel_evaluation(energy, q, hessian=True):
+    """(value, gradient, dense Hessian incl. low-rank terms) from an energy's compiled
+    ``evaluate_into``, with a dense (n, n) matrix standing in for the CSC values
+    (scatter = row * n + column)."""
+    n = q.size
+    grad = np.zeros(n)
+    data = np.zeros(n * n)
+    if energy.dofs is None:
+        scatter = np.zeros((0, 0), np.int64)
+    else:
+        m = energy.dofs.shape[1]
+        scatter = (np.repeat(energy.dofs, m, axis=1) * n + np.tile(energy.dofs, (1, m)))
+    value, low_rank = energy.evaluate_into(q, grad, data, scatter, hessian)
+    dense = data.reshape(n, n)
+    for c, u in low_rank:
+        dense = dense + c * np.outer(u, u)
+    return value, grad, dense

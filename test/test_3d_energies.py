@@ -2,11 +2,14 @@
 import numpy as np
 import pytest
 
-from gripper_sim.core3d.energies import (EnclosedVolumePressure, Gravity3D, HingeBending,
-                                         Membrane, NeoHookeanTets, dihedral_angles)
+from gripper_sim.core.energies import Gravity
+from gripper_sim.core3d.energies import (EnclosedVolumePressure, HingeBending, Membrane,
+                                         NeoHookeanTets, dihedral_angles)
 from gripper_sim.core3d.energies.quadratic_tets import QuadraticNeoHookeanTets
 from gripper_sim.core3d.meshes import (TET10_EDGES, body_surface, enclosed_volume,
                                        geodesic_sphere, hinges, signed_volumes)
+
+from helpers import kernel_evaluation
 
 RNG = np.random.default_rng(7)
 RADIUS = 0.03
@@ -59,7 +62,7 @@ def _energies():
          _perturbed(x0, 1e-3)),
         ('neo-hookean-tets', NeoHookeanTets(tets, corners, 2e6, 0.38),
          _perturbed(corners, 1e-3)),
-        ('gravity', Gravity3D(np.full(len(x0), 0.01), 9.81), _perturbed(x0, 1e-3)),
+        ('gravity', Gravity(np.full(len(x0), 0.01), 9.81, dim=3), _perturbed(x0, 1e-3)),
         ('quadratic-tets', QuadraticNeoHookeanTets(tets10, points10, 2e6, 0.38),
          _perturbed(points10, 5e-4)),
     ]
@@ -90,28 +93,10 @@ def test_hessian_matches_central_differences(name, energy, q):
     assert np.allclose(hess, hess.T, atol=1e-9 * np.max(np.abs(hess)))
 
 
-def _kernel_evaluation(energy, q, hessian=True):
-    """(value, gradient, dense Hessian incl. low-rank terms) from ``evaluate_into``, with
-    a dense (n, n) matrix standing in for the CSC values (scatter = row * n + column)."""
-    n = q.size
-    grad = np.zeros(n)
-    data = np.zeros(n * n)
-    if energy.dofs is None:
-        scatter = np.zeros((0, 0), np.int64)
-    else:
-        m = energy.dofs.shape[1]
-        scatter = (np.repeat(energy.dofs, m, axis=1) * n + np.tile(energy.dofs, (1, m)))
-    value, low_rank = energy.evaluate_into(q, grad, data, scatter, hessian)
-    dense = data.reshape(n, n)
-    for c, u in low_rank:
-        dense = dense + c * np.outer(u, u)
-    return value, grad, dense
-
-
 @pytest.mark.parametrize('name,energy,q', CASES, ids=IDS)
 def test_numba_kernel_matches_the_numpy_reference(name, energy, q):
     """The fast solver's kernels give the reference value, gradient and Hessian."""
-    value, grad, hess = _kernel_evaluation(energy, q)
+    value, grad, hess = kernel_evaluation(energy, q)
     assert value == pytest.approx(energy.evaluate(q, hessian=False).value, rel=1e-12,
                                   abs=1e-18)
     assert energy.value(q) == pytest.approx(value, rel=1e-12, abs=1e-18)
@@ -119,7 +104,7 @@ def test_numba_kernel_matches_the_numpy_reference(name, energy, q):
     assert np.max(np.abs(grad - ref_grad)) <= 1e-12 * np.max(np.abs(ref_grad))
     ref_hess = energy.hessian(q)
     assert np.max(np.abs(hess - ref_hess)) <= 1e-12 * max(np.max(np.abs(ref_hess)), 1.0)
-    value_only, grad_only, untouched = _kernel_evaluation(energy, q, hessian=False)
+    value_only, grad_only, untouched = kernel_evaluation(energy, q, hessian=False)
     assert value_only == value and np.array_equal(grad_only, grad)
     assert not np.any(untouched)
 
@@ -127,9 +112,9 @@ def test_numba_kernel_matches_the_numpy_reference(name, energy, q):
 @pytest.mark.parametrize('name,energy,q', CASES[:4] + CASES[5:], ids=IDS[:4] + IDS[5:])
 def test_numba_kernel_hessian_matches_central_differences_of_its_gradient(name, energy, q):
     h = 1e-7
-    _, _, hess = _kernel_evaluation(energy, q)
-    fd = np.array([(_kernel_evaluation(energy, q + h * e, False)[1]
-                    - _kernel_evaluation(energy, q - h * e, False)[1]) / (2 * h)
+    _, _, hess = kernel_evaluation(energy, q)
+    fd = np.array([(kernel_evaluation(energy, q + h * e, False)[1]
+                    - kernel_evaluation(energy, q - h * e, False)[1]) / (2 * h)
                    for e in np.eye(q.size)])
     assert np.max(np.abs(hess)) > 1e-3, 'Hessian is trivially zero'
     assert np.max(np.abs(hess - fd)) <= 1e-6 * np.max(np.abs(hess))
@@ -148,7 +133,7 @@ def test_numba_tet_kernel_rejects_an_inverted_element_without_adding_anything():
     corners, tets = _cube_tets()
     flesh = NeoHookeanTets(tets, corners, 2e6, 0.38)
     mirrored = (corners * np.array([-1.0, 1.0, 1.0])).ravel()
-    value, grad, hess = _kernel_evaluation(flesh, mirrored)
+    value, grad, hess = kernel_evaluation(flesh, mirrored)
     assert value == np.inf and not np.any(grad) and not np.any(hess)
 
 

@@ -5,7 +5,11 @@ import pytest
 from gripper_sim.core.energies import (EnclosedAreaPressure, Gravity, NeoHookeanTriangles,
                                        RingBending, Stretching)
 from gripper_sim.core.mesh import mesh_outline
+from gripper_sim.core.pad import PadLayer
+from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.shapes import circle
+
+from helpers import kernel_evaluation
 
 RNG = np.random.default_rng(42)
 
@@ -70,3 +74,59 @@ def test_inverted_triangle_has_infinite_energy():
     flipped = nodes.copy()
     flipped[:, 0] *= -1  # mirror: every triangle turns clockwise
     assert flesh.value(flipped.ravel()) == np.inf
+
+
+def _pad_in_contact():
+    """A pad layer on a face of normal +x that the perturbed ring presses into and slides
+    along: every term of the pad energy (penalty, static and kinetic friction) active."""
+    x0, ring, _, _ = _ring()
+    pad = PadLayer(ring, np.full(len(ring), 0.015), 0.04, 2e-3, 2e5, 0.45, 0.8, len(x0))
+    face = FlatFace('left_jaw', np.array([x0[:, 0].min() - 1.5e-3, 0.0]),
+                    np.array([1.0, 0.0]), half_length=0.05, thickness=0.01)
+    moved = FlatFace('left_jaw', face.origin + np.array([1e-4, 2e-5]), face.normal,
+                     half_length=0.05, thickness=0.01, velocity=np.array([0.1, 0.02]))
+    pad.begin_step(x0, [(face, 0, 0)], [(moved, 0, 0)], 1e-3)
+    q = _perturbed(x0, 1e-5)
+    return pad, q
+
+
+def _compiled_cases():
+    return _energies() + [('pad', *_pad_in_contact())]
+
+
+@pytest.mark.parametrize('name,energy,q', _compiled_cases(),
+                         ids=[e[0] for e in _compiled_cases()])
+def test_compiled_kernel_matches_the_numpy_reference(name, energy, q):
+    """Each energy's ``evaluate_into`` (what the solver runs) gives the value, gradient
+    and Hessian of its numpy ``evaluate``."""
+    value, grad, hess = kernel_evaluation(energy, q)
+    reference = energy.evaluate(q, hessian=False)
+    assert value == pytest.approx(reference.value, rel=1e-12, abs=1e-18)
+    assert energy.value(q) == pytest.approx(value, rel=1e-12, abs=1e-18)
+    assert np.max(np.abs(grad)) > 0, 'gradient is trivially zero'
+    assert np.max(np.abs(grad - reference.gradient)) <= 1e-12 * np.max(np.abs(grad))
+    ref_hess = energy.hessian(q)
+    if energy.dofs is not None:
+        assert np.max(np.abs(ref_hess)) > 0, 'Hessian is trivially zero'
+    assert np.max(np.abs(hess - ref_hess)) <= 1e-11 * max(np.max(np.abs(ref_hess)), 1.0)
+    value_only, grad_only, untouched = kernel_evaluation(energy, q, hessian=False)
+    assert value_only == value and np.array_equal(grad_only, grad)
+    assert not np.any(untouched)
+
+
+def test_compiled_von_mises_matches_the_numpy_reference():
+    nodes, tri = mesh_outline(circle(0.06, 16), 1.3)
+    flesh = NeoHookeanTriangles(tri, nodes, 2e6, 0.38, 0.04)
+    q = _perturbed(nodes, 5e-4)
+    stress = flesh.von_mises(q)
+    assert np.max(stress) > 0
+    np.testing.assert_allclose(stress, flesh.von_mises_reference(q), rtol=1e-12)
+
+
+def test_compiled_kernel_of_an_inverted_triangle_is_infinite_and_adds_nothing():
+    nodes, tri = mesh_outline(circle(0.06, 16), 1.3)
+    flesh = NeoHookeanTriangles(tri, nodes, 2e6, 0.38, 0.04)
+    x = nodes.copy()
+    x[tri[0, 0]], x[tri[0, 1]] = nodes[tri[0, 1]], nodes[tri[0, 0]]
+    value, grad, hess = kernel_evaluation(flesh, x.ravel())
+    assert value == np.inf and not np.any(grad) and not np.any(hess)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gripper_sim.core.energies.base import Energy, Evaluation
+from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING
 
 
@@ -120,6 +120,8 @@ class PadLayer(PadState):
                  youngs_modulus: float, poisson_ratio: float, friction: float, n_nodes: int):
         super().__init__(surface, np.asarray(tributary, dtype=float) * depth, thickness,
                          youngs_modulus, poisson_ratio, friction, n_nodes, dim=2)
+        #: each surface node one element of the Hessian's pattern (its 2x2 node block)
+        self.dofs = element_dofs(self.surface[:, None])
 
     # ------------------------------------------------------------------ per step
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
@@ -169,44 +171,73 @@ class PadLayer(PadState):
         return f_n, f_t
 
     # ------------------------------------------------------------------ energy
+    def _face_terms(self, x: np.ndarray, face, active: np.ndarray, lagged: np.ndarray,
+                    hessian: bool):
+        """One pad face's energy (J), its gradient (k, 2) N on the active surface nodes and
+        their Hessian blocks (k, 2, 2) N/m (None without ``hessian``)."""
+        eps = FRICTION_SMOOTHING * self.dt
+        nodes = self.surface[active]
+        k = self.k[active]
+        gap = (x[nodes] - face.origin) @ face.normal
+        delta = np.maximum(0.0, -gap)
+        u = ((x[nodes] - self.x_start[nodes]) @ face.tangent) - face.speed * self.dt
+        a = np.abs(u)
+        bound = self.mu * lagged
+        value = 0.5 * float(np.sum(k * delta ** 2)) + float(np.sum(bound * _f0(a, eps)))
+        g_n = -k * delta  # d E / d gap, along the normal
+        g_t = bound * _f1(a, eps) * np.sign(u)
+        local = g_n[:, None] * face.normal + g_t[:, None] * face.tangent
+        if not hessian:
+            return value, local, None
+        h_n = np.where(delta > 0, k, 0.0)
+        h_t = bound * _df1(a, eps)
+        n, t = face.normal, face.tangent
+        blocks = (h_n[:, None, None] * np.outer(n, n)[None]
+                  + h_t[:, None, None] * np.outer(t, t)[None])
+        return value, local, blocks
+
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         x = q.reshape(-1, 2)
         value = 0.0
         grad = np.zeros(q.size)
         rows, cols, vals = [], [], []
-        eps = FRICTION_SMOOTHING * self.dt
         for face, active, lagged in zip(self.faces, self.active, self.lagged):
             if not active.size:
                 continue
             nodes = self.surface[active]
-            k = self.k[active]
-            gap = (x[nodes] - face.origin) @ face.normal
-            delta = np.maximum(0.0, -gap)
-            value += 0.5 * float(np.sum(k * delta ** 2))
-            u = ((x[nodes] - self.x_start[nodes]) @ face.tangent) - face.speed * self.dt
-            a = np.abs(u)
-            bound = self.mu * lagged
-            value += float(np.sum(bound * _f0(a, eps)))
-            g_n = -k * delta  # d E / d gap, along the normal
-            g_t = bound * _f1(a, eps) * np.sign(u)
-            local = g_n[:, None] * face.normal + g_t[:, None] * face.tangent
+            face_value, local, blocks = self._face_terms(x, face, active, lagged, hessian)
+            value += face_value
             np.add.at(grad, 2 * nodes, local[:, 0])
             np.add.at(grad, 2 * nodes + 1, local[:, 1])
             if hessian:
-                h_n = np.where(delta > 0, k, 0.0)
-                h_t = bound * _df1(a, eps)
-                n, t = face.normal, face.tangent
-                block = (h_n[:, None, None] * np.outer(n, n)[None]
-                         + h_t[:, None, None] * np.outer(t, t)[None])
-                dofs = np.stack([2 * nodes, 2 * nodes + 1], axis=1)
+                dofs = self.dofs[active]
                 rows.append(np.repeat(dofs, 2, axis=1).ravel())
                 cols.append(np.tile(dofs, (1, 2)).ravel())
-                vals.append(block.ravel())
+                vals.append(blocks.ravel())
         if not hessian or not rows:
             empty = np.zeros(0, np.int64)
             return Evaluation(value, grad, empty, empty, np.zeros(0))
         return Evaluation(value, grad, np.concatenate(rows), np.concatenate(cols),
                           np.concatenate(vals))
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """``evaluate`` for the fast solver: adds the gradient (N) into ``grad`` and the
+        node blocks (N/m) into the CSC values ``data`` at ``scatter`` (n_s, 4), one
+        element per surface node; returns (value in J, no low-rank terms)."""
+        x = q.reshape(-1, 2)
+        value = 0.0
+        for face, active, lagged in zip(self.faces, self.active, self.lagged):
+            if not active.size:
+                continue
+            nodes = self.surface[active]
+            face_value, local, blocks = self._face_terms(x, face, active, lagged, hessian)
+            value += face_value
+            np.add.at(grad, 2 * nodes, local[:, 0])
+            np.add.at(grad, 2 * nodes + 1, local[:, 1])
+            if hessian:
+                np.add.at(data, scatter[active], blocks.reshape(-1, 4))
+        return value, []
 
 
 def _f0(y, eps):

@@ -18,13 +18,14 @@ from gripper_sim.core import fingers
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast import FastPath
+from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics, GripperState
 from gripper_sim.core.measures import deformation, face_contact_length
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.results import Energies, JawWrench, StepResult
-from gripper_sim.core.stepper import FRICTION_SMOOTHING, ImplicitEulerSolver, StepConstraints
+from gripper_sim.core.stepper import FRICTION_SMOOTHING, StepConstraints
 from gripper_sim.errors import ConfigError
 
 LEFT, RIGHT = 0, 1
@@ -67,11 +68,12 @@ class Simulation(SimulationFacade):
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
-        self.solver = ImplicitEulerSolver(
+        self.solver = PatternCachingSolver(
             self.fruit.masses, list(self.fruit.energies) + [self.gravity]
             + ([self._pad] if self._pad is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
-            tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'])
+            tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
+            dim=2, lu_options=SYMMETRIC_LU_OPTIONS, fast=None if fast is not False else False)
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
             c['gripper.force_time_constant'],
@@ -89,6 +91,7 @@ class Simulation(SimulationFacade):
     def reset(self) -> None:
         """Back to the initial state and commands, time 0."""
         n = self.fruit.n_nodes
+        self.solver.reset()
         self.q = self.initial_positions.copy()
         self.v = np.tile([self.config['fruit.initial_velocity.x'],
                           self.config['fruit.initial_velocity.z']], (n, 1)).astype(float)

@@ -29,25 +29,20 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from gripper_sim.core import contact as cm
+from gripper_sim.core.energies import Gravity
 from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
+from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperKinematics, GripperState
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, StepConstraints
 from gripper_sim.core3d import fingers3d, meshes
 from gripper_sim.core3d.damage import DamageTracker3D
-from gripper_sim.core3d.energies import Gravity3D
 from gripper_sim.core3d.fingers_pad import PadLayer3D
 from gripper_sim.core3d.fruit import FruitModel3D, build_fruit3d
 from gripper_sim.core3d.obstacles import Plate
-from gripper_sim.core3d.solver import PatternCachingSolver
 from gripper_sim.errors import ConfigError
 
 LEFT, RIGHT = 0, 1
-
-#: SuperLU settings for the 3D Newton systems (symmetric pattern: minimum degree on
-#: A^T + A and diagonal pivots, about twice as fast as the defaults here)
-LU_OPTIONS = dict(permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
-                  options=dict(SymmetricMode=True))
 
 #: a contact pass adds, of the free nodes that ended inside a face, those at least this
 #: fraction of the deepest one's depth; the others, if still inside after the next
@@ -129,7 +124,7 @@ class Simulation3D(SimulationFacade):
             raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
         self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
                              else centre_z)
-        self.gravity = Gravity3D(self.fruit.masses, c['world.gravity'])
+        self.gravity = Gravity(self.fruit.masses, c['world.gravity'], dim=3)
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
@@ -138,7 +133,7 @@ class Simulation3D(SimulationFacade):
             + ([self._pad] if self._pad is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
-            dim=3, lu_options=LU_OPTIONS)
+            dim=3, lu_options=SYMMETRIC_LU_OPTIONS)
         # first guess of d force / d gap for the force regulator (it adapts): a Hertz
         # contact of the flesh at a 1 % approach
         radius = 0.5 * self.fruit.rest_width

@@ -36,7 +36,13 @@ class Energy:
         return Evaluation(0.0, np.zeros_like(q), empty, empty, np.zeros(0))
 
     def value(self, q: np.ndarray) -> float:
-        return self.evaluate(q, hessian=False).value
+        """J, through the energy's compiled ``evaluate_into`` when it has one."""
+        evaluate_into = getattr(self, 'evaluate_into', None)
+        if evaluate_into is None:
+            return self.evaluate(q, hessian=False).value
+        value, _ = evaluate_into(q, np.zeros(q.size), np.zeros(1), np.zeros((0, 0), np.int64),
+                                 False)
+        return float(value)
 
     def gradient(self, q: np.ndarray) -> np.ndarray:
         return self.evaluate(q, hessian=False).gradient

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gripper_sim.core.energies import kernels
 from gripper_sim.core.energies.base import (Energy, Evaluation, element_dofs,
                                             hessian_triplets, scatter_gradient)
 
@@ -84,3 +85,10 @@ class RingBending(Energy):
         local = self.k[:, None, None] * (jac[:, :, None] * jac[:, None, :]
                                          + dphi[:, None, None] * hphi)
         return Evaluation(value, grad, *hessian_triplets(self.dofs, local))
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """The numba kernel of ``evaluate`` (see ``Stretching.evaluate_into``; scatter
+        (n_triple, 36))."""
+        return kernels.bending(q.reshape(-1, 2), self.triples, self.phi0, self.k, grad, data,
+                               scatter, hessian), []

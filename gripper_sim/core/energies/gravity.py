@@ -1,4 +1,4 @@
-"""Gravity along -z: E = g sum_i m_i z_i."""
+"""Gravity along -z (the last coordinate): E = g sum_i m_i z_i."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,15 +10,27 @@ class Gravity(Energy):
     """Args:
         masses: (n_nodes,) kg.
         g: m/s^2, magnitude of gravity (acting along -z).
+        dim: 2 (q = [x0, z0, ...]) or 3 (q = [x0, y0, z0, ...]).
     """
 
     elastic = False
+    #: no Hessian: nothing to scatter
+    dofs = None
 
-    def __init__(self, masses: np.ndarray, g: float):
+    def __init__(self, masses: np.ndarray, g: float, dim: int = 2):
         self.g = float(g)
-        self.grad = np.zeros(2 * len(masses))
-        self.grad[1::2] = self.g * np.asarray(masses, dtype=float)
+        self.grad = np.zeros(dim * len(masses))
+        self.grad[dim - 1::dim] = self.g * np.asarray(masses, dtype=float)
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         empty = np.zeros(0, np.int64)
         return Evaluation(float(self.grad @ q), self.grad.copy(), empty, empty, np.zeros(0))
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter, hessian: bool = True):
+        """``evaluate`` for the fast solver: adds the gradient into ``grad``."""
+        grad += self.grad
+        return float(self.grad @ q), []
+
+    def value(self, q: np.ndarray) -> float:
+        return float(self.grad @ q)

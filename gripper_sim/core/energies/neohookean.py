@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gripper_sim.core.energies import kernels
 from gripper_sim.core.energies.base import (Energy, Evaluation, element_dofs,
                                             hessian_triplets, scatter_gradient)
 
@@ -38,7 +39,7 @@ class NeoHookeanTriangles(Energy):
         det = dm[:, 0, 0] * dm[:, 1, 1] - dm[:, 0, 1] * dm[:, 1, 0]
         if np.any(det <= 0):
             raise ValueError('triangles must be counter-clockwise with positive area')
-        self.dm_inv = np.linalg.inv(dm)
+        self.dm_inv = np.ascontiguousarray(np.linalg.inv(dm))
         self.volume = 0.5 * det * depth  # m^3 per element
         self.mu, self.lam = lame_parameters(youngs_modulus, poisson_ratio)
         self.dofs = element_dofs(self.tri)
@@ -60,6 +61,13 @@ class NeoHookeanTriangles(Energy):
 
     def von_mises(self, q: np.ndarray) -> np.ndarray:
         """(n_tri,) Pa, plane-strain von Mises of the Cauchy stress (damage measure)."""
+        out = np.empty(len(self.tri))
+        kernels.neohookean_von_mises(q.reshape(-1, 2), self.tri, self.dm_inv, float(self.mu),
+                                     float(self.lam), out)
+        return out
+
+    def von_mises_reference(self, q: np.ndarray) -> np.ndarray:
+        """``von_mises`` in numpy (the reference of the numba kernel)."""
         f = self.deformation_gradients(q)
         j = np.linalg.det(f)
         b = f @ np.swapaxes(f, 1, 2)
@@ -98,3 +106,11 @@ class NeoHookeanTriangles(Energy):
              + lam * np.einsum('eji,enm->eijmn', finv, finv).reshape(-1, 4, 4))
         local = np.einsum('e,eak,eab,ebl->ekl', self.volume, self.b, c, self.b)
         return Evaluation(value, grad, *hessian_triplets(self.dofs, local))
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """The numba kernel of ``evaluate`` (see ``Stretching.evaluate_into``; scatter
+        (n_tri, 36)); value inf, nothing added, if an element is inverted."""
+        return kernels.neohookean_triangles(q.reshape(-1, 2), self.tri, self.dm_inv,
+                                            self.volume, float(self.mu), float(self.lam), grad,
+                                            data, scatter, hessian), []

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import Energy, Evaluation
+from gripper_sim.core.energies import kernels
+from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 
 
 def enclosed_area(x: np.ndarray, ring: np.ndarray) -> float:
@@ -37,6 +38,8 @@ class EnclosedAreaPressure(Energy):
         self.p0 = float(turgor)
         self.k = float(bulk_modulus)
         nxt = np.roll(self.ring, -1)
+        #: each ring edge (node, next node) an element of the Hessian's pattern
+        self.dofs = element_dofs(np.stack([self.ring, nxt], axis=1))
         # d2A/(dx_i dz_j) = +1/2 for j = next(i), -1/2 for i = next(j); symmetric
         self.h_rows = np.concatenate([2 * self.ring, 2 * nxt + 1, 2 * nxt, 2 * self.ring + 1])
         self.h_cols = np.concatenate([2 * nxt + 1, 2 * self.ring, 2 * self.ring + 1, 2 * nxt])
@@ -70,3 +73,17 @@ class EnclosedAreaPressure(Energy):
             return Evaluation(value, grad, empty, empty, np.zeros(0))
         low_rank = [(self.b * self.k / self.a0, ga)] if self.k > 0 else []
         return Evaluation(value, grad, self.h_rows, self.h_cols, de_da * self.h_vals, low_rank)
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """The numba kernel of ``evaluate`` (see ``Stretching.evaluate_into``; scatter
+        (n_ring, 16)); the rank-one term is returned as in ``evaluate``."""
+        ga = np.empty(q.size)
+        da = kernels.area_and_gradient(q.reshape(-1, 2), self.ring, ga) - self.a0
+        value = self.b * (-self.p0 * da + 0.5 * self.k * da ** 2 / self.a0)
+        de_da = self.b * (-self.p0 + self.k * da / self.a0)
+        grad += de_da * ga
+        if not hessian:
+            return value, []
+        kernels.area_pressure_hessian(de_da, data, scatter)
+        return value, ([(self.b * self.k / self.a0, ga)] if self.k > 0 else [])

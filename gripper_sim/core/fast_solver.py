@@ -1,18 +1,20 @@
-"""The 2D core's implicit Euler Newton stepper with a faster Hessian assembly for 3D.
+"""The implicit Euler Newton stepper of the simulations (2D and 3D) on a fixed pattern.
 
-``ImplicitEulerSolver`` turns the energies' IJV triplets into a sparse matrix on every
-evaluation (a sort of ~10^5-10^6 triplets). The meshes of the 3D fruit do not change,
-so neither do the triplets' positions: this subclass finds the CSC pattern once and then
-sums each evaluation's values into it with one ``np.bincount``. Same incremental
-potential, gradient and Hessian as the base class (up to round-off in the summation
-order); the friction cone and everything else are inherited.
+``ImplicitEulerSolver`` (``core.stepper``, the reference) turns the energies' IJV
+triplets into a sparse matrix on every evaluation. The fruit's meshes do not change, so
+neither do the triplets' positions: this subclass finds the CSC pattern once. Same
+incremental potential, gradient and Hessian as the base class (up to round-off in the
+summation order); without numba it sums each evaluation's triplets into the pattern
+with one ``np.bincount``.
 
 The fast path (numba installed, no stiffness damping, every energy with an
 ``evaluate_into`` kernel; ``GRIPPER_SIM_FAST=0`` turns it off) solves the same Newton
 iteration (same line search, shifts and stopping rule) with less work:
 - the energies add their gradients and Hessians straight into the CSC values through
-  precomputed scatter indices (``core3d.kernels``), and S H S + (I - S) is one kernel
-  over the 3x3 node blocks, on the same pattern;
+  precomputed scatter indices (``core.energies.kernels``, ``core3d.kernels``), and
+  S H S + (I - S) is one kernel over the d x d node blocks (``core.solver_kernels``), on
+  the same pattern; kinetic friction is the Coulomb cone of the stepper, a 2D tangent
+  being a cone with one tangent;
 - each Newton system is solved by conjugate gradients preconditioned with a
   single-precision LU factorisation kept from an earlier Newton iteration or step (the
   matrix changes little between them), its rank-one terms by the Woodbury identity and
@@ -48,9 +50,14 @@ from gripper_sim.core.stepper import (ImplicitEulerSolver, NewtonFailure, StepCo
                                       stack_low_rank, woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
-    from gripper_sim.core3d import kernels
+    from gripper_sim.core import solver_kernels as kernels
 except ImportError:  # pragma: no cover - depends on the environment
     kernels = None
+
+#: SuperLU settings for the Newton systems (symmetric pattern: minimum degree on
+#: A^T + A and diagonal pivots, about twice as fast as the defaults for the 3D fruit)
+SYMMETRIC_LU_OPTIONS = dict(permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
+                            options=dict(SymmetricMode=True))
 
 #: relative residual (infinity norms) at which the preconditioned CG stops
 CG_TOLERANCE = 1e-1
@@ -122,6 +129,15 @@ def fast_available() -> bool:
     return kernels is not None and os.environ.get('GRIPPER_SIM_FAST', '1') != '0'
 
 
+def as_cone(con: StepConstraints) -> StepConstraints:
+    """``con`` with 2D friction (one tangent (k, 2), speeds (k,)) written as a Coulomb
+    cone with one tangent ((k, 1, 2), (k, 1)): the same potential, gradient and Hessian."""
+    if con.friction_tangents.ndim == 3:
+        return con
+    return StepConstraints(con.filters, con.friction_nodes, con.friction_tangents[:, None, :],
+                           con.friction_bounds, con.friction_obstacle_speed[:, None])
+
+
 class PatternCachingSolver(ImplicitEulerSolver):
     """``ImplicitEulerSolver`` whose energy Hessians keep one sparsity pattern."""
 
@@ -130,7 +146,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._pattern = None  # (signature, inverse, indices, indptr, nnz)
         if fast is None:
             fast = fast_available()
-        self.fast = bool(fast and kernels is not None and self.beta == 0 and self.dim == 3
+        self.fast = bool(fast and kernels is not None and self.beta == 0
                          and all(hasattr(e, 'evaluate_into') for e in self.energies))
         #: counts of the fast path: Newton solves (contact passes), Newton systems, LU
         #: factorisations, CG iterations
@@ -225,11 +241,12 @@ class PatternCachingSolver(ImplicitEulerSolver):
     # ------------------------------------------------------------------ fast path
     def _build_fast_pattern(self) -> None:
         """CSC pattern of every energy's elements plus the diagonal node blocks, the
-        scatter index of each energy, and the positions of the 3x3 node blocks."""
+        scatter index of each energy, and the positions of the d x d node blocks."""
         n = self.n
-        nodes = n // 3
-        diag = (3 * np.arange(nodes))[:, None] + np.arange(3)[None, :]
-        key_sets = [(np.tile(diag, (1, 3)) * n + np.repeat(diag, 3, axis=1)).ravel()]
+        d = self.dim
+        nodes = n // d
+        diag = (d * np.arange(nodes))[:, None] + np.arange(d)[None, :]
+        key_sets = [(np.tile(diag, (1, d)) * n + np.repeat(diag, d, axis=1)).ravel()]
         element_keys = []
         for energy in self.energies:
             if energy.dofs is None:
@@ -246,12 +263,12 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._scatter = [np.zeros((0, 0), np.int64) if keys is None else
                          np.searchsorted(unique, keys).astype(np.int64)
                          for keys in element_keys]
-        col_node, row_node = unique // n // 3, unique % n // 3
+        col_node, row_node = unique // n // d, unique % n // d
         block_keys = np.unique(col_node * nodes + row_node)
         bcol, brow = block_keys // nodes, block_keys % nodes
-        a = np.arange(3)
-        keys = ((3 * bcol[:, None, None] + a[None, None, :]) * n
-                + 3 * brow[:, None, None] + a[None, :, None])  # [block, row a, col c]
+        a = np.arange(d)
+        keys = ((d * bcol[:, None, None] + a[None, None, :]) * n
+                + d * brow[:, None, None] + a[None, :, None])  # [block, row a, col c]
         self._block_pos = np.searchsorted(unique, keys).astype(np.int64)
         self._block_nodes = np.stack([brow, bcol], axis=1).astype(np.int64)
         self._diag_block_pos = self._block_pos[brow == bcol][np.argsort(brow[brow == bcol])]
@@ -260,7 +277,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         # index that permutes the CSC values to the pattern of P A P^T
         graph = sp.csr_matrix((np.ones(len(bcol)), (brow, bcol)), shape=(nodes, nodes))
         node_order = nested_dissection(graph)
-        perm = (3 * node_order[:, None] + a[None, :]).ravel()
+        perm = (d * node_order[:, None] + a[None, :]).ravel()
         inverse = np.empty(n, np.int64)
         inverse[perm] = np.arange(n)
         col = np.repeat(np.arange(n), np.diff(self._indptr))
@@ -437,6 +454,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
               con: StepConstraints) -> StepSolution:
         """``ImplicitEulerSolver.solve`` (same Newton iteration, line search and
         shifts), on the fast path when it applies."""
+        con = as_cone(con)
         if not self.fast:
             return super().solve(q_n, v_n, dt, q_start, con)
         self.stats['passes'] += 1

@@ -1,0 +1,283 @@
+"""Numba kernels of the 2D energies (the ``evaluate_into`` of each energy class).
+
+Free functions ``@njit(cache=True)`` on arrays. Each computes the value, gradient and
+Hessian of the numpy ``evaluate`` of its class in ``gripper_sim.core.energies``
+(test/test_energies.py compares them), adding the gradient into a preallocated (n_dof,)
+vector and each element Hessian entry straight into the ``data`` array of a fixed CSC
+matrix: ``scatter[e, r * m + c]`` is the position in ``data`` of the entry (row
+``dofs[e, r]``, column ``dofs[e, c]``) of element e with m dofs (``base.element_dofs``
+order: [x, z] of each element node). With ``hessian`` False only the value and the
+gradient are computed (line searches).
+
+Positions x are (n_nodes, 2) (m). Import this module only where numba is installed.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def stretching(x, edges, rest, k, grad, data, scatter, hessian):
+    """Axial springs E = k (l - L)^2 / 2 per edge (``Stretching``).
+
+    Args:
+        x: (n, 2) m.  edges: (n_edge, 2).  rest: (n_edge,) L (m).  k: (n_edge,) EA / L
+        (N/m).  grad: (2 n,) N, added to.  data: CSC values (N/m), added to.
+        scatter: (n_edge, 16) positions in data.
+
+    Returns:
+        Energy (J).
+    """
+    value = 0.0
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        ex = x[j, 0] - x[i, 0]
+        ez = x[j, 1] - x[i, 1]
+        length = math.hypot(ex, ez)
+        stretch = length - rest[e]
+        value += 0.5 * k[e] * stretch * stretch
+        ux, uz = ex / length, ez / length
+        fx, fz = k[e] * stretch * ux, k[e] * stretch * uz
+        grad[2 * i] -= fx
+        grad[2 * i + 1] -= fz
+        grad[2 * j] += fx
+        grad[2 * j + 1] += fz
+        if not hessian:
+            continue
+        ratio = stretch / length
+        b00 = k[e] * (ux * ux + ratio * (1.0 - ux * ux))
+        b01 = k[e] * (ux * uz - ratio * ux * uz)
+        b11 = k[e] * (uz * uz + ratio * (1.0 - uz * uz))
+        sc = scatter[e]
+        for r in range(4):
+            for c in range(4):
+                a, b = r % 2, c % 2
+                v = b00 if a + b == 0 else (b11 if a + b == 2 else b01)
+                if (r < 2) != (c < 2):
+                    v = -v
+                data[sc[4 * r + c]] += v
+    return value
+
+
+@njit(cache=True, inline='always')
+def _angle_gradient(vx, vz, out, sign):
+    """out (2,) = sign d atan2(v_z, v_x) / dv."""
+    r2 = vx * vx + vz * vz
+    out[0] = -sign * vz / r2
+    out[1] = sign * vx / r2
+
+
+@njit(cache=True, inline='always')
+def _angle_hessian(vx, vz, out, sign):
+    """out (2, 2) = sign d^2 atan2(v_z, v_x) / dv^2."""
+    r4 = (vx * vx + vz * vz) ** 2
+    out[0, 0] = sign * 2.0 * vx * vz / r4
+    out[1, 1] = -out[0, 0]
+    out[0, 1] = sign * (vz * vz - vx * vx) / r4
+    out[1, 0] = out[0, 1]
+
+
+@njit(cache=True)
+def bending(x, triples, phi0, k, grad, data, scatter, hessian):
+    """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RingBending``).
+
+    Args:
+        x: (n, 2) m.  triples: (n_t, 3) previous, middle, next node.  phi0: (n_t,) rad.
+        k: (n_t,) EI / l (N m).  grad, data: added to.  scatter: (n_t, 36).
+
+    Returns:
+        Energy (J).
+    """
+    value = 0.0
+    ga = np.empty(2)
+    gb = np.empty(2)
+    jac = np.empty(6)
+    ha = np.empty((2, 2))
+    hb = np.empty((2, 2))
+    hphi = np.empty((6, 6))
+    for t in range(triples.shape[0]):
+        p, i, n = triples[t, 0], triples[t, 1], triples[t, 2]
+        ax, az = x[i, 0] - x[p, 0], x[i, 1] - x[p, 1]
+        bx, bz = x[n, 0] - x[i, 0], x[n, 1] - x[i, 1]
+        dphi = math.atan2(ax * bz - az * bx, ax * bx + az * bz) - phi0[t]
+        dphi = (dphi + math.pi) % (2 * math.pi) - math.pi
+        value += 0.5 * k[t] * dphi * dphi
+        _angle_gradient(ax, az, ga, -1.0)
+        _angle_gradient(bx, bz, gb, 1.0)
+        for a in range(2):
+            jac[a] = -ga[a]
+            jac[2 + a] = ga[a] - gb[a]
+            jac[4 + a] = gb[a]
+        nodes = (p, i, n)
+        for m in range(3):
+            for a in range(2):
+                grad[2 * nodes[m] + a] += k[t] * dphi * jac[2 * m + a]
+        if not hessian:
+            continue
+        _angle_hessian(ax, az, ha, -1.0)
+        _angle_hessian(bx, bz, hb, 1.0)
+        hphi[:, :] = 0.0
+        # a = x_i - x_{i-1}: selector [-I, I, 0]; b = x_{i+1} - x_i: [0, -I, I]
+        for r in range(2):
+            for c in range(2):
+                hphi[r, c] += ha[r, c]
+                hphi[r, 2 + c] -= ha[r, c]
+                hphi[2 + r, c] -= ha[r, c]
+                hphi[2 + r, 2 + c] += ha[r, c] + hb[r, c]
+                hphi[2 + r, 4 + c] -= hb[r, c]
+                hphi[4 + r, 2 + c] -= hb[r, c]
+                hphi[4 + r, 4 + c] += hb[r, c]
+        sc = scatter[t]
+        for r in range(6):
+            for c in range(6):
+                data[sc[6 * r + c]] += k[t] * (jac[r] * jac[c] + dphi * hphi[r, c])
+    return value
+
+
+@njit(cache=True)
+def area_and_gradient(x, ring, ga):
+    """Signed area (m^2) of the polygon x[ring]; dA/dx (m) written into ga (2 n,)."""
+    ga[:] = 0.0
+    area = 0.0
+    m = ring.shape[0]
+    for r in range(m):
+        i = ring[r]
+        nxt = ring[(r + 1) % m]
+        prv = ring[(r - 1) % m]
+        area += x[i, 0] * x[nxt, 1] - x[nxt, 0] * x[i, 1]
+        ga[2 * i] += 0.5 * (x[nxt, 1] - x[prv, 1])
+        ga[2 * i + 1] += 0.5 * (x[prv, 0] - x[nxt, 0])
+    return 0.5 * area
+
+
+@njit(cache=True)
+def area_pressure_hessian(de_da, data, scatter):
+    """The sparse part dE/dA d2A/dx2 of the pressure Hessian, added into data; each ring
+    edge (i, next) an element with dofs [x_i, z_i, x_next, z_next] and scatter (n, 16):
+    d2A/(dx_i dz_next) = 1/2, d2A/(dz_i dx_next) = -1/2, and their transposes."""
+    h = 0.5 * de_da
+    for e in range(scatter.shape[0]):
+        sc = scatter[e]
+        data[sc[0 * 4 + 3]] += h
+        data[sc[3 * 4 + 0]] += h
+        data[sc[1 * 4 + 2]] -= h
+        data[sc[2 * 4 + 1]] -= h
+
+
+@njit(cache=True)
+def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, hessian):
+    """Plane-strain neo-Hookean linear triangles (``NeoHookeanTriangles``).
+
+    Args:
+        x: (n, 2) m.  tri: (n_tri, 3).  dm_inv: (n_tri, 2, 2) 1/m, inverse rest edge
+        matrices.  volume: (n_tri,) m^3.  mu, lam: Lame parameters (Pa).
+        grad, data: added to.  scatter: (n_tri, 36).
+
+    Returns:
+        Energy (J); inf, nothing added, if an element is inverted (J <= 0).
+    """
+    n_tri = tri.shape[0]
+    for t in range(n_tri):
+        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
+        d00 = x[i1, 0] - x[i0, 0]
+        d01 = x[i2, 0] - x[i0, 0]
+        d10 = x[i1, 1] - x[i0, 1]
+        d11 = x[i2, 1] - x[i0, 1]
+        a = dm_inv[t]
+        f00 = d00 * a[0, 0] + d01 * a[1, 0]
+        f01 = d00 * a[0, 1] + d01 * a[1, 1]
+        f10 = d10 * a[0, 0] + d11 * a[1, 0]
+        f11 = d10 * a[0, 1] + d11 * a[1, 1]
+        if f00 * f11 - f01 * f10 <= 0.0:
+            return np.inf
+    value = 0.0
+    f = np.empty((2, 2))
+    finv = np.empty((2, 2))
+    piola = np.empty(4)
+    b = np.empty((4, 6))  # dF_(ij) / dx_local
+    c = np.empty((4, 4))
+    cb = np.empty((4, 6))
+    for t in range(n_tri):
+        nodes = (tri[t, 0], tri[t, 1], tri[t, 2])
+        a = dm_inv[t]
+        for i in range(2):
+            for j in range(2):
+                f[i, j] = ((x[nodes[1], i] - x[nodes[0], i]) * a[0, j]
+                           + (x[nodes[2], i] - x[nodes[0], i]) * a[1, j])
+        jdet = f[0, 0] * f[1, 1] - f[0, 1] * f[1, 0]
+        lnj = math.log(jdet)
+        value += volume[t] * (0.5 * mu * (f[0, 0] ** 2 + f[0, 1] ** 2 + f[1, 0] ** 2
+                                          + f[1, 1] ** 2 - 2.0)
+                              - mu * lnj + 0.5 * lam * lnj * lnj)
+        finv[0, 0], finv[1, 1] = f[1, 1] / jdet, f[0, 0] / jdet
+        finv[0, 1], finv[1, 0] = -f[0, 1] / jdet, -f[1, 0] / jdet
+        for i in range(2):
+            for j in range(2):
+                piola[2 * i + j] = mu * (f[i, j] - finv[j, i]) + lam * lnj * finv[j, i]
+        b[:, :] = 0.0
+        for i in range(2):
+            for j in range(2):
+                for kk in range(2):
+                    b[2 * i + j, 2 * (kk + 1) + i] += a[kk, j]
+                    b[2 * i + j, i] -= a[kk, j]
+        for r in range(6):
+            acc = 0.0
+            for q in range(4):
+                acc += piola[q] * b[q, r]
+            grad[2 * nodes[r // 2] + r % 2] += volume[t] * acc
+        if not hessian:
+            continue
+        # dP_ij/dF_mn = mu d_im d_jn + (mu - lam lnJ) Finv_ni Finv_jm + lam Finv_ji Finv_nm
+        for i in range(2):
+            for j in range(2):
+                for m in range(2):
+                    for n in range(2):
+                        v = ((mu - lam * lnj) * finv[n, i] * finv[j, m]
+                             + lam * finv[j, i] * finv[n, m])
+                        if i == m and j == n:
+                            v += mu
+                        c[2 * i + j, 2 * m + n] = v
+        for p in range(4):
+            for r in range(6):
+                acc = 0.0
+                for q in range(4):
+                    acc += c[p, q] * b[q, r]
+                cb[p, r] = acc
+        sc = scatter[t]
+        for r in range(6):
+            for s in range(6):
+                acc = 0.0
+                for p in range(4):
+                    acc += b[p, r] * cb[p, s]
+                data[sc[6 * r + s]] += volume[t] * acc
+    return value
+
+
+@njit(cache=True)
+def neohookean_von_mises(x, tri, dm_inv, mu, lam, out):
+    """(n_tri,) Pa written into out: ``NeoHookeanTriangles.von_mises``."""
+    for t in range(tri.shape[0]):
+        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
+        a = dm_inv[t]
+        d00 = x[i1, 0] - x[i0, 0]
+        d01 = x[i2, 0] - x[i0, 0]
+        d10 = x[i1, 1] - x[i0, 1]
+        d11 = x[i2, 1] - x[i0, 1]
+        f00 = d00 * a[0, 0] + d01 * a[1, 0]
+        f01 = d00 * a[0, 1] + d01 * a[1, 1]
+        f10 = d10 * a[0, 0] + d11 * a[1, 0]
+        f11 = d10 * a[0, 1] + d11 * a[1, 1]
+        j = f00 * f11 - f01 * f10
+        lnj = math.log(max(j, 1e-12))
+        bxx = f00 * f00 + f01 * f01
+        bzz = f10 * f10 + f11 * f11
+        bxz = f00 * f10 + f01 * f11
+        sxx = (mu * (bxx - 1.0) + lam * lnj) / j
+        szz = (mu * (bzz - 1.0) + lam * lnj) / j
+        sxz = mu * bxz / j
+        s33 = lam * lnj / j
+        out[t] = math.sqrt(0.5 * ((sxx - szz) ** 2 + (szz - s33) ** 2 + (s33 - sxx) ** 2)
+                           + 3.0 * sxz * sxz)
