@@ -1,24 +1,29 @@
 """Benchmark of the 2D physics core on a grasp-and-lift. Prints figures; asserts nothing.
 
-For the default fruit (shell model, 64 skin nodes) and the solid model (a meshed disk of
-about 200 nodes), a grasp-and-lift - close to 3 N, settle, lift 5 cm, hold 1 s - is run
-on one core: wall time per simulated second, the real-time factor (simulated seconds
-per wall second), mean Newton iterations per step, and where the time goes:
+Every set-up side by side in one run - the default fruit (shell model, 64 skin nodes)
+and the solid model (a meshed disk of about 200 nodes), each with flat, arc and V-groove
+fingers and with a soft pad on flat fingers: a grasp-and-lift (close to 3 N, settle,
+lift 5 cm, hold 1 s) at the configured step on one core, in CPU time (this process's
+``time.process_time``: what a quiet core gives; the machine's load average is printed):
+CPU time per simulated second, the real-time factor (simulated seconds per CPU second),
+mean Newton iterations per step, the route the step took, and where the time goes:
 
 - assembly: energies, gradients and Hessians, and building the Newton matrix;
 - solve: factorising the Newton matrix and solving with it (with the rank-one term);
 - contact: contact constraints, contact-set updates and the rest of a step's passes;
-- measures: the step's outputs (StepResult);
+- measures: the step's outputs (StepResult, damage);
 - other: gripper kinematics, the grasp state machine, Python glue.
 
-Fast path (numba, shell and point models): glue, kernel and measures are timed with
+Routes: 'kernel' = the whole step in one numba call (``core.fast``: shell and point
+fruits with flat fingers and no pad); 'compiled' = the compiled energy kernels and the
+fixed-pattern Newton solver (``core.fast_solver``) driven by the contact passes
+(``core.contact_passes``). Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations) times the cost of each operation timed alone at the end
-state. Generic path (solid model): fractions of a cProfile run applied to the plain
-run's wall time. Wall times are the best of ``--repeat`` runs (the machine is shared:
-the load average is printed too). Usage::
+state. Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
+Times are the best of ``--repeat`` runs. Usage::
 
-    python bench/bench_core.py [--repeat N] [--hold S] [--models shell,solid]
+    python bench/bench_core.py [--repeat N] [--hold S] [--setups shell,solid-vgroove,...]
         [--set key=value ...]
 """
 from __future__ import annotations
@@ -42,6 +47,18 @@ from gripper_sim.core.grasp import GraspSequence, run_grasp  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
 
 FORCE, LIFT = 3.0, 0.05
+
+#: set-up name -> configuration overrides
+SETUPS = {
+    'shell': ['fruit.model=shell'],
+    'shell-arc': ['fruit.model=shell', 'gripper.finger.type=arc'],
+    'shell-vgroove': ['fruit.model=shell', 'gripper.finger.type=vgroove'],
+    'shell-pad': ['fruit.model=shell', 'gripper.finger.pad.enabled=true'],
+    'solid': ['fruit.model=solid'],
+    'solid-arc': ['fruit.model=solid', 'gripper.finger.type=arc'],
+    'solid-vgroove': ['fruit.model=solid', 'gripper.finger.type=vgroove'],
+    'solid-pad': ['fruit.model=solid', 'gripper.finger.pad.enabled=true'],
+}
 
 
 def grasp(sim: Simulation, hold: float) -> tuple[float, float, int, int, dict, np.ndarray]:
@@ -216,8 +233,8 @@ def kernel_split(sim: Simulation) -> dict:
 
 
 def profile_generic(sim: Simulation, hold: float) -> dict:
-    """Fractions of time in the generic path's parts, from a cProfile run."""
-    profiler = cProfile.Profile()
+    """Fractions of CPU time in the compiled route's parts, from a cProfile run."""
+    profiler = cProfile.Profile(time.process_time)
     profiler.enable()
     grasp(sim, hold)
     profiler.disable()
@@ -228,27 +245,29 @@ def profile_generic(sim: Simulation, hold: float) -> dict:
                    if key[2] == name and file_part in key[0])
 
     total = cumulative('run_grasp', 'grasp.py')
-    evaluate = cumulative('_evaluate', 'stepper.py')
-    solve = cumulative('solve', 'stepper.py') - evaluate
-    contact = (cumulative('_substep_reference', 'simulation.py')
-               - cumulative('solve', 'stepper.py') - cumulative('advance', 'gripper.py'))
-    measures = cumulative('_measure_reference', 'simulation.py')
+    evaluate = cumulative('_evaluate_fast', 'fast_solver.py') + cumulative(
+        '_evaluate', 'fast_solver.py')
+    solve = cumulative('solve', 'fast_solver.py') - evaluate
+    contact = (cumulative('contact_step', 'contact_passes.py')
+               - cumulative('solve', 'fast_solver.py'))
+    measures = cumulative('_measure', 'simulation.py')
     return dict(assembly=evaluate / total, solve=solve / total, contact=contact / total,
                 measures=measures / total,
                 other=1.0 - (evaluate + solve + contact + measures) / total)
 
 
 def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> dict:
-    config = load_config(overrides=[f'fruit.model={name}'] + overrides)
+    config = load_config(overrides=SETUPS[name] + overrides)
     sim = Simulation(config)
     grasp(sim, 0.01)  # warm up: numba cache load, first-call costs
-    runs = [grasp(sim, hold) for _ in range(repeat if sim._fast is not None else 1)]
-    wall, cpu, steps, iterations, summary, per_step = min(runs, key=lambda r: r[0])
+    runs = [grasp(sim, hold) for _ in range(repeat)]
+    wall, cpu, steps, iterations, summary, per_step = min(runs, key=lambda r: r[1])
     sim_time = steps * sim.dt
     # the typical step, less exposed to other processes than the total: median and the
     # 10th percentile of single steps (each with its grasp update)
     median, p10 = np.median(per_step), np.percentile(per_step, 10)
-    row = dict(model=name, nodes=sim.fruit.n_nodes, path='fast' if sim._fast else 'generic',
+    row = dict(model=name, nodes=sim.fruit.n_nodes, path='kernel' if sim._fast else (
+                   'compiled' if sim.solver.fast else 'numpy'),
                steps=steps, sim_time=sim_time, wall_per_sim=wall / sim_time,
                cpu_per_sim=cpu / sim_time, rtf=sim_time / wall, us_per_step=wall / steps * 1e6,
                iterations=iterations / steps, outcome=summary['outcome'],
@@ -296,44 +315,50 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--repeat', type=int, default=3, help='runs per model (best wall)')
+    parser.add_argument('--repeat', type=int, default=3, help='runs per set-up (best CPU time)')
     parser.add_argument('--hold', type=float, default=1.0, help='hold time after lifting, s')
-    parser.add_argument('--models', default='shell,solid')
+    parser.add_argument('--setups', default=','.join(SETUPS),
+                        help=f'comma-separated, of: {", ".join(SETUPS)}')
     parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
-                        help='configuration override for every model')
+                        help='configuration override for every set-up')
     args = parser.parse_args(argv)
-    print(f'numba fast path: {"available" if fast.available() else "NOT available"}; '
+    unknown = [name for name in args.setups.split(',') if name not in SETUPS]
+    if unknown:
+        print(f'error: unknown set-up {unknown[0]!r} (choose from {", ".join(SETUPS)})',
+              file=sys.stderr)
+        return 2
+    print(f'numba: {"available" if fast.available() else "NOT available"}; '
           f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')
     print(f'grasp-and-lift: close to {FORCE} N, lift {LIFT * 100:.0f} cm, hold {args.hold} s; '
           f'best of {args.repeat}')
     rows = [bench_model(name, args.set, args.repeat, args.hold)
-            for name in args.models.split(',')]
+            for name in args.setups.split(',')]
     print()
-    print(f'{"model":<6} {"nodes":>5} {"path":<7} {"steps":>5} {"us/step":>8} '
-          f'{"wall s/sim s":>12} {"RTF":>7} {"cpu s/sim s":>11} {"cpu RTF":>7} '
-          f'{"Newton it/step":>14} outcome')
+    print(f'{"set-up":<14} {"nodes":>5} {"route":<8} {"steps":>5} {"CPU us/step":>11} '
+          f'{"CPU s/sim s":>11} {"CPU RTF":>7} {"wall RTF":>8} {"Newton it/step":>14} outcome')
     for r in rows:
-        print(f'{r["model"]:<6} {r["nodes"]:>5} {r["path"]:<7} {r["steps"]:>5} '
-              f'{r["us_per_step"]:>8.1f} {r["wall_per_sim"]:>12.4f} {r["rtf"]:>7.1f} '
-              f'{r["cpu_per_sim"]:>11.4f} {1 / r["cpu_per_sim"]:>7.1f} '
+        print(f'{r["model"]:<14} {r["nodes"]:>5} {r["path"]:<8} {r["steps"]:>5} '
+              f'{r["cpu_per_sim"] * r["sim_time"] / r["steps"] * 1e6:>11.1f} '
+              f'{r["cpu_per_sim"]:>11.4f} {1 / r["cpu_per_sim"]:>7.2f} {r["rtf"]:>8.2f} '
               f'{r["iterations"]:>14.2f} {r["outcome"]}')
-    print('(RTF = simulated s per wall s; cpu = this process\'s CPU time, what an idle core '
-          'would give)')
+    print('(CPU RTF = simulated s per CPU s of this process: what a quiet core gives; wall '
+          'RTF depends on the load)')
+    flat = {r['model'].split('-')[0]: r['cpu_per_sim'] for r in rows if '-' not in r['model']}
     for r in rows:
-        dt_us = r['sim_time'] / r['steps'] * 1e6
-        print(f'{r["model"]}: single steps (with the grasp update): median '
-              f'{r["median_us"]:.1f} us (RTF {dt_us / r["median_us"]:.1f}), 10th percentile '
-              f'{r["p10_us"]:.1f} us (RTF {dt_us / r["p10_us"]:.1f})')
+        fruit = r['model'].split('-')[0]
+        if '-' in r['model'] and fruit in flat:
+            print(f'{r["model"]}: {r["cpu_per_sim"] / flat[fruit]:.1f} x the CPU time of '
+                  f'flat fingers ({fruit})')
     print()
     print('where the time goes (share of a grasp-and-lift, CPU us per step):')
-    print(f'{"model":<6} {"assembly":>14} {"solve":>14} {"contact":>14} {"measures":>14} '
+    print(f'{"set-up":<14} {"assembly":>14} {"solve":>14} {"contact":>14} {"measures":>14} '
           f'{"other":>14}')
     for r in rows:
         cpu_us = r['cpu_per_sim'] * r['sim_time'] / r['steps'] * 1e6
         cells = ' '.join(
             f'{100 * r["split"][key]:>5.1f}% {cpu_us * r["split"][key]:>6.1f}us'
             for key in ('assembly', 'solve', 'contact', 'measures', 'other'))
-        print(f'{r["model"]:<6} {cells}')
+        print(f'{r["model"]:<14} {cells}')
     for r in rows:
         if 'ops_us' in r:
             ops = ', '.join(f'{key} {value:.2f}' for key, value in r['ops_us'].items())

@@ -264,15 +264,42 @@ def test_parameter_changes_while_running_match_the_reference_path():
     assert sims[0].last.damage.bruised_length > 0  # low bruise threshold: the cover grows
 
 
-def test_solid_model_keeps_the_generic_path():
-    config = load_config(overrides=['fruit.model=solid'])
-    assert Simulation(config)._fast is None
-    with pytest.raises(Exception, match='fast path'):
-        Simulation(config, fast=True)
+#: every 2D set-up: (overrides, route) with route 'kernel' (the whole step in one numba
+#: call) or 'compiled' (the compiled energies and the fixed-pattern Newton solver)
+SETUPS = [
+    ([], 'kernel'),
+    (['fruit.model=point'], 'kernel'),
+    (['gripper.finger.type=arc'], 'compiled'),
+    (['gripper.finger.type=vgroove'], 'compiled'),
+    (['gripper.finger.pad.enabled=true'], 'compiled'),
+    (['fruit.model=solid'], 'compiled'),
+    (['fruit.model=solid', 'gripper.finger.type=arc'], 'compiled'),
+    (['fruit.model=solid', 'gripper.finger.type=vgroove'], 'compiled'),
+    (['fruit.model=solid', 'gripper.finger.pad.enabled=true'], 'compiled'),
+]
 
 
-def test_shell_model_takes_the_fast_path_by_default():
-    assert Simulation(load_config())._fast is not None
+@pytest.mark.parametrize('overrides,route', SETUPS, ids=[' '.join(o) or 'default'
+                                                         for o, _ in SETUPS])
+def test_every_setup_takes_a_compiled_route(overrides, route):
+    """No 2D set-up steps on the numpy energies: the flat-finger shell and point fruits
+    take the whole-step kernel, every other one the compiled energy kernels through the
+    fixed-pattern solver (each energy has an ``evaluate_into``)."""
+    sim = Simulation(load_config(overrides=overrides + ['fruit.nodes=32']))
+    sim.command_force(1.0)
+    for _ in range(5):
+        sim.step()
+    if route == 'kernel':
+        assert sim._fast is not None and sim._fast.applies()
+        assert sim._fast.counts.sum() > 0
+        assert sim.solver.stats['passes'] == 0
+    else:
+        assert sim._fast is None
+        assert sim.solver.fast
+        assert all(hasattr(energy, 'evaluate_into') for energy in sim.solver.energies)
+        assert sim.solver.stats['passes'] >= 5
+        with pytest.raises(Exception, match='fast path'):
+            Simulation(load_config(overrides=overrides), fast=True)
 
 
 def test_faces_the_kernels_do_not_model_fall_back_to_the_reference_path(monkeypatch):
@@ -333,10 +360,3 @@ def test_damage_kernel_matches_the_damage_tracker(seed):
                  contact.equivalent_radius, contact.modulus], rtol=1e-12)
             np.testing.assert_allclose(row[[kernels.P_CX, kernels.P_CZ]], contact.centre,
                                        rtol=0, atol=1e-15)
-
-
-def test_a_padded_finger_keeps_the_generic_path():
-    config = load_config(overrides=['gripper.finger.pad.enabled=true'])
-    sim = Simulation(config)
-    assert sim._fast is None
-    sim.step()

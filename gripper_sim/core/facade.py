@@ -1,10 +1,12 @@
 """What the 2D and the 3D simulation facades share: commands, state, observers, stepping.
 
 A facade keeps the gripper command state ``_grip`` (``GripperState``), the time, the
-last ``StepResult`` and its observers; the subclasses (``core.simulation.Simulation``,
-``core3d.simulation.Simulation3D``) build the fruit and the jaws and provide
-``reset()``, ``_make_faces()``, ``_substep(dt)`` (one implicit step, raising
-``NewtonFailure`` when it does not converge) and ``_measure(iterations, substeps)``.
+last ``StepResult`` and its observers, and steps: the jaw faces follow the gripper, the
+soft pads (if any) are set up around the step, and one implicit step with contact
+(``core.contact_passes``) advances the fruit, whatever the dimension. The subclasses
+(``core.simulation.Simulation``, ``core3d.simulation.Simulation3D``) build the fruit,
+the solver and the jaws (``_faces_template``, ``_face_side``, ``_face_offsets``) and
+provide ``reset()``, ``_make_faces()`` and ``_measure(iterations, substeps)``.
 Commands validate their values (``CommandError``, the simulation unchanged) and take
 effect on the next step.
 """
@@ -14,10 +16,15 @@ import math
 from dataclasses import replace
 from typing import Any, Callable
 
+import numpy as np
+
+from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.results import StepResult
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
+
+LEFT, RIGHT = 0, 1
 
 #: configuration keys that may change while the simulation runs
 DYNAMIC_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction',
@@ -194,6 +201,82 @@ class SimulationFacade:
         if not right_n > 0:
             gaps.append((grip.x + 0.5 * grip.gap) - float(x.max()))
         return min(gaps)
+
+    # ------------------------------------------------------------------ jaws
+    def _jaw_origin(self, grip: GripperState, side: int) -> np.ndarray:
+        """(d,) m, centre of the jaw's front face (where the gap is measured)."""
+        sign = -1.0 if side == LEFT else 1.0
+        return self._in_plane(grip.x + sign * 0.5 * grip.gap, grip.lift)
+
+    def _in_plane(self, x: float, z: float) -> np.ndarray:
+        """(d,) the point (x, z) of the gripper's plane (y = 0 in 3D)."""
+        return np.array([x, z]) if self.dimension == 2 else np.array([x, 0.0, z])
+
+    def _faces(self, grip: GripperState) -> list:
+        """The obstacles with the jaw faces where ``grip`` puts them, moving with it."""
+        faces = [replace(f) for f in self._faces_template]
+        for index, side in enumerate(self._face_side):
+            sign = -1.0 if side == LEFT else 1.0
+            faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
+            faces[index].velocity = self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
+                                                   grip.lift_rate)
+        return faces
+
+    def _jaw_faces(self, side: int) -> list[int]:
+        """Obstacle indices of the faces of jaw ``side`` (LEFT or RIGHT)."""
+        return [i for i, s in enumerate(self._face_side) if s == side]
+
+    def _pad_faces(self, grip: GripperState) -> list:
+        """(face, jaw side, obstacle index) of every jaw face, for the pads."""
+        faces = self._faces(grip)
+        return [(faces[i], side, i) for i, side in enumerate(self._face_side)]
+
+    @property
+    def obstacle_names(self) -> tuple:
+        return tuple(f.name for f in self._faces_template)
+
+    def _closing_forces(self, forces, obstacle, faces) -> tuple:
+        """(left, right) N, each jaw's hard-contact force on the fruit along its closing
+        axis (the face normal for flat jaws), summed over its faces."""
+        if self._plain_jaws:
+            return tuple(float(np.sum(forces[obstacle == side] @ faces[side].normal))
+                         for side in (LEFT, RIGHT))
+        return tuple(sign * float(np.sum(forces[np.isin(obstacle, self._jaw_faces(side)), 0]))
+                     for side, sign in ((LEFT, 1.0), (RIGHT, -1.0)))
+
+    # ------------------------------------------------------------------ stepping
+    #: the contact passes' ``ContactSettings.deepest_first`` (0: every penetrating node
+    #: is held at once)
+    deepest_first = 0.0
+
+    def _substep(self, dt: float) -> int:
+        """One implicit step of ``dt``, the soft pads (if any) set up around it; returns
+        Newton iterations. Raises NewtonFailure (the caller halves the step)."""
+        if self._pad is None:
+            return self._substep_hard(dt)
+        grip_new = self._advance_gripper(dt)
+        self._pad.begin_step(self.q, self._pad_faces(self._grip), self._pad_faces(grip_new), dt)
+        iterations = self._substep_hard(dt)
+        self._pad.finish_step(self.q.ravel())
+        hard = self._jaw_force
+        self._jaw_force = (hard[0] + float(self._pad.side_force[0]),
+                           hard[1] + float(self._pad.side_force[1]))
+        return iterations
+
+    def _substep_hard(self, dt: float) -> int:
+        """One step with the hard contacts (the pads, if any, set up by the caller)."""
+        grip_new = self._advance_gripper(dt)
+        new_faces = self._faces(grip_new)
+        outcome = contact_step(self.solver, self.fruit.surface, self.contacts, self.q, self.v,
+                               self._faces(self._grip), new_faces, dt,
+                               ContactSettings.from_config(self.config, self.deepest_first))
+        self.q, self.v, self.contacts = outcome.x, outcome.v, outcome.contacts
+        self.contact_forces = outcome.forces
+        self._grip = grip_new
+        self._time += dt
+        self._jaw_force = self._closing_forces(outcome.forces, outcome.contacts.obstacle,
+                                               new_faces)
+        return outcome.iterations
 
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:
         """Step ``dt``, halving it (recursively) while Newton fails; (iterations, substeps)."""

@@ -40,6 +40,18 @@ class FlatFace:
         """(2,) unit tangent, the normal turned by +90 degrees."""
         return np.array([-self.normal[1], self.normal[0]])
 
+    @property
+    def tangents(self) -> np.ndarray:
+        """(1, 2) the tangent as the one row spanning the face's tangent space (the
+        dimension-generic contact code reads ``tangents`` (d - 1, d))."""
+        return np.array([[-self.normal[1], self.normal[0]]])
+
+    def may_touch(self, low: np.ndarray, high: np.ndarray) -> bool:
+        """Broad phase: can any point of the box [low, high] (2,) be inside the face?"""
+        corners = np.array([[low[0], low[1]], [low[0], high[1]], [high[0], low[1]],
+                            [high[0], high[1]]])
+        return bool(np.min(self.gap(corners)) < 0)
+
     def gap(self, points: np.ndarray, origin: np.ndarray | None = None) -> np.ndarray:
         """(n,) m, signed distance of points (n, 2) from the face; < 0 inside."""
         o = self.origin if origin is None else origin

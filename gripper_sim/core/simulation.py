@@ -25,7 +25,6 @@ from gripper_sim.core.measures import deformation, face_contact_length
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.results import Energies, JawWrench, StepResult
-from gripper_sim.core.stepper import FRICTION_SMOOTHING, StepConstraints
 from gripper_sim.errors import ConfigError
 
 LEFT, RIGHT = 0, 1
@@ -43,6 +42,8 @@ class Simulation(SimulationFacade):
     Commands take effect on the next step. Invalid commands raise ``CommandError``
     and leave the simulation unchanged.
     """
+
+    dimension = 2
 
     def __init__(self, config: Mapping[str, Any], fast: bool | None = None):
         self.config = dict(config)
@@ -147,23 +148,6 @@ class Simulation(SimulationFacade):
                                   **ground))
         return faces
 
-    def _faces(self, grip: GripperState) -> list[FlatFace]:
-        faces = [replace(f) for f in self._faces_template]
-        if self._plain_jaws:
-            faces[LEFT].origin = np.array([grip.x - 0.5 * grip.gap, grip.lift])
-            faces[LEFT].velocity = np.array([grip.x_rate - 0.5 * grip.gap_rate, grip.lift_rate])
-            faces[RIGHT].origin = np.array([grip.x + 0.5 * grip.gap, grip.lift])
-            faces[RIGHT].velocity = np.array([grip.x_rate + 0.5 * grip.gap_rate,
-                                              grip.lift_rate])
-            return faces
-        for index, side in enumerate(self._face_side):
-            sign = -1.0 if side == LEFT else 1.0
-            faces[index].origin = np.array([grip.x + sign * 0.5 * grip.gap, grip.lift]) \
-                + self._face_offsets[index]
-            faces[index].velocity = np.array([grip.x_rate + sign * 0.5 * grip.gap_rate,
-                                              grip.lift_rate])
-        return faces
-
     def _jaw_facet_faces(self, jaw: dict):
         """The jaw faces of a shaped finger or a padded one (``gripper_sim.core.fingers``):
         faces, the jaw side of each, and each one's offset from its jaw's origin."""
@@ -178,10 +162,6 @@ class Simulation(SimulationFacade):
                 sides.append(side)
                 offsets.append(f.offset - back * f.normal)  # the rigid jaw behind the pad
         return faces, sides, offsets
-
-    def _jaw_faces(self, side: int) -> list[int]:
-        """Indices of the faces of the jaw ``side`` (LEFT or RIGHT)."""
-        return [i for i, s in enumerate(self._face_side) if s == side]
 
     def _face_groups(self) -> list[int]:
         """Per obstacle, the body it belongs to (faces of a jaw share one)."""
@@ -203,226 +183,11 @@ class Simulation(SimulationFacade):
                         c['gripper.finger.pad.poisson_ratio'], c['contact.pad.friction'],
                         self.fruit.n_nodes)
 
-    def _pad_faces(self, grip: GripperState) -> list:
-        faces = self._faces(grip)
-        return [(faces[i], side, i) for i, side in enumerate(self._face_side)]
-
-    @property
-    def obstacle_names(self) -> tuple:
-        return tuple(f.name for f in self._faces_template)
-
     # ------------------------------------------------------------------ stepping
     def _substep(self, dt: float) -> int:
         if self._fast is not None and self._fast.applies():
             return self._fast.substep(dt)
-        if self._pad is None:
-            return self._substep_reference(dt)
-        grip_new = self._advance_gripper(dt)
-        self._pad.begin_step(self.q, self._pad_faces(self._grip), self._pad_faces(grip_new), dt)
-        iterations = self._substep_reference(dt)
-        self._pad.finish_step(self.q.ravel())
-        hard = self._jaw_force
-        self._jaw_force = (hard[0] + float(self._pad.side_force[0]),
-                           hard[1] + float(self._pad.side_force[1]))
-        return iterations
-
-    def _substep_reference(self, dt: float) -> int:
-        grip_new = self._advance_gripper(dt)
-        old_faces, new_faces = self._faces(self._grip), self._faces(grip_new)
-        x_n, v_n = self.q, self.v
-        q_n = x_n.ravel()
-        x_pred = x_n + dt * v_n
-        contacts = self.contacts.copy()
-        n = self.fruit.n_nodes
-        released = np.zeros(n, bool)
-        slipped = np.zeros(n, bool)
-        iterations = 0
-        for _ in range(self.config['sim.max_contact_passes']):
-            q_start, constraints = self._constraints(contacts, x_n, x_pred, old_faces,
-                                                     new_faces, dt)
-            solution = self.solver.solve(q_n, v_n.ravel(), dt, q_start.ravel(), constraints)
-            iterations += solution.iterations
-            x = solution.q.reshape(-1, 2)
-            reaction = solution.reaction.reshape(-1, 2)
-            if not self._update_contacts(contacts, x, x_n, v_n, reaction, old_faces, new_faces,
-                                         dt, released, slipped):
-                break
-        v = (x - x_n) / dt
-        forces = np.zeros((n, 2))
-        for index, face in enumerate(new_faces):
-            nodes = np.flatnonzero(contacts.obstacle == index)
-            if not nodes.size:
-                continue
-            nrm, tan = face.normal, face.tangent
-            v_t = v[nodes] @ tan
-            stuck = contacts.mode[nodes] == cm.STICK
-            v_t[stuck] = face.velocity @ tan
-            v_n_new = np.full(nodes.size, face.velocity @ nrm) + contacts.bounce_speed[nodes]
-            v[nodes] = v_n_new[:, None] * nrm + v_t[:, None] * tan
-            forces[nodes] = reaction[nodes]
-        for node in np.flatnonzero(contacts.secondary >= 0):
-            face = new_faces[contacts.secondary[node]]
-            v[node] += (face.velocity @ face.normal - v[node] @ face.normal) * face.normal
-        impacts = np.flatnonzero(contacts.mode == cm.IMPACT)
-        contacts.release(impacts)
-        self.q, self.v, self.contacts, self.contact_forces = x, v, contacts, forces
-        self._grip = grip_new
-        self._time += dt
-        if self._plain_jaws:
-            self._jaw_force = tuple(
-                float(np.sum(forces[contacts.obstacle == side] @ new_faces[side].normal))
-                for side in (LEFT, RIGHT))
-        else:  # the jaw's force along its closing axis, summed over its faces
-            self._jaw_force = tuple(
-                sign * float(np.sum(forces[np.isin(contacts.obstacle, self._jaw_faces(side)), 0]))
-                for side, sign in ((LEFT, 1.0), (RIGHT, -1.0)))
-        return iterations
-
-    def _constraints(self, contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces,
-                     dt: float):
-        """Start positions (n, 2) with held nodes at their targets, and the step filters."""
-        n = self.fruit.n_nodes
-        start = x_pred.copy()
-        filters = np.tile(np.eye(2), (n, 1, 1))
-        fr_nodes, fr_tangents, fr_bounds, fr_speed = [], [], [], []
-        v_corr = self.config['contact.max_correction_speed']
-        for index, face in enumerate(new_faces):
-            nodes = np.flatnonzero(contacts.obstacle == index)
-            if not nodes.size:
-                continue
-            nrm, tan = face.normal, face.tangent
-            mode = contacts.mode[nodes]
-            penetration = np.maximum(0.0, -old_faces[index].gap(x_n[nodes]))
-            target = -np.maximum(0.0, penetration - v_corr * dt)
-            impact = mode == cm.IMPACT
-            target[impact] = contacts.impact_gap[nodes[impact]]
-            start[nodes] += (target - face.gap(start[nodes]))[:, None] * nrm
-            stuck = mode == cm.STICK
-            if np.any(stuck):
-                held = nodes[stuck]
-                along = x_n[held] @ tan + dt * (face.velocity @ tan)
-                start[held] += (along - start[held] @ tan)[:, None] * tan
-                filters[held] = 0.0
-            normal_only = nodes[~stuck]
-            filters[normal_only] = np.eye(2) - np.outer(nrm, nrm)
-            sliding = nodes[mode == cm.SLIP]
-            if sliding.size and face.kinetic_friction > 0:
-                fr_nodes.append(sliding)
-                fr_tangents.append(np.tile(tan, (sliding.size, 1)))
-                fr_bounds.append(face.kinetic_friction * np.maximum(
-                    contacts.normal_force[sliding], 0.0))
-                fr_speed.append(np.full(sliding.size, face.velocity @ tan))
-        for node in np.flatnonzero(contacts.secondary >= 0):
-            face = new_faces[contacts.secondary[node]]
-            nrm = face.normal
-            start[node] += (0.0 - face.gap(start[node])) * nrm
-            filters[node] = filters[node] - np.outer(nrm, nrm) @ filters[node]
-        if fr_nodes:
-            con = StepConstraints(filters, np.concatenate(fr_nodes), np.concatenate(fr_tangents),
-                                  np.concatenate(fr_bounds), np.concatenate(fr_speed))
-        else:
-            con = StepConstraints(filters, np.zeros(0, np.int64), np.zeros((0, 2)),
-                                  np.zeros(0), np.zeros(0))
-        return start, con
-
-    def _update_contacts(self, contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces,
-                         new_faces, dt, released, slipped) -> bool:
-        """Correct the contact set after a solve; True if it changed (solve again)."""
-        changed = False
-        threshold = self.config['contact.release_threshold']
-        for index, face in enumerate(new_faces):
-            nodes = np.flatnonzero(contacts.obstacle == index)
-            if not nodes.size:
-                continue
-            nrm, tan = face.normal, face.tangent
-            r_n = reaction[nodes] @ nrm
-            r_t = reaction[nodes] @ tan
-            mode = contacts.mode[nodes]
-            pulling = (r_n < -threshold) & (mode != cm.IMPACT)
-            if np.any(pulling):
-                contacts.release(nodes[pulling])
-                released[nodes[pulling]] = True
-                changed = True
-            keep = ~pulling
-            stuck = keep & (mode == cm.STICK)
-            to_slip = stuck & (np.abs(r_t) > face.static_friction * r_n)
-            if np.any(to_slip):
-                contacts.mode[nodes[to_slip]] = cm.SLIP
-                slipped[nodes[to_slip]] = True
-                changed = True
-            sliding = keep & (mode == cm.SLIP)
-            if np.any(sliding):
-                rel = ((x[nodes] - x_n[nodes]) / dt - face.velocity) @ tan
-                to_stick = (sliding & (np.abs(rel) < 2 * FRICTION_SMOOTHING)
-                            & ~slipped[nodes] & (face.static_friction > 0))
-                if np.any(to_stick):
-                    contacts.mode[nodes[to_stick]] = cm.STICK
-                    changed = True
-                lag = contacts.normal_force[nodes]
-                stale = sliding & ~to_stick & (np.abs(r_n - lag) > 0.02 * np.abs(lag) + 1e-9)
-                if np.any(stale) and face.kinetic_friction > 0:
-                    changed = True
-            contacts.normal_force[nodes[keep]] = r_n[keep]
-        for node in np.flatnonzero(contacts.secondary >= 0):
-            face = new_faces[contacts.secondary[node]]
-            if reaction[node] @ face.normal < -threshold:
-                contacts.secondary[node] = -1
-                changed = True
-        if self._add_corners(contacts, x, new_faces):
-            changed = True
-        if self._add_penetrating(contacts, x, x_n, v_n, old_faces, new_faces, dt, released):
-            changed = True
-        return changed
-
-    def _add_corners(self, contacts, x, new_faces) -> bool:
-        """Held nodes pushed into a second face (a corner) get it as a secondary hold."""
-        held = np.flatnonzero((contacts.obstacle >= 0) & (contacts.secondary < 0))
-        added = False
-        for index, face in enumerate(new_faces):
-            nodes = held[contacts.obstacle[held] != index]
-            inside = nodes[face.covers(x[nodes]) & (face.gap(x[nodes]) < 0)]
-            if inside.size:
-                contacts.secondary[inside] = index
-                contacts.mode[inside[contacts.mode[inside] == cm.STICK]] = cm.SLIP
-                held = np.setdiff1d(held, inside)
-                added = True
-        return added
-
-    def _add_penetrating(self, contacts, x, x_n, v_n, old_faces, new_faces, dt, released) -> bool:
-        surface = self.fruit.surface
-        candidates = surface[(contacts.obstacle[surface] < 0) & ~released[surface]]
-        if not candidates.size:
-            return False
-        depth = np.zeros(candidates.size)
-        chosen = -np.ones(candidates.size, np.int64)
-        for index, face in enumerate(new_faces):
-            gap = face.gap(x[candidates])
-            inside = face.covers(x[candidates]) & (gap < 0) & (-gap > depth)
-            depth[inside] = -gap[inside]
-            chosen[inside] = index
-        hit = chosen >= 0
-        if not np.any(hit):
-            return False
-        v_min = max(5.0 * self.config['world.gravity'] * dt, 1e-3)
-        for node, index in zip(candidates[hit], chosen[hit]):
-            face, old = new_faces[index], old_faces[index]
-            contacts.obstacle[node] = index
-            contacts.mode[node] = cm.STICK if face.static_friction > 0 else cm.SLIP
-            contacts.normal_force[node] = 0.0
-            if face.restitution > 0:
-                gap_start = float(old.gap(x_n[node]))
-                gap_end = float(face.gap(x[node]))
-                tau = min(max(gap_start / (gap_start - gap_end), 0.0), 1.0) if gap_start > 0 \
-                    else 0.0
-                v_start = float((v_n[node] - face.velocity) @ face.normal)
-                v_end = float(((x[node] - x_n[node]) / dt - face.velocity) @ face.normal)
-                approach = -(v_start + tau * (v_end - v_start))
-                if approach > v_min:
-                    bounce = face.restitution * approach
-                    contacts.mode[node] = cm.IMPACT
-                    contacts.bounce_speed[node] = bounce
-                    contacts.impact_gap[node] = bounce * (1.0 - tau) * dt
-        return True
+        return super()._substep(dt)
 
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult:

@@ -49,9 +49,10 @@ class PadLayer3D(PadState):
                  poisson_ratio: float, friction: float, n_nodes: int):
         super().__init__(surface, areas, thickness, youngs_modulus, poisson_ratio, friction,
                          n_nodes, dim=3)
-        dofs = 3 * self.surface[:, None] + np.arange(3)[None, :]
-        self._rows = np.repeat(dofs, 3, axis=1).ravel()
-        self._cols = np.tile(dofs, (1, 3)).ravel()
+        #: each surface node one element of the Hessian's pattern (its 3x3 node block)
+        self.dofs = 3 * self.surface[:, None] + np.arange(3)[None, :]
+        self._rows = np.repeat(self.dofs, 3, axis=1).ravel()
+        self._cols = np.tile(self.dofs, (1, 3)).ravel()
 
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set the pad surfaces for a step from ``x_n`` (n_nodes, 3) over ``dt`` (s).
@@ -137,3 +138,14 @@ class PadLayer3D(PadState):
             return Evaluation(value, grad, empty, empty, np.zeros(0))
         return Evaluation(value, grad, self._rows, self._cols,
                           blocks[self.surface].ravel())
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """``evaluate`` for the fast solver: adds the gradient (N) into ``grad`` and the
+        node blocks (N/m) into the CSC values ``data`` at ``scatter`` (n_s, 9), one element
+        per surface node; returns (value in J, no low-rank terms)."""
+        ev = self.evaluate(q, hessian)
+        grad += ev.gradient
+        if hessian:
+            data[scatter.ravel()] += ev.vals  # distinct positions: one block per node
+        return ev.value, []

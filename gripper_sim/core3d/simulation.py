@@ -23,7 +23,7 @@ jaw's front plane.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
 import numpy as np
@@ -34,7 +34,6 @@ from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperKinematics, GripperState
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
-from gripper_sim.core.stepper import FRICTION_SMOOTHING, StepConstraints
 from gripper_sim.core3d import fingers3d, meshes
 from gripper_sim.core3d.damage import DamageTracker3D
 from gripper_sim.core3d.fingers_pad import PadLayer3D
@@ -43,13 +42,6 @@ from gripper_sim.core3d.obstacles import Plate
 from gripper_sim.errors import ConfigError
 
 LEFT, RIGHT = 0, 1
-
-#: a contact pass adds, of the free nodes that ended inside a face, those at least this
-#: fraction of the deepest one's depth; the others, if still inside after the next
-#: solve, come in the next pass. Holding every penetrating node at once (a resting
-#: fruit's whole cap after its first 20 ms step) and releasing the pulling ones ring by
-#: ring took twice the passes and Newton iterations
-DEEPEST_FIRST = 0.7
 
 _Y = np.array([0.0, 1.0, 0.0])
 _Z = np.array([0.0, 0.0, 1.0])
@@ -102,6 +94,12 @@ class Simulation3D(SimulationFacade):
     """
 
     dimension = 3
+    #: a contact pass adds, of the free nodes that ended inside a face, those at least
+    #: this fraction of the deepest one's depth; the others, if still inside after the
+    #: next solve, come in the next pass. Holding every penetrating node at once (a
+    #: resting fruit's whole cap after its first 20 ms step) and releasing the pulling
+    #: ones ring by ring took twice the passes and Newton iterations
+    deepest_first = 0.7
 
     def __init__(self, config: Mapping[str, Any]):
         self.config = dict(config)
@@ -205,25 +203,6 @@ class Simulation3D(SimulationFacade):
                                **ground))
         return faces
 
-    def _faces(self, grip: GripperState) -> list[Plate]:
-        faces = [replace(f) for f in self._faces_template]
-        for index, side in enumerate(self._face_side):
-            sign = -1.0 if side == LEFT else 1.0
-            faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
-            faces[index].velocity = np.array([grip.x_rate + sign * 0.5 * grip.gap_rate, 0.0,
-                                              grip.lift_rate])
-        return faces
-
-    @staticmethod
-    def _jaw_origin(grip: GripperState, side: int) -> np.ndarray:
-        """(3,) m, centre of the jaw's front plane (where the gap is measured)."""
-        sign = -1.0 if side == LEFT else 1.0
-        return np.array([grip.x + sign * 0.5 * grip.gap, 0.0, grip.lift])
-
-    def _jaw_faces(self, side: int) -> list[int]:
-        """Obstacle indices of the faces of jaw ``side`` (LEFT or RIGHT)."""
-        return [i for i, s in enumerate(self._face_side) if s == side]
-
     def _make_pad(self) -> PadLayer3D:
         c, fruit = self.config, self.fruit
         areas = meshes.vertex_areas(fruit.rest_positions, fruit.triangles, fruit.n_nodes)
@@ -232,248 +211,6 @@ class Simulation3D(SimulationFacade):
                           c['gripper.finger.pad.youngs_modulus'],
                           c['gripper.finger.pad.poisson_ratio'], c['contact.pad.friction'],
                           fruit.n_nodes)
-
-    def _pad_faces(self, grip: GripperState) -> list:
-        faces = self._faces(grip)
-        return [(faces[i], side, i) for i, side in enumerate(self._face_side)]
-
-    @property
-    def obstacle_names(self) -> tuple:
-        return tuple(f.name for f in self._faces_template)
-
-    # ------------------------------------------------------------------ stepping
-    def _substep(self, dt: float) -> int:
-        if self._pad is None:
-            return self._substep_hard(dt)
-        grip_new = self._advance_gripper(dt)
-        self._pad.begin_step(self.q, self._pad_faces(self._grip), self._pad_faces(grip_new), dt)
-        iterations = self._substep_hard(dt)
-        self._pad.finish_step(self.q.ravel())
-        hard = self._jaw_force
-        self._jaw_force = (hard[0] + float(self._pad.side_force[0]),
-                           hard[1] + float(self._pad.side_force[1]))
-        return iterations
-
-    def _substep_hard(self, dt: float) -> int:
-        """One step with the hard contacts (the pads, if any, set up by the caller)."""
-        grip_new = self._advance_gripper(dt)
-        old_faces, new_faces = self._faces(self._grip), self._faces(grip_new)
-        x_n, v_n = self.q, self.v
-        q_n = x_n.ravel()
-        x_pred = x_n + dt * v_n
-        contacts = self.contacts.copy()
-        n = self.fruit.n_nodes
-        released = np.zeros(n, bool)
-        slipped = np.zeros(n, bool)
-        iterations = 0
-        for _ in range(self.config['sim.max_contact_passes']):
-            q_start, constraints = self._constraints(contacts, x_n, x_pred, old_faces,
-                                                     new_faces, dt)
-            solution = self.solver.solve(q_n, v_n.ravel(), dt, q_start.ravel(), constraints)
-            iterations += solution.iterations
-            x = solution.q.reshape(-1, 3)
-            reaction = solution.reaction.reshape(-1, 3)
-            if not self._update_contacts(contacts, x, x_n, v_n, reaction, old_faces, new_faces,
-                                         dt, released, slipped):
-                break
-        v = (x - x_n) / dt
-        forces = np.zeros((n, 3))
-        for index, face in enumerate(new_faces):
-            nodes = np.flatnonzero(contacts.obstacle == index)
-            if not nodes.size:
-                continue
-            nrm = face.normal
-            stuck = contacts.mode[nodes] == cm.STICK
-            v_t = v[nodes] - np.outer(v[nodes] @ nrm, nrm)
-            v_t[stuck] = face.velocity - (face.velocity @ nrm) * nrm
-            v_n_new = face.velocity @ nrm + contacts.bounce_speed[nodes]
-            v[nodes] = v_t + v_n_new[:, None] * nrm
-            forces[nodes] = reaction[nodes]
-        for node in np.flatnonzero(contacts.secondary >= 0):
-            face = new_faces[contacts.secondary[node]]
-            v[node] += (face.velocity @ face.normal - v[node] @ face.normal) * face.normal
-        contacts.release(np.flatnonzero(contacts.mode == cm.IMPACT))
-        self.q, self.v, self.contacts, self.contact_forces = x, v, contacts, forces
-        self._grip = grip_new
-        self._time += dt
-        self._jaw_force = self._closing_forces(forces, contacts.obstacle, new_faces)
-        return iterations
-
-    def _closing_forces(self, forces, obstacle, faces) -> tuple:
-        """(left, right) N, each jaw's hard-contact force on the fruit along its closing
-        axis (the plate normal for flat jaws), summed over its faces."""
-        if self._plain_jaws:
-            return tuple(float(np.sum(forces[obstacle == side] @ faces[side].normal))
-                         for side in (LEFT, RIGHT))
-        return tuple(sign * float(np.sum(forces[np.isin(obstacle, self._jaw_faces(side)), 0]))
-                     for side, sign in ((LEFT, 1.0), (RIGHT, -1.0)))
-
-    def _constraints(self, contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces,
-                     dt: float):
-        """Start positions (n, 3) with held nodes at their targets, and the step filters."""
-        n = self.fruit.n_nodes
-        start = x_pred.copy()
-        filters = np.tile(np.eye(3), (n, 1, 1))
-        fr_nodes, fr_tangents, fr_bounds, fr_speed = [], [], [], []
-        v_corr = self.config['contact.max_correction_speed']
-        for index, face in enumerate(new_faces):
-            nodes = np.flatnonzero(contacts.obstacle == index)
-            if not nodes.size:
-                continue
-            nrm, tan = face.normal, face.tangents
-            mode = contacts.mode[nodes]
-            penetration = np.maximum(0.0, -old_faces[index].gap(x_n[nodes]))
-            target = -np.maximum(0.0, penetration - v_corr * dt)
-            impact = mode == cm.IMPACT
-            target[impact] = contacts.impact_gap[nodes[impact]]
-            start[nodes] += (target - face.gap(start[nodes]))[:, None] * nrm
-            stuck = mode == cm.STICK
-            if np.any(stuck):
-                held = nodes[stuck]
-                along = x_n[held] @ tan.T + dt * (tan @ face.velocity)  # (k, 2)
-                start[held] += (along - start[held] @ tan.T) @ tan
-                filters[held] = 0.0
-            filters[nodes[~stuck]] = np.eye(3) - np.outer(nrm, nrm)
-            sliding = nodes[mode == cm.SLIP]
-            if sliding.size and face.kinetic_friction > 0:
-                fr_nodes.append(sliding)
-                fr_tangents.append(np.broadcast_to(tan, (sliding.size, 2, 3)))
-                fr_bounds.append(face.kinetic_friction * np.maximum(
-                    contacts.normal_force[sliding], 0.0))
-                fr_speed.append(np.broadcast_to(tan @ face.velocity, (sliding.size, 2)))
-        for node in np.flatnonzero(contacts.secondary >= 0):
-            # the second face's normal gap, set by a move that keeps the first one's gap
-            # (along u = P n, P the node's filter); the filter stays a symmetric
-            # projector, now also orthogonal to n (at a V's edge: onto the edge line)
-            face = new_faces[contacts.secondary[node]]
-            u = filters[node] @ face.normal
-            uu = float(u @ u)
-            if uu < 1e-12:
-                continue
-            start[node] += (0.0 - face.gap(start[node][None])[0]) / uu * u
-            filters[node] = filters[node] - np.outer(u, u) / uu
-        if fr_nodes:
-            con = StepConstraints(filters, np.concatenate(fr_nodes), np.concatenate(fr_tangents),
-                                  np.concatenate(fr_bounds), np.concatenate(fr_speed))
-        else:
-            con = StepConstraints.free(n, dim=3)
-            con.filters = filters
-        return start, con
-
-    def _update_contacts(self, contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces,
-                         new_faces, dt, released, slipped) -> bool:
-        """Correct the contact set after a solve; True if it changed (solve again)."""
-        changed = False
-        threshold = self.config['contact.release_threshold']
-        for index, face in enumerate(new_faces):
-            nodes = np.flatnonzero(contacts.obstacle == index)
-            if not nodes.size:
-                continue
-            nrm, tan = face.normal, face.tangents
-            r_n = reaction[nodes] @ nrm
-            r_t = np.linalg.norm(reaction[nodes] @ tan.T, axis=1)
-            mode = contacts.mode[nodes]
-            pulling = (r_n < -threshold) & (mode != cm.IMPACT)
-            if np.any(pulling):
-                contacts.release(nodes[pulling])
-                released[nodes[pulling]] = True
-                changed = True
-            keep = ~pulling
-            stuck = keep & (mode == cm.STICK)
-            to_slip = stuck & (r_t > face.static_friction * r_n)
-            if np.any(to_slip):
-                contacts.mode[nodes[to_slip]] = cm.SLIP
-                slipped[nodes[to_slip]] = True
-                changed = True
-            sliding = keep & (mode == cm.SLIP)
-            if np.any(sliding):
-                rel = np.linalg.norm(((x[nodes] - x_n[nodes]) / dt - face.velocity) @ tan.T,
-                                     axis=1)
-                to_stick = (sliding & (rel < 2 * FRICTION_SMOOTHING)
-                            & ~slipped[nodes] & (face.static_friction > 0))
-                if np.any(to_stick):
-                    contacts.mode[nodes[to_stick]] = cm.STICK
-                    changed = True
-                lag = contacts.normal_force[nodes]
-                stale = sliding & ~to_stick & (np.abs(r_n - lag) > 0.02 * np.abs(lag) + 1e-9)
-                if np.any(stale) and face.kinetic_friction > 0:
-                    changed = True
-            contacts.normal_force[nodes[keep]] = r_n[keep]
-        for node in np.flatnonzero(contacts.secondary >= 0):
-            face = new_faces[contacts.secondary[node]]
-            if reaction[node] @ face.normal < -threshold:
-                contacts.secondary[node] = -1
-                changed = True
-        if self._add_corners(contacts, x, new_faces):
-            changed = True
-        if self._add_penetrating(contacts, x, x_n, v_n, old_faces, new_faces, dt, released):
-            changed = True
-        return changed
-
-    def _add_corners(self, contacts, x, new_faces) -> bool:
-        """Held nodes pushed into a second face (a corner) get it as a secondary hold."""
-        held = np.flatnonzero((contacts.obstacle >= 0) & (contacts.secondary < 0))
-        added = False
-        for index, face in enumerate(new_faces):
-            nodes = held[contacts.obstacle[held] != index]
-            if not nodes.size:
-                continue
-            inside = nodes[face.covers(x[nodes]) & (face.gap(x[nodes]) < 0)]
-            if inside.size:
-                contacts.secondary[inside] = index
-                contacts.mode[inside[contacts.mode[inside] == cm.STICK]] = cm.SLIP
-                held = np.setdiff1d(held, inside)
-                added = True
-        return added
-
-    def _add_penetrating(self, contacts, x, x_n, v_n, old_faces, new_faces, dt, released) -> bool:
-        surface = self.fruit.surface
-        candidates = surface[(contacts.obstacle[surface] < 0) & ~released[surface]]
-        if not candidates.size:
-            return False
-        pts = x[candidates]
-        low, high = pts.min(axis=0), pts.max(axis=0)
-        depth = np.zeros(candidates.size)
-        chosen = -np.ones(candidates.size, np.int64)
-        for index, face in enumerate(new_faces):
-            if not face.may_touch(low, high):  # broad phase
-                continue
-            gap = face.gap(pts)
-            inside = face.covers(pts) & (gap < 0) & (-gap > depth)
-            depth[inside] = -gap[inside]
-            chosen[inside] = index
-        hit = chosen >= 0
-        if not np.any(hit):
-            return False
-        for face_index in np.unique(chosen[hit]):
-            # the deepest first: shallower nodes often come free once these are held
-            on = chosen == face_index
-            hit &= ~on | (depth >= DEEPEST_FIRST * depth[on].max())
-        nodes, index = candidates[hit], chosen[hit]
-        contacts.obstacle[nodes] = index
-        mu_s = np.array([f.static_friction for f in new_faces])
-        contacts.mode[nodes] = np.where(mu_s[index] > 0, cm.STICK, cm.SLIP)
-        contacts.normal_force[nodes] = 0.0
-        v_min = max(5.0 * self.config['world.gravity'] * dt, 1e-3)
-        for face_index in np.unique(index):
-            face, old = new_faces[face_index], old_faces[face_index]
-            if face.restitution <= 0:
-                continue
-            sel = nodes[index == face_index]
-            gap_start = old.gap(x_n[sel])
-            gap_end = face.gap(x[sel])
-            with np.errstate(divide='ignore', invalid='ignore'):
-                tau = np.where(gap_start > 0, np.clip(gap_start / (gap_start - gap_end), 0, 1),
-                               0.0)
-            v_start = (v_n[sel] - face.velocity) @ face.normal
-            v_end = ((x[sel] - x_n[sel]) / dt - face.velocity) @ face.normal
-            approach = -(v_start + tau * (v_end - v_start))
-            bouncing = approach > v_min
-            b = sel[bouncing]
-            contacts.mode[b] = cm.IMPACT
-            contacts.bounce_speed[b] = face.restitution * approach[bouncing]
-            contacts.impact_gap[b] = contacts.bounce_speed[b] * (1.0 - tau[bouncing]) * dt
-        return True
 
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult3D:

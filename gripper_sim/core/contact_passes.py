@@ -1,0 +1,290 @@
+"""One implicit step with contact: the predictor-corrector passes, for 2D and 3D.
+
+The modified mass method (Baraff & Witkin 1998) around the Newton solve of the implicit
+Euler step (``core.stepper``): each pass prescribes the held nodes (z targets: a stuck
+node moves with its obstacle, a sliding one keeps its normal gap, an IMPACT node ends at
+its bounce gap; the S filter frees the rest), solves, and corrects the contact set
+(``core.contact``): pulling nodes are released, stuck nodes whose tangential reaction
+leaves the Coulomb cone |R_t| <= mu_s R_n slip, slipping nodes that stopped stick, a
+held node pushed into a second face gets it as a frictionless secondary hold (a
+corner), free surface nodes found inside a face are added (with restitution if they
+arrive fast). The passes end when the set no longer changes.
+
+Dimension is a parameter, not a copy: positions are (n, d), faces (``FlatFace`` in 2D,
+``Plate`` in 3D) have a unit ``normal`` (d,) and ``tangents`` (d - 1, d), and kinetic
+friction is the smoothed Coulomb cone of the stepper in the tangent space (one tangent
+in 2D).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gripper_sim.core import contact as cm
+from gripper_sim.core.stepper import FRICTION_SMOOTHING, StepConstraints
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    """Attributes:
+        max_passes: predictor-corrector passes per step.
+        max_correction_speed: m/s, fastest rate at which a penetration is undone.
+        release_threshold: N, a held node is released when its normal reaction pulls
+            by more than this.
+        gravity: m/s^2, sets the slowest approach that bounces (5 g dt, at least 1 mm/s).
+        deepest_first: a pass adds, of the free nodes inside a face, those at least this
+            fraction of the deepest one's depth (0: all of them).
+    """
+
+    max_passes: int
+    max_correction_speed: float
+    release_threshold: float
+    gravity: float
+    deepest_first: float = 0.0
+
+    @classmethod
+    def from_config(cls, config, deepest_first: float = 0.0) -> 'ContactSettings':
+        return cls(int(config['sim.max_contact_passes']),
+                   float(config['contact.max_correction_speed']),
+                   float(config['contact.release_threshold']), float(config['world.gravity']),
+                   deepest_first)
+
+
+@dataclass
+class StepOutcome:
+    """Attributes:
+        x: (n, d) m, end positions.  v: (n, d) m/s, end velocities (held nodes with their
+        obstacle's normal speed, stuck ones with its tangential speed too).
+        forces: (n, d) N, the obstacles' reactions on the held nodes.
+        contacts: the contact set at the end of the step.  iterations: Newton iterations.
+    """
+
+    x: np.ndarray
+    v: np.ndarray
+    forces: np.ndarray
+    contacts: cm.ContactState
+    iterations: int
+
+
+def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np.ndarray,
+                 v_n: np.ndarray, old_faces: list, new_faces: list, dt: float,
+                 settings: ContactSettings) -> StepOutcome:
+    """One implicit step of ``dt`` from (x_n, v_n) (n, d) with the faces moving from
+    ``old_faces`` to ``new_faces``; ``contacts`` is not modified.
+
+    Raises:
+        NewtonFailure: from the solver (the caller halves the step).
+    """
+    n, d = x_n.shape
+    q_n = x_n.ravel()
+    x_pred = x_n + dt * v_n
+    contacts = contacts.copy()
+    released = np.zeros(n, bool)
+    slipped = np.zeros(n, bool)
+    iterations = 0
+    for _ in range(settings.max_passes):
+        q_start, constraints = _constraints(contacts, x_n, x_pred, old_faces, new_faces, dt,
+                                            settings)
+        solution = solver.solve(q_n, v_n.ravel(), dt, q_start.ravel(), constraints)
+        iterations += solution.iterations
+        x = solution.q.reshape(-1, d)
+        reaction = solution.reaction.reshape(-1, d)
+        if not _update_contacts(contacts, x, x_n, v_n, reaction, old_faces, new_faces, dt,
+                                released, slipped, surface, settings):
+            break
+    v = (x - x_n) / dt
+    forces = np.zeros((n, d))
+    for index, face in enumerate(new_faces):
+        nodes = np.flatnonzero(contacts.obstacle == index)
+        if not nodes.size:
+            continue
+        nrm = face.normal
+        stuck = contacts.mode[nodes] == cm.STICK
+        v_t = v[nodes] - np.outer(v[nodes] @ nrm, nrm)
+        v_t[stuck] = face.velocity - (face.velocity @ nrm) * nrm
+        v_n_new = face.velocity @ nrm + contacts.bounce_speed[nodes]
+        v[nodes] = v_t + v_n_new[:, None] * nrm
+        forces[nodes] = reaction[nodes]
+    for node in np.flatnonzero(contacts.secondary >= 0):
+        face = new_faces[contacts.secondary[node]]
+        v[node] += (face.velocity @ face.normal - v[node] @ face.normal) * face.normal
+    contacts.release(np.flatnonzero(contacts.mode == cm.IMPACT))
+    return StepOutcome(x, v, forces, contacts, iterations)
+
+
+def _constraints(contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces, dt: float,
+                 settings: ContactSettings):
+    """Start positions (n, d) with held nodes at their targets, and the step filters."""
+    n, d = x_n.shape
+    start = x_pred.copy()
+    filters = np.tile(np.eye(d), (n, 1, 1))
+    fr_nodes, fr_tangents, fr_bounds, fr_speed = [], [], [], []
+    v_corr = settings.max_correction_speed
+    for index, face in enumerate(new_faces):
+        nodes = np.flatnonzero(contacts.obstacle == index)
+        if not nodes.size:
+            continue
+        nrm, tan = face.normal, face.tangents
+        mode = contacts.mode[nodes]
+        penetration = np.maximum(0.0, -old_faces[index].gap(x_n[nodes]))
+        target = -np.maximum(0.0, penetration - v_corr * dt)
+        impact = mode == cm.IMPACT
+        target[impact] = contacts.impact_gap[nodes[impact]]
+        start[nodes] += (target - face.gap(start[nodes]))[:, None] * nrm
+        stuck = mode == cm.STICK
+        if np.any(stuck):
+            held = nodes[stuck]
+            along = x_n[held] @ tan.T + dt * (tan @ face.velocity)  # (k, d - 1)
+            start[held] += (along - start[held] @ tan.T) @ tan
+            filters[held] = 0.0
+        filters[nodes[~stuck]] = np.eye(d) - np.outer(nrm, nrm)
+        sliding = nodes[mode == cm.SLIP]
+        if sliding.size and face.kinetic_friction > 0:
+            fr_nodes.append(sliding)
+            fr_tangents.append(np.broadcast_to(tan, (sliding.size, d - 1, d)))
+            fr_bounds.append(face.kinetic_friction * np.maximum(
+                contacts.normal_force[sliding], 0.0))
+            fr_speed.append(np.broadcast_to(tan @ face.velocity, (sliding.size, d - 1)))
+    for node in np.flatnonzero(contacts.secondary >= 0):
+        # the second face's normal gap, set by a move that keeps the first one's gap
+        # (along u = P n, P the node's filter); the filter stays a symmetric projector,
+        # now also orthogonal to n (in 2D: the node is held at the corner point; in 3D
+        # at a V's edge: on the edge line)
+        face = new_faces[contacts.secondary[node]]
+        u = filters[node] @ face.normal
+        uu = float(u @ u)
+        if uu < 1e-12:
+            continue
+        start[node] += (0.0 - face.gap(start[node][None])[0]) / uu * u
+        filters[node] = filters[node] - np.outer(u, u) / uu
+    if fr_nodes:
+        con = StepConstraints(filters, np.concatenate(fr_nodes), np.concatenate(fr_tangents),
+                              np.concatenate(fr_bounds), np.concatenate(fr_speed))
+    else:
+        con = StepConstraints.free(n, dim=d)
+        con.filters = filters
+    return start, con
+
+
+def _update_contacts(contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces, new_faces,
+                     dt, released, slipped, surface, settings: ContactSettings) -> bool:
+    """Correct the contact set after a solve; True if it changed (solve again)."""
+    changed = False
+    threshold = settings.release_threshold
+    for index, face in enumerate(new_faces):
+        nodes = np.flatnonzero(contacts.obstacle == index)
+        if not nodes.size:
+            continue
+        nrm, tan = face.normal, face.tangents
+        r_n = reaction[nodes] @ nrm
+        r_t = np.linalg.norm(reaction[nodes] @ tan.T, axis=1)
+        mode = contacts.mode[nodes]
+        pulling = (r_n < -threshold) & (mode != cm.IMPACT)
+        if np.any(pulling):
+            contacts.release(nodes[pulling])
+            released[nodes[pulling]] = True
+            changed = True
+        keep = ~pulling
+        stuck = keep & (mode == cm.STICK)
+        to_slip = stuck & (r_t > face.static_friction * r_n)
+        if np.any(to_slip):
+            contacts.mode[nodes[to_slip]] = cm.SLIP
+            slipped[nodes[to_slip]] = True
+            changed = True
+        sliding = keep & (mode == cm.SLIP)
+        if np.any(sliding):
+            rel = np.linalg.norm(((x[nodes] - x_n[nodes]) / dt - face.velocity) @ tan.T,
+                                 axis=1)
+            to_stick = (sliding & (rel < 2 * FRICTION_SMOOTHING)
+                        & ~slipped[nodes] & (face.static_friction > 0))
+            if np.any(to_stick):
+                contacts.mode[nodes[to_stick]] = cm.STICK
+                changed = True
+            lag = contacts.normal_force[nodes]
+            stale = sliding & ~to_stick & (np.abs(r_n - lag) > 0.02 * np.abs(lag) + 1e-9)
+            if np.any(stale) and face.kinetic_friction > 0:
+                changed = True
+        contacts.normal_force[nodes[keep]] = r_n[keep]
+    for node in np.flatnonzero(contacts.secondary >= 0):
+        face = new_faces[contacts.secondary[node]]
+        if reaction[node] @ face.normal < -threshold:
+            contacts.secondary[node] = -1
+            changed = True
+    if _add_corners(contacts, x, new_faces):
+        changed = True
+    if _add_penetrating(contacts, x, x_n, v_n, old_faces, new_faces, dt, released, surface,
+                        settings):
+        changed = True
+    return changed
+
+
+def _add_corners(contacts: cm.ContactState, x, new_faces) -> bool:
+    """Held nodes pushed into a second face (a corner) get it as a secondary hold."""
+    held = np.flatnonzero((contacts.obstacle >= 0) & (contacts.secondary < 0))
+    added = False
+    for index, face in enumerate(new_faces):
+        nodes = held[contacts.obstacle[held] != index]
+        if not nodes.size:
+            continue
+        inside = nodes[face.covers(x[nodes]) & (face.gap(x[nodes]) < 0)]
+        if inside.size:
+            contacts.secondary[inside] = index
+            contacts.mode[inside[contacts.mode[inside] == cm.STICK]] = cm.SLIP
+            held = np.setdiff1d(held, inside)
+            added = True
+    return added
+
+
+def _add_penetrating(contacts: cm.ContactState, x, x_n, v_n, old_faces, new_faces, dt,
+                     released, surface, settings: ContactSettings) -> bool:
+    """Free surface nodes inside a face are held by it (the deepest face of each), as
+    IMPACT nodes if they arrive faster than the bounce threshold on a face with
+    restitution; True if any was added."""
+    candidates = surface[(contacts.obstacle[surface] < 0) & ~released[surface]]
+    if not candidates.size:
+        return False
+    pts = x[candidates]
+    low, high = pts.min(axis=0), pts.max(axis=0)
+    depth = np.zeros(candidates.size)
+    chosen = -np.ones(candidates.size, np.int64)
+    for index, face in enumerate(new_faces):
+        if not face.may_touch(low, high):  # broad phase
+            continue
+        gap = face.gap(pts)
+        inside = face.covers(pts) & (gap < 0) & (-gap > depth)
+        depth[inside] = -gap[inside]
+        chosen[inside] = index
+    hit = chosen >= 0
+    if not np.any(hit):
+        return False
+    if settings.deepest_first > 0:
+        for face_index in np.unique(chosen[hit]):
+            # the deepest first: shallower nodes often come free once these are held
+            on = chosen == face_index
+            hit &= ~on | (depth >= settings.deepest_first * depth[on].max())
+    nodes, index = candidates[hit], chosen[hit]
+    contacts.obstacle[nodes] = index
+    mu_s = np.array([f.static_friction for f in new_faces])
+    contacts.mode[nodes] = np.where(mu_s[index] > 0, cm.STICK, cm.SLIP)
+    contacts.normal_force[nodes] = 0.0
+    v_min = max(5.0 * settings.gravity * dt, 1e-3)
+    for face_index in np.unique(index):
+        face, old = new_faces[face_index], old_faces[face_index]
+        if face.restitution <= 0:
+            continue
+        sel = nodes[index == face_index]
+        gap_start = old.gap(x_n[sel])
+        gap_end = face.gap(x[sel])
+        with np.errstate(divide='ignore', invalid='ignore'):
+            tau = np.where(gap_start > 0, np.clip(gap_start / (gap_start - gap_end), 0, 1),
+                           0.0)
+        v_start = (v_n[sel] - face.velocity) @ face.normal
+        v_end = ((x[sel] - x_n[sel]) / dt - face.velocity) @ face.normal
+        approach = -(v_start + tau * (v_end - v_start))
+        bouncing = approach > v_min
+        b = sel[bouncing]
+        contacts.mode[b] = cm.IMPACT
+        contacts.bounce_speed[b] = face.restitution * approach[bouncing]
+        contacts.impact_gap[b] = contacts.bounce_speed[b] * (1.0 - tau[bouncing]) * dt
+    return True
