@@ -90,6 +90,7 @@ $(IFACE_STAMP): $(VENV_STAMP) $(IFACE_SRCS) scripts/fix_ros_cmake_exports.py
 # numba compiles the fast-path kernels once and caches them next to the sources: do it
 # at install time so a user's first run does not pay the compile.
 $(KERNEL_STAMP): $(VENV_STAMP) gripper_sim/core/kernels.py gripper_sim/core/fast.py \
+		gripper_sim/core/energies/kernels.py gripper_sim/core/solver_kernels.py \
 		gripper_sim/core3d/kernels.py gripper_sim/core3d/energies/wrinkling_membrane.py
 	@echo "== kernels: compiling the numba fast paths (2D, 3D) into their cache (~1-2 min, once)"
 	$(PY) -m gripper_sim.core.fast

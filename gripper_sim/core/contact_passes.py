@@ -95,10 +95,7 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
             break
     v = (x - x_n) / dt
     forces = np.zeros((n, d))
-    for index, face in enumerate(new_faces):
-        nodes = np.flatnonzero(contacts.obstacle == index)
-        if not nodes.size:
-            continue
+    for _, face, nodes in _held_by_face(contacts, new_faces):
         nrm = face.normal
         stuck = contacts.mode[nodes] == cm.STICK
         v_t = v[nodes] - np.outer(v[nodes] @ nrm, nrm)
@@ -113,6 +110,14 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
     return StepOutcome(x, v, forces, contacts, iterations)
 
 
+def _held_by_face(contacts: cm.ContactState, faces: list):
+    """(index, face, the nodes (k,) it holds) of every face that holds nodes."""
+    for index, face in enumerate(faces):
+        nodes = np.flatnonzero(contacts.obstacle == index)
+        if nodes.size:
+            yield index, face, nodes
+
+
 def _constraints(contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces, dt: float,
                  settings: ContactSettings):
     """Start positions (n, d) with held nodes at their targets, and the step filters."""
@@ -121,10 +126,7 @@ def _constraints(contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces, d
     filters = np.tile(np.eye(d), (n, 1, 1))
     fr_nodes, fr_tangents, fr_bounds, fr_speed = [], [], [], []
     v_corr = settings.max_correction_speed
-    for index, face in enumerate(new_faces):
-        nodes = np.flatnonzero(contacts.obstacle == index)
-        if not nodes.size:
-            continue
+    for index, face, nodes in _held_by_face(contacts, new_faces):
         nrm, tan = face.normal, face.tangents
         mode = contacts.mode[nodes]
         penetration = np.maximum(0.0, -old_faces[index].gap(x_n[nodes]))
@@ -172,10 +174,7 @@ def _update_contacts(contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces
     """Correct the contact set after a solve; True if it changed (solve again)."""
     changed = False
     threshold = settings.release_threshold
-    for index, face in enumerate(new_faces):
-        nodes = np.flatnonzero(contacts.obstacle == index)
-        if not nodes.size:
-            continue
+    for index, face, nodes in _held_by_face(contacts, new_faces):
         nrm, tan = face.normal, face.tangents
         r_n = reaction[nodes] @ nrm
         r_t = np.linalg.norm(reaction[nodes] @ tan.T, axis=1)

@@ -3,10 +3,11 @@
 A facade keeps the gripper command state ``_grip`` (``GripperState``), the time, the
 last ``StepResult`` and its observers, and steps: the jaw faces follow the gripper, the
 soft pads (if any) are set up around the step, and one implicit step with contact
-(``core.contact_passes``) advances the fruit, whatever the dimension. The subclasses
-(``core.simulation.Simulation``, ``core3d.simulation.Simulation3D``) build the fruit,
-the solver and the jaws (``_faces_template``, ``_face_side``, ``_face_offsets``) and
-provide ``reset()``, ``_make_faces()`` and ``_measure(iterations, substeps)``.
+(``core.contact_passes``) advances the fruit, whatever the dimension ``dimension``
+(d = 2 or 3). The subclasses (``core.simulation.Simulation``,
+``core3d.simulation.Simulation3D``) build the fruit, the gravity, pads and kinematics,
+and provide ``_make_faces()`` (which also sets ``_face_side`` and ``_face_offsets``),
+``_make_damage()`` and ``_measure(iterations, substeps)``.
 Commands validate their values (``CommandError``, the simulation unchanged) and take
 effect on the next step.
 """
@@ -18,9 +19,11 @@ from typing import Any, Callable
 
 import numpy as np
 
+from gripper_sim.core import contact as cm
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
+from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
-from gripper_sim.core.results import StepResult
+from gripper_sim.core.results import Energies, JawWrench, StepResult
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
 
@@ -45,6 +48,65 @@ def finite(name: str, value: Any) -> float:
 
 class SimulationFacade:
     """Base of the simulation facades (see the module docstring)."""
+
+    # ------------------------------------------------------------------ construction
+    def _place_fruit(self) -> None:
+        """``initial_positions`` (n, d) m (the fruit on the table, or at its configured
+        height), ``initial_gap`` and ``initial_lift`` (m) from the configuration."""
+        c = self.config
+        rest = self.fruit.rest_positions
+        if c['fruit.initial_height'] is not None:
+            centre_z = c['fruit.initial_height']
+        elif c['world.table']:
+            centre_z = c['world.table_height'] - rest[:, -1].min()
+        else:
+            centre_z = 0.0
+        self.initial_positions = rest + self._in_plane(0.0, centre_z)
+        self.initial_gap = (c['gripper.initial_gap'] if c['gripper.initial_gap'] is not None
+                            else min(self.fruit.rest_width + 0.01, c['gripper.max_gap']))
+        if self.initial_gap > c['gripper.max_gap']:
+            raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
+        self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
+                             else centre_z)
+
+    def _make_solver(self, fast: bool | None = None) -> PatternCachingSolver:
+        """The Newton solver of the fruit's energies, gravity and the pads (if any)."""
+        c = self.config
+        return PatternCachingSolver(
+            self.fruit.masses, list(self.fruit.energies) + [self.gravity]
+            + ([self._pad] if self._pad is not None else []),
+            damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
+            tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
+            dim=self.dimension, lu_options=SYMMETRIC_LU_OPTIONS, fast=fast)
+
+    def reset(self) -> None:
+        """Back to the initial state and commands, time 0."""
+        n = self.fruit.n_nodes
+        self.solver.reset()
+        self.q = self.initial_positions.copy()
+        self.v = np.tile(self._in_plane(self.config['fruit.initial_velocity.x'],
+                                        self.config['fruit.initial_velocity.z']), (n, 1))
+        self.contacts = cm.ContactState.empty(n)
+        self.contact_forces = np.zeros((n, self.dimension))
+        self._time = 0.0
+        self._step = 0
+        self._slip_reference: float | None = None
+        self._held_slip = 0.0
+        self._faces_template = self._make_faces()
+        self._grip = GripperState(
+            gap=self.initial_gap, gap_rate=0.0, lift=self.initial_lift, lift_rate=0.0,
+            mode='position', target_gap=self.initial_gap, target_force=0.0,
+            speed=self.config['gripper.close_speed'], target_lift=self.initial_lift,
+            lift_speed=self.config['gripper.lift_speed'],
+            stiffness=self.kinematics.initial_stiffness,
+            x_speed=self.config['gripper.transport_speed'])
+        self._jaw_force = (0.0, 0.0)
+        self._damage = self._make_damage()
+        if self._pad is not None:
+            self._pad.begin_step(self.q, self._pad_faces(self._grip),
+                                 self._pad_faces(self._grip), self.dt)
+            self._pad.finish_step(self.q.ravel())
+        self._last = self._measure(0, 1)
 
     # ------------------------------------------------------------------ commands
     def command_gap(self, gap: float, speed: float | None = None) -> None:
@@ -244,6 +306,71 @@ class SimulationFacade:
         return tuple(sign * float(np.sum(forces[np.isin(obstacle, self._jaw_faces(side)), 0]))
                      for side, sign in ((LEFT, 1.0), (RIGHT, -1.0)))
 
+    # ------------------------------------------------------------------ measures
+    def _common_measures(self, x: np.ndarray, v: np.ndarray, forces: np.ndarray,
+                         obstacle: np.ndarray, iterations: int, substeps: int):
+        """What the 2D and 3D step results share, at the present gripper state.
+
+        Args:
+            x, v: (n, d) positions (m) and velocities (m/s).  forces: (n, d) N, every
+            contact force on the fruit (pads included).  obstacle: (n,) the obstacle
+            holding each node (pads included), -1 if none.
+
+        Returns:
+            (StepResult fields (dict), normal (n,) N each node's normal contact force,
+            (on_left, on_right) (n,) bool the nodes each jaw holds).
+        """
+        grip, fruit = self._grip, self.fruit
+        normals = np.array([f.normal for f in self._faces_template])
+        held = obstacle >= 0
+        normal = np.zeros(len(obstacle))
+        normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
+        sides = (np.isin(obstacle, self._jaw_faces(LEFT)),
+                 np.isin(obstacle, self._jaw_faces(RIGHT)))
+        wrenches = []
+        for side in (LEFT, RIGHT):
+            on_jaw = _spatial(-forces[sides[side]])
+            r = _spatial(x[sides[side]] - self._jaw_origin(grip, side))
+            wrenches.append(JawWrench(on_jaw.sum(axis=0), np.cross(r, on_jaw).sum(axis=0)))
+        if self._plain_jaws:
+            left_n, right_n = (float(np.sum(normal[on])) for on in sides)
+        else:  # each jaw's force along the closing axis
+            left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
+        masses = fruit.masses
+        centroid = masses @ x / masses.sum()
+        centroid_velocity = masses @ v / masses.sum()
+        touching = bool(np.any(sides[LEFT]) or np.any(sides[RIGHT]))
+        both = bool(np.any(sides[LEFT]) and np.any(sides[RIGHT]))
+        slip = self._slip_distance(float(centroid[-1] - grip.lift), both, touching)
+        slipping = touching and abs(centroid_velocity[-1] - grip.lift_rate) > 1e-3
+        energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
+                            elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
+                            gravitational=float(self.gravity.value(x.ravel())))
+        fields = dict(
+            time=self._time, step=self._step, positions=x.copy(), velocities=v.copy(),
+            contact_forces=forces.copy(), contact_obstacle=obstacle.copy(),
+            contact_sticking=self.contacts.mode == cm.STICK,
+            obstacle_names=self.obstacle_names, surface=fruit.surface,
+            left_wrench=wrenches[LEFT], right_wrench=wrenches[RIGHT],
+            left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
+            jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
+            gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
+            slipping=slipping, centroid=centroid, energies=energies,
+            newton_iterations=iterations, substeps=substeps, gripper_x=grip.x,
+            gripper_x_velocity=grip.x_rate)
+        return fields, normal, sides
+
+    def _contact_forces_and_holders(self) -> tuple[np.ndarray, np.ndarray]:
+        """(n, d) N every contact force on the fruit and (n,) the obstacle holding each
+        node: the hard contacts' reactions, plus the pads' forces on the nodes that press
+        a pad (held by the pad's face) if there are pads."""
+        obstacle = self.contacts.obstacle.copy()
+        if self._pad is None:
+            return self.contact_forces, obstacle
+        on_pad = (obstacle < 0) & (self._pad.holder >= 0)
+        obstacle[on_pad] = self._pad.holder[on_pad]
+        return self.contact_forces + self._pad.forces, obstacle
+
     # ------------------------------------------------------------------ stepping
     #: the contact passes' ``ContactSettings.deepest_first`` (0: every penetrating node
     #: is held at once)
@@ -291,3 +418,10 @@ class SimulationFacade:
         it1, s1 = self._advance(0.5 * dt, depth + 1)
         it2, s2 = self._advance(0.5 * dt, depth + 1)
         return it1 + it2, s1 + s2
+
+
+def _spatial(vectors: np.ndarray) -> np.ndarray:
+    """(k, 3) vectors (x, y, z) from (k, 2) planar (x, z) ones (y = 0) or (k, 3) ones."""
+    if vectors.shape[1] == 3:
+        return vectors
+    return np.stack([vectors[:, 0], np.zeros(len(vectors)), vectors[:, 1]], axis=1)

@@ -289,7 +289,7 @@ class FastPath:
         if status != kernels.OK:
             self._measured = None
             if status == kernels.UNSUPPORTED:
-                return sim._substep_reference(dt)
+                return sim._substep_hard(dt)
             history = [float(h) for h in self.history[:int(out[1])]]
             message = _FAILURES.get(
                 status, f'no convergence in {sim.solver.max_iterations} iterations')
@@ -498,12 +498,15 @@ def _build(cls, fields: dict):
 
 
 def warm_cache() -> float:
-    """Compile (or load) every kernel by stepping a small shell and point fruit; seconds."""
+    """Compile (or load) every 2D kernel - the whole-step kernel, the energy kernels and
+    the solver's - by stepping small fruits in every route; seconds."""
     from gripper_sim.configuration import load_config
     from gripper_sim.core.simulation import Simulation
     start = time.perf_counter()
-    for model in ('shell', 'point'):
-        sim = Simulation(load_config(overrides=[f'fruit.model={model}', 'fruit.nodes=16']))
+    for overrides in (['fruit.model=shell'], ['fruit.model=point'],
+                      ['fruit.model=solid', 'gripper.finger.type=vgroove'],
+                      ['fruit.model=shell', 'gripper.finger.pad.enabled=true']):
+        sim = Simulation(load_config(overrides=overrides + ['fruit.nodes=16']))
         sim.command_force(1.0)
         for _ in range(3):
             sim.step()

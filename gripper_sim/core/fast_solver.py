@@ -202,9 +202,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
             if need:
                 low_rank.extend(ev.low_rank)
         dq = q - q_n
-        if self.alpha > 0:
-            phi += 0.5 * self.alpha * float(np.sum(self.m * dq ** 2)) / dt
-            grad += self.alpha * self.m * dq / dt
+        phi += self._mass_damping(dq, dt, grad)
         stiffness = self._assemble(rows, cols, vals) if need and rows else None
         if self.beta > 0 and elastic_rows:
             damping = (stiffness if len(elastic_rows) == len(rows) else
@@ -215,13 +213,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
             cdq = damping @ dq
             phi += 0.5 * self.beta * float(dq @ cdq) / dt
             grad += self.beta * cdq / dt
-        fric_grad = np.zeros(self.n)
-        blocks = None
-        k = con.friction_nodes
-        if k.size:
-            phi_f, blocks = self._cone_friction(q, q_n, dt, con, fric_grad)
-            phi += phi_f
-            grad += fric_grad
+        phi_f, fric_grad, blocks = self._friction(q, q_n, dt, con, grad)
+        phi += phi_f
         if not hessian:
             return phi, grad, fric_grad, None
         diag = self.m / dt ** 2 + (self.alpha * self.m / dt if self.alpha > 0 else 0.0)
@@ -230,6 +223,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
             hess = hess + stiffness
             if self.beta > 0 and elastic_rows:
                 hess = hess + (self.beta / dt) * damping
+        k = con.friction_nodes
         if k.size:
             d = self.dim
             dofs = d * k[:, None] + np.arange(d)[None, :]
@@ -237,6 +231,23 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 (blocks.ravel(), (np.repeat(dofs, d, axis=1).ravel(),
                                   np.tile(dofs, (1, d)).ravel())), shape=(self.n, self.n))
         return phi, grad, fric_grad, (hess.tocsc(), low_rank)
+
+    def _mass_damping(self, dq: np.ndarray, dt: float, grad: np.ndarray) -> float:
+        """Rayleigh mass damping alpha M dq^2 / (2 dt) (J); its gradient added to grad."""
+        if self.alpha <= 0:
+            return 0.0
+        grad += self.alpha * self.m * dq / dt
+        return 0.5 * self.alpha * float(np.sum(self.m * dq ** 2)) / dt
+
+    def _friction(self, q, q_n, dt: float, con: StepConstraints, grad: np.ndarray):
+        """Kinetic friction of the sliding nodes: (potential J, its gradient (n_dof,) N,
+        also added to grad, its (k, d, d) Hessian blocks N/m or None)."""
+        fric_grad = np.zeros(self.n)
+        if not con.friction_nodes.size:
+            return 0.0, fric_grad, None
+        phi_f, blocks = self._cone_friction(q, q_n, dt, con, fric_grad)
+        grad += fric_grad
+        return phi_f, fric_grad, blocks
 
     # ------------------------------------------------------------------ fast path
     def _build_fast_pattern(self) -> None:
@@ -306,17 +317,10 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 return np.inf, None, None, None
             phi += value
             low_rank.extend(terms)
-        if self.alpha > 0:
-            dq = q - q_n
-            phi += 0.5 * self.alpha * float(np.sum(self.m * dq ** 2)) / dt
-            grad += self.alpha * self.m * dq / dt
-        fric_grad = np.zeros(self.n)
+        phi += self._mass_damping(q - q_n, dt, grad)
+        phi_f, fric_grad, blocks = self._friction(q, q_n, dt, con, grad)
+        phi += phi_f
         k = con.friction_nodes
-        blocks = None
-        if k.size:
-            phi_f, blocks = self._cone_friction(q, q_n, dt, con, fric_grad)
-            phi += phi_f
-            grad += fric_grad
         if not hessian:
             return phi, grad, fric_grad, None
         diag = self.m / dt ** 2 + (self.alpha * self.m / dt if self.alpha > 0 else 0.0)

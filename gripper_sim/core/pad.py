@@ -196,11 +196,12 @@ class PadLayer(PadState):
                   + h_t[:, None, None] * np.outer(t, t)[None])
         return value, local, blocks
 
-    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
+    def _accumulate(self, q: np.ndarray, grad: np.ndarray, hessian: bool):
+        """Adds every face's gradient (N) into ``grad`` (2 n,); returns (value in J,
+        [(active surface indices (k,), Hessian blocks (k, 2, 2) N/m)] if ``hessian``)."""
         x = q.reshape(-1, 2)
         value = 0.0
-        grad = np.zeros(q.size)
-        rows, cols, vals = [], [], []
+        parts = []
         for face, active, lagged in zip(self.faces, self.active, self.lagged):
             if not active.size:
                 continue
@@ -210,33 +211,29 @@ class PadLayer(PadState):
             np.add.at(grad, 2 * nodes, local[:, 0])
             np.add.at(grad, 2 * nodes + 1, local[:, 1])
             if hessian:
-                dofs = self.dofs[active]
-                rows.append(np.repeat(dofs, 2, axis=1).ravel())
-                cols.append(np.tile(dofs, (1, 2)).ravel())
-                vals.append(blocks.ravel())
-        if not hessian or not rows:
+                parts.append((active, blocks))
+        return value, parts
+
+    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
+        grad = np.zeros(q.size)
+        value, parts = self._accumulate(q, grad, hessian)
+        if not parts:
             empty = np.zeros(0, np.int64)
             return Evaluation(value, grad, empty, empty, np.zeros(0))
-        return Evaluation(value, grad, np.concatenate(rows), np.concatenate(cols),
-                          np.concatenate(vals))
+        dofs = [self.dofs[active] for active, _ in parts]
+        return Evaluation(value, grad,
+                          np.concatenate([np.repeat(d, 2, axis=1).ravel() for d in dofs]),
+                          np.concatenate([np.tile(d, (1, 2)).ravel() for d in dofs]),
+                          np.concatenate([blocks.ravel() for _, blocks in parts]))
 
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
         """``evaluate`` for the fast solver: adds the gradient (N) into ``grad`` and the
         node blocks (N/m) into the CSC values ``data`` at ``scatter`` (n_s, 4), one
         element per surface node; returns (value in J, no low-rank terms)."""
-        x = q.reshape(-1, 2)
-        value = 0.0
-        for face, active, lagged in zip(self.faces, self.active, self.lagged):
-            if not active.size:
-                continue
-            nodes = self.surface[active]
-            face_value, local, blocks = self._face_terms(x, face, active, lagged, hessian)
-            value += face_value
-            np.add.at(grad, 2 * nodes, local[:, 0])
-            np.add.at(grad, 2 * nodes + 1, local[:, 1])
-            if hessian:
-                np.add.at(data, scatter[active], blocks.reshape(-1, 4))
+        value, parts = self._accumulate(q, grad, hessian)
+        for active, blocks in parts:
+            np.add.at(data, scatter[active], blocks.reshape(-1, 4))
         return value, []
 
 

@@ -28,12 +28,10 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from gripper_sim.core import contact as cm
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
-from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
-from gripper_sim.core.gripper import GripperKinematics, GripperState
-from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
+from gripper_sim.core.gripper import GripperKinematics
+from gripper_sim.core.results import Deformation, StepResult
 from gripper_sim.core3d import fingers3d, meshes
 from gripper_sim.core3d.damage import DamageTracker3D
 from gripper_sim.core3d.fingers_pad import PadLayer3D
@@ -108,30 +106,12 @@ class Simulation3D(SimulationFacade):
         self.fruit: FruitModel3D = build_fruit3d(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config
-        rest = self.fruit.rest_positions
-        if c['fruit.initial_height'] is not None:
-            centre_z = c['fruit.initial_height']
-        elif c['world.table']:
-            centre_z = c['world.table_height'] - rest[:, 2].min()
-        else:
-            centre_z = 0.0
-        self.initial_positions = rest + np.array([0.0, 0.0, centre_z])
-        self.initial_gap = (c['gripper.initial_gap'] if c['gripper.initial_gap'] is not None
-                            else min(self.fruit.rest_width + 0.01, c['gripper.max_gap']))
-        if self.initial_gap > c['gripper.max_gap']:
-            raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
-        self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
-                             else centre_z)
+        self._place_fruit()
         self.gravity = Gravity(self.fruit.masses, c['world.gravity'], dim=3)
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
-        self.solver = PatternCachingSolver(
-            self.fruit.masses, list(self.fruit.energies) + [self.gravity]
-            + ([self._pad] if self._pad is not None else []),
-            damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
-            tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
-            dim=3, lu_options=SYMMETRIC_LU_OPTIONS)
+        self.solver = self._make_solver()
         # first guess of d force / d gap for the force regulator (it adapts): a Hertz
         # contact of the flesh at a 1 % approach
         radius = 0.5 * self.fruit.rest_width
@@ -139,39 +119,12 @@ class Simulation3D(SimulationFacade):
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
             c['gripper.force_time_constant'],
             initial_stiffness=0.1 * c['fruit.flesh.youngs_modulus'] * radius,
-            transport_acceleration=c.get('gripper.transport_acceleration', 1.0))
+            transport_acceleration=c['gripper.transport_acceleration'])
         self._observers: list[Callable[[StepResult3D], None]] = []
         self.reset()
 
-    # ------------------------------------------------------------------ state
-    def reset(self) -> None:
-        """Back to the initial state and commands, time 0."""
-        n = self.fruit.n_nodes
-        self.solver.reset()
-        self.q = self.initial_positions.copy()
-        self.v = np.tile([self.config['fruit.initial_velocity.x'], 0.0,
-                          self.config['fruit.initial_velocity.z']], (n, 1)).astype(float)
-        self.contacts = cm.ContactState.empty(n)
-        self.contact_forces = np.zeros((n, 3))
-        self._time = 0.0
-        self._step = 0
-        self._slip_reference: float | None = None
-        self._held_slip = 0.0
-        self._faces_template = self._make_faces()
-        self._grip = GripperState(
-            gap=self.initial_gap, gap_rate=0.0, lift=self.initial_lift, lift_rate=0.0,
-            mode='position', target_gap=self.initial_gap, target_force=0.0,
-            speed=self.config['gripper.close_speed'], target_lift=self.initial_lift,
-            lift_speed=self.config['gripper.lift_speed'],
-            stiffness=self.kinematics.initial_stiffness,
-            x_speed=self.config.get('gripper.transport_speed', 0.1))
-        self._jaw_force = (0.0, 0.0)
-        self._damage = DamageTracker3D(self.fruit, self.config)
-        if self._pad is not None:
-            self._pad.begin_step(self.q, self._pad_faces(self._grip),
-                                 self._pad_faces(self._grip), self.dt)
-            self._pad.finish_step(self.q.ravel())
-        self._last = self._measure(0, 1)
+    def _make_damage(self) -> DamageTracker3D:
+        return DamageTracker3D(self.fruit, self.config)
 
     # ------------------------------------------------------------------ geometry
     def _make_faces(self) -> list[Plate]:
@@ -214,61 +167,15 @@ class Simulation3D(SimulationFacade):
 
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult3D:
-        x, v, forces = self.q, self.v, self.contact_forces
-        fruit, grip = self.fruit, self._grip
-        faces = self._faces(grip)
-        n = fruit.n_nodes
-        obstacle = self.contacts.obstacle.copy()
-        if self._pad is not None:
-            forces = forces + self._pad.forces
-            on_pad = (obstacle < 0) & (self._pad.holder >= 0)
-            obstacle[on_pad] = self._pad.holder[on_pad]
-        normal = np.zeros(n)
-        for index, face in enumerate(faces):
-            nodes = np.flatnonzero(obstacle == index)
-            normal[nodes] = forces[nodes] @ face.normal
-        sides = [np.isin(obstacle, self._jaw_faces(side)) for side in (LEFT, RIGHT)]
-        wrenches = []
-        for side in (LEFT, RIGHT):
-            on_jaw = -forces[sides[side]]
-            r = x[sides[side]] - self._jaw_origin(grip, side)
-            torque = meshes.cross_rows(r, on_jaw).sum(axis=0)
-            wrenches.append(JawWrench(on_jaw.sum(axis=0), torque))
-        if self._plain_jaws:
-            left_n = float(np.sum(normal[sides[LEFT]]))
-            right_n = float(np.sum(normal[sides[RIGHT]]))
-        else:  # along the closing axis
-            left_n, right_n = -wrenches[LEFT].force[0], wrenches[RIGHT].force[0]
-        masses = fruit.masses
-        centroid = masses @ x / masses.sum()
-        centroid_velocity = masses @ v / masses.sum()
-        on_left, on_right = sides
-        both = bool(np.any(on_left) and np.any(on_right))
-        jaw_contact = on_left | on_right
-        slip = self._slip_distance(float(centroid[2] - grip.lift), both,
-                                   bool(np.any(jaw_contact)))
-        slipping = bool(np.any(jaw_contact) and
-                        abs(centroid_velocity[2] - grip.lift_rate) > 1e-3)
-        elastic = sum(e.value(x.ravel()) for e in fruit.energies)
-        energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
-                            elastic=float(elastic),
-                            gravitational=float(self.gravity.value(x.ravel())))
+        x = self.q
+        forces, obstacle = self._contact_forces_and_holders()
+        fields, normal, (on_left, on_right) = self._common_measures(
+            x, self.v, forces, obstacle, iterations, substeps)
         deformation = self._deformation(x, normal, on_left, on_right)
         damage = self._damage.update(x, deformation.node_pressure,
                                      deformation.compression_ratio)
-        return StepResult3D(
-            time=self._time, step=self._step, positions=x.copy(), velocities=v.copy(),
-            contact_forces=forces.copy(), contact_obstacle=obstacle,
-            contact_sticking=self.contacts.mode == cm.STICK,
-            obstacle_names=self.obstacle_names, surface=fruit.surface,
-            left_wrench=wrenches[LEFT], right_wrench=wrenches[RIGHT],
-            left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
-            jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
-            gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
-            slipping=slipping, centroid=centroid, energies=energies,
-            deformation=deformation, newton_iterations=iterations, substeps=substeps,
-            damage=damage,
-            gripper_x=grip.x, gripper_x_velocity=grip.x_rate, triangles=fruit.triangles)
+        return StepResult3D(**fields, deformation=deformation, damage=damage,
+                            triangles=self.fruit.triangles)
 
     def _deformation(self, x, normal, on_left, on_right) -> Deformation3D:
         fruit = self.fruit

@@ -35,15 +35,3 @@ def fast_kernels():
     except ImportError:  # pragma: no cover - depends on the environment
         return None
     return kernels
-
-
-class KernelValue:
-    """Mixin: ``value(q)`` through the energy's numba kernel (``evaluate_into``) when the
-    fast path is on (the per-step elastic energy output), else the numpy ``evaluate``."""
-
-    def value(self, q: np.ndarray) -> float:
-        if fast_kernels() is None:
-            return self.evaluate(q, hessian=False).value
-        value, _ = self.evaluate_into(q, np.zeros(q.size), np.zeros(1),
-                                      np.zeros((0, 0), np.int64), False)
-        return float(value)

@@ -26,8 +26,7 @@ import numpy as np
 
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
-from gripper_sim.core3d.energies.common import (KernelValue, cross_matrices,
-                                                element_dofs3, empty_triplets)
+from gripper_sim.core3d.energies.common import cross_matrices, element_dofs3, empty_triplets
 
 
 def dihedral_angles(x: np.ndarray, hinges: np.ndarray) -> np.ndarray:
@@ -41,7 +40,7 @@ def dihedral_angles(x: np.ndarray, hinges: np.ndarray) -> np.ndarray:
     return np.arctan2(sin, cos)
 
 
-class HingeBending(KernelValue, Energy):
+class HingeBending(Energy):
     """Args:
         hinges: (n_hinge, 4) nodes (p0, p1, p2, p3), see ``meshes.hinges``.
         rest_positions: (n_nodes, 3) m, the stress-free shape (theta0, |e0|, A0).

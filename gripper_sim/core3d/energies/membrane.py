@@ -16,10 +16,10 @@ import numpy as np
 
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
-from gripper_sim.core3d.energies.common import KernelValue, element_dofs3, empty_triplets
+from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
 
 
-class Membrane(KernelValue, Energy):
+class Membrane(Energy):
     """Args:
         triangles: (n_tri, 3) node indices.
         rest_positions: (n_nodes, 3) m, the stress-free shape.

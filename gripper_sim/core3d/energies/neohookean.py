@@ -16,7 +16,7 @@ import numpy as np
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
-from gripper_sim.core3d.energies.common import (KernelValue, element_dofs3, empty_triplets,
+from gripper_sim.core3d.energies.common import (element_dofs3, empty_triplets,
                                                 fast_kernels)
 
 
@@ -59,7 +59,7 @@ def neohookean_response(f: np.ndarray, mu: float, lam: float):
     return psi, lnj, finv, piola
 
 
-class NeoHookeanTets(KernelValue, Energy):
+class NeoHookeanTets(Energy):
     """Args:
         tetrahedra: (n_tet, 4) node indices, positively oriented at rest.
         rest_positions: (n_nodes, 3) m.

@@ -14,11 +14,10 @@ import numpy as np
 
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
-from gripper_sim.core3d.energies.common import (KernelValue, cross_matrices,
-                                                element_dofs3, empty_triplets)
+from gripper_sim.core3d.energies.common import cross_matrices, element_dofs3, empty_triplets
 
 
-class EnclosedVolumePressure(KernelValue, Energy):
+class EnclosedVolumePressure(Energy):
     """Args:
         triangles: (n_tri, 3) the closed outward skin.
         rest_volume: V0, m^3.  turgor: p0, Pa.  bulk_modulus: K, Pa.

@@ -17,7 +17,7 @@ import numpy as np
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
-from gripper_sim.core3d.energies.common import KernelValue, element_dofs3, empty_triplets
+from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
 from gripper_sim.core3d.energies.neohookean import neohookean_response, rest_tetrahedra
 
 _EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
@@ -46,7 +46,7 @@ def lumped_masses(tetrahedra: np.ndarray, volumes: np.ndarray, density: float,
     return np.bincount(tetrahedra.ravel(), weights=weights.ravel(), minlength=n_nodes)
 
 
-class QuadraticNeoHookeanTets(KernelValue, Energy):
+class QuadraticNeoHookeanTets(Energy):
     """Args:
         tetrahedra: (n_tet, 10) corners (positively oriented) then edge midpoints.
         rest_positions: (n_nodes, 3) m.

@@ -28,11 +28,10 @@ from __future__ import annotations
 import numpy as np
 
 from gripper_sim.core.energies.base import Energy, Evaluation
-from gripper_sim.core3d.energies.common import KernelValue
 from gripper_sim.core3d.energies.membrane import Membrane
 
 
-class WrinklingMembrane(KernelValue, Energy):
+class WrinklingMembrane(Energy):
     """Relaxed (tension-field) St. Venant-Kirchhoff skin; same arguments as ``Membrane``.
 
     Args:
