@@ -13,6 +13,7 @@ effect on the next step.
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import replace
 from typing import Any, Callable
@@ -276,7 +277,8 @@ class SimulationFacade:
 
     def _faces(self, grip: GripperState) -> list:
         """The obstacles with the jaw faces where ``grip`` puts them, moving with it."""
-        faces = [replace(f) for f in self._faces_template]
+        # shallow copies: the moving faces get new origin and velocity arrays
+        faces = [copy.copy(f) for f in self._faces_template]
         for index, side in enumerate(self._face_side):
             sign = -1.0 if side == LEFT else 1.0
             faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
@@ -325,13 +327,12 @@ class SimulationFacade:
         held = obstacle >= 0
         normal = np.zeros(len(obstacle))
         normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
-        sides = (np.isin(obstacle, self._jaw_faces(LEFT)),
-                 np.isin(obstacle, self._jaw_faces(RIGHT)))
-        wrenches = []
-        for side in (LEFT, RIGHT):
-            on_jaw = _spatial(-forces[sides[side]])
-            r = _spatial(x[sides[side]] - self._jaw_origin(grip, side))
-            wrenches.append(JawWrench(on_jaw.sum(axis=0), np.cross(r, on_jaw).sum(axis=0)))
+        side_of_face = np.full(len(self._faces_template) + 1, -1)  # the last: obstacle -1
+        side_of_face[:len(self._face_side)] = self._face_side
+        side_of_node = side_of_face[obstacle]
+        sides = (side_of_node == LEFT, side_of_node == RIGHT)
+        wrenches = [_wrench(x[sides[side]] - self._jaw_origin(grip, side), -forces[sides[side]])
+                    for side in (LEFT, RIGHT)]
         if self._plain_jaws:
             left_n, right_n = (float(np.sum(normal[on])) for on in sides)
         else:  # each jaw's force along the closing axis
@@ -420,8 +421,14 @@ class SimulationFacade:
         return it1 + it2, s1 + s2
 
 
-def _spatial(vectors: np.ndarray) -> np.ndarray:
-    """(k, 3) vectors (x, y, z) from (k, 2) planar (x, z) ones (y = 0) or (k, 3) ones."""
-    if vectors.shape[1] == 3:
-        return vectors
-    return np.stack([vectors[:, 0], np.zeros(len(vectors)), vectors[:, 1]], axis=1)
+def _wrench(r: np.ndarray, f: np.ndarray) -> JawWrench:
+    """The net force (3,) N and torque (3,) N m of forces f (k, d) applied at r (k, d) m
+    from the reference point; planar (x, z) vectors have y = 0."""
+    if r.shape[1] == 2:
+        return JawWrench(np.array([f[:, 0].sum(), 0.0, f[:, 1].sum()]),
+                         np.array([0.0, float(np.sum(r[:, 1] * f[:, 0] - r[:, 0] * f[:, 1])),
+                                   0.0]))
+    torque = np.array([np.sum(r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1]),
+                       np.sum(r[:, 2] * f[:, 0] - r[:, 0] * f[:, 2]),
+                       np.sum(r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0])])
+    return JawWrench(f.sum(axis=0), torque)
