@@ -96,7 +96,7 @@ def test_start_reports_bad_paths_and_reset_keeps_log_order(sim_node, tmp_path):
     assert ok
     for _ in range(5):
         sim_node.advance()
-    sim_node._reset('test reset')  # the path ~/reset and failure recovery take
+    sim_node.reset_simulation('test reset')  # the path ~/reset and failure recovery take
     for _ in range(5):
         sim_node.advance()
     recording.stop()

@@ -13,7 +13,8 @@ import rclpy
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConvergenceError
 from gripper_sim.ros import messages
-from gripper_sim.ros.node import JawOwner, SimNode
+from gripper_sim.ros.node import SimNode
+from gripper_sim.ros.sync import JawOwner
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
 
 pytestmark = pytest.mark.ros

@@ -21,7 +21,7 @@ from gripper_sim_interfaces.action import Grasp
 
 from gripper_sim.errors import GripperSimError
 from gripper_sim.ros.grasp_goal import GoalRun, goal_problem
-from gripper_sim.ros.node import JawOwner
+from gripper_sim.ros.sync import JawOwner
 
 __all__ = ['GraspServer', 'goal_problem']
 

@@ -28,7 +28,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from gripper_sim_interfaces.action import GripperCommand
 
 from gripper_sim.errors import CommandError
-from gripper_sim.ros.node import JawOwner
+from gripper_sim.ros.sync import JawOwner
 
 FEEDBACK_PERIOD = 0.05   # s
 

@@ -1,0 +1,128 @@
+"""Synchronisation inside the node: the simulation lock and the ownership of the jaws.
+
+``SimLock`` guards the simulation; it is fair to the threads that wait for it (the
+physics thread steps back to back and would otherwise keep it). ``JawOwnership``
+records which action drives the jaws: one at a time.
+No rclpy import here.
+"""
+from __future__ import annotations
+
+import threading
+
+
+class SimLock:
+    """The simulation lock: re-entrant, and fair to the threads that wait for it.
+
+    The physics thread steps back to back at ``real_time_factor`` 0 (or whenever it
+    cannot keep up), releasing the lock only for a moment between steps. A plain lock
+    then nearly always goes straight back to it: a callback waiting for the lock
+    (``~/reset``, ``~/pause``, an action, a recording switch) could wait for seconds or
+    for ever. The physics thread calls ``yield_to_waiters`` before each step, so a
+    thread already waiting gets the lock first. Use it like ``threading.RLock``.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()
+        self._state = threading.Condition(threading.Lock())
+        self._waiting = 0
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        if self._lock.acquire(False):   # free, or held by this thread
+            return True
+        if not blocking:
+            return False
+        with self._state:
+            self._waiting += 1
+        try:
+            return self._lock.acquire(True, timeout)
+        finally:
+            with self._state:
+                self._waiting -= 1
+                if not self._waiting:
+                    self._state.notify_all()
+
+    def release(self) -> None:
+        self._lock.release()
+
+    def __enter__(self) -> 'SimLock':
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+    @property
+    def waiting(self) -> int:
+        """How many threads are blocked waiting for the lock."""
+        return self._waiting
+
+    def yield_to_waiters(self, timeout: float) -> None:
+        """Until every thread waiting for the lock got it (at most ``timeout`` s).
+
+        Call it without holding the lock (it would be a deadlock otherwise, bounded by
+        ``timeout``).
+        """
+        with self._state:
+            if self._waiting:
+                self._state.wait_for(lambda: not self._waiting, timeout)
+
+
+class JawOwner:
+    """What an action that drives the jaws implements so the node can stop it."""
+
+    kind = 'action'
+
+    def abort(self, reason: str) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class JawOwnership:
+    """Which action drives the jaws: at most one, and none once the node shuts down."""
+
+    def __init__(self) -> None:
+        self._changed = threading.Condition(threading.Lock())
+        self._owner: JawOwner | None = None
+        self._closed = False
+
+    @property
+    def owner(self) -> JawOwner | None:
+        return self._owner
+
+    def claim(self, owner: JawOwner, preempt_kind: str | None = None) -> str | None:
+        """Make ``owner`` the only driver of the jaws; the reason it cannot, or None.
+
+        An active owner of kind ``preempt_kind`` is aborted (preempted) instead.
+        """
+        with self._changed:
+            if self._closed:   # nothing would ever finish it
+                return 'the simulator is shutting down'
+            current = self._owner
+            if current is not None:
+                if preempt_kind is None or current.kind != preempt_kind:
+                    return f'a {current.kind} goal is already driving the jaws'
+                current.abort(f'preempted by a new {owner.kind} goal')
+            self._owner = owner
+            return None
+
+    def release(self, owner: JawOwner) -> None:
+        with self._changed:
+            if self._owner is owner:
+                self._owner = None
+                self._changed.notify_all()
+
+    def abort_owner(self, reason: str) -> None:
+        """Abort the active owner, if any (it releases the jaws when it has finished)."""
+        with self._changed:
+            owner = self._owner
+        if owner is not None:
+            owner.abort(reason)
+
+    def close(self, reason: str, timeout: float) -> None:
+        """Refuse new owners; abort the active one and wait (``timeout`` s) until it ends."""
+        with self._changed:
+            self._closed = True
+            owner = self._owner
+        if owner is not None:
+            owner.abort(reason)
+            with self._changed:
+                self._changed.wait_for(lambda: self._owner is None, timeout)
