@@ -55,9 +55,10 @@ class Owner(JawOwner):
 
 @pytest.fixture
 def context():
-    apply_ros_environment(pick_domain_id(30))
+    domain = pick_domain_id(30)
+    apply_ros_environment(domain)
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=pick_domain_id(30))
+    rclpy.init(context=context, domain_id=domain)
     yield context
     rclpy.try_shutdown(context=context)
 
@@ -66,6 +67,7 @@ def context():
 def test_a_failed_step_is_reported_resets_and_publishes_nothing_non_finite(context, mode):
     FailingSimulation.mode = mode
     node = SimNode(context=context, simulation_factory=FailingSimulation, start=False,
+                   namesake_wait=None,
                    parameter_overrides=[rclpy.parameter.Parameter('publish_rate', value=1000.0)])
     try:
         published = []

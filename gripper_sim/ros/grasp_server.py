@@ -4,47 +4,40 @@ The goal runs ``gripper_sim.core.grasp.GraspSequence``, or with ``place`` the
 pick-and-place ``gripper_sim.core.scenario.PickAndPlace`` (``grasp_goal.GoalRun``),
 updated after every physics step in the physics thread. Feedback goes out on every
 phase change and at least every 0.05 s of sim time or of wall time (20 Hz at real
-time). One grasp at a time: a goal that arrives while one runs, or while a
-GripperCommand goal drives the jaws, is rejected and the reason is logged. Cancel
+time), kept in a deep history so a slow client still gets every phase. One goal
+drives the jaws at a time: a new Grasp goal preempts (aborts) the active Grasp or
+GripperCommand goal, so a goal whose client has gone never blocks the next. Cancel
 stops the motion and holds the jaws where they are.
 """
 from __future__ import annotations
 
-import math
-import threading
 import time
 
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from gripper_sim_interfaces.action import Grasp
 
 from gripper_sim.errors import GripperSimError
 from gripper_sim.ros.grasp_goal import GoalRun, goal_problem
-from gripper_sim.ros.sync import JawOwner
+from gripper_sim.ros.sync import ActiveGoal
 
 __all__ = ['GraspServer', 'goal_problem']
 
 FEEDBACK_PERIOD = 0.05     # s, sim time and wall time
+# Feedback history kept for a slow client: every phase change reaches it even when it
+# reads late (the default depth 10 is 0.2 s of feedback at 50 messages per s).
+FEEDBACK_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
 
 
-class _GraspRun(JawOwner):
+class _GraspRun(ActiveGoal):
     kind = 'Grasp'
 
     def __init__(self, goal_handle):
-        self.goal_handle = goal_handle
+        super().__init__(goal_handle)
         self.sequence = None
-        self.finished = threading.Event()
-        self.abort_reason: str | None = None
-        self.error: str | None = None
         self.last_phase = None
-        self.last_feedback = (-math.inf, -math.inf)   # (sim time, wall time)
-
-    def abort(self, reason: str) -> None:
-        """Stop from outside (reset, solver failure, shutdown, preemption): non-blocking."""
-        if self.abort_reason is None:
-            self.abort_reason = reason
-        self.finished.set()
 
 
 class GraspServer:
@@ -52,35 +45,23 @@ class GraspServer:
 
     def __init__(self, node):
         self._node = node
-        self._pending = threading.Lock()
         self._server = ActionServer(
             node, Grasp, '~/grasp', execute_callback=self._execute,
             goal_callback=self._on_goal, cancel_callback=self._on_cancel,
-            callback_group=ReentrantCallbackGroup())
-        self._run: _GraspRun | None = None
-        self._reserved = False
-
-    def _reject(self, reason: str) -> GoalResponse:
-        self._node.get_logger().warning(f'Grasp goal rejected: {reason}')
-        return GoalResponse.REJECT
+            callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
+        self._runs: dict[int, _GraspRun] = {}
 
     def _on_goal(self, goal) -> GoalResponse:
         problem = goal_problem(goal, self._node.params.config)
         if problem:
-            return self._reject(problem)
-        with self._pending:
-            owner = self._node.jaw_owner
-            if owner is not None or self._reserved:
-                kind = owner.kind if owner is not None else 'Grasp'
-                return self._reject(f'a {kind} goal is already running (one at a time; '
-                                    'cancel it or wait for its result)')
-            self._reserved = True
+            self._node.get_logger().warning(f'Grasp goal rejected: {problem}')
+            return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
     def _on_cancel(self, goal_handle) -> CancelResponse:
-        run = self._run
-        if run is not None and run.goal_handle is goal_handle:
-            run.finished.set()
+        for run in list(self._runs.values()):
+            if run.goal_handle is goal_handle:
+                run.cancel()
         return CancelResponse.ACCEPT
 
     def _execute(self, goal_handle):
@@ -93,14 +74,12 @@ class GraspServer:
             goal_handle.abort()
             return Grasp.Result(success=False, outcome='failed',
                                 message=f'not started: {reason}', dropped_at=-1.0)
-        self._run = run
+        self._runs[id(run)] = run
         try:
             return self._drive(run, goal)
         finally:
-            self._run = None
+            self._runs.pop(id(run), None)
             node.release_jaws(run)
-            with self._pending:
-                self._reserved = False
 
     def _drive(self, run: _GraspRun, goal):
         node = self._node
@@ -138,7 +117,7 @@ class GraspServer:
             f'{goal.lift_height:g} m, {what}')
         self._feedback(run, node.sim.last)
         while not run.finished.wait(FEEDBACK_PERIOD):
-            if goal_handle.is_cancel_requested:
+            if run.canceled:
                 break
             with node.lock:
                 if node.paused:   # no steps: keep the client informed anyway
@@ -149,7 +128,7 @@ class GraspServer:
             last = node.sim.last
             summary = run.sequence.summary()
             phase = run.sequence.phase
-            canceled = goal_handle.is_cancel_requested and not run.sequence.done
+            canceled = run.canceled and not run.sequence.done
             # Stop the motion, hold the jaws where they are. Not after an abort: that
             # came with a reset (or the shutdown), and holding now could override a
             # command sent since the reset.

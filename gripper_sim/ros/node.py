@@ -31,12 +31,13 @@ from rclpy.utilities import remove_ros_args
 
 from gripper_sim.core import make_simulation
 from gripper_sim.core.results import StepResult
-from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
+from gripper_sim.errors import CommandError, ConvergenceError, GripperSimError
 from gripper_sim.ros import messages
 from gripper_sim.ros.commands import CommandQueue, DoneCallback, JawCommandTopics
 from gripper_sim.ros.grasp_server import GraspServer
 from gripper_sim.ros.gripper_command_server import GripperCommandServer
 from gripper_sim.ros.messages import MessageContext
+from gripper_sim.ros.namesakes import NAMESAKE_WAIT, NamesakeWatch, refuse_namesake
 from gripper_sim.ros.params import SimParameters
 from gripper_sim.ros.physics_thread import PhysicsLoop
 from gripper_sim.ros.publishing import OrderedPublisher, PublishObserver
@@ -44,6 +45,7 @@ from gripper_sim.ros.recording_control import RecordingControl
 from gripper_sim.ros.runtime_parameters import RuntimeParameters, log_rejections
 from gripper_sim.ros.services import SimServices
 from gripper_sim.ros.sync import JawOwner, JawOwnership, SimLock
+from gripper_sim.ros.watchdog import CHECK_PERIOD, STALL_TIMEOUT, PhysicsWatchdog
 
 NODE_NAME = 'gripper_sim'
 # GIL switch interval of the node process (Python's default: 5 ms). The physics thread
@@ -61,15 +63,25 @@ class SimNode(Node):
         fruit, config_file: take precedence over the parameters of the same name.
         simulation_factory: builds the simulation from the flat configuration.
         start: start the physics thread (tests may drive ``advance`` by hand).
+        physics_stall_timeout: wall s without progress of the physics loop that the
+            watchdog reports as a stall.
+        watchdog_period: wall s between watchdog checks (0: none; call
+            ``watchdog.check()``).
+        namesake_wait: wall s after its creation the node looks for another node of
+            its name before it goes on (``namesakes``); None: no look (tests).
         **kwargs: passed to ``rclpy.node.Node`` (e.g. ``parameter_overrides``).
 
     Raises:
         ConfigError: a parameter or the configuration is invalid.
+        NameInUseError: another node of this name is in the ROS graph.
     """
 
     def __init__(self, *, fruit: str | None = None, config_file: str | None = None,
                  simulation_factory: Callable[[dict], Any] = make_simulation, start: bool = True,
-                 **kwargs):
+                 physics_stall_timeout: float = STALL_TIMEOUT,
+                 watchdog_period: float = CHECK_PERIOD,
+                 namesake_wait: float | None = NAMESAKE_WAIT, **kwargs):
+        created = time.monotonic()
         super().__init__(NODE_NAME, **kwargs)
         self.params = SimParameters(self, fruit=fruit, config_file=config_file)
         self.lock = SimLock()
@@ -78,6 +90,10 @@ class SimNode(Node):
         self.sim = simulation_factory(dict(self.params.config))
         self.message_context = MessageContext.from_config(self.params.config,
                                                           initial=self.sim.last)
+        # after building the simulation: discovery has had that time to find a namesake
+        if namesake_wait is not None:
+            refuse_namesake(self, created, namesake_wait)
+        self.namesake_watch = NamesakeWatch(self)
         self._step_listeners: list[Callable[[StepResult], None]] = []
         self._observers: list[Callable[[StepResult], None]] = []
         self._reset_listeners: list[Callable[[StepResult], None]] = []
@@ -85,7 +101,8 @@ class SimNode(Node):
         self.steps_taken = 0
         self.physics = PhysicsLoop(
             lock=self.lock, step=lambda: self.advance(unless_paused=True),
-            run_commands=self._run_commands, has_commands=lambda: bool(self.commands),
+            force_step=self.advance, run_commands=self._run_commands,
+            has_commands=lambda: bool(self.commands),
             sim_time=lambda: self.sim.time, recover=self._recover, logger=self.get_logger(),
             real_time_factor=float(self.params.get('real_time_factor')))
         self.commands = CommandQueue(self.get_logger(), self.physics.wake)
@@ -102,6 +119,8 @@ class SimNode(Node):
         self.sim_services = SimServices(self, services)
         self.grasp_server = GraspServer(self)
         self.gripper_command_server = GripperCommandServer(self)
+        self.watchdog = PhysicsWatchdog(self, stall_timeout=physics_stall_timeout,
+                                        period=watchdog_period)
 
         config = self.params.config
         publish_every = self.state_publisher.publish_every
@@ -145,10 +164,10 @@ class SimNode(Node):
             if callback in self._step_listeners:
                 self._step_listeners.remove(callback)
 
-    def claim_jaws(self, owner: JawOwner, preempt_kind: str | None = None) -> str | None:
-        """Make ``owner`` the only driver of the jaws; the reason it cannot, or None
-        (``JawOwnership.claim``)."""
-        return self.jaws.claim(owner, preempt_kind)
+    def claim_jaws(self, owner: JawOwner) -> str | None:
+        """Make ``owner`` the only driver of the jaws (preempting the active one); the
+        reason it cannot, or None (``JawOwnership.claim``)."""
+        return self.jaws.claim(owner)
 
     def release_jaws(self, owner: JawOwner) -> None:
         self.jaws.release(owner)
@@ -235,6 +254,7 @@ class SimNode(Node):
         """Abort the active goal (with ``reason``), drop queued commands, reset to t = 0."""
         self.jaws.abort_owner(reason)
         with self.lock:
+            self.physics.interrupt_steps(reason)
             self.commands.clear()
             self.sim.reset()
             self.message_context.reset()
@@ -298,11 +318,13 @@ def main(args: list[str] | None = None) -> int:
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stopping.set())
     node = None
-    executor = MultiThreadedExecutor(num_threads=4)
+    # Threads: a running Grasp or GripperCommand goal and a ~/step request each wait
+    # in one; the services, topics, parameters and the watchdog need the rest.
+    executor = MultiThreadedExecutor(num_threads=6)
     try:
         try:
             node = SimNode(fruit=options.fruit, config_file=options.config)
-        except ConfigError as err:
+        except GripperSimError as err:   # a configuration, parameter or name problem
             rclpy.logging.get_logger(NODE_NAME).error(f'cannot start: {err}')
             return 2
         executor.add_node(node)

@@ -26,6 +26,9 @@ from gripper_sim import configuration
 from gripper_sim.errors import ConfigError
 
 PHYSICS_PREFIX = 'physics.'
+# The publish interval is a whole number of steps, 1 / (publish_rate x dt): a rate
+# closer to 0 than this has no such number (it overflows, or divides by 0).
+MIN_PUBLISH_RATE = 0.001   # Hz
 
 # Physics keys that may change while the node runs (the rest are read-only): the
 # ones the core can change between steps.
@@ -56,8 +59,8 @@ NODE_PARAMETERS: tuple[NodeParameter, ...] = (
                   'one the config file names)', read_only=True),
     NodeParameter('config_file', '', '-', "YAML configuration file ('' = none); merged "
                   'after the fruit preset', read_only=True),
-    NodeParameter('publish_rate', 100.0, 'Hz', 'state publishing rate, in sim time',
-                  0.0, 1000.0, open_low=True),
+    NodeParameter('publish_rate', 100.0, 'Hz', 'state publishing rate, in sim time (at '
+                  'least one message per 1000 s of sim time)', MIN_PUBLISH_RATE, 1000.0),
     NodeParameter('real_time_factor', 1.0, '', 'sim seconds per wall second; 0 = as fast '
                   'as possible', 0.0, 1000.0),
     NodeParameter('publish_clock', True, '-', 'publish /clock (sim time) at publish_rate'),

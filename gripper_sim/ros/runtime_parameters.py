@@ -42,7 +42,8 @@ class RuntimeParameters:
             node.state_publisher.publish_clock = bool(changes['publish_clock'])
         for key, value in physics_changes(changes).items():
             node.commands.put(f'parameter change {PHYSICS_PREFIX}{key} = {value}',
-                              lambda key=key, value=value: node.sim.set_parameter(key, value))
+                              lambda key=key, value=value: node.sim.set_parameter(key, value),
+                              slot=PHYSICS_PREFIX + key)
         node.get_logger().info(f'parameters changed: {changes}')
 
 

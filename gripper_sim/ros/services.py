@@ -1,22 +1,28 @@
 """The node's simulation services: ``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``."""
 from __future__ import annotations
 
-from rclpy.callback_groups import CallbackGroup
+from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from std_srvs.srv import SetBool, Trigger
 
 from gripper_sim_interfaces.srv import Step
 
+from gripper_sim.ros.commands import JAWS
+
 MAX_STEPS_PER_REQUEST = 1_000_000
+# ~/step checks this often whether the node is shutting down while it waits.
+STEP_WAIT = 0.5   # s
 
 
 class SimServices:
-    """Serves the simulation services of ``node`` (a ``SimNode``) in ``group``."""
+    """Serves the simulation services of ``node`` (a ``SimNode``) in ``group``; ``~/step``
+    in a group of its own, as it waits for the physics thread to take the steps."""
 
     def __init__(self, node, group: CallbackGroup):
         self._node = node
         node.create_service(Trigger, '~/reset', self._on_reset, callback_group=group)
         node.create_service(SetBool, '~/pause', self._on_pause, callback_group=group)
-        node.create_service(Step, '~/step', self._on_step, callback_group=group)
+        node.create_service(Step, '~/step', self._on_step,
+                            callback_group=MutuallyExclusiveCallbackGroup())
         node.create_service(Trigger, '~/jaw/open', self._on_open, callback_group=group)
 
     def _on_reset(self, request, response):
@@ -32,6 +38,7 @@ class SimServices:
         # Under the lock: once this answers "paused", the physics thread takes no step.
         with node.lock:
             loop.paused = bool(request.data)
+            loop.interrupt_steps(f"interrupted by ~/pause ({'true' if loop.paused else 'false'})")
             if not loop.paused:
                 loop.reanchor()
             sim_time = node.sim.time
@@ -43,23 +50,27 @@ class SimServices:
         return response
 
     def _on_step(self, request, response):
+        """Hand the steps to the physics thread and wait for them (own callback group:
+        ``~/pause``, ``~/reset`` and the rest answer meanwhile, and stop it)."""
         node = self._node
-        if not node.paused:
-            response.success = False
-            response.message = 'refused: the simulation is running; pause it first (~/pause)'
-        elif request.steps < 1 or request.steps > MAX_STEPS_PER_REQUEST:
-            response.success = False
+        response.success = False
+        if request.steps < 1 or request.steps > MAX_STEPS_PER_REQUEST:
             response.message = (f'refused: steps must be in [1, {MAX_STEPS_PER_REQUEST}], '
                                 f'got {request.steps}')
         else:
-            response.success = True
-            response.message = f'advanced {request.steps} steps'
-            for done in range(request.steps):
-                if node.advance() is None:
-                    response.success = False
-                    response.message = (f'step {done + 1} of {request.steps} failed; the '
-                                        'simulation was reset (see the log)')
-                    break
+            queued = node.physics.request_steps(int(request.steps))
+            if isinstance(queued, str):
+                response.message = f'refused: {queued}'
+            else:
+                while not queued.done.wait(STEP_WAIT):
+                    if node.physics.stopped:
+                        queued.finish('the simulator is shutting down')
+                if queued.stopped_by is None:
+                    response.success = True
+                    response.message = f'advanced {queued.taken} steps'
+                else:
+                    response.message = (f'stopped after {queued.taken} of {queued.steps} '
+                                        f'steps: {queued.stopped_by}')
         if not response.success:
             node.get_logger().warning(f'step request {response.message}')
         response.sim_time = float(node.sim.time)
@@ -74,7 +85,7 @@ class SimServices:
                                 'jaws (cancel it first)')
             node.get_logger().warning(f'open request {response.message}')
         else:
-            node.commands.put('open command', node.sim.command_open)
+            node.commands.put('open command', node.sim.command_open, slot=JAWS)
             response.success = True
             response.message = 'opening the jaws to the initial gap'
         return response

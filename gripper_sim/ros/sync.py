@@ -2,11 +2,13 @@
 
 ``SimLock`` guards the simulation; it is fair to the threads that wait for it (the
 physics thread steps back to back and would otherwise keep it). ``JawOwnership``
-records which action drives the jaws: one at a time.
+records which action drives the jaws: one at a time, the newest goal preempts the
+active one. ``ActiveGoal`` is what such a goal looks like to the node.
 No rclpy import here.
 """
 from __future__ import annotations
 
+import math
 import threading
 
 
@@ -76,6 +78,43 @@ class JawOwner:
         raise NotImplementedError
 
 
+class ActiveGoal(JawOwner):
+    """An executing action goal that drives the jaws.
+
+    Attributes:
+        goal_handle: the rclpy goal handle.
+        finished: set when the goal should stop waiting (done, canceled, aborted).
+        abort_reason: why it was stopped from outside (reset, failure, shutdown,
+            preemption), or None.
+        error: why its own motion failed, or None.
+        last_feedback: (sim time, wall time) of the last feedback sent, s.
+    """
+
+    def __init__(self, goal_handle):
+        self.goal_handle = goal_handle
+        self.finished = threading.Event()
+        self.abort_reason: str | None = None
+        self.error: str | None = None
+        self.last_feedback = (-math.inf, -math.inf)
+        self._cancel_requested = False
+
+    def abort(self, reason: str) -> None:
+        """Stop from outside: non-blocking (the executing callback finishes the goal)."""
+        if self.abort_reason is None:
+            self.abort_reason = reason
+        self.finished.set()
+
+    def cancel(self) -> None:
+        """The client asked to cancel (from the cancel callback, before rclpy marks the
+        goal as canceling: ``canceled`` is true from now on)."""
+        self._cancel_requested = True
+        self.finished.set()
+
+    @property
+    def canceled(self) -> bool:
+        return self._cancel_requested or self.goal_handle.is_cancel_requested
+
+
 class JawOwnership:
     """Which action drives the jaws: at most one, and none once the node shuts down."""
 
@@ -88,18 +127,18 @@ class JawOwnership:
     def owner(self) -> JawOwner | None:
         return self._owner
 
-    def claim(self, owner: JawOwner, preempt_kind: str | None = None) -> str | None:
+    def claim(self, owner: JawOwner) -> str | None:
         """Make ``owner`` the only driver of the jaws; the reason it cannot, or None.
 
-        An active owner of kind ``preempt_kind`` is aborted (preempted) instead.
+        An active owner is aborted (preempted by ``owner``): the newest goal always
+        wins, as in ros2_controllers' gripper action controller, so a goal whose client
+        has gone (killed, disconnected) never blocks the jaws.
         """
         with self._changed:
             if self._closed:   # nothing would ever finish it
                 return 'the simulator is shutting down'
             current = self._owner
             if current is not None:
-                if preempt_kind is None or current.kind != preempt_kind:
-                    return f'a {current.kind} goal is already driving the jaws'
                 current.abort(f'preempted by a new {owner.kind} goal')
             self._owner = owner
             return None
