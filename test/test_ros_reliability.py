@@ -17,6 +17,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from gripper_sim_interfaces.srv import Step
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConfigError
+from gripper_sim.ros.namesakes import NameInUseError
 from gripper_sim.ros.node import SimNode
 from gripper_sim.ros.physics_thread import MAX_WAIT, pacing_delay
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
@@ -256,3 +257,27 @@ def test_only_the_latest_set_point_counts_and_each_command_is_answered(context):
         assert node.sim.gripper_state.target_force == 3.0
     finally:
         node.destroy_node()
+
+
+# ----------------------------------------------------------- item 6: namesakes
+def test_a_namesake_is_refused_at_start_up_and_warned_about_later(context):
+    other = rclpy.Context()
+    rclpy.init(context=other, domain_id=DOMAIN)
+    try:
+        first = make_node(context, start=False)
+        try:
+            assert not first.namesake_watch.check()
+            namesake = rclpy.create_node('gripper_sim', context=other)
+            assert wait_for(first.namesake_watch.check, what='the namesake to be seen')
+            namesake.destroy_node()
+            wait_for(lambda: not first.namesake_watch.check(), what='the namesake to go')
+        finally:
+            first.destroy_node()
+        holder = rclpy.create_node('gripper_sim', context=other)
+        try:
+            with pytest.raises(NameInUseError, match='another node named /gripper_sim'):
+                SimNode(context=context, start=False, namesake_wait=5.0)
+        finally:
+            holder.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=other)

@@ -18,7 +18,7 @@ from rclpy.node import Node
 from gripper_sim.errors import GripperSimError
 
 NAMESAKE_WAIT = 2.0    # s after the node's creation
-CHECK_PERIOD = 2.0     # s between checks while running
+CHECK_PERIOD = 1.0     # s between checks while running
 POLL = 0.05            # s between looks at start-up
 
 
