@@ -121,13 +121,13 @@ def test_a_new_goal_preempts_the_active_grasp_and_cancel_holds_the_jaws(client):
     # a GripperCommand goal preempts a Grasp too
     third = client.send_goal(client.grasp, grasp_goal(6.0, hold=3000.0))
     assert third.accepted
-    fourth = client.send_goal(client.gripper_cmd, gripper_goal(0.070, 5.0))
+    fourth = client.send_goal(client.gripper_cmd, gripper_goal(0.070, 10.0))
     assert fourth.accepted
     status, result = client.result(third)
     assert status == GoalStatus.STATUS_ABORTED
     assert 'preempted by a new GripperCommand goal' in result.message
     status, result = client.result(fourth)
-    assert status == GoalStatus.STATUS_SUCCEEDED and result.reached_goal
+    assert status == GoalStatus.STATUS_SUCCEEDED and result.reached_goal, result
 
 
 @pytest.mark.parametrize('goal', [

@@ -67,7 +67,6 @@ def context():
 def test_a_failed_step_is_reported_resets_and_publishes_nothing_non_finite(context, mode):
     FailingSimulation.mode = mode
     node = SimNode(context=context, simulation_factory=FailingSimulation, start=False,
-                   namesake_wait=None,
                    parameter_overrides=[rclpy.parameter.Parameter('publish_rate', value=1000.0)])
     try:
         published = []

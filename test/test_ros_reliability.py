@@ -50,7 +50,7 @@ def context():
 def make_node(context, factory=Simulation, start=True, **parameters):
     overrides = [Parameter(name, value=value) for name, value in parameters.items()]
     return SimNode(context=context, simulation_factory=factory, start=start,
-                   parameter_overrides=overrides, watchdog_period=0.0, namesake_wait=None)
+                   parameter_overrides=overrides, watchdog_period=0.0)
 
 
 class StatusLog:
@@ -180,7 +180,7 @@ class BlockingSimulation(Simulation):
 def test_a_stalled_physics_loop_is_reported_and_recovers(context):
     node = SimNode(context=context, simulation_factory=BlockingSimulation,
                    parameter_overrides=[Parameter('real_time_factor', value=0.0)],
-                   watchdog_period=0.0, namesake_wait=None, physics_stall_timeout=0.2)
+                   watchdog_period=0.0, physics_stall_timeout=0.2)
     try:
         wait_for(node.sim.blocked.is_set, what='the blocking step')
         status = wait_for(lambda: (s := node.watchdog.check()).level == DiagnosticStatus.ERROR

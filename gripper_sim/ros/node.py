@@ -54,6 +54,8 @@ NODE_NAME = 'gripper_sim'
 # it back, many times per callback. At 5 ms a ~/reset or ~/pause took up to 1 s on a
 # busy 2-core machine, at 1 ms under 0.2 s.
 GIL_SWITCH_INTERVAL = 0.001   # s
+# At shutdown the node spins this long to deliver an aborted goal's result.
+RESULT_DELIVERY = 1.0   # s
 
 
 class SimNode(Node):
@@ -68,7 +70,8 @@ class SimNode(Node):
         watchdog_period: wall s between watchdog checks (0: none; call
             ``watchdog.check()``).
         namesake_wait: wall s after its creation the node looks for another node of
-            its name before it goes on (``namesakes``); None: no look (tests).
+            its name before it goes on (``namesakes``); None (the default, for a node
+            embedded in a process): no look. ``main`` looks ``NAMESAKE_WAIT`` s.
         **kwargs: passed to ``rclpy.node.Node`` (e.g. ``parameter_overrides``).
 
     Raises:
@@ -80,7 +83,7 @@ class SimNode(Node):
                  simulation_factory: Callable[[dict], Any] = make_simulation, start: bool = True,
                  physics_stall_timeout: float = STALL_TIMEOUT,
                  watchdog_period: float = CHECK_PERIOD,
-                 namesake_wait: float | None = NAMESAKE_WAIT, **kwargs):
+                 namesake_wait: float | None = None, **kwargs):
         created = time.monotonic()
         super().__init__(NODE_NAME, **kwargs)
         self.params = SimParameters(self, fruit=fruit, config_file=config_file)
@@ -323,7 +326,8 @@ def main(args: list[str] | None = None) -> int:
     executor = MultiThreadedExecutor(num_threads=6)
     try:
         try:
-            node = SimNode(fruit=options.fruit, config_file=options.config)
+            node = SimNode(fruit=options.fruit, config_file=options.config,
+                           namesake_wait=NAMESAKE_WAIT)
         except GripperSimError as err:   # a configuration, parameter or name problem
             rclpy.logging.get_logger(NODE_NAME).error(f'cannot start: {err}')
             return 2
@@ -334,9 +338,10 @@ def main(args: list[str] | None = None) -> int:
         pass
     finally:
         if node is not None:
+            had_goal = node.jaw_owner is not None
             node.stop()
             # deliver the aborted goal's result to its client, then go
-            deadline = time.monotonic() + 1.0
+            deadline = time.monotonic() + (RESULT_DELIVERY if had_goal else 0.0)
             while time.monotonic() < deadline and rclpy.ok():
                 executor.spin_once(timeout_sec=0.05)
             node.destroy_node()
