@@ -142,3 +142,17 @@ def node_and_client():
     a node subprocess and a ready client for module-scoped fixtures (see
     ``_node_and_client`` for the arguments and the checks on exit)."""
     return _node_and_client
+
+
+@pytest.fixture(scope='session')
+def restarted():
+    """``restarted(running)`` -> the client of a module's ``(process, client)``, after
+    checking the node still runs and resetting it while paused (a fast node would
+    otherwise have moved on, and its reset state dropped from the history, before the
+    client sees it); then running again."""
+    def restart(process_and_client):
+        process, client = process_and_client
+        assert process.running, process.log()
+        client.restart()
+        return client
+    return restart

@@ -24,13 +24,8 @@ def running(tmp_path_factory, node_and_client):
 
 
 @pytest.fixture
-def client(running):
-    process, client = running
-    assert process.running, process.log()
-    # reset while paused: a fast node would otherwise have moved on (and its reset
-    # state dropped from the history) before the client sees it
-    client.restart()
-    return client
+def client(running, restarted):
+    return restarted(running)
 
 
 def grasp_goal(force, lift=0.0, hold=0.0, release=False, close_speed=0.0):

@@ -34,13 +34,8 @@ def running(tmp_path_factory):
 
 
 @pytest.fixture
-def client(running):
-    process, client = running
-    assert process.running, process.log()
-    # reset while paused: a fast node would otherwise have moved on (and its reset
-    # state dropped from the history) before the client sees it
-    client.restart()
-    return client
+def client(running, restarted):
+    return restarted(running)
 
 
 def test_jaw_gap_is_delivered_and_acted_on(client):

@@ -32,20 +32,8 @@ def running(tmp_path_factory, node_and_client):
 
 
 @pytest.fixture
-def client(running):
-    process, client = running
-    assert process.running, process.log()
-    client.restart()
-    return client
-
-
-def test_a_tiny_publish_rate_at_start_up_exits_2_with_the_range(tmp_path):
-    process = node_process({'publish_rate': 1e-307}, env=ros_environment(pick_domain_id(71)),
-                           log_path=tmp_path / 'rate.log').start()
-    process.process.wait(120)
-    text = process.log()
-    assert process.process.returncode == 2, text
-    assert "cannot start: parameter 'publish_rate'" in text and 'Traceback' not in text
+def client(running, restarted):
+    return restarted(running)
 
 
 def test_a_tiny_real_time_factor_and_back_the_physics_goes_on(client):
