@@ -130,12 +130,14 @@ class Soak:
 
     def step(self) -> None:
         client = self.client
-        self.timed('~/pause', lambda: client.pause(True))
+        paused = self.timed('~/pause', lambda: client.pause(True))
         self.paused = True
         if self.rng.random() < 0.2:   # a long request, interrupted by ~/reset
             future = client.step_client.call_async(Step.Request(steps=1_000_000))
-            t0 = client.sim_time()
-            client.spin_until(lambda: client.sim_time() > t0, 60, 'the requested steps')
+            # 'paused at t = 1.234000 s': a later state comes from the requested steps
+            t_paused = float(paused.message.split('t = ')[1].split()[0])
+            client.spin_until(lambda: client.sim_time() > t_paused + 0.005, 60,
+                              'the requested steps')
             self.timed('~/reset', client.reset)
             client.spin_until(future.done, 120, 'the interrupted ~/step')
             self._settle_pending()

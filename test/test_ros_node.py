@@ -4,6 +4,8 @@ Topics and types, jaw commands by topic, pause/step/reset, parameters, and every
 of bad input rejected with a logged reason while the node keeps running.
 """
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -204,6 +206,15 @@ def test_a_bad_start_up_parameter_fails_cleanly(tmp_path, name, value):
     text = process.log()
     assert process.process.returncode == 2, text
     assert f"cannot start: parameter '{name}'" in text and 'Traceback' not in text
+
+
+def test_malformed_ros_arguments_fail_cleanly():
+    run = subprocess.run([sys.executable, '-m', 'gripper_sim.ros.node', '--ros-args', '-p'],
+                         env=ros_environment(DOMAIN + 1), capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.startswith('error: Failed to parse ROS arguments')
+    assert 'Traceback' not in run.stderr
 
 
 def test_an_unknown_fruit_fails_cleanly(tmp_path):

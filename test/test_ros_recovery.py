@@ -74,7 +74,7 @@ def test_a_failed_step_is_reported_resets_and_publishes_nothing_non_finite(conte
         resets = []
         node.add_reset_listener(resets.append)
         owner = Owner()
-        assert node.claim_jaws(owner) is None
+        assert node.claim_jaws(owner, node.jaws.ticket()) is None
         node.sim.command_gap(0.06)
         results = [node.advance() for _ in range(8)]
         assert results[4] is None and all(r is not None for r in results[:4] + results[5:])

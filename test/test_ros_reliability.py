@@ -21,6 +21,7 @@ from gripper_sim.ros.namesakes import NameInUseError
 from gripper_sim.ros.node import SimNode
 from gripper_sim.ros.physics_thread import MAX_WAIT, pacing_delay
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
+from gripper_sim.ros.sync import JawOwner, JawOwnership
 
 pytestmark = [pytest.mark.ros]
 
@@ -260,9 +261,13 @@ def test_only_the_latest_set_point_counts_and_each_command_is_answered(context):
 
 
 # ----------------------------------------------------------- item 6: namesakes
-def test_a_namesake_is_refused_at_start_up_and_warned_about_later(context):
-    other = rclpy.Context()
-    rclpy.init(context=other, domain_id=DOMAIN)
+def test_a_namesake_is_refused_at_start_up_and_warned_about_later():
+    # a domain of its own: nodes of the tests above may linger in their domain's graph
+    domain = pick_domain_id(61)
+    apply_ros_environment(domain)
+    context, other = rclpy.Context(), rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    rclpy.init(context=other, domain_id=domain)
     try:
         first = make_node(context, start=False)
         try:
@@ -281,3 +286,29 @@ def test_a_namesake_is_refused_at_start_up_and_warned_about_later(context):
             holder.destroy_node()
     finally:
         rclpy.try_shutdown(context=other)
+        rclpy.try_shutdown(context=context)
+
+
+# ------------------------------------------------------- item 5: the newest goal wins
+class Owner(JawOwner):
+    kind = 'Grasp'
+
+    def __init__(self):
+        self.reasons = []
+
+    def abort(self, reason):
+        self.reasons.append(reason)
+
+
+def test_the_newest_goal_drives_the_jaws_whatever_order_they_start_in():
+    jaws = JawOwnership()
+    older, newer, newest = Owner(), Owner(), Owner()
+    older_ticket, newer_ticket = jaws.ticket(), jaws.ticket()
+    assert jaws.claim(newer, newer_ticket) is None            # started first
+    assert 'newer goal' in jaws.claim(older, older_ticket)    # started late: refused
+    assert jaws.owner is newer and not newer.reasons
+    assert jaws.claim(newest, jaws.ticket()) is None          # a new goal preempts
+    assert newer.reasons == ['preempted by a new Grasp goal'] and jaws.owner is newest
+    jaws.release(newest)
+    jaws.close('shutting down', timeout=1.0)
+    assert 'shutting down' in jaws.claim(Owner(), jaws.ticket())

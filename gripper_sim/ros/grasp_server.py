@@ -13,29 +13,23 @@ from __future__ import annotations
 
 import time
 
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from gripper_sim_interfaces.action import Grasp
 
 from gripper_sim.errors import GripperSimError
 from gripper_sim.ros.grasp_goal import GoalRun, goal_problem
+from gripper_sim.ros.jaw_goals import FEEDBACK_PERIOD, FEEDBACK_QOS, JawGoals
 from gripper_sim.ros.sync import ActiveGoal
 
 __all__ = ['GraspServer', 'goal_problem']
 
-FEEDBACK_PERIOD = 0.05     # s, sim time and wall time
-# Feedback history kept for a slow client: every phase change reaches it even when it
-# reads late (the default depth 10 is 0.2 s of feedback at 50 messages per s).
-FEEDBACK_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
-
-
 class _GraspRun(ActiveGoal):
     kind = 'Grasp'
 
-    def __init__(self, goal_handle):
-        super().__init__(goal_handle)
+    def __init__(self, goal_handle, ticket: int):
+        super().__init__(goal_handle, ticket)
         self.sequence = None
         self.last_phase = None
 
@@ -45,11 +39,12 @@ class GraspServer:
 
     def __init__(self, node):
         self._node = node
+        self._goals = JawGoals(node.jaws)
         self._server = ActionServer(
             node, Grasp, '~/grasp', execute_callback=self._execute,
-            goal_callback=self._on_goal, cancel_callback=self._on_cancel,
-            callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
-        self._runs: dict[int, _GraspRun] = {}
+            goal_callback=self._on_goal, handle_accepted_callback=self._goals.accepted,
+            cancel_callback=self._goals.cancel, callback_group=ReentrantCallbackGroup(),
+            feedback_pub_qos_profile=FEEDBACK_QOS)
 
     def _on_goal(self, goal) -> GoalResponse:
         problem = goal_problem(goal, self._node.params.config)
@@ -58,27 +53,21 @@ class GraspServer:
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def _on_cancel(self, goal_handle) -> CancelResponse:
-        for run in list(self._runs.values()):
-            if run.goal_handle is goal_handle:
-                run.cancel()
-        return CancelResponse.ACCEPT
-
     def _execute(self, goal_handle):
         node = self._node
         goal = goal_handle.request
-        run = _GraspRun(goal_handle)
-        reason = node.claim_jaws(run)
+        run = _GraspRun(goal_handle, self._goals.ticket(goal_handle))
+        reason = node.claim_jaws(run, run.ticket)
         if reason is not None:
             node.get_logger().warning(f'Grasp goal aborted before it started: {reason}')
             goal_handle.abort()
             return Grasp.Result(success=False, outcome='failed',
                                 message=f'not started: {reason}', dropped_at=-1.0)
-        self._runs[id(run)] = run
+        self._goals.add(run)
         try:
             return self._drive(run, goal)
         finally:
-            self._runs.pop(id(run), None)
+            self._goals.remove(run)
             node.release_jaws(run)
 
     def _drive(self, run: _GraspRun, goal):

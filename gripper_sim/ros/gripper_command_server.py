@@ -21,16 +21,15 @@ import math
 import time
 from collections import deque
 
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 
 from gripper_sim_interfaces.action import GripperCommand
 
 from gripper_sim.errors import CommandError
-from gripper_sim.ros.grasp_server import FEEDBACK_QOS
+from gripper_sim.ros.jaw_goals import FEEDBACK_PERIOD, FEEDBACK_QOS, JawGoals
 from gripper_sim.ros.sync import ActiveGoal
 
-FEEDBACK_PERIOD = 0.05   # s
 
 
 class StallDetector:
@@ -60,9 +59,9 @@ class StallDetector:
 class _CommandRun(ActiveGoal):
     kind = 'GripperCommand'
 
-    def __init__(self, goal_handle, position: float, max_effort: float, tolerance: float,
-                 stall: StallDetector):
-        super().__init__(goal_handle)
+    def __init__(self, goal_handle, ticket: int, position: float, max_effort: float,
+                 tolerance: float, stall: StallDetector):
+        super().__init__(goal_handle, ticket)
         self.position = position
         self.max_effort = max_effort
         self.tolerance = tolerance
@@ -91,11 +90,12 @@ class GripperCommandServer:
 
     def __init__(self, node):
         self._node = node
+        self._goals = JawGoals(node.jaws)
         self._server = ActionServer(
             node, GripperCommand, '~/gripper_cmd', execute_callback=self._execute,
-            goal_callback=self._on_goal, cancel_callback=self._on_cancel,
-            callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
-        self._runs: dict[int, _CommandRun] = {}
+            goal_callback=self._on_goal, handle_accepted_callback=self._goals.accepted,
+            cancel_callback=self._goals.cancel, callback_group=ReentrantCallbackGroup(),
+            feedback_pub_qos_profile=FEEDBACK_QOS)
 
     def _on_goal(self, goal) -> GoalResponse:
         command = goal.command
@@ -105,31 +105,26 @@ class GripperCommandServer:
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def _on_cancel(self, goal_handle) -> CancelResponse:
-        for run in list(self._runs.values()):
-            if run.goal_handle is goal_handle:
-                run.cancel()
-        return CancelResponse.ACCEPT
-
     def _execute(self, goal_handle):
         node = self._node
         params = node.params
         command = goal_handle.request.command
         max_effort = command.max_effort or float(params.get('max_effort'))
-        run = _CommandRun(goal_handle, command.position, max_effort,
+        run = _CommandRun(goal_handle, self._goals.ticket(goal_handle), command.position,
+                          max_effort,
                           float(params.get('goal_tolerance')),
                           StallDetector(float(params.get('stall_velocity_threshold')),
                                         float(params.get('stall_timeout'))))
-        reason = node.claim_jaws(run)
+        reason = node.claim_jaws(run, run.ticket)
         if reason is not None:
             node.get_logger().warning(f'GripperCommand goal aborted before it started: {reason}')
             goal_handle.abort()
             return self._result(run, node.sim.last)
-        self._runs[id(run)] = run
+        self._goals.add(run)
         try:
             return self._drive(run)
         finally:
-            self._runs.pop(id(run), None)
+            self._goals.remove(run)
             node.release_jaws(run)
 
     def _drive(self, run: _CommandRun):

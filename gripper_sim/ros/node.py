@@ -27,6 +27,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
 from gripper_sim.core import make_simulation
@@ -167,10 +168,10 @@ class SimNode(Node):
             if callback in self._step_listeners:
                 self._step_listeners.remove(callback)
 
-    def claim_jaws(self, owner: JawOwner) -> str | None:
+    def claim_jaws(self, owner: JawOwner, ticket: int) -> str | None:
         """Make ``owner`` the only driver of the jaws (preempting the active one); the
         reason it cannot, or None (``JawOwnership.claim``)."""
-        return self.jaws.claim(owner)
+        return self.jaws.claim(owner, ticket)
 
     def release_jaws(self, owner: JawOwner) -> None:
         self.jaws.release(owner)
@@ -312,7 +313,11 @@ def main(args: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='sim_node', description='The gripper_sim node.')
     parser.add_argument('--fruit', help='fruit preset name')
     parser.add_argument('--config', help='YAML configuration file')
-    options = parser.parse_args(remove_ros_args(argv)[1:])
+    try:
+        options = parser.parse_args(remove_ros_args(argv)[1:])
+    except rclpy_implementation.RCLError as err:   # malformed --ros-args
+        print(f'error: {err}', file=sys.stderr)
+        return 2
     # Our own SIGINT/SIGTERM handling instead of rclpy's, which shuts the context down
     # at once: an active goal must still get its (aborted) result out before we stop.
     sys.setswitchinterval(GIL_SWITCH_INTERVAL)

@@ -174,7 +174,7 @@ class SimParameters:
         for spec in NODE_PARAMETERS:
             self._declare_checked(spec.name, spec.default, _descriptor(
                 spec.name, spec.default, spec.description, spec.unit, spec.low, spec.high,
-                spec.read_only, spec.open_low), spec.unit, spec.low, spec.high)
+                spec.read_only, spec.open_low), spec.unit, spec.low, spec.high, spec.open_low)
         fruit = fruit or node.get_parameter('fruit').value or None
         config_file = config_file or node.get_parameter('config_file').value or None
         base = configuration.load_config(fruit=fruit, config_file=config_file)
@@ -185,10 +185,10 @@ class SimParameters:
             descriptor = physics_descriptor(key)
             if default is None:
                 value = self._declare_checked(name, _KIND_TYPES[spec.kind], descriptor,
-                                              spec.unit, spec.low, spec.high)
+                                              spec.unit, spec.low, spec.high, spec.open_low)
             else:
                 value = self._declare_checked(name, default, descriptor, spec.unit,
-                                              spec.low, spec.high)
+                                              spec.low, spec.high, spec.open_low)
             if value is not None and value != default:
                 overrides[key] = value
         self.config = configuration.load_config(fruit=fruit, config_file=config_file,
@@ -197,15 +197,20 @@ class SimParameters:
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._applied)
 
-    def _declare_checked(self, name, value, descriptor, unit, low, high):
+    def _declare_checked(self, name, value, descriptor, unit, low, high, open_low=False):
         try:
             parameter = self._node.declare_parameter(name, value, descriptor)
         except Exception as err:   # rclpy: InvalidParameterValue / InvalidParameterType
             given = getattr(self._node, '_parameter_overrides', {}).get(name)
             shown = given.value if given is not None else value
-            bounds = (f': it must be in {_range_text(low, high, unit)}'
+            bounds = (f': it must be in {_range_text(low, high, unit, open_low)}'
                       if low is not None and high is not None else '')
-            raise ConfigError(f"parameter '{name}' = {shown!r} is invalid{bounds} "
+            hint = ''
+            if isinstance(shown, str) and low is not None:
+                # rcl reads a number it cannot hold as a double (below 2.2e-308 or above
+                # 1.8e308) as text
+                hint = '; it was read as text, not as a number in the double range'
+            raise ConfigError(f"parameter '{name}' = {shown!r} is invalid{bounds}{hint} "
                               f'({type(err).__name__})') from err
         value = parameter.value
         problem = _finite_problem(name, value) or _node_range_problem(name, value)

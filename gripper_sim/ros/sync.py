@@ -88,10 +88,12 @@ class ActiveGoal(JawOwner):
             preemption), or None.
         error: why its own motion failed, or None.
         last_feedback: (sim time, wall time) of the last feedback sent, s.
+        ticket: ``JawOwnership.ticket()`` of its acceptance.
     """
 
-    def __init__(self, goal_handle):
+    def __init__(self, goal_handle, ticket: int):
         self.goal_handle = goal_handle
+        self.ticket = ticket
         self.finished = threading.Event()
         self.abort_reason: str | None = None
         self.error: str | None = None
@@ -122,21 +124,33 @@ class JawOwnership:
         self._changed = threading.Condition(threading.Lock())
         self._owner: JawOwner | None = None
         self._closed = False
+        self._newest = 0   # ticket of the newest goal accepted
+
+    def ticket(self) -> int:
+        """A number for a goal just accepted: later goals get larger ones. Goals start
+        executing in any order; ``claim`` uses the ticket so the newest one wins."""
+        with self._changed:
+            self._newest += 1
+            return self._newest
 
     @property
     def owner(self) -> JawOwner | None:
         return self._owner
 
-    def claim(self, owner: JawOwner) -> str | None:
-        """Make ``owner`` the only driver of the jaws; the reason it cannot, or None.
+    def claim(self, owner: JawOwner, ticket: int) -> str | None:
+        """Make ``owner`` (accepted with ``ticket``) the only driver of the jaws; the
+        reason it cannot, or None.
 
         An active owner is aborted (preempted by ``owner``): the newest goal always
         wins, as in ros2_controllers' gripper action controller, so a goal whose client
-        has gone (killed, disconnected) never blocks the jaws.
+        has gone (killed, disconnected) never blocks the jaws. A goal that starts after
+        a newer one was accepted never drives them.
         """
         with self._changed:
             if self._closed:   # nothing would ever finish it
                 return 'the simulator is shutting down'
+            if ticket < self._newest:
+                return 'preempted by a newer goal before it started'
             current = self._owner
             if current is not None:
                 current.abort(f'preempted by a new {owner.kind} goal')
