@@ -44,6 +44,7 @@ from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
 from gripper_sim.ros import messages
 from gripper_sim.ros.messages import MessageContext, build_messages
 from gripper_sim.ros.params import PHYSICS_PREFIX, SimParameters, physics_changes
+from gripper_sim.view.foxglove import start_node_view
 
 NODE_NAME = 'gripper_sim'
 MAX_STEPS_PER_REQUEST = 1_000_000
@@ -226,6 +227,8 @@ class SimNode(Node):
             f'sim time), real-time factor {self._rtf:g}')
         self._publish(self.sim.last, self.message_context.snapshot(), self._sequence)
         self._start_recording_at_startup()
+        # Foxglove live view (foxglove_port, 0 = off): observes every published batch.
+        self.live_view = start_node_view(self)
         self._thread = threading.Thread(target=self._run, name='physics', daemon=True)
         if start:
             self._thread.start()
@@ -752,6 +755,8 @@ class SimNode(Node):
     def destroy_node(self):
         self.stop()
         self._finish_recording()
+        if getattr(self, 'live_view', None) is not None:
+            self.live_view.close()
         return super().destroy_node()
 
 
