@@ -171,8 +171,16 @@ def _packed(kind: int, data: bytes) -> list:
 def decode_protobuf(types: dict, type_name: str, data: bytes) -> dict[str, Any]:
     """A protobuf message as a dict (repeated fields as lists) by its schema ``types``."""
     fields = types[type_name]
-    out: dict[str, Any] = {name: [] for name, label, _, _ in fields.values()
-                           if label == LABEL_REPEATED}
+    out: dict[str, Any] = {}
+    for name, label, kind, _ in fields.values():   # proto3 leaves defaults out
+        if label == LABEL_REPEATED:
+            out[name] = []
+        elif kind == TYPE_STRING:
+            out[name] = ''
+        elif kind == TYPE_BOOL:
+            out[name] = False
+        elif kind not in (TYPE_MESSAGE, TYPE_BYTES):
+            out[name] = 0
     for number, wire, value in wire_fields(data):
         if number not in fields:
             continue
@@ -202,3 +210,11 @@ def protobuf_decoder(channel: dict):
     name = '.' + channel['schemaName']
     assert name in types, sorted(types)
     return lambda payload: decode_protobuf(types, name, payload)
+
+
+def decode_foxglove(message: Any) -> dict[str, Any]:
+    """A ``foxglove.messages`` object (write-only from Python) as a dict, through its
+    own protobuf encoding and schema."""
+    schema = type(message).get_schema()
+    types = message_types(bytes(schema.data))
+    return decode_protobuf(types, '.' + schema.name, bytes(message.encode()))
