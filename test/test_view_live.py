@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import socket
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -17,7 +19,7 @@ from gripper_sim.recording.recorder import import_message_class
 from gripper_sim.recording.schemas import message_definition
 from gripper_sim.ros import messages
 from gripper_sim.ros.process import RosProcess, node_process, ros_environment
-from gripper_sim.view.foxglove import FoxgloveView, node_topics
+from gripper_sim.view.foxglove import FoxgloveView, NodeFeed, node_topics
 from gripper_sim.view.layout import layout_json
 from gripper_sim.view import ViewError
 from view_client import capture, protobuf_decoder
@@ -173,3 +175,54 @@ def test_the_shipped_layout_is_the_built_one_and_names_our_topics():
         assert f'"{path}"' in text
     panels = {p for p in ('ThreeDee', 'Plot', 'RawMessages') if f'"panelType": "{p}"' in text}
     assert panels == {'ThreeDee', 'Plot', 'RawMessages'}
+
+
+class PublishingNode:
+    """Stands in for the node: publishes one batch to its publish observers on demand."""
+
+    def __init__(self, batch):
+        self.batch = batch
+        self.observers = []
+
+    def add_publish_observer(self, callback):
+        self.observers.append(callback)
+
+    def remove_publish_observer(self, callback):
+        self.observers.remove(callback)
+
+    def publish(self, stamp_ns):
+        for observer in list(self.observers):
+            observer(self.batch, stamp_ns)
+
+
+def test_the_node_is_observed_only_while_a_client_subscribes():
+    config = load_config(overrides=['fruit.nodes=32'])
+    sim = make_simulation(config)
+    batch = messages.build_messages(sim.last, config)
+    node = PublishingNode(batch)
+    topics = node_topics('gripper_sim', '/')
+    feed = NodeFeed(node, {suffix: name for suffix, (name, _) in topics.items()})
+    feed.view = FoxgloveView({name: kind for name, kind in topics.values()}, port=0,
+                             on_watched=feed.watched)
+    stop = threading.Event()
+
+    def publish():
+        stamp = 0
+        while not stop.wait(0.01):
+            stamp += 10 ** 7
+            node.publish(stamp)
+    publisher = threading.Thread(target=publish)
+    try:
+        assert node.observers == []   # nobody watches: the node builds nothing for it
+        publisher.start()
+        seen = capture(feed.view.url, {'/gripper_sim/fruit/state'}, per_topic=2)
+        assert len(seen.messages['/gripper_sim/fruit/state']) >= 2
+        # the client has gone: the observer is removed again
+        deadline = time.monotonic() + 60.0
+        while node.observers and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert node.observers == []
+    finally:
+        stop.set()
+        publisher.join()
+        feed.view.close()

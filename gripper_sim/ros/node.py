@@ -245,6 +245,10 @@ class SimNode(Node):
         """Call ``callback({suffix: msg}, stamp_ns)`` with every batch the node publishes."""
         self._publish_observers.append(callback)
 
+    def remove_publish_observer(self, callback: Callable[[dict, int], None]) -> None:
+        if callback in self._publish_observers:
+            self._publish_observers.remove(callback)
+
     def add_reset_listener(self, callback: Callable[[StepResult], None]) -> None:
         """Call ``callback(initial_result)`` after every reset (``~/reset`` or recovery).
 

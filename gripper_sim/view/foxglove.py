@@ -19,6 +19,7 @@ The node starts its view with ``start_node_view(node)`` (parameters ``foxglove_p
 """
 from __future__ import annotations
 
+import threading
 from typing import Any, Callable, Mapping
 
 import foxglove
@@ -61,6 +62,9 @@ class FoxgloveView:
         host, port: where to listen (port 0 = any free port; the node's parameter 0
             means off and never gets here).
         name: the server name clients show.
+        on_watched: called with True when a client subscribes to the first channel and
+            with False when the last subscription ends (from the server's thread): the
+            node builds its messages for the view only while someone watches.
 
     The scene is served when exactly one topic is a ``MarkerArray`` (its markers) and
     drawn with the ``FruitState`` of the same step when there is such a topic.
@@ -72,7 +76,7 @@ class FoxgloveView:
 
     def __init__(self, topics: Mapping[str, str], *, legend: PressureLegend | None = None,
                  host: str = DEFAULT_ADDRESS, port: int = DEFAULT_PORT,
-                 name: str = 'gripper_sim'):
+                 name: str = 'gripper_sim', on_watched: Callable[[bool], None] | None = None):
         self.host = host
         self.legend = legend
         self._types = dict(topics)
@@ -92,7 +96,8 @@ class FoxgloveView:
         try:
             self.server = foxglove.start_server(
                 name=name, host=host, port=int(port), context=context,
-                capabilities=[foxglove.Capability.Time])
+                capabilities=[foxglove.Capability.Time],
+                server_listener=_SubscriptionCounter(on_watched))
         except RuntimeError as err:   # foxglove-sdk's FoxgloveError, e.g. port taken
             reason = str(err).removeprefix('FoxgloveError: ')
             msg = (f'cannot serve the Foxglove live view on {host}:{port}: {reason}; choose '
@@ -175,6 +180,30 @@ class FoxgloveView:
         self.server.stop()
 
 
+class _SubscriptionCounter:
+    """A ``foxglove.websocket.ServerListener`` that counts subscriptions (all clients)
+    and reports when the count leaves or returns to zero."""
+
+    def __init__(self, on_watched: Callable[[bool], None] | None):
+        self._on_watched = on_watched
+        self._lock = threading.Lock()
+        self.count = 0
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        with self._lock:
+            self.count += 1
+            first = self.count == 1
+        if first and self._on_watched is not None:
+            self._on_watched(True)
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        with self._lock:
+            self.count = max(self.count - 1, 0)
+            last = self.count == 0
+        if last and self._on_watched is not None:
+            self._on_watched(False)
+
+
 def node_topics(node_name: str, namespace: str) -> dict[str, tuple[str, str]]:
     """``{topic suffix: (topic name, ROS type)}`` of a node named so."""
     return {suffix: (messages.resolved_topic(suffix, node_name, namespace), kind)
@@ -185,9 +214,10 @@ def start_node_view(node: Any) -> FoxgloveView | None:
     """Serve the live view of a ``SimNode`` (None if ``foxglove_port`` is 0 or it fails).
 
     Reads the node's parameters ``foxglove_port`` and ``foxglove_address`` and its
-    ``message_context`` (the legend), and observes every batch it publishes
-    (``add_publish_observer``). A port already in use is a warning: the node runs on
-    without the view.
+    ``message_context`` (the legend). While a client subscribes to anything, it
+    observes every batch the node publishes (``add_publish_observer``; removed again
+    when the last subscription ends: an observer makes the node build every message).
+    A port already in use is a warning: the node runs on without the view.
     """
     port = int(node.params.get('foxglove_port'))
     host = str(node.params.get('foxglove_address'))
@@ -195,26 +225,45 @@ def start_node_view(node: Any) -> FoxgloveView | None:
     if port == 0:
         return None
     topics = node_topics(node.get_name(), node.get_namespace())
+    feed = NodeFeed(node, {suffix: name for suffix, (name, _) in topics.items()})
     try:
-        view = FoxgloveView({name: kind for name, kind in topics.values()},
-                            legend=PressureLegend.beside(node.message_context),
-                            host=host, port=port, name=node.get_fully_qualified_name())
+        feed.view = FoxgloveView({name: kind for name, kind in topics.values()},
+                                 legend=PressureLegend.beside(node.message_context),
+                                 host=host, port=port, name=node.get_fully_qualified_name(),
+                                 on_watched=feed.watched)
     except ViewError as err:
         logger.warning(f'{err}; running without the live view')
         return None
-    names = {suffix: name for suffix, (name, _) in topics.items()}
-    node.add_publish_observer(batch_observer(view, names))
+    view = feed.view
     logger.info(f'Foxglove live view on {view.url} (in Foxglove: Open connection > '
                 'Foxglove WebSocket; layout config/foxglove/gripper_sim_layout.json)')
     return view
 
 
-def batch_observer(view: FoxgloveView, names: Mapping[str, str]
-                   ) -> Callable[[Mapping[str, Any], int], None]:
-    """A publish observer ``(batch {suffix: msg}, stamp_ns)`` feeding ``view``."""
-    def observe(batch: Mapping[str, Any], stamp_ns: int) -> None:
-        view.log_messages({names[suffix]: msg for suffix, msg in batch.items()}, stamp_ns)
-    return observe
+class NodeFeed:
+    """Feeds the batches a node publishes to its view while a client watches.
+
+    Args:
+        node: has ``add_publish_observer`` / ``remove_publish_observer``.
+        names: ``{topic suffix: topic name}`` of the node.
+    """
+
+    def __init__(self, node: Any, names: Mapping[str, str]):
+        self.node = node
+        self.names = dict(names)
+        self.view: FoxgloveView | None = None
+
+    def watched(self, yes: bool) -> None:
+        """``FoxgloveView``'s ``on_watched``: observe the node only while watched."""
+        if yes:
+            self.node.add_publish_observer(self.observe)
+        else:
+            self.node.remove_publish_observer(self.observe)
+
+    def observe(self, batch: Mapping[str, Any], stamp_ns: int) -> None:
+        """A publish observer: ``batch`` is ``{topic suffix: message}``."""
+        if self.view is not None:
+            self.view.log_messages({self.names[s]: msg for s, msg in batch.items()}, stamp_ns)
 
 
 def recording_view(bag: Any, *, host: str = DEFAULT_ADDRESS, port: int = DEFAULT_PORT,
