@@ -39,6 +39,7 @@ ADD, DELETE, DELETEALL = 0, 2, 3   # MODIFY is ADD
 
 LEGEND_STEPS = 10          # cubes in the colour bar
 LEGEND_TEXT_SIZE = 0.006   # m, font size of the legend labels
+LEGEND_LABEL_OFFSET = 0.04   # m from the bar to the centre of its labels (text is centred)
 STATE_TEXT_SIZE = 0.007    # m
 
 
@@ -63,10 +64,12 @@ class PressureLegend:
     @classmethod
     def beside(cls, context: Any) -> 'PressureLegend':
         """A legend beside the fruit for a ``MessageContext`` (its rest width, gripper
-        centre, table height and bruise pressure): 1.5 fruit widths to the -x side."""
+        centre, table height and bruise pressure): two fruit widths and the labels'
+        room to the -x side, clear of the open jaws."""
         width = float(context.rest_width)
         return cls(bruise_pressure=float(context.bruise_pressure),
-                   x=float(context.gripper_centre_x) - 1.5 * width - 0.02, y=0.0,
+                   x=float(context.gripper_centre_x) - 2.0 * width - LEGEND_LABEL_OFFSET,
+                   y=0.0,
                    z=float(context.table_height), height=width)
 
 
@@ -216,7 +219,7 @@ def legend_entity(legend: PressureLegend, stamp_ns: int) -> SceneEntity:
             pose=Pose(position=centre, orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
             size=Vector3(x=width, y=width, z=step), color=_colour(colour)))
     kpa = legend.bruise_pressure / 1e3
-    label_x = legend.x - width
+    label_x = legend.x + 0.5 * width + LEGEND_LABEL_OFFSET
     texts = [
         _text('0 kPa', label_x, legend.y, legend.z, LEGEND_TEXT_SIZE),
         _text(f'{0.5 * kpa:.0f} kPa', label_x, legend.y, legend.z + 0.5 * legend.height,
