@@ -149,3 +149,19 @@ def test_the_scene_module_leaves_rclpy_out():
     code = ('import sys, gripper_sim.view.scene; '
             "sys.exit(1 if 'rclpy' in sys.modules else 0)")
     assert subprocess.run([sys.executable, '-c', code]).returncode == 0
+
+
+def test_a_3d_fruit_is_drawn_as_its_skin_coloured_by_pressure():
+    config = load_config(overrides=['dimension=3', 'fruit.mesh.subdivisions=3',
+                                    'sim.dt=0.002'])
+    sim = make_simulation(config)
+    context = messages.MessageContext.from_config(config, initial=sim.last)
+    batch = messages.build_messages(sim.step(), context)
+    update = decode_foxglove(scene_of_batch(batch, PressureLegend.beside(context), 0))
+    skin = next(e for e in update['entities'] if e['id'] == 'fruit_mesh/0')
+    triangles = skin['triangles'][0]
+    mesh = next(m for m in batch['markers'].markers if m.ns == 'fruit_mesh')
+    assert len(triangles['points']) == len(mesh.points) == 3 * len(sim.last.triangles)
+    assert len(triangles['colors']) == len(triangles['points'])
+    assert [xyz(p) for p in triangles['points'][:6]] == \
+        [(p.x, p.y, p.z) for p in mesh.points[:6]]
