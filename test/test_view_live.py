@@ -117,13 +117,16 @@ def test_a_port_in_use_is_a_warning_and_the_node_runs_on(tmp_path, new_domain_id
     assert code == 0 and 'Traceback' not in process.log(), process.log()
 
 
-def test_a_view_on_a_taken_port_raises_a_view_error():
+def test_a_view_on_a_taken_port_or_a_foreign_address_raises_a_view_error():
     with socket.socket() as taken:
         taken.bind(('127.0.0.1', 0))
         taken.listen()
         port = taken.getsockname()[1]
         with pytest.raises(ViewError, match=f'127.0.0.1:{port}: .*in use.*foxglove_port'):
             FoxgloveView({'/clock': 'rosgraph_msgs/msg/Clock'}, port=port)
+    # 192.0.2.1: TEST-NET-1 (RFC 5737), never an address of this machine
+    with pytest.raises(ViewError, match='on 192.0.2.1:0: .*foxglove_address'):
+        FoxgloveView({'/clock': 'rosgraph_msgs/msg/Clock'}, host='192.0.2.1', port=0)
 
 
 @pytest.fixture(scope='module')

@@ -101,7 +101,8 @@ class FoxgloveView:
         except RuntimeError as err:   # foxglove-sdk's FoxgloveError, e.g. port taken
             reason = str(err).removeprefix('FoxgloveError: ')
             msg = (f'cannot serve the Foxglove live view on {host}:{port}: {reason}; choose '
-                   'another port (foxglove_port, 0 = off)')
+                   'a free port or an address of this machine (parameters foxglove_port, '
+                   '0 = off, and foxglove_address)')
             raise ViewError(msg) from err
         self.channels = {topic: foxglove.Channel(topic, schema=schema, message_encoding='cdr',
                                                  context=context)
@@ -119,7 +120,8 @@ class FoxgloveView:
 
     @property
     def url(self) -> str:
-        return f'ws://{self.host}:{self.port}'
+        host = f'[{self.host}]' if ':' in self.host else self.host   # IPv6
+        return f'ws://{host}:{self.port}'
 
     def _advance_time(self, stamp_ns: int) -> None:
         if self._last_time is not None and stamp_ns < self._last_time:
