@@ -2,14 +2,18 @@
 client (``view_client``) that decodes every channel with the schema it advertises."""
 from __future__ import annotations
 
+import asyncio
 import json
 import socket
+import struct
 import threading
 import time
 from pathlib import Path
 
 import pytest
+import websockets
 from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
 
 from gripper_sim.configuration import load_config
 from gripper_sim.core import make_simulation
@@ -22,7 +26,7 @@ from gripper_sim.ros.process import RosProcess, node_process, ros_environment
 from gripper_sim.view.foxglove import FoxgloveView, NodeFeed, node_topics
 from gripper_sim.view.layout import layout_json
 from gripper_sim.view import ViewError
-from view_client import capture, protobuf_decoder
+from view_client import SUBPROTOCOLS, capture, protobuf_decoder
 
 pytestmark = [pytest.mark.ros]
 
@@ -229,3 +233,39 @@ def test_the_node_is_observed_only_while_a_client_subscribes():
         stop.set()
         publisher.join()
         feed.view.close()
+
+
+def test_time_going_back_starts_a_new_session():
+    """A reset (sim time back to 0): clients are told to drop the old run (a new
+    serverInfo with a new session id) before the first message of the new one."""
+    view = FoxgloveView({'/clock': 'rosgraph_msgs/msg/Clock'}, port=0)
+
+    async def run() -> list:
+        async with websockets.connect(view.url, subprotocols=SUBPROTOCOLS,
+                                      proxy=None) as socket:
+            frames = [await socket.recv(), await socket.recv()]   # serverInfo, advertise
+            channel = json.loads(frames[1])['channels'][0]['id']
+            await socket.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+                {'id': 0, 'channelId': channel}]}))
+            while not view.channels['/clock'].has_sinks():
+                await asyncio.sleep(0.01)
+            for stamp in (10, 20, 5):
+                view.log_messages({'/clock': Clock()}, stamp)
+            while not (isinstance(frames[-1], bytes) and frames[-1][0] == 1
+                       and struct.unpack_from('<Q', frames[-1], 5)[0] == 5):
+                frames.append(await socket.recv())
+            return frames
+
+    try:
+        frames = asyncio.run(asyncio.wait_for(run(), 120))
+    finally:
+        view.close()
+    events, sessions = [], []
+    for frame in frames:
+        if isinstance(frame, str) and json.loads(frame)['op'] == 'serverInfo':
+            events.append('serverInfo')
+            sessions.append(json.loads(frame)['sessionId'])
+        elif isinstance(frame, bytes) and frame[0] == 1:   # Message Data: its time
+            events.append(struct.unpack_from('<Q', frame, 5)[0])
+    assert events == ['serverInfo', 10, 20, 'serverInfo', 5]
+    assert sessions[0] != sessions[1]
