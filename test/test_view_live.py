@@ -275,3 +275,32 @@ def test_time_going_back_starts_a_new_session():
     sessions = [json.loads(f)['sessionId'] for f in frames
                 if isinstance(f, str) and json.loads(f)['op'] == 'serverInfo']
     assert len(sessions) == 2 and sessions[0] != sessions[1]
+
+
+def test_a_failing_view_stops_feeding_and_never_raises_into_the_physics():
+    class Logger:
+        def __init__(self):
+            self.errors = []
+
+        def error(self, text):
+            self.errors.append(text)
+
+    class Node(PublishingNode):
+        logger = Logger()
+
+        def get_logger(self):
+            return self.logger
+
+    class BrokenView:
+        def log_messages(self, batch, stamp_ns):
+            raise RuntimeError('the server went away')
+
+    node = Node({'fruit/state': None})
+    feed = NodeFeed(node, {'fruit/state': '/gripper_sim/fruit/state'})
+    feed.view = BrokenView()
+    feed.watched(True)
+    node.publish(1)   # must not raise
+    node.publish(2)
+    assert node.observers == [] and feed.view is None
+    assert node.logger.errors == ['Foxglove live view stopped: RuntimeError: the server '
+                                  'went away']

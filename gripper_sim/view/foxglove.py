@@ -263,9 +263,20 @@ class NodeFeed:
             self.node.remove_publish_observer(self.observe)
 
     def observe(self, batch: Mapping[str, Any], stamp_ns: int) -> None:
-        """A publish observer: ``batch`` is ``{topic suffix: message}``."""
-        if self.view is not None:
+        """A publish observer: ``batch`` is ``{topic suffix: message}``.
+
+        It runs in the node's physics thread, which resets the simulation on any
+        exception: a failing view logs the error and stops feeding instead.
+        """
+        if self.view is None:
+            return
+        try:
             self.view.log_messages({self.names[s]: msg for s, msg in batch.items()}, stamp_ns)
+        except Exception as err:  # noqa: BLE001 - never let the view reset the physics
+            self.view = None
+            self.node.remove_publish_observer(self.observe)
+            self.node.get_logger().error(
+                f'Foxglove live view stopped: {type(err).__name__}: {err}')
 
 
 def recording_view(bag: Any, *, host: str = DEFAULT_ADDRESS, port: int = DEFAULT_PORT,
