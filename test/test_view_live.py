@@ -81,6 +81,7 @@ def node_view(tmp_path_factory, new_domain_id):
         assert code == 0, process.log()
 
 
+@pytest.mark.slow
 def test_the_node_serves_every_topic_and_the_scene_decodable_by_schema(node_view):
     process, port = node_view
     seen = capture(f'ws://127.0.0.1:{port}', NODE_TOPICS | {SCENE}, per_topic=3)
@@ -100,6 +101,7 @@ def test_the_node_serves_every_topic_and_the_scene_decodable_by_schema(node_view
     assert process.running
 
 
+@pytest.mark.slow
 def test_a_port_in_use_is_a_warning_and_the_node_runs_on(tmp_path, new_domain_id):
     with socket.socket() as taken:
         taken.bind(('127.0.0.1', 0))
@@ -147,6 +149,7 @@ def recording(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_replay_serves_the_recording_and_its_scene(recording, new_domain_id, tmp_path):
     with BagReader(recording) as bag:
         recorded = {name: [m.data for m in bag.messages([name])] for name in bag.topics}
