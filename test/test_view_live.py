@@ -6,6 +6,8 @@ import asyncio
 import json
 import socket
 import struct
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -116,7 +118,7 @@ def test_a_port_in_use_is_a_warning_and_the_node_runs_on(tmp_path, new_domain_id
             assert process.wait_for_log('ready:', timeout=60), process.log()
             text = process.log()
             assert f'cannot serve the Foxglove live view on 127.0.0.1:{port}' in text
-            assert 'Address already in use' in text
+            assert 'Address already in use' in text and 'foxglove_port, 0 = off' in text
             assert process.running
         finally:
             code = process.stop()
@@ -128,10 +130,10 @@ def test_a_view_on_a_taken_port_or_a_foreign_address_raises_a_view_error():
         taken.bind(('127.0.0.1', 0))
         taken.listen()
         port = taken.getsockname()[1]
-        with pytest.raises(ViewError, match=f'127.0.0.1:{port}: .*in use.*foxglove_port'):
+        with pytest.raises(ViewError, match=f'127.0.0.1:{port}: .*in use.*a free port'):
             FoxgloveView({'/clock': 'rosgraph_msgs/msg/Clock'}, port=port)
     # 192.0.2.1: TEST-NET-1 (RFC 5737), never an address of this machine
-    with pytest.raises(ViewError, match='on 192.0.2.1:0: .*foxglove_address'):
+    with pytest.raises(ViewError, match='on 192.0.2.1:0: .*an address of this machine'):
         FoxgloveView({'/clock': 'rosgraph_msgs/msg/Clock'}, host='192.0.2.1', port=0)
 
 
@@ -173,6 +175,22 @@ def test_replay_serves_the_recording_and_its_scene(recording, new_domain_id, tmp
     check_scene(decoded[SCENE])
     labels = [t['text'] for s in decoded[SCENE] for e in s['entities'] for t in e['texts']]
     assert '>= 260 kPa (bruise)' in labels   # the apple's, from the stored configuration
+
+
+@pytest.mark.slow
+def test_replay_on_a_taken_port_is_an_error(recording, new_domain_id):
+    with socket.socket() as taken:
+        taken.bind(('127.0.0.1', 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        run = subprocess.run([sys.executable, '-m', 'gripper_sim.cli.main', 'replay',
+                              str(recording), '--foxglove', str(port)],
+                             env=ros_environment(new_domain_id()), capture_output=True,
+                             text=True, timeout=300)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.startswith(
+        f'error: cannot serve the Foxglove live view on 127.0.0.1:{port}: '), run.stderr
+    assert 'Traceback' not in run.stderr
 
 
 def test_the_shipped_layout_is_the_built_one_and_names_our_topics():

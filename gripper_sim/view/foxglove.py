@@ -101,8 +101,7 @@ class FoxgloveView:
         except RuntimeError as err:   # foxglove-sdk's FoxgloveError, e.g. port taken
             reason = str(err).removeprefix('FoxgloveError: ')
             msg = (f'cannot serve the Foxglove live view on {host}:{port}: {reason}; choose '
-                   'a free port or an address of this machine (parameters foxglove_port, '
-                   '0 = off, and foxglove_address)')
+                   'a free port or an address of this machine')
             raise ViewError(msg) from err
         self.channels = {topic: foxglove.Channel(topic, schema=schema, message_encoding='cdr',
                                                  context=context)
@@ -234,7 +233,8 @@ def start_node_view(node: Any) -> FoxgloveView | None:
                                  host=host, port=port, name=node.get_fully_qualified_name(),
                                  on_watched=feed.watched)
     except ViewError as err:
-        logger.warning(f'{err}; running without the live view')
+        logger.warning(f'{err} (parameters foxglove_port, 0 = off, and foxglove_address); '
+                       'running without the live view')
         return None
     view = feed.view
     logger.info(f'Foxglove live view on {view.url} (in Foxglove: Open connection > '
