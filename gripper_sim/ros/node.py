@@ -227,7 +227,8 @@ class SimNode(Node):
             f'sim time), real-time factor {self._rtf:g}')
         self._publish(self.sim.last, self.message_context.snapshot(), self._sequence)
         self._start_recording_at_startup()
-        # Foxglove live view (foxglove_port, 0 = off): observes every published batch.
+        # Foxglove live view (foxglove_port, 0 = off): observes published batches while a
+        # client watches; None when off or its port is taken (a warning).
         self.live_view = start_node_view(self)
         self._thread = threading.Thread(target=self._run, name='physics', daemon=True)
         if start:
