@@ -34,7 +34,8 @@ def sim_node():
     rclpy.init(context=context, domain_id=domain)
     node = SimNode(start=False, context=context,
                    parameter_overrides=[rclpy.parameter.Parameter('real_time_factor',
-                                                                  value=0.0)])
+                                                                  value=0.0),
+                                        rclpy.parameter.Parameter('foxglove_port', value=0)])
     try:
         yield node
     finally:

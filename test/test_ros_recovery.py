@@ -67,7 +67,8 @@ def context():
 def test_a_failed_step_is_reported_resets_and_publishes_nothing_non_finite(context, mode):
     FailingSimulation.mode = mode
     node = SimNode(context=context, simulation_factory=FailingSimulation, start=False,
-                   parameter_overrides=[rclpy.parameter.Parameter('publish_rate', value=1000.0)])
+                   parameter_overrides=[rclpy.parameter.Parameter('publish_rate', value=1000.0),
+                                        rclpy.parameter.Parameter('foxglove_port', value=0)])
     try:
         published = []
         node.add_publish_observer(lambda batch, stamp: published.append(batch))

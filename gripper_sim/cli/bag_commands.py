@@ -12,7 +12,7 @@ import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-from gripper_sim.cli.arguments import non_negative_float, positive_float
+from gripper_sim.cli.arguments import non_negative_float, port_number, positive_float
 
 
 def _remap(text: str) -> tuple[str, str]:
@@ -62,6 +62,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--wait-for-subscribers', type=non_negative_float, default=0.0,
                    metavar='S', help='before playing, wait up to S seconds until every '
                    'replayed topic has a subscriber')
+    p.add_argument('--foxglove', nargs='?', type=port_number, const=8765, metavar='PORT',
+                   help='also serve the replay and its 3D scene to Foxglove on '
+                        '127.0.0.1:PORT (default 8765)')
     p.set_defaults(handler=_replay)
 
     p = subparsers.add_parser('info', help='topics, types, counts and duration of a recording')
@@ -220,7 +223,8 @@ def _replay(args: argparse.Namespace) -> int:
 
     summary = run_replay(args.file, rate=args.rate, loop=args.loop, topics=args.topics,
                          start=args.start, clock_hz=args.clock, remaps=dict(args.remap),
-                         wait_for_subscribers=args.wait_for_subscribers)
+                         wait_for_subscribers=args.wait_for_subscribers,
+                         foxglove_port=args.foxglove)
     print(summary, file=sys.stderr)
     return 0
 

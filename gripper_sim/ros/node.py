@@ -47,6 +47,7 @@ from gripper_sim.ros.runtime_parameters import RuntimeParameters, log_rejections
 from gripper_sim.ros.services import SimServices
 from gripper_sim.ros.sync import JawOwner, JawOwnership, SimLock
 from gripper_sim.ros.watchdog import CHECK_PERIOD, STALL_TIMEOUT, PhysicsWatchdog
+from gripper_sim.view.foxglove import start_node_view
 
 NODE_NAME = 'gripper_sim'
 # GIL switch interval of the node process (Python's default: 5 ms). The physics thread
@@ -137,6 +138,9 @@ class SimNode(Node):
         self.state_publisher.publish(self.sim.last, self.message_context.snapshot(),
                                      self._sequence)
         self.recording_control.start_at_startup()
+        # Foxglove live view (foxglove_port, 0 = off): observes published batches while a
+        # client watches; None when off or its port is taken (a warning).
+        self.live_view = start_node_view(self)
         if start:
             self.physics.start()
 
@@ -151,6 +155,10 @@ class SimNode(Node):
     def add_publish_observer(self, callback: PublishObserver) -> None:
         """Call ``callback({suffix: msg}, stamp_ns)`` with every batch the node publishes."""
         self.state_publisher.add_observer(callback)
+
+    def remove_publish_observer(self, callback: PublishObserver) -> None:
+        """Stop calling ``callback`` with published batches."""
+        self.state_publisher.remove_observer(callback)
 
     def add_reset_listener(self, callback: Callable[[StepResult], None]) -> None:
         """Call ``callback(initial_result)`` after every reset (``~/reset`` or recovery).
@@ -290,6 +298,8 @@ class SimNode(Node):
     def destroy_node(self):
         self.stop()
         self.recording_control.finish()
+        if getattr(self, 'live_view', None) is not None:
+            self.live_view.close()
         return super().destroy_node()
 
 

@@ -78,6 +78,10 @@ NODE_PARAMETERS: tuple[NodeParameter, ...] = (
     NodeParameter('record_path', '', '-', "MCAP file to record every physics step to "
                   "('' = not recording); setting it starts recording there (a new file: "
                   "an existing one is refused), '' stops; ~/record also sets it"),
+    NodeParameter('foxglove_port', 8765, '-', 'TCP port of the Foxglove live view '
+                  '(WebSocket); 0 = off', 0, 65535, read_only=True),
+    NodeParameter('foxglove_address', '127.0.0.1', '-', 'address the Foxglove live view '
+                  'listens on', read_only=True),
 )
 
 

@@ -196,12 +196,17 @@ class RosProcess:
 def node_process(parameters: Mapping[str, object] | None = None, *, fruit: str | None = None,
                  env: Mapping[str, str] | None = None, log_path=None,
                  extra: Iterable[str] = ()) -> RosProcess:
-    """A ``gripper_sim`` node process with ``-p name:=value`` for each parameter."""
+    """A ``gripper_sim`` node process with ``-p name:=value`` for each parameter.
+
+    The Foxglove live view is off (``foxglove_port`` 0) unless ``parameters`` set it:
+    tests and benchmarks start many nodes at once, which would all ask for its port.
+    """
+    parameters = {'foxglove_port': 0, **(parameters or {})}
     args: list[str] = []
     if fruit:
         args += ['--fruit', fruit]
     ros_args = list(extra)
-    for name, value in (parameters or {}).items():
+    for name, value in parameters.items():
         if isinstance(value, bool):
             value = 'true' if value else 'false'
         ros_args += ['-p', f'{name}:={value}']

@@ -48,6 +48,11 @@ class OrderedPublisher:
         """Call ``callback({suffix: msg}, stamp_ns)`` with every batch published."""
         self._observers.append(callback)
 
+    def remove_observer(self, callback: PublishObserver) -> None:
+        """Stop calling ``callback`` (no error when it was not added)."""
+        if callback in self._observers:
+            self._observers.remove(callback)
+
     def set_rate(self, rate: float, dt: float) -> None:
         """Publish every ``1 / rate`` s of sim time (``rate`` Hz, ``dt`` s per step)."""
         self.publish_every = max(1, int(round(1.0 / (rate * dt))))
