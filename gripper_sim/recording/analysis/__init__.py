@@ -19,7 +19,8 @@ the schemas stored in the file, so the analysis runs without ROS installed.
 """
 from gripper_sim.recording.analysis.frames import (cloud_array, jaw_contact_nodes,
                                                    patch_outline)
-from gripper_sim.recording.analysis.outputs import AnalysisResult, analyze, load_summary
+from gripper_sim.recording.analysis.outputs import (AnalysisResult, analyze, load_summary,
+                                                    write_recording_report)
 from gripper_sim.recording.analysis.series import (COLUMNS, TimeSeries, find_topics,
                                                    read_config, read_time_series,
                                                    split_runs)
@@ -28,4 +29,4 @@ from gripper_sim.recording.analysis.summary import fit_stiffness, summarize, wri
 __all__ = ['COLUMNS', 'AnalysisResult', 'TimeSeries', 'analyze', 'cloud_array',
            'find_topics', 'fit_stiffness', 'jaw_contact_nodes', 'load_summary',
            'patch_outline', 'read_config', 'read_time_series', 'split_runs', 'summarize',
-           'write_csv']
+           'write_csv', 'write_recording_report']

@@ -182,3 +182,25 @@ def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
 def load_summary(output_dir: str | os.PathLike) -> dict:
     """Read back a ``summary.json``."""
     return json.loads((Path(output_dir) / 'summary.json').read_text(encoding='utf-8'))
+
+
+def write_recording_report(path: str | os.PathLike, html_path: str | os.PathLike, *,
+                           namespace: str | None = None,
+                           frames_in_html: int = 60) -> Path:
+    """Only the HTML report of the last run recorded in ``path`` (e.g. the run an
+    offline verb just recorded), written to ``html_path``.
+
+    Raises:
+        RecordingError: bad file, no FruitState topic, or the report cannot be written.
+    """
+    with BagReader(path) as bag:
+        topics = find_topics(bag, namespace)
+        config = read_config(bag)
+        bruise = float(config.get('fruit.bruise_pressure', DEFAULT_BRUISE_PRESSURE))
+        series = split_runs(read_time_series(bag, topics))[-1]
+        summary = {'file': str(Path(path)), 'fruit_state_topic': topics['state'],
+                   'fruit': config.get('fruit.name'),
+                   **summarize(series, bruise_pressure=bruise)}
+        frames = run_frames(bag, topics['markers'], series,
+                            animation_rows(series, frames_in_html), bruise)
+    return report_html.write_grasp_report(series, summary, frames, html_path)

@@ -262,7 +262,7 @@ def _frame_traces(frame: Frame, dimension: int, top: float, bruise: float) -> li
         _rectangle(jaws[0], 'left jaw', 'slategrey'),
         _rectangle(jaws[1], 'right jaw', 'slategrey'),
         go.Scatter(x=pts[:, 0], y=pts[:, 2], mode='lines+markers', name='fruit',
-                   line={'color': 'rgba(80,80,80,0.6)', 'width': 1},
+                   line={'color': 'rgb(90,90,90)', 'width': 1.5},
                    marker={'size': 7, 'color': pressure_kpa, 'colorscale': PRESSURE_COLOURS,
                            'cmin': 0.0, 'cmax': top / 1e3,
                            'colorbar': _colour_bar(2, top, bruise)},
@@ -307,8 +307,9 @@ def animation_figure(series: TimeSeries, frames: list[Frame], summary: dict) -> 
         height=720 if dimension == 3 else 640, showlegend=False,
         sliders=[{'active': 0, 'steps': steps, 'currentvalue': {'prefix': 'sim time (s): '},
                   'pad': {'t': 40}}],
-        updatemenus=[{'type': 'buttons', 'showactive': False, 'x': 0.0, 'y': -0.02,
-                      'xanchor': 'right', 'yanchor': 'top', 'buttons': [
+        updatemenus=[{'type': 'buttons', 'showactive': False, 'x': 1.0, 'y': 1.02,
+                      'xanchor': 'right', 'yanchor': 'bottom', 'direction': 'left',
+                      'buttons': [
                           {'label': 'play', 'method': 'animate',
                            'args': [None, {'frame': {'duration': 120, 'redraw': True},
                                            'fromcurrent': True,
@@ -323,8 +324,10 @@ def animation_figure(series: TimeSeries, frames: list[Frame], summary: dict) -> 
             'zaxis': {'title': {'text': 'z (mm)'}, 'range': [low[2], high[2]]},
             'aspectmode': 'cube', 'camera': {'eye': {'x': 1.2, 'y': -1.6, 'z': 0.6}}})
     else:
-        fig.update_xaxes(title_text='x (mm)', range=[low[0], high[0]])
-        fig.update_yaxes(title_text='z (mm)', range=[low[2], high[2]], scaleanchor='x')
+        fig.update_layout(plot_bgcolor='white')
+        fig.update_xaxes(title_text='x (mm)', range=[low[0], high[0]], gridcolor='#eee')
+        fig.update_yaxes(title_text='z (mm)', range=[low[2], high[2]], scaleanchor='x',
+                         gridcolor='#eee')
     return fig
 
 
@@ -356,10 +359,20 @@ def write_grasp_report(series: TimeSeries, summary: dict, frames: list[Frame],
 
 
 # ---------------------------------------------------------------------- window report
+def _force_value(value: Any) -> float | None:
+    """A window bound as a float (``as_dict`` writes infinity as 'inf'), or None."""
+    return None if value is None else float(value)
+
+
+def _trial_pressure(trial: dict) -> float:
+    """Pa, the trial's peak damage pressure."""
+    return float(trial.get('peak_pressure', trial.get('peak_damage_pressure', math.nan)))
+
+
 def write_window_report(window: dict, path: str | Path, title: str = 'Grasp window') -> Path:
-    """``window``'s report: every trial's outcome, slip and peak pressure over its
-    grip force, with the window found. ``window``: ``GraspWindow.as_dict()``."""
-    trials = window.get('trials', [])
+    """``window``'s report: every trial's outcome, slip and peak damage pressure over its
+    grip force, with the bounds found. ``window``: ``GraspWindow.as_dict()``."""
+    trials = sorted(window.get('trials', []), key=lambda t: t['force'])
     force = [t['force'] for t in trials]
     fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.06)
     fig.add_trace(go.Scatter(
@@ -369,14 +382,14 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
                                       for t in trials]},
         hovertemplate='%{x:.3g} N: %{text}, slip %{y:.3f} mm<extra></extra>'), row=1, col=1)
     fig.add_trace(go.Scatter(
-        x=force, y=[t['peak_pressure'] / 1e3 for t in trials], mode='markers',
+        x=force, y=[_trial_pressure(t) / 1e3 for t in trials], mode='markers',
         text=[t['outcome'] for t in trials], name='peak damage pressure (kPa)',
         marker={'size': 10, 'symbol': 'diamond',
                 'color': ['crimson' if t['bruised'] else 'seagreen' for t in trials]},
         hovertemplate='%{x:.3g} N: %{text}, %{y:.1f} kPa<extra></extra>'), row=2, col=1)
-    low, high = window.get('min_force'), window.get('max_force')
+    low, high = _force_value(window.get('min_force')), _force_value(window.get('max_force'))
     for value, label in ((low, 'holds from'), (high, 'bruises above')):
-        if isinstance(value, (int, float)) and math.isfinite(value):
+        if value is not None and math.isfinite(value):
             fig.add_vline(x=value, line_dash='dash', line_color='grey')
             fig.add_annotation(x=value, y=1.0, yref='paper', text=f'{label} {value:.3g} N',
                                showarrow=False, xanchor='left')
@@ -385,12 +398,13 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
     fig.update_xaxes(title_text='grip force (N)', row=2, col=1)
     fig.update_layout(height=640, showlegend=False)
     rows = [(f"{t['force']:.4g} N", f"{t['outcome']}, slip {1e3 * t['slip_distance']:.3f} "
-             f"mm, peak pressure {t['peak_pressure'] / 1e3:.1f} kPa")
-            for t in sorted(trials, key=lambda t: t['force'])]
-    found = ('none' if not window.get('window') else
-             f"{low:.3g} N .. " + ('gripper.max_force' if high is None or
-                                    not math.isfinite(high) else f'{high:.3g} N'))
+             f'mm, peak damage pressure {_trial_pressure(t) / 1e3:.1f} kPa') for t in trials]
+    if not window.get('window') or low is None or high is None:
+        found = 'none'
+    else:
+        found = f'{low:.3g} N .. ' + (f'{high:.3g} N' if math.isfinite(high)
+                                      else 'gripper.max_force (nothing bruised)')
     return write_html_report(path, title, [
         Block('Window', rows=[('safe window', found)]),
         Block('Trials', fig, rows=rows,
-              text='Green: held (top) or not bruised (bottom); red: not held or bruised.')])
+              text='Green: held (top) or not bruised (bottom); red: not held, or bruised.')])
