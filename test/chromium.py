@@ -50,7 +50,7 @@ class Browser:
             time.sleep(0.05)
         port, path = port_file.read_text().splitlines()[:2]
         self.socket = connect(f'ws://127.0.0.1:{port}{path}', max_size=None,
-                              open_timeout=timeout)
+                              open_timeout=timeout).__enter__()
         target = self.call('Target.createTarget', url='about:blank')['targetId']
         self.session = self.call('Target.attachToTarget', targetId=target,
                                  flatten=True)['sessionId']
