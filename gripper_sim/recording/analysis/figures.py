@@ -132,7 +132,8 @@ def force_vs_compression(series: TimeSeries, summary: dict, fit: StiffnessFit) -
     if fit.secant is not None and fit.end is not None:
         ax.plot([c_mm[fit.end]], [force[fit.end]], 'D', color='tab:purple',
                 label=f'end of loading: secant {fit.secant / 1e3:.2f} N/mm')
-    ax.legend(loc='upper left', fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc='upper left', fontsize=8)
     ax.set_xlabel('compression (mm)')
     ax.set_ylabel('grip force (N)')
     ax.set_title('Force vs compression (stiffness from the loading part only)')
