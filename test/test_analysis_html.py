@@ -193,12 +193,16 @@ class Terminal(io.StringIO):
         return True
 
 
-def test_progress_shows_on_a_terminal_only(monkeypatch):
+def test_progress_shows_on_a_terminal_only(monkeypatch, tmp_path):
     monkeypatch.setattr(progress, 'DELAY', 0.0)
     terminal = Terminal()
     monkeypatch.setattr('sys.stderr', terminal)
-    assert main(['squeeze', '--to-force', '0.5']) == 0
+    path = tmp_path / 'squeeze.mcap'
+    assert main(['squeeze', '--to-force', '0.5', '--out', str(path)]) == 0
     assert 'squeeze' in terminal.getvalue() and 'steps' in terminal.getvalue()
+    assert main(['analyze', str(path), '-o', str(tmp_path / 'a'), '--no-html']) == 0
+    assert 'analyze: reading' in terminal.getvalue()
+    assert 'analyze: run 1 of 1' in terminal.getvalue()
     quiet = Terminal()
     monkeypatch.setattr('sys.stderr', quiet)
     assert main(['squeeze', '--to-force', '0.5', '--quiet']) == 0

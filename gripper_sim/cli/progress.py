@@ -21,10 +21,11 @@ def wanted(quiet: bool) -> bool:
 
 
 def bar(description: str, *, quiet: bool, total: float | None = None,
-        unit: str = 'it') -> tqdm:
+        unit: str = 'it', miniters: int | None = None) -> tqdm:
     """A tqdm bar on stderr (disabled when not ``wanted``), closed by the caller."""
     return tqdm(total=total, desc=description, unit=unit, file=sys.stderr, delay=DELAY,
-                disable=not wanted(quiet), leave=False, dynamic_ncols=True)
+                disable=not wanted(quiet), leave=False, dynamic_ncols=True,
+                miniters=miniters)
 
 
 class StepProgress:
@@ -47,20 +48,21 @@ class StepProgress:
 
 
 class StageProgress:
-    """``progress(stage, done, total)`` for ``analyze``: one bar, relabelled per stage."""
+    """``progress(stage, done, total)`` for ``analyze``: one bar, relabelled per stage
+    (its clock, and so the delay before it shows, runs from the first stage)."""
 
     def __init__(self, description: str, *, quiet: bool):
         self.description = description
-        self.bar = bar(description, quiet=quiet)
+        self.bar = bar(description, quiet=quiet, miniters=1)
         self.stage = ''
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         if stage != self.stage:
             self.stage = stage
-            self.bar.reset(total=total)
+            self.bar.total = total
+            self.bar.n = self.bar.last_print_n = 0
             self.bar.set_description(f'{self.description}: {stage}', refresh=False)
-        self.bar.n = done
-        self.bar.refresh()
+        self.bar.update(done - self.bar.n)
 
     def __enter__(self) -> StageProgress:
         return self

@@ -25,6 +25,8 @@ from gripper_sim.recording.reader import BagReader
 
 #: called as ``progress(stage, done, total)``: stage in words, counts of that stage
 Progress = Callable[[str, int, int], None]
+#: the steps of one run's outputs: CSV, time figures, snapshots, HTML report
+OUTPUTS = 4
 
 
 @dataclass
@@ -89,11 +91,13 @@ def animation_rows(series: TimeSeries, count: int) -> list[tuple[str, int]]:
 
 def _analyze_run(bag: BagReader, topics: dict, series: TimeSeries, header: dict[str, Any],
                  out: Path, *, figures_on: bool, html: bool, bruise: float,
-                 frames_in_html: int) -> tuple[dict, list[Path]]:
+                 frames_in_html: int, done: Callable[[int], None]) -> tuple[dict, list[Path]]:
+    """Write one run's outputs into ``out``; ``done(k)`` after each of ``OUTPUTS``."""
     summary = {**header, **summarize(series, bruise_pressure=bruise)}
     _mkdir(out)
     files = [out / 'timeseries.csv', out / 'summary.json']
     write_csv(series, files[0])
+    done(1)
     if figures_on:
         events = find_events(series)
         fit = fit_stiffness(series, events)
@@ -101,6 +105,7 @@ def _analyze_run(bag: BagReader, topics: dict, series: TimeSeries, header: dict[
                                   out / 'force_vs_time.png'))
         files.append(figures.save(figures.force_vs_compression(series, summary, fit),
                                   out / 'force_vs_compression.png'))
+        done(2)
         snapshots = run_frames(bag, topics['markers'], series,
                                key_moments(series, events), bruise)
         if snapshots and series.dimension == 3:
@@ -117,11 +122,13 @@ def _analyze_run(bag: BagReader, topics: dict, series: TimeSeries, header: dict[
                 fig, patches = figures.contact_patch(series, cloud)
                 files.append(figures.save(fig, out / 'contact_patch.png'))
                 summary['contact_patches_at_peak_force'] = patches
+        done(3)
         if html:
             frames = run_frames(bag, topics['markers'], series,
                                 animation_rows(series, frames_in_html), bruise)
             files.append(report_html.write_grasp_report(series, summary, frames,
                                                         out / 'report.html'))
+    done(OUTPUTS)
     # last: the 3D contact patch figure adds its measured patches to the summary
     files[1].write_text(json.dumps(summary, indent=2) + '\n', encoding='utf-8')
     return summary, files
@@ -157,18 +164,21 @@ def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
         files: list[Path] = []
         _mkdir(out)
         for k, series in enumerate(runs):
-            if progress is not None:
-                progress('writing', k, len(runs))
+            stage = f'run {k + 1} of {len(runs)}'
+
+            def done(count: int, stage: str = stage) -> None:
+                if progress is not None:
+                    progress(stage, count, OUTPUTS)
+            done(0)
             run_dir = out if len(runs) == 1 else out / f'run_{k + 1}'
             run_header = header if len(runs) == 1 else \
                 {**header, 'run': k + 1, 'runs': len(runs)}
             summary, written = _analyze_run(bag, topics, series, run_header, run_dir,
                                             figures_on=figures, html=html and figures,
-                                            bruise=bruise, frames_in_html=frames_in_html)
+                                            bruise=bruise, frames_in_html=frames_in_html,
+                                            done=done)
             summaries.append(summary)
             files += written
-        if progress is not None:
-            progress('writing', len(runs), len(runs))
     if len(runs) == 1:
         return AnalysisResult(summary=summaries[0], output_dir=out, runs=summaries,
                               files=files)
