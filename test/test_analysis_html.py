@@ -58,19 +58,23 @@ def pick_2d_html(tmp_path_factory):
     return folder / 'pick.html'
 
 
-@pytest.fixture(scope='module')
-def window_html(tmp_path_factory):
-    """The window report of a window made of trials with every kind of outcome."""
+def made_window() -> GraspWindow:
+    """A window of trials with every kind of outcome (not simulated: the report's input)."""
     forces = [0.5, 1.0, 2.0, 4.0, 8.0]
     trials = [Trial(force=f, held=f >= 1.0, bruised=f >= 8.0,
                     outcome='dropped' if f < 1.0 else 'bruised' if f >= 8.0 else 'held',
                     slip_distance=0.01 / f, peak_pressure=4e4 * f, wall_time=1.0)
               for f in forces]
-    window = GraspWindow(fruit='apple', finger='flat', min_force=1.0, max_force=4.0,
-                         min_estimate=0.9, max_estimate=5.0, mass=0.2, friction=0.5,
-                         tolerance=0.03, trials=trials)
+    return GraspWindow(fruit='apple', finger='flat', min_force=1.0, max_force=4.0,
+                       min_estimate=0.9, max_estimate=5.0, mass=0.2, friction=0.5,
+                       tolerance=0.03, trials=trials)
+
+
+@pytest.fixture(scope='module')
+def window_html(tmp_path_factory):
+    """The window report of ``made_window``."""
     path = tmp_path_factory.mktemp('window') / 'window.html'
-    write_window_report(window.as_dict(), path)
+    write_window_report(made_window().as_dict(), path)
     return path
 
 
@@ -186,6 +190,20 @@ def test_html_and_quiet_options(tmp_path, capsys):
                  '--quiet', '--hold', '0']) == 2
     err = capsys.readouterr().err
     assert err.startswith('error: cannot write') and 'Traceback' not in err
+
+
+def test_window_verb_writes_its_report(monkeypatch, tmp_path, capsys):
+    """The verb hands its window to the report (the search itself is stubbed: it is
+    tested with the window verb)."""
+    monkeypatch.setattr('gripper_sim.core.window.grasp_window',
+                        lambda config, scenario, tolerance, progress: made_window())
+    path = tmp_path / 'window.html'
+    assert main(['window', '--html', str(path), '--quiet']) == 0
+    out = capsys.readouterr().out
+    assert 'trial' not in out and 'safe window     1 N .. 4 N' in out
+    page = path.read_text()
+    assert 'Grasp window of apple with the flat finger (pick_and_place)' in page
+    assert '1 N .. 4 N' in page
 
 
 class Terminal(io.StringIO):

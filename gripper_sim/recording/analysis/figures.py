@@ -67,9 +67,10 @@ def _mark_phases(axes: list, series: TimeSeries, events: Events) -> None:
         for k, ax in enumerate(axes):
             ax.axvline(t[row], color=PHASE_COLOUR, lw=0.8, ls='--', gid=f'phase:{label}')
             if k == 0:
-                ax.annotate(label, (t[row], 1.0), xycoords=('data', 'axes fraction'),
-                            xytext=(2, -2), textcoords='offset points', rotation=90,
-                            va='top', ha='left', fontsize=7, color=PHASE_COLOUR)
+                ax.annotate(label, (t[row], 0.5), xycoords=('data', 'axes fraction'),
+                            xytext=(2, 0), textcoords='offset points', rotation=90,
+                            va='center', ha='left', fontsize=7, color=PHASE_COLOUR,
+                            bbox={'facecolor': 'white', 'edgecolor': 'none', 'pad': 1})
 
 
 def force_vs_time(series: TimeSeries, summary: dict, events: Events) -> Figure:
