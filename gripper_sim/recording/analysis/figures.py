@@ -112,7 +112,7 @@ def force_vs_time(series: TimeSeries, summary: dict, events: Events) -> Figure:
 
 def force_vs_compression(series: TimeSeries, summary: dict, fit: StiffnessFit) -> Figure:
     """Force over compression coloured by time; the loading rows the stiffness was
-    fitted on, the fitted line over their range and the secant point."""
+    fitted on, the fitted line over their range and the secant chord."""
     fig = Figure(figsize=(7, 5.2), dpi=110, layout='constrained')
     ax = fig.subplots()
     c_mm = 1e3 * series['compression_m']
@@ -130,9 +130,10 @@ def force_vs_compression(series: TimeSeries, summary: dict, fit: StiffnessFit) -
         ax.plot(1e3 * xs, fit.tangent * xs + fit.intercept, 'r-', lw=1.5, gid='fit line',
                 label=f'tangent {fit.tangent / 1e3:.2f} N/mm, fitted on {lo:.2f}-{hi:.2f} N'
                       f' (t = {t_lo:.3f}-{t_hi:.3f} s)')
-    if fit.secant is not None and fit.end is not None:
-        ax.plot([c_mm[fit.end]], [force[fit.end]], 'D', color='tab:purple',
-                label=f'end of loading: secant {fit.secant / 1e3:.2f} N/mm')
+    if fit.secant is not None and fit.start is not None and fit.end is not None:
+        ends = [fit.start, fit.end]
+        ax.plot(c_mm[ends], force[ends], 'D:', color='tab:purple', gid='secant',
+                label=f'grip to end of loading: secant {fit.secant / 1e3:.2f} N/mm')
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc='upper left', fontsize=8)
     ax.set_xlabel('compression (mm)')

@@ -4,8 +4,10 @@ Stiffness is fitted on the loading part only: from the grip (both jaws touching)
 first row at which the grip force reaches ``FORCE_REACHED`` of its largest value before
 the lift-off (or the release, or the end). The plateau that follows, the dip and rise
 at lift-off and any unloading stay out of the fit. Tangent: least-squares slope over
-the loading rows above ``FIT_FROM`` of that force; secant: the force at the end of
-loading over the compression there. The rows and ranges used are in the summary.
+the loading rows above ``FIT_FROM`` of that force; secant: the chord of the loading
+curve, from the grip to the end of loading (compression is measured from the rest
+width, and a fruit sagging on the table starts the grip below zero). The rows and
+ranges used are in the summary.
 
 Held and slipped use ``gripper_sim.core.slip.grasp_slipped``, the definition of the
 node's Grasp result: the slip at the end of the hold (before the release), or a drop.
@@ -37,16 +39,19 @@ class StiffnessFit:
 
     Attributes:
         tangent: N/m, least-squares slope of force over compression (None: < 3 rows).
-        secant: N/m, force over compression at the end of loading (None: no grip).
+        secant: N/m, (force, compression) chord from the grip to the end of loading
+            (None: no grip, or no compression gained).
         intercept: N, of the tangent line.
         rows: (k,) row indices of the series used by the tangent fit.
-        end: row at which loading ends (None: the jaws never both touched).
+        start, end: rows of the grip and of the end of loading (None: the jaws never
+            both touched).
     """
 
     tangent: float | None
     secant: float | None
     intercept: float
     rows: np.ndarray
+    start: int | None
     end: int | None
 
     def ranges(self, series: TimeSeries) -> dict[str, list[float] | None]:
@@ -78,16 +83,17 @@ def fit_stiffness(series: TimeSeries, events: Events | None = None) -> Stiffness
     end = loading_end(series, events)
     empty = np.zeros(0, dtype=int)
     if end is None:
-        return StiffnessFit(None, None, 0.0, empty, None)
+        return StiffnessFit(None, None, 0.0, empty, None, None)
     force = series['grip_force_n']
     compression = series['compression_m']
-    secant = float(force[end] / compression[end]) if compression[end] > 0 else None
+    gained = float(compression[end] - compression[events.grip])
+    secant = float(force[end] - force[events.grip]) / gained if gained > 0 else None
     span = np.arange(events.grip, end + 1)
     span = span[both_jaws(series)[span] & (force[span] >= FIT_FROM * force[end])]
     if span.size < 3 or float(np.ptp(compression[span])) <= 0:
-        return StiffnessFit(None, secant, 0.0, span, end)
+        return StiffnessFit(None, secant, 0.0, span, events.grip, end)
     slope, intercept = np.polyfit(compression[span], force[span], 1)
-    return StiffnessFit(float(slope), secant, float(intercept), span, end)
+    return StiffnessFit(float(slope), secant, float(intercept), span, events.grip, end)
 
 
 def _finite_or_none(value: float) -> float | None:
