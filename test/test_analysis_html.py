@@ -167,6 +167,7 @@ def test_mesh_snapshots_show_the_patch_and_mark_the_bruise_threshold(pick_3d):
     assert bar.get_ylim()[1] == pytest.approx(shown / 1e3)   # the scale ends at the peak
     assert f'bruise threshold {bruise / 1e3:.0f} kPa' in bar.get_ylabel()
     peak_ax = next(ax for ax in fig.axes if ax.get_title().startswith('peak force'))
+    assert figures.pressure_name(3) in peak_ax.get_title()
     skin = next(c for c in peak_ax.collections if c.get_gid() == 'fruit pressure')
     colours = np.unique(np.round(skin.get_facecolors(), 3), axis=0)
     assert len(colours) >= 5, 'the contact patch is not told apart from the rest'
