@@ -23,6 +23,7 @@ from gripper_sim.recording.analysis.events import Events
 from gripper_sim.recording.analysis.frames import Frame, jaw_contact_nodes, patch_outline
 from gripper_sim.recording.analysis.series import TimeSeries
 from gripper_sim.recording.analysis.summary import StiffnessFit
+from gripper_sim.recording.errors import RecordingError
 
 #: the colour map of contact pressure in every figure and in the HTML report
 PRESSURE_COLOURS = 'YlOrRd'
@@ -57,7 +58,15 @@ def contact_state(series: TimeSeries, row: int) -> str:
 
 
 def save(fig: Figure, path: Path) -> Path:
-    fig.savefig(path)
+    """Write ``fig`` as a PNG to ``path``.
+
+    Raises:
+        RecordingError: the file cannot be written.
+    """
+    try:
+        fig.savefig(path)
+    except OSError as err:
+        raise RecordingError(f'cannot write {path}: {err.strerror}') from err
     return path
 
 

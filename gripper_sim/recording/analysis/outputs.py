@@ -130,8 +130,15 @@ def _analyze_run(bag: BagReader, topics: dict, series: TimeSeries, header: dict[
                                                         out / 'report.html'))
     done(OUTPUTS)
     # last: the 3D contact patch figure adds its measured patches to the summary
-    files[1].write_text(json.dumps(summary, indent=2) + '\n', encoding='utf-8')
+    _write_json(files[1], summary)
     return summary, files
+
+
+def _write_json(path: Path, data: dict) -> None:
+    try:
+        path.write_text(json.dumps(data, indent=2) + '\n', encoding='utf-8')
+    except OSError as err:
+        raise RecordingError(f'cannot write {path}: {err.strerror}') from err
 
 
 def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
@@ -184,7 +191,7 @@ def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
                               files=files)
     top = {**header, 'runs': summaries}
     top_path = out / 'summary.json'
-    top_path.write_text(json.dumps(top, indent=2) + '\n', encoding='utf-8')
+    _write_json(top_path, top)
     return AnalysisResult(summary=top, output_dir=out, runs=summaries,
                           files=[top_path] + files)
 

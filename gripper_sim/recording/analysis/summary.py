@@ -26,6 +26,7 @@ from gripper_sim.core.slip import SLIP_TOLERANCE, grasp_slipped
 from gripper_sim.recording.analysis.events import Events, both_jaws, find_events
 from gripper_sim.recording.analysis.series import (COLUMNS, DAMAGE_PRESSURE_FIELD,
                                                    TimeSeries)
+from gripper_sim.recording.errors import RecordingError
 
 #: fraction of the pre-lift peak force at which loading ends (as the grasp's closing)
 FORCE_REACHED = 0.97
@@ -246,10 +247,17 @@ def describe(summary: dict) -> list[str]:
 
 
 def write_csv(series: TimeSeries, path: Path) -> None:
-    """``timeseries.csv``: a header of ``COLUMNS`` and one row per sample (empty: NaN)."""
-    with open(path, 'w', newline='', encoding='utf-8') as f:
-        writer = csv.writer(f)
-        writer.writerow(COLUMNS)
-        data = np.column_stack([series[c] for c in COLUMNS])
-        for row in data:
-            writer.writerow([repr(float(v)) if math.isfinite(v) else '' for v in row])
+    """``timeseries.csv``: a header of ``COLUMNS`` and one row per sample (empty: NaN).
+
+    Raises:
+        RecordingError: the file cannot be written.
+    """
+    data = np.column_stack([series[c] for c in COLUMNS])
+    try:
+        with open(path, 'w', newline='', encoding='utf-8') as f:
+            writer = csv.writer(f)
+            writer.writerow(COLUMNS)
+            for row in data:
+                writer.writerow([repr(float(v)) if math.isfinite(v) else '' for v in row])
+    except OSError as err:
+        raise RecordingError(f'cannot write {path}: {err.strerror}') from err
