@@ -34,9 +34,11 @@ pytestmark = pytest.mark.ros
 LIFT = 0.03
 
 
-def recorded_pick(path, force: float, hold: float = 0.3, overrides: dict | None = None):
-    """A pick (close, settle, lift LIFT, hold) of the default fruit recorded at every step
-    as the node would publish it; (grasp summary, [(step result, phase)])."""
+def recorded_pick(path, force: float, hold: float = 0.3, overrides: dict | None = None,
+                  release: bool = False):
+    """A pick (close, settle, lift LIFT, hold, and with ``release`` lower and open) of
+    the default fruit recorded at every step as the node would publish it; (grasp
+    summary, [(step result, phase)])."""
     base = load_config(overrides=overrides or {})
     config = load_config(overrides={**(overrides or {}),
                                     'gripper.initial_lift': grasp_height(base)})
@@ -44,7 +46,7 @@ def recorded_pick(path, force: float, hold: float = 0.3, overrides: dict | None 
     steps = []
     with SimRecorder(path, sim.config, initial=sim.last) as rec:
         sim.add_observer(rec.on_step)
-        sequence = GraspSequence(sim, force, None, LIFT, hold)
+        sequence = GraspSequence(sim, force, None, LIFT, hold, release=release)
         summary = run_grasp(sim, sequence, on_step=lambda r, phase: steps.append((r, phase)))
     return summary, steps
 
@@ -54,6 +56,16 @@ def held_pick(tmp_path_factory):
     path = tmp_path_factory.mktemp('held') / 'held.mcap'
     summary, steps = recorded_pick(path, 3.0)
     assert summary['outcome'] == 'held'
+    return path, summary, steps
+
+
+@pytest.fixture(scope='module')
+def released_pick(tmp_path_factory):
+    """A held pick that lowers the fruit back and opens the jaws, as a Grasp goal with
+    release does."""
+    path = tmp_path_factory.mktemp('released') / 'released.mcap'
+    summary, steps = recorded_pick(path, 3.0, hold=0.1, release=True)
+    assert summary['outcome'] == 'held' and steps[-1][1] == 'done'
     return path, summary, steps
 
 
@@ -80,16 +92,21 @@ def load_run(path):
 
 
 # ---------------------------------------------------------------------- held / slipped
-def test_held_and_slipped_are_the_grasp_results_own(held_pick, slipped_pick, tmp_path):
+def test_held_and_slipped_are_the_grasp_results_own(held_pick, slipped_pick, released_pick,
+                                                     tmp_path):
     """One definition (gripper_sim.core.slip): the analysis of the recording says what
     the grasp state machine (the node's Grasp result) said, although the simulation
     flagged sliding steps in the held run (a jaw pushing the fruit, the jolt at
     lift-off)."""
-    for path, grasp, steps in (held_pick, slipped_pick):
+    for path, grasp, steps in (held_pick, slipped_pick, released_pick):
         s = analyze(path, tmp_path / path.stem, figures=False).summary
         assert s['slipped'] == grasp['slipped']
         assert s['held'] == (grasp['outcome'] == 'held')
         assert s['held_slip_distance_m'] == pytest.approx(grasp['slip_distance'], abs=1e-9)
+    path, _grasp, steps = released_pick
+    lowering = next(r.time for r, phase in steps if phase == 'releasing')
+    release = analyze(path, tmp_path / 'events', figures=False).summary['event_times_s']
+    assert lowering < release['release'] < release['let go']
     assert any(r.slipping for r, _phase in held_pick[2]), 'no sliding step to test with'
 
 

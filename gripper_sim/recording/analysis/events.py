@@ -22,8 +22,9 @@ from gripper_sim.recording.analysis.series import TimeSeries
 #: m the jaws must open beyond their smallest gap to count as a release (a force
 #: controller breathes by far less; a release opens them by centimetres)
 OPENING = 1e-3
-#: m the lift must change by to count as moving
-LIFT_MOVE = 1e-6
+#: m the lift must change by to count as moving (a held lift joint does not move at all;
+#: the first step of a ramped start may move it by less than a micrometre)
+LIFT_MOVE = 1e-9
 
 
 @dataclass(frozen=True)
