@@ -27,6 +27,7 @@ from gripper_sim.recording.analysis import analyze, figures  # noqa: E402
 from gripper_sim.recording.analysis.events import find_events, key_moments  # noqa: E402
 from gripper_sim.recording.analysis.outputs import run_frames  # noqa: E402
 from gripper_sim.recording.analysis.report_html import (ANIMATION_ID,  # noqa: E402
+                                                        write_runs_index,
                                                         write_window_report)
 from gripper_sim.recording.analysis.series import (find_topics, read_time_series,  # noqa: E402
                                                    split_runs)
@@ -147,6 +148,23 @@ def test_window_report_opens_offline(window_html, tmp_path):
         assert open_report(browser, window_html, tmp_path / 'window.png') == 1
         text = browser.evaluate('document.body.innerText')
     assert '1 N .. 4 N' in text and 'dropped' in text
+
+
+def test_the_index_of_several_runs_links_to_their_reports(pick_3d, tmp_path):
+    _path, analysis = pick_3d
+    summary = json.loads((analysis / 'summary.json').read_text())
+    (tmp_path / 'run_1').symlink_to(analysis, target_is_directory=True)
+    index = write_runs_index([summary], ['run_1'], tmp_path / 'report.html')
+    with Browser() as browser:
+        browser.open(index)
+        not_blank(browser.screenshot(tmp_path / 'index.png'))
+        link = json.loads(browser.evaluate(
+            "JSON.stringify(document.querySelector('a').getBoundingClientRect())"))
+        browser.click(link['x'] + 5, link['y'] + 0.5 * link['height'])
+        browser.wait_until("location.href.endsWith('run_1/report.html')")
+        browser.wait_until(f"!!(document.getElementById('{ANIMATION_ID}') &&"
+                           f" document.getElementById('{ANIMATION_ID}')._fullLayout)")
+        assert browser.console_errors == [] and browser.remote_requests == []
 
 
 def test_mesh_snapshots_show_the_patch_and_mark_the_bruise_threshold(pick_3d):

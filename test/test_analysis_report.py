@@ -239,3 +239,5 @@ def test_a_recording_with_a_reset_is_analysed_run_by_run(tmp_path):
         assert (run_dir / 'force_vs_time.png').is_file()
         assert (run_dir / 'report.html').is_file()
     assert [r['run'] for r in result.summary['runs']] == [1, 2]
+    index = (tmp_path / 'out' / 'report.html').read_text()
+    assert 'href="run_1/report.html"' in index and 'href="run_2/report.html"' in index

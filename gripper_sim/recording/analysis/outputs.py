@@ -190,10 +190,13 @@ def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
         return AnalysisResult(summary=summaries[0], output_dir=out, runs=summaries,
                               files=files)
     top = {**header, 'runs': summaries}
-    top_path = out / 'summary.json'
-    _write_json(top_path, top)
+    top_files = [out / 'summary.json']
+    _write_json(top_files[0], top)
+    if figures and html:
+        top_files.append(report_html.write_runs_index(
+            summaries, [f'run_{k + 1}' for k in range(len(runs))], out / 'report.html'))
     return AnalysisResult(summary=top, output_dir=out, runs=summaries,
-                          files=[top_path] + files)
+                          files=top_files + files)
 
 
 def load_summary(output_dir: str | os.PathLike) -> dict:

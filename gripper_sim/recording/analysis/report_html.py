@@ -45,6 +45,7 @@ class Block:
         rows: (name, value) pairs shown as a table (after the figure, if both).
         text: a paragraph under the heading.
         div_id: the figure's element id (default: made up by plotly).
+        links: (label, relative address) pairs shown as a list of links.
     """
 
     heading: str
@@ -52,6 +53,7 @@ class Block:
     rows: Sequence[tuple[str, str]] = ()
     text: str = ''
     div_id: str | None = None
+    links: Sequence[tuple[str, str]] = ()
 
 
 _PAGE = """<!DOCTYPE html>
@@ -91,6 +93,10 @@ def write_html_report(path: str | Path, title: str, blocks: Sequence[Block]) -> 
             cells = ''.join(f'<tr><td>{html.escape(name)}</td><td>{html.escape(value)}'
                             '</td></tr>' for name, value in block.rows)
             parts.append(f'<table>{cells}</table>')
+        if block.links:
+            items = ''.join(f'<li><a href="{html.escape(href)}">{html.escape(label)}</a></li>'
+                            for label, href in block.links)
+            parts.append(f'<ul>{items}</ul>')
     page = _PAGE.format(title=html.escape(title), body='\n'.join(parts))
     target = Path(path)
     try:
@@ -355,6 +361,19 @@ def write_grasp_report(series: TimeSeries, summary: dict, frames: list[Frame],
     title = (f"Grasp of {summary.get('fruit') or 'a fruit'} ({dimension}D): "
              + ('slipped' if summary['slipped'] else 'held' if summary['held']
                 else 'not gripped'))
+    return write_html_report(path, title, blocks)
+
+
+def write_runs_index(summaries: Sequence[dict], run_dirs: Sequence[str],
+                     path: str | Path) -> Path:
+    """The page of a recording with several runs: each run's numbers and a link to its
+    own report (``run_dirs``: the runs' folders relative to ``path``)."""
+    blocks = [Block(f'Run {k + 1}', rows=summary_rows(summary),
+                    links=[('its report: plots and the fruit over time',
+                            f'{folder}/report.html')])
+              for k, (summary, folder) in enumerate(zip(summaries, run_dirs))]
+    title = (f"{len(summaries)} runs of {summaries[0].get('fruit') or 'a fruit'} "
+             '(the sim time went back to 0 at a reset between them)')
     return write_html_report(path, title, blocks)
 
 
