@@ -75,13 +75,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         'analyze', help='time series, summary and figures of a recorded grasp',
         description='Read FruitState and jaw wrenches from a recording (no ROS graph needed) '
-                    'and write a CSV time series, a summary JSON and PNG figures.')
+                    'and write a CSV time series, a summary JSON, PNG figures and an HTML '
+                    'report (report.html, opens offline), for each run of the recording.')
     p.add_argument('file', metavar='FILE.mcap')
     p.add_argument('-o', '--output-dir', default=None, metavar='DIR',
                    help='where to write (default: FILE without .mcap, plus _analysis)')
     p.add_argument('--namespace', default=None,
                    help='topic prefix of the sim node, e.g. /gripper_sim (default: found)')
     p.add_argument('--no-figures', action='store_true', help='write CSV and JSON only')
+    p.add_argument('--no-html', action='store_true', help='no report.html')
+    p.add_argument('--quiet', action='store_true',
+                   help='no progress bar (it shows on a terminal after 2 s)')
     p.set_defaults(handler=_analyze)
 
     p = subparsers.add_parser(
@@ -230,14 +234,17 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _analyze(args: argparse.Namespace) -> int:
+    from gripper_sim.cli.progress import StageProgress
     from gripper_sim.recording.analysis import analyze
 
     out_dir = args.output_dir
     if out_dir is None:
         path = Path(args.file)
         out_dir = str(path.with_name(path.stem + '_analysis'))
-    result = analyze(args.file, out_dir, namespace=args.namespace,
-                     figures=not args.no_figures)
+    with StageProgress('analyze', quiet=args.quiet) as progress:
+        result = analyze(args.file, out_dir, namespace=args.namespace,
+                         figures=not args.no_figures, html=not args.no_html,
+                         progress=progress)
     for line in result.describe():
         print(line)
     return 0

@@ -9,6 +9,7 @@ import math
 
 from gripper_sim.core.results import StepResult
 from gripper_sim.core.simulation import Simulation
+from gripper_sim.core.slip import grasp_slipped
 from gripper_sim.errors import CommandError
 
 CLOSING, SQUEEZING, LIFTING, HOLDING, RELEASING, DONE = (
@@ -18,8 +19,6 @@ CLOSING, SQUEEZING, LIFTING, HOLDING, RELEASING, DONE = (
 FORCE_REACHED = 0.97
 #: time (s) the grip force is held on the table before lifting
 SETTLE_TIME = 0.2
-#: slip (m) of the fruit relative to the jaws beyond which the grasp slipped
-SLIP_TOLERANCE = 1e-3
 
 
 class GraspSequence:
@@ -127,7 +126,7 @@ class GraspSequence:
                 self._enter(HOLDING)
         elif self.phase == HOLDING:
             if elapsed >= self.hold_time - 0.5 * sim.dt:
-                if self.slip_distance > SLIP_TOLERANCE:
+                if grasp_slipped(self.slip_distance):
                     self._finish('slipped', f'the fruit slipped {self.slip_distance * 1e3:.2f}'
                                  ' mm relative to the jaws')
                 else:
@@ -153,7 +152,9 @@ class GraspSequence:
         if damage is not None and damage.crushed:
             message += '; crushed: the flesh failed'
         return dict(success=success, outcome=self.outcome or 'running',
-                    slipped=self.outcome in ('slipped', 'dropped'), bruised=self.bruised,
+                    slipped=self.outcome is not None and grasp_slipped(
+                        self.slip_distance, self.dropped_at is not None),
+                    bruised=self.bruised,
                     message=message, max_grip_force=self.max_grip_force,
                     final_gap=self.final_gap, max_compression=self.max_compression,
                     max_contact_pressure=self.max_contact_pressure,
