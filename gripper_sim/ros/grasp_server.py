@@ -42,16 +42,15 @@ class GraspServer:
         self._goals = JawGoals(node.jaws)
         self._server = ActionServer(
             node, Grasp, '~/grasp', execute_callback=self._execute,
-            goal_callback=self._on_goal, handle_accepted_callback=self._goals.accepted,
-            cancel_callback=self._goals.cancel, callback_group=ReentrantCallbackGroup(),
-            feedback_pub_qos_profile=FEEDBACK_QOS)
+            goal_callback=self._on_goal, cancel_callback=self._goals.cancel,
+            callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
 
     def _on_goal(self, goal) -> GoalResponse:
         problem = goal_problem(goal, self._node.params.config)
         if problem:
             self._node.get_logger().warning(f'Grasp goal rejected: {problem}')
             return GoalResponse.REJECT
-        return GoalResponse.ACCEPT
+        return self._goals.accept(goal)
 
     def _execute(self, goal_handle):
         node = self._node

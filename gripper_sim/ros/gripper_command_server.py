@@ -93,9 +93,8 @@ class GripperCommandServer:
         self._goals = JawGoals(node.jaws)
         self._server = ActionServer(
             node, GripperCommand, '~/gripper_cmd', execute_callback=self._execute,
-            goal_callback=self._on_goal, handle_accepted_callback=self._goals.accepted,
-            cancel_callback=self._goals.cancel, callback_group=ReentrantCallbackGroup(),
-            feedback_pub_qos_profile=FEEDBACK_QOS)
+            goal_callback=self._on_goal, cancel_callback=self._goals.cancel,
+            callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
 
     def _on_goal(self, goal) -> GoalResponse:
         command = goal.command
@@ -103,7 +102,7 @@ class GripperCommandServer:
         if problem:
             self._node.get_logger().warning(f'GripperCommand goal rejected: {problem}')
             return GoalResponse.REJECT
-        return GoalResponse.ACCEPT
+        return self._goals.accept(goal)
 
     def _execute(self, goal_handle):
         node = self._node

@@ -1,13 +1,14 @@
 """What the two action servers share about their goals: tickets, cancel, feedback QoS.
 
-Every accepted goal gets a ticket (``JawOwnership.ticket``) in the order the server
-accepted them, so that however the executor orders their execute callbacks, the newest
-goal is the one that drives the jaws. A cancel request marks the run before rclpy does
+Every accepted goal gets a ticket (``JawOwnership.ticket``) in its goal callback, before
+the client hears it was accepted, so tickets follow the order in which clients' goals
+were accepted; however the executor orders their execute callbacks, the newest goal is
+the one that drives the jaws. A cancel request marks the run before rclpy does
 (``ActiveGoal.cancel``), so the run sees it as soon as it wakes.
 """
 from __future__ import annotations
 
-from rclpy.action import CancelResponse
+from rclpy.action import CancelResponse, GoalResponse
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from gripper_sim.ros.sync import ActiveGoal, JawOwnership
@@ -16,10 +17,6 @@ FEEDBACK_PERIOD = 0.05     # s, sim time and wall time
 # Feedback history kept for a slow client: every phase change reaches it even when it
 # reads late (the default depth 10 is 0.2 s of feedback at 50 messages per s).
 FEEDBACK_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def _key(goal_handle) -> bytes:
-    return bytes(goal_handle.goal_id.uuid)
 
 
 class JawGoals:
@@ -31,17 +28,18 @@ class JawGoals:
 
     def __init__(self, jaws: JawOwnership):
         self._jaws = jaws
-        self._tickets: dict[bytes, int] = {}
+        self._tickets: dict[int, int] = {}   # id(goal request) -> ticket
         self._runs: dict[int, ActiveGoal] = {}
 
-    def accepted(self, goal_handle) -> None:
-        """The server's ``handle_accepted_callback``: a ticket, then execute."""
-        self._tickets[_key(goal_handle)] = self._jaws.ticket()
-        goal_handle.execute()
+    def accept(self, goal) -> GoalResponse:
+        """Accept ``goal`` (a valid goal request, in the goal callback) with a ticket."""
+        self._tickets[id(goal)] = self._jaws.ticket()
+        return GoalResponse.ACCEPT
 
     def ticket(self, goal_handle) -> int:
-        """The ticket of an accepted goal (once, at the start of its execution)."""
-        return self._tickets.pop(_key(goal_handle))
+        """The ticket of an accepted goal (once, at the start of its execution; the
+        handle's ``request`` is the goal request the goal callback saw)."""
+        return self._tickets.pop(id(goal_handle.request))
 
     def cancel(self, goal_handle) -> CancelResponse:
         """The server's ``cancel_callback``: always accepted."""

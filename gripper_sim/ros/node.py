@@ -119,7 +119,6 @@ class SimNode(Node):
         # Registered last: it starts or stops the recording, so every other check of
         # the same change has already accepted it.
         self.recording_control = RecordingControl(self, services)
-        self.recording = self.recording_control.recording
         self.jaw_topics = JawCommandTopics(self, qos)
         self.sim_services = SimServices(self, services)
         self.grasp_server = GraspServer(self)
