@@ -10,7 +10,8 @@ What makes a file read by ``ros2 bag info/play`` like one rosbag2 wrote:
 - messages with ``log_time`` = receive time and ``publish_time`` = send time, integer ns;
 - zstd-compressed chunks with message indexes, a Statistics record and a summary;
 - a Metadata record ``rosbag2`` whose ``serialized_metadata`` is the BagMetadata YAML
-  (version 9, ``ros_distro: jazzy``), written on close.
+  (version 9, ``ros_distro: jazzy``, see ``bag_metadata``), written on close: of this
+  file alone, or of the whole bag when ``close`` is given the bag's document.
 
 No data lost: a chunk is closed and handed to the operating system when it reaches
 ``chunk_size`` bytes or when ``flush_interval`` seconds (wall clock) have passed since
@@ -32,103 +33,14 @@ from mcap.writer import CompressionType, IndexType, Writer
 from gripper_sim import __version__
 from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording import schemas
+from gripper_sim.recording.bag_metadata import FileEntry, TopicEntry, bag_metadata_yaml
 from gripper_sim.recording.errors import RecordingError
 
-ROS_DISTRO = 'jazzy'
-BAG_METADATA_VERSION = 9
 PROFILE = 'ros2'
 LIBRARY = f'gripper_sim.recording {__version__}'
 DEFAULT_CHUNK_SIZE = 1024 * 1024
 DEFAULT_FLUSH_INTERVAL = 0.5  # s; SIGKILL loses at most about this much
-
-
-@dataclass
-class TopicEntry:
-    """A topic written to the file.
-
-    Attributes:
-        name: topic name, e.g. ``/gripper_sim/fruit/state``.
-        type: message type, ``pkg/msg/Type``.
-        channel_id: MCAP channel id.
-        offered_qos_profiles: profiles (dicts, see ``qos``) of the publishers seen.
-        type_hash: ``RIHS01_...`` or '' when unknown.
-        message_count: messages written so far.
-    """
-
-    name: str
-    type: str
-    channel_id: int
-    offered_qos_profiles: list = field(default_factory=list)
-    type_hash: str = ''
-    message_count: int = 0
-
-
-def _yaml_str(value: str) -> str:
-    """A YAML scalar for ``value``, quoted only when needed (as yaml-cpp does)."""
-    if value == '':
-        return '""'
-    if any(c in value for c in ':#{}[],&*!|>\'"%@`\n') or value.strip() != value:
-        escaped = value.replace('\\', '\\\\').replace('"', '\\"').replace('\n', '\\n')
-        return f'"{escaped}"'
-    return value
-
-
-def bag_metadata_yaml(*, topics: Iterable[TopicEntry], file_name: str, start_ns: int,
-                      end_ns: int, message_count: int,
-                      custom_data: Mapping[str, str] | None = None) -> str:
-    """The rosbag2 BagMetadata YAML (version 9) for one MCAP file."""
-    duration = max(0, end_ns - start_ns)
-    lines = [
-        f'version: {BAG_METADATA_VERSION}',
-        'storage_identifier: mcap',
-        'duration:',
-        f'  nanoseconds: {duration}',
-        'starting_time:',
-        f'  nanoseconds_since_epoch: {start_ns}',
-        f'message_count: {message_count}',
-    ]
-    topic_list = list(topics)
-    if topic_list:
-        lines.append('topics_with_message_count:')
-        for t in topic_list:
-            lines += [
-                '  - topic_metadata:',
-                f'      name: {_yaml_str(t.name)}',
-                f'      type: {_yaml_str(t.type)}',
-                '      serialization_format: cdr',
-            ]
-            if t.offered_qos_profiles:
-                lines.append('      offered_qos_profiles:')
-                qos_yaml = qos_mod.to_yaml(t.offered_qos_profiles)
-                lines += ['        ' + line for line in qos_yaml.splitlines()]
-            else:
-                lines.append('      offered_qos_profiles: []')
-            lines += [
-                f'      type_description_hash: {_yaml_str(t.type_hash)}',
-                f'    message_count: {t.message_count}',
-            ]
-    else:
-        lines.append('topics_with_message_count: []')
-    lines += [
-        'compression_format: ""',
-        'compression_mode: ""',
-        'relative_file_paths:',
-        f'  - {_yaml_str(file_name)}',
-        'files:',
-        f'  - path: {_yaml_str(file_name)}',
-        '    starting_time:',
-        f'      nanoseconds_since_epoch: {start_ns}',
-        '    duration:',
-        f'      nanoseconds: {duration}',
-        f'    message_count: {message_count}',
-    ]
-    if custom_data:
-        lines.append('custom_data:')
-        lines += [f'  {_yaml_str(k)}: {_yaml_str(v)}' for k, v in custom_data.items()]
-    else:
-        lines.append('custom_data: ~')
-    lines.append(f'ros_distro: {ROS_DISTRO}')
-    return '\n'.join(lines) + '\n'
+COMPRESSIONS = ('zstd', 'lz4', 'none')
 
 
 class BagWriter:
@@ -182,10 +94,9 @@ class BagWriter:
         self._schema_ids: dict[str, int] = {}
         self._sequence: dict[str, int] = {}
         self._custom_data: dict[str, str] = {}
-        self._message_count = 0
+        self._file = FileEntry(self.path.name)
         self._bytes_written = 0
-        self._start_ns: int | None = None
-        self._end_ns = 0
+        self._pending_bytes = 0
         self._last_flush = 0.0
         self._pending = 0
 
@@ -235,8 +146,12 @@ class BagWriter:
             self._stream.flush()
             self._last_flush = self._clock()
 
-    def close(self) -> None:
+    def close(self, bag_document: str | None = None) -> None:
         """Write the rosbag2 metadata record, the summary and the footer; close the file.
+
+        Args:
+            bag_document: the BagMetadata YAML to store (a split bag's writer passes the
+                whole bag's); default: this file's own.
 
         Closing twice is allowed and does nothing the second time.
         """
@@ -247,10 +162,8 @@ class BagWriter:
             writer, self._writer = self._writer, None
             self._closed = True
             try:
-                writer.add_metadata('rosbag2', {
-                    'serialized_metadata': self.bag_metadata(),
-                    'ROS_DISTRO': ROS_DISTRO,
-                })
+                document = self.bag_metadata() if bag_document is None else bag_document
+                writer.add_metadata('rosbag2', {'serialized_metadata': document})
                 writer.finish()
                 self._stream.flush()
                 os.fsync(self._stream.fileno())
@@ -370,13 +283,10 @@ class BagWriter:
             except OSError as err:
                 raise RecordingError(f'cannot write {self.path}: {err.strerror}') from err
             entry.message_count += 1
-            self._message_count += 1
+            self._file.add(log_time)
             self._pending += 1
+            self._pending_bytes += len(data)
             self._bytes_written += len(data)
-            if self._start_ns is None or log_time < self._start_ns:
-                self._start_ns = log_time
-            if log_time > self._end_ns:
-                self._end_ns = log_time
             if self._clock() - self._last_flush >= self._flush_interval:
                 self._flush_locked()
 
@@ -410,6 +320,7 @@ class BagWriter:
         except OSError as err:
             raise RecordingError(f'cannot write {self.path}: {err.strerror}') from err
         self._pending = 0
+        self._pending_bytes = 0
         self._last_flush = self._clock()
 
     def flush(self) -> None:
@@ -435,7 +346,20 @@ class BagWriter:
 
     @property
     def message_count(self) -> int:
-        return self._message_count
+        return self._file.message_count
+
+    @property
+    def file_entry(self) -> FileEntry:
+        """This file's name, log-time span and message count so far."""
+        return self._file
+
+    @property
+    def size(self) -> int:
+        """Bytes of the file so far: what is on disk plus the payload of the open chunk."""
+        with self._lock:
+            if self._stream is None or self._stream.closed:
+                return self.path.stat().st_size if self.path.exists() else 0
+            return self._stream.tell() + self._pending_bytes
 
     @property
     def payload_bytes(self) -> int:
@@ -443,10 +367,7 @@ class BagWriter:
         return self._bytes_written
 
     def bag_metadata(self) -> str:
-        """The rosbag2 BagMetadata YAML for what was written so far."""
+        """The rosbag2 BagMetadata YAML of this file alone, for what was written so far."""
         with self._lock:
-            start = self._start_ns if self._start_ns is not None else 0
-            return bag_metadata_yaml(
-                topics=list(self._topics.values()), file_name=self.path.name,
-                start_ns=start, end_ns=self._end_ns if self._start_ns is not None else 0,
-                message_count=self._message_count, custom_data=self._custom_data)
+            return bag_metadata_yaml(topics=list(self._topics.values()), files=[self._file],
+                                     custom_data=self._custom_data)
