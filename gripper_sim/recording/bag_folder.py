@@ -318,6 +318,8 @@ def open_bag_writer(path: str | os.PathLike, *, max_bag_size: int = 0,
             raise RecordingError(f'{path} is a single .mcap file and cannot be split; give a '
                                  'bag folder name (without .mcap) to split by size or duration')
         return BagWriter(path, **options)
+    if options.pop('overwrite', False):
+        raise RecordingError(f'{path}: a bag folder is never overwritten; remove it first')
     return BagFolderWriter(path, max_bag_size=max_bag_size, max_bag_duration=max_bag_duration,
                            **options)
 

@@ -4,8 +4,13 @@ A recorder killed with SIGKILL leaves a file with a header, whole chunks (the wr
 closes a chunk at least every ``flush_interval``), perhaps half a chunk, and no summary
 or footer. ``recover`` reads the data section record by record, keeps every schema,
 channel, message and metadata record of every chunk that is whole and passes its CRC,
-stops at the first cut record, and writes all of it to a new file with a fresh summary,
-statistics and rosbag2 metadata. The input file is only ever opened for reading.
+stops at the first cut record, and writes all of it to a new file with a fresh summary
+and statistics. The output keeps the input's header (profile, library) and every
+channel, also those without messages; only a ``ros2`` file gets a fresh rosbag2
+metadata record. The input file is only ever opened for reading.
+
+A bag folder is recovered file by file into a new bag folder with its own
+``metadata.yaml``.
 """
 from __future__ import annotations
 
@@ -23,7 +28,7 @@ from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
 from gripper_sim.recording.errors import RecordingError
-from gripper_sim.recording.reader import MCAP_MAGIC, READ_ERRORS, check_mcap_start
+from gripper_sim.recording.reader import MCAP_MAGIC, READ_ERRORS, check_mcap_start, has_footer
 from gripper_sim.recording.writer import BagWriter
 
 _KNOWN_OPCODES = {int(op) for op in Opcode}
@@ -39,7 +44,8 @@ class RecoverReport:
         topics: topic name -> messages kept.
         chunks: whole chunks read.
         damaged_chunks: chunks skipped because they failed to decompress or their CRC.
-        complete: the input had a data-end record (it was not cut short).
+        complete: the input was whole: a data-end record, then the summary and the footer
+            (a file cut anywhere, even after its data, is not complete).
         stopped_at: byte offset where reading stopped.
         input_size: bytes in the input.
         reason: why reading stopped before the end, '' when it reached the end.
@@ -105,7 +111,9 @@ def scan(path: str | os.PathLike) -> _Scan:
                 report.reason = f'unreadable data at byte {offset} (opcode {opcode:#x})'
                 break
             if opcode == Opcode.DATA_END or opcode == Opcode.FOOTER:
-                report.complete = True
+                report.complete = has_footer(path)
+                if not report.complete:
+                    report.reason = 'the file is cut after its data (no footer)'
                 break
             if length > min(_MAX_RECORD, report.input_size - offset - 9):
                 report.reason = (f'the record at byte {offset} is cut: it needs {length} '
@@ -134,6 +142,22 @@ def scan(path: str | os.PathLike) -> _Scan:
     return result
 
 
+def _add_channel(bag: BagWriter, channel: Channel, schemas: dict[int, Schema],
+                 topics: dict[int, str]) -> None:
+    """Register ``channel`` in the output as it was (nothing if its schema was lost)."""
+    if channel.id in topics:
+        return
+    schema = schemas.get(channel.schema_id)
+    if schema is None and channel.schema_id != 0:
+        return  # its schema record was in a lost chunk
+    bag.add_topic(channel.topic, schema.name if schema else '',
+                  definition=schema.data if schema else b'',
+                  schema_encoding=schema.encoding if schema else '',
+                  message_encoding=channel.message_encoding,
+                  channel_metadata=channel.metadata)
+    topics[channel.id] = channel.topic
+
+
 def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
             overwrite: bool = False) -> RecoverReport:
     """Write every whole message of ``src`` into a new, indexed file ``dst``.
@@ -154,38 +178,32 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
     if result.header is None:
         raise RecordingError(f'{src} has no readable MCAP header: nothing to recover')
     schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
+    topics: dict[int, str] = {}   # channel id -> topic registered in the output
     dst_dir = dst.parent if str(dst.parent) else Path('.')
     if not dst_dir.is_dir():
         raise RecordingError(f'{dst}: directory {dst_dir} does not exist')
     fd, tmp_name = tempfile.mkstemp(prefix=f'.{dst.name}.', suffix='.part', dir=dst_dir)
     os.close(fd)
     tmp = Path(tmp_name)
+    header = result.header
     try:
-        with BagWriter(tmp, overwrite=True) as bag:
+        with BagWriter(tmp, overwrite=True, profile=header.profile,
+                       library=header.library) as bag:
             for record in result.records:
                 if isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
-                    channels[record.id] = record
+                    _add_channel(bag, record, schemas, topics)
                 elif isinstance(record, Metadata):
                     if record.name != 'rosbag2':
                         bag.add_metadata(record.name, dict(record.metadata))
                 elif isinstance(record, Message):
-                    channel = channels.get(record.channel_id)
-                    if channel is None:
+                    topic = topics.get(record.channel_id)
+                    if topic is None:
                         continue  # its channel record was in a lost chunk
-                    if not bag.has_topic(channel.topic):
-                        schema = schemas.get(channel.schema_id)
-                        bag.add_topic(
-                            channel.topic, schema.name if schema else '',
-                            definition=schema.data.decode('utf-8') if schema else '',
-                            schema_encoding=schema.encoding if schema else '',
-                            message_encoding=channel.message_encoding,
-                            channel_metadata=channel.metadata)
-                    bag.write(channel.topic, record.data, log_time=record.log_time,
+                    bag.write(topic, record.data, log_time=record.log_time,
                               publish_time=record.publish_time, sequence=record.sequence)
-                    report.topics[channel.topic] = report.topics.get(channel.topic, 0) + 1
+                    report.topics[topic] = report.topics.get(topic, 0) + 1
                     if report.messages == 0:
                         report.start_time = report.end_time = record.log_time
                     report.start_time = min(report.start_time, record.log_time)

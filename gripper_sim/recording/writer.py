@@ -60,6 +60,8 @@ class BagWriter:
             written to the operating system, even if not full.
         compression: 'zstd' (default), 'lz4' or 'none'.
         library: the header's library string.
+        profile: the header's profile: 'ros2' (default) adds the rosbag2 metadata record
+            on close; another profile (a foreign file being recovered) does not.
         clock: monotonic seconds for the flush policy (tests pass a fake one).
 
     Thread-safe: ``write`` may be called from several threads.
@@ -68,7 +70,7 @@ class BagWriter:
     def __init__(self, path: str | os.PathLike, *, overwrite: bool = False,
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_interval: float = DEFAULT_FLUSH_INTERVAL,
-                 compression: str = 'zstd', library: str = LIBRARY,
+                 compression: str = 'zstd', library: str = LIBRARY, profile: str = PROFILE,
                  clock: Callable[[], float] = time.monotonic):
         self.path = Path(path)
         self._overwrite = overwrite
@@ -85,6 +87,7 @@ class BagWriter:
             msg = f"compression must be 'zstd', 'lz4' or 'none', got {compression!r}"
             raise RecordingError(msg) from None
         self._library = library
+        self._profile = profile
         self._clock = clock
         self._lock = threading.RLock()
         self._stream: Any = None
@@ -142,7 +145,7 @@ class BagWriter:
                 index_types=IndexType.ALL, repeat_channels=True, repeat_schemas=True,
                 use_chunking=True, use_statistics=True, use_summary_offsets=True,
                 enable_crcs=True)
-            self._writer.start(profile=PROFILE, library=self._library)
+            self._writer.start(profile=self._profile, library=self._library)
             self._stream.flush()
             self._last_flush = self._clock()
 
@@ -162,8 +165,9 @@ class BagWriter:
             writer, self._writer = self._writer, None
             self._closed = True
             try:
-                document = self.bag_metadata() if bag_document is None else bag_document
-                writer.add_metadata('rosbag2', {'serialized_metadata': document})
+                if self._profile == PROFILE:
+                    document = self.bag_metadata() if bag_document is None else bag_document
+                    writer.add_metadata('rosbag2', {'serialized_metadata': document})
                 writer.finish()
                 self._stream.flush()
                 os.fsync(self._stream.fileno())
@@ -181,7 +185,7 @@ class BagWriter:
     # ------------------------------------------------------------------ content
     def add_topic(self, name: str, type_name: str, *,
                   offered_qos_profiles: Iterable[Mapping[str, Any]] | None = None,
-                  type_hash: str | None = None, definition: str | None = None,
+                  type_hash: str | None = None, definition: str | bytes | None = None,
                   schema_encoding: str = 'ros2msg',
                   message_encoding: str = 'cdr',
                   channel_metadata: Mapping[str, str] | None = None) -> TopicEntry:
@@ -193,8 +197,9 @@ class BagWriter:
             offered_qos_profiles: QoS profile dicts of its publishers (default: one
                 reliable keep-last-10 profile).
             type_hash: RIHS01 hash; default: looked up from the installed type description.
-            definition: schema text; default: built from the installed .msg files.
-            schema_encoding: 'ros2msg' (default) or 'ros2idl' with ``definition``.
+            definition: schema text (or bytes); default: built from the installed .msg files.
+            schema_encoding: 'ros2msg' (default) or 'ros2idl' with ``definition``; '' with
+                an empty ``definition`` for a channel without a schema (foreign files).
             message_encoding: 'cdr' (default; the only one ROS 2 tools play).
             channel_metadata: channel metadata to store verbatim (e.g. copied from another
                 file); overrides ``offered_qos_profiles`` and ``type_hash``.
@@ -215,12 +220,14 @@ class BagWriter:
                            f'cannot add it again as {type_name}')
                     raise RecordingError(msg)
                 return existing
-            schema_id = self._schema_ids.get(type_name)
+            schema_id = 0 if schema_encoding == '' and not definition else \
+                self._schema_ids.get(type_name)
             if schema_id is None:
                 if definition is None:
                     definition = schemas.message_definition(type_name)
-                schema_id = writer.register_schema(type_name, schema_encoding,
-                                                   definition.encode('utf-8'))
+                data = definition.encode('utf-8') if isinstance(definition, str) \
+                    else bytes(definition)
+                schema_id = writer.register_schema(type_name, schema_encoding, data)
                 self._schema_ids[type_name] = schema_id
             if channel_metadata is not None:
                 metadata = {str(k): str(v) for k, v in channel_metadata.items()}
