@@ -28,6 +28,7 @@ from typing import Any, Iterable, Mapping
 from gripper_sim import __version__
 from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.bag_folder import open_bag_writer
+from gripper_sim.recording.cdr import CdrTrimmer
 from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
 
 CONFIG_METADATA = 'gripper_sim_config'
@@ -76,6 +77,7 @@ class SimRecorder:
                             for s in self.suffixes}
         self.initial = initial
         self.source = source
+        self._trimmer = CdrTrimmer()
         self.writer = open_bag_writer(path, overwrite=overwrite, flush_interval=flush_interval)
         self.steps_seen = 0
         self.samples = 0
@@ -174,7 +176,9 @@ class SimRecorder:
                 topic = self.topic_names.get(suffix)
                 if topic is None:
                     continue
-                self.writer.write(topic, serialize_message(msg), log_time=log_time,
+                data = self._trimmer.trim(self._messages.TOPICS[suffix][1],
+                                          serialize_message(msg))
+                self.writer.write(topic, data, log_time=log_time,
                                   publish_time=log_time)
             self.samples += 1
             self._last_time_ns = log_time

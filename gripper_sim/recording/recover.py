@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import io
 import os
+import shutil
 import struct
 import tempfile
 from dataclasses import dataclass, field
@@ -27,8 +28,13 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
+from gripper_sim.recording.bag_folder import (bag_files, check_new_bag_path, is_single_file,
+                                              storage_file_name)
+from gripper_sim.recording.bag_metadata import (FileEntry, TopicEntry, bag_metadata_yaml,
+                                                write_metadata_file)
 from gripper_sim.recording.errors import RecordingError
-from gripper_sim.recording.reader import MCAP_MAGIC, READ_ERRORS, check_mcap_start, has_footer
+from gripper_sim.recording.reader import (MCAP_MAGIC, READ_ERRORS, McapFile, check_mcap_start,
+                                          has_footer)
 from gripper_sim.recording.writer import BagWriter
 
 _KNOWN_OPCODES = {int(op) for op in Opcode}
@@ -233,3 +239,90 @@ def iter_report_lines(report: RecoverReport, src: Path, dst: Path) -> Iterator[s
         yield f'        {span:.3f} s of messages'
     for topic, count in sorted(report.topics.items()):
         yield f'        {topic}: {count}'
+
+
+@dataclass
+class BagRecoverReport:
+    """What ``recover_bag`` did: one ``RecoverReport`` per input file it rebuilt.
+
+    Attributes:
+        files: (input file, output file or None when it held nothing whole, report or
+            the reason it was skipped).
+        metadata_file: the ``metadata.yaml`` written.
+    """
+
+    files: list = field(default_factory=list)
+    metadata_file: Path | None = None
+
+    @property
+    def messages(self) -> int:
+        return sum(r.messages for _, _, r in self.files if isinstance(r, RecoverReport))
+
+
+def _folder_metadata(files: list[Path]) -> str:
+    """The BagMetadata YAML of a bag made of the (whole, readable) ``files``."""
+    topics: dict[str, TopicEntry] = {}
+    entries = []
+    for path in files:
+        with McapFile(path) as part:
+            entry = FileEntry(path.name, message_count=part.message_count)
+            if part.message_count:
+                entry.start_ns, entry.end_ns = part.start_time, part.end_time
+            entries.append(entry)
+            for name, info in part.topics.items():
+                if info.message_encoding != 'cdr':
+                    continue
+                total = topics.setdefault(name, TopicEntry(
+                    name=name, type=info.type, channel_id=info.channel_id,
+                    offered_qos_profiles=info.offered_qos_profiles, type_hash=info.type_hash))
+                total.message_count += info.message_count
+    return bag_metadata_yaml(topics=list(topics.values()), files=entries)
+
+
+def recover_bag(src: str | os.PathLike, dst: str | os.PathLike) -> BagRecoverReport:
+    """Recover every file of the bag folder ``src`` into the new bag folder ``dst``.
+
+    The files are those ``src/metadata.yaml`` lists or, when the recorder died before
+    writing it, the folder's ``*.mcap`` files in split order. A file holding nothing
+    whole is left out; ``dst/metadata.yaml`` describes what was kept.
+
+    Raises:
+        RecordingError: ``src`` is not a recording folder; ``dst`` exists or cannot be
+            created; no file held a whole message.
+    """
+    src, dst = Path(src), Path(dst)
+    files, _ = bag_files(src)
+    target = check_new_bag_path(dst)
+    if is_single_file(target):
+        raise RecordingError(f'{dst}: a bag folder is recovered into a new bag folder; give '
+                             'a name without .mcap')
+    try:
+        target.mkdir()
+    except OSError as err:
+        raise RecordingError(f'cannot create {target}: {err.strerror}') from err
+    report = BagRecoverReport()
+    written: list[Path] = []
+    for path in files:
+        out = target / storage_file_name(target, len(written))
+        try:
+            report.files.append((path, out, recover(path, out)))
+        except RecordingError as err:
+            report.files.append((path, None, str(err)))
+            continue
+        written.append(out)
+    if not written:
+        shutil.rmtree(target, ignore_errors=True)
+        raise RecordingError(f'{src}: no file holds a whole message: nothing to recover')
+    report.metadata_file = write_metadata_file(target, _folder_metadata(written))
+    return report
+
+
+def iter_bag_report_lines(report: BagRecoverReport, src: Path, dst: Path) -> Iterator[str]:
+    """Human-readable lines describing a bag folder recovery."""
+    yield f'bag:    {src} -> {dst} ({report.messages} messages)'
+    for path, out, file_report in report.files:
+        if out is None:
+            yield f'input:  {path}: skipped ({file_report})'
+        else:
+            yield from iter_report_lines(file_report, path, out)
+    yield f'        {report.metadata_file}'

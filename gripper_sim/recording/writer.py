@@ -84,7 +84,7 @@ class BagWriter:
             self._compression = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                                  'none': CompressionType.NONE}[compression]
         except KeyError:
-            msg = f"compression must be 'zstd', 'lz4' or 'none', got {compression!r}"
+            msg = f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}"
             raise RecordingError(msg) from None
         self._library = library
         self._profile = profile
