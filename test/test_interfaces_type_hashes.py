@@ -14,7 +14,6 @@ package computes for its ROS 2 Jazzy type store (checked below).
 from __future__ import annotations
 
 import json
-import os
 import time
 from pathlib import Path
 
@@ -24,7 +23,6 @@ import rclpy
 from rosbags.typesys import Stores, get_typestore
 
 from gripper_sim.recording.schemas import search_prefixes
-from gripper_sim.ros.process import pick_domain_id, ros_environment
 
 INTERFACES = Path(__file__).resolve().parent.parent / 'interfaces'
 PACKAGES = ('tf2_msgs', 'control_msgs', 'simulation_interfaces')
@@ -123,14 +121,8 @@ def test_the_type_support_reports_the_upstream_hash_on_the_graph():
     from simulation_interfaces.msg import EntityState
     from tf2_msgs.msg import TFMessage
 
-    domain = pick_domain_id(53)
-    env = ros_environment(domain)
-    keys = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'RMW_IMPLEMENTATION',
-            'FASTRTPS_DEFAULT_PROFILES_FILE')
-    saved = {k: os.environ.get(k) for k in keys}
-    os.environ.update({k: env[k] for k in keys})
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
+    rclpy.init(context=context)       # the session's own domain and loopback discovery
     try:
         node = rclpy.create_node('type_hash_check', context=context)
         types = {'/tf': TFMessage, '/gripper_command': GripperCommand,
@@ -147,11 +139,6 @@ def test_the_type_support_reports_the_upstream_hash_on_the_graph():
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
     assert reported == {
         '/tf': ('tf2_msgs/msg/TFMessage', UPSTREAM_HASHES['tf2_msgs/msg/TFMessage']),
         '/gripper_command': ('control_msgs/msg/GripperCommand',

@@ -117,7 +117,42 @@ def has_footer(path: Path) -> bool:
     return tail[0] == 0x02 and tail[-MAGIC_SIZE:] == MCAP_MAGIC
 
 
-class McapFile:
+class _Summary:
+    """What a file and a whole bag both tell: header strings, counts, times, Metadata
+    records; opened and closed as a context manager."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self._topics: dict[str, TopicInfo] = {}
+        self.profile = ''
+        self.library = ''
+        self.start_time = 0
+        self.end_time = 0
+        self.message_count = 0
+        self.chunk_count = 0
+        self.compression: set[str] = set()
+        self.metadata: list[tuple[str, dict[str, str]]] = []
+
+    def open(self) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self):
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topics by name."""
+        return dict(self._topics)
+
+
+class McapFile(_Summary):
     """One MCAP file written by rosbag2, by ``BagWriter`` or by any MCAP writer.
 
     The storage layer of ``BagReader``: its summary (schemas, channels, counts, times),
@@ -129,30 +164,14 @@ class McapFile:
     """
 
     def __init__(self, path: str | os.PathLike):
-        self.path = Path(path)
+        super().__init__(path)
         self._file: Any = None
         self._reader: SeekingReader | None = None
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._counts: dict[int, int] = {}
-        self._topics: dict[str, TopicInfo] = {}
-        self.profile = ''
-        self.library = ''
-        self.start_time = 0
-        self.end_time = 0
-        self.message_count = 0
-        self.chunk_count = 0
-        self.compression: set[str] = set()
-        self.metadata: list[tuple[str, dict[str, str]]] = []
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> McapFile:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def open(self) -> None:
         if self._file is not None:
             raise RecordingError(f'{self.path}: reader is already open')
@@ -282,11 +301,6 @@ class McapFile:
         return self._reader
 
     # ------------------------------------------------------------------ contents
-    @property
-    def topics(self) -> dict[str, TopicInfo]:
-        """Topics by name."""
-        return dict(self._topics)
-
     def messages(self, topics: Iterable[str] | None = None, *, start: int | None = None,
                  end: int | None = None) -> Iterator[RawMessage]:
         """Messages in log-time order.
@@ -352,7 +366,7 @@ class McapFile:
         return safe_decode
 
 
-class BagReader:
+class BagReader(_Summary):
     """Reads a recording: a rosbag2 bag folder of MCAP files, or one MCAP file.
 
     Use as a context manager::
@@ -374,28 +388,12 @@ class BagReader:
     """
 
     def __init__(self, path: str | os.PathLike):
-        self.path = Path(path)
+        super().__init__(path)
         self.files: list[Path] = []
         self.folder_metadata: dict | None = None
         self._parts: list[McapFile] = []
-        self._topics: dict[str, TopicInfo] = {}
-        self.profile = ''
-        self.library = ''
-        self.start_time = 0
-        self.end_time = 0
-        self.message_count = 0
-        self.chunk_count = 0
-        self.compression: set[str] = set()
-        self.metadata: list[tuple[str, dict[str, str]]] = []
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> BagReader:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     @property
     def is_folder(self) -> bool:
         return self.path.is_dir()
@@ -440,11 +438,6 @@ class BagReader:
         return sum(part.verify() for part in self._parts)
 
     # ------------------------------------------------------------------ contents
-    @property
-    def topics(self) -> dict[str, TopicInfo]:
-        """Topics by name, with their message counts over all files."""
-        return dict(self._topics)
-
     @property
     def duration_ns(self) -> int:
         return max(0, self.end_time - self.start_time) if self.message_count else 0
