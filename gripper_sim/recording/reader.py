@@ -407,9 +407,12 @@ class BagReader(_Summary):
                 part = McapFile(file)
                 part.open()
                 self._parts.append(part)
-        except RecordingError:
+        except RecordingError as err:
             self.close()
-            raise
+            if not self.path.is_dir():
+                raise
+            raise RecordingError(f'{err} (for the whole bag: gripper-sim recover '
+                                 f'{self.path} FIXED)') from err
         first = self._parts[0]
         self.profile, self.library = first.profile, first.library
         with_messages = [p for p in self._parts if p.message_count]
