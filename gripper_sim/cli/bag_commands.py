@@ -173,7 +173,7 @@ def info_dict(path: str) -> dict:
                         'type_hash': t.type_hash,
                         'qos': t.offered_qos_profiles}
                        for t in bag.topics.values()],
-            'metadata': [name for name, _ in bag.metadata],
+            'metadata': list(dict.fromkeys(name for name, _ in bag.metadata)),
         }
 
 

@@ -29,7 +29,7 @@ from gripper_sim.recording.bag_metadata import (METADATA_FILE, FileEntry, TopicE
                                                 write_metadata_file)
 from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_INTERVAL,
-                                          BagWriter)
+                                          BagWriter, check_options)
 
 MCAP_SUFFIX = '.mcap'
 #: rosbag2 refuses smaller split sizes for MCAP as well (its minimum split file size).
@@ -117,7 +117,8 @@ class BagFolderWriter:
         self._writer_options: dict[str, Any] = {
             'compression': compression, 'chunk_size': chunk_size,
             'flush_interval': flush_interval, 'clock': clock}
-        BagWriter(self.path / 'check.mcap', **self._writer_options)  # validates the options
+        check_options(chunk_size=chunk_size, flush_interval=flush_interval,
+                      compression=compression)
         self._lock = threading.RLock()
         self._current: BagWriter | None = None
         self._files: list[FileEntry] = []

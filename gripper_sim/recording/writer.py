@@ -43,6 +43,24 @@ DEFAULT_FLUSH_INTERVAL = 0.5  # s; SIGKILL loses at most about this much
 COMPRESSIONS = ('zstd', 'lz4', 'none')
 
 
+def check_options(*, chunk_size: int, flush_interval: float, compression: str) -> Any:
+    """The MCAP compression type for ``compression``, after checking every option.
+
+    Raises:
+        RecordingError: a non-positive chunk size or flush interval, an unknown compression.
+    """
+    if chunk_size <= 0:
+        raise RecordingError(f'chunk_size must be positive, got {chunk_size}')
+    if not flush_interval > 0:
+        raise RecordingError(f'flush_interval must be positive, got {flush_interval}')
+    types = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+             'none': CompressionType.NONE}
+    if compression not in types:
+        msg = f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}"
+        raise RecordingError(msg)
+    return types[compression]
+
+
 class BagWriter:
     """Writes one rosbag2-compatible MCAP file.
 
@@ -74,18 +92,11 @@ class BagWriter:
                  clock: Callable[[], float] = time.monotonic):
         self.path = Path(path)
         self._overwrite = overwrite
-        if chunk_size <= 0:
-            raise RecordingError(f'chunk_size must be positive, got {chunk_size}')
-        if not flush_interval > 0:
-            raise RecordingError(f'flush_interval must be positive, got {flush_interval}')
+        self._compression = check_options(chunk_size=chunk_size,
+                                          flush_interval=flush_interval,
+                                          compression=compression)
         self._chunk_size = int(chunk_size)
         self._flush_interval = float(flush_interval)
-        try:
-            self._compression = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-                                 'none': CompressionType.NONE}[compression]
-        except KeyError:
-            msg = f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}"
-            raise RecordingError(msg) from None
         self._library = library
         self._profile = profile
         self._clock = clock
