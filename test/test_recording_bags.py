@@ -23,7 +23,6 @@ from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.offline import SimRecorder
 from gripper_sim.recording.reader import BagReader, McapFile
 from gripper_sim.recording.recorder import TopicSelection
-from gripper_sim.recording.recover import recover_bag
 
 # rosbag2 (jazzy) rosbag2_storage/yaml.hpp, convert<BagMetadata>::encode, in this order.
 BAG_KEYS = ['version', 'storage_identifier', 'duration', 'starting_time', 'message_count',
