@@ -219,7 +219,7 @@ class BagWriter:
         """
         if schema_encoding in ('ros2msg', 'ros2idl'):
             type_name = schemas.full_type_name(type_name)
-        if not name.startswith('/') and message_encoding == 'cdr':
+        if not name.startswith('/') and message_encoding == 'cdr' and channel_metadata is None:
             raise RecordingError(f"topic name '{name}' must be absolute (start with '/')")
         with self._lock:
             writer = self._require_open()
