@@ -28,6 +28,7 @@ from gripper_sim.recording.bag_metadata import (METADATA_FILE, FileEntry, TopicE
                                                 bag_metadata_yaml, read_metadata_file,
                                                 write_metadata_file)
 from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.lifecycle import OpenClose
 from gripper_sim.recording.writer import (DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_INTERVAL,
                                           BagWriter, check_options)
 
@@ -71,7 +72,7 @@ def check_new_bag_path(path: str | os.PathLike) -> Path:
     return target
 
 
-class BagFolderWriter:
+class BagFolderWriter(OpenClose):
     """Writes a rosbag2 bag folder of MCAP files, split by size and/or duration.
 
     Use as a context manager, like ``BagWriter``::
@@ -130,13 +131,6 @@ class BagFolderWriter:
         self._bytes_written = 0
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> BagFolderWriter:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     @property
     def is_open(self) -> bool:
         return self._current is not None

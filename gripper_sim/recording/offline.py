@@ -27,6 +27,7 @@ from typing import Any, Iterable, Mapping
 
 from gripper_sim import __version__
 from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.lifecycle import OpenClose
 from gripper_sim.recording.bag_folder import open_bag_writer
 from gripper_sim.recording.cdr import CdrTrimmer
 from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
@@ -34,7 +35,7 @@ from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
 CONFIG_METADATA = 'gripper_sim_config'
 
 
-class SimRecorder:
+class SimRecorder(OpenClose):
     """Writes every ``every``-th step of a run to a rosbag2 bag folder or MCAP file.
 
     Args:
@@ -92,13 +93,6 @@ class SimRecorder:
         return self.writer.path
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> SimRecorder:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     @property
     def is_open(self) -> bool:
         return self.writer.is_open

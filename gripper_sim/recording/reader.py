@@ -29,6 +29,7 @@ from mcap.stream_reader import MAGIC_SIZE, CRCValidationError
 from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording.bag_folder import bag_files
 from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.lifecycle import OpenClose
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, offset start, crc
@@ -117,9 +118,9 @@ def has_footer(path: Path) -> bool:
     return tail[0] == 0x02 and tail[-MAGIC_SIZE:] == MCAP_MAGIC
 
 
-class _Summary:
+class _Summary(OpenClose):
     """What a file and a whole bag both tell: header strings, counts, times, Metadata
-    records; opened and closed as a context manager."""
+    records."""
 
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
@@ -132,19 +133,6 @@ class _Summary:
         self.chunk_count = 0
         self.compression: set[str] = set()
         self.metadata: list[tuple[str, dict[str, str]]] = []
-
-    def open(self) -> None:
-        raise NotImplementedError
-
-    def close(self) -> None:
-        raise NotImplementedError
-
-    def __enter__(self):
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     @property
     def topics(self) -> dict[str, TopicInfo]:

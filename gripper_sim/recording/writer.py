@@ -34,6 +34,7 @@ from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording import schemas
 from gripper_sim.recording.bag_metadata import FileEntry, TopicEntry, bag_metadata_yaml
 from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.lifecycle import OpenClose
 
 PROFILE = 'ros2'
 LIBRARY = f'gripper_sim.recording {__version__}'
@@ -60,7 +61,7 @@ def check_options(*, chunk_size: int, flush_interval: float, compression: str) -
     return types[compression]
 
 
-class BagWriter:
+class BagWriter(OpenClose):
     """Writes one rosbag2-compatible MCAP file.
 
     Use as a context manager::
@@ -114,13 +115,6 @@ class BagWriter:
         self._pending = 0
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> BagWriter:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     @property
     def is_open(self) -> bool:
         return self._writer is not None
