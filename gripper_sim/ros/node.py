@@ -533,7 +533,7 @@ class SimNode(Node):
 
     def _recording_target(self, path: str) -> Path:
         """The bag folder (or ``.mcap`` file) ``record_path`` = ``path`` names."""
-        return Path(path).expanduser().absolute()
+        return self.recording.target(path)
 
     def _record_path_problem(self, path: str) -> str | None:
         """Why recording to ``path`` cannot start, or None (checked before switching)."""
