@@ -191,3 +191,14 @@ def test_the_type_support_reports_the_upstream_hash_on_the_graph():
         '/entity_state': ('simulation_interfaces/msg/EntityState',
                           UPSTREAM_HASHES['simulation_interfaces/msg/EntityState']),
     }
+
+
+def test_an_apt_or_colcon_install_uses_the_real_packages():
+    from catkin_pkg.package import parse_package
+    declared = {d.name for d in parse_package(str(INTERFACES.parent)).exec_depends}
+    assert set(PACKAGES) <= declared
+    for package in PACKAGES:
+        ours = parse_package(str(INTERFACES / package))
+        assert ours.name == package
+        assert 'rosidl_interface_packages' in [g.name for g in ours.member_of_groups]
+        assert (INTERFACES / package / 'COLCON_IGNORE').is_file()   # colcon skips ours
