@@ -9,6 +9,9 @@ import yaml
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader as RosbagsReader
+from rosbags.typesys import Stores, get_typestore
+from geometry_msgs.msg import Point
+from visualization_msgs.msg import Marker, MarkerArray
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -268,3 +271,31 @@ def test_rosbags_decodes_every_topic_of_a_simulation_bag(tmp_path):
     assert len(ours) == len(types) and all(len(v) == 6 for v in ours.values())
     state = deserialize_message(ours['/joint_states'][-1], JointState)
     assert len(state.name) == len(state.position) > 0
+
+
+def test_trimmer_cuts_rclpys_stale_tail_to_where_rosbags_ends_the_message():
+    store = get_typestore(Stores.ROS2_JAZZY)
+    trimmer = CdrTrimmer()
+    cases = []
+    for k in range(4):
+        for values in ([], [1.0], [1.0, 2.0]):
+            msg = JointState()
+            msg.header.frame_id, msg.name = 'w' * k, ['j'] * k
+            msg.position, msg.effort = values, values[:1]
+            cases.append(('sensor_msgs/msg/JointState', msg))
+    for k in range(5):
+        marker = Marker(ns='n' * k, text='t' * k, points=[Point(x=float(i)) for i in range(k)])
+        cases.append(('visualization_msgs/msg/MarkerArray', MarkerArray(markers=[marker] * k)))
+    longer = 0
+    for type_name, msg in cases:
+        data = serialize_message(msg)
+        exact = trimmer.trim(type_name, data)
+        longer += len(data) > len(exact)
+        msgdef = store.get_msgdef(type_name)
+        _, end = msgdef.deserialize_cdr_le(memoryview(data)[4:], 0, msgdef.cls, store)
+        assert len(exact) == 4 + end
+        store.deserialize_cdr(exact, type_name)          # the strict reader accepts it
+        assert deserialize_message(exact, type(msg)) == msg
+    assert longer > 0    # rclpy did append stale bytes to some of them
+    assert trimmer.trim('std_msgs/msg/String', b'\x00\x01\x00\x00\x10') == \
+        b'\x00\x01\x00\x00\x10'                          # cut short: kept as it is
