@@ -75,9 +75,10 @@ NODE_PARAMETERS: tuple[NodeParameter, ...] = (
                   open_low=True),
     NodeParameter('stall_timeout', 1.0, 's', 'GripperCommand: stall window, sim time',
                   0.0, 60.0, open_low=True),
-    NodeParameter('record_path', '', '-', "MCAP file to record every physics step to "
-                  "('' = not recording); setting it starts recording there (a new file: "
-                  "an existing one is refused), '' stops; ~/record also sets it"),
+    NodeParameter('record_path', '', '-', "bag folder to record every physics step to "
+                  "(NAME/NAME_0.mcap + metadata.yaml; one file if it ends in .mcap; "
+                  "'' = not recording); setting it starts recording there (an existing "
+                  "file or folder is refused), '' stops; ~/record also sets it"),
     NodeParameter('foxglove_port', 8765, '-', 'TCP port of the Foxglove live view '
                   '(WebSocket); 0 = off', 0, 65535, read_only=True),
     NodeParameter('foxglove_address', '127.0.0.1', '-', 'address the Foxglove live view '

@@ -7,7 +7,6 @@ keeps the parameter saying what is being recorded.
 """
 from __future__ import annotations
 
-import os
 import threading
 from pathlib import Path
 
@@ -57,28 +56,14 @@ class RecordingControl:
 
     @staticmethod
     def _target(path: str) -> Path:
-        """The file ``NodeRecording.start(path)`` would create (``.mcap`` appended)."""
-        target = Path(path).expanduser().absolute()
-        if target.suffix != '.mcap':
-            target = target.with_name(target.name + '.mcap')
-        return target
+        """The bag folder (or ``.mcap`` file) ``record_path`` = ``path`` names."""
+        return NodeRecording.target(path)
 
     def _path_problem(self, path: str) -> str | None:
         """Why recording to ``path`` cannot start, or None (checked before switching)."""
         if self.recording is None:
             return RECORDING_UNAVAILABLE
-        target = self._target(path)
-        parent = target.parent
-        if target.is_dir():
-            return f'{target} is a directory; give a file name ending in .mcap'
-        if target.exists():
-            return (f'{target} already exists; choose another name or remove it '
-                    '(recordings are never overwritten)')
-        if not parent.is_dir():
-            return f'{target}: directory {parent} does not exist'
-        if not os.access(parent, os.W_OK | os.X_OK):
-            return f'cannot create {target}: directory {parent} is not writable'
-        return None
+        return self.recording.problem(path)
 
     def _start(self, path: str) -> tuple[bool, str]:
         """Start recording to ``path``; (ok, message)."""
