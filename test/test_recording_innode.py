@@ -125,7 +125,7 @@ def test_record_path_names_the_bag_folder_and_an_existing_directory_is_refused(
     bag = tmp_path / 'run1'
     result, = sim_node.set_parameters([Parameter('record_path', value=str(bag))])
     assert result.successful, result.reason
-    assert sim_node.recording.path == bag           # the parameter names what is written
+    assert sim_node.recording_control.recording.path == bag           # the parameter names what is written
     assert sim_node.get_parameter('record_path').value == str(bag)
     for _ in range(10):
         sim_node.advance()
@@ -143,14 +143,14 @@ def test_record_path_names_the_bag_folder_and_an_existing_directory_is_refused(
 def test_record_service_without_record_path_reports_the_folder_it_writes(
         sim_node, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    started = sim_node._on_record(SetBool.Request(data=True), SetBool.Response())
+    started = sim_node.recording_control._on_record(SetBool.Request(data=True), SetBool.Response())
     assert started.success, started.message
     [folder] = list(tmp_path.iterdir())
     assert re.fullmatch(r'gripper_sim_\d{8}_\d{6}(_\d+)?', folder.name), folder.name
     assert str(folder) in started.message
     assert sim_node.get_parameter('record_path').value == str(folder)
     sim_node.advance()
-    stopped = sim_node._on_record(SetBool.Request(data=False), SetBool.Response())
+    stopped = sim_node.recording_control._on_record(SetBool.Request(data=False), SetBool.Response())
     assert stopped.success and str(folder) in stopped.message
     with BagReader(folder) as bag:
         assert bag.is_folder and bag.message_count == 2 * len(messages.TOPICS)
