@@ -92,6 +92,7 @@ class CompressionTest:
     Args:
         curve: the measured curve (its largest deformation and speed set the test).
         fruit: fruit preset name or preset file (None: the default fruit).
+        config_file: a configuration file (``--config``), as ``load_config`` takes it.
         overrides: ``{key: value}`` from ``--set`` (they win over the test's settings).
         speed: m/s, plate speed; None = the curve's, else ``DEFAULT_SPEED``.
 
@@ -102,11 +103,14 @@ class CompressionTest:
     """
 
     def __init__(self, curve: CompressionCurve, fruit: str | None = None,
-                 overrides: Mapping | None = None, speed: float | None = None):
+                 overrides: Mapping | None = None, speed: float | None = None,
+                 config_file: str | None = None):
         self.curve = curve
+        self.config_file = config_file
         self.user = dict(overrides or {})
         self.speed = speed or curve.speed or DEFAULT_SPEED
-        probe = load_config(fruit=fruit, overrides={**SQUEEZE_DEFAULTS, **self.user})
+        probe = load_config(fruit=fruit, config_file=config_file,
+                            overrides={**SQUEEZE_DEFAULTS, **self.user})
         self.fruit = fruit
         self.dimension = int(probe['dimension'])
         self.model = probe['fruit.model']
@@ -130,13 +134,13 @@ class CompressionTest:
                                   SCHEMA['sim.dt'].high)}
         self.settings = {key: value for key, value in settings.items()
                          if key not in self.user}
-        self.base = load_config(fruit=fruit, overrides={**SQUEEZE_DEFAULTS, **self.settings,
-                                                        **self.user})
+        self.base = self.config()
 
     def config(self, values: Mapping[str, float] | None = None) -> dict:
         """The validated configuration with ``values`` ({key: value}) set."""
-        return load_config(fruit=self.fruit, overrides={**SQUEEZE_DEFAULTS, **self.settings,
-                                                        **self.user, **(values or {})})
+        return load_config(fruit=self.fruit, config_file=self.config_file,
+                           overrides={**SQUEEZE_DEFAULTS, **self.settings, **self.user,
+                                      **(values or {})})
 
     def simulate(self, values: Mapping[str, float] | None = None,
                  config: Mapping | None = None) -> SimulatedCurve:
