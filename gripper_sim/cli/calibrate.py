@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -19,6 +18,9 @@ from gripper_sim.workflows.calibrate_fit import fit
 from gripper_sim.workflows.calibrate_model import CompressionTest, fit_keys
 from gripper_sim.workflows.calibrate_plots import plot_html, plot_png
 from gripper_sim.workflows.calibrate_preset import preset_text, write_preset
+
+#: relative standard error from which a value is shown as undetermined
+UNDETERMINED = 10.0
 
 
 def _quantity(units: dict[str, float], bare_unit: str | None, what: str):
@@ -143,8 +145,8 @@ def run_calibrate(args) -> int:
         return 0
     print(f'  {result.evaluations} simulations, {cpu:.1f} s CPU')
     for k in result.keys:
-        spread = f'+/- {k.relative_error:.1%}' if math.isfinite(k.relative_error) else \
-            '(undetermined)'
+        spread = (f'+/- {k.relative_error:.1%}' if k.relative_error < UNDETERMINED
+                  else '(undetermined)')
         print(f'  {k.key:28s} {k.value:11.4g}  {spread:>12s}   (start {k.start:.4g})')
     print(f'  RMS force error {result.rms_error:.3g} N ({result.relative_rms_error:.1%} of '
           f'the largest force), largest {result.max_error:.3g} N')

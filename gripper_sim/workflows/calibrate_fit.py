@@ -251,9 +251,13 @@ def _uncertainty(parameters: list[Parameter], solution,
         direction = vt[-1]
         involved = [names[i] for i in np.argsort(-np.abs(direction))
                     if abs(direction[i]) > 0.3]
-        warnings.append('flat direction: the data do not determine '
-                        + ' and '.join(involved) + ' separately (the force barely '
-                        'changes along a combination of them)')
+        if len(involved) > 1:
+            warnings.append('flat direction: the data do not determine '
+                            + ' and '.join(involved) + ' separately (the force barely '
+                            'changes along a combination of them)')
+        else:
+            warnings.append(f'flat direction: the data barely determine {involved[0]} '
+                            '(the force hardly changes with it)')
     covariance = variance * np.linalg.pinv(normal)
     sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     sigma = np.where(dead, np.inf, sigma)
