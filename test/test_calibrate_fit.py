@@ -12,8 +12,8 @@ import yaml
 
 from gripper_sim.cli.main import main
 from gripper_sim.configuration import load_config
-from gripper_sim.workflows.calibrate_data import CompressionCurve
-from gripper_sim.workflows.calibrate_model import CompressionTest
+from gripper_sim.workflows.calibrate_data import read_curve, write_curve
+from gripper_sim.workflows.calibrate_model import synthetic_curve
 
 ROOT = Path(__file__).resolve().parents[1]
 PEACH = ROOT / 'config' / 'data' / 'peach_compression.csv'
@@ -23,21 +23,29 @@ NOISE = 0.02
 SPEED = 0.005
 #: a coarse 3D mesh, as bench/bench_3d.py uses for quick runs (259 vertices)
 COARSE_3D = {'dimension': 3, 'fruit.mesh.subdivisions': 4}
+SHELL = {'fruit.model': 'shell', 'fruit.nodes': 48}
+SHELL_TRUTH = {'fruit.pressure.turgor': 45e3}
 
 
 def synthetic_csv(path, fruit, overrides, truth, max_deformation, points, seed):
     """Write the simulated curve of ``truth`` ({key: value}) with 2 % multiplicative
     noise. The data are simulated with half the step the fit will use."""
     d = np.linspace(max_deformation / points, max_deformation, points)
-    placeholder = CompressionCurve(d, np.ones_like(d), SPEED, 'synthetic', '')
-    fit_dt = CompressionTest(placeholder, fruit, overrides).base['sim.dt']
-    generator = CompressionTest(placeholder, fruit, {**overrides, 'sim.dt': fit_dt / 2})
-    clean = generator.simulate(truth).force_at(d)
-    noisy = clean * (1 + NOISE * np.random.default_rng(seed).standard_normal(points))
-    rows = ''.join(f'{a * 1e3:.5f},{b:.5f}\n' for a, b in zip(d, noisy))
-    path.write_text(f'# synthetic: {truth}\n# plate_speed: {SPEED * 1e3} mm/s\n'
-                    f'deformation_mm,force_N\n{rows}')
+    curve = synthetic_curve(fruit, overrides, truth, d, SPEED, NOISE, seed, step_ratio=0.5)
+    write_curve(path, curve, f'synthetic: {truth}')
     return path
+
+
+def test_synthetic_curve_round_trips_through_csv(tmp_path):
+    d = np.linspace(0.5e-3, 5e-3, 10)
+    curve = synthetic_curve('apple', SHELL, SHELL_TRUTH, d, SPEED, NOISE, seed=4)
+    clean = synthetic_curve('apple', SHELL, SHELL_TRUTH, d, SPEED)
+    assert 0.002 < np.std(curve.force / clean.force - 1) < 0.05   # the noise is there
+    write_curve(tmp_path / 'c.csv', curve, 'two\nlines')
+    back = read_curve(tmp_path / 'c.csv')
+    np.testing.assert_allclose(back.deformation, d, rtol=1e-5)
+    np.testing.assert_allclose(back.force, curve.force, rtol=1e-5)
+    assert back.speed == pytest.approx(SPEED)
 
 
 def calibrate(capsys, *args) -> dict:
@@ -51,8 +59,6 @@ def assert_fitted_within(summary, truth, tolerance=0.05):
         assert fitted == pytest.approx(value, rel=tolerance), (key, fitted, value)
 
 
-SHELL = {'fruit.model': 'shell', 'fruit.nodes': 48}
-SHELL_TRUTH = {'fruit.pressure.turgor': 45e3}
 
 
 @pytest.fixture(scope='module')

@@ -210,6 +210,17 @@ def read_curve(path: str | Path, deformation_unit: str | None = None,
                             path=str(path), sha256=hashlib.sha256(raw).hexdigest())
 
 
+def write_curve(path: str | Path, curve: CompressionCurve, comment: str = '') -> None:
+    """Write ``curve`` as a CSV that ``read_curve`` reads back (mm, N, plate speed in
+    mm/s); ``comment`` lines go first, each prefixed with '# '."""
+    lines = [f'# {line}' for line in comment.splitlines()]
+    if curve.speed is not None:
+        lines.append(f'# plate_speed: {curve.speed * 1e3:.9g} mm/s')
+    lines.append('deformation_mm,force_N')
+    lines += [f'{d * 1e3:.6g},{f:.6g}' for d, f in zip(curve.deformation, curve.force)]
+    Path(path).write_text('\n'.join(lines) + '\n', encoding='utf-8')
+
+
 def _is_text(cell: str) -> bool:
     """A header cell: not a number (not even NaN or inf written out)."""
     try:

@@ -222,8 +222,10 @@ def fit(test: CompressionTest, keys: tuple[str, ...],
                                      at_bound))
     for k in fitted_keys:
         if math.isfinite(k.relative_error) and k.relative_error > MAX_RELATIVE_ERROR:
+            size = (f'{k.relative_error:.0%} of its value' if k.relative_error < 10
+                    else 'more than 10 times its value')
             warnings.append(f'{k.key} is poorly determined by these data (standard error '
-                            f'{k.relative_error:.0%} of its value)')
+                            f'{size})')
     return FitResult(keys=tuple(fitted_keys), config=config, fitted=fitted,
                      start=start_curve, measured=measured,
                      rms_error=float(np.sqrt(np.mean(error ** 2))),

@@ -163,3 +163,20 @@ class CompressionTest:
         table = np.array(rows, dtype=float)
         return SimulatedCurve(deformation=table[:, 0], force=table[:, 1],
                               damage_pressure=table[:, 2], bruised=table[:, 3] > 0.5)
+
+
+def synthetic_curve(fruit: str | None, overrides: Mapping, values: Mapping[str, float],
+                    deformation: np.ndarray, speed: float, noise: float = 0.0,
+                    seed: int = 0, step_ratio: float = 1.0) -> CompressionCurve:
+    """A test measured on the model itself: the simulated force of ``values`` at
+    ``deformation`` ((n,) m, increasing) times ``1 + noise * N(0, 1)`` (fixed ``seed``),
+    simulated with ``step_ratio`` times the step a calibration of it would take. For
+    checking a calibration, or whether a planned test can determine a key."""
+    deformation = np.asarray(deformation, dtype=float)
+    placeholder = CompressionCurve(deformation, np.ones_like(deformation), speed,
+                                   'synthetic', '')
+    step = CompressionTest(placeholder, fruit, overrides).base['sim.dt'] * step_ratio
+    generator = CompressionTest(placeholder, fruit, {**overrides, 'sim.dt': step})
+    force = generator.simulate(values).force_at(deformation)
+    force = force * (1.0 + noise * np.random.default_rng(seed).standard_normal(len(force)))
+    return CompressionCurve(deformation, np.maximum(force, 0.0), speed, 'synthetic', '')
