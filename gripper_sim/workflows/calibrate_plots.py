@@ -7,6 +7,7 @@ bruise onset when one was calibrated, and the force residuals below.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,38 +26,50 @@ def _title(result: FitResult, name: str) -> str:
             f'({result.relative_rms_error:.1%} of peak)')
 
 
-def _within_test(result: FitResult) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(fitted d mm, fitted F, start d mm, start F), from first contact on."""
-    fitted, start = result.fitted, result.start
+@dataclass(frozen=True)
+class _Curves:
+    """What both figures draw, deformations in mm: measured (d, force), fitted - measured
+    at each measured point, and the fitted and starting curves from first contact on."""
+
+    measured_d: np.ndarray
+    measured_force: np.ndarray
+    residual: np.ndarray
+    fitted_d: np.ndarray
+    fitted_force: np.ndarray
+    start_d: np.ndarray
+    start_force: np.ndarray
+
+
+def _curves(result: FitResult) -> _Curves:
+    measured, fitted, start = result.measured, result.fitted, result.start
     keep_f, keep_s = fitted.deformation >= 0, start.deformation >= 0
-    return (fitted.deformation[keep_f] * 1e3, fitted.force[keep_f],
-            start.deformation[keep_s] * 1e3, start.force[keep_s])
+    return _Curves(measured.deformation * 1e3, measured.force,
+                   fitted.force_at(measured.deformation) - measured.force,
+                   fitted.deformation[keep_f] * 1e3, fitted.force[keep_f],
+                   start.deformation[keep_s] * 1e3, start.force[keep_s])
 
 
 def plot_png(result: FitResult, path: str | Path, name: str,
              bruise: BruiseCalibration | None = None) -> None:
     """Write the PNG figure to ``path``."""
-    measured = result.measured
-    d_mm = measured.deformation * 1e3
-    residual = result.fitted.force_at(measured.deformation) - measured.force
-    fit_d, fit_f, start_d, start_f = _within_test(result)
+    c = _curves(result)
     figure = Figure(figsize=(8, 6.5), dpi=110, layout='constrained')
     FigureCanvasAgg(figure)
     top, bottom = figure.subplots(2, 1, sharex=True, height_ratios=(3, 1))
-    top.plot(d_mm, measured.force, 'o', color='black', markersize=4, label='measured')
-    top.plot(fit_d, fit_f, '-', color='tab:blue', linewidth=2, label='fitted model')
-    top.plot(start_d, start_f, '--', color='tab:gray', linewidth=1,
+    top.plot(c.measured_d, c.measured_force, 'o', color='black', markersize=4, label='measured')
+    top.plot(c.fitted_d, c.fitted_force, '-', color='tab:blue', linewidth=2, label='fitted model')
+    top.plot(c.start_d, c.start_force, '--', color='tab:gray', linewidth=1,
              label='starting values (preset)')
     if bruise is not None:
         top.axvline(bruise.observed_deformation * 1e3, color='tab:red', linestyle=':',
                     label=f'bruise onset ({bruise.bruise_pressure / 1e3:.0f} kPa)')
     top.set_ylabel('force (N)')
-    top.set_ylim(0, 1.15 * max(float(measured.force.max()), float(fit_f.max())))
+    top.set_ylim(0, 1.15 * max(float(c.measured_force.max()), float(c.fitted_force.max())))
     top.legend(loc='upper left')
     top.grid(alpha=0.3)
     top.set_title(_title(result, name), fontsize=9)
     bottom.axhline(0, color='gray', linewidth=0.8)
-    bottom.plot(d_mm, residual, 'o-', color='tab:blue', markersize=3)
+    bottom.plot(c.measured_d, c.residual, 'o-', color='tab:blue', markersize=3)
     bottom.set_xlabel('deformation (plate travel since first contact, mm)')
     bottom.set_ylabel('fitted - measured (N)')
     bottom.grid(alpha=0.3)
@@ -66,20 +79,18 @@ def plot_png(result: FitResult, path: str | Path, name: str,
 def plot_html(result: FitResult, path: str | Path, name: str,
               bruise: BruiseCalibration | None = None) -> None:
     """Write the self-contained HTML figure (plotly.js included) to ``path``."""
-    measured = result.measured
-    d_mm = measured.deformation * 1e3
-    residual = result.fitted.force_at(measured.deformation) - measured.force
-    fit_d, fit_f, start_d, start_f = _within_test(result)
+    c = _curves(result)
     figure = make_subplots(rows=2, cols=1, shared_xaxes=True, row_heights=[0.75, 0.25],
                            vertical_spacing=0.06)
-    figure.add_trace(go.Scatter(x=d_mm, y=measured.force, mode='markers', name='measured',
-                                marker=dict(color='black', size=6)), row=1, col=1)
-    figure.add_trace(go.Scatter(x=fit_d, y=fit_f, mode='lines', name='fitted model',
+    figure.add_trace(go.Scatter(x=c.measured_d, y=c.measured_force, mode='markers',
+                                name='measured', marker=dict(color='black', size=6)),
+                     row=1, col=1)
+    figure.add_trace(go.Scatter(x=c.fitted_d, y=c.fitted_force, mode='lines', name='fitted model',
                                 line=dict(color='#1f77b4', width=3)), row=1, col=1)
-    figure.add_trace(go.Scatter(x=start_d, y=start_f, mode='lines',
+    figure.add_trace(go.Scatter(x=c.start_d, y=c.start_force, mode='lines',
                                 name='starting values (preset)',
                                 line=dict(color='gray', dash='dash')), row=1, col=1)
-    figure.add_trace(go.Scatter(x=d_mm, y=residual, mode='lines+markers',
+    figure.add_trace(go.Scatter(x=c.measured_d, y=c.residual, mode='lines+markers',
                                 name='fitted - measured', line=dict(color='#1f77b4')),
                      row=2, col=1)
     if bruise is not None:
