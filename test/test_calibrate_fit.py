@@ -145,6 +145,18 @@ def test_preset_loads_as_a_fruit_everywhere(shell_data, tmp_path, capsys, monkey
     assert "unknown config key 'fruit.pressure.turgour'" in capsys.readouterr().err
 
 
+def test_calibrate_from_a_config_file(shell_data, tmp_path, capsys):
+    config = tmp_path / 'setup.yaml'
+    config.write_text('fruit: apple\nfruit.model: shell\nfruit.nodes: 48\n')
+    output = tmp_path / 'from_config.yaml'
+    summary = calibrate(capsys, '--data', shell_data, '--config', config, '--fit',
+                        'pressure.turgor', '-o', output, '--no-plots')
+    assert_fitted_within(summary, SHELL_TRUTH)
+    record = yaml.safe_load(output.read_text())['calibration']
+    assert record['base_fruit'] == 'config file setup.yaml'
+    assert '# Fruit preset from_config: written by gripper-sim calibrate' in output.read_text()
+
+
 @pytest.mark.slow
 def test_2d_solid_modulus_fitted_back(tmp_path, capsys):
     truth = {'fruit.flesh.youngs_modulus': 3.0e6}

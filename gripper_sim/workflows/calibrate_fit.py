@@ -260,8 +260,8 @@ def _uncertainty(parameters: list[Parameter], solution,
     dof = max(n_points - p, 1)
     variance = float(solution.fun @ solution.fun) / dof
     norms = np.linalg.norm(jac, axis=0)
-    dead = norms <= 1e-9 * max(float(norms.max()), 1e-300) if norms.max() > 0 else \
-        np.ones(p, bool)
+    largest = float(norms.max())
+    dead = norms <= 1e-9 * largest if largest > 0 else np.ones(p, dtype=bool)
     for name, flat in zip(names, dead):
         if flat:
             warnings.append(f'{name} is not identifiable: it does not change the simulated '

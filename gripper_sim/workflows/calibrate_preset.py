@@ -15,7 +15,7 @@ from pathlib import Path
 
 import yaml
 
-from gripper_sim.configuration import PROVENANCE_KEY, load_config, unflatten
+from gripper_sim.configuration import DEFAULT_FRUIT, PROVENANCE_KEY, load_config, unflatten
 from gripper_sim.workflows.calibrate_bruise import BruiseCalibration
 from gripper_sim.workflows.calibrate_data import CalibrationError
 from gripper_sim.workflows.calibrate_fit import FitResult
@@ -40,7 +40,8 @@ def provenance(test: CompressionTest, result: FitResult, bruise: BruiseCalibrati
         'data_file': Path(curve.path).name,
         'data_sha256': curve.sha256,
         'date': (today or datetime.date.today()).isoformat(),
-        'base_fruit': test.fruit or 'apple',
+        'base_fruit': test.fruit or (f'config file {Path(test.config_file).name}'
+                                     if test.config_file else DEFAULT_FRUIT),
         'model': test.model,
         'dimension': test.dimension,
         'points': int(len(curve.force)),
@@ -79,8 +80,8 @@ def preset_text(test: CompressionTest, result: FitResult, name: str,
                        for k in result.keys)
     header = [
         f'# Fruit preset {name}: written by gripper-sim calibrate on {record["date"]}',
-        f'# from {record["data_file"]} (sha256 {test.curve.sha256[:16]}...), starting from the '
-        f'{record["base_fruit"]} preset, {test.model} model, {test.dimension}D.',
+        f'# from {record["data_file"]} (sha256 {test.curve.sha256[:16]}...), starting from '
+        f'{record["base_fruit"]}, {test.model} model, {test.dimension}D.',
         f'# Fitted: {fitted}.',
         f'# Fit: RMS force error {result.rms_error:.3g} N '
         f'({result.relative_rms_error:.1%} of the largest force), largest '
