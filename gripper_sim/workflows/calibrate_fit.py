@@ -2,12 +2,13 @@
 
 The residuals are the simulated minus the measured force at each measured
 deformation, over the largest measured force. Each key is fitted in a scaled variable
-``x`` that is 0 at its starting value: ``x = ln(value / start)`` for a key whose range
-starts above zero (moduli), ``x = value / scale`` otherwise (turgor, Poisson ratio);
-the bounds are the configuration schema's range in that variable
-(``scipy.optimize.least_squares``, trust-region reflective, forward differences of
-``DIFF_STEP`` in ``x``). Before the fit the stiffness keys are scaled together by the factor
-that best matches the starting curve to the data.
+``x``: ``x = ln(value / start)`` for a key whose range starts above zero (moduli),
+``x = value / scale`` otherwise (turgor, Poisson ratio; scale = the starting value), so a
+step of ``x`` is a relative change either way; the bounds are the configuration schema's
+range in that variable. ``scipy.optimize.least_squares`` (trust-region reflective,
+variables scaled by the Jacobian's columns) with forward differences of ``DIFF_STEP`` in
+``x``. Before the fit the stiffness keys are scaled together by the factor that best
+matches the starting curve to the data.
 
 Uncertainty: the covariance of ``x`` at the optimum is ``s^2 (J^T J)^-1`` with
 ``s^2`` the residual variance (sum of squares over n - p), J the Jacobian; a key's
@@ -202,7 +203,7 @@ def fit(test: CompressionTest, keys: tuple[str, ...],
 
     start_x = np.array([p.variable(p.start) for p in parameters])
     solution = least_squares(residuals, start_x, jac=jacobian, bounds=(lower, upper),
-                             method='trf', x_scale=1.0, ftol=1e-8, xtol=1e-6, gtol=1e-10,
+                             method='trf', x_scale='jac', ftol=1e-8, xtol=1e-6, gtol=1e-10,
                              max_nfev=MAX_EVALUATIONS)
     values = {p.key: p.value(xi) for p, xi in zip(parameters, solution.x)}
     config = test.config(values)
