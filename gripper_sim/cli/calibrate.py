@@ -10,14 +10,9 @@ from pathlib import Path
 
 from gripper_sim.cli.offline import add_config_arguments
 from gripper_sim.configuration import PRESET_SUFFIXES, parse_override
-from gripper_sim.workflows.calibrate_bruise import calibrate_bruise
 from gripper_sim.workflows.calibrate_data import (FORCE_UNITS, LENGTH_UNITS, SPEED_UNITS,
                                                   CalibrationError, parse_quantity,
                                                   read_curve)
-from gripper_sim.workflows.calibrate_fit import fit
-from gripper_sim.workflows.calibrate_model import CompressionTest, fit_keys
-from gripper_sim.workflows.calibrate_plots import plot_html, plot_png
-from gripper_sim.workflows.calibrate_preset import preset_text, write_preset
 
 #: relative standard error from which a value is shown as undetermined
 UNDETERMINED = 10.0
@@ -106,6 +101,13 @@ def _overrides(args) -> dict:
 
 
 def run_calibrate(args) -> int:
+    # imported here, as the other verbs import the core: every gripper-sim command builds
+    # this parser, and scipy.optimize, matplotlib and plotly take seconds to import
+    from gripper_sim.workflows.calibrate_bruise import calibrate_bruise
+    from gripper_sim.workflows.calibrate_fit import fit
+    from gripper_sim.workflows.calibrate_model import CompressionTest, fit_keys
+    from gripper_sim.workflows.calibrate_plots import plot_html, plot_png
+    from gripper_sim.workflows.calibrate_preset import preset_text, write_preset
     paths = _outputs(args)
     name = args.name or paths[0].stem
     curve = read_curve(args.data, args.deformation_unit, args.force_unit, args.speed)

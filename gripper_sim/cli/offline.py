@@ -21,7 +21,8 @@ from gripper_sim.workflows.squeeze import SQUEEZE_DEFAULTS, check_squeeze, squee
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     """--fruit / --config / --set, shared by every verb that builds a simulation."""
     source = parser.add_mutually_exclusive_group()
-    source.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits)')
+    source.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits), or a '
+                        'preset file (.yaml, e.g. from gripper-sim calibrate)')
     source.add_argument('--config', metavar='FILE', help='YAML configuration file')
     parser.add_argument('--set', metavar='KEY=VALUE', action='append', default=[],
                         dest='overrides', help='override a configuration key (repeatable)')
