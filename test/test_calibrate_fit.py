@@ -114,6 +114,20 @@ def test_bruise_calibration_matches_the_observed_onset(shell_data, tmp_path, cap
     assert step > 0
 
 
+def test_bruise_by_deformation_and_an_onset_outside_the_test(shell_data, tmp_path, capsys):
+    summary = calibrate(capsys, *shell_args(shell_data, tmp_path / 'by_d.yaml'), '--fit',
+                        'pressure.turgor', '--bruise-deformation', '6mm', '--no-plots')
+    assert summary['bruise']['observed_deformation'] == pytest.approx(0.006)
+    assert abs(summary['bruise']['simulated_deformation'] - 0.006) <= 0.1e-3
+    for onset in (['--bruise-force', '5000'], ['--bruise-deformation', '40mm']):
+        assert main(['calibrate', *map(str, shell_args(shell_data, tmp_path / 'no.yaml')),
+                     '--fit', 'pressure.turgor', *onset]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and err.startswith('error: ') and (
+            'beyond the largest force' in err or 'outside the test' in err), err
+        assert not (tmp_path / 'no.yaml').exists()
+
+
 def test_preset_loads_as_a_fruit_everywhere(shell_data, tmp_path, capsys, monkeypatch):
     output = tmp_path / 'myfruit.yaml'
     summary = calibrate(capsys, *shell_args(shell_data, output), '--fit', 'pressure.turgor',
