@@ -21,6 +21,10 @@ import yaml
 from gripper_sim.errors import ConfigError
 
 DEFAULT_FRUIT = 'apple'
+#: file name endings that make a ``--fruit`` value a preset file rather than a name
+PRESET_SUFFIXES = ('.yaml', '.yml')
+#: top-level section of a preset file that records where it came from (not configuration)
+PROVENANCE_KEY = 'calibration'
 
 
 @dataclass(frozen=True)
@@ -389,8 +393,25 @@ def finger_preset_path(name: str) -> Path:
     return path
 
 
-def fruit_preset_path(name: str) -> Path:
-    """Path of the preset for fruit ``name``; ConfigError if there is none."""
+def is_preset_file(name: str) -> bool:
+    """Whether a fruit name is a path to a preset file (``*.yaml``/``*.yml``, e.g. one
+    written by ``gripper-sim calibrate``) rather than the name of a built-in preset."""
+    return name.endswith(PRESET_SUFFIXES)
+
+
+def fruit_preset_path(name: str, base_dir: str | os.PathLike | None = None) -> Path:
+    """Path of the preset for fruit ``name``; ConfigError if there is none.
+
+    A ``name`` ending in .yaml/.yml is a preset file: relative to the working directory,
+    else to ``base_dir`` (the directory of the configuration file that names it).
+    """
+    if is_preset_file(name):
+        path = Path(name).expanduser()
+        if not path.is_file() and base_dir is not None and not path.is_absolute():
+            path = Path(base_dir) / path
+        if not path.is_file():
+            raise ConfigError(f"fruit preset file '{name}' not found")
+        return path
     path = package_config_dir() / 'fruits' / f'{name}.yaml'
     if not path.is_file():
         known = ', '.join(available_fruits()) or 'none installed'
@@ -439,7 +460,8 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
 
     Args:
         fruit: preset name in ``config/fruits`` (default: the default fruit, unless a
-            file is given).
+            file is given), or the path of a preset file (``*.yaml``, e.g. written by
+            ``gripper-sim calibrate``).
         config_file: a YAML file of keys (nested or dotted), merged after the presets;
             its top-level ``fruit: NAME`` / ``finger: NAME`` select presets.
         overrides: ``['key=value', ...]`` strings or a ``{key: value}`` mapping,
@@ -457,8 +479,9 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
         flat.update(_finger_preset(finger))
     if config_file is not None:
         data = read_yaml(config_file)
+        _drop_provenance(data, f"config file '{config_file}'")
         if 'fruit' in data and isinstance(data['fruit'], str):
-            flat.update(_preset(data.pop('fruit')))
+            flat.update(_preset(data.pop('fruit'), Path(config_file).parent))
         if 'finger' in data and isinstance(data['finger'], str):
             flat.update(_finger_preset(data.pop('finger')))
         flat.update(_checked_flatten(data, str(config_file)))
@@ -473,8 +496,18 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
     return validate(flat)
 
 
-def _preset(name: str) -> dict[str, Any]:
-    return _checked_flatten(read_yaml(fruit_preset_path(name)), f'fruit preset {name}')
+def _preset(name: str, base_dir: Path | None = None) -> dict[str, Any]:
+    data = read_yaml(fruit_preset_path(name, base_dir))
+    if is_preset_file(name):
+        _drop_provenance(data, f"fruit preset file '{name}'")
+    return _checked_flatten(data, f'fruit preset {name}')
+
+
+def _drop_provenance(data: dict, source: str) -> None:
+    """Remove the ``calibration:`` record (where a preset came from) from ``data``."""
+    provenance = data.pop(PROVENANCE_KEY, None)
+    if provenance is not None and not isinstance(provenance, Mapping):
+        raise ConfigError(f"{source}: '{PROVENANCE_KEY}' must be a mapping")
 
 
 def _finger_preset(name: str) -> dict[str, Any]:

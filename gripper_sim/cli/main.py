@@ -19,6 +19,7 @@ VERB_MODULES = (
     'gripper_sim.cli.offline',
     'gripper_sim.cli.ros_commands',
     'gripper_sim.cli.bag_commands',
+    'gripper_sim.cli.calibrate',
 )
 
 

@@ -18,15 +18,14 @@ from gripper_sim.cli.arguments import non_negative_float, positive_float
 from gripper_sim.cli.progress import StepProgress
 from gripper_sim.configuration import available_fruits, load_config, parse_override
 from gripper_sim.errors import GripperSimError
-
-#: longest simulated time (s) a squeeze may take before it is called off
-SQUEEZE_TIME_LIMIT = 600.0
+from gripper_sim.workflows.squeeze import SQUEEZE_DEFAULTS, check_squeeze, squeeze
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     """--fruit / --config / --set, shared by every verb that builds a simulation."""
     source = parser.add_mutually_exclusive_group()
-    source.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits)')
+    source.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits), or a '
+                        'preset file (.yaml, e.g. from gripper-sim calibrate)')
     source.add_argument('--config', metavar='FILE', help='YAML configuration file')
     parser.add_argument('--set', metavar='KEY=VALUE', action='append', default=[],
                         dest='overrides', help='override a configuration key (repeatable)')
@@ -244,37 +243,15 @@ def _write_html(args, recorder) -> None:
 
 def run_squeeze(args) -> int:
     from gripper_sim.core import make_simulation as Simulation
-    config = config_from_args(args, {'world.gravity': 0.0, 'world.table': False})
-    if args.to_force is not None and args.to_force > config['gripper.max_force']:
-        raise GripperSimError(f"--to-force {args.to_force} N exceeds gripper.max_force "
-                              f"{config['gripper.max_force']} N")
-    if args.speed > config['gripper.max_speed']:
-        raise GripperSimError(f"--speed {args.speed} m/s exceeds gripper.max_speed "
-                              f"{config['gripper.max_speed']} m/s")
+    config = config_from_args(args, SQUEEZE_DEFAULTS)
+    check_squeeze(config, args.speed, args.to_force)
     sim = Simulation(config)
-    if args.to_gap is not None and args.to_gap >= sim.initial_gap:
-        raise GripperSimError(f'--to-gap {args.to_gap} m is not below the initial gap '
-                              f'{sim.initial_gap:.4g} m')
     series = _Series(_dimension(sim))
     sim.add_observer(series)
     with ExitStack() as stack:
         recorder = _start_observers(stack, args, sim, 'squeeze')
-        sim.command_gap(args.to_gap if args.to_gap is not None else 0.0, args.speed)
-        reached = False
-        while sim.time < SQUEEZE_TIME_LIMIT:
-            result = sim.step()
-            if args.to_force is not None and result.grip_force >= args.to_force:
-                reached = True
-                break
-            if args.to_gap is not None and result.gap <= args.to_gap + 1e-12:
-                reached = True
-                break
-            if result.gap <= 0.0:
-                break
+        squeeze(sim, args.speed, to_force=args.to_force, to_gap=args.to_gap)
         _write_html(args, recorder)
-    if not reached:
-        raise GripperSimError(f'the squeeze did not reach the target (peak force '
-                              f'{series.peak_force:.4g} N, final gap {sim.last.gap:.4g} m)')
     summary = dict(fruit=config['fruit.name'], model=config['fruit.model'],
                    peak_force=series.peak_force, peak_compression=series.peak_compression,
                    peak_contact_pressure=series.peak_pressure, final_gap=sim.last.gap,
