@@ -16,9 +16,11 @@ so a prism whose inner corners lie strictly inside its outer ones along their ra
 convex and its three tetrahedra have positive volume; a cone tetrahedron has the
 orientation of its triangle seen from c. The surface is kept exactly.
 
-Layer thickness: the first layer is ``first_layer`` times the local surface edge length
-h_i deep, each next one ``growth`` times the one before, as long as a layer stays thinner
-than ``max_layer_fraction`` of what is left of the ray.
+Layer depth along each ray: the first layer is ``FIRST_LAYER`` times the local surface
+edge length h_i deep, each next one ``LAYER_GROWTH`` times the one before, but never
+deeper than the layer's own edges are long (``MAX_LAYER_ASPECT``; a layer's triangles are
+the surface's shrunk toward c) nor than ``MAX_LAYER_FRACTION`` of what is left of the
+ray: fine under a fine surface, coarser inward, no thin or tall prisms.
 
 Shapes: positions (n, 3) m; tetrahedra (n_tet, 4) with positive volume.
 """
@@ -37,6 +39,8 @@ FIRST_LAYER = 0.6
 LAYER_GROWTH = 1.6
 #: a layer never takes more than this fraction of what is left of the ray to the centre
 MAX_LAYER_FRACTION = 0.6
+#: a layer is at most this many times as deep as its triangles' edges are long
+MAX_LAYER_ASPECT = 1.0
 #: smallest dihedral angle (deg) the mesh may have; a thinner tetrahedron is an error
 MIN_DIHEDRAL = 5.0
 
@@ -99,7 +103,8 @@ def vertex_edge_lengths(positions: np.ndarray, triangles: np.ndarray) -> np.ndar
 
 def layer_radii(radius: np.ndarray, spacing: np.ndarray, layers: int,
                 first_layer: float = FIRST_LAYER, growth: float = LAYER_GROWTH,
-                max_fraction: float = MAX_LAYER_FRACTION) -> np.ndarray:
+                max_fraction: float = MAX_LAYER_FRACTION,
+                max_aspect: float = MAX_LAYER_ASPECT) -> np.ndarray:
     """(layers + 1, n) m, the distance from the centre of each vertex's copy per layer.
 
     Args:
@@ -107,10 +112,15 @@ def layer_radii(radius: np.ndarray, spacing: np.ndarray, layers: int,
         spacing: (n,) m, local surface edge length at each vertex.
         layers: number of layers below the surface.
     """
-    rho = [np.asarray(radius, dtype=float)]
-    depth = first_layer * np.asarray(spacing, dtype=float)
+    radius = np.asarray(radius, dtype=float)
+    spacing = np.asarray(spacing, dtype=float)
+    rho = [radius]
+    depth = first_layer * spacing
     for _ in range(layers):
-        rho.append(rho[-1] - np.minimum(depth, max_fraction * rho[-1]))
+        # the layer's triangles are the surface's shrunk by rho / radius
+        width = spacing * rho[-1] / radius
+        rho.append(rho[-1] - np.minimum(np.minimum(depth, max_aspect * width),
+                                        max_fraction * rho[-1]))
         depth = depth * growth
     return np.array(rho)
 
@@ -144,8 +154,8 @@ def layered_tetrahedra(positions: np.ndarray, triangles: np.ndarray, layers: int
                           'it cannot be filled with tetrahedra')
     rho = layer_radii(radius, vertex_edge_lengths(surface, tris), layers)
     n_s = len(surface)
-    nodes = np.vstack([centre + (rho[k] / radius)[:, None] * ray for k in range(layers + 1)]
-                      + [centre[None, :]])
+    nodes = np.vstack([surface] + [centre + (rho[k] / radius)[:, None] * ray
+                                   for k in range(1, layers + 1)] + [centre[None, :]])
     ordered = np.sort(tris, axis=1)
     a, b, c = ordered[:, 0], ordered[:, 1], ordered[:, 2]
     tets = []

@@ -271,28 +271,33 @@ def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
     tetrahedra, cones to the centre below the last layer (``layered_mesher``).
 
     Args:
-        max_volume: m^3, the largest tetrahedron: layers are added (up to
-            ``MAX_LAYERS``) until the cones to the centre are no larger; None =
+        max_volume: m^3, the largest tetrahedron: layers are added (at least one, at
+            most ``MAX_LAYERS``) until no tetrahedron is larger; None =
             ``DEFAULT_LAYERS`` layers.
         order: 1 linear (4-node) or 2 quadratic (10-node: straight edges with midpoint
             nodes) tetrahedra.
 
     Raises:
-        ConfigError: the body is not star-shaped, or its tetrahedra would be too thin
-            (smallest dihedral angle below ``layered_mesher.MIN_DIHEDRAL``).
+        ConfigError: the body is not star-shaped, its tetrahedra would be too thin
+            (smallest dihedral angle below ``layered_mesher.MIN_DIHEDRAL``), or
+            ``MAX_LAYERS`` layers leave a tetrahedron larger than ``max_volume``.
     """
     centre = layered_mesher.star_centre(surface.positions, surface.triangles)
-    layers = DEFAULT_LAYERS
-    if max_volume is not None:
-        layers = 1
-        while layers < MAX_LAYERS:
+    if max_volume is None:
+        nodes, elems = layered_mesher.layered_tetrahedra(surface.positions, surface.triangles,
+                                                         DEFAULT_LAYERS, centre)
+    else:
+        for layers in range(1, MAX_LAYERS + 1):
             nodes, elems = layered_mesher.layered_tetrahedra(
                 surface.positions, surface.triangles, layers, centre)
-            if signed_volumes(nodes, elems[-len(surface.triangles):]).max() <= max_volume:
+            largest = signed_volumes(nodes, elems).max()
+            if largest <= max_volume:
                 break
-            layers += 1
-    nodes, elems = layered_mesher.layered_tetrahedra(surface.positions, surface.triangles,
-                                                     layers, centre)
+        else:
+            raise ConfigError(f"config key 'fruit.mesh.max_tet_volume' = {max_volume:g} m^3 "
+                              f'is below what {MAX_LAYERS} layers of this surface give '
+                              f'({largest:.3g} m^3): raise it, or refine the surface '
+                              "('fruit.mesh.subdivisions')")
     quality = layered_mesher.mesh_quality(nodes, elems)
     if quality.min_dihedral < layered_mesher.MIN_DIHEDRAL:
         raise ConfigError("config keys 'fruit.shape.*' / 'fruit.mesh.*': the body's "
