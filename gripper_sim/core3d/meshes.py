@@ -5,8 +5,8 @@ all: a unit sphere mesh, uniform (a geodesic sphere, an icosahedron whose edges 
 into ``frequency`` parts, 10 f^2 + 2 vertices) or in rings about the x axis, fine at
 the two jaw contact points (``ring_sphere``), then mapped radially onto the body
 (sphere, ellipsoid, or a solid of revolution about z given by a profile curve).
-Tetrahedra come from TetGen (Si 2015, ACM TOMS 41(2):11) through its Python wrapper
-``tetgen``, with the surface kept as given, so surface vertices are nodes
+Tetrahedra come from graded layers of the surface toward its centre
+(``layered_mesher``), with the surface kept as given, so surface vertices are nodes
 0..n_surface-1 of the volume mesh; quadratic (10-node) tetrahedra add the edge
 midpoints (``tetrahedralize(order=2)``).
 
@@ -58,6 +58,7 @@ class VolumeMesh:
             each boundary face split into 4 at its edge midpoints).
         n_surface: number of surface vertices (the corners).
         surface_nodes: (n_s,) every node on the boundary (corners, then edge midpoints).
+        quality: volumes, dihedral angles and aspect ratios of the (corner) tetrahedra.
     """
 
     positions: np.ndarray
@@ -65,6 +66,7 @@ class VolumeMesh:
     triangles: np.ndarray
     n_surface: int
     surface_nodes: np.ndarray | None = None
+    quality: layered_mesher.MeshQuality | None = None
 
 
 def _icosahedron() -> tuple[np.ndarray, np.ndarray]:
@@ -306,11 +308,12 @@ def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
                           'finer surface mesh')
     n_s = len(surface.positions)
     if order == 1:
-        return VolumeMesh(nodes, elems, surface.triangles.copy(), n_s, np.arange(n_s))
-    return _quadratic(nodes, elems, surface.triangles, n_s)
+        return VolumeMesh(nodes, elems, surface.triangles.copy(), n_s, np.arange(n_s),
+                          quality)
+    return _quadratic(nodes, elems, surface.triangles, n_s, quality)
 
 
-def _quadratic(nodes, corners, triangles, n_s) -> VolumeMesh:
+def _quadratic(nodes, corners, triangles, n_s, quality) -> VolumeMesh:
     """The 10-node mesh of linear tetrahedra ``corners`` (n, 4): a node at the midpoint
     of every edge (after the corner nodes), in the order of ``TET10_EDGES`` per element;
     the boundary faces split in 4."""
@@ -333,7 +336,7 @@ def _quadratic(nodes, corners, triangles, n_s) -> VolumeMesh:
     split = np.concatenate([np.stack([t[:, 0], m01, m20], 1), np.stack([m01, t[:, 1], m12], 1),
                             np.stack([m20, m12, t[:, 2]], 1), np.stack([m01, m12, m20], 1)])
     surface_nodes = np.concatenate([np.arange(n_s), np.unique(np.concatenate([m01, m12, m20]))])
-    return VolumeMesh(positions, tets, split, n_s, surface_nodes)
+    return VolumeMesh(positions, tets, split, n_s, surface_nodes, quality)
 
 
 def signed_volumes(positions: np.ndarray, tets: np.ndarray) -> np.ndarray:
