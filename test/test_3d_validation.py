@@ -211,10 +211,10 @@ def _hertz_errors(subdivisions, refinement, order=2):
 def test_hertz_sphere_between_plates_with_quadratic_tetrahedra(capsys):
     """Quadratic (10-node) tetrahedra: the Hertz force within 10 % at D/R = 0.02 and
     0.05, the error shrinking with the spacing at the contact (0.111 -> 0.092 rad:
-    measured -9 % / -3 % -> -3 % / +2 %), the contact radius within 15 %, no skin node
+    measured -10 % / -4 % -> -4 % / +2 %), the contact radius within 15 %, no skin node
     inside a plate. Linear tetrahedra are stiff and converge from above, slowly (not
-    volumetric locking: nu = 0 gives the same excess): +45 / +25 % at 674 nodes, +21 /
-    +23 % at 1494, +18 / +17 % at 4005 (README, the 3D model)."""
+    volumetric locking: nu = 0 gives the same excess): +13 / +24 % at 922 nodes, +27 /
+    +20 % at 1138 (README, the 3D model)."""
     coarse, _ = _hertz_errors(4, 0.4)
     fine, penetration = _hertz_errors(3, 0.25)
     with capsys.disabled():

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linprog
 
+from gripper_sim.core3d.mesh_geometry import signed_volumes, surface_edges
 from gripper_sim.errors import ConfigError
 
 #: depth of the first layer over the local surface edge length
@@ -93,8 +94,7 @@ def star_centre(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 def vertex_edge_lengths(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """(n,) m, the mean length of the surface edges at each vertex."""
-    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    edges = np.unique(np.sort(edges, axis=1), axis=0)
+    edges = surface_edges(triangles)
     length = np.linalg.norm(positions[edges[:, 0]] - positions[edges[:, 1]], axis=1)
     n = len(positions)
     total = np.bincount(edges.ravel(), weights=np.repeat(length, 2), minlength=n)
@@ -167,9 +167,7 @@ def layered_tetrahedra(positions: np.ndarray, triangles: np.ndarray, layers: int
     last = layers * n_s
     tets.append(np.stack([a + last, b + last, c + last, np.full_like(a, len(nodes) - 1)], 1))
     tets = np.vstack(tets)
-    p = nodes[tets]
-    negative = np.einsum('ij,ij->i', np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]),
-                         p[:, 3] - p[:, 0]) < 0
+    negative = signed_volumes(nodes, tets) < 0
     tets[negative] = tets[negative][:, [0, 2, 1, 3]]
     return nodes, tets
 
@@ -181,8 +179,7 @@ _EDGES = ((0, 1, 2, 3), (0, 2, 1, 3), (0, 3, 1, 2), (1, 2, 0, 3), (1, 3, 0, 2), 
 def mesh_quality(positions: np.ndarray, tets: np.ndarray) -> MeshQuality:
     """Volumes, dihedral angles and aspect ratios of linear tetrahedra (n_tet, 4)."""
     p = positions[tets[:, :4]]
-    volume = np.einsum('ij,ij->i', np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]),
-                       p[:, 3] - p[:, 0]) / 6.0
+    volume = signed_volumes(positions, tets[:, :4])
     dihedral = []
     longest = np.zeros(len(tets))
     for i, j, k, m in _EDGES:

@@ -22,6 +22,9 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from gripper_sim.core3d import layered_mesher
+# the volumes and edges are part of this module's mesh API
+from gripper_sim.core3d.mesh_geometry import (  # noqa: F401
+    enclosed_volume, signed_volumes, surface_edges)
 from gripper_sim.errors import ConfigError
 
 #: layers of the solid model's tetrahedra below the skin when no largest volume is set
@@ -339,17 +342,6 @@ def _quadratic(nodes, corners, triangles, n_s, quality) -> VolumeMesh:
     return VolumeMesh(positions, tets, split, n_s, surface_nodes, quality)
 
 
-def signed_volumes(positions: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """(n_tet,) m^3, ((x1 - x0) x (x2 - x0)) . (x3 - x0) / 6."""
-    p = positions[tets]
-    return np.einsum('ij,ij->i', np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]),
-                     p[:, 3] - p[:, 0]) / 6.0
-
-
-def enclosed_volume(positions: np.ndarray, triangles: np.ndarray) -> float:
-    """m^3 enclosed by a closed outward surface (divergence theorem)."""
-    p = positions[triangles]
-    return float(np.einsum('ij,ij->', p[:, 0], np.cross(p[:, 1], p[:, 2])) / 6.0)
 
 
 def hinges(triangles: np.ndarray) -> np.ndarray:
@@ -378,13 +370,6 @@ def hinges(triangles: np.ndarray) -> np.ndarray:
         raise ValueError('surface is not closed (an edge has one triangle)')
     return np.stack([a[forward], b[forward], opposite[forward], opposite[twin]], axis=1)
 
-
-def surface_edges(triangles: np.ndarray) -> np.ndarray:
-    """(n_edge, 2) unique undirected edges of a triangle mesh."""
-    t = np.asarray(triangles, dtype=np.int64)
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    e.sort(axis=1)
-    return np.unique(e, axis=0)
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
