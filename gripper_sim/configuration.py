@@ -231,8 +231,8 @@ SCHEMA: dict[str, Key] = {
                        'bool'),
     'world.wall_half_width': Key(0.5, 'm', 'wall position', low=1e-3, high=100.0),
     # --- solver
-    'sim.dt': Key(1e-3, 's', 'physics time step (3D: 20 ms, the largest step whose forces, '
-                  'contact areas and pressures stay within 2 % of small steps)', low=1e-7,
+    'sim.dt': Key(1e-3, 's', 'physics time step (3D default 20 ms: forces within 1-3 %, '
+                  'contact areas and pressures within 1 % of a 5 ms step)', low=1e-7,
                   high=0.1, open_low=True, default_3d=0.02),
     'sim.newton_tolerance': Key(1e-6, 'm/s', 'Newton stops when the infinity norm of '
                                 'the update divided by dt is below this', low=1e-14,

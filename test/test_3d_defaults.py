@@ -40,10 +40,12 @@ def _squeeze(capsys, *extra):
 
 @pytest.mark.slow
 def test_default_3d_squeeze_agrees_with_a_small_step(capsys):
-    """The README's promise for the 20 ms default: forces, contact areas and pressures
-    within 2 % of a 5 ms step."""
+    """The README's promise for the 20 ms default: the peak force within 3 % of a 5 ms
+    step (a squeeze stops up to one step past its target), contact area and pressure
+    within 1 %."""
     default = _squeeze(capsys)
     fine = _squeeze(capsys, '--set', 'sim.dt=0.005')
     assert default['peak_force'] >= 2.0
-    for key in ('peak_force', 'contact_area_at_peak_force', 'peak_contact_pressure'):
-        assert default[key] == pytest.approx(fine[key], rel=0.02), key
+    assert default['peak_force'] == pytest.approx(fine['peak_force'], rel=0.03)
+    for key in ('contact_area_at_peak_force', 'peak_contact_pressure'):
+        assert default[key] == pytest.approx(fine[key], rel=0.01), key
