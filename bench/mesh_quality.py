@@ -21,8 +21,8 @@ from gripper_sim.core3d.fruit import body_from_config  # noqa: E402
 
 SOLID = ['dimension=3', 'fruit.model=solid']
 SET_UPS = [(f'{fruit} (defaults)', fruit, []) for fruit in available_fruits()] + [
-    ('benchmark solid', 'apple', ['fruit.mesh.subdivisions=5',
-                                  'fruit.mesh.max_tet_volume=2.5e-7']),
+    ('benchmark solid', 'apple', ['fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=0.5',
+                                  'fruit.mesh.max_tet_volume=0.01']),
     ('Hertz coarse', 'apple', ['fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=0.4',
                                'fruit.shape.diameter=0.06', 'fruit.mesh.order=2']),
     ('Hertz fine', 'apple', ['fruit.mesh.subdivisions=3', 'fruit.mesh.jaw_refinement=0.25',
