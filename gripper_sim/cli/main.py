@@ -17,6 +17,7 @@ VERB_MODULES = (
     'gripper_sim.cli.offline',
     'gripper_sim.cli.ros_commands',
     'gripper_sim.cli.bag_commands',
+    'gripper_sim.cli.study',
 )
 
 
