@@ -11,8 +11,7 @@ A study file's ``population`` names, per key, one distribution:
 Keys are numeric configuration keys (``fruit.shape.diameter``, ``fruit.density``,
 ``fruit.flesh.youngs_modulus``, ``fruit.pressure.turgor``, ``contact.jaw.static_friction``,
 ...) or ``mass`` (kg: the fruit's density is scaled so that the fruit weighs that
-much). A drawn ``contact.jaw.static_friction`` keeps the configured ratio of kinetic to
-static friction unless ``contact.jaw.kinetic_friction`` is drawn too. Every drawn value
+much; ``study_spec`` applies it). Every drawn value
 must lie in its key's range: a distribution that yields a non-physical value (a
 negative diameter, a friction above 5) is a ``ConfigError`` naming the key and the
 sample.
@@ -170,10 +169,16 @@ def _distribution(key: str, spec: Any, where: str) -> Distribution:
 
 
 def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value):
+    """A finite float; text such as '1.5e6' (YAML 1.1 reads it as a string) too."""
+    try:
+        if isinstance(value, bool):
+            raise ValueError
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if not math.isfinite(number):
         raise ConfigError(f"study key '{where}' must be a finite number, got {value!r}")
-    return float(value)
+    return number
 
 
 def _check_range(dist: Distribution, values: np.ndarray) -> None:

@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from gripper_sim.configuration import SCHEMA, _suggest, package_config_dir, read_yaml
+from gripper_sim.configuration import (SCHEMA, _suggest, load_config, package_config_dir,
+                                       read_yaml)
 from gripper_sim.core.scenario import SCENARIO_SCHEMA, Scenario, load_scenario, scenario_config
 from gripper_sim.core.window import TOLERANCE, estimates, trial_setup
 from gripper_sim.errors import ConfigError
@@ -105,14 +106,13 @@ class Study:
             scenario = scenario.with_values(**scenario_values)
         sampled = {k: v for k, v in drawn.items() if k != 'mass'}
         overrides.update(sampled)
-        if ('contact.jaw.static_friction' in sampled
-                and 'contact.jaw.kinetic_friction' not in sampled):
-            plain = scenario_config(scenario, fruit=fruit, finger=finger,
-                                    overrides={k: v for k, v in overrides.items()
-                                               if k not in sampled})
-            ratio = plain['contact.jaw.kinetic_friction'] / plain['contact.jaw.static_friction']
-            overrides['contact.jaw.kinetic_friction'] = ratio * sampled[
-                'contact.jaw.static_friction']
+        static, kinetic = 'contact.jaw.static_friction', 'contact.jaw.kinetic_friction'
+        if static in overrides and static not in self.base['set'] \
+                and kinetic not in overrides:
+            # a varied static friction keeps the configured kinetic/static ratio
+            plain = load_config(fruit=fruit, finger=finger, overrides={
+                k: v for k, v in overrides.items() if k != static})
+            overrides[kinetic] = overrides[static] * plain[kinetic] / plain[static]
         config = _config(scenario, fruit, finger, overrides, point, sample)
         if 'mass' in drawn:
             mass = estimates(config)[2]
