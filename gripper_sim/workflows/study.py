@@ -42,7 +42,7 @@ from gripper_sim.workflows.study_spec import Trial as TrialSetup
 from gripper_sim.workflows.study_tasks import code_version, run_case
 
 #: seconds to wait for an existing scheduler before giving up
-CONNECT_TIMEOUT = 5.0
+CONNECT_TIMEOUT = 3.0
 #: evaluations a fruit's window search takes, until measured in the run
 EXPECTED_PER_CHAIN = 13
 _EVALUATION_FIELDS = [f.name for f in fields(GraspEvaluation) if f.name not in ('summary',
@@ -91,11 +91,11 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     if scheduler:
         try:
             client = Client(scheduler, timeout=f'{CONNECT_TIMEOUT}s')
-        except (OSError, TimeoutError, ValueError) as err:
-            raise StudyError(f'cannot reach the Dask scheduler at {scheduler} within '
-                             f'{CONNECT_TIMEOUT:g} s ({type(err).__name__}: {err}); start it '
-                             'with `dask scheduler` or leave --scheduler out for a local '
-                             'cluster') from err
+        except Exception as err:  # noqa: BLE001 - refused, timed out, not a Dask server...
+            reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+            raise StudyError(f'cannot reach the Dask scheduler at {scheduler} ({reason}); '
+                             'start one with `dask scheduler`, or leave --scheduler out '
+                             'for a local cluster') from err
         try:
             yield client
         finally:
