@@ -20,7 +20,7 @@ base:
   finger: flat
   scenario_set: {transport.distance: 0.0, lift.height: 0.02, squeeze.time: 0.05,
                  close.speed: 0.1}
-  set: {sim.dt: 0.002}
+  set: {sim.dt: 0.004}
 population:
   samples: 3
   seed: 1

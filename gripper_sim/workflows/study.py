@@ -21,7 +21,9 @@ import json
 import logging
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
@@ -63,6 +65,9 @@ class StudyRun:
     interrupted: bool
     summary: dict
     rows: list = field(default_factory=list)
+    #: s of wall time: starting the cluster, and running the evaluations
+    startup_time: float = 0.0
+    run_time: float = 0.0
 
 
 def config_hash(config) -> str:
@@ -102,9 +107,17 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             client.close()
         return
     count = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                           host='127.0.0.1', dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    # the worker processes start with Ctrl-C ignored: a terminal's SIGINT reaches the
+    # whole process group, and this client, not the workers, stops the study cleanly
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+    try:
+        cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
+                               host='127.0.0.1', dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGINT, previous)
     client = Client(cluster)
     try:
         yield client
@@ -275,7 +288,6 @@ class _Runner:
                 else 1 if self.study.forces else EXPECTED_PER_CHAIN)
         left = sum(max(1.0, mean - c.evaluations) for c in self.chains if not c.done)
         self.bar.total = int(self.computed + math.ceil(left))
-        self.bar.refresh()
 
 
 def run_case_failure(force: float, message: str) -> dict:
@@ -298,20 +310,24 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
     """
     samples = study.population.draw()
     store = RowStore(out)
+    start = time.perf_counter()
     with open_client(scheduler, workers) as client:
+        started = time.perf_counter()
         runner = _Runner(study, store, client, progress)
         try:
             runner.start(samples)
             complete = runner.run()
         finally:
             store.flush()
+        finished = time.perf_counter()
     summary = summarise(study, runner.chains, store, complete)
     summary.update(computed=runner.computed, reused=runner.reused,
                    scheduler=scheduler or f'local ({workers or os.cpu_count()} workers)')
     if complete:
         store.compact()
     return StudyRun(computed=runner.computed, reused=runner.reused,
-                    interrupted=not complete, summary=summary, rows=store.sorted_rows())
+                    interrupted=not complete, summary=summary, rows=store.sorted_rows(),
+                    startup_time=started - start, run_time=finished - started)
 
 
 def summarise(study: Study, chains: list[_Chain], store: RowStore, complete: bool) -> dict:
