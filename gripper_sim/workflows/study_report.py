@@ -15,6 +15,7 @@ import matplotlib
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker as ticker  # noqa: E402
 import plotly.graph_objects as go  # noqa: E402
 from plotly.subplots import make_subplots  # noqa: E402
 
@@ -29,13 +30,28 @@ PALETTE = ('#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e
 def write_report(summary: dict, rows: Sequence[dict], out: str | os.PathLike) -> None:
     """Write ``out/report.html`` and ``out/report.png``."""
     out = Path(out)
-    axes = [key for key in summary['axes'] if key != 'force'] or ['point']
+    axes = [key for key in summary['axes'] if key != 'force'] or ['sample']
     _html(summary, rows, axes, out / 'report.html')
     _png(summary, rows, axes, out / 'report.png')
 
 
 def _axis_value(row: dict, axis: str) -> str:
-    return str(row['point'] if axis == 'point' else row.get(axis))
+    return str(row.get(axis))
+
+
+def _categories(rows: Sequence[dict], axis: str) -> list[str]:
+    """The axis values in order: numbers by value, text alphabetically."""
+    values = {row.get(axis) for row in rows}
+    numeric = all(isinstance(v, (int, float)) for v in values)
+    return [str(v) for v in sorted(values, key=(float if numeric else str))]
+
+
+def _force_axis(ax) -> None:
+    """Log force axis with plain numbers (2, 5, 10 N, not 2 x 10^0)."""
+    ax.set_xscale('log')
+    ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f'{v:g}'))
+    ax.xaxis.set_minor_formatter(ticker.FuncFormatter(
+        lambda v, _: f'{v:g}' if str(f'{v:g}')[0] in '235' else ''))
 
 
 def _window_ends(point: dict) -> tuple[float, float] | None:
@@ -68,7 +84,8 @@ def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> N
                 text=[f"point {r['point']}, sample {r['sample']}, {r['kind']}"
                       for r in picked]), row=i, col=1)
         fig.update_yaxes(type='log', title_text='grip force (N)', row=i, col=1)
-        fig.update_xaxes(type='category', title_text=axis, row=i, col=1)
+        fig.update_xaxes(type='category', title_text=axis, row=i, col=1,
+                         categoryorder='array', categoryarray=_categories(rows, axis))
     curve_row, window_row = len(axes) + 1, len(axes) + 2
     for k, point in enumerate(summary['points']):
         curve = (point.get('population') or {}).get('curve')
@@ -111,11 +128,14 @@ def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> N
 
 def _png(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> None:
     panels = len(axes) + 2
-    fig, ax = plt.subplots(panels, 1, figsize=(9, 3.4 * panels), squeeze=False)
+    window_height = 0.6 + 0.25 * len(summary['points'])
+    fig, ax = plt.subplots(panels, 1, squeeze=False,
+                           figsize=(9, 3.2 * (panels - 1) + 1.2 + window_height),
+                           height_ratios=[3.2] * (panels - 1) + [0.6 + window_height])
     ax = ax[:, 0]
     for i, axis in enumerate(axes):
-        categories = sorted({_axis_value(r, axis) for r in rows})
-        spread = 0.3
+        categories = _categories(rows, axis)
+        spread = 0.0 if axis == 'sample' else 0.3
         for outcome, colour in OUTCOME_COLOURS.items():
             picked = [r for r in rows if r['outcome'] == outcome]
             if not picked:
@@ -124,8 +144,11 @@ def _png(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> No
                  + spread * ((r['sample'] * 0.618) % 1 - 0.5) for r in picked]
             ax[i].scatter(x, [r['force'] for r in picked], s=10, color=colour, alpha=0.6,
                           label=outcome if i == 0 else None)
-        ax[i].set_xticks(range(len(categories)), categories)
+        step = max(1, len(categories) // 20)
+        ax[i].set_xticks(range(0, len(categories), step), categories[::step],
+                         fontsize=7 if len(categories) > 8 else None)
         ax[i].set_yscale('log')
+        ax[i].yaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f'{v:g}'))
         ax[i].set_xlabel(axis)
         ax[i].set_ylabel('grip force (N)')
         ax[i].set_title(f'window map: grip force vs {axis}', fontsize=10)
@@ -142,7 +165,7 @@ def _png(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> No
         curve_ax.step(curve['force'], curve['p'], where='post', color=colour,
                       label=point['label'])
     curve_ax.axhline(summary['fraction'], color='k', linestyle=':', linewidth=1)
-    curve_ax.set_xscale('log')
+    _force_axis(curve_ax)
     curve_ax.set_ylim(0, 1.02)
     curve_ax.set_xlabel('grip force (N)')
     curve_ax.set_ylabel('fruits succeeding')
@@ -165,7 +188,7 @@ def _png(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> No
     window_ax.set_yticks(range(len(summary['points'])),
                          [p['label'] for p in summary['points']], fontsize=7)
     window_ax.set_ylim(-0.7, len(summary['points']) - 0.3)
-    window_ax.set_xscale('log')
+    _force_axis(window_ax)
     window_ax.set_xlabel('grip force (N)')
     window_ax.set_title(f"population window ({summary['fraction'] * 100:g} % of the fruits; "
                         f"whiskers: {summary['confidence'] * 100:g} % bootstrap interval of "
