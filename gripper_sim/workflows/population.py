@@ -204,5 +204,5 @@ def _check_range(dist: Distribution, values: np.ndarray) -> None:
             limits.append(f'<= {high:g}{unit}')
         raise ConfigError(
             f"population key '{key}' ({dist.describe()}) yields non-physical values: "
-            f'sample {i} is {values[i]:.4g}{unit} ({int(bad.sum())} of {len(values)} '
-            f"outside {' and '.join(limits)}); narrow the distribution")
+            f'sample {i} is {values[i]:.4g}{unit} ({int(bad.sum())} of {len(values)} out of '
+            f"the key's range: {', '.join(limits)}); narrow the distribution")
