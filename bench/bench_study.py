@@ -96,7 +96,8 @@ def main() -> int:
     scenario = example.base['scenario']
     config = dict(setup.config)
     config['gripper.initial_lift'] += scenario['approach.height']
-    in_process(config, scenario, example.tolerance, '2D study settings (dt 2 ms, short lift)')
+    in_process(config, scenario, example.tolerance,
+               f"2D study settings (dt {config['sim.dt'] * 1e3:g} ms, short lift)")
     full = load_scenario('pick_and_place')
     in_process(scenario_config(full), full, example.tolerance,
                '2D window defaults (pick_and_place, dt 1 ms)')

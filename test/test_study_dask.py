@@ -103,9 +103,9 @@ def study_file(tmp_path_factory):
     return path
 
 
-@pytest.fixture
-def cluster(tmp_path):
-    started = DaskCluster(tmp_path)
+@pytest.fixture(scope='module')
+def cluster(tmp_path_factory):
+    started = DaskCluster(tmp_path_factory.mktemp('cluster'))
     yield started
     started.close()
 
@@ -172,6 +172,8 @@ def test_a_worker_killed_mid_study_loses_no_row(study_file, reference, cluster, 
     assert study.returncode == 0, stderr
     assert victim.wait() == -signal.SIGKILL
     assert comparable(out) == local
+    cluster.workers[0] = cluster.start_worker()  # two workers again for the next test
+    cluster.wait_for_workers(2)
 
 
 def test_an_interrupted_study_resumes_without_recomputing(study_file, reference, cluster,

@@ -123,3 +123,13 @@ def test_the_example_studies_load():
     for name in names:
         study = load_study(name)
         assert study.points and len(study.population.draw()) == study.population.samples
+
+
+def test_studies_run_without_ros():
+    import subprocess
+    import sys
+    code = ('import sys; import gripper_sim.workflows.study, gripper_sim.cli.study, '
+            'gripper_sim.workflows.study_report; print("rclpy" in sys.modules)')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == 'False'

@@ -3,37 +3,32 @@ windows whose answer is known."""
 from __future__ import annotations
 
 import math
-import textwrap
 
 import numpy as np
 import pytest
+import yaml
 
 from gripper_sim.core.window import grasp_window
 from gripper_sim.workflows.population_window import SampleWindow, population_window
 from gripper_sim.workflows.study import run_study
 from gripper_sim.workflows.study_spec import load_study
+from test_study_dask import STUDY
 
-ZERO_SPREAD = '''
-name: zero
-base:
-  fruit: apple
-  finger: flat
-  scenario_set: {transport.distance: 0.0, lift.height: 0.02, squeeze.time: 0.05,
-                 close.speed: 0.1}
-  set: {sim.dt: 0.004}
-population:
-  samples: 3
-  seed: 1
-  distributions:
-    fruit.shape.diameter: {distribution: normal, mean: 0.0635, std: 0.0}
-    fruit.density: {distribution: list, values: [1000.0]}
-window: {tolerance: 0.05}
-'''
+
+def zero_spread_study() -> str:
+    """The small study of the Dask tests, its fruits all the same (zero spread)."""
+    data = yaml.safe_load(STUDY)
+    data.update(name='zero', window={'tolerance': 0.05})
+    data.pop('axes')
+    data['population'] = {'samples': 3, 'seed': 1, 'distributions': {
+        'fruit.shape.diameter': {'distribution': 'normal', 'mean': 0.0635, 'std': 0.0},
+        'fruit.density': {'distribution': 'list', 'values': [1000.0]}}}
+    return yaml.safe_dump(data)
 
 
 def test_a_zero_spread_population_has_the_window_of_its_single_fruit(tmp_path):
     path = tmp_path / 'zero.yaml'
-    path.write_text(textwrap.dedent(ZERO_SPREAD))
+    path.write_text(zero_spread_study())
     study = load_study(path)
     run = run_study(study, tmp_path / 'out', workers=1, progress=False)
     (point,) = run.summary['points']
