@@ -5,7 +5,7 @@ Prints figures, asserts nothing (a benchmark, not a test). CPU time is
 ``time.process_time`` in one process, and for a Dask run the user+system time of the
 client and of every worker process (``os.times``, children included), so the figures hold on a loaded machine.
 
-1. In one process through the study path (``study_tasks.run_case``, what a worker
+1. In one process through the study path (``study_tasks.run_fruit``, what a worker
    runs): the cases one fruit's window search asks for, 2D with the study settings of
    ``config/studies/apple_friction.yaml``, 2D with the window's full scenario (1 ms),
    and 3D.
@@ -29,33 +29,25 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gripper_sim.core.scenario import load_scenario, scenario_config  # noqa: E402
-from gripper_sim.core.window import (estimates, run_search, trial_of,  # noqa: E402
-                                     trial_setup, window_search)
-from gripper_sim.workflows.study import _row_evaluation, run_study  # noqa: E402
+from gripper_sim.core.window import trial_setup  # noqa: E402
+from gripper_sim.workflows.study import run_study  # noqa: E402
 from gripper_sim.workflows.study_spec import Study, load_study  # noqa: E402
-from gripper_sim.workflows.study_tasks import run_case  # noqa: E402
+from gripper_sim.workflows.study_tasks import run_fruit  # noqa: E402
 
 EXAMPLE = 'apple_friction'
 
 
 def in_process(config, scenario, tolerance: float, label: str) -> None:
-    """One fruit's window search, each case through ``run_case``; CPU per evaluation."""
-    hold, bruise, _ = estimates(config)
+    """One fruit's window search through ``run_fruit`` (what a worker runs)."""
     config, scenario = trial_setup(config, scenario)
-    run_case(config, scenario, hold, 'hold')  # compile / load the kernels once
-    cpu = []
-
-    def answer(request):
-        kind, force = request
-        start = time.process_time()
-        row = run_case(config, scenario, force, kind)
-        cpu.append(time.process_time() - start)
-        return trial_of(_row_evaluation(row), kind)
-
-    low, high = run_search(window_search(config, hold, bruise, tolerance), answer)
-    total = sum(cpu)
-    print(f'  {label:44s} {len(cpu):3d} evaluations, {total / len(cpu) * 1e3:7.1f} ms CPU '
-          f'each: {60 * len(cpu) / total:7.0f} per CPU-minute (window {low:.3g} .. '
+    run_fruit(config, scenario, 0.5, (), {})  # load the kernels once
+    start = time.process_time()
+    done = run_fruit(config, scenario, tolerance, (), {})
+    total = time.process_time() - start
+    count = len(done['new'])
+    low, high = done['result']
+    print(f'  {label:44s} {count:3d} evaluations, {total / count * 1e3:7.1f} ms CPU '
+          f'each: {60 * count / total:7.0f} per CPU-minute (window {low:.3g} .. '
           f'{high:.3g} N)', flush=True)
 
 
@@ -91,7 +83,7 @@ def main() -> int:
     args = parser.parse_args()
     print(f'load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores')
     example = load_study(EXAMPLE)
-    print('1. one process, through the study path (run_case), one window search:')
+    print('1. one process, through the study path (run_fruit), one window search:')
     setup = example.trial(example.points[1], 0, {})
     scenario = example.base['scenario']
     config = dict(setup.config)

@@ -1,13 +1,13 @@
 """Run a study on Dask: every design point x fruit, rows as they finish, resumable.
 
-Each (design point, fruit) is a chain: the fruit's window search
-(``core.window.window_search``, the same bisections as ``gripper-sim window``),
-started from its closed-form seeds (``core.window.estimates``, one task), or, with a
-'force' axis, one evaluation per grid force. Every evaluation is one Dask task
-(``study_tasks.run_case``); the client advances each chain as its answers arrive, so
-all chains run in parallel over the cluster. A request whose row is already stored
-(same effective configuration, scenario, force, kind and code version: ``case_key``)
-is answered from the store: a study run again computes only what is missing.
+Each (design point, fruit) is one Dask task (``study_tasks.run_fruit``): the fruit's
+window search (``core.window.window_search``, the same bisections as ``gripper-sim
+window``) from its closed-form seeds, or with a 'force' axis one evaluation per grid
+force. All fruits of all design points run in parallel over the cluster; each
+fruit's evaluations become rows as its task returns. A task is given the rows already
+stored for its fruit (same effective configuration, scenario, force, kind and code
+version: ``case_key``) and does not compute them again: a study run again computes only
+what is missing.
 
 The cluster: a local one on this machine's cores by default (worker processes on
 127.0.0.1, one thread each), or an existing one (``scheduler='tcp://HOST:8786'``).
@@ -26,29 +26,26 @@ import sys
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Generator, Iterator
+from typing import Any, Iterator
 
 import numpy as np
 from tqdm import tqdm
 
 from gripper_sim.core.grasp import GraspEvaluation
-from gripper_sim.core.window import estimates, trial_of, window_search
 from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.population_window import (SampleWindow, grid_curve,
                                                      population_window)
 from gripper_sim.workflows.study_results import RowStore
 from gripper_sim.workflows.study_spec import Study
 from gripper_sim.workflows.study_spec import Trial as TrialSetup
-from gripper_sim.workflows.study_tasks import code_version, run_case
+from gripper_sim.workflows.study_tasks import answer_key, code_version, evaluation_of, run_fruit
 
 #: seconds to wait for an existing scheduler before giving up
 CONNECT_TIMEOUT = 3.0
 #: evaluations a fruit's window search takes, until measured in the run
 EXPECTED_PER_CHAIN = 13
-_EVALUATION_FIELDS = [f.name for f in fields(GraspEvaluation) if f.name not in ('summary',
-                                                                              'failure')]
 
 
 class StudyError(GripperSimError):
@@ -127,97 +124,119 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
 
 
 class _Chain:
-    """One (design point, fruit): its set-up, its search generator and its answers."""
+    """One (design point, fruit): its set-up and, once its task is back, its result
+    (window search: (min, max) N; grid: the evaluations, one per force)."""
 
-    def __init__(self, setup: TrialSetup, search: Generator | None, grid: bool = False):
+    def __init__(self, setup: TrialSetup):
         self.setup = setup
-        self.search = search
-        self.grid = grid
         self.error = ''
-        self.evaluations = 0
         self.result: Any = None
         self.done = False
-
-
-def _grid_search(forces) -> Generator:
-    """A search that asks for one evaluation per force; returns the evaluations."""
-    evaluations = []
-    for force in forces:
-        evaluations.append((yield 'hold', force))
-    return evaluations
-
-
-def _row_evaluation(row: dict) -> GraspEvaluation:
-    return GraspEvaluation(**{name: row[name] for name in _EVALUATION_FIELDS})
 
 
 class _Runner:
     """The client side of a study run (see the module docstring)."""
 
     def __init__(self, study: Study, store: RowStore, client, progress: bool):
+        from distributed import as_completed
         self.study = study
         self.store = store
         self.client = client
         self.code = code_version()
         self.computed = 0
         self.reused = 0
-        self.waiting: dict[str, tuple[Any, list]] = {}
+        self.waiting: dict[str, tuple[Any, list[_Chain]]] = {}
         self.chains: list[_Chain] = []
-        self.finished_counts: list[int] = []
         self.bar = tqdm(total=0, unit='eval', file=sys.stderr, disable=not progress,
                         dynamic_ncols=True, desc=study.name)
-        from distributed import as_completed
         self.queue = as_completed()
+        self.by_config: dict[str, list[dict]] = {}
+        for row in store.rows.values():
+            self.by_config.setdefault(row['config_hash'], []).append(row)
 
-    # -------------------------------------------------------------- set-up
     def start(self, samples: list[dict[str, float]]) -> None:
+        """Submit one task per (design point, fruit), with the rows already stored."""
         study = self.study
+        per_fruit = len(study.forces) or EXPECTED_PER_CHAIN
         for point in study.points:
             for index, drawn in enumerate(samples):
                 setup = study.trial(point, index, drawn)
-                if study.forces:
-                    for force in study.forces:
-                        chain = _Chain(setup, _grid_search([force]), grid=True)
-                        self.chains.append(chain)
-                        self._feed(chain, None)
-                else:
-                    chain = _Chain(setup, None)
-                    self.chains.append(chain)
-                    future = self.client.submit(estimates, dict(setup.config),
-                                                key=f'seeds-{config_hash(setup.config)}',
-                                                retries=2)
-                    self._wait(future, chain, None)
-        self._update_total()
+                chain = _Chain(setup)
+                self.chains.append(chain)
+                known = self._known(setup)
+                self.reused += len(known)
+                args = (dict(setup.config), setup.scenario, study.tolerance, study.forces)
+                key = 'fruit-' + hashlib.sha256(json.dumps(
+                    [config_hash(setup.config), dict(setup.scenario.values), study.tolerance,
+                     study.forces, self.code, sorted(known)], default=repr).encode()
+                ).hexdigest()[:24]
+                future = self.client.submit(run_fruit, *args, known, key=key, retries=2)
+                if future.key not in self.waiting:
+                    self.waiting[future.key] = (future, [])
+                    self.queue.add(future)
+                self.waiting[future.key][1].append(chain)
+                self.bar.total += max(per_fruit - len(known), 0)
+        self.bar.refresh()
 
-    # -------------------------------------------------------------- driving
-    def _wait(self, future, chain: _Chain, request) -> None:
-        if future.key not in self.waiting:
-            self.waiting[future.key] = (future, [])
-            self.queue.add(future)
-        self.waiting[future.key][1].append((chain, request))
+    def _known(self, setup: TrialSetup) -> dict:
+        """The stored outputs of this fruit's evaluations, by ``answer_key``."""
+        known = {}
+        for row in self.by_config.get(config_hash(setup.config), ()):
+            if row['case_key'] == case_key(setup, row['kind'], row['force'], self.code):
+                known[answer_key(row['kind'], row['force'])] = row
+        return known
 
-    def _feed(self, chain: _Chain, answer) -> None:
-        """Send ``answer`` to the chain's search; answer its next requests from the store
-        until one must be computed (submitted) or the search ends."""
-        while True:
-            try:
-                request = next(chain.search) if answer is None else chain.search.send(answer)
-            except StopIteration as stop:
-                chain.result, chain.done = stop.value, True
-                self.finished_counts.append(chain.evaluations)
-                return
-            kind, force = request
-            key = case_key(chain.setup, kind, force, self.code)
-            row = self.store.get(key)
-            chain.evaluations += 1
-            if row is None:
-                future = self.client.submit(run_case, dict(chain.setup.config),
-                                            chain.setup.scenario, float(force), kind,
-                                            key=f'grasp-{key}', retries=2)
-                self._wait(future, chain, (kind, force, key))
-                return
-            self.reused += 1
-            answer = self._verdict(chain, row, kind)
+    def run(self) -> bool:
+        """Until every fruit is done; False if interrupted (Ctrl-C)."""
+        finished = []
+        try:
+            for future in self.queue:
+                _, chains = self.waiting.pop(future.key)
+                try:
+                    value, failure = future.result(), ''
+                except Exception as err:  # noqa: BLE001 - a lost task: the fruit's error
+                    value, failure = None, f'{type(err).__name__}: {err}'
+                new = self._keep(chains[0].setup, value['new'] if value else [])
+                for chain in chains:
+                    self._finish(chain, value, failure)
+                finished.append(new)
+                mean = float(np.mean(finished))
+                left = sum(1 for c in self.chains if not c.done) * mean
+                self.bar.total = int(self.computed + math.ceil(left))
+                self.bar.update(new)
+        except KeyboardInterrupt:
+            for future, _ in self.waiting.values():
+                future.cancel()
+            return False
+        finally:
+            self.store.flush()
+            self.bar.close()
+        return True
+
+    def _keep(self, setup: TrialSetup, new: list) -> int:
+        """Store the fruit's new evaluations as rows; how many."""
+        for kind, force, outputs in new:
+            if outputs['code_version'] != self.code:
+                raise StudyError(f"a worker runs other code ({outputs['code_version']}) "
+                                 f'than this client ({self.code}): install the same '
+                                 'gripper_sim on every worker')
+            key = case_key(setup, kind, force, self.code)
+            if key not in self.store:
+                self.store.add(self._row(setup, kind, force, key, outputs))
+                self.computed += 1
+        return len(new)
+
+    def _finish(self, chain: _Chain, value: dict | None, failure: str) -> None:
+        chain.done = True
+        if value is None:
+            chain.error = failure
+            chain.result = [] if self.study.forces else (None, None)
+        elif self.study.forces:
+            chain.result = [evaluation_of(self.store.get(case_key(chain.setup, 'hold', f,
+                                                                  self.code)))
+                            for f in self.study.forces]
+        else:
+            chain.result = tuple(value['result'])
 
     def _row(self, setup: TrialSetup, kind: str, force: float, key: str,
              outputs: dict) -> dict:
@@ -228,76 +247,9 @@ class _Runner:
                    kind=kind, package_version=self.code.split('+')[0])
         row.update({k: v for k, v in point.values.items()})
         row.update(setup.drawn)
-        row.update(outputs)
+        row.update({k: v for k, v in outputs.items() if k not in row})
         row['force'] = float(force)
         return row
-
-    def run(self) -> bool:
-        """Until every chain is done; False if interrupted (Ctrl-C)."""
-        try:
-            for future in self.queue:
-                _, waiters = self.waiting.pop(future.key)
-                try:
-                    value = future.result()
-                    failure = None
-                except Exception as err:  # noqa: BLE001 - a lost task is a row
-                    value, failure = None, f'{type(err).__name__}: {err}'
-                for chain, request in waiters:
-                    self._answer(chain, request, value, failure)
-                self._update_total()
-        except KeyboardInterrupt:
-            for future, _ in self.waiting.values():
-                future.cancel()
-            return False
-        finally:
-            self.store.flush()
-            self.bar.close()
-        return True
-
-    def _answer(self, chain: _Chain, request, value, failure: str | None) -> None:
-        if request is None:  # the window seeds
-            if failure is not None:
-                chain.result, chain.done = (None, None), True
-                chain.error = failure
-                return
-            hold, bruise, _ = value
-            chain.search = window_search(chain.setup.config, hold, bruise,
-                                         self.study.tolerance)
-            self._feed(chain, None)
-            return
-        kind, force, key = request
-        if key not in self.store:
-            outputs = value if failure is None else run_case_failure(force, failure)
-            if outputs['code_version'] != self.code:
-                raise StudyError(f"a worker runs other code ({outputs['code_version']}) "
-                                 f'than this client ({self.code}): install the same '
-                                 'gripper_sim on every worker')
-            self.store.add(self._row(chain.setup, kind, force, key, outputs))
-            self.computed += 1
-            self.bar.update(1)
-        self._feed(chain, self._verdict(chain, self.store.get(key), kind))
-
-    @staticmethod
-    def _verdict(chain: _Chain, row: dict, kind: str):
-        """A window search is sent the window's ``Trial``, a grid the evaluation."""
-        evaluation = _row_evaluation(row)
-        return evaluation if chain.grid else trial_of(evaluation, kind)
-
-    def _update_total(self) -> None:
-        mean = (float(np.mean(self.finished_counts)) if self.finished_counts
-                else 1 if self.study.forces else EXPECTED_PER_CHAIN)
-        left = sum(max(1.0, mean - c.evaluations) for c in self.chains if not c.done)
-        self.bar.total = int(self.computed + math.ceil(left))
-
-
-def run_case_failure(force: float, message: str) -> dict:
-    """The outputs of a case whose task was lost (its worker kept dying, ...)."""
-    return dict(force=float(force), outcome='error', held=False, dropped=True,
-                slipped=False, bruised=True, crushed=True, slip_distance=0.0,
-                peak_grip_force=0.0, peak_compression=0.0, peak_contact_pressure=0.0,
-                peak_damage_pressure=0.0, bruised_fraction=0.0, error=message,
-                sim_time=0.0, steps=0, message='', cpu_time=0.0, worker=-1,
-                code_version=code_version())
 
 
 def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = None,
