@@ -301,6 +301,7 @@ def summarise(study: Study, chains: list[_Chain], store: RowStore, complete: boo
                 entry['population']['curve'] = _grid_success(study, own)
         entry['samples'] = [dict(sample=w.sample, min_force=w.min_force,
                                  max_force=_number(w.max_force)) for w in windows]
+        entry['failed'] = [dict(sample=c.setup.sample, error=c.error) for c in own if c.error]
         points.append(entry)
     rows = store.rows.values()
     return dict(study=study.name, description=study.description, source=study.source,
