@@ -3,7 +3,8 @@ wall time of the README example study.
 
 Prints figures, asserts nothing (a benchmark, not a test). CPU time is
 ``time.process_time`` in one process, and for a Dask run the user+system time of the
-client and of every worker process (``os.times``, children included), so the figures hold on a loaded machine.
+client and of every worker process (``os.times``, children included), so the figures
+hold on a loaded machine.
 
 1. In one process through the study path (``study_tasks.run_fruit``, what a worker
    runs): the cases one fruit's window search asks for, 2D with the study settings of

@@ -88,3 +88,24 @@ def test_no_safe_force_and_a_confident_window():
     result = population_window(some, 50.0, 0.99, 0.95)
     assert result['window']['low'] == 2.0 and result['holds_nowhere'] == 1
     assert population_window(some, 50.0, 0.995, 0.95)['window'] is None
+
+
+def test_a_force_grid_evaluates_every_fruit_at_every_force(tmp_path):
+    data = yaml.safe_load(STUDY)
+    data['axes'] = {'force': [0.5, 3.0, 60.0]}
+    data['population']['samples'] = 2
+    path = tmp_path / 'grid.yaml'
+    path.write_text(yaml.safe_dump(data))
+    study = load_study(path)
+    assert study.method == 'grid'
+    run = run_study(study, tmp_path / 'out', workers=1, progress=False)
+    assert run.computed == 6 and len(run.rows) == 6
+    assert {(r['sample'], r['force'], r['kind']) for r in run.rows} == {
+        (s, f, 'hold') for s in (0, 1) for f in (0.5, 3.0, 60.0)}
+    outcome = {(r['sample'], r['force']): r['outcome'] for r in run.rows}
+    assert all(outcome[(s, 0.5)] == 'dropped' for s in (0, 1))  # below m g / (2 mu)
+    assert all(outcome[(s, 3.0)] == 'held' for s in (0, 1))
+    assert all(outcome[(s, 60.0)] in ('bruised', 'crushed') for s in (0, 1))
+    (point,) = run.summary['points']
+    assert point['population']['curve']['p'] == [0.0, 1.0, 0.0]
+    assert point['population']['window'] == dict(low=3.0, high=3.0, high_is_limit=False)

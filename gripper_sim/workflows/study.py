@@ -40,7 +40,8 @@ from gripper_sim.workflows.population_window import (SampleWindow, grid_curve,
 from gripper_sim.workflows.study_results import RowStore
 from gripper_sim.workflows.study_spec import Study
 from gripper_sim.workflows.study_spec import Trial as TrialSetup
-from gripper_sim.workflows.study_tasks import answer_key, code_version, evaluation_of, run_fruit
+from gripper_sim.workflows.study_tasks import (answer_key, code_version, evaluation_of,
+                                               run_fruit)
 
 #: seconds to wait for an existing scheduler before giving up
 CONNECT_TIMEOUT = 3.0
@@ -343,9 +344,9 @@ def _grid_success(study: Study, chains: list[_Chain]) -> dict:
     samples = sorted({c.setup.sample for c in chains})
     success = np.zeros((len(samples), len(forces)), dtype=bool)
     for chain in chains:
-        (evaluation,) = chain.result
-        success[samples.index(chain.setup.sample), forces.index(evaluation.force)] = (
-            evaluation.held and not (evaluation.bruised or evaluation.crushed))
+        for evaluation in chain.result:
+            success[samples.index(chain.setup.sample), forces.index(evaluation.force)] = (
+                evaluation.held and not (evaluation.bruised or evaluation.crushed))
     return grid_curve(success, forces, study.confidence)
 
 
