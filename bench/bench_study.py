@@ -79,39 +79,45 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--skip-3d', action='store_true')
     parser.add_argument('--skip-example', action='store_true')
+    parser.add_argument('--only-example', action='store_true')
     parser.add_argument('--samples', type=int, default=6,
                         help='fruits per design point of the scaling study (default 6)')
     args = parser.parse_args()
     print(f'load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores')
     example = load_study(EXAMPLE)
-    print('1. one process, through the study path (run_fruit), one window search:')
-    setup = example.trial(example.points[1], 0, {})
-    scenario = example.base['scenario']
-    config = dict(setup.config)
-    config['gripper.initial_lift'] += scenario['approach.height']
-    in_process(config, scenario, example.tolerance,
-               f"2D study settings (dt {config['sim.dt'] * 1e3:g} ms, short lift)")
-    full = load_scenario('pick_and_place')
-    in_process(scenario_config(full), full, example.tolerance,
-               '2D window defaults (pick_and_place, dt 1 ms)')
-    if not args.skip_3d:
-        config3d = scenario_config(scenario, overrides={
-            'dimension': 3, 'sim.dt': 0.02, 'fruit.mesh.subdivisions': 4})
-        in_process(config3d, scenario, 0.1, '3D study settings (dt 20 ms, 162 vertices)')
-    print(f'2. local Dask cluster, {EXAMPLE} with {args.samples} fruits per design point:')
-    small = replace(example, population=replace(example.population, samples=args.samples))
-    one = on_cluster(small, 1)
-    two = on_cluster(small, 2)
-    print(f'  scaling 1 -> 2 workers: {two / one:.2f}x (evaluations per second of wall '
-          'time, cluster start excluded)')
+    if not args.only_example:
+        print('1. one process, through the study path (run_fruit), one window search:')
+        setup = example.trial(example.points[1], 0, {})
+        scenario = example.base['scenario']
+        config = dict(setup.config)
+        config['gripper.initial_lift'] += scenario['approach.height']
+        in_process(config, scenario, example.tolerance,
+                   f"2D study settings (dt {config['sim.dt'] * 1e3:g} ms, short lift)")
+        full = load_scenario('pick_and_place')
+        in_process(scenario_config(full), full, example.tolerance,
+                   '2D window defaults (pick_and_place, dt 1 ms)')
+        if not args.skip_3d:
+            config3d = scenario_config(scenario, overrides={
+                'dimension': 3, 'sim.dt': 0.02, 'fruit.mesh.subdivisions': 4})
+            in_process(config3d, scenario, 0.1, '3D study settings (dt 20 ms, 162 vertices)')
+        print(f'2. local Dask cluster, {EXAMPLE} with {args.samples} fruits per design point:')
+        small = replace(example, population=replace(example.population,
+                                                    samples=args.samples))
+        one = on_cluster(small, 1)
+        two = on_cluster(small, 2)
+        print(f'  scaling 1 -> 2 workers: {two / one:.2f}x (evaluations per second of wall '
+              'time, cluster start excluded)')
     if not args.skip_example:
         print(f'3. the README example study ({EXAMPLE}), default local cluster:')
-        start = time.perf_counter()
+        start, before = time.perf_counter(), cpu_seconds()
         with tempfile.TemporaryDirectory() as out:
             run = run_study(example, out, progress=False)
-        wall = time.perf_counter() - start
+        wall, cpu = time.perf_counter() - start, cpu_seconds() - before
+        task_cpu = sum(r['cpu_time'] for r in run.rows)
         print(f'  {run.computed} evaluations in {wall:.0f} s wall (cluster start '
-              f'{run.startup_time:.1f} s)')
+              f'{run.startup_time:.1f} s); CPU: in the tasks {task_cpu:.1f} s '
+              f'({60 * run.computed / task_cpu:.0f} per CPU-minute), all processes '
+              f'{cpu:.1f} s ({60 * run.computed / cpu:.0f} per CPU-minute)')
     return 0
 
 
