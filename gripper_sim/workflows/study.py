@@ -39,7 +39,7 @@ from gripper_sim.workflows.population_window import (SampleWindow, grid_curve,
                                                      population_window)
 from gripper_sim.workflows.study_results import RowStore
 from gripper_sim.workflows.study_spec import Study
-from gripper_sim.workflows.study_spec import Trial as TrialSetup
+from gripper_sim.workflows.study_spec import FruitSetup
 from gripper_sim.workflows.study_tasks import (answer_key, code_version, evaluation_of,
                                                run_fruit)
 
@@ -74,7 +74,7 @@ def config_hash(config) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def case_key(setup: TrialSetup, kind: str, force: float, code: str) -> str:
+def case_key(setup: FruitSetup, kind: str, force: float, code: str) -> str:
     """The row key: effective configuration, scenario, kind, force and code version."""
     text = json.dumps(dict(config=config_hash(setup.config),
                            scenario=dict(setup.scenario.values), kind=kind,
@@ -128,7 +128,7 @@ class _Chain:
     """One (design point, fruit): its set-up and, once its task is back, its result
     (window search: (min, max) N; grid: the evaluations, one per force)."""
 
-    def __init__(self, setup: TrialSetup):
+    def __init__(self, setup: FruitSetup):
         self.setup = setup
         self.error = ''
         self.result: Any = None
@@ -179,7 +179,7 @@ class _Runner:
                 self.bar.total += max(per_fruit - len(known), 0)
         self.bar.refresh()
 
-    def _known(self, setup: TrialSetup) -> dict:
+    def _known(self, setup: FruitSetup) -> dict:
         """The stored outputs of this fruit's evaluations, by ``answer_key``."""
         known = {}
         for row in self.by_config.get(config_hash(setup.config), ()):
@@ -214,7 +214,7 @@ class _Runner:
             self.bar.close()
         return True
 
-    def _keep(self, setup: TrialSetup, new: list) -> int:
+    def _keep(self, setup: FruitSetup, new: list) -> int:
         """Store the fruit's new evaluations as rows; how many."""
         for kind, force, outputs in new:
             if outputs['code_version'] != self.code:
@@ -239,7 +239,7 @@ class _Runner:
         else:
             chain.result = tuple(value['result'])
 
-    def _row(self, setup: TrialSetup, kind: str, force: float, key: str,
+    def _row(self, setup: FruitSetup, kind: str, force: float, key: str,
              outputs: dict) -> dict:
         study = self.study
         point = study.points[setup.point]

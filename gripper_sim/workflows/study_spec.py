@@ -55,7 +55,7 @@ class DesignPoint:
 
 
 @dataclass(frozen=True)
-class Trial:
+class FruitSetup:
     """The set-up of one (design point, sample): its trial configuration and scenario
     (``core.window.trial_setup``) and the sample's drawn values."""
 
@@ -90,7 +90,8 @@ class Study:
     def method(self) -> str:
         return 'grid' if self.forces else 'bisection'
 
-    def trial(self, point: DesignPoint, sample: int, drawn: Mapping[str, float]) -> Trial:
+    def trial(self, point: DesignPoint, sample: int,
+              drawn: Mapping[str, float]) -> FruitSetup:
         """The trial set-up of ``point`` for the fruit ``drawn`` (ConfigError if invalid)."""
         fruit = point.values.get('fruit', self.base['fruit'])
         finger = point.values.get('finger', self.base['finger'])
@@ -119,7 +120,7 @@ class Study:
             overrides['fruit.density'] = config['fruit.density'] * drawn['mass'] / mass
             config = _config(scenario, fruit, finger, overrides, point, sample)
         trial_config, trial_scenario = trial_setup(config, scenario)
-        return Trial(point=point.index, sample=sample, config=trial_config,
+        return FruitSetup(point=point.index, sample=sample, config=trial_config,
                      scenario=trial_scenario, drawn=dict(drawn))
 
 
