@@ -20,6 +20,7 @@ VERB_MODULES = (
     'gripper_sim.cli.ros_commands',
     'gripper_sim.cli.bag_commands',
     'gripper_sim.cli.calibrate',
+    'gripper_sim.cli.study',
 )
 
 
