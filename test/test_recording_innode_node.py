@@ -67,7 +67,12 @@ def record_path_param(client, get_params) -> str:
 
 
 def read_states(path: Path) -> tuple[list[FruitState], dict[str, str], list[str]]:
-    """FruitState messages, the config metadata and the topics, with the mcap library."""
+    """FruitState messages, the config metadata and the topics, with the mcap library
+    (``path`` is a one-file bag folder or an .mcap file)."""
+    if path.is_dir():
+        assert sorted(p.name for p in path.iterdir()) == [f'{path.name}_0.mcap',
+                                                           'metadata.yaml']
+        path = path / f'{path.name}_0.mcap'
     with open(path, 'rb') as stream:
         reader = mcap_reader.make_reader(stream)
         states = [deserialize_message(message.data, FruitState)
@@ -92,12 +97,12 @@ def test_record_service_writes_every_step_and_a_config_that_reproduces_the_run(
 
     started = client.call(record, SetBool.Request(data=True))
     assert started.success, started.message
-    match = re.search(r'(/\S+\.mcap)', started.message)
+    match = re.search(r'(/\S+/gripper_sim_\S+)', started.message)
     assert match, started.message
     path = Path(match.group(1))
-    # record_path empty: a timestamped file in the node's working directory
+    # record_path empty: a timestamped bag folder in the node's working directory
     assert path.parent == workdir, started.message
-    assert re.fullmatch(r'gripper_sim_\d{8}_\d{6}(_\d+)?\.mcap', path.name), path.name
+    assert re.fullmatch(r'gripper_sim_\d{8}_\d{6}(_\d+)?', path.name), path.name
     assert record_path_param(client, get_params) == str(path)
     again = client.call(record, SetBool.Request(data=True))
     assert not again.success and 'already recording' in again.message
@@ -167,7 +172,8 @@ def test_record_path_parameter_starts_and_stops_and_bad_paths_are_refused(node, 
     taken = tmp_path / 'taken.mcap'
     taken.write_bytes(b'keep me')
     for bad, why in ((tmp_path / 'no_such_dir' / 'run.mcap', 'does not exist'),
-                     (taken, 'already exists'), (Path('/proc/run.mcap'), 'cannot create')):
+                     (taken, 'already exists'), (Path('/proc/run.mcap'), 'cannot create'),
+                     (tmp_path, 'existing directory')):
         result, = client.set_parameters(record_path=str(bad))
         assert not result.successful and why in result.reason, (bad, result.reason)
         assert record_path_param(client, get_params) == ''
@@ -199,7 +205,10 @@ def test_record_path_parameter_starts_and_stops_and_bad_paths_are_refused(node, 
     assert client.set_parameters(record_path=str(tmp_path / 'third'))[0].successful
     assert record_path_param(client, get_params) == str(tmp_path / 'third')
     assert client.call(record, SetBool.Request(data=False)).success
-    assert (tmp_path / 'third.mcap').is_file()          # '.mcap' appended
+    # a name without .mcap is a bag folder of that name, as ros2 bag record -o writes
+    assert sorted(p.name for p in (tmp_path / 'third').iterdir()) == ['metadata.yaml',
+                                                                       'third_0.mcap']
+    assert not (tmp_path / 'third.mcap').exists()
 
 
 def test_record_path_at_start_up_records_until_the_node_stops(tmp_path):

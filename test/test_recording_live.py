@@ -386,3 +386,52 @@ def test_replay_clock_drives_a_use_sim_time_node(tmp_path):
     assert followed == sorted(followed)
     assert followed[-1] - followed[0] >= 1_000_000_000  # most of the 2 s recording
     assert followed[-1] <= t0 + 2_100_000_000
+
+
+def test_record_a_split_bag_folder_by_pattern_and_replay_it(tmp_path):
+    from rosbags.rosbag2 import Reader as RosbagsReader
+
+    domain = _domain()
+    out = tmp_path / 'patterns'
+    with ros_node(domain, 'pattern_talker') as node:
+        qos_profile = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        pubs = {t: node.create_publisher(String, t, qos_profile)
+                for t in ('/sim/a', '/sim/b', '/other')}
+        recorder = cli(domain, tmp_path, 'record', '-o', str(out), '-e', '/sim/.*',
+                       '-x', '.*/b', '--max-bag-duration', '0.2', name='record_patterns')
+        with recorder:
+            wait_for(lambda: pubs['/sim/a'].get_subscription_count() > 0,
+                     what='/sim/a subscribed')
+            for i in range(60):
+                for topic, pub in pubs.items():
+                    pub.publish(String(data=f'{topic} {i}'))
+                time.sleep(0.01)
+            for pub in pubs.values():
+                pub.wait_for_all_acked(Duration(seconds=TIMEOUT))
+            wait_for(lambda: "recording '/sim/a'" in recorder.log(), what='recorder log')
+            stop_cleanly(recorder)
+    log = recorder.log()
+    assert "recording '/sim/b'" not in log and "recording '/other'" not in log, log
+    files = sorted(p.name for p in out.glob('*.mcap'))
+    assert len(files) >= 3 and (out / 'metadata.yaml').is_file()
+    with BagReader(out) as bag:
+        assert set(bag.topics) == {'/sim/a'} and bag.message_count == 60
+        sent = [m.data for m in bag.messages()]
+    with RosbagsReader(out) as reader:
+        assert [bytes(raw) for _, _, raw in reader.messages()] == sent
+
+    # the folder replays like a file: every message, in order
+    copy = tmp_path / 'copy'
+    domain = _domain()
+    recorder = cli(domain, tmp_path, 'record', '/sim/a', '-o', str(copy), name='record_copy')
+    with recorder:
+        replay = cli(domain, tmp_path, 'replay', str(out), '--wait-for-subscribers', '30',
+                     name='replay_folder')
+        with replay:
+            replay.process.wait(TIMEOUT)
+            assert replay.process.returncode == 0, replay.log()
+        wait_for(lambda: copy.exists(), what='the copy')
+        stop_cleanly(recorder)
+    with BagReader(copy) as bag:
+        got = [m.data for m in bag.messages()]
+    assert len(got) == len(sent) and all(same_payload(g, s) for g, s in zip(got, sent))

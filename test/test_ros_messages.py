@@ -196,7 +196,8 @@ def squeezed_3d():
     from gripper_sim.configuration import load_config
     from gripper_sim.core import make_simulation
     config = load_config(overrides={
-        'dimension': 3, 'fruit.mesh.subdivisions': 3, 'gripper.initial_gap': 0.0645,
+        'dimension': 3, 'fruit.mesh.subdivisions': 3, 'fruit.mesh.jaw_refinement': 0.5,
+        'gripper.initial_gap': 0.0645,
         'gripper.close_speed': 0.05, 'sim.dt': 0.002, 'fruit.bruise_pressure': BRUISE_3D})
     sim = make_simulation(config)
     context = MessageContext.from_config(config, initial=sim.last)

@@ -4,6 +4,8 @@ Topics and types, jaw commands by topic, pause/step/reset, parameters, and every
 of bad input rejected with a logged reason while the node keeps running.
 """
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -37,13 +39,8 @@ def running(tmp_path_factory, node_and_client):
 
 
 @pytest.fixture
-def client(running):
-    process, client = running
-    assert process.running, process.log()
-    # reset while paused: a fast node would otherwise have moved on (and its reset
-    # state dropped from the history) before the client sees it
-    client.restart()
-    return client
+def client(running, restarted):
+    return restarted(running)
 
 
 def gap_of(client):
@@ -199,13 +196,25 @@ def test_publish_rate_is_a_live_parameter(client):
     assert sorted(gaps)[len(gaps) // 2] == 20_000_000, gaps
 
 
-def test_a_bad_start_up_parameter_fails_cleanly(tmp_path):
-    process = node_process({'physics.sim.dt': 5.0}, env=ros_environment(DOMAIN + 1),
+# publish_rate 1e-307 is inside (0, 1000] but has no whole number of steps: it was a
+# traceback (OverflowError) at start-up; the range is now [0.001, 1000]
+@pytest.mark.parametrize('name, value', [('physics.sim.dt', 5.0), ('publish_rate', 1e-307)])
+def test_a_bad_start_up_parameter_fails_cleanly(tmp_path, name, value):
+    process = node_process({name: value}, env=ros_environment(DOMAIN + 1),
                            log_path=tmp_path / 'bad.log').start()
     process.process.wait(120)
     text = process.log()
     assert process.process.returncode == 2, text
-    assert "cannot start: parameter 'physics.sim.dt'" in text and 'Traceback' not in text
+    assert f"cannot start: parameter '{name}'" in text and 'Traceback' not in text
+
+
+def test_malformed_ros_arguments_fail_cleanly():
+    run = subprocess.run([sys.executable, '-m', 'gripper_sim.ros.node', '--ros-args', '-p'],
+                         env=ros_environment(DOMAIN + 1), capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.startswith('error: Failed to parse ROS arguments')
+    assert 'Traceback' not in run.stderr
 
 
 def test_an_unknown_fruit_fails_cleanly(tmp_path):

@@ -13,7 +13,8 @@ import rclpy
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConvergenceError
 from gripper_sim.ros import messages
-from gripper_sim.ros.node import JawOwner, SimNode
+from gripper_sim.ros.node import SimNode
+from gripper_sim.ros.sync import JawOwner
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
 
 pytestmark = pytest.mark.ros
@@ -54,9 +55,10 @@ class Owner(JawOwner):
 
 @pytest.fixture
 def context():
-    apply_ros_environment(pick_domain_id(30))
+    domain = pick_domain_id(30)
+    apply_ros_environment(domain)
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=pick_domain_id(30))
+    rclpy.init(context=context, domain_id=domain)
     yield context
     rclpy.try_shutdown(context=context)
 
@@ -65,14 +67,15 @@ def context():
 def test_a_failed_step_is_reported_resets_and_publishes_nothing_non_finite(context, mode):
     FailingSimulation.mode = mode
     node = SimNode(context=context, simulation_factory=FailingSimulation, start=False,
-                   parameter_overrides=[rclpy.parameter.Parameter('publish_rate', value=1000.0)])
+                   parameter_overrides=[rclpy.parameter.Parameter('publish_rate', value=1000.0),
+                                        rclpy.parameter.Parameter('foxglove_port', value=0)])
     try:
         published = []
         node.add_publish_observer(lambda batch, stamp: published.append(batch))
         resets = []
         node.add_reset_listener(resets.append)
         owner = Owner()
-        assert node.claim_jaws(owner) is None
+        assert node.claim_jaws(owner, node.jaws.ticket()) is None
         node.sim.command_gap(0.06)
         results = [node.advance() for _ in range(8)]
         assert results[4] is None and all(r is not None for r in results[:4] + results[5:])

@@ -43,7 +43,7 @@ def test_rclpy_imports_and_creates_a_node():
     try:
         node = rclpy.create_node('gripper_sim_setup_check', context=context)
         assert node.get_name() == 'gripper_sim_setup_check'
-        from conftest import domain_in_use  # the probe the domain picking relies on
+        from gripper_sim.ros.process import domain_in_use  # the probe the domain picking relies on
         assert domain_in_use(int(os.environ['ROS_DOMAIN_ID']))
         node.destroy_node()
     finally:
@@ -230,7 +230,7 @@ def test_two_processes_talk_on_loopback(ros_env):
 
 
 def test_new_domain_ids_are_distinct_and_unused(new_domain_id):
-    from conftest import domain_in_use
+    from gripper_sim.ros.process import domain_in_use
     ids = [new_domain_id() for _ in range(3)]
     assert len(set(ids + [int(os.environ['ROS_DOMAIN_ID'])])) == 4
     assert all(1 <= i <= 101 and not domain_in_use(i) for i in ids)

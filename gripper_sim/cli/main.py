@@ -8,15 +8,19 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from gripper_sim import __version__
 from gripper_sim.errors import GripperSimError
 
+SIGPIPE_EXIT = 141   # 128 + SIGPIPE: what a shell reports for a tool a closed pipe ended
 VERB_MODULES = (
     'gripper_sim.cli.offline',
     'gripper_sim.cli.ros_commands',
     'gripper_sim.cli.bag_commands',
+    'gripper_sim.cli.calibrate',
+    'gripper_sim.cli.study',
 )
 
 
@@ -38,6 +42,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one verb: its exit code; 2 for a gripper_sim error (``error: ...``), 130 on
+    Ctrl-C, 141 when the reader of stdout has gone."""
+    try:
+        code = _run(argv)
+        sys.stdout.flush()   # here, not at exit: a closed pipe is then ours to handle
+        return code
+    except BrokenPipeError:
+        return _reader_gone()
+
+
+def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args, extra = parser.parse_known_args(argv)
     if extra and not getattr(args, 'accepts_extra', False):
@@ -53,6 +68,22 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+
+
+def _reader_gone() -> int:
+    """The reader of stdout has gone (``gripper-sim info FILE | head -1``): stop quietly
+    and exit 141 (128 + SIGPIPE) as Unix tools do, with no traceback.
+
+    Later writes and the flush at exit go to /dev/null instead of the closed pipe.
+    """
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (AttributeError, OSError, ValueError):   # stdout is not a file descriptor
+        sys.stdout = os.fdopen(devnull, 'w')
+    else:
+        os.close(devnull)
+    return SIGPIPE_EXIT
 
 
 if __name__ == '__main__':

@@ -7,23 +7,25 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
+import tempfile
 from contextlib import ExitStack
 
 import numpy as np
 
 from gripper_sim.cli.arguments import non_negative_float, positive_float
+from gripper_sim.cli.progress import StepProgress
 from gripper_sim.configuration import available_fruits, load_config, parse_override
 from gripper_sim.errors import GripperSimError
-
-#: longest simulated time (s) a squeeze may take before it is called off
-SQUEEZE_TIME_LIMIT = 600.0
+from gripper_sim.workflows.squeeze import SQUEEZE_DEFAULTS, check_squeeze, squeeze
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     """--fruit / --config / --set, shared by every verb that builds a simulation."""
     source = parser.add_mutually_exclusive_group()
-    source.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits)')
+    source.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits), or a '
+                        'preset file (.yaml, e.g. from gripper-sim calibrate)')
     source.add_argument('--config', metavar='FILE', help='YAML configuration file')
     parser.add_argument('--set', metavar='KEY=VALUE', action='append', default=[],
                         dest='overrides', help='override a configuration key (repeatable)')
@@ -98,6 +100,9 @@ def register(subparsers) -> None:
     window.add_argument('--tolerance', type=positive_float, default=None, metavar='REL',
                         help='relative width at which the bisections stop (default 0.03)')
     window.add_argument('--json', action='store_true', help='print one JSON object')
+    window.add_argument('--html', metavar='FILE.html',
+                        help='also write an HTML report of the trials (opens offline)')
+    window.add_argument('--quiet', action='store_true', help='no line per trial')
     window.set_defaults(handler=run_window)
 
     fingers = subparsers.add_parser('fingers', help='list the finger presets')
@@ -121,6 +126,11 @@ def _add_output_arguments(parser) -> None:
                         help='print one JSON object with the time series and summary')
     parser.add_argument('--out', metavar='FILE.mcap',
                         help='record every step to an MCAP file, as the node would publish')
+    parser.add_argument('--html', metavar='FILE.html',
+                        help='also write an HTML report of the run (plots and an animation '
+                             'of the fruit; opens offline)')
+    parser.add_argument('--quiet', action='store_true',
+                        help='no progress bar (it shows on a terminal after 2 s)')
 
 
 class _Series:
@@ -197,50 +207,51 @@ def _dimension(sim) -> int:
     return int(getattr(sim, 'dimension', 2))
 
 
-def _start_recording(stack: ExitStack, args, sim) -> None:
-    if not args.out:
-        return
+def _start_observers(stack: ExitStack, args, sim, verb: str):
+    """Progress bar and recording of a run (``--quiet``, ``--out``, ``--html``); the
+    recorder or None. Without ``--out``, ``--html`` records to a temporary file."""
+    sim.add_observer(stack.enter_context(StepProgress(verb, quiet=args.quiet)))
+    path = args.out
+    if not path and args.html:
+        folder = stack.enter_context(tempfile.TemporaryDirectory(prefix='gripper_sim_'))
+        path = os.path.join(folder, 'run.mcap')
+    if not path:
+        return None
     from gripper_sim.recording.offline import SimRecorder
     from gripper_sim.recording.errors import RecordingError
     try:
-        recorder = stack.enter_context(SimRecorder(args.out, sim.config, initial=sim.last))
+        recorder = stack.enter_context(SimRecorder(path, sim.config, initial=sim.last))
     except RecordingError as err:
         raise GripperSimError(str(err)) from err
     sim.add_observer(recorder.on_step)
+    return recorder
+
+
+def _write_html(args, recorder) -> None:
+    """``--html``: close the recording and write its report (call inside the stack)."""
+    if recorder is None or not args.html:
+        return
+    from gripper_sim.recording.analysis import write_recording_report
+    from gripper_sim.recording.errors import RecordingError
+    recorder.close()
+    try:
+        write_recording_report(recorder.path, args.html)
+    except RecordingError as err:
+        raise GripperSimError(str(err)) from err
+    print(f'wrote {args.html}', file=sys.stderr)
 
 
 def run_squeeze(args) -> int:
     from gripper_sim.core import make_simulation as Simulation
-    config = config_from_args(args, {'world.gravity': 0.0, 'world.table': False})
-    if args.to_force is not None and args.to_force > config['gripper.max_force']:
-        raise GripperSimError(f"--to-force {args.to_force} N exceeds gripper.max_force "
-                              f"{config['gripper.max_force']} N")
-    if args.speed > config['gripper.max_speed']:
-        raise GripperSimError(f"--speed {args.speed} m/s exceeds gripper.max_speed "
-                              f"{config['gripper.max_speed']} m/s")
+    config = config_from_args(args, SQUEEZE_DEFAULTS)
+    check_squeeze(config, args.speed, args.to_force)
     sim = Simulation(config)
-    if args.to_gap is not None and args.to_gap >= sim.initial_gap:
-        raise GripperSimError(f'--to-gap {args.to_gap} m is not below the initial gap '
-                              f'{sim.initial_gap:.4g} m')
     series = _Series(_dimension(sim))
     sim.add_observer(series)
     with ExitStack() as stack:
-        _start_recording(stack, args, sim)
-        sim.command_gap(args.to_gap if args.to_gap is not None else 0.0, args.speed)
-        reached = False
-        while sim.time < SQUEEZE_TIME_LIMIT:
-            result = sim.step()
-            if args.to_force is not None and result.grip_force >= args.to_force:
-                reached = True
-                break
-            if args.to_gap is not None and result.gap <= args.to_gap + 1e-12:
-                reached = True
-                break
-            if result.gap <= 0.0:
-                break
-    if not reached:
-        raise GripperSimError(f'the squeeze did not reach the target (peak force '
-                              f'{series.peak_force:.4g} N, final gap {sim.last.gap:.4g} m)')
+        recorder = _start_observers(stack, args, sim, 'squeeze')
+        squeeze(sim, args.speed, to_force=args.to_force, to_gap=args.to_gap)
+        _write_html(args, recorder)
     summary = dict(fruit=config['fruit.name'], model=config['fruit.model'],
                    peak_force=series.peak_force, peak_compression=series.peak_compression,
                    peak_contact_pressure=series.peak_pressure, final_gap=sim.last.gap,
@@ -283,9 +294,10 @@ def run_pick(args) -> int:
     series = _Series(_dimension(sim))
     sim.add_observer(series)
     with ExitStack() as stack:
-        _start_recording(stack, args, sim)
+        recorder = _start_observers(stack, args, sim, 'pick')
         sequence = GraspSequence(sim, args.force, args.speed, args.lift, args.hold)
         summary = run_grasp(sim, sequence)
+        _write_html(args, recorder)
     summary.update(series.contact_summary())
     if args.json:
         json.dump(dict(outcome=summary['outcome'], slip_distance=summary['slip_distance'],
@@ -365,8 +377,9 @@ def run_scenario_verb(args) -> int:
     series = _Series(_dimension(sim))
     sim.add_observer(series)
     with ExitStack() as stack:
-        _start_recording(stack, args, sim)
+        recorder = _start_observers(stack, args, sim, scenario['name'])
         summary = run_scenario(sim, scenario)
+        _write_html(args, recorder)
     summary = dict(scenario=scenario['name'], fruit=config['fruit.name'],
                    finger=config['gripper.finger.name'], **summary,
                    **series.contact_summary())
@@ -406,7 +419,7 @@ def run_window(args) -> int:
         raise GripperSimError(f'--tolerance {tolerance} must be below 1')
 
     def progress(trial):
-        if not args.json:
+        if not args.json and not args.quiet:
             print(f'  trial {trial.force:8.3f} N: {trial.outcome:8s} slip '
                   f'{trial.slip_distance * 1e3:6.3f} mm, peak pressure '
                   f'{trial.peak_pressure / 1e3:7.1f} kPa ({trial.wall_time:.1f} s)', flush=True)
@@ -417,6 +430,16 @@ def run_window(args) -> int:
               f"{scenario['lift.height']:g} m, transport {scenario['transport.distance']:g} m)",
               flush=True)
     window = grasp_window(config, scenario, tolerance, progress)
+    if args.html:
+        from gripper_sim.recording.analysis.report_html import write_window_report
+        from gripper_sim.recording.errors import RecordingError
+        try:
+            write_window_report(window.as_dict(), args.html, title=(
+                f"Grasp window of {config['fruit.name']} with the "
+                f"{config['gripper.finger.name']} finger ({scenario['name']})"))
+        except RecordingError as err:
+            raise GripperSimError(str(err)) from err
+        print(f'wrote {args.html}', file=sys.stderr)
     if args.json:
         json.dump(window.as_dict(), sys.stdout)
         sys.stdout.write('\n')

@@ -8,11 +8,18 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import sys
+import threading
 import time
 
 DEFAULT_NODE = '/gripper_sim'
 WARN = 30   # rcl_interfaces/Log level
+# After Ctrl-C a verb cancels its goal and waits this long for the answer, then exits.
+CANCEL_WAIT = 0.8   # s
+# Feedback history of the Grasp client: every phase change is printed even when this
+# process reads late.
+FEEDBACK_DEPTH = 200
 
 
 def _finite(minimum: float | None = 0.0, positive: bool = False, what: str = 'value'):
@@ -114,16 +121,26 @@ def _default_environment() -> None:
 
 
 class _Session:
-    """An rclpy context with one node, spun by hand."""
+    """An rclpy context with one node, spun by hand.
+
+    Ctrl-C (SIGINT) only sets ``interrupted``; ``spin_until`` and ``spin_once`` then
+    raise KeyboardInterrupt between two spins, never inside rclpy (a KeyboardInterrupt
+    raised in, e.g., a future's ``__del__`` is swallowed, and the verb would go on).
+    """
 
     def __init__(self, name: str):
         _default_environment()
         import rclpy
         self.rclpy = rclpy
+        self.interrupted = threading.Event()
+        self._previous_handler = None
+        if threading.current_thread() is threading.main_thread():
+            self._previous_handler = signal.signal(
+                signal.SIGINT, lambda *_: self.interrupted.set())
         self.context = rclpy.Context()
         from rclpy.signals import SignalHandlerOptions
-        # Ctrl-C raises KeyboardInterrupt here (rclpy would shut the context down
-        # first, and a Grasp goal could no longer be canceled).
+        # rclpy's handler would shut the context down first, and a Grasp goal could
+        # no longer be canceled.
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(name, context=self.context,
                                       start_parameter_services=False)
@@ -133,13 +150,20 @@ class _Session:
         self.rejections: list[str] = []
         self._target_name = None
 
-    def spin_until(self, condition, timeout: float) -> bool:
+    def spin_once(self, timeout: float, interruptible: bool = True) -> None:
+        if interruptible and self.interrupted.is_set():
+            raise KeyboardInterrupt
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def spin_until(self, condition, timeout: float, interruptible: bool = True) -> bool:
+        """Spin until ``condition()`` (True) or ``timeout`` s (False); Ctrl-C raises
+        KeyboardInterrupt unless not ``interruptible``."""
         deadline = time.monotonic() + timeout
         while not condition():
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return False
-            self.executor.spin_once(timeout_sec=min(0.05, remaining))
+            self.spin_once(min(0.05, remaining), interruptible)
         return True
 
     def watch_rejections(self, node_path: str) -> None:
@@ -161,6 +185,8 @@ class _Session:
         self.executor.shutdown()
         self.node.destroy_node()
         self.rclpy.try_shutdown(context=self.context)
+        if self._previous_handler is not None:
+            signal.signal(signal.SIGINT, self._previous_handler)
 
     def __enter__(self) -> '_Session':
         return self
@@ -242,6 +268,9 @@ def _jaw(args) -> int:
         reply = answer()
         if reply.startswith('rejected'):
             return _error(f'the node rejected it: {reply.split(": ", 2)[2]}')
+        if reply.startswith('superseded'):   # another command arrived before the next step
+            return _error(f'not applied: {reply.split(": ", 2)[2]} (only the latest '
+                          'command counts)')
         count = len(joints)
         if not session.spin_until(lambda: len(joints) > count, 1.0):
             print('accepted; no new state within 1 s (is the simulation paused?)')
@@ -281,11 +310,14 @@ def _open(args) -> int:
 
 def _grasp(args) -> int:
     from rclpy.action import ActionClient
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from gripper_sim_interfaces.action import Grasp
     node_path = args.node.rstrip('/')
     with _Session('gripper_sim_grasp_cli') as session:
         session.watch_rejections(node_path)
-        client = ActionClient(session.node, Grasp, f'{node_path}/grasp')
+        client = ActionClient(session.node, Grasp, f'{node_path}/grasp',
+                              feedback_sub_qos_profile=QoSProfile(
+                                  depth=FEEDBACK_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
         if not session.spin_until(client.server_is_ready, args.timeout):
             return _no_node(f'Grasp action server {node_path}/grasp', node_path, args.timeout)
         if not args.place and (args.transport is not None or args.retreat is not None):
@@ -317,7 +349,14 @@ def _grasp(args) -> int:
             print(f'grasp: {args.force:g} N, lift {lift:g} m, hold {args.hold:g} s'
                   + (', release' if args.release else ''), flush=True)
         sent = client.send_goal_async(goal, feedback_callback=on_feedback)
-        if not session.spin_until(sent.done, args.timeout):
+        try:
+            answered = session.spin_until(sent.done, args.timeout)
+        except KeyboardInterrupt:   # the goal may be accepted all the same: cancel it
+            session.spin_until(sent.done, CANCEL_WAIT, interruptible=False)
+            if sent.done() and sent.result().accepted:
+                return _cancel(session, sent.result(), sent.result().get_result_async())
+            return 130
+        if not answered:
             return _error('the Grasp server did not answer the goal request')
         handle = sent.result()
         if not handle.accepted:
@@ -329,7 +368,7 @@ def _grasp(args) -> int:
         try:
             gone_since = None
             while not result_future.done():
-                session.executor.spin_once(timeout_sec=0.1)
+                session.spin_once(0.1)
                 if client.server_is_ready():
                     gone_since = None
                 elif gone_since is None:
@@ -337,16 +376,31 @@ def _grasp(args) -> int:
                 elif time.monotonic() - gone_since > 5.0:
                     return _error('the node went away before the goal finished')
         except KeyboardInterrupt:
-            print('canceling the goal...', flush=True)
-            cancel = handle.cancel_goal_async()
-            session.spin_until(cancel.done, 10.0)
-            session.spin_until(result_future.done, 10.0)
-            if result_future.done():
-                _print_result(result_future.result().result)
-            return 130
+            return _cancel(session, handle, result_future)
         result = result_future.result().result
         _print_result(result)
         return 0 if result.success else 1
+
+
+def _cancel(session: _Session, handle, result_future) -> int:
+    """Ctrl-C during a goal: cancel it, print its result if it comes within
+    ``CANCEL_WAIT`` s, and exit 130."""
+    print('canceling the goal...', flush=True)
+    cancel = handle.cancel_goal_async()
+    deadline = time.monotonic() + CANCEL_WAIT
+    session.spin_until(result_future.done, CANCEL_WAIT, interruptible=False)
+    if result_future.done():
+        _print_result(result_future.result().result)
+    else:
+        session.spin_until(cancel.done, max(0.0, deadline - time.monotonic()),
+                           interruptible=False)
+        if cancel.done() and cancel.result().goals_canceling:
+            print(f'the node is canceling the goal (no result within {CANCEL_WAIT:g} s)',
+                  flush=True)
+        else:
+            print(f'the node did not confirm the cancel within {CANCEL_WAIT:g} s',
+                  flush=True)
+    return 130
 
 
 def _print_result(result) -> None:

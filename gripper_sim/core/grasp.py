@@ -1,15 +1,23 @@
-"""A grasp as a step-driven state machine: close to a force, settle, lift, hold, release.
+"""A grasp as a step-driven state machine: close to a force, settle, lift, hold, release;
+and ``evaluate``, the one function that runs a grasp and measures it.
 
 Used by the offline ``pick`` command and by the node's Grasp action alike: after every
 ``sim.step()`` call ``update(result)``; it issues the simulation's commands itself.
+``evaluate`` drives any such machine (``GraspSequence`` for ``pick``, the scenario's
+``PickAndPlace`` for the grasp window and for studies) to its end and returns a
+``GraspEvaluation``: the outcome, the peaks of force, compression and pressure, the
+damage, and the solver's error if it failed.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Protocol
 
 from gripper_sim.core.results import StepResult
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.errors import CommandError
+from gripper_sim.core.slip import grasp_slipped
+from gripper_sim.errors import CommandError, ConvergenceError
 
 CLOSING, SQUEEZING, LIFTING, HOLDING, RELEASING, DONE = (
     'closing', 'squeezing', 'lifting', 'holding', 'releasing', 'done')
@@ -18,8 +26,6 @@ CLOSING, SQUEEZING, LIFTING, HOLDING, RELEASING, DONE = (
 FORCE_REACHED = 0.97
 #: time (s) the grip force is held on the table before lifting
 SETTLE_TIME = 0.2
-#: slip (m) of the fruit relative to the jaws beyond which the grasp slipped
-SLIP_TOLERANCE = 1e-3
 
 
 class GraspSequence:
@@ -127,7 +133,7 @@ class GraspSequence:
                 self._enter(HOLDING)
         elif self.phase == HOLDING:
             if elapsed >= self.hold_time - 0.5 * sim.dt:
-                if self.slip_distance > SLIP_TOLERANCE:
+                if grasp_slipped(self.slip_distance):
                     self._finish('slipped', f'the fruit slipped {self.slip_distance * 1e3:.2f}'
                                  ' mm relative to the jaws')
                 else:
@@ -153,7 +159,9 @@ class GraspSequence:
         if damage is not None and damage.crushed:
             message += '; crushed: the flesh failed'
         return dict(success=success, outcome=self.outcome or 'running',
-                    slipped=self.outcome in ('slipped', 'dropped'), bruised=self.bruised,
+                    slipped=self.outcome is not None and grasp_slipped(
+                        self.slip_distance, self.dropped_at is not None),
+                    bruised=self.bruised,
                     message=message, max_grip_force=self.max_grip_force,
                     final_gap=self.final_gap, max_compression=self.max_compression,
                     max_contact_pressure=self.max_contact_pressure,
@@ -163,13 +171,144 @@ class GraspSequence:
                     peak_damage_pressure=peak)
 
 
+class GraspMachine(Protocol):
+    """What ``evaluate`` needs of a state machine (``GraspSequence``, ``PickAndPlace``)."""
+
+    phase: str
+
+    @property
+    def done(self) -> bool: ...
+
+    def update(self, result: StepResult) -> str: ...
+
+    def summary(self) -> dict: ...
+
+
+#: outcomes after which the fruit was still in the jaws (``held`` needs more: see below)
+CARRIED = ('held', 'slipped', 'bruised', 'crushed', 'placed')
+
+
+@dataclass
+class GraspEvaluation:
+    """One grasp run to its end, measured (``evaluate``).
+
+    Attributes:
+        force: N, the commanded grip force.
+        outcome: the machine's one-word outcome, or 'solver failed'.
+        held: the fruit was carried to the end, not dropped and no longer sliding.
+        dropped, slipped, bruised, crushed: the run's flags.
+        slip_distance: m, slip of the fruit in the jaws (``StepResult.slip_distance``).
+        peak_grip_force: N, largest mean jaw normal force.
+        peak_compression: m, largest loss of width along the closing axis.
+        peak_contact_pressure: Pa, largest contact pressure (planar line contact in 2D,
+            resolved over the patch in 3D).
+        peak_damage_pressure: Pa, the damage model's peak pressure (Hertz in 2D).
+        bruised_fraction: fraction of the outline (2D) or surface (3D) bruised.
+        error: '' or the solver's message when it failed.
+        sim_time: s simulated; steps: time steps taken.
+        message: the machine's text.
+        summary: the machine's own summary (JSON-ready; empty when the solver failed).
+        failure: the ConvergenceError when the solver failed (not compared, not pickled
+            into rows).
+    """
+
+    force: float
+    outcome: str
+    held: bool
+    dropped: bool
+    slipped: bool
+    bruised: bool
+    crushed: bool
+    slip_distance: float
+    peak_grip_force: float
+    peak_compression: float
+    peak_contact_pressure: float
+    peak_damage_pressure: float
+    bruised_fraction: float
+    error: str
+    sim_time: float
+    steps: int
+    message: str
+    summary: dict = field(default_factory=dict, repr=False)
+    failure: ConvergenceError | None = field(default=None, repr=False, compare=False)
+
+    def row(self) -> dict[str, Any]:
+        """The scalar fields (no summary, no exception object)."""
+        values = asdict(self)
+        values.pop('summary')
+        values.pop('failure')
+        return values
+
+
+class _Peaks:
+    """Largest grip force (N), compression (m) and contact pressure (Pa) over the steps."""
+
+    def __init__(self):
+        self.force = self.compression = self.pressure = 0.0
+
+    def add(self, result: StepResult) -> None:
+        deformation = result.deformation
+        self.force = max(self.force, float(result.grip_force))
+        self.compression = max(self.compression, float(deformation.compression))
+        self.pressure = max(self.pressure, float(deformation.peak_contact_pressure))
+
+
+def evaluate(sim, machine: GraspMachine, force: float,
+             on_step: Callable[[StepResult, str], None] | None = None,
+             time_limit: float = 120.0) -> GraspEvaluation:
+    """Step ``sim`` until ``machine`` is done (or ``time_limit`` s of simulation).
+
+    A ``ConvergenceError`` of the solver ends the run: the evaluation then has outcome
+    'solver failed', ``error`` set and counts as neither held nor undamaged (dropped
+    and crushed flags set), so that a force the solver cannot follow stays out of any
+    window.
+    """
+    peaks = _Peaks()
+    start_step = sim.last.step
+    end = sim.time + time_limit
+    try:
+        while not machine.done and sim.time < end:
+            result = sim.step()
+            peaks.add(result)
+            machine.update(result)
+            if on_step is not None:
+                on_step(result, machine.phase)
+    except ConvergenceError as err:
+        return GraspEvaluation(
+            force=float(force), outcome='solver failed', held=False, dropped=True,
+            slipped=False, bruised=True, crushed=True, slip_distance=0.0,
+            peak_grip_force=peaks.force, peak_compression=peaks.compression,
+            peak_contact_pressure=peaks.pressure, peak_damage_pressure=0.0,
+            bruised_fraction=0.0, error=str(err) or type(err).__name__,
+            sim_time=float(sim.time), steps=int(sim.last.step - start_step),
+            message=str(err), failure=err)
+    summary = machine.summary()
+    damage = sim.last.damage
+    outcome = str(summary['outcome'])
+    dropped = bool(summary.get('dropped', outcome == 'dropped'))
+    held = outcome in CARRIED and not dropped and not summary.get('sliding', False)
+    return GraspEvaluation(
+        force=float(force), outcome=outcome, held=bool(held), dropped=dropped,
+        slipped=bool(summary.get('slipped', outcome == 'slipped')),
+        bruised=bool(summary.get('bruised', False)),
+        crushed=bool(summary.get('crushed', False)),
+        slip_distance=float(summary.get('slip_distance', 0.0)),
+        peak_grip_force=peaks.force, peak_compression=peaks.compression,
+        peak_contact_pressure=peaks.pressure,
+        peak_damage_pressure=float(damage.peak_pressure) if damage is not None else 0.0,
+        bruised_fraction=float(damage.bruised_fraction) if damage is not None else 0.0,
+        error='', sim_time=float(sim.time), steps=int(sim.last.step - start_step),
+        message=str(summary.get('message', '')), summary=summary)
+
+
 def run_grasp(sim: Simulation, sequence: GraspSequence, on_step=None,
               time_limit: float = 120.0) -> dict:
-    """Step until the sequence is done (or ``time_limit`` s of simulation); its summary."""
-    end = sim.time + time_limit
-    while not sequence.done and sim.time < end:
-        result = sim.step()
-        sequence.update(result)
-        if on_step is not None:
-            on_step(result, sequence.phase)
-    return sequence.summary()
+    """Step until the sequence is done (or ``time_limit`` s of simulation); its summary.
+
+    Raises:
+        ConvergenceError: the solver failed (``evaluate``'s failure, raised again).
+    """
+    evaluation = evaluate(sim, sequence, sequence.target_force, on_step, time_limit)
+    if evaluation.failure is not None:
+        raise evaluation.failure
+    return evaluation.summary

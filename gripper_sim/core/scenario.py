@@ -43,10 +43,9 @@ import numpy as np
 
 from gripper_sim.configuration import (Key, load_config, package_config_dir, parse_override,
                                        read_yaml)
+from gripper_sim.core.slip import SLIP_TOLERANCE
 from gripper_sim.errors import ConfigError
 
-#: slip (m) of the fruit relative to the jaws beyond which it slipped (as grasp.py)
-SLIP_TOLERANCE = 1e-3
 #: slip (m) beyond which the fruit is lost: dropped
 DROP_SLIP = 0.01
 #: height (m) above the table at which the lowered fruit is let go

@@ -15,22 +15,28 @@
 - The window is [minimum, maximum] when minimum <= maximum, else there is none.
 
 Each trial is a fresh simulation starting with the jaws open at the grasp height (the
-scenario's approach skipped). A trial stops early once its answer is known (dropped or
-bruised). A trial whose solver fails (``ConvergenceError``) counts as neither holding
-nor safe, so that force stays out of the window.
+scenario's approach skipped), run by ``evaluate_grasp`` (``core.grasp.evaluate``, the
+evaluation the ``pick`` command and studies share). A trial stops early once its
+answer is known (dropped or bruised). A trial whose solver fails (``ConvergenceError``)
+counts as neither holding nor safe, so that force stays out of the window. The two
+bisections are one generator, ``window_search``, driven here trial after trial and by
+``gripper_sim.workflows.study`` over a Dask cluster.
 """
 from __future__ import annotations
 
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Generator, Mapping, Tuple
 
 import numpy as np
 
+from gripper_sim.core import make_simulation
 from gripper_sim.core.damage import contact_modulus
-from gripper_sim.core.scenario import Scenario, run_scenario
-from gripper_sim.errors import ConvergenceError, GripperSimError
+from gripper_sim.core.fruit import build_fruit
+from gripper_sim.core.grasp import GraspEvaluation, evaluate
+from gripper_sim.core.scenario import SLIP_TOLERANCE, PickAndPlace, Scenario
+from gripper_sim.errors import GripperSimError
 
 #: relative width of the final bisection brackets
 TOLERANCE = 0.03
@@ -108,7 +114,6 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     curvature along y at the jaw contact of a body of half-widths a (x) and b (y)
     (exact for spheroids: R_y = a for a body of revolution about z).
     """
-    from gripper_sim.core.fruit import build_fruit
     fruit = build_fruit(config)
     mass = fruit.total_mass
     radius_y = None
@@ -148,6 +153,101 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     return hold, bruise, mass
 
 
+#: one request of a window search: (kind, force in N), kind 'hold' or 'bruise'
+Request = Tuple[str, float]
+
+
+def trial_setup(config: Mapping[str, Any], scenario: Scenario) -> tuple[dict, Scenario]:
+    """The configuration and scenario of a window trial: the jaws start open at the
+    grasp height (the scenario's approach skipped)."""
+    config = dict(config)
+    lift = scenario['approach.height']
+    if config.get('gripper.initial_lift') is not None:
+        config['gripper.initial_lift'] = config['gripper.initial_lift'] - lift
+    return config, scenario.with_values(approach__height=0.0)
+
+
+def evaluate_grasp(config: Mapping[str, Any], scenario: Scenario, force: float,
+                   kind: str = 'hold') -> GraspEvaluation:
+    """One grasp at ``force`` N: a fresh simulation of ``config`` (from ``trial_setup``)
+    runs the scenario's close, squeeze, lift, transport and a hold of ``squeeze.time``.
+
+    kind: 'hold' runs to the end; 'bruise' stops as soon as the fruit is damaged.
+    """
+    if kind not in ('hold', 'bruise'):
+        raise ValueError(f'unknown trial kind {kind!r}')
+    sim = make_simulation(config)
+    machine = PickAndPlace(sim, scenario.with_values(close__mode='force', close__force=force),
+                           until='transport', stop_on_bruise=(kind == 'bruise'))
+    return evaluate(sim, machine, force)
+
+
+def trial_of(evaluation: GraspEvaluation, kind: str, wall_time: float = 0.0) -> Trial:
+    """The window's verdict on an evaluation: held (for 'hold') or damaged (bruised or
+    crushed, for 'bruise'; such a run stopped at the damage, so it counts as not held)."""
+    held, bruised = evaluation.held, evaluation.bruised
+    if kind == 'bruise' and (evaluation.bruised or evaluation.crushed):
+        held, bruised = False, True
+    return Trial(force=float(evaluation.force), held=bool(held), bruised=bool(bruised),
+                 outcome=evaluation.outcome, slip_distance=evaluation.slip_distance,
+                 peak_pressure=evaluation.peak_damage_pressure, wall_time=wall_time)
+
+
+def window_search(config: Mapping[str, Any], hold_estimate: float, bruise_estimate: float,
+                  tolerance: float = TOLERANCE
+                  ) -> Generator[Request, Trial, tuple[float | None, float | None]]:
+    """The grasp window's two bisections as a generator: it yields ``(kind, force)``
+    requests, is sent back each request's ``Trial`` (``trial_of``), and returns
+    ``(min_force, max_force)`` (see ``GraspWindow``). The same search runs in one
+    process (``grasp_window``) and over a cluster (``gripper_sim.workflows.study``).
+
+    Args:
+        config: the trials' configuration (friction, pad, gripper.max_force, dimension).
+        hold_estimate, bruise_estimate: N, the closed-form seeds of ``estimates``.
+        tolerance: relative width at which a bisection stops.
+    """
+    limit = float(config['gripper.max_force'])
+    pad = config['gripper.finger.pad.enabled']
+    mu = config['contact.pad.friction'] if pad else config['contact.jaw.static_friction']
+    # a slide that starts (e.g. as the table lets go) goes on at kinetic friction: the
+    # minimum lies between m g / (2 mu_s) and m g / (2 mu_k)
+    mu_k = mu if pad else config['contact.jaw.kinetic_friction']
+    kinetic = hold_estimate * mu / mu_k if mu_k > 0 else 2 * hold_estimate
+    min_force = yield from _ask('hold', bisection(0.8 * hold_estimate, 1.15 * kinetic, limit,
+                                                  tolerance, want_smallest=True))
+    # the pressurised 3D shell spreads its contact (its pressure stays near the turgor,
+    # far from Hertz): start the search no lower than the holding force there
+    seed = (max(bruise_estimate, hold_estimate) if int(config.get('dimension', 2)) == 3
+            else bruise_estimate)
+    max_force = yield from _ask('bruise', bisection(0.8 * seed, 1.25 * seed, limit,
+                                                    tolerance, want_smallest=False))
+    return min_force, max_force
+
+
+def _ask(kind: str, search: Generator[float, bool, float | None]
+         ) -> Generator[Request, Trial, float | None]:
+    """Turn a bisection's forces into ``(kind, force)`` requests and trials into its
+    verdicts (held for 'hold', not damaged for 'bruise')."""
+    try:
+        force = next(search)
+        while True:
+            trial = yield kind, force
+            force = search.send(trial.held if kind == 'hold' else not trial.bruised)
+    except StopIteration as stop:
+        return stop.value
+
+
+def run_search(search: Generator, answer: Callable[[Any], Any]) -> Any:
+    """Drive a search generator in this process: send ``answer(request)`` for each
+    request it yields; its return value."""
+    try:
+        request = next(search)
+        while True:
+            request = search.send(answer(request))
+    except StopIteration as stop:
+        return stop.value
+
+
 def grasp_window(config: Mapping[str, Any], scenario: Scenario,
                  tolerance: float = TOLERANCE,
                  progress: Callable[[Trial], None] | None = None) -> GraspWindow:
@@ -159,64 +259,29 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
         tolerance: relative width at which a bisection stops.
         progress: called with each trial as it finishes.
     """
-    from gripper_sim.core import make_simulation as Simulation
     start = time.perf_counter()
-    config = dict(config)
-    limit = float(config['gripper.max_force'])
     hold_estimate, bruise_estimate, mass = estimates(config)
-    lift = scenario['approach.height']
-    config['gripper.initial_lift'] = config['gripper.initial_lift'] - lift \
-        if config.get('gripper.initial_lift') is not None else None
-    base = scenario.with_values(approach__height=0.0)
+    config, base = trial_setup(config, scenario)
     trials: list[Trial] = []
-    cache: dict[tuple[str, float], Trial] = {}
+    cache: dict[Request, Trial] = {}
 
-    def trial(force: float, kind: str) -> Trial:
+    def trial(request: Request) -> Trial:
+        kind, force = request
         key = (kind, round(force, 12))
-        if key in cache:
-            return cache[key]
-        t0 = time.perf_counter()
-        sim = Simulation(config)
-        try:
-            run = run_scenario(sim, base.with_values(close__mode='force', close__force=force),
-                               until='transport', stop_on_bruise=(kind == 'bruise'))
-        except ConvergenceError as err:
-            # a force the solver cannot follow is kept out of the window: not held, and
-            # counted as damaging
-            run = dict(outcome='solver failed', dropped=True, sliding=True, bruised=True,
-                       slip_distance=0.0, damage=None, message=str(err))
-        damage = run['damage'] or {}
-        held = (run['outcome'] in ('held', 'slipped', 'bruised', 'crushed')
-                and not run['dropped'] and not run['sliding'])
-        result = Trial(force=float(force), held=bool(held), bruised=bool(run['bruised']),
-                       outcome=str(run['outcome']), slip_distance=float(run['slip_distance']),
-                       peak_pressure=float(damage.get('peak_pressure', 0.0)),
-                       wall_time=time.perf_counter() - t0)
-        if kind == 'bruise' and (result.bruised or run.get('crushed')):
-            result.bruised = True  # damaged: bruised, or crushed without a bruise
-            result.held = False  # stopped at the damage: holding was not tried to the end
-        cache[key] = result
-        trials.append(result)
-        if progress is not None:
-            progress(result)
-        return result
+        if key not in cache:
+            t0 = time.perf_counter()
+            result = trial_of(evaluate_grasp(config, base, force, kind), kind,
+                              time.perf_counter() - t0)
+            cache[key] = result
+            trials.append(result)
+            if progress is not None:
+                progress(result)
+        return cache[key]
 
+    min_force, max_force = run_search(
+        window_search(config, hold_estimate, bruise_estimate, tolerance), trial)
     mu = (config['contact.pad.friction'] if config['gripper.finger.pad.enabled']
           else config['contact.jaw.static_friction'])
-    # a slide that starts (e.g. as the table lets go) goes on at kinetic friction: the
-    # minimum lies between m g / (2 mu_s) and m g / (2 mu_k)
-    mu_k = (mu if config['gripper.finger.pad.enabled']
-            else config['contact.jaw.kinetic_friction'])
-    kinetic = hold_estimate * mu / mu_k if mu_k > 0 else 2 * hold_estimate
-    min_force = _bisect(lambda f: trial(f, 'hold').held, 0.8 * hold_estimate,
-                        1.15 * kinetic, limit, tolerance, want_smallest=True)
-    # the pressurised 3D shell spreads its contact (its pressure stays near the turgor,
-    # far from Hertz): start the search no lower than the holding force there
-    seed = (max(bruise_estimate, hold_estimate) if int(config.get('dimension', 2)) == 3
-            else bruise_estimate)
-    max_force = _bisect(lambda f: not trial(f, 'bruise').bruised, 0.8 * seed, 1.25 * seed,
-                        limit, tolerance, want_smallest=False)
-    from gripper_sim.core.scenario import SLIP_TOLERANCE
     firm = [t.force for t in trials if t.held and t.slip_distance <= SLIP_TOLERANCE]
     return GraspWindow(fruit=str(config['fruit.name']), finger=str(config['gripper.finger.name']),
                        min_force=min_force, max_force=max_force, min_estimate=hold_estimate,
@@ -228,14 +293,21 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
 
 def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
             tolerance: float, want_smallest: bool) -> float | None:
-    """The boundary of the forces where ``ok`` holds, to ``tolerance``, from the
+    """``bisection`` driven in this process by the verdicts of ``ok(force)``."""
+    return run_search(bisection(low, high, limit, tolerance, want_smallest), ok)
+
+
+def bisection(low: float, high: float, limit: float, tolerance: float,
+              want_smallest: bool) -> Generator[float, bool, float | None]:
+    """The boundary of the forces where a verdict holds, to ``tolerance``, from the
     bracket guess [low, high] (widened as needed: halved down at most ``MAX_WIDENINGS``
     times, doubled up until ``limit``, so "none up to ``limit``" means ``limit`` was tried).
+    A generator: yields the force (N) to try next, is sent back the verdict there.
 
-    want_smallest: ``ok`` holds above the boundary (the minimum force); returns the
-    smallest force found ok, None if none up to ``limit``. Otherwise ``ok`` holds
-    below it (the maximum force); returns the largest force found ok, ``inf`` if ok
-    at ``limit``, None if not even at the smallest force tried.
+    want_smallest: the verdict holds above the boundary (the minimum force); returns the
+    smallest force found ok, None if none up to ``limit``. Otherwise it holds below it
+    (the maximum force); returns the largest force found ok, ``inf`` if ok at ``limit``,
+    None if not even at the smallest force tried.
     """
     if not low > 0 or not math.isfinite(high):
         raise GripperSimError('the grasp window needs a positive, finite force estimate')
@@ -245,7 +317,7 @@ def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
     good_high = want_smallest
     # widen until ok(lo) != ok(hi) with the good side where it should be
     for _ in range(MAX_WIDENINGS):
-        ok_lo = ok(lo)
+        ok_lo = yield lo
         if ok_lo == good_high:  # lo is already on the high side: move it down
             hi, lo = lo, lo / 2
             continue
@@ -253,7 +325,7 @@ def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
     else:
         return lo if want_smallest else None
     while True:  # doubling, so at most log2(limit / hi) + 1 trials
-        ok_hi = ok(hi)
+        ok_hi = yield hi
         if ok_hi != good_high:  # hi is still on the low side: move it up
             if hi >= limit:
                 return None if want_smallest else math.inf
@@ -262,7 +334,7 @@ def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
         break
     while (hi - lo) > tolerance * hi:
         mid = 0.5 * (lo + hi)
-        if ok(mid) == good_high:
+        if (yield mid) == good_high:
             hi = mid
         else:
             lo = mid

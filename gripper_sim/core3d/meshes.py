@@ -5,8 +5,8 @@ all: a unit sphere mesh, uniform (a geodesic sphere, an icosahedron whose edges 
 into ``frequency`` parts, 10 f^2 + 2 vertices) or in rings about the x axis, fine at
 the two jaw contact points (``ring_sphere``), then mapped radially onto the body
 (sphere, ellipsoid, or a solid of revolution about z given by a profile curve).
-Tetrahedra come from TetGen (Si 2015, ACM TOMS 41(2):11) through its Python wrapper
-``tetgen``, with the surface kept as given, so surface vertices are nodes
+Tetrahedra come from graded layers of the surface toward its centre
+(``layered_mesher``), with the surface kept as given, so surface vertices are nodes
 0..n_surface-1 of the volume mesh; quadratic (10-node) tetrahedra add the edge
 midpoints (``tetrahedralize(order=2)``).
 
@@ -21,10 +21,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from gripper_sim.core3d import layered_mesher
+# the volumes and edges are part of this module's mesh API
+from gripper_sim.core3d.mesh_geometry import (  # noqa: F401
+    enclosed_volume, signed_volumes, surface_edges)
 from gripper_sim.errors import ConfigError
 
-#: the pin of the meshing library the solid model was validated with
-TETGEN_REQUIREMENT = 'tetgen==0.8.4'
+#: layers of the solid model's tetrahedra below the skin when no largest volume is set
+DEFAULT_LAYERS = 2
+#: most layers a largest tetrahedron volume may ask for
+MAX_LAYERS = 4
 #: arc (rad) between neighbouring vertices of the unit icosahedron
 GEODESIC_EDGE = 1.1071487177940904
 
@@ -55,6 +61,7 @@ class VolumeMesh:
             each boundary face split into 4 at its edge midpoints).
         n_surface: number of surface vertices (the corners).
         surface_nodes: (n_s,) every node on the boundary (corners, then edge midpoints).
+        quality: volumes, dihedral angles and aspect ratios of the (corner) tetrahedra.
     """
 
     positions: np.ndarray
@@ -62,6 +69,7 @@ class VolumeMesh:
     triangles: np.ndarray
     n_surface: int
     surface_nodes: np.ndarray | None = None
+    quality: layered_mesher.MeshQuality | None = None
 
 
 def _icosahedron() -> tuple[np.ndarray, np.ndarray]:
@@ -261,69 +269,68 @@ def mean_edge_length(mesh: SurfaceMesh) -> float:
 
 
 def tetrahedralize(surface: SurfaceMesh, max_volume: float | None = None,
-                   radius_edge_ratio: float = 1.5, min_dihedral: float = 10.0,
                    order: int = 1) -> VolumeMesh:
-    """Tetrahedra filling a closed surface, with TetGen (the surface is kept as given).
+    """Tetrahedra filling a closed star-shaped surface, which they keep as given.
+
+    Graded layers of the surface toward its centre, each prism cut into three
+    tetrahedra, cones to the centre below the last layer (``layered_mesher``).
 
     Args:
-        max_volume: m^3 per tetrahedron; None = that of a regular tetrahedron whose
-            edge is twice the mean surface edge (a coarser interior, graded from the
-            surface by TetGen's quality bound).
-        radius_edge_ratio, min_dihedral: TetGen's quality bounds (-q).
-        order: 1 linear (4-node) or 2 quadratic (10-node, TetGen -o2: straight edges
-            with midpoint nodes) tetrahedra.
+        max_volume: m^3, the largest tetrahedron: layers are added (at least one, at
+            most ``MAX_LAYERS``) until no tetrahedron is larger; None =
+            ``DEFAULT_LAYERS`` layers.
+        order: 1 linear (4-node) or 2 quadratic (10-node: straight edges with midpoint
+            nodes) tetrahedra.
 
     Raises:
-        ConfigError: the tetgen package is missing.
+        ConfigError: the body is not star-shaped, its tetrahedra would be too thin
+            (smallest dihedral angle below ``layered_mesher.MIN_DIHEDRAL``), or
+            ``MAX_LAYERS`` layers leave a tetrahedron larger than ``max_volume``.
     """
-    try:
-        import tetgen
-    except ImportError as err:
-        msg = (f'the 3D solid model needs the TetGen mesher: pip install '
-               f'{TETGEN_REQUIREMENT}')
-        raise ConfigError(msg) from err
+    centre = layered_mesher.star_centre(surface.positions, surface.triangles)
     if max_volume is None:
-        h = 2.0 * mean_edge_length(surface)
-        max_volume = h ** 3 / (6 * 2 ** 0.5)
-    gen = tetgen.TetGen(np.ascontiguousarray(surface.positions, dtype=float),
-                        np.ascontiguousarray(surface.triangles, dtype=np.int32))
-    nodes, elems, _, _ = gen.tetrahedralize(quality=True, nobisect=True, fixedvolume=True,
-                                            minratio=radius_edge_ratio,
-                                            mindihedral=min_dihedral,
-                                            maxvolume=float(max_volume), order=int(order))
-    nodes = np.asarray(nodes, dtype=float)
-    raw = np.asarray(elems, dtype=np.int64)
-    elems = raw[:, :4].copy()
+        nodes, elems = layered_mesher.layered_tetrahedra(surface.positions, surface.triangles,
+                                                         DEFAULT_LAYERS, centre)
+    else:
+        for layers in range(1, MAX_LAYERS + 1):
+            nodes, elems = layered_mesher.layered_tetrahedra(
+                surface.positions, surface.triangles, layers, centre)
+            largest = signed_volumes(nodes, elems).max()
+            if largest <= max_volume:
+                break
+        else:
+            raise ConfigError(f"config key 'fruit.mesh.max_tet_volume' = {max_volume:g} m^3 "
+                              f'is below what {MAX_LAYERS} layers of this surface give '
+                              f'({largest:.3g} m^3): raise it, or refine the surface '
+                              "('fruit.mesh.subdivisions')")
+    quality = layered_mesher.mesh_quality(nodes, elems)
+    if quality.min_dihedral < layered_mesher.MIN_DIHEDRAL:
+        raise ConfigError("config keys 'fruit.shape.*' / 'fruit.mesh.*': the body's "
+                          f'tetrahedra would be too thin (smallest dihedral angle '
+                          f'{quality.min_dihedral:.1f} deg); use a rounder shape or a '
+                          'finer surface mesh')
     n_s = len(surface.positions)
-    if not np.allclose(nodes[:n_s], surface.positions, rtol=0, atol=1e-12):
-        raise RuntimeError('TetGen changed the surface vertices')
-    vol = signed_volumes(nodes, elems)
-    elems[vol < 0] = elems[vol < 0][:, [0, 2, 1, 3]]
     if order == 1:
-        return VolumeMesh(nodes, elems, surface.triangles.copy(), n_s, np.arange(n_s))
-    return _quadratic(nodes, elems, raw[:, 4:10], surface.triangles, n_s)
+        return VolumeMesh(nodes, elems, surface.triangles.copy(), n_s, np.arange(n_s),
+                          quality)
+    return _quadratic(nodes, elems, surface.triangles, n_s, quality)
 
 
-def _quadratic(nodes, corners, extra, triangles, n_s) -> VolumeMesh:
-    """The 10-node mesh: each element's midpoint nodes ``extra`` (n, 6) (TetGen's order)
-    put in the order of ``TET10_EDGES`` by position, the boundary faces split in 4."""
+def _quadratic(nodes, corners, triangles, n_s, quality) -> VolumeMesh:
+    """The 10-node mesh of linear tetrahedra ``corners`` (n, 4): a node at the midpoint
+    of every edge (after the corner nodes), in the order of ``TET10_EDGES`` per element;
+    the boundary faces split in 4."""
     pairs = np.array(TET10_EDGES)
-    mid = 0.5 * (nodes[corners[:, pairs[:, 0]]] + nodes[corners[:, pairs[:, 1]]])  # (n,6,3)
-    dist = np.linalg.norm(mid[:, :, None, :] - nodes[extra][:, None, :, :], axis=3)
-    pick = np.argmin(dist, axis=2)
-    mids = np.take_along_axis(extra, pick, axis=1)
-    size = float(np.ptp(nodes))
-    if np.max(np.take_along_axis(dist, pick[:, :, None], axis=2)) > 1e-9 * size:
-        raise RuntimeError('TetGen quadratic nodes are not at the edge midpoints')
+    ends = np.sort(corners[:, pairs], axis=2).reshape(-1, 2)  # (6 n, 2)
+    edges, inverse = np.unique(ends, axis=0, return_inverse=True)
+    mids = len(nodes) + inverse.reshape(-1, 6)
+    positions = np.vstack([nodes, 0.5 * (nodes[edges[:, 0]] + nodes[edges[:, 1]])])
     tets = np.hstack([corners, mids])
-    a = corners[:, pairs].reshape(-1, 2)
-    keys = np.minimum(a[:, 0], a[:, 1]) * len(nodes) + np.maximum(a[:, 0], a[:, 1])
-    keys, first = np.unique(keys, return_index=True)
-    edge_mid = mids.ravel()[first]
+    keys = edges[:, 0] * len(nodes) + edges[:, 1]
 
     def midpoint(i, j):
-        k = np.minimum(i, j) * len(nodes) + np.maximum(i, j)
-        return edge_mid[np.searchsorted(keys, k)]
+        return len(nodes) + np.searchsorted(keys, np.minimum(i, j) * len(nodes)
+                                            + np.maximum(i, j))
 
     t = np.asarray(triangles, dtype=np.int64)
     m01 = midpoint(t[:, 0], t[:, 1])
@@ -332,20 +339,9 @@ def _quadratic(nodes, corners, extra, triangles, n_s) -> VolumeMesh:
     split = np.concatenate([np.stack([t[:, 0], m01, m20], 1), np.stack([m01, t[:, 1], m12], 1),
                             np.stack([m20, m12, t[:, 2]], 1), np.stack([m01, m12, m20], 1)])
     surface_nodes = np.concatenate([np.arange(n_s), np.unique(np.concatenate([m01, m12, m20]))])
-    return VolumeMesh(nodes, tets, split, n_s, surface_nodes)
+    return VolumeMesh(positions, tets, split, n_s, surface_nodes, quality)
 
 
-def signed_volumes(positions: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """(n_tet,) m^3, ((x1 - x0) x (x2 - x0)) . (x3 - x0) / 6."""
-    p = positions[tets]
-    return np.einsum('ij,ij->i', np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]),
-                     p[:, 3] - p[:, 0]) / 6.0
-
-
-def enclosed_volume(positions: np.ndarray, triangles: np.ndarray) -> float:
-    """m^3 enclosed by a closed outward surface (divergence theorem)."""
-    p = positions[triangles]
-    return float(np.einsum('ij,ij->', p[:, 0], np.cross(p[:, 1], p[:, 2])) / 6.0)
 
 
 def hinges(triangles: np.ndarray) -> np.ndarray:
@@ -374,13 +370,6 @@ def hinges(triangles: np.ndarray) -> np.ndarray:
         raise ValueError('surface is not closed (an edge has one triangle)')
     return np.stack([a[forward], b[forward], opposite[forward], opposite[twin]], axis=1)
 
-
-def surface_edges(triangles: np.ndarray) -> np.ndarray:
-    """(n_edge, 2) unique undirected edges of a triangle mesh."""
-    t = np.asarray(triangles, dtype=np.int64)
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    e.sort(axis=1)
-    return np.unique(e, axis=0)
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -1,4 +1,10 @@
-"""In-node recording: the ``gripper_sim`` node writes its own MCAP at full physics rate.
+"""In-node recording: the ``gripper_sim`` node writes its own bag at full physics rate.
+
+``record_path`` names the recording: a bag folder to create (``NAME/NAME_0.mcap`` and
+``NAME/metadata.yaml``, as ``ros2 bag record -o NAME`` writes), or one MCAP file when
+it ends in ``.mcap``. Nothing is appended to it, so the parameter always names what is
+being written; an existing file or folder, or a missing or read-only parent, is
+refused with the reason (``NodeRecording.problem``).
 
 ``NodeRecording`` hooks one step observer into the node (``node.add_observer``) and
 forwards every physics step to the active ``SimRecorder``, if any, so recording can
@@ -14,7 +20,7 @@ What the node needs (``gripper_sim/ros/node.py``)::
     if path:
         self.recording.start(path)
     # ~/record (std_srvs/SetBool): data=True starts (to record_path, or a new
-    # timestamped file when it is empty or already used), data=False stops:
+    # timestamped bag folder when it is empty), data=False stops:
     ok, message = self.recording.start() / self.recording.stop()
     # in destroy_node: self.recording.stop()
     # (resets are followed through the node's add_reset_listener hook)
@@ -30,17 +36,18 @@ import time
 from pathlib import Path
 from typing import Any
 
+from gripper_sim.recording.bag_folder import check_new_bag_path
 from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.offline import SimRecorder
 
 
 def default_path(directory: str | os.PathLike = '.') -> Path:
-    """A new file name ``gripper_sim_YYYYmmdd_HHMMSS.mcap`` in ``directory``."""
+    """A new bag folder name ``gripper_sim_YYYYmmdd_HHMMSS`` in ``directory``."""
     stamp = time.strftime('%Y%m%d_%H%M%S')
-    path = Path(directory) / f'gripper_sim_{stamp}.mcap'
+    path = Path(directory) / f'gripper_sim_{stamp}'
     k = 1
     while path.exists():
-        path = Path(directory) / f'gripper_sim_{stamp}_{k}.mcap'
+        path = Path(directory) / f'gripper_sim_{stamp}_{k}'
         k += 1
     return path
 
@@ -73,6 +80,20 @@ class NodeRecording:
         rec = self._recorder
         return rec.path if rec is not None else None
 
+    @staticmethod
+    def target(path: str | os.PathLike) -> Path:
+        """The absolute bag folder (or ``.mcap`` file) that ``record_path`` = ``path`` names."""
+        return Path(path).expanduser().absolute()
+
+    @staticmethod
+    def problem(path: str | os.PathLike) -> str | None:
+        """Why recording to ``path`` cannot start, or None."""
+        try:
+            check_new_bag_path(path)
+        except RecordingError as err:
+            return str(err)
+        return None
+
     def _config(self) -> dict:
         params = getattr(self.node, 'params', None)
         config = getattr(params, 'config', None)
@@ -81,14 +102,17 @@ class NodeRecording:
         return dict(config)
 
     def start(self, path: str | os.PathLike | None = None) -> tuple[bool, str]:
-        """Start recording to ``path`` (default: a new timestamped file); (ok, message)."""
+        """Start recording to ``path`` (default: a new timestamped bag folder); (ok, message).
+
+        The message names the absolute path being written.
+        """
         with self._lock:
             if self._recorder is not None and self._recorder.is_open:
                 return False, f'already recording to {self._recorder.path}'
-            target = Path(path) if path else default_path()
-            if target.suffix != '.mcap':
-                target = target.with_suffix(target.suffix + '.mcap') if target.suffix \
-                    else target.with_suffix('.mcap')
+            target = self.target(path if path else default_path())
+            problem = self.problem(target)
+            if problem is not None:
+                return False, problem
             initial = None
             sim = getattr(self.node, 'sim', None)
             if sim is not None:

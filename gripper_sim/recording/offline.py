@@ -27,16 +27,20 @@ from typing import Any, Iterable, Mapping
 
 from gripper_sim import __version__
 from gripper_sim.recording.errors import RecordingError
-from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL, BagWriter
+from gripper_sim.recording.lifecycle import OpenClose
+from gripper_sim.recording.bag_folder import open_bag_writer
+from gripper_sim.recording.cdr import CdrTrimmer
+from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
 
 CONFIG_METADATA = 'gripper_sim_config'
 
 
-class SimRecorder:
-    """Writes every ``every``-th step of a run to a rosbag2-compatible MCAP file.
+class SimRecorder(OpenClose):
+    """Writes every ``every``-th step of a run to a rosbag2 bag folder or MCAP file.
 
     Args:
-        path: the file to create (never overwritten unless ``overwrite``).
+        path: the bag folder to create, or one file when it ends in ``.mcap`` (never
+            overwritten unless ``overwrite``, which only a single file allows).
         config: the flat configuration of the run (stored in the file).
         initial: the result of the initial state (``Simulation.last`` before any step):
             written as the first sample and used for the jaw joint origin.
@@ -74,7 +78,8 @@ class SimRecorder:
                             for s in self.suffixes}
         self.initial = initial
         self.source = source
-        self.writer = BagWriter(path, overwrite=overwrite, flush_interval=flush_interval)
+        self._trimmer = CdrTrimmer()
+        self.writer = open_bag_writer(path, overwrite=overwrite, flush_interval=flush_interval)
         self.steps_seen = 0
         self.samples = 0
         self.failures = 0
@@ -88,13 +93,6 @@ class SimRecorder:
         return self.writer.path
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> SimRecorder:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     @property
     def is_open(self) -> bool:
         return self.writer.is_open
@@ -172,7 +170,9 @@ class SimRecorder:
                 topic = self.topic_names.get(suffix)
                 if topic is None:
                     continue
-                self.writer.write(topic, serialize_message(msg), log_time=log_time,
+                data = self._trimmer.trim(self._messages.TOPICS[suffix][1],
+                                          serialize_message(msg))
+                self.writer.write(topic, data, log_time=log_time,
                                   publish_time=log_time)
             self.samples += 1
             self._last_time_ns = log_time

@@ -1,4 +1,9 @@
-"""Reading rosbag2-style MCAP files: topics, counts, metadata and messages.
+"""Reading rosbag2 recordings: a bag folder or one MCAP file; topics, counts, messages.
+
+``BagReader`` opens either a bag folder (``metadata.yaml`` and its split files, see
+``bag_folder``) or a single ``.mcap`` file and shows them the same way: topics with
+their counts over all files, one log-time-ordered message stream, the Metadata records
+of every file.
 
 Every failure of the underlying libraries (bad magic, truncated file, broken chunk,
 CRC mismatch, undecodable message) is turned into a ``RecordingError`` that names the
@@ -6,6 +11,8 @@ file and says what to do; a reader never writes to the file it reads.
 """
 from __future__ import annotations
 
+import dataclasses
+import heapq
 import os
 import struct
 import zlib
@@ -20,7 +27,9 @@ from mcap.records import Channel, Schema
 from mcap.stream_reader import MAGIC_SIZE, CRCValidationError
 
 from gripper_sim.recording import qos as qos_mod
+from gripper_sim.recording.bag_folder import bag_files
 from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.lifecycle import OpenClose
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, offset start, crc
@@ -109,28 +118,12 @@ def has_footer(path: Path) -> bool:
     return tail[0] == 0x02 and tail[-MAGIC_SIZE:] == MCAP_MAGIC
 
 
-class BagReader:
-    """Reads one MCAP file written by rosbag2, by ``BagWriter`` or by any MCAP writer.
-
-    Use as a context manager::
-
-        with BagReader(path) as bag:
-            print(bag.topics, bag.duration_ns)
-            for msg in bag.messages(['/chatter']):
-                ...
-
-    Raises (on open):
-        RecordingError: missing, empty, non-MCAP, truncated (suggests ``recover``) or
-            corrupt file.
-    """
+class _Summary(OpenClose):
+    """What a file and a whole bag both tell: header strings, counts, times, Metadata
+    records."""
 
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
-        self._file: Any = None
-        self._reader: SeekingReader | None = None
-        self._schemas: dict[int, Schema] = {}
-        self._channels: dict[int, Channel] = {}
-        self._counts: dict[int, int] = {}
         self._topics: dict[str, TopicInfo] = {}
         self.profile = ''
         self.library = ''
@@ -141,14 +134,32 @@ class BagReader:
         self.compression: set[str] = set()
         self.metadata: list[tuple[str, dict[str, str]]] = []
 
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topics by name."""
+        return dict(self._topics)
+
+
+class McapFile(_Summary):
+    """One MCAP file written by rosbag2, by ``BagWriter`` or by any MCAP writer.
+
+    The storage layer of ``BagReader``: its summary (schemas, channels, counts, times),
+    Metadata records, verification and message stream.
+
+    Raises (on open):
+        RecordingError: missing, empty, non-MCAP, truncated (suggests ``recover``) or
+            corrupt file.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(path)
+        self._file: Any = None
+        self._reader: SeekingReader | None = None
+        self._schemas: dict[int, Schema] = {}
+        self._channels: dict[int, Channel] = {}
+        self._counts: dict[int, int] = {}
+
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> BagReader:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def open(self) -> None:
         if self._file is not None:
             raise RecordingError(f'{self.path}: reader is already open')
@@ -278,59 +289,19 @@ class BagReader:
         return self._reader
 
     # ------------------------------------------------------------------ contents
-    @property
-    def topics(self) -> dict[str, TopicInfo]:
-        """Topics by name."""
-        return dict(self._topics)
-
-    @property
-    def duration_ns(self) -> int:
-        return max(0, self.end_time - self.start_time) if self.message_count else 0
-
-    def metadata_named(self, name: str) -> dict[str, str] | None:
-        """The last Metadata record called ``name``, or None."""
-        found = None
-        for rec_name, data in self.metadata:
-            if rec_name == name:
-                found = data
-        return found
-
-    def bag_metadata(self) -> dict | None:
-        """The parsed rosbag2 ``serialized_metadata`` YAML, or None if absent."""
-        rec = self.metadata_named('rosbag2')
-        if not rec or 'serialized_metadata' not in rec:
-            return None
-        try:
-            data = yaml.safe_load(rec['serialized_metadata'])
-        except yaml.YAMLError as err:
-            raise RecordingError(f'{self.path}: rosbag2 metadata is not valid YAML: '
-                                 f'{err}') from err
-        return data if isinstance(data, dict) else None
-
-    def check_topics(self, topics: Iterable[str] | None) -> list[str] | None:
-        """Validate requested topic names; None means all topics."""
-        if topics is None:
-            return None
-        wanted = list(topics)
-        missing = [t for t in wanted if t not in self._topics]
-        if missing:
-            have = ', '.join(sorted(self._topics)) or 'none'
-            msg = (f"{self.path} has no topic {', '.join(repr(m) for m in missing)} "
-                   f'(topics: {have})')
-            raise RecordingError(msg)
-        return wanted
-
     def messages(self, topics: Iterable[str] | None = None, *, start: int | None = None,
                  end: int | None = None) -> Iterator[RawMessage]:
         """Messages in log-time order.
 
         Args:
-            topics: topic names (all if None); an unknown name raises RecordingError.
+            topics: topic names (all if None); names not in this file are skipped.
             start: first log time included, ns.
             end: log times before this are included, ns.
         """
         reader = self._require_open()
-        wanted = self.check_topics(topics)
+        wanted = None if topics is None else [t for t in topics if t in self._topics]
+        if wanted == []:
+            return
         types = {c.id: (self._schemas[c.schema_id].name if c.schema_id in self._schemas
                         else '') for c in self._channels.values()}
         iterator = reader.iter_messages(topics=wanted, starting_at=start, ending_before=end,
@@ -356,8 +327,7 @@ class BagReader:
 
         info = self._topics.get(topic)
         if info is None:
-            self.check_topics([topic])
-        assert info is not None
+            raise RecordingError(f"{self.path} has no topic '{topic}'")
         channel = self._channels[info.channel_id]
         schema = self._schemas.get(channel.schema_id)
         if channel.message_encoding != 'cdr' or schema is None or \
@@ -382,6 +352,147 @@ class BagReader:
                        f'{schema.name}: {err}')
                 raise RecordingError(msg) from err
         return safe_decode
+
+
+class BagReader(_Summary):
+    """Reads a recording: a rosbag2 bag folder of MCAP files, or one MCAP file.
+
+    Use as a context manager::
+
+        with BagReader(path) as bag:
+            print(bag.topics, bag.duration_ns)
+            for msg in bag.messages(['/chatter']):
+                ...
+
+    Attributes (once open):
+        path: the folder or file given.
+        files: the MCAP files, in order.
+        folder_metadata: the ``metadata.yaml`` mapping of a folder (None for a file, or
+            for a folder whose recorder died before writing it).
+
+    Raises (on open):
+        RecordingError: missing path, broken ``metadata.yaml``, or a missing, empty,
+            non-MCAP, truncated (suggests ``recover``) or corrupt file.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(path)
+        self.files: list[Path] = []
+        self.folder_metadata: dict | None = None
+        self._parts: list[McapFile] = []
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def is_folder(self) -> bool:
+        return self.path.is_dir()
+
+    def open(self) -> None:
+        if self._parts:
+            raise RecordingError(f'{self.path}: reader is already open')
+        self.files, self.folder_metadata = bag_files(self.path)
+        try:
+            for file in self.files:
+                part = McapFile(file)
+                part.open()
+                self._parts.append(part)
+        except RecordingError as err:
+            self.close()
+            if not self.path.is_dir():
+                raise
+            raise RecordingError(f'{err} (for the whole bag: gripper-sim recover '
+                                 f'{self.path} FIXED)') from err
+        first = self._parts[0]
+        self.profile, self.library = first.profile, first.library
+        with_messages = [p for p in self._parts if p.message_count]
+        self.start_time = min((p.start_time for p in with_messages), default=0)
+        self.end_time = max((p.end_time for p in with_messages), default=0)
+        self.message_count = sum(p.message_count for p in self._parts)
+        self.chunk_count = sum(p.chunk_count for p in self._parts)
+        self.compression = set().union(*(p.compression for p in self._parts))
+        self.metadata = [record for p in self._parts for record in p.metadata]
+        for part in self._parts:
+            for name, info in part.topics.items():
+                known = self._topics.get(name)
+                if known is None:
+                    self._topics[name] = info
+                else:
+                    self._topics[name] = dataclasses.replace(
+                        known, message_count=known.message_count + info.message_count)
+
+    def close(self) -> None:
+        for part in self._parts:
+            part.close()
+        self._parts = []
+
+    def verify(self) -> int:
+        """Check every chunk of every file; return the number of chunks checked."""
+        return sum(part.verify() for part in self._parts)
+
+    # ------------------------------------------------------------------ contents
+    @property
+    def duration_ns(self) -> int:
+        return max(0, self.end_time - self.start_time) if self.message_count else 0
+
+    def metadata_named(self, name: str) -> dict[str, str] | None:
+        """The last Metadata record called ``name`` (of the last file having one), or None."""
+        found = None
+        for rec_name, data in self.metadata:
+            if rec_name == name:
+                found = data
+        return found
+
+    def bag_metadata(self) -> dict | None:
+        """The bag's BagMetadata: ``metadata.yaml`` of a folder, else the last file's
+        ``rosbag2`` record (parsed), or None if there is neither."""
+        if self.folder_metadata is not None:
+            return self.folder_metadata
+        rec = self.metadata_named('rosbag2')
+        if not rec or 'serialized_metadata' not in rec:
+            return None
+        try:
+            data = yaml.safe_load(rec['serialized_metadata'])
+        except yaml.YAMLError as err:
+            raise RecordingError(f'{self.path}: rosbag2 metadata is not valid YAML: '
+                                 f'{err}') from err
+        return data if isinstance(data, dict) else None
+
+    def check_topics(self, topics: Iterable[str] | None) -> list[str] | None:
+        """Validate requested topic names; None means all topics."""
+        if topics is None:
+            return None
+        wanted = list(topics)
+        missing = [t for t in wanted if t not in self._topics]
+        if missing:
+            have = ', '.join(sorted(self._topics)) or 'none'
+            msg = (f"{self.path} has no topic {', '.join(repr(m) for m in missing)} "
+                   f'(topics: {have})')
+            raise RecordingError(msg)
+        return wanted
+
+    def messages(self, topics: Iterable[str] | None = None, *, start: int | None = None,
+                 end: int | None = None) -> Iterator[RawMessage]:
+        """Messages of all files in log-time order.
+
+        Args:
+            topics: topic names (all if None); an unknown name raises RecordingError.
+            start: first log time included, ns.
+            end: log times before this are included, ns.
+        """
+        wanted = self.check_topics(topics)
+        streams = [part.messages(wanted, start=start, end=end) for part in self._parts]
+        if len(streams) == 1:
+            yield from streams[0]
+            return
+        yield from heapq.merge(*streams, key=lambda m: m.log_time)
+
+    def decoder(self, topic: str) -> Callable[[bytes], Any]:
+        """A function decoding the CDR bytes of ``topic`` with its stored ros2msg schema.
+
+        Uses ``mcap-ros2-support``'s decoder: works from the files alone, without ROS.
+        """
+        self.check_topics([topic])
+        part = next(p for p in self._parts if topic in p.topics)
+        return part.decoder(topic)
 
     def decoded_messages(self, topics: Iterable[str] | None = None, *,
                          start: int | None = None,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import signal
 import threading
 import time
@@ -20,8 +21,9 @@ from typing import Any, Callable, Iterable
 
 from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording import schemas
+from gripper_sim.recording.bag_folder import open_bag_writer
 from gripper_sim.recording.errors import RecordingError
-from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL, BagWriter
+from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
 
 SUBSCRIPTION_DEPTH = 1000  # deep enough that bursts at full physics rate are not dropped
 
@@ -36,6 +38,56 @@ def import_message_class(type_name: str) -> Any:
         msg = (f"message type '{package}/msg/{name}' is not installed for Python "
                f'({err}); install its interface package')
         raise RecordingError(msg) from err
+
+
+def compile_pattern(pattern: str | None, option: str) -> re.Pattern | None:
+    """A topic pattern (matched against the whole topic name, as rosbag2 does), or None."""
+    if pattern is None or pattern == '':
+        return None
+    try:
+        return re.compile(pattern)
+    except re.error as err:
+        raise RecordingError(f"{option} '{pattern}' is not a valid regular expression: "
+                             f'{err}') from None
+
+
+@dataclass(frozen=True)
+class TopicSelection:
+    """Which topics to record, as ``ros2 bag record`` chooses them.
+
+    A topic is recorded when it is named, or matches ``regex``, or ``all_topics`` is set
+    (hidden topics excepted), and it does not match ``exclude``. Patterns match the whole
+    topic name.
+    """
+
+    names: frozenset = frozenset()
+    regex: re.Pattern | None = None
+    exclude: re.Pattern | None = None
+    all_topics: bool = False
+
+    @classmethod
+    def build(cls, topics: Iterable[str] = (), *, regex: str | None = None,
+              exclude: str | None = None, all_topics: bool = False) -> TopicSelection:
+        names = set()
+        for topic in topics:
+            topic = topic.strip()
+            if not topic:
+                raise RecordingError('empty topic name')
+            names.add(topic if topic.startswith('/') else '/' + topic)
+        selection = cls(frozenset(names), compile_pattern(regex, '--regex'),
+                        compile_pattern(exclude, '--exclude'), all_topics)
+        if not selection.names and selection.regex is None and not all_topics:
+            raise RecordingError('give topics to record, --regex or --all')
+        return selection
+
+    def wants(self, topic: str) -> bool:
+        if self.exclude is not None and self.exclude.fullmatch(topic):
+            return False
+        if topic in self.names:
+            return True
+        if self.regex is not None and self.regex.fullmatch(topic):
+            return True
+        return self.all_topics and not is_hidden(topic)
 
 
 def is_hidden(topic: str) -> bool:
@@ -61,20 +113,23 @@ class Recorder:
 
     Args:
         node: an rclpy node to create subscriptions on.
-        writer: an open ``BagWriter``.
+        writer: an open ``BagWriter`` or ``BagFolderWriter``.
         topics: topic names to record (subscribed as soon as a publisher appears).
         all_topics: record every (non-hidden) topic, including ones that appear later.
+        regex: also record topics whose whole name matches this pattern.
+        exclude: never record topics whose whole name matches this pattern.
         discovery_period: s between graph scans.
         on_message: optional callback ``(topic, log_time_ns)`` after each message.
     """
 
-    def __init__(self, node: Any, writer: BagWriter, *, topics: Iterable[str] = (),
-                 all_topics: bool = False, discovery_period: float = 0.2,
+    def __init__(self, node: Any, writer: Any, *, topics: Iterable[str] = (),
+                 all_topics: bool = False, regex: str | None = None,
+                 exclude: str | None = None, discovery_period: float = 0.2,
                  on_message: Callable[[str, int], None] | None = None):
         self.node = node
         self.writer = writer
-        self.wanted = {self._absolute(t) for t in topics}
-        self.all_topics = all_topics
+        self.selection = TopicSelection.build(topics, regex=regex, exclude=exclude,
+                                              all_topics=all_topics)
         self.on_message = on_message
         self.stats = RecorderStats()
         self._subscriptions: dict[str, Any] = {}
@@ -85,12 +140,6 @@ class Recorder:
             max(0.05, writer.flush_interval / 4), writer.flush_if_due)
         self.discover()
 
-    def _absolute(self, topic: str) -> str:
-        topic = topic.strip()
-        if not topic:
-            raise RecordingError('empty topic name')
-        return topic if topic.startswith('/') else '/' + topic
-
     @property
     def subscribed(self) -> list[str]:
         return sorted(self._subscriptions)
@@ -100,7 +149,7 @@ class Recorder:
         for topic, types in self.node.get_topic_names_and_types():
             if topic in self._subscriptions or topic in self._skipped or not types:
                 continue
-            if topic not in self.wanted and not (self.all_topics and not is_hidden(topic)):
+            if not self.selection.wants(topic):
                 continue
             if topic.endswith('/_service_event'):
                 continue
@@ -188,20 +237,27 @@ class Recorder:
 
 
 def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = False,
+               regex: str | None = None, exclude: str | None = None,
                duration: float | None = None, flush_interval: float = DEFAULT_FLUSH_INTERVAL,
-               max_messages: int | None = None, node_name: str | None = None) -> str:
+               max_messages: int | None = None, max_bag_size: int = 0,
+               max_bag_duration: float = 0.0, compression: str = 'zstd',
+               node_name: str | None = None) -> str:
     """Record until Ctrl-C/SIGTERM, ``duration`` s or ``max_messages``; return a summary.
 
-    The file is always closed properly (summary, statistics, rosbag2 metadata), except
-    after SIGKILL, where ``recover`` rebuilds it.
+    ``output`` is a bag folder to create (split by ``max_bag_size`` bytes and/or
+    ``max_bag_duration`` s) or, ending in ``.mcap``, one file. The files are always
+    closed properly (summary, statistics, rosbag2 metadata, ``metadata.yaml``), except
+    after SIGKILL, where ``recover`` rebuilds them.
     """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
     topics = list(topics)
-    if not topics and not all_topics:
-        raise RecordingError('give topics to record or --all')
+    TopicSelection.build(topics, regex=regex, exclude=exclude, all_topics=all_topics)
+    writer = open_bag_writer(output, max_bag_size=max_bag_size,
+                             max_bag_duration=max_bag_duration, compression=compression,
+                             flush_interval=flush_interval)
     stop = threading.Event()
 
     def request_stop(_signum: int, _frame: Any) -> None:
@@ -210,13 +266,13 @@ def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = Fa
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT,
                                                                   signal.SIGTERM)}
-    writer = BagWriter(output, flush_interval=flush_interval)
     node = None
     recorder = None
     try:
         writer.open()
         node = rclpy.create_node(node_name or f'gripper_sim_recorder_{os.getpid()}')
-        recorder = Recorder(node, writer, topics=topics, all_topics=all_topics)
+        recorder = Recorder(node, writer, topics=topics, all_topics=all_topics, regex=regex,
+                            exclude=exclude)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         deadline = None if duration is None else time.monotonic() + duration
@@ -238,8 +294,10 @@ def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = Fa
             signal.signal(sig, handler)
     stats = recorder.stats if recorder is not None else RecorderStats()
     missing = sorted({('/' + t.lstrip('/')) for t in topics} - set(stats.per_topic))
+    files = getattr(writer, 'files', [writer.path])
+    where = f'{output} ({len(files)} files)' if len(files) > 1 else str(output)
     text = (f'recorded {stats.messages} messages on {len(stats.per_topic)} topics to '
-            f'{output} in {stats.elapsed():.1f} s')
+            f'{where} in {stats.elapsed():.1f} s')
     if missing:
         text += f" (no messages on: {', '.join(missing)})"
     return text

@@ -4,13 +4,19 @@ A recorder killed with SIGKILL leaves a file with a header, whole chunks (the wr
 closes a chunk at least every ``flush_interval``), perhaps half a chunk, and no summary
 or footer. ``recover`` reads the data section record by record, keeps every schema,
 channel, message and metadata record of every chunk that is whole and passes its CRC,
-stops at the first cut record, and writes all of it to a new file with a fresh summary,
-statistics and rosbag2 metadata. The input file is only ever opened for reading.
+stops at the first cut record, and writes all of it to a new file with a fresh summary
+and statistics. The output keeps the input's header (profile, library) and every
+channel, also those without messages; only a ``ros2`` file gets a fresh rosbag2
+metadata record. The input file is only ever opened for reading.
+
+A bag folder is recovered file by file into a new bag folder with its own
+``metadata.yaml``.
 """
 from __future__ import annotations
 
 import io
 import os
+import shutil
 import struct
 import tempfile
 from dataclasses import dataclass, field
@@ -22,8 +28,13 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
+from gripper_sim.recording.bag_folder import (bag_files, check_new_bag_path, is_single_file,
+                                              storage_file_name)
+from gripper_sim.recording.bag_metadata import (FileEntry, TopicEntry, bag_metadata_yaml,
+                                                write_metadata_file)
 from gripper_sim.recording.errors import RecordingError
-from gripper_sim.recording.reader import MCAP_MAGIC, READ_ERRORS, check_mcap_start
+from gripper_sim.recording.reader import (MCAP_MAGIC, READ_ERRORS, McapFile, check_mcap_start,
+                                          has_footer)
 from gripper_sim.recording.writer import BagWriter
 
 _KNOWN_OPCODES = {int(op) for op in Opcode}
@@ -39,7 +50,8 @@ class RecoverReport:
         topics: topic name -> messages kept.
         chunks: whole chunks read.
         damaged_chunks: chunks skipped because they failed to decompress or their CRC.
-        complete: the input had a data-end record (it was not cut short).
+        complete: the input was whole: a data-end record, then the summary and the footer
+            (a file cut anywhere, even after its data, is not complete).
         stopped_at: byte offset where reading stopped.
         input_size: bytes in the input.
         reason: why reading stopped before the end, '' when it reached the end.
@@ -105,7 +117,9 @@ def scan(path: str | os.PathLike) -> _Scan:
                 report.reason = f'unreadable data at byte {offset} (opcode {opcode:#x})'
                 break
             if opcode == Opcode.DATA_END or opcode == Opcode.FOOTER:
-                report.complete = True
+                report.complete = has_footer(path)
+                if not report.complete:
+                    report.reason = 'the file is cut after its data (no footer)'
                 break
             if length > min(_MAX_RECORD, report.input_size - offset - 9):
                 report.reason = (f'the record at byte {offset} is cut: it needs {length} '
@@ -134,6 +148,22 @@ def scan(path: str | os.PathLike) -> _Scan:
     return result
 
 
+def _add_channel(bag: BagWriter, channel: Channel, schemas: dict[int, Schema],
+                 topics: dict[int, str]) -> None:
+    """Register ``channel`` in the output as it was (nothing if its schema was lost)."""
+    if channel.id in topics:
+        return
+    schema = schemas.get(channel.schema_id)
+    if schema is None and channel.schema_id != 0:
+        return  # its schema record was in a lost chunk
+    bag.add_topic(channel.topic, schema.name if schema else '',
+                  definition=schema.data if schema else b'',
+                  schema_encoding=schema.encoding if schema else '',
+                  message_encoding=channel.message_encoding,
+                  channel_metadata=channel.metadata)
+    topics[channel.id] = channel.topic
+
+
 def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
             overwrite: bool = False) -> RecoverReport:
     """Write every whole message of ``src`` into a new, indexed file ``dst``.
@@ -154,38 +184,32 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
     if result.header is None:
         raise RecordingError(f'{src} has no readable MCAP header: nothing to recover')
     schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
+    topics: dict[int, str] = {}   # channel id -> topic registered in the output
     dst_dir = dst.parent if str(dst.parent) else Path('.')
     if not dst_dir.is_dir():
         raise RecordingError(f'{dst}: directory {dst_dir} does not exist')
     fd, tmp_name = tempfile.mkstemp(prefix=f'.{dst.name}.', suffix='.part', dir=dst_dir)
     os.close(fd)
     tmp = Path(tmp_name)
+    header = result.header
     try:
-        with BagWriter(tmp, overwrite=True) as bag:
+        with BagWriter(tmp, overwrite=True, profile=header.profile,
+                       library=header.library) as bag:
             for record in result.records:
                 if isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
-                    channels[record.id] = record
+                    _add_channel(bag, record, schemas, topics)
                 elif isinstance(record, Metadata):
                     if record.name != 'rosbag2':
                         bag.add_metadata(record.name, dict(record.metadata))
                 elif isinstance(record, Message):
-                    channel = channels.get(record.channel_id)
-                    if channel is None:
+                    topic = topics.get(record.channel_id)
+                    if topic is None:
                         continue  # its channel record was in a lost chunk
-                    if not bag.has_topic(channel.topic):
-                        schema = schemas.get(channel.schema_id)
-                        bag.add_topic(
-                            channel.topic, schema.name if schema else '',
-                            definition=schema.data.decode('utf-8') if schema else '',
-                            schema_encoding=schema.encoding if schema else '',
-                            message_encoding=channel.message_encoding,
-                            channel_metadata=channel.metadata)
-                    bag.write(channel.topic, record.data, log_time=record.log_time,
+                    bag.write(topic, record.data, log_time=record.log_time,
                               publish_time=record.publish_time, sequence=record.sequence)
-                    report.topics[channel.topic] = report.topics.get(channel.topic, 0) + 1
+                    report.topics[topic] = report.topics.get(topic, 0) + 1
                     if report.messages == 0:
                         report.start_time = report.end_time = record.log_time
                     report.start_time = min(report.start_time, record.log_time)
@@ -215,3 +239,90 @@ def iter_report_lines(report: RecoverReport, src: Path, dst: Path) -> Iterator[s
         yield f'        {span:.3f} s of messages'
     for topic, count in sorted(report.topics.items()):
         yield f'        {topic}: {count}'
+
+
+@dataclass
+class BagRecoverReport:
+    """What ``recover_bag`` did: one ``RecoverReport`` per input file it rebuilt.
+
+    Attributes:
+        files: (input file, output file or None when it held nothing whole, report or
+            the reason it was skipped).
+        metadata_file: the ``metadata.yaml`` written.
+    """
+
+    files: list = field(default_factory=list)
+    metadata_file: Path | None = None
+
+    @property
+    def messages(self) -> int:
+        return sum(r.messages for _, _, r in self.files if isinstance(r, RecoverReport))
+
+
+def _folder_metadata(files: list[Path]) -> str:
+    """The BagMetadata YAML of a bag made of the (whole, readable) ``files``."""
+    topics: dict[str, TopicEntry] = {}
+    entries = []
+    for path in files:
+        with McapFile(path) as part:
+            entry = FileEntry(path.name, message_count=part.message_count)
+            if part.message_count:
+                entry.start_ns, entry.end_ns = part.start_time, part.end_time
+            entries.append(entry)
+            for name, info in part.topics.items():
+                if info.message_encoding != 'cdr':
+                    continue
+                total = topics.setdefault(name, TopicEntry(
+                    name=name, type=info.type, channel_id=info.channel_id,
+                    offered_qos_profiles=info.offered_qos_profiles, type_hash=info.type_hash))
+                total.message_count += info.message_count
+    return bag_metadata_yaml(topics=list(topics.values()), files=entries)
+
+
+def recover_bag(src: str | os.PathLike, dst: str | os.PathLike) -> BagRecoverReport:
+    """Recover every file of the bag folder ``src`` into the new bag folder ``dst``.
+
+    The files are those ``src/metadata.yaml`` lists or, when the recorder died before
+    writing it, the folder's ``*.mcap`` files in split order. A file holding nothing
+    whole is left out; ``dst/metadata.yaml`` describes what was kept.
+
+    Raises:
+        RecordingError: ``src`` is not a recording folder; ``dst`` exists or cannot be
+            created; no file held a whole message.
+    """
+    src, dst = Path(src), Path(dst)
+    files, _ = bag_files(src)
+    target = check_new_bag_path(dst)
+    if is_single_file(target):
+        raise RecordingError(f'{dst}: a bag folder is recovered into a new bag folder; give '
+                             'a name without .mcap')
+    try:
+        target.mkdir()
+    except OSError as err:
+        raise RecordingError(f'cannot create {target}: {err.strerror}') from err
+    report = BagRecoverReport()
+    written: list[Path] = []
+    for path in files:
+        out = target / storage_file_name(target, len(written))
+        try:
+            report.files.append((path, out, recover(path, out)))
+        except RecordingError as err:
+            report.files.append((path, None, str(err)))
+            continue
+        written.append(out)
+    if not written:
+        shutil.rmtree(target, ignore_errors=True)
+        raise RecordingError(f'{src}: no file holds a whole message: nothing to recover')
+    report.metadata_file = write_metadata_file(target, _folder_metadata(written))
+    return report
+
+
+def iter_bag_report_lines(report: BagRecoverReport, src: Path, dst: Path) -> Iterator[str]:
+    """Human-readable lines describing a bag folder recovery."""
+    yield f'bag:    {src} -> {dst} ({report.messages} messages)'
+    for path, out, file_report in report.files:
+        if out is None:
+            yield f'input:  {path}: skipped ({file_report})'
+        else:
+            yield from iter_report_lines(file_report, path, out)
+    yield f'        {report.metadata_file}'

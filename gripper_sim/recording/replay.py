@@ -18,6 +18,7 @@ from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.reader import BagReader
 from gripper_sim.recording.recorder import import_message_class
+from gripper_sim.view.foxglove import recording_view
 
 CLOCK_TOPIC = '/clock'
 PUBLISHER_DEPTH = 100
@@ -44,11 +45,13 @@ class Player:
         start: s of the recording to skip.
         clock_hz: publish ``/clock`` at this rate (None = not).
         remaps: ``{recorded topic: published topic}``.
+        view: a ``FoxgloveView`` that also gets every replayed message (None = none).
     """
 
     def __init__(self, node: Any, bag: BagReader, *, rate: float = 1.0,
                  topics: Iterable[str] | None = None, start: float = 0.0,
-                 clock_hz: float | None = None, remaps: Mapping[str, str] | None = None):
+                 clock_hz: float | None = None, remaps: Mapping[str, str] | None = None,
+                 view: Any = None):
         if not rate > 0:
             raise RecordingError(f'rate must be positive, got {rate}')
         if start < 0:
@@ -61,6 +64,7 @@ class Player:
         self.clock_hz = clock_hz
         self.stats = ReplayStats()
         self.stop = threading.Event()
+        self.view = view
         remaps = dict(remaps or {})
         explicit = topics is not None
         selected = bag.check_topics(topics) or list(bag.topics)
@@ -157,6 +161,8 @@ class Player:
                 return
             self.stats.max_lateness = max(self.stats.max_lateness, time.monotonic() - target)
             self.publishers[msg.topic].publish(msg.data)
+            if self.view is not None:
+                self.view.log_cdr(msg.topic, msg.data, msg.log_time)
             self.stats.messages += 1
             self.stats.per_topic[msg.topic] = self.stats.per_topic.get(msg.topic, 0) + 1
         self.stats.loops += 1
@@ -183,8 +189,13 @@ class Player:
 def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
                topics: Iterable[str] | None = None, start: float = 0.0,
                clock_hz: float | None = None, remaps: Mapping[str, str] | None = None,
-               wait_for_subscribers: float = 0.0) -> str:
-    """Replay ``path`` until done (or Ctrl-C/SIGTERM with ``loop``); return a summary."""
+               wait_for_subscribers: float = 0.0, foxglove_port: int | None = None,
+               foxglove_address: str = '127.0.0.1') -> str:
+    """Replay ``path`` until done (or Ctrl-C/SIGTERM with ``loop``); return a summary.
+
+    With ``foxglove_port`` the same messages and the 3D scene are also served to
+    Foxglove (``gripper_sim.view.foxglove.recording_view``; ViewError if it cannot).
+    """
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -192,6 +203,7 @@ def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         node = None
         player = None
+        view = None
 
         def request_stop(_signum: int, _frame: Any) -> None:
             if player is not None:
@@ -204,6 +216,11 @@ def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
             node = rclpy.create_node(f'gripper_sim_replay_{os.getpid()}')
             player = Player(node, bag, rate=rate, topics=topics, start=start,
                             clock_hz=clock_hz, remaps=remaps)
+            if foxglove_port is not None:
+                view = player.view = recording_view(bag, host=foxglove_address,
+                                                    port=foxglove_port,
+                                                    topics=list(player.publishers))
+                node.get_logger().info(f'Foxglove view of the replay on {view.url}')
             if wait_for_subscribers > 0 and not player.wait_for_subscribers(
                     wait_for_subscribers):
                 lonely = [t for t, p in player.publishers.items()
@@ -213,6 +230,8 @@ def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
             stats = player.play(loop=loop)
             player.drain()
         finally:
+            if view is not None:
+                view.close()
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()

@@ -10,7 +10,8 @@ What makes a file read by ``ros2 bag info/play`` like one rosbag2 wrote:
 - messages with ``log_time`` = receive time and ``publish_time`` = send time, integer ns;
 - zstd-compressed chunks with message indexes, a Statistics record and a summary;
 - a Metadata record ``rosbag2`` whose ``serialized_metadata`` is the BagMetadata YAML
-  (version 9, ``ros_distro: jazzy``), written on close.
+  (version 9, ``ros_distro: jazzy``, see ``bag_metadata``), written on close: of this
+  file alone, or of the whole bag when ``close`` is given the bag's document.
 
 No data lost: a chunk is closed and handed to the operating system when it reaches
 ``chunk_size`` bytes or when ``flush_interval`` seconds (wall clock) have passed since
@@ -23,7 +24,6 @@ from __future__ import annotations
 import os
 import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
@@ -32,106 +32,36 @@ from mcap.writer import CompressionType, IndexType, Writer
 from gripper_sim import __version__
 from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording import schemas
+from gripper_sim.recording.bag_metadata import FileEntry, TopicEntry, bag_metadata_yaml
 from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.lifecycle import OpenClose
 
-ROS_DISTRO = 'jazzy'
-BAG_METADATA_VERSION = 9
 PROFILE = 'ros2'
 LIBRARY = f'gripper_sim.recording {__version__}'
 DEFAULT_CHUNK_SIZE = 1024 * 1024
 DEFAULT_FLUSH_INTERVAL = 0.5  # s; SIGKILL loses at most about this much
+COMPRESSIONS = ('zstd', 'lz4', 'none')
 
 
-@dataclass
-class TopicEntry:
-    """A topic written to the file.
+def check_options(*, chunk_size: int, flush_interval: float, compression: str) -> Any:
+    """The MCAP compression type for ``compression``, after checking every option.
 
-    Attributes:
-        name: topic name, e.g. ``/gripper_sim/fruit/state``.
-        type: message type, ``pkg/msg/Type``.
-        channel_id: MCAP channel id.
-        offered_qos_profiles: profiles (dicts, see ``qos``) of the publishers seen.
-        type_hash: ``RIHS01_...`` or '' when unknown.
-        message_count: messages written so far.
+    Raises:
+        RecordingError: a non-positive chunk size or flush interval, an unknown compression.
     """
-
-    name: str
-    type: str
-    channel_id: int
-    offered_qos_profiles: list = field(default_factory=list)
-    type_hash: str = ''
-    message_count: int = 0
-
-
-def _yaml_str(value: str) -> str:
-    """A YAML scalar for ``value``, quoted only when needed (as yaml-cpp does)."""
-    if value == '':
-        return '""'
-    if any(c in value for c in ':#{}[],&*!|>\'"%@`\n') or value.strip() != value:
-        escaped = value.replace('\\', '\\\\').replace('"', '\\"').replace('\n', '\\n')
-        return f'"{escaped}"'
-    return value
+    if chunk_size <= 0:
+        raise RecordingError(f'chunk_size must be positive, got {chunk_size}')
+    if not flush_interval > 0:
+        raise RecordingError(f'flush_interval must be positive, got {flush_interval}')
+    types = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+             'none': CompressionType.NONE}
+    if compression not in types:
+        msg = f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}"
+        raise RecordingError(msg)
+    return types[compression]
 
 
-def bag_metadata_yaml(*, topics: Iterable[TopicEntry], file_name: str, start_ns: int,
-                      end_ns: int, message_count: int,
-                      custom_data: Mapping[str, str] | None = None) -> str:
-    """The rosbag2 BagMetadata YAML (version 9) for one MCAP file."""
-    duration = max(0, end_ns - start_ns)
-    lines = [
-        f'version: {BAG_METADATA_VERSION}',
-        'storage_identifier: mcap',
-        'duration:',
-        f'  nanoseconds: {duration}',
-        'starting_time:',
-        f'  nanoseconds_since_epoch: {start_ns}',
-        f'message_count: {message_count}',
-    ]
-    topic_list = list(topics)
-    if topic_list:
-        lines.append('topics_with_message_count:')
-        for t in topic_list:
-            lines += [
-                '  - topic_metadata:',
-                f'      name: {_yaml_str(t.name)}',
-                f'      type: {_yaml_str(t.type)}',
-                '      serialization_format: cdr',
-            ]
-            if t.offered_qos_profiles:
-                lines.append('      offered_qos_profiles:')
-                qos_yaml = qos_mod.to_yaml(t.offered_qos_profiles)
-                lines += ['        ' + line for line in qos_yaml.splitlines()]
-            else:
-                lines.append('      offered_qos_profiles: []')
-            lines += [
-                f'      type_description_hash: {_yaml_str(t.type_hash)}',
-                f'    message_count: {t.message_count}',
-            ]
-    else:
-        lines.append('topics_with_message_count: []')
-    lines += [
-        'compression_format: ""',
-        'compression_mode: ""',
-        'relative_file_paths:',
-        f'  - {_yaml_str(file_name)}',
-        'files:',
-        f'  - path: {_yaml_str(file_name)}',
-        '    starting_time:',
-        f'      nanoseconds_since_epoch: {start_ns}',
-        '    duration:',
-        f'      nanoseconds: {duration}',
-        f'    message_count: {message_count}',
-    ]
-    if custom_data:
-        lines.append('custom_data:')
-        lines += [f'  {_yaml_str(k)}: {_yaml_str(v)}' for k, v in custom_data.items()]
-    else:
-        lines.append('custom_data: ~')
-    lines.append(f'ros_distro: {ROS_DISTRO}')
-    return '\n'.join(lines) + '\n'
-
-
-class BagWriter:
+class BagWriter(OpenClose):
     """Writes one rosbag2-compatible MCAP file.
 
     Use as a context manager::
@@ -148,6 +78,8 @@ class BagWriter:
             written to the operating system, even if not full.
         compression: 'zstd' (default), 'lz4' or 'none'.
         library: the header's library string.
+        profile: the header's profile: 'ros2' (default) adds the rosbag2 metadata record
+            on close; another profile (a foreign file being recovered) does not.
         clock: monotonic seconds for the flush policy (tests pass a fake one).
 
     Thread-safe: ``write`` may be called from several threads.
@@ -156,23 +88,17 @@ class BagWriter:
     def __init__(self, path: str | os.PathLike, *, overwrite: bool = False,
                  chunk_size: int = DEFAULT_CHUNK_SIZE,
                  flush_interval: float = DEFAULT_FLUSH_INTERVAL,
-                 compression: str = 'zstd', library: str = LIBRARY,
+                 compression: str = 'zstd', library: str = LIBRARY, profile: str = PROFILE,
                  clock: Callable[[], float] = time.monotonic):
         self.path = Path(path)
         self._overwrite = overwrite
-        if chunk_size <= 0:
-            raise RecordingError(f'chunk_size must be positive, got {chunk_size}')
-        if not flush_interval > 0:
-            raise RecordingError(f'flush_interval must be positive, got {flush_interval}')
+        self._compression = check_options(chunk_size=chunk_size,
+                                          flush_interval=flush_interval,
+                                          compression=compression)
         self._chunk_size = int(chunk_size)
         self._flush_interval = float(flush_interval)
-        try:
-            self._compression = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-                                 'none': CompressionType.NONE}[compression]
-        except KeyError:
-            msg = f"compression must be 'zstd', 'lz4' or 'none', got {compression!r}"
-            raise RecordingError(msg) from None
         self._library = library
+        self._profile = profile
         self._clock = clock
         self._lock = threading.RLock()
         self._stream: Any = None
@@ -182,21 +108,13 @@ class BagWriter:
         self._schema_ids: dict[str, int] = {}
         self._sequence: dict[str, int] = {}
         self._custom_data: dict[str, str] = {}
-        self._message_count = 0
+        self._file = FileEntry(self.path.name)
         self._bytes_written = 0
-        self._start_ns: int | None = None
-        self._end_ns = 0
+        self._pending_bytes = 0
         self._last_flush = 0.0
         self._pending = 0
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> BagWriter:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     @property
     def is_open(self) -> bool:
         return self._writer is not None
@@ -231,12 +149,16 @@ class BagWriter:
                 index_types=IndexType.ALL, repeat_channels=True, repeat_schemas=True,
                 use_chunking=True, use_statistics=True, use_summary_offsets=True,
                 enable_crcs=True)
-            self._writer.start(profile=PROFILE, library=self._library)
+            self._writer.start(profile=self._profile, library=self._library)
             self._stream.flush()
             self._last_flush = self._clock()
 
-    def close(self) -> None:
+    def close(self, bag_document: str | None = None) -> None:
         """Write the rosbag2 metadata record, the summary and the footer; close the file.
+
+        Args:
+            bag_document: the BagMetadata YAML to store (a split bag's writer passes the
+                whole bag's); default: this file's own.
 
         Closing twice is allowed and does nothing the second time.
         """
@@ -247,10 +169,9 @@ class BagWriter:
             writer, self._writer = self._writer, None
             self._closed = True
             try:
-                writer.add_metadata('rosbag2', {
-                    'serialized_metadata': self.bag_metadata(),
-                    'ROS_DISTRO': ROS_DISTRO,
-                })
+                if self._profile == PROFILE:
+                    document = self.bag_metadata() if bag_document is None else bag_document
+                    writer.add_metadata('rosbag2', {'serialized_metadata': document})
                 writer.finish()
                 self._stream.flush()
                 os.fsync(self._stream.fileno())
@@ -268,7 +189,7 @@ class BagWriter:
     # ------------------------------------------------------------------ content
     def add_topic(self, name: str, type_name: str, *,
                   offered_qos_profiles: Iterable[Mapping[str, Any]] | None = None,
-                  type_hash: str | None = None, definition: str | None = None,
+                  type_hash: str | None = None, definition: str | bytes | None = None,
                   schema_encoding: str = 'ros2msg',
                   message_encoding: str = 'cdr',
                   channel_metadata: Mapping[str, str] | None = None) -> TopicEntry:
@@ -280,8 +201,9 @@ class BagWriter:
             offered_qos_profiles: QoS profile dicts of its publishers (default: one
                 reliable keep-last-10 profile).
             type_hash: RIHS01 hash; default: looked up from the installed type description.
-            definition: schema text; default: built from the installed .msg files.
-            schema_encoding: 'ros2msg' (default) or 'ros2idl' with ``definition``.
+            definition: schema text (or bytes); default: built from the installed .msg files.
+            schema_encoding: 'ros2msg' (default) or 'ros2idl' with ``definition``; '' with
+                an empty ``definition`` for a channel without a schema (foreign files).
             message_encoding: 'cdr' (default; the only one ROS 2 tools play).
             channel_metadata: channel metadata to store verbatim (e.g. copied from another
                 file); overrides ``offered_qos_profiles`` and ``type_hash``.
@@ -291,7 +213,7 @@ class BagWriter:
         """
         if schema_encoding in ('ros2msg', 'ros2idl'):
             type_name = schemas.full_type_name(type_name)
-        if not name.startswith('/') and message_encoding == 'cdr':
+        if not name.startswith('/') and message_encoding == 'cdr' and channel_metadata is None:
             raise RecordingError(f"topic name '{name}' must be absolute (start with '/')")
         with self._lock:
             writer = self._require_open()
@@ -302,12 +224,14 @@ class BagWriter:
                            f'cannot add it again as {type_name}')
                     raise RecordingError(msg)
                 return existing
-            schema_id = self._schema_ids.get(type_name)
+            schema_id = 0 if schema_encoding == '' and not definition else \
+                self._schema_ids.get(type_name)
             if schema_id is None:
                 if definition is None:
                     definition = schemas.message_definition(type_name)
-                schema_id = writer.register_schema(type_name, schema_encoding,
-                                                   definition.encode('utf-8'))
+                data = definition.encode('utf-8') if isinstance(definition, str) \
+                    else bytes(definition)
+                schema_id = writer.register_schema(type_name, schema_encoding, data)
                 self._schema_ids[type_name] = schema_id
             if channel_metadata is not None:
                 metadata = {str(k): str(v) for k, v in channel_metadata.items()}
@@ -370,13 +294,10 @@ class BagWriter:
             except OSError as err:
                 raise RecordingError(f'cannot write {self.path}: {err.strerror}') from err
             entry.message_count += 1
-            self._message_count += 1
+            self._file.add(log_time)
             self._pending += 1
+            self._pending_bytes += len(data)
             self._bytes_written += len(data)
-            if self._start_ns is None or log_time < self._start_ns:
-                self._start_ns = log_time
-            if log_time > self._end_ns:
-                self._end_ns = log_time
             if self._clock() - self._last_flush >= self._flush_interval:
                 self._flush_locked()
 
@@ -410,6 +331,7 @@ class BagWriter:
         except OSError as err:
             raise RecordingError(f'cannot write {self.path}: {err.strerror}') from err
         self._pending = 0
+        self._pending_bytes = 0
         self._last_flush = self._clock()
 
     def flush(self) -> None:
@@ -435,7 +357,20 @@ class BagWriter:
 
     @property
     def message_count(self) -> int:
-        return self._message_count
+        return self._file.message_count
+
+    @property
+    def file_entry(self) -> FileEntry:
+        """This file's name, log-time span and message count so far."""
+        return self._file
+
+    @property
+    def size(self) -> int:
+        """Bytes of the file so far: what is on disk plus the payload of the open chunk."""
+        with self._lock:
+            if self._stream is None or self._stream.closed:
+                return self.path.stat().st_size if self.path.exists() else 0
+            return self._stream.tell() + self._pending_bytes
 
     @property
     def payload_bytes(self) -> int:
@@ -443,10 +378,7 @@ class BagWriter:
         return self._bytes_written
 
     def bag_metadata(self) -> str:
-        """The rosbag2 BagMetadata YAML for what was written so far."""
+        """The rosbag2 BagMetadata YAML of this file alone, for what was written so far."""
         with self._lock:
-            start = self._start_ns if self._start_ns is not None else 0
-            return bag_metadata_yaml(
-                topics=list(self._topics.values()), file_name=self.path.name,
-                start_ns=start, end_ns=self._end_ns if self._start_ns is not None else 0,
-                message_count=self._message_count, custom_data=self._custom_data)
+            return bag_metadata_yaml(topics=list(self._topics.values()), files=[self._file],
+                                     custom_data=self._custom_data)

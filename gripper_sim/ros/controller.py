@@ -31,6 +31,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
 from geometry_msgs.msg import WrenchStamped
@@ -134,7 +135,11 @@ def main(args: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='controller', description=__doc__.splitlines()[0])
     parser.add_argument('--force', type=float, help='grip force setpoint, N')
     parser.add_argument('--sim-node', help='simulator node (default /gripper_sim)')
-    options = parser.parse_args(remove_ros_args(argv)[1:])
+    try:
+        options = parser.parse_args(remove_ros_args(argv)[1:])
+    except rclpy_implementation.RCLError as err:   # malformed --ros-args
+        print(f'error: {err}', file=sys.stderr)
+        return 2
     overrides = []
     if options.force is not None:
         if not math.isfinite(options.force) or options.force <= 0:

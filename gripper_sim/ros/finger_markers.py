@@ -28,6 +28,8 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker
 
+from gripper_sim.core import fingers
+
 FINGER_COLOUR = ColorRGBA(r=0.45, g=0.45, b=0.5, a=0.9)
 PAD_COLOUR = ColorRGBA(r=0.15, g=0.35, b=0.75, a=0.9)
 OUTLINE_COLOUR = ColorRGBA(r=0.1, g=0.1, b=0.1, a=1.0)
@@ -79,7 +81,6 @@ class FingerGeometry:
 
 def finger_geometry(config: Mapping[str, Any]) -> FingerGeometry | None:
     """The finger of a flat configuration; None for a flat finger without a pad."""
-    from gripper_sim.core import fingers
     kind = config.get('gripper.finger.type', 'flat')
     padded = bool(config.get('gripper.finger.pad.enabled', False))
     if kind == 'flat' and not padded:

@@ -17,6 +17,9 @@ from typing import Any, Mapping
 
 from gripper_sim_interfaces.action import Grasp
 
+from gripper_sim.core.grasp import SETTLE_TIME as SQUEEZE_TIME, GraspSequence
+from gripper_sim.core.scenario import PickAndPlace, scenario_from_mapping
+
 MAX_LIFT_HEIGHT = 1.0       # m
 MAX_HOLD_TIME = 3600.0      # s
 MAX_TRANSPORT = 5.0         # m, |transport_distance| (the scenario's range)
@@ -86,8 +89,6 @@ def place_scenario(goal, config: Mapping[str, Any]):
     Raises:
         ConfigError: a value outside the scenario's ranges.
     """
-    from gripper_sim.core.grasp import SETTLE_TIME as SQUEEZE_TIME
-    from gripper_sim.core.scenario import scenario_from_mapping
     lift_speed = float(config['gripper.lift_speed'])
     close_speed = float(goal.close_speed or config['gripper.close_speed'])
     return scenario_from_mapping({
@@ -138,10 +139,8 @@ class GoalRun:
         self.max_contact_pressure = 0.0
         self.last = sim.last
         if self.place:
-            from gripper_sim.core.scenario import PickAndPlace
             self.machine = PickAndPlace(sim, place_scenario(goal, config))
         else:
-            from gripper_sim.core.grasp import GraspSequence
             close_speed = goal.close_speed or config['gripper.close_speed']
             self.machine = GraspSequence(sim, goal.target_force, close_speed,
                                          goal.lift_height, goal.hold_time, goal.release)

@@ -4,47 +4,34 @@ The goal runs ``gripper_sim.core.grasp.GraspSequence``, or with ``place`` the
 pick-and-place ``gripper_sim.core.scenario.PickAndPlace`` (``grasp_goal.GoalRun``),
 updated after every physics step in the physics thread. Feedback goes out on every
 phase change and at least every 0.05 s of sim time or of wall time (20 Hz at real
-time). One grasp at a time: a goal that arrives while one runs, or while a
-GripperCommand goal drives the jaws, is rejected and the reason is logged. Cancel
+time), kept in a deep history so a slow client still gets every phase. One goal
+drives the jaws at a time: a new Grasp goal preempts (aborts) the active Grasp or
+GripperCommand goal, so a goal whose client has gone never blocks the next. Cancel
 stops the motion and holds the jaws where they are.
 """
 from __future__ import annotations
 
-import math
-import threading
 import time
 
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 
 from gripper_sim_interfaces.action import Grasp
 
 from gripper_sim.errors import GripperSimError
 from gripper_sim.ros.grasp_goal import GoalRun, goal_problem
-from gripper_sim.ros.node import JawOwner
+from gripper_sim.ros.jaw_goals import FEEDBACK_PERIOD, FEEDBACK_QOS, JawGoals
+from gripper_sim.ros.sync import ActiveGoal
 
 __all__ = ['GraspServer', 'goal_problem']
 
-FEEDBACK_PERIOD = 0.05     # s, sim time and wall time
-
-
-class _GraspRun(JawOwner):
+class _GraspRun(ActiveGoal):
     kind = 'Grasp'
 
-    def __init__(self, goal_handle):
-        self.goal_handle = goal_handle
+    def __init__(self, goal_handle, ticket: int):
+        super().__init__(goal_handle, ticket)
         self.sequence = None
-        self.finished = threading.Event()
-        self.abort_reason: str | None = None
-        self.error: str | None = None
         self.last_phase = None
-        self.last_feedback = (-math.inf, -math.inf)   # (sim time, wall time)
-
-    def abort(self, reason: str) -> None:
-        """Stop from outside (reset, solver failure, shutdown, preemption): non-blocking."""
-        if self.abort_reason is None:
-            self.abort_reason = reason
-        self.finished.set()
 
 
 class GraspServer:
@@ -52,55 +39,35 @@ class GraspServer:
 
     def __init__(self, node):
         self._node = node
-        self._pending = threading.Lock()
+        self._goals = JawGoals(node.jaws)
         self._server = ActionServer(
             node, Grasp, '~/grasp', execute_callback=self._execute,
-            goal_callback=self._on_goal, cancel_callback=self._on_cancel,
-            callback_group=ReentrantCallbackGroup())
-        self._run: _GraspRun | None = None
-        self._reserved = False
-
-    def _reject(self, reason: str) -> GoalResponse:
-        self._node.get_logger().warning(f'Grasp goal rejected: {reason}')
-        return GoalResponse.REJECT
+            goal_callback=self._on_goal, cancel_callback=self._goals.cancel,
+            callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
 
     def _on_goal(self, goal) -> GoalResponse:
         problem = goal_problem(goal, self._node.params.config)
         if problem:
-            return self._reject(problem)
-        with self._pending:
-            owner = self._node.jaw_owner
-            if owner is not None or self._reserved:
-                kind = owner.kind if owner is not None else 'Grasp'
-                return self._reject(f'a {kind} goal is already running (one at a time; '
-                                    'cancel it or wait for its result)')
-            self._reserved = True
-        return GoalResponse.ACCEPT
-
-    def _on_cancel(self, goal_handle) -> CancelResponse:
-        run = self._run
-        if run is not None and run.goal_handle is goal_handle:
-            run.finished.set()
-        return CancelResponse.ACCEPT
+            self._node.get_logger().warning(f'Grasp goal rejected: {problem}')
+            return GoalResponse.REJECT
+        return self._goals.accept(goal)
 
     def _execute(self, goal_handle):
         node = self._node
         goal = goal_handle.request
-        run = _GraspRun(goal_handle)
-        reason = node.claim_jaws(run)
+        run = _GraspRun(goal_handle, self._goals.ticket(goal_handle))
+        reason = node.claim_jaws(run, run.ticket)
         if reason is not None:
             node.get_logger().warning(f'Grasp goal aborted before it started: {reason}')
             goal_handle.abort()
             return Grasp.Result(success=False, outcome='failed',
                                 message=f'not started: {reason}', dropped_at=-1.0)
-        self._run = run
+        self._goals.add(run)
         try:
             return self._drive(run, goal)
         finally:
-            self._run = None
+            self._goals.remove(run)
             node.release_jaws(run)
-            with self._pending:
-                self._reserved = False
 
     def _drive(self, run: _GraspRun, goal):
         node = self._node
@@ -138,7 +105,7 @@ class GraspServer:
             f'{goal.lift_height:g} m, {what}')
         self._feedback(run, node.sim.last)
         while not run.finished.wait(FEEDBACK_PERIOD):
-            if goal_handle.is_cancel_requested:
+            if run.canceled:
                 break
             with node.lock:
                 if node.paused:   # no steps: keep the client informed anyway
@@ -149,7 +116,7 @@ class GraspServer:
             last = node.sim.last
             summary = run.sequence.summary()
             phase = run.sequence.phase
-            canceled = goal_handle.is_cancel_requested and not run.sequence.done
+            canceled = run.canceled and not run.sequence.done
             # Stop the motion, hold the jaws where they are. Not after an abort: that
             # came with a reset (or the shutdown), and holding now could override a
             # command sent since the reset.

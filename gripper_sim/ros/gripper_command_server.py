@@ -12,25 +12,24 @@ that force (so the fruit is never squeezed harder than asked).
   aborted otherwise, with ``stalled`` set.
 - Feedback (position, real effort, stalled, reached_goal) on every state change and
   every 0.05 s of sim or wall time. Effort is the real mean contact normal force.
-- A new GripperCommand goal preempts the active one (which is aborted); a goal while
-  a Grasp runs is rejected. Cancel holds the jaws where they are.
+- A new GripperCommand goal preempts the active GripperCommand or Grasp goal (which
+  is aborted). Cancel holds the jaws where they are.
 """
 from __future__ import annotations
 
 import math
-import threading
 import time
 from collections import deque
 
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 
 from gripper_sim_interfaces.action import GripperCommand
 
 from gripper_sim.errors import CommandError
-from gripper_sim.ros.node import JawOwner
+from gripper_sim.ros.jaw_goals import FEEDBACK_PERIOD, FEEDBACK_QOS, JawGoals
+from gripper_sim.ros.sync import ActiveGoal
 
-FEEDBACK_PERIOD = 0.05   # s
 
 
 class StallDetector:
@@ -57,12 +56,12 @@ class StallDetector:
         return t - t0 >= self.timeout - 1e-12 and abs(gap - gap0) < self.threshold * self.timeout
 
 
-class _CommandRun(JawOwner):
+class _CommandRun(ActiveGoal):
     kind = 'GripperCommand'
 
-    def __init__(self, goal_handle, position: float, max_effort: float, tolerance: float,
-                 stall: StallDetector):
-        self.goal_handle = goal_handle
+    def __init__(self, goal_handle, ticket: int, position: float, max_effort: float,
+                 tolerance: float, stall: StallDetector):
+        super().__init__(goal_handle, ticket)
         self.position = position
         self.max_effort = max_effort
         self.tolerance = tolerance
@@ -70,15 +69,6 @@ class _CommandRun(JawOwner):
         self.mode = 'position'
         self.reached = False
         self.stalled = False
-        self.error: str | None = None
-        self.abort_reason: str | None = None
-        self.finished = threading.Event()
-        self.last_feedback = (-math.inf, -math.inf)
-
-    def abort(self, reason: str) -> None:
-        if self.abort_reason is None:
-            self.abort_reason = reason
-        self.finished.set()
 
 
 def goal_problem(position: float, max_effort: float, config) -> str | None:
@@ -100,48 +90,40 @@ class GripperCommandServer:
 
     def __init__(self, node):
         self._node = node
+        self._goals = JawGoals(node.jaws)
         self._server = ActionServer(
             node, GripperCommand, '~/gripper_cmd', execute_callback=self._execute,
-            goal_callback=self._on_goal, cancel_callback=self._on_cancel,
-            callback_group=ReentrantCallbackGroup())
-        self._runs: dict[int, _CommandRun] = {}
+            goal_callback=self._on_goal, cancel_callback=self._goals.cancel,
+            callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
 
     def _on_goal(self, goal) -> GoalResponse:
         command = goal.command
         problem = goal_problem(command.position, command.max_effort, self._node.params.config)
-        owner = self._node.jaw_owner
-        if problem is None and owner is not None and owner.kind != _CommandRun.kind:
-            problem = f'a {owner.kind} goal is driving the jaws (cancel it first)'
         if problem:
             self._node.get_logger().warning(f'GripperCommand goal rejected: {problem}')
             return GoalResponse.REJECT
-        return GoalResponse.ACCEPT
-
-    def _on_cancel(self, goal_handle) -> CancelResponse:
-        for run in list(self._runs.values()):
-            if run.goal_handle is goal_handle:
-                run.finished.set()
-        return CancelResponse.ACCEPT
+        return self._goals.accept(goal)
 
     def _execute(self, goal_handle):
         node = self._node
         params = node.params
         command = goal_handle.request.command
         max_effort = command.max_effort or float(params.get('max_effort'))
-        run = _CommandRun(goal_handle, command.position, max_effort,
+        run = _CommandRun(goal_handle, self._goals.ticket(goal_handle), command.position,
+                          max_effort,
                           float(params.get('goal_tolerance')),
                           StallDetector(float(params.get('stall_velocity_threshold')),
                                         float(params.get('stall_timeout'))))
-        reason = node.claim_jaws(run, preempt_kind=_CommandRun.kind)
+        reason = node.claim_jaws(run, run.ticket)
         if reason is not None:
             node.get_logger().warning(f'GripperCommand goal aborted before it started: {reason}')
             goal_handle.abort()
             return self._result(run, node.sim.last)
-        self._runs[id(run)] = run
+        self._goals.add(run)
         try:
             return self._drive(run)
         finally:
-            self._runs.pop(id(run), None)
+            self._goals.remove(run)
             node.release_jaws(run)
 
     def _drive(self, run: _CommandRun):
@@ -171,14 +153,14 @@ class GripperCommandServer:
                                f'{run.max_effort:g} N')
         self._feedback(run, node.sim.last)
         while not run.finished.wait(FEEDBACK_PERIOD):
-            if goal_handle.is_cancel_requested:
+            if run.canceled:
                 break
         node.remove_step_listener(on_step)
 
         allow_stalling = bool(node.params.get('allow_stalling'))
         with node.lock:
             last = node.sim.last
-            canceled = (goal_handle.is_cancel_requested and run.abort_reason is None
+            canceled = (run.canceled and run.abort_reason is None
                         and not (run.reached or run.stalled))
             if run.abort_reason is None and (canceled or run.error):
                 node.hold_jaws()   # not after an abort: a reset or a newer goal moved on

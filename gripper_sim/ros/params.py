@@ -26,6 +26,9 @@ from gripper_sim import configuration
 from gripper_sim.errors import ConfigError
 
 PHYSICS_PREFIX = 'physics.'
+# The publish interval is a whole number of steps, 1 / (publish_rate x dt): a rate
+# closer to 0 than this has no such number (it overflows, or divides by 0).
+MIN_PUBLISH_RATE = 0.001   # Hz
 
 # Physics keys that may change while the node runs (the rest are read-only): the
 # ones the core can change between steps.
@@ -56,8 +59,8 @@ NODE_PARAMETERS: tuple[NodeParameter, ...] = (
                   'one the config file names)', read_only=True),
     NodeParameter('config_file', '', '-', "YAML configuration file ('' = none); merged "
                   'after the fruit preset', read_only=True),
-    NodeParameter('publish_rate', 100.0, 'Hz', 'state publishing rate, in sim time',
-                  0.0, 1000.0, open_low=True),
+    NodeParameter('publish_rate', 100.0, 'Hz', 'state publishing rate, in sim time (at '
+                  'least one message per 1000 s of sim time)', MIN_PUBLISH_RATE, 1000.0),
     NodeParameter('real_time_factor', 1.0, '', 'sim seconds per wall second; 0 = as fast '
                   'as possible', 0.0, 1000.0),
     NodeParameter('publish_clock', True, '-', 'publish /clock (sim time) at publish_rate'),
@@ -72,9 +75,14 @@ NODE_PARAMETERS: tuple[NodeParameter, ...] = (
                   open_low=True),
     NodeParameter('stall_timeout', 1.0, 's', 'GripperCommand: stall window, sim time',
                   0.0, 60.0, open_low=True),
-    NodeParameter('record_path', '', '-', "MCAP file to record every physics step to "
-                  "('' = not recording); setting it starts recording there (a new file: "
-                  "an existing one is refused), '' stops; ~/record also sets it"),
+    NodeParameter('record_path', '', '-', "bag folder to record every physics step to "
+                  "(NAME/NAME_0.mcap + metadata.yaml; one file if it ends in .mcap; "
+                  "'' = not recording); setting it starts recording there (an existing "
+                  "file or folder is refused), '' stops; ~/record also sets it"),
+    NodeParameter('foxglove_port', 8765, '-', 'TCP port of the Foxglove live view '
+                  '(WebSocket); 0 = off', 0, 65535, read_only=True),
+    NodeParameter('foxglove_address', '127.0.0.1', '-', 'address the Foxglove live view '
+                  'listens on', read_only=True),
 )
 
 
@@ -171,7 +179,7 @@ class SimParameters:
         for spec in NODE_PARAMETERS:
             self._declare_checked(spec.name, spec.default, _descriptor(
                 spec.name, spec.default, spec.description, spec.unit, spec.low, spec.high,
-                spec.read_only, spec.open_low), spec.unit, spec.low, spec.high)
+                spec.read_only, spec.open_low), spec.unit, spec.low, spec.high, spec.open_low)
         fruit = fruit or node.get_parameter('fruit').value or None
         config_file = config_file or node.get_parameter('config_file').value or None
         base = configuration.load_config(fruit=fruit, config_file=config_file)
@@ -182,10 +190,10 @@ class SimParameters:
             descriptor = physics_descriptor(key)
             if default is None:
                 value = self._declare_checked(name, _KIND_TYPES[spec.kind], descriptor,
-                                              spec.unit, spec.low, spec.high)
+                                              spec.unit, spec.low, spec.high, spec.open_low)
             else:
                 value = self._declare_checked(name, default, descriptor, spec.unit,
-                                              spec.low, spec.high)
+                                              spec.low, spec.high, spec.open_low)
             if value is not None and value != default:
                 overrides[key] = value
         self.config = configuration.load_config(fruit=fruit, config_file=config_file,
@@ -194,15 +202,20 @@ class SimParameters:
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._applied)
 
-    def _declare_checked(self, name, value, descriptor, unit, low, high):
+    def _declare_checked(self, name, value, descriptor, unit, low, high, open_low=False):
         try:
             parameter = self._node.declare_parameter(name, value, descriptor)
         except Exception as err:   # rclpy: InvalidParameterValue / InvalidParameterType
             given = getattr(self._node, '_parameter_overrides', {}).get(name)
             shown = given.value if given is not None else value
-            bounds = (f': it must be in {_range_text(low, high, unit)}'
+            bounds = (f': it must be in {_range_text(low, high, unit, open_low)}'
                       if low is not None and high is not None else '')
-            raise ConfigError(f"parameter '{name}' = {shown!r} is invalid{bounds} "
+            hint = ''
+            if isinstance(shown, str) and low is not None:
+                # rcl reads a number it cannot hold as a double (below 2.2e-308 or above
+                # 1.8e308) as text
+                hint = '; it was read as text, not as a number in the double range'
+            raise ConfigError(f"parameter '{name}' = {shown!r} is invalid{bounds}{hint} "
                               f'({type(err).__name__})') from err
         value = parameter.value
         problem = _finite_problem(name, value) or _node_range_problem(name, value)

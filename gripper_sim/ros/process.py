@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -45,9 +46,47 @@ def fastdds_profile() -> str:
     return str(path)
 
 
+DOMAIN_IDS = range(1, 102)
+_handed_out: set[int] = set()
+
+
+def domain_in_use(domain_id: int, participants: int = 4) -> bool:
+    """Whether a DDS participant of this machine holds a unicast port of ``domain_id``.
+
+    RTPS ports: 7400 + 250 * domain + 10 + 2 * participant (+1 for user traffic).
+    """
+    base = 7400 + 250 * domain_id + 10
+    for port in range(base, base + 2 * participants):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(('127.0.0.1', port))
+            except OSError:
+                return True
+    return False
+
+
+def free_domain_id(start: int) -> int:
+    """A domain id in 1..101 that no process on this machine uses and that this process
+    has not handed out before, searched from ``start`` (modulo 101)."""
+    for offset in range(len(DOMAIN_IDS)):
+        candidate = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
+        if candidate not in _handed_out and not domain_in_use(candidate):
+            break
+    else:
+        candidate = DOMAIN_IDS[start % len(DOMAIN_IDS)]
+    _handed_out.add(candidate)
+    return candidate
+
+
+def reserve_domain_id(domain_id: int) -> None:
+    """Never hand out ``domain_id`` (it is taken, e.g. by a session set by hand)."""
+    _handed_out.add(domain_id)
+
+
 def pick_domain_id(offset: int = 0) -> int:
-    """A domain id in [10, 99] from the process id (distinct per run; ``offset`` per use)."""
-    return 10 + (os.getpid() + offset) % 90
+    """A free domain id (``free_domain_id``), searched from the process id + ``offset``:
+    concurrent runs start far apart, and a node of another run is never a namesake."""
+    return free_domain_id(os.getpid() + offset)
 
 
 def ros_environment(domain_id: int | None = None,
@@ -157,12 +196,17 @@ class RosProcess:
 def node_process(parameters: Mapping[str, object] | None = None, *, fruit: str | None = None,
                  env: Mapping[str, str] | None = None, log_path=None,
                  extra: Iterable[str] = ()) -> RosProcess:
-    """A ``gripper_sim`` node process with ``-p name:=value`` for each parameter."""
+    """A ``gripper_sim`` node process with ``-p name:=value`` for each parameter.
+
+    The Foxglove live view is off (``foxglove_port`` 0) unless ``parameters`` set it:
+    tests and benchmarks start many nodes at once, which would all ask for its port.
+    """
+    parameters = {'foxglove_port': 0, **(parameters or {})}
     args: list[str] = []
     if fruit:
         args += ['--fruit', fruit]
     ros_args = list(extra)
-    for name, value in (parameters or {}).items():
+    for name, value in parameters.items():
         if isinstance(value, bool):
             value = 'true' if value else 'false'
         ros_args += ['-p', f'{name}:={value}']

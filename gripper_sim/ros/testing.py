@@ -31,6 +31,8 @@ from visualization_msgs.msg import MarkerArray
 from gripper_sim.ros.process import apply_ros_environment
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+# Action feedback: as deep as the servers' history, so a slow client misses no phase.
+FEEDBACK = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
 
 
 class TimeoutError_(AssertionError):
@@ -91,8 +93,10 @@ class SimClient:
         self.open_client = self.node.create_client(Trigger, f'{self.path}/jaw/open')
         self.param_client = self.node.create_client(SetParameters,
                                                     f'{self.path}/set_parameters')
-        self.grasp = ActionClient(self.node, Grasp, f'{self.path}/grasp')
-        self.gripper_cmd = ActionClient(self.node, GripperCommand, f'{self.path}/gripper_cmd')
+        self.grasp = ActionClient(self.node, Grasp, f'{self.path}/grasp',
+                                  feedback_sub_qos_profile=FEEDBACK)
+        self.gripper_cmd = ActionClient(self.node, GripperCommand, f'{self.path}/gripper_cmd',
+                                        feedback_sub_qos_profile=FEEDBACK)
 
     def _store(self, suffix: str) -> Callable[[Any], None]:
         def store(msg) -> None:

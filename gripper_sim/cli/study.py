@@ -1,0 +1,91 @@
+"""``gripper-sim study STUDY.yaml``: run a grasp study on Dask (``gripper_sim.workflows``)."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    study = subparsers.add_parser(
+        'study', help='grasp study: population force windows over design axes, on Dask',
+        description='Run every design point of a study file over its fruit population: '
+                    "each fruit's grasp window (or a grip-force grid), the force range that "
+                    'succeeds for a fraction of the population, rows as Parquet, a summary '
+                    'JSON and an HTML/PNG report. Running it again resumes.')
+    study.add_argument('study', metavar='STUDY',
+                       help='a study file, or the name of one in config/studies')
+    study.add_argument('--out', metavar='DIR', default=None,
+                       help='results directory (default: study-results/NAME)')
+    study.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
+                       help='an existing Dask scheduler (default: a local cluster)')
+    study.add_argument('--workers', type=_positive_int, default=None, metavar='N',
+                       help='local cluster: worker processes (default: the CPU count)')
+    study.add_argument('--csv', action='store_true', help='also write rows.csv')
+    study.add_argument('--no-report', action='store_true',
+                       help='skip the HTML/PNG report')
+    study.add_argument('--no-progress', action='store_true', help='no progress bar')
+    study.set_defaults(handler=run_study_verb)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from err
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'{value} must be at least 1')
+    return value
+
+
+def run_study_verb(args) -> int:
+    from gripper_sim.workflows.study import run_study, write_summary
+    from gripper_sim.workflows.study_report import write_report
+    from gripper_sim.workflows.study_spec import load_study
+    study = load_study(args.study)
+    out = Path(args.out or Path('study-results') / study.name)
+    run = run_study(study, out, scheduler=args.scheduler, workers=args.workers,
+                    progress=not args.no_progress)
+    write_summary(run.summary, out / 'summary.json')
+    if args.csv:
+        from gripper_sim.workflows.study_results import RowStore
+        RowStore(out).write_csv(out / 'rows.csv')
+    if run.interrupted:
+        print(f'interrupted: {len(run.rows)} rows kept in {out}/rows ({run.computed} '
+              'computed now); run the same command again to resume', file=sys.stderr)
+        return 130
+    if not args.no_report:
+        write_report(run.summary, run.rows, out)
+    summary = run.summary
+    print(f"study {summary['study']}: {len(summary['points'])} design points x "
+          f"{summary['population']['samples']} fruits, {summary['rows']} evaluations "
+          f"({run.computed} computed, {run.reused} reused, {summary['errors']} with errors)")
+    percent = f"{summary['fraction'] * 100:g} %"
+    for point in summary['points']:
+        print(f"  {point['label']}: {describe_window(point.get('population'), percent)}")
+    print(f'  results in {out}/ (rows/*.parquet, summary.json'
+          + (', rows.csv' if args.csv else '') + ('' if args.no_report else
+                                                   ', report.html, report.png') + ')')
+    return 0
+
+
+def describe_window(population: dict | None, percent: str) -> str:
+    """One line: the population window with its interval, or 'no safe force'."""
+    if population is None:
+        return 'not complete'
+    window = population['window']
+    if window is None:
+        return (f"no safe force for {percent} of the fruits ({population['no_own_window']} "
+                f"of {population['samples']} have no window of their own)")
+    high = ('gripper.max_force' if window['high_is_limit'] else f"{window['high']:.3g} N")
+    text = f"{window['low']:.3g} N .. {high} holds {percent} undamaged"
+    ci = population['ci']
+    if ci is not None:
+        pct = f"{population['confidence'] * 100:g} %"
+        text += (f" ({pct} CI: low {ci['low'][0]:.3g}-{ci['low'][1]:.3g} N, high "
+                 f"{ci['high'][0]:.3g}-{ci['high'][1]:.3g} N)")
+    sure = population['confident_window']
+    if sure is None and not math.isnan(population['samples_needed']):
+        text += f"; a confident claim needs >= {population['samples_needed']} fruits"
+    return text

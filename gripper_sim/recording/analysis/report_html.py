@@ -1,0 +1,429 @@
+"""Self-contained HTML reports (plotly, its JavaScript embedded: they open offline).
+
+``write_html_report(path, title, blocks)`` is the one page writer: a list of blocks,
+each a heading with either a plotly figure or a small table of (name, value) rows.
+The analysis of a recording (``write_grasp_report``), the grasp window
+(``write_window_report``) and a study can each build their blocks and call it.
+
+The grasp report: the key numbers; force, gap, compression and slip over time with the
+phases marked; force over compression with the stiffness fit; and an animation of the
+fruit (2D outline, 3D skin) with a time slider, coloured by the contact pressure on a
+stated scale, with the jaw plates and the table drawn and the phase named in each frame.
+"""
+from __future__ import annotations
+
+import html
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import plotly.graph_objects as go
+import plotly.io as pio
+from plotly.subplots import make_subplots
+
+from gripper_sim.recording.analysis.events import Events, find_events, phase_at
+from gripper_sim.recording.analysis.figures import (PRESSURE_COLOURS, contact_state,
+                                                    pressure_name, pressure_scale)
+from gripper_sim.recording.analysis.frames import Box, Frame
+from gripper_sim.recording.analysis.series import TimeSeries
+from gripper_sim.recording.analysis.summary import fit_stiffness
+from gripper_sim.recording.errors import RecordingError
+
+#: the element id of the fruit animation's plot, for scripts and tests
+ANIMATION_ID = 'fruit-animation'
+
+
+@dataclass(frozen=True)
+class Block:
+    """One part of a report page.
+
+    Attributes:
+        heading: the section title.
+        figure: a plotly figure, or None.
+        rows: (name, value) pairs shown as a table (after the figure, if both).
+        text: a paragraph under the heading.
+        div_id: the figure's element id (default: made up by plotly).
+        links: (label, relative address) pairs shown as a list of links.
+    """
+
+    heading: str
+    figure: go.Figure | None = None
+    rows: Sequence[tuple[str, str]] = ()
+    text: str = ''
+    div_id: str | None = None
+    links: Sequence[tuple[str, str]] = ()
+
+
+_PAGE = """<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{title}</title>
+<style>
+body {{ font-family: sans-serif; margin: 1.5em auto; max-width: 1200px; color: #222; }}
+h1 {{ font-size: 1.4em; }} h2 {{ font-size: 1.15em; margin-top: 1.6em; }}
+table {{ border-collapse: collapse; margin: 0.5em 0; }}
+td {{ border-bottom: 1px solid #ddd; padding: 0.2em 1em 0.2em 0; }}
+p.note {{ color: #555; font-size: 0.9em; }}
+</style></head><body>
+<h1>{title}</h1>
+{body}
+</body></html>
+"""
+
+
+def write_html_report(path: str | Path, title: str, blocks: Sequence[Block]) -> Path:
+    """Write one self-contained HTML page of ``blocks``: plotly's JavaScript is embedded
+    once (no network needed to open it), each figure interactive.
+
+    Raises:
+        RecordingError: the file cannot be written.
+    """
+    parts: list[str] = []
+    script_done = False
+    for block in blocks:
+        parts.append(f'<h2>{html.escape(block.heading)}</h2>')
+        if block.text:
+            parts.append(f'<p class="note">{html.escape(block.text)}</p>')
+        if block.figure is not None:
+            parts.append(pio.to_html(block.figure, full_html=False, auto_play=False,
+                                     include_plotlyjs=not script_done, div_id=block.div_id,
+                                     config={'displaylogo': False}))
+            script_done = True
+        if block.rows:
+            cells = ''.join(f'<tr><td>{html.escape(name)}</td><td>{html.escape(value)}'
+                            '</td></tr>' for name, value in block.rows)
+            parts.append(f'<table>{cells}</table>')
+        if block.links:
+            items = ''.join(f'<li><a href="{html.escape(href)}">{html.escape(label)}</a></li>'
+                            for label, href in block.links)
+            parts.append(f'<ul>{items}</ul>')
+    page = _PAGE.format(title=html.escape(title), body='\n'.join(parts))
+    target = Path(path)
+    try:
+        target.write_text(page, encoding='utf-8')
+    except OSError as err:
+        raise RecordingError(f'cannot write {target}: {err.strerror}') from err
+    return target
+
+
+# ---------------------------------------------------------------------- grasp report
+def _number(value: Any, unit: str, scale: float = 1.0, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return 'n/a'
+    return f'{value * scale:.{digits}g} {unit}'
+
+
+def summary_rows(summary: dict) -> list[tuple[str, str]]:
+    """The key numbers of a run's summary as (name, value) rows."""
+    three_d = summary.get('dimension') == 3
+    fit = summary.get('stiffness_fit_force_range_n')
+    rows = [
+        ('fruit', str(summary.get('fruit'))),
+        ('model', f"{summary.get('dimension', 2)}D"),
+        ('sim time', f"{summary['start_time_s']:.3f} to "
+                     f"{summary['start_time_s'] + summary['duration_s']:.3f} s"),
+        ('held / slipped / dropped', f"{summary['held']} / {summary['slipped']} / "
+                                     f"{summary.get('dropped', False)}"),
+        ('slip at the end of the hold', _number(summary['held_slip_distance_m'], 'mm', 1e3)),
+        ('peak grip force', _number(summary['peak_grip_force_n'], 'N')),
+        ('peak compression', _number(summary['peak_compression_m'], 'mm', 1e3)),
+        ('stiffness (tangent, secant)',
+         f"{_number(summary['stiffness_n_per_m'], 'N/mm', 1e-3)}, "
+         f"{_number(summary['secant_stiffness_n_per_m'], 'N/mm', 1e-3)}"
+         + (f' (fitted on the loading only, {fit[0]:.2f}-{fit[1]:.2f} N)' if fit else '')),
+        ('peak damage pressure', _number(summary['peak_damage_pressure_pa'], 'kPa', 1e-3)),
+        ('bruise threshold', _number(summary['bruise_threshold_pa'], 'kPa', 1e-3)),
+        ('bruised / crushed', f"{summary['bruised']} / {summary['crushed']}"),
+    ]
+    if three_d:
+        rows.append(('contact area at peak force',
+                     _number(summary['contact_area_at_peak_force_m2'], 'mm^2', 1e6)))
+    else:
+        rows.append(('contact length at peak force',
+                     _number(summary['contact_length_at_peak_force_m'], 'mm', 1e3)))
+    rows += [(f'phase: {label}', f'{time:.3f} s')
+             for label, time in summary.get('event_times_s', {}).items()]
+    return rows
+
+
+def _phase_lines(fig: go.Figure, series: TimeSeries, events: Events) -> None:
+    t = series['time_s']
+    for label, row in events.marked():
+        fig.add_vline(x=float(t[row]), line_dash='dash', line_color='grey', line_width=1)
+        fig.add_annotation(x=float(t[row]), y=1.0, yref='paper', text=label,
+                           showarrow=False, textangle=-90, xanchor='left', yanchor='top',
+                           font={'size': 10, 'color': 'grey'})
+
+
+def time_figure(series: TimeSeries, summary: dict, events: Events) -> go.Figure:
+    """Grip force (and per jaw), gap, compression and slip, each on its own axis."""
+    t = series['time_s']
+    fig = make_subplots(rows=4, cols=1, shared_xaxes=True, vertical_spacing=0.03,
+                        row_heights=(0.34, 0.22, 0.22, 0.22))
+    fig.add_trace(go.Scatter(x=t, y=series['grip_force_n'], name='grip force (mean)',
+                             line={'color': 'black'}), row=1, col=1)
+    for side in ('left', 'right'):
+        values = series[f'{side}_force_n']
+        if np.any(np.isfinite(values)):
+            fig.add_trace(go.Scatter(x=t, y=values, name=f'{side} jaw',
+                                     line={'dash': 'dot', 'width': 1}), row=1, col=1)
+    fig.add_trace(go.Scatter(x=t, y=1e3 * series['gap_m'], name='jaw gap (mm)'), row=2, col=1)
+    fig.add_trace(go.Scatter(x=t, y=1e3 * series['compression_m'], name='compression (mm)'),
+                  row=3, col=1)
+    fig.add_trace(go.Scatter(x=t, y=1e3 * series['slip_distance_m'],
+                             name='slip in the jaws (mm)'), row=4, col=1)
+    tolerance = 1e3 * summary['slip_threshold_m']
+    fig.add_hline(y=tolerance, line_dash='dot', line_color='red', row=4, col=1,
+                  annotation_text=f'slip tolerance {tolerance:g} mm')
+    for row, label in enumerate(('normal force (N)', 'jaw gap (mm)', 'compression (mm)',
+                                 'slip (mm)'), start=1):
+        fig.update_yaxes(title_text=label, row=row, col=1)
+    fig.update_xaxes(title_text='sim time (s)', row=4, col=1)
+    _phase_lines(fig, series, events)
+    fig.update_layout(height=820, margin={'t': 40})
+    return fig
+
+
+def compression_figure(series: TimeSeries, summary: dict, events: Events) -> go.Figure:
+    """Force over compression coloured by time, with the loading fit over its range."""
+    fit = fit_stiffness(series, events)
+    c_mm = 1e3 * series['compression_m']
+    fig = go.Figure(go.Scatter(
+        x=c_mm, y=series['grip_force_n'], mode='markers', name='samples',
+        marker={'size': 4, 'color': series['time_s'], 'colorscale': 'Viridis',
+                'colorbar': {'title': {'text': 'sim time (s)'}}}))
+    if fit.tangent is not None:
+        c = series['compression_m'][fit.rows]
+        xs = np.linspace(c.min(), c.max(), 20)
+        lo, hi = summary['stiffness_fit_force_range_n']
+        fig.add_trace(go.Scatter(x=1e3 * xs, y=fit.tangent * xs + fit.intercept,
+                                 mode='lines', line={'color': 'red'},
+                                 name=f'tangent {fit.tangent / 1e3:.2f} N/mm '
+                                      f'(loading, {lo:.2f}-{hi:.2f} N)'))
+    fig.update_layout(xaxis_title='compression (mm)', yaxis_title='grip force (N)',
+                      height=480, legend={'x': 0.01, 'y': 0.99})
+    return fig
+
+
+def _box_mesh(box: Box, name: str, colour: str, opacity: float) -> go.Mesh3d:
+    low, high = (1e3 * v for v in box.bounds())
+    x = [low[0], high[0], high[0], low[0], low[0], high[0], high[0], low[0]]
+    y = [low[1], low[1], high[1], high[1], low[1], low[1], high[1], high[1]]
+    z = [low[2], low[2], low[2], low[2], high[2], high[2], high[2], high[2]]
+    i = [0, 0, 4, 4, 0, 0, 1, 1, 2, 2, 3, 3]
+    j = [1, 2, 5, 6, 1, 5, 2, 6, 3, 7, 0, 4]
+    k = [2, 3, 6, 7, 5, 4, 6, 5, 7, 6, 4, 7]
+    return go.Mesh3d(x=x, y=y, z=z, i=i, j=j, k=k, color=colour, opacity=opacity, name=name,
+                     hoverinfo='name', showscale=False)
+
+
+def _rectangle(box: Box | None, name: str, colour: str) -> go.Scatter:
+    if box is None:
+        return go.Scatter(x=[], y=[], name=name, showlegend=False)
+    low, high = (1e3 * v for v in box.bounds())
+    return go.Scatter(x=[low[0], high[0], high[0], low[0], low[0]],
+                      y=[low[2], low[2], high[2], high[2], low[2]], fill='toself',
+                      mode='lines', line={'color': colour, 'width': 1}, fillcolor=colour,
+                      opacity=0.7, name=name, hoverinfo='name', showlegend=False)
+
+
+def _colour_bar(dimension: int, top: float, bruise: float) -> dict:
+    name = pressure_name(dimension)
+    ticks = list(np.linspace(0.0, top / 1e3, 5))
+    labels = [f'{v:.0f}' for v in ticks]
+    if bruise <= top * (1 + 1e-6):
+        ticks.append(bruise / 1e3)
+        labels.append(f'bruise {bruise / 1e3:.0f}')
+        note = ''
+    else:
+        note = f'<br>bruise threshold {bruise / 1e3:.0f} kPa<br>is above this scale'
+    return {'title': {'text': f'{name}<br>(kPa){note}', 'side': 'right'},
+            'tickvals': ticks, 'ticktext': labels}
+
+
+def _frame_traces(frame: Frame, dimension: int, top: float, bruise: float) -> list:
+    """The traces of one frame: table, left and right jaw, fruit (in that order)."""
+    pressure_kpa = np.nan_to_num(frame.pressure) / 1e3
+    jaws = list(frame.jaws) + [None] * (2 - len(frame.jaws))
+    if dimension == 3:
+        scene: list = []
+        if frame.table is not None:
+            scene.append(_box_mesh(frame.table, 'table', 'sienna', 0.35))
+        else:
+            scene.append(go.Mesh3d(x=[], y=[], z=[], name='table'))
+        for k, jaw in enumerate(jaws[:2]):
+            scene.append(_box_mesh(jaw, ('left', 'right')[k] + ' jaw', 'slategrey', 0.3)
+                         if jaw is not None else go.Mesh3d(x=[], y=[], z=[]))
+        pts = 1e3 * frame.points
+        tri = frame.triangles
+        scene.append(go.Mesh3d(
+            x=pts[:, 0], y=pts[:, 1], z=pts[:, 2], i=tri[:, 0], j=tri[:, 1], k=tri[:, 2],
+            intensity=pressure_kpa, colorscale=PRESSURE_COLOURS, cmin=0.0, cmax=top / 1e3,
+            colorbar=_colour_bar(3, top, bruise), name='fruit', flatshading=False,
+            hovertemplate='p = %{intensity:.1f} kPa<extra>fruit</extra>'))
+        return scene
+    pts = 1e3 * frame.points
+    return [
+        _rectangle(frame.table, 'table', 'sienna'),
+        _rectangle(jaws[0], 'left jaw', 'slategrey'),
+        _rectangle(jaws[1], 'right jaw', 'slategrey'),
+        go.Scatter(x=pts[:, 0], y=pts[:, 2], mode='lines+markers', name='fruit',
+                   line={'color': 'rgb(90,90,90)', 'width': 1.5},
+                   marker={'size': 7, 'color': pressure_kpa, 'colorscale': PRESSURE_COLOURS,
+                           'cmin': 0.0, 'cmax': top / 1e3,
+                           'colorbar': _colour_bar(2, top, bruise)},
+                   hovertemplate='p = %{marker.color:.1f} kPa<extra>fruit</extra>',
+                   showlegend=False),
+    ]
+
+
+def _frame_title(series: TimeSeries, events: Events, frame: Frame, dimension: int) -> str:
+    peak = float(np.nanmax(frame.pressure)) if np.any(np.isfinite(frame.pressure)) else 0.0
+    moment = f' ({frame.label})' if frame.label else ''
+    return (f't = {frame.time:.3f} s{moment}: {phase_at(events, frame.row)}, '
+            f'{contact_state(series, frame.row)}, F = {series["grip_force_n"][frame.row]:.2f}'
+            f' N, peak {pressure_name(dimension)} {peak / 1e3:.1f} kPa')
+
+
+def animation_figure(series: TimeSeries, frames: list[Frame], summary: dict) -> go.Figure:
+    """The fruit over time with a time slider and play/pause buttons (module docstring)."""
+    dimension = series.dimension
+    bruise = summary['bruise_threshold_pa']
+    top = pressure_scale(frames, bruise)
+    events = find_events(series)
+    every = 1e3 * np.vstack([f.points for f in frames] +
+                            [np.vstack(b.bounds()) for f in frames for b in f.jaws])
+    low, high = every.min(axis=0), every.max(axis=0)
+    pad = 0.08 * float(np.max(high - low) or 10.0)
+    low, high = low - pad, high + pad
+    low[2] = min(low[2], -3.0)
+    plotly_frames = [go.Frame(data=_frame_traces(f, dimension, top, bruise), name=str(k),
+                              layout={'title': {'text': _frame_title(series, events, f,
+                                                                      dimension)}})
+                     for k, f in enumerate(frames)]
+    fig = go.Figure(data=plotly_frames[0].data, frames=plotly_frames)
+    steps = [{'method': 'animate', 'label': f'{f.time:.2f}' + (f' {f.label}' if f.label
+                                                                else ''),
+              'args': [[str(k)], {'mode': 'immediate', 'frame': {'duration': 0,
+                                                                  'redraw': True},
+                                  'transition': {'duration': 0}}]}
+             for k, f in enumerate(frames)]
+    fig.update_layout(
+        title={'text': _frame_title(series, events, frames[0], dimension)},
+        height=720 if dimension == 3 else 640, showlegend=False,
+        sliders=[{'active': 0, 'steps': steps, 'currentvalue': {'prefix': 'sim time (s): '},
+                  'pad': {'t': 40}}],
+        updatemenus=[{'type': 'buttons', 'showactive': False, 'x': 1.0, 'y': 1.02,
+                      'xanchor': 'right', 'yanchor': 'bottom', 'direction': 'left',
+                      'buttons': [
+                          {'label': 'play', 'method': 'animate',
+                           'args': [None, {'frame': {'duration': 120, 'redraw': True},
+                                           'fromcurrent': True,
+                                           'transition': {'duration': 0}}]},
+                          {'label': 'pause', 'method': 'animate',
+                           'args': [[None], {'mode': 'immediate',
+                                             'frame': {'duration': 0, 'redraw': False}}]}]}])
+    if dimension == 3:
+        fig.update_layout(scene={
+            'xaxis': {'title': {'text': 'x (mm)'}, 'range': [low[0], high[0]]},
+            'yaxis': {'title': {'text': 'y (mm)'}, 'range': [low[1], high[1]]},
+            'zaxis': {'title': {'text': 'z (mm)'}, 'range': [low[2], high[2]]},
+            'aspectmode': 'cube', 'camera': {'eye': {'x': 1.2, 'y': -1.6, 'z': 0.6}}})
+    else:
+        fig.update_layout(plot_bgcolor='white')
+        fig.update_xaxes(title_text='x (mm)', range=[low[0], high[0]], gridcolor='#eee')
+        fig.update_yaxes(title_text='z (mm)', range=[low[2], high[2]], scaleanchor='x',
+                         gridcolor='#eee')
+    return fig
+
+
+def write_grasp_report(series: TimeSeries, summary: dict, frames: list[Frame],
+                       path: str | Path) -> Path:
+    """``report.html`` of one recorded run: numbers, time plots, force-compression and
+    (when the recording has markers) the fruit animation."""
+    events = find_events(series)
+    dimension = series.dimension
+    blocks = [Block('Summary', rows=summary_rows(summary)),
+              Block('Force, gap, compression and slip over time', time_figure(
+                  series, summary, events), text='Dashed lines: the phases found in the '
+                  'recording (grip, lift-off, hold, release, let go).'),
+              Block('Force vs compression', compression_figure(series, summary, events),
+                    text='The stiffness is fitted on the loading part only, from the grip '
+                         'to the force reached before the lift.')]
+    if frames:
+        blocks.append(Block(
+            'The fruit over time', animation_figure(series, frames, summary),
+            div_id=ANIMATION_ID,
+            text=f'Colour: {pressure_name(dimension)} in kPa, from 0 to the largest value '
+                 f'shown; the bruise threshold is '
+                 f"{summary['bruise_threshold_pa'] / 1e3:.0f} kPa. Grey: the jaw plates; "
+                 'brown: the table. Move the slider or press play.'))
+    title = (f"Grasp of {summary.get('fruit') or 'a fruit'} ({dimension}D): "
+             + ('slipped' if summary['slipped'] else 'held' if summary['held']
+                else 'not gripped'))
+    return write_html_report(path, title, blocks)
+
+
+def write_runs_index(summaries: Sequence[dict], run_dirs: Sequence[str],
+                     path: str | Path) -> Path:
+    """The page of a recording with several runs: each run's numbers and a link to its
+    own report (``run_dirs``: the runs' folders relative to ``path``)."""
+    blocks = [Block(f'Run {k + 1}', rows=summary_rows(summary),
+                    links=[('its report: plots and the fruit over time',
+                            f'{folder}/report.html')])
+              for k, (summary, folder) in enumerate(zip(summaries, run_dirs))]
+    title = (f"{len(summaries)} runs of {summaries[0].get('fruit') or 'a fruit'} "
+             '(the sim time went back to 0 at a reset between them)')
+    return write_html_report(path, title, blocks)
+
+
+# ---------------------------------------------------------------------- window report
+def _force_value(value: Any) -> float | None:
+    """A window bound as a float (``as_dict`` writes infinity as 'inf'), or None."""
+    return None if value is None else float(value)
+
+
+def _trial_pressure(trial: dict) -> float:
+    """Pa, the trial's peak damage pressure."""
+    return float(trial.get('peak_pressure', trial.get('peak_damage_pressure', math.nan)))
+
+
+def write_window_report(window: dict, path: str | Path, title: str = 'Grasp window') -> Path:
+    """``window``'s report: every trial's outcome, slip and peak damage pressure over its
+    grip force, with the bounds found. ``window``: ``GraspWindow.as_dict()``."""
+    trials = sorted(window.get('trials', []), key=lambda t: t['force'])
+    force = [t['force'] for t in trials]
+    fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.06)
+    fig.add_trace(go.Scatter(
+        x=force, y=[1e3 * t['slip_distance'] for t in trials], mode='markers',
+        text=[t['outcome'] for t in trials], name='slip (mm)',
+        marker={'size': 10, 'color': ['seagreen' if t['held'] else 'crimson'
+                                      for t in trials]},
+        hovertemplate='%{x:.3g} N: %{text}, slip %{y:.3f} mm<extra></extra>'), row=1, col=1)
+    fig.add_trace(go.Scatter(
+        x=force, y=[_trial_pressure(t) / 1e3 for t in trials], mode='markers',
+        text=[t['outcome'] for t in trials], name='peak damage pressure (kPa)',
+        marker={'size': 10, 'symbol': 'diamond',
+                'color': ['crimson' if t['bruised'] else 'seagreen' for t in trials]},
+        hovertemplate='%{x:.3g} N: %{text}, %{y:.1f} kPa<extra></extra>'), row=2, col=1)
+    low, high = _force_value(window.get('min_force')), _force_value(window.get('max_force'))
+    for value, label in ((low, 'holds from'), (high, 'bruises above')):
+        if value is not None and math.isfinite(value):
+            fig.add_vline(x=value, line_dash='dash', line_color='grey')
+            fig.add_annotation(x=value, y=1.0, yref='paper', text=f'{label} {value:.3g} N',
+                               showarrow=False, xanchor='left')
+    fig.update_yaxes(title_text='slip (mm)', row=1, col=1)
+    fig.update_yaxes(title_text='peak damage pressure (kPa)', row=2, col=1)
+    fig.update_xaxes(title_text='grip force (N)', row=2, col=1)
+    fig.update_layout(height=640, showlegend=False)
+    rows = [(f"{t['force']:.4g} N", f"{t['outcome']}, slip {1e3 * t['slip_distance']:.3f} "
+             f'mm, peak damage pressure {_trial_pressure(t) / 1e3:.1f} kPa') for t in trials]
+    if not window.get('window') or low is None or high is None:
+        found = 'none'
+    else:
+        found = f'{low:.3g} N .. ' + (f'{high:.3g} N' if math.isfinite(high)
+                                      else 'gripper.max_force (nothing bruised)')
+    return write_html_report(path, title, [
+        Block('Window', rows=[('safe window', found)]),
+        Block('Trials', fig, rows=rows,
+              text='Green: held (top) or not bruised (bottom); red: not held, or bruised.')])

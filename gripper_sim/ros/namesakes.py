@@ -1,0 +1,74 @@
+"""Another node of the same name in the ROS graph: refused at start-up, warned about later.
+
+Two simulators of one name in one domain would interleave two timelines on ``/clock``
+and the state topics and both execute every goal. A starting node looks for a namesake
+until ``NAMESAKE_WAIT`` s after its creation (discovery on loopback takes 0.25-0.5 s,
+longer on a loaded machine) and refuses to start if it finds one
+(``NameInUseError``; ``gripper-sim node`` exits 2). A namesake that shows up later
+(started within the same moment, or its network joined) is a warning, once per
+appearance, in the log of each node that sees it; the running node goes on.
+"""
+from __future__ import annotations
+
+import time
+
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+
+from gripper_sim.errors import GripperSimError
+
+NAMESAKE_WAIT = 2.0    # s after the node's creation
+CHECK_PERIOD = 1.0     # s between checks while running
+POLL = 0.05            # s between looks at start-up
+
+
+class NameInUseError(GripperSimError):
+    """Another node with this node's fully qualified name is in the ROS graph."""
+
+
+def namesakes(node: Node) -> int:
+    """How many other nodes in the graph have ``node``'s name and namespace."""
+    mine = (node.get_name(), node.get_namespace())
+    return sum(1 for entry in node.get_node_names_and_namespaces() if entry == mine) - 1
+
+
+def _advice(node: Node) -> str:
+    return (f'another node named {node.get_fully_qualified_name()} runs in ROS domain '
+            f'{node.context.get_domain_id()}: its topics and /clock would interleave with this '
+            "one's and both would execute every goal. Stop it, or give this node another "
+            'name (--ros-args -r __node:=NAME) or ROS_DOMAIN_ID')
+
+
+def refuse_namesake(node: Node, created: float, wait: float = NAMESAKE_WAIT) -> None:
+    """Look for a namesake until ``created + wait`` (``time.monotonic()`` s).
+
+    Raises:
+        NameInUseError: one was found.
+    """
+    deadline = created + wait
+    while True:
+        if namesakes(node) > 0:
+            raise NameInUseError(_advice(node))
+        if time.monotonic() >= deadline:
+            return
+        time.sleep(min(POLL, max(0.0, deadline - time.monotonic())))
+
+
+class NamesakeWatch:
+    """Warns (once per appearance) when a namesake of ``node`` shows up in the graph."""
+
+    def __init__(self, node: Node, period: float = CHECK_PERIOD):
+        self._node = node
+        self.seen = False
+        node.create_timer(period, self.check, callback_group=MutuallyExclusiveCallbackGroup())
+
+    def check(self) -> bool:
+        """Whether a namesake is in the graph now (logging a change)."""
+        found = namesakes(self._node) > 0
+        if found and not self.seen:
+            self._node.get_logger().warning(_advice(self._node))
+        elif self.seen and not found:
+            self._node.get_logger().info(
+                f'the other node named {self._node.get_fully_qualified_name()} has gone')
+        self.seen = found
+        return found

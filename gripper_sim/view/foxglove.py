@@ -1,0 +1,291 @@
+"""The Foxglove live view: a WebSocket server (``foxglove-sdk``) on the node's topics.
+
+``FoxgloveView`` serves, on ``host:port`` (127.0.0.1 by default):
+
+- every topic of the node (``gripper_sim.ros.messages.TOPICS``) under its ROS name,
+  message encoding ``cdr``, schema encoding ``ros2msg`` with the type's full message
+  definition (``recording.schemas.message_definition``: the .msg text and every nested
+  definition, as rosbag2 stores it), so Foxglove decodes them like a ROS 2 bag;
+- ``<node>/scene`` (e.g. ``/gripper_sim/scene``): a ``foxglove.SceneUpdate`` (protobuf)
+  built from the node's markers (``view.scene``), for Foxglove's 3D panel without RViz
+  or a URDF.
+
+Messages carry the sim time of their step as log time, and the server announces it
+(capability ``time``); when the time goes back (a reset) the session is cleared so
+clients drop the old run. Work is done only for channels a client subscribed to.
+
+The node starts its view with ``start_node_view(node)`` (parameters ``foxglove_port``,
+0 = off, and ``foxglove_address``); ``replay`` with ``FoxgloveView.for_recording``.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Any, Callable, Mapping
+
+import foxglove
+from foxglove.channels import SceneUpdateChannel
+from rclpy.serialization import deserialize_message, serialize_message
+
+from gripper_sim.recording.analysis import read_config
+from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.recorder import import_message_class
+from gripper_sim.recording.schemas import message_definition
+from gripper_sim.ros import messages
+from gripper_sim.view.errors import ViewError
+from gripper_sim.view.scene import PressureLegend, scene_update
+
+DEFAULT_PORT = 8765
+DEFAULT_ADDRESS = '127.0.0.1'
+MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
+STATE_TYPE = 'gripper_sim_interfaces/msg/FruitState'
+SCENE_NAME = 'scene'
+
+
+def scene_topic(markers_topic: str) -> str:
+    """The scene's topic beside the markers topic: ``/gripper_sim/markers`` ->
+    ``/gripper_sim/scene``."""
+    parent = markers_topic.rsplit('/', 1)[0]
+    return f'{parent}/{SCENE_NAME}'
+
+
+def _only_topic_of(topics: Mapping[str, str], type_name: str) -> str | None:
+    found = [name for name, kind in topics.items() if kind == type_name]
+    return found[0] if len(found) == 1 else None
+
+
+class FoxgloveView:
+    """A Foxglove WebSocket server streaming ROS topics (CDR) and the 3D scene.
+
+    Args:
+        topics: ``{topic name: ROS type}`` (``'pkg/msg/Type'``) to serve.
+        legend: the pressure colour bar of the scene (None = no legend).
+        host, port: where to listen (port 0 = any free port; the node's parameter 0
+            means off and never gets here).
+        name: the server name clients show.
+        on_watched: called with True when a client subscribes to the first channel and
+            with False when the last subscription ends (from the server's thread): the
+            node builds its messages for the view only while someone watches.
+
+    The scene is served when exactly one topic is a ``MarkerArray`` (its markers) and
+    drawn with the ``FruitState`` of the same step when there is such a topic.
+
+    Raises:
+        ViewError: the server cannot listen there (port taken, bad address), or a
+            type's message definition is not installed.
+    """
+
+    def __init__(self, topics: Mapping[str, str], *, legend: PressureLegend | None = None,
+                 host: str = DEFAULT_ADDRESS, port: int = DEFAULT_PORT,
+                 name: str = 'gripper_sim', on_watched: Callable[[bool], None] | None = None):
+        self.host = host
+        self.legend = legend
+        self._types = dict(topics)
+        self._markers_topic = _only_topic_of(self._types, MARKERS_TYPE)
+        self._state_topic = _only_topic_of(self._types, STATE_TYPE)
+        self._classes: dict[str, Any] = {}
+        self._last_state: Any = None
+        self._last_time: int | None = None
+        # Kept: the server and the channels are bound to it only while it lives.
+        self._context = context = foxglove.Context()
+        try:
+            schemas = {topic: foxglove.Schema(name=kind, encoding='ros2msg',
+                                              data=message_definition(kind).encode())
+                       for topic, kind in self._types.items()}
+        except RecordingError as err:
+            raise ViewError(f'cannot serve the live view: {err}') from err
+        try:
+            self.server = foxglove.start_server(
+                name=name, host=host, port=int(port), context=context,
+                capabilities=[foxglove.Capability.Time],
+                server_listener=_SubscriptionCounter(on_watched))
+        except RuntimeError as err:   # foxglove-sdk's FoxgloveError, e.g. port taken
+            reason = str(err).removeprefix('FoxgloveError: ')
+            msg = (f'cannot serve the Foxglove live view on {host}:{port}: {reason}; choose '
+                   'a free port or an address of this machine')
+            raise ViewError(msg) from err
+        self.channels = {topic: foxglove.Channel(topic, schema=schema, message_encoding='cdr',
+                                                 context=context)
+                         for topic, schema in schemas.items()}
+        self.scene_topic = (scene_topic(self._markers_topic)
+                            if self._markers_topic is not None else None)
+        self.scene_channel = (SceneUpdateChannel(self.scene_topic, context=context)
+                              if self.scene_topic is not None else None)
+        self.scenes = 0
+
+    @property
+    def port(self) -> int:
+        """The port the server listens on."""
+        return int(self.server.port)
+
+    @property
+    def url(self) -> str:
+        host = f'[{self.host}]' if ':' in self.host else self.host   # IPv6
+        return f'ws://{host}:{self.port}'
+
+    def _advance_time(self, stamp_ns: int) -> None:
+        if self._last_time is not None and stamp_ns < self._last_time:
+            self.server.clear_session()   # a reset: clients drop the old run
+            self._last_state = None
+        self._last_time = stamp_ns
+        self.server.broadcast_time(stamp_ns)
+
+    def _scene_wanted(self) -> bool:
+        return self.scene_channel is not None and self.scene_channel.has_sinks()
+
+    def _log_scene(self, markers: Any, state: Any, stamp_ns: int) -> None:
+        assert self.scene_channel is not None
+        update = scene_update(markers.markers, legend=self.legend, fruit_state=state,
+                              stamp_ns=stamp_ns)
+        self.scene_channel.log(update, log_time=stamp_ns)
+        self.scenes += 1
+
+    def log_messages(self, batch: Mapping[str, Any], stamp_ns: int) -> None:
+        """Serve one step's messages ``{topic: ROS message}`` (live, from the node)."""
+        self._advance_time(stamp_ns)
+        for topic, msg in batch.items():
+            channel = self.channels.get(topic)
+            if channel is not None and channel.has_sinks():
+                channel.log(serialize_message(msg), log_time=stamp_ns)
+        if self._scene_wanted() and self._markers_topic in batch:
+            self._log_scene(batch[self._markers_topic], batch.get(self._state_topic),
+                            stamp_ns)
+
+    def _decode(self, topic: str, data: bytes) -> Any:
+        cls = self._classes.get(topic)
+        if cls is None:
+            cls = self._classes[topic] = import_message_class(self._types[topic])
+        return deserialize_message(data, cls)
+
+    def log_cdr(self, topic: str, data: bytes, stamp_ns: int) -> None:
+        """Serve one recorded message (CDR bytes) of ``topic`` (replay); the scene is
+        drawn from each markers message with the latest fruit state before it."""
+        channel = self.channels.get(topic)
+        if channel is None:
+            return
+        self._advance_time(stamp_ns)
+        if channel.has_sinks():
+            channel.log(data, log_time=stamp_ns)
+        if not self._scene_wanted():
+            return
+        if topic == self._state_topic:
+            self._last_state = self._decode(topic, data)
+        elif topic == self._markers_topic:
+            self._log_scene(self._decode(topic, data), self._last_state, stamp_ns)
+
+    def close(self) -> None:
+        """Stop the server (clients are disconnected)."""
+        for channel in self.channels.values():
+            channel.close()
+        if self.scene_channel is not None:
+            self.scene_channel.close()
+        self.server.stop()
+
+
+class _SubscriptionCounter:
+    """A ``foxglove.websocket.ServerListener`` that counts subscriptions (all clients)
+    and reports when the count leaves or returns to zero."""
+
+    def __init__(self, on_watched: Callable[[bool], None] | None):
+        self._on_watched = on_watched
+        self._lock = threading.Lock()
+        self.count = 0
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        with self._lock:
+            self.count += 1
+            first = self.count == 1
+        if first and self._on_watched is not None:
+            self._on_watched(True)
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        with self._lock:
+            self.count = max(self.count - 1, 0)
+            last = self.count == 0
+        if last and self._on_watched is not None:
+            self._on_watched(False)
+
+
+def node_topics(node_name: str, namespace: str) -> dict[str, tuple[str, str]]:
+    """``{topic suffix: (topic name, ROS type)}`` of a node named so."""
+    return {suffix: (messages.resolved_topic(suffix, node_name, namespace), kind)
+            for suffix, (_, kind) in messages.TOPICS.items()}
+
+
+def start_node_view(node: Any) -> FoxgloveView | None:
+    """Serve the live view of a ``SimNode`` (None if ``foxglove_port`` is 0 or it fails).
+
+    Reads the node's parameters ``foxglove_port`` and ``foxglove_address`` and its
+    ``message_context`` (the legend). While a client subscribes to anything, it
+    observes every batch the node publishes (``add_publish_observer``; removed again
+    when the last subscription ends: an observer makes the node build every message).
+    A port already in use is a warning: the node runs on without the view.
+    """
+    port = int(node.params.get('foxglove_port'))
+    host = str(node.params.get('foxglove_address'))
+    logger = node.get_logger()
+    if port == 0:
+        return None
+    topics = node_topics(node.get_name(), node.get_namespace())
+    feed = NodeFeed(node, {suffix: name for suffix, (name, _) in topics.items()})
+    try:
+        feed.view = FoxgloveView({name: kind for name, kind in topics.values()},
+                                 legend=PressureLegend.beside(node.message_context),
+                                 host=host, port=port, name=node.get_fully_qualified_name(),
+                                 on_watched=feed.watched)
+    except ViewError as err:
+        logger.warning(f'{err} (parameters foxglove_port, 0 = off, and foxglove_address); '
+                       'running without the live view')
+        return None
+    view = feed.view
+    logger.info(f'Foxglove live view on {view.url} (in Foxglove: Open connection > '
+                'Foxglove WebSocket; layout config/foxglove/gripper_sim_layout.json)')
+    return view
+
+
+class NodeFeed:
+    """Feeds the batches a node publishes to its view while a client watches.
+
+    Args:
+        node: has ``add_publish_observer`` / ``remove_publish_observer``.
+        names: ``{topic suffix: topic name}`` of the node.
+    """
+
+    def __init__(self, node: Any, names: Mapping[str, str]):
+        self.node = node
+        self.names = dict(names)
+        self.view: FoxgloveView | None = None
+
+    def watched(self, yes: bool) -> None:
+        """``FoxgloveView``'s ``on_watched``: observe the node only while watched."""
+        if yes:
+            self.node.add_publish_observer(self.observe)
+        else:
+            self.node.remove_publish_observer(self.observe)
+
+    def observe(self, batch: Mapping[str, Any], stamp_ns: int) -> None:
+        """A publish observer: ``batch`` is ``{topic suffix: message}``.
+
+        It runs in the node's physics thread, which resets the simulation on any
+        exception: a failing view logs the error and stops feeding instead.
+        """
+        if self.view is None:
+            return
+        try:
+            self.view.log_messages({self.names[s]: msg for s, msg in batch.items()}, stamp_ns)
+        except Exception as err:  # noqa: BLE001 - never let the view reset the physics
+            self.view = None
+            self.node.remove_publish_observer(self.observe)
+            self.node.get_logger().error(
+                f'Foxglove live view stopped: {type(err).__name__}: {err}')
+
+
+def recording_view(bag: Any, *, host: str = DEFAULT_ADDRESS, port: int = DEFAULT_PORT,
+                   topics: list[str] | None = None) -> FoxgloveView:
+    """The view of an open ``BagReader`` for ``replay``: its CDR topics (``topics`` =
+    only these), the legend from the configuration stored in it (if any)."""
+    wanted = set(topics) if topics is not None else None
+    served = {name: info.type for name, info in bag.topics.items()
+              if info.message_encoding == 'cdr' and (wanted is None or name in wanted)}
+    legend = PressureLegend.beside(messages.MessageContext.from_config(read_config(bag)))
+    return FoxgloveView(served, legend=legend, host=host, port=port,
+                        name=f'gripper_sim replay {bag.path}')

@@ -1,0 +1,355 @@
+"""Run a study on Dask: every design point x fruit, rows as they finish, resumable.
+
+Each (design point, fruit) is one Dask task (``study_tasks.run_fruit``): the fruit's
+window search (``core.window.window_search``, the same bisections as ``gripper-sim
+window``) from its closed-form seeds, or with a 'force' axis one evaluation per grid
+force. All fruits of all design points run in parallel over the cluster; each
+fruit's evaluations become rows as its task returns. A task is given the rows already
+stored for its fruit (same effective configuration, scenario, force, kind and code
+version: ``case_key``) and does not compute them again: a study run again computes only
+what is missing.
+
+The cluster: a local one on this machine's cores by default (worker processes on
+127.0.0.1, one thread each), or an existing one (``scheduler='tcp://HOST:8786'``).
+A worker that dies mid-task has its task run again elsewhere (Dask reschedules it);
+Ctrl-C cancels what is running and keeps every finished row.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import os
+import signal
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+from tqdm import tqdm
+
+from gripper_sim.core.grasp import GraspEvaluation
+from gripper_sim.errors import GripperSimError
+from gripper_sim.workflows.population_window import (SampleWindow, grid_curve,
+                                                     population_window)
+from gripper_sim.workflows.study_results import RowStore
+from gripper_sim.workflows.study_spec import Study
+from gripper_sim.workflows.study_spec import FruitSetup
+from gripper_sim.workflows.study_tasks import (answer_key, code_version, evaluation_of,
+                                               run_fruit)
+
+#: seconds to wait for an existing scheduler before giving up
+CONNECT_TIMEOUT = 3.0
+#: evaluations a fruit's window search takes, until measured in the run
+EXPECTED_PER_CHAIN = 13
+
+
+class StudyError(GripperSimError):
+    """The study cannot run (cluster unreachable, workers on other code, ...)."""
+
+
+@dataclass
+class StudyRun:
+    """What ``run_study`` did: rows computed now and reused, whether it was interrupted,
+    and the summary (``summary.json``)."""
+
+    computed: int
+    reused: int
+    interrupted: bool
+    summary: dict
+    rows: list = field(default_factory=list)
+    #: s of wall time: starting the cluster, and running the evaluations
+    startup_time: float = 0.0
+    run_time: float = 0.0
+
+
+def config_hash(config) -> str:
+    """16 hex digits of the effective configuration (sorted JSON)."""
+    text = json.dumps(dict(config), sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def case_key(setup: FruitSetup, kind: str, force: float, code: str) -> str:
+    """The row key: effective configuration, scenario, kind, force and code version."""
+    text = json.dumps(dict(config=config_hash(setup.config),
+                           scenario=dict(setup.scenario.values), kind=kind,
+                           force=repr(float(force)), code=code), sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+@contextmanager
+def open_client(scheduler: str | None = None, workers: int | None = None) -> Iterator:
+    """A Dask client: on ``scheduler`` (an address), or on a new local cluster of
+    ``workers`` processes (default: this machine's cores) on 127.0.0.1.
+
+    Raises:
+        StudyError: the scheduler cannot be reached within ``CONNECT_TIMEOUT`` s.
+    """
+    from distributed import Client, LocalCluster
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=f'{CONNECT_TIMEOUT}s')
+        except Exception as err:  # noqa: BLE001 - refused, timed out, not a Dask server...
+            reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+            raise StudyError(f'cannot reach the Dask scheduler at {scheduler} ({reason}); '
+                             'start one with `dask scheduler`, or leave --scheduler out '
+                             'for a local cluster') from err
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    count = workers or os.cpu_count() or 1
+    # the worker processes start with Ctrl-C ignored: a terminal's SIGINT reaches the
+    # whole process group, and this client, not the workers, stops the study cleanly
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+    try:
+        cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
+                               host='127.0.0.1', dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGINT, previous)
+    client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()
+
+
+class _Chain:
+    """One (design point, fruit): its set-up and, once its task is back, its result
+    (window search: (min, max) N; grid: the evaluations, one per force)."""
+
+    def __init__(self, setup: FruitSetup):
+        self.setup = setup
+        self.error = ''
+        self.result: Any = None
+        self.done = False
+
+
+class _Runner:
+    """The client side of a study run (see the module docstring)."""
+
+    def __init__(self, study: Study, store: RowStore, client, progress: bool):
+        from distributed import as_completed
+        self.study = study
+        self.store = store
+        self.client = client
+        self.code = code_version()
+        self.computed = 0
+        self.reused = 0
+        self.waiting: dict[str, tuple[Any, list[_Chain]]] = {}
+        self.chains: list[_Chain] = []
+        self.bar = tqdm(total=0, unit='eval', file=sys.stderr, disable=not progress,
+                        dynamic_ncols=True, desc=study.name)
+        self.queue = as_completed()
+        self.by_config: dict[str, list[dict]] = {}
+        for row in store.rows.values():
+            self.by_config.setdefault(row['config_hash'], []).append(row)
+
+    def start(self, samples: list[dict[str, float]]) -> None:
+        """Submit one task per (design point, fruit), with the rows already stored."""
+        study = self.study
+        per_fruit = len(study.forces) or EXPECTED_PER_CHAIN
+        for point in study.points:
+            for index, drawn in enumerate(samples):
+                setup = study.trial(point, index, drawn)
+                chain = _Chain(setup)
+                self.chains.append(chain)
+                known = self._known(setup)
+                self.reused += len(known)
+                args = (dict(setup.config), setup.scenario, study.tolerance, study.forces)
+                key = 'fruit-' + hashlib.sha256(json.dumps(
+                    [config_hash(setup.config), dict(setup.scenario.values), study.tolerance,
+                     study.forces, self.code, sorted(known)], default=repr).encode()
+                ).hexdigest()[:24]
+                future = self.client.submit(run_fruit, *args, known, key=key, retries=2)
+                if future.key not in self.waiting:
+                    self.waiting[future.key] = (future, [])
+                    self.queue.add(future)
+                self.waiting[future.key][1].append(chain)
+                self.bar.total += max(per_fruit - len(known), 0)
+        self.bar.refresh()
+
+    def _known(self, setup: FruitSetup) -> dict:
+        """The stored outputs of this fruit's evaluations, by ``answer_key``."""
+        known = {}
+        for row in self.by_config.get(config_hash(setup.config), ()):
+            if row['case_key'] == case_key(setup, row['kind'], row['force'], self.code):
+                known[answer_key(row['kind'], row['force'])] = row
+        return known
+
+    def run(self) -> bool:
+        """Until every fruit is done; False if interrupted (Ctrl-C)."""
+        finished = []
+        try:
+            for future in self.queue:
+                _, chains = self.waiting.pop(future.key)
+                try:
+                    value, failure = future.result(), ''
+                except Exception as err:  # noqa: BLE001 - a lost task: the fruit's error
+                    value, failure = None, f'{type(err).__name__}: {err}'
+                new = self._keep(chains[0].setup, value['new'] if value else [])
+                for chain in chains:
+                    self._finish(chain, value, failure)
+                finished.append(new)
+                mean = float(np.mean(finished))
+                left = sum(1 for c in self.chains if not c.done) * mean
+                self.bar.total = int(self.computed + math.ceil(left))
+                self.bar.update(new)
+        except KeyboardInterrupt:
+            for future, _ in self.waiting.values():
+                future.cancel()
+            return False
+        finally:
+            self.store.flush()
+            self.bar.close()
+        return True
+
+    def _keep(self, setup: FruitSetup, new: list) -> int:
+        """Store the fruit's new evaluations as rows; how many."""
+        for kind, force, outputs in new:
+            if outputs['code_version'] != self.code:
+                raise StudyError(f"a worker runs other code ({outputs['code_version']}) "
+                                 f'than this client ({self.code}): install the same '
+                                 'gripper_sim on every worker')
+            key = case_key(setup, kind, force, self.code)
+            if key not in self.store:
+                self.store.add(self._row(setup, kind, force, key, outputs))
+                self.computed += 1
+        return len(new)
+
+    def _finish(self, chain: _Chain, value: dict | None, failure: str) -> None:
+        chain.done = True
+        if value is None:
+            chain.error = failure
+            chain.result = [] if self.study.forces else (None, None)
+        elif self.study.forces:
+            chain.result = [evaluation_of(self.store.get(case_key(chain.setup, 'hold', f,
+                                                                  self.code)))
+                            for f in self.study.forces]
+        else:
+            chain.result = tuple(value['result'])
+
+    def _row(self, setup: FruitSetup, kind: str, force: float, key: str,
+             outputs: dict) -> dict:
+        study = self.study
+        point = study.points[setup.point]
+        row = dict(study=study.name, case_key=key, config_hash=config_hash(setup.config),
+                   point=setup.point, sample=setup.sample, seed=study.population.seed,
+                   kind=kind, package_version=self.code.split('+')[0])
+        row.update({k: v for k, v in point.values.items()})
+        row.update(setup.drawn)
+        row.update({k: v for k, v in outputs.items() if k not in row})
+        row['force'] = float(force)
+        return row
+
+
+def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = None,
+              workers: int | None = None, progress: bool = True) -> StudyRun:
+    """Run ``study``, its rows in ``out/rows`` (resuming what is there), then its summary.
+
+    Raises:
+        StudyError: the cluster cannot be reached, or runs other code.
+        ConfigError: a sample of the population is invalid.
+    """
+    samples = study.population.draw()
+    store = RowStore(out)
+    start = time.perf_counter()
+    with open_client(scheduler, workers) as client:
+        started = time.perf_counter()
+        runner = _Runner(study, store, client, progress)
+        try:
+            runner.start(samples)
+            complete = runner.run()
+        finally:
+            store.flush()
+        finished = time.perf_counter()
+    summary = summarise(study, runner.chains, store, complete)
+    summary.update(computed=runner.computed, reused=runner.reused,
+                   scheduler=scheduler or f'local ({workers or os.cpu_count()} workers)')
+    if complete:
+        store.compact()
+    return StudyRun(computed=runner.computed, reused=runner.reused,
+                    interrupted=not complete, summary=summary, rows=store.sorted_rows(),
+                    startup_time=started - start, run_time=finished - started)
+
+
+def summarise(study: Study, chains: list[_Chain], store: RowStore, complete: bool) -> dict:
+    """The study's summary: per design point the fruits' windows, the population window
+    and the success curve (JSON-ready)."""
+    points = []
+    for point in study.points:
+        own = [c for c in chains if c.setup.point == point.index]
+        limit = float(own[0].setup.config['gripper.max_force']) if own else math.inf
+        windows = _sample_windows(study, own)
+        entry: dict[str, Any] = dict(index=point.index, label=point.label(),
+                                     values=dict(point.values), max_force=limit,
+                                     complete=all(c.done for c in own))
+        if entry['complete'] and windows:
+            entry['population'] = population_window(
+                windows, limit, study.fraction, study.confidence,
+                seed=study.population.seed)
+            if study.forces:
+                entry['population']['curve'] = _grid_success(study, own)
+        entry['samples'] = [dict(sample=w.sample, min_force=w.min_force,
+                                 max_force=_number(w.max_force)) for w in windows]
+        entry['failed'] = [dict(sample=c.setup.sample, error=c.error) for c in own if c.error]
+        points.append(entry)
+    rows = store.rows.values()
+    return dict(study=study.name, description=study.description, source=study.source,
+                method=study.method, axes={k: list(v) for k, v in study.axes.items()},
+                population=dict(samples=study.population.samples,
+                                seed=study.population.seed,
+                                distributions={d.key: d.describe()
+                                               for d in study.population.distributions}),
+                fraction=study.fraction, confidence=study.confidence,
+                tolerance=study.tolerance, code_version=code_version(),
+                complete=complete, rows=len(store),
+                errors=sum(1 for r in rows if r.get('error')),
+                points=points)
+
+
+def _number(value):
+    return 'inf' if value is not None and math.isinf(value) else value
+
+
+def _sample_windows(study: Study, chains: list[_Chain]) -> list[SampleWindow]:
+    if not all(c.done for c in chains):
+        return []
+    if not study.forces:
+        return [SampleWindow(c.setup.sample, *c.result) for c in chains]
+    by_sample: dict[int, list[GraspEvaluation]] = {}
+    for chain in chains:
+        by_sample.setdefault(chain.setup.sample, []).extend(chain.result)
+    windows = []
+    for sample, evaluations in sorted(by_sample.items()):
+        held = [e.force for e in evaluations if e.held]
+        safe = [e.force for e in evaluations if not (e.bruised or e.crushed)]
+        windows.append(SampleWindow(sample, min(held) if held else None,
+                                    max(safe) if safe else None))
+    return windows
+
+
+def _grid_success(study: Study, chains: list[_Chain]) -> dict:
+    forces = list(study.forces)
+    samples = sorted({c.setup.sample for c in chains})
+    success = np.zeros((len(samples), len(forces)), dtype=bool)
+    for chain in chains:
+        for evaluation in chain.result:
+            success[samples.index(chain.setup.sample), forces.index(evaluation.force)] = (
+                evaluation.held and not (evaluation.bruised or evaluation.crushed))
+    return grid_curve(success, forces, study.confidence)
+
+
+def write_summary(summary: dict, path: str | os.PathLike) -> None:
+    Path(path).write_text(json.dumps(summary, indent=1) + '\n', encoding='utf-8')
+

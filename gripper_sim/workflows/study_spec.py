@@ -1,0 +1,242 @@
+"""Study files: a base set-up, axes (grids over keys) and a fruit population, validated.
+
+A study file (``config/studies/*.yaml``) is YAML with these top-level keys:
+
+    name, description       text
+    base                    fruit, finger (presets), scenario (a name in config/scenarios
+                            or a file), scenario_set (scenario keys), set (configuration
+                            keys): the set-up every evaluation starts from
+    axes                    {key: [values, ...]}: the design points are every
+                            combination. A key is 'fruit' or 'finger' (presets), a
+                            scenario key spelled 'scenario.KEY', a configuration key,
+                            or 'force' (grip forces in N: the study then evaluates
+                            this grid instead of searching each fruit's window)
+    population              samples, seed, distributions (``population.py``)
+    window                  fraction (default 0.99), confidence (0.95), tolerance (0.03)
+
+Everything is checked before any simulation runs: unknown keys, empty axes, values out
+of range (every design point and every sample is built), negative standard
+deviations and distributions that yield non-physical values are ``ConfigError``s
+naming the key.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from gripper_sim.configuration import (SCHEMA, _suggest, load_config, package_config_dir,
+                                       read_yaml)
+from gripper_sim.core.scenario import SCENARIO_SCHEMA, Scenario, load_scenario, scenario_config
+from gripper_sim.core.window import TOLERANCE, estimates, trial_setup
+from gripper_sim.errors import ConfigError
+from gripper_sim.workflows.population import Population, parse_population
+
+TOP_KEYS = ('name', 'description', 'base', 'axes', 'population', 'window')
+BASE_KEYS = ('fruit', 'finger', 'scenario', 'scenario_set', 'set')
+WINDOW_KEYS = ('fraction', 'confidence', 'tolerance')
+#: axis keys that are not configuration keys
+PRESET_AXES = ('fruit', 'finger')
+FORCE_AXIS = 'force'
+SCENARIO_PREFIX = 'scenario.'
+
+
+@dataclass(frozen=True)
+class DesignPoint:
+    """One combination of the axes (without 'force'): index and ``{axis key: value}``."""
+
+    index: int
+    values: Mapping[str, Any]
+
+    def label(self) -> str:
+        return ', '.join(f'{key}={value}' for key, value in self.values.items()) or 'base'
+
+
+@dataclass(frozen=True)
+class FruitSetup:
+    """The set-up of one (design point, sample): its trial configuration and scenario
+    (``core.window.trial_setup``) and the sample's drawn values."""
+
+    point: int
+    sample: int
+    config: Mapping[str, Any]
+    scenario: Scenario
+    drawn: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study file (see the module docstring)."""
+
+    name: str
+    description: str
+    source: str
+    base: Mapping[str, Any]
+    axes: Mapping[str, tuple]
+    population: Population
+    fraction: float = 0.99
+    confidence: float = 0.95
+    tolerance: float = TOLERANCE
+    points: tuple[DesignPoint, ...] = field(default=())
+
+    @property
+    def forces(self) -> tuple[float, ...]:
+        """The grip-force grid (N), empty when each fruit's window is searched."""
+        return tuple(self.axes.get(FORCE_AXIS, ()))
+
+    @property
+    def method(self) -> str:
+        return 'grid' if self.forces else 'bisection'
+
+    def trial(self, point: DesignPoint, sample: int,
+              drawn: Mapping[str, float]) -> FruitSetup:
+        """The trial set-up of ``point`` for the fruit ``drawn`` (ConfigError if invalid)."""
+        fruit = point.values.get('fruit', self.base['fruit'])
+        finger = point.values.get('finger', self.base['finger'])
+        scenario = self.base['scenario']
+        overrides = dict(self.base['set'])
+        scenario_values = {}
+        for key, value in point.values.items():
+            if key.startswith(SCENARIO_PREFIX):
+                scenario_values[key[len(SCENARIO_PREFIX):].replace('.', '__')] = value
+            elif key not in PRESET_AXES:
+                overrides[key] = value
+        if scenario_values:
+            scenario = scenario.with_values(**scenario_values)
+        sampled = {k: v for k, v in drawn.items() if k != 'mass'}
+        overrides.update(sampled)
+        static, kinetic = 'contact.jaw.static_friction', 'contact.jaw.kinetic_friction'
+        if static in overrides and static not in self.base['set'] \
+                and kinetic not in overrides:
+            # a varied static friction keeps the configured kinetic/static ratio
+            plain = load_config(fruit=fruit, finger=finger, overrides={
+                k: v for k, v in overrides.items() if k != static})
+            overrides[kinetic] = overrides[static] * plain[kinetic] / plain[static]
+        config = _config(scenario, fruit, finger, overrides, point, sample)
+        if 'mass' in drawn:
+            mass = estimates(config)[2]
+            overrides['fruit.density'] = config['fruit.density'] * drawn['mass'] / mass
+            config = _config(scenario, fruit, finger, overrides, point, sample)
+        trial_config, trial_scenario = trial_setup(config, scenario)
+        return FruitSetup(point=point.index, sample=sample, config=trial_config,
+                     scenario=trial_scenario, drawn=dict(drawn))
+
+
+def _config(scenario, fruit, finger, overrides, point, sample) -> dict:
+    try:
+        return scenario_config(scenario, fruit=fruit, finger=finger, overrides=overrides)
+    except ConfigError as err:
+        raise ConfigError(f'design point {point.index} ({point.label()}), sample {sample}: '
+                          f'{err}') from err
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and validate a study file (a path, or the name of one in config/studies).
+
+    Raises:
+        ConfigError: see the module docstring.
+    """
+    file = Path(path)
+    if not file.is_file() and not file.suffix:
+        candidate = package_config_dir() / 'studies' / f'{path}.yaml'
+        if candidate.is_file():
+            file = candidate
+    if not file.is_file():
+        raise ConfigError(f"no study file '{path}'")
+    data = read_yaml(file)
+    _known(data, TOP_KEYS, '')
+    base = _base(data.get('base') or {})
+    axes = _axes(data.get('axes') or {}, base['scenario'])
+    population = parse_population(data.get('population') or {})
+    overlap = set(axes) & set(population.keys)
+    if overlap:
+        raise ConfigError(f"key '{sorted(overlap)[0]}' is both an axis and a population key")
+    if 'mass' in population.keys and 'fruit.density' in population.keys + list(axes):
+        raise ConfigError("population key 'mass' sets fruit.density: do not vary both")
+    window = data.get('window') or {}
+    _known(window, WINDOW_KEYS, 'window.')
+    fraction = _fraction(window.get('fraction', 0.99), 'window.fraction')
+    confidence = _fraction(window.get('confidence', 0.95), 'window.confidence')
+    tolerance = _fraction(window.get('tolerance', TOLERANCE), 'window.tolerance')
+    grid_keys = [key for key in axes if key != FORCE_AXIS]
+    points = tuple(DesignPoint(i, dict(zip(grid_keys, combo))) for i, combo in enumerate(
+        itertools.product(*(axes[key] for key in grid_keys))))
+    study = Study(name=str(data.get('name') or file.stem),
+                  description=str(data.get('description') or ''), source=str(file),
+                  base=base, axes=axes, population=population, fraction=fraction,
+                  confidence=confidence, tolerance=tolerance, points=points)
+    forces = study.forces
+    for point in points:  # every design point's set-up builds (values in range)
+        config = study.trial(point, 0, {}).config
+        for force in forces:
+            if force > config['gripper.max_force']:
+                raise ConfigError(f"axis 'force': {force:g} N exceeds gripper.max_force "
+                                  f"{config['gripper.max_force']:g} N")
+    return study
+
+
+def _known(data: Mapping, known: tuple, prefix: str) -> None:
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"study key '{prefix.rstrip('.') or 'study'}' must be a mapping")
+    for key in data:
+        if key not in known:
+            raise ConfigError(f"unknown study key '{prefix}{key}' (known: {', '.join(known)})")
+
+
+def _base(data: Mapping) -> dict[str, Any]:
+    _known(data, BASE_KEYS, 'base.')
+    scenario = load_scenario(str(data.get('scenario') or 'pick_and_place'))
+    changes = data.get('scenario_set') or {}
+    _known(changes, tuple(SCENARIO_SCHEMA), 'base.scenario_set.')
+    if changes:
+        scenario = scenario.with_values(**{k.replace('.', '__'): v for k, v in changes.items()})
+    overrides = data.get('set') or {}
+    if not isinstance(overrides, Mapping):
+        raise ConfigError("study key 'base.set' must map configuration keys to values")
+    for key in overrides:
+        if key not in SCHEMA:
+            raise ConfigError(f"unknown config key '{key}' in base.set{_suggest(key)}")
+    return dict(fruit=data.get('fruit') or scenario['fruit'],
+                finger=data.get('finger') or scenario['finger'],
+                scenario=scenario, set=dict(overrides))
+
+
+def _axes(data: Mapping, scenario: Scenario) -> dict[str, tuple]:
+    if not isinstance(data, Mapping):
+        raise ConfigError("study key 'axes' must map keys to lists of values")
+    axes: dict[str, tuple] = {}
+    for key, values in data.items():
+        key = str(key)
+        if not isinstance(values, (list, tuple)):
+            raise ConfigError(f"axis '{key}' must be a list of values, got {values!r}")
+        if not values:
+            raise ConfigError(f"axis '{key}' is empty: give it at least one value")
+        if key == FORCE_AXIS:
+            for value in values:
+                if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                        or not math.isfinite(value) or value <= 0:
+                    raise ConfigError(f"axis 'force' values must be positive grip forces "
+                                      f'(N), got {value!r}')
+            values = sorted(float(v) for v in values)
+        elif key.startswith(SCENARIO_PREFIX):
+            name = key[len(SCENARIO_PREFIX):]
+            if name not in SCENARIO_SCHEMA:
+                raise ConfigError(f"unknown scenario key '{name}' in axis '{key}'")
+            for value in values:  # validates each value
+                scenario.with_values(**{name.replace('.', '__'): value})
+        elif key not in PRESET_AXES and key not in SCHEMA:
+            raise ConfigError(f"unknown axis key '{key}'{_suggest(key)} (an axis is "
+                              "'fruit', 'finger', 'force', 'scenario.KEY' or a configuration "
+                              'key)')
+        if len(set(map(repr, values))) != len(values):
+            raise ConfigError(f"axis '{key}' repeats a value")
+        axes[key] = tuple(values)
+    return axes
+
+
+def _fraction(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1:
+        raise ConfigError(f"study key '{where}' must be a number in (0, 1), got {value!r}")
+    return float(value)

@@ -1,0 +1,108 @@
+"""What a Dask worker runs for a study: one fruit at one design point (``run_fruit``):
+its window search, or its force grid, one grasp evaluation (``run_case``) per force.
+
+A task per fruit, not per evaluation: a window search is a dozen evaluations of
+~15 ms, and a Dask task costs the client, scheduler and worker several ms of CPU of
+their own. Plain module-level functions, so that a task carries only its arguments and
+a worker imports gripper_sim (and loads the compiled kernels) once, not per task.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import time
+import traceback
+from pathlib import Path
+from dataclasses import fields
+from typing import Any, Mapping, Sequence
+
+import gripper_sim
+from gripper_sim.core.grasp import GraspEvaluation
+from gripper_sim.core.scenario import Scenario
+from gripper_sim.core.window import (estimates, evaluate_grasp, run_search, trial_of,
+                                     window_search)
+
+#: the fields of a GraspEvaluation a row carries
+EVALUATION_FIELDS = tuple(f.name for f in fields(GraspEvaluation)
+                          if f.name not in ('summary', 'failure'))
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """The package version and a digest of its Python sources, e.g. '0.1.0+3f2a9c1e0b7d'."""
+    root = Path(gripper_sim.__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob('*.py')):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return f'{gripper_sim.__version__}+{digest.hexdigest()[:12]}'
+
+
+def run_case(config: Mapping[str, Any], scenario: Scenario, force: float,
+             kind: str) -> dict[str, Any]:
+    """Evaluate one grasp (``core.window.evaluate_grasp``); its outputs as a row.
+
+    Any error (a solver failure, or anything else this case raises) is the row's
+    ``error`` with outcome 'solver failed' or 'error': the study goes on.
+    """
+    start = time.process_time()
+    try:
+        outputs = evaluate_grasp(config, scenario, force, kind).row()
+    except Exception as err:  # noqa: BLE001 - a case's failure is a row, not a failed study
+        where = traceback.extract_tb(err.__traceback__)[-1]
+        outputs = dict(force=float(force), outcome='error', held=False, dropped=True,
+                       slipped=False, bruised=True, crushed=True, slip_distance=0.0,
+                       peak_grip_force=0.0, peak_compression=0.0,
+                       peak_contact_pressure=0.0, peak_damage_pressure=0.0,
+                       bruised_fraction=0.0,
+                       error=f'{type(err).__name__}: {err} ({Path(where.filename).name}:'
+                             f'{where.lineno})',
+                       sim_time=0.0, steps=0, message='')
+    outputs.update(cpu_time=time.process_time() - start, worker=os.getpid(),
+                   code_version=code_version())
+    return outputs
+
+
+
+def evaluation_of(outputs: Mapping[str, Any]) -> GraspEvaluation:
+    """The ``GraspEvaluation`` of a row's outputs."""
+    return GraspEvaluation(**{name: outputs[name] for name in EVALUATION_FIELDS})
+
+
+def answer_key(kind: str, force: float) -> tuple[str, str]:
+    """How a fruit's known evaluations are looked up: (kind, repr of the force)."""
+    return kind, repr(float(force))
+
+
+def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
+              forces: Sequence[float], known: Mapping[tuple[str, str], dict]) -> dict:
+    """One fruit at one design point.
+
+    Without ``forces``: its window search (``core.window.window_search`` from the seeds
+    of ``estimates``), returning ``result`` = (min_force, max_force). With ``forces``:
+    one 'hold' evaluation per force, ``result`` None. An evaluation already in
+    ``known`` (outputs by ``answer_key``, from a previous run) is not computed again.
+
+    Returns:
+        {'result': ..., 'new': [(kind, force, outputs), ...] the evaluations computed}.
+    """
+    answers = dict(known)
+    new: list[tuple[str, float, dict]] = []
+
+    def evaluation(request: tuple[str, float]) -> GraspEvaluation:
+        kind, force = request
+        key = answer_key(kind, force)
+        if key not in answers:
+            answers[key] = run_case(config, scenario, force, kind)
+            new.append((kind, float(force), answers[key]))
+        return evaluation_of(answers[key])
+
+    if forces:
+        for force in forces:
+            evaluation(('hold', force))
+        return dict(result=None, new=new)
+    hold, bruise, _ = estimates(config)
+    result = run_search(window_search(config, hold, bruise, tolerance),
+                        lambda request: trial_of(evaluation(request), request[0]))
+    return dict(result=result, new=new)

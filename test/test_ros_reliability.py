@@ -1,0 +1,314 @@
+"""Reliability of the node in this process: extreme parameter values, a physics loop that
+survives and is watched, ``~/step`` that other services interrupt, set-point commands.
+
+Every wait is a condition with a generous deadline, never a fixed sleep.
+"""
+import math
+import threading
+import time
+
+import pytest
+import rclpy
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool, Trigger
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from gripper_sim_interfaces.srv import Step
+from gripper_sim.core.simulation import Simulation
+from gripper_sim.errors import ConfigError
+from gripper_sim.ros.namesakes import NameInUseError
+from gripper_sim.ros.node import SimNode
+from gripper_sim.ros.physics_thread import MAX_WAIT, pacing_delay
+from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
+from gripper_sim.ros.sync import JawOwner, JawOwnership
+
+pytestmark = [pytest.mark.ros]
+
+DOMAIN = pick_domain_id(60)
+
+
+def wait_for(condition, timeout=60.0, what='condition'):
+    """Poll ``condition()`` until true (returns it); AssertionError after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def context():
+    apply_ros_environment(DOMAIN)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=DOMAIN)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+def make_node(context, factory=Simulation, start=True, **parameters):
+    overrides = [Parameter(name, value=value) for name, value in parameters.items()]
+    return SimNode(context=context, simulation_factory=factory, start=start,
+                   parameter_overrides=overrides, watchdog_period=0.0)
+
+
+class StatusLog:
+    """Stands in for the ``~/jaw/command_status`` publisher: keeps what it was given."""
+
+    def __init__(self):
+        self.texts = []
+
+    def publish(self, msg):
+        self.texts.append(msg.data)
+
+
+# --------------------------------------------------------------- item 1: parameters
+@pytest.mark.parametrize('rate', [5e-324, 1e-310, 5.6e-306, 1e-4, 0.0])
+def test_a_publish_rate_the_node_cannot_use_is_refused_with_a_reason(context, rate):
+    node = make_node(context, start=False, real_time_factor=0.0)
+    try:
+        result, = node.set_parameters([Parameter('publish_rate', value=rate)])
+        assert not result.successful
+        assert 'publish_rate' in result.reason and '0.001' in result.reason
+        every = node.state_publisher.publish_every
+        assert node.advance() is not None and node.state_publisher.publish_every == every
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize('rate', [5e-324, 1e-310])
+def test_a_tiny_publish_rate_at_start_up_is_a_config_error(context, rate):
+    with pytest.raises(ConfigError, match='publish_rate'):
+        make_node(context, start=False, publish_rate=rate)
+
+
+def test_the_lowest_publish_rate_publishes_once_per_1000_s():
+    node_rate = 0.001
+    assert round(1.0 / (node_rate * 1e-7)) == 10_000_000_000   # the smallest dt: an int
+
+
+# ------------------------------------------------------- item 2: the physics thread
+@pytest.mark.parametrize('factor', [1e-300, 5e-324, 1e-13, 1e-9])
+def test_a_tiny_real_time_factor_neither_kills_nor_freezes_the_physics(context, factor):
+    node = make_node(context, real_time_factor=0.0)
+    try:
+        wait_for(lambda: node.sim.time > 0.005, what='steps at real_time_factor 0')
+        assert node.set_parameters([Parameter('real_time_factor', value=factor)])[0].successful
+        beat = node.physics.heartbeat
+        wait_for(lambda: node.physics.heartbeat > beat + MAX_WAIT, what='a pacing wait')
+        assert node.physics.alive
+        assert node.set_parameters([Parameter('real_time_factor', value=0.0)])[0].successful
+        t = node.sim.time
+        wait_for(lambda: node.sim.time > t + 0.005, what='steps after the factor is back')
+        assert node.physics.errors == 0
+    finally:
+        node.destroy_node()
+
+
+def test_pacing_delay_is_bounded_for_every_factor():
+    for factor in (5e-324, 1e-300, 1e-13, 1e-3, 1.0, 1000.0):
+        for ahead in (-1.0, 0.0, 1e-3, 1.0, 1e300):
+            delay = pacing_delay(ahead, factor)
+            assert 0.0 <= delay <= MAX_WAIT and math.isfinite(delay)
+    assert pacing_delay(0.01, 1.0) == pytest.approx(0.01)
+
+
+class RaisingSimulation(Simulation):
+    """Raises ``error`` from step number ``at`` (counted over its life)."""
+
+    at = 3
+    error: BaseException = OverflowError('injected')
+
+    def __init__(self, config):
+        super().__init__(config)
+        self.calls = 0
+
+    def step(self):
+        self.calls += 1
+        if self.calls == self.at:
+            raise self.error
+        return super().step()
+
+
+def test_the_physics_thread_survives_any_exception(context):
+    RaisingSimulation.error = OverflowError('injected overflow')
+    node = make_node(context, factory=RaisingSimulation, real_time_factor=0.0)
+    try:
+        wait_for(lambda: node.physics.errors == 1, what='the injected error')
+        wait_for(lambda: node.steps_taken > 5, what='steps after the error')
+        assert node.physics.alive and node.failures == 1   # reported, reset, went on
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.filterwarnings('ignore::pytest.PytestUnhandledThreadExceptionWarning')
+def test_a_physics_thread_that_ended_is_restarted_by_the_watchdog(context):
+    RaisingSimulation.error = SystemExit('injected exit')   # ends a thread silently
+    node = make_node(context, factory=RaisingSimulation, real_time_factor=0.0)
+    try:
+        wait_for(lambda: not node.physics.alive, what='the thread to end')
+        status = node.watchdog.check()
+        assert status.level == DiagnosticStatus.ERROR and 'restarted' in status.message
+        assert node.physics.alive
+        steps = node.steps_taken
+        wait_for(lambda: node.steps_taken > steps + 5, what='steps of the new thread')
+        assert node.watchdog.check().level == DiagnosticStatus.OK
+    finally:
+        node.destroy_node()
+
+
+class BlockingSimulation(Simulation):
+    """Step number ``at`` blocks until ``release`` is set."""
+
+    at = 3
+
+    def __init__(self, config):
+        super().__init__(config)
+        self.calls = 0
+        self.blocked = threading.Event()
+        self.release = threading.Event()
+
+    def step(self):
+        self.calls += 1
+        if self.calls == self.at:
+            self.blocked.set()
+            self.release.wait()
+        return super().step()
+
+
+def test_a_stalled_physics_loop_is_reported_and_recovers(context):
+    node = SimNode(context=context, simulation_factory=BlockingSimulation,
+                   parameter_overrides=[Parameter('real_time_factor', value=0.0)],
+                   watchdog_period=0.0, physics_stall_timeout=0.2)
+    try:
+        wait_for(node.sim.blocked.is_set, what='the blocking step')
+        status = wait_for(lambda: (s := node.watchdog.check()).level == DiagnosticStatus.ERROR
+                          and s, what='the stall to be reported')
+        assert 'stalled' in status.message and node.watchdog.stalls == 1
+        values = {v.key: v.value for v in status.values}
+        assert values['steps_taken'] == '2' and 'real_time_factor' in values
+        node.sim.release.set()
+        wait_for(lambda: node.steps_taken > 10, what='steps after the stall')
+        assert node.watchdog.check().level == DiagnosticStatus.OK
+        assert node.watchdog.stalled_since is None and node.physics.alive
+    finally:
+        node.sim.release.set()
+        node.destroy_node()
+
+
+# -------------------------------------------------------------- item 3: ~/step
+def call_step(node, steps, answers):
+    answers.append(node.sim_services._on_step(Step.Request(steps=steps), Step.Response()))
+
+
+@pytest.mark.parametrize('interrupt', ['reset', 'pause', 'resume'])
+def test_a_long_step_request_is_interrupted_by_reset_and_pause(context, interrupt):
+    node = make_node(context, real_time_factor=0.0)
+    try:
+        node.sim_services._on_pause(SetBool.Request(data=True), SetBool.Response())
+        answers = []
+        caller = threading.Thread(target=call_step, args=(node, 1_000_000, answers))
+        caller.start()
+        wait_for(lambda: node.steps_taken > 3, what='the requested steps to start')
+        # another request meanwhile is refused, not queued behind it
+        refused = node.sim_services._on_step(Step.Request(steps=5), Step.Response())
+        assert not refused.success and 'in progress' in refused.message
+        if interrupt == 'reset':
+            answer = node.sim_services._on_reset(Trigger.Request(), Trigger.Response())
+        else:
+            answer = node.sim_services._on_pause(
+                SetBool.Request(data=interrupt == 'pause'), SetBool.Response())
+        assert answer.success
+        caller.join(timeout=60)
+        assert not caller.is_alive()
+        step, = answers
+        assert not step.success and 'stopped after' in step.message
+        assert ('~/reset' if interrupt == 'reset' else '~/pause') in step.message
+        if interrupt == 'pause':   # still paused: no step after the answer
+            taken = node.steps_taken
+            assert node.sim_services._on_step(Step.Request(steps=2),
+                                              Step.Response()).success
+            assert node.steps_taken == taken + 2
+    finally:
+        node.destroy_node()
+
+
+# ----------------------------------------------------------- item 4: burst commands
+def test_only_the_latest_set_point_counts_and_each_command_is_answered(context):
+    node = make_node(context, start=False)
+    try:
+        status = StatusLog()
+        node.jaw_topics._status = status
+        node.jaw_topics._on_gap(Float64(data=0.05))
+        node.jaw_topics._on_gap(Float64(data=0.06))
+        node.jaw_topics._on_lift(Float64(data=0.05))
+        node.jaw_topics._on_force(Float64(data=3.0))
+        node.jaw_topics._on_gap(Float64(data=float('nan')))
+        node.advance()
+        assert status.texts == [
+            'superseded: gap command 0.05 m: superseded by gap command 0.06 m',
+            'superseded: gap command 0.06 m: superseded by force command 3 N',
+            'rejected: gap command nan m: gap command must be a finite number of m, got nan',
+            'accepted: lift command 0.05 m',
+            'accepted: force command 3 N',
+        ]
+        assert node.sim.gripper_state.mode == 'force'
+        assert node.sim.gripper_state.target_force == 3.0
+    finally:
+        node.destroy_node()
+
+
+# ----------------------------------------------------------- item 6: namesakes
+def test_a_namesake_is_refused_at_start_up_and_warned_about_later():
+    # a domain of its own: nodes of the tests above may linger in their domain's graph
+    domain = pick_domain_id(61)
+    apply_ros_environment(domain)
+    context, other = rclpy.Context(), rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    rclpy.init(context=other, domain_id=domain)
+    try:
+        first = make_node(context, start=False)
+        try:
+            assert not first.namesake_watch.check()
+            namesake = rclpy.create_node('gripper_sim', context=other)
+            assert wait_for(first.namesake_watch.check, what='the namesake to be seen')
+            namesake.destroy_node()
+            wait_for(lambda: not first.namesake_watch.check(), what='the namesake to go')
+        finally:
+            first.destroy_node()
+        holder = rclpy.create_node('gripper_sim', context=other)
+        try:
+            with pytest.raises(NameInUseError, match='another node named /gripper_sim'):
+                SimNode(context=context, start=False, namesake_wait=5.0)
+        finally:
+            holder.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=other)
+        rclpy.try_shutdown(context=context)
+
+
+# ------------------------------------------------------- item 5: the newest goal wins
+class Owner(JawOwner):
+    kind = 'Grasp'
+
+    def __init__(self):
+        self.reasons = []
+
+    def abort(self, reason):
+        self.reasons.append(reason)
+
+
+def test_the_newest_goal_drives_the_jaws_whatever_order_they_start_in():
+    jaws = JawOwnership()
+    older, newer, newest = Owner(), Owner(), Owner()
+    older_ticket, newer_ticket = jaws.ticket(), jaws.ticket()
+    assert jaws.claim(newer, newer_ticket) is None            # started first
+    assert 'newer goal' in jaws.claim(older, older_ticket)    # started late: refused
+    assert jaws.owner is newer and not newer.reasons
+    assert jaws.claim(newest, jaws.ticket()) is None          # a new goal preempts
+    assert newer.reasons == ['preempted by a new Grasp goal'] and jaws.owner is newest
+    jaws.release(newest)
+    jaws.close('shutting down', timeout=1.0)
+    assert 'shutting down' in jaws.claim(Owner(), jaws.ticket())

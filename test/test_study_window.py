@@ -1,0 +1,111 @@
+"""The population window: zero spread gives `window`'s answer; the statistics on
+windows whose answer is known."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from gripper_sim.core.window import grasp_window
+from gripper_sim.workflows.population_window import SampleWindow, population_window
+from gripper_sim.workflows.study import run_study
+from gripper_sim.workflows.study_spec import load_study
+from test_study_dask import STUDY
+
+
+def zero_spread_study() -> str:
+    """The small study of the Dask tests, its fruits all the same (zero spread)."""
+    data = yaml.safe_load(STUDY)
+    data.update(name='zero', window={'tolerance': 0.05})
+    data.pop('axes')
+    data['population'] = {'samples': 3, 'seed': 1, 'distributions': {
+        'fruit.shape.diameter': {'distribution': 'normal', 'mean': 0.0635, 'std': 0.0},
+        'fruit.density': {'distribution': 'list', 'values': [1000.0]}}}
+    return yaml.safe_dump(data)
+
+
+def test_a_zero_spread_population_has_the_window_of_its_single_fruit(tmp_path):
+    path = tmp_path / 'zero.yaml'
+    path.write_text(zero_spread_study())
+    study = load_study(path)
+    run = run_study(study, tmp_path / 'out', workers=1, progress=False)
+    (point,) = run.summary['points']
+    window = point['population']['window']
+    assert window is not None
+    # the single fruit, by the `window` command's own function
+    setup = study.trial(study.points[0], 0, {})
+    config = dict(setup.config)
+    config['gripper.initial_lift'] += study.base['scenario']['approach.height']
+    single = grasp_window(config, study.base['scenario'], tolerance=study.tolerance)
+    assert single.exists
+    assert window['low'] == pytest.approx(single.min_force, rel=study.tolerance)
+    assert window['high'] == pytest.approx(single.max_force, rel=study.tolerance)
+    samples = point['samples']
+    assert len(samples) == 3 and all(s == {**samples[0], 'sample': s['sample']}
+                                     for s in samples)
+    # identical fruits are one case: each force was computed once
+    assert run.computed == len(single.trials)
+
+
+def windows_from(lows, highs):
+    return [SampleWindow(i, lo, hi) for i, (lo, hi) in enumerate(zip(lows, highs))]
+
+
+def test_the_window_is_where_the_fraction_of_fruits_succeeds():
+    lows = np.linspace(1.0, 2.0, 100)  # fruit i holds from 1 + i/99 N
+    highs = np.linspace(10.0, 20.0, 100)  # and bruises above 10 + 10 i/99 N
+    result = population_window(windows_from(lows, highs), 200.0, 0.99, 0.95, seed=3)
+    # 99 of 100 succeed from the 99th-smallest minimum to the 2nd-smallest maximum
+    assert result['window']['low'] == pytest.approx(lows[98])
+    assert result['window']['high'] == pytest.approx(highs[1])
+    ci = result['ci']
+    assert ci['low'][0] <= lows[98] <= ci['low'][1] <= lows[99]
+    assert highs[0] <= ci['high'][0] <= highs[1] <= ci['high'][1]
+    # 100 fruits cannot show 99 % at 95 % confidence: 299 are needed
+    assert result['confident_window'] is None and result['samples_needed'] == 299
+    curve = result['curve']
+    at = {f: p for f, p in zip(curve['force'], curve['p'])}
+    assert at[lows[98]] == pytest.approx(0.99) and max(curve['p']) == 1.0
+    assert all(lo <= p <= hi for p, lo, hi in zip(curve['p'], curve['lower'],
+                                                  curve['upper']))
+
+
+def test_no_safe_force_and_a_confident_window():
+    # half the fruits bruise below the force that holds the other half
+    lows = [1.0] * 50 + [5.0] * 50
+    highs = [4.0] * 50 + [9.0] * 50
+    none = population_window(windows_from(lows, highs), 200.0, 0.99, 0.95)
+    assert none['window'] is None and none['no_window_share'] == 1.0
+    assert max(none['curve']['p']) == pytest.approx(0.5)
+    # 400 identical fruits, undamaged up to the gripper's limit: a confident window
+    many = population_window(windows_from([2.0] * 400, [math.inf] * 400), 50.0, 0.99, 0.95)
+    assert many['window'] == dict(low=2.0, high=50.0, high_is_limit=True)
+    assert many['confident_window'] == dict(low=2.0, high=50.0)
+    # a fruit that nothing holds counts against every force
+    some = windows_from([2.0] * 99 + [None], [8.0] * 100)
+    result = population_window(some, 50.0, 0.99, 0.95)
+    assert result['window']['low'] == 2.0 and result['holds_nowhere'] == 1
+    assert population_window(some, 50.0, 0.995, 0.95)['window'] is None
+
+
+def test_a_force_grid_evaluates_every_fruit_at_every_force(tmp_path):
+    data = yaml.safe_load(STUDY)
+    data['axes'] = {'force': [0.5, 3.0, 60.0]}
+    data['population']['samples'] = 2
+    path = tmp_path / 'grid.yaml'
+    path.write_text(yaml.safe_dump(data))
+    study = load_study(path)
+    assert study.method == 'grid'
+    run = run_study(study, tmp_path / 'out', workers=1, progress=False)
+    assert run.computed == 6 and len(run.rows) == 6
+    assert {(r['sample'], r['force'], r['kind']) for r in run.rows} == {
+        (s, f, 'hold') for s in (0, 1) for f in (0.5, 3.0, 60.0)}
+    outcome = {(r['sample'], r['force']): r['outcome'] for r in run.rows}
+    assert all(outcome[(s, 0.5)] == 'dropped' for s in (0, 1))  # below m g / (2 mu)
+    assert all(outcome[(s, 3.0)] == 'held' for s in (0, 1))
+    assert all(outcome[(s, 60.0)] in ('bruised', 'crushed') for s in (0, 1))
+    (point,) = run.summary['points']
+    assert point['population']['curve']['p'] == [0.0, 1.0, 0.0]
+    assert point['population']['window'] == dict(low=3.0, high=3.0, high_is_limit=False)
