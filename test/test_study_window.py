@@ -11,7 +11,10 @@ import yaml
 from gripper_sim.core.window import grasp_window
 from gripper_sim.workflows.population_window import SampleWindow, population_window
 from gripper_sim.workflows.study import run_study
+from gripper_sim.workflows.study_report import write_report
 from gripper_sim.workflows.study_spec import load_study
+from chromium import Browser
+from test_analysis_html import open_report
 from test_study_dask import STUDY
 
 
@@ -47,6 +50,13 @@ def test_a_zero_spread_population_has_the_window_of_its_single_fruit(tmp_path):
                                      for s in samples)
     # identical fruits are one case: each force was computed once
     assert run.computed == len(single.trials)
+    # the study's report opens offline in a browser, its plots drawn, no console error
+    write_report(run.summary, run.rows, tmp_path / 'out')
+    with Browser() as browser:
+        assert open_report(browser, tmp_path / 'out' / 'report.html',
+                           tmp_path / 'report.png') >= 1
+        text = browser.evaluate('document.body.textContent')
+    assert 'study zero' in text and 'success probability vs grip force' in text
 
 
 def windows_from(lows, highs):
