@@ -136,7 +136,7 @@ class GraspServer:
             result.message = (f'canceled during {phase}; jaws held at gap {last.gap:.4f} m, '
                               f'grip force {last.grip_force:.2f} N')
             node.get_logger().info(f'Grasp goal {result.message}')
-            goal_handle.canceled()
+            goal_handle.canceled() if run.cancel_confirmed() else goal_handle.abort()
         elif result.success:
             node.get_logger().info(f'Grasp goal succeeded ({result.outcome}): '
                                    f'{result.message}')

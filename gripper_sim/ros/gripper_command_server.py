@@ -183,7 +183,7 @@ class GripperCommandServer:
                 goal_handle.abort()
         else:
             node.get_logger().info(f'GripperCommand goal canceled; jaws held at {state}')
-            goal_handle.canceled()
+            goal_handle.canceled() if run.cancel_confirmed() else goal_handle.abort()
         return result
 
     def _track(self, run: _CommandRun, result) -> None:

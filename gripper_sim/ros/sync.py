@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 
 
 class SimLock:
@@ -69,6 +70,10 @@ class SimLock:
                 self._state.wait_for(lambda: not self._waiting, timeout)
 
 
+# How long a canceled run waits for rclpy to mark its goal as canceling.
+CANCEL_CONFIRM_TIMEOUT = 2.0   # s
+
+
 class JawOwner:
     """What an action that drives the jaws implements so the node can stop it."""
 
@@ -115,6 +120,19 @@ class ActiveGoal(JawOwner):
     @property
     def canceled(self) -> bool:
         return self._cancel_requested or self.goal_handle.is_cancel_requested
+
+    def cancel_confirmed(self, timeout: float = CANCEL_CONFIRM_TIMEOUT) -> bool:
+        """Whether rclpy has moved the goal to CANCELING, waiting up to ``timeout`` s.
+
+        It does so just after the cancel callback accepted, but this run may already
+        be finishing: ``goal_handle.canceled()`` before that is an invalid transition.
+        """
+        deadline = time.monotonic() + timeout
+        while not self.goal_handle.is_cancel_requested:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.001)
+        return True
 
 
 class JawOwnership:
