@@ -196,6 +196,10 @@ class SimParameters:
                                               spec.low, spec.high, spec.open_low)
             if value is not None and value != default:
                 overrides[key] = value
+                if key == 'dimension':
+                    # the other keys' defaults follow the dimension (e.g. 3D's sim.dt)
+                    base = configuration.load_config(fruit=fruit, config_file=config_file,
+                                                     overrides={'dimension': value})
         self.config = configuration.load_config(fruit=fruit, config_file=config_file,
                                                 overrides=overrides)
         self.fruit = fruit or configuration.DEFAULT_FRUIT
