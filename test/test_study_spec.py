@@ -4,7 +4,9 @@ from __future__ import annotations
 import textwrap
 
 import pytest
+import yaml
 
+from gripper_sim.configuration import package_config_dir
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.population import parse_population
 from gripper_sim.workflows.study_spec import load_study
@@ -133,3 +135,23 @@ def test_studies_run_without_ros():
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == 'False'
+
+
+def test_a_fruit_preset_file_is_a_study_fruit(tmp_path):
+    """A preset written by `gripper-sim calibrate` (any fruit preset file) is a study's
+    base fruit like a built-in name."""
+    preset = yaml.safe_load((package_config_dir() / 'fruits' / 'plum.yaml').read_text())
+    preset['fruit']['name'] = 'my_plum'
+    preset['fruit']['density'] = 987.0
+    (tmp_path / 'my_plum.yaml').write_text(yaml.safe_dump(preset))
+    study_file = tmp_path / 'study.yaml'
+    study_file.write_text(textwrap.dedent(f"""\
+        name: preset_fruit
+        base: {{fruit: {tmp_path / 'my_plum.yaml'}, finger: flat}}
+        axes: {{force: [1.0, 2.0]}}
+        population: {{samples: 2, seed: 1, distributions:
+          {{fruit.shape.diameter: {{distribution: normal, mean: 0.05, std: 0.001}}}}}}
+        """))
+    study = load_study(study_file)
+    config = study.trial(study.points[0], 0, {}).config
+    assert config['fruit.name'] == 'my_plum' and config['fruit.density'] == 987.0
