@@ -33,8 +33,9 @@ from action_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from std_msgs.msg import Float64
 
-from gripper_sim_interfaces.action import Grasp, GripperCommand
-from gripper_sim_interfaces.msg import GripperCommand as GripperCommandMsg
+from control_msgs.action import GripperCommand
+from control_msgs.msg import GripperCommand as GripperCommandMsg
+from gripper_sim_interfaces.action import Grasp
 from gripper_sim_interfaces.srv import Step
 from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
 from gripper_sim.ros.testing import SimClient, TimeoutError_

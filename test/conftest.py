@@ -98,7 +98,7 @@ def ros_env() -> dict[str, str]:
 
 @contextlib.contextmanager
 def _node_and_client(parameters: dict, domain_id: int, log_path, client_name: str | None = None,
-                     cwd=None, timeout: float = 120.0):
+                     cwd=None, timeout: float = 120.0, extra=(), node_path='/gripper_sim'):
     """The gripper_sim node in a subprocess and a ``SimClient`` that has seen it ready.
 
     Args:
@@ -108,6 +108,8 @@ def _node_and_client(parameters: dict, domain_id: int, log_path, client_name: st
         client_name: the client's node name (default ``SimClient``'s).
         cwd: working directory the node starts in (default this process's).
         timeout: seconds for the node to come up.
+        extra: more ``--ros-args`` arguments (e.g. ``['-r', '__ns:=/a']``).
+        node_path: the node's full name, as the client addresses it.
 
     Yields:
         (process, client). On exit the client closes and the node stops; it must have
@@ -115,7 +117,8 @@ def _node_and_client(parameters: dict, domain_id: int, log_path, client_name: st
     """
     from gripper_sim.ros.process import node_process, ros_environment
     from gripper_sim.ros.testing import SimClient
-    process = node_process(parameters, env=ros_environment(domain_id), log_path=log_path)
+    process = node_process(parameters, env=ros_environment(domain_id), log_path=log_path,
+                           extra=extra)
     here = os.getcwd()
     if cwd is not None:
         os.chdir(cwd)   # the child inherits it
@@ -123,8 +126,8 @@ def _node_and_client(parameters: dict, domain_id: int, log_path, client_name: st
         process.start()
     finally:
         os.chdir(here)
-    client = (SimClient(domain_id) if client_name is None
-              else SimClient(domain_id, name=client_name))
+    client = (SimClient(domain_id, node_path) if client_name is None
+              else SimClient(domain_id, node_path, name=client_name))
     try:
         client.wait_ready(timeout=timeout)
         yield process, client

@@ -34,8 +34,9 @@ from gripper_sim.ros.node import SimNode
 from gripper_sim.ros.params import DYNAMIC_PHYSICS_KEYS, NODE_PARAMETERS, PHYSICS_PREFIX
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
 from gripper_sim.ros.testing import SimClient
-from gripper_sim_interfaces.action import Grasp, GripperCommand
-from gripper_sim_interfaces.msg import GripperCommand as GripperCommandMsg
+from control_msgs.action import GripperCommand
+from control_msgs.msg import GripperCommand as GripperCommandMsg
+from gripper_sim_interfaces.action import Grasp
 
 pytestmark = [pytest.mark.ros]
 

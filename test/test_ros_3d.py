@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
 
-from gripper_sim_interfaces.action import Grasp, GripperCommand
-from gripper_sim_interfaces.msg import GripperCommand as GripperCommandMsg
+from control_msgs.action import GripperCommand
+from control_msgs.msg import GripperCommand as GripperCommandMsg
+from gripper_sim_interfaces.action import Grasp
 from gripper_sim.ros import messages
 from gripper_sim.ros.process import pick_domain_id
 

@@ -1,11 +1,14 @@
-"""Grasp and GripperCommand actions against the node in a subprocess."""
+"""Grasp, GripperCommand and ParallelGripperCommand actions against the node in a
+subprocess; the gripper goals use only the control_msgs types."""
 import math
 
 import pytest
 from action_msgs.msg import GoalStatus
 
-from gripper_sim_interfaces.action import Grasp, GripperCommand
-from gripper_sim_interfaces.msg import GripperCommand as GripperCommandMsg
+from control_msgs.action import GripperCommand, ParallelGripperCommand
+from control_msgs.msg import GripperCommand as GripperCommandMsg
+from gripper_sim_interfaces.action import Grasp
+from sensor_msgs.msg import JointState
 from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
 from gripper_sim.ros.testing import SimClient
 
@@ -36,6 +39,22 @@ def grasp_goal(force, lift=0.0, hold=0.0, release=False, close_speed=0.0):
 def gripper_goal(position, max_effort=0.0):
     return GripperCommand.Goal(command=GripperCommandMsg(position=position,
                                                          max_effort=max_effort))
+
+
+def assert_rejected(client, server, goal, kind, reason):
+    """``goal`` is rejected by ``server`` and the node logs why, naming ``reason``."""
+    since = len(client.logs)
+    handle = client.send_goal(server, goal)
+    assert not handle.accepted
+    log = client.wait_log(f'{kind} goal rejected', since=since)
+    assert reason in log.msg
+
+
+def parallel_goal(position, effort=(), name=('left_jaw_joint',), velocity=()):
+    """A ParallelGripperCommand goal on one jaw joint (m from the centre, open > 0)."""
+    return ParallelGripperCommand.Goal(command=JointState(
+        name=list(name), position=list(position) if isinstance(position, tuple)
+        else [position], velocity=list(velocity), effort=list(effort)))
 
 
 def test_grasp_succeeds_with_real_feedback(client):
@@ -191,11 +210,7 @@ def test_a_place_goal_too_weak_to_hold_reports_when_it_dropped(client):
 ], ids=['no-release', 'nan-transport', 'negative-retreat', 'no-lift', 'hold', 'far',
         'transport-without-place'])
 def test_bad_place_goals_are_rejected_with_a_clear_reason(client, goal, reason):
-    since = len(client.logs)
-    handle = client.send_goal(client.grasp, goal)
-    assert not handle.accepted
-    log = client.wait_log('Grasp goal rejected', since=since)
-    assert reason in log.msg
+    assert_rejected(client, client.grasp, goal, 'Grasp', reason)
 
 
 def test_gripper_command_reaches_a_free_gap(client):
@@ -235,20 +250,26 @@ def test_gripper_command_with_allow_stalling_succeeds_on_a_stall(client):
         client.set_parameters(allow_stalling=False)
 
 
-def test_a_new_gripper_command_preempts_the_active_one(client):
+@pytest.mark.parametrize('server, first_goal, second_goal', [
+    ('gripper_cmd', gripper_goal(0.040, 5.0), gripper_goal(0.070, 5.0)),
+    ('parallel_gripper_cmd', parallel_goal(0.020, (5.0,)), parallel_goal(0.035, (5.0,))),
+], ids=['GripperCommand', 'ParallelGripperCommand'])
+def test_a_new_gripper_goal_preempts_the_active_one(client, server, first_goal, second_goal):
     client.pause(True)    # keep the first goal running until the second arrives
     started = []
-    first = client.send_goal(client.gripper_cmd, gripper_goal(0.040, 5.0), started)
+    first = client.send_goal(getattr(client, server), first_goal, started)
     assert first.accepted
     # executing (it has the jaws: its first feedback went out), then the second goal
     client.spin_until(lambda: started, 30, "the first goal's feedback")
-    second = client.send_goal(client.gripper_cmd, gripper_goal(0.070, 5.0))
+    second = client.send_goal(getattr(client, server), second_goal)
     assert second.accepted
     status, result = client.result(first)
     assert status == GoalStatus.STATUS_ABORTED and not result.reached_goal
     client.pause(False)
     status, result = client.result(second)
     assert status == GoalStatus.STATUS_SUCCEEDED and result.reached_goal
+    if server == 'parallel_gripper_cmd':
+        assert result.state.position[0] == pytest.approx(0.035, abs=0.001)
 
 
 def test_gripper_command_cancel_holds_the_jaws(client):
@@ -283,6 +304,50 @@ def test_out_of_range_gripper_commands_are_rejected(client, goal):
     assert not handle.accepted
     client.wait_log('GripperCommand goal rejected', since=since)
     client.wait_sim_time(0.05)
+
+
+def test_parallel_gripper_command_reaches_a_free_joint_position(client):
+    feedback = []
+    handle = client.send_goal(client.parallel_gripper_cmd, parallel_goal(0.034, (10.0,)),
+                              feedback)
+    assert handle.accepted
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_SUCCEEDED
+    assert result.reached_goal and not result.stalled
+    assert list(result.state.name) == ['left_jaw_joint']
+    assert result.state.position[0] == pytest.approx(0.034, abs=0.001)
+    assert result.state.effort[0] == pytest.approx(0.0, abs=1e-6)
+    assert client.latest['fruit/state'].gap == pytest.approx(0.068, abs=0.002)
+    assert feedback and all(list(f.state.name) == ['left_jaw_joint'] for f in feedback)
+    assert feedback[0].state.position[0] > feedback[-1].state.position[0]   # it closed
+
+
+def test_parallel_gripper_command_stalls_on_the_fruit_at_its_effort_limit(client):
+    feedback = []
+    handle = client.send_goal(client.parallel_gripper_cmd,
+                              parallel_goal(0.020, (5.0,), name=('right_jaw_joint',)), feedback)
+    assert handle.accepted
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_ABORTED   # allow_stalling is false
+    assert result.stalled and not result.reached_goal
+    assert result.state.effort[0] == pytest.approx(5.0, rel=0.05)
+    assert 0.025 < result.state.position[0] < 0.0318
+    client.spin_until(lambda: feedback and max(f.state.effort[0] for f in feedback) > 4.5,
+                      30, 'feedback with the real effort')
+
+
+@pytest.mark.parametrize('goal, reason', [
+    (parallel_goal(0.03, name=('left_jaw_joint', 'right_jaw_joint')), 'command.name'),
+    (parallel_goal(0.03, name=('elbow',)), 'command.name'),
+    (parallel_goal(()), 'command.position must hold one value'),
+    (parallel_goal(float('nan')), 'must be finite'),
+    (parallel_goal(-0.01), 'position (gap)'),
+    (parallel_goal(0.03, (-1.0,)), 'max_effort'),
+    (parallel_goal(0.03, velocity=(0.0,)), 'command.velocity must be > 0'),
+], ids=['two-joints', 'unknown-joint', 'no-position', 'nan', 'negative', 'negative-effort',
+        'zero-velocity'])
+def test_bad_parallel_gripper_commands_are_rejected_with_the_reason(client, goal, reason):
+    assert_rejected(client, client.parallel_gripper_cmd, goal, 'ParallelGripperCommand', reason)
 
 
 def test_stopping_the_node_aborts_the_goal_and_delivers_its_result(tmp_path):

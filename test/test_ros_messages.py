@@ -84,7 +84,8 @@ def test_default_stamp_is_the_result_time():
 
 def test_joint_states_measure_from_the_centre_and_carry_the_real_contact_effort():
     joints = build_messages(make_result(squeeze=6.0, gap=0.058), context())['joint_states']
-    assert list(joints.name) == ['left_jaw_joint', 'right_jaw_joint', 'lift_joint']
+    assert list(joints.name) == ['left_jaw_joint', 'right_jaw_joint', 'lift_joint',
+                                 'transport_joint']
     assert joints.position[0] == pytest.approx(0.029)
     assert joints.position[1] == pytest.approx(0.029)
     assert joints.position[2] == pytest.approx(0.03)
@@ -93,6 +94,8 @@ def test_joint_states_measure_from_the_centre_and_carry_the_real_contact_effort(
     assert joints.effort[0] == pytest.approx(6.0)
     assert joints.effort[1] == pytest.approx(6.0)
     assert joints.effort[2] == pytest.approx(0.3)   # the fruit hangs 0.3 N on the jaws
+    assert joints.position[3] == 0.0 and joints.velocity[3] == 0.0   # not transported
+    assert len(joints.effort) == 4
 
 
 def test_joint_positions_use_the_gripper_centre_of_the_initial_state():
@@ -401,3 +404,18 @@ def test_flat_jaws_have_no_finger_markers_and_a_pad_is_drawn_on_the_face():
     jaw = markers[('jaws', 0)]
     assert jaw.pose.position.x == pytest.approx(
         result.left_jaw_x - t - config['gripper.jaw_thickness'] / 2)
+
+
+def test_a_frame_prefix_names_every_header_and_the_tf_edges():
+    initial = make_result(gap=0.07)
+    ctx = MessageContext.from_config({'fruit.shape.diameter': 0.06}, initial=initial,
+                                     frame_prefix='g1/')
+    batch = build_messages(make_result(squeeze=6.0, gap=0.058), ctx)
+    headers = [batch[s].header for s in ('fruit/nodes', 'fruit/state', 'left_jaw/wrench',
+                                         'right_jaw/wrench')]
+    headers += [m.header for m in batch['markers'].markers]
+    assert {h.frame_id for h in headers} == {'g1/world', 'g1/left_jaw', 'g1/right_jaw'}
+    edges = {t.child_frame_id: t for t in batch['tf'].transforms}
+    assert set(edges) == {'g1/carriage', 'g1/gripper_base', 'g1/left_jaw', 'g1/right_jaw'}
+    assert edges['g1/left_jaw'].transform.translation.x == pytest.approx(-0.029)
+    assert all(t.header.stamp == batch['clock'].clock for t in edges.values())

@@ -25,6 +25,9 @@ EXPECTED_TYPES = {
     '/joint_states': 'sensor_msgs/msg/JointState',
     '/gripper_sim/markers': 'visualization_msgs/msg/MarkerArray',
     '/clock': 'rosgraph_msgs/msg/Clock',
+    '/tf': 'tf2_msgs/msg/TFMessage',
+    '/tf_static': 'tf2_msgs/msg/TFMessage',
+    '/robot_description': 'std_msgs/msg/String',
     '/gripper_sim/jaw/gap_command': 'std_msgs/msg/Float64',
     '/gripper_sim/jaw/force_command': 'std_msgs/msg/Float64',
     '/gripper_sim/lift/command': 'std_msgs/msg/Float64',
@@ -69,7 +72,8 @@ def test_every_topic_is_published_with_its_type_and_sane_values(client):
     assert np.all(np.abs(radii - 0.0635 / 2) < 2e-3)
 
     joints = client.latest['joint_states']
-    assert list(joints.name) == ['left_jaw_joint', 'right_jaw_joint', 'lift_joint']
+    assert list(joints.name) == ['left_jaw_joint', 'right_jaw_joint', 'lift_joint',
+                                 'transport_joint']
     assert joints.position[0] + joints.position[1] == pytest.approx(state.gap, abs=1e-9)
     assert client.latest['left_jaw/wrench'].header.frame_id == 'left_jaw'
     assert client.latest['right_jaw/wrench'].header.frame_id == 'right_jaw'

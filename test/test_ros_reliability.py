@@ -1,5 +1,6 @@
 """Reliability of the node in this process: extreme parameter values, a physics loop that
-survives and is watched, ``~/step`` that other services interrupt, set-point commands.
+survives and is watched, ``~/step`` that other services interrupt, set-point commands,
+``/clock``, ``~/markers`` and the state topics each at their own rate.
 
 Every wait is a condition with a generous deadline, never a fixed sleep.
 """
@@ -312,3 +313,50 @@ def test_the_newest_goal_drives_the_jaws_whatever_order_they_start_in():
     jaws.release(newest)
     jaws.close('shutting down', timeout=1.0)
     assert 'shutting down' in jaws.claim(Owner(), jaws.ticket())
+
+
+# ------------------------------------------------ /clock, markers, state: own rates
+def _batches(node, steps):
+    """{step: set of topic suffixes published} over ``steps`` hand-taken steps."""
+    seen = {}
+
+    def observe(batch, ns):
+        seen.setdefault(round(ns * 1e-9 / node.sim.dt), set()).update(batch)
+    node.add_publish_observer(observe)
+    for _ in range(steps):
+        assert node.advance() is not None
+    node.remove_publish_observer(observe)
+    return seen
+
+
+def test_clock_markers_and_state_go_out_at_their_own_rates(context):
+    node = make_node(context, start=False, foxglove_port=0,
+                     **{'physics.sim.dt': 0.0005, 'publish_rate': 200.0, 'clock_rate': 1000.0,
+                        'marker_rate': 100.0})
+    try:
+        seen = _batches(node, 40)
+    finally:
+        node.destroy_node()
+    # dt 0.5 ms: /clock every 2 steps (1 kHz), state every 10 (200 Hz), markers every 20
+    assert {s for s, topics in seen.items() if 'clock' in topics} == set(range(2, 41, 2))
+    assert {s for s, topics in seen.items() if 'fruit/state' in topics} == {10, 20, 30, 40}
+    assert {s for s, topics in seen.items() if 'tf' in topics} == {10, 20, 30, 40}
+    assert {s for s, topics in seen.items() if 'markers' in topics} == {20, 40}
+    assert seen[2] == {'clock'}
+
+
+def test_the_clock_goes_out_at_every_step_when_a_step_is_longer_than_its_period(context):
+    node = make_node(context, start=False, foxglove_port=0,
+                     **{'physics.sim.dt': 0.002, 'publish_rate': 100.0, 'marker_rate': 10.0})
+    try:
+        assert node.get_parameter('clock_rate').value == 1000.0   # the default
+        seen = _batches(node, 10)
+        node.set_parameters([Parameter('clock_rate', value=100.0),
+                             Parameter('publish_clock', value=False)])
+        later = _batches(node, 10)
+    finally:
+        node.destroy_node()
+    assert {s for s, topics in seen.items() if 'clock' in topics} == set(range(1, 11))
+    assert {s for s, topics in seen.items() if 'fruit/state' in topics} == {5, 10}
+    assert not any('markers' in topics for topics in seen.values())   # every 50 steps
+    assert set(later) == {15, 20} and not any('clock' in topics for topics in later.values())

@@ -14,8 +14,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 IFACE = ROOT / 'interfaces' / 'gripper_sim_interfaces'
-INTERFACE_FILES = ('msg/FruitState.msg', 'msg/GripperCommand.msg', 'action/Grasp.action',
-                   'action/GripperCommand.action', 'srv/Step.srv')
+INTERFACE_FILES = ('msg/FruitState.msg', 'action/Grasp.action', 'srv/Step.srv')
 
 
 def prefix() -> Path:
@@ -73,7 +72,8 @@ def test_fruit_state_round_trip():
 
 
 def test_grasp_goal_and_gripper_command_round_trip():
-    from gripper_sim_interfaces.action import Grasp, GripperCommand
+    from control_msgs.action import GripperCommand
+    from gripper_sim_interfaces.action import Grasp
     from rclpy.serialization import deserialize_message, serialize_message
     goal = Grasp.Goal(target_force=8.0, close_speed=0.01, lift_height=0.03, hold_time=1.0,
                       release=True)

@@ -4,6 +4,9 @@ Tree (REP 103 axes, every frame parallel to ``world``, so every rotation is the
 identity; names after the ``frame_prefix``)::
 
     world
+    ├─ <p>world            fixed, identical to world (only with a prefix): the fruit's,
+    │                      the markers' and the table's frame
+    ├─ <p>table            fixed, the table surface (when there is a table)
     └─ <p>carriage         transport_joint: prismatic along x, the gripper centre's x
        └─ <p>gripper_base  lift_joint: prismatic along z, the jaw centre's height
           ├─ <p>left_jaw   left_jaw_joint: prismatic, outwards, m from the centre (open > 0)
@@ -85,6 +88,12 @@ class GripperFrames:
         return self.prefix + frame
 
     @property
+    def scene(self) -> str:
+        """The frame of the fruit, the markers and the table: ``<p>world``, or ``world``
+        itself without a prefix."""
+        return self.name(WORLD_FRAME)
+
+    @property
     def carriage(self) -> str:
         return self.name('carriage')
 
@@ -162,10 +171,15 @@ def dynamic_transforms(result: Any, frames: GripperFrames) -> list[FrameTransfor
 
 
 def static_transforms(frames: GripperFrames) -> list[FrameTransform]:
-    """The fixed edges (for ``/tf_static``): the table surface, when there is one."""
-    if frames.table_height is None:
-        return []
-    return [FrameTransform(WORLD_FRAME, frames.table, (0.0, 0.0, frames.table_height))]
+    """The fixed edges (for ``/tf_static``): the prefixed scene frame (with a prefix)
+    and the table surface (when there is a table)."""
+    edges = []
+    if frames.scene != WORLD_FRAME:
+        edges.append(FrameTransform(WORLD_FRAME, frames.scene, (0.0, 0.0, 0.0)))
+    if frames.table_height is not None:
+        edges.append(FrameTransform(WORLD_FRAME, frames.table,
+                                    (0.0, 0.0, frames.table_height)))
+    return edges
 
 
 def frame_position(transforms: list[FrameTransform], frame: str) -> tuple[float, ...]:

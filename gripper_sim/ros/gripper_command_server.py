@@ -1,7 +1,11 @@
-"""The ``~/gripper_cmd`` action: control_msgs/GripperCommand semantics, done properly.
+"""The ``~/gripper_cmd`` action (``control_msgs/action/GripperCommand``), with the
+semantics of the ros2_controllers gripper controllers, done properly.
 
 Goal ``command.position`` is the jaw gap (m), ``command.max_effort`` the grip force
-limit (N; 0 = parameter ``max_effort``). The jaws move to the gap in position mode;
+limit (N; 0 = parameter ``max_effort``). ``GripperCommandServer`` is also the base of
+``parallel_gripper_server`` (ParallelGripperCommand): a subclass maps its goal to a
+``JawTarget`` and the run back to its result and feedback messages; the motion, the
+force limit, the goal and stall checks and preemption are the same. The jaws move to the gap in position mode;
 once the grip force reaches ``max_effort`` the node switches to force mode and holds
 that force (so the fruit is never squeezed harder than asked).
 
@@ -20,16 +24,15 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from dataclasses import dataclass
 
+from control_msgs.action import GripperCommand
 from rclpy.action import ActionServer, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-
-from gripper_sim_interfaces.action import GripperCommand
 
 from gripper_sim.errors import CommandError
 from gripper_sim.ros.jaw_goals import FEEDBACK_PERIOD, FEEDBACK_QOS, JawGoals
 from gripper_sim.ros.sync import ActiveGoal
-
 
 
 class StallDetector:
@@ -56,15 +59,37 @@ class StallDetector:
         return t - t0 >= self.timeout - 1e-12 and abs(gap - gap0) < self.threshold * self.timeout
 
 
-class _CommandRun(ActiveGoal):
-    kind = 'GripperCommand'
+@dataclass(frozen=True)
+class JawTarget:
+    """What a goal asks of the jaws.
 
-    def __init__(self, goal_handle, ticket: int, position: float, max_effort: float,
-                 tolerance: float, stall: StallDetector):
+    Attributes:
+        gap: m, target jaw gap.
+        max_effort: N, grip force limit; 0 = parameter ``max_effort``.
+        speed: m/s, gap rate; None = ``gripper.close_speed``.
+        tolerance_scale: the goal is reached when |gap - target| < this x
+            ``goal_tolerance`` (2 for a goal on one jaw joint, which moves half the gap).
+    """
+
+    gap: float
+    max_effort: float = 0.0
+    speed: float | None = None
+    tolerance_scale: float = 1.0
+
+
+class GoalProblem(ValueError):
+    """Why a goal cannot be executed (the message is logged with the rejection)."""
+
+
+class _CommandRun(ActiveGoal):
+    def __init__(self, goal_handle, ticket: int, kind: str, target: JawTarget,
+                 max_effort: float, tolerance: float, stall: StallDetector):
         super().__init__(goal_handle, ticket)
-        self.position = position
+        self.kind = kind
+        self.position = target.gap
+        self.speed = target.speed
         self.max_effort = max_effort
-        self.tolerance = tolerance
+        self.tolerance = tolerance * target.tolerance_scale
         self.stall = stall
         self.mode = 'position'
         self.reached = False
@@ -86,37 +111,52 @@ def goal_problem(position: float, max_effort: float, config) -> str | None:
 
 
 class GripperCommandServer:
-    """Serves ``~/gripper_cmd`` for a ``SimNode``."""
+    """Serves ``~/gripper_cmd`` (control_msgs GripperCommand) for a ``SimNode``.
+
+    Subclasses set ``kind``, ``action_type`` and ``action_name`` and override
+    ``target``, ``_result`` and ``_feedback_message``.
+    """
+
+    kind = 'GripperCommand'
+    action_type = GripperCommand
+    action_name = '~/gripper_cmd'
 
     def __init__(self, node):
         self._node = node
         self._goals = JawGoals(node.jaws)
         self._server = ActionServer(
-            node, GripperCommand, '~/gripper_cmd', execute_callback=self._execute,
+            node, self.action_type, self.action_name, execute_callback=self._execute,
             goal_callback=self._on_goal, cancel_callback=self._goals.cancel,
             callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
 
-    def _on_goal(self, goal) -> GoalResponse:
+    def target(self, goal) -> JawTarget:
+        """The jaw target of a goal request; GoalProblem if it is unusable."""
         command = goal.command
-        problem = goal_problem(command.position, command.max_effort, self._node.params.config)
+        return JawTarget(gap=command.position, max_effort=command.max_effort)
+
+    def _on_goal(self, goal) -> GoalResponse:
+        try:
+            target = self.target(goal)
+            problem = goal_problem(target.gap, target.max_effort, self._node.params.config)
+        except GoalProblem as err:
+            problem = str(err)
         if problem:
-            self._node.get_logger().warning(f'GripperCommand goal rejected: {problem}')
+            self._node.get_logger().warning(f'{self.kind} goal rejected: {problem}')
             return GoalResponse.REJECT
         return self._goals.accept(goal)
 
     def _execute(self, goal_handle):
         node = self._node
         params = node.params
-        command = goal_handle.request.command
-        max_effort = command.max_effort or float(params.get('max_effort'))
-        run = _CommandRun(goal_handle, self._goals.ticket(goal_handle), command.position,
-                          max_effort,
-                          float(params.get('goal_tolerance')),
+        target = self.target(goal_handle.request)
+        max_effort = target.max_effort or float(params.get('max_effort'))
+        run = _CommandRun(goal_handle, self._goals.ticket(goal_handle), self.kind, target,
+                          max_effort, float(params.get('goal_tolerance')),
                           StallDetector(float(params.get('stall_velocity_threshold')),
                                         float(params.get('stall_timeout'))))
         reason = node.claim_jaws(run, run.ticket)
         if reason is not None:
-            node.get_logger().warning(f'GripperCommand goal aborted before it started: {reason}')
+            node.get_logger().warning(f'{self.kind} goal aborted before it started: {reason}')
             goal_handle.abort()
             return self._result(run, node.sim.last)
         self._goals.add(run)
@@ -143,13 +183,13 @@ class GripperCommandServer:
 
         with node.lock:
             try:
-                node.sim.command_gap(run.position)
+                node.sim.command_gap(run.position, run.speed)
             except CommandError as err:
                 goal_handle.abort()
-                node.get_logger().warning(f'GripperCommand goal aborted: {err}')
+                node.get_logger().warning(f'{self.kind} goal aborted: {err}')
                 return self._result(run, node.sim.last)
             node.add_step_listener(on_step)
-        node.get_logger().info(f'GripperCommand goal: gap {run.position:g} m, max effort '
+        node.get_logger().info(f'{self.kind} goal: gap {run.position:g} m, max effort '
                                f'{run.max_effort:g} N')
         self._feedback(run, node.sim.last)
         while not run.finished.wait(FEEDBACK_PERIOD):
@@ -168,13 +208,13 @@ class GripperCommandServer:
         state = f'gap {last.gap:.4f} m, effort {last.grip_force:.2f} N'
         if run.abort_reason or run.error:
             why = run.abort_reason or run.error
-            node.get_logger().warning(f'GripperCommand goal aborted ({why}); {state}')
+            node.get_logger().warning(f'{self.kind} goal aborted ({why}); {state}')
             goal_handle.abort()
         elif run.reached:
-            node.get_logger().info(f'GripperCommand goal reached; {state}')
+            node.get_logger().info(f'{self.kind} goal reached; {state}')
             goal_handle.succeed()
         elif run.stalled:
-            node.get_logger().info(f'GripperCommand goal stalled; {state}'
+            node.get_logger().info(f'{self.kind} goal stalled; {state}'
                                    + ('' if allow_stalling else ' (aborted: allow_stalling '
                                       'is false)'))
             if allow_stalling:
@@ -182,7 +222,7 @@ class GripperCommandServer:
             else:
                 goal_handle.abort()
         else:
-            node.get_logger().info(f'GripperCommand goal canceled; jaws held at {state}')
+            node.get_logger().info(f'{self.kind} goal canceled; jaws held at {state}')
             goal_handle.canceled() if run.cancel_confirmed() else goal_handle.abort()
         return result
 
@@ -195,7 +235,7 @@ class GripperCommandServer:
         elif run.mode == 'force' and result.gap > run.position + run.tolerance \
                 and result.grip_force < 0.5 * run.max_effort:
             # contact lost (e.g. the fruit moved): go back to the position target
-            sim.command_gap(run.position)
+            sim.command_gap(run.position, run.speed)
             run.mode = 'position'
         if abs(result.gap - run.position) < run.tolerance:
             run.reached = True
@@ -204,8 +244,8 @@ class GripperCommandServer:
             run.stalled = True
             run.finished.set()
 
-    @staticmethod
-    def _result(run: _CommandRun, last) -> GripperCommand.Result:
+    def _result(self, run: _CommandRun, last) -> GripperCommand.Result:
+        """The action's result for ``run`` ending at step result ``last``."""
         return GripperCommand.Result(position=float(last.gap), effort=float(last.grip_force),
                                      stalled=run.stalled, reached_goal=run.reached)
 
@@ -215,10 +255,13 @@ class GripperCommandServer:
                 or time.monotonic() - wall_last >= FEEDBACK_PERIOD):
             self._feedback(run, result)
 
-    @staticmethod
-    def _feedback(run: _CommandRun, result) -> None:
-        feedback = GripperCommand.Feedback(position=float(result.gap),
-                                           effort=float(result.grip_force),
-                                           stalled=run.stalled, reached_goal=run.reached)
+    def _feedback_message(self, run: _CommandRun, result) -> GripperCommand.Feedback:
+        """The action's feedback for ``run`` at step result ``result``."""
+        return GripperCommand.Feedback(position=float(result.gap),
+                                       effort=float(result.grip_force),
+                                       stalled=run.stalled, reached_goal=run.reached)
+
+    def _feedback(self, run: _CommandRun, result) -> None:
+        feedback = self._feedback_message(run, result)
         run.last_feedback = (result.time, time.monotonic())
         run.goal_handle.publish_feedback(feedback)

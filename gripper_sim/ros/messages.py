@@ -6,9 +6,11 @@ with the same contents.
 
 Conventions (REP 103): SI units; the planar model (``dimension`` 2) lives in the x-z
 plane of the world frame and is published as 3D data with y = 0; the 3D model
-(``StepResult3D``: (n, 3) positions) is published as it is. Frames: ``world`` for the
-fruit, the markers and the table; ``left_jaw`` / ``right_jaw`` for the jaw wrenches
-(parallel to ``world``, origin at the centre of the jaw face).
+(``StepResult3D``: (n, 3) positions) is published as it is. Frames
+(``convert.frames``, after the context's ``frame_prefix``): ``<p>world`` (``world``
+without a prefix) for the fruit, the markers and the table; ``<p>left_jaw`` /
+``<p>right_jaw`` for the jaw wrenches (parallel to ``world``, origin at the centre of
+the jaw face). ``/tf`` carries the moving edges of that tree with every batch.
 
 The fruit marker: a 2D result draws the outline (ns ``fruit_outline``, LINE_STRIP), a
 3D result the skin (ns ``fruit_mesh``, TRIANGLE_LIST, three points per skin triangle),
@@ -27,21 +29,21 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, WrenchStamped
+from geometry_msgs.msg import Point, TransformStamped, WrenchStamped
 from gripper_sim_interfaces.msg import FruitState
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, PointCloud2, PointField
 from std_msgs.msg import ColorRGBA, Header
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
+from gripper_sim.convert import frames as frame_tree
+from gripper_sim.convert.frames import FrameTransform, GripperFrames
 from gripper_sim.core.results import StepResult
 from gripper_sim.ros.finger_markers import (FingerGeometry, base_marker, finger_geometry,
                                             finger_markers)
 
-WORLD_FRAME = 'world'
-LEFT_JAW_FRAME = 'left_jaw'
-RIGHT_JAW_FRAME = 'right_jaw'
-JOINT_NAMES = ('left_jaw_joint', 'right_jaw_joint', 'lift_joint')
+JOINT_NAMES = frame_tree.JOINT_NAMES
 DEFAULT_NODE_NAME = 'gripper_sim'
 
 # suffix -> (name as the node creates it, ROS type). Names starting with '~/' are
@@ -54,6 +56,7 @@ TOPICS: dict[str, tuple[str, str]] = {
     'joint_states': ('joint_states', 'sensor_msgs/msg/JointState'),
     'markers': ('~/markers', 'visualization_msgs/msg/MarkerArray'),
     'clock': ('/clock', 'rosgraph_msgs/msg/Clock'),
+    'tf': ('/tf', 'tf2_msgs/msg/TFMessage'),
 }
 
 MESSAGE_CLASSES = {
@@ -64,6 +67,7 @@ MESSAGE_CLASSES = {
     'joint_states': JointState,
     'markers': MarkerArray,
     'clock': Clock,
+    'tf': TFMessage,
 }
 
 # Point cloud layout: six float32 fields, 24 bytes a point.
@@ -152,6 +156,7 @@ class MessageContext:
         gripper_centre_x: m, x of the gripper centre the jaw joints are measured from.
         finger: the shaped finger / pad to draw (``finger_markers.finger_geometry``);
             None for flat jaws without pads.
+        frames: the TF frame names (``frame_prefix``) and the jaw joints' directions.
     """
 
     dimension: int = 2
@@ -166,26 +171,42 @@ class MessageContext:
     table_height: float = 0.0
     gripper_centre_x: float = 0.0
     finger: FingerGeometry | None = None
+    frames: GripperFrames = field(default_factory=GripperFrames)
     bruised: bool = field(default=False, init=False)
     crushed: bool = field(default=False, init=False)
     peak_pressure: float = field(default=0.0, init=False)
     _node_bruised: np.ndarray | None = field(default=None, init=False, repr=False)
 
     @classmethod
-    def from_config(cls, config: Mapping[str, Any],
-                    initial: StepResult | None = None) -> 'MessageContext':
+    def from_config(cls, config: Mapping[str, Any], initial: StepResult | None = None,
+                    frame_prefix: str = '') -> 'MessageContext':
         """Context of a run of configuration ``config`` (flat, from ``load_config``).
 
         Args:
             config: the flat configuration of the simulation.
             initial: the result of the initial state (``Simulation.last`` before any
                 step); the gripper centre is the midpoint of its jaw faces.
+            frame_prefix: prepended to every frame id (``convert.frames.check_prefix``).
+
+        Raises:
+            FrameError: ``frame_prefix`` is not valid.
         """
         diameter = float(config.get('fruit.shape.diameter', cls.rest_width))
         depth = config.get('fruit.depth')
         centre = 0.0
+        left_outward = -1.0
         if initial is not None:
             centre = 0.5 * (float(initial.left_jaw_x) + float(initial.right_jaw_x))
+            left_outward = -1.0 if _left_is_negative(initial) else 1.0
+        table = bool(config.get('world.table', True))
+        table_height = float(config.get('world.table_height', 0.0))
+        frames = GripperFrames(
+            prefix=frame_prefix, left_outward=left_outward,
+            jaw_height=float(config.get('gripper.jaw_height', cls.jaw_height)),
+            jaw_width=float(config.get('gripper.jaw_width', cls.jaw_width)),
+            jaw_thickness=float(config.get('gripper.jaw_thickness', cls.jaw_thickness)),
+            max_gap=float(config.get('gripper.max_gap', GripperFrames.max_gap)),
+            table_height=table_height if table else None)
         return cls(
             dimension=int(config.get('dimension', 2)),
             rest_width=diameter,
@@ -195,10 +216,11 @@ class MessageContext:
             jaw_height=float(config.get('gripper.jaw_height', cls.jaw_height)),
             jaw_thickness=float(config.get('gripper.jaw_thickness', cls.jaw_thickness)),
             jaw_width=float(config.get('gripper.jaw_width', cls.jaw_width)),
-            table=bool(config.get('world.table', True)),
-            table_height=float(config.get('world.table_height', 0.0)),
+            table=table,
+            table_height=table_height,
             gripper_centre_x=centre,
             finger=finger_geometry(config),
+            frames=frames,
         )
 
     def reset(self) -> None:
@@ -359,12 +381,13 @@ def fruit_state(result: StepResult, context: MessageContext, header: Header) -> 
     return msg
 
 
-def jaw_wrench(result: StepResult, side: str, stamp: Time) -> WrenchStamped:
+def jaw_wrench(result: StepResult, side: str, stamp: Time,
+               frames: GripperFrames = GripperFrames()) -> WrenchStamped:
     """Net wrench the fruit exerts on jaw ``side`` ('left' or 'right'), in its frame."""
     wrench = result.left_wrench if side == 'left' else result.right_wrench
     msg = WrenchStamped()
-    msg.header = Header(stamp=stamp, frame_id=LEFT_JAW_FRAME if side == 'left'
-                        else RIGHT_JAW_FRAME)
+    msg.header = Header(stamp=stamp, frame_id=frames.left_jaw if side == 'left'
+                        else frames.right_jaw)
     force, torque = wrench.force, wrench.torque
     msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in force)
     msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in torque)
@@ -372,26 +395,41 @@ def jaw_wrench(result: StepResult, side: str, stamp: Time) -> WrenchStamped:
 
 
 def joint_state(result: StepResult, context: MessageContext, stamp: Time) -> JointState:
-    """Jaw joints: m from the gripper centre (positive = open); lift: height (m).
+    """The joints of ``convert.frames`` (and of the URDF): jaws, m from the gripper
+    centre (positive = open); lift: height (m); transport: the gripper centre's x (m).
 
     Effort: the contact normal force on each jaw (N, positive when the fruit pushes
-    the jaw open), and for ``lift_joint`` the vertical load the fruit puts on the
-    jaws (N, positive when the gripper carries the fruit's weight).
+    the jaw open); for ``lift_joint`` the vertical load the fruit puts on the jaws
+    (N, positive when the gripper carries the fruit's weight); for
+    ``transport_joint`` the force along x that holds the fruit's sideways push on the
+    jaws (N, positive along +x).
     """
-    centre = context.gripper_centre_x
-    if _left_is_negative(result):
-        left_pos, right_pos = centre - result.left_jaw_x, result.right_jaw_x - centre
-    else:
-        left_pos, right_pos = result.left_jaw_x - centre, centre - result.right_jaw_x
+    positions = frame_tree.joint_positions(result, context.frames)
     left_force, right_force = jaw_normal_forces(result)
     load = -float(result.left_wrench.force[2] + result.right_wrench.force[2]) + 0.0
+    sideways = -float(result.left_wrench.force[0] + result.right_wrench.force[0]) + 0.0
     msg = JointState()
     msg.header = Header(stamp=stamp, frame_id='')
     msg.name = list(JOINT_NAMES)
-    msg.position = [float(left_pos), float(right_pos), float(result.lift)]
+    msg.position = [positions[name] for name in JOINT_NAMES]
     opening = -float(result.jaw_velocity)
-    msg.velocity = [opening, opening, float(result.lift_velocity)]
-    msg.effort = [left_force, right_force, load]
+    msg.velocity = [opening, opening, float(result.lift_velocity),
+                    float(result.gripper_x_velocity)]
+    msg.effort = [left_force, right_force, load, sideways]
+    return msg
+
+
+def transform_message(transforms: Iterable[FrameTransform], stamp: Time) -> TFMessage:
+    """A ``tf2_msgs/TFMessage`` of ``transforms`` (``convert.frames``), all at ``stamp``."""
+    msg = TFMessage()
+    for edge in transforms:
+        stamped = TransformStamped()
+        stamped.header = Header(stamp=stamp, frame_id=edge.parent)
+        stamped.child_frame_id = edge.child
+        t, q = stamped.transform.translation, stamped.transform.rotation
+        t.x, t.y, t.z = (float(v) for v in edge.translation)
+        q.x, q.y, q.z, q.w = (float(v) for v in edge.rotation)
+        msg.transforms.append(stamped)
     return msg
 
 
@@ -533,7 +571,7 @@ def build_messages(result: StepResult, context: MessageContext | Mapping[str, An
     Returns:
         ``{suffix: message}`` with suffixes from ``TOPICS`` ('fruit/nodes',
         'fruit/state', 'left_jaw/wrench', 'right_jaw/wrench', 'joint_states',
-        'markers', 'clock'); ``resolved_topic(suffix)`` gives the topic name.
+        'markers', 'clock', 'tf'); ``resolved_topic(suffix)`` gives the topic name.
     """
     if not isinstance(context, MessageContext):
         context = MessageContext.from_config(context)
@@ -543,20 +581,23 @@ def build_messages(result: StepResult, context: MessageContext | Mapping[str, An
     if unknown:
         raise ValueError(f"unknown topic suffix(es): {', '.join(sorted(unknown))}")
     time = time_msg(result.time if stamp is None else stamp)
-    world = Header(stamp=time, frame_id=WORLD_FRAME)
+    frames = context.frames
+    world = Header(stamp=time, frame_id=frames.scene)
     out: dict[str, Any] = {}
     if 'fruit/nodes' in wanted:
         out['fruit/nodes'] = point_cloud(result, world)
     if 'fruit/state' in wanted:
         out['fruit/state'] = fruit_state(result, context, world)
     if 'left_jaw/wrench' in wanted:
-        out['left_jaw/wrench'] = jaw_wrench(result, 'left', time)
+        out['left_jaw/wrench'] = jaw_wrench(result, 'left', time, frames)
     if 'right_jaw/wrench' in wanted:
-        out['right_jaw/wrench'] = jaw_wrench(result, 'right', time)
+        out['right_jaw/wrench'] = jaw_wrench(result, 'right', time, frames)
     if 'joint_states' in wanted:
         out['joint_states'] = joint_state(result, context, time)
     if 'markers' in wanted:
         out['markers'] = markers(result, context, world)
     if 'clock' in wanted:
         out['clock'] = Clock(clock=time)
+    if 'tf' in wanted:
+        out['tf'] = transform_message(frame_tree.dynamic_transforms(result, frames), time)
     return out

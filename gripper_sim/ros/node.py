@@ -4,9 +4,10 @@
 The node composes one module per job: ``sync`` (the simulation lock, the jaw
 ownership), ``physics_thread`` (stepping and pacing), ``commands`` (the command queue
 and the jaw topics), ``publishing`` (state topics in step order), ``runtime_parameters``
-(what a parameter change does), ``recording_control`` (``record_path``, ``~/record``),
-``services`` (``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``) and the two action
-servers. What stays here is the step itself (commands, physics, listeners, publishing)
+(what a parameter change does), ``description`` (``/tf_static``, the URDF on
+``robot_description``), ``recording_control`` (``record_path``, ``~/record``),
+``services`` (``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``) and the three action
+servers (Grasp, control_msgs GripperCommand and ParallelGripperCommand). What stays here is the step itself (commands, physics, listeners, publishing)
 and the reset, which touch all of them.
 
 See the README section "ROS interface" for every topic, service, action and parameter.
@@ -35,10 +36,12 @@ from gripper_sim.core.results import StepResult
 from gripper_sim.errors import CommandError, ConvergenceError, GripperSimError
 from gripper_sim.ros import messages
 from gripper_sim.ros.commands import CommandQueue, DoneCallback, JawCommandTopics
+from gripper_sim.ros.description import RobotDescription
 from gripper_sim.ros.grasp_server import GraspServer
 from gripper_sim.ros.gripper_command_server import GripperCommandServer
 from gripper_sim.ros.messages import MessageContext
 from gripper_sim.ros.namesakes import NAMESAKE_WAIT, NamesakeWatch, refuse_namesake
+from gripper_sim.ros.parallel_gripper_server import ParallelGripperCommandServer
 from gripper_sim.ros.params import SimParameters
 from gripper_sim.ros.physics_thread import PhysicsLoop
 from gripper_sim.ros.publishing import OrderedPublisher, PublishObserver
@@ -93,8 +96,9 @@ class SimNode(Node):
         self.jaws = JawOwnership()
         self._sequence = 0          # +1 per step and per reset, under ``lock``
         self.sim = simulation_factory(dict(self.params.config))
-        self.message_context = MessageContext.from_config(self.params.config,
-                                                          initial=self.sim.last)
+        self.message_context = MessageContext.from_config(
+            self.params.config, initial=self.sim.last,
+            frame_prefix=str(self.params.get('frame_prefix')))
         # after building the simulation: discovery has had that time to find a namesake
         if namesake_wait is not None:
             refuse_namesake(self, created, namesake_wait)
@@ -113,8 +117,11 @@ class SimNode(Node):
         self.commands = CommandQueue(self.get_logger(), self.physics.wake)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.state_publisher = OrderedPublisher(self, qos, bool(self.params.get('publish_clock')))
-        self.state_publisher.set_rate(float(self.params.get('publish_rate')), self.sim.dt)
+        for group, name in (('state', 'publish_rate'), ('clock', 'clock_rate'),
+                            ('markers', 'marker_rate')):
+            self.state_publisher.set_rate(float(self.params.get(name)), self.sim.dt, group)
         self.runtime_parameters = RuntimeParameters(self)
+        self.description = RobotDescription(self, self.message_context.frames)
         services = MutuallyExclusiveCallbackGroup()
         # Registered last: it starts or stops the recording, so every other check of
         # the same change has already accepted it.
@@ -123,6 +130,7 @@ class SimNode(Node):
         self.sim_services = SimServices(self, services)
         self.grasp_server = GraspServer(self)
         self.gripper_command_server = GripperCommandServer(self)
+        self.parallel_gripper_server = ParallelGripperCommandServer(self)
         self.watchdog = PhysicsWatchdog(self, stall_timeout=physics_stall_timeout,
                                         period=watchdog_period)
 
@@ -335,7 +343,8 @@ def main(args: list[str] | None = None) -> int:
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stopping.set())
     node = None
-    # Threads: a running Grasp or GripperCommand goal and a ~/step request each wait
+    # Threads: a running goal (Grasp, GripperCommand, ParallelGripperCommand; one
+    # drives, a preempted one finishes) and a ~/step request each wait
     # in one; the services, topics, parameters and the watchdog need the rest.
     executor = MultiThreadedExecutor(num_threads=6)
     try:

@@ -63,7 +63,12 @@ NODE_PARAMETERS: tuple[NodeParameter, ...] = (
                   'least one message per 1000 s of sim time)', MIN_PUBLISH_RATE, 1000.0),
     NodeParameter('real_time_factor', 1.0, '', 'sim seconds per wall second; 0 = as fast '
                   'as possible', 0.0, 1000.0),
-    NodeParameter('publish_clock', True, '-', 'publish /clock (sim time) at publish_rate'),
+    NodeParameter('publish_clock', True, '-', 'publish /clock (sim time) at clock_rate'),
+    NodeParameter('clock_rate', 1000.0, 'Hz', '/clock rate in sim time (at most every '
+                  'physics step: the interval is a whole number of steps)', MIN_PUBLISH_RATE,
+                  1e6),
+    NodeParameter('marker_rate', 10.0, 'Hz', '~/markers rate in sim time (at most every '
+                  'physics step)', MIN_PUBLISH_RATE, 1000.0),
     NodeParameter('max_effort', 10.0, 'N', 'GripperCommand: force limit used when a goal '
                   'has max_effort 0', 0.0, 1e5, open_low=True),
     NodeParameter('goal_tolerance', 0.001, 'm', 'GripperCommand: the goal is reached when '
@@ -79,6 +84,8 @@ NODE_PARAMETERS: tuple[NodeParameter, ...] = (
                   "(NAME/NAME_0.mcap + metadata.yaml; one file if it ends in .mcap; "
                   "'' = not recording); setting it starts recording there (an existing "
                   "file or folder is refused), '' stops; ~/record also sets it"),
+    NodeParameter('frame_prefix', '', '-', "prepended to every TF frame id the node "
+                  "publishes (e.g. 'gripper1/'); 'world' stays shared", read_only=True),
     NodeParameter('foxglove_port', 8765, '-', 'TCP port of the Foxglove live view '
                   '(WebSocket); 0 = off', 0, 65535, read_only=True),
     NodeParameter('foxglove_address', '127.0.0.1', '-', 'address the Foxglove live view '

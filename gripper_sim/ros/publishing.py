@@ -1,4 +1,6 @@
-"""The node's state topics, published in step order, every ``publish_every`` steps.
+"""The node's state topics, published in step order: ``/clock`` every ``clock_rate``,
+``~/markers`` every ``marker_rate``, every other topic every ``publish_rate`` (each a
+whole number of physics steps; a reset state goes out on every topic).
 
 Batches go out in step order: a state older than one already published (e.g. a step
 that finished just before a reset) is dropped, never published after it. Messages are
@@ -15,6 +17,13 @@ from gripper_sim.core.results import StepResult
 from gripper_sim.ros import messages
 from gripper_sim.ros.messages import MessageContext, build_messages
 
+#: keep-last depths other than ``qos``'s: /clock 1, /tf 100 (tf2's broadcaster)
+QOS_DEPTHS = {'clock': 1, 'tf': 100}
+
+#: topics published at their own rate; every other suffix is in group 'state'
+GROUP_OF = {'clock': 'clock', 'markers': 'markers'}
+GROUPS = ('state', 'clock', 'markers')
+
 #: ``observer({suffix: msg}, stamp_ns)`` with every batch published
 PublishObserver = Callable[[dict, int], None]
 
@@ -24,7 +33,7 @@ class OrderedPublisher:
 
     Args:
         node: the rclpy node to create the publishers on.
-        qos: profile of every topic but ``/clock`` (keep-last 1).
+        qos: profile of every topic but ``/clock`` and ``/tf`` (``QOS_DEPTHS``).
         publish_clock: publish ``/clock`` too.
 
     Attributes:
@@ -35,14 +44,19 @@ class OrderedPublisher:
     def __init__(self, node, qos: QoSProfile, publish_clock: bool):
         self._publishers = {
             suffix: node.create_publisher(messages.MESSAGE_CLASSES[suffix], name,
-                                          1 if suffix == 'clock' else qos)
+                                          QOS_DEPTHS.get(suffix, qos))
             for suffix, (name, _) in messages.TOPICS.items()}
         self._lock = threading.Lock()
         self._published = -1        # sequence number of the last batch published
         self._observers: list[PublishObserver] = []
         self.publish_clock = publish_clock
-        self.publish_every = 1
+        self.every = {group: 1 for group in GROUPS}
         self.publish_count = 0
+
+    @property
+    def publish_every(self) -> int:
+        """Steps between two state batches (``publish_rate``)."""
+        return self.every['state']
 
     def add_observer(self, callback: PublishObserver) -> None:
         """Call ``callback({suffix: msg}, stamp_ns)`` with every batch published."""
@@ -53,13 +67,20 @@ class OrderedPublisher:
         if callback in self._observers:
             self._observers.remove(callback)
 
-    def set_rate(self, rate: float, dt: float) -> None:
-        """Publish every ``1 / rate`` s of sim time (``rate`` Hz, ``dt`` s per step)."""
-        self.publish_every = max(1, int(round(1.0 / (rate * dt))))
+    def set_rate(self, rate: float, dt: float, group: str = 'state') -> None:
+        """Publish ``group`` (``GROUPS``) every ``1 / rate`` s of sim time, at most every
+        step (``rate`` Hz, ``dt`` s per step)."""
+        self.every[group] = max(1, int(round(1.0 / (rate * dt))))
+
+    def _due_groups(self, step: int) -> set[str]:
+        due = {group for group, every in self.every.items() if step % every == 0}
+        if not self.publish_clock:
+            due.discard('clock')
+        return due
 
     def due(self, result: StepResult) -> bool:
-        """Whether the result of this step is one to publish."""
-        return result.step % self.publish_every == 0
+        """Whether the result of this step has a topic to publish."""
+        return bool(self._due_groups(result.step))
 
     def publish(self, result: StepResult, context: MessageContext, sequence: int) -> None:
         """Publish the batch of step ``sequence``, unless a later one is already out.
@@ -73,8 +94,9 @@ class OrderedPublisher:
                 return
             self._published = sequence
             stamp = messages.time_msg(result.time)
+            due = self._due_groups(result.step)
             wanted = [suffix for suffix, pub in self._publishers.items()
-                      if (suffix != 'clock' or self.publish_clock)
+                      if GROUP_OF.get(suffix, 'state') in due
                       and (self._observers or pub.get_subscription_count() > 0)]
             if not wanted:
                 return

@@ -1,6 +1,7 @@
 """Parameter changes while the node runs: what each accepted change does to the node.
 
-``publish_rate``, ``real_time_factor`` and ``publish_clock`` act at once; a dynamic
+``publish_rate``, ``clock_rate``, ``marker_rate``, ``real_time_factor`` and
+``publish_clock`` act at once; a dynamic
 ``physics.*`` key is queued for the physics thread (``sim.set_parameter``) like a
 command. ``log_rejections`` puts rclpy's own refusals (range, type, read-only) in the
 node's log, which rclpy does not.
@@ -36,6 +37,11 @@ class RuntimeParameters:
         node = self._node
         if 'publish_rate' in changes:
             node.state_publisher.set_rate(float(changes['publish_rate']), node.sim.dt)
+        if 'clock_rate' in changes:
+            node.state_publisher.set_rate(float(changes['clock_rate']), node.sim.dt, 'clock')
+        if 'marker_rate' in changes:
+            node.state_publisher.set_rate(float(changes['marker_rate']), node.sim.dt,
+                                          'markers')
         if 'real_time_factor' in changes:
             node.physics.set_real_time_factor(float(changes['real_time_factor']))
         if 'publish_clock' in changes:

@@ -15,8 +15,9 @@ from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from control_msgs.action import GripperCommand, ParallelGripperCommand
 from geometry_msgs.msg import WrenchStamped
-from gripper_sim_interfaces.action import Grasp, GripperCommand
+from gripper_sim_interfaces.action import Grasp
 from gripper_sim_interfaces.msg import FruitState
 from gripper_sim_interfaces.srv import Step
 from rcl_interfaces.msg import Log, Parameter as ParameterMsg
@@ -26,6 +27,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from gripper_sim.ros.process import apply_ros_environment
@@ -44,7 +46,8 @@ class SimClient:
 
     Attributes:
         latest: ``{suffix: last message}`` for 'fruit/state', 'fruit/nodes',
-            'left_jaw/wrench', 'right_jaw/wrench', 'joint_states', 'markers', 'clock'.
+            'left_jaw/wrench', 'right_jaw/wrench', 'joint_states', 'markers', 'clock',
+            'tf'.
         counts: messages received per suffix.
         states: the last 2000 FruitState messages.
         logs: /rosout messages of the node (warnings and above).
@@ -72,6 +75,7 @@ class SimClient:
             'joint_states': (JointState, '/joint_states'),
             'markers': (MarkerArray, f'{self.path}/markers'),
             'clock': (Clock, '/clock'),
+            'tf': (TFMessage, '/tf'),
         }
         for suffix, (kind, topic) in topics.items():
             self.node.create_subscription(kind, topic, self._store(suffix),
@@ -97,6 +101,9 @@ class SimClient:
                                   feedback_sub_qos_profile=FEEDBACK)
         self.gripper_cmd = ActionClient(self.node, GripperCommand, f'{self.path}/gripper_cmd',
                                         feedback_sub_qos_profile=FEEDBACK)
+        self.parallel_gripper_cmd = ActionClient(
+            self.node, ParallelGripperCommand, f'{self.path}/parallel_gripper_cmd',
+            feedback_sub_qos_profile=FEEDBACK)
 
     def _store(self, suffix: str) -> Callable[[Any], None]:
         def store(msg) -> None:
@@ -125,6 +132,7 @@ class SimClient:
                    self.param_client)
         self.spin_until(lambda: all(c.service_is_ready() for c in clients)
                         and self.grasp.server_is_ready() and self.gripper_cmd.server_is_ready()
+                        and self.parallel_gripper_cmd.server_is_ready()
                         and all(p.get_subscription_count() > 0
                                 for p in self.publishers.values())
                         and 'fruit/state' in self.latest, timeout, 'the node to be ready')
@@ -242,6 +250,7 @@ class SimClient:
     def close(self) -> None:
         self.grasp.destroy()
         self.gripper_cmd.destroy()
+        self.parallel_gripper_cmd.destroy()
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
