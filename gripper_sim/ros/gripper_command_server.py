@@ -5,9 +5,11 @@ Goal ``command.position`` is the jaw gap (m), ``command.max_effort`` the grip fo
 limit (N; 0 = parameter ``max_effort``). ``GripperCommandServer`` is also the base of
 ``parallel_gripper_server`` (ParallelGripperCommand): a subclass maps its goal to a
 ``JawTarget`` and the run back to its result and feedback messages; the motion, the
-force limit, the goal and stall checks and preemption are the same. The jaws move to the gap in position mode;
-once the grip force reaches ``max_effort`` the node switches to force mode and holds
-that force (so the fruit is never squeezed harder than asked).
+force limit, the goal and stall checks and preemption are the same.
+
+The jaws move to the gap in position mode; once the grip force reaches ``max_effort``
+the node switches to force mode and holds that force (so the fruit is never squeezed
+harder than asked).
 
 - reached: |gap - position| < ``goal_tolerance`` -> succeeded, ``reached_goal``.
 - stalled: the gap moved less than ``stall_velocity_threshold`` x ``stall_timeout``
@@ -16,8 +18,8 @@ that force (so the fruit is never squeezed harder than asked).
   aborted otherwise, with ``stalled`` set.
 - Feedback (position, real effort, stalled, reached_goal) on every state change and
   every 0.05 s of sim or wall time. Effort is the real mean contact normal force.
-- A new GripperCommand goal preempts the active GripperCommand or Grasp goal (which
-  is aborted). Cancel holds the jaws where they are.
+- A new goal of any jaw action (Grasp, GripperCommand, ParallelGripperCommand)
+  preempts the active one (which is aborted). Cancel holds the jaws where they are.
 """
 from __future__ import annotations
 

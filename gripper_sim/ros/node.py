@@ -6,9 +6,11 @@ ownership), ``physics_thread`` (stepping and pacing), ``commands`` (the command 
 and the jaw topics), ``publishing`` (state topics in step order), ``runtime_parameters``
 (what a parameter change does), ``description`` (``/tf_static``, the URDF on
 ``robot_description``), ``recording_control`` (``record_path``, ``~/record``),
-``services`` (``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``) and the three action
-servers (Grasp, control_msgs GripperCommand and ParallelGripperCommand). What stays here is the step itself (commands, physics, listeners, publishing)
-and the reset, which touch all of them.
+``services`` (``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``),
+``simulation_standard`` (the simulation_interfaces services over them) and the three
+action servers (Grasp, control_msgs GripperCommand and ParallelGripperCommand). What
+stays here is the step itself (commands, physics, listeners, publishing) and the reset,
+which touch all of them.
 
 See the README section "ROS interface" for every topic, service, action and parameter.
 """
@@ -48,6 +50,7 @@ from gripper_sim.ros.publishing import OrderedPublisher, PublishObserver
 from gripper_sim.ros.recording_control import RecordingControl
 from gripper_sim.ros.runtime_parameters import RuntimeParameters, log_rejections
 from gripper_sim.ros.services import SimServices
+from gripper_sim.ros.simulation_standard import SimulationStandard
 from gripper_sim.ros.sync import JawOwner, JawOwnership, SimLock
 from gripper_sim.ros.watchdog import CHECK_PERIOD, STALL_TIMEOUT, PhysicsWatchdog
 from gripper_sim.view.foxglove import start_node_view
@@ -128,6 +131,7 @@ class SimNode(Node):
         self.recording_control = RecordingControl(self, services)
         self.jaw_topics = JawCommandTopics(self, qos)
         self.sim_services = SimServices(self, services)
+        self.simulation_standard = SimulationStandard(self, services)
         self.grasp_server = GraspServer(self)
         self.gripper_command_server = GripperCommandServer(self)
         self.parallel_gripper_server = ParallelGripperCommandServer(self)

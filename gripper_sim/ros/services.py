@@ -1,4 +1,8 @@
-"""The node's simulation services: ``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``."""
+"""The node's simulation services: ``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``.
+
+``set_paused`` and ``take_steps`` are also what the simulation_interfaces services
+(``simulation_standard``) call.
+"""
 from __future__ import annotations
 
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
@@ -32,48 +36,56 @@ class SimServices:
         self._node.get_logger().info(response.message)
         return response
 
-    def _on_pause(self, request, response):
+    def set_paused(self, paused: bool, via: str = '~/pause') -> str:
+        """Pause or resume the physics (``via``: the request, for the log and for an
+        interrupted ``~/step``); returns the message, e.g. ``paused at t = 0.1 s``."""
         node = self._node
         loop = node.physics
         # Under the lock: once this answers "paused", the physics thread takes no step.
         with node.lock:
-            loop.paused = bool(request.data)
-            loop.interrupt_steps(f"interrupted by ~/pause ({'true' if loop.paused else 'false'})")
+            loop.paused = bool(paused)
+            loop.interrupt_steps(f"interrupted by {via} ({'true' if loop.paused else 'false'})")
             if not loop.paused:
                 loop.reanchor()
             sim_time = node.sim.time
         loop.wake()
-        response.success = True
-        state = 'paused' if loop.paused else 'running'
-        response.message = f'{state} at t = {sim_time:.6f} s'
-        node.get_logger().info(response.message)
-        return response
+        message = f"{'paused' if loop.paused else 'running'} at t = {sim_time:.6f} s"
+        node.get_logger().info(message)
+        return message
 
-    def _on_step(self, request, response):
-        """Hand the steps to the physics thread and wait for them (own callback group:
-        ``~/pause``, ``~/reset`` and the rest answer meanwhile, and stop it)."""
+    def take_steps(self, steps: int) -> tuple[bool, str]:
+        """Hand ``steps`` steps to the (paused) physics thread and wait for them:
+        (True, 'advanced n steps') or (False, the reason); a failure is logged."""
         node = self._node
-        response.success = False
-        if request.steps < 1 or request.steps > MAX_STEPS_PER_REQUEST:
-            response.message = (f'refused: steps must be in [1, {MAX_STEPS_PER_REQUEST}], '
-                                f'got {request.steps}')
+        ok = False
+        if steps < 1 or steps > MAX_STEPS_PER_REQUEST:
+            message = f'refused: steps must be in [1, {MAX_STEPS_PER_REQUEST}], got {steps}'
         else:
-            queued = node.physics.request_steps(int(request.steps))
+            queued = node.physics.request_steps(int(steps))
             if isinstance(queued, str):
-                response.message = f'refused: {queued}'
+                message = f'refused: {queued}'
             else:
                 while not queued.done.wait(STEP_WAIT):
                     if node.physics.stopped:
                         queued.finish('the simulator is shutting down')
-                if queued.stopped_by is None:
-                    response.success = True
-                    response.message = f'advanced {queued.taken} steps'
-                else:
-                    response.message = (f'stopped after {queued.taken} of {queued.steps} '
-                                        f'steps: {queued.stopped_by}')
-        if not response.success:
-            node.get_logger().warning(f'step request {response.message}')
-        response.sim_time = float(node.sim.time)
+                ok = queued.stopped_by is None
+                message = (f'advanced {queued.taken} steps' if ok else
+                           f'stopped after {queued.taken} of {queued.steps} steps: '
+                           f'{queued.stopped_by}')
+        if not ok:
+            node.get_logger().warning(f'step request {message}')
+        return ok, message
+
+    def _on_pause(self, request, response):
+        response.message = self.set_paused(bool(request.data))
+        response.success = True
+        return response
+
+    def _on_step(self, request, response):
+        """Wait for the steps (own callback group: ``~/pause``, ``~/reset`` and the rest
+        answer meanwhile, and stop it)."""
+        response.success, response.message = self.take_steps(int(request.steps))
+        response.sim_time = float(self._node.sim.time)
         return response
 
     def _on_open(self, request, response):

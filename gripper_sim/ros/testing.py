@@ -152,6 +152,10 @@ class SimClient:
             if not msg.markers:
                 return None
             stamp = msg.markers[0].header.stamp
+        elif suffix == 'tf':
+            if not msg.transforms:
+                return None
+            stamp = msg.transforms[0].header.stamp
         else:
             stamp = msg.header.stamp
         return stamp.sec * 1_000_000_000 + stamp.nanosec

@@ -1,0 +1,119 @@
+"""The simulation_interfaces services (the standard simulator control of Gazebo, Isaac
+Sim and O3DE), as thin layers over the node's own ``~/reset``, ``~/pause`` and ``~/step``
+(``services.SimServices``). Named in the node's namespace, as the standard's tools look
+for them: ``get_simulator_features``, ``reset_simulation``, ``step_simulation``,
+``get_simulation_state``, ``set_simulation_state``.
+
+Simulation states: PLAYING (running), PAUSED, and STOPPED (set_simulation_state
+STOPPED: reset to t = 0 and paused, until it is played, paused or stepped).
+"""
+from __future__ import annotations
+
+from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
+from simulation_interfaces.msg import Result, SimulationState, SimulatorFeatures
+from simulation_interfaces.srv import (GetSimulationState, GetSimulatorFeatures,
+                                       ResetSimulation, SetSimulationState, StepSimulation)
+
+#: exactly what the services below implement
+FEATURES = (SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_STATE_GETTING,
+            SimulatorFeatures.SIMULATION_STATE_SETTING,
+            SimulatorFeatures.SIMULATION_STATE_PAUSE,
+            SimulatorFeatures.STEP_SIMULATION_SINGLE,
+            SimulatorFeatures.STEP_SIMULATION_MULTIPLE)
+#: reset scopes our reset covers: time and state together (nothing is ever spawned)
+RESET_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Request.SCOPE_ALL,
+                ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE)
+STATE_NAMES = {SimulationState.STATE_STOPPED: 'STOPPED', SimulationState.STATE_PLAYING:
+               'PLAYING', SimulationState.STATE_PAUSED: 'PAUSED',
+               SimulationState.STATE_QUITTING: 'QUITTING',
+               SimulationState.STATE_NO_WORLD: 'NO_WORLD',
+               SimulationState.STATE_LOADING_WORLD: 'LOADING_WORLD'}
+
+
+def _result(code: int = Result.RESULT_OK, message: str = '') -> Result:
+    return Result(result=code, error_message=message)
+
+
+class SimulationStandard:
+    """Serves the simulation_interfaces services of ``node`` (a ``SimNode``) in
+    ``group``; ``step_simulation`` in a group of its own (it waits for the steps)."""
+
+    def __init__(self, node, group: CallbackGroup):
+        self._node = node
+        self._stopped = False
+        node.create_service(GetSimulatorFeatures, 'get_simulator_features',
+                            self._on_features, callback_group=group)
+        node.create_service(ResetSimulation, 'reset_simulation', self._on_reset,
+                            callback_group=group)
+        node.create_service(StepSimulation, 'step_simulation', self._on_step,
+                            callback_group=MutuallyExclusiveCallbackGroup())
+        node.create_service(GetSimulationState, 'get_simulation_state', self._on_get_state,
+                            callback_group=group)
+        node.create_service(SetSimulationState, 'set_simulation_state', self._on_set_state,
+                            callback_group=group)
+
+    @property
+    def state(self) -> int:
+        """The ``SimulationState`` code the node is in."""
+        if not self._node.paused:
+            self._stopped = False
+            return SimulationState.STATE_PLAYING
+        return SimulationState.STATE_STOPPED if self._stopped else SimulationState.STATE_PAUSED
+
+    def _on_features(self, request, response):
+        response.features = SimulatorFeatures(
+            features=list(FEATURES), spawn_formats=[],
+            custom_info='gripper_sim: a parallel-jaw gripper and one deformable fruit; '
+                        'a reset restores t = 0 and the initial commands')
+        return response
+
+    def _on_reset(self, request, response):
+        if request.scope not in RESET_SCOPES:
+            response.result = _result(
+                Result.RESULT_FEATURE_UNSUPPORTED,
+                f'reset scope {request.scope} is not supported: time and state are reset '
+                'together (SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME | SCOPE_STATE)')
+            return response
+        self._node.reset_simulation('the simulation was reset (reset_simulation)')
+        response.result = _result()
+        return response
+
+    def _on_step(self, request, response):
+        if not self._node.paused:
+            response.result = _result(Result.RESULT_INCORRECT_STATE,
+                                      'the simulation is playing; pause it first')
+            return response
+        self._stopped = False
+        ok, message = self._node.sim_services.take_steps(int(request.steps))
+        response.result = _result() if ok else _result(Result.RESULT_OPERATION_FAILED, message)
+        return response
+
+    def _on_get_state(self, request, response):
+        response.state = SimulationState(state=self.state)
+        response.result = _result()
+        return response
+
+    def _on_set_state(self, request, response):
+        target, current = request.state.state, self.state
+        name = STATE_NAMES.get(target, str(target))
+        if target == current:
+            response.result = _result(SetSimulationState.Response.ALREADY_IN_TARGET_STATE,
+                                      f'the simulation is already {name}')
+        elif target == SimulationState.STATE_PLAYING:
+            self._stopped = False
+            self._node.sim_services.set_paused(False, 'set_simulation_state')
+            response.result = _result()
+        elif target == SimulationState.STATE_PAUSED:
+            self._stopped = False
+            self._node.sim_services.set_paused(True, 'set_simulation_state')
+            response.result = _result()
+        elif target == SimulationState.STATE_STOPPED:
+            self._node.sim_services.set_paused(True, 'set_simulation_state')
+            self._node.reset_simulation('the simulation was stopped (set_simulation_state)')
+            self._stopped = True
+            response.result = _result()
+        else:
+            response.result = _result(SetSimulationState.Response.INCORRECT_TRANSITION,
+                                      f'cannot go to state {name}: only PLAYING, PAUSED and '
+                                      'STOPPED are supported')
+        return response

@@ -1,0 +1,105 @@
+"""A generic simulator client drives the node through simulation_interfaces only: the
+features it lists, pause, step N (time advances by exactly N dt), reset, stop, play."""
+import pytest
+from simulation_interfaces.msg import Result, SimulationState, SimulatorFeatures
+from simulation_interfaces.srv import (GetSimulationState, GetSimulatorFeatures,
+                                       ResetSimulation, SetSimulationState, StepSimulation)
+
+from gripper_sim.ros.process import pick_domain_id
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+DOMAIN = pick_domain_id(12)
+DT_NS = 1_000_000   # physics.sim.dt 1 ms; /clock and the state every step
+IMPLEMENTED = {SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_STATE_GETTING,
+               SimulatorFeatures.SIMULATION_STATE_SETTING,
+               SimulatorFeatures.SIMULATION_STATE_PAUSE,
+               SimulatorFeatures.STEP_SIMULATION_SINGLE,
+               SimulatorFeatures.STEP_SIMULATION_MULTIPLE}
+
+
+class Standard:
+    """Service clients of the standard, on the test client's node."""
+
+    def __init__(self, client):
+        self.client = client
+        node = client.node
+        self.features = node.create_client(GetSimulatorFeatures, '/get_simulator_features')
+        self.reset = node.create_client(ResetSimulation, '/reset_simulation')
+        self.step = node.create_client(StepSimulation, '/step_simulation')
+        self.get_state = node.create_client(GetSimulationState, '/get_simulation_state')
+        self.set_state = node.create_client(SetSimulationState, '/set_simulation_state')
+        services = (self.features, self.reset, self.step, self.get_state, self.set_state)
+        client.spin_until(lambda: all(s.service_is_ready() for s in services), 60,
+                          'the simulation_interfaces services')
+
+    def call(self, service, **fields):
+        return self.client.call(service, service.srv_type.Request(**fields))
+
+    def state(self) -> int:
+        response = self.call(self.get_state)
+        assert response.result.result == Result.RESULT_OK
+        return response.state.state
+
+    def go(self, state: int):
+        return self.call(self.set_state, state=SimulationState(state=state)).result
+
+    def clock_ns(self) -> int:
+        stamp = self.client.latest['clock'].clock
+        return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+    def wait_clock(self, ns: int):
+        self.client.spin_until(lambda: 'clock' in self.client.latest and self.clock_ns() == ns,
+                               60, f'/clock at {ns} ns')
+
+
+@pytest.fixture(scope='module')
+def standard(tmp_path_factory, node_and_client):
+    log = tmp_path_factory.mktemp('standard') / 'node.log'
+    parameters = {'physics.sim.dt': 0.001, 'publish_rate': 1000.0, 'clock_rate': 1000.0,
+                  'real_time_factor': 0.0}
+    with node_and_client(parameters, DOMAIN, log, client_name='standard_client') as (_, client):
+        yield Standard(client)
+
+
+def test_the_features_are_exactly_those_implemented(standard):
+    features = standard.call(standard.features).features
+    assert set(features.features) == IMPLEMENTED and len(features.features) == len(IMPLEMENTED)
+    assert list(features.spawn_formats) == []
+
+
+def test_pause_step_n_reset_stop_and_play(standard):
+    assert standard.state() == SimulationState.STATE_PLAYING
+    response = standard.call(standard.step, steps=5)
+    assert response.result.result == Result.RESULT_INCORRECT_STATE   # playing: no step
+
+    assert standard.go(SimulationState.STATE_PAUSED).result == Result.RESULT_OK
+    assert standard.state() == SimulationState.STATE_PAUSED
+    again = standard.go(SimulationState.STATE_PAUSED)
+    assert again.result == SetSimulationState.Response.ALREADY_IN_TARGET_STATE
+
+    assert standard.call(standard.reset).result.result == Result.RESULT_OK
+    standard.wait_clock(0)
+    assert standard.call(standard.step, steps=25).result.result == Result.RESULT_OK
+    standard.wait_clock(25 * DT_NS)
+    assert standard.call(standard.step, steps=1).result.result == Result.RESULT_OK
+    standard.wait_clock(26 * DT_NS)
+    assert standard.state() == SimulationState.STATE_PAUSED
+    assert standard.clock_ns() == 26 * DT_NS   # paused: nothing beyond the steps asked
+
+    only_time = standard.call(standard.reset, scope=ResetSimulation.Request.SCOPE_TIME)
+    assert only_time.result.result == Result.RESULT_FEATURE_UNSUPPORTED
+    assert 'scope' in only_time.result.error_message
+    zero = standard.call(standard.step, steps=0)
+    assert zero.result.result == Result.RESULT_OPERATION_FAILED
+    assert 'steps must be in' in zero.result.error_message
+
+    assert standard.go(SimulationState.STATE_STOPPED).result == Result.RESULT_OK
+    standard.wait_clock(0)
+    assert standard.state() == SimulationState.STATE_STOPPED
+    quitting = standard.go(SimulationState.STATE_QUITTING)
+    assert quitting.result == SetSimulationState.Response.INCORRECT_TRANSITION
+
+    assert standard.go(SimulationState.STATE_PLAYING).result == Result.RESULT_OK
+    assert standard.state() == SimulationState.STATE_PLAYING
+    standard.client.spin_until(lambda: standard.clock_ns() > 50 * DT_NS, 60, 'time to run')
