@@ -1,6 +1,10 @@
 """A generic simulator client drives the node through simulation_interfaces only: the
-features it lists, pause, step N (time advances by exactly N dt), reset, stop, play."""
+features it lists, pause, step N (time advances by exactly N dt), SimulateSteps with
+feedback and cancel, reset, stop, play."""
 import pytest
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient
+from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import Result, SimulationState, SimulatorFeatures
 from simulation_interfaces.srv import (GetSimulationState, GetSimulatorFeatures,
                                        ResetSimulation, SetSimulationState, StepSimulation)
@@ -15,7 +19,8 @@ IMPLEMENTED = {SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_
                SimulatorFeatures.SIMULATION_STATE_SETTING,
                SimulatorFeatures.SIMULATION_STATE_PAUSE,
                SimulatorFeatures.STEP_SIMULATION_SINGLE,
-               SimulatorFeatures.STEP_SIMULATION_MULTIPLE}
+               SimulatorFeatures.STEP_SIMULATION_MULTIPLE,
+               SimulatorFeatures.STEP_SIMULATION_ACTION}
 
 
 class Standard:
@@ -29,8 +34,10 @@ class Standard:
         self.step = node.create_client(StepSimulation, '/step_simulation')
         self.get_state = node.create_client(GetSimulationState, '/get_simulation_state')
         self.set_state = node.create_client(SetSimulationState, '/set_simulation_state')
+        self.simulate = ActionClient(node, SimulateSteps, '/simulate_steps')
         services = (self.features, self.reset, self.step, self.get_state, self.set_state)
-        client.spin_until(lambda: all(s.service_is_ready() for s in services), 60,
+        client.spin_until(lambda: all(s.service_is_ready() for s in services)
+                          and self.simulate.server_is_ready(), 60,
                           'the simulation_interfaces services')
 
     def call(self, service, **fields):
@@ -103,3 +110,39 @@ def test_pause_step_n_reset_stop_and_play(standard):
     assert standard.go(SimulationState.STATE_PLAYING).result == Result.RESULT_OK
     assert standard.state() == SimulationState.STATE_PLAYING
     standard.client.spin_until(lambda: standard.clock_ns() > 50 * DT_NS, 60, 'time to run')
+
+
+def test_simulate_steps_reports_progress_and_stops_when_canceled(standard):
+    client = standard.client
+    assert standard.go(SimulationState.STATE_PAUSED).result in (
+        Result.RESULT_OK, SetSimulationState.Response.ALREADY_IN_TARGET_STATE)
+    assert standard.call(standard.reset).result.result == Result.RESULT_OK
+    standard.wait_clock(0)
+
+    feedback = []
+    handle = client.send_goal(standard.simulate, SimulateSteps.Goal(steps=40), feedback)
+    status, result = client.result(handle)
+    assert status == GoalStatus.STATUS_SUCCEEDED and result.result.result == Result.RESULT_OK
+    standard.wait_clock(40 * DT_NS)
+    client.spin_until(lambda: feedback and feedback[-1].completed_steps == 40, 30,
+                      'the last feedback')
+    assert feedback[-1].remaining_steps == 0
+
+    feedback.clear()
+    long = client.send_goal(standard.simulate, SimulateSteps.Goal(steps=1_000_000), feedback)
+    client.spin_until(lambda: feedback and feedback[-1].completed_steps > 0, 60, 'progress')
+    assert all(f.completed_steps + f.remaining_steps == 1_000_000 for f in feedback)
+    client.cancel(long)
+    status, result = client.result(long)
+    assert status == GoalStatus.STATUS_CANCELED
+    assert result.result.result == Result.RESULT_OPERATION_FAILED
+    assert 'canceled by the client' in result.result.error_message
+    stopped_at = standard.clock_ns()
+    assert standard.state() == SimulationState.STATE_PAUSED
+    assert 40 * DT_NS < stopped_at < 1_000_040 * DT_NS
+
+    assert standard.go(SimulationState.STATE_PLAYING).result == Result.RESULT_OK
+    refused = client.send_goal(standard.simulate, SimulateSteps.Goal(steps=5))
+    status, result = client.result(refused)
+    assert status == GoalStatus.STATUS_ABORTED
+    assert result.result.result == Result.RESULT_INCORRECT_STATE

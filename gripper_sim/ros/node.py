@@ -348,9 +348,10 @@ def main(args: list[str] | None = None) -> int:
         signal.signal(signum, lambda *_: stopping.set())
     node = None
     # Threads: a running goal (Grasp, GripperCommand, ParallelGripperCommand; one
-    # drives, a preempted one finishes) and a ~/step request each wait
-    # in one; the services, topics, parameters and the watchdog need the rest.
-    executor = MultiThreadedExecutor(num_threads=6)
+    # drives, a preempted one finishes) and a step request (~/step, step_simulation,
+    # simulate_steps) each wait in one; the services, topics, parameters and the
+    # watchdog need the rest.
+    executor = MultiThreadedExecutor(num_threads=8)
     try:
         try:
             node = SimNode(fruit=options.fruit, config_file=options.config,

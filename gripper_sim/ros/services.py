@@ -5,6 +5,8 @@
 """
 from __future__ import annotations
 
+from typing import Callable
+
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from std_srvs.srv import SetBool, Trigger
 
@@ -53,9 +55,15 @@ class SimServices:
         node.get_logger().info(message)
         return message
 
-    def take_steps(self, steps: int) -> tuple[bool, str]:
+    def take_steps(self, steps: int, progress: Callable[[int, int], None] | None = None,
+                   canceled: Callable[[], bool] | None = None,
+                   period: float = STEP_WAIT) -> tuple[bool, str]:
         """Hand ``steps`` steps to the (paused) physics thread and wait for them:
-        (True, 'advanced n steps') or (False, the reason); a failure is logged."""
+        (True, 'advanced n steps') or (False, the reason); a failure is logged.
+
+        Every ``period`` wall s meanwhile: ``progress(taken, steps)``, and the request
+        ends (before its next step) once ``canceled()`` is true.
+        """
         node = self._node
         ok = False
         if steps < 1 or steps > MAX_STEPS_PER_REQUEST:
@@ -65,9 +73,14 @@ class SimServices:
             if isinstance(queued, str):
                 message = f'refused: {queued}'
             else:
-                while not queued.done.wait(STEP_WAIT):
+                while not queued.done.wait(period):
                     if node.physics.stopped:
                         queued.finish('the simulator is shutting down')
+                    elif canceled is not None and canceled():
+                        with node.lock:
+                            node.physics.interrupt_steps('canceled by the client')
+                    elif progress is not None:
+                        progress(queued.taken, queued.steps)
                 ok = queued.stopped_by is None
                 message = (f'advanced {queued.taken} steps' if ok else
                            f'stopped after {queued.taken} of {queued.steps} steps: '

@@ -2,14 +2,18 @@
 Sim and O3DE), as thin layers over the node's own ``~/reset``, ``~/pause`` and ``~/step``
 (``services.SimServices``). Named in the node's namespace, as the standard's tools look
 for them: ``get_simulator_features``, ``reset_simulation``, ``step_simulation``,
-``get_simulation_state``, ``set_simulation_state``.
+``get_simulation_state``, ``set_simulation_state``, and the ``simulate_steps`` action
+(feedback every ``FEEDBACK_PERIOD`` wall s, cancel ends it before the next step).
 
 Simulation states: PLAYING (running), PAUSED, and STOPPED (set_simulation_state
 STOPPED: reset to t = 0 and paused, until it is played, paused or stepped).
 """
 from __future__ import annotations
 
-from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
+from rclpy.action import ActionServer, CancelResponse
+from rclpy.callback_groups import (CallbackGroup, MutuallyExclusiveCallbackGroup,
+                                   ReentrantCallbackGroup)
+from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import Result, SimulationState, SimulatorFeatures
 from simulation_interfaces.srv import (GetSimulationState, GetSimulatorFeatures,
                                        ResetSimulation, SetSimulationState, StepSimulation)
@@ -19,7 +23,9 @@ FEATURES = (SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_STA
             SimulatorFeatures.SIMULATION_STATE_SETTING,
             SimulatorFeatures.SIMULATION_STATE_PAUSE,
             SimulatorFeatures.STEP_SIMULATION_SINGLE,
-            SimulatorFeatures.STEP_SIMULATION_MULTIPLE)
+            SimulatorFeatures.STEP_SIMULATION_MULTIPLE,
+            SimulatorFeatures.STEP_SIMULATION_ACTION)
+FEEDBACK_PERIOD = 0.05   # wall s, SimulateSteps progress
 #: reset scopes our reset covers: time and state together (nothing is ever spawned)
 RESET_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Request.SCOPE_ALL,
                 ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE)
@@ -51,6 +57,10 @@ class SimulationStandard:
                             callback_group=group)
         node.create_service(SetSimulationState, 'set_simulation_state', self._on_set_state,
                             callback_group=group)
+        self._simulate = ActionServer(
+            node, SimulateSteps, 'simulate_steps', execute_callback=self._on_simulate,
+            cancel_callback=lambda goal_handle: CancelResponse.ACCEPT,
+            callback_group=ReentrantCallbackGroup())
 
     @property
     def state(self) -> int:
@@ -87,6 +97,34 @@ class SimulationStandard:
         ok, message = self._node.sim_services.take_steps(int(request.steps))
         response.result = _result() if ok else _result(Result.RESULT_OPERATION_FAILED, message)
         return response
+
+    def _on_simulate(self, goal_handle):
+        """The SimulateSteps action: ``step_simulation`` with progress and cancel."""
+        result = SimulateSteps.Result()
+        steps = int(goal_handle.request.steps)
+        if not self._node.paused:
+            result.result = _result(Result.RESULT_INCORRECT_STATE,
+                                    'the simulation is playing; pause it first')
+            goal_handle.abort()
+            return result
+        self._stopped = False
+
+        def progress(taken: int, total: int) -> None:
+            goal_handle.publish_feedback(SimulateSteps.Feedback(
+                completed_steps=taken, remaining_steps=total - taken))
+        ok, message = self._node.sim_services.take_steps(
+            steps, progress, lambda: goal_handle.is_cancel_requested, FEEDBACK_PERIOD)
+        if ok:
+            progress(steps, steps)
+            result.result = _result()
+            goal_handle.succeed()
+        elif goal_handle.is_cancel_requested:
+            result.result = _result(Result.RESULT_OPERATION_FAILED, message)
+            goal_handle.canceled()
+        else:
+            result.result = _result(Result.RESULT_OPERATION_FAILED, message)
+            goal_handle.abort()
+        return result
 
     def _on_get_state(self, request, response):
         response.state = SimulationState(state=self.state)
