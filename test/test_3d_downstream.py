@@ -288,7 +288,8 @@ def test_live_recording_of_the_3d_node_round_trips_through_info_and_replay(
 
     parameters = {'real_time_factor': 0.0, 'physics.dimension': 3,
                   'physics.fruit.mesh.subdivisions': 3, 'physics.sim.dt': 0.002,
-                  'physics.gripper.initial_gap': 0.066}
+                  'physics.gripper.initial_gap': 0.066,
+                  'marker_rate': 100.0}   # markers with every state batch (publish_rate 100)
     live = tmp_path / 'live3d.mcap'
     in_node = tmp_path / 'innode3d.mcap'
     node = node_process(parameters, env=env, log_path=tmp_path / 'node.log').start()

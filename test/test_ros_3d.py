@@ -17,7 +17,8 @@ DIAMETER = 0.0635          # apple
 INITIAL_GAP = 0.068
 PARAMETERS = {'real_time_factor': 0.0, 'physics.dimension': 3,
               'physics.fruit.mesh.subdivisions': 3, 'physics.sim.dt': 0.002,
-              'physics.gripper.initial_gap': INITIAL_GAP}
+              'physics.gripper.initial_gap': INITIAL_GAP,
+              'marker_rate': 100.0}   # markers with every state batch (publish_rate 100)
 
 
 @pytest.fixture(scope='module')
