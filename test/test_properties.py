@@ -194,10 +194,15 @@ def assert_healthy(sim_node):
     assert sim_node.physics.alive
     batches, sim_node.published[:] = list(sim_node.published), []
     for batch in batches:
+        if 'fruit/state' not in batch:   # /clock (or markers) at its own rate only
+            continue
         state = batch['fruit/state']
         for field in ('gap', 'grip_force', 'compression', 'elastic_energy'):
             assert math.isfinite(getattr(state, field)), field
         assert np.all(np.isfinite(messages.read_point_cloud(batch['fruit/nodes'])))
+        for edge in batch['tf'].transforms:
+            t = edge.transform.translation
+            assert all(map(math.isfinite, (t.x, t.y, t.z))), edge.child_frame_id
 
 
 def wait_steps(sim_node, steps=3, timeout=60.0):
