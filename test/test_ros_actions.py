@@ -133,8 +133,10 @@ def test_a_new_goal_preempts_the_active_grasp_and_cancel_holds_the_jaws(client):
     assert client.latest['fruit/state'].grip_force > 3.0   # still gripping
 
     # a GripperCommand goal preempts a Grasp too
-    third = client.send_goal(client.grasp, grasp_goal(6.0, hold=3000.0))
+    feedback = []
+    third = client.send_goal(client.grasp, grasp_goal(6.0, hold=3000.0), feedback)
     assert third.accepted
+    client.spin_until(lambda: bool(feedback), 120, 'the third grasp to start')
     fourth = client.send_goal(client.gripper_cmd, gripper_goal(0.070, 10.0))
     assert fourth.accepted
     status, result = client.result(third)

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from gripper_sim.ros.process import domain_in_use
+
 ROOT = Path(__file__).resolve().parent.parent
 IFACE = ROOT / 'interfaces' / 'gripper_sim_interfaces'
 INTERFACE_FILES = ('msg/FruitState.msg', 'action/Grasp.action', 'srv/Step.srv')
@@ -42,8 +44,13 @@ def test_rclpy_imports_and_creates_a_node():
     try:
         node = rclpy.create_node('gripper_sim_setup_check', context=context)
         assert node.get_name() == 'gripper_sim_setup_check'
-        from gripper_sim.ros.process import domain_in_use  # the probe the domain picking relies on
-        assert domain_in_use(int(os.environ['ROS_DOMAIN_ID']))
+        # the probe the domain picking relies on sees this participant's ports (the
+        # domain the context really uses; other participants may hold the low indexes)
+        domain = context.get_domain_id()
+        deadline = time.monotonic() + 5.0
+        while not domain_in_use(domain, participants=32) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert domain_in_use(domain, participants=32), domain
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
@@ -230,7 +237,6 @@ def test_two_processes_talk_on_loopback(ros_env):
 
 
 def test_new_domain_ids_are_distinct_and_unused(new_domain_id):
-    from gripper_sim.ros.process import domain_in_use
     ids = [new_domain_id() for _ in range(3)]
     assert len(set(ids + [int(os.environ['ROS_DOMAIN_ID'])])) == 4
     assert all(1 <= i <= 101 and not domain_in_use(i) for i in ids)
