@@ -19,6 +19,7 @@ MIT (its wrapper) but bundles TetGen, AGPL-3.0.
 from __future__ import annotations
 
 import ast
+import xml.etree.ElementTree as ET
 import re
 import sys
 from importlib import metadata
@@ -55,6 +56,17 @@ ROS_WHEELS = frozenset('''
     ros-wheels-bootstrapper'''.split())
 #: this project's own distributions
 OWN = frozenset({'gripper-sim', 'gripper-sim-interfaces'})
+
+
+def interface_licences() -> dict[str, str]:
+    """The interface packages built from ``interfaces/`` (ours, and our own copies of the
+    standard definitions, used where the real packages are absent): distribution name ->
+    the licence their package.xml declares (their builds carry no licence metadata)."""
+    licences = {}
+    for package_xml in sorted((ROOT / 'interfaces').glob('*/package.xml')):
+        root = ET.parse(package_xml).getroot()
+        licences[root.findtext('name').replace('_', '-')] = root.findtext('license')
+    return licences
 #: distributions whose metadata names a permissive licence but which bundle copyleft code
 BUNDLED_COPYLEFT = {'tetgen': 'bundles TetGen (AGPL-3.0) under an MIT wrapper'}
 #: a License field longer than this is a licence text, not a licence name
@@ -203,8 +215,13 @@ def test_runtime_closure_holds_what_the_package_imports():
 
 def test_no_gpl_family_licence_in_the_runtime_dependencies():
     findings, unknown = [], []
+    interfaces = interface_licences()
     for name, dist in sorted(runtime_closure().items()):
         if name in OWN:
+            continue
+        if name in interfaces:
+            if _COPYLEFT.search(interfaces[name]):
+                findings.append(f'{name}: {interfaces[name]} (its package.xml)')
             continue
         if name.startswith('ros-'):
             if name not in ROS_WHEELS:
@@ -221,3 +238,10 @@ def test_no_gpl_family_licence_in_the_runtime_dependencies():
             findings.append(f'{name}: {licence[0]}')
     assert not findings, 'GPL-family runtime dependencies: ' + ', '.join(findings)
     assert not unknown, 'runtime dependencies of unknown licence: ' + ', '.join(unknown)
+
+
+def test_interface_packages_declare_a_permissive_licence():
+    licences = interface_licences()
+    assert {'gripper-sim-interfaces', 'control-msgs', 'simulation-interfaces',
+            'tf2-msgs'} <= set(licences)
+    assert all(licence and not _COPYLEFT.search(licence) for licence in licences.values())
