@@ -4,6 +4,7 @@ Sim and O3DE), as thin layers over the node's own ``~/reset``, ``~/pause`` and `
 for them: ``get_simulator_features``, ``reset_simulation``, ``step_simulation``,
 ``get_simulation_state``, ``set_simulation_state``, and the ``simulate_steps`` action
 (feedback every ``FEEDBACK_PERIOD`` wall s, cancel ends it before the next step).
+The entity services are in ``entities``.
 
 Simulation states: PLAYING (running), PAUSED, and STOPPED (set_simulation_state
 STOPPED: reset to t = 0 and paused, until it is played, paused or stepped).
@@ -24,9 +25,13 @@ FEATURES = (SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_STA
             SimulatorFeatures.SIMULATION_STATE_PAUSE,
             SimulatorFeatures.STEP_SIMULATION_SINGLE,
             SimulatorFeatures.STEP_SIMULATION_MULTIPLE,
-            SimulatorFeatures.STEP_SIMULATION_ACTION)
+            SimulatorFeatures.STEP_SIMULATION_ACTION,
+            SimulatorFeatures.ENTITY_STATE_GETTING, SimulatorFeatures.SPAWNABLES,
+            SimulatorFeatures.SPAWNING)
+#: spawn_entity takes a fruit preset name or a preset file of this format
+SPAWN_FORMATS = ('yaml',)
 FEEDBACK_PERIOD = 0.05   # wall s, SimulateSteps progress
-#: reset scopes our reset covers: time and state together (nothing is ever spawned)
+#: reset scopes our reset covers: time and state together (a spawned fruit stays)
 RESET_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Request.SCOPE_ALL,
                 ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE)
 STATE_NAMES = {SimulationState.STATE_STOPPED: 'STOPPED', SimulationState.STATE_PLAYING:
@@ -72,9 +77,10 @@ class SimulationStandard:
 
     def _on_features(self, request, response):
         response.features = SimulatorFeatures(
-            features=list(FEATURES), spawn_formats=[],
+            features=list(FEATURES), spawn_formats=list(SPAWN_FORMATS),
             custom_info='gripper_sim: a parallel-jaw gripper and one deformable fruit; '
-                        'a reset restores t = 0 and the initial commands')
+                        'a reset restores t = 0 and the initial commands; spawn_entity '
+                        'replaces the fruit (a preset name or file), nothing is deleted')
         return response
 
     def _on_reset(self, request, response):
