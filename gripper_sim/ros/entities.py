@@ -27,6 +27,7 @@ from gripper_sim.errors import ConfigError
 from gripper_sim.convert import frames as frame_tree
 from gripper_sim.core.results import StepResult
 from gripper_sim.ros.messages import time_msg, world_xyz
+from gripper_sim.ros.simulation_standard import outcome
 
 FRUIT, LEFT_JAW, RIGHT_JAW, TABLE = 'fruit', 'left_jaw', 'right_jaw', 'table'
 CATEGORIES = {FRUIT: EntityCategory.CATEGORY_DYNAMIC_OBJECT,
@@ -42,30 +43,27 @@ DELETE_REFUSALS = {
            "false for a world without it"}
 
 
-def _result(code: int = Result.RESULT_OK, message: str = '') -> Result:
-    return Result(result=code, error_message=message)
-
-
 def entity_names(has_table: bool) -> list[str]:
     """The entities of a world with or without a table, in a fixed order."""
     return [FRUIT, LEFT_JAW, RIGHT_JAW] + ([TABLE] if has_table else [])
 
 
-def filtered(names: list[str], filters) -> tuple[list[str], str]:
+def filtered(names: list[str], filters) -> tuple[list[str], Result]:
     """``names`` matching the ``EntityFilters`` ``filters`` (regex searched in the name,
-    categories, tags: none of our entities has a tag); ``('', error)`` on a bad regex or
-    a bounds filter (not supported)."""
+    categories, tags: none of our entities has a tag), and the ``Result``: a bad regex
+    or a bounds filter (not supported) match nothing."""
     if filters.bounds.type != Bounds.TYPE_EMPTY:
-        return [], 'bounds filters are not supported'
+        return [], outcome(Result.RESULT_FEATURE_UNSUPPORTED, 'bounds filters are not supported')
     try:
         pattern = re.compile(filters.filter) if filters.filter else None
     except re.error as error:
-        return [], f"invalid filter regex '{filters.filter}': {error}"
+        return [], outcome(Result.RESULT_OPERATION_FAILED,
+                           f"invalid filter regex '{filters.filter}': {error}")
     categories = {c.category for c in filters.categories}
     return [name for name in names
             if (pattern is None or pattern.search(name))
             and (not categories or CATEGORIES[name] in categories)
-            and not filters.tags.tags], ''
+            and not filters.tags.tags], outcome()
 
 
 def spawnable_description(name: str) -> str:
@@ -102,8 +100,8 @@ def entity_pose_twist(result: StepResult, entity: str, frames, table_height: flo
 
 class EntityServices:
     """Serves the entity services of ``node`` (a ``SimNode``) in ``group``;
-    ``replace_fruit(name_or_path) -> str | None`` swaps the fruit (an error message or
-    None), ``has_table()`` tells whether the world has a table."""
+    ``replace_fruit(name_or_path) -> str | None`` swaps the fruit (an error message, or
+    None when it was replaced)."""
 
     def __init__(self, node, group, replace_fruit: Callable[[str], str | None]):
         self._node = node
@@ -120,18 +118,13 @@ class EntityServices:
         return entity_names(bool(self._node.params.config['world.table']))
 
     def _on_entities(self, request, response):
-        names, error = filtered(self._names(), request.filters)
-        response.entities = names
-        response.result = (_result(Result.RESULT_FEATURE_UNSUPPORTED, error)
-                           if error.startswith('bounds') else
-                           _result(Result.RESULT_OPERATION_FAILED, error) if error
-                           else _result())
+        response.entities, response.result = filtered(self._names(), request.filters)
         return response
 
     def _on_entity_state(self, request, response):
         node = self._node
         if request.entity not in self._names():
-            response.result = _result(Result.RESULT_NOT_FOUND,
+            response.result = outcome(Result.RESULT_NOT_FOUND,
                                       f"no entity '{request.entity}' (entities: "
                                       f"{', '.join(self._names())})")
             return response
@@ -145,61 +138,61 @@ class EntityServices:
             pose=Pose(position=Point(x=position[0], y=position[1], z=position[2]),
                       orientation=Quaternion(w=1.0)),
             twist=Twist(linear=Vector3(x=velocity[0], y=velocity[1], z=velocity[2])))
-        response.result = _result()
+        response.result = outcome()
         return response
 
     def _on_spawnables(self, request, response):
         if request.sources:
-            response.result = _result(
+            response.result = outcome(
                 Result.RESULT_NOT_FOUND, 'only the built-in fruit presets are listed; '
                 'leave sources empty (a preset file path can still be spawned)')
             return response
         response.spawnables = [Spawnable(uri=name, description=spawnable_description(name))
                                for name in configuration.available_fruits()]
-        response.result = _result()
+        response.result = outcome()
         return response
 
     def _on_spawn(self, request, response):
-        response.result = self._spawn_problem(request) or _result()
+        response.result = self._spawn_problem(request) or outcome()
         if response.result.result == Result.RESULT_OK:
             response.entity_name = FRUIT
         return response
 
     def _spawn_problem(self, request) -> Result | None:
         if request.name not in ('', FRUIT):
-            return _result(SpawnEntity.Response.NAME_NOT_UNIQUE,
+            return outcome(SpawnEntity.Response.NAME_NOT_UNIQUE,
                            f"cannot spawn '{request.name}': the simulation holds exactly "
                            f"one fruit; spawn under the name '{FRUIT}' (or no name) to "
                            'replace it')
         if request.entity_namespace:
-            return _result(SpawnEntity.Response.NAMESPACE_INVALID,
+            return outcome(SpawnEntity.Response.NAMESPACE_INVALID,
                            'entity namespaces are not supported')
         if request.resource_string:
-            return _result(SpawnEntity.Response.UNSUPPORTED_FORMAT,
+            return outcome(SpawnEntity.Response.UNSUPPORTED_FORMAT,
                            'spawn by uri: a fruit preset name or a preset file path')
         if not request.uri:
-            return _result(SpawnEntity.Response.NO_RESOURCE,
+            return outcome(SpawnEntity.Response.NO_RESOURCE,
                            'no uri: give a fruit preset name (get_spawnables) or a preset '
                            'file path')
         pose = request.initial_pose.pose
         if (pose.position.x, pose.position.y, pose.position.z) != (0.0, 0.0, 0.0) or \
                 (pose.orientation.x, pose.orientation.y, pose.orientation.z,
                  pose.orientation.w) != (0.0, 0.0, 0.0, 1.0):
-            return _result(SpawnEntity.Response.INVALID_POSE,
+            return outcome(SpawnEntity.Response.INVALID_POSE,
                            'the fruit always starts at rest on the table; leave '
                            'initial_pose at its default')
         try:
             configuration.fruit_preset_path(request.uri)
         except ConfigError as error:
-            return _result(Result.RESULT_NOT_FOUND, f'{error}')
+            return outcome(Result.RESULT_NOT_FOUND, f'{error}')
         error = self._replace_fruit(request.uri)
         if error:
-            return _result(SpawnEntity.Response.RESOURCE_PARSE_ERROR, error)
+            return outcome(SpawnEntity.Response.RESOURCE_PARSE_ERROR, error)
         return None
 
     def _on_delete(self, request, response):
         reason = DELETE_REFUSALS.get(request.entity)
-        response.result = (_result(Result.RESULT_OPERATION_FAILED, reason) if reason else
-                           _result(Result.RESULT_NOT_FOUND,
+        response.result = (outcome(Result.RESULT_OPERATION_FAILED, reason) if reason else
+                           outcome(Result.RESULT_NOT_FOUND,
                                    f"no entity '{request.entity}'"))
         return response
