@@ -185,6 +185,11 @@ class EntityServices:
             configuration.fruit_preset_path(request.uri)
         except ConfigError as error:
             return outcome(Result.RESULT_NOT_FOUND, f'{error}')
+        recording = self._node.recording_control.recording
+        if recording is not None and recording.active:
+            return outcome(Result.RESULT_INCORRECT_STATE,
+                           'a recording is running and names the current fruit; stop it '
+                           '(~/record false) before replacing the fruit')
         error = self._replace_fruit(request.uri)
         if error:
             return outcome(SpawnEntity.Response.RESOURCE_PARSE_ERROR, error)
