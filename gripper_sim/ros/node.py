@@ -33,12 +33,14 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
+from gripper_sim import configuration
 from gripper_sim.core import make_simulation
 from gripper_sim.core.results import StepResult
 from gripper_sim.errors import CommandError, ConvergenceError, GripperSimError
 from gripper_sim.ros import messages
 from gripper_sim.ros.commands import CommandQueue, DoneCallback, JawCommandTopics
 from gripper_sim.ros.description import RobotDescription
+from gripper_sim.ros.entities import EntityServices
 from gripper_sim.ros.grasp_server import GraspServer
 from gripper_sim.ros.gripper_command_server import GripperCommandServer
 from gripper_sim.ros.messages import MessageContext
@@ -98,6 +100,7 @@ class SimNode(Node):
         self.lock = SimLock()
         self.jaws = JawOwnership()
         self._sequence = 0          # +1 per step and per reset, under ``lock``
+        self._simulation_factory = simulation_factory
         self.sim = simulation_factory(dict(self.params.config))
         self.message_context = MessageContext.from_config(
             self.params.config, initial=self.sim.last,
@@ -132,6 +135,7 @@ class SimNode(Node):
         self.jaw_topics = JawCommandTopics(self, qos)
         self.sim_services = SimServices(self, services)
         self.simulation_standard = SimulationStandard(self, services)
+        self.entities = EntityServices(self, services, self.replace_fruit)
         self.grasp_server = GraspServer(self)
         self.gripper_command_server = GripperCommandServer(self)
         self.parallel_gripper_server = ParallelGripperCommandServer(self)
@@ -273,14 +277,20 @@ class SimNode(Node):
                                 'aborting the active goal')
         self.reset_simulation(f'the simulation was reset after a failed step ({reason})')
 
-    def reset_simulation(self, reason: str) -> None:
-        """Abort the active goal (with ``reason``), drop queued commands, reset to t = 0."""
+    def reset_simulation(self, reason: str,
+                         replacement: tuple[Any, dict, MessageContext] | None = None) -> None:
+        """Abort the active goal (with ``reason``), drop queued commands, reset to t = 0;
+        with ``replacement`` (simulation, configuration, message context) that new
+        simulation takes the old one's place instead."""
         self.jaws.abort_owner(reason)
         with self.lock:
             self.physics.interrupt_steps(reason)
             self.commands.clear()
-            self.sim.reset()
-            self.message_context.reset()
+            if replacement is None:
+                self.sim.reset()
+                self.message_context.reset()
+            else:
+                self.sim, self.params.config, self.message_context = replacement
             self.physics.reanchor()
             self._sequence += 1
             initial = self.sim.last
@@ -288,6 +298,30 @@ class SimNode(Node):
             for listener in self._reset_listeners:
                 listener(initial)
         self.state_publisher.publish(*batch)
+
+    def replace_fruit(self, fruit: str) -> str | None:
+        """Swap the fruit for the preset ``fruit`` (a name or a preset file path): the
+        keys the preset sets replace the current ones, everything else stays; the new
+        fruit starts at rest at t = 0, as after a reset. Returns an error message, or
+        None when the fruit was replaced."""
+        config = dict(self.params.config)
+        try:
+            keys = configuration.flatten(configuration.read_yaml(
+                configuration.fruit_preset_path(fruit)))
+            preset = configuration.load_config(fruit=fruit,
+                                               overrides={'dimension': config['dimension']})
+            config.update({key: preset[key] for key in keys if key in preset})
+            config = configuration.validate(config)
+            sim = self._simulation_factory(dict(config))
+            context = MessageContext.from_config(
+                config, initial=sim.last, frame_prefix=str(self.params.get('frame_prefix')))
+        except (GripperSimError, ValueError) as error:
+            return f"fruit '{fruit}' not loaded: {error}"
+        self.params.fruit = str(config['fruit.name'])
+        self.reset_simulation(f"the fruit was replaced by '{fruit}' (spawn_entity)",
+                              (sim, config, context))
+        self.get_logger().info(f"fruit replaced by '{config['fruit.name']}' (spawn_entity)")
+        return None
 
     # ------------------------------------------------------------ parameters
     def set_parameters(self, parameter_list):

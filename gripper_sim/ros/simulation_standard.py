@@ -4,6 +4,7 @@ Sim and O3DE), as thin layers over the node's own ``~/reset``, ``~/pause`` and `
 for them: ``get_simulator_features``, ``reset_simulation``, ``step_simulation``,
 ``get_simulation_state``, ``set_simulation_state``, and the ``simulate_steps`` action
 (feedback every ``FEEDBACK_PERIOD`` wall s, cancel ends it before the next step).
+The entity services are in ``entities``.
 
 Simulation states: PLAYING (running), PAUSED, and STOPPED (set_simulation_state
 STOPPED: reset to t = 0 and paused, until it is played, paused or stepped).
@@ -24,9 +25,13 @@ FEATURES = (SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_STA
             SimulatorFeatures.SIMULATION_STATE_PAUSE,
             SimulatorFeatures.STEP_SIMULATION_SINGLE,
             SimulatorFeatures.STEP_SIMULATION_MULTIPLE,
-            SimulatorFeatures.STEP_SIMULATION_ACTION)
+            SimulatorFeatures.STEP_SIMULATION_ACTION,
+            SimulatorFeatures.ENTITY_STATE_GETTING, SimulatorFeatures.SPAWNABLES,
+            SimulatorFeatures.SPAWNING)
+#: spawn_entity takes a fruit preset name or a preset file of this format
+SPAWN_FORMATS = ('yaml',)
 FEEDBACK_PERIOD = 0.05   # wall s, SimulateSteps progress
-#: reset scopes our reset covers: time and state together (nothing is ever spawned)
+#: reset scopes our reset covers: time and state together (a spawned fruit stays)
 RESET_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Request.SCOPE_ALL,
                 ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE)
 STATE_NAMES = {SimulationState.STATE_STOPPED: 'STOPPED', SimulationState.STATE_PLAYING:
@@ -36,7 +41,8 @@ STATE_NAMES = {SimulationState.STATE_STOPPED: 'STOPPED', SimulationState.STATE_P
                SimulationState.STATE_LOADING_WORLD: 'LOADING_WORLD'}
 
 
-def _result(code: int = Result.RESULT_OK, message: str = '') -> Result:
+def outcome(code: int = Result.RESULT_OK, message: str = '') -> Result:
+    """A simulation_interfaces ``Result`` (OK unless ``code`` says otherwise)."""
     return Result(result=code, error_message=message)
 
 
@@ -72,30 +78,31 @@ class SimulationStandard:
 
     def _on_features(self, request, response):
         response.features = SimulatorFeatures(
-            features=list(FEATURES), spawn_formats=[],
+            features=list(FEATURES), spawn_formats=list(SPAWN_FORMATS),
             custom_info='gripper_sim: a parallel-jaw gripper and one deformable fruit; '
-                        'a reset restores t = 0 and the initial commands')
+                        'a reset restores t = 0 and the initial commands; spawn_entity '
+                        'replaces the fruit (a preset name or file), nothing is deleted')
         return response
 
     def _on_reset(self, request, response):
         if request.scope not in RESET_SCOPES:
-            response.result = _result(
+            response.result = outcome(
                 Result.RESULT_FEATURE_UNSUPPORTED,
                 f'reset scope {request.scope} is not supported: time and state are reset '
                 'together (SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME | SCOPE_STATE)')
             return response
         self._node.reset_simulation('the simulation was reset (reset_simulation)')
-        response.result = _result()
+        response.result = outcome()
         return response
 
     def _on_step(self, request, response):
         if not self._node.paused:
-            response.result = _result(Result.RESULT_INCORRECT_STATE,
+            response.result = outcome(Result.RESULT_INCORRECT_STATE,
                                       'the simulation is playing; pause it first')
             return response
         self._stopped = False
         ok, message = self._node.sim_services.take_steps(int(request.steps))
-        response.result = _result() if ok else _result(Result.RESULT_OPERATION_FAILED, message)
+        response.result = outcome() if ok else outcome(Result.RESULT_OPERATION_FAILED, message)
         return response
 
     def _on_simulate(self, goal_handle):
@@ -103,7 +110,7 @@ class SimulationStandard:
         result = SimulateSteps.Result()
         steps = int(goal_handle.request.steps)
         if not self._node.paused:
-            result.result = _result(Result.RESULT_INCORRECT_STATE,
+            result.result = outcome(Result.RESULT_INCORRECT_STATE,
                                     'the simulation is playing; pause it first')
             goal_handle.abort()
             return result
@@ -116,42 +123,42 @@ class SimulationStandard:
             steps, progress, lambda: goal_handle.is_cancel_requested, FEEDBACK_PERIOD)
         if ok:
             progress(steps, steps)
-            result.result = _result()
+            result.result = outcome()
             goal_handle.succeed()
         elif goal_handle.is_cancel_requested:
-            result.result = _result(Result.RESULT_OPERATION_FAILED, message)
+            result.result = outcome(Result.RESULT_OPERATION_FAILED, message)
             goal_handle.canceled()
         else:
-            result.result = _result(Result.RESULT_OPERATION_FAILED, message)
+            result.result = outcome(Result.RESULT_OPERATION_FAILED, message)
             goal_handle.abort()
         return result
 
     def _on_get_state(self, request, response):
         response.state = SimulationState(state=self.state)
-        response.result = _result()
+        response.result = outcome()
         return response
 
     def _on_set_state(self, request, response):
         target, current = request.state.state, self.state
         name = STATE_NAMES.get(target, str(target))
         if target == current:
-            response.result = _result(SetSimulationState.Response.ALREADY_IN_TARGET_STATE,
+            response.result = outcome(SetSimulationState.Response.ALREADY_IN_TARGET_STATE,
                                       f'the simulation is already {name}')
         elif target == SimulationState.STATE_PLAYING:
             self._stopped = False
             self._node.sim_services.set_paused(False, 'set_simulation_state')
-            response.result = _result()
+            response.result = outcome()
         elif target == SimulationState.STATE_PAUSED:
             self._stopped = False
             self._node.sim_services.set_paused(True, 'set_simulation_state')
-            response.result = _result()
+            response.result = outcome()
         elif target == SimulationState.STATE_STOPPED:
             self._node.sim_services.set_paused(True, 'set_simulation_state')
             self._node.reset_simulation('the simulation was stopped (set_simulation_state)')
             self._stopped = True
-            response.result = _result()
+            response.result = outcome()
         else:
-            response.result = _result(SetSimulationState.Response.INCORRECT_TRANSITION,
+            response.result = outcome(SetSimulationState.Response.INCORRECT_TRANSITION,
                                       f'cannot go to state {name}: only PLAYING, PAUSED and '
                                       'STOPPED are supported')
         return response

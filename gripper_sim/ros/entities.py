@@ -1,0 +1,203 @@
+"""The entity services of simulation_interfaces over the node's one simulation:
+``get_entities``, ``get_entity_state``, ``get_spawnables``, ``spawn_entity`` and
+``delete_entity``, named in the node's namespace.
+
+Entities: ``fruit`` (a dynamic object), ``left_jaw`` and ``right_jaw`` (the robot) and,
+when the world has one, ``table`` (a static object). There is always exactly one fruit:
+``spawn_entity`` replaces it by another preset (it keeps the name ``fruit`` and starts at
+rest on the table, as after a reset), and ``delete_entity`` refuses every entity, the
+fruit included (a gripper simulation without a fruit has nothing to simulate).
+"""
+from __future__ import annotations
+
+import re
+from typing import Callable
+
+import numpy as np
+
+from geometry_msgs.msg import Point, Pose, Quaternion, Twist, Vector3
+from simulation_interfaces.msg import (Bounds, EntityCategory, EntityState, Result,
+                                       Spawnable)
+from simulation_interfaces.srv import (DeleteEntity, GetEntities, GetEntityState,
+                                       GetSpawnables, SpawnEntity)
+from std_msgs.msg import Header
+
+from gripper_sim import configuration
+from gripper_sim.errors import ConfigError
+from gripper_sim.convert import frames as frame_tree
+from gripper_sim.core.results import StepResult
+from gripper_sim.ros.messages import time_msg, world_xyz
+from gripper_sim.ros.simulation_standard import outcome
+
+FRUIT, LEFT_JAW, RIGHT_JAW, TABLE = 'fruit', 'left_jaw', 'right_jaw', 'table'
+CATEGORIES = {FRUIT: EntityCategory.CATEGORY_DYNAMIC_OBJECT,
+              LEFT_JAW: EntityCategory.CATEGORY_ROBOT,
+              RIGHT_JAW: EntityCategory.CATEGORY_ROBOT,
+              TABLE: EntityCategory.CATEGORY_STATIC_OBJECT}
+DELETE_REFUSALS = {
+    FRUIT: 'the fruit cannot be deleted: the simulation always has exactly one fruit; '
+           'spawn_entity with another preset replaces it',
+    LEFT_JAW: 'the jaws are part of the gripper and cannot be deleted',
+    RIGHT_JAW: 'the jaws are part of the gripper and cannot be deleted',
+    TABLE: "the table is part of the world; start the node with physics.world.table "
+           "false for a world without it"}
+
+
+def entity_names(has_table: bool) -> list[str]:
+    """The entities of a world with or without a table, in a fixed order."""
+    return [FRUIT, LEFT_JAW, RIGHT_JAW] + ([TABLE] if has_table else [])
+
+
+def filtered(names: list[str], filters) -> tuple[list[str], Result]:
+    """``names`` matching the ``EntityFilters`` ``filters`` (regex searched in the name,
+    categories, tags: none of our entities has a tag), and the ``Result``: a bad regex
+    or a bounds filter (not supported) match nothing."""
+    if filters.bounds.type != Bounds.TYPE_EMPTY:
+        return [], outcome(Result.RESULT_FEATURE_UNSUPPORTED, 'bounds filters are not supported')
+    try:
+        pattern = re.compile(filters.filter) if filters.filter else None
+    except re.error as error:
+        return [], outcome(Result.RESULT_OPERATION_FAILED,
+                           f"invalid filter regex '{filters.filter}': {error}")
+    categories = {c.category for c in filters.categories}
+    return [name for name in names
+            if (pattern is None or pattern.search(name))
+            and (not categories or CATEGORIES[name] in categories)
+            and not filters.tags.tags], outcome()
+
+
+def spawnable_description(name: str) -> str:
+    """One line on the preset ``name``: model, shape and stiffness."""
+    config = configuration.load_config(fruit=name)
+    size = config.get('fruit.shape.diameter')
+    size_text = f', {size * 1000:.1f} mm across' if size else ''
+    return (f"{name}: {config['fruit.model']} model, {config['fruit.shape.type']}"
+            f"{size_text}, E = {config['fruit.flesh.youngs_modulus'] / 1e6:.2f} MPa")
+
+
+def entity_pose_twist(result: StepResult, entity: str, frames, table_height: float
+                      ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """World position (m) and linear velocity (m/s) of ``entity`` in ``result``: the
+    fruit's mass-weighted centroid and mean nodal velocity, the jaws' frame origins, the
+    table's surface (at rest)."""
+    if entity == FRUIT:
+        centroid = world_xyz(np.reshape(result.centroid, (1, -1)))[0]
+        velocity = world_xyz(np.mean(np.asarray(result.velocities), axis=0,
+                                     keepdims=True))[0]
+        return tuple(centroid.tolist()), tuple(velocity.tolist())
+    if entity == TABLE:
+        return (0.0, 0.0, table_height), (0.0, 0.0, 0.0)
+    transforms = frame_tree.dynamic_transforms(result, frames)
+    frame = frames.left_jaw if entity == LEFT_JAW else frames.right_jaw
+    position = frame_tree.frame_position(transforms, frame)
+    # a jaw closes towards the gripper centre; the left one sits on the left_outward side
+    closing = float(result.jaw_velocity)
+    side = frames.left_outward if entity == LEFT_JAW else -frames.left_outward
+    velocity = (float(result.gripper_x_velocity) - side * closing, 0.0,
+                float(result.lift_velocity))
+    return tuple(position), velocity
+
+
+class EntityServices:
+    """Serves the entity services of ``node`` (a ``SimNode``) in ``group``;
+    ``replace_fruit(name_or_path) -> str | None`` swaps the fruit (an error message, or
+    None when it was replaced)."""
+
+    def __init__(self, node, group, replace_fruit: Callable[[str], str | None]):
+        self._node = node
+        self._replace_fruit = replace_fruit
+        for srv, name, callback in (
+                (GetEntities, 'get_entities', self._on_entities),
+                (GetEntityState, 'get_entity_state', self._on_entity_state),
+                (GetSpawnables, 'get_spawnables', self._on_spawnables),
+                (SpawnEntity, 'spawn_entity', self._on_spawn),
+                (DeleteEntity, 'delete_entity', self._on_delete)):
+            node.create_service(srv, name, callback, callback_group=group)
+
+    def _names(self) -> list[str]:
+        return entity_names(bool(self._node.params.config['world.table']))
+
+    def _on_entities(self, request, response):
+        response.entities, response.result = filtered(self._names(), request.filters)
+        return response
+
+    def _on_entity_state(self, request, response):
+        node = self._node
+        if request.entity not in self._names():
+            response.result = outcome(Result.RESULT_NOT_FOUND,
+                                      f"no entity '{request.entity}' (entities: "
+                                      f"{', '.join(self._names())})")
+            return response
+        with node.lock:
+            result = node.sim.last
+            frames = node.message_context.frames
+            table_height = float(node.params.config['world.table_height'])
+        position, velocity = entity_pose_twist(result, request.entity, frames, table_height)
+        response.state = EntityState(
+            header=Header(stamp=time_msg(result.time), frame_id=frames.scene),
+            pose=Pose(position=Point(x=position[0], y=position[1], z=position[2]),
+                      orientation=Quaternion(w=1.0)),
+            twist=Twist(linear=Vector3(x=velocity[0], y=velocity[1], z=velocity[2])))
+        response.result = outcome()
+        return response
+
+    def _on_spawnables(self, request, response):
+        if request.sources:
+            response.result = outcome(
+                Result.RESULT_NOT_FOUND, 'only the built-in fruit presets are listed; '
+                'leave sources empty (a preset file path can still be spawned)')
+            return response
+        response.spawnables = [Spawnable(uri=name, description=spawnable_description(name))
+                               for name in configuration.available_fruits()]
+        response.result = outcome()
+        return response
+
+    def _on_spawn(self, request, response):
+        response.result = self._spawn_problem(request) or outcome()
+        if response.result.result == Result.RESULT_OK:
+            response.entity_name = FRUIT
+        return response
+
+    def _spawn_problem(self, request) -> Result | None:
+        if request.name not in ('', FRUIT):
+            return outcome(SpawnEntity.Response.NAME_NOT_UNIQUE,
+                           f"cannot spawn '{request.name}': the simulation holds exactly "
+                           f"one fruit; spawn under the name '{FRUIT}' (or no name) to "
+                           'replace it')
+        if request.entity_namespace:
+            return outcome(SpawnEntity.Response.NAMESPACE_INVALID,
+                           'entity namespaces are not supported')
+        if request.resource_string:
+            return outcome(SpawnEntity.Response.UNSUPPORTED_FORMAT,
+                           'spawn by uri: a fruit preset name or a preset file path')
+        if not request.uri:
+            return outcome(SpawnEntity.Response.NO_RESOURCE,
+                           'no uri: give a fruit preset name (get_spawnables) or a preset '
+                           'file path')
+        pose = request.initial_pose.pose
+        if (pose.position.x, pose.position.y, pose.position.z) != (0.0, 0.0, 0.0) or \
+                (pose.orientation.x, pose.orientation.y, pose.orientation.z,
+                 pose.orientation.w) != (0.0, 0.0, 0.0, 1.0):
+            return outcome(SpawnEntity.Response.INVALID_POSE,
+                           'the fruit always starts at rest on the table; leave '
+                           'initial_pose at its default')
+        try:
+            configuration.fruit_preset_path(request.uri)
+        except ConfigError as error:
+            return outcome(Result.RESULT_NOT_FOUND, f'{error}')
+        recording = self._node.recording_control.recording
+        if recording is not None and recording.active:
+            return outcome(Result.RESULT_INCORRECT_STATE,
+                           'a recording is running and names the current fruit; stop it '
+                           '(~/record false) before replacing the fruit')
+        error = self._replace_fruit(request.uri)
+        if error:
+            return outcome(SpawnEntity.Response.RESOURCE_PARSE_ERROR, error)
+        return None
+
+    def _on_delete(self, request, response):
+        reason = DELETE_REFUSALS.get(request.entity)
+        response.result = (outcome(Result.RESULT_OPERATION_FAILED, reason) if reason else
+                           outcome(Result.RESULT_NOT_FOUND,
+                                   f"no entity '{request.entity}'"))
+        return response
