@@ -14,6 +14,9 @@ package computes for its ROS 2 Jazzy type store (checked below).
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -23,6 +26,7 @@ import rclpy
 from rosbags.typesys import Stores, get_typestore
 
 from gripper_sim.recording.schemas import search_prefixes
+from gripper_sim.ros.process import free_domain_id
 
 INTERFACES = Path(__file__).resolve().parent.parent / 'interfaces'
 PACKAGES = ('tf2_msgs', 'control_msgs', 'simulation_interfaces')
@@ -161,29 +165,38 @@ def test_rosbags_jazzy_store_agrees_on_tf2_msgs():
         assert store.hash_rihs01(name) == UPSTREAM_HASHES[name]
 
 
-def test_the_type_support_reports_the_upstream_hash_on_the_graph():
-    from control_msgs.msg import GripperCommand
-    from simulation_interfaces.msg import EntityState
-    from tf2_msgs.msg import TFMessage
+GRAPH_CHECK = """
+import json, sys, time
+import rclpy
+from control_msgs.msg import GripperCommand
+from simulation_interfaces.msg import EntityState
+from tf2_msgs.msg import TFMessage
+context = rclpy.Context()
+rclpy.init(context=context, domain_id=int(sys.argv[1]))
+node = rclpy.create_node('type_hash_check', context=context)
+types = {'/tf': TFMessage, '/gripper_command': GripperCommand, '/entity_state': EntityState}
+for topic, cls in types.items():
+    node.create_publisher(cls, topic, 10)
+reported = {}
+deadline = time.monotonic() + 30
+while len(reported) < len(types) and time.monotonic() < deadline:
+    for topic in types:
+        for info in node.get_publishers_info_by_topic(topic):
+            reported[topic] = [info.topic_type, str(info.topic_type_hash)]
+    time.sleep(0.05)
+node.destroy_node()
+rclpy.shutdown(context=context)
+print(json.dumps(reported))
+"""
 
-    context = rclpy.Context()
-    rclpy.init(context=context)       # the session's own domain and loopback discovery
-    try:
-        node = rclpy.create_node('type_hash_check', context=context)
-        types = {'/tf': TFMessage, '/gripper_command': GripperCommand,
-                 '/entity_state': EntityState}
-        for topic, cls in types.items():
-            node.create_publisher(cls, topic, 10)
-        reported = {}
-        deadline = time.monotonic() + 30
-        while len(reported) < len(types) and time.monotonic() < deadline:
-            for topic in types:
-                for info in node.get_publishers_info_by_topic(topic):
-                    reported[topic] = (info.topic_type, str(info.topic_type_hash))
-            time.sleep(0.05)
-        node.destroy_node()
-    finally:
-        rclpy.shutdown(context=context)
+
+def test_the_type_support_reports_the_upstream_hash_on_the_graph():
+    # in a process of its own, on a domain of its own: nothing of it stays in the test
+    # process (an rclpy context made and shut down here slowed later in-process nodes)
+    out = subprocess.run([sys.executable, '-c', GRAPH_CHECK,
+                          str(free_domain_id(os.getpid() + 7))],
+                         capture_output=True, text=True, timeout=120, check=True).stdout
+    reported = {topic: tuple(value) for topic, value in json.loads(out).items()}
     assert reported == {
         '/tf': ('tf2_msgs/msg/TFMessage', UPSTREAM_HASHES['tf2_msgs/msg/TFMessage']),
         '/gripper_command': ('control_msgs/msg/GripperCommand',
