@@ -176,8 +176,6 @@ SCHEMA: dict[str, Key] = {
                                      '(trapezoidal speed profile)', low=1e-3, high=100.0),
     'gripper.max_force': Key(200.0, 'N', 'largest grip force a command may ask for',
                              low=0.0, high=1e5, open_low=True),
-    'gripper.force_time_constant': Key(0.02, 's', 'time constant of the built-in grip '
-                                       'force regulator', low=1e-4, high=10.0),
     'gripper.transport_speed': Key(0.1, 'm/s', 'default speed of the sideways transport '
                                    '(x translation of both jaws)', low=1e-5, high=5.0,
                                    open_low=True),

@@ -1,7 +1,10 @@
 """Shared set-ups of the mechanics tests (also used by bench/validation_report.py)."""
 import numpy as np
 
+import time
+
 from gripper_sim.configuration import load_config
+from gripper_sim.core import make_simulation
 from gripper_sim.core.grasp import GraspSequence, run_grasp
 from gripper_sim.core.simulation import Simulation
 
@@ -88,6 +91,30 @@ def pick(ratio, mu=0.5, lift=0.02, hold=1.0):
     force = ratio * weight / (2 * mu)
     sequence = GraspSequence(sim, force, lift_height=lift, hold_time=hold)
     return sim, run_grasp(sim, sequence)
+
+
+def hold_minimum(config) -> float:
+    """N, the grip force m g / (2 mu_s) at which jaw friction just carries the fruit."""
+    sim = make_simulation(config)
+    return (sim.fruit.total_mass * config['world.gravity']
+            / (2 * config['contact.jaw.static_friction']))
+
+
+def traced_pick(config, force, lift=0.05, hold=1.0):
+    """Pick at ``force`` (N): close, lift ``lift`` m, hold ``hold`` s. Returns a dict:
+    outcome, slip (m), peak (N, peak grip force), lift_min (N, the lowest grip force
+    from the start of the lift to the end of the hold), solves (mean solves per step) and
+    cpu (s, process time)."""
+    start = time.process_time()
+    sim = make_simulation(config)
+    sequence = GraspSequence(sim, force, lift_height=lift, hold_time=hold)
+    lifted = []
+    summary = run_grasp(sim, sequence, on_step=lambda r, phase: lifted.append(r.grip_force)
+                        if phase in ('lifting', 'holding') else None)
+    return dict(outcome=summary['outcome'], slip=summary['slip_distance'],
+                peak=summary['max_grip_force'], lift_min=min(lifted, default=0.0),
+                solves=sim.gap_solves / max(sim.last.step, 1),
+                cpu=time.process_time() - start)
 
 
 def kernel_evaluation(energy, q, hessian=True):

@@ -10,6 +10,15 @@ and provide ``_make_faces()`` (which also sets ``_face_side`` and ``_face_offset
 ``_make_damage()`` and ``_measure(iterations, substeps)``.
 Commands validate their values (``CommandError``, the simulation unchanged) and take
 effect on the next step.
+
+The jaw drive (``_drive_jaws``): in force mode the grip force (the mean of the contact
+forces the fruit exerts on the two jaws) meets its command at the end of every step,
+within ``FORCE_TOLERANCE``, unless the speed limit keeps the jaws from getting there; in
+position mode the servo moves the gap towards its target but stops where the grip force
+reaches the maximum effort. After a step is solved at the gap ``GripperKinematics``
+predicts, a force that misses its goal restores the step's start and solves it again at
+a gap corrected by secant steps on force(gap) (bracketed, at most ``MAX_GAP_SOLVES``
+solves), so the force does not depend on dt.
 """
 from __future__ import annotations
 
@@ -29,6 +38,12 @@ from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
 
 LEFT, RIGHT = 0, 1
+
+#: relative miss of the grip force (of its command, or of the maximum effort) a step
+#: accepts before it is solved again at a corrected gap
+FORCE_TOLERANCE = 0.005
+#: solves of one step at most, the first included (the best one is kept)
+MAX_GAP_SOLVES = 8
 
 #: configuration keys that may change while the simulation runs
 DYNAMIC_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction',
@@ -100,8 +115,12 @@ class SimulationFacade:
             speed=self.config['gripper.close_speed'], target_lift=self.initial_lift,
             lift_speed=self.config['gripper.lift_speed'],
             stiffness=self.kinematics.initial_stiffness,
-            x_speed=self.config['gripper.transport_speed'])
+            x_speed=self.config['gripper.transport_speed'],
+            max_effort=self.config['gripper.max_force'])
         self._jaw_force = (0.0, 0.0)
+        self._gap_override: float | None = None
+        #: solves of the steps so far, gap corrections included (``_drive_jaws``)
+        self.gap_solves = 0
         self._damage = self._make_damage()
         if self._pad is not None:
             self._pad.begin_step(self.q, self._pad_faces(self._grip),
@@ -110,14 +129,24 @@ class SimulationFacade:
         self._last = self._measure(0, 1)
 
     # ------------------------------------------------------------------ commands
-    def command_gap(self, gap: float, speed: float | None = None) -> None:
-        """Position mode: move the jaws to gap ``gap`` (m) at gap rate ``speed`` (m/s)."""
+    def command_gap(self, gap: float, speed: float | None = None,
+                    max_effort: float | None = None) -> None:
+        """Position mode: move the jaws to gap ``gap`` (m) at gap rate ``speed`` (m/s),
+        closing no further than where the grip force reaches ``max_effort`` (N; None =
+        ``gripper.max_force``); there the jaws hold that force."""
         gap = finite('gap', gap)
         if gap < 0 or gap > self.config['gripper.max_gap']:
             raise CommandError(f"gap {gap} m is out of range [0, "
                                f"{self.config['gripper.max_gap']}] m")
         speed = self._speed(speed, self.config['gripper.close_speed'])
-        self._grip = replace(self._grip, mode='position', target_gap=gap, speed=speed)
+        limit = self.config['gripper.max_force']
+        if max_effort is None:
+            max_effort = limit
+        max_effort = finite('max_effort', max_effort)
+        if max_effort <= 0 or max_effort > limit:
+            raise CommandError(f'max_effort {max_effort} N is out of range (0, {limit}] N')
+        self._grip = replace(self._grip, mode='position', target_gap=gap, speed=speed,
+                             max_effort=max_effort)
 
     def command_force(self, force: float, speed: float | None = None) -> None:
         """Force mode: close until the mean jaw normal force is ``force`` (N), hold it."""
@@ -241,10 +270,82 @@ class SimulationFacade:
         return self._last
 
     def _advance_gripper(self, dt: float) -> GripperState:
-        """The gripper state after ``dt`` (s), from the last step's jaw forces."""
+        """The gripper state after ``dt`` (s), from the last step's jaw forces; the jaws at
+        the drive's corrected gap while ``_drive_jaws`` re-solves a step."""
         left_n, right_n = self._jaw_force
-        return self.kinematics.advance(self._grip, dt, 0.5 * (left_n + right_n),
-                                       left_n > 0 and right_n > 0, self._jaw_clearance())
+        force = 0.5 * (left_n + right_n)
+        if self._gap_override is not None:
+            return self.kinematics.moved(self._grip, dt, self._gap_override, force)
+        return self.kinematics.advance(self._grip, dt, force, left_n > 0 and right_n > 0,
+                                       self._jaw_clearance())
+
+    def _grip_force_goal(self, grip: GripperState, dt: float):
+        """(goal N, lowest gap m, highest gap m) the drive meets in the step from ``grip``:
+        force mode its command anywhere the speed allows; position mode the maximum
+        effort, the gap no smaller than the servo's own step."""
+        left_n, right_n = self._jaw_force
+        if grip.mode == 'force':
+            lo, hi = self.kinematics.gap_bounds(grip, dt, left_n > 0 and right_n > 0)
+            return grip.target_force, lo, hi
+        servo = self.kinematics.servo_gap(grip, dt)
+        return grip.max_effort, servo, max(servo, self.kinematics.gap_bounds(grip, dt, False)[1])
+
+    def _drive_jaws(self, dt: float) -> int:
+        """One step of ``dt`` (``_substep``) whose end meets the jaw drive's force goal
+        (see the module docstring); returns the Newton iterations of every solve.
+
+        Raises:
+            NewtonFailure: a solve failed (the state is back at the step's start).
+        """
+        saved = (self.q, self.v, self.contacts, self.contact_forces, self._grip,
+                 self._time, self._jaw_force)
+        start = self._grip
+        goal, lo, hi = self._grip_force_goal(start, dt)
+        tolerance = FORCE_TOLERANCE * goal
+        stiffness = start.stiffness
+        iterations = 0
+        tried: list[tuple[float, float, bool]] = []   # (gap, force - goal, both touch)
+        gap = None
+        try:
+            while True:
+                self._gap_override = gap
+                iterations += self._substep(dt)
+                left_n, right_n = self._jaw_force
+                both = left_n > 0 and right_n > 0
+                gap = self._grip.gap
+                miss = (0.5 * (left_n + right_n) if both else 0.0) - goal
+                tried.append((gap, miss, both))
+                self.gap_solves += 1
+                if (abs(miss) <= tolerance or (miss < 0 and gap <= lo + 1e-12)
+                        or (miss > 0 and gap >= hi - 1e-12)):
+                    break
+                if len(tried) >= MAX_GAP_SOLVES:
+                    best = min(tried, key=lambda t: abs(t[1]))
+                    if best[0] == gap:
+                        break
+                    gap = best[0]
+                    tried.append(best)
+                    (self.q, self.v, self.contacts, self.contact_forces, self._grip,
+                     self._time, self._jaw_force) = saved
+                    self._gap_override = gap
+                    iterations += self._substep(dt)
+                    self.gap_solves += 1
+                    break
+                stiffness = _secant_stiffness(tried, stiffness)
+                gap = _next_gap(tried, stiffness, lo, hi)
+                if gap is None:
+                    break
+                (self.q, self.v, self.contacts, self.contact_forces, self._grip,
+                 self._time, self._jaw_force) = saved
+        except NewtonFailure:
+            (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
+             self._jaw_force) = saved
+            raise
+        finally:
+            self._gap_override = None
+        if stiffness != self._grip.stiffness:
+            self._grip = replace(self._grip, stiffness=stiffness)
+        return iterations
 
     def _jaw_clearance(self) -> float:
         """m, the distance along x from the fruit to the nearest flat jaw face that does
@@ -409,7 +510,7 @@ class SimulationFacade:
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:
         """Step ``dt``, halving it (recursively) while Newton fails; (iterations, substeps)."""
         try:
-            return self._substep(dt), 1
+            return self._drive_jaws(dt), 1
         except NewtonFailure as failure:
             if depth >= self.config['sim.max_halvings']:
                 msg = (f'the solver did not converge at t = {self._time:.6g} s even with the '
@@ -419,6 +520,42 @@ class SimulationFacade:
         it1, s1 = self._advance(0.5 * dt, depth + 1)
         it2, s2 = self._advance(0.5 * dt, depth + 1)
         return it1 + it2, s1 + s2
+
+
+def _secant_stiffness(tried: list, stiffness: float) -> float:
+    """N/m, -d force / d gap between the last two solves of a step if both jaws held
+    the fruit in each (``tried``: (gap, force miss, both touch) per solve), else
+    ``stiffness``."""
+    if len(tried) < 2:
+        return stiffness
+    (g1, m1, both1), (g2, m2, both2) = tried[-2], tried[-1]
+    if both1 and both2 and g1 != g2 and (m1 - m2) / (g2 - g1) > 0:
+        return (m1 - m2) / (g2 - g1)
+    return stiffness
+
+
+def _next_gap(tried: list, stiffness: float, lo: float, hi: float) -> float | None:
+    """m, the next gap to solve a step at so that the force meets its goal, from the
+    solves so far (``tried``: (gap, force - goal, both touch) each; the force falls as
+    the gap grows), within [lo, hi]: a secant step (slope ``stiffness``, N/m) from the
+    last solve if it stays inside the bracket the solves so far leave, else the end of
+    the range not yet tried, else the bracket's middle; None when the bracket has
+    closed."""
+    over = [t[0] for t in tried if t[1] > 0]      # too much force: the gap must grow
+    under = [t[0] for t in tried if t[1] <= 0]
+    low = max(over) if over else lo
+    high = min(under) if under else hi
+    if high - low <= 1e-12:
+        return None
+    gap, miss, _ = tried[-1]
+    guess = gap + miss / stiffness
+    if low < guess < high:
+        return guess
+    if guess <= low and not over:
+        return lo
+    if guess >= high and not under:
+        return hi
+    return 0.5 * (low + high)
 
 
 def _wrench(r: np.ndarray, f: np.ndarray) -> JawWrench:

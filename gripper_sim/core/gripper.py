@@ -1,10 +1,15 @@
 """Prescribed kinematics of the two jaws and the lift, and their controllers.
 
 The jaws close symmetrically about the gripper centre x. In position mode the gap moves
-towards a target at a rate limit; in force mode a regulator moves it so that the grip
-force (mean normal force of the two jaws) reaches a target and stays there. The lift
-moves the jaw centre height towards a target with a trapezoidal speed profile, and the
-transport moves the gripper centre sideways (x) the same way.
+towards a target at a rate limit, but never closes further than where the grip force
+(mean normal force of the two jaws on the fruit) reaches the maximum effort; in force
+mode the gap moves so that the grip force meets its target. ``GripperKinematics.advance``
+predicts the step's gap from the last measured force and the contact stiffness; the
+facade (``core.facade.SimulationFacade``) then solves the step and, if the force it
+measures misses the target, re-solves the step at a corrected gap (``force_error``), so
+the force holds whatever dt. The lift moves the jaw centre height towards a target with
+a trapezoidal speed profile, and the transport moves the gripper centre sideways (x)
+the same way.
 """
 from __future__ import annotations
 
@@ -24,10 +29,12 @@ class GripperState:
         mode: 'position' or 'force'.
         target_gap: m.  target_force: N.  speed: m/s gap rate limit.
         target_lift: m.  lift_speed: m/s.
-        stiffness: N/m, the force regulator's running estimate of d force / d gap.
-        measured_force, measured_gap: N and m at the previous advance (for the estimate).
+        stiffness: N/m, -d grip force / d gap of the contact, as last measured within a
+            step (the facade's gap correction); the prediction's slope.
+        measured_force, measured_gap: N and m at the previous advance.
         x: m, gripper centre along x (the transport axis).  x_rate: m/s.
         target_x: m.  x_speed: m/s, transport speed limit.
+        max_effort: N, position mode's grip force limit (the servo stops closing there).
     """
 
     gap: float
@@ -47,22 +54,24 @@ class GripperState:
     x_rate: float = 0.0
     target_x: float = 0.0
     x_speed: float = 0.1
+    max_effort: float = math.inf
 
 
 class GripperKinematics:
     """Advances the jaws and lift by one step given the last measured grip force.
 
     Args:
-        max_gap: m.  lift_acceleration: m/s^2.  force_time_constant: s.
-        initial_stiffness: N/m, first guess of the contact stiffness.
+        max_gap: m.  lift_acceleration: m/s^2.
+        initial_stiffness: N/m, first guess of -d grip force / d gap.
         transport_acceleration: m/s^2, of the sideways transport.
+        max_speed: m/s, the drive's top gap rate (see ``gap_bounds``).
     """
 
-    def __init__(self, max_gap: float, lift_acceleration: float, force_time_constant: float,
-                 initial_stiffness: float, transport_acceleration: float = 1.0):
+    def __init__(self, max_gap: float, lift_acceleration: float, initial_stiffness: float,
+                 transport_acceleration: float = 1.0, max_speed: float = math.inf):
         self.max_gap = max_gap
+        self.max_speed = max_speed
         self.lift_acceleration = lift_acceleration
-        self.tau = force_time_constant
         self.initial_stiffness = initial_stiffness
         self.transport_acceleration = transport_acceleration
 
@@ -70,34 +79,37 @@ class GripperKinematics:
                 both_in_contact: bool, clearance: float = math.inf) -> GripperState:
         """The state after ``dt`` (s); ``grip_force`` (N) measured at the current state.
 
+        The gap is a prediction: the gap at which the grip force would meet the target
+        (force mode) or the effort limit (position mode) at the present stiffness, within
+        the speed limit; the facade corrects it after the solve (``force_error``).
         ``clearance`` (m): how far a jaw that does not yet touch the fruit is from it (inf
         when both touch or unknown). Under force control the jaws close at the commanded
         speed until both touch, but never further in one step than that clearance plus
-        the travel the force regulator allows from zero force: a large step then lands
-        the jaw on the fruit instead of driving it through the surface (at dt 20 ms
-        the impact overshot a 2 N target by 150 %).
+        the travel that gives the target force at the present stiffness: a large step
+        then lands the jaw on the fruit instead of driving it through the surface.
         """
         stiffness = state.stiffness
         if state.mode == 'force':
-            if both_in_contact and abs(state.gap - state.measured_gap) > 1e-9:
-                measured = -(grip_force - state.measured_force) / (state.gap - state.measured_gap)
-                if measured > 0:
-                    stiffness = min(max(0.7 * stiffness + 0.3 * measured,
-                                        1e-3 * self.initial_stiffness),
-                                    1e3 * self.initial_stiffness)
             if grip_force <= 0.0 or not both_in_contact:
                 # one jaw alone only pushes the fruit (e.g. across the table): that force
                 # is no grip, so close at the commanded speed until both jaws touch
-                landing = (max(clearance, 0.0) / dt
-                           + state.target_force / (stiffness * max(self.tau, dt)))
+                landing = (max(clearance, 0.0) + state.target_force / stiffness) / dt
                 rate = -min(state.speed, landing)
             else:
-                rate = -(state.target_force - grip_force) / (stiffness * max(self.tau, dt))
-                rate = min(max(rate, -state.speed), state.speed)
+                rate = -(state.target_force - grip_force) / (stiffness * dt)
         else:
-            rate = (state.target_gap - state.gap) / dt
-            rate = min(max(rate, -state.speed), state.speed)
-        gap = min(max(state.gap + rate * dt, 0.0), self.max_gap)
+            rate = (self.servo_gap(state, dt) - state.gap) / dt
+            if rate < 0 and both_in_contact and grip_force > 0:
+                # the servo closes no further than where the force reaches its limit
+                rate = max(rate, -(state.max_effort - grip_force) / (stiffness * dt))
+        lo, hi = self.gap_bounds(state, dt, state.mode == 'force' and both_in_contact)
+        gap = min(max(state.gap + rate * dt, lo), hi)
+        return self.moved(state, dt, gap, grip_force)
+
+    def moved(self, state: GripperState, dt: float, gap: float,
+              grip_force: float) -> GripperState:
+        """The state after ``dt`` (s) with the jaws at ``gap`` (m) and the lift and the
+        transport advanced; ``grip_force`` (N) the force measured at ``state``."""
         rate = (gap - state.gap) / dt
         lift, lift_rate = self._advance_lift(state, dt)
         if state.x != state.target_x or state.x_rate != 0.0:
@@ -107,8 +119,26 @@ class GripperKinematics:
             x, x_rate = state.x, 0.0
         return GripperState(gap, rate, lift, lift_rate, state.mode, state.target_gap,
                             state.target_force, state.speed, state.target_lift,
-                            state.lift_speed, stiffness, grip_force, state.gap, x, x_rate,
-                            state.target_x, state.x_speed)
+                            state.lift_speed, state.stiffness, grip_force, state.gap, x,
+                            x_rate, state.target_x, state.x_speed, state.max_effort)
+
+    def servo_gap(self, state: GripperState, dt: float) -> float:
+        """m, the gap after ``dt`` (s) of the position servo's move towards its target at
+        the commanded speed, before any force limit."""
+        travel = state.speed * dt
+        return min(max(state.target_gap, state.gap - travel, 0.0), state.gap + travel,
+                   self.max_gap)
+
+    def gap_bounds(self, state: GripperState, dt: float,
+                   holding: bool) -> tuple[float, float]:
+        """(smallest, largest) gap (m) the drive can reach from ``state`` in ``dt`` (s).
+
+        The jaws close at the commanded speed until both hold the fruit (``holding``);
+        then, and to open (to relieve a force above its goal), the drive may move at its
+        own top speed ``max_speed``, as a force-controlled drive does."""
+        fastest = max(state.speed, self.max_speed)
+        close = fastest if holding else state.speed
+        return max(state.gap - close * dt, 0.0), min(state.gap + fastest * dt, self.max_gap)
 
     def _advance_lift(self, state: GripperState, dt: float) -> tuple[float, float]:
         distance = state.target_lift - state.lift

@@ -56,9 +56,9 @@ class Simulation(SimulationFacade):
         self.solver = self._make_solver(fast=None if fast is not False else False)
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
-            c['gripper.force_time_constant'],
             initial_stiffness=c['fruit.flesh.youngs_modulus'] * self.fruit.depth,
-            transport_acceleration=c['gripper.transport_acceleration'])
+            transport_acceleration=c['gripper.transport_acceleration'],
+            max_speed=c['gripper.max_speed'])
         self._observers: list[Callable[[StepResult], None]] = []
         self._fast = (FastPath.create(self) if fast is not False and self._plain_jaws
                       else None)

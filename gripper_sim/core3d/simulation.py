@@ -117,9 +117,9 @@ class Simulation3D(SimulationFacade):
         radius = 0.5 * self.fruit.rest_width
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
-            c['gripper.force_time_constant'],
             initial_stiffness=0.1 * c['fruit.flesh.youngs_modulus'] * radius,
-            transport_acceleration=c['gripper.transport_acceleration'])
+            transport_acceleration=c['gripper.transport_acceleration'],
+            max_speed=c['gripper.max_speed'])
         self._observers: list[Callable[[StepResult3D], None]] = []
         self.reset()
 

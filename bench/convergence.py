@@ -1,0 +1,69 @@
+"""Convergence of a pick in the time step: the default 2D apple and the default 3D fruit.
+
+Each fruit is picked (close, lift 5 cm, hold 1 s) at 1.1x, 1.5x and 3x its hold minimum
+m g / (2 mu_s), at every dt of a ladder (2D: 2, 1, 0.5, 0.25, 0.125 ms; 3D: 20, 10, 5,
+2.5 ms). Prints one row per run: outcome, slip, peak grip force, the lowest grip force
+during lift and hold (relative to the command), solves per step and process CPU time,
+then per force whether the outcome is the same at every dt, the slip within
+max(0.2 mm, 20 %) of the finest dt's and the peak grip force within 2 %.
+Run: ``nice python bench/convergence.py [--only 2d|3d] [--ratios 1.1 1.5 3]``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
+
+from gripper_sim.configuration import load_config  # noqa: E402
+from helpers import hold_minimum, traced_pick  # noqa: E402
+
+LADDERS = {'2d': (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4), '3d': (2e-2, 1e-2, 5e-3, 2.5e-3)}
+OVERRIDES = {'2d': [], '3d': ['dimension=3']}
+
+
+def converged(rows: list[dict]) -> tuple[bool, bool, bool]:
+    """(same outcome, slip within max(0.2 mm, 20 %), peak within 2 %) of the finest dt's
+    row (the last) for every row."""
+    finest = rows[-1]
+    same = all(r['outcome'] == finest['outcome'] for r in rows)
+    slip = all(abs(r['slip'] - finest['slip']) <= max(2e-4, 0.2 * finest['slip'])
+               for r in rows)
+    peak = all(abs(r['peak'] - finest['peak']) <= 0.02 * finest['peak'] for r in rows)
+    return same, slip, peak
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument('--only', choices=sorted(LADDERS), default=None)
+    parser.add_argument('--ratios', type=float, nargs='+', default=[1.1, 1.5, 3.0])
+    args = parser.parse_args(argv)
+    print('model  ratio  force N   dt ms  outcome   slip mm  peak N  peak/cmd  '
+          'lift min/cmd  solves/step  cpu s')
+    verdicts = []
+    for model in [args.only] if args.only else sorted(LADDERS):
+        base = load_config(overrides=OVERRIDES[model])
+        minimum = hold_minimum(base)
+        for ratio in args.ratios:
+            force = ratio * minimum
+            rows = []
+            for dt in LADDERS[model]:
+                config = load_config(overrides=OVERRIDES[model] + [f'sim.dt={dt}'])
+                row = traced_pick(config, force)
+                rows.append(row)
+                print(f"{model:5}  {ratio:5.2f}  {force:7.3f}  {dt * 1e3:6.3f}  "
+                      f"{row['outcome']:8}  {row['slip'] * 1e3:7.3f}  {row['peak']:6.3f}  "
+                      f"{row['peak'] / force:8.4f}  {row['lift_min'] / force:12.4f}  "
+                      f"{row['solves']:11.2f}  {row['cpu']:6.1f}", flush=True)
+            same, slip, peak = converged(rows)
+            verdicts.append((model, ratio, same, slip, peak))
+    print('\nmodel  ratio  same outcome  slip within max(0.2 mm, 20 %)  peak within 2 %')
+    for model, ratio, same, slip, peak in verdicts:
+        print(f'{model:5}  {ratio:5.2f}  {str(same):12}  {str(slip):30}  {peak}')
+    return 0 if all(all(v[2:]) for v in verdicts) else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
