@@ -18,21 +18,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
 
 from gripper_sim.configuration import load_config  # noqa: E402
-from helpers import hold_minimum, traced_pick  # noqa: E402
+from helpers import converged, hold_minimum, traced_pick  # noqa: E402
 
 LADDERS = {'2d': (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4), '3d': (2e-2, 1e-2, 5e-3, 2.5e-3)}
 OVERRIDES = {'2d': [], '3d': ['dimension=3']}
-
-
-def converged(rows: list[dict]) -> tuple[bool, bool, bool]:
-    """(same outcome, slip within max(0.2 mm, 20 %), peak within 2 %) of the finest dt's
-    row (the last) for every row."""
-    finest = rows[-1]
-    same = all(r['outcome'] == finest['outcome'] for r in rows)
-    slip = all(abs(r['slip'] - finest['slip']) <= max(2e-4, 0.2 * finest['slip'])
-               for r in rows)
-    peak = all(abs(r['peak'] - finest['peak']) <= 0.02 * finest['peak'] for r in rows)
-    return same, slip, peak
 
 
 def main(argv=None) -> int:

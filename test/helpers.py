@@ -6,6 +6,7 @@ import time
 from gripper_sim.configuration import load_config
 from gripper_sim.core import make_simulation
 from gripper_sim.core.grasp import GraspSequence, run_grasp
+from gripper_sim.core.scenario import load_scenario, run_scenario, scenario_config
 from gripper_sim.core.simulation import Simulation
 
 #: quasi-static settings: light fruit, mass damping, large step, no gravity, no table
@@ -115,6 +116,34 @@ def traced_pick(config, force, lift=0.05, hold=1.0):
                 peak=summary['max_grip_force'], lift_min=min(lifted, default=0.0),
                 solves=sim.gap_solves / max(sim.last.step, 1),
                 cpu=time.process_time() - start)
+
+
+def converged(rows: list[dict]) -> tuple[bool, bool, bool]:
+    """Of ``traced_pick`` rows, finest dt last: (the same outcome at every dt, every slip
+    within max(0.2 mm, 20 %) of the finest dt's, every peak grip force within 2 %)."""
+    finest = rows[-1]
+    same = all(r['outcome'] == finest['outcome'] for r in rows)
+    slip = all(abs(r['slip'] - finest['slip']) <= max(2e-4, 0.2 * finest['slip'])
+               for r in rows)
+    peak = all(abs(r['peak'] - finest['peak']) <= 0.02 * finest['peak'] for r in rows)
+    return same, slip, peak
+
+
+def pick_and_place_forces(fruit, force, *overrides):
+    """Run the pick_and_place scenario in force mode at ``force`` (N). Returns (summary,
+    peak grip force per phase (N), lowest grip force during the lift (N), cpu s)."""
+    start = time.process_time()
+    scenario = load_scenario('pick_and_place').with_values(close__mode='force',
+                                                           close__force=force)
+    sim = make_simulation(scenario_config(scenario, fruit=fruit, overrides=list(overrides)))
+    peaks, lift = {}, []
+
+    def on_step(result, phase):
+        peaks[phase] = max(peaks.get(phase, 0.0), result.grip_force)
+        if phase == 'lift':
+            lift.append(result.grip_force)
+    summary = run_scenario(sim, scenario, on_step=on_step)
+    return summary, peaks, min(lift, default=0.0), time.process_time() - start
 
 
 def kernel_evaluation(energy, q, hessian=True):

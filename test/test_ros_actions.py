@@ -241,6 +241,27 @@ def test_gripper_command_stalls_on_the_fruit_with_the_real_effort(client):
     assert max(f.effort for f in feedback) > 4.5
 
 
+def test_a_gap_of_0_stops_at_the_maximum_effort(client):
+    """Gap 0 asks more than the fruit gives: the jaws stop where the grip force reaches
+    the maximum effort (the goal's max_effort; gripper.max_force for the gap topic) and
+    hold it, within 2 % (it used to reach 8x gripper.max_force)."""
+    feedback = []
+    handle = client.send_goal(client.gripper_cmd, gripper_goal(0.0, 20.0), feedback)
+    status, result = client.result(handle)
+    assert result.stalled and not result.reached_goal
+    assert result.effort == pytest.approx(20.0, rel=0.02)
+    client.spin_until(lambda: feedback and feedback[-1].stalled, 30, 'the stalled feedback')
+    assert max(f.effort for f in feedback) <= 1.02 * 20.0
+    client.states.clear()
+    client.publish('gap', 0.0)
+    limit = 200.0   # gripper.max_force
+    client.spin_until(lambda: client.states and client.states[-1].grip_force > 0.98 * limit,
+                      120, 'the grip force to reach gripper.max_force')
+    client.wait_sim_time(0.2)
+    assert max(s.grip_force for s in client.states) <= 1.02 * limit
+    assert client.latest['fruit/state'].grip_force == pytest.approx(limit, rel=0.02)
+
+
 def test_gripper_command_with_allow_stalling_succeeds_on_a_stall(client):
     ok, = client.set_parameters(allow_stalling=True)
     assert ok.successful

@@ -18,7 +18,8 @@ from gripper_sim.cli.arguments import non_negative_float, positive_float
 from gripper_sim.cli.progress import StepProgress
 from gripper_sim.configuration import available_fruits, load_config, parse_override
 from gripper_sim.errors import GripperSimError
-from gripper_sim.workflows.squeeze import SQUEEZE_DEFAULTS, check_squeeze, squeeze
+from gripper_sim.workflows.squeeze import (SQUEEZE_DEFAULTS, check_squeeze, squeeze,
+                                          stopped_at_max_effort)
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
@@ -278,6 +279,9 @@ def run_squeeze(args) -> int:
               + f' ({damage["bruised_fraction"] * 100:.1f} % of the {of_what})'
               + (', crushed' if damage['crushed'] else ''))
         print(f'  final gap             {summary["final_gap"] * 1e3:.4g} mm')
+        if stopped_at_max_effort(sim, sim.last):
+            print(f"  the jaws stopped at their maximum effort (gripper.max_force "
+                  f"{config['gripper.max_force']:g} N) before the gap target")
     return 0
 
 

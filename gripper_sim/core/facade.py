@@ -249,13 +249,11 @@ class SimulationFacade:
         Raises:
             ConvergenceError: the step failed even after halving; the state is unchanged.
         """
-        saved = (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
-                 self._jaw_force)
+        saved = self._saved_state()
         try:
             iterations, substeps = self._advance(self.dt, 0)
         except ConvergenceError:
-            (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
-             self._jaw_force) = saved
+            self._restore(saved)
             raise
         self._step += 1
         self._last = self._measure(iterations, substeps)
@@ -283,69 +281,74 @@ class SimulationFacade:
         """(goal N, lowest gap m, highest gap m) the drive meets in the step from ``grip``:
         force mode its command anywhere the speed allows; position mode the maximum
         effort, the gap no smaller than the servo's own step."""
-        left_n, right_n = self._jaw_force
+        lo, hi = self.kinematics.gap_bounds(grip, dt)
         if grip.mode == 'force':
-            lo, hi = self.kinematics.gap_bounds(grip, dt, left_n > 0 and right_n > 0)
             return grip.target_force, lo, hi
         servo = self.kinematics.servo_gap(grip, dt)
-        return grip.max_effort, servo, max(servo, self.kinematics.gap_bounds(grip, dt, False)[1])
+        return grip.max_effort, servo, max(servo, hi)
 
     def _drive_jaws(self, dt: float) -> int:
         """One step of ``dt`` (``_substep``) whose end meets the jaw drive's force goal
         (see the module docstring); returns the Newton iterations of every solve.
 
         Raises:
-            NewtonFailure: a solve failed (the state is back at the step's start).
+            NewtonFailure: the first solve failed (the state is back at the step's start).
         """
-        saved = (self.q, self.v, self.contacts, self.contact_forces, self._grip,
-                 self._time, self._jaw_force)
-        start = self._grip
-        goal, lo, hi = self._grip_force_goal(start, dt)
-        tolerance = FORCE_TOLERANCE * goal
-        stiffness = start.stiffness
+        saved = self._saved_state()
+        goal, lo, hi = self._grip_force_goal(self._grip, dt)
+        stiffness = self._grip.stiffness
         iterations = 0
         tried: list[tuple[float, float, bool]] = []   # (gap, force - goal, both touch)
         gap = None
         try:
             while True:
-                self._gap_override = gap
-                iterations += self._substep(dt)
+                iterations += self._solve_at(gap, dt)
                 left_n, right_n = self._jaw_force
                 both = left_n > 0 and right_n > 0
                 gap = self._grip.gap
                 miss = (0.5 * (left_n + right_n) if both else 0.0) - goal
                 tried.append((gap, miss, both))
-                self.gap_solves += 1
-                if (abs(miss) <= tolerance or (miss < 0 and gap <= lo + 1e-12)
+                stiffness = _secant_stiffness(tried, stiffness)
+                if (abs(miss) <= FORCE_TOLERANCE * goal or (miss < 0 and gap <= lo + 1e-12)
                         or (miss > 0 and gap >= hi - 1e-12)):
                     break
-                if len(tried) >= MAX_GAP_SOLVES:
-                    best = min(tried, key=lambda t: abs(t[1]))
-                    if best[0] == gap:
-                        break
-                    gap = best[0]
-                    tried.append(best)
-                    (self.q, self.v, self.contacts, self.contact_forces, self._grip,
-                     self._time, self._jaw_force) = saved
-                    self._gap_override = gap
-                    iterations += self._substep(dt)
-                    self.gap_solves += 1
-                    break
-                stiffness = _secant_stiffness(tried, stiffness)
-                gap = _next_gap(tried, stiffness, lo, hi)
+                gap = (_next_gap(tried, stiffness, lo, hi) if len(tried) < MAX_GAP_SOLVES
+                       else None)
                 if gap is None:
+                    best = min(tried, key=lambda t: abs(t[1]))[0]
+                    if best != tried[-1][0]:
+                        self._restore(saved)
+                        iterations += self._solve_at(best, dt)
                     break
-                (self.q, self.v, self.contacts, self.contact_forces, self._grip,
-                 self._time, self._jaw_force) = saved
+                self._restore(saved)
         except NewtonFailure:
-            (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
-             self._jaw_force) = saved
-            raise
+            self._restore(saved)
+            if not tried:
+                raise
+            # a corrected gap the solver cannot follow: the best gap solved so far
+            iterations += self._solve_at(min(tried, key=lambda t: abs(t[1]))[0], dt)
         finally:
             self._gap_override = None
         if stiffness != self._grip.stiffness:
             self._grip = replace(self._grip, stiffness=stiffness)
         return iterations
+
+    def _solve_at(self, gap: float | None, dt: float) -> int:
+        """``_substep(dt)`` with the jaws at ``gap`` (m; None: where the kinematics put
+        them); Newton iterations."""
+        self._gap_override = gap
+        self.gap_solves += 1
+        return self._substep(dt)
+
+    def _saved_state(self) -> tuple:
+        """What a step changes (the state ``_restore`` returns to)."""
+        return (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
+                self._jaw_force)
+
+    def _restore(self, saved: tuple) -> None:
+        """Back to a ``_saved_state``."""
+        (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
+         self._jaw_force) = saved
 
     def _jaw_clearance(self) -> float:
         """m, the distance along x from the fruit to the nearest flat jaw face that does

@@ -102,7 +102,7 @@ class GripperKinematics:
             if rate < 0 and both_in_contact and grip_force > 0:
                 # the servo closes no further than where the force reaches its limit
                 rate = max(rate, -(state.max_effort - grip_force) / (stiffness * dt))
-        lo, hi = self.gap_bounds(state, dt, state.mode == 'force' and both_in_contact)
+        lo, hi = self.gap_bounds(state, dt)
         gap = min(max(state.gap + rate * dt, lo), hi)
         return self.moved(state, dt, gap, grip_force)
 
@@ -129,16 +129,13 @@ class GripperKinematics:
         return min(max(state.target_gap, state.gap - travel, 0.0), state.gap + travel,
                    self.max_gap)
 
-    def gap_bounds(self, state: GripperState, dt: float,
-                   holding: bool) -> tuple[float, float]:
-        """(smallest, largest) gap (m) the drive can reach from ``state`` in ``dt`` (s).
-
-        The jaws close at the commanded speed until both hold the fruit (``holding``);
-        then, and to open (to relieve a force above its goal), the drive may move at its
-        own top speed ``max_speed``, as a force-controlled drive does."""
+    def gap_bounds(self, state: GripperState, dt: float) -> tuple[float, float]:
+        """(smallest, largest) gap (m) the drive can reach from ``state`` in ``dt`` (s):
+        it closes at the commanded speed; it opens (to relieve a grip force above its
+        goal) at up to its own top speed ``max_speed``, as a force-controlled drive does."""
         fastest = max(state.speed, self.max_speed)
-        close = fastest if holding else state.speed
-        return max(state.gap - close * dt, 0.0), min(state.gap + fastest * dt, self.max_gap)
+        return (max(state.gap - state.speed * dt, 0.0),
+                min(state.gap + fastest * dt, self.max_gap))
 
     def _advance_lift(self, state: GripperState, dt: float) -> tuple[float, float]:
         distance = state.target_lift - state.lift

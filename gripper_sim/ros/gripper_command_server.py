@@ -185,7 +185,7 @@ class GripperCommandServer:
 
         with node.lock:
             try:
-                node.sim.command_gap(run.position, run.speed)
+                node.sim.command_gap(run.position, run.speed, run.max_effort)
             except CommandError as err:
                 goal_handle.abort()
                 node.get_logger().warning(f'{self.kind} goal aborted: {err}')
@@ -237,7 +237,7 @@ class GripperCommandServer:
         elif run.mode == 'force' and result.gap > run.position + run.tolerance \
                 and result.grip_force < 0.5 * run.max_effort:
             # contact lost (e.g. the fruit moved): go back to the position target
-            sim.command_gap(run.position, run.speed)
+            sim.command_gap(run.position, run.speed, run.max_effort)
             run.mode = 'position'
         if abs(result.gap - run.position) < run.tolerance:
             run.reached = True

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Mapping
 
+from gripper_sim.core.facade import FORCE_TOLERANCE
 from gripper_sim.core.results import StepResult
 from gripper_sim.errors import GripperSimError
 
@@ -29,10 +30,20 @@ def check_squeeze(config: Mapping, speed: float, to_force: float | None = None) 
                               f"{config['gripper.max_speed']} m/s")
 
 
+def stopped_at_max_effort(sim, result: StepResult) -> bool:
+    """Whether the position servo of ``sim`` holds the jaws at its maximum effort (the
+    grip force within ``FORCE_TOLERANCE`` of it) short of its gap target."""
+    grip = sim.gripper_state
+    return (grip.mode == 'position' and result.gap > grip.target_gap + 1e-12
+            and result.grip_force >= (1 - FORCE_TOLERANCE) * grip.max_effort)
+
+
 def squeeze(sim, speed: float, to_force: float | None = None,
             to_gap: float | None = None) -> StepResult:
     """Close the jaws of ``sim`` at ``speed`` (m/s) until the grip force reaches
-    ``to_force`` (N) or the gap reaches ``to_gap`` (m); returns the last step's result.
+    ``to_force`` (N) or the gap reaches ``to_gap`` (m), or the jaws stop at their maximum
+    effort (``gripper.max_force``, see ``stopped_at_max_effort``); returns the last step's
+    result.
 
     Observers added to ``sim`` beforehand see every step.
 
@@ -54,6 +65,8 @@ def squeeze(sim, speed: float, to_force: float | None = None,
         if to_force is not None and result.grip_force >= to_force:
             return result
         if to_gap is not None and result.gap <= to_gap + 1e-12:
+            return result
+        if stopped_at_max_effort(sim, result):
             return result
         if result.gap <= 0.0:
             break
