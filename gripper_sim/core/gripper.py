@@ -138,26 +138,25 @@ class GripperKinematics:
                 min(state.gap + fastest * dt, self.max_gap))
 
     def _advance_lift(self, state: GripperState, dt: float) -> tuple[float, float]:
-        distance = state.target_lift - state.lift
-        a = self.lift_acceleration
-        # fastest speed from which we can still stop at the target
-        v_stop = math.copysign(min(state.lift_speed, math.sqrt(2 * a * abs(distance))),
-                               distance)
-        rate = state.lift_rate + min(max(v_stop - state.lift_rate, -a * dt), a * dt)
-        if abs(distance) <= max(abs(rate) * dt, 1e-12):
-            return state.target_lift, 0.0
-        return state.lift + rate * dt, rate
+        return trapezoid(state.lift, state.lift_rate, state.target_lift, state.lift_speed,
+                         self.lift_acceleration, dt)
 
 
 def trapezoid(position: float, rate: float, target: float, speed: float,
               acceleration: float, dt: float) -> tuple[float, float]:
-    """One step of a move to ``target`` at speed and acceleration limits (as the lift).
+    """One step of ``dt`` (s) of a move to ``target`` at speed and acceleration limits.
 
-    Returns the new position (m) and rate (m/s).
+    The rate is the fastest from which the move can still stop at the target decelerating
+    at ``acceleration`` after this step (v dt + v^2 / (2 a) = distance), so the move ends
+    at a rate of about ``acceleration`` dt whatever dt. Returns the new position (m) and
+    the rate over the step (m/s): the step that reaches the target moves at the distance
+    left over dt (the jaws' faces move with that velocity).
     """
     distance = target - position
-    v_stop = math.copysign(min(speed, math.sqrt(2 * acceleration * abs(distance))), distance)
-    rate = rate + min(max(v_stop - rate, -acceleration * dt), acceleration * dt)
+    a = acceleration
+    v_stop = math.copysign(
+        min(speed, -a * dt + math.sqrt((a * dt) ** 2 + 2 * a * abs(distance))), distance)
+    rate = rate + min(max(v_stop - rate, -a * dt), a * dt)
     if abs(distance) <= max(abs(rate) * dt, 1e-12):
-        return target, 0.0
+        return target, distance / dt
     return position + rate * dt, rate
