@@ -42,7 +42,7 @@ LEFT, RIGHT = 0, 1
 #: relative miss of the grip force (of its command, or of the maximum effort) a step
 #: accepts before it is solved again at a corrected gap
 FORCE_TOLERANCE = 0.005
-#: solves of one step at most, the first included (the best one is kept)
+#: solves of one step at most, the first included (then the best one is solved again)
 MAX_GAP_SOLVES = 8
 
 #: configuration keys that may change while the simulation runs
@@ -301,8 +301,16 @@ class SimulationFacade:
         tried: list[tuple[float, float, bool]] = []   # (gap, force - goal, both touch)
         gap = None
         try:
-            while True:
-                iterations += self._solve_at(gap, dt)
+            for _ in range(MAX_GAP_SOLVES):
+                try:
+                    iterations += self._solve_at(gap, dt)
+                except NewtonFailure:
+                    if not tried:
+                        raise
+                    # a corrected gap the solver cannot follow: halfway back to the last
+                    self._restore(saved)
+                    gap = 0.5 * (gap + tried[-1][0])
+                    continue
                 left_n, right_n = self._jaw_force
                 both = left_n > 0 and right_n > 0
                 gap = self._grip.gap
@@ -311,24 +319,21 @@ class SimulationFacade:
                 stiffness = _secant_stiffness(tried, stiffness)
                 if (abs(miss) <= FORCE_TOLERANCE * goal or (miss < 0 and gap <= lo + 1e-12)
                         or (miss > 0 and gap >= hi - 1e-12)):
-                    break
-                gap = (_next_gap(tried, stiffness, lo, hi) if len(tried) < MAX_GAP_SOLVES
-                       else None)
-                if gap is None:
-                    best = min(tried, key=lambda t: abs(t[1]))[0]
-                    if best != tried[-1][0]:
-                        self._restore(saved)
-                        iterations += self._solve_at(best, dt)
-                    break
+                    return self._kept_stiffness(stiffness, iterations)
+                gap = _next_gap(tried, stiffness, lo, hi)
                 self._restore(saved)
-        except NewtonFailure:
+                if gap is None:
+                    break
+            # no gap within the tolerance: the best one solved
             self._restore(saved)
-            if not tried:
-                raise
-            # a corrected gap the solver cannot follow: the best gap solved so far
             iterations += self._solve_at(min(tried, key=lambda t: abs(t[1]))[0], dt)
         finally:
             self._gap_override = None
+        return self._kept_stiffness(stiffness, iterations)
+
+    def _kept_stiffness(self, stiffness: float, iterations: int) -> int:
+        """Keep ``stiffness`` (N/m) in the gripper state for the next step's prediction;
+        returns ``iterations``."""
         if stiffness != self._grip.stiffness:
             self._grip = replace(self._grip, stiffness=stiffness)
         return iterations
