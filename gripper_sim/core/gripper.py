@@ -6,7 +6,7 @@ towards a target at a rate limit, but never closes further than where the grip f
 mode the gap moves so that the grip force meets its target. ``GripperKinematics.advance``
 predicts the step's gap from the last measured force and the contact stiffness; the
 facade (``core.facade.SimulationFacade``) then solves the step and, if the force it
-measures misses the target, re-solves the step at a corrected gap (``force_error``), so
+measures misses the target, re-solves the step at a corrected gap (``_drive_jaws``), so
 the force holds whatever dt. The lift moves the jaw centre height towards a target with
 a trapezoidal speed profile, and the transport moves the gripper centre sideways (x)
 the same way.
@@ -81,7 +81,7 @@ class GripperKinematics:
 
         The gap is a prediction: the gap at which the grip force would meet the target
         (force mode) or the effort limit (position mode) at the present stiffness, within
-        the speed limit; the facade corrects it after the solve (``force_error``).
+        the speed limits; the facade corrects it after the solve (``_drive_jaws``).
         ``clearance`` (m): how far a jaw that does not yet touch the fruit is from it (inf
         when both touch or unknown). Under force control the jaws close at the commanded
         speed until both touch, but never further in one step than that clearance plus
