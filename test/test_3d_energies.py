@@ -263,7 +263,7 @@ def test_strawberry_outline_revolved_has_the_pappus_volume():
     """The 3D body of a 2D outline is that outline revolved about z: its volume is
     2 pi x_c A of the right half-outline (Pappus), x_c its centroid's distance from the axis."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core import shapes
+    from gripper_sim.geometry import shapes
     from gripper_sim.core3d.fruit import _meridian, body_from_config
     config = load_config(fruit='strawberry', overrides=['dimension=3', 'fruit.shape.angle=0',
                                                        'fruit.mesh.subdivisions=10',

@@ -353,7 +353,7 @@ def xyz(marker):
 
 
 def test_arc_finger_outline_is_drawn_at_each_jaw_and_moves_with_it():
-    from gripper_sim.core.fingers import finger_outline
+    from gripper_sim.geometry.fingers import finger_outline
     config, *runs = finger_run('arc')
     radius, h = config['gripper.finger.radius'], config['gripper.jaw_height']
     sagitta = radius - np.sqrt(radius ** 2 - h * h / 4)

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gripper_sim.core import shapes
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core3d import meshes
 from gripper_sim.core3d.energies import (EnclosedVolumePressure, HingeBending, Membrane,
@@ -29,6 +28,7 @@ from gripper_sim.core3d.energies import (EnclosedVolumePressure, HingeBending, M
 from gripper_sim.core3d.energies.quadratic_tets import QuadraticNeoHookeanTets
 from gripper_sim.core3d.energies.wrinkling_membrane import WrinklingMembrane
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry import shapes
 
 
 @dataclass(frozen=True)
