@@ -296,7 +296,7 @@ def test_fast_solver_follows_the_numpy_reference_path(model, monkeypatch):
     contact passes) and on the reference path (numpy energies, one LU per Newton
     iteration): the same contact sets and, to the Newton tolerance, the same motion."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core import make_simulation
+    from gripper_sim.workflows.factory import make_simulation
     config = load_config(overrides=['dimension=3', 'sim.dt=0.01'] + model)
     runs = []
     steps = None

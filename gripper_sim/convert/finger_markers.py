@@ -1,6 +1,6 @@
 """Markers of shaped fingers and soft pads (ns ``fingers`` and ``pads``), moving with the jaws.
 
-Geometry from the core (``gripper_sim.geometry.fingers``): the face profile of the left
+Geometry from ``gripper_sim.geometry.fingers``: the face profile of the left
 jaw in its frame (x towards the fruit, z up, origin at the centre of the jaw's front
 plane), from its bottom rim to its top rim; the right jaw is its mirror image. A pad
 (``gripper.finger.pad.*``) of thickness t lies on the face: its free surface is the
