@@ -1,5 +1,6 @@
-"""The package's import contracts (``.importlinter``): layers that import only downward,
-no import cycle between the modules of a package, no ROS in the physics.
+"""The package's import contracts (``.importlinter``): layers that import only downward
+(every top-level module in one), no import cycle between the modules of a package, no ROS
+in the physics.
 
 ``lint-imports`` (import-linter, from this venv) reads every import of the package, those
 inside functions too. The contracts are also checked against copies of the package with
@@ -23,8 +24,8 @@ def lint_imports(root: Path) -> subprocess.CompletedProcess:
     """``lint-imports`` on the ``gripper_sim`` under ``root`` with the contracts of ROOT."""
     env = dict(os.environ)
     env['PYTHONPATH'] = os.pathsep.join([str(root), env.get('PYTHONPATH', '')])
-    return subprocess.run([str(LINT_IMPORTS), '--config', str(ROOT / '.importlinter'),
-                           '--no-cache'], cwd=root, env=env, capture_output=True, text=True)
+    return subprocess.run([str(LINT_IMPORTS), str(ROOT / '.importlinter'), '--no-cache',
+                           '--no-logo'], cwd=root, env=env, capture_output=True, text=True)
 
 
 def test_the_package_keeps_its_import_contracts():
@@ -41,6 +42,10 @@ PLANTS = {
     'ros in the physics': ({'core3d/planted.py': 'def connect():\n    import rclpy\n'},
                            ['The physics and its workflows know nothing about ROS BROKEN',
                             'gripper_sim.core3d.planted -> rclpy']),
+    'module without a layer': ({'params.py': 'SPEED = 1.0\n'},
+                               ['Layers import only downward BROKEN',
+                                'The following modules are not listed as layers:',
+                                '- gripper_sim.params']),
     'cycle': ({'core/planted_a.py': 'from gripper_sim.core import planted_b\n',
                'core/planted_b.py': 'def back():\n    from gripper_sim.core import planted_a\n'},
               ['No import cycles between the modules of a package BROKEN',
