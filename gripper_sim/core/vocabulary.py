@@ -42,6 +42,7 @@ OUTCOMES: dict[str, str] = {
     'solver failed': 'the solver did not converge (the run counts as neither held nor safe)',
     'canceled': 'the Grasp goal was canceled',
     'running': 'the run ended (time limit) before it had an outcome',
+    'safe': 'a window trial that did not bruise or crush the fruit',
     'error': 'a study case raised an error (its message is the row\'s error)',
 }
 
@@ -117,6 +118,9 @@ KEYS: dict[str, Term] = {
     'max_slip': Term('m', 'window.max_slip: the slip limit of a held trial'),
     'wall_time': Term('s', 'wall-clock time of the computation'),
     'trials': Term('-', 'every simulated grasp of the window'),
+    'verdict': Term('-', 'a window trial\'s verdict: held or slipped (or the run\'s '
+                         'outcome when it did not carry the fruit) for a hold trial, '
+                         'bruised or safe for a bruise trial'),
     'kind': Term('-', 'a window trial\'s question: hold (does it hold?) or bruise (does '
                       'it bruise?)'),
 }

@@ -139,7 +139,7 @@ class GraspWindow:
                     wall_time=self.wall_time, max_slip=self.max_slip,
                     min_force_measured=self.min_force_measured,
                     max_force_measured=self.max_force_measured,
-                    trials=[vars(t) for t in self.trials])
+                    trials=[dict(vars(t), verdict=t.verdict) for t in self.trials])
 
 
 def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
