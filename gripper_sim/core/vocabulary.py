@@ -123,6 +123,40 @@ KEYS: dict[str, Term] = {
                          'bruised or safe for a bruise trial'),
     'kind': Term('-', 'a window trial\'s question: hold (does it hold?) or bruise (does '
                       'it bruise?)'),
+    # analyze (a recording's summary.json; the unit is a suffix there)
+    'file': Term('-', 'the recording analysed'),
+    'fruit_state_topic': Term('-', 'topic of the FruitState messages read'),
+    'left_wrench_topic': Term('-', 'topic of the left jaw\'s wrench'),
+    'right_wrench_topic': Term('-', 'topic of the right jaw\'s wrench'),
+    'samples': Term('-', 'FruitState messages read'),
+    'start_time': Term('s', 'simulation time of the first message'),
+    'time_of_peak_force': Term('s', 'when the grip force peaked'),
+    'peak_left_force': Term('N', 'largest normal force on the left jaw'),
+    'peak_right_force': Term('N', 'largest normal force on the right jaw'),
+    'peak_compression_ratio': Term('', 'largest compression over the rest width'),
+    'compression_at_peak_force': Term('m', 'compression at the peak grip force'),
+    'stiffness': Term('N/m', 'tangent stiffness of the loading'),
+    'secant_stiffness': Term('N/m', 'secant stiffness of the loading'),
+    'stiffness_fit_force_range': Term('N', 'force range the stiffness is fitted on'),
+    'stiffness_fit_compression_range': Term('m', 'compression range of the fit'),
+    'stiffness_fit_time_range': Term('s', 'time range of the fit'),
+    'peak_contact_pressure': Term('Pa', 'largest contact pressure at any node, jaws or '
+                                        'table, as recorded (FruitState.'
+                                        'peak_contact_pressure)'),
+    'peak_max_skin_strain': Term('', 'largest skin strain (signed)'),
+    'gripped': Term('-', 'both jaws touched the fruit'),
+    'held_slip_distance': Term('m', 'slip at the end of the hold (what held and slipped '
+                                    'are judged on)'),
+    'max_slip_distance': Term('m', 'largest slip over the recording'),
+    'final_slip_distance': Term('m', 'slip at the last message'),
+    'slipping_time': Term('s', 'time the fruit slid while gripped'),
+    'final_bruised_fraction': Term('', 'bruised fraction at the last message'),
+    'damage_note': Term('-', 'why a damage value is missing (old recordings)'),
+    'bruise_threshold': Term('Pa', 'fruit.bruise_pressure of the recording'),
+    'time_above_bruise_threshold': Term('s', 'time the damage pressure exceeded it'),
+    'first_contact_time': Term('s', 'when both jaws first touched the fruit'),
+    'event_times': Term('s', 'grip, lift-off, hold, drop: when each happened'),
+    'slip_threshold': Term('m', 'the slip above which a grasp slipped (1 mm)'),
 }
 
 #: the node's Grasp action result field -> the key it reports
@@ -137,7 +171,7 @@ ACTION_RESULT_FIELDS: dict[str, str] = {
 
 #: unit -> the suffix ``analyze`` appends to a key in summary.json ('' and '-': none)
 ANALYZE_UNIT_SUFFIXES: dict[str, str] = {'N': '_n', 'm': '_m', 's': '_s', 'Pa': '_pa',
-                                         'm^2': '_m2', 'kg': '_kg'}
+                                         'm^2': '_m2', 'kg': '_kg', 'N/m': '_n_per_m'}
 
 
 def analyze_key(key: str) -> str:
@@ -153,3 +187,18 @@ def damage_fields(damage: Any) -> dict[str, Any]:
                 bruised_fraction=float(values['bruised_fraction']),
                 peak_damage_pressure=float(values['peak_pressure']),
                 peak_flesh_stress=float(values['peak_flesh_stress']))
+
+
+#: first line of the README's glossary (``markdown_glossary``)
+GLOSSARY_HEADER = '| outcome word | meaning |'
+
+
+def markdown_glossary() -> str:
+    """The README's glossary: the outcome words, the keys, the Grasp action's fields."""
+    lines = [GLOSSARY_HEADER, '|---|---|']
+    lines += [f'| `{word}` | {meaning} |' for word, meaning in OUTCOMES.items()]
+    lines += ['', '| key | unit | meaning |', '|---|---|---|']
+    lines += [f'| `{key}` | {term.unit} | {term.meaning} |' for key, term in KEYS.items()]
+    lines += ['', '| Grasp action result field | key |', '|---|---|']
+    lines += [f'| `{field}` | `{key}` |' for field, key in ACTION_RESULT_FIELDS.items()]
+    return '\n'.join(lines)
