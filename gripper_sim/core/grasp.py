@@ -161,8 +161,9 @@ class GraspSequence:
                                peak_flesh_stress=0.0)
         damage_keys['bruised'] = bool(self.bruised)
         if self.bruised:
-            message += (f"; bruised: peak damage pressure {damage_keys['peak_damage_pressure']:.4g}"
-                        f" Pa above {self.sim.config['fruit.bruise_pressure']:.4g} Pa")
+            peak = damage_keys['peak_damage_pressure']
+            message += (f'; bruised: peak damage pressure {peak:.4g} Pa above '
+                        f"{self.sim.config['fruit.bruise_pressure']:.4g} Pa")
         if damage_keys['crushed']:
             message += '; crushed: the flesh failed'
         return dict(success=success, outcome=self.outcome or 'running',
