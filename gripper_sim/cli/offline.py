@@ -455,8 +455,12 @@ def run_window(args) -> int:
           f' m g / (2 mu) = {window.min_estimate:.3g} N, m = {window.mass * 1e3:.0f} g, '
           f'mu = {window.friction:g})')
     print(f'  bruises above   {high}')
-    print(f'                  (Hertz estimate {window.max_estimate:.3g} N'
-          + (', 3D: resolved pressure' if int(config['dimension']) == 3 else '') + ')')
+    sites = sorted({t.bruised_at for t in window.trials if t.bruised and t.bruised_at})
+    print(f'                  (Hertz estimate at the jaws {window.max_estimate:.3g} N'
+          + (', 3D: resolved pressure' if int(config['dimension']) == 3 else '')
+          + (f'; on the table once it carries {window.table_bruise_estimate:.3g} N'
+             if window.table_bruise_estimate else '')
+          + (f"; bruised at the {' and the '.join(sites)}" if sites else '') + ')')
     if window.exists:
         top = 'gripper.max_force' if window.max_force == math.inf else \
             f'{window.max_force:.3g} N'
@@ -475,7 +479,8 @@ def _trial_line(trial) -> str:
             f'{trial.peak_grip_force:7.3f} N, jaw pressure '
             f'{trial.peak_jaw_pressure / 1e3:6.1f} kPa, table '
             f'{trial.peak_table_pressure / 1e3:5.1f} kPa, damage '
-            f'{trial.peak_damage_pressure / 1e3:6.1f} kPa')
+            f'{trial.peak_damage_pressure / 1e3:6.1f} kPa'
+            + (f' at the {trial.bruised_at}' if trial.bruised and trial.bruised_at else ''))
 
 
 def run_fingers(args) -> int:

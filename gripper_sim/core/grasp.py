@@ -208,6 +208,8 @@ class GraspEvaluation:
         peak_jaw_pressure, peak_table_pressure: Pa, largest contact pressure at the jaws,
             on the table (``core.peaks.contact_pressures``).
         peak_damage_pressure: Pa, the damage model's peak pressure (Hertz in 2D).
+        bruised_at: where it first bruised, 'jaws' or 'table' ('': not bruised; a study's
+            rows are a table of one type per column).
         bruised_fraction: fraction of the outline (2D) or surface (3D) bruised.
         error: '' or the solver's message when it failed.
         sim_time: s simulated; steps: time steps taken.
@@ -230,6 +232,7 @@ class GraspEvaluation:
     peak_jaw_pressure: float
     peak_table_pressure: float
     peak_damage_pressure: float
+    bruised_at: str
     bruised_fraction: float
     error: str
     sim_time: float
@@ -273,7 +276,7 @@ def evaluate(sim, machine: GraspMachine, force: float,
             slipped=False, bruised=True, crushed=True, slip_distance=0.0,
             peak_grip_force=peaks.grip_force, peak_compression=peaks.compression,
             peak_jaw_pressure=peaks.jaw_pressure, peak_table_pressure=peaks.table_pressure,
-            peak_damage_pressure=0.0,
+            peak_damage_pressure=0.0, bruised_at=peaks.bruised_at or '',
             bruised_fraction=0.0, error=str(err) or type(err).__name__,
             sim_time=float(sim.time), steps=int(sim.last.step - start_step),
             message=str(err), failure=err)
@@ -292,6 +295,7 @@ def evaluate(sim, machine: GraspMachine, force: float,
         peak_grip_force=peaks.grip_force, peak_compression=peaks.compression,
         peak_jaw_pressure=peaks.jaw_pressure, peak_table_pressure=peaks.table_pressure,
         peak_damage_pressure=float(damage.peak_pressure) if damage is not None else 0.0,
+        bruised_at=peaks.bruised_at or '',
         bruised_fraction=float(damage.bruised_fraction) if damage is not None else 0.0,
         error='', sim_time=float(sim.time), steps=int(sim.last.step - start_step),
         message=str(summary.get('message', '')), summary=summary)

@@ -91,6 +91,8 @@ KEYS: dict[str, Term] = {
                                        'with fruit.bruise_pressure (2D: Hertz estimate of '
                                        'each contact, jaws and table; 3D: resolved)'),
     'peak_flesh_stress': Term('Pa', 'largest flesh stress of the damage model'),
+    'bruised_at': Term('-', 'where the fruit first bruised: jaws or table (null, or empty '
+                            'in a study\'s rows: not bruised)'),
     'bruised_length': Term('m', '2D: length of the outline bruised'),
     'bruised_fraction': Term('', 'fraction of the outline (2D) or surface (3D) bruised'),
     'final_gap': Term('m', 'jaw gap at the end'),
@@ -112,6 +114,9 @@ KEYS: dict[str, Term] = {
                                     '(null when max_force is "inf")'),
     'min_estimate': Term('N', 'closed-form lower seed m g / (2 mu)'),
     'max_estimate': Term('N', 'closed-form upper seed (Hertz bruise force)'),
+    'table_bruise_estimate': Term('N', 'closed-form table load at which the fruit bruises '
+                                       'on the rigid table (Hertz): a fruit squeezed on the '
+                                       'table is pressed into it too'),
     'mass': Term('kg', 'fruit mass'),
     'friction': Term('', 'friction coefficient at the jaws (pad friction under a pad)'),
     'tolerance': Term('', 'relative width at which the bisections stop'),

@@ -61,6 +61,7 @@ class Trial:
         peak_jaw_pressure, peak_table_pressure: Pa, contact pressure at the jaws, on
             the table.
         peak_damage_pressure: Pa, the damage model's pressure.
+        bruised_at: where it first bruised ('jaws', 'table') or None.
         wall_time: s.
     """
 
@@ -75,6 +76,7 @@ class Trial:
     peak_jaw_pressure: float
     peak_table_pressure: float
     peak_damage_pressure: float
+    bruised_at: str | None
     wall_time: float
 
     @property
@@ -103,6 +105,8 @@ class GraspWindow:
         trials: every simulated grasp, in order.
         wall_time: s, time to compute the window.
         max_slip: m, ``window.max_slip``.
+        table_bruise_estimate: N, the table load at which the fruit bruises on the table
+            (``table_bruise_load``); the trials say where each bruised (``bruised_at``).
     """
 
     fruit: str
@@ -117,6 +121,7 @@ class GraspWindow:
     trials: list = field(default_factory=list)
     wall_time: float = 0.0
     max_slip: float = 0.0
+    table_bruise_estimate: float = 0.0
     min_force_measured: float | None = None
     max_force_measured: float | None = None
 
@@ -137,6 +142,7 @@ class GraspWindow:
                     max_estimate=float(self.max_estimate), mass=float(self.mass),
                     friction=float(self.friction), tolerance=self.tolerance,
                     wall_time=self.wall_time, max_slip=self.max_slip,
+                    table_bruise_estimate=self.table_bruise_estimate,
                     min_force_measured=self.min_force_measured,
                     max_force_measured=self.max_force_measured,
                     trials=[dict(vars(t), verdict=t.verdict) for t in self.trials])
@@ -167,12 +173,7 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     hold = weight / (2 * mu) if mu > 0 else math.inf
     # the outline's radius of curvature where it meets the jaws (the points of largest |x|)
     surface = fruit.rest_positions[fruit.surface]
-    i = int(abs(surface[:, 0]).argmax())
-    n = len(surface)
-    a, b, c = surface[(i - 1) % n], surface[i], surface[(i + 1) % n]
-    side = [math.dist(a, b), math.dist(b, c), math.dist(a, c)]
-    area2 = abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
-    radius = side[0] * side[1] * side[2] / (2 * area2) if area2 > 0 else 0.5 * fruit.rest_width
+    radius = _outline_radius(surface, int(abs(surface[:, 0]).argmax()), fruit.rest_width)
     pad = config['gripper.finger.pad.enabled']
     e_star = contact_modulus(config['fruit.flesh.youngs_modulus'],
                              config['fruit.flesh.poisson_ratio'],
@@ -188,6 +189,31 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     if config['gripper.finger.type'] == 'vgroove':  # two flanks share a jaw's force
         bruise *= 2 * math.sin(math.radians(0.5 * config['gripper.finger.groove_angle']))
     return hold, bruise, mass
+
+
+def _outline_radius(surface: np.ndarray, i: int, width: float) -> float:
+    """m, the radius of curvature of the closed outline ``surface`` (n, 2) at node ``i``
+    (the circle through it and its neighbours; half ``width`` where they are in line)."""
+    n = len(surface)
+    a, b, c = surface[(i - 1) % n], surface[i], surface[(i + 1) % n]
+    side = [math.dist(a, b), math.dist(b, c), math.dist(a, c)]
+    area2 = abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+    return side[0] * side[1] * side[2] / (2 * area2) if area2 > 0 else 0.5 * width
+
+
+def table_bruise_load(config: Mapping[str, Any]) -> float:
+    """N, the load on the rigid table at which the fruit resting on it bruises: the
+    Hertz force F = p_b^3 pi^3 Re^2 / (6 E*^2) with the rigid E* and the outline's
+    radius of curvature at its lowest point (a round fruit: Re = R; validation.md
+    section 3). Gripping a fruit that rests on the table loads the table too: a squeezed
+    fruit bulges down against jaws that hold it by friction, so with a soft pad (which
+    spares the jaw contact) the table contact may bruise first."""
+    fruit = build_fruit(config)
+    surface = fruit.rest_positions[fruit.surface]
+    radius = _outline_radius(surface, int(surface[:, -1].argmin()), fruit.rest_width)
+    e_star = contact_modulus(config['fruit.flesh.youngs_modulus'],
+                             config['fruit.flesh.poisson_ratio'])
+    return config['fruit.bruise_pressure'] ** 3 * math.pi ** 3 * radius ** 2 / (6 * e_star ** 2)
 
 
 #: one request of a window search: (kind, force in N), kind 'hold' or 'bruise'
@@ -233,7 +259,7 @@ def trial_of(evaluation: GraspEvaluation, kind: str, wall_time: float = 0.0) -> 
                  peak_jaw_pressure=float(evaluation.peak_jaw_pressure),
                  peak_table_pressure=float(evaluation.peak_table_pressure),
                  peak_damage_pressure=float(evaluation.peak_damage_pressure),
-                 wall_time=wall_time)
+                 bruised_at=evaluation.bruised_at or None, wall_time=wall_time)
 
 
 def measured_bounds(min_force: float | None, max_force: float | None,
@@ -346,6 +372,8 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
                        tolerance=tolerance, trials=trials,
                        wall_time=time.perf_counter() - start,
                        max_slip=float(config['window.max_slip']),
+                       table_bruise_estimate=(table_bruise_load(config)
+                                              if config['world.table'] else 0.0),
                        min_force_measured=low, max_force_measured=high)
 
 

@@ -55,7 +55,7 @@ def run_case(config: Mapping[str, Any], scenario: Scenario, force: float,
                        slipped=False, bruised=True, crushed=True, slip_distance=0.0,
                        peak_grip_force=0.0, peak_compression=0.0,
                        peak_jaw_pressure=0.0, peak_table_pressure=0.0,
-                       peak_damage_pressure=0.0,
+                       peak_damage_pressure=0.0, bruised_at='',
                        bruised_fraction=0.0,
                        error=f'{type(err).__name__}: {err} ({Path(where.filename).name}:'
                              f'{where.lineno})',
