@@ -209,7 +209,7 @@ class SimParameters:
                                                      overrides={'dimension': value})
         self.config = configuration.load_config(fruit=fruit, config_file=config_file,
                                                 overrides=overrides)
-        self.fruit = fruit or configuration.DEFAULT_FRUIT
+        self.fruit = str(self.config['fruit.name'])
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._applied)
 
