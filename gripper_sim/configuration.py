@@ -483,7 +483,8 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
     preset: a file layers over one. It is, first found: ``--set fruit=NAME`` (an
     override ``fruit``), ``fruit``, the file's top-level ``fruit: NAME``,
     ``fallback_fruit`` (a scenario's), the default fruit (``DEFAULT_FRUIT``). A choice
-    that replaces another given one is a ``ConfigWarning``. The finger preset likewise.
+    that replaces another given one (not a fallback) is a ``ConfigWarning``. The finger
+    preset likewise.
 
     Args:
         fruit: preset name in ``config/fruits``, or the path of a preset file
@@ -518,7 +519,7 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
             choices[selector].append((f"the config file's '{selector}: {data[selector]}'",
                                       data.pop(selector)))
     for selector, fallback in (('fruit', fallback_fruit), ('finger', fallback_finger)):
-        if fallback is not None:
+        if fallback is not None and not choices[selector]:   # a default, replaced quietly
             choices[selector].append((f"the scenario's '{selector}: {fallback}'", fallback))
     fruit_name = _chosen('fruit', choices['fruit']) or DEFAULT_FRUIT
     finger_name = _chosen('finger', choices['finger'])

@@ -111,6 +111,9 @@ def test_a_scenario_warns_once_and_its_fruit_is_the_fallback(tmp_path):
         warnings.simplefilter('error', ConfigWarning)
         config = scenario_config(scenario.with_values(fruit='plum'), config_file=path)
     assert config['fruit.name'] == 'plum' and config['sim.dt'] == 0.002
+    with warnings.catch_warnings():   # the command line overrides the scenario quietly
+        warnings.simplefilter('error', ConfigWarning)
+        assert scenario_config(scenario, fruit='peach')['fruit.name'] == 'peach'
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter('always')
         scenario_config(scenario, overrides=['fruit.name=plum'])
