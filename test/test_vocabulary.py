@@ -16,8 +16,9 @@ from gripper_sim.ros.grasp_goal import GoalRun
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ['--set', 'fruit.nodes=16', '--quiet']
-#: keys whose values are free-form mappings (phase names, event names), not vocabulary
-FREE_FORM = ('phase_times', 'event_times_s')
+#: keys whose values are free-form mappings (phase names, event names, per-jaw patches),
+#: not vocabulary
+FREE_FORM = ('phase_times', 'event_times_s', 'contact_patches_at_peak_force')
 
 
 def keys_of(value, prefix=''):

@@ -161,6 +161,9 @@ KEYS: dict[str, Term] = {
     'time_above_bruise_threshold': Term('s', 'time the damage pressure exceeded it'),
     'first_contact_time': Term('s', 'when both jaws first touched the fruit'),
     'event_times': Term('s', 'grip, lift-off, hold, drop: when each happened'),
+    'contact_patches_at_peak_force': Term('-', '3D: per jaw (left, right) the contact '
+                                                'patch at the peak grip force: its nodes '
+                                                'and hull area (m^2)'),
     'slip_threshold': Term('m', 'the slip above which a grasp slipped (1 mm)'),
 }
 
