@@ -55,7 +55,9 @@ def recording(tmp_path_factory):
     ['pick', '--force', '0.05', '--lift', '0.01', '--hold', '0.1'],   # it drops
     ['run', 'pick_and_place', '--force', '2'],
     ['window', '--tolerance', '0.5'],
-], ids=['squeeze', 'pick', 'pick-dropped', 'run', 'window'])
+    ['pick', '--force', '2', '--lift', '0.01', '--hold', '0.1', '--set', 'dimension=3',
+     '--set', 'fruit.mesh.subdivisions=3'],
+], ids=['squeeze', 'pick', 'pick-dropped', 'run', 'window', 'pick-3d'])
 def test_every_verb_reports_only_vocabulary_keys_and_words(argv, capsys):
     data = verb_json(capsys, *argv, *SMALL)
     unknown = keys_of(data) - set(KEYS)
