@@ -67,7 +67,8 @@ def made_window() -> GraspWindow:
                     outcome='dropped' if f < 1.0 else 'bruised' if f >= 8.0 else 'held',
                     slip_distance=0.01 / f, peak_grip_force=1.01 * f,
                     peak_jaw_pressure=1e4 * f, peak_table_pressure=2e3,
-                    peak_damage_pressure=4e4 * f, wall_time=1.0)
+                    peak_damage_pressure=4e4 * f,
+                    bruised_at='jaws' if f >= 8.0 else None, wall_time=1.0)
               for f in forces]
     return GraspWindow(fruit='apple', finger='flat', min_force=1.0, max_force=4.0,
                        min_estimate=0.9, max_estimate=5.0, mass=0.2, friction=0.5,
