@@ -7,7 +7,7 @@ import pytest
 
 from gripper_sim.cli.main import main
 from gripper_sim.configuration import load_config, no_effect_reason
-from gripper_sim.core.scenario import load_scenario, scenario_config
+from gripper_sim.workflows.scenario import load_scenario, scenario_config
 from gripper_sim.errors import ConfigError, ConfigWarning
 
 SMALL = ['--set', 'fruit.nodes=16']

@@ -9,7 +9,7 @@ from gripper_sim_interfaces.action import Grasp
 
 from gripper_sim.cli.main import main
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
+from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.core.vocabulary import (ACTION_RESULT_FIELDS, KEYS, OUTCOMES, analyze_key,
                                          markdown_glossary)
 from gripper_sim.ros.grasp_goal import GoalRun

@@ -4,10 +4,10 @@ and the fruit, squeezed on the table, bruises at the table once the table carrie
 own Hertz bruise load."""
 import pytest
 
-from gripper_sim.core import make_simulation
-from gripper_sim.core.grasp import evaluate
-from gripper_sim.core.scenario import PickAndPlace, load_scenario, scenario_config
-from gripper_sim.core.window import estimates, table_bruise_load, trial_of, trial_setup
+from gripper_sim.workflows.factory import make_simulation
+from gripper_sim.workflows.grasp import evaluate
+from gripper_sim.workflows.scenario import PickAndPlace, load_scenario, scenario_config
+from gripper_sim.workflows.window import estimates, table_bruise_load, trial_of, trial_setup
 
 
 def bruise_trial(finger: str, force: float):

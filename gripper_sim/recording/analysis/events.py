@@ -9,7 +9,7 @@
     drop        between the lift-off (or the grip) and the release, no jaw touches the
                 fruit or it slid more than ``DROP_SLIP`` behind them
 
-These are the moments at which the grasp state machine (``gripper_sim.core.grasp``)
+These are the moments at which the grasp state machine (``gripper_sim.workflows.grasp``)
 changes phase, seen from outside: the analysis has only what was recorded.
 """
 from __future__ import annotations
