@@ -175,7 +175,8 @@ def test_a_study_on_an_existing_cluster_gives_the_local_rows(study_file, referen
     for column in ('config_hash', 'sample', 'seed', 'package_version', 'code_version',
                    'contact.jaw.static_friction', 'fruit.shape.diameter', 'outcome',
                    'slip_distance', 'peak_grip_force', 'peak_compression',
-                   'peak_contact_pressure', 'peak_damage_pressure', 'bruised_fraction',
+                   'peak_jaw_pressure', 'peak_table_pressure', 'peak_damage_pressure',
+                   'bruised_fraction',
                    'error'):
         assert column in csv_lines[0].split(',')
     # run again: nothing is computed, the table is unchanged
