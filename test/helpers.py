@@ -1,13 +1,13 @@
 """Shared set-ups of the mechanics tests (also used by bench/validation_report.py)."""
-import numpy as np
-
 import time
 
+import numpy as np
+
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
-from gripper_sim.core.grasp import GraspSequence, run_grasp
-from gripper_sim.core.scenario import load_scenario, run_scenario, scenario_config
 from gripper_sim.core.simulation import Simulation
+from gripper_sim.workflows.factory import make_simulation
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+from gripper_sim.workflows.scenario import load_scenario, run_scenario, scenario_config
 
 #: quasi-static settings: light fruit, mass damping, large step, no gravity, no table
 QUASI_STATIC = ['world.gravity=0', 'world.table=false', 'fruit.density=50',
@@ -113,7 +113,7 @@ def traced_pick(config, force, lift=0.05, hold=1.0):
     summary = run_grasp(sim, sequence, on_step=lambda r, phase: lifted.append(r.grip_force)
                         if phase in ('lifting', 'holding') else None)
     return dict(outcome=summary['outcome'], slip=summary['slip_distance'],
-                peak=summary['max_grip_force'], lift_min=min(lifted, default=0.0),
+                peak=summary['peak_grip_force'], lift_min=min(lifted, default=0.0),
                 solves=sim.gap_solves / max(sim.last.step, 1),
                 cpu=time.process_time() - start)
 

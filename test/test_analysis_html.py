@@ -22,7 +22,6 @@ from chromium import Browser  # noqa: E402
 from gripper_sim.cli import progress  # noqa: E402
 from gripper_sim.cli.main import main  # noqa: E402
 from gripper_sim.configuration import load_config  # noqa: E402
-from gripper_sim.core.window import GraspWindow, Trial  # noqa: E402
 from gripper_sim.recording.analysis import analyze, figures  # noqa: E402
 from gripper_sim.recording.analysis.events import find_events, key_moments  # noqa: E402
 from gripper_sim.recording.analysis.outputs import run_frames  # noqa: E402
@@ -33,6 +32,7 @@ from gripper_sim.recording.analysis.series import (find_topics, read_time_series
                                                    split_runs)
 from gripper_sim.recording.analysis.summary import summarize  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
+from gripper_sim.workflows.window import GraspWindow, Trial  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -62,9 +62,13 @@ def pick_2d_html(tmp_path_factory):
 def made_window() -> GraspWindow:
     """A window of trials with every kind of outcome (not simulated: the report's input)."""
     forces = [0.5, 1.0, 2.0, 4.0, 8.0]
-    trials = [Trial(force=f, held=f >= 1.0, bruised=f >= 8.0,
+    trials = [Trial(force=f, kind='bruise' if f >= 4.0 else 'hold', held=f >= 1.0,
+                    slipped=f < 1.0, bruised=f >= 8.0,
                     outcome='dropped' if f < 1.0 else 'bruised' if f >= 8.0 else 'held',
-                    slip_distance=0.01 / f, peak_pressure=4e4 * f, wall_time=1.0)
+                    slip_distance=0.01 / f, peak_grip_force=1.01 * f,
+                    peak_jaw_pressure=1e4 * f, peak_table_pressure=2e3,
+                    peak_damage_pressure=4e4 * f,
+                    bruised_at='jaws' if f >= 8.0 else None, wall_time=1.0)
               for f in forces]
     return GraspWindow(fruit='apple', finger='flat', min_force=1.0, max_force=4.0,
                        min_estimate=0.9, max_estimate=5.0, mass=0.2, friction=0.5,
@@ -214,7 +218,7 @@ def test_html_and_quiet_options(tmp_path, capsys):
 def test_window_verb_writes_its_report(monkeypatch, tmp_path, capsys):
     """The verb hands its window to the report (the search itself is stubbed: it is
     tested with the window verb)."""
-    monkeypatch.setattr('gripper_sim.core.window.grasp_window',
+    monkeypatch.setattr('gripper_sim.workflows.window.grasp_window',
                         lambda config, scenario, tolerance, progress: made_window())
     path = tmp_path / 'window.html'
     assert main(['window', '--html', str(path), '--quiet']) == 0

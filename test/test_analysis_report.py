@@ -15,9 +15,7 @@ import rclpy  # noqa: F401
 import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim.configuration import load_config  # noqa: E402
-from gripper_sim.core import make_simulation  # noqa: E402
-from gripper_sim.core.grasp import CLOSING, LIFTING, GraspSequence, run_grasp  # noqa: E402
-from gripper_sim.core.scenario import grasp_height  # noqa: E402
+from gripper_sim.convert import messages  # noqa: E402
 from gripper_sim.recording.analysis import analyze, read_time_series, split_runs  # noqa: E402
 from gripper_sim.recording.analysis import figures  # noqa: E402
 from gripper_sim.recording.analysis.events import find_events, key_moments  # noqa: E402
@@ -27,7 +25,9 @@ from gripper_sim.recording.analysis.series import find_topics  # noqa: E402
 from gripper_sim.recording.analysis.summary import summarize  # noqa: E402
 from gripper_sim.recording.offline import SimRecorder  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
-from gripper_sim.ros import messages  # noqa: E402
+from gripper_sim.workflows.factory import make_simulation  # noqa: E402
+from gripper_sim.workflows.grasp import CLOSING, LIFTING, GraspSequence, run_grasp  # noqa: E402
+from gripper_sim.workflows.scenario import grasp_height  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -71,9 +71,11 @@ def released_pick(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def slipped_pick(tmp_path_factory):
+    """A grip too weak to lift the fruit: it stays on the table as the jaws rise,
+    'dropped' (as in ``run``), and slipped."""
     path = tmp_path_factory.mktemp('slipped') / 'slipped.mcap'
     summary, steps = recorded_pick(path, 0.5, hold=0.2)
-    assert summary['outcome'] == 'slipped'
+    assert summary['outcome'] == 'dropped' and summary['slipped']
     return path, summary, steps
 
 
@@ -101,6 +103,7 @@ def test_held_and_slipped_are_the_grasp_results_own(held_pick, slipped_pick, rel
     for path, grasp, steps in (held_pick, slipped_pick, released_pick):
         s = analyze(path, tmp_path / path.stem, figures=False).summary
         assert s['slipped'] == grasp['slipped']
+        assert s['dropped'] == grasp['dropped']
         assert s['held'] == (grasp['outcome'] == 'held')
         assert s['held_slip_distance_m'] == pytest.approx(grasp['slip_distance'], abs=1e-9)
     path, _grasp, steps = released_pick

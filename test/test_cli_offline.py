@@ -27,9 +27,9 @@ def test_squeeze_json_reports_series_and_summary():
     assert data['force'][-1] >= 4.0
     assert all(b < a for a, b in zip(data['gap'], data['gap'][1:]))
     summary = data['summary']
-    assert summary['peak_force'] == pytest.approx(max(data['force']))
+    assert summary['peak_grip_force'] == pytest.approx(max(data['force']))
     assert 0 < summary['peak_compression'] < 0.01
-    assert summary['peak_contact_pressure'] > 0
+    assert summary['peak_jaw_pressure'] > 0
 
 
 def test_squeeze_to_gap_stops_at_the_gap():
@@ -84,8 +84,8 @@ def test_force_grasp_closes_at_full_speed_while_one_jaw_pushes_the_fruit():
     only with both jaws at the force (it used to end on the first jaw's impact, or
     crawl at (F - F_push) / (k tau) and time out)."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core.grasp import CLOSING, GraspSequence, run_grasp
-    from gripper_sim.core.scenario import grasp_height
+    from gripper_sim.workflows.grasp import CLOSING, GraspSequence, run_grasp
+    from gripper_sim.workflows.scenario import grasp_height
     from gripper_sim.core.simulation import Simulation
     config = load_config(fruit='strawberry')
     config = load_config(fruit='strawberry',

@@ -3,8 +3,8 @@ whatever dt; in position mode the jaws stop at the maximum effort (2D and 3D).""
 import pytest
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
 from gripper_sim.errors import CommandError
+from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.squeeze import SQUEEZE_DEFAULTS, squeeze, stopped_at_max_effort
 from helpers import converged, hold_minimum, pick_and_place_forces, traced_pick
 
