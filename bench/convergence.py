@@ -6,7 +6,10 @@ m g / (2 mu_s), at every dt of a ladder (2D: 2, 1, 0.5, 0.25, 0.125 ms; 3D: 20, 
 during lift and hold (relative to the command), solves per step and process CPU time,
 then per force whether the outcome is the same at every dt, the slip within
 max(0.2 mm, 20 %) of the finest dt's and the peak grip force within 2 %.
-Run: ``nice python bench/convergence.py [--only 2d|3d] [--ratios 1.1 1.5 3]``.
+With ``--forces``, instead: the pick_and_place scenario in force mode on the apple
+from 0.5 N to 100 N, the peak grip force over the command in every phase (close,
+squeeze, lift, transport, lower, open) and the lowest grip force during the lift.
+Run: ``nice python bench/convergence.py [--only 2d|3d] [--ratios 1.1 1.5 3] [--forces]``.
 """
 from __future__ import annotations
 
@@ -18,17 +21,41 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
 
 from gripper_sim.configuration import load_config  # noqa: E402
-from helpers import converged, hold_minimum, traced_pick  # noqa: E402
+from helpers import (converged, hold_minimum, pick_and_place_forces,  # noqa: E402
+                     traced_pick)
 
+FORCES = (0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+PHASES = ('close', 'squeeze', 'lift', 'transport', 'lower', 'open')
 LADDERS = {'2d': (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4), '3d': (2e-2, 1e-2, 5e-3, 2.5e-3)}
 OVERRIDES = {'2d': [], '3d': ['dimension=3']}
+
+
+def force_table(fruit: str) -> int:
+    """Print the --forces table; 0 if every peak is within 2 % of its command and the
+    lift never below 95 % of it."""
+    print(f'pick_and_place, {fruit} (2D), force mode: peak grip force / command per phase')
+    print('command N  outcome     ' + ''.join(f'{p:>10}' for p in PHASES)
+          + '  lift min/cmd  cpu s')
+    good = True
+    for force in FORCES:
+        summary, peaks, lift_min, cpu = pick_and_place_forces(fruit, force)
+        ratios = [peaks[p] / force if p in peaks else float('nan') for p in PHASES]
+        print(f"{force:9.1f}  {summary['outcome']:10}  "
+              + ''.join(f'{r:10.4f}' for r in ratios)
+              + f'  {lift_min / force:12.4f}  {cpu:5.1f}', flush=True)
+        good = good and max(peaks.values()) <= 1.02 * force and lift_min >= 0.95 * force
+    return 0 if good else 1
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--only', choices=sorted(LADDERS), default=None)
+    parser.add_argument('--fruit', default='apple', help='with --forces')
     parser.add_argument('--ratios', type=float, nargs='+', default=[1.1, 1.5, 3.0])
+    parser.add_argument('--forces', action='store_true')
     args = parser.parse_args(argv)
+    if args.forces:
+        return force_table(args.fruit)
     print('model  ratio  force N   dt ms  outcome   slip mm  peak N  peak/cmd  '
           'lift min/cmd  solves/step  cpu s')
     verdicts = []
