@@ -263,8 +263,8 @@ class FastPath:
         self.ipar[1] = config['sim.max_contact_passes']
         c = sim.contacts
         obstacle, mode, secondary = c.obstacle.copy(), c.mode.copy(), c.secondary.copy()
-        normal_force, bounce, impact = (c.normal_force.copy(), c.bounce_speed.copy(),
-                                        c.impact_gap.copy())
+        normal_force, bounce, secondary_bounce = (c.normal_force.copy(), c.bounce_speed.copy(),
+                                                  c.secondary_bounce.copy())
         n = self.n
         x, v, forces = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, 2))
         normal, pressure = np.empty(n), np.empty(len(self.surface))
@@ -276,9 +276,10 @@ class FastPath:
         if timing:
             t1 = time.perf_counter()
         status = kernels.substep(
-            x_n, v_n, obstacle, mode, normal_force, bounce, impact, secondary, face_par,
-            face_dyn, (grip.gap, grip.lift, grip.x, grip_new.gap, grip_new.lift, grip_new.x,
-                       grip_new.gap_rate, grip_new.lift_rate, grip_new.x_rate),
+            x_n, v_n, obstacle, mode, normal_force, bounce, secondary, secondary_bounce,
+            face_par, face_dyn, (grip.gap, grip.lift, grip.x, grip_new.gap, grip_new.lift,
+                                 grip_new.x, grip_new.gap_rate, grip_new.lift_rate,
+                                 grip_new.x_rate),
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
             model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
@@ -297,7 +298,7 @@ class FastPath:
         sim.q, sim.v, sim.contact_forces = x, v, forces
         sim.contacts = _build(cm.ContactState, dict(
             obstacle=obstacle, mode=mode, normal_force=normal_force, bounce_speed=bounce,
-            impact_gap=impact, secondary=secondary))
+            secondary=secondary, secondary_bounce=secondary_bounce))
         sim._grip = grip_new
         sim._time += dt
         sim._jaw_force = (float(out[2]), float(out[3]))

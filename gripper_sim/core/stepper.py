@@ -266,6 +266,11 @@ class ImplicitEulerSolver:
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
 
 
+#: relative rounding error of the incremental potential: a step that lowers the projected
+#: gradient but raises the potential by more is no progress (a Newton step across the kink
+#: of the smoothed friction law, back and forth)
+PHI_ROUNDOFF = 1e-12
+
 #: multiples of the (filtered) inertia M / dt^2 added to an indefinite Newton matrix
 DESCENT_SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
 
@@ -320,7 +325,8 @@ def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: floa
         phi_trial, grad_trial = evaluate(trial)
         if np.isfinite(phi_trial) and (
                 phi_trial <= phi + 1e-4 * step * slope
-                or float(np.max(np.abs(project(grad_trial)))) < 0.5 * residual):
+                or (phi_trial <= phi + PHI_ROUNDOFF * abs(phi)
+                    and float(np.max(np.abs(project(grad_trial)))) < 0.5 * residual)):
             return trial, phi_trial, grad_trial, step
         step *= 0.5
     raise NewtonFailure('line search failed', history)
