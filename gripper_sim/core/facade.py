@@ -25,6 +25,7 @@ from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.results import Energies, JawWrench, StepResult
+from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
 
@@ -339,11 +340,12 @@ class SimulationFacade:
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
         masses = fruit.masses
         centroid = masses @ x / masses.sum()
-        centroid_velocity = masses @ v / masses.sum()
         touching = bool(np.any(sides[LEFT]) or np.any(sides[RIGHT]))
         both = bool(np.any(sides[LEFT]) and np.any(sides[RIGHT]))
         slip = self._slip_distance(float(centroid[-1] - grip.lift), both, touching)
-        slipping = touching and abs(centroid_velocity[-1] - grip.lift_rate) > 1e-3
+        slipping = jaw_contacts_sliding(
+            v, obstacle, side_of_face[:-1], normals,
+            np.array([face.velocity for face in self._faces(grip)]))
         energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
                             elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
                             gravitational=float(self.gravity.value(x.ravel())))

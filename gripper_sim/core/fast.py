@@ -31,6 +31,7 @@ from gripper_sim.core import contact as cm
 from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
 from gripper_sim.core.energies import EnclosedAreaPressure, RingBending, Stretching
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
+from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NewtonFailure
 
 try:  # numba is optional: without it every model takes the generic path
@@ -326,12 +327,12 @@ class FastPath:
             _, normal, pressure, values, damage_of_x = measured
         else:
             values, normal, pressure = self._measure_kernel()
-        (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, cvz, any_left, any_right,
+        (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, _cvz, any_left, any_right,
          kinetic, elastic, gravitational, width, max_strain, contact_length,
          peak) = values
         both = any_left > 0 and any_right > 0
         slip = sim._slip_distance(cz - grip.lift, both, any_left > 0 or any_right > 0)
-        slipping = bool((any_left > 0 or any_right > 0) and abs(cvz - grip.lift_rate) > 1e-3)
+        slipping = (any_left > 0 or any_right > 0) and self._sliding(v, contacts.obstacle)
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
@@ -361,6 +362,19 @@ class FastPath:
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
+
+    def _sliding(self, v: np.ndarray, obstacle: np.ndarray) -> bool:
+        """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) with the kernels' faces:
+        0 and 1 the jaws, moving with the gripper, the others fixed."""
+        grip = self.sim._grip
+        face_par, _ = self._face_arrays()
+        jaw_of_face = np.full(len(face_par), -1)
+        jaw_of_face[:2] = (0, 1)
+        face_velocities = np.zeros((len(face_par), 2))
+        face_velocities[:2, 0] = (grip.x_rate - 0.5 * grip.gap_rate,
+                                  grip.x_rate + 0.5 * grip.gap_rate)
+        face_velocities[:2, 1] = grip.lift_rate
+        return jaw_contacts_sliding(v, obstacle, jaw_of_face, face_par[:, :2], face_velocities)
 
     def _names(self) -> tuple:
         """``Simulation.obstacle_names``, kept per face set."""

@@ -49,8 +49,9 @@ UNSUPPORTED = 5  # a non-symmetric contact filter (oblique faces): use the refer
 #: regularisation speed (m/s) of the kinetic friction law, as stepper.FRICTION_SMOOTHING
 FRICTION_SMOOTHING = 1e-4
 
-#: relative rounding error of the incremental potential, as stepper.PHI_ROUNDOFF
-PHI_ROUNDOFF = 1e-12
+#: relative rise of the potential the line search's gradient test lets pass, as
+#: stepper.PHI_ROUNDOFF
+PHI_ROUNDOFF = 1e-9
 
 #: shifts of the inertia-like diagonal tried when the Newton matrix gives no descent
 SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)

@@ -266,10 +266,11 @@ class ImplicitEulerSolver:
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
 
 
-#: relative rounding error of the incremental potential: a step that lowers the projected
-#: gradient but raises the potential by more is no progress (a Newton step across the kink
-#: of the smoothed friction law, back and forth)
-PHI_ROUNDOFF = 1e-12
+#: relative rise of the incremental potential that the line search's gradient test lets
+#: pass (above its rounding noise, ~1e-11 at the end of a step's Newton iterations): a
+#: step that lowers the projected gradient but raises the potential by more is no progress
+#: (a Newton step across the kink of the smoothed friction law, back and forth: 7e-8)
+PHI_ROUNDOFF = 1e-9
 
 #: multiples of the (filtered) inertia M / dt^2 added to an indefinite Newton matrix
 DESCENT_SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
@@ -306,8 +307,9 @@ def descent_direction(solve_shifted, gradient: np.ndarray, history: list[float])
 def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: float,
                 residual: float, project, history: list[float]):
     """Backtracking from the full Newton step ``dq``: the first of the steps 1, 1/2,
-    1/4, ... (30 halvings) with sufficient decrease (Armijo, 1e-4 of ``slope``) or a
-    projected gradient below half of ``residual``.
+    1/4, ... (30 halvings) with sufficient decrease (Armijo, 1e-4 of ``slope``) or, with
+    the potential risen by at most ``PHI_ROUNDOFF`` of itself, a projected gradient below
+    half of ``residual``.
 
     Args:
         evaluate: x -> (phi, gradient) of the incremental potential (inf if infeasible).
