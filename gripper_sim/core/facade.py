@@ -414,13 +414,25 @@ class SimulationFacade:
             return self._substep(dt), 1
         except NewtonFailure as failure:
             if depth >= self.config['sim.max_halvings']:
-                msg = (f'the solver did not converge at t = {self._time:.6g} s even with the '
-                       f'step halved {depth} times ({failure}); try a smaller sim.dt or '
-                       f'slower jaws')
+                msg = (f'the solver did not converge at t = {self._time:.6g} s even in '
+                       f'sub-steps of {dt:.3g} s (the step halved {depth} times: '
+                       f'{failure}); {self._convergence_advice(failure)}')
                 raise ConvergenceError(msg, failure.history, self._time) from failure
         it1, s1 = self._advance(0.5 * dt, depth + 1)
         it2, s2 = self._advance(0.5 * dt, depth + 1)
         return it1 + it2, s1 + s2
+
+    def _convergence_advice(self, failure: NewtonFailure) -> str:
+        """What may help a step that failed in its smallest sub-steps (a smaller sim.dt
+        would only repeat them)."""
+        c = self.config
+        if 'infeasible' in str(failure):  # an element inverted: the fruit is crushed
+            return ('an element of the fruit inverted (it is crushed): a smaller grip force, '
+                    'gap command or closing speed helps; a smaller sim.dt would only repeat '
+                    'these sub-steps')
+        return (f"raise sim.max_newton_iterations (now {c['sim.max_newton_iterations']}) "
+                f"or sim.max_halvings (now {c['sim.max_halvings']}); a smaller sim.dt would "
+                f'only repeat these sub-steps')
 
 
 def _wrench(r: np.ndarray, f: np.ndarray) -> JawWrench:
