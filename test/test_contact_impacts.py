@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConvergenceError
+from gripper_sim.workflows.factory import make_simulation
 
 #: a coarse 3D shell (162 nodes), as in test_3d_validation
 COARSE_3D = ['dimension=3', 'fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=1']

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core.grasp import GraspSequence
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.core.slip import SLIDING_SPEED, jaw_contacts_sliding
+from gripper_sim.workflows.grasp import GraspSequence
 
 MU = 0.5
 
