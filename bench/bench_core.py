@@ -216,7 +216,8 @@ def kernel_split(sim: Simulation) -> dict:
     fac = (q, x_n.ravel(), dt, path.masses2, path.fpar[k.F_ALPHA], path.fpar[k.F_BETA],
            filters, frn, frt, frb, frs) + energy
     contact = (c.obstacle, c.mode, c.normal_force, c.bounce_speed, c.secondary,
-               c.secondary_bounce, x_n, v_n, sim.contact_forces, face_par, face_dyn, path.surface, dt,
+               c.secondary_bounce, x_n, v_n, sim.contact_forces, face_par, face_dyn,
+               path.surface, dt,
                sim.config['contact.max_correction_speed'],
                sim.config['contact.release_threshold'], max(5 * sim.gravity.g * dt, 1e-3))
     damage = path._damage_inputs()

@@ -31,7 +31,7 @@ from gripper_sim.core import contact as cm
 from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
 from gripper_sim.core.energies import EnclosedAreaPressure, RingBending, Stretching
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
-from gripper_sim.core.slip import jaw_contacts_sliding
+from gripper_sim.core.slip import SLIDING_SPEED
 from gripper_sim.core.stepper import NewtonFailure
 
 try:  # numba is optional: without it every model takes the generic path
@@ -364,17 +364,15 @@ class FastPath:
         return result
 
     def _sliding(self, v: np.ndarray, obstacle: np.ndarray) -> bool:
-        """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) with the kernels' faces:
-        0 and 1 the jaws, moving with the gripper, the others fixed."""
+        """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) on the kernels' faces:
+        0 and 1 the jaws, moving with the gripper."""
         grip = self.sim._grip
         face_par, _ = self._face_arrays()
-        jaw_of_face = np.full(len(face_par), -1)
-        jaw_of_face[:2] = (0, 1)
-        face_velocities = np.zeros((len(face_par), 2))
-        face_velocities[:2, 0] = (grip.x_rate - 0.5 * grip.gap_rate,
-                                  grip.x_rate + 0.5 * grip.gap_rate)
-        face_velocities[:2, 1] = grip.lift_rate
-        return jaw_contacts_sliding(v, obstacle, jaw_of_face, face_par[:, :2], face_velocities)
+        half = 0.5 * grip.gap_rate
+        jaw_velocities = np.array([[grip.x_rate - half, grip.lift_rate],
+                                   [grip.x_rate + half, grip.lift_rate]])
+        return bool(kernels.jaw_sliding(v, obstacle, face_par, jaw_velocities,
+                                        SLIDING_SPEED))
 
     def _names(self) -> tuple:
         """``Simulation.obstacle_names``, kept per face set."""

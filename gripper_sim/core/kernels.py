@@ -10,7 +10,7 @@ reference elsewhere in the core, in the same order of operations where it matter
 - ``contact_constraints``, ``update_contacts``, ``substep``: ``Simulation._constraints``,
   ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
 - ``step_measures``: the numbers ``Simulation._measure`` and ``measures.deformation``
-  report;
+  report; ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
 - ``damage_update``: the per-step part of ``damage.DamageTracker.update``.
 
 Layout. Positions are flat, q = [x0, z0, x1, z1, ...] (m). Hessians are kept as a
@@ -1011,11 +1011,11 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secon
 
 
 @njit(cache=True, error_model='numpy')
-def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary,
-            secondary_bounce, face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
-            nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out,
-            v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts,
-            d_face, d_rest, d_par, covered_in, covered_out, d_pressure, patches, d_out):
+def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
+            face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
+            nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out, v_out,
+            forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face, d_rest,
+            d_par, covered_in, covered_out, d_pressure, patches, d_out):
     """One implicit Euler step with predictor-corrector contact, as
     ``contact_passes.contact_step``, and the measures of its end state, as
     ``Simulation._measure`` (``step_measures``).
@@ -1195,6 +1195,33 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary,
 (M_LEFT_FX, M_LEFT_FZ, M_LEFT_TY, M_RIGHT_FX, M_RIGHT_FZ, M_RIGHT_TY, M_LEFT_N, M_RIGHT_N,
  M_CX, M_CZ, M_CVX, M_CVZ, M_ANY_LEFT, M_ANY_RIGHT, M_KINETIC, M_ELASTIC, M_GRAVITY,
  M_WIDTH, M_MAX_STRAIN, M_CONTACT_LENGTH, M_PEAK_PRESSURE, M_SIZE) = range(22)
+
+
+@njit(cache=True, error_model='numpy')
+def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
+    """Whether the fruit slides in the jaws, as ``slip.jaw_contacts_sliding`` with the
+    jaws being faces 0 and 1: on either, more than half of the nodes it holds move along it
+    faster than ``speed`` (m/s) relative to it.
+
+    Args:
+        v: (n, 2) m/s.  obstacle: (n,) holding face per node.  face_par: see the module
+        doc.  jaw_velocities: (2, 2) m/s, left and right jaw.
+    """
+    held = np.zeros(2, np.int64)
+    sliding = np.zeros(2, np.int64)
+    for i in range(v.shape[0]):
+        f = obstacle[i]
+        if f < 0 or f > 1:
+            continue
+        rx = v[i, 0] - jaw_velocities[f, 0]
+        rz = v[i, 1] - jaw_velocities[f, 1]
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        r_n = rx * nx + rz * nz
+        ax, az = rx - r_n * nx, rz - r_n * nz
+        held[f] += 1
+        if ax * ax + az * az > speed * speed:
+            sliding[f] += 1
+    return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
 
 
 @njit(cache=True, error_model='numpy')
