@@ -104,15 +104,15 @@ def bench(model: str, quick: bool) -> None:
           + ('fast (numba kernels, CG on a kept LU)' if getattr(sim.solver, 'fast', False)
              else 'numpy reference'))
     print(f'  reference dt {reference_dt * 1e3:g} ms: outcome {ref["outcome"]}, peak grip '
-          f'force {ref["max_grip_force"]:.4f} N, slip {ref["slip_distance"] * 1e3:.2f} mm, '
+          f'force {ref["peak_grip_force"]:.4f} N, slip {ref["slip_distance"] * 1e3:.2f} mm, '
           f'{sim.time:.2f} s simulated in {wall:.1f} s (real-time factor {sim.time / wall:.3f})')
     chosen = None
     for dt in candidates:
         sim, summary, wall, cpu, _ = grasp(overrides, dt)
-        dev = summary['max_grip_force'] / ref['max_grip_force'] - 1
+        dev = summary['peak_grip_force'] / ref['peak_grip_force'] - 1
         ok = abs(dev) <= 0.02 and summary['outcome'] == ref['outcome']
         print(f'  dt {dt * 1e3:g} ms: outcome {summary["outcome"]}, peak grip force '
-              f'{summary["max_grip_force"]:.4f} N ({dev * 100:+.2f} % vs reference), slip '
+              f'{summary["peak_grip_force"]:.4f} N ({dev * 100:+.2f} % vs reference), slip '
               f'{summary["slip_distance"] * 1e3:.2f} mm, real-time factor {sim.time / wall:.3f} '
               f'(CPU {sim.time / cpu:.3f})' + ('' if ok else '  (rejected)'))
         if ok:

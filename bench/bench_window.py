@@ -27,21 +27,23 @@ def main() -> int:
     args = parser.parse_args()
     scenario = load_scenario(args.scenario)
     config = scenario_config(scenario, fruit=args.fruit, finger=args.finger)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     window = grasp_window(config, scenario, args.tolerance)
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     steps = len(window.trials)
     top = ('none up to gripper.max_force' if window.max_force == math.inf
            else 'none' if window.max_force is None else f'{window.max_force:.3g} N')
     low = 'none' if window.min_force is None else f'{window.min_force:.3g} N'
     print(f'grasp window, {window.fruit} / {window.finger} finger / {args.scenario}, '
           f'tolerance {args.tolerance:g}')
-    print(f'  min force {low} (m g / 2 mu = {window.min_estimate:.3g} N), '
+    print(f'  min force {low} (slip < {window.max_slip * 1e3:g} mm; '
+          f'm g / 2 mu = {window.min_estimate:.3g} N), '
           f'max force {top} (Hertz {window.max_estimate:.3g} N)')
-    print(f'  {steps} simulations, wall time {wall:.1f} s '
-          f'({wall / max(steps, 1):.1f} s per simulation)')
+    print(f'  {steps} simulations, wall time {wall:.1f} s, CPU time {cpu:.1f} s '
+          f'({cpu / max(steps, 1):.2f} s of CPU per simulation)')
     for trial in window.trials:
-        print(f'    {trial.force:8.3f} N  {trial.outcome:8s} {trial.wall_time:6.1f} s')
+        print(f'    {trial.kind:6s} {trial.force:8.3f} N  {trial.verdict:8s} slip '
+              f'{trial.slip_distance * 1e3:6.3f} mm {trial.wall_time:6.1f} s')
     return 0
 
 

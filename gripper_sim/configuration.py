@@ -2,9 +2,12 @@
 
 A configuration is a nested mapping (YAML) whose every leaf is described in
 ``SCHEMA`` with its unit, range and meaning. Presets live in ``config/fruits``;
-``load_config`` merges, in order, the embedded defaults, a fruit preset or a file,
-and ``dotted.key=value`` overrides, and validates the result. Unknown keys and values
-out of range raise ``ConfigError`` naming the key.
+``load_config`` merges, in order, the embedded defaults, a fruit preset (always one:
+``--fruit``, else the file's ``fruit:``, else ``--set fruit=NAME``, else the default
+fruit's), a finger preset, a file, and ``dotted.key=value`` overrides, and validates
+the result. Unknown keys and values out of range raise ``ConfigError`` naming the key;
+a key set by the user that has no effect in the set-up (``NO_EFFECT``) is a
+``ConfigWarning`` naming the key that does (``no_effect_reason``).
 """
 from __future__ import annotations
 
@@ -12,13 +15,14 @@ import copy
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import yaml
 
-from gripper_sim.errors import ConfigError
+from gripper_sim.errors import ConfigError, ConfigWarning
 from gripper_sim.geometry.fingers import check_finger
 from gripper_sim.geometry.shapes import outline_from_config
 
@@ -27,6 +31,9 @@ DEFAULT_FRUIT = 'apple'
 PRESET_SUFFIXES = ('.yaml', '.yml')
 #: top-level section of a preset file that records where it came from (not configuration)
 PROVENANCE_KEY = 'calibration'
+#: keys that select a preset (in a file's top level, a scenario, ``--set fruit=plum``)
+#: rather than set a value
+SELECTORS = ('fruit', 'finger')
 
 
 @dataclass(frozen=True)
@@ -236,6 +243,11 @@ SCHEMA: dict[str, Key] = {
     'world.walls': Key(False, '-', 'two vertical walls at x = +/- wall_half_width',
                        'bool'),
     'world.wall_half_width': Key(0.5, 'm', 'wall position', low=1e-3, high=100.0),
+    # --- the grasp window
+    'window.max_slip': Key(1e-3, 'm', 'grasp window: a trial holds when the fruit slid '
+                           'less than this in the jaws from the lift-off to the end of the '
+                           'hold (the lower bound is the smallest force that does)',
+                           low=0.0, high=0.01, open_low=True),
     # --- solver
     'sim.dt': Key(1e-3, 's', 'physics time step (3D default 20 ms: forces within 1-3 %, '
                   'contact areas and pressures within 1 % of a 5 ms step)', low=1e-7,
@@ -354,18 +366,20 @@ def parse_override(text: str) -> tuple[str, Any]:
         raise ConfigError(f"override '{text}' must look like dotted.key=value")
     key, _, raw = text.partition('=')
     key = key.strip()
-    if key not in SCHEMA:
+    if key not in SCHEMA and key not in SELECTORS:
         raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
     try:
         value = yaml.safe_load(raw) if raw.strip() else None
     except yaml.YAMLError as err:
         raise ConfigError(f"override '{text}': value is not valid YAML") from err
+    if key in SELECTORS and not isinstance(value, str):
+        raise ConfigError(f"override '{text}': {key} must be a {key} preset name")
     return key, value
 
 
 def _suggest(key: str) -> str:
     import difflib
-    close = difflib.get_close_matches(key, SCHEMA.keys(), n=1)
+    close = difflib.get_close_matches(key, list(SCHEMA) + list(SELECTORS), n=1)
     return f" (did you mean '{close[0]}'?)" if close else ''
 
 
@@ -460,53 +474,138 @@ def _check_shape(config: Mapping[str, Any]) -> None:
 
 def load_config(fruit: str | None = None, config_file: str | os.PathLike | None = None,
                 overrides: Iterable[str] | Mapping[str, Any] = (),
-                finger: str | None = None) -> dict[str, Any]:
+                finger: str | None = None, fallback_fruit: str | None = None,
+                fallback_finger: str | None = None) -> dict[str, Any]:
     """Build a validated flat configuration ``{'dotted.key': value}``.
 
     Precedence: the schema's defaults (its 3D defaults when ``dimension`` is 3) < the
-    fruit preset < the finger preset < the file < the overrides.
+    fruit preset < the finger preset < the file < the overrides. There is always a fruit
+    preset: a file layers over one. It is, first found: ``--set fruit=NAME`` (an
+    override ``fruit``), ``fruit``, the file's top-level ``fruit: NAME``,
+    ``fallback_fruit`` (a scenario's), the default fruit (``DEFAULT_FRUIT``). A choice
+    that replaces another given one (not a fallback) is a ``ConfigWarning``. The finger
+    preset likewise.
 
     Args:
-        fruit: preset name in ``config/fruits`` (default: the default fruit, unless a
-            file is given), or the path of a preset file (``*.yaml``, e.g. written by
-            ``gripper-sim calibrate``).
+        fruit: preset name in ``config/fruits``, or the path of a preset file
+            (``*.yaml``, e.g. written by ``gripper-sim calibrate``).
         config_file: a YAML file of keys (nested or dotted), merged after the presets;
             its top-level ``fruit: NAME`` / ``finger: NAME`` select presets.
         overrides: ``['key=value', ...]`` strings or a ``{key: value}`` mapping,
-            applied last.
+            applied last; the keys ``fruit`` and ``finger`` select presets.
         finger: preset name in ``config/fingers`` (``gripper.finger.*`` keys), merged
             after the fruit preset.
+        fallback_fruit, fallback_finger: presets used when nothing else chooses one.
 
     Raises:
         ConfigError: unknown fruit, finger or key, bad YAML, value out of range.
     """
-    chosen: dict[str, Any] = {}
-    if fruit is not None or config_file is None:
-        chosen.update(_preset(fruit or DEFAULT_FRUIT))
-    if finger is not None:
-        chosen.update(_finger_preset(finger))
+    data: dict[str, Any] = {}
     if config_file is not None:
         data = read_yaml(config_file)
         _drop_provenance(data, f"config file '{config_file}'")
-        if 'fruit' in data and isinstance(data['fruit'], str):
-            chosen.update(_preset(data.pop('fruit'), Path(config_file).parent))
-        if 'finger' in data and isinstance(data['finger'], str):
-            chosen.update(_finger_preset(data.pop('finger')))
-        chosen.update(_checked_flatten(data, str(config_file)))
     if isinstance(overrides, Mapping):
         items = list(overrides.items())
     else:
         items = [parse_override(text) for text in overrides]
+    choices = {selector: [] for selector in SELECTORS}   # (source, name), strongest first
+    for key, value in reversed(items):
+        if key in SELECTORS:
+            choices[key].append((f'--set {key}={value}', value))
+    for selector, given in (('fruit', fruit), ('finger', finger)):
+        if given is not None:
+            choices[selector].append((f'--{selector} {given}', given))
+        if isinstance(data.get(selector), str):
+            choices[selector].append((f"the config file's '{selector}: {data[selector]}'",
+                                      data.pop(selector)))
+    for selector, fallback in (('fruit', fallback_fruit), ('finger', fallback_finger)):
+        if fallback is not None and not choices[selector]:   # a default, replaced quietly
+            choices[selector].append((f"the scenario's '{selector}: {fallback}'", fallback))
+    fruit_name = _chosen('fruit', choices['fruit']) or DEFAULT_FRUIT
+    finger_name = _chosen('finger', choices['finger'])
+    base_dir = Path(config_file).parent if config_file is not None else None
+    chosen: dict[str, Any] = dict(_preset(fruit_name, base_dir))
+    if finger_name is not None:
+        chosen.update(_finger_preset(finger_name))
+    user: dict[str, Any] = {}
+    if config_file is not None:
+        user.update(_checked_flatten(data, str(config_file)))
     for key, value in items:
+        if key in SELECTORS:
+            continue
         if key not in SCHEMA:
             raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
-        chosen[key] = value
+        user[key] = value
+    chosen.update(user)
     flat = flatten(defaults())
     if _coerce('dimension', chosen.get('dimension', flat['dimension'])) == 3:
         flat.update({key: spec.default_3d for key, spec in SCHEMA.items()
                      if spec.default_3d is not None})
     flat.update(chosen)
-    return validate(flat)
+    config = validate(flat)
+    for message in no_effect_warnings(config, user, fruit_name):
+        warnings.warn(message, ConfigWarning, stacklevel=2)
+    return config
+
+
+def _chosen(selector: str, choices: list[tuple[str, str]]) -> str | None:
+    """The strongest of the preset ``choices`` ((source, name), strongest first); a
+    ``ConfigWarning`` for each other one it replaces."""
+    if not choices:
+        return None
+    source, name = choices[0]
+    for other, replaced in choices[1:]:
+        if replaced != name:
+            warnings.warn(f"{source} replaces {other}: the {selector} preset is '{name}'",
+                          ConfigWarning, stacklevel=3)
+    return name
+
+
+#: the keys that have no effect in some set-ups (``no_effect_reason``)
+PAD_KEYS = ('contact.pad.friction', 'gripper.finger.pad.thickness',
+            'gripper.finger.pad.youngs_modulus', 'gripper.finger.pad.poisson_ratio')
+JAW_FRICTION_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction')
+
+
+def no_effect_reason(key: str, config: Mapping[str, Any]) -> str | None:
+    """Why ``key`` has no effect in ``config``'s set-up, naming what does; None if it has."""
+    pad = config['gripper.finger.pad.enabled']
+    if key in JAW_FRICTION_KEYS and pad:
+        return ("a soft pad covers the jaws ('gripper.finger.pad.enabled'): the friction "
+                "there is 'contact.pad.friction'")
+    if key == 'contact.pad.friction' and not pad:
+        return ("there is no pad ('gripper.finger.pad.enabled' is false): the jaw "
+                "friction is 'contact.jaw.static_friction' and 'contact.jaw.kinetic_friction'")
+    if key in PAD_KEYS and not pad:
+        return "there is no pad: set 'gripper.finger.pad.enabled' = true"
+    finger = config['gripper.finger.type']
+    if key in ('gripper.finger.radius', 'gripper.finger.segments') and finger != 'arc':
+        return f"the finger is {finger}, not an arc: set 'gripper.finger.type' = arc"
+    if key == 'gripper.finger.groove_angle' and finger != 'vgroove':
+        return f"the finger is {finger}, not a V-groove: set 'gripper.finger.type' = vgroove"
+    model = config['fruit.model']
+    if key in ('fruit.pressure.turgor', 'fruit.pressure.bulk_modulus') and model != 'shell':
+        return f"only the shell model has an internal pressure ('fruit.model' is {model})"
+    return None
+
+
+def no_effect_warnings(config: Mapping[str, Any], user: Mapping[str, Any],
+                       fruit_preset: str | None = None) -> list[str]:
+    """One line per key the user set (``user``: from a file or an override) that has no
+    effect in ``config``'s set-up, naming the key that does; and a ``fruit.name`` that
+    names another fruit preset than the one loaded (``fruit_preset``): it only renames."""
+    lines = []
+    for key in user:
+        reason = no_effect_reason(key, config)
+        if reason is not None:
+            lines.append(f"config key '{key}' has no effect: {reason}")
+    name = user.get('fruit.name')
+    if (fruit_preset is not None and isinstance(name, str) and name != fruit_preset
+            and name in available_fruits()):
+        lines.append(f"config key 'fruit.name' = {name} only renames the '{fruit_preset}' "
+                     f"preset (its physics stay); to load the {name} preset use "
+                     f"--fruit {name} or --set fruit={name}")
+    return lines
 
 
 def _preset(name: str, base_dir: Path | None = None) -> dict[str, Any]:

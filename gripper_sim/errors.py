@@ -25,3 +25,9 @@ class ConvergenceError(GripperSimError):
         super().__init__(message)
         self.residual_history = list(residual_history)
         self.time = time
+
+
+class ConfigWarning(UserWarning):
+    """A configuration key that is valid but has no effect in the set-up (or a choice
+    that overrides another), issued with ``warnings.warn``; the CLI prints it as
+    ``warning: ...``."""

@@ -45,7 +45,7 @@ def test_default_3d_squeeze_agrees_with_a_small_step(capsys):
     within 1 %."""
     default = _squeeze(capsys)
     fine = _squeeze(capsys, '--set', 'sim.dt=0.005')
-    assert default['peak_force'] >= 2.0
-    assert default['peak_force'] == pytest.approx(fine['peak_force'], rel=0.03)
-    for key in ('contact_area_at_peak_force', 'peak_contact_pressure'):
+    assert default['peak_grip_force'] >= 2.0
+    assert default['peak_grip_force'] == pytest.approx(fine['peak_grip_force'], rel=0.03)
+    for key in ('contact_area_at_peak_force', 'peak_jaw_pressure'):
         assert default[key] == pytest.approx(fine[key], rel=0.01), key

@@ -48,7 +48,7 @@ def test_squeeze_in_3d_end_to_end_recording_and_analysis(tmp_path, capsys):
     assert main(['squeeze', '--to-force', '3', '--speed', '0.02', *COARSE, '--json',
                  '--out', str(path)]) == 0
     summary = json.loads(capsys.readouterr().out)['summary']
-    assert summary['dimension'] == 3 and summary['peak_force'] >= 3.0
+    assert summary['dimension'] == 3 and summary['peak_grip_force'] >= 3.0
 
     with BagReader(path) as bag:
         config = configuration.validate(read_config(bag))
@@ -58,7 +58,7 @@ def test_squeeze_in_3d_end_to_end_recording_and_analysis(tmp_path, capsys):
     assert config['dimension'] == 3 and config['fruit.mesh.subdivisions'] == 4
     results = replay_squeeze(config, 3.0, 0.02)
     assert len(clouds) == len(arrays) == len(results)
-    assert summary['peak_force'] == max(r.grip_force for r in results)
+    assert summary['peak_grip_force'] == max(r.grip_force for r in results)
 
     # the 3D point cloud and the skin mesh of the last step, intact
     last = results[-1]
@@ -208,7 +208,7 @@ def test_pick_in_3d(capsys):
     data = json.loads(capsys.readouterr().out)
     s = data['summary']
     assert data['outcome'] == 'held' and s['dimension'] == 3
-    assert s['max_grip_force'] >= 0.97 * 3.0 and s['contact_area_at_peak_force'] > 0
+    assert s['peak_grip_force'] >= 0.97 * 3.0 and s['contact_area_at_peak_force'] > 0
     assert data['slip_distance'] < 1e-3
 
 
@@ -375,7 +375,7 @@ def test_grasp_window_in_3d(tmp_path, capsys):
     assert window['max_force'] != 'inf' and window['min_force'] <= window['max_force']
     for trial in window['trials']:
         if trial['outcome'] != 'solver failed':
-            assert trial['bruised'] == (trial['peak_pressure'] > bruise), trial
+            assert trial['bruised'] == (trial['peak_damage_pressure'] > bruise), trial
     assert any(t['bruised'] for t in window['trials'])
     assert any(not t['held'] and t['force'] < window['min_force'] for t in window['trials'])
 

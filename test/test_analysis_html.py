@@ -62,9 +62,13 @@ def pick_2d_html(tmp_path_factory):
 def made_window() -> GraspWindow:
     """A window of trials with every kind of outcome (not simulated: the report's input)."""
     forces = [0.5, 1.0, 2.0, 4.0, 8.0]
-    trials = [Trial(force=f, held=f >= 1.0, bruised=f >= 8.0,
+    trials = [Trial(force=f, kind='bruise' if f >= 4.0 else 'hold', held=f >= 1.0,
+                    slipped=f < 1.0, bruised=f >= 8.0,
                     outcome='dropped' if f < 1.0 else 'bruised' if f >= 8.0 else 'held',
-                    slip_distance=0.01 / f, peak_pressure=4e4 * f, wall_time=1.0)
+                    slip_distance=0.01 / f, peak_grip_force=1.01 * f,
+                    peak_jaw_pressure=1e4 * f, peak_table_pressure=2e3,
+                    peak_damage_pressure=4e4 * f,
+                    bruised_at='jaws' if f >= 8.0 else None, wall_time=1.0)
               for f in forces]
     return GraspWindow(fruit='apple', finger='flat', min_force=1.0, max_force=4.0,
                        min_estimate=0.9, max_estimate=5.0, mass=0.2, friction=0.5,

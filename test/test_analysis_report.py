@@ -71,9 +71,11 @@ def released_pick(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def slipped_pick(tmp_path_factory):
+    """A grip too weak to lift the fruit: it stays on the table as the jaws rise,
+    'dropped' (as in ``run``), and slipped."""
     path = tmp_path_factory.mktemp('slipped') / 'slipped.mcap'
     summary, steps = recorded_pick(path, 0.5, hold=0.2)
-    assert summary['outcome'] == 'slipped'
+    assert summary['outcome'] == 'dropped' and summary['slipped']
     return path, summary, steps
 
 
@@ -100,6 +102,7 @@ def test_held_and_slipped_are_the_grasp_results_own(held_pick, slipped_pick, rel
     for path, grasp, steps in (held_pick, slipped_pick, released_pick):
         s = analyze(path, tmp_path / path.stem, figures=False).summary
         assert s['slipped'] == grasp['slipped']
+        assert s['dropped'] == grasp['dropped']
         assert s['held'] == (grasp['outcome'] == 'held')
         assert s['held_slip_distance_m'] == pytest.approx(grasp['slip_distance'], abs=1e-9)
     path, _grasp, steps = released_pick

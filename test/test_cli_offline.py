@@ -27,9 +27,9 @@ def test_squeeze_json_reports_series_and_summary():
     assert data['force'][-1] >= 4.0
     assert all(b < a for a, b in zip(data['gap'], data['gap'][1:]))
     summary = data['summary']
-    assert summary['peak_force'] == pytest.approx(max(data['force']))
+    assert summary['peak_grip_force'] == pytest.approx(max(data['force']))
     assert 0 < summary['peak_compression'] < 0.01
-    assert summary['peak_contact_pressure'] > 0
+    assert summary['peak_jaw_pressure'] > 0
 
 
 def test_squeeze_to_gap_stops_at_the_gap():

@@ -10,9 +10,10 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 
 from gripper_sim import __version__
-from gripper_sim.errors import GripperSimError
+from gripper_sim.errors import ConfigWarning, GripperSimError
 
 SIGPIPE_EXIT = 141   # 128 + SIGPIPE: what a shell reports for a tool a closed pipe ended
 VERB_MODULES = (
@@ -62,12 +63,20 @@ def _run(argv: list[str] | None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.handler(args) or 0)
+        with warnings.catch_warnings():
+            warnings.simplefilter('default', ConfigWarning)   # each once
+            warnings.showwarning = _show_warning
+            return int(args.handler(args) or 0)
     except GripperSimError as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line on stderr: ``warning: ...``."""
+    print(f'warning: {message}', file=sys.stderr)
 
 
 def _reader_gone() -> int:

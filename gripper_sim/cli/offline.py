@@ -17,18 +17,22 @@ import numpy as np
 from gripper_sim.cli.arguments import non_negative_float, positive_float
 from gripper_sim.cli.progress import StepProgress
 from gripper_sim.configuration import available_fruits, load_config, parse_override
+from gripper_sim.core.peaks import RunPeaks
+from gripper_sim.core.vocabulary import damage_fields
 from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.squeeze import SQUEEZE_DEFAULTS, check_squeeze, squeeze
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     """--fruit / --config / --set, shared by every verb that builds a simulation."""
-    source = parser.add_mutually_exclusive_group()
-    source.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits), or a '
+    parser.add_argument('--fruit', help='fruit preset name (see: gripper-sim fruits), or a '
                         'preset file (.yaml, e.g. from gripper-sim calibrate)')
-    source.add_argument('--config', metavar='FILE', help='YAML configuration file')
+    parser.add_argument('--config', metavar='FILE', help='YAML configuration file, layered '
+                        "over the fruit preset (--fruit, else its own 'fruit:', else the "
+                        'default fruit)')
     parser.add_argument('--set', metavar='KEY=VALUE', action='append', default=[],
-                        dest='overrides', help='override a configuration key (repeatable)')
+                        dest='overrides', help='override a configuration key (repeatable); '
+                        'fruit=NAME and finger=NAME select presets')
 
 
 def config_from_args(args, forced: dict | None = None) -> dict:
@@ -134,7 +138,8 @@ def _add_output_arguments(parser) -> None:
 
 
 class _Series:
-    """Collects the time series every verb reports.
+    """Collects the time series, the peaks (``core.peaks.RunPeaks``) and the contact size
+    every verb reports.
 
     Contact size: in 2D the contact length (m, both jaws); in 3D the contact area
     (m^2, both jaws, ``Deformation3D.contact_area``) and the larger of the two jaws'
@@ -144,7 +149,7 @@ class _Series:
     def __init__(self, dimension: int = 2):
         self.dimension = int(dimension)
         self.time, self.gap, self.force = [], [], []
-        self.peak_force = self.peak_compression = self.peak_pressure = 0.0
+        self.peaks = RunPeaks()
         self.peak_contact = 0.0
         self.contact_at_peak_force = 0.0
         self.patch_radius_at_peak_force = 0.0
@@ -160,12 +165,10 @@ class _Series:
             radius = float(max(deformation.jaw_contact_radii))
         else:
             contact, radius = float(deformation.contact_length), 0.0
-        if result.grip_force > self.peak_force or not self.time[:-1]:
+        if result.grip_force > self.peaks.grip_force or not self.time[:-1]:
             self.contact_at_peak_force = contact
             self.patch_radius_at_peak_force = radius
-        self.peak_force = max(self.peak_force, result.grip_force)
-        self.peak_compression = max(self.peak_compression, deformation.compression)
-        self.peak_pressure = max(self.peak_pressure, deformation.peak_contact_pressure)
+        self.peaks(result)
         self.peak_contact = max(self.peak_contact, contact)
         self.peak_patch_radius = max(self.peak_patch_radius, radius)
 
@@ -191,6 +194,24 @@ class _Series:
                     f'{self.patch_radius_at_peak_force * 1e3:.3g} mm at peak force (larger jaw)']
         return [f"{'contact length':{width}s} {self.contact_at_peak_force * 1e3:.4g} mm at "
                 'peak force (both jaws, planar)']
+
+
+def _measure_lines(summary: dict, dimension: int, width: int) -> list[str]:
+    """The text lines every simulation verb prints for the same keys (labels padded to
+    ``width``): peak grip force, compression, jaw and table pressure, damage."""
+    how, of_what = _damage_note(dimension)
+    return [
+        f"{'peak grip force':{width}s} {summary['peak_grip_force']:.4g} N (measured)",
+        f"{'peak compression':{width}s} {summary['peak_compression'] * 1e3:.4g} mm",
+        f"{'peak jaw pressure':{width}s} {summary['peak_jaw_pressure'] / 1e3:.4g} kPa "
+        f'({_pressure_note(dimension)})',
+        f"{'peak table pressure':{width}s} {summary['peak_table_pressure'] / 1e3:.4g} kPa",
+        f"{'damage':{width}s} peak damage pressure "
+        f"{summary.get('peak_damage_pressure', 0.0) / 1e3:.4g} kPa ({how}), "
+        + ('bruised' if summary['bruised'] else 'not bruised')
+        + f" ({summary.get('bruised_fraction', 0.0) * 100:.1f} % of the {of_what})"
+        + (', crushed' if summary['crushed'] else ''),
+    ]
 
 
 def _pressure_note(dimension: int) -> str:
@@ -253,31 +274,19 @@ def run_squeeze(args) -> int:
         squeeze(sim, args.speed, to_force=args.to_force, to_gap=args.to_gap)
         _write_html(args, recorder)
     summary = dict(fruit=config['fruit.name'], model=config['fruit.model'],
-                   peak_force=series.peak_force, peak_compression=series.peak_compression,
-                   peak_contact_pressure=series.peak_pressure, final_gap=sim.last.gap,
+                   **series.peaks.as_dict(), final_gap=sim.last.gap,
                    duration=sim.time, steps=sim.last.step,
-                   bruised=sim.last.damage.bruised, damage=sim.last.damage.as_dict(),
-                   **series.contact_summary())
+                   **damage_fields(sim.last.damage), **series.contact_summary())
     if args.json:
         json.dump(dict(series.arrays(), summary=summary), sys.stdout)
         sys.stdout.write('\n')
     else:
         dim = series.dimension
-        how, of_what = _damage_note(dim)
         print(f"squeeze of {config['fruit.name']} ({config['fruit.model']} model, {dim}D), "
               f'{sim.time:.3f} s simulated in {sim.last.step} steps')
-        print(f'  peak force            {summary["peak_force"]:.4g} N')
-        print(f'  peak compression      {summary["peak_compression"] * 1e3:.4g} mm')
-        print(f'  peak contact pressure {summary["peak_contact_pressure"] / 1e3:.4g} kPa'
-              f' ({_pressure_note(dim)})')
-        for line in series.contact_lines(21):
+        for line in _measure_lines(summary, dim, 21) + series.contact_lines(21):
             print(f'  {line}')
-        damage = summary['damage']
-        print(f'  damage: peak pressure {damage["peak_pressure"] / 1e3:.4g} kPa ({how}), '
-              + ('bruised' if damage['bruised'] else 'not bruised')
-              + f' ({damage["bruised_fraction"] * 100:.1f} % of the {of_what})'
-              + (', crushed' if damage['crushed'] else ''))
-        print(f'  final gap             {summary["final_gap"] * 1e3:.4g} mm')
+        print(f"  {'final gap':21s} {summary['final_gap'] * 1e3:.4g} mm")
     return 0
 
 
@@ -298,28 +307,20 @@ def run_pick(args) -> int:
         sequence = GraspSequence(sim, args.force, args.speed, args.lift, args.hold)
         summary = run_grasp(sim, sequence)
         _write_html(args, recorder)
-    summary.update(series.contact_summary())
+    summary = dict(fruit=config['fruit.name'], finger=config['gripper.finger.name'],
+                   **summary, **series.contact_summary())
     if args.json:
         json.dump(dict(outcome=summary['outcome'], slip_distance=summary['slip_distance'],
                        **series.arrays(), summary=summary), sys.stdout)
         sys.stdout.write('\n')
     else:
         dim = series.dimension
-        how, of_what = _damage_note(dim)
         print(f"pick of {config['fruit.name']} ({dim}D) at {args.force:g} N: "
               f"{summary['outcome']}")
         print(f"  {summary['message']}")
-        print(f"  slip relative to the jaws  {summary['slip_distance'] * 1e3:.3f} mm")
-        print(f"  peak grip force            {summary['max_grip_force']:.4g} N")
-        print(f"  peak compression           {summary['max_compression'] * 1e3:.4g} mm")
-        print(f"  peak contact pressure      {summary['max_contact_pressure'] / 1e3:.4g} kPa "
-              f'({_pressure_note(dim)})')
-        for line in series.contact_lines(26):
+        print(f"  {'slip in the jaws':26s} {summary['slip_distance'] * 1e3:.3f} mm")
+        for line in _measure_lines(summary, dim, 26) + series.contact_lines(26):
             print(f'  {line}')
-        print(f"  damage                     peak {summary['peak_damage_pressure'] / 1e3:.4g} "
-              f"kPa ({how}), bruised {summary['bruised']} "
-              f"({summary['bruised_fraction'] * 100:.1f} % of the {of_what}), "
-              f"crushed {summary['crushed']}")
     return 0 if summary['outcome'] == 'held' else 1
 
 
@@ -396,15 +397,11 @@ def run_scenario_verb(args) -> int:
             print(f"  {summary['message']}")
         phases = ', '.join(f'{name} {t:.2f}' for name, t in summary['phase_times'].items())
         print(f'  phases (s): {phases}')
-        print(f"  slip in the jaws           {summary['slip_distance'] * 1e3:.3f} mm")
-        print(f"  peak grip force            {summary['max_grip_force']:.4g} N")
+        print(f"  {'slip in the jaws':26s} {summary['slip_distance'] * 1e3:.3f} mm")
+        for line in _measure_lines(summary, series.dimension, 26):
+            print(f'  {line}')
         for line in series.contact_lines(26):
             print(f'  {line}')
-        damage = summary['damage']
-        how, of_what = _damage_note(series.dimension)
-        print(f"  peak contact pressure      {damage['peak_pressure'] / 1e3:.4g} kPa ({how}); "
-              f"bruised {damage['bruised']} ({damage['bruised_fraction'] * 100:.1f} % of the "
-              f"{of_what}), crushed {damage['crushed']}")
     return 0 if summary['outcome'] == 'placed' else 1
 
 
@@ -420,9 +417,7 @@ def run_window(args) -> int:
 
     def progress(trial):
         if not args.json and not args.quiet:
-            print(f'  trial {trial.force:8.3f} N: {trial.outcome:8s} slip '
-                  f'{trial.slip_distance * 1e3:6.3f} mm, peak pressure '
-                  f'{trial.peak_pressure / 1e3:7.1f} kPa ({trial.wall_time:.1f} s)', flush=True)
+            print(f'  {_trial_line(trial)} ({trial.wall_time:.1f} s)', flush=True)
 
     if not args.json:
         print(f"grasp window of {config['fruit.name']} ({int(config['dimension'])}D) with the "
@@ -445,25 +440,47 @@ def run_window(args) -> int:
         sys.stdout.write('\n')
         return 0
     limit = config['gripper.max_force']
+
+    def bound(force, measured):
+        return f'{force:.3g} N commanded, {measured:.3g} N measured peak grip force' \
+            if measured is not None else f'{force:.3g} N commanded'
+
     low = ('none up to gripper.max_force' if window.min_force is None
-           else f'{window.min_force:.3g} N')
+           else bound(window.min_force, window.min_force_measured))
     high = (f'none up to gripper.max_force ({limit:g} N)' if window.max_force == math.inf
             else 'bruised at every force tried' if window.max_force is None
-            else f'{window.max_force:.3g} N')
-    print(f'  holds from      {low}   (m g / (2 mu) = {window.min_estimate:.3g} N, '
-          f'm = {window.mass * 1e3:.0f} g, mu = {window.friction:g})')
-    if window.min_force_no_slip is not None:
-        print(f'  slips < 1 mm    from {window.min_force_no_slip:.3g} N or less (tried)')
-    print(f'  bruises above   {high}   (Hertz estimate {window.max_estimate:.3g} N'
-          + (', 3D: resolved pressure' if int(config['dimension']) == 3 else '') + ')')
+            else bound(window.max_force, window.max_force_measured))
+    print(f'  holds from      {low}')
+    print(f'                  (slides less than window.max_slip = {window.max_slip * 1e3:g} mm;'
+          f' m g / (2 mu) = {window.min_estimate:.3g} N, m = {window.mass * 1e3:.0f} g, '
+          f'mu = {window.friction:g})')
+    print(f'  bruises above   {high}')
+    sites = sorted({t.bruised_at for t in window.trials if t.bruised and t.bruised_at})
+    print(f'                  (Hertz estimate at the jaws {window.max_estimate:.3g} N'
+          + (', 3D: resolved pressure' if int(config['dimension']) == 3 else '')
+          + (f'; on the table once it carries {window.table_bruise_estimate:.3g} N'
+             if window.table_bruise_estimate else '')
+          + (f"; bruised at the {' and the '.join(sites)}" if sites else '') + ')')
     if window.exists:
         top = 'gripper.max_force' if window.max_force == math.inf else \
             f'{window.max_force:.3g} N'
-        print(f'  safe window     {window.min_force:.3g} N .. {top}')
+        print(f'  safe window     {window.min_force:.3g} N .. {top} commanded')
     else:
         print('  safe window     none')
     print(f'  {len(window.trials)} simulations in {window.wall_time:.1f} s')
     return 0
+
+
+def _trial_line(trial) -> str:
+    """One window trial as text: its verdict (held/slipped, bruised/safe), slip, forces
+    and the jaws' pressure apart from the table's."""
+    return (f'{trial.kind:6s} trial {trial.force:8.3f} N: {trial.verdict:8s} slip '
+            f'{trial.slip_distance * 1e3:6.3f} mm, peak grip force '
+            f'{trial.peak_grip_force:7.3f} N, jaw pressure '
+            f'{trial.peak_jaw_pressure / 1e3:6.1f} kPa, table '
+            f'{trial.peak_table_pressure / 1e3:5.1f} kPa, damage '
+            f'{trial.peak_damage_pressure / 1e3:6.1f} kPa'
+            + (f' at the {trial.bruised_at}' if trial.bruised and trial.bruised_at else ''))
 
 
 def run_fingers(args) -> int:

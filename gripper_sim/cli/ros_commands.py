@@ -410,9 +410,9 @@ def _print_result(result) -> None:
     print(f'  slipped {result.slipped}, bruised {result.bruised} '
           f'({result.bruised_fraction:.1%} of the surface), crushed {result.crushed}, slip '
           f'distance {result.slip_distance * 1e3:.3f} mm{dropped}')
-    print(f'  max grip force {result.max_grip_force:.3f} N, final gap '
-          f'{result.final_gap * 1e3:.2f} mm, max compression '
-          f'{result.max_compression * 1e3:.3f} mm, max contact pressure '
+    print(f'  peak grip force {result.max_grip_force:.3f} N, final gap '
+          f'{result.final_gap * 1e3:.2f} mm, peak compression '
+          f'{result.max_compression * 1e3:.3f} mm, peak jaw pressure '
           f'{result.max_contact_pressure / 1e3:.1f} kPa, peak damage pressure '
           f'{result.peak_damage_pressure / 1e3:.1f} kPa', flush=True)
 

@@ -17,6 +17,7 @@ from typing import Any, Mapping
 
 from gripper_sim_interfaces.action import Grasp
 
+from gripper_sim.core.vocabulary import ACTION_RESULT_FIELDS
 from gripper_sim.workflows.grasp import SETTLE_TIME as SQUEEZE_TIME, GraspSequence
 from gripper_sim.workflows.scenario import PickAndPlace, scenario_from_mapping
 
@@ -135,8 +136,6 @@ class GoalRun:
     def __init__(self, sim, goal, config: Mapping[str, Any]):
         self.sim = sim
         self.place = bool(goal.place)
-        self.max_compression = 0.0
-        self.max_contact_pressure = 0.0
         self.last = sim.last
         if self.place:
             self.machine = PickAndPlace(sim, place_scenario(goal, config))
@@ -158,38 +157,28 @@ class GoalRun:
     def update(self, result) -> None:
         """After every physics step."""
         self.last = result
-        self.max_compression = max(self.max_compression, float(result.deformation.compression))
-        self.max_contact_pressure = max(self.max_contact_pressure,
-                                        float(result.deformation.peak_contact_pressure))
         self.machine.update(result)
 
     def summary(self) -> dict:
         return dict(self.machine.summary())
 
     def result(self, summary: Mapping[str, Any] | None = None) -> Grasp.Result:
-        """The action result of the run so far (``summary``: an earlier ``summary()``)."""
-        summary = self.summary() if summary is None else summary
-        damage = self.last.damage
+        """The action result of the run so far (``summary``: an earlier ``summary()``):
+        each field is the summary's key of ``core.vocabulary.ACTION_RESULT_FIELDS``."""
+        summary = dict(self.summary() if summary is None else summary)
+        summary.setdefault('final_gap', self.last.gap)
         result = Grasp.Result()
-        result.outcome = outcome_of(summary)
-        result.success = result.outcome == ('placed' if self.place else 'held')
-        result.slipped = bool(summary.get('slipped', False))
-        result.bruised = bool(summary.get('bruised', False))
-        result.crushed = bool(summary.get('crushed', False))
-        result.message = str(summary.get('message', ''))
-        dropped_at = summary.get('dropped_at')
-        values = {
-            'max_grip_force': summary.get('max_grip_force', 0.0),
-            'final_gap': self.last.gap,
-            'max_compression': self.max_compression,
-            'max_contact_pressure': self.max_contact_pressure,
-            'peak_damage_pressure': damage.peak_pressure if damage is not None
-            else self.max_contact_pressure,
-            'bruised_fraction': damage.bruised_fraction if damage is not None else 0.0,
-            'slip_distance': summary.get('slip_distance', 0.0),
-            'dropped_at': -1.0 if dropped_at is None else dropped_at,
-        }
-        for name, value in values.items():
-            value = float(value)
-            setattr(result, name, value if math.isfinite(value) else 0.0)
+        for name, key in ACTION_RESULT_FIELDS.items():
+            value = summary.get(key)
+            if name == 'outcome':
+                result.outcome = outcome_of(summary)
+            elif name == 'success':
+                result.success = outcome_of(summary) == ('placed' if self.place else 'held')
+            elif name == 'message':
+                result.message = str(value or '')
+            elif isinstance(getattr(result, name), bool):
+                setattr(result, name, bool(value))
+            else:
+                number = -1.0 if name == 'dropped_at' and value is None else float(value or 0.0)
+                setattr(result, name, number if math.isfinite(number) else 0.0)
         return result

@@ -14,6 +14,7 @@ rejected with a reason naming the parameter, its range and its unit.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
@@ -23,7 +24,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from gripper_sim import configuration
-from gripper_sim.errors import ConfigError
+from gripper_sim.errors import ConfigError, ConfigWarning
 
 PHYSICS_PREFIX = 'physics.'
 # The publish interval is a whole number of steps, 1 / (publish_rate x dt): a rate
@@ -164,6 +165,16 @@ def _finite_problem(name: str, value: Any) -> str | None:
     return None
 
 
+def _defaults_of(fruit: str | None, config_file: str | None,
+                 overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The configuration before the node's parameters apply (the physics parameters'
+    defaults); its warnings come once, with the final configuration's."""
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', ConfigWarning)
+        return configuration.load_config(fruit=fruit, config_file=config_file,
+                                         overrides=overrides or {})
+
+
 class SimParameters:
     """Declares the node's parameters, builds the physics configuration, validates changes.
 
@@ -189,7 +200,7 @@ class SimParameters:
                 spec.read_only, spec.open_low), spec.unit, spec.low, spec.high, spec.open_low)
         fruit = fruit or node.get_parameter('fruit').value or None
         config_file = config_file or node.get_parameter('config_file').value or None
-        base = configuration.load_config(fruit=fruit, config_file=config_file)
+        base = _defaults_of(fruit, config_file)
         overrides: dict[str, Any] = {}
         for key, spec in configuration.SCHEMA.items():
             name = PHYSICS_PREFIX + key
@@ -205,11 +216,14 @@ class SimParameters:
                 overrides[key] = value
                 if key == 'dimension':
                     # the other keys' defaults follow the dimension (e.g. 3D's sim.dt)
-                    base = configuration.load_config(fruit=fruit, config_file=config_file,
-                                                     overrides={'dimension': value})
-        self.config = configuration.load_config(fruit=fruit, config_file=config_file,
-                                                overrides=overrides)
-        self.fruit = fruit or configuration.DEFAULT_FRUIT
+                    base = _defaults_of(fruit, config_file, {'dimension': value})
+        with warnings.catch_warnings(record=True) as caught:   # once, in the node's log
+            warnings.simplefilter('always', ConfigWarning)
+            self.config = configuration.load_config(fruit=fruit, config_file=config_file,
+                                                    overrides=overrides)
+        for warning in caught:
+            node.get_logger().warning(str(warning.message))
+        self.fruit = str(self.config['fruit.name'])
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._applied)
 

@@ -14,9 +14,11 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Protocol
 
+from gripper_sim.core.peaks import RunPeaks
 from gripper_sim.core.results import StepResult
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.core.slip import grasp_slipped
+from gripper_sim.core.vocabulary import DROP_SLIP, damage_fields
 from gripper_sim.errors import CommandError, ConvergenceError
 
 CLOSING, SQUEEZING, LIFTING, HOLDING, RELEASING, DONE = (
@@ -63,9 +65,7 @@ class GraspSequence:
         self.outcome: str | None = None
         self.message = ''
         self.dropped_at: float | None = None
-        self.max_grip_force = 0.0
-        self.max_compression = 0.0
-        self.max_contact_pressure = 0.0
+        self.peaks = RunPeaks()
         self.slip_distance = 0.0
         self.bruised = False
         self.damage = sim.last.damage
@@ -92,23 +92,22 @@ class GraspSequence:
     def update(self, result: StepResult) -> str:
         """Advance the state machine after a step; returns the phase."""
         sim = self.sim
-        self.max_grip_force = max(self.max_grip_force, result.grip_force)
-        self.max_compression = max(self.max_compression, result.deformation.compression)
-        self.max_contact_pressure = max(self.max_contact_pressure,
-                                        result.deformation.peak_contact_pressure)
+        self.peaks(result)
         if result.damage is not None:  # the Hertz estimate of gripper_sim.core.damage
             self.damage = result.damage
             self.bruised = result.damage.bruised
         else:
-            self.bruised = self.max_contact_pressure > sim.config['fruit.bruise_pressure']
+            self.bruised = self.peaks.jaw_pressure > sim.config['fruit.bruise_pressure']
         self.final_gap = result.gap
         elapsed = sim.time - self.phase_start
         gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
         if self.phase in (LIFTING, HOLDING):
             self.slip_distance = result.slip_distance
-            if not gripped:
+            if not gripped or result.slip_distance > DROP_SLIP:
                 self.dropped_at = sim.time
-                self._finish('dropped', f'the fruit dropped at t = {sim.time:.3f} s')
+                why = ('' if not gripped else f' (it slid {result.slip_distance * 1e3:.1f} '
+                       'mm behind the jaws)')
+                self._finish('dropped', f'the fruit dropped at t = {sim.time:.3f} s{why}')
                 return self.phase
         if self.phase == CLOSING:
             # both jaws: a single jaw's force (an impact, or pushing the fruit along the
@@ -118,7 +117,7 @@ class GraspSequence:
                 self._enter(SQUEEZING)
             elif sim.time > self.closing_deadline or result.gap <= 0.0:
                 self._finish('failed', f'the grip force did not reach {self.target_force} N '
-                             f'(reached {self.max_grip_force:.3g} N)')
+                             f'(reached {self.peaks.grip_force:.3g} N)')
         elif self.phase == SQUEEZING:
             if elapsed >= SETTLE_TIME:
                 if self.lift_height > 0:
@@ -148,27 +147,32 @@ class GraspSequence:
         return self.phase
 
     def summary(self) -> dict:
-        """The grasp's result, with the fields of the Grasp action's result."""
+        """The grasp's result under the vocabulary's keys (``core.vocabulary``; the
+        Grasp action's result maps its fields onto them)."""
         success = self.outcome == 'held'
         message = self.message
         damage = self.damage
-        peak = damage.peak_pressure if damage is not None else self.max_contact_pressure
+        if damage is not None:
+            damage_keys = damage_fields(damage)
+        else:
+            damage_keys = dict(bruised=self.bruised, crushed=False, bruised_length=0.0,
+                               bruised_fraction=0.0,
+                               peak_damage_pressure=self.peaks.jaw_pressure,
+                               peak_flesh_stress=0.0)
+        damage_keys['bruised'] = bool(self.bruised)
         if self.bruised:
-            message += (f'; bruised: peak contact pressure {peak:.4g} Pa '
-                        f"above {self.sim.config['fruit.bruise_pressure']:.4g} Pa")
-        if damage is not None and damage.crushed:
+            peak = damage_keys['peak_damage_pressure']
+            message += (f'; bruised: peak damage pressure {peak:.4g} Pa above '
+                        f"{self.sim.config['fruit.bruise_pressure']:.4g} Pa")
+        if damage_keys['crushed']:
             message += '; crushed: the flesh failed'
         return dict(success=success, outcome=self.outcome or 'running',
                     slipped=self.outcome is not None and grasp_slipped(
                         self.slip_distance, self.dropped_at is not None),
-                    bruised=self.bruised,
-                    message=message, max_grip_force=self.max_grip_force,
-                    final_gap=self.final_gap, max_compression=self.max_compression,
-                    max_contact_pressure=self.max_contact_pressure,
+                    dropped=self.dropped_at is not None,
+                    message=message, final_gap=self.final_gap,
                     slip_distance=self.slip_distance, dropped_at=self.dropped_at,
-                    crushed=bool(damage.crushed) if damage is not None else False,
-                    bruised_fraction=damage.bruised_fraction if damage is not None else 0.0,
-                    peak_damage_pressure=peak)
+                    **self.peaks.as_dict(), **damage_keys)
 
 
 class GraspMachine(Protocol):
@@ -195,14 +199,17 @@ class GraspEvaluation:
     Attributes:
         force: N, the commanded grip force.
         outcome: the machine's one-word outcome, or 'solver failed'.
-        held: the fruit was carried to the end, not dropped and no longer sliding.
+        held: the fruit was carried to the end, not dropped, and slid less than
+            ``window.max_slip`` in the jaws.
         dropped, slipped, bruised, crushed: the run's flags.
         slip_distance: m, slip of the fruit in the jaws (``StepResult.slip_distance``).
-        peak_grip_force: N, largest mean jaw normal force.
+        peak_grip_force: N, largest measured grip force (mean jaw normal force).
         peak_compression: m, largest loss of width along the closing axis.
-        peak_contact_pressure: Pa, largest contact pressure (planar line contact in 2D,
-            resolved over the patch in 3D).
+        peak_jaw_pressure, peak_table_pressure: Pa, largest contact pressure at the jaws,
+            on the table (``core.peaks.contact_pressures``).
         peak_damage_pressure: Pa, the damage model's peak pressure (Hertz in 2D).
+        bruised_at: where it first bruised, 'jaws' or 'table' ('': not bruised; a study's
+            rows are a table of one type per column).
         bruised_fraction: fraction of the outline (2D) or surface (3D) bruised.
         error: '' or the solver's message when it failed.
         sim_time: s simulated; steps: time steps taken.
@@ -222,8 +229,10 @@ class GraspEvaluation:
     slip_distance: float
     peak_grip_force: float
     peak_compression: float
-    peak_contact_pressure: float
+    peak_jaw_pressure: float
+    peak_table_pressure: float
     peak_damage_pressure: float
+    bruised_at: str
     bruised_fraction: float
     error: str
     sim_time: float
@@ -240,19 +249,6 @@ class GraspEvaluation:
         return values
 
 
-class _Peaks:
-    """Largest grip force (N), compression (m) and contact pressure (Pa) over the steps."""
-
-    def __init__(self):
-        self.force = self.compression = self.pressure = 0.0
-
-    def add(self, result: StepResult) -> None:
-        deformation = result.deformation
-        self.force = max(self.force, float(result.grip_force))
-        self.compression = max(self.compression, float(deformation.compression))
-        self.pressure = max(self.pressure, float(deformation.peak_contact_pressure))
-
-
 def evaluate(sim, machine: GraspMachine, force: float,
              on_step: Callable[[StepResult, str], None] | None = None,
              time_limit: float = 120.0) -> GraspEvaluation:
@@ -261,15 +257,16 @@ def evaluate(sim, machine: GraspMachine, force: float,
     A ``ConvergenceError`` of the solver ends the run: the evaluation then has outcome
     'solver failed', ``error`` set and counts as neither held nor undamaged (dropped
     and crushed flags set), so that a force the solver cannot follow stays out of any
-    window.
+    window. A run holds when it carried the fruit to the end (``CARRIED``, not dropped)
+    with less than ``window.max_slip`` of slip.
     """
-    peaks = _Peaks()
+    peaks = RunPeaks()
     start_step = sim.last.step
     end = sim.time + time_limit
     try:
         while not machine.done and sim.time < end:
             result = sim.step()
-            peaks.add(result)
+            peaks(result)
             machine.update(result)
             if on_step is not None:
                 on_step(result, machine.phase)
@@ -277,8 +274,9 @@ def evaluate(sim, machine: GraspMachine, force: float,
         return GraspEvaluation(
             force=float(force), outcome='solver failed', held=False, dropped=True,
             slipped=False, bruised=True, crushed=True, slip_distance=0.0,
-            peak_grip_force=peaks.force, peak_compression=peaks.compression,
-            peak_contact_pressure=peaks.pressure, peak_damage_pressure=0.0,
+            peak_grip_force=peaks.grip_force, peak_compression=peaks.compression,
+            peak_jaw_pressure=peaks.jaw_pressure, peak_table_pressure=peaks.table_pressure,
+            peak_damage_pressure=0.0, bruised_at=peaks.bruised_at or '',
             bruised_fraction=0.0, error=str(err) or type(err).__name__,
             sim_time=float(sim.time), steps=int(sim.last.step - start_step),
             message=str(err), failure=err)
@@ -286,16 +284,18 @@ def evaluate(sim, machine: GraspMachine, force: float,
     damage = sim.last.damage
     outcome = str(summary['outcome'])
     dropped = bool(summary.get('dropped', outcome == 'dropped'))
-    held = outcome in CARRIED and not dropped and not summary.get('sliding', False)
+    slip = float(summary.get('slip_distance', 0.0))
+    held = outcome in CARRIED and not dropped and slip < sim.config['window.max_slip']
     return GraspEvaluation(
         force=float(force), outcome=outcome, held=bool(held), dropped=dropped,
         slipped=bool(summary.get('slipped', outcome == 'slipped')),
         bruised=bool(summary.get('bruised', False)),
         crushed=bool(summary.get('crushed', False)),
-        slip_distance=float(summary.get('slip_distance', 0.0)),
-        peak_grip_force=peaks.force, peak_compression=peaks.compression,
-        peak_contact_pressure=peaks.pressure,
+        slip_distance=slip,
+        peak_grip_force=peaks.grip_force, peak_compression=peaks.compression,
+        peak_jaw_pressure=peaks.jaw_pressure, peak_table_pressure=peaks.table_pressure,
         peak_damage_pressure=float(damage.peak_pressure) if damage is not None else 0.0,
+        bruised_at=peaks.bruised_at or '',
         bruised_fraction=float(damage.bruised_fraction) if damage is not None else 0.0,
         error='', sim_time=float(sim.time), steps=int(sim.last.step - start_step),
         message=str(summary.get('message', '')), summary=summary)

@@ -35,6 +35,7 @@ and results, whose last coordinate column is the height.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -44,12 +45,11 @@ import numpy as np
 from gripper_sim.configuration import (Key, flatten, load_config, package_config_dir,
                                        parse_override, read_yaml)
 from gripper_sim.core.fruit import build_fruit
+from gripper_sim.core.peaks import RunPeaks
 from gripper_sim.core.slip import SLIP_TOLERANCE
+from gripper_sim.core.vocabulary import DROP_SLIP, damage_fields
 from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import ConfigError
-
-#: slip (m) beyond which the fruit is lost: dropped
-DROP_SLIP = 0.01
 #: height (m) above the table at which the lowered fruit is let go
 PLACE_CLEARANCE = 5e-4
 #: fraction of the target force at which closing ends (as grasp.py)
@@ -223,7 +223,9 @@ def scenario_config(scenario: Scenario, fruit: str | None = None, finger: str | 
     """The simulation configuration of a scenario run.
 
     Command-line choices (``fruit``, ``finger``, ``config_file``, ``overrides``) win over
-    the scenario's. The gripper starts ``approach.height`` above the grasp height.
+    the scenario's (its ``fruit``, ``finger`` and ``set``); the configuration file layers
+    over the fruit preset (``configuration.load_config``). The gripper starts
+    ``approach.height`` above the grasp height.
     """
     if isinstance(overrides, Mapping):
         user = dict(overrides)
@@ -231,13 +233,18 @@ def scenario_config(scenario: Scenario, fruit: str | None = None, finger: str | 
         user = dict(parse_override(text) for text in overrides)
     merged = dict(scenario.overrides)
     merged.update(user)
-    fruit = fruit or (None if config_file else scenario['fruit'])
-    finger = finger or scenario['finger']
-    config = load_config(fruit=fruit, config_file=config_file, overrides=merged, finger=finger)
+    choice = dict(fruit=fruit, finger=finger, config_file=config_file,
+                  fallback_fruit=scenario['fruit'], fallback_finger=scenario['finger'])
+    with warnings.catch_warnings(record=True) as first:   # warned once, by the second load
+        warnings.simplefilter('always')
+        config = load_config(overrides=merged, **choice)
     if 'gripper.initial_lift' not in merged:
         merged['gripper.initial_lift'] = grasp_height(config) + scenario['approach.height']
-        config = load_config(fruit=fruit, config_file=config_file, overrides=merged,
-                             finger=finger)
+        config = load_config(overrides=merged, **choice)
+    else:
+        for warning in first:
+            warnings.warn_explicit(warning.message, warning.category, warning.filename,
+                                   warning.lineno)
     return config
 
 
@@ -282,7 +289,7 @@ class PickAndPlace:
         self.slide = 0.0
         self.max_drop = 0.0
         self._jaw_faces = None
-        self.max_grip_force = 0.0
+        self.peaks = RunPeaks()
         self.placed = False
         self.reached_grip = False
         self.last = sim.last
@@ -351,7 +358,7 @@ class PickAndPlace:
         if self.phase in ('lift', 'transport', 'lower', 'hold'):
             self._slide(result)
         self.last = result
-        self.max_grip_force = max(self.max_grip_force, result.grip_force)
+        self.peaks(result)
         elapsed = sim.time - self.phase_start
         gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
         if self.phase in ('lift', 'transport', 'lower'):
@@ -388,7 +395,7 @@ class PickAndPlace:
                 what = (f"{sc['close.force']} N" if sc['close.mode'] == 'force'
                         else f"the gap {sc['close.gap']} m")
                 self._end('failed', f'the grip did not reach {what} (peak force '
-                          f'{self.max_grip_force:.3g} N)')
+                          f'{self.peaks.grip_force:.3g} N)')
         elif self.phase == 'squeeze':
             if elapsed >= sc['squeeze.time'] - 0.5 * sim.dt:
                 if self._past_until('lift'):
@@ -460,7 +467,8 @@ class PickAndPlace:
             self.outcome, self.message = 'failed', f'the fruit was not placed: {why}'
 
     def summary(self) -> dict:
-        """The run's outcome and measures (JSON-ready)."""
+        """The run's outcome and measures (JSON-ready), under the vocabulary's keys
+        (``gripper_sim.core.vocabulary``)."""
         damage = self.last.damage
         bruised = bool(damage is not None and damage.bruised)
         crushed = bool(damage is not None and damage.crushed)
@@ -484,26 +492,26 @@ class PickAndPlace:
             outcome = self.outcome or 'running'
         messages = [self.message] if self.message else []
         if bruised:
-            messages.append(f'bruised: peak contact pressure {damage.peak_pressure:.4g} Pa '
+            messages.append(f'bruised: peak damage pressure {damage.peak_pressure:.4g} Pa '
                             f"above {self.sim.config['fruit.bruise_pressure']:.4g} Pa, "
                             f'{damage.bruised_fraction * 100:.1f} % of the '
                             + ('surface' if getattr(self.sim, 'dimension', 2) == 3
                                else 'outline'))
         if crushed:
             messages.append(f'crushed: flesh stress {damage.peak_flesh_stress:.4g} Pa')
-        return dict(outcome=outcome, placed=bool(self.placed), dropped=dropped,
-                    dropped_at=None if self.dropped_at is None else float(self.dropped_at),
-                    dropped_phase=self.dropped_phase, slipped=bool(slipped),
-                    slip_distance=float(self.max_slip),
-                    centroid_drop=float(self.max_drop), bruised=bruised,
-                    crushed=crushed, message='; '.join(messages),
-                    max_grip_force=float(self.max_grip_force),
-                    sliding=bool(self.last.slipping),
-                    damage=({k: (v if isinstance(v, bool) else float(v))
-                             for k, v in damage.as_dict().items()}
-                            if damage is not None else None),
-                    final_centroid=[float(v) for v in self.last.centroid],
-                    phase_times=dict(self.phase_times), duration=self.sim.time)
+        summary = dict(outcome=outcome, placed=bool(self.placed), dropped=dropped,
+                       dropped_at=None if self.dropped_at is None else float(self.dropped_at),
+                       dropped_phase=self.dropped_phase, slipped=bool(slipped),
+                       slip_distance=float(self.max_slip),
+                       centroid_drop=float(self.max_drop),
+                       message='; '.join(messages), sliding=bool(self.last.slipping),
+                       **self.peaks.as_dict())
+        if damage is not None:
+            summary.update(damage_fields(damage))
+        summary.update(bruised=bruised, crushed=crushed,
+                       final_centroid=[float(v) for v in self.last.centroid],
+                       phase_times=dict(self.phase_times), duration=self.sim.time)
+        return summary
 
 
 def run_scenario(sim, scenario: Scenario, on_step=None, time_limit: float = 120.0,

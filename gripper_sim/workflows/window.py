@@ -1,10 +1,9 @@
 """The grasp window: the grip forces that hold a fruit without bruising it, by simulation.
 
 - Minimum force: the smallest grip force at which the fruit is carried through the
-  scenario's close, squeeze, lift, transport and a hold (``squeeze.time``): not
-  dropped (``scenario.DROP_SLIP``) and no longer sliding in the jaws at the end. The
-  slip it took on the way (e.g. at lift-off, when the table lets go and the grip force
-  dips for a moment) is reported with each trial. Found by bisection
+  scenario's close, squeeze, lift, transport and a hold (``squeeze.time``) and slides
+  less than ``window.max_slip`` in the jaws on the way (from the lift-off, when the
+  table lets go, to the end of the hold): such a trial is 'held'. Found by bisection
   over full simulations, from a bracket seeded with the rigid-flat-jaw estimate
   m g / (2 mu_s) (validation.md section 6) and m g / (2 mu_k), widened until it
   brackets.
@@ -12,7 +11,9 @@
   undamaged (neither bruised nor crushed), by bisection seeded with the Hertz force at
   which the peak pressure reaches the bruise threshold,
   F = p_b^3 pi^3 R^2 / (6 E*^2) (validation.md section 3).
-- The window is [minimum, maximum] when minimum <= maximum, else there is none.
+- The window is [minimum, maximum] when minimum <= maximum, else there is none. Both
+  bounds are commanded forces; each is also reported as the peak grip force measured
+  in its trial (``min_force_measured``, ``max_force_measured``).
 
 Each trial is a fresh simulation starting with the jaws open at the grasp height (the
 scenario's approach skipped), run by ``evaluate_grasp`` (``workflows.grasp.evaluate``, the
@@ -27,7 +28,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Generator, Mapping, Tuple
+from typing import Any, Callable, Generator, Iterable, Mapping, Tuple
 
 import numpy as np
 
@@ -37,7 +38,7 @@ from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import GraspEvaluation, evaluate
-from gripper_sim.workflows.scenario import SLIP_TOLERANCE, PickAndPlace, Scenario
+from gripper_sim.workflows.scenario import PickAndPlace, Scenario
 
 #: relative width of the final bisection brackets
 TOLERANCE = 0.03
@@ -47,15 +48,47 @@ MAX_WIDENINGS = 8
 
 @dataclass
 class Trial:
-    """One simulated grasp: the force (N), what happened and the run's measures."""
+    """One simulated grasp of the window and the window's verdict on it.
+
+    Attributes:
+        force: N, the commanded grip force.
+        kind: 'hold' (does it hold?) or 'bruise' (does it bruise?).
+        held: it counts as holding: carried, slid less than ``window.max_slip``.
+        slipped: carried but slid ``window.max_slip`` or more (or dropped).
+        bruised: damaged (bruised or crushed).
+        outcome: the run's own one-word outcome (``core.vocabulary.OUTCOMES``).
+        slip_distance: m, how far the fruit slid in the jaws.
+        peak_grip_force: N, the measured peak grip force.
+        peak_jaw_pressure, peak_table_pressure: Pa, contact pressure at the jaws, on
+            the table.
+        peak_damage_pressure: Pa, the damage model's pressure.
+        bruised_at: where it first bruised ('jaws', 'table') or None.
+        wall_time: s.
+    """
 
     force: float
+    kind: str
     held: bool
+    slipped: bool
     bruised: bool
     outcome: str
     slip_distance: float
-    peak_pressure: float
+    peak_grip_force: float
+    peak_jaw_pressure: float
+    peak_table_pressure: float
+    peak_damage_pressure: float
+    bruised_at: str | None
     wall_time: float
+
+    @property
+    def verdict(self) -> str:
+        """One word for the trial line: held, slipped (or the run's word when it did
+        not carry the fruit) for a 'hold' trial; bruised or safe for a 'bruise' one."""
+        if self.kind == 'bruise':
+            return 'bruised' if self.bruised else 'safe'
+        if self.held:
+            return 'held'
+        return 'slipped' if self.outcome in ('held', 'slipped', 'placed') else self.outcome
 
 
 @dataclass
@@ -63,14 +96,18 @@ class GraspWindow:
     """Result of ``grasp_window``.
 
     Attributes:
-        min_force: N, smallest force that held (None: none up to gripper.max_force).
-        max_force: N, largest force that did not bruise (None: even the smallest force
-            tried bruised; inf: nothing bruised up to gripper.max_force).
+        min_force: N commanded, smallest force that held: slid less than ``max_slip``
+            (None: none up to gripper.max_force).
+        max_force: N commanded, largest force that did not bruise (None: even the
+            smallest force tried bruised; inf: nothing bruised up to gripper.max_force).
+        min_force_measured, max_force_measured: N, the peak grip force measured in the
+            trial of each bound (None where the bound is None or inf).
         min_estimate, max_estimate: N, the closed-form seeds (m g / 2 mu; Hertz).
         trials: every simulated grasp, in order.
         wall_time: s, time to compute the window.
-        min_force_no_slip: N, the smallest force tried that held with less than
-            ``scenario.SLIP_TOLERANCE`` of slip (an upper bound, not bisected), or None.
+        max_slip: m, ``window.max_slip``.
+        table_bruise_estimate: N, the table load at which the fruit bruises on the table
+            (``table_bruise_load``); the trials say where each bruised (``bruised_at``).
     """
 
     fruit: str
@@ -84,7 +121,10 @@ class GraspWindow:
     tolerance: float
     trials: list = field(default_factory=list)
     wall_time: float = 0.0
-    min_force_no_slip: float | None = None
+    max_slip: float = 0.0
+    table_bruise_estimate: float = 0.0
+    min_force_measured: float | None = None
+    max_force_measured: float | None = None
 
     @property
     def exists(self) -> bool:
@@ -102,8 +142,11 @@ class GraspWindow:
                     min_estimate=float(self.min_estimate),
                     max_estimate=float(self.max_estimate), mass=float(self.mass),
                     friction=float(self.friction), tolerance=self.tolerance,
-                    wall_time=self.wall_time, min_force_no_slip=self.min_force_no_slip,
-                    trials=[vars(t) for t in self.trials])
+                    wall_time=self.wall_time, max_slip=self.max_slip,
+                    table_bruise_estimate=self.table_bruise_estimate,
+                    min_force_measured=self.min_force_measured,
+                    max_force_measured=self.max_force_measured,
+                    trials=[dict(vars(t), verdict=t.verdict) for t in self.trials])
 
 
 def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
@@ -130,12 +173,7 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     hold = weight / (2 * mu) if mu > 0 else math.inf
     # the outline's radius of curvature where it meets the jaws (the points of largest |x|)
     surface = fruit.rest_positions[fruit.surface]
-    i = int(abs(surface[:, 0]).argmax())
-    n = len(surface)
-    a, b, c = surface[(i - 1) % n], surface[i], surface[(i + 1) % n]
-    side = [math.dist(a, b), math.dist(b, c), math.dist(a, c)]
-    area2 = abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
-    radius = side[0] * side[1] * side[2] / (2 * area2) if area2 > 0 else 0.5 * fruit.rest_width
+    radius = _outline_radius(surface, int(abs(surface[:, 0]).argmax()), fruit.rest_width)
     pad = config['gripper.finger.pad.enabled']
     e_star = contact_modulus(config['fruit.flesh.youngs_modulus'],
                              config['fruit.flesh.poisson_ratio'],
@@ -151,6 +189,31 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     if config['gripper.finger.type'] == 'vgroove':  # two flanks share a jaw's force
         bruise *= 2 * math.sin(math.radians(0.5 * config['gripper.finger.groove_angle']))
     return hold, bruise, mass
+
+
+def _outline_radius(surface: np.ndarray, i: int, width: float) -> float:
+    """m, the radius of curvature of the closed outline ``surface`` (n, 2) at node ``i``
+    (the circle through it and its neighbours; half ``width`` where they are in line)."""
+    n = len(surface)
+    a, b, c = surface[(i - 1) % n], surface[i], surface[(i + 1) % n]
+    side = [math.dist(a, b), math.dist(b, c), math.dist(a, c)]
+    area2 = abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+    return side[0] * side[1] * side[2] / (2 * area2) if area2 > 0 else 0.5 * width
+
+
+def table_bruise_load(config: Mapping[str, Any]) -> float:
+    """N, the load on the rigid table at which the fruit resting on it bruises: the
+    Hertz force F = p_b^3 pi^3 Re^2 / (6 E*^2) with the rigid E* and the outline's
+    radius of curvature at its lowest point (a round fruit: Re = R; validation.md
+    section 3). Gripping a fruit that rests on the table loads the table too: a squeezed
+    fruit bulges down against jaws that hold it by friction, so with a soft pad (which
+    spares the jaw contact) the table contact may bruise first."""
+    fruit = build_fruit(config)
+    surface = fruit.rest_positions[fruit.surface]
+    radius = _outline_radius(surface, int(surface[:, -1].argmin()), fruit.rest_width)
+    e_star = contact_modulus(config['fruit.flesh.youngs_modulus'],
+                             config['fruit.flesh.poisson_ratio'])
+    return config['fruit.bruise_pressure'] ** 3 * math.pi ** 3 * radius ** 2 / (6 * e_star ** 2)
 
 
 #: one request of a window search: (kind, force in N), kind 'hold' or 'bruise'
@@ -183,14 +246,34 @@ def evaluate_grasp(config: Mapping[str, Any], scenario: Scenario, force: float,
 
 
 def trial_of(evaluation: GraspEvaluation, kind: str, wall_time: float = 0.0) -> Trial:
-    """The window's verdict on an evaluation: held (for 'hold') or damaged (bruised or
-    crushed, for 'bruise'; such a run stopped at the damage, so it counts as not held)."""
+    """The window's verdict on an evaluation: held (for 'hold': ``evaluation.held``,
+    carried with less than ``window.max_slip`` of slip) or damaged (bruised or crushed,
+    for 'bruise'; such a run stopped at the damage, so it counts as not held)."""
     held, bruised = evaluation.held, evaluation.bruised
     if kind == 'bruise' and (evaluation.bruised or evaluation.crushed):
         held, bruised = False, True
-    return Trial(force=float(evaluation.force), held=bool(held), bruised=bool(bruised),
-                 outcome=evaluation.outcome, slip_distance=evaluation.slip_distance,
-                 peak_pressure=evaluation.peak_damage_pressure, wall_time=wall_time)
+    return Trial(force=float(evaluation.force), kind=kind, held=bool(held),
+                 slipped=not held, bruised=bool(bruised), outcome=evaluation.outcome,
+                 slip_distance=float(evaluation.slip_distance),
+                 peak_grip_force=float(evaluation.peak_grip_force),
+                 peak_jaw_pressure=float(evaluation.peak_jaw_pressure),
+                 peak_table_pressure=float(evaluation.peak_table_pressure),
+                 peak_damage_pressure=float(evaluation.peak_damage_pressure),
+                 bruised_at=evaluation.bruised_at or None, wall_time=wall_time)
+
+
+def measured_bounds(min_force: float | None, max_force: float | None,
+                    trials: Iterable[Trial]) -> tuple[float | None, float | None]:
+    """(N, N) the peak grip force measured in the trial of each bound: the 'hold' trial
+    at ``min_force`` and the 'bruise' trial at ``max_force`` (None where a bound is None
+    or inf)."""
+    def measured(kind: str, force: float | None) -> float | None:
+        if force is None or math.isinf(force):
+            return None
+        found = [t.peak_grip_force for t in trials if t.kind == kind and t.force == force]
+        return found[0] if found else None
+    trials = list(trials)
+    return measured('hold', min_force), measured('bruise', max_force)
 
 
 def window_search(config: Mapping[str, Any], hold_estimate: float, bruise_estimate: float,
@@ -282,13 +365,16 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
         window_search(config, hold_estimate, bruise_estimate, tolerance), trial)
     mu = (config['contact.pad.friction'] if config['gripper.finger.pad.enabled']
           else config['contact.jaw.static_friction'])
-    firm = [t.force for t in trials if t.held and t.slip_distance <= SLIP_TOLERANCE]
+    low, high = measured_bounds(min_force, max_force, trials)
     return GraspWindow(fruit=str(config['fruit.name']), finger=str(config['gripper.finger.name']),
                        min_force=min_force, max_force=max_force, min_estimate=hold_estimate,
                        max_estimate=bruise_estimate, mass=mass, friction=mu,
                        tolerance=tolerance, trials=trials,
                        wall_time=time.perf_counter() - start,
-                       min_force_no_slip=min(firm) if firm else None)
+                       max_slip=float(config['window.max_slip']),
+                       table_bruise_estimate=(table_bruise_load(config)
+                                              if config['world.table'] else 0.0),
+                       min_force_measured=low, max_force_measured=high)
 
 
 def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,

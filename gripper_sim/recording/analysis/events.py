@@ -6,7 +6,8 @@
     release     the gripper comes down again after the hold, or the jaws open
                 (the gap grows by more than ``OPENING`` over its smallest value)
     let go      no jaw touches the fruit any more after the release
-    drop        no jaw touches the fruit between the grip and the release
+    drop        between the lift-off (or the grip) and the release, no jaw touches the
+                fruit or it slid more than ``DROP_SLIP`` behind them
 
 These are the moments at which the grasp state machine (``gripper_sim.workflows.grasp``)
 changes phase, seen from outside: the analysis has only what was recorded.
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gripper_sim.core.vocabulary import DROP_SLIP
 from gripper_sim.recording.analysis.series import TimeSeries
 
 #: m the jaws must open beyond their smallest gap to count as a release (a force
@@ -89,7 +91,10 @@ def find_events(series: TimeSeries) -> Events:
     touching = any_jaw(series)
     let_go = _first(~touching, release) if release is not None else None
     judged_from = lift_off if lift_off is not None else grip
-    drop = _first(~touching[:release if release is not None else n], judged_from)
+    # lost: no jaw touches it, or it slid more than DROP_SLIP behind them (left on the
+    # table as the jaws rose): the grasp state machine's 'dropped'
+    lost = ~touching | (np.abs(series['slip_distance_m']) > DROP_SLIP)
+    drop = _first(lost[:release if release is not None else n], judged_from)
     return Events(grip, lift_off, hold, release, let_go, drop)
 
 

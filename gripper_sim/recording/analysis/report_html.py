@@ -396,7 +396,7 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
     fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.06)
     fig.add_trace(go.Scatter(
         x=force, y=[1e3 * t['slip_distance'] for t in trials], mode='markers',
-        text=[t['outcome'] for t in trials], name='slip (mm)',
+        text=[t.get('verdict', t['outcome']) for t in trials], name='slip (mm)',
         marker={'size': 10, 'color': ['seagreen' if t['held'] else 'crimson'
                                       for t in trials]},
         hovertemplate='%{x:.3g} N: %{text}, slip %{y:.3f} mm<extra></extra>'), row=1, col=1)
@@ -416,7 +416,8 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
     fig.update_yaxes(title_text='peak damage pressure (kPa)', row=2, col=1)
     fig.update_xaxes(title_text='grip force (N)', row=2, col=1)
     fig.update_layout(height=640, showlegend=False)
-    rows = [(f"{t['force']:.4g} N", f"{t['outcome']}, slip {1e3 * t['slip_distance']:.3f} "
+    rows = [(f"{t['force']:.4g} N", f"{t.get('verdict', t['outcome'])}, slip "
+             f"{1e3 * t['slip_distance']:.3f} "
              f'mm, peak damage pressure {_trial_pressure(t) / 1e3:.1f} kPa') for t in trials]
     if not window.get('window') or low is None or high is None:
         found = 'none'

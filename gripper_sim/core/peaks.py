@@ -1,0 +1,88 @@
+"""The peaks of a run, measured the same way by every verb: grip force, compression and
+contact pressure, the jaws' pressure apart from the table's.
+
+An observer: call it with every ``StepResult`` (2D or 3D). ``pick``, ``squeeze``, ``run``,
+``window``, studies and the node's Grasp action all read their peaks from it.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gripper_sim.core.results import StepResult
+
+#: obstacle names (before any '.part') whose contact pressure is the jaws'
+JAWS = ('left_jaw', 'right_jaw')
+#: obstacle name of the table
+TABLE = 'table'
+
+
+def _sites(result: StepResult) -> tuple[np.ndarray, np.ndarray]:
+    """(n_surface,) bool each: the surface node touches a jaw (any face of it), the table."""
+    owner = np.asarray(result.contact_obstacle)[result.surface]
+    base = [name.split('.')[0] for name in result.obstacle_names]
+    jaw = [i for i, name in enumerate(base) if name in JAWS]
+    table = [i for i, name in enumerate(base) if name == TABLE]
+    return np.isin(owner, jaw), np.isin(owner, table)
+
+
+def damage_site(result: StepResult) -> str | None:
+    """Where the damage pressure (``Damage.node_pressure``) of this step is largest:
+    'jaws', 'table', or None (no damage model, no pressure, or elsewhere)."""
+    damage = result.damage
+    if damage is None or not np.size(damage.node_pressure):
+        return None
+    pressure = np.asarray(damage.node_pressure)
+    node = int(np.argmax(pressure))
+    if pressure[node] <= 0:
+        return None
+    on_jaw, on_table = _sites(result)
+    return 'jaws' if on_jaw[node] else 'table' if on_table[node] else None
+
+
+def contact_pressures(result: StepResult) -> tuple[float, float]:
+    """(jaw pressure, table pressure) in Pa: the largest contact pressure at a surface
+    node held by a jaw (by any face of it), and at one resting on the table.
+
+    The pressure of a node is ``Deformation.node_pressure`` (2D: normal force over the
+    tributary length times the depth, a planar line contact; 3D: over the vertex area,
+    resolved over the patch).
+    """
+    pressure = np.asarray(result.deformation.node_pressure)
+    if not pressure.size:
+        return 0.0, 0.0
+    on_jaw, on_table = _sites(result)
+    return (float(pressure[on_jaw].max(initial=0.0)),
+            float(pressure[on_table].max(initial=0.0)))
+
+
+class RunPeaks:
+    """Largest values over the steps seen.
+
+    Attributes:
+        grip_force: N, largest measured grip force (mean jaw normal force).
+        compression: m, largest loss of width along the closing axis.
+        jaw_pressure: Pa, largest contact pressure at the jaws (``contact_pressures``).
+        table_pressure: Pa, largest contact pressure on the table.
+        bruised_at: where the fruit first bruised ('jaws', 'table'; ``damage_site`` of
+            the first bruised step), or None.
+    """
+
+    def __init__(self):
+        self.grip_force = self.compression = 0.0
+        self.jaw_pressure = self.table_pressure = 0.0
+        self.bruised_at: str | None = None
+
+    def __call__(self, result: StepResult) -> None:
+        self.grip_force = max(self.grip_force, float(result.grip_force))
+        self.compression = max(self.compression, float(result.deformation.compression))
+        jaw, table = contact_pressures(result)
+        self.jaw_pressure = max(self.jaw_pressure, jaw)
+        self.table_pressure = max(self.table_pressure, table)
+        if self.bruised_at is None and result.damage is not None and result.damage.bruised:
+            self.bruised_at = damage_site(result)
+
+    def as_dict(self) -> dict[str, float]:
+        """The peaks under their vocabulary keys (``gripper_sim.core.vocabulary``)."""
+        return dict(peak_grip_force=self.grip_force, peak_compression=self.compression,
+                    peak_jaw_pressure=self.jaw_pressure,
+                    peak_table_pressure=self.table_pressure, bruised_at=self.bruised_at)
