@@ -12,7 +12,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
-from gripper_sim.core import fingers
+from gripper_sim.core import barrier, fingers
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast import FastPath
@@ -53,6 +53,12 @@ class Simulation(SimulationFacade):
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
+        barrier.check_supported(c, self.dimension, fast)
+        if c['contact.model'] == 'ipc':
+            self._barrier = barrier.BarrierContact(
+                self.fruit.n_nodes, self.fruit.surface, self.fruit.skin_edges,
+                barrier.BarrierSettings.from_config(c))
+            fast = False
         self.solver = self._make_solver(fast=None if fast is not False else False)
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
