@@ -23,6 +23,7 @@ blocks and the skin edges' pairs.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import ipctk
@@ -30,7 +31,7 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.contact_passes import StepOutcome
-from gripper_sim.core.energies.base import Energy, Evaluation
+from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
 
@@ -115,6 +116,10 @@ class BarrierContact(Energy):
         self.friction = ipctk.FrictionPotential(settings.friction_smoothing)
         n_s = self.surface.size
         self.fruit_dofs = (2 * self.surface[:, None] + np.arange(2)[None, :]).ravel()
+        #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
+        #: (solvers that keep one sparsity pattern read it)
+        self.dofs = element_dofs(self.surface[self.fruit_edges] if self.fruit_edges.size
+                                 else self.surface[:, None])
         self._pattern_keys = self._hessian_pattern()
         self._mesh = None
         self._n_faces = -1
@@ -122,21 +127,15 @@ class BarrierContact(Energy):
         self._obstacles_end = np.zeros((0, 2))
         self._start = np.zeros((n_s, 2))
         self._tangential = ipctk.TangentialCollisions()
+        self._positions = None  # (scatter, CSC position of each pattern key)
 
     # ------------------------------------------------------------------ set-up
     def _hessian_pattern(self) -> np.ndarray:
-        """Sorted keys row * n_dof + col of the fixed Hessian pattern (fruit dofs)."""
-        blocks = [self.surface[:, None]]
-        if self.fruit_edges.size:
-            blocks.append(self.surface[self.fruit_edges])
-        keys = []
-        for nodes in blocks:
-            dofs = (2 * nodes[:, :, None] + np.arange(2)[None, None, :]).reshape(len(nodes), -1)
-            m = dofs.shape[1]
-            rows = np.repeat(dofs, m, axis=1).ravel()
-            cols = np.tile(dofs, (1, m)).ravel()
-            keys.append(rows * self.n_dof + cols)
-        return np.unique(np.concatenate(keys))
+        """Sorted keys col * n_dof + row of the fixed Hessian pattern: the entries of the
+        elements ``dofs`` (the skin edges, or the lone surface nodes of a point fruit)."""
+        m = self.dofs.shape[1]
+        keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
+        return np.unique(keys)
 
     def _build_mesh(self, obstacles: np.ndarray) -> None:
         n_s = self.surface.size
@@ -182,44 +181,70 @@ class BarrierContact(Energy):
         out[self.fruit_dofs] = vec[:self.fruit_dofs.size]
         return out
 
-    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        """Barrier plus lagged friction at fruit positions ``q`` (2 n,) m."""
+    def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool):
+        """Barrier plus lagged friction at fruit positions ``q`` (2 n,) m: adds the
+        gradient (N) into ``gradient``; returns (value J, Hessian values N/m on the
+        pattern's sorted keys, or None)."""
         mesh = self._mesh
         v = self.vertices(q.reshape(-1, 2))
         collisions = ipctk.NormalCollisions()
         collisions.build(mesh, v, self.settings.dhat)
-        value = self.potential(collisions, mesh, v) if len(collisions) else 0.0
-        if not np.isfinite(value):
-            return Evaluation(np.inf, np.zeros(self.n_dof), *_no_triplets())
-        grad = self.potential.gradient(collisions, mesh, v) if len(collisions) else None
-        friction = len(self._tangential) > 0
-        if friction:
+        parts = []
+        value = 0.0
+        if len(collisions):
+            value = self.potential(collisions, mesh, v)
+            if not np.isfinite(value):
+                return np.inf, None
+            gradient[self.fruit_dofs] += self.potential.gradient(
+                collisions, mesh, v)[:self.fruit_dofs.size]
+            if hessian:
+                parts.append(self.potential.hessian(collisions, mesh, v,
+                                                    ipctk.PSDProjectionMethod.CLAMP))
+        if len(self._tangential):
             velocity = np.asfortranarray((v - self._start) / self._dt)
             value += self._dt * self.friction(self._tangential, mesh, velocity)
-            fric = self.friction.gradient(self._tangential, mesh, velocity)
-            grad = fric if grad is None else grad + fric
-        gradient = self._fruit_part(grad) if grad is not None else np.zeros(self.n_dof)
+            gradient[self.fruit_dofs] += self.friction.gradient(
+                self._tangential, mesh, velocity)[:self.fruit_dofs.size]
+            if hessian:
+                parts.append(self.friction.hessian(self._tangential, mesh, velocity,
+                                                   ipctk.PSDProjectionMethod.CLAMP) / self._dt)
         if not hessian:
-            return Evaluation(float(value), gradient, *_no_triplets())
+            return float(value), None
         vals = np.zeros(self._pattern_keys.size)
-        parts = []
-        if len(collisions):
-            parts.append(self.potential.hessian(collisions, mesh, v,
-                                                ipctk.PSDProjectionMethod.CLAMP))
-        if friction:
-            parts.append(self.friction.hessian(self._tangential, mesh, velocity,
-                                               ipctk.PSDProjectionMethod.CLAMP) / self._dt)
         n_f = self.fruit_dofs.size
         for matrix in parts:
             block = matrix.tocsc()[:n_f, :n_f].tocoo()
-            keys = self.fruit_dofs[block.row] * self.n_dof + self.fruit_dofs[block.col]
-            where = np.searchsorted(self._pattern_keys, keys)
-            if np.any(where >= keys.size + self._pattern_keys.size) or not np.array_equal(
-                    self._pattern_keys[np.minimum(where, self._pattern_keys.size - 1)], keys):
+            keys = self.fruit_dofs[block.col] * self.n_dof + self.fruit_dofs[block.row]
+            where = np.minimum(np.searchsorted(self._pattern_keys, keys),
+                               self._pattern_keys.size - 1)
+            if not np.array_equal(self._pattern_keys[where], keys):
                 raise AssertionError('barrier Hessian entry outside its pattern')
             np.add.at(vals, where, block.data)
-        rows, cols = np.divmod(self._pattern_keys, self.n_dof)
-        return Evaluation(float(value), gradient, rows, cols, vals)
+        return float(value), vals
+
+    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
+        """Barrier plus lagged friction at fruit positions ``q`` (2 n,) m."""
+        gradient = np.zeros(self.n_dof)
+        value, vals = self._terms(q, gradient, hessian)
+        if vals is None:
+            return Evaluation(value, gradient, *_no_triplets())
+        cols, rows = np.divmod(self._pattern_keys, self.n_dof)
+        return Evaluation(value, gradient, rows, cols, vals)
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
+        into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
+        positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
+        value, vals = self._terms(q, grad, hessian)
+        if vals is not None:
+            if self._positions is None or self._positions[0] is not scatter:
+                m = self.dofs.shape[1]
+                keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
+                first = np.unique(keys.ravel(), return_index=True)[1]
+                self._positions = (scatter, scatter.ravel()[first])
+            np.add.at(data, self._positions[1], vals)
+        return value, []
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (2 n,) m from ``q`` along which no
@@ -260,7 +285,9 @@ class BarrierContact(Energy):
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, 2) N, the faces' force on each node at ``q`` (2 n,) m: barrier + friction."""
-        return -self.evaluate(q, hessian=False).gradient.reshape(-1, 2)
+        gradient = np.zeros(self.n_dof)
+        self._terms(q, gradient, hessian=False)
+        return -gradient.reshape(-1, 2)
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
         """(n,) the face (index) each node with a contact force touches (its nearest face
@@ -279,6 +306,20 @@ class BarrierContact(Energy):
             holder[loaded[closer]] = k
             best[loaded[closer]] = dist[closer]
         return holder
+
+    @staticmethod
+    def touching_faces(faces, x: np.ndarray, holder: np.ndarray) -> list:
+        """The faces moved out along their normals to the mean gap of the nodes they hold
+        (``holder`` (n,), positions ``x`` (n, 2) m): the surfaces the outline lies on, for
+        the measures that read gaps from a face (the contact length's edges)."""
+        moved = []
+        for k, face in enumerate(faces):
+            nodes = holder == k
+            if np.any(nodes):
+                face = copy.copy(face)
+                face.origin = face.origin + float(np.mean(face.gap(x[nodes]))) * face.normal
+            moved.append(face)
+        return moved
 
     def min_distance(self, x: np.ndarray) -> float:
         """m, the smallest distance between the outline and a face at positions (n, 2)

@@ -58,7 +58,6 @@ class Simulation(SimulationFacade):
             self._barrier = barrier.BarrierContact(
                 self.fruit.n_nodes, self.fruit.surface, self.fruit.skin_edges,
                 barrier.BarrierSettings.from_config(c))
-            fast = False
         self.solver = self._make_solver(fast=None if fast is not False else False)
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
@@ -67,7 +66,7 @@ class Simulation(SimulationFacade):
             transport_acceleration=c['gripper.transport_acceleration'])
         self._observers: list[Callable[[StepResult], None]] = []
         self._fast = (FastPath.create(self) if fast is not False and self._plain_jaws
-                      else None)
+                      and self._barrier is None else None)
         if fast and self._fast is None:
             raise ConfigError('the fast path needs numba, a shell or point fruit model and '
                               'a flat finger without a pad')
@@ -155,6 +154,8 @@ class Simulation(SimulationFacade):
         fields, normal, (on_left, on_right) = self._common_measures(
             x, self.v, forces, obstacle, iterations, substeps)
         fruit, faces = self.fruit, self._faces(self._grip)
+        if self._barrier is not None:  # the outline lies a barrier gap off the faces
+            faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
         length = sum(face_contact_length(fruit, x, faces[index], self.contacts.obstacle == index)
                      for index in range(len(self._face_side)))
         if self._pad is not None:
