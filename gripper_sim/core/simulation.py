@@ -58,6 +58,9 @@ class Simulation(SimulationFacade):
             self._barrier = barrier.BarrierContact(
                 self.fruit.n_nodes, self.fruit.surface, self.fruit.skin_edges,
                 barrier.BarrierSettings.from_config(c))
+            if c['fruit.initial_height'] is None and c['world.table']:
+                # a barrier needs a positive gap: the fruit starts just above the table
+                self.initial_positions[:, 1] += barrier.START_GAP_FRACTION * c['contact.ipc.dhat']
         self.solver = self._make_solver(fast=None if fast is not False else False)
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
