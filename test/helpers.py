@@ -79,10 +79,10 @@ def bounce_apex_ratios(dt, count=4):
     return apex[1:count + 1] / apex[:count]
 
 
-def pick(ratio, mu=0.5, lift=0.02, hold=1.0):
+def pick(ratio, mu=0.5, lift=0.02, hold=1.0, overrides=()):
     """Grip so that 2 mu N = ratio m g, lift and hold; (sim, summary)."""
     config = load_config(overrides=[f'contact.jaw.static_friction={mu}',
-                                    f'contact.jaw.kinetic_friction={mu}'])
+                                    f'contact.jaw.kinetic_friction={mu}', *overrides])
     sim = Simulation(config)
     weight = sim.fruit.total_mass * config['world.gravity']
     force = ratio * weight / (2 * mu)
