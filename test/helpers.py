@@ -13,11 +13,11 @@ RING_COEFFICIENT = np.pi / 4 - 2 / np.pi  # 0.14878 (Roark; validation.md sectio
 RESTITUTION = 0.8
 
 
-def quasi_static_sim(radius: float, *overrides: str) -> Simulation:
+def quasi_static_sim(radius: float, *overrides: str, fast: bool | None = None) -> Simulation:
     config = load_config(overrides=QUASI_STATIC + [
         f'fruit.shape.diameter={2 * radius}', f'gripper.initial_gap={2 * radius + 1e-4}',
         *overrides])
-    return Simulation(config)
+    return Simulation(config, fast=fast)
 
 
 def hollow_ring_error(radius, skin_modulus, thickness, nodes, deflection_ratio=0.005):

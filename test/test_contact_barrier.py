@@ -153,14 +153,22 @@ def test_barrier_gap_stays_within_dhat():
 
 
 @pytest.mark.slow
-def test_friction_hold_agrees_between_the_contact_models():
-    outcomes = {}
-    for model in MODELS:
-        sim, summary = pick(1.2, overrides=[f'contact.model={model}'])
-        lifted = sim.last.centroid[1] - sim.initial_positions[:, 1].mean()
-        outcomes[model] = (summary['outcome'], lifted)
-    assert outcomes['ipc'][0] == outcomes['mmm'][0] == 'held'
-    assert outcomes['ipc'][1] == pytest.approx(outcomes['mmm'][1], rel=0.05)
+@pytest.mark.parametrize('ratio,outcome', [(1.2, 'held'), (0.8, 'slipped')])
+def test_friction_hold_and_slip_agree_between_the_contact_models(ratio, outcome):
+    """Lift the default apple with 2 mu N = ratio m g: held (then it rises with the jaws)
+    or slipping (then it stays behind by the slip distance) with either model."""
+    runs = {model: pick(ratio, overrides=[f'contact.model={model}']) for model in MODELS}
+    for model, (sim, summary) in runs.items():
+        assert summary['outcome'] == outcome, model
+    (mmm, mmm_summary), (ipc, ipc_summary) = runs['mmm'], runs['ipc']
+    if outcome == 'held':
+        rise = [sim.last.centroid[1] - sim.initial_positions[:, 1].mean()
+                for sim in (mmm, ipc)]
+        assert rise[0] > 0.015 and rise[1] == pytest.approx(rise[0], rel=0.05)
+    else:
+        assert ipc_summary['slip_distance'] == pytest.approx(mmm_summary['slip_distance'],
+                                                             rel=0.05)
+    assert ipc.last.grip_force == pytest.approx(mmm.last.grip_force, rel=0.05)
 
 
 # ---------------------------------------------------------------------- bad configurations

@@ -167,7 +167,9 @@ class BarrierContact(Energy):
         collisions = ipctk.NormalCollisions()
         collisions.build(self._mesh, start, self.settings.dhat)
         n_s = self.surface.size
-        mu_s = np.concatenate([np.zeros(n_s), np.repeat([f.static_friction for f in new_faces], 2)])
+        # per vertex; a pair takes the larger one: the face's, the outline's being 0
+        mu_s = np.concatenate([np.zeros(n_s),
+                               np.repeat([f.static_friction for f in new_faces], 2)])
         mu_k = np.concatenate([np.zeros(n_s),
                                np.repeat([f.kinetic_friction for f in new_faces], 2)])
         self._tangential = ipctk.TangentialCollisions()
