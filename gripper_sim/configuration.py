@@ -214,7 +214,7 @@ SCHEMA: dict[str, Key] = {
     'contact.ipc.dhat': Key(1e-6, 'm', 'ipc: barrier activation distance dhat (the largest '
                             'gap that still carries force; nodes stay within it of a face)',
                             low=1e-9, high=1e-3),
-    'contact.ipc.stiffness': Key(1.0, 'N', 'ipc: barrier stiffness kappa (a node pressed with '
+    'contact.ipc.stiffness': Key(0.1, 'N', 'ipc: barrier stiffness kappa (a node pressed with '
                                  'force F stays about 2 kappa dhat / F from the face)',
                                  low=1e-6, high=1e6),
     'contact.jaw.static_friction': Key(0.5, '', 'static friction coefficient '

@@ -165,10 +165,10 @@ def test_friction_hold_and_slip_agree_between_the_contact_models(ratio, outcome)
         rise = [sim.last.centroid[1] - sim.initial_positions[:, 1].mean()
                 for sim in (mmm, ipc)]
         assert rise[0] > 0.015 and rise[1] == pytest.approx(rise[0], rel=0.05)
-    else:
+        assert ipc.last.grip_force == pytest.approx(mmm.last.grip_force, rel=0.05)
+    else:  # the force of a fruit sliding out of the jaws is not a steady figure
         assert ipc_summary['slip_distance'] == pytest.approx(mmm_summary['slip_distance'],
                                                              rel=0.05)
-    assert ipc.last.grip_force == pytest.approx(mmm.last.grip_force, rel=0.05)
 
 
 # ---------------------------------------------------------------------- bad configurations
