@@ -12,6 +12,7 @@ from helpers import kernel_evaluation, pick, quasi_static_sim
 
 from gripper_sim.configuration import load_config
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
+from gripper_sim.core.grasp import GraspSequence, run_grasp
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.core3d.simulation import Simulation3D
@@ -169,6 +170,26 @@ def test_friction_hold_and_slip_agree_between_the_contact_models(ratio, outcome)
     else:  # the force of a fruit sliding out of the jaws is not a steady figure
         assert ipc_summary['slip_distance'] == pytest.approx(mmm_summary['slip_distance'],
                                                              rel=0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('finger', ['arc', 'vgroove'])
+def test_shaped_fingers_agree_between_the_contact_models(finger):
+    """The default apple gripped at 3 N by arc or V-groove fingers (several facets per
+    jaw, the fruit on the table), lifted 2 cm: held either way, with the same force and
+    contact length."""
+    results = {}
+    for model in MODELS:
+        sim = Simulation(load_config(overrides=[f'gripper.finger.type={finger}',
+                                                f'contact.model={model}']))
+        summary = run_grasp(sim, GraspSequence(sim, 3.0, lift_height=0.02, hold_time=0.5))
+        assert summary['outcome'] == 'held', model
+        results[model] = sim.last
+    mmm, ipc = results['mmm'], results['ipc']
+    assert mmm.deformation.contact_length > 0
+    assert ipc.grip_force == pytest.approx(mmm.grip_force, rel=0.05)
+    assert ipc.deformation.contact_length == pytest.approx(mmm.deformation.contact_length,
+                                                           rel=0.05)
 
 
 # ---------------------------------------------------------------------- bad configurations
