@@ -270,7 +270,7 @@ class BarrierContact(Energy):
             nodes = self.surface[old.covers(x_n[self.surface])]
             gap = old.gap(x_n[nodes])
             advance = float(shift @ old.normal)
-            target = np.minimum(gap, START_GAP_FRACTION * dhat)
+            target = np.where(gap < dhat, gap, START_GAP_FRACTION * dhat)
             push = np.maximum(advance - gap + target, 0.0)
             front = gap >= 0
             touching = front & (gap < dhat)
