@@ -26,8 +26,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gripper_sim.configuration import load_config  # noqa: E402
-from gripper_sim.core import make_simulation  # noqa: E402
-from gripper_sim.core.grasp import GraspSequence, run_grasp  # noqa: E402
+from gripper_sim.workflows.factory import make_simulation  # noqa: E402
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp  # noqa: E402
 
 MODELS = {
     'shell': ['dimension=3', 'fruit.model=shell', 'fruit.mesh.subdivisions=8',

@@ -43,8 +43,8 @@ sys.path.insert(0, str(ROOT))
 
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core import fast  # noqa: E402
-from gripper_sim.core.grasp import GraspSequence, run_grasp  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp  # noqa: E402
 
 FORCE, LIFT = 3.0, 0.05
 

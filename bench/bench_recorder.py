@@ -70,7 +70,7 @@ def full_rate_batch(step: int, dt: float) -> dict[str, bytes]:
     from rclpy.serialization import serialize_message
 
     from gripper_sim.configuration import load_config
-    from gripper_sim.ros import messages
+    from gripper_sim.convert import messages
 
     batch = messages.build_messages(synthetic_result(step, dt), load_config())
     return {messages.resolved_topic(s): serialize_message(m) for s, m in batch.items()}
@@ -98,7 +98,7 @@ def bench_writer(seconds: float, sim_seconds: float) -> None:
     from gripper_sim.recording.offline import SimRecorder
     from gripper_sim.recording.reader import BagReader
     from gripper_sim.recording.writer import BagWriter
-    from gripper_sim.ros import messages
+    from gripper_sim.convert import messages
 
     wall = time.perf_counter()
     sim, results = real_run(sim_seconds)
@@ -163,7 +163,7 @@ def publisher_main(args: argparse.Namespace) -> None:
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from gripper_sim.recording.recorder import import_message_class
-    from gripper_sim.ros import messages
+    from gripper_sim.convert import messages
 
     rclpy.init()
     node = rclpy.create_node('bench_publisher')
@@ -207,7 +207,7 @@ def bench_live(seconds: float, steps_per_second: float) -> None:
     env = _env(domain)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'live.mcap'
-        from gripper_sim.ros import messages
+        from gripper_sim.convert import messages
         topics = [messages.resolved_topic(s) for s in messages.TOPICS]
         rec = subprocess.Popen([sys.executable, '-m', 'gripper_sim.cli.main', 'record', '-o',
                                 str(out), *topics], env=env, stderr=subprocess.PIPE,

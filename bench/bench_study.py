@@ -29,11 +29,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gripper_sim.core.scenario import load_scenario, scenario_config  # noqa: E402
-from gripper_sim.core.window import trial_setup  # noqa: E402
+from gripper_sim.workflows.scenario import load_scenario, scenario_config  # noqa: E402
 from gripper_sim.workflows.study import run_study  # noqa: E402
 from gripper_sim.workflows.study_spec import Study, load_study  # noqa: E402
 from gripper_sim.workflows.study_tasks import run_fruit  # noqa: E402
+from gripper_sim.workflows.window import trial_setup  # noqa: E402
 
 EXAMPLE = 'apple_friction'
 

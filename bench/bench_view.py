@@ -23,10 +23,10 @@ import time
 import websockets
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
-from gripper_sim.ros import messages
+from gripper_sim.convert import messages
 from gripper_sim.view.foxglove import FoxgloveView, node_topics
 from gripper_sim.view.scene import PressureLegend
+from gripper_sim.workflows.factory import make_simulation
 
 PUBLISH_RATE = 100.0   # Hz of sim time, the node's default
 

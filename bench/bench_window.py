@@ -14,8 +14,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from gripper_sim.configuration import DEFAULT_FRUIT  # noqa: E402
-from gripper_sim.core.scenario import load_scenario, scenario_config  # noqa: E402
-from gripper_sim.core.window import TOLERANCE, grasp_window  # noqa: E402
+from gripper_sim.workflows.scenario import load_scenario, scenario_config  # noqa: E402
+from gripper_sim.workflows.window import TOLERANCE, grasp_window  # noqa: E402
 
 
 def main() -> int:

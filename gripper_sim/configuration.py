@@ -19,6 +19,8 @@ from typing import Any, Iterable, Mapping
 import yaml
 
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry.fingers import check_finger
+from gripper_sim.geometry.shapes import outline_from_config
 
 DEFAULT_FRUIT = 'apple'
 #: file name endings that make a ``--fruit`` value a preset file rather than a name
@@ -450,7 +452,6 @@ def validate(flat: Mapping[str, Any]) -> dict[str, Any]:
                           "'contact.table.static_friction'")
     _check_shape(result)
     if result.get('gripper.finger.type') == 'arc':
-        from gripper_sim.core.fingers import check_finger
         check_finger(result)
     return result
 
@@ -460,7 +461,6 @@ def _check_shape(config: Mapping[str, Any]) -> None:
     kind = config.get('fruit.shape.type', 'circle')
     if kind == 'circle':
         return
-    from gripper_sim.core.shapes import outline_from_config
     outline_from_config(config)
     if config.get('fruit.model') == 'shell' and config.get('fruit.pressure.turgor', 0) > 0:
         raise ConfigError(f"config key 'fruit.shape.type' = {kind}: the shell model holds "

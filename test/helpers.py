@@ -2,8 +2,8 @@
 import numpy as np
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core.grasp import GraspSequence, run_grasp
 from gripper_sim.core.simulation import Simulation
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
 #: quasi-static settings: light fruit, mass damping, large step, no gravity, no table
 QUASI_STATIC = ['world.gravity=0', 'world.table=false', 'fruit.density=50',

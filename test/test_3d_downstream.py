@@ -18,11 +18,11 @@ import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim import configuration  # noqa: E402
 from gripper_sim.cli.main import main  # noqa: E402
-from gripper_sim.core import make_simulation  # noqa: E402
 from gripper_sim.recording.analysis import (analyze, cloud_array, jaw_contact_nodes,  # noqa: E402
                                             patch_outline, read_config)
 from gripper_sim.recording.offline import SimRecorder  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
+from gripper_sim.workflows.factory import make_simulation  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

@@ -263,7 +263,7 @@ def test_strawberry_outline_revolved_has_the_pappus_volume():
     """The 3D body of a 2D outline is that outline revolved about z: its volume is
     2 pi x_c A of the right half-outline (Pappus), x_c its centroid's distance from the axis."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core import shapes
+    from gripper_sim.geometry import shapes
     from gripper_sim.core3d.fruit import _meridian, body_from_config
     config = load_config(fruit='strawberry', overrides=['dimension=3', 'fruit.shape.angle=0',
                                                        'fruit.mesh.subdivisions=10',
@@ -296,7 +296,7 @@ def test_fast_solver_follows_the_numpy_reference_path(model, monkeypatch):
     contact passes) and on the reference path (numpy energies, one LU per Newton
     iteration): the same contact sets and, to the Newton tolerance, the same motion."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core import make_simulation
+    from gripper_sim.workflows.factory import make_simulation
     config = load_config(overrides=['dimension=3', 'sim.dt=0.01'] + model)
     runs = []
     steps = None

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
 from gripper_sim.core.damage import contact_modulus
-from gripper_sim.core.grasp import GraspSequence, run_grasp
-from gripper_sim.core.scenario import load_scenario, run_scenario, scenario_config
 from gripper_sim.core3d.simulation import Simulation3D
+from gripper_sim.workflows.factory import make_simulation
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+from gripper_sim.workflows.scenario import load_scenario, run_scenario, scenario_config
 
 #: a coarse uniform shell (162 nodes), as the 3D friction test
 COARSE = ['dimension=3', 'fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=1']

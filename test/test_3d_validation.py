@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
-from gripper_sim.core.grasp import GraspSequence, run_grasp
 from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
 from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
+from gripper_sim.workflows.factory import make_simulation
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
 #: a coarse uniform shell (162 nodes): enough for global balances and friction
 COARSE = ['dimension=3', 'fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=1']

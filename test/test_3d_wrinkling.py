@@ -99,7 +99,7 @@ def _pressed_shell(wrinkling, ratios, subdivisions=12):
     sqrt(D / (p R / 2)) ~ 0.14 mm, small against the contact patch) pressed between two
     plates by delta per plate. Returns (deltas in m, plate forces F in N, p R)."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core import make_simulation
+    from gripper_sim.workflows.factory import make_simulation
     turgor = 2e4
     config = load_config(overrides=[
         'dimension=3', 'fruit.model=shell', 'world.gravity=0', 'world.table=false',

@@ -22,7 +22,6 @@ from chromium import Browser  # noqa: E402
 from gripper_sim.cli import progress  # noqa: E402
 from gripper_sim.cli.main import main  # noqa: E402
 from gripper_sim.configuration import load_config  # noqa: E402
-from gripper_sim.core.window import GraspWindow, Trial  # noqa: E402
 from gripper_sim.recording.analysis import analyze, figures  # noqa: E402
 from gripper_sim.recording.analysis.events import find_events, key_moments  # noqa: E402
 from gripper_sim.recording.analysis.outputs import run_frames  # noqa: E402
@@ -33,6 +32,7 @@ from gripper_sim.recording.analysis.series import (find_topics, read_time_series
                                                    split_runs)
 from gripper_sim.recording.analysis.summary import summarize  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
+from gripper_sim.workflows.window import GraspWindow, Trial  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -214,7 +214,7 @@ def test_html_and_quiet_options(tmp_path, capsys):
 def test_window_verb_writes_its_report(monkeypatch, tmp_path, capsys):
     """The verb hands its window to the report (the search itself is stubbed: it is
     tested with the window verb)."""
-    monkeypatch.setattr('gripper_sim.core.window.grasp_window',
+    monkeypatch.setattr('gripper_sim.workflows.window.grasp_window',
                         lambda config, scenario, tolerance, progress: made_window())
     path = tmp_path / 'window.html'
     assert main(['window', '--html', str(path), '--quiet']) == 0

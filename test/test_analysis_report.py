@@ -15,9 +15,7 @@ import rclpy  # noqa: F401
 import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim.configuration import load_config  # noqa: E402
-from gripper_sim.core import make_simulation  # noqa: E402
-from gripper_sim.core.grasp import CLOSING, LIFTING, GraspSequence, run_grasp  # noqa: E402
-from gripper_sim.core.scenario import grasp_height  # noqa: E402
+from gripper_sim.convert import messages  # noqa: E402
 from gripper_sim.recording.analysis import analyze, read_time_series, split_runs  # noqa: E402
 from gripper_sim.recording.analysis import figures  # noqa: E402
 from gripper_sim.recording.analysis.events import find_events, key_moments  # noqa: E402
@@ -27,7 +25,9 @@ from gripper_sim.recording.analysis.series import find_topics  # noqa: E402
 from gripper_sim.recording.analysis.summary import summarize  # noqa: E402
 from gripper_sim.recording.offline import SimRecorder  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
-from gripper_sim.ros import messages  # noqa: E402
+from gripper_sim.workflows.factory import make_simulation  # noqa: E402
+from gripper_sim.workflows.grasp import CLOSING, LIFTING, GraspSequence, run_grasp  # noqa: E402
+from gripper_sim.workflows.scenario import grasp_height  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

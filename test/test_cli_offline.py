@@ -84,8 +84,8 @@ def test_force_grasp_closes_at_full_speed_while_one_jaw_pushes_the_fruit():
     only with both jaws at the force (it used to end on the first jaw's impact, or
     crawl at (F - F_push) / (k tau) and time out)."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core.grasp import CLOSING, GraspSequence, run_grasp
-    from gripper_sim.core.scenario import grasp_height
+    from gripper_sim.workflows.grasp import CLOSING, GraspSequence, run_grasp
+    from gripper_sim.workflows.scenario import grasp_height
     from gripper_sim.core.simulation import Simulation
     config = load_config(fruit='strawberry')
     config = load_config(fruit='strawberry',

@@ -12,11 +12,11 @@ from helpers import kernel_evaluation, pick, quasi_static_sim
 
 from gripper_sim.configuration import load_config
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
-from gripper_sim.core.grasp import GraspSequence, run_grasp
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
 DHAT = 1e-4
 SETTINGS = BarrierSettings(dhat=DHAT, stiffness=0.5, friction_smoothing=1e-3)

@@ -10,7 +10,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_core_imports_without_rclpy():
-    code = ('import sys; import gripper_sim.core.simulation, gripper_sim.core.grasp, '
+    code = ('import sys; import gripper_sim.core.simulation, gripper_sim.workflows.grasp, '
             'gripper_sim.cli.offline; print("rclpy" in sys.modules)')
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                          cwd=ROOT, check=True).stdout.strip()

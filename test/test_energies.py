@@ -7,7 +7,7 @@ from gripper_sim.core.energies import (EnclosedAreaPressure, Gravity, NeoHookean
 from gripper_sim.core.mesh import mesh_outline
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.obstacles import FlatFace
-from gripper_sim.core.shapes import circle
+from gripper_sim.geometry.shapes import circle
 
 from helpers import kernel_evaluation
 

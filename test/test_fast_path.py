@@ -11,10 +11,10 @@ import pytest
 from gripper_sim.configuration import load_config
 from gripper_sim.core import fast
 from gripper_sim.core.fruit import build_fruit
-from gripper_sim.core.grasp import GraspSequence
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
 from gripper_sim.errors import ConvergenceError
+from gripper_sim.workflows.grasp import GraspSequence
 
 from gripper_sim.core import kernels  # noqa: E402 - needs numba, pinned in requirements.txt
 

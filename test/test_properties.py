@@ -26,15 +26,15 @@ from std_msgs.msg import Float64
 
 from gripper_sim import configuration
 from gripper_sim.cli import main as cli_main
-from gripper_sim.core import make_simulation
+from gripper_sim.convert import messages
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
-from gripper_sim.ros import messages
 from gripper_sim.ros.grasp_goal import goal_problem as grasp_problem
 from gripper_sim.ros.gripper_command_server import goal_problem as gripper_problem
 from gripper_sim.ros.node import SimNode
 from gripper_sim.ros.params import DYNAMIC_PHYSICS_KEYS, NODE_PARAMETERS, PHYSICS_PREFIX
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
 from gripper_sim.ros.testing import SimClient
+from gripper_sim.workflows.factory import make_simulation
 from control_msgs.action import GripperCommand
 from control_msgs.msg import GripperCommand as GripperCommandMsg
 from gripper_sim_interfaces.action import Grasp

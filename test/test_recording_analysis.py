@@ -17,13 +17,13 @@ import rclpy  # noqa: F401
 import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim.cli.main import main  # noqa: E402
+from gripper_sim.convert import messages  # noqa: E402
 from gripper_sim.core.results import (Deformation, Energies, JawWrench,  # noqa: E402
                                       StepResult)
 from gripper_sim.recording.analysis import COLUMNS, analyze  # noqa: E402
 from gripper_sim.recording.errors import RecordingError  # noqa: E402
 from gripper_sim.recording.offline import CONFIG_METADATA, SimRecorder  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
-from gripper_sim.ros import messages  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

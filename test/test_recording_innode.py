@@ -14,10 +14,10 @@ from rosbags.rosbag2 import Reader as RosbagsReader
 from std_srvs.srv import SetBool
 
 from gripper_sim.configuration import to_yaml  # noqa: E402
+from gripper_sim.convert import messages  # noqa: E402
 from gripper_sim.recording.node_recording import NodeRecording  # noqa: E402
 from gripper_sim.recording.offline import CONFIG_METADATA  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
-from gripper_sim.ros import messages  # noqa: E402
 from gripper_sim.ros.process import ros_environment  # noqa: E402
 
 pytestmark = pytest.mark.ros

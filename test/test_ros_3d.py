@@ -6,9 +6,9 @@ from action_msgs.msg import GoalStatus
 
 from control_msgs.action import GripperCommand
 from control_msgs.msg import GripperCommand as GripperCommandMsg
-from gripper_sim_interfaces.action import Grasp
-from gripper_sim.ros import messages
+from gripper_sim.convert import messages
 from gripper_sim.ros.process import pick_domain_id
+from gripper_sim_interfaces.action import Grasp
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

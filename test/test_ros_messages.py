@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
+from gripper_sim.convert import messages
+from gripper_sim.convert.messages import MessageContext, build_messages
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
-from gripper_sim.ros import messages
-from gripper_sim.ros.messages import MessageContext, build_messages
 
 pytestmark = pytest.mark.ros
 
@@ -197,7 +197,7 @@ BRUISE_3D = 2.0e4    # Pa: low, so the 3 N squeeze below bruises part of the pat
 def squeezed_3d():
     """A real 3D step: the apple (coarse mesh) squeezed to 3 N by the flat jaws."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core import make_simulation
+    from gripper_sim.workflows.factory import make_simulation
     config = load_config(overrides={
         'dimension': 3, 'fruit.mesh.subdivisions': 3, 'fruit.mesh.jaw_refinement': 0.5,
         'gripper.initial_gap': 0.0645,
@@ -285,7 +285,7 @@ def test_3d_cloud_and_fruit_state_carry_the_real_y_and_the_contact_area(squeezed
 def squeezed_apple_state(force=8.0, **overrides):
     """FruitState and jaw wrench of the 2D apple squeezed to ``force`` N for 0.4 s."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core import make_simulation
+    from gripper_sim.workflows.factory import make_simulation
     config = load_config(overrides=overrides)
     sim = make_simulation(config)
     context = MessageContext.from_config(config, initial=sim.last)
@@ -333,7 +333,7 @@ def test_fruit_state_is_bruised_and_crushed_by_the_damage_estimate():
 def finger_run(finger, seconds=0.3):
     """Markers of the 2D apple at t = 0 and after closing for ``seconds`` with ``finger``."""
     from gripper_sim.configuration import load_config
-    from gripper_sim.core import make_simulation
+    from gripper_sim.workflows.factory import make_simulation
     config = load_config(finger=finger)
     sim = make_simulation(config)
     context = MessageContext.from_config(config, initial=sim.last)
@@ -353,7 +353,7 @@ def xyz(marker):
 
 
 def test_arc_finger_outline_is_drawn_at_each_jaw_and_moves_with_it():
-    from gripper_sim.core.fingers import finger_outline
+    from gripper_sim.geometry.fingers import finger_outline
     config, *runs = finger_run('arc')
     radius, h = config['gripper.finger.radius'], config['gripper.jaw_height']
     sagitta = radius - np.sqrt(radius ** 2 - h * h / 4)

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from gripper_sim.ros import messages
+from gripper_sim.convert import messages
 from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
 from gripper_sim.ros.testing import SimClient
 

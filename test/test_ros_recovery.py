@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import rclpy
 
+from gripper_sim.convert import messages
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConvergenceError
-from gripper_sim.ros import messages
 from gripper_sim.ros.node import SimNode
-from gripper_sim.ros.sync import JawOwner
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
+from gripper_sim.ros.sync import JawOwner
 
 pytestmark = pytest.mark.ros
 

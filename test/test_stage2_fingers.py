@@ -6,11 +6,11 @@ import pytest
 
 from gripper_sim.configuration import available_fingers, load_config
 from gripper_sim.core.damage import contact_modulus
-from gripper_sim.core.fingers import finger_outline, left_facets, profile
-from gripper_sim.core.scenario import load_scenario, run_scenario, scenario_config
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core.window import estimates
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry.fingers import finger_outline, left_facets, profile
+from gripper_sim.workflows.scenario import load_scenario, run_scenario, scenario_config
+from gripper_sim.workflows.window import estimates
 from test_cli_offline import gripper_sim
 
 SQUEEZE = ['world.gravity=0', 'world.table=false', 'fruit.damping.mass=20']

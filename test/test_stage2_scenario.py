@@ -5,11 +5,11 @@ import pytest
 import yaml
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core.scenario import (PHASES, grasp_height, load_scenario, run_scenario,
-                                       scenario_config, scenario_from_mapping)
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core.window import estimates
 from gripper_sim.errors import ConfigError
+from gripper_sim.workflows.scenario import (PHASES, grasp_height, load_scenario, run_scenario,
+                                       scenario_config, scenario_from_mapping)
+from gripper_sim.workflows.window import estimates
 from test_cli_offline import gripper_sim
 
 

@@ -7,8 +7,8 @@ import yaml
 from gripper_sim.configuration import load_config, to_yaml
 from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core.mesh import boundary_edges, mesh_outline, triangle_areas
-from gripper_sim.core.shapes import crossing_segments, outline_from_config, polygon_area
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry.shapes import crossing_segments, outline_from_config, polygon_area
 from helpers import QUASI_STATIC
 from gripper_sim.core.simulation import Simulation
 from test_cli_offline import gripper_sim

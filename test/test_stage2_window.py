@@ -5,9 +5,9 @@ import math
 
 import pytest
 
-from gripper_sim.core.scenario import load_scenario, run_scenario, scenario_config
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core.window import _bisect, grasp_window
+from gripper_sim.workflows.scenario import load_scenario, run_scenario, scenario_config
+from gripper_sim.workflows.window import _bisect, grasp_window
 from test_cli_offline import gripper_sim
 
 LIBRARY = ('apple', 'tomato', 'peach', 'orange', 'plum', 'strawberry')

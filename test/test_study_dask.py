@@ -38,13 +38,42 @@ population:
     fruit.flesh.youngs_modulus: {distribution: lognormal, mean: 2.0e+6, std: 3.0e+5}
 window: {tolerance: 0.1}
 '''
-#: runs the CLI with a row buffer of one row (a part file per finished row)
-CHILD = ('import sys; import gripper_sim.workflows.study_results as r; r.FLUSH_ROWS = 1; '
-         'from gripper_sim.cli.main import main; sys.exit(main(sys.argv[1:]))')
+#: runs the CLI with a row buffer of one row (a part file per finished row); with
+#: STUDY_HOOK=interrupt it sends itself SIGINT (Ctrl-C) when the STUDY_HOOK_ROWS-th row
+#: is stored; with STUDY_HOOK=pause it then writes STUDY_HOOK_FILE + '.paused' and waits
+#: for STUDY_HOOK_FILE, so a test acts while the study is surely still running
+CHILD = textwrap.dedent('''
+    import os, signal, sys, time
+    from pathlib import Path
+    import gripper_sim.workflows.study_results as results
+    from gripper_sim.cli.main import main
+    results.FLUSH_ROWS = 1
+    action = os.environ.get('STUDY_HOOK', '')
+    after = int(os.environ.get('STUDY_HOOK_ROWS', '0'))
+    go = Path(os.environ.get('STUDY_HOOK_FILE', 'unused'))
+    store_row = results.RowStore.add
+    stored = []
+
+    def store_then_act(self, row):
+        store_row(self, row)
+        stored.append(row)
+        if len(stored) != after:
+            return
+        if action == 'interrupt':
+            os.kill(os.getpid(), signal.SIGINT)
+        elif action == 'pause':
+            Path(str(go) + '.paused').touch()
+            end = time.monotonic() + 300
+            while not go.exists() and time.monotonic() < end:
+                time.sleep(0.05)
+
+    results.RowStore.add = store_then_act
+    sys.exit(main(sys.argv[1:]))
+''')
 
 
-def env():
-    values = dict(os.environ)
+def env(**hook):
+    values = dict(os.environ, **hook)
     values['PYTHONPATH'] = str(ROOT) + os.pathsep + values.get('PYTHONPATH', '')
     return values
 
@@ -160,14 +189,18 @@ def test_a_study_on_an_existing_cluster_gives_the_local_rows(study_file, referen
 def test_a_worker_killed_mid_study_loses_no_row(study_file, reference, cluster, tmp_path):
     _, local = reference
     out = tmp_path / 'killed'
+    go = tmp_path / 'go'
     study = subprocess.Popen(
         [sys.executable, '-c', CHILD, 'study', str(study_file), '--out', str(out),
          '--no-progress', '--scheduler', cluster.address, '--no-report'],
-        env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    wait_for(lambda: len(list((out / 'rows').glob('part-*.parquet'))) >= 2, 'two rows')
+        env=env(STUDY_HOOK='pause', STUDY_HOOK_ROWS='2', STUDY_HOOK_FILE=str(go)),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    wait_for(lambda: (tmp_path / 'go.paused').exists() or study.poll() is not None,
+             'two rows')
+    assert study.poll() is None, study.communicate()[1]
     victim = cluster.workers[0]
-    assert study.poll() is None, 'the study ended before a worker could be killed'
     victim.send_signal(signal.SIGKILL)
+    go.touch()
     stdout, stderr = study.communicate(timeout=600)
     assert study.returncode == 0, stderr
     assert victim.wait() == -signal.SIGKILL
@@ -182,10 +215,9 @@ def test_an_interrupted_study_resumes_without_recomputing(study_file, reference,
     out = tmp_path / 'interrupted'
     args = ['study', str(study_file), '--out', str(out), '--no-progress',
             '--scheduler', cluster.address, '--no-report']
-    study = subprocess.Popen([sys.executable, '-c', CHILD, *args], env=env(),
+    study = subprocess.Popen([sys.executable, '-c', CHILD, *args],
+                             env=env(STUDY_HOOK='interrupt', STUDY_HOOK_ROWS='3'),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    wait_for(lambda: len(list((out / 'rows').glob('part-*.parquet'))) >= 3, 'three rows')
-    study.send_signal(signal.SIGINT)
     _, stderr = study.communicate(timeout=120)
     assert study.returncode == 130, stderr
     assert 'interrupted' in stderr and 'Traceback' not in stderr

@@ -45,7 +45,7 @@ def test_a_good_study_has_every_combination_and_reproducible_samples(tmp_path):
     assert len({s['fruit.shape.diameter'] for s in first}) == 5
     assert all(s['fruit.pressure.turgor'] in (2.0e4, 3.0e4, 4.0e4) for s in first)
     # the drawn mass is the mass of the simulated fruit (density scaled to it)
-    from gripper_sim.core.window import estimates
+    from gripper_sim.workflows.window import estimates
     setup = study.trial(study.points[3], 2, first[2])
     assert estimates(setup.config)[2] == pytest.approx(first[2]['mass'], rel=1e-9)
     assert setup.config['contact.jaw.static_friction'] == 0.8

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import yaml
 
-from gripper_sim.core.window import grasp_window
 from gripper_sim.workflows.population_window import SampleWindow, population_window
 from gripper_sim.workflows.study import run_study
 from gripper_sim.workflows.study_report import write_report
 from gripper_sim.workflows.study_spec import load_study
+from gripper_sim.workflows.window import grasp_window
 from chromium import Browser
 from test_analysis_html import open_report
 from test_study_dask import STUDY

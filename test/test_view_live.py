@@ -18,16 +18,16 @@ from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
+from gripper_sim.convert import messages
 from gripper_sim.recording.offline import SimRecorder
 from gripper_sim.recording.reader import BagReader
 from gripper_sim.recording.recorder import import_message_class
 from gripper_sim.recording.schemas import message_definition
-from gripper_sim.ros import messages
 from gripper_sim.ros.process import RosProcess, node_process, ros_environment
+from gripper_sim.view import ViewError
 from gripper_sim.view.foxglove import FoxgloveView, NodeFeed, node_topics
 from gripper_sim.view.layout import layout_json
-from gripper_sim.view import ViewError
+from gripper_sim.workflows.factory import make_simulation
 from view_client import SUBPROTOCOLS, capture, protobuf_decoder
 
 pytestmark = [pytest.mark.ros]

@@ -12,11 +12,11 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import make_simulation
-from gripper_sim.ros import messages
-from gripper_sim.ros.finger_markers import base_marker
+from gripper_sim.convert import messages
+from gripper_sim.convert.finger_markers import base_marker
 from gripper_sim.view.scene import (LEGEND_STEPS, PressureLegend, legend_entity,
                                     rotation_from_x, scene_of_batch, scene_update)
+from gripper_sim.workflows.factory import make_simulation
 from view_client import decode_foxglove
 
 

@@ -278,7 +278,7 @@ def _record(args: argparse.Namespace) -> int:
 
 def _replay(args: argparse.Namespace) -> int:
     _require_rclpy('replay')
-    from gripper_sim.recording.replay import run_replay
+    from gripper_sim.ros.replay import run_replay
 
     summary = run_replay(args.file, rate=args.rate, loop=args.loop, topics=args.topics,
                          start=args.start, clock_hz=args.clock, remaps=dict(args.remap),

@@ -242,7 +242,7 @@ def _write_html(args, recorder) -> None:
 
 
 def run_squeeze(args) -> int:
-    from gripper_sim.core import make_simulation as Simulation
+    from gripper_sim.workflows.factory import make_simulation as Simulation
     config = config_from_args(args, SQUEEZE_DEFAULTS)
     check_squeeze(config, args.speed, args.to_force)
     sim = Simulation(config)
@@ -282,13 +282,13 @@ def run_squeeze(args) -> int:
 
 
 def run_pick(args) -> int:
-    from gripper_sim.core.grasp import GraspSequence, run_grasp
-    from gripper_sim.core import make_simulation as Simulation
+    from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+    from gripper_sim.workflows.factory import make_simulation as Simulation
     config = config_from_args(args)
     if config['gripper.initial_lift'] is None and config['world.table']:
         # the jaws start at the grasp height: the fruit's centre, or higher where a small
         # fruit's centre would put the jaws into the table
-        from gripper_sim.core.scenario import grasp_height
+        from gripper_sim.workflows.scenario import grasp_height
         config = config_from_args(args, {'gripper.initial_lift': grasp_height(config)})
     sim = Simulation(config)
     series = _Series(_dimension(sim))
@@ -363,8 +363,8 @@ def run_fruits(args) -> int:
 
 
 def run_scenario_verb(args) -> int:
-    from gripper_sim.core.scenario import load_scenario, run_scenario, scenario_config
-    from gripper_sim.core import make_simulation as Simulation
+    from gripper_sim.workflows.scenario import load_scenario, run_scenario, scenario_config
+    from gripper_sim.workflows.factory import make_simulation as Simulation
     scenario = load_scenario(args.scenario)
     if args.force is not None:
         scenario = scenario.with_values(close__mode='force', close__force=args.force)
@@ -409,8 +409,8 @@ def run_scenario_verb(args) -> int:
 
 
 def run_window(args) -> int:
-    from gripper_sim.core.scenario import load_scenario, scenario_config
-    from gripper_sim.core.window import TOLERANCE, grasp_window
+    from gripper_sim.workflows.scenario import load_scenario, scenario_config
+    from gripper_sim.workflows.window import TOLERANCE, grasp_window
     scenario = load_scenario(args.scenario)
     config = scenario_config(scenario, fruit=args.fruit, finger=args.finger,
                              config_file=args.config, overrides=args.overrides)

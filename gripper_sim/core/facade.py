@@ -20,6 +20,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from gripper_sim.configuration import validate
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier import BarrierContact, barrier_step
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
@@ -184,7 +185,6 @@ class SimulationFacade:
 
     def set_parameter(self, key: str, value: Any) -> None:
         """Change a dynamic configuration key while running (see DYNAMIC_KEYS)."""
-        from gripper_sim.configuration import validate
         if key not in DYNAMIC_KEYS:
             raise ConfigError(f"config key '{key}' cannot change while running")
         trial = dict(self.config)

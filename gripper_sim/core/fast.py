@@ -15,7 +15,7 @@ solid (neo-Hookean) model, other finger geometries - the generic path runs.
 the fast path off.
 
 numba's compiled kernels are cached on disk (``cache=True``, next to the sources);
-``warm_cache()`` compiles them once, at install time: ``python -m gripper_sim.core.fast``
+``gripper_sim.workflows.compile_kernels`` compiles them once, at install time
 (``make install`` does). A cold compile takes ~15-20 s of CPU.
 """
 from __future__ import annotations
@@ -495,26 +495,3 @@ _BUILDERS = {cls: _frozen_builder(cls) for cls in (StepResult, JawWrench, Energi
 
 def _build(cls, fields: dict):
     return _BUILDERS[cls](fields)
-
-
-def warm_cache() -> float:
-    """Compile (or load) every 2D kernel - the whole-step kernel, the energy kernels and
-    the solver's - by stepping small fruits in every route; seconds."""
-    from gripper_sim.configuration import load_config
-    from gripper_sim.core.simulation import Simulation
-    start = time.perf_counter()
-    for overrides in (['fruit.model=shell'], ['fruit.model=point'],
-                      ['fruit.model=solid', 'gripper.finger.type=vgroove'],
-                      ['fruit.model=shell', 'gripper.finger.pad.enabled=true']):
-        sim = Simulation(load_config(overrides=overrides + ['fruit.nodes=16']))
-        sim.command_force(1.0)
-        for _ in range(3):
-            sim.step()
-    return time.perf_counter() - start
-
-
-if __name__ == '__main__':  # pragma: no cover - install-time helper
-    if not available():
-        print('numba is not installed: the fast path is off')
-    else:
-        print(f'fast-path kernels compiled and cached in {warm_cache():.1f} s')

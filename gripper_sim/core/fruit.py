@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gripper_sim.core import shapes
 from gripper_sim.core.energies import (EnclosedAreaPressure, Energy, NeoHookeanTriangles,
                                        RingBending, Stretching)
 from gripper_sim.core.mesh import mesh_outline
+from gripper_sim.geometry import shapes
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay
 
-from gripper_sim.core.shapes import polygon_area, resample_closed
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry.shapes import polygon_area, resample_closed
 
 
 class MeshError(ConfigError):

@@ -12,7 +12,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
-from gripper_sim.core import barrier, fingers
+from gripper_sim.core import barrier
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast import FastPath
@@ -23,6 +23,7 @@ from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.results import StepResult
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry import fingers
 
 LEFT, RIGHT = 0, 1
 
@@ -109,7 +110,7 @@ class Simulation(SimulationFacade):
         return faces
 
     def _jaw_facet_faces(self, jaw: dict):
-        """The jaw faces of a shaped finger or a padded one (``gripper_sim.core.fingers``):
+        """The jaw faces of a shaped finger or a padded one (``gripper_sim.geometry.fingers``):
         faces, the jaw side of each, and each one's offset from its jaw's origin."""
         faces, sides, offsets = [], [], []
         back = self.config['gripper.finger.pad.thickness'] if self._pad is not None else 0.0

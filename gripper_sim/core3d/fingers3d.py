@@ -1,6 +1,6 @@
 """Shaped 3D fingers: the 2D jaw face profile extruded along y over the jaw width.
 
-The 2D fingers (``gripper_sim.core.fingers``: flat, arc, vgroove) are profiles in the
+The 2D fingers (``gripper_sim.geometry.fingers``: flat, arc, vgroove) are profiles in the
 x-z plane made of flat facets. In 3D each facet becomes a rectangular ``Plate``: normal
 (n_x, 0, n_z) of the facet, tangents y and the facet's in-plane direction
 (-n_z, 0, n_x), half-extents (``gripper.jaw_width`` / 2, facet half length). The arc is
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core import fingers
 from gripper_sim.core3d.obstacles import Plate
+from gripper_sim.geometry import fingers
 
 LEFT, RIGHT = 0, 1
 _Y = np.array([0.0, 1.0, 0.0])

@@ -21,14 +21,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gripper_sim.core import shapes
 from gripper_sim.core.energies.base import Energy
+from gripper_sim.core.stepper import ImplicitEulerSolver, NewtonFailure, StepConstraints
 from gripper_sim.core3d import meshes
 from gripper_sim.core3d.energies import (EnclosedVolumePressure, HingeBending, Membrane,
                                          NeoHookeanTets, quadratic_tets)
 from gripper_sim.core3d.energies.quadratic_tets import QuadraticNeoHookeanTets
 from gripper_sim.core3d.energies.wrinkling_membrane import WrinklingMembrane
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry import shapes
 
 
 @dataclass(frozen=True)
@@ -160,7 +161,6 @@ def _relax(positions: np.ndarray, masses: np.ndarray, energies, steps: int = 40)
     Raises:
         ConfigError: no equilibrium found (e.g. a skin too soft for its turgor).
     """
-    from gripper_sim.core.stepper import ImplicitEulerSolver, NewtonFailure, StepConstraints
     solver = ImplicitEulerSolver(masses, list(energies), damping_mass=100.0, tolerance=1e-9,
                                  max_iterations=30, dim=3)
     q = positions.ravel().copy()

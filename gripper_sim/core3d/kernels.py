@@ -655,31 +655,3 @@ def neohookean_von_mises(x, tet, grad_n, mu, lam, out):
                 d = sig[i, j] - (mean if i == j else 0.0)
                 acc += d * d
         out[t] = math.sqrt(1.5 * acc)
-
-
-def warm_cache() -> float:
-    """Compile (or load) every kernel by stepping small 3D shells (plain and wrinkling skin)
-    and solids (linear and quadratic tetrahedra); seconds.
-
-    ``python -m gripper_sim.core3d.kernels`` (``make install`` runs it) so that no user
-    pays numba's compile time (~30 s of CPU) on a first run.
-    """
-    import time
-
-    from gripper_sim.configuration import load_config
-    from gripper_sim.core import make_simulation
-    start = time.perf_counter()
-    for model in (['fruit.model=shell', 'fruit.pressure.turgor=2e4'],
-                  ['fruit.model=shell', 'fruit.pressure.turgor=2e4', 'fruit.skin.wrinkling=true'],
-                  ['fruit.model=solid', 'fruit.mesh.max_tet_volume=1e-6'],
-                  ['fruit.model=solid', 'fruit.mesh.max_tet_volume=1e-6', 'fruit.mesh.order=2']):
-        sim = make_simulation(load_config(overrides=['dimension=3', 'fruit.mesh.subdivisions=3']
-                                          + model))
-        sim.command_force(1.0)
-        for _ in range(3):
-            sim.step()
-    return time.perf_counter() - start
-
-
-if __name__ == '__main__':  # pragma: no cover - install-time helper
-    print(f'3D kernels compiled and cached in {warm_cache():.1f} s')

@@ -1,7 +1,7 @@
 """Record a simulation's steps to MCAP as the node would publish them: offline and in-node.
 
 ``SimRecorder`` is a step observer (``on_step(result)``) that converts each
-``StepResult`` with ``gripper_sim.ros.messages.build_messages`` (the node's own
+``StepResult`` with ``gripper_sim.convert.messages.build_messages`` (the node's own
 conversion), serializes the messages and writes them under the node's topic names
 (``/gripper_sim/fruit/state``, ...). Log and publish times are the sim time of the step
 in integer ns, the same as the messages' header stamps and ``/clock`` (after a reset of
@@ -26,6 +26,8 @@ import threading
 from typing import Any, Iterable, Mapping
 
 from gripper_sim import __version__
+from gripper_sim.configuration import to_yaml
+from gripper_sim.convert import messages
 from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.lifecycle import OpenClose
 from gripper_sim.recording.bag_folder import open_bag_writer
@@ -60,8 +62,6 @@ class SimRecorder(OpenClose):
                  namespace: str = '/', topics: Iterable[str] | None = None, every: int = 1,
                  source: str = 'offline', overwrite: bool = False,
                  flush_interval: float = DEFAULT_FLUSH_INTERVAL):
-        from gripper_sim.ros import messages
-
         self._messages = messages
         if int(every) < 1:
             raise RecordingError(f'every must be a positive whole number of steps, got {every}')
@@ -99,8 +99,6 @@ class SimRecorder(OpenClose):
 
     def open(self) -> None:
         """Create the file, register the topics, store the configuration."""
-        from gripper_sim.configuration import to_yaml
-
         with self._lock:
             self.writer.open()
             try:

@@ -1,5 +1,6 @@
-"""The ROS 2 adapter: the ``gripper_sim`` node, its actions, the example controller.
+"""The ROS 2 adapter: the ``gripper_sim`` node, its actions, the example controller, replay.
 
-Only ``gripper_sim.ros.messages`` is meant for use without a running node (the
-offline MCAP writer calls it); everything here imports rclpy, the core does not.
+Everything here imports rclpy, the core does not. The message contents the node
+publishes are built without rclpy by ``gripper_sim.convert.messages`` (the offline MCAP
+writer uses it too).
 """

@@ -12,8 +12,8 @@ from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
 from gripper_sim.convert.frames import GripperFrames, static_transforms
+from gripper_sim.convert.messages import time_msg, transform_message
 from gripper_sim.convert.urdf import gripper_urdf
-from gripper_sim.ros.messages import time_msg, transform_message
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -23,10 +23,10 @@ from simulation_interfaces.srv import (DeleteEntity, GetEntities, GetEntityState
 from std_msgs.msg import Header
 
 from gripper_sim import configuration
-from gripper_sim.errors import ConfigError
 from gripper_sim.convert import frames as frame_tree
+from gripper_sim.convert.messages import time_msg, world_xyz
 from gripper_sim.core.results import StepResult
-from gripper_sim.ros.messages import time_msg, world_xyz
+from gripper_sim.errors import ConfigError
 from gripper_sim.ros.simulation_standard import outcome
 
 FRUIT, LEFT_JAW, RIGHT_JAW, TABLE = 'fruit', 'left_jaw', 'right_jaw', 'table'

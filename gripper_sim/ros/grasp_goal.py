@@ -1,7 +1,7 @@
 """What a ``~/grasp`` goal means: its validation, the state machine that runs it, its result.
 
-A plain goal runs ``gripper_sim.core.grasp.GraspSequence`` (close, squeeze, lift, hold,
-release); a goal with ``place`` runs ``gripper_sim.core.scenario.PickAndPlace`` on a
+A plain goal runs ``gripper_sim.workflows.grasp.GraspSequence`` (close, squeeze, lift, hold,
+release); a goal with ``place`` runs ``gripper_sim.workflows.scenario.PickAndPlace`` on a
 scenario built from the goal and the node's configuration (``place_scenario``). Both
 are wrapped in a ``GoalRun``: ``update(result)`` after every step, ``phase`` (the
 feedback's -ing name), ``done``, and ``result()`` the filled ``Grasp.Result``.
@@ -17,8 +17,8 @@ from typing import Any, Mapping
 
 from gripper_sim_interfaces.action import Grasp
 
-from gripper_sim.core.grasp import SETTLE_TIME as SQUEEZE_TIME, GraspSequence
-from gripper_sim.core.scenario import PickAndPlace, scenario_from_mapping
+from gripper_sim.workflows.grasp import SETTLE_TIME as SQUEEZE_TIME, GraspSequence
+from gripper_sim.workflows.scenario import PickAndPlace, scenario_from_mapping
 
 MAX_LIFT_HEIGHT = 1.0       # m
 MAX_HOLD_TIME = 3600.0      # s

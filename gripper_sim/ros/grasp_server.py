@@ -1,7 +1,7 @@
 """The ``~/grasp`` action (gripper_sim_interfaces/action/Grasp).
 
-The goal runs ``gripper_sim.core.grasp.GraspSequence``, or with ``place`` the
-pick-and-place ``gripper_sim.core.scenario.PickAndPlace`` (``grasp_goal.GoalRun``),
+The goal runs ``gripper_sim.workflows.grasp.GraspSequence``, or with ``place`` the
+pick-and-place ``gripper_sim.workflows.scenario.PickAndPlace`` (``grasp_goal.GoalRun``),
 updated after every physics step in the physics thread. Feedback goes out on every
 phase change and at least every 0.05 s of sim time or of wall time (20 Hz at real
 time), kept in a deep history so a slow client still gets every phase. One goal

@@ -34,16 +34,15 @@ from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
 from gripper_sim import configuration
-from gripper_sim.core import make_simulation
+from gripper_sim.convert import messages
+from gripper_sim.convert.messages import MessageContext
 from gripper_sim.core.results import StepResult
 from gripper_sim.errors import CommandError, ConvergenceError, GripperSimError
-from gripper_sim.ros import messages
 from gripper_sim.ros.commands import CommandQueue, DoneCallback, JawCommandTopics
 from gripper_sim.ros.description import RobotDescription
 from gripper_sim.ros.entities import EntityServices
 from gripper_sim.ros.grasp_server import GraspServer
 from gripper_sim.ros.gripper_command_server import GripperCommandServer
-from gripper_sim.ros.messages import MessageContext
 from gripper_sim.ros.namesakes import NAMESAKE_WAIT, NamesakeWatch, refuse_namesake
 from gripper_sim.ros.parallel_gripper_server import ParallelGripperCommandServer
 from gripper_sim.ros.params import SimParameters
@@ -56,6 +55,7 @@ from gripper_sim.ros.simulation_standard import SimulationStandard
 from gripper_sim.ros.sync import JawOwner, JawOwnership, SimLock
 from gripper_sim.ros.watchdog import CHECK_PERIOD, STALL_TIMEOUT, PhysicsWatchdog
 from gripper_sim.view.foxglove import start_node_view
+from gripper_sim.workflows.factory import make_simulation
 
 NODE_NAME = 'gripper_sim'
 # GIL switch interval of the node process (Python's default: 5 ms). The physics thread

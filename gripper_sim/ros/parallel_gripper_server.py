@@ -21,8 +21,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from gripper_sim.convert.frames import joint_positions
+from gripper_sim.convert.messages import time_msg
 from gripper_sim.ros.gripper_command_server import GoalProblem, GripperCommandServer, JawTarget
-from gripper_sim.ros.messages import time_msg
 
 JAW_JOINTS = ('left_jaw_joint', 'right_jaw_joint')
 DEFAULT_JOINT = JAW_JOINTS[0]

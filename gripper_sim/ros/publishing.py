@@ -13,9 +13,9 @@ from typing import Callable
 
 from rclpy.qos import QoSProfile
 
+from gripper_sim.convert import messages
+from gripper_sim.convert.messages import MessageContext, build_messages
 from gripper_sim.core.results import StepResult
-from gripper_sim.ros import messages
-from gripper_sim.ros.messages import MessageContext, build_messages
 
 #: keep-last depths other than ``qos``'s: /clock 1, /tf 100 (tf2's broadcaster)
 QOS_DEPTHS = {'clock': 1, 'tf': 100}

@@ -2,7 +2,7 @@
 
 ``FoxgloveView`` serves, on ``host:port`` (127.0.0.1 by default):
 
-- every topic of the node (``gripper_sim.ros.messages.TOPICS``) under its ROS name,
+- every topic of the node (``gripper_sim.convert.messages.TOPICS``) under its ROS name,
   message encoding ``cdr``, schema encoding ``ros2msg`` with the type's full message
   definition (``recording.schemas.message_definition``: the .msg text and every nested
   definition, as rosbag2 stores it), so Foxglove decodes them like a ROS 2 bag;
@@ -26,11 +26,11 @@ import foxglove
 from foxglove.channels import SceneUpdateChannel
 from rclpy.serialization import deserialize_message, serialize_message
 
+from gripper_sim.convert import messages
 from gripper_sim.recording.analysis import read_config
 from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.recorder import import_message_class
 from gripper_sim.recording.schemas import message_definition
-from gripper_sim.ros import messages
 from gripper_sim.view.errors import ViewError
 from gripper_sim.view.scene import PressureLegend, scene_update
 

@@ -1,7 +1,7 @@
 """The 3D scene of the live view: the node's markers as a Foxglove ``SceneUpdate``.
 
 The node already draws its scene as a ``visualization_msgs/MarkerArray``
-(``gripper_sim.ros.messages.markers``): the fruit coloured by contact pressure (2D
+(``gripper_sim.convert.messages.markers``): the fruit coloured by contact pressure (2D
 outline as a LINE_STRIP, 3D skin as a TRIANGLE_LIST with a colour per corner), the
 jaws, shaped fingers and pads, the table, the jaw force arrows and the contact force
 lines. Foxglove's 3D panel shows that array only through its ROS marker support;
@@ -30,7 +30,7 @@ from foxglove.messages import (ArrowPrimitive, Color, CubePrimitive, CylinderPri
                                SceneEntityDeletionType, SceneUpdate, SpherePrimitive,
                                TextPrimitive, Timestamp, TriangleListPrimitive, Vector3)
 
-from gripper_sim.ros.messages import pressure_colour
+from gripper_sim.convert.messages import pressure_colour
 
 # visualization_msgs/Marker type and action constants (fixed by its .msg definition).
 ARROW, CUBE, SPHERE, CYLINDER, LINE_STRIP, LINE_LIST = 0, 1, 2, 3, 4, 5

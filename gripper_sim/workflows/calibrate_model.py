@@ -21,8 +21,8 @@ from typing import Mapping
 import numpy as np
 
 from gripper_sim.configuration import SCHEMA, load_config
-from gripper_sim.core import make_simulation
 from gripper_sim.workflows.calibrate_data import CalibrationError, CompressionCurve
+from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.squeeze import SQUEEZE_DEFAULTS, check_squeeze, squeeze
 
 #: steps a simulated test takes (sets sim.dt unless the user sets it)

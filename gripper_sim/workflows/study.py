@@ -1,7 +1,7 @@
 """Run a study on Dask: every design point x fruit, rows as they finish, resumable.
 
 Each (design point, fruit) is one Dask task (``study_tasks.run_fruit``): the fruit's
-window search (``core.window.window_search``, the same bisections as ``gripper-sim
+window search (``workflows.window.window_search``, the same bisections as ``gripper-sim
 window``) from its closed-form seeds, or with a 'force' axis one evaluation per grid
 force. All fruits of all design points run in parallel over the cluster; each
 fruit's evaluations become rows as its task returns. A task is given the rows already
@@ -33,8 +33,8 @@ from typing import Any, Iterator
 import numpy as np
 from tqdm import tqdm
 
-from gripper_sim.core.grasp import GraspEvaluation
 from gripper_sim.errors import GripperSimError
+from gripper_sim.workflows.grasp import GraspEvaluation
 from gripper_sim.workflows.population_window import (SampleWindow, grid_curve,
                                                      population_window)
 from gripper_sim.workflows.study_results import RowStore

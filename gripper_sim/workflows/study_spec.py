@@ -29,10 +29,11 @@ from typing import Any, Mapping
 
 from gripper_sim.configuration import (SCHEMA, _suggest, load_config, package_config_dir,
                                        read_yaml)
-from gripper_sim.core.scenario import SCENARIO_SCHEMA, Scenario, load_scenario, scenario_config
-from gripper_sim.core.window import TOLERANCE, estimates, trial_setup
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.population import Population, parse_population
+from gripper_sim.workflows.scenario import (SCENARIO_SCHEMA, Scenario, load_scenario,
+                                            scenario_config)
+from gripper_sim.workflows.window import TOLERANCE, estimates, trial_setup
 
 TOP_KEYS = ('name', 'description', 'base', 'axes', 'population', 'window')
 BASE_KEYS = ('fruit', 'finger', 'scenario', 'scenario_set', 'set')
@@ -57,7 +58,7 @@ class DesignPoint:
 @dataclass(frozen=True)
 class FruitSetup:
     """The set-up of one (design point, sample): its trial configuration and scenario
-    (``core.window.trial_setup``) and the sample's drawn values."""
+    (``workflows.window.trial_setup``) and the sample's drawn values."""
 
     point: int
     sample: int

@@ -18,9 +18,9 @@ from dataclasses import fields
 from typing import Any, Mapping, Sequence
 
 import gripper_sim
-from gripper_sim.core.grasp import GraspEvaluation
-from gripper_sim.core.scenario import Scenario
-from gripper_sim.core.window import (estimates, evaluate_grasp, run_search, trial_of,
+from gripper_sim.workflows.grasp import GraspEvaluation
+from gripper_sim.workflows.scenario import Scenario
+from gripper_sim.workflows.window import (estimates, evaluate_grasp, run_search, trial_of,
                                      window_search)
 
 #: the fields of a GraspEvaluation a row carries
@@ -41,7 +41,7 @@ def code_version() -> str:
 
 def run_case(config: Mapping[str, Any], scenario: Scenario, force: float,
              kind: str) -> dict[str, Any]:
-    """Evaluate one grasp (``core.window.evaluate_grasp``); its outputs as a row.
+    """Evaluate one grasp (``workflows.window.evaluate_grasp``); its outputs as a row.
 
     Any error (a solver failure, or anything else this case raises) is the row's
     ``error`` with outcome 'solver failed' or 'error': the study goes on.
@@ -79,7 +79,7 @@ def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
               forces: Sequence[float], known: Mapping[tuple[str, str], dict]) -> dict:
     """One fruit at one design point.
 
-    Without ``forces``: its window search (``core.window.window_search`` from the seeds
+    Without ``forces``: its window search (``workflows.window.window_search`` from the seeds
     of ``estimates``), returning ``result`` = (min_force, max_force). With ``forces``:
     one 'hold' evaluation per force, ``result`` None. An evaluation already in
     ``known`` (outputs by ``answer_key``, from a previous run) is not computed again.

@@ -5,6 +5,8 @@ import os
 
 import numpy as np
 
+from gripper_sim.core3d import kernels
+
 
 def element_dofs3(nodes: np.ndarray) -> np.ndarray:
     """(n_elem, k) node indices to (n_elem, 3k) dof indices [x, y, z] per node."""
@@ -26,12 +28,8 @@ def empty_triplets():
 
 
 def fast_kernels():
-    """``gripper_sim.core3d.kernels`` if numba is installed and GRIPPER_SIM_FAST is not
-    0, else None (the numpy reference path)."""
+    """``gripper_sim.core3d.kernels`` unless GRIPPER_SIM_FAST is 0, else None (the numpy
+    reference path)."""
     if os.environ.get('GRIPPER_SIM_FAST', '1') == '0':
-        return None
-    try:
-        from gripper_sim.core3d import kernels
-    except ImportError:  # pragma: no cover - depends on the environment
         return None
     return kernels

@@ -26,6 +26,7 @@ import numpy as np
 
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
+from gripper_sim.core3d import kernels
 from gripper_sim.core3d.energies.common import cross_matrices, element_dofs3, empty_triplets
 
 
@@ -146,6 +147,5 @@ class HingeBending(Energy):
                       scatter: np.ndarray, hessian: bool = True):
         """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
         (n_hinge, 144))."""
-        from gripper_sim.core3d import kernels
         return kernels.hinge_bending(q.reshape(-1, 3), self.hinges, self.theta0, self.k,
                                      grad, data, scatter, hessian), []

@@ -16,6 +16,7 @@ import numpy as np
 
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
+from gripper_sim.core3d import kernels
 from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
 
 
@@ -122,7 +123,6 @@ class Membrane(Energy):
         """The numba kernel of ``evaluate``: adds the gradient (N) into ``grad`` and the
         Hessian (N/m) into the CSC values ``data`` at ``scatter`` (n_tri, 81); returns
         (value in J, low-rank terms)."""
-        from gripper_sim.core3d import kernels
         return kernels.membrane(q.reshape(-1, 3), self.tri, self.grad_n, self.weight,
                                 float(self.mu), float(self.lam), grad, data, scatter,
                                 hessian), []

@@ -16,6 +16,7 @@ import numpy as np
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
+from gripper_sim.core3d import kernels
 from gripper_sim.core3d.energies.common import (element_dofs3, empty_triplets,
                                                 fast_kernels)
 
@@ -128,7 +129,6 @@ class NeoHookeanTets(Energy):
                       scatter: np.ndarray, hessian: bool = True):
         """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
         (n_tet, 144)); value inf, nothing added, if an element is inverted."""
-        from gripper_sim.core3d import kernels
         return kernels.neohookean_tets(q.reshape(-1, 3), self.tet, self.grad_n, self.volume,
                                        float(self.mu), float(self.lam), grad, data, scatter,
                                        hessian), []

@@ -14,6 +14,7 @@ import numpy as np
 
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
+from gripper_sim.core3d import kernels
 from gripper_sim.core3d.energies.common import cross_matrices, element_dofs3, empty_triplets
 
 
@@ -67,7 +68,6 @@ class EnclosedVolumePressure(Energy):
                       scatter: np.ndarray, hessian: bool = True):
         """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
         (n_tri, 81)); the rank-one term is returned as in ``evaluate``."""
-        from gripper_sim.core3d import kernels
         x = q.reshape(-1, 3)
         gv = np.empty(q.size)
         dv = kernels.volume_and_gradient(x, self.tri, gv) - self.v0

@@ -17,6 +17,7 @@ import numpy as np
 from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
                                             scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
+from gripper_sim.core3d import kernels
 from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
 from gripper_sim.core3d.energies.neohookean import neohookean_response, rest_tetrahedra
 
@@ -110,7 +111,6 @@ class QuadraticNeoHookeanTets(Energy):
                       scatter: np.ndarray, hessian: bool = True):
         """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
         (n_tet, 900)); value inf, nothing added, if J <= 0 at a quadrature point."""
-        from gripper_sim.core3d import kernels
         return kernels.neohookean_quadrature(q.reshape(-1, 3), self.tet, self.grad_n,
                                              self.weight, float(self.mu), float(self.lam),
                                              grad, data, scatter, hessian), []

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from gripper_sim.core.energies.base import Energy, Evaluation
+from gripper_sim.core3d import kernels
 from gripper_sim.core3d.energies.membrane import Membrane
 
 
@@ -128,7 +129,6 @@ class WrinklingMembrane(Energy):
                       scatter: np.ndarray, hessian: bool = True):
         """The numba kernel ``kernels.wrinkling_membrane`` of ``evaluate`` (see
         ``Membrane.evaluate_into``)."""
-        from gripper_sim.core3d import kernels
         return kernels.wrinkling_membrane(q.reshape(-1, 3), self.tri, self.grad_n,
                                           self.weight, float(self.mu), float(self.lam),
                                           self.youngs_modulus, self.nu, grad, data, scatter,

@@ -8,7 +8,7 @@
     let go      no jaw touches the fruit any more after the release
     drop        no jaw touches the fruit between the grip and the release
 
-These are the moments at which the grasp state machine (``gripper_sim.core.grasp``)
+These are the moments at which the grasp state machine (``gripper_sim.workflows.grasp``)
 changes phase, seen from outside: the analysis has only what was recorded.
 """
 from __future__ import annotations

@@ -5,7 +5,7 @@ pressure at each of its points, the jaw plates and the table, all in the world f
 
 The pressure is the damage estimate's contact pressure the node colours the fruit marker
 with (Hertz per node in 2D, normal force over vertex area in 3D), read back from the
-marker colours by inverting ``gripper_sim.ros.messages.pressure_colour`` (green at 0,
+marker colours by inverting ``gripper_sim.convert.messages.pressure_colour`` (green at 0,
 yellow at half the bruise pressure, red at and above it): exact below the bruise
 pressure, and "at or above it" where the colour is saturated.
 """

@@ -15,7 +15,7 @@
 - The window is [minimum, maximum] when minimum <= maximum, else there is none.
 
 Each trial is a fresh simulation starting with the jaws open at the grasp height (the
-scenario's approach skipped), run by ``evaluate_grasp`` (``core.grasp.evaluate``, the
+scenario's approach skipped), run by ``evaluate_grasp`` (``workflows.grasp.evaluate``, the
 evaluation the ``pick`` command and studies share). A trial stops early once its
 answer is known (dropped or bruised). A trial whose solver fails (``ConvergenceError``)
 counts as neither holding nor safe, so that force stays out of the window. The two
@@ -31,12 +31,13 @@ from typing import Any, Callable, Generator, Mapping, Tuple
 
 import numpy as np
 
-from gripper_sim.core import make_simulation
 from gripper_sim.core.damage import contact_modulus
 from gripper_sim.core.fruit import build_fruit
-from gripper_sim.core.grasp import GraspEvaluation, evaluate
-from gripper_sim.core.scenario import SLIP_TOLERANCE, PickAndPlace, Scenario
+from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import GripperSimError
+from gripper_sim.workflows.factory import make_simulation
+from gripper_sim.workflows.grasp import GraspEvaluation, evaluate
+from gripper_sim.workflows.scenario import SLIP_TOLERANCE, PickAndPlace, Scenario
 
 #: relative width of the final bisection brackets
 TOLERANCE = 0.03
@@ -118,7 +119,6 @@ def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
     mass = fruit.total_mass
     radius_y = None
     if int(config.get('dimension', 2)) == 3:
-        from gripper_sim.core3d.fruit import build_fruit3d
         body = build_fruit3d(config)
         mass = body.total_mass
         half = 0.5 * np.ptp(body.rest_positions[body.surface], axis=0)

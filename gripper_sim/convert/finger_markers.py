@@ -1,6 +1,6 @@
 """Markers of shaped fingers and soft pads (ns ``fingers`` and ``pads``), moving with the jaws.
 
-Geometry from the core (``gripper_sim.core.fingers``): the face profile of the left
+Geometry from ``gripper_sim.geometry.fingers``: the face profile of the left
 jaw in its frame (x towards the fruit, z up, origin at the centre of the jaw's front
 plane), from its bottom rim to its top rim; the right jaw is its mirror image. A pad
 (``gripper.finger.pad.*``) of thickness t lies on the face: its free surface is the
@@ -28,7 +28,7 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker
 
-from gripper_sim.core import fingers
+from gripper_sim.geometry import fingers
 
 FINGER_COLOUR = ColorRGBA(r=0.45, g=0.45, b=0.5, a=0.9)
 PAD_COLOUR = ColorRGBA(r=0.15, g=0.35, b=0.75, a=0.9)

@@ -8,11 +8,18 @@ With ``clock_hz``, ``/clock`` carries the recording's time so that nodes running
 """
 from __future__ import annotations
 
+import os
 import signal
 import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
 
 from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording.errors import RecordingError
@@ -103,8 +110,6 @@ class Player:
             raise RecordingError(f'{bag.path}: nothing to replay')
         self.clock_publisher = None
         if clock_hz is not None:
-            from rclpy.qos import QoSProfile
-            from rosgraph_msgs.msg import Clock
             self._clock_class = Clock
             self.clock_publisher = node.create_publisher(Clock, CLOCK_TOPIC,
                                                          QoSProfile(depth=10))
@@ -178,7 +183,6 @@ class Player:
 
     def drain(self, timeout: float = 2.0) -> None:
         """Give reliable subscribers time to receive the last messages."""
-        from rclpy.duration import Duration
         for pub in self.publishers.values():
             try:
                 pub.wait_for_all_acked(Duration(seconds=timeout))
@@ -196,9 +200,6 @@ def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
     With ``foxglove_port`` the same messages and the 3D scene are also served to
     Foxglove (``gripper_sim.view.foxglove.recording_view``; ViewError if it cannot).
     """
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
-
     with BagReader(path) as bag:
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         node = None
@@ -212,7 +213,6 @@ def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
         previous = {sig: signal.signal(sig, request_stop)
                     for sig in (signal.SIGINT, signal.SIGTERM)}
         try:
-            import os
             node = rclpy.create_node(f'gripper_sim_replay_{os.getpid()}')
             player = Player(node, bag, rate=rate, topics=topics, start=start,
                             clock_hz=clock_hz, remaps=remaps)

@@ -38,10 +38,10 @@ from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from gripper_sim.convert import frames as frame_tree
+from gripper_sim.convert.finger_markers import (FingerGeometry, base_marker, finger_geometry,
+                                            finger_markers)
 from gripper_sim.convert.frames import FrameTransform, GripperFrames
 from gripper_sim.core.results import StepResult
-from gripper_sim.ros.finger_markers import (FingerGeometry, base_marker, finger_geometry,
-                                            finger_markers)
 
 JOINT_NAMES = frame_tree.JOINT_NAMES
 DEFAULT_NODE_NAME = 'gripper_sim'

@@ -41,9 +41,11 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from gripper_sim.configuration import (Key, load_config, package_config_dir, parse_override,
-                                       read_yaml)
+from gripper_sim.configuration import (Key, flatten, load_config, package_config_dir,
+                                       parse_override, read_yaml)
+from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core.slip import SLIP_TOLERANCE
+from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import ConfigError
 
 #: slip (m) beyond which the fruit is lost: dropped
@@ -168,7 +170,6 @@ def load_scenario(name_or_path: str) -> Scenario:
 
 def scenario_from_mapping(data: Mapping[str, Any], source: str = '') -> Scenario:
     """Validate a scenario given as a (nested) mapping."""
-    from gripper_sim.configuration import flatten
     data = dict(data)
     overrides = data.pop('set', None) or {}
     if not isinstance(overrides, Mapping):
@@ -197,9 +198,7 @@ def rest_shape(config: Mapping[str, Any]):
     ``dimension`` says): its ``rest_positions`` are (n, 2) (x, z) or (n, 3) (x, y, z),
     the last column always the height (m)."""
     if int(config.get('dimension', 2)) == 3:
-        from gripper_sim.core3d.fruit import build_fruit3d
         return build_fruit3d(config)
-    from gripper_sim.core.fruit import build_fruit
     return build_fruit(config)
 
 
