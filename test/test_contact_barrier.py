@@ -153,6 +153,23 @@ def test_barrier_gap_stays_within_dhat():
     assert 0 < smallest and np.all(gaps < load_config()['contact.ipc.dhat'])
 
 
+def test_dropped_node_rests_on_the_table_with_its_weight_and_no_chatter():
+    """A point mass dropped 5 cm onto the table (dt = 1 ms, 3 s): at rest the barrier
+    carries exactly its weight, it never touches or passes the table, and it does not
+    bounce."""
+    sim = Simulation(load_config(overrides=['fruit.model=point', 'fruit.initial_height=0.05',
+                                            'gripper.initial_lift=5', 'contact.model=ipc']))
+    heights, reactions = [], []
+    for _ in range(3000):
+        result = sim.step()
+        heights.append(result.positions[0, 1])
+        reactions.append(result.contact_forces[0, 1])
+    weight = sim.fruit.total_mass * sim.config['world.gravity']
+    assert min(heights) > 0
+    assert np.ptp(heights[-500:]) < 1e-9
+    assert np.array(reactions[-500:]) / weight == pytest.approx(1.0, rel=1e-3)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize('ratio,outcome', [(1.2, 'held'), (0.8, 'slipped')])
 def test_friction_hold_and_slip_agree_between_the_contact_models(ratio, outcome):
