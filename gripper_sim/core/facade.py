@@ -22,6 +22,7 @@ import numpy as np
 
 from gripper_sim.configuration import validate
 from gripper_sim.core import contact as cm
+from gripper_sim.core.barrier import BarrierContact, barrier_step
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
@@ -52,6 +53,10 @@ def finite(name: str, value: Any) -> float:
 class SimulationFacade:
     """Base of the simulation facades (see the module docstring)."""
 
+    #: the barrier contact model (``contact.model: ipc``, ``core.barrier``), or None for
+    #: the modified mass method's contact passes
+    _barrier: BarrierContact | None = None
+
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
         """``initial_positions`` (n, d) m (the fruit on the table, or at its configured
@@ -77,7 +82,8 @@ class SimulationFacade:
         c = self.config
         return PatternCachingSolver(
             self.fruit.masses, list(self.fruit.energies) + [self.gravity]
-            + ([self._pad] if self._pad is not None else []),
+            + ([self._pad] if self._pad is not None else [])
+            + ([self._barrier] if self._barrier is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
             dim=self.dimension, lu_options=SYMMETRIC_LU_OPTIONS, fast=fast)
@@ -397,9 +403,14 @@ class SimulationFacade:
         """One step with the hard contacts (the pads, if any, set up by the caller)."""
         grip_new = self._advance_gripper(dt)
         new_faces = self._faces(grip_new)
-        outcome = contact_step(self.solver, self.fruit.surface, self.contacts, self.q, self.v,
-                               self._faces(self._grip), new_faces, dt,
-                               ContactSettings.from_config(self.config, self.deepest_first))
+        if self._barrier is not None:
+            outcome = barrier_step(self.solver, self._barrier, self.q, self.v,
+                                   self._faces(self._grip), new_faces, dt)
+        else:
+            outcome = contact_step(self.solver, self.fruit.surface, self.contacts, self.q,
+                                   self.v, self._faces(self._grip), new_faces, dt,
+                                   ContactSettings.from_config(self.config,
+                                                               self.deepest_first))
         self.q, self.v, self.contacts = outcome.x, outcome.v, outcome.contacts
         self.contact_forces = outcome.forces
         self._grip = grip_new

@@ -211,6 +211,11 @@ class ImplicitEulerSolver:
         blocks = (b / dt)[:, None, None] * np.einsum('kad,kab,kbe->kde', t, inner, t)
         return float(np.sum(b * dt * root)), blocks
 
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """The line search's first step: 1, or less where an energy bounds it (a contact
+        barrier: the continuous-collision step, ``Energy.max_step``)."""
+        return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
+
     def _filter_matrix(self, filters: np.ndarray) -> sp.csc_matrix:
         n_nodes = filters.shape[0]
         if self.dim != 2:
@@ -256,7 +261,8 @@ class ImplicitEulerSolver:
                 return StepSolution(q, grad - fric_grad, iteration, history)
             q, phi, grad, step = line_search(
                 lambda x: self._evaluate(x, q_n, v_n, dt, con, hessian=False)[:2],
-                q, dq, phi, slope, float(np.max(np.abs(g_f))), lambda g: s @ g, history)
+                q, dq, phi, slope, float(np.max(np.abs(g_f))), lambda g: s @ g, history,
+                first_step=self.max_step(q, dq))
             norm = float(np.max(np.abs(step * dq))) / dt
             history.append(norm)
             if norm < self.tolerance:
@@ -305,11 +311,12 @@ def descent_direction(solve_shifted, gradient: np.ndarray, history: list[float])
 
 
 def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: float,
-                residual: float, project, history: list[float]):
-    """Backtracking from the full Newton step ``dq``: the first of the steps 1, 1/2,
-    1/4, ... (30 halvings) with sufficient decrease (Armijo, 1e-4 of ``slope``) or, with
-    the potential risen by at most ``PHI_ROUNDOFF`` of itself, a projected gradient below
-    half of ``residual``.
+                residual: float, project, history: list[float], first_step: float = 1.0):
+    """Backtracking from the Newton step ``dq``: the first of the steps s, s/2, s/4, ...
+    (30 halvings; s = ``first_step``, 1 unless a barrier's collision-free bound is
+    smaller) with sufficient decrease (Armijo, 1e-4 of ``slope``) or, with the potential
+    risen by at most ``PHI_ROUNDOFF`` of itself, a projected gradient below half of
+    ``residual``.
 
     Args:
         evaluate: x -> (phi, gradient) of the incremental potential (inf if infeasible).
@@ -321,7 +328,7 @@ def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: floa
     Raises:
         NewtonFailure: no acceptable step.
     """
-    step = 1.0
+    step = first_step
     for _ in range(30):
         trial = q + step * dq
         phi_trial, grad_trial = evaluate(trial)
