@@ -131,8 +131,9 @@ def _op_loops():
         return ok
 
     @njit(cache=True)
-    def contact_passes(reps, obstacle, mode, normal_force, bounce, impact, secondary, x_n, v_n,
-                       reaction, face_par, face_dyn, surface, dt, v_corr, threshold, v_min):
+    def contact_passes(reps, obstacle, mode, normal_force, bounce, secondary, secondary_bounce,
+                       x_n, v_n, reaction, face_par, face_dyn, surface, dt, v_corr, threshold,
+                       v_min):
         n = x_n.shape[0]
         start, filters = np.empty((n, 2)), np.empty((n, 2, 2))
         frn, frt = np.empty(n, np.int64), np.empty((n, 2))
@@ -141,10 +142,10 @@ def _op_loops():
         changed = 0
         for _ in range(reps):
             o, m, nf = obstacle.copy(), mode.copy(), normal_force.copy()
-            b, i, s = bounce.copy(), impact.copy(), secondary.copy()
-            k.contact_constraints(o, m, nf, i, s, x_n, x_n, face_par, face_dyn, dt, v_corr,
+            b, s, sb = bounce.copy(), secondary.copy(), secondary_bounce.copy()
+            k.contact_constraints(o, m, nf, s, x_n, x_n, face_par, face_dyn, dt, v_corr,
                                   start, filters, frn, frt, frb, frs)
-            changed += k.update_contacts(o, m, nf, b, i, s, x_n, x_n, v_n, reaction, face_par,
+            changed += k.update_contacts(o, m, nf, b, s, sb, x_n, x_n, v_n, reaction, face_par,
                                          face_dyn, surface, dt, threshold, v_min, released,
                                          toggled)
         return changed
@@ -201,9 +202,9 @@ def kernel_split(sim: Simulation) -> dict:
     frn, frt = np.empty(n, np.int64), np.empty((n, 2))
     frb, frs = np.empty(n), np.empty(n)
     face_par, face_dyn = path._face_arrays()
-    n_fr = k.contact_constraints(c.obstacle, c.mode, c.normal_force, c.impact_gap,
-                                 c.secondary, x_n, x_n + dt * v_n, face_par, face_dyn, dt,
-                                 0.05, start, filters, frn, frt, frb, frs)
+    n_fr = k.contact_constraints(c.obstacle, c.mode, c.normal_force, c.secondary, x_n,
+                                 x_n + dt * v_n, face_par, face_dyn, dt, 0.05, start, filters,
+                                 frn, frt, frb, frs)
     frn, frt = frn[:n_fr].copy(), frt[:n_fr].copy()
     frb, frs = frb[:n_fr].copy(), frs[:n_fr].copy()
     model = path.model
@@ -214,8 +215,9 @@ def kernel_split(sim: Simulation) -> dict:
               path.fpar[k.F_BETA], filters, frn, frt, frb, frs) + energy
     fac = (q, x_n.ravel(), dt, path.masses2, path.fpar[k.F_ALPHA], path.fpar[k.F_BETA],
            filters, frn, frt, frb, frs) + energy
-    contact = (c.obstacle, c.mode, c.normal_force, c.bounce_speed, c.impact_gap, c.secondary,
-               x_n, v_n, sim.contact_forces, face_par, face_dyn, path.surface, dt,
+    contact = (c.obstacle, c.mode, c.normal_force, c.bounce_speed, c.secondary,
+               c.secondary_bounce, x_n, v_n, sim.contact_forces, face_par, face_dyn,
+               path.surface, dt,
                sim.config['contact.max_correction_speed'],
                sim.config['contact.release_threshold'], max(5 * sim.gravity.g * dt, 1e-3))
     damage = path._damage_inputs()

@@ -213,6 +213,17 @@ SCHEMA: dict[str, Key] = {
                                             'elastic-foundation pad model needs a '
                                             'compressible layer)', low=0.0, high=0.475),
     # --- contact
+    'contact.model': Key('mmm', '-', 'contact with the rigid faces (jaws, table, walls): mmm '
+                         '= the modified mass method (held nodes prescribed on the faces); '
+                         'ipc = a barrier energy (Incremental Potential Contact, through '
+                         'ipctk; 2D, no soft pads, no restitution, the generic solver)', 'str',
+                         choices=('mmm', 'ipc')),
+    'contact.ipc.dhat': Key(1e-6, 'm', 'ipc: barrier activation distance dhat (the largest '
+                            'gap that still carries force; nodes stay within it of a face)',
+                            low=1e-9, high=1e-3),
+    'contact.ipc.stiffness': Key(0.1, 'N', 'ipc: barrier stiffness kappa (a node pressed with '
+                                 'force F stays about 2 kappa dhat / F from the face)',
+                                 low=1e-6, high=1e6),
     'contact.jaw.static_friction': Key(0.5, '', 'static friction coefficient '
                                        'fruit-jaw mu_s (rubber pad, estimate)',
                                        low=0.0, high=5.0),

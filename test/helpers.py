@@ -17,11 +17,11 @@ RING_COEFFICIENT = np.pi / 4 - 2 / np.pi  # 0.14878 (Roark; validation.md sectio
 RESTITUTION = 0.8
 
 
-def quasi_static_sim(radius: float, *overrides: str) -> Simulation:
+def quasi_static_sim(radius: float, *overrides: str, fast: bool | None = None) -> Simulation:
     config = load_config(overrides=QUASI_STATIC + [
         f'fruit.shape.diameter={2 * radius}', f'gripper.initial_gap={2 * radius + 1e-4}',
         *overrides])
-    return Simulation(config)
+    return Simulation(config, fast=fast)
 
 
 def hollow_ring_error(radius, skin_modulus, thickness, nodes, deflection_ratio=0.005):
@@ -83,10 +83,10 @@ def bounce_apex_ratios(dt, count=4):
     return apex[1:count + 1] / apex[:count]
 
 
-def pick(ratio, mu=0.5, lift=0.02, hold=1.0):
+def pick(ratio, mu=0.5, lift=0.02, hold=1.0, overrides=()):
     """Grip so that 2 mu N = ratio m g, lift and hold; (sim, summary)."""
     config = load_config(overrides=[f'contact.jaw.static_friction={mu}',
-                                    f'contact.jaw.kinetic_friction={mu}'])
+                                    f'contact.jaw.kinetic_friction={mu}', *overrides])
     sim = Simulation(config)
     weight = sim.fruit.total_mass * config['world.gravity']
     force = ratio * weight / (2 * mu)

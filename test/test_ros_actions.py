@@ -340,9 +340,9 @@ def test_parallel_gripper_command_reaches_a_free_joint_position(client):
     assert list(result.state.name) == ['left_jaw_joint']
     assert result.state.position[0] == pytest.approx(0.034, abs=0.001)
     assert result.state.effort[0] == pytest.approx(0.0, abs=1e-6)
-    # the states published up to the goal's end may reach this client after its result
-    client.spin_until(lambda: abs(client.latest['fruit/state'].gap - 0.068) <= 0.002, 30,
-                      'the state at the reached gap')
+    # the state topic may still be on its way when the result arrives (a loaded machine)
+    client.spin_until(lambda: abs(client.latest['fruit/state'].gap - 0.068) < 0.002, 30,
+                      'a fruit state at the goal gap')
     assert feedback and all(list(f.state.name) == ['left_jaw_joint'] for f in feedback)
     assert feedback[0].state.position[0] > feedback[-1].state.position[0]   # it closed
 

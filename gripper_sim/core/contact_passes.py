@@ -2,13 +2,23 @@
 
 The modified mass method (Baraff & Witkin 1998) around the Newton solve of the implicit
 Euler step (``core.stepper``): each pass prescribes the held nodes (z targets: a stuck
-node moves with its obstacle, a sliding one keeps its normal gap, an IMPACT node ends at
-its bounce gap; the S filter frees the rest), solves, and corrects the contact set
+node moves with its obstacle, a sliding one and an IMPACT node keep their normal gap;
+the S filter frees the rest), solves, and corrects the contact set
 (``core.contact``): pulling nodes are released, stuck nodes whose tangential reaction
 leaves the Coulomb cone |R_t| <= mu_s R_n slip, slipping nodes that stopped stick, a
 held node pushed into a second face gets it as a frictionless secondary hold (a
 corner), free surface nodes found inside a face are added (with restitution if they
-arrive fast). The passes end when the set no longer changes.
+arrive fast, at the first face and at the second of a corner alike: a node that hits a
+floor and a wall in one step rebounds from both). The passes end when the set no longer
+changes.
+
+Restitution never adds energy: the outgoing velocity of a node that rebounds is capped so
+that its kinetic energy after the step is at most its kinetic energy before plus the work
+the fruit's forces (elastic, gravity, damping) did on it during the step. Backward Euler
+with the obstacles' reactions R gives E_end - E_start <= sum R . dx (convex energies);
+replacing a node's velocity dx / dt by v_out changes that node's part to
+m |v_out|^2 / 2 - m |v_start|^2 / 2 - F . dx with F = m (dx / dt - v_start) / dt - R
+the other forces on it, so with the cap no rebound raises the total energy.
 
 Dimension is a parameter, not a copy: positions are (n, d), faces (``FlatFace`` in 2D,
 ``Plate`` in 3D) have a unit ``normal`` (d,) and ``tangents`` (d - 1, d), and kinetic
@@ -95,6 +105,7 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
             break
     v = (x - x_n) / dt
     forces = np.zeros((n, d))
+    rebound = np.zeros((n, d))  # (n, d) m/s, the restitution part of each velocity
     for _, face, nodes in _held_by_face(contacts, new_faces):
         nrm = face.normal
         stuck = contacts.mode[nodes] == cm.STICK
@@ -102,12 +113,50 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
         v_t[stuck] = face.velocity - (face.velocity @ nrm) * nrm
         v_n_new = face.velocity @ nrm + contacts.bounce_speed[nodes]
         v[nodes] = v_t + v_n_new[:, None] * nrm
+        rebound[nodes] += contacts.bounce_speed[nodes][:, None] * nrm
         forces[nodes] = reaction[nodes]
     for node in np.flatnonzero(contacts.secondary >= 0):
         face = new_faces[contacts.secondary[node]]
-        v[node] += (face.velocity @ face.normal - v[node] @ face.normal) * face.normal
+        bounce = contacts.secondary_bounce[node]
+        v[node] += (face.velocity @ face.normal + bounce - v[node] @ face.normal) * face.normal
+        rebound[node] += bounce * face.normal
+    bouncing = np.flatnonzero(np.any(rebound != 0.0, axis=1))
+    if bouncing.size:
+        masses = solver.m[::d]
+        v[bouncing] = capped_rebound(v[bouncing], rebound[bouncing], v_n[bouncing],
+                                     x[bouncing] - x_n[bouncing], reaction[bouncing],
+                                     masses[bouncing], dt)
     contacts.release(np.flatnonzero(contacts.mode == cm.IMPACT))
+    contacts.release_secondary(np.flatnonzero(contacts.secondary_bounce > 0))
     return StepOutcome(x, v, forces, contacts, iterations)
+
+
+def capped_rebound(v: np.ndarray, rebound: np.ndarray, v_start: np.ndarray, dx: np.ndarray,
+                   reaction: np.ndarray, masses: np.ndarray, dt: float) -> np.ndarray:
+    """The end velocities (k, d) m/s of k rebounding nodes with their rebound scaled down
+    (by one factor s in [0, 1] per node) where it would add energy (see the module doc):
+    |v - (1 - s) rebound|^2 <= |v_start|^2 + 2 F . dx / m.
+
+    Args:
+        v: (k, d) m/s, end velocities with the full rebound.  rebound: (k, d) m/s, its
+        restitution part.  v_start: (k, d) m/s, velocities at the start of the step.
+        dx: (k, d) m, displacements over the step.  reaction: (k, d) N, the obstacles'
+        reactions.  masses: (k,) kg.
+    """
+    others = masses[:, None] * (dx / dt - v_start) / dt - reaction  # (k, d) N
+    budget = (np.sum(v_start * v_start, axis=1)
+              + 2.0 * np.sum(others * dx, axis=1) / masses)  # (m/s)^2
+    base = v - rebound
+    # |base + s rebound|^2 = bb + 2 s br + s^2 rr <= budget: the largest s in [0, 1]
+    bb = np.sum(base * base, axis=1)
+    br = np.sum(base * rebound, axis=1)
+    rr = np.sum(rebound * rebound, axis=1)
+    discriminant = br * br - rr * (bb - budget)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        root = (-br + np.sqrt(np.maximum(discriminant, 0.0))) / rr
+    scale = np.where((bb + 2.0 * br + rr <= budget) | (rr == 0.0), 1.0,
+                     np.where(discriminant >= 0.0, np.clip(root, 0.0, 1.0), 0.0))
+    return base + scale[:, None] * rebound
 
 
 def _held_by_face(contacts: cm.ContactState, faces: list):
@@ -131,8 +180,6 @@ def _constraints(contacts: cm.ContactState, x_n, x_pred, old_faces, new_faces, d
         mode = contacts.mode[nodes]
         penetration = np.maximum(0.0, -old_faces[index].gap(x_n[nodes]))
         target = -np.maximum(0.0, penetration - v_corr * dt)
-        impact = mode == cm.IMPACT
-        target[impact] = contacts.impact_gap[nodes[impact]]
         start[nodes] += (target - face.gap(start[nodes]))[:, None] * nrm
         stuck = mode == cm.STICK
         if np.any(stuck):
@@ -205,12 +252,12 @@ def _update_contacts(contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces
             if np.any(stale) and face.kinetic_friction > 0:
                 changed = True
         contacts.normal_force[nodes[keep]] = r_n[keep]
-    for node in np.flatnonzero(contacts.secondary >= 0):
+    for node in np.flatnonzero((contacts.secondary >= 0) & (contacts.secondary_bounce <= 0)):
         face = new_faces[contacts.secondary[node]]
         if reaction[node] @ face.normal < -threshold:
-            contacts.secondary[node] = -1
+            contacts.release_secondary(node)
             changed = True
-    if _add_corners(contacts, x, new_faces):
+    if _add_corners(contacts, x, x_n, v_n, old_faces, new_faces, dt, settings):
         changed = True
     if _add_penetrating(contacts, x, x_n, v_n, old_faces, new_faces, dt, released, surface,
                         settings):
@@ -218,8 +265,11 @@ def _update_contacts(contacts: cm.ContactState, x, x_n, v_n, reaction, old_faces
     return changed
 
 
-def _add_corners(contacts: cm.ContactState, x, new_faces) -> bool:
-    """Held nodes pushed into a second face (a corner) get it as a secondary hold."""
+def _add_corners(contacts: cm.ContactState, x, x_n, v_n, old_faces, new_faces, dt,
+                 settings: ContactSettings) -> bool:
+    """Held nodes pushed into a second face (a corner) get it as a secondary hold, with
+    a rebound from it if they arrive faster than the bounce threshold and it has
+    restitution."""
     held = np.flatnonzero((contacts.obstacle >= 0) & (contacts.secondary < 0))
     added = False
     for index, face in enumerate(new_faces):
@@ -230,9 +280,35 @@ def _add_corners(contacts: cm.ContactState, x, new_faces) -> bool:
         if inside.size:
             contacts.secondary[inside] = index
             contacts.mode[inside[contacts.mode[inside] == cm.STICK]] = cm.SLIP
+            contacts.secondary_bounce[inside] = _rebound_speeds(
+                face, old_faces[index], x_n[inside], v_n[inside], x[inside], dt, settings)
             held = np.setdiff1d(held, inside)
             added = True
     return added
+
+
+def _rebound_speeds(face, old_face, x_n, v_n, x, dt: float,
+                    settings: ContactSettings) -> np.ndarray:
+    """Outgoing normal speeds (k,) m/s, relative to ``face``, of k nodes found inside it
+    (0: no rebound): a node rebounds if it met the face faster than 5 g dt (at least
+    1 mm/s) and the face has restitution e; it leaves with e times its speed at the moment
+    it met the face (linear in time between the start and the solve's end).
+
+    Args:
+        face, old_face: the face at the end and at the start of the step.
+        x_n, v_n: (k, d) m and m/s at the start of the step.  x: (k, d) m, the solve's end.
+    """
+    if face.restitution <= 0:
+        return np.zeros(len(x))
+    gap_start = old_face.gap(x_n)
+    gap_end = face.gap(x)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        tau = np.where(gap_start > 0, np.clip(gap_start / (gap_start - gap_end), 0, 1), 0.0)
+    v_start = (v_n - face.velocity) @ face.normal
+    v_end = ((x - x_n) / dt - face.velocity) @ face.normal
+    approach = -(v_start + tau * (v_end - v_start))
+    bouncing = approach > max(5.0 * settings.gravity * dt, 1e-3)
+    return np.where(bouncing, face.restitution * approach, 0.0)
 
 
 def _add_penetrating(contacts: cm.ContactState, x, x_n, v_n, old_faces, new_faces, dt,
@@ -267,23 +343,10 @@ def _add_penetrating(contacts: cm.ContactState, x, x_n, v_n, old_faces, new_face
     mu_s = np.array([f.static_friction for f in new_faces])
     contacts.mode[nodes] = np.where(mu_s[index] > 0, cm.STICK, cm.SLIP)
     contacts.normal_force[nodes] = 0.0
-    v_min = max(5.0 * settings.gravity * dt, 1e-3)
     for face_index in np.unique(index):
-        face, old = new_faces[face_index], old_faces[face_index]
-        if face.restitution <= 0:
-            continue
         sel = nodes[index == face_index]
-        gap_start = old.gap(x_n[sel])
-        gap_end = face.gap(x[sel])
-        with np.errstate(divide='ignore', invalid='ignore'):
-            tau = np.where(gap_start > 0, np.clip(gap_start / (gap_start - gap_end), 0, 1),
-                           0.0)
-        v_start = (v_n[sel] - face.velocity) @ face.normal
-        v_end = ((x[sel] - x_n[sel]) / dt - face.velocity) @ face.normal
-        approach = -(v_start + tau * (v_end - v_start))
-        bouncing = approach > v_min
-        b = sel[bouncing]
-        contacts.mode[b] = cm.IMPACT
-        contacts.bounce_speed[b] = face.restitution * approach[bouncing]
-        contacts.impact_gap[b] = contacts.bounce_speed[b] * (1.0 - tau[bouncing]) * dt
+        speed = _rebound_speeds(new_faces[face_index], old_faces[face_index], x_n[sel],
+                                v_n[sel], x[sel], dt, settings)
+        contacts.mode[sel[speed > 0]] = cm.IMPACT
+        contacts.bounce_speed[sel] = speed
     return True

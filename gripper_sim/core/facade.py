@@ -31,10 +31,12 @@ import numpy as np
 
 from gripper_sim.configuration import validate
 from gripper_sim.core import contact as cm
+from gripper_sim.core.barrier import BarrierContact, barrier_step
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.results import Energies, JawWrench, StepResult
+from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
 
@@ -66,6 +68,10 @@ def finite(name: str, value: Any) -> float:
 class SimulationFacade:
     """Base of the simulation facades (see the module docstring)."""
 
+    #: the barrier contact model (``contact.model: ipc``, ``core.barrier``), or None for
+    #: the modified mass method's contact passes
+    _barrier: BarrierContact | None = None
+
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
         """``initial_positions`` (n, d) m (the fruit on the table, or at its configured
@@ -91,7 +97,8 @@ class SimulationFacade:
         c = self.config
         return PatternCachingSolver(
             self.fruit.masses, list(self.fruit.energies) + [self.gravity]
-            + ([self._pad] if self._pad is not None else []),
+            + ([self._pad] if self._pad is not None else [])
+            + ([self._barrier] if self._barrier is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
             dim=self.dimension, lu_options=SYMMETRIC_LU_OPTIONS, fast=fast)
@@ -448,11 +455,12 @@ class SimulationFacade:
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
         masses = fruit.masses
         centroid = masses @ x / masses.sum()
-        centroid_velocity = masses @ v / masses.sum()
         touching = bool(np.any(sides[LEFT]) or np.any(sides[RIGHT]))
         both = bool(np.any(sides[LEFT]) and np.any(sides[RIGHT]))
         slip = self._slip_distance(float(centroid[-1] - grip.lift), both, touching)
-        slipping = touching and abs(centroid_velocity[-1] - grip.lift_rate) > 1e-3
+        slipping = jaw_contacts_sliding(
+            v, obstacle, side_of_face[:-1], normals,
+            np.array([face.velocity for face in self._faces(grip)]))
         energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
                             elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
                             gravitational=float(self.gravity.value(x.ravel())))
@@ -504,9 +512,14 @@ class SimulationFacade:
         """One step with the hard contacts (the pads, if any, set up by the caller)."""
         grip_new = self._advance_gripper(dt)
         new_faces = self._faces(grip_new)
-        outcome = contact_step(self.solver, self.fruit.surface, self.contacts, self.q, self.v,
-                               self._faces(self._grip), new_faces, dt,
-                               ContactSettings.from_config(self.config, self.deepest_first))
+        if self._barrier is not None:
+            outcome = barrier_step(self.solver, self._barrier, self.q, self.v,
+                                   self._faces(self._grip), new_faces, dt)
+        else:
+            outcome = contact_step(self.solver, self.fruit.surface, self.contacts, self.q,
+                                   self.v, self._faces(self._grip), new_faces, dt,
+                                   ContactSettings.from_config(self.config,
+                                                               self.deepest_first))
         self.q, self.v, self.contacts = outcome.x, outcome.v, outcome.contacts
         self.contact_forces = outcome.forces
         self._grip = grip_new
@@ -521,13 +534,25 @@ class SimulationFacade:
             return self._drive_jaws(dt), 1
         except NewtonFailure as failure:
             if depth >= self.config['sim.max_halvings']:
-                msg = (f'the solver did not converge at t = {self._time:.6g} s even with the '
-                       f'step halved {depth} times ({failure}); try a smaller sim.dt or '
-                       f'slower jaws')
+                msg = (f'the solver did not converge at t = {self._time:.6g} s even in '
+                       f'sub-steps of {dt:.3g} s (the step halved {depth} times: '
+                       f'{failure}); {self._convergence_advice(failure)}')
                 raise ConvergenceError(msg, failure.history, self._time) from failure
         it1, s1 = self._advance(0.5 * dt, depth + 1)
         it2, s2 = self._advance(0.5 * dt, depth + 1)
         return it1 + it2, s1 + s2
+
+    def _convergence_advice(self, failure: NewtonFailure) -> str:
+        """What may help a step that failed in its smallest sub-steps (a smaller sim.dt
+        would only repeat them)."""
+        c = self.config
+        if 'infeasible' in str(failure):  # an element inverted: the fruit is crushed
+            return ('an element of the fruit inverted (it is crushed): a smaller grip force, '
+                    'gap command or closing speed helps; a smaller sim.dt would only repeat '
+                    'these sub-steps')
+        return (f"raise sim.max_newton_iterations (now {c['sim.max_newton_iterations']}) "
+                f"or sim.max_halvings (now {c['sim.max_halvings']}); a smaller sim.dt would "
+                f'only repeat these sub-steps')
 
 
 def _secant_stiffness(tried: list, stiffness: float) -> float:

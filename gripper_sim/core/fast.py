@@ -31,6 +31,7 @@ from gripper_sim.core import contact as cm
 from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
 from gripper_sim.core.energies import EnclosedAreaPressure, RingBending, Stretching
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
+from gripper_sim.core.slip import SLIDING_SPEED
 from gripper_sim.core.stepper import NewtonFailure
 
 try:  # numba is optional: without it every model takes the generic path
@@ -263,8 +264,8 @@ class FastPath:
         self.ipar[1] = config['sim.max_contact_passes']
         c = sim.contacts
         obstacle, mode, secondary = c.obstacle.copy(), c.mode.copy(), c.secondary.copy()
-        normal_force, bounce, impact = (c.normal_force.copy(), c.bounce_speed.copy(),
-                                        c.impact_gap.copy())
+        normal_force, bounce, secondary_bounce = (c.normal_force.copy(), c.bounce_speed.copy(),
+                                                  c.secondary_bounce.copy())
         n = self.n
         x, v, forces = np.empty((n, 2)), np.empty((n, 2)), np.empty((n, 2))
         normal, pressure = np.empty(n), np.empty(len(self.surface))
@@ -276,9 +277,10 @@ class FastPath:
         if timing:
             t1 = time.perf_counter()
         status = kernels.substep(
-            x_n, v_n, obstacle, mode, normal_force, bounce, impact, secondary, face_par,
-            face_dyn, (grip.gap, grip.lift, grip.x, grip_new.gap, grip_new.lift, grip_new.x,
-                       grip_new.gap_rate, grip_new.lift_rate, grip_new.x_rate),
+            x_n, v_n, obstacle, mode, normal_force, bounce, secondary, secondary_bounce,
+            face_par, face_dyn, (grip.gap, grip.lift, grip.x, grip_new.gap, grip_new.lift,
+                                 grip_new.x, grip_new.gap_rate, grip_new.lift_rate,
+                                 grip_new.x_rate),
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
             model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
@@ -297,7 +299,7 @@ class FastPath:
         sim.q, sim.v, sim.contact_forces = x, v, forces
         sim.contacts = _build(cm.ContactState, dict(
             obstacle=obstacle, mode=mode, normal_force=normal_force, bounce_speed=bounce,
-            impact_gap=impact, secondary=secondary))
+            secondary=secondary, secondary_bounce=secondary_bounce))
         sim._grip = grip_new
         sim._time += dt
         sim._jaw_force = (float(out[2]), float(out[3]))
@@ -325,12 +327,12 @@ class FastPath:
             _, normal, pressure, values, damage_of_x = measured
         else:
             values, normal, pressure = self._measure_kernel()
-        (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, cvz, any_left, any_right,
+        (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, _cvz, any_left, any_right,
          kinetic, elastic, gravitational, width, max_strain, contact_length,
          peak) = values
         both = any_left > 0 and any_right > 0
         slip = sim._slip_distance(cz - grip.lift, both, any_left > 0 or any_right > 0)
-        slipping = bool((any_left > 0 or any_right > 0) and abs(cvz - grip.lift_rate) > 1e-3)
+        slipping = (any_left > 0 or any_right > 0) and self._sliding(v, contacts.obstacle)
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
@@ -360,6 +362,17 @@ class FastPath:
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
+
+    def _sliding(self, v: np.ndarray, obstacle: np.ndarray) -> bool:
+        """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) on the kernels' faces:
+        0 and 1 the jaws, moving with the gripper."""
+        grip = self.sim._grip
+        face_par, _ = self._face_arrays()
+        half = 0.5 * grip.gap_rate
+        jaw_velocities = np.array([[grip.x_rate - half, grip.lift_rate],
+                                   [grip.x_rate + half, grip.lift_rate]])
+        return bool(kernels.jaw_sliding(v, obstacle, face_par, jaw_velocities,
+                                        SLIDING_SPEED))
 
     def _names(self) -> tuple:
         """``Simulation.obstacle_names``, kept per face set."""

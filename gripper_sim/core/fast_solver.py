@@ -522,7 +522,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 return self._evaluate_fast(x, q_n, v_n, dt, con, False)[:2]
 
             q, phi, grad, step = line_search(evaluate, q, dq, phi, slope,
-                                             float(np.max(np.abs(g_f))), filtered, history)
+                                             float(np.max(np.abs(g_f))), filtered, history,
+                                             first_step=self.max_step(q, dq))
             norm = float(np.max(np.abs(step * dq))) / dt
             history.append(norm)
             if norm < self.tolerance:

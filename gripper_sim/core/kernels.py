@@ -10,7 +10,7 @@ reference elsewhere in the core, in the same order of operations where it matter
 - ``contact_constraints``, ``update_contacts``, ``substep``: ``Simulation._constraints``,
   ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
 - ``step_measures``: the numbers ``Simulation._measure`` and ``measures.deformation``
-  report;
+  report; ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
 - ``damage_update``: the per-step part of ``damage.DamageTracker.update``.
 
 Layout. Positions are flat, q = [x0, z0, x1, z1, ...] (m). Hessians are kept as a
@@ -48,6 +48,10 @@ UNSUPPORTED = 5  # a non-symmetric contact filter (oblique faces): use the refer
 
 #: regularisation speed (m/s) of the kinetic friction law, as stepper.FRICTION_SMOOTHING
 FRICTION_SMOOTHING = 1e-4
+
+#: relative rise of the potential the line search's gradient test lets pass, as
+#: stepper.PHI_ROUNDOFF
+PHI_ROUNDOFF = 1e-9
 
 #: shifts of the inertia-like diagonal tried when the Newton matrix gives no descent
 SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
@@ -750,7 +754,8 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
                 tmp, cdq, values)
             if small or math.isfinite(phi_trial) and (
                     phi_trial <= phi + 1e-4 * step * slope
-                    or _filtered_max(filters, grad_t) < 0.5 * residual):
+                    or (phi_trial <= phi + PHI_ROUNDOFF * abs(phi)
+                        and _filtered_max(filters, grad_t) < 0.5 * residual)):
                 accepted = True
                 break
             step *= 0.5
@@ -785,13 +790,13 @@ def _covers(face_par, origin_x, origin_z, f, px, pz):
 
 
 @njit(cache=True, error_model='numpy')
-def contact_constraints(obstacle, mode, normal_force, impact_gap, secondary, x_n, x_pred,
-                        face_par, face_dyn, dt, v_corr, start, filters, fr_nodes, fr_t,
-                        fr_bound, fr_speed):
-    """Start positions and step filters, as ``Simulation._constraints``.
+def contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred, face_par,
+                        face_dyn, dt, v_corr, start, filters, fr_nodes, fr_t, fr_bound,
+                        fr_speed):
+    """Start positions and step filters, as ``contact_passes._constraints``.
 
     Args:
-        obstacle, mode, normal_force, impact_gap, secondary: (n,) the contact state.
+        obstacle, mode, normal_force, secondary: (n,) the contact state.
         x_n, x_pred: (n, 2) m, positions at the start of the step and predicted.
         Outputs: start (n, 2), filters (n, 2, 2), fr_nodes (n,), fr_t (n, 2),
         fr_bound (n,), fr_speed (n,).
@@ -819,8 +824,6 @@ def contact_constraints(obstacle, mode, normal_force, impact_gap, secondary, x_n
             penetration = max(0.0, -_gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f,
                                          x_n[i, 0], x_n[i, 1]))
             target = -max(0.0, penetration - v_corr * dt)
-            if md == IMPACT:
-                target = impact_gap[i]
             corr = target - _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, start[i, 0],
                                  start[i, 1])
             start[i, 0] += corr * nx
@@ -865,20 +868,59 @@ def contact_constraints(obstacle, mode, normal_force, impact_gap, secondary, x_n
 
 
 @njit(cache=True, error_model='numpy')
-def _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, i):
+def _release(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce, i):
     obstacle[i] = -1
     mode[i] = FREE
     normal_force[i] = 0.0
     bounce_speed[i] = 0.0
-    impact_gap[i] = 0.0
     secondary[i] = -1
+    secondary_bounce[i] = 0.0
 
 
 @njit(cache=True, error_model='numpy')
-def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, x,
-                    x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
+def _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i, dt, v_min):
+    """Outgoing normal speed (m/s) of node i found inside face f, as
+    ``contact_passes._rebound_speeds`` (0: no rebound)."""
+    e = face_par[f, 6]
+    if e <= 0:
+        return 0.0
+    nx, nz = face_par[f, 0], face_par[f, 1]
+    vx, vz = face_dyn[f, 4], face_dyn[f, 5]
+    gap_start = _gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f, x_n[i, 0], x_n[i, 1])
+    gap_end = _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, x[i, 0], x[i, 1])
+    tau = min(max(gap_start / (gap_start - gap_end), 0.0), 1.0) if gap_start > 0 else 0.0
+    v_start = (v_n[i, 0] - vx) * nx + (v_n[i, 1] - vz) * nz
+    v_end = (((x[i, 0] - x_n[i, 0]) / dt - vx) * nx
+             + ((x[i, 1] - x_n[i, 1]) / dt - vz) * nz)
+    approach = -(v_start + tau * (v_end - v_start))
+    return e * approach if approach > v_min else 0.0
+
+
+@njit(cache=True, error_model='numpy')
+def _capped_rebound(v, rebound, v_start, dx, reaction, mass, dt):
+    """The scale s in [0, 1] of one node's rebound (2,) m/s, as
+    ``contact_passes.capped_rebound``; v (2,) its end velocity with the full rebound."""
+    work = 0.0
+    for c in range(2):
+        work += (mass * (dx[c] / dt - v_start[c]) / dt - reaction[c]) * dx[c]
+    budget = (v_start[0] * v_start[0] + v_start[1] * v_start[1]) + 2.0 * work / mass
+    b0, b1 = v[0] - rebound[0], v[1] - rebound[1]
+    bb = b0 * b0 + b1 * b1
+    br = b0 * rebound[0] + b1 * rebound[1]
+    rr = rebound[0] * rebound[0] + rebound[1] * rebound[1]
+    if rr == 0.0 or bb + 2.0 * br + rr <= budget:
+        return 1.0
+    discriminant = br * br - rr * (bb - budget)
+    if discriminant < 0.0:
+        return 0.0
+    return min(max((-br + math.sqrt(discriminant)) / rr, 0.0), 1.0)
+
+
+@njit(cache=True, error_model='numpy')
+def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
+                    x, x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
                     released, slipped):
-    """Correct the contact set after a solve, as ``Simulation._update_contacts``
+    """Correct the contact set after a solve, as ``contact_passes._update_contacts``
     (with ``_add_corners`` and ``_add_penetrating``). Returns True if it changed.
     """
     n = x.shape[0]
@@ -896,7 +938,8 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, seco
             r_t = reaction[i, 0] * tx + reaction[i, 1] * tz
             md = mode[i]
             if r_n < -threshold and md != IMPACT:
-                _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, i)
+                _release(obstacle, mode, normal_force, bounce_speed, secondary,
+                         secondary_bounce, i)
                 released[i] = True
                 changed = True
                 continue
@@ -917,7 +960,7 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, seco
             normal_force[i] = r_n
     for i in range(n):
         f = secondary[i]
-        if f < 0:
+        if f < 0 or secondary_bounce[i] > 0:
             continue
         if reaction[i, 0] * face_par[f, 0] + reaction[i, 1] * face_par[f, 1] < -threshold:
             secondary[i] = -1
@@ -934,6 +977,8 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, seco
             if _covers(face_par, ox, oz, f, x[i, 0], x[i, 1]) and _gap(
                     face_par, ox, oz, f, x[i, 0], x[i, 1]) < 0:
                 secondary[i] = f
+                secondary_bounce[i] = _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i,
+                                                     dt, v_min)
                 if mode[i] == STICK:
                     mode[i] = SLIP
                 held[i] = False
@@ -959,38 +1004,26 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap, seco
         obstacle[i] = f
         mode[i] = STICK if face_par[f, 4] > 0 else SLIP
         normal_force[i] = 0.0
-        e = face_par[f, 6]
-        if e > 0:
-            nx, nz = face_par[f, 0], face_par[f, 1]
-            vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-            gap_start = _gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f, x_n[i, 0], x_n[i, 1])
-            gap_end = _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, x[i, 0], x[i, 1])
-            tau = min(max(gap_start / (gap_start - gap_end), 0.0), 1.0) if gap_start > 0 \
-                else 0.0
-            v_start = (v_n[i, 0] - vx) * nx + (v_n[i, 1] - vz) * nz
-            v_end = (((x[i, 0] - x_n[i, 0]) / dt - vx) * nx
-                     + ((x[i, 1] - x_n[i, 1]) / dt - vz) * nz)
-            approach = -(v_start + tau * (v_end - v_start))
-            if approach > v_min:
-                bounce = e * approach
-                mode[i] = IMPACT
-                bounce_speed[i] = bounce
-                impact_gap[i] = bounce * (1.0 - tau) * dt
+        bounce_speed[i] = _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i, dt, v_min)
+        if bounce_speed[i] > 0:
+            mode[i] = IMPACT
     return changed or hit_any
 
 
 @njit(cache=True, error_model='numpy')
-def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, secondary,
+def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
             face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
-            nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out,
-            v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts,
-            d_face, d_rest, d_par, covered_in, covered_out, d_pressure, patches, d_out):
-    """One implicit Euler step with predictor-corrector contact, as ``Simulation._substep``,
-    and the measures of its end state, as ``Simulation._measure`` (``step_measures``).
+            nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out, v_out,
+            forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face, d_rest,
+            d_par, covered_in, covered_out, d_pressure, patches, d_out):
+    """One implicit Euler step with predictor-corrector contact, as
+    ``contact_passes.contact_step``, and the measures of its end state, as
+    ``Simulation._measure`` (``step_measures``).
 
     Args:
         x_n, v_n: (n, 2) state at the start of the step.
-        obstacle .. secondary: (n,) the contact state, updated in place (pass copies).
+        obstacle .. secondary_bounce: (n,) the contact state, updated in place (pass
+            copies).
         face_par, face_dyn: the faces (see the module doc); rows 0 and 1 of face_dyn
             (the jaws) are set here from ``grip``.
         grip: (gap, lift, x) at the start, (gap, lift, x, gap rate, lift rate, x rate)
@@ -1048,9 +1081,9 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
     iterations = 0
     n_hist = 0
     for _ in range(ipar[I_MAX_PASSES]):
-        n_fr = contact_constraints(obstacle, mode, normal_force, impact_gap, secondary, x_n,
-                                   x_pred, face_par, face_dyn, dt, fpar[F_VCORR], start,
-                                   filters, fr_nodes, fr_t, fr_bound, fr_speed)
+        n_fr = contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred,
+                                   face_par, face_dyn, dt, fpar[F_VCORR], start, filters,
+                                   fr_nodes, fr_t, fr_bound, fr_speed)
         status, its, n_hist = newton_solve(
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
@@ -1062,9 +1095,9 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
         iterations += its
         x = q.reshape((n, 2))
         r = reaction.reshape((n, 2))
-        if not update_contacts(obstacle, mode, normal_force, bounce_speed, impact_gap,
-                               secondary, x, x_n, v_n, r, face_par, face_dyn, surface, dt,
-                               fpar[F_RELEASE], v_min, released, slipped):
+        if not update_contacts(obstacle, mode, normal_force, bounce_speed, secondary,
+                               secondary_bounce, x, x_n, v_n, r, face_par, face_dyn, surface,
+                               dt, fpar[F_RELEASE], v_min, released, slipped):
             break
     x = q.reshape((n, 2))
     r = reaction.reshape((n, 2))
@@ -1090,18 +1123,36 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
             v_out[i, 1] = v_nn * nz + v_t * tz
             forces_out[i, 0] = r[i, 0]
             forces_out[i, 1] = r[i, 1]
+    rebound = np.zeros(2)
     for i in range(n):
         f = secondary[i]
         if f < 0:
             continue
         nx, nz = face_par[f, 0], face_par[f, 1]
         vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        dv = (vx * nx + vz * nz) - (v_out[i, 0] * nx + v_out[i, 1] * nz)
+        dv = (vx * nx + vz * nz) + secondary_bounce[i] - (v_out[i, 0] * nx + v_out[i, 1] * nz)
         v_out[i, 0] += dv * nx
         v_out[i, 1] += dv * nz
+    for i in range(n):  # restitution never adds energy (contact_passes.capped_rebound)
+        f = obstacle[i]
+        if f < 0 or (bounce_speed[i] == 0.0 and secondary_bounce[i] == 0.0):
+            continue
+        rebound[0] = bounce_speed[i] * face_par[f, 0]
+        rebound[1] = bounce_speed[i] * face_par[f, 1]
+        if secondary[i] >= 0:
+            rebound[0] += secondary_bounce[i] * face_par[secondary[i], 0]
+            rebound[1] += secondary_bounce[i] * face_par[secondary[i], 1]
+        scale = _capped_rebound(v_out[i], rebound, v_n[i], x[i] - x_n[i], r[i],
+                                masses[i], dt)
+        v_out[i, 0] -= (1.0 - scale) * rebound[0]
+        v_out[i, 1] -= (1.0 - scale) * rebound[1]
     for i in range(n):
         if mode[i] == IMPACT:
-            _release(obstacle, mode, normal_force, bounce_speed, impact_gap, secondary, i)
+            _release(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
+                     i)
+        elif secondary_bounce[i] > 0:
+            secondary[i] = -1
+            secondary_bounce[i] = 0.0
     for side in range(2):
         acc = 0.0
         nx, nz = face_par[side, 0], face_par[side, 1]
@@ -1144,6 +1195,33 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, impact_gap, se
 (M_LEFT_FX, M_LEFT_FZ, M_LEFT_TY, M_RIGHT_FX, M_RIGHT_FZ, M_RIGHT_TY, M_LEFT_N, M_RIGHT_N,
  M_CX, M_CZ, M_CVX, M_CVZ, M_ANY_LEFT, M_ANY_RIGHT, M_KINETIC, M_ELASTIC, M_GRAVITY,
  M_WIDTH, M_MAX_STRAIN, M_CONTACT_LENGTH, M_PEAK_PRESSURE, M_SIZE) = range(22)
+
+
+@njit(cache=True, error_model='numpy')
+def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
+    """Whether the fruit slides in the jaws, as ``slip.jaw_contacts_sliding`` with the
+    jaws being faces 0 and 1: on either, more than half of the nodes it holds move along it
+    faster than ``speed`` (m/s) relative to it.
+
+    Args:
+        v: (n, 2) m/s.  obstacle: (n,) holding face per node.  face_par: see the module
+        doc.  jaw_velocities: (2, 2) m/s, left and right jaw.
+    """
+    held = np.zeros(2, np.int64)
+    sliding = np.zeros(2, np.int64)
+    for i in range(v.shape[0]):
+        f = obstacle[i]
+        if f < 0 or f > 1:
+            continue
+        rx = v[i, 0] - jaw_velocities[f, 0]
+        rz = v[i, 1] - jaw_velocities[f, 1]
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        r_n = rx * nx + rz * nz
+        ax, az = rx - r_n * nx, rz - r_n * nz
+        held[f] += 1
+        if ax * ax + az * az > speed * speed:
+            sliding[f] += 1
+    return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
 
 
 @njit(cache=True, error_model='numpy')

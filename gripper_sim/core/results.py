@@ -89,7 +89,9 @@ class StepResult:
         grip_force: N, mean contact normal force of the two jaws.
         slip_distance: m, vertical motion of the fruit centroid relative to the jaws
             since both jaws first gripped it (0 before that).
-        slipping: fruit slides relative to the jaws in this step.
+        slipping: fruit slides in the jaws in this step: on a jaw, most of the contact
+            nodes move along the face relative to it (``slip.jaw_contacts_sliding``);
+            elastic deformation with the contacts stuck is not slipping.
         centroid: (2,) m, mass-weighted centroid of the fruit.
         energies: kinetic, elastic and gravitational energy.
         deformation: compression, strain and contact measures.

@@ -12,6 +12,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
+from gripper_sim.core import barrier
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast import FastPath
@@ -53,6 +54,14 @@ class Simulation(SimulationFacade):
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
+        barrier.check_supported(c, self.dimension, fast)
+        if c['contact.model'] == 'ipc':
+            self._barrier = barrier.BarrierContact(
+                self.fruit.n_nodes, self.fruit.surface, self.fruit.skin_edges,
+                barrier.BarrierSettings.from_config(c))
+            if c['fruit.initial_height'] is None and c['world.table']:
+                # a barrier needs a positive gap: the fruit starts just above the table
+                self.initial_positions[:, 1] += barrier.START_GAP_FRACTION * c['contact.ipc.dhat']
         self.solver = self._make_solver(fast=None if fast is not False else False)
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
@@ -61,7 +70,7 @@ class Simulation(SimulationFacade):
             max_speed=c['gripper.max_speed'])
         self._observers: list[Callable[[StepResult], None]] = []
         self._fast = (FastPath.create(self) if fast is not False and self._plain_jaws
-                      else None)
+                      and self._barrier is None else None)
         if fast and self._fast is None:
             raise ConfigError('the fast path needs numba, a shell or point fruit model and '
                               'a flat finger without a pad')
@@ -149,6 +158,8 @@ class Simulation(SimulationFacade):
         fields, normal, (on_left, on_right) = self._common_measures(
             x, self.v, forces, obstacle, iterations, substeps)
         fruit, faces = self.fruit, self._faces(self._grip)
+        if self._barrier is not None:  # the outline lies a barrier gap off the faces
+            faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
         length = sum(face_contact_length(fruit, x, faces[index], self.contacts.obstacle == index)
                      for index in range(len(self._face_side)))
         if self._pad is not None:

@@ -211,6 +211,11 @@ class ImplicitEulerSolver:
         blocks = (b / dt)[:, None, None] * np.einsum('kad,kab,kbe->kde', t, inner, t)
         return float(np.sum(b * dt * root)), blocks
 
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """The line search's first step: 1, or less where an energy bounds it (a contact
+        barrier: the continuous-collision step, ``Energy.max_step``)."""
+        return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
+
     def _filter_matrix(self, filters: np.ndarray) -> sp.csc_matrix:
         n_nodes = filters.shape[0]
         if self.dim != 2:
@@ -256,7 +261,8 @@ class ImplicitEulerSolver:
                 return StepSolution(q, grad - fric_grad, iteration, history)
             q, phi, grad, step = line_search(
                 lambda x: self._evaluate(x, q_n, v_n, dt, con, hessian=False)[:2],
-                q, dq, phi, slope, float(np.max(np.abs(g_f))), lambda g: s @ g, history)
+                q, dq, phi, slope, float(np.max(np.abs(g_f))), lambda g: s @ g, history,
+                first_step=self.max_step(q, dq))
             norm = float(np.max(np.abs(step * dq))) / dt
             history.append(norm)
             if norm < self.tolerance:
@@ -265,6 +271,12 @@ class ImplicitEulerSolver:
             phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=True)
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
 
+
+#: relative rise of the incremental potential that the line search's gradient test lets
+#: pass (above its rounding noise, ~1e-11 at the end of a step's Newton iterations): a
+#: step that lowers the projected gradient but raises the potential by more is no progress
+#: (a Newton step across the kink of the smoothed friction law, back and forth: 7e-8)
+PHI_ROUNDOFF = 1e-9
 
 #: multiples of the (filtered) inertia M / dt^2 added to an indefinite Newton matrix
 DESCENT_SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
@@ -299,10 +311,12 @@ def descent_direction(solve_shifted, gradient: np.ndarray, history: list[float])
 
 
 def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: float,
-                residual: float, project, history: list[float]):
-    """Backtracking from the full Newton step ``dq``: the first of the steps 1, 1/2,
-    1/4, ... (30 halvings) with sufficient decrease (Armijo, 1e-4 of ``slope``) or a
-    projected gradient below half of ``residual``.
+                residual: float, project, history: list[float], first_step: float = 1.0):
+    """Backtracking from the Newton step ``dq``: the first of the steps s, s/2, s/4, ...
+    (30 halvings; s = ``first_step``, 1 unless a barrier's collision-free bound is
+    smaller) with sufficient decrease (Armijo, 1e-4 of ``slope``) or, with the potential
+    risen by at most ``PHI_ROUNDOFF`` of itself, a projected gradient below half of
+    ``residual``.
 
     Args:
         evaluate: x -> (phi, gradient) of the incremental potential (inf if infeasible).
@@ -314,13 +328,14 @@ def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: floa
     Raises:
         NewtonFailure: no acceptable step.
     """
-    step = 1.0
+    step = first_step
     for _ in range(30):
         trial = q + step * dq
         phi_trial, grad_trial = evaluate(trial)
         if np.isfinite(phi_trial) and (
                 phi_trial <= phi + 1e-4 * step * slope
-                or float(np.max(np.abs(project(grad_trial)))) < 0.5 * residual):
+                or (phi_trial <= phi + PHI_ROUNDOFF * abs(phi)
+                    and float(np.max(np.abs(project(grad_trial)))) < 0.5 * residual)):
             return trial, phi_trial, grad_trial, step
         step *= 0.5
     raise NewtonFailure('line search failed', history)

@@ -28,6 +28,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from gripper_sim.core.barrier import check_supported
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
 from gripper_sim.core.gripper import GripperKinematics
@@ -103,6 +104,7 @@ class Simulation3D(SimulationFacade):
         self.config = dict(config)
         if int(self.config.get('dimension', 2)) != 3:
             raise ConfigError("config key 'dimension' must be 3 for the 3D simulation")
+        check_supported(self.config, 3, None)
         self.fruit: FruitModel3D = build_fruit3d(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config

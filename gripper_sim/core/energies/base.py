@@ -35,6 +35,11 @@ class Energy:
         empty = np.zeros(0, dtype=np.int64)
         return Evaluation(0.0, np.zeros_like(q), empty, empty, np.zeros(0))
 
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """The largest fraction of the step ``dq`` from ``q`` (both (n_dof,) m) this energy
+        allows (a contact barrier: no crossing along it); 1 = no bound."""
+        return 1.0
+
     def value(self, q: np.ndarray) -> float:
         """J, through the energy's compiled ``evaluate_into`` when it has one."""
         evaluate_into = getattr(self, 'evaluate_into', None)

@@ -1,0 +1,370 @@
+"""Barrier contact (Incremental Potential Contact) of the fruit outline with rigid faces, 2D.
+
+The alternative to the modified mass method (``core.contact_passes``), selected by
+``contact.model: ipc``. Following Li et al. 2020 ("Incremental Potential Contact",
+ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
+- every pair of a vertex and an edge of different bodies closer than ``dhat`` adds the
+  barrier kappa b(d), b(d) = -(d - dhat)^2 ln(d / dhat) for 0 < d < dhat, 0 beyond;
+  ipctk evaluates it on squared distances, b(d^2, dhat^2), and as its "physical"
+  barrier divides it by dhat^3, so that kappa is a force (N): a vertex pressed with a
+  force F settles at d ~ 2 kappa dhat / F, never at or below 0;
+- friction is the lagged dissipative potential (their section 5): the normal forces and
+  tangents of the start of the step, mu lambda f0(|v_t|) with f0 smoothed below the
+  slip speed eps_v, added to the step as dt D(v) with v = (x - x_n) / dt;
+- every Newton line search starts from the continuous-collision bound: the largest
+  fraction of the step along which no vertex crosses an edge (their section 4).
+The candidates, barrier, friction potential and CCD are the IPC Toolkit's (``ipctk``,
+MIT). Its collision mesh holds the fruit's outline (the surface nodes and skin edges)
+and one segment per rigid face (``FlatFace``: jaw faces, table, walls), which moves
+with its face; infinite faces (table, walls) become segments ``INFINITE_FACE_LENGTH``
+long. Only pairs of the fruit and an obstacle collide (no self-contact of the outline
+yet), so the barrier's Hessian stays on a fixed pattern: the surface nodes' 2 x 2
+blocks and the skin edges' pairs.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import ipctk
+import numpy as np
+
+from gripper_sim.core import contact as cm
+from gripper_sim.core.contact_passes import StepOutcome
+from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
+from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
+from gripper_sim.errors import ConfigError
+
+#: m, length of the segment standing for an infinite face (table, walls), centred on
+#: the face's origin
+INFINITE_FACE_LENGTH = 4.0
+#: a start of step whose pushed nodes would stop this fraction of dhat from a face
+START_GAP_FRACTION = 0.5
+#: the start's check: whether the straight paths cross at all (no conservative rescaling;
+#: the line search's CCD keeps ipctk's default, which stops short of 0.8 of the time of
+#: impact so that a Newton step never lands on a face)
+EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
+
+
+@dataclass(frozen=True)
+class BarrierSettings:
+    """Attributes:
+        dhat: m, the barrier's activation distance (the largest gap still in contact).
+        stiffness: N, the barrier stiffness kappa (a vertex pressed with F stays about
+            2 kappa dhat / F from the face).
+        friction_smoothing: m/s, eps_v, the slip speed below which friction is
+            smoothed (static friction is approximated by slow creep).
+    """
+
+    dhat: float
+    stiffness: float
+    friction_smoothing: float = FRICTION_SMOOTHING
+
+    @classmethod
+    def from_config(cls, config) -> 'BarrierSettings':
+        return cls(float(config['contact.ipc.dhat']), float(config['contact.ipc.stiffness']))
+
+
+def check_supported(config, dimension: int, fast: bool | None) -> None:
+    """ConfigError if ``contact.model: ipc`` is asked where it is not built yet."""
+    if config['contact.model'] != 'ipc':
+        return
+    if dimension != 2:
+        raise ConfigError("config key 'contact.model': ipc is 2D only so far (dimension 3 "
+                          'uses mmm)')
+    if config['gripper.finger.pad.enabled']:
+        raise ConfigError("config key 'contact.model': ipc does not support soft pads yet "
+                          '(gripper.finger.pad.enabled: false, or contact.model: mmm)')
+    if config['contact.restitution'] > 0:
+        raise ConfigError("config key 'contact.model': ipc has no restitution "
+                          '(contact.restitution must be 0, or contact.model: mmm)')
+    if fast:
+        raise ConfigError("config key 'contact.model': ipc runs on the generic solver, not "
+                          'the numba fast path (fast=True needs contact.model: mmm)')
+
+
+def face_segments(faces) -> np.ndarray:
+    """(2 k, 2) m, the end points of the k faces (``FlatFace``), two rows per face."""
+    points = np.empty((2 * len(faces), 2))
+    for k, face in enumerate(faces):
+        half = min(face.half_length, 0.5 * INFINITE_FACE_LENGTH)
+        points[2 * k] = face.origin - half * face.tangent
+        points[2 * k + 1] = face.origin + half * face.tangent
+    return points
+
+
+class BarrierContact(Energy):
+    """The barrier and friction potentials of one step (``begin_step`` sets it up).
+
+    Args:
+        n_nodes: nodes of the fruit.  surface: (n_s,) its outline's nodes.
+        skin_edges: (n_e, 2) the outline's edges (node indices), may be empty.
+        settings: dhat, kappa, eps_v.
+    """
+
+    elastic = False
+
+    def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
+                 settings: BarrierSettings):
+        self.n_dof = 2 * n_nodes
+        self.surface = np.asarray(surface, dtype=np.int64)
+        local = -np.ones(n_nodes, np.int64)
+        local[self.surface] = np.arange(self.surface.size)
+        self.fruit_edges = local[np.asarray(skin_edges, dtype=np.int64).reshape(-1, 2)]
+        self.settings = settings
+        self.potential = ipctk.BarrierPotential(settings.dhat, settings.stiffness, True)
+        self.friction = ipctk.FrictionPotential(settings.friction_smoothing)
+        n_s = self.surface.size
+        self.fruit_dofs = (2 * self.surface[:, None] + np.arange(2)[None, :]).ravel()
+        #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
+        #: (solvers that keep one sparsity pattern read it)
+        self.dofs = element_dofs(self.surface[self.fruit_edges] if self.fruit_edges.size
+                                 else self.surface[:, None])
+        self._pattern_keys = self._hessian_pattern()
+        self._mesh = None
+        self._n_faces = -1
+        self._dt = 1.0
+        self._obstacles_end = np.zeros((0, 2))
+        self._start = np.zeros((n_s, 2))
+        self._tangential = ipctk.TangentialCollisions()
+        self._positions = None  # (scatter, CSC position of each pattern key)
+
+    # ------------------------------------------------------------------ set-up
+    def _hessian_pattern(self) -> np.ndarray:
+        """Sorted keys col * n_dof + row of the fixed Hessian pattern: the entries of the
+        elements ``dofs`` (the skin edges, or the lone surface nodes of a point fruit)."""
+        m = self.dofs.shape[1]
+        keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
+        return np.unique(keys)
+
+    def _build_mesh(self, obstacles: np.ndarray) -> None:
+        n_s = self.surface.size
+        k = obstacles.shape[0] // 2
+        face_edges = n_s + np.arange(2 * k).reshape(k, 2)
+        edges = np.vstack([self.fruit_edges, face_edges]).astype(np.int32)
+        rest = np.vstack([np.zeros((n_s, 2)), obstacles])
+        self._mesh = ipctk.CollisionMesh(np.asfortranarray(rest), np.asfortranarray(edges))
+        patches = np.concatenate([np.zeros(n_s, np.int32), np.ones(2 * k, np.int32)])
+        self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
+        self._n_faces = k
+
+    def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
+        """(n_s + 2 k, 2) m, the collision mesh's vertices: the outline of ``positions``
+        (n, 2) and the faces' end points (default: where they end this step)."""
+        ends = self._obstacles_end if obstacles is None else obstacles
+        return np.asfortranarray(np.vstack([positions[self.surface], ends]))
+
+    def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
+        """Set up a step of ``dt`` (s) from positions ``x_n`` (n, 2) m with the faces moving
+        from ``old_faces`` to ``new_faces``: the lagged friction of the start state."""
+        old, new = face_segments(old_faces), face_segments(new_faces)
+        if self._mesh is None or self._n_faces != len(new_faces):
+            self._build_mesh(new)
+        self._obstacles_start, self._obstacles_end = old, new
+        self._dt = dt
+        start = self.vertices(x_n, old)
+        self._start = start
+        collisions = ipctk.NormalCollisions()
+        collisions.build(self._mesh, start, self.settings.dhat)
+        n_s = self.surface.size
+        # per vertex; a pair takes the larger one: the face's, the outline's being 0
+        mu_s = np.concatenate([np.zeros(n_s),
+                               np.repeat([f.static_friction for f in new_faces], 2)])
+        mu_k = np.concatenate([np.zeros(n_s),
+                               np.repeat([f.kinetic_friction for f in new_faces], 2)])
+        self._tangential = ipctk.TangentialCollisions()
+        if len(collisions):
+            self._tangential.build(self._mesh, start, collisions, self.potential, mu_s, mu_k,
+                                   max)
+
+    # ------------------------------------------------------------------ the energy
+    def _fruit_part(self, vec: np.ndarray) -> np.ndarray:
+        out = np.zeros(self.n_dof)
+        out[self.fruit_dofs] = vec[:self.fruit_dofs.size]
+        return out
+
+    def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool):
+        """Barrier plus lagged friction at fruit positions ``q`` (2 n,) m: adds the
+        gradient (N) into ``gradient``; returns (value J, Hessian values N/m on the
+        pattern's sorted keys, or None)."""
+        mesh = self._mesh
+        v = self.vertices(q.reshape(-1, 2))
+        collisions = ipctk.NormalCollisions()
+        collisions.build(mesh, v, self.settings.dhat)
+        parts = []
+        value = 0.0
+        if len(collisions):
+            value = self.potential(collisions, mesh, v)
+            if not np.isfinite(value):
+                return np.inf, None
+            gradient[self.fruit_dofs] += self.potential.gradient(
+                collisions, mesh, v)[:self.fruit_dofs.size]
+            if hessian:
+                parts.append(self.potential.hessian(collisions, mesh, v,
+                                                    ipctk.PSDProjectionMethod.CLAMP))
+        if len(self._tangential):
+            velocity = np.asfortranarray((v - self._start) / self._dt)
+            value += self._dt * self.friction(self._tangential, mesh, velocity)
+            gradient[self.fruit_dofs] += self.friction.gradient(
+                self._tangential, mesh, velocity)[:self.fruit_dofs.size]
+            if hessian:
+                parts.append(self.friction.hessian(self._tangential, mesh, velocity,
+                                                   ipctk.PSDProjectionMethod.CLAMP) / self._dt)
+        if not hessian:
+            return float(value), None
+        vals = np.zeros(self._pattern_keys.size)
+        n_f = self.fruit_dofs.size
+        for matrix in parts:
+            block = matrix.tocsc()[:n_f, :n_f].tocoo()
+            keys = self.fruit_dofs[block.col] * self.n_dof + self.fruit_dofs[block.row]
+            where = np.minimum(np.searchsorted(self._pattern_keys, keys),
+                               self._pattern_keys.size - 1)
+            if not np.array_equal(self._pattern_keys[where], keys):
+                raise AssertionError('barrier Hessian entry outside its pattern')
+            np.add.at(vals, where, block.data)
+        return float(value), vals
+
+    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
+        """Barrier plus lagged friction at fruit positions ``q`` (2 n,) m."""
+        gradient = np.zeros(self.n_dof)
+        value, vals = self._terms(q, gradient, hessian)
+        if vals is None:
+            return Evaluation(value, gradient, *_no_triplets())
+        cols, rows = np.divmod(self._pattern_keys, self.n_dof)
+        return Evaluation(value, gradient, rows, cols, vals)
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
+        into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
+        positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
+        value, vals = self._terms(q, grad, hessian)
+        if vals is not None:
+            if self._positions is None or self._positions[0] is not scatter:
+                m = self.dofs.shape[1]
+                keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
+                first = np.unique(keys.ravel(), return_index=True)[1]
+                self._positions = (scatter, scatter.ravel()[first])
+            np.add.at(data, self._positions[1], vals)
+        return value, []
+
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """The largest fraction (0, 1] of the step ``dq`` (2 n,) m from ``q`` along which no
+        outline vertex crosses a face and no face end crosses the outline (CCD)."""
+        v0 = self.vertices(q.reshape(-1, 2))
+        v1 = self.vertices((q + dq).reshape(-1, 2))
+        return float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1))
+
+    # ------------------------------------------------------------------ the start
+    def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
+        """(n, 2) m, positions to start the step's Newton solve from: ``x_n``, with the
+        outline nodes that a moving face would come closer than dhat / 2 to moved ahead
+        of it (and along with it if they touch it). None if even that start is not
+        reached without a crossing (the caller halves the step)."""
+        start = x_n.copy()
+        dhat = self.settings.dhat
+        for old, new in zip(old_faces, new_faces):
+            shift = new.origin - old.origin
+            if not np.any(shift):
+                continue
+            nodes = self.surface[old.covers(x_n[self.surface])]
+            gap = old.gap(x_n[nodes])
+            advance = float(shift @ old.normal)
+            target = np.where(gap < dhat, gap, START_GAP_FRACTION * dhat)
+            push = np.maximum(advance - gap + target, 0.0)
+            front = gap >= 0
+            touching = front & (gap < dhat)
+            start[nodes[front]] += push[front, None] * old.normal
+            start[nodes[touching]] += float(shift @ old.tangent) * old.tangent
+        v0 = self.vertices(x_n, self._obstacles_start)
+        v1 = self.vertices(start)
+        exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
+                                                            narrow_phase_ccd=EXACT_CCD))
+        if exact < 1.0 or not self.min_distance(start) > 0.0:
+            return None
+        return start
+
+    # ------------------------------------------------------------------ outputs
+    def contact_forces(self, q: np.ndarray) -> np.ndarray:
+        """(n, 2) N, the faces' force on each node at ``q`` (2 n,) m: barrier + friction."""
+        gradient = np.zeros(self.n_dof)
+        self._terms(q, gradient, hessian=False)
+        return -gradient.reshape(-1, 2)
+
+    def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
+        """(n,) the face (index) each node with a contact force touches (its nearest face
+        within dhat), -1 for the others."""
+        holder = -np.ones(x.shape[0], np.int64)
+        best = np.full(x.shape[0], np.inf)
+        loaded = np.flatnonzero(np.any(forces != 0.0, axis=1))
+        ends = face_segments(faces)
+        for k in range(len(faces)):
+            a, b = ends[2 * k], ends[2 * k + 1]
+            dist = np.array([ipctk.point_edge_distance(x[i], a, b) for i in loaded])
+            if not dist.size:
+                continue
+            dist = np.sqrt(dist)
+            closer = (dist < self.settings.dhat) & (dist < best[loaded])
+            holder[loaded[closer]] = k
+            best[loaded[closer]] = dist[closer]
+        return holder
+
+    @staticmethod
+    def touching_faces(faces, x: np.ndarray, holder: np.ndarray) -> list:
+        """The faces moved out along their normals to the mean gap of the nodes they hold
+        (``holder`` (n,), positions ``x`` (n, 2) m): the surfaces the outline lies on, for
+        the measures that read gaps from a face (the contact length's edges)."""
+        moved = []
+        for k, face in enumerate(faces):
+            nodes = holder == k
+            if np.any(nodes):
+                face = copy.copy(face)
+                face.origin = face.origin + float(np.mean(face.gap(x[nodes]))) * face.normal
+            moved.append(face)
+        return moved
+
+    def min_distance(self, x: np.ndarray) -> float:
+        """m, the smallest distance between the outline and a face at positions (n, 2)
+        (inf when none is within dhat)."""
+        v = self.vertices(x)
+        collisions = ipctk.NormalCollisions()
+        collisions.build(self._mesh, v, self.settings.dhat)
+        if not len(collisions):
+            return np.inf
+        return float(np.sqrt(collisions.compute_minimum_distance(self._mesh, v)))
+
+
+def _no_triplets():
+    empty = np.zeros(0, dtype=np.int64)
+    return empty, empty, np.zeros(0)
+
+
+def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
+                 old_faces: list, new_faces: list, dt: float) -> StepOutcome:
+    """One implicit step of ``dt`` (s) from (x_n, v_n) (n, 2) with the barrier model: one
+    Newton solve of the incremental potential with the barrier among its energies (the
+    solver holds ``barrier``), no contact passes.
+
+    Raises:
+        NewtonFailure: no feasible start or no convergence (the caller halves the step).
+    """
+    n = x_n.shape[0]
+    barrier.begin_step(x_n, old_faces, new_faces, dt)
+    start = barrier.feasible_start(x_n, old_faces, new_faces)
+    if start is None:
+        raise NewtonFailure('no collision-free start for the barrier step', [])
+    solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(),
+                            StepConstraints.free(n, dim=2))
+    x = solution.q.reshape(-1, 2)
+    forces = barrier.contact_forces(solution.q)
+    contacts = cm.ContactState.empty(n)
+    contacts.obstacle = barrier.holders(x, new_faces, forces)
+    v = (x - x_n) / dt
+    for k in np.flatnonzero(np.bincount(contacts.obstacle + 1, minlength=len(new_faces) + 1)[1:]):
+        face = new_faces[k]
+        nodes = np.flatnonzero(contacts.obstacle == k)
+        contacts.normal_force[nodes] = forces[nodes] @ face.normal
+        slip = np.abs((v[nodes] - face.velocity) @ face.tangent)
+        contacts.mode[nodes] = np.where(slip < barrier.settings.friction_smoothing, cm.STICK,
+                                        cm.SLIP)
+    return StepOutcome(x, v, forces, contacts, solution.iterations)

@@ -1,0 +1,236 @@
+"""The barrier contact model (``contact.model: ipc``, ``core.barrier``).
+
+Its energy against finite differences and its collision-free step bound; then the
+cross-check with the modified mass method on the rigid-finger validation cases (ring
+squeeze, pressurised membrane, 2D Hertz, friction hold): force and contact length within
+5 % of each other, and no node inside a jaw at any step.
+"""
+import numpy as np
+import pytest
+
+from helpers import kernel_evaluation, pick, quasi_static_sim
+
+from gripper_sim.configuration import load_config
+from gripper_sim.core.barrier import BarrierContact, BarrierSettings
+from gripper_sim.core.obstacles import FlatFace
+from gripper_sim.core.simulation import Simulation
+from gripper_sim.core3d.simulation import Simulation3D
+from gripper_sim.errors import ConfigError
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+
+DHAT = 1e-4
+SETTINGS = BarrierSettings(dhat=DHAT, stiffness=0.5, friction_smoothing=1e-3)
+MODELS = ('mmm', 'ipc')
+
+
+def _table(height=0.0, velocity=(0.0, 0.0)):
+    return FlatFace('table', np.array([0.0, height]), np.array([0.0, 1.0]),
+                    velocity=np.array(velocity), static_friction=0.5, kinetic_friction=0.4)
+
+
+def _chain():
+    """A barrier over a four-node open chain hovering within dhat of a table, the table
+    sliding sideways (so the lagged friction acts too); (barrier, positions (4, 2))."""
+    x = np.array([[0.0, 0.3], [1.0, 0.5], [2.0, 0.2], [3.0, 0.7]]) * DHAT
+    barrier = BarrierContact(4, np.arange(4), np.array([[0, 1], [1, 2], [2, 3]]), SETTINGS)
+    old, new = _table(-0.1 * DHAT), _table(0.0, velocity=(0.05, 0.0))
+    new.origin = old.origin + np.array([0.05 * 1e-3, 0.1 * DHAT])
+    barrier.begin_step(x, [old], [new], 1e-3)
+    return barrier, x
+
+
+def test_barrier_gradient_and_hessian_match_finite_differences():
+    barrier, x = _chain()
+    q = x.ravel() + 0.05 * DHAT * np.sin(np.arange(8.0))
+    ev = barrier.evaluate(q)
+    dense = barrier.hessian(q)
+    assert np.max(np.abs(ev.gradient)) > 0 and np.max(np.abs(dense)) > 0
+    h = 1e-4 * DHAT
+    fd_grad = np.array([(barrier.value(q + h * e) - barrier.value(q - h * e)) / (2 * h)
+                        for e in np.eye(q.size)])
+    fd_hess = np.array([(barrier.gradient(q + h * e) - barrier.gradient(q - h * e)) / (2 * h)
+                        for e in np.eye(q.size)])
+    assert ev.gradient == pytest.approx(fd_grad, rel=1e-5, abs=1e-6 * np.max(np.abs(fd_grad)))
+    # the Hessian is the per-pair PSD projection of the exact one: equal where each pair
+    # is convex, which these gaps (all on the barrier's convex side) make it
+    assert dense == pytest.approx(fd_hess, rel=1e-4, abs=1e-5 * np.max(np.abs(fd_hess)))
+
+
+def test_barrier_kernel_adds_the_same_hessian_into_a_fixed_pattern():
+    barrier, x = _chain()
+    q = x.ravel()
+    value, gradient, dense = kernel_evaluation(barrier, q)
+    assert value == pytest.approx(barrier.value(q))
+    assert gradient == pytest.approx(barrier.gradient(q))
+    assert dense == pytest.approx(barrier.hessian(q))
+
+
+def test_collision_free_step_stops_before_the_face():
+    barrier, x = _chain()
+    q = x.ravel()
+    through = np.zeros_like(q)
+    through[1::2] = -10 * DHAT  # every node straight through the table
+    fraction = barrier.max_step(q, through)
+    assert 0 < fraction < 0.1
+    assert np.all((q + fraction * through)[1::2] > 0)
+    assert barrier.max_step(q, -through) == 1.0
+
+
+def _no_penetration(result, jaw_height):
+    """m, the smallest distance of a surface node in front of a jaw face from that face
+    (negative: inside the jaw)."""
+    x = result.positions[result.surface]
+    facing = np.abs(x[:, 1] - result.lift) <= 0.5 * jaw_height
+    gaps = np.concatenate([x[facing, 0] - result.left_jaw_x, result.right_jaw_x - x[facing, 0]])
+    return float(gaps.min())
+
+
+def _run_checked(sim, duration):
+    """Step for ``duration`` s; the smallest jaw gap over every step."""
+    smallest = np.inf
+    for _ in range(int(round(duration / sim.dt))):
+        result = sim.step()
+        smallest = min(smallest, _no_penetration(result, sim.config['gripper.jaw_height']))
+    return result, smallest
+
+
+def _squeezed_ring(model):
+    radius = 0.03
+    sim = quasi_static_sim(radius, 'fruit.skin.youngs_modulus=1e7', 'fruit.skin.thickness=1e-3',
+                           'fruit.nodes=64', 'fruit.pressure.turgor=0',
+                           'fruit.pressure.bulk_modulus=0', f'contact.model={model}')
+    dv = 0.005 * radius
+    sim.command_gap(2 * radius - dv, speed=dv / 0.5)
+    return _run_checked(sim, 1.5)
+
+
+def _membrane(model, approach_ratio):
+    radius = 0.03
+    sim = quasi_static_sim(radius, 'fruit.skin.youngs_modulus=1e9', 'fruit.skin.thickness=1e-5',
+                           'fruit.nodes=256', 'fruit.pressure.turgor=2e4',
+                           'fruit.pressure.bulk_modulus=0', f'contact.model={model}')
+    approach = approach_ratio * radius
+    sim.command_gap(2 * radius - 2 * approach, speed=2 * approach / 0.5)
+    return _run_checked(sim, 1.5)
+
+
+def _hertz_disk(model, force):
+    sim = quasi_static_sim(0.03, 'fruit.model=solid', 'fruit.skin.enabled=false',
+                           'fruit.nodes=256', 'fruit.flesh.youngs_modulus=1e6',
+                           'fruit.flesh.poisson_ratio=0.3', f'contact.model={model}')
+    sim.command_force(force, speed=0.004)
+    return _run_checked(sim, 1.5)
+
+
+def _assert_agree(results):
+    (mmm, mmm_gap), (ipc, ipc_gap) = results
+    assert mmm.grip_force > 0 and mmm.deformation.contact_length > 0
+    assert ipc.grip_force == pytest.approx(mmm.grip_force, rel=0.05)
+    assert ipc.deformation.contact_length == pytest.approx(mmm.deformation.contact_length,
+                                                           rel=0.05)
+    assert mmm_gap > -1e-9  # the modified mass method holds nodes on the face
+    assert ipc_gap > 0  # the barrier never lets one touch it
+
+
+def test_ring_squeeze_agrees_between_the_contact_models():
+    _assert_agree([_squeezed_ring(model) for model in MODELS])
+
+
+@pytest.mark.parametrize('approach_ratio', [0.05, 0.1])
+def test_membrane_agrees_between_the_contact_models(approach_ratio):
+    _assert_agree([_membrane(model, approach_ratio) for model in MODELS])
+
+
+def test_hertz_disk_agrees_between_the_contact_models():
+    _assert_agree([_hertz_disk(model, 1.5) for model in MODELS])
+
+
+def test_barrier_gap_stays_within_dhat():
+    result, smallest = _membrane('ipc', 0.05)
+    held = result.contact_obstacle >= 0
+    x = result.positions[held, 0]
+    gaps = np.minimum(x - result.left_jaw_x, result.right_jaw_x - x)
+    assert 0 < smallest and np.all(gaps < load_config()['contact.ipc.dhat'])
+
+
+def test_dropped_node_rests_on_the_table_with_its_weight_and_no_chatter():
+    """A point mass dropped 5 cm onto the table (dt = 1 ms, 3 s): at rest the barrier
+    carries exactly its weight, it never touches or passes the table, and it does not
+    bounce."""
+    sim = Simulation(load_config(overrides=['fruit.model=point', 'fruit.initial_height=0.05',
+                                            'gripper.initial_lift=5', 'contact.model=ipc']))
+    heights, reactions = [], []
+    for _ in range(3000):
+        result = sim.step()
+        heights.append(result.positions[0, 1])
+        reactions.append(result.contact_forces[0, 1])
+    weight = sim.fruit.total_mass * sim.config['world.gravity']
+    assert min(heights) > 0
+    assert np.ptp(heights[-500:]) < 1e-9
+    assert np.array(reactions[-500:]) / weight == pytest.approx(1.0, rel=1e-3)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('ratio,outcome', [(1.2, 'held'), (0.8, 'slipped')])
+def test_friction_hold_and_slip_agree_between_the_contact_models(ratio, outcome):
+    """Lift the default apple with 2 mu N = ratio m g: held (then it rises with the jaws)
+    or slipping (then it stays behind by the slip distance) with either model."""
+    runs = {model: pick(ratio, overrides=[f'contact.model={model}']) for model in MODELS}
+    for model, (sim, summary) in runs.items():
+        assert summary['outcome'] == outcome, model
+    (mmm, mmm_summary), (ipc, ipc_summary) = runs['mmm'], runs['ipc']
+    if outcome == 'held':
+        rise = [sim.last.centroid[1] - sim.initial_positions[:, 1].mean()
+                for sim in (mmm, ipc)]
+        assert rise[0] > 0.015 and rise[1] == pytest.approx(rise[0], rel=0.05)
+        assert ipc.last.grip_force == pytest.approx(mmm.last.grip_force, rel=0.05)
+    else:  # the force of a fruit sliding out of the jaws is not a steady figure
+        assert ipc_summary['slip_distance'] == pytest.approx(mmm_summary['slip_distance'],
+                                                             rel=0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('finger', ['arc', 'vgroove'])
+def test_shaped_fingers_agree_between_the_contact_models(finger):
+    """The default apple gripped at 3 N by arc or V-groove fingers (several facets per
+    jaw, the fruit on the table), lifted 2 cm: held either way, with the same force and
+    contact length."""
+    results = {}
+    for model in MODELS:
+        sim = Simulation(load_config(overrides=[f'gripper.finger.type={finger}',
+                                                f'contact.model={model}']))
+        summary = run_grasp(sim, GraspSequence(sim, 3.0, lift_height=0.02, hold_time=0.5))
+        assert summary['outcome'] == 'held', model
+        results[model] = sim.last
+    mmm, ipc = results['mmm'], results['ipc']
+    assert mmm.deformation.contact_length > 0
+    assert ipc.grip_force == pytest.approx(mmm.grip_force, rel=0.05)
+    assert ipc.deformation.contact_length == pytest.approx(mmm.deformation.contact_length,
+                                                           rel=0.05)
+
+
+# ---------------------------------------------------------------------- bad configurations
+def test_unknown_contact_model_is_refused():
+    with pytest.raises(ConfigError, match="contact.model.*mmm, ipc.*'foo'"):
+        load_config(overrides=['contact.model=foo'])
+
+
+@pytest.mark.parametrize('override,match', [
+    ('gripper.finger.pad.enabled=true', 'soft pads'),
+    ('contact.restitution=0.5', 'restitution')])
+def test_ipc_refuses_what_it_does_not_model(override, match):
+    with pytest.raises(ConfigError, match=match):
+        Simulation(load_config(overrides=['contact.model=ipc', override]))
+
+
+def test_ipc_refuses_the_fast_path_and_3d():
+    config = load_config(overrides=['contact.model=ipc'])
+    with pytest.raises(ConfigError, match='fast path'):
+        Simulation(config, fast=True)
+    with pytest.raises(ConfigError, match='2D only'):
+        Simulation3D(load_config(overrides=['dimension=3', 'contact.model=ipc']))
+
+
+def test_ipc_takes_the_generic_step():
+    sim = Simulation(load_config(overrides=['contact.model=ipc']))
+    assert sim._fast is None and sim._barrier in sim.solver.energies
