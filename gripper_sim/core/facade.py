@@ -301,6 +301,11 @@ class SimulationFacade:
         Raises:
             NewtonFailure: the first solve failed (the state is back at the step's start).
         """
+        if self._barrier is not None:
+            # the barrier's contact force is not monotone in the gap within a step (the
+            # solve starts from a feasible, pushed-ahead outline): the prediction only
+            self.gap_solves += 1
+            return self._substep(dt)
         saved = self._saved_state()
         goal, lo, hi = self._grip_force_goal(self._grip, dt)
         stiffness = self._grip.stiffness
@@ -324,16 +329,19 @@ class SimulationFacade:
                 miss = (0.5 * (left_n + right_n) if both else 0.0) - goal
                 tried.append((gap, miss, both))
                 stiffness = _secant_stiffness(tried, stiffness)
-                if (abs(miss) <= FORCE_TOLERANCE * goal or (miss < 0 and gap <= lo + 1e-12)
-                        or (miss > 0 and gap >= hi - 1e-12)):
+                if abs(miss) <= FORCE_TOLERANCE * goal:
                     return self._kept_stiffness(stiffness, iterations)
+                if (miss < 0 and gap <= lo + 1e-12) or (miss > 0 and gap >= hi - 1e-12):
+                    break   # the speed limit: no gap of this step does better
                 gap = _next_gap(tried, stiffness, lo, hi)
                 self._restore(saved)
                 if gap is None:
                     break
-            # no gap within the tolerance: the best one solved
-            self._restore(saved)
-            iterations += self._solve_at(min(tried, key=lambda t: abs(t[1]))[0], dt)
+            # no gap within the tolerance: the best one solved (the last, if it is)
+            best = min(tried, key=lambda t: abs(t[1]))
+            if best is not tried[-1] or gap != best[0]:
+                self._restore(saved)
+                iterations += self._solve_at(best[0], dt)
         finally:
             self._gap_override = None
         return self._kept_stiffness(stiffness, iterations)
