@@ -132,7 +132,8 @@ def test_no_node_stays_stuck_outside_the_cone_at_a_large_step():
                                            hold_time=0.3), on_step=check)
     assert max(excess) < 1e-6, f'a stuck node {max(excess):.3g} N outside the cone'
     assert summary['outcome'] in ('slipped', 'dropped')
-    assert summary['slip_distance'] > 0.015  # the fruit stays on the table: all the lift
+    # the fruit stays on the table until it is 10 mm behind the jaws: the run ends dropped
+    assert summary['outcome'] == 'dropped' and summary['slip_distance'] > 0.01
     assert sim.last.centroid[2] < sim.initial_positions[:, 2].mean() + 0.002
 
 
