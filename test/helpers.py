@@ -6,8 +6,9 @@ import numpy as np
 from gripper_sim.configuration import load_config
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.workflows.factory import make_simulation
-from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+from gripper_sim.workflows.grasp import GraspSequence, evaluate, run_grasp
 from gripper_sim.workflows.scenario import load_scenario, run_scenario, scenario_config
+from gripper_sim.workflows.window import bisection, run_search
 
 #: quasi-static settings: light fruit, mass damping, large step, no gravity, no table
 QUASI_STATIC = ['world.gravity=0', 'world.table=false', 'fruit.density=50',
@@ -99,6 +100,34 @@ def hold_minimum(config) -> float:
     sim = make_simulation(config)
     return (sim.fruit.total_mass * config['world.gravity']
             / (2 * config['contact.jaw.static_friction']))
+
+
+def lift_hold_minimum(config) -> float:
+    """N, m (g + a) / (2 mu_k), a = ``gripper.lift_acceleration``: the grip force at which
+    kinetic jaw friction carries the fruit through the lift's acceleration (README,
+    *Grasp window*)."""
+    sim = make_simulation(config)
+    return (sim.fruit.total_mass * (config['world.gravity'] + config['gripper.lift_acceleration'])
+            / (2 * config['contact.jaw.kinetic_friction']))
+
+
+def hold_threshold(config, low, high, lift=0.02, hold=0.2, tolerance=0.005):
+    """The smallest commanded grip force (N) at which a pick (close, lift ``lift`` m, hold
+    ``hold`` s) holds: carried to the end, not dropped, less than ``window.max_slip`` of
+    slip (``GraspEvaluation.held``). Found by the grasp window's bisection from the bracket
+    [low, high] N (widened as needed) to ``tolerance`` (relative). Returns (threshold N,
+    the largest force tried that did not hold N, the trials' ``GraspEvaluation`` list)."""
+    trials = []
+
+    def held(force):
+        sim = make_simulation(config)
+        sequence = GraspSequence(sim, force, lift_height=lift, hold_time=hold)
+        trials.append(evaluate(sim, sequence, force))
+        return trials[-1].held
+    threshold = run_search(bisection(low, high, config['gripper.max_force'], tolerance,
+                                     want_smallest=True), held)
+    below = max((t.force for t in trials if not t.held), default=0.0)
+    return threshold, below, trials
 
 
 def traced_pick(config, force, lift=0.05, hold=1.0):
