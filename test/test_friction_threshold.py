@@ -10,7 +10,7 @@ carried, a few millimetres down, so "carried" alone marks m g / (2 mu) (the slow
 ``test_jaw_drive.py``), not the lift's formula; the slip limit marks the formula (a rigid
 slider slides 1 mm at 0.986 of it).
 
-dt 2 ms: the thresholds at 2 ms and at 0.5 ms agree within 0.3 % (``bench/friction_threshold.py
+dt 2 ms: the thresholds at 2 ms and at 0.5 ms agree within 0.4 % (``bench/friction_threshold.py
 --dt 5e-4``). A 2 cm lift and a 0.2 s hold: near the threshold the fruit creeps about
 0.4 mm per second of hold, so a 1 s hold (lift 5 cm) raises the threshold by 1 to 3 %.
 """
