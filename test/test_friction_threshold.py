@@ -41,16 +41,17 @@ def threshold_within_5_percent(fruit, mu, lift, *overrides):
 @pytest.mark.parametrize('mu', [0.3, 0.8])
 @pytest.mark.parametrize('fruit', ['apple', 'plum'])
 def test_the_hold_threshold_at_the_default_lift_is_the_lift_formula(fruit, mu):
-    """Measured threshold / formula: apple 0.982 (mu 0.3), 0.984 (0.8); plum 0.982, 0.996."""
+    """Measured threshold / formula: apple 0.984 (mu 0.3), 0.988 (0.8); plum 0.959 at both."""
     assert load_config()['gripper.lift_acceleration'] == 0.5
     threshold_within_5_percent(fruit, mu, 0.02)
 
 
 @pytest.mark.parametrize('mu', [0.3, 0.8])
-def test_the_hold_threshold_follows_the_lift_acceleration(mu):
+@pytest.mark.parametrize('fruit', ['apple', 'plum'])
+def test_the_hold_threshold_follows_the_lift_acceleration(fruit, mu):
     """At 2 m/s^2 (0.2 m/s, the same 0.1 s of acceleration) m g / (2 mu) is 17 % below
-    the formula, so this tells the two apart (at the default lift a / g is 5 %). The apple
-    only: the soft plum's grip force dips to 0.73 of its command as the table lets go at
-    this acceleration (0.91 at the default lift) and it needs 1.3-1.6x the formula."""
-    threshold_within_5_percent('apple', mu, 0.04, 'gripper.lift_acceleration=2',
+    the formula, so this tells the two apart (at the default lift a / g is 5 %). Measured
+    threshold / formula: apple 0.99-1.00, plum 1.003 and 1.006 (the drive keeps 0.995 of
+    the command while the table lets go of the soft plum)."""
+    threshold_within_5_percent(fruit, mu, 0.04, 'gripper.lift_acceleration=2',
                                'gripper.lift_speed=0.2')
