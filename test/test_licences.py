@@ -5,7 +5,8 @@ The runtime dependency closure: the distributions that provide every third-party
 ``install_requires`` and the ROS wheels of the Makefile's ``ROS_PKGS``, then everything
 their ``Requires-Dist`` pull in (extras left out). Each distribution's licence is read
 from its installed metadata: ``License-Expression`` (SPDX) when it has one, else a short
-``License`` field, else its ``License ::`` classifiers (a long ``License`` field is the
+``License`` field, else its ``License ::`` classifiers, else the licence text it ships
+(``License-File``, recognised by its opening words; ipctk has only that) (a long ``License`` field is the
 full text of the package and the libraries it bundles, which mentions licences it does
 not use).
 
@@ -112,6 +113,38 @@ def licence_of(meta) -> tuple[str, bool] | None:
     return None
 
 
+#: the opening words of licence texts, for a distribution whose metadata names none but
+#: ships the text (``License-File``); copyleft first, so that a text quoting both counts
+LICENCE_TEXTS = (
+    ('GNU AFFERO GENERAL PUBLIC LICENSE', 'AGPL', True),
+    ('GNU LESSER GENERAL PUBLIC LICENSE', 'LGPL', True),
+    ('GNU GENERAL PUBLIC LICENSE', 'GPL', True),
+    ('Permission is hereby granted, free of charge', 'MIT', False),
+    ('Redistribution and use in source and binary forms', 'BSD', False),
+    ('Apache License', 'Apache', False),
+)
+
+
+def licence_of_text(text: str) -> tuple[str, bool] | None:
+    """(licence name, is it GPL-family) recognised from a licence file's text, or None."""
+    folded = ' '.join(text.split())
+    for words, name, copyleft in LICENCE_TEXTS:
+        if words.lower() in folded.lower():
+            return name, copyleft
+    return None
+
+
+def licence_of_files(dist) -> tuple[str, bool] | None:
+    """(where, is it GPL-family) from the licence files a distribution ships, or None."""
+    for name in dist.metadata.get_all('License-File') or []:
+        for candidate in (f'licenses/{name}', name):
+            text = dist.read_text(candidate)
+            if text:
+                found = licence_of_text(text)
+                if found:
+                    return f'License-File {name}: {found[0]} text', found[1]
+    return None
+
 def imported_modules() -> set[str]:
     """Top-level names of every absolute import in gripper_sim/ (standard library and
     the package itself left out)."""
@@ -205,6 +238,16 @@ def test_licence_is_read_from_the_right_field():
     assert licence_of(Meta({'License': long_text, 'Classifier': [mit]}))[1] is False
 
 
+@pytest.mark.parametrize('text, expected', [
+    ('MIT License\n\nPermission is hereby granted, free of charge, to any', ('MIT', False)),
+    ('GNU LESSER GENERAL PUBLIC LICENSE\n Version 2.1', ('LGPL', True)),
+    ('                    GNU GENERAL PUBLIC LICENSE\n Version 3', ('GPL', True)),
+    ('Redistribution and use in source and binary forms, with or without', ('BSD', False)),
+    ('All rights reserved.', None)])
+def test_licence_files_are_recognised_by_their_text(text, expected):
+    assert licence_of_text(text) == expected
+
+
 def test_runtime_closure_holds_what_the_package_imports():
     closure = runtime_closure()
     for name in ('numpy', 'scipy', 'numba', 'llvmlite', 'pyyaml', 'ros-rclpy'):
@@ -231,7 +274,7 @@ def test_no_gpl_family_licence_in_the_runtime_dependencies():
         if name in BUNDLED_COPYLEFT:
             findings.append(f'{name}: {BUNDLED_COPYLEFT[name]}')
             continue
-        licence = licence_of(dist.metadata)
+        licence = licence_of(dist.metadata) or licence_of_files(dist)
         if licence is None:
             unknown.append(f'{name} (no licence in its metadata)')
         elif licence[1]:
