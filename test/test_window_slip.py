@@ -12,7 +12,9 @@ import pytest
 
 from gripper_sim.cli.main import main
 
-LOW_FRICTION = ['--fruit', 'apple', '--finger', 'flat', '--tolerance', '0.1',
+#: a 2 % search: the jaw drive holds its force through the lift, so the forces that carry
+#: the fruit but let it slide more than 1 mm lie in a band about 3 % wide
+LOW_FRICTION = ['--fruit', 'apple', '--finger', 'flat', '--tolerance', '0.02',
                 '--set', 'contact.jaw.static_friction=0.3',
                 '--set', 'contact.jaw.kinetic_friction=0.3']
 
