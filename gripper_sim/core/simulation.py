@@ -11,7 +11,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
+from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core import barrier
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity

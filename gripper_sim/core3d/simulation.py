@@ -30,7 +30,7 @@ import numpy as np
 
 from gripper_sim.core.barrier import check_supported
 from gripper_sim.core.energies import Gravity
-from gripper_sim.core.facade import DYNAMIC_KEYS, SimulationFacade  # noqa: F401 (re-export)
+from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core.gripper import GripperKinematics
 from gripper_sim.core.results import Deformation, StepResult
 from gripper_sim.core3d import fingers3d, meshes

@@ -24,6 +24,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from gripper_sim import configuration
+from gripper_sim.core.facade import DYNAMIC_KEYS
 from gripper_sim.errors import ConfigError, ConfigWarning
 
 PHYSICS_PREFIX = 'physics.'
@@ -33,12 +34,7 @@ MIN_PUBLISH_RATE = 0.001   # Hz
 
 # Physics keys that may change while the node runs (the rest are read-only): the
 # ones the core can change between steps.
-try:
-    from gripper_sim.core.simulation import DYNAMIC_KEYS as DYNAMIC_PHYSICS_KEYS
-except ImportError:   # a core without run-time changes: friction is what users tune
-    DYNAMIC_PHYSICS_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction',
-                            'contact.table.static_friction',
-                            'contact.table.kinetic_friction')
+DYNAMIC_PHYSICS_KEYS = DYNAMIC_KEYS
 
 
 @dataclass(frozen=True)
