@@ -1,0 +1,57 @@
+"""A deformable finger body (2D): the geometry and material a soft finger is made of.
+
+Frame: the finger's own jaw frame. x (m) points from the jaw's rigid backing towards the
+fruit, the backing being the line x = 0; z (m) points up, z = 0 at the jaw's centre
+height. The left jaw carries the body as given, the right jaw its mirror image (x -> -x).
+
+A body is rods (elastic beams: stretching edges and bending triples, e.g. a Fin Ray
+finger's front and back beams and its ribs), triangles (plane-strain elastic solid, e.g.
+a thick pad), or both. Its ``base_nodes`` move with the jaw; the rest is free and touches
+the fruit through ``surface_edges``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def _ints(shape) -> np.ndarray:
+    return np.zeros(shape, np.int64)
+
+
+@dataclass(frozen=True)
+class FingerBody:
+    """Attributes:
+        name: the finger type (``gripper.finger.type``), e.g. 'fin_ray'.
+        rest_positions: (m, 2) m, in the finger frame (module docstring).
+        masses: (m,) kg, lumped.
+        base_nodes: (k,) nodes fixed to the jaw's backing.
+        surface_edges: (e, 2) the edges of the outline that may touch the fruit.
+        tip_node: the node whose displacement is the finger's tip displacement.
+        depth: m, out-of-plane depth (the finger's width along the jaw).
+        rod_edges: (r, 2) rod segments; rod_axial_stiffness: (r,) EA, N.
+        bend_triples: (t, 3) node triples (i, j, k) bent at j; bend_stiffness: (t,) EI,
+            N m^2 (rest angle: that of ``rest_positions``).
+        triangles: (n_tri, 3) counter-clockwise solid triangles; youngs_modulus: Pa;
+            poisson_ratio: -.
+    """
+
+    name: str
+    rest_positions: np.ndarray
+    masses: np.ndarray
+    base_nodes: np.ndarray
+    surface_edges: np.ndarray
+    tip_node: int
+    depth: float
+    rod_edges: np.ndarray = field(default_factory=lambda: _ints((0, 2)))
+    rod_axial_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    bend_triples: np.ndarray = field(default_factory=lambda: _ints((0, 3)))
+    bend_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    triangles: np.ndarray = field(default_factory=lambda: _ints((0, 3)))
+    youngs_modulus: float = 0.0
+    poisson_ratio: float = 0.0
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.masses)
