@@ -234,7 +234,7 @@ SCHEMA: dict[str, Key] = {
                                                   'linear triangles from locking)', low=0.0,
                                                   high=0.49),
     'gripper.finger.solid_pad.density': Key(1080.0, 'kg/m^3', 'solid_pad: density (Dragon '
-                                            'Skin 30: 1080)', low=100.0, high=5000.0),
+                                            'Skin 30: 1080)', low=10.0, high=5000.0),
     'gripper.finger.solid_pad.layers': Key(4, '-', 'solid_pad: mesh cells across the '
                                            'thickness (the cells are about square)', 'int',
                                            1, 32),

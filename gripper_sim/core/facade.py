@@ -405,7 +405,7 @@ class SimulationFacade:
         left_n, right_n = self._jaw_force
         if left_n > 0 and right_n > 0:
             return math.inf
-        if (self.config.get('gripper.finger.type', 'flat') != 'flat'
+        if (self.config.get('gripper.finger.type', 'flat') != 'flat' or self._soft is not None
                 or self.config.get('gripper.finger.pad.enabled', False)):
             return math.inf
         grip = self._grip

@@ -15,6 +15,7 @@ from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core import barrier
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
+from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.fast import FastPath
 from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics
@@ -37,6 +38,8 @@ class Simulation(SimulationFacade):
         fast: step with the numba kernels (``gripper_sim.core.fast``) when they cover the
             fruit model; None (default) = whenever numba is installed, False = always the
             generic numpy/scipy path (the reference), True = require the fast path.
+        finger: a deformable finger's body to put on the jaws instead of the configured
+            finger (a new geometry, a test body); None: ``gripper.finger.type``'s.
 
     Commands take effect on the next step. Invalid commands raise ``CommandError``
     and leave the simulation unchanged.
@@ -44,14 +47,17 @@ class Simulation(SimulationFacade):
 
     dimension = 2
 
-    def __init__(self, config: Mapping[str, Any], fast: bool | None = None):
+    def __init__(self, config: Mapping[str, Any], fast: bool | None = None,
+                 finger: FingerBody | None = None):
         self.config = dict(config)
         self.fruit: FruitModel = build_fruit(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config
-        if is_deformable(c):
+        if is_deformable(c) or finger is not None:
             check_soft_fingers(c, fast)
-            self._soft = SoftFingers(finger_body(c, self.fruit.depth), self.fruit.n_nodes,
+            if finger is None:
+                finger = finger_body(c, self.fruit.depth)
+            self._soft = SoftFingers(finger, self.fruit.n_nodes,
                                      c['contact.jaw.static_friction'],
                                      c['contact.jaw.kinetic_friction'])
         self._place_fruit()
@@ -59,7 +65,7 @@ class Simulation(SimulationFacade):
             self._soft.check_fit(c, self.initial_gap, self.fruit.rest_width)
         self.gravity = Gravity(self.fruit.masses, c['world.gravity'])
         self._facets = fingers.left_facets(c) if self._soft is None else []
-        self._plain_jaws = (c['gripper.finger.type'] == 'flat'
+        self._plain_jaws = (c['gripper.finger.type'] == 'flat' and self._soft is None
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
         barrier.check_supported(c, self.dimension, fast)
