@@ -432,6 +432,16 @@ def _no_triplets():
     return empty, empty, np.zeros(0)
 
 
+def _begin(barrier: BarrierContact, x_n: np.ndarray, old_faces: list, new_faces: list,
+           dt: float) -> np.ndarray:
+    """Set up the barrier's step; its feasible start (n, 2) m (NewtonFailure if none)."""
+    barrier.begin_step(x_n, old_faces, new_faces, dt)
+    start = barrier.feasible_start(x_n, old_faces, new_faces)
+    if start is None:
+        raise NewtonFailure('no collision-free start for the barrier step', [])
+    return start
+
+
 def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                  old_faces: list, new_faces: list, dt: float) -> StepOutcome:
     """One implicit step of ``dt`` (s) from (x_n, v_n) (n, 2) with the barrier model: one
@@ -442,10 +452,7 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
     n = x_n.shape[0]
-    barrier.begin_step(x_n, old_faces, new_faces, dt)
-    start = barrier.feasible_start(x_n, old_faces, new_faces)
-    if start is None:
-        raise NewtonFailure('no collision-free start for the barrier step', [])
+    start = _begin(barrier, x_n, old_faces, new_faces, dt)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(),
                             StepConstraints.free(n, dim=2))
     x = solution.q.reshape(-1, 2)
@@ -486,10 +493,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
     n = x_n.shape[0]
-    barrier.begin_step(x_n, old_faces, new_faces, dt)
-    pushed = barrier.feasible_start(x_n, old_faces, new_faces)
-    if pushed is None:
-        raise NewtonFailure('no collision-free start for the barrier step', [])
+    pushed = _begin(barrier, x_n, old_faces, new_faces, dt)
     start = None
     for candidate in (pushed + dt * v_n, pushed):
         candidate = candidate.copy()
