@@ -24,10 +24,10 @@ blocks and the skin edges' pairs.
 Deformable bodies (``SoftBody``: the soft fingers, ``core.soft_fingers``) join the
 collision mesh with their outlines, whose vertices are degrees of freedom too: the
 contact is two-way, both bodies' nodes feel the barrier and the friction (soft-on-soft
-contact). Their pairs with the fruit couple nodes of two bodies, so the Hessian's pattern
-grows with the pairs met so far (a solver that keeps one pattern must then take the
-triplets, ``evaluate``, not ``evaluate_into``). Still only pairs with the fruit collide:
-the fingers do not touch each other, the table or themselves.
+contact). A pair may couple any node of the fruit's outline with any of a soft body's,
+so the Hessian's fixed pattern holds every such pair of nodes (beside the outlines'
+edges); the solver's fast path keeps one pattern as for rigid faces. Still only pairs
+with the fruit collide: the fingers do not touch each other, the table or themselves.
 """
 from __future__ import annotations
 
@@ -154,15 +154,11 @@ class BarrierContact(Energy):
         n_v = self.vertex_nodes.size
         self.vertex_dofs = (2 * self.vertex_nodes[:, None] + np.arange(2)[None, :]).ravel()
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
-        #: (solvers that keep one sparsity pattern read it); with soft bodies the pattern
-        #: grows with the pairs that met (``_terms``)
-        self.dofs = element_dofs(self.surface[self.fruit_edges] if self.fruit_edges.size
-                                 else self.surface[:, None])
+        #: (solvers that keep one sparsity pattern read it): the fruit's skin edges (or
+        #: its lone surface nodes), and with soft bodies their outlines' edges and every
+        #: pair of a fruit outline node and a soft body's outline node
+        self.dofs = element_dofs(self._pattern_elements())
         self._pattern_keys = self._hessian_pattern()
-        for edges in self.body_edges:
-            if edges.size:
-                self._pattern_keys = np.union1d(self._pattern_keys,
-                                                self._element_keys(self.vertex_nodes[edges]))
         self._mesh = None
         self._n_faces = -1
         self._dt = 1.0
@@ -172,16 +168,19 @@ class BarrierContact(Energy):
         self._positions = None  # (scatter, CSC position of each pattern key)
 
     # ------------------------------------------------------------------ set-up
-    @property
-    def grows(self) -> bool:
-        """Whether the Hessian's pattern grows with the pairs met (soft bodies)."""
-        return bool(self.bodies)
-
-    def _element_keys(self, nodes: np.ndarray) -> np.ndarray:
-        """Sorted keys col * n_dof + row of the entries of elements of ``nodes`` (e, k)."""
-        dofs = element_dofs(nodes)
-        m = dofs.shape[1]
-        return np.unique(np.tile(dofs, (1, m)) * self.n_dof + np.repeat(dofs, m, axis=1))
+    def _pattern_elements(self) -> np.ndarray:
+        """(n_elem, k) node elements spanning the Hessian's pattern (see ``dofs``)."""
+        if not self.bodies:
+            return (self.surface[self.fruit_edges] if self.fruit_edges.size
+                    else self.surface[:, None])
+        fruit = (self.surface[self.fruit_edges] if self.fruit_edges.size
+                 else np.stack([self.surface, self.surface], axis=1))
+        nodes = [fruit] + [self.vertex_nodes[edges] for edges in self.body_edges]
+        for body in self.bodies:
+            outline = np.asarray(body.nodes, np.int64)
+            nodes.append(np.stack([np.repeat(self.surface, outline.size),
+                                   np.tile(outline, self.surface.size)], axis=1))
+        return np.vstack(nodes)
 
     def _hessian_pattern(self) -> np.ndarray:
         """Sorted keys col * n_dof + row of the fixed Hessian pattern: the entries of the
@@ -268,8 +267,6 @@ class BarrierContact(Energy):
             return float(value), None
         blocks = [matrix.tocsc()[:n_d, :n_d].tocoo() for matrix in parts]
         keys = [self.vertex_dofs[b.col] * self.n_dof + self.vertex_dofs[b.row] for b in blocks]
-        if self.grows and keys:
-            self._pattern_keys = np.union1d(self._pattern_keys, np.concatenate(keys))
         vals = np.zeros(self._pattern_keys.size)
         for block, key in zip(blocks, keys):
             where = np.minimum(np.searchsorted(self._pattern_keys, key),
@@ -293,9 +290,6 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
-        if self.grows:
-            raise AssertionError('a barrier with soft bodies has no fixed pattern: the '
-                                 'solver must take its triplets (evaluate)')
         value, vals = self._terms(q, grad, hessian)
         if vals is not None:
             if self._positions is None or self._positions[0] is not scatter:

@@ -37,7 +37,7 @@ from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.results import Energies, JawWrench, StepResult
-from gripper_sim.core.soft_fingers import SoftFingers
+from gripper_sim.core.soft_fingers import FingerState, SoftFingers
 from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
@@ -75,10 +75,8 @@ class SimulationFacade:
     _barrier: BarrierContact | None = None
     #: the deformable fingers (``core.soft_fingers``), None for rigid ones
     _soft: SoftFingers | None = None
-    #: the fingers' state (``_substep_soft``): positions (m, 2) m, velocities (m, 2) m/s,
-    #: the fruit's forces on them (m, 2) N, the base reactions (m, 2) N, and which nodes
-    #: touch the fruit (m,) bool; None for rigid fingers
-    _finger: tuple | None = None
+    #: the deformable fingers' state, None for rigid fingers
+    _finger: FingerState | None = None
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -105,15 +103,13 @@ class SimulationFacade:
 
     def _make_solver(self, fast: bool | None = None) -> PatternCachingSolver:
         """The Newton solver of the fruit's energies, gravity, the pads and the
-        deformable fingers (if any). A barrier with deformable fingers has no fixed
-        Hessian pattern: the solver takes its triplets (not the fast kernels)."""
+        deformable fingers (if any)."""
         c = self.config
         masses, gravity, fingers = self.fruit.masses, self.gravity, []
         if self._soft is not None:
             masses = np.concatenate([masses, self._soft.masses])
             gravity = Gravity(masses, c['world.gravity'], self.dimension)
             fingers = self._soft.energies
-            fast = False
         return PatternCachingSolver(
             masses, list(self.fruit.energies) + [gravity] + fingers
             + ([self._pad] if self._pad is not None else [])
@@ -145,14 +141,11 @@ class SimulationFacade:
             x_speed=self.config['gripper.transport_speed'],
             max_effort=self.config['gripper.max_force'])
         if self._soft is not None:
-            m = self._soft.n_nodes
-            self._finger = (self._soft.placed(self._jaw_origin(self._grip, LEFT),
-                                              self._jaw_origin(self._grip, RIGHT)),
-                            np.zeros((m, 2)), np.zeros((m, 2)), np.zeros((m, 2)),
-                            np.zeros(m, bool))
+            self._finger = self._soft.at_rest(self._jaw_origin(self._grip, LEFT),
+                                              self._jaw_origin(self._grip, RIGHT))
             faces = self._faces(self._grip)
-            self._barrier.begin_step(np.vstack([self.q, self._finger[0]]), faces, faces,
-                                     self.dt)
+            self._barrier.begin_step(np.vstack([self.q, self._finger.positions]), faces,
+                                     faces, self.dt)
         self._jaw_force = (0.0, 0.0)
         self._gap_override: float | None = None
         #: solves of the steps so far, gap corrections included (``_drive_jaws``)
@@ -495,7 +488,8 @@ class SimulationFacade:
         held = obstacle >= 0
         normal = np.zeros(len(obstacle))
         if self._soft is not None:  # the barrier's force is normal to the finger's outline
-            soft_normal = self._barrier.normal_forces(np.vstack([x, self._finger[0]]).ravel())
+            soft_normal = self._barrier.normal_forces(
+                np.vstack([x, self._finger.positions]).ravel())
             normal[held] = np.linalg.norm(soft_normal[:len(obstacle)][held], axis=1)
         else:
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
@@ -533,9 +527,7 @@ class SimulationFacade:
             newton_iterations=iterations, substeps=substeps, gripper_x=grip.x,
             gripper_x_velocity=grip.x_rate)
         if self._soft is not None:
-            finger_x, _, finger_forces, _, touching = self._finger
-            fields['fingers'] = self._soft.result(finger_x, finger_forces, touching,
-                                                  self._jaw_origin(grip, LEFT),
+            fields['fingers'] = self._soft.result(self._finger, self._jaw_origin(grip, LEFT),
                                                   self._jaw_origin(grip, RIGHT))
         return fields, normal, sides
 
@@ -594,12 +586,12 @@ class SimulationFacade:
     def _substep_soft(self, dt: float, grip_new: GripperState, new_faces: list) -> int:
         """One step of the fruit and the deformable fingers (``barrier.soft_body_step``),
         the fingers' bases on the jaws where ``grip_new`` puts them; Newton iterations."""
-        soft, n = self._soft, self.fruit.n_nodes
-        finger_x, finger_v = self._finger[:2]
+        soft, n, finger = self._soft, self.fruit.n_nodes, self._finger
         targets = soft.base_targets(self._jaw_origin(grip_new, LEFT),
                                     self._jaw_origin(grip_new, RIGHT))
-        outcome = soft_body_step(self.solver, self._barrier, np.vstack([self.q, finger_x]),
-                                 np.vstack([self.v, finger_v]), soft.base, targets,
+        outcome = soft_body_step(self.solver, self._barrier,
+                                 np.vstack([self.q, finger.positions]),
+                                 np.vstack([self.v, finger.velocities]), soft.base, targets,
                                  self._faces(self._grip), new_faces, dt)
         partner = outcome.contacts.obstacle
         self.q, self.v = outcome.x[:n], outcome.v[:n]
@@ -608,8 +600,8 @@ class SimulationFacade:
         # right_jaw (the fingers), then the faces
         self.contacts.obstacle = np.where(partner[:n] > 0, partner[:n] - 1, -1)
         self.contact_forces = outcome.forces[:n]
-        self._finger = (outcome.x[n:], outcome.v[n:], outcome.forces[n:],
-                        outcome.reaction[n:], partner[n:] == 0)
+        self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
+                                   outcome.reaction[n:], partner[n:] == 0)
         self._grip = grip_new
         self._time += dt
         wrenches = self._finger_wrenches(grip_new)
@@ -620,16 +612,16 @@ class SimulationFacade:
         """What each jaw feels at its deformable finger's base nodes (the reaction that
         holds them on it), about the backing's centre; zero for a finger that does not
         touch the fruit (its inertia and weight are no grip)."""
-        soft = self._soft
-        x, _, _, reaction, touching = self._finger
+        soft, finger = self._soft, self._finger
         base = soft.base - soft.first
         m = soft.body.n_nodes
         wrenches = []
         for side, mine in zip((LEFT, RIGHT), soft.sides_of_base()):
             nodes = base[mine]
-            if not np.any(touching[side * m:(side + 1) * m]):
+            if not np.any(finger.touching[side * m:(side + 1) * m]):
                 nodes = nodes[:0]
-            wrenches.append(_wrench(x[nodes] - self._jaw_origin(grip, side), -reaction[nodes]))
+            wrenches.append(_wrench(finger.positions[nodes] - self._jaw_origin(grip, side),
+                                    -finger.reaction[nodes]))
         return wrenches
 
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:

@@ -23,7 +23,8 @@ from gripper_sim.core.measures import deformation, face_contact_length, tributar
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.results import StepResult
-from gripper_sim.core.soft_fingers import SoftFingers, check_soft_fingers, finger_body, is_deformable
+from gripper_sim.core.soft_fingers import (SoftFingers, check_soft_fingers, finger_body,
+                                           is_deformable)
 from gripper_sim.errors import ConfigError
 from gripper_sim.geometry import fingers
 

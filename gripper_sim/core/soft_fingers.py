@@ -17,6 +17,8 @@ grip force the jaw drive reads.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from gripper_sim.core.barrier import SoftBody
@@ -34,6 +36,24 @@ THICKNESS_KEYS = {'solid_pad': 'gripper.finger.solid_pad.thickness'}
 
 #: the right finger is the left one mirrored in x
 MIRROR = np.array([-1.0, 1.0])
+
+
+@dataclass(frozen=True)
+class FingerState:
+    """The deformable fingers' part of the state after a step (m = both fingers' nodes).
+
+    Attributes:
+        positions: (m, 2) m.  velocities: (m, 2) m/s.
+        contact_forces: (m, 2) N, the fruit's force on each node.
+        reaction: (m, 2) N, the force holding each base node on its jaw (0 elsewhere).
+        touching: (m,) bool, the nodes in a barrier pair with the fruit.
+    """
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    contact_forces: np.ndarray
+    reaction: np.ndarray
+    touching: np.ndarray
 
 
 def is_deformable(config) -> bool:
@@ -147,6 +167,12 @@ class SoftFingers:
         ``left_origin`` and ``right_origin`` (2,) m."""
         return np.vstack([left_origin + self.frames[0], right_origin + self.frames[1]])
 
+    def at_rest(self, left_origin: np.ndarray, right_origin: np.ndarray) -> FingerState:
+        """Both fingers at rest on jaws whose backings are centred at the origins (2,) m."""
+        m = self.n_nodes
+        return FingerState(self.placed(left_origin, right_origin), np.zeros((m, 2)),
+                           np.zeros((m, 2)), np.zeros((m, 2)), np.zeros(m, bool))
+
     def base_targets(self, left_origin: np.ndarray, right_origin: np.ndarray) -> np.ndarray:
         """(2 k, 2) m, where the base nodes are held (``base`` order)."""
         return self.placed(left_origin, right_origin)[self.base - self.first]
@@ -158,15 +184,10 @@ class SoftFingers:
         return left, ~left
 
     # ------------------------------------------------------------------ outputs
-    def result(self, x: np.ndarray, forces: np.ndarray, touching: np.ndarray,
-               left_origin: np.ndarray, right_origin: np.ndarray) -> FingerResult:
-        """The fingers' outputs.
-
-        Args:
-            x: (2 m, 2) m, the fingers' nodes.  forces: (2 m, 2) N, the fruit's force on
-            them.  touching: (2 m,) bool, the nodes in a pair with the fruit.
-            left_origin, right_origin: (2,) m, the backings' centres.
-        """
+    def result(self, state: FingerState, left_origin: np.ndarray,
+               right_origin: np.ndarray) -> FingerResult:
+        """The fingers' outputs in ``state``, the backings centred at the origins (2,) m."""
+        x, forces, touching = state.positions, state.contact_forces, state.touching
         m = self.body.n_nodes
         rest = self.placed(left_origin, right_origin)
         tip = self.body.tip_node
