@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gripper_sim.core.energies import Energy, RodBending, Stretching
+
 
 def _ints(shape) -> np.ndarray:
     return np.zeros(shape, np.int64)
@@ -32,7 +34,9 @@ class FingerBody:
         depth: m, out-of-plane depth (the finger's width along the jaw).
         rod_edges: (r, 2) rod segments; rod_axial_stiffness: (r,) EA, N.
         bend_triples: (t, 3) node triples (i, j, k) bent at j; bend_stiffness: (t,) EI,
-            N m^2 (rest angle: that of ``rest_positions``).
+            N m^2 (rest angle: that of ``rest_positions``); bend_lengths: (t,) m, the rod
+            length each triple's curvature stands for (empty: the mean of its two rest
+            edge lengths; see ``RodBending``).
         triangles: (n_tri, 3) counter-clockwise solid triangles; youngs_modulus: Pa;
             poisson_ratio: -.
     """
@@ -48,6 +52,7 @@ class FingerBody:
     rod_axial_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
     bend_triples: np.ndarray = field(default_factory=lambda: _ints((0, 3)))
     bend_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    bend_lengths: np.ndarray = field(default_factory=lambda: np.zeros(0))
     triangles: np.ndarray = field(default_factory=lambda: _ints((0, 3)))
     youngs_modulus: float = 0.0
     poisson_ratio: float = 0.0
@@ -55,3 +60,16 @@ class FingerBody:
     @property
     def n_nodes(self) -> int:
         return len(self.masses)
+
+    def rod_energies(self) -> list[Energy]:
+        """The stretching and bending energies of the rods, of the flat position vector
+        of this body's nodes (``2 n_nodes``); empty for a body without rods."""
+        if not len(self.rod_edges):
+            return []
+        x0 = self.rest_positions
+        rest = np.linalg.norm(x0[self.rod_edges[:, 1]] - x0[self.rod_edges[:, 0]], axis=1)
+        energies: list[Energy] = [Stretching(self.rod_edges, rest, self.rod_axial_stiffness)]
+        if len(self.bend_triples):
+            lengths = self.bend_lengths if len(self.bend_lengths) else None
+            energies.append(RodBending(self.bend_triples, x0, self.bend_stiffness, lengths))
+        return energies

@@ -80,6 +80,10 @@ def profile(config) -> np.ndarray:
         phi_max = math.asin(0.5 * h / radius)
         phi = np.linspace(-phi_max, phi_max, int(config['gripper.finger.segments']) + 1)
         return np.stack([centre_x - radius * np.cos(phi), radius * np.sin(phi)], axis=1)
+    if kind == 'fin_ray':
+        raise ConfigError("config key 'gripper.finger.type' = fin_ray: a deformable finger "
+                          'has no rigid face profile; this simulation does not run '
+                          'deformable fingers yet')
     raise ConfigError(f"config key 'gripper.finger.type': unknown finger '{kind}'")
 
 
