@@ -52,8 +52,8 @@ def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial) -> FingerBo
     e_mod = material.youngs_modulus
     edges, axial, masses = [], [], np.zeros(len(x0))
     triples, stiffness, lengths = [], [], []
-    arms: dict[int, list[tuple[int, int, float]]] = {}   # node -> (neighbour, member, EI)
-    rigid = {k for k, member in enumerate(plan.members) if member.rigid}
+    # node -> its arms: (neighbour, member, EI, whether the member ends at the node)
+    arms: dict[int, list[tuple[int, int, float, bool]]] = {}
     for k, member in enumerate(plan.members):
         t = member.thickness
         ei = e_mod * t ** 3 * b / 12.0
@@ -64,35 +64,34 @@ def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial) -> FingerBo
         axial.append(np.full(len(pairs), e_mod * t * b))
         np.add.at(masses, pairs.ravel(),
                   np.repeat(0.5 * material.density * t * b * edge_lengths, 2))
-        for i in range(1, len(nodes) - 1 if not member.rigid else 1):
-            triples.append((nodes[i - 1], nodes[i], nodes[i + 1]))
-            stiffness.append(ei)
-            lengths.append(0.5 * (edge_lengths[i - 1] + edge_lengths[i]))
-        for end, neighbour in ((nodes[0], nodes[1]), (nodes[-1], nodes[-2])):
-            arms.setdefault(int(end), []).append((int(neighbour), k, ei))
         for i in range(1, len(nodes) - 1):
+            if not member.rigid:
+                triples.append((nodes[i - 1], nodes[i], nodes[i + 1]))
+                stiffness.append(ei)
+                lengths.append(0.5 * (edge_lengths[i - 1] + edge_lengths[i]))
             arms.setdefault(int(nodes[i]), []).extend(
-                [(int(nodes[i - 1]), k, ei), (int(nodes[i + 1]), k, ei)])
+                [(int(nodes[i - 1]), k, ei, False), (int(nodes[i + 1]), k, ei, False)])
+        for end, neighbour in ((nodes[0], nodes[1]), (nodes[-1], nodes[-2])):
+            arms.setdefault(int(end), []).append((int(neighbour), k, ei, not member.rigid))
     for joint, joint_arms in arms.items():
         cross = [(a, c) for a, c in combinations(joint_arms, 2) if a[1] != c[1]]
-        taken = {}
+        taken: dict[tuple, int] = {}
+        for pair in cross:
+            for arm in pair:
+                taken[arm] = taken.get(arm, 0) + 1
         for a, c in cross:
-            taken[a] = taken.get(a, 0) + 1
-            taken[c] = taken.get(c, 0) + 1
-        for a, c in cross:
-            if a[1] in rigid and c[1] in rigid:
+            # the curvature at the joint stands for half the first edge of each member
+            # that ends there (a member running through it, or the rigid base, keeps its
+            # own triples): springs in series, shared among the pairs an arm takes part in
+            ending = [(arm, float(np.hypot(*(x0[arm[0]] - x0[joint])))) for arm in (a, c)
+                      if arm[3]]
+            if not ending:
                 continue
-            weaker = a if a[2] <= c[2] else c
+            length = sum(0.5 * edge for _, edge in ending)
+            compliance = sum(0.5 * edge / arm[2] for arm, edge in ending)
             triples.append((a[0], joint, c[0]))
-            stiffness.append(weaker[2] / max(taken[a], taken[c]))
-            la = float(np.hypot(*(x0[joint] - x0[a[0]])))
-            lc = float(np.hypot(*(x0[c[0]] - x0[joint])))
-            if a[1] in rigid:
-                lengths.append(0.5 * lc)
-            elif c[1] in rigid:
-                lengths.append(0.5 * la)
-            else:
-                lengths.append(0.5 * (la + lc))
+            stiffness.append(length / compliance / max(taken[a], taken[c]))
+            lengths.append(length)
     front = plan.front_nodes
     return FingerBody(
         name='fin_ray', rest_positions=x0, masses=masses,

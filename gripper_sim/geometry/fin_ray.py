@@ -114,6 +114,12 @@ def rib_points(geometry: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
     corner = np.array([g.base_width, half])
     along = np.array([g.tip_offset, -half]) - corner          # front beam, base corner -> tip
     beam_length = float(np.hypot(*along))
+    step = back[1] - back[0] if n > 1 else np.zeros(2)
+    gap = abs(direction[0] * step[1] - direction[1] * step[0])   # between parallel ribs
+    if n > 1 and gap <= g.rib_thickness:
+        raise _error('rib_count', n, f'the ribs intersect: {n} ribs at {g.rib_angle:g} deg '
+                     f'are {gap * 1e3:.3g} mm apart, not more than their thickness '
+                     f'{g.rib_thickness * 1e3:.3g} mm')
     fronts = np.empty((n, 2))
     margin = max(g.beam_thickness, g.rib_thickness)
     for k in range(n):
@@ -125,11 +131,6 @@ def rib_points(geometry: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
                          f'rib {k + 1} of {n} leaves the finger: its front end falls {where} '
                          f'(ribs start on the back beam {spacing * 1e3:.3g} mm apart)')
         fronts[k] = corner + s * along
-    gap = spacing * math.cos(angle)
-    if n > 1 and gap <= g.rib_thickness:
-        raise _error('rib_count', n, f'the ribs intersect: {n} ribs at {g.rib_angle:g} deg '
-                     f'are {gap * 1e3:.3g} mm apart, not more than their thickness '
-                     f'{g.rib_thickness * 1e3:.3g} mm')
     return back, fronts
 
 
