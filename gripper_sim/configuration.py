@@ -211,8 +211,10 @@ SCHEMA: dict[str, Key] = {
     'gripper.finger.fin_ray.base_width': Key(0.025, 'm', 'fin_ray: width of the base along x '
                                              '(how far the front beam stands out of the '
                                              'jaw at the base)', low=0.002, high=0.2),
-    'gripper.finger.fin_ray.depth': Key(0.02, 'm', 'fin_ray: width of the finger along the '
-                                        'jaw (out of the plane)', low=1e-3, high=0.5),
+    'gripper.finger.fin_ray.depth': Key(None, 'm', 'fin_ray: width of the finger along the '
+                                        'jaw (out of the plane); null = the fruit\'s depth '
+                                        '(fruit.depth), as the planar model assumes',
+                                        low=1e-3, high=0.5, nullable=True),
     'gripper.finger.fin_ray.beam_thickness': Key(0.0012, 'm', 'fin_ray: thickness of the '
                                                  'front and back beams', low=0.0, high=0.02,
                                                  open_low=True),

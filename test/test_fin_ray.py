@@ -31,7 +31,8 @@ def _config(*overrides):
 
 
 def _geometry(**changes) -> FinRayGeometry:
-    return dataclasses.replace(FinRayGeometry.from_config(_config()), **changes)
+    """The default Fin Ray, 20 mm deep, with ``changes``."""
+    return dataclasses.replace(FinRayGeometry.from_config(_config(), 0.02), **changes)
 
 
 def _front_normal(body: FingerBody) -> np.ndarray:
@@ -95,8 +96,9 @@ def test_members_carry_ea_and_ei_of_their_sections():
     config = _config('gripper.finger.fin_ray.material=custom',
                      'gripper.finger.fin_ray.youngs_modulus=5e7',
                      'gripper.finger.fin_ray.density=1000')
-    body = fin_ray_from_config(config)
-    g = FinRayGeometry.from_config(config)
+    body = fin_ray_from_config(config, 0.042)
+    g = FinRayGeometry.from_config(config, 0.042)
+    assert g.depth == 0.042
     plan = layout(g)
     x0 = body.rest_positions
     edge_index = {tuple(sorted(e)): i for i, e in enumerate(body.rod_edges.tolist())}
@@ -214,3 +216,10 @@ it is far softer), swings its tip away, further than the pressed point."""
     swung = static_equilibrium(cantilever, forces).positions - cantilever.rest_positions
     assert swung[mid, 0] < -1e-3
     assert swung[cantilever.tip_node, 0] < 2 * swung[mid, 0]
+
+
+def test_a_null_depth_is_the_fruits_and_a_set_one_is_kept():
+    assert FinRayGeometry.from_config(_config(), 0.042).depth == 0.042
+    config = _config('gripper.finger.fin_ray.depth=0.03')
+    assert FinRayGeometry.from_config(config, 0.042).depth == 0.03
+    assert fin_ray_from_config(config, 0.042).depth == 0.03

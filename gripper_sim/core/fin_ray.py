@@ -34,17 +34,21 @@ def material_from_config(config) -> FingerMaterial:
                           'custom')
 
 
-def fin_ray_from_config(config) -> FingerBody:
-    """The Fin Ray finger of a flat configuration (``gripper.finger.fin_ray.*``)."""
-    return fin_ray_body(FinRayGeometry.from_config(config), material_from_config(config))
+def fin_ray_from_config(config, fruit_depth: float) -> FingerBody:
+    """The Fin Ray finger of a flat configuration (``gripper.finger.fin_ray.*``), as deep
+    as the fruit (``fruit_depth``, m) unless ``gripper.finger.fin_ray.depth`` is set."""
+    return fin_ray_body(FinRayGeometry.from_config(config, fruit_depth),
+                        material_from_config(config))
 
 
 def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial) -> FingerBody:
     """The finger of ``geometry`` made of ``material``.
 
     Raises:
-        ConfigError: a geometry that cannot be built (``check_geometry``).
+        ConfigError: a geometry that cannot be built (``check_geometry``), or no depth.
     """
+    if geometry.depth is None:
+        raise ConfigError(f"config key '{PREFIX}depth': the finger needs a depth")
     check_geometry(geometry)
     plan = layout(geometry)
     x0 = plan.positions

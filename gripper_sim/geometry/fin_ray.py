@@ -35,7 +35,8 @@ class FinRayGeometry:
         length: height of the finger along z.
         base_width: width of its base along x (the front beam's distance from the
             backing at the base).
-        depth: out-of-plane depth (along the jaw).
+        depth: out-of-plane depth (along the jaw); None: not chosen yet (the fruit's,
+            which the physics knows; the plane geometry and its checks do not need it).
         beam_thickness: of the front and back beams.
         rib_thickness: of each rib.
         rib_count: number of ribs (0: the rib-free frame of two beams).
@@ -47,7 +48,7 @@ class FinRayGeometry:
 
     length: float
     base_width: float
-    depth: float
+    depth: float | None
     beam_thickness: float
     rib_thickness: float
     rib_count: int
@@ -56,9 +57,13 @@ class FinRayGeometry:
     tip_offset: float
 
     @classmethod
-    def from_config(cls, config) -> 'FinRayGeometry':
-        """From the ``gripper.finger.fin_ray.*`` keys of a flat configuration."""
-        return cls(**{name: config[PREFIX + name] for name in cls.__dataclass_fields__})
+    def from_config(cls, config, fruit_depth: float | None = None) -> 'FinRayGeometry':
+        """From the ``gripper.finger.fin_ray.*`` keys of a flat configuration; a null
+        depth is ``fruit_depth`` (m)."""
+        values = {name: config[PREFIX + name] for name in cls.__dataclass_fields__}
+        if values['depth'] is None:
+            values['depth'] = fruit_depth
+        return cls(**values)
 
 
 @dataclass(frozen=True)
@@ -172,6 +177,8 @@ def check_geometry(geometry: FinRayGeometry) -> None:
     for name in ('length', 'base_width', 'depth', 'beam_thickness', 'rib_thickness',
                  'element_length'):
         value = getattr(g, name)
+        if name == 'depth' and value is None:
+            continue
         if not (math.isfinite(value) and value > 0):
             raise _error(name, value, 'must be positive')
     if g.rib_count < 0:
