@@ -36,6 +36,8 @@ PROVENANCE_KEY = 'calibration'
 #: keys that select a preset (in a file's top level, a scenario, ``--set fruit=plum``)
 #: rather than set a value
 SELECTORS = ('fruit', 'finger')
+#: the finger types whose faces are rigid (the others are deformable bodies, 2D only)
+RIGID_FINGERS = ('flat', 'arc', 'vgroove')
 
 
 @dataclass(frozen=True)
@@ -196,9 +198,11 @@ SCHEMA: dict[str, Key] = {
     'gripper.finger.name': Key('flat', '-', 'name of the finger shown in outputs', 'str'),
     'gripper.finger.type': Key('flat', '-', 'jaw face profile in the x-z plane: flat; arc '
                                '(concave circular arc of radius gripper.finger.radius); '
-                               'vgroove (a V of opening gripper.finger.groove_angle); fin_ray '
-                               '(a deformable Fin Ray finger, gripper.finger.fin_ray.*)', 'str',
-                               choices=('flat', 'arc', 'vgroove', 'fin_ray')),
+                               'vgroove (a V of opening gripper.finger.groove_angle); '
+                               'solid_pad (a deformable elastic block on the jaw, '
+                               'gripper.finger.solid_pad.*; 2D); fin_ray (a deformable Fin Ray '
+                               'finger, gripper.finger.fin_ray.*; 2D)', 'str',
+                               choices=RIGID_FINGERS + ('solid_pad', 'fin_ray')),
     'gripper.finger.radius': Key(0.05, 'm', 'arc: radius of the concave face (its chord is '
                                  'gripper.jaw_height)', low=1e-3, high=10.0),
     'gripper.finger.groove_angle': Key(120.0, 'deg', 'vgroove: opening angle between the '
@@ -251,6 +255,28 @@ SCHEMA: dict[str, Key] = {
     'gripper.finger.pad.poisson_ratio': Key(0.45, '', 'pad Poisson ratio nu_p (< 0.5: the '
                                             'elastic-foundation pad model needs a '
                                             'compressible layer)', low=0.0, high=0.475),
+    # solid pad sources: Smooth-On technical bulletins, 100 % tensile modulus (a secant
+    # modulus near the small-strain E of these rubbers): Ecoflex 00-30 10 psi (69 kPa),
+    # Dragon Skin 10 22 psi (152 kPa), Dragon Skin 30 86 psi (593 kPa), specific gravity
+    # 1.07-1.08; Sylgard 184 (PDMS) E = 1.32-2.97 MPa by curing temperature (Johnston et
+    # al. 2014, J. Micromech. Microeng. 24 035017)
+    'gripper.finger.solid_pad.thickness': Key(0.006, 'm', 'solid_pad: thickness t of the '
+                                              'block from the jaw backing to its front face '
+                                              '(its height is gripper.jaw_height)', low=0.0,
+                                              high=0.05, open_low=True),
+    'gripper.finger.solid_pad.youngs_modulus': Key(
+        0.593e6, 'Pa', 'solid_pad: Young modulus E (Dragon Skin 30: 0.59 MPa; Ecoflex 00-30: '
+        '0.069 MPa; Sylgard 184: 1.3-3.0 MPa)', low=1e3, high=1e9),
+    'gripper.finger.solid_pad.poisson_ratio': Key(0.45, '', 'solid_pad: Poisson ratio nu '
+                                                  '(silicone rubbers are nearly '
+                                                  'incompressible, ~0.49; 0.45 keeps the '
+                                                  'linear triangles from locking)', low=0.0,
+                                                  high=0.49),
+    'gripper.finger.solid_pad.density': Key(1080.0, 'kg/m^3', 'solid_pad: density (Dragon '
+                                            'Skin 30: 1080)', low=10.0, high=5000.0),
+    'gripper.finger.solid_pad.layers': Key(4, '-', 'solid_pad: mesh cells across the '
+                                           'thickness (the cells are about square)', 'int',
+                                           1, 32),
     # --- contact
     'contact.model': Key('mmm', '-', 'contact with the rigid faces (jaws, table, walls): mmm '
                          '= the modified mass method (held nodes prescribed on the faces); '
@@ -505,6 +531,10 @@ def validate(flat: Mapping[str, Any]) -> dict[str, Any]:
     if result.get('gripper.finger.type') == 'arc':
         check_finger(result)
     check_fin_ray(result)
+    if result.get('dimension') == 3 and result.get('gripper.finger.type') not in RIGID_FINGERS:
+        raise ConfigError(f"config key 'gripper.finger.type' = {result['gripper.finger.type']}"
+                          ': deformable fingers are 2D only so far (dimension 3 takes '
+                          f"{', '.join(RIGID_FINGERS)})")
     return result
 
 
@@ -639,6 +669,11 @@ def no_effect_reason(key: str, config: Mapping[str, Any]) -> str | None:
         return ("the Fin Ray's material is "
                 f"{config['gripper.finger.fin_ray.material']}: set "
                 "'gripper.finger.fin_ray.material' = custom")
+    if key.startswith('gripper.finger.solid_pad.') and finger != 'solid_pad':
+        return f"the finger is {finger}, not a solid pad: set 'gripper.finger.type' = solid_pad"
+    if key == 'contact.model' and finger not in RIGID_FINGERS:
+        return (f'the finger is the deformable {finger}: every contact is the barrier '
+                "(the 'contact.ipc.*' keys)")
     model = config['fruit.model']
     if key in ('fruit.pressure.turgor', 'fruit.pressure.bulk_modulus') and model != 'shell':
         return f"only the shell model has an internal pressure ('fruit.model' is {model})"

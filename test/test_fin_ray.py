@@ -65,8 +65,6 @@ def _press(body: FingerBody, force: float, spread: float) -> tuple[np.ndarray, i
     ('gripper.finger.fin_ray.rib_count=30 gripper.finger.fin_ray.rib_thickness=0.0025',
      'rib_count', 'the ribs intersect'),
     ('gripper.finger.fin_ray.rib_angle=-50', 'rib_angle', 'leaves the finger'),
-    ('gripper.finger.fin_ray.base_width=0.08', 'base_width', 'less than the fruit'),
-    ('gripper.initial_gap=0.04', 'base_width', 'overlap'),
     ('gripper.finger.fin_ray.beam_thickness=0.013', 'beam_thickness', 'fill the base'),
     ('gripper.finger.fin_ray.tip_offset=0.03', 'tip_offset', 'between the backing'),
     ('gripper.finger.fin_ray.material=custom', 'youngs_modulus', 'must be set'),
@@ -84,9 +82,23 @@ def test_fin_ray_keys_without_a_fin_ray_have_no_effect():
         load_config(overrides=['gripper.finger.fin_ray.rib_count=6'])
 
 
-def test_the_simulation_refuses_a_fin_ray_with_a_clear_error():
-    with pytest.raises(ConfigError, match='does not run deformable fingers yet'):
-        Simulation(_config())
+@pytest.mark.parametrize('override,key,words', [
+    ('gripper.max_gap=0.05', 'gripper.finger.fin_ray.base_width', 'fill the jaw stroke'),
+    ('gripper.max_gap=0.1', 'gripper.max_gap', 'does not fit between the fin_ray fingers'),
+    ('gripper.initial_gap=0.09', 'gripper.initial_gap', 'does not fit'),
+])
+def test_fingers_that_leave_no_room_for_the_fruit_are_refused(override, key, words):
+    with pytest.raises(ConfigError, match=f"config key '{key}'.*{words}"):
+        Simulation(_config(override))
+
+
+def test_the_simulation_puts_a_fin_ray_on_each_jaw():
+    sim = Simulation(_config())
+    assert sim.initial_gap == pytest.approx(sim.fruit.rest_width + 0.01 + 2 * 0.025)
+    finger = fin_ray_from_config(_config(), sim.fruit.depth)
+    result = sim.step()
+    assert result.fingers.positions.shape == (2 * finger.n_nodes, 2)
+    assert np.allclose(result.fingers.tip_displacement, 0.0, atol=1e-4)
 
 
 # --- the rods

@@ -20,6 +20,14 @@ with its face; infinite faces (table, walls) become segments ``INFINITE_FACE_LEN
 long. Only pairs of the fruit and an obstacle collide (no self-contact of the outline
 yet), so the barrier's Hessian stays on a fixed pattern: the surface nodes' 2 x 2
 blocks and the skin edges' pairs.
+
+Deformable bodies (``SoftBody``: the soft fingers, ``core.soft_fingers``) join the
+collision mesh with their outlines, whose vertices are degrees of freedom too: the
+contact is two-way, both bodies' nodes feel the barrier and the friction (soft-on-soft
+contact). Their pairs with the fruit couple nodes of two bodies, so the Hessian's pattern
+grows with the pairs met so far (a solver that keeps one pattern must then take the
+triplets, ``evaluate``, not ``evaluate_into``). Still only pairs with the fruit collide:
+the fingers do not touch each other, the table or themselves.
 """
 from __future__ import annotations
 
@@ -83,6 +91,22 @@ def check_supported(config, dimension: int, fast: bool | None) -> None:
                           'the numba fast path (fast=True needs contact.model: mmm)')
 
 
+@dataclass(frozen=True)
+class SoftBody:
+    """A deformable body's outline in the collision mesh (beside the fruit's).
+
+    Attributes:
+        nodes: (k,) its outline's nodes (global node indices of the state).
+        edges: (e, 2) its outline's edges (global node indices).
+        static_friction, kinetic_friction: Coulomb coefficients against the fruit.
+    """
+
+    nodes: np.ndarray
+    edges: np.ndarray
+    static_friction: float
+    kinetic_friction: float
+
+
 def face_segments(faces) -> np.ndarray:
     """(2 k, 2) m, the end points of the k faces (``FlatFace``), two rows per face."""
     points = np.empty((2 * len(faces), 2))
@@ -97,39 +121,68 @@ class BarrierContact(Energy):
     """The barrier and friction potentials of one step (``begin_step`` sets it up).
 
     Args:
-        n_nodes: nodes of the fruit.  surface: (n_s,) its outline's nodes.
+        n_nodes: nodes of the state (the fruit's, then any soft bodies').
+        surface: (n_s,) the fruit outline's nodes.
         skin_edges: (n_e, 2) the outline's edges (node indices), may be empty.
         settings: dhat, kappa, eps_v.
+        bodies: the soft bodies (``SoftBody``) whose outlines touch the fruit.
     """
 
     elastic = False
 
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
-                 settings: BarrierSettings):
+                 settings: BarrierSettings, bodies: tuple = ()):
         self.n_dof = 2 * n_nodes
         self.surface = np.asarray(surface, dtype=np.int64)
+        self.bodies = tuple(bodies)
+        #: (n_v,) the node of each deformable vertex of the collision mesh: the fruit's
+        #: outline first, then each soft body's
+        self.vertex_nodes = np.concatenate(
+            [self.surface] + [np.asarray(b.nodes, np.int64) for b in self.bodies])
         local = -np.ones(n_nodes, np.int64)
-        local[self.surface] = np.arange(self.surface.size)
+        local[self.vertex_nodes] = np.arange(self.vertex_nodes.size)
         self.fruit_edges = local[np.asarray(skin_edges, dtype=np.int64).reshape(-1, 2)]
+        self.body_edges = [local[np.asarray(b.edges, np.int64).reshape(-1, 2)]
+                           for b in self.bodies]
+        #: (n_v,) 0 for the fruit's vertices, 1 + b for soft body b's
+        self.vertex_body = np.concatenate(
+            [np.zeros(self.surface.size, np.int64)]
+            + [np.full(len(b.nodes), 1 + k, np.int64) for k, b in enumerate(self.bodies)])
         self.settings = settings
         self.potential = ipctk.BarrierPotential(settings.dhat, settings.stiffness, True)
         self.friction = ipctk.FrictionPotential(settings.friction_smoothing)
-        n_s = self.surface.size
-        self.fruit_dofs = (2 * self.surface[:, None] + np.arange(2)[None, :]).ravel()
+        n_v = self.vertex_nodes.size
+        self.vertex_dofs = (2 * self.vertex_nodes[:, None] + np.arange(2)[None, :]).ravel()
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
-        #: (solvers that keep one sparsity pattern read it)
+        #: (solvers that keep one sparsity pattern read it); with soft bodies the pattern
+        #: grows with the pairs that met (``_terms``)
         self.dofs = element_dofs(self.surface[self.fruit_edges] if self.fruit_edges.size
                                  else self.surface[:, None])
         self._pattern_keys = self._hessian_pattern()
+        for edges in self.body_edges:
+            if edges.size:
+                self._pattern_keys = np.union1d(self._pattern_keys,
+                                                self._element_keys(self.vertex_nodes[edges]))
         self._mesh = None
         self._n_faces = -1
         self._dt = 1.0
         self._obstacles_end = np.zeros((0, 2))
-        self._start = np.zeros((n_s, 2))
+        self._start = np.zeros((n_v, 2))
         self._tangential = ipctk.TangentialCollisions()
         self._positions = None  # (scatter, CSC position of each pattern key)
 
     # ------------------------------------------------------------------ set-up
+    @property
+    def grows(self) -> bool:
+        """Whether the Hessian's pattern grows with the pairs met (soft bodies)."""
+        return bool(self.bodies)
+
+    def _element_keys(self, nodes: np.ndarray) -> np.ndarray:
+        """Sorted keys col * n_dof + row of the entries of elements of ``nodes`` (e, k)."""
+        dofs = element_dofs(nodes)
+        m = dofs.shape[1]
+        return np.unique(np.tile(dofs, (1, m)) * self.n_dof + np.repeat(dofs, m, axis=1))
+
     def _hessian_pattern(self) -> np.ndarray:
         """Sorted keys col * n_dof + row of the fixed Hessian pattern: the entries of the
         elements ``dofs`` (the skin edges, or the lone surface nodes of a point fruit)."""
@@ -138,21 +191,24 @@ class BarrierContact(Energy):
         return np.unique(keys)
 
     def _build_mesh(self, obstacles: np.ndarray) -> None:
-        n_s = self.surface.size
+        n_v = self.vertex_nodes.size
         k = obstacles.shape[0] // 2
-        face_edges = n_s + np.arange(2 * k).reshape(k, 2)
-        edges = np.vstack([self.fruit_edges, face_edges]).astype(np.int32)
-        rest = np.vstack([np.zeros((n_s, 2)), obstacles])
+        face_edges = n_v + np.arange(2 * k).reshape(k, 2)
+        edges = np.vstack([self.fruit_edges, *self.body_edges, face_edges]).astype(np.int32)
+        rest = np.vstack([np.zeros((n_v, 2)), obstacles])
         self._mesh = ipctk.CollisionMesh(np.asfortranarray(rest), np.asfortranarray(edges))
-        patches = np.concatenate([np.zeros(n_s, np.int32), np.ones(2 * k, np.int32)])
+        # the fruit against everything else: soft bodies and faces share one patch
+        patches = np.concatenate([(self.vertex_body > 0).astype(np.int32),
+                                  np.ones(2 * k, np.int32)])
         self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
         self._n_faces = k
 
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
-        """(n_s + 2 k, 2) m, the collision mesh's vertices: the outline of ``positions``
-        (n, 2) and the faces' end points (default: where they end this step)."""
+        """(n_v + 2 k, 2) m, the collision mesh's vertices: the outlines (the fruit's, the
+        soft bodies') of ``positions`` (n, 2) and the faces' end points (default: where
+        they end this step)."""
         ends = self._obstacles_end if obstacles is None else obstacles
-        return np.asfortranarray(np.vstack([positions[self.surface], ends]))
+        return np.asfortranarray(np.vstack([positions[self.vertex_nodes], ends]))
 
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set up a step of ``dt`` (s) from positions ``x_n`` (n, 2) m with the faces moving
@@ -166,11 +222,13 @@ class BarrierContact(Energy):
         self._start = start
         collisions = ipctk.NormalCollisions()
         collisions.build(self._mesh, start, self.settings.dhat)
-        n_s = self.surface.size
-        # per vertex; a pair takes the larger one: the face's, the outline's being 0
-        mu_s = np.concatenate([np.zeros(n_s),
+        # per vertex; a pair takes the larger one: the face's or the soft body's, the
+        # fruit's being 0
+        body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
+        body_mu_k = np.array([0.0] + [b.kinetic_friction for b in self.bodies])
+        mu_s = np.concatenate([body_mu_s[self.vertex_body],
                                np.repeat([f.static_friction for f in new_faces], 2)])
-        mu_k = np.concatenate([np.zeros(n_s),
+        mu_k = np.concatenate([body_mu_k[self.vertex_body],
                                np.repeat([f.kinetic_friction for f in new_faces], 2)])
         self._tangential = ipctk.TangentialCollisions()
         if len(collisions):
@@ -178,14 +236,10 @@ class BarrierContact(Energy):
                                    max)
 
     # ------------------------------------------------------------------ the energy
-    def _fruit_part(self, vec: np.ndarray) -> np.ndarray:
-        out = np.zeros(self.n_dof)
-        out[self.fruit_dofs] = vec[:self.fruit_dofs.size]
-        return out
-
-    def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool):
-        """Barrier plus lagged friction at fruit positions ``q`` (2 n,) m: adds the
-        gradient (N) into ``gradient``; returns (value J, Hessian values N/m on the
+    def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
+               friction: bool = True):
+        """Barrier plus lagged friction (if ``friction``) at positions ``q`` (2 n,) m: adds
+        the gradient (N) into ``gradient``; returns (value J, Hessian values N/m on the
         pattern's sorted keys, or None)."""
         mesh = self._mesh
         v = self.vertices(q.reshape(-1, 2))
@@ -193,33 +247,34 @@ class BarrierContact(Energy):
         collisions.build(mesh, v, self.settings.dhat)
         parts = []
         value = 0.0
+        n_d = self.vertex_dofs.size
         if len(collisions):
             value = self.potential(collisions, mesh, v)
             if not np.isfinite(value):
                 return np.inf, None
-            gradient[self.fruit_dofs] += self.potential.gradient(
-                collisions, mesh, v)[:self.fruit_dofs.size]
+            gradient[self.vertex_dofs] += self.potential.gradient(collisions, mesh, v)[:n_d]
             if hessian:
                 parts.append(self.potential.hessian(collisions, mesh, v,
                                                     ipctk.PSDProjectionMethod.CLAMP))
-        if len(self._tangential):
+        if friction and len(self._tangential):
             velocity = np.asfortranarray((v - self._start) / self._dt)
             value += self._dt * self.friction(self._tangential, mesh, velocity)
-            gradient[self.fruit_dofs] += self.friction.gradient(
-                self._tangential, mesh, velocity)[:self.fruit_dofs.size]
+            gradient[self.vertex_dofs] += self.friction.gradient(
+                self._tangential, mesh, velocity)[:n_d]
             if hessian:
                 parts.append(self.friction.hessian(self._tangential, mesh, velocity,
                                                    ipctk.PSDProjectionMethod.CLAMP) / self._dt)
         if not hessian:
             return float(value), None
+        blocks = [matrix.tocsc()[:n_d, :n_d].tocoo() for matrix in parts]
+        keys = [self.vertex_dofs[b.col] * self.n_dof + self.vertex_dofs[b.row] for b in blocks]
+        if self.grows and keys:
+            self._pattern_keys = np.union1d(self._pattern_keys, np.concatenate(keys))
         vals = np.zeros(self._pattern_keys.size)
-        n_f = self.fruit_dofs.size
-        for matrix in parts:
-            block = matrix.tocsc()[:n_f, :n_f].tocoo()
-            keys = self.fruit_dofs[block.col] * self.n_dof + self.fruit_dofs[block.row]
-            where = np.minimum(np.searchsorted(self._pattern_keys, keys),
+        for block, key in zip(blocks, keys):
+            where = np.minimum(np.searchsorted(self._pattern_keys, key),
                                self._pattern_keys.size - 1)
-            if not np.array_equal(self._pattern_keys[where], keys):
+            if not np.array_equal(self._pattern_keys[where], key):
                 raise AssertionError('barrier Hessian entry outside its pattern')
             np.add.at(vals, where, block.data)
         return float(value), vals
@@ -238,6 +293,9 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
+        if self.grows:
+            raise AssertionError('a barrier with soft bodies has no fixed pattern: the '
+                                 'solver must take its triplets (evaluate)')
         value, vals = self._terms(q, grad, hessian)
         if vals is not None:
             if self._positions is None or self._positions[0] is not scatter:
@@ -276,13 +334,16 @@ class BarrierContact(Energy):
             touching = front & (gap < dhat)
             start[nodes[front]] += push[front, None] * old.normal
             start[nodes[touching]] += float(shift @ old.tangent) * old.tangent
+        return start if self.reachable(x_n, start) else None
+
+    def reachable(self, x_n: np.ndarray, start: np.ndarray) -> bool:
+        """Whether the straight paths from ``x_n`` (the faces at the start of the step) to
+        ``start`` (the faces at its end), both (n, 2) m, cross nothing and end apart."""
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
         exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
                                                             narrow_phase_ccd=EXACT_CCD))
-        if exact < 1.0 or not self.min_distance(start) > 0.0:
-            return None
-        return start
+        return exact >= 1.0 and self.min_distance(start) > 0.0
 
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
@@ -290,6 +351,38 @@ class BarrierContact(Energy):
         gradient = np.zeros(self.n_dof)
         self._terms(q, gradient, hessian=False)
         return -gradient.reshape(-1, 2)
+
+    def normal_forces(self, q: np.ndarray) -> np.ndarray:
+        """(n, 2) N, the barrier's (normal) part of ``contact_forces``, no friction."""
+        gradient = np.zeros(self.n_dof)
+        self._terms(q, gradient, hessian=False, friction=False)
+        return -gradient.reshape(-1, 2)
+
+    def partners(self, q: np.ndarray) -> np.ndarray:
+        """(n,) int, for every node of an outline the body its nearest pair within dhat
+        at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
+        soft bodies); -1 for the nodes in no pair."""
+        v = self.vertices(q.reshape(-1, 2))
+        collisions = ipctk.NormalCollisions()
+        collisions.build(self._mesh, v, self.settings.dhat)
+        n_v = self.vertex_nodes.size
+        n_b = len(self.bodies)
+        # the body of every collision-mesh vertex: outlines, then the faces' end points
+        owner = np.concatenate([self.vertex_body,
+                                1 + n_b + np.arange(v.shape[0] - n_v) // 2])
+        edges = self._mesh.edges
+        partner = -np.ones(self.n_dof // 2, np.int64)
+        best = np.full(self.n_dof // 2, np.inf)
+        pairs = [(c.vertex_id, edges[c.edge_id]) for c in collisions.ev_collisions]
+        pairs += [(c.vertex0_id, [c.vertex1_id]) for c in collisions.vv_collisions]
+        for vertex, others in pairs:
+            others = list(others)
+            distance = float(np.min(np.linalg.norm(v[others] - v[vertex], axis=1)))
+            for a, b in [(vertex, o) for o in others] + [(o, vertex) for o in others]:
+                if a < n_v and distance < best[self.vertex_nodes[a]]:
+                    partner[self.vertex_nodes[a]] = owner[b]
+                    best[self.vertex_nodes[a]] = distance
+        return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
         """(n,) the face (index) each node with a contact force touches (its nearest face
@@ -368,3 +461,51 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
         contacts.mode[nodes] = np.where(slip < barrier.settings.friction_smoothing, cm.STICK,
                                         cm.SLIP)
     return StepOutcome(x, v, forces, contacts, solution.iterations)
+
+
+def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
+                   fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
+                   new_faces: list, dt: float) -> StepOutcome:
+    """One implicit step of ``dt`` (s) from (x_n, v_n) (n, 2) of the fruit and the soft
+    bodies in the barrier (``barrier.bodies``), nodes ``fixed`` (k,) prescribed at
+    ``fixed_targets`` (k, 2) m (a finger's base on its jaw: zero filters, the modified
+    mass method), the faces moving from ``old_faces`` to ``new_faces``.
+
+    The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
+    nothing, else from x_n (each with the fixed nodes at their targets and the outline
+    pushed ahead of moving faces, ``feasible_start``).
+
+    Returns:
+        The outcome; ``forces`` (n, 2) N the barrier's and friction's force on every node
+        (both bodies of a pair), ``reaction`` (n, 2) N the force holding each fixed node
+        at its target (0 elsewhere), ``contacts.obstacle`` (n,) the body each outline node
+        touches as ``partners`` numbers them (0 the fruit, 1 + b soft body b, then the
+        faces; -1 none).
+
+    Raises:
+        NewtonFailure: no feasible start or no convergence (the caller halves the step).
+    """
+    n = x_n.shape[0]
+    barrier.begin_step(x_n, old_faces, new_faces, dt)
+    pushed = barrier.feasible_start(x_n, old_faces, new_faces)
+    if pushed is None:
+        raise NewtonFailure('no collision-free start for the barrier step', [])
+    start = None
+    for candidate in (pushed + dt * v_n, pushed):
+        candidate = candidate.copy()
+        candidate[fixed] = fixed_targets
+        if barrier.reachable(x_n, candidate):
+            start = candidate
+            break
+    if start is None:
+        raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
+    constraints = StepConstraints.free(n, dim=2)
+    constraints.filters[fixed] = 0.0
+    solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
+    x = solution.q.reshape(-1, 2)
+    reaction = np.zeros((n, 2))
+    reaction[fixed] = solution.reaction.reshape(-1, 2)[fixed]
+    contacts = cm.ContactState.empty(n)
+    contacts.obstacle = barrier.partners(solution.q)
+    return StepOutcome(x, (x - x_n) / dt, barrier.contact_forces(solution.q), contacts,
+                       solution.iterations, reaction)

@@ -68,6 +68,8 @@ class StepOutcome:
         obstacle's normal speed, stuck ones with its tangential speed too).
         forces: (n, d) N, the obstacles' reactions on the held nodes.
         contacts: the contact set at the end of the step.  iterations: Newton iterations.
+        reaction: (n, d) N, the forces holding prescribed nodes (a soft finger's base,
+        ``barrier.soft_body_step``), None where no node is prescribed.
     """
 
     x: np.ndarray
@@ -75,6 +77,7 @@ class StepOutcome:
     forces: np.ndarray
     contacts: cm.ContactState
     iterations: int
+    reaction: np.ndarray | None = None
 
 
 def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np.ndarray,

@@ -124,17 +124,22 @@ class DamageTracker:
         face_curvature: per obstacle index, its in-plane curvature (1/m, negative for
             a concave face; 0 flat).
         face_padded: per obstacle index, whether a soft pad covers it.
+        pad_material: (E Pa, nu) of what covers the padded faces (a deformable finger);
+            None: the soft pad's (``gripper.finger.pad.*``).
     """
 
-    def __init__(self, fruit, config, face_groups, face_curvature, face_padded):
+    def __init__(self, fruit, config, face_groups, face_curvature, face_padded,
+                 pad_material: tuple[float, float] | None = None):
         self.fruit = fruit
         self.bruise_pressure = float(config['fruit.bruise_pressure'])
         self.failure_stress = float(config['fruit.failure_stress'])
         self.failure_strain = config.get('fruit.failure_strain')
         e, nu = config['fruit.flesh.youngs_modulus'], config['fruit.flesh.poisson_ratio']
         self.rigid_modulus = contact_modulus(e, nu)
-        self.pad_modulus = contact_modulus(e, nu, config['gripper.finger.pad.youngs_modulus'],
-                                           config['gripper.finger.pad.poisson_ratio'])
+        if pad_material is None:
+            pad_material = (config['gripper.finger.pad.youngs_modulus'],
+                            config['gripper.finger.pad.poisson_ratio'])
+        self.pad_modulus = contact_modulus(e, nu, *pad_material)
         self.groups = list(face_groups)
         self.curvature = list(face_curvature)
         self.padded = list(face_padded)

@@ -31,11 +31,13 @@ import numpy as np
 
 from gripper_sim.configuration import validate
 from gripper_sim.core import contact as cm
-from gripper_sim.core.barrier import BarrierContact, barrier_step
+from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
+from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.results import Energies, JawWrench, StepResult
+from gripper_sim.core.soft_fingers import SoftFingers
 from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
@@ -71,6 +73,12 @@ class SimulationFacade:
     #: the barrier contact model (``contact.model: ipc``, ``core.barrier``), or None for
     #: the modified mass method's contact passes
     _barrier: BarrierContact | None = None
+    #: the deformable fingers (``core.soft_fingers``), None for rigid ones
+    _soft: SoftFingers | None = None
+    #: the fingers' state (``_substep_soft``): positions (m, 2) m, velocities (m, 2) m/s,
+    #: the fruit's forces on them (m, 2) N, the base reactions (m, 2) N, and which nodes
+    #: touch the fruit (m,) bool; None for rigid fingers
+    _finger: tuple | None = None
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -85,18 +93,29 @@ class SimulationFacade:
         else:
             centre_z = 0.0
         self.initial_positions = rest + self._in_plane(0.0, centre_z)
+        # deformable fingers: the gap is between their backings, which they stand in front of
+        fingers = 2.0 * self._soft.thickness if self._soft is not None else 0.0
         self.initial_gap = (c['gripper.initial_gap'] if c['gripper.initial_gap'] is not None
-                            else min(self.fruit.rest_width + 0.01, c['gripper.max_gap']))
+                            else min(self.fruit.rest_width + 0.01 + fingers,
+                                     c['gripper.max_gap']))
         if self.initial_gap > c['gripper.max_gap']:
             raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
         self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
                              else centre_z)
 
     def _make_solver(self, fast: bool | None = None) -> PatternCachingSolver:
-        """The Newton solver of the fruit's energies, gravity and the pads (if any)."""
+        """The Newton solver of the fruit's energies, gravity, the pads and the
+        deformable fingers (if any). A barrier with deformable fingers has no fixed
+        Hessian pattern: the solver takes its triplets (not the fast kernels)."""
         c = self.config
+        masses, gravity, fingers = self.fruit.masses, self.gravity, []
+        if self._soft is not None:
+            masses = np.concatenate([masses, self._soft.masses])
+            gravity = Gravity(masses, c['world.gravity'], self.dimension)
+            fingers = self._soft.energies
+            fast = False
         return PatternCachingSolver(
-            self.fruit.masses, list(self.fruit.energies) + [self.gravity]
+            masses, list(self.fruit.energies) + [gravity] + fingers
             + ([self._pad] if self._pad is not None else [])
             + ([self._barrier] if self._barrier is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
@@ -125,6 +144,15 @@ class SimulationFacade:
             stiffness=self.kinematics.initial_stiffness,
             x_speed=self.config['gripper.transport_speed'],
             max_effort=self.config['gripper.max_force'])
+        if self._soft is not None:
+            m = self._soft.n_nodes
+            self._finger = (self._soft.placed(self._jaw_origin(self._grip, LEFT),
+                                              self._jaw_origin(self._grip, RIGHT)),
+                            np.zeros((m, 2)), np.zeros((m, 2)), np.zeros((m, 2)),
+                            np.zeros(m, bool))
+            faces = self._faces(self._grip)
+            self._barrier.begin_step(np.vstack([self.q, self._finger[0]]), faces, faces,
+                                     self.dt)
         self._jaw_force = (0.0, 0.0)
         self._gap_override: float | None = None
         #: solves of the steps so far, gap corrections included (``_drive_jaws``)
@@ -301,7 +329,7 @@ class SimulationFacade:
         Raises:
             NewtonFailure: the first solve failed (the state is back at the step's start).
         """
-        if self._barrier is not None:
+        if self._barrier is not None and self._soft is None:
             # the barrier's contact force is not monotone in the gap within a step (the
             # solve starts from a feasible, pushed-ahead outline): the prediction only
             self.gap_solves += 1
@@ -363,12 +391,12 @@ class SimulationFacade:
     def _saved_state(self) -> tuple:
         """What a step changes (the state ``_restore`` returns to)."""
         return (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
-                self._jaw_force)
+                self._jaw_force, self._finger)
 
     def _restore(self, saved: tuple) -> None:
         """Back to a ``_saved_state``."""
         (self.q, self.v, self.contacts, self.contact_forces, self._grip, self._time,
-         self._jaw_force) = saved
+         self._jaw_force, self._finger) = saved
 
     def _jaw_clearance(self) -> float:
         """m, the distance along x from the fruit to the nearest flat jaw face that does
@@ -377,7 +405,7 @@ class SimulationFacade:
         left_n, right_n = self._jaw_force
         if left_n > 0 and right_n > 0:
             return math.inf
-        if (self.config.get('gripper.finger.type', 'flat') != 'flat'
+        if (self.config.get('gripper.finger.type', 'flat') != 'flat' or self._soft is not None
                 or self.config.get('gripper.finger.pad.enabled', False)):
             return math.inf
         grip = self._grip
@@ -421,7 +449,23 @@ class SimulationFacade:
 
     @property
     def obstacle_names(self) -> tuple:
-        return tuple(f.name for f in self._faces_template)
+        names = tuple(f.name for f in self._faces_template)
+        return ('left_jaw', 'right_jaw') + names if self._soft is not None else names
+
+    def _obstacles(self, grip: GripperState):
+        """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
+        (``obstacle_names``) where ``grip`` puts them; a deformable finger counts as a face
+        along its backing."""
+        faces = self._faces(grip)
+        normals = [f.normal for f in faces]
+        velocities = [f.velocity for f in faces]
+        sides = list(self._face_side) + [-1] * (len(faces) - len(self._face_side))
+        if self._soft is not None:
+            normals = [self._in_plane(1.0, 0.0), self._in_plane(-1.0, 0.0)] + normals
+            velocities = [self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
+                                         grip.lift_rate) for sign in (-1.0, 1.0)] + velocities
+            sides = [LEFT, RIGHT] + sides
+        return np.array(normals), np.array(sides, np.int64), np.array(velocities)
 
     def _closing_forces(self, forces, obstacle, faces) -> tuple:
         """(left, right) N, each jaw's hard-contact force on the fruit along its closing
@@ -447,16 +491,22 @@ class SimulationFacade:
             (on_left, on_right) (n,) bool the nodes each jaw holds).
         """
         grip, fruit = self._grip, self.fruit
-        normals = np.array([f.normal for f in self._faces_template])
+        normals, face_sides, face_velocities = self._obstacles(grip)
         held = obstacle >= 0
         normal = np.zeros(len(obstacle))
-        normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
-        side_of_face = np.full(len(self._faces_template) + 1, -1)  # the last: obstacle -1
-        side_of_face[:len(self._face_side)] = self._face_side
+        if self._soft is not None:  # the barrier's force is normal to the finger's outline
+            soft_normal = self._barrier.normal_forces(np.vstack([x, self._finger[0]]).ravel())
+            normal[held] = np.linalg.norm(soft_normal[:len(obstacle)][held], axis=1)
+        else:
+            normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
+        side_of_face = np.append(face_sides, -1)  # the last: obstacle -1
         side_of_node = side_of_face[obstacle]
         sides = (side_of_node == LEFT, side_of_node == RIGHT)
-        wrenches = [_wrench(x[sides[side]] - self._jaw_origin(grip, side), -forces[sides[side]])
-                    for side in (LEFT, RIGHT)]
+        if self._soft is not None:
+            wrenches = self._finger_wrenches(grip)
+        else:
+            wrenches = [_wrench(x[sides[side]] - self._jaw_origin(grip, side),
+                                -forces[sides[side]]) for side in (LEFT, RIGHT)]
         if self._plain_jaws:
             left_n, right_n = (float(np.sum(normal[on])) for on in sides)
         else:  # each jaw's force along the closing axis
@@ -466,9 +516,7 @@ class SimulationFacade:
         touching = bool(np.any(sides[LEFT]) or np.any(sides[RIGHT]))
         both = bool(np.any(sides[LEFT]) and np.any(sides[RIGHT]))
         slip = self._slip_distance(float(centroid[-1] - grip.lift), both, touching)
-        slipping = jaw_contacts_sliding(
-            v, obstacle, side_of_face[:-1], normals,
-            np.array([face.velocity for face in self._faces(grip)]))
+        slipping = jaw_contacts_sliding(v, obstacle, face_sides, normals, face_velocities)
         energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
                             elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
                             gravitational=float(self.gravity.value(x.ravel())))
@@ -484,6 +532,11 @@ class SimulationFacade:
             slipping=slipping, centroid=centroid, energies=energies,
             newton_iterations=iterations, substeps=substeps, gripper_x=grip.x,
             gripper_x_velocity=grip.x_rate)
+        if self._soft is not None:
+            finger_x, _, finger_forces, _, touching = self._finger
+            fields['fingers'] = self._soft.result(finger_x, finger_forces, touching,
+                                                  self._jaw_origin(grip, LEFT),
+                                                  self._jaw_origin(grip, RIGHT))
         return fields, normal, sides
 
     def _contact_forces_and_holders(self) -> tuple[np.ndarray, np.ndarray]:
@@ -520,6 +573,8 @@ class SimulationFacade:
         """One step with the hard contacts (the pads, if any, set up by the caller)."""
         grip_new = self._advance_gripper(dt)
         new_faces = self._faces(grip_new)
+        if self._soft is not None:
+            return self._substep_soft(dt, grip_new, new_faces)
         if self._barrier is not None:
             outcome = barrier_step(self.solver, self._barrier, self.q, self.v,
                                    self._faces(self._grip), new_faces, dt)
@@ -535,6 +590,47 @@ class SimulationFacade:
         self._jaw_force = self._closing_forces(outcome.forces, outcome.contacts.obstacle,
                                                new_faces)
         return outcome.iterations
+
+    def _substep_soft(self, dt: float, grip_new: GripperState, new_faces: list) -> int:
+        """One step of the fruit and the deformable fingers (``barrier.soft_body_step``),
+        the fingers' bases on the jaws where ``grip_new`` puts them; Newton iterations."""
+        soft, n = self._soft, self.fruit.n_nodes
+        finger_x, finger_v = self._finger[:2]
+        targets = soft.base_targets(self._jaw_origin(grip_new, LEFT),
+                                    self._jaw_origin(grip_new, RIGHT))
+        outcome = soft_body_step(self.solver, self._barrier, np.vstack([self.q, finger_x]),
+                                 np.vstack([self.v, finger_v]), soft.base, targets,
+                                 self._faces(self._grip), new_faces, dt)
+        partner = outcome.contacts.obstacle
+        self.q, self.v = outcome.x[:n], outcome.v[:n]
+        self.contacts = cm.ContactState.empty(n)
+        # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
+        # right_jaw (the fingers), then the faces
+        self.contacts.obstacle = np.where(partner[:n] > 0, partner[:n] - 1, -1)
+        self.contact_forces = outcome.forces[:n]
+        self._finger = (outcome.x[n:], outcome.v[n:], outcome.forces[n:],
+                        outcome.reaction[n:], partner[n:] == 0)
+        self._grip = grip_new
+        self._time += dt
+        wrenches = self._finger_wrenches(grip_new)
+        self._jaw_force = (-float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0]))
+        return outcome.iterations
+
+    def _finger_wrenches(self, grip: GripperState) -> list[JawWrench]:
+        """What each jaw feels at its deformable finger's base nodes (the reaction that
+        holds them on it), about the backing's centre; zero for a finger that does not
+        touch the fruit (its inertia and weight are no grip)."""
+        soft = self._soft
+        x, _, _, reaction, touching = self._finger
+        base = soft.base - soft.first
+        m = soft.body.n_nodes
+        wrenches = []
+        for side, mine in zip((LEFT, RIGHT), soft.sides_of_base()):
+            nodes = base[mine]
+            if not np.any(touching[side * m:(side + 1) * m]):
+                nodes = nodes[:0]
+            wrenches.append(_wrench(x[nodes] - self._jaw_origin(grip, side), -reaction[nodes]))
+        return wrenches
 
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:
         """Step ``dt``, halving it (recursively) while Newton fails; (iterations, substeps)."""

@@ -104,4 +104,5 @@ def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial) -> FingerBo
         tip_node=int(plan.tip_node), depth=float(b),
         rod_edges=np.concatenate(edges), rod_axial_stiffness=np.concatenate(axial),
         bend_triples=np.array(triples, dtype=np.int64).reshape(-1, 3),
-        bend_stiffness=np.array(stiffness), bend_lengths=np.array(lengths))
+        bend_stiffness=np.array(stiffness), bend_lengths=np.array(lengths),
+        youngs_modulus=e_mod, poisson_ratio=material.poisson_ratio)

@@ -38,7 +38,8 @@ class FingerBody:
             length each triple's curvature stands for (empty: the mean of its two rest
             edge lengths; see ``RodBending``).
         triangles: (n_tri, 3) counter-clockwise solid triangles; youngs_modulus: Pa;
-            poisson_ratio: -.
+            poisson_ratio: -: the material of the triangles, and of the rods' surface
+            (the contact modulus of the damage estimate).
     """
 
     name: str
@@ -61,15 +62,30 @@ class FingerBody:
     def n_nodes(self) -> int:
         return len(self.masses)
 
-    def rod_energies(self) -> list[Energy]:
-        """The stretching and bending energies of the rods, of the flat position vector
-        of this body's nodes (``2 n_nodes``); empty for a body without rods."""
+    def rod_energies(self, copies: tuple[np.ndarray, ...] | None = None,
+                     rest_positions: np.ndarray | None = None) -> list[Energy]:
+        """The stretching and bending energies of the rods (empty for a body without).
+
+        Args:
+            copies: for a state holding several copies of the body (the two jaws'
+                fingers), each copy's (n_nodes,) global node indices; None: the body
+                alone, q of ``2 n_nodes``.
+            rest_positions: (N, 2) m, the global rest positions (each copy's rest shape
+                at its nodes, e.g. mirrored); None with ``copies`` None.
+        """
         if not len(self.rod_edges):
             return []
-        x0 = self.rest_positions
-        rest = np.linalg.norm(x0[self.rod_edges[:, 1]] - x0[self.rod_edges[:, 0]], axis=1)
-        energies: list[Energy] = [Stretching(self.rod_edges, rest, self.rod_axial_stiffness)]
+        if copies is None:
+            copies, rest_positions = (np.arange(self.n_nodes),), self.rest_positions
+        n = len(copies)
+        edges = np.vstack([nodes[self.rod_edges] for nodes in copies])
+        rest = np.linalg.norm(rest_positions[edges[:, 1]] - rest_positions[edges[:, 0]],
+                              axis=1)
+        energies: list[Energy] = [Stretching(edges, rest,
+                                             np.tile(self.rod_axial_stiffness, n))]
         if len(self.bend_triples):
-            lengths = self.bend_lengths if len(self.bend_lengths) else None
-            energies.append(RodBending(self.bend_triples, x0, self.bend_stiffness, lengths))
+            lengths = np.tile(self.bend_lengths, n) if len(self.bend_lengths) else None
+            energies.append(RodBending(np.vstack([nodes[self.bend_triples] for nodes in copies]),
+                                       rest_positions, np.tile(self.bend_stiffness, n),
+                                       lengths))
         return energies

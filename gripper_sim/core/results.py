@@ -66,6 +66,29 @@ class Energies:
 
 
 @dataclass(frozen=True)
+class FingerResult:
+    """The deformable fingers after a step (``gripper.finger.type`` solid_pad, ...).
+
+    Attributes:
+        positions: (2 m, 2) m, the left finger's nodes, then the right finger's.
+        contact_forces: (2 m, 2) N, the fruit's force on each finger node (barrier and
+            friction).
+        tip_displacement: (2, 2) m, each finger's tip (left, right) moved from where the
+            jaw carries its rest position, in the finger's frame: x towards the fruit,
+            z up (a Fin Ray finger's tip bending towards the fruit has x > 0).
+        contact_length: (2,) m, the length of each finger's outline touching the fruit.
+        surface_edges: (e, 2) the fingers' outline edges that may touch the fruit
+            (indices into ``positions``).
+    """
+
+    positions: np.ndarray
+    contact_forces: np.ndarray
+    tip_displacement: np.ndarray
+    contact_length: np.ndarray
+    surface_edges: np.ndarray
+
+
+@dataclass(frozen=True)
 class StepResult:
     """Everything one step produces.
 
@@ -101,6 +124,10 @@ class StepResult:
             where a producer does not compute it.
         gripper_x: m, x of the gripper centre (the sideways transport axis).
         gripper_x_velocity: m/s.
+        fingers: the deformable fingers (their nodes, forces, tip displacement, contact
+            length), None for rigid fingers. With deformable fingers the jaw wrenches
+            are what the jaws feel at the fingers' bases, ``left_jaw_x``/``right_jaw_x``
+            the backings' x, and the obstacles 'left_jaw'/'right_jaw' the fingers.
     """
 
     time: float
@@ -131,6 +158,7 @@ class StepResult:
     damage: 'Damage | None' = None
     gripper_x: float = 0.0
     gripper_x_velocity: float = 0.0
+    fingers: FingerResult | None = None
 
     def in_contact_with(self, name: str) -> bool:
         """Whether any node touches the obstacle called ``name`` (or one of its faces,

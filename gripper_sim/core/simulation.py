@@ -15,6 +15,7 @@ from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core import barrier
 from gripper_sim.core.damage import DamageTracker
 from gripper_sim.core.energies import Gravity
+from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.fast import FastPath
 from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics
@@ -22,6 +23,7 @@ from gripper_sim.core.measures import deformation, face_contact_length, tributar
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.results import StepResult
+from gripper_sim.core.soft_fingers import SoftFingers, check_soft_fingers, finger_body, is_deformable
 from gripper_sim.errors import ConfigError
 from gripper_sim.geometry import fingers
 
@@ -36,6 +38,8 @@ class Simulation(SimulationFacade):
         fast: step with the numba kernels (``gripper_sim.core.fast``) when they cover the
             fruit model; None (default) = whenever numba is installed, False = always the
             generic numpy/scipy path (the reference), True = require the fast path.
+        finger: a deformable finger's body to put on the jaws instead of the configured
+            finger (a new geometry, a test body); None: ``gripper.finger.type``'s.
 
     Commands take effect on the next step. Invalid commands raise ``CommandError``
     and leave the simulation unchanged.
@@ -43,22 +47,34 @@ class Simulation(SimulationFacade):
 
     dimension = 2
 
-    def __init__(self, config: Mapping[str, Any], fast: bool | None = None):
+    def __init__(self, config: Mapping[str, Any], fast: bool | None = None,
+                 finger: FingerBody | None = None):
         self.config = dict(config)
         self.fruit: FruitModel = build_fruit(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config
+        if is_deformable(c) or finger is not None:
+            check_soft_fingers(c, fast)
+            if finger is None:
+                finger = finger_body(c, self.fruit.depth)
+            self._soft = SoftFingers(finger, self.fruit.n_nodes,
+                                     c['contact.jaw.static_friction'],
+                                     c['contact.jaw.kinetic_friction'])
         self._place_fruit()
+        if self._soft is not None:
+            self._soft.check_fit(c, self.initial_gap, self.fruit.rest_width)
         self.gravity = Gravity(self.fruit.masses, c['world.gravity'])
-        self._facets = fingers.left_facets(c)
-        self._plain_jaws = (c['gripper.finger.type'] == 'flat'
+        self._facets = fingers.left_facets(c) if self._soft is None else []
+        self._plain_jaws = (c['gripper.finger.type'] == 'flat' and self._soft is None
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
         barrier.check_supported(c, self.dimension, fast)
-        if c['contact.model'] == 'ipc':
+        if c['contact.model'] == 'ipc' or self._soft is not None:
+            soft = self._soft
             self._barrier = barrier.BarrierContact(
-                self.fruit.n_nodes, self.fruit.surface, self.fruit.skin_edges,
-                barrier.BarrierSettings.from_config(c))
+                self.fruit.n_nodes + (soft.n_nodes if soft else 0), self.fruit.surface,
+                self.fruit.skin_edges, barrier.BarrierSettings.from_config(c),
+                bodies=soft.soft_bodies if soft else ())
             if c['fruit.initial_height'] is None and c['world.table']:
                 # a barrier needs a positive gap: the fruit starts just above the table
                 self.initial_positions[:, 1] += barrier.START_GAP_FRACTION * c['contact.ipc.dhat']
@@ -77,6 +93,13 @@ class Simulation(SimulationFacade):
         self.reset()
 
     def _make_damage(self) -> DamageTracker:
+        if self._soft is not None:  # the obstacles: the two fingers, then the faces
+            n = len(self._faces_template) + 2
+            body = self._soft.body
+            return DamageTracker(self.fruit, self.config, face_groups=list(range(n)),
+                                 face_curvature=[0.0] * n,
+                                 face_padded=[i < 2 for i in range(n)],
+                                 pad_material=(body.youngs_modulus, body.poisson_ratio))
         return DamageTracker(
             self.fruit, self.config, face_groups=self._face_groups(),
             face_curvature=self._face_curvatures(),
@@ -89,7 +112,9 @@ class Simulation(SimulationFacade):
         jaw = dict(half_length=0.5 * c['gripper.jaw_height'], thickness=c['gripper.jaw_thickness'],
                    static_friction=c['contact.jaw.static_friction'],
                    kinetic_friction=c['contact.jaw.kinetic_friction'])
-        if self._plain_jaws:
+        if self._soft is not None:  # the deformable fingers are no faces
+            faces, self._face_side, self._face_offsets = [], [], []
+        elif self._plain_jaws:
             faces = [FlatFace('left_jaw', np.zeros(2), np.array([1.0, 0.0]), **jaw),
                      FlatFace('right_jaw', np.zeros(2), np.array([-1.0, 0.0]), **jaw)]
             self._face_side, self._face_offsets = [LEFT, RIGHT], [np.zeros(2), np.zeros(2)]
@@ -158,10 +183,15 @@ class Simulation(SimulationFacade):
         fields, normal, (on_left, on_right) = self._common_measures(
             x, self.v, forces, obstacle, iterations, substeps)
         fruit, faces = self.fruit, self._faces(self._grip)
-        if self._barrier is not None:  # the outline lies a barrier gap off the faces
-            faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
-        length = sum(face_contact_length(fruit, x, faces[index], self.contacts.obstacle == index)
-                     for index in range(len(self._face_side)))
+        if self._soft is not None:  # the fruit's outline in pairs with the fingers
+            on_finger = (on_left | on_right)[fruit.surface]
+            length = float(np.sum(tributary_lengths(fruit, x)[on_finger]))
+        else:
+            if self._barrier is not None:  # the outline lies a barrier gap off the faces
+                faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
+            length = sum(face_contact_length(fruit, x, faces[index],
+                                             self.contacts.obstacle == index)
+                         for index in range(len(self._face_side)))
         if self._pad is not None:
             on_pad = (self.contacts.obstacle < 0) & (self._pad.holder >= 0)
             length += float(np.sum(tributary_lengths(fruit, x)[on_pad[fruit.surface]]))

