@@ -23,6 +23,8 @@ from typing import Any, Iterable, Mapping
 import yaml
 
 from gripper_sim.errors import ConfigError, ConfigWarning
+from gripper_sim.geometry.fin_ray import check_fin_ray
+from gripper_sim.geometry.finger_materials import MATERIAL_NAMES
 from gripper_sim.geometry.fingers import check_finger
 from gripper_sim.geometry.shapes import outline_from_config
 
@@ -198,14 +200,51 @@ SCHEMA: dict[str, Key] = {
                                '(concave circular arc of radius gripper.finger.radius); '
                                'vgroove (a V of opening gripper.finger.groove_angle); '
                                'solid_pad (a deformable elastic block on the jaw, '
-                               'gripper.finger.solid_pad.*; 2D)', 'str',
-                               choices=RIGID_FINGERS + ('solid_pad',)),
+                               'gripper.finger.solid_pad.*; 2D); fin_ray (a deformable Fin Ray '
+                               'finger, gripper.finger.fin_ray.*; 2D)', 'str',
+                               choices=RIGID_FINGERS + ('solid_pad', 'fin_ray')),
     'gripper.finger.radius': Key(0.05, 'm', 'arc: radius of the concave face (its chord is '
                                  'gripper.jaw_height)', low=1e-3, high=10.0),
     'gripper.finger.groove_angle': Key(120.0, 'deg', 'vgroove: opening angle between the '
                                        'two flanks (180 = flat)', low=30.0, high=179.0),
     'gripper.finger.segments': Key(8, '-', 'arc: number of flat facets the arc is made '
                                    'of', 'int', 2, 64),
+    'gripper.finger.fin_ray.length': Key(0.06, 'm', 'fin_ray: height of the finger along z '
+                                         '(base on the jaw at the top, tip at the bottom)',
+                                         low=0.01, high=0.5),
+    'gripper.finger.fin_ray.base_width': Key(0.025, 'm', 'fin_ray: width of the base along x '
+                                             '(how far the front beam stands out of the '
+                                             'jaw at the base)', low=0.002, high=0.2),
+    'gripper.finger.fin_ray.depth': Key(None, 'm', 'fin_ray: width of the finger along the '
+                                        'jaw (out of the plane); null = the fruit\'s depth '
+                                        '(fruit.depth), as the planar model assumes',
+                                        low=1e-3, high=0.5, nullable=True),
+    'gripper.finger.fin_ray.beam_thickness': Key(0.0012, 'm', 'fin_ray: thickness of the '
+                                                 'front and back beams', low=0.0, high=0.02,
+                                                 open_low=True),
+    'gripper.finger.fin_ray.rib_thickness': Key(0.0008, 'm', 'fin_ray: thickness of each rib',
+                                                low=0.0, high=0.02, open_low=True),
+    'gripper.finger.fin_ray.rib_count': Key(4, '-', 'fin_ray: number of ribs (cross beams), '
+                                            'equally spaced along the back beam', 'int', 1,
+                                            40),
+    'gripper.finger.fin_ray.rib_angle': Key(0.0, 'deg', 'fin_ray: angle of the ribs to the '
+                                            'base (0: parallel to it; positive: front ends '
+                                            'towards the tip)', low=-60.0, high=60.0),
+    'gripper.finger.fin_ray.tip_offset': Key(0.0, 'm', 'fin_ray: x of the tip (0: the back '
+                                             'beam runs along the jaw; base_width / 2: an '
+                                             'isosceles finger)', low=0.0, high=0.2),
+    'gripper.finger.fin_ray.element_length': Key(0.002, 'm', 'fin_ray: rod element length '
+                                                 'of the discretisation', low=0.0, high=0.05,
+                                                 open_low=True),
+    'gripper.finger.fin_ray.material': Key('tpu', '-', 'fin_ray: tpu (printed TPU, E = 100 '
+                                           'MPa); silicone (E = 1 MPa); custom '
+                                           '(gripper.finger.fin_ray.youngs_modulus and '
+                                           'density)', 'str', choices=MATERIAL_NAMES),
+    'gripper.finger.fin_ray.youngs_modulus': Key(None, 'Pa', 'fin_ray, custom material: '
+                                                 'Young modulus E', low=1e3, high=1e11,
+                                                 nullable=True),
+    'gripper.finger.fin_ray.density': Key(1200.0, 'kg/m^3', 'fin_ray, custom material: '
+                                          'density', low=50.0, high=20000.0),
     'gripper.finger.pad.enabled': Key(False, '-', 'a soft elastic pad (silicone-like) on '
                                       'the jaw face', 'bool'),
     'gripper.finger.pad.thickness': Key(0.003, 'm', 'pad thickness t', low=0.0, high=0.05,
@@ -491,6 +530,7 @@ def validate(flat: Mapping[str, Any]) -> dict[str, Any]:
     _check_shape(result)
     if result.get('gripper.finger.type') == 'arc':
         check_finger(result)
+    check_fin_ray(result)
     if result.get('dimension') == 3 and result.get('gripper.finger.type') not in RIGID_FINGERS:
         raise ConfigError(f"config key 'gripper.finger.type' = {result['gripper.finger.type']}"
                           ': deformable fingers are 2D only so far (dimension 3 takes '
@@ -622,6 +662,13 @@ def no_effect_reason(key: str, config: Mapping[str, Any]) -> str | None:
         return f"the finger is {finger}, not an arc: set 'gripper.finger.type' = arc"
     if key == 'gripper.finger.groove_angle' and finger != 'vgroove':
         return f"the finger is {finger}, not a V-groove: set 'gripper.finger.type' = vgroove"
+    if key.startswith('gripper.finger.fin_ray.') and finger != 'fin_ray':
+        return f"the finger is {finger}, not a Fin Ray: set 'gripper.finger.type' = fin_ray"
+    if (key in ('gripper.finger.fin_ray.youngs_modulus', 'gripper.finger.fin_ray.density')
+            and config['gripper.finger.fin_ray.material'] != 'custom'):
+        return ("the Fin Ray's material is "
+                f"{config['gripper.finger.fin_ray.material']}: set "
+                "'gripper.finger.fin_ray.material' = custom")
     if key.startswith('gripper.finger.solid_pad.') and finger != 'solid_pad':
         return f"the finger is {finger}, not a solid pad: set 'gripper.finger.type' = solid_pad"
     if key == 'contact.model' and finger not in RIGID_FINGERS:

@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gripper_sim.core.energies import Energy, RodBending, Stretching
+
 
 def _ints(shape) -> np.ndarray:
     return np.zeros(shape, np.int64)
@@ -32,9 +34,12 @@ class FingerBody:
         depth: m, out-of-plane depth (the finger's width along the jaw).
         rod_edges: (r, 2) rod segments; rod_axial_stiffness: (r,) EA, N.
         bend_triples: (t, 3) node triples (i, j, k) bent at j; bend_stiffness: (t,) EI,
-            N m^2 (rest angle: that of ``rest_positions``).
+            N m^2 (rest angle: that of ``rest_positions``); bend_lengths: (t,) m, the rod
+            length each triple's curvature stands for (empty: the mean of its two rest
+            edge lengths; see ``RodBending``).
         triangles: (n_tri, 3) counter-clockwise solid triangles; youngs_modulus: Pa;
-            poisson_ratio: -.
+            poisson_ratio: -: the material of the triangles, and of the rods' surface
+            (the contact modulus of the damage estimate).
     """
 
     name: str
@@ -48,6 +53,7 @@ class FingerBody:
     rod_axial_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
     bend_triples: np.ndarray = field(default_factory=lambda: _ints((0, 3)))
     bend_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    bend_lengths: np.ndarray = field(default_factory=lambda: np.zeros(0))
     triangles: np.ndarray = field(default_factory=lambda: _ints((0, 3)))
     youngs_modulus: float = 0.0
     poisson_ratio: float = 0.0
@@ -55,3 +61,31 @@ class FingerBody:
     @property
     def n_nodes(self) -> int:
         return len(self.masses)
+
+    def rod_energies(self, copies: tuple[np.ndarray, ...] | None = None,
+                     rest_positions: np.ndarray | None = None) -> list[Energy]:
+        """The stretching and bending energies of the rods (empty for a body without).
+
+        Args:
+            copies: for a state holding several copies of the body (the two jaws'
+                fingers), each copy's (n_nodes,) global node indices; None: the body
+                alone, q of ``2 n_nodes``.
+            rest_positions: (N, 2) m, the global rest positions (each copy's rest shape
+                at its nodes, e.g. mirrored); None with ``copies`` None.
+        """
+        if not len(self.rod_edges):
+            return []
+        if copies is None:
+            copies, rest_positions = (np.arange(self.n_nodes),), self.rest_positions
+        n = len(copies)
+        edges = np.vstack([nodes[self.rod_edges] for nodes in copies])
+        rest = np.linalg.norm(rest_positions[edges[:, 1]] - rest_positions[edges[:, 0]],
+                              axis=1)
+        energies: list[Energy] = [Stretching(edges, rest,
+                                             np.tile(self.rod_axial_stiffness, n))]
+        if len(self.bend_triples):
+            lengths = np.tile(self.bend_lengths, n) if len(self.bend_lengths) else None
+            energies.append(RodBending(np.vstack([nodes[self.bend_triples] for nodes in copies]),
+                                       rest_positions, np.tile(self.bend_stiffness, n),
+                                       lengths))
+        return energies

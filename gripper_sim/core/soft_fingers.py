@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gripper_sim.core.barrier import SoftBody
-from gripper_sim.core.energies import NeoHookeanTriangles, Stretching
+from gripper_sim.core.energies import NeoHookeanTriangles
+from gripper_sim.core.fin_ray import fin_ray_from_config
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.results import FingerResult
 from gripper_sim.core.solid_pad import solid_pad_body
@@ -30,9 +31,10 @@ from gripper_sim.errors import ConfigError
 
 #: the deformable finger types and the builders of their bodies: (config, depth m) ->
 #: FingerBody
-DEFORMABLE_FINGERS = {'solid_pad': solid_pad_body}
+DEFORMABLE_FINGERS = {'solid_pad': solid_pad_body, 'fin_ray': fin_ray_from_config}
 #: the key that sets how far each deformable finger reaches in front of its jaw
-THICKNESS_KEYS = {'solid_pad': 'gripper.finger.solid_pad.thickness'}
+THICKNESS_KEYS = {'solid_pad': 'gripper.finger.solid_pad.thickness',
+                  'fin_ray': 'gripper.finger.fin_ray.base_width'}
 
 #: the right finger is the left one mirrored in x
 MIRROR = np.array([-1.0, 1.0])
@@ -129,14 +131,7 @@ class SoftFingers:
                                    self.nodes[1][body.triangles[:, [0, 2, 1]]]])
             energies.append(NeoHookeanTriangles(triangles, rest, body.youngs_modulus,
                                                 body.poisson_ratio, body.depth))
-        if body.rod_edges.size:
-            edges = np.vstack([side[body.rod_edges] for side in self.nodes])
-            lengths = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
-            energies.append(Stretching(edges, lengths, np.tile(body.rod_axial_stiffness, 2)))
-        if body.bend_triples.size:
-            raise ConfigError(f"config key 'gripper.finger.type': {body.name} has bending "
-                              'rods, which this build cannot simulate yet')
-        return energies
+        return energies + body.rod_energies(self.nodes, rest)
 
     def check_fit(self, config, open_gap: float, fruit_width: float) -> None:
         """ConfigError unless both fingers fit in the jaws' stroke with room between them,

@@ -68,7 +68,7 @@ def profile(config) -> np.ndarray:
     """(k, 2) m, the left jaw's face profile from its bottom rim to its top rim."""
     h = config['gripper.jaw_height']
     kind = config['gripper.finger.type']
-    if kind in ('flat', 'solid_pad'):  # a deformable finger's backing is flat
+    if kind in ('flat', 'solid_pad', 'fin_ray'):  # a deformable finger's backing is flat
         return np.array([[0.0, -0.5 * h], [0.0, 0.5 * h]])
     if kind == 'vgroove':
         depth = 0.5 * h / math.tan(math.radians(0.5 * config['gripper.finger.groove_angle']))

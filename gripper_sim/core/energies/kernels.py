@@ -82,7 +82,7 @@ def _angle_hessian(vx, vz, out, sign):
 
 @njit(cache=True)
 def bending(x, triples, phi0, k, grad, data, scatter, hessian):
-    """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RingBending``).
+    """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RodBending``).
 
     Args:
         x: (n, 2) m.  triples: (n_t, 3) previous, middle, next node.  phi0: (n_t,) rad.

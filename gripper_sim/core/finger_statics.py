@@ -1,0 +1,57 @@
+"""A deformable finger on its own: its base held, loads on its nodes, the static
+equilibrium solved by the project's Newton (the implicit Euler step with a long step and
+the load applied in increments, so that the inertia term is a vanishing regulariser).
+For structural checks and figures, without fruit or jaws.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gripper_sim.core.energies import ConstantForce
+from gripper_sim.core.finger_body import FingerBody
+from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+
+#: s, the step of the quasi-static solve: m / dt^2 (a few 1e-4 N/m for a finger's grams)
+#: is far below the stiffness of any finger (> 1 N/m)
+STATIC_STEP = 1.0
+
+
+@dataclass(frozen=True)
+class StaticState:
+    """Attributes:
+        positions: (n_nodes, 2) m, the deformed finger.
+        base_reaction: (2,) N, the force the base exerts on the finger (x, z).
+    """
+
+    positions: np.ndarray
+    base_reaction: np.ndarray
+
+
+def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8,
+                       tolerance: float = 1e-10) -> StaticState:
+    """The finger under ``forces`` with its base nodes fixed at rest.
+
+    Args:
+        forces: (n_nodes, 2) N, constant loads on the nodes (x, z).
+        increments: load steps from 0 to the full load (each a Newton solve).
+        tolerance: m, Newton stops when the largest update is below it.
+
+    Raises:
+        NewtonFailure: no equilibrium found.
+    """
+    constraints = StepConstraints.free(body.n_nodes)
+    constraints.filters[body.base_nodes] = 0.0
+    elastic = body.rod_energies()
+    q = body.rest_positions.ravel().copy()
+    still = np.zeros_like(q)
+    solution = None
+    for fraction in list(np.linspace(1.0 / increments, 1.0, increments)) + [1.0]:
+        load = ConstantForce(fraction * np.asarray(forces, dtype=float).ravel())
+        solver = ImplicitEulerSolver(body.masses, elastic + [load],
+                                     tolerance=tolerance / STATIC_STEP, max_iterations=100)
+        solution = solver.solve(q, still, STATIC_STEP, q.copy(), constraints)
+        q = solution.q
+    reaction = solution.reaction.reshape(-1, 2)[body.base_nodes]
+    return StaticState(q.reshape(-1, 2), reaction.sum(axis=0))

@@ -1,0 +1,216 @@
+"""The Fin Ray finger's plane geometry: beams, ribs and their discretisation into rods.
+
+Finger frame (as ``gripper_sim.core.finger_body``): x (m) from the jaw's backing (x = 0)
+towards the fruit, z (m) up, z = 0 at the jaw's centre height. The finger is a triangle
+of height ``length``: its base, ``base_width`` long along x, is on the jaw at the top
+(z = +length / 2, from x = 0 to x = base_width); the back beam runs down the backing
+(x = 0) to the tip (x = 0, z = -length / 2); the front beam, the side that touches the
+fruit, runs from the base's front corner (base_width, +length / 2) down to the tip. The
+two fingers thus open into a V towards their tips, as Fin Ray fingers on a parallel
+gripper do (Festo's gripper finger DHAS: two flexible polyurethane bands meeting at the
+tip, joined by intermediate bridges).
+
+``rib_count`` ribs start on the back beam at equal spacing between base and tip and run
+to the front beam at ``rib_angle`` to the base (0: parallel to the base, i.e. horizontal
+and perpendicular to the back beam; positive: their front ends lower, towards the tip).
+Every member (base, back beam, front beam, each rib) is a chain of rod elements about
+``element_length`` long along its centre line, with nodes where members meet.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gripper_sim.errors import ConfigError
+
+PREFIX = 'gripper.finger.fin_ray.'
+
+
+@dataclass(frozen=True)
+class FinRayGeometry:
+    """Attributes (m unless noted):
+        length: height of the finger along z.
+        base_width: width of its base along x (the front beam's distance from the
+            backing at the base).
+        depth: out-of-plane depth (along the jaw); None: not chosen yet (the fruit's,
+            which the physics knows; the plane geometry and its checks do not need it).
+        beam_thickness: of the front and back beams.
+        rib_thickness: of each rib.
+        rib_count: number of ribs (0: the rib-free frame of two beams).
+        rib_angle: deg, of the ribs to the base (positive: front end towards the tip).
+        element_length: rod element length of the discretisation.
+        tip_offset: x of the tip (0: the back beam runs along the backing; base_width / 2:
+            an isosceles finger).
+    """
+
+    length: float
+    base_width: float
+    depth: float | None
+    beam_thickness: float
+    rib_thickness: float
+    rib_count: int
+    rib_angle: float
+    element_length: float
+    tip_offset: float
+
+    @classmethod
+    def from_config(cls, config, fruit_depth: float | None = None) -> 'FinRayGeometry':
+        """From the ``gripper.finger.fin_ray.*`` keys of a flat configuration; a null
+        depth is ``fruit_depth`` (m)."""
+        values = {name: config[PREFIX + name] for name in cls.__dataclass_fields__}
+        if values['depth'] is None:
+            values['depth'] = fruit_depth
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class Member:
+    """A chain of rod elements. Attributes: name ('base', 'back', 'front', 'rib0', ...);
+    nodes (k,) in order along it; thickness (m); rigid: part of the jaw (the base)."""
+
+    name: str
+    nodes: np.ndarray
+    thickness: float
+    rigid: bool = False
+
+
+@dataclass(frozen=True)
+class FinRayLayout:
+    """Attributes:
+        positions: (m, 2) m, nodes in the finger frame.
+        members: the chains (base first, then back and front beams, then the ribs).
+        base_nodes: (k,) the nodes of the base (on the jaw).
+        front_nodes: (f,) the front beam's nodes from the tip up to the base.
+        tip_node: where the beams meet.
+        rib_ends: (rib_count, 2) m, each rib's front end on the front beam.
+    """
+
+    positions: np.ndarray
+    members: list[Member]
+    base_nodes: np.ndarray
+    front_nodes: np.ndarray
+    tip_node: int
+    rib_ends: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+
+def _error(name: str, value, reason: str) -> ConfigError:
+    return ConfigError(f"config key '{PREFIX}{name}' = {value:g}: {reason}")
+
+
+def rib_points(geometry: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """((n, 2), (n, 2)) m: each rib's back end on the back beam and front end on the
+    front beam, top to bottom.
+
+    Raises:
+        ConfigError: a rib that leaves the finger (its front end beyond the tip or above
+            the base) or ribs that intersect (closer than a rib thickness).
+    """
+    g = geometry
+    n = int(g.rib_count)
+    half = 0.5 * g.length
+    spacing = g.length / (n + 1)
+    heights = spacing * np.arange(1, n + 1)
+    back = np.stack([g.tip_offset * heights / g.length, half - heights], axis=1)
+    angle = math.radians(g.rib_angle)
+    direction = np.array([math.cos(angle), -math.sin(angle)])
+    corner = np.array([g.base_width, half])
+    along = np.array([g.tip_offset, -half]) - corner          # front beam, base corner -> tip
+    beam_length = float(np.hypot(*along))
+    step = back[1] - back[0] if n > 1 else np.zeros(2)
+    gap = abs(direction[0] * step[1] - direction[1] * step[0])   # between parallel ribs
+    if n > 1 and gap <= g.rib_thickness:
+        raise _error('rib_count', n, f'the ribs intersect: {n} ribs at {g.rib_angle:g} deg '
+                     f'are {gap * 1e3:.3g} mm apart, not more than their thickness '
+                     f'{g.rib_thickness * 1e3:.3g} mm')
+    fronts = np.empty((n, 2))
+    margin = max(g.beam_thickness, g.rib_thickness)
+    for k in range(n):
+        # back[k] + r direction = corner + s along
+        r, s = np.linalg.solve(np.stack([direction, -along], axis=1), corner - back[k])
+        if r <= 0 or not margin <= s * beam_length <= beam_length - margin:
+            where = 'beyond the tip' if s > 0.5 else 'above the base'
+            raise _error('rib_angle', g.rib_angle,
+                         f'rib {k + 1} of {n} leaves the finger: its front end falls {where} '
+                         f'(ribs start on the back beam {spacing * 1e3:.3g} mm apart)')
+        fronts[k] = corner + s * along
+    return back, fronts
+
+
+def check_fin_ray(config) -> None:
+    """ConfigError naming the key if the Fin Ray of a flat configuration cannot be built
+    (only when ``gripper.finger.type`` is fin_ray). Whether two fingers fit the jaws'
+    stroke with the fruit between them is the simulation's check (it knows the fruit's
+    width and the open gap)."""
+    if config.get('gripper.finger.type') != 'fin_ray':
+        return
+    if (config[PREFIX + 'material'] == 'custom'
+            and config.get(PREFIX + 'youngs_modulus') is None):
+        raise ConfigError(f"config key '{PREFIX}youngs_modulus' must be set for the custom "
+                          'material')
+    geometry = FinRayGeometry.from_config(config)
+    check_geometry(geometry)
+
+
+def check_geometry(geometry: FinRayGeometry) -> None:
+    """ConfigError naming the key for a geometry that cannot be built."""
+    g = geometry
+    for name in ('length', 'base_width', 'depth', 'beam_thickness', 'rib_thickness',
+                 'element_length'):
+        value = getattr(g, name)
+        if name == 'depth' and value is None:
+            continue
+        if not (math.isfinite(value) and value > 0):
+            raise _error(name, value, 'must be positive')
+    if g.rib_count < 0:
+        raise _error('rib_count', g.rib_count, 'must not be negative')
+    if g.beam_thickness >= 0.5 * g.base_width:
+        raise _error('beam_thickness', g.beam_thickness,
+                     f'the beams fill the base ({g.base_width:g} m wide): it must be below '
+                     'half the base width')
+    front_most = g.base_width - 2 * g.beam_thickness
+    if not 0.0 <= g.tip_offset <= front_most:
+        raise _error('tip_offset', g.tip_offset,
+                     'the tip must lie between the backing and the front corner: 0 to '
+                     f'base_width - 2 beam_thickness ({front_most:g} m)')
+    if g.element_length > 0.25 * g.length:
+        raise _error('element_length', g.element_length,
+                     f'too coarse: at most a quarter of the length ({g.length:g} m)')
+    rib_points(g)
+
+
+def layout(geometry: FinRayGeometry) -> FinRayLayout:
+    """The nodes and member chains of a checked geometry (``check_geometry``)."""
+    g = geometry
+    half = 0.5 * g.length
+    backs, fronts = rib_points(g) if g.rib_count else (np.zeros((0, 2)), np.zeros((0, 2)))
+    positions: list[np.ndarray] = []
+
+    def node(point) -> int:
+        positions.append(np.asarray(point, dtype=float))
+        return len(positions) - 1
+
+    def chain(ends: list[int]) -> np.ndarray:
+        """Nodes along the polyline through the existing nodes ``ends``, elements of
+        about ``element_length``."""
+        nodes = [ends[0]]
+        for a, b in zip(ends[:-1], ends[1:]):
+            pa, pb = positions[a], positions[b]
+            count = max(1, math.ceil(float(np.hypot(*(pb - pa))) / g.element_length - 1e-9))
+            nodes += [node(pa + (pb - pa) * i / count) for i in range(1, count)] + [b]
+        return np.array(nodes, dtype=np.int64)
+
+    back_corner = node([0.0, half])
+    front_corner = node([g.base_width, half])
+    tip = node([g.tip_offset, -half])
+    back_joints = [node(p) for p in backs]
+    front_joints = [node(p) for p in fronts]
+    members = [Member('base', chain([back_corner, front_corner]), g.beam_thickness, True),
+               Member('back', chain([back_corner, *back_joints, tip]), g.beam_thickness),
+               Member('front', chain([tip, *front_joints[::-1], front_corner]),
+                      g.beam_thickness)]
+    members += [Member(f'rib{k}', chain([back_joints[k], front_joints[k]]), g.rib_thickness)
+                for k in range(len(backs))]
+    return FinRayLayout(np.array(positions), members, members[0].nodes, members[2].nodes,
+                        tip, fronts)
