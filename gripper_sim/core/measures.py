@@ -16,6 +16,13 @@ def tributary_lengths(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
     return 0.5 * (seg + np.roll(seg, 1))
 
 
+def touching_length(x: np.ndarray, edges: np.ndarray, touching: np.ndarray) -> float:
+    """m, the length of an outline in contact: each edge (e, 2) of positions ``x`` (n, 2)
+    counts by the share of its two ends that touch (``touching`` (n,) bool)."""
+    seg = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
+    return float(np.sum(seg * 0.5 * touching[edges].sum(axis=1)))
+
+
 def skin_strains(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
     """(n_surface,) engineering strains of the skin segments."""
     rest = fruit.rest_positions

@@ -25,6 +25,7 @@ from gripper_sim.core.barrier import SoftBody
 from gripper_sim.core.energies import NeoHookeanTriangles
 from gripper_sim.core.fin_ray import fin_ray_from_config
 from gripper_sim.core.finger_body import FingerBody
+from gripper_sim.core.measures import touching_length
 from gripper_sim.core.results import FingerResult
 from gripper_sim.core.solid_pad import solid_pad_body
 from gripper_sim.errors import ConfigError
@@ -189,11 +190,7 @@ class SoftFingers:
         moved = x - rest
         tip_displacement = np.array([moved[tip], moved[m + tip] * MIRROR])
         edges = self.body.surface_edges
-        lengths = []
-        for side in range(2):
-            ends = side * m + edges
-            seg = np.linalg.norm(x[ends[:, 1]] - x[ends[:, 0]], axis=1)
-            lengths.append(float(np.sum(seg * 0.5 * touching[ends].sum(axis=1))))
+        lengths = [touching_length(x, side * m + edges, touching) for side in range(2)]
         return FingerResult(positions=x.copy(), contact_forces=forces.copy(),
                             tip_displacement=tip_displacement,
                             contact_length=np.array(lengths),
