@@ -11,6 +11,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from gripper_sim.configuration import validate
 from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core import barrier
 from gripper_sim.core.damage import DamageTracker
@@ -44,7 +45,7 @@ class Simulation(SimulationFacade):
     dimension = 2
 
     def __init__(self, config: Mapping[str, Any], fast: bool | None = None):
-        self.config = dict(config)
+        self.config = validate(config)
         self.fruit: FruitModel = build_fruit(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config
