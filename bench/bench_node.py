@@ -15,7 +15,12 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
+
+#: the tests' directory, whose ROS client (test/ros_client.py) the benchmark drives the node with
+TEST_DIR = Path(__file__).resolve().parents[1] / 'test'
 
 
 def core_speed(seconds: float) -> float:
@@ -72,7 +77,8 @@ def main() -> None:
     options = parser.parse_args()
 
     from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
-    from gripper_sim.ros.testing import SimClient
+    sys.path.insert(0, str(TEST_DIR))   # the tests' ROS client (test/ros_client.py)
+    from ros_client import SimClient
 
     print(f'core alone (no ROS, default fruit, force mode): real-time factor '
           f'{core_speed(options.seconds):.2f}')

@@ -55,6 +55,9 @@ class Key:
         open_low: the lower bound itself is not allowed (e.g. > 0).
         default_3d: the default when ``dimension`` is 3, where it differs (None: the
             same as ``default``).
+        runtime: the key may change while a simulation runs (``RUNTIME_KEYS``: the
+            node's dynamic parameters, ``set_parameter``); every other key is fixed
+            when the simulation is built.
     """
 
     default: Any
@@ -67,6 +70,7 @@ class Key:
     nullable: bool = False
     open_low: bool = False
     default_3d: Any = None
+    runtime: bool = False
 
 
 SCHEMA: dict[str, Key] = {
@@ -181,10 +185,10 @@ SCHEMA: dict[str, Key] = {
                                 'the fruit centre height', low=-10.0, high=10.0,
                                 nullable=True),
     'gripper.close_speed': Key(0.02, 'm/s', 'default gap closing rate', low=1e-5,
-                               high=1.0, open_low=True),
+                               high=1.0, open_low=True, runtime=True),
     'gripper.max_speed': Key(0.2, 'm/s', 'largest gap rate a command may ask for',
                              low=1e-5, high=5.0),
-    'gripper.lift_speed': Key(0.05, 'm/s', 'default lift speed', low=1e-5, high=2.0),
+    'gripper.lift_speed': Key(0.05, 'm/s', 'default lift speed', low=1e-5, high=2.0, runtime=True),
     'gripper.lift_acceleration': Key(0.5, 'm/s^2', 'acceleration limit of the lift '
                                      '(trapezoidal speed profile)', low=1e-3, high=100.0),
     'gripper.max_force': Key(200.0, 'N', 'largest grip force a command may ask for',
@@ -291,18 +295,18 @@ SCHEMA: dict[str, Key] = {
                                  low=1e-6, high=1e6),
     'contact.jaw.static_friction': Key(0.5, '', 'static friction coefficient '
                                        'fruit-jaw mu_s (rubber pad, estimate)',
-                                       low=0.0, high=5.0),
+                                       low=0.0, high=5.0, runtime=True),
     'contact.jaw.kinetic_friction': Key(0.4, '', 'kinetic friction coefficient '
-                                        'fruit-jaw mu_k (<= mu_s)', low=0.0, high=5.0),
+                                        'fruit-jaw mu_k (<= mu_s)', low=0.0, high=5.0, runtime=True),
     'contact.table.static_friction': Key(0.5, '', 'static friction fruit-table',
-                                         low=0.0, high=5.0),
+                                         low=0.0, high=5.0, runtime=True),
     'contact.table.kinetic_friction': Key(0.4, '', 'kinetic friction fruit-table',
-                                          low=0.0, high=5.0),
+                                          low=0.0, high=5.0, runtime=True),
     'contact.pad.friction': Key(0.8, '', 'friction coefficient fruit-soft pad (smoothed '
                                 'Coulomb, one coefficient; silicone 0.5-1.0, estimate)',
                                 low=0.0, high=5.0),
     'contact.restitution': Key(0.0, '', 'normal restitution coefficient e of node '
-                               'impacts on the table and walls', low=0.0, high=1.0),
+                               'impacts on the table and walls', low=0.0, high=1.0, runtime=True),
     'contact.release_threshold': Key(1e-6, 'N', 'hysteresis: a contact is released '
                                      'only once its reaction pulls by more than this',
                                      low=0.0, high=1.0),
@@ -336,6 +340,41 @@ SCHEMA: dict[str, Key] = {
     'sim.max_contact_passes': Key(10, '-', 'predictor-corrector passes per step',
                                   'int', 1, 50),
 }
+
+#: the keys that may change while a simulation runs (``Key.runtime``)
+RUNTIME_KEYS = tuple(key for key, spec in SCHEMA.items() if spec.runtime)
+
+
+class Parameters(dict):
+    """A validated configuration: ``{'dotted.key': value}``, every value of its schema
+    key's type and range. Frozen: it cannot be changed in place (a changed
+    configuration is a new one, ``replaced``, validated again); ``dict(parameters)`` is
+    a plain, editable copy. Built by ``validate`` (and so by ``load_config``).
+    """
+
+    __slots__ = ()
+
+    def _frozen(self, *args, **kwargs):
+        raise TypeError('a validated configuration is frozen: build a new one with '
+                        'replaced({key: value}) or edit dict(config)')
+
+    __setitem__ = __delitem__ = __ior__ = _frozen
+    update = pop = popitem = clear = setdefault = _frozen
+
+    def __reduce__(self):
+        return Parameters._restore, (dict(self),)
+
+    @staticmethod
+    def _restore(values: dict) -> 'Parameters':
+        parameters = Parameters()
+        dict.update(parameters, values)
+        return parameters
+
+    def replaced(self, changes: Mapping[str, Any]) -> 'Parameters':
+        """A new validated configuration with ``changes`` applied (ConfigError if one
+        is unknown or out of range)."""
+        return validate({**self, **changes})
+
 
 
 def package_config_dir() -> Path:
@@ -514,8 +553,8 @@ def fruit_preset_path(name: str, base_dir: str | os.PathLike | None = None) -> P
     return path
 
 
-def validate(flat: Mapping[str, Any]) -> dict[str, Any]:
-    """Check every key is known and in range; returns the coerced flat mapping."""
+def validate(flat: Mapping[str, Any]) -> Parameters:
+    """Check every key is known and in range; returns the coerced flat mapping, frozen."""
     result: dict[str, Any] = {}
     for key, value in flat.items():
         if key not in SCHEMA:
@@ -535,7 +574,7 @@ def validate(flat: Mapping[str, Any]) -> dict[str, Any]:
         raise ConfigError(f"config key 'gripper.finger.type' = {result['gripper.finger.type']}"
                           ': deformable fingers are 2D only so far (dimension 3 takes '
                           f"{', '.join(RIGID_FINGERS)})")
-    return result
+    return Parameters._restore(result)
 
 
 def _check_shape(config: Mapping[str, Any]) -> None:
@@ -554,7 +593,7 @@ def _check_shape(config: Mapping[str, Any]) -> None:
 def load_config(fruit: str | None = None, config_file: str | os.PathLike | None = None,
                 overrides: Iterable[str] | Mapping[str, Any] = (),
                 finger: str | None = None, fallback_fruit: str | None = None,
-                fallback_finger: str | None = None) -> dict[str, Any]:
+                fallback_finger: str | None = None) -> Parameters:
     """Build a validated flat configuration ``{'dotted.key': value}``.
 
     Precedence: the schema's defaults (its 3D defaults when ``dimension`` is 3) < the

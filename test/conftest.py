@@ -116,7 +116,7 @@ def _node_and_client(parameters: dict, domain_id: int, log_path, client_name: st
         exited with code 0 and no traceback in its log.
     """
     from gripper_sim.ros.process import node_process, ros_environment
-    from gripper_sim.ros.testing import SimClient
+    from ros_client import SimClient
     process = node_process(parameters, env=ros_environment(domain_id), log_path=log_path,
                            extra=extra)
     here = os.getcwd()

@@ -278,7 +278,7 @@ def test_live_recording_of_the_3d_node_round_trips_through_info_and_replay(
     """Record the 3D node live, check the file, replay it and record the replay: the
     point cloud and mesh marker payloads come back byte for byte."""
     from gripper_sim.ros.process import RosProcess, node_process, ros_environment
-    from gripper_sim.ros.testing import SimClient
+    from ros_client import SimClient
     domain = new_domain_id()
     env = ros_environment(domain)
 

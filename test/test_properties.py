@@ -33,7 +33,7 @@ from gripper_sim.ros.gripper_command_server import goal_problem as gripper_probl
 from gripper_sim.ros.node import SimNode
 from gripper_sim.ros.params import DYNAMIC_PHYSICS_KEYS, NODE_PARAMETERS, PHYSICS_PREFIX
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
-from gripper_sim.ros.testing import SimClient
+from ros_client import SimClient
 from gripper_sim.workflows.factory import make_simulation
 from control_msgs.action import GripperCommand
 from control_msgs.msg import GripperCommand as GripperCommandMsg

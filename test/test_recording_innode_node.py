@@ -27,7 +27,7 @@ from gripper_sim import configuration  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
 from gripper_sim.recording.offline import CONFIG_METADATA  # noqa: E402
 from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment  # noqa: E402
-from gripper_sim.ros.testing import SimClient  # noqa: E402
+from ros_client import SimClient  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -10,7 +10,7 @@ from control_msgs.msg import GripperCommand as GripperCommandMsg
 from gripper_sim_interfaces.action import Grasp
 from sensor_msgs.msg import JointState
 from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
-from gripper_sim.ros.testing import SimClient
+from ros_client import SimClient
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -3,7 +3,7 @@ import pytest
 
 from gripper_sim.ros.process import (controller_process, node_process, pick_domain_id,
                                      ros_environment)
-from gripper_sim.ros.testing import SimClient
+from ros_client import SimClient
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

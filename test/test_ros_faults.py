@@ -16,7 +16,7 @@ from std_msgs.msg import Float64, String
 from gripper_sim_interfaces.action import Grasp
 from gripper_sim_interfaces.srv import Step
 from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
-from gripper_sim.ros.testing import RELIABLE
+from ros_client import RELIABLE
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

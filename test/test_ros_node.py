@@ -12,7 +12,7 @@ import pytest
 
 from gripper_sim.convert import messages
 from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
-from gripper_sim.ros.testing import SimClient
+from ros_client import SimClient
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

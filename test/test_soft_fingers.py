@@ -114,7 +114,7 @@ def squeeze(finger, force, fruit_nodes, *overrides, gap_margin=2e-3):
         f'fruit.flesh.poisson_ratio={POISSON}', *overrides])
     reach = 0.0 if finger is None else float(finger.rest_positions[:, 0].max())
     if finger is not None:
-        config['gripper.initial_gap'] = 2 * RADIUS + 2 * reach + gap_margin
+        config = config.replaced({'gripper.initial_gap': 2 * RADIUS + 2 * reach + gap_margin})
     sim = Simulation(config, finger=finger)
     check = PenetrationCheck(sim)
     sim.add_observer(check)

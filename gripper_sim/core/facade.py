@@ -29,7 +29,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from gripper_sim.configuration import validate
+from gripper_sim.configuration import RUNTIME_KEYS, validate
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
@@ -50,10 +50,8 @@ FORCE_TOLERANCE = 0.005
 #: solves of one step at most, the first included (then the best one is solved again)
 MAX_GAP_SOLVES = 8
 
-#: configuration keys that may change while the simulation runs
-DYNAMIC_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_friction',
-                'contact.table.static_friction', 'contact.table.kinetic_friction',
-                'contact.restitution', 'gripper.close_speed', 'gripper.lift_speed')
+#: configuration keys that may change while the simulation runs (the schema's runtime keys)
+DYNAMIC_KEYS = RUNTIME_KEYS
 
 
 def finite(name: str, value: Any) -> float:
@@ -238,9 +236,7 @@ class SimulationFacade:
         """Change a dynamic configuration key while running (see DYNAMIC_KEYS)."""
         if key not in DYNAMIC_KEYS:
             raise ConfigError(f"config key '{key}' cannot change while running")
-        trial = dict(self.config)
-        trial[key] = value
-        self.config = validate(trial)
+        self.config = self.config.replaced({key: value})
         self._faces_template = self._make_faces()
 
     def _speed(self, speed, default: float) -> float:

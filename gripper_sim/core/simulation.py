@@ -11,6 +11,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from gripper_sim.configuration import validate
 from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core import barrier
 from gripper_sim.core.damage import DamageTracker
@@ -50,7 +51,7 @@ class Simulation(SimulationFacade):
 
     def __init__(self, config: Mapping[str, Any], fast: bool | None = None,
                  finger: FingerBody | None = None):
-        self.config = dict(config)
+        self.config = validate(config)
         self.fruit: FruitModel = build_fruit(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config

@@ -28,6 +28,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from gripper_sim.configuration import validate
 from gripper_sim.core.barrier import check_supported
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.facade import SimulationFacade
@@ -101,7 +102,7 @@ class Simulation3D(SimulationFacade):
     deepest_first = 0.7
 
     def __init__(self, config: Mapping[str, Any]):
-        self.config = dict(config)
+        self.config = validate(config)
         if int(self.config.get('dimension', 2)) != 3:
             raise ConfigError("config key 'dimension' must be 3 for the 3D simulation")
         check_supported(self.config, 3, None)

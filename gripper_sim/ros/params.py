@@ -277,12 +277,15 @@ class SimParameters:
 
     def _applied(self, parameters: list[Parameter]) -> None:
         changes: dict[str, Any] = {}
+        physics: dict[str, Any] = {}
         for parameter in parameters:
             if parameter.name.startswith(PHYSICS_PREFIX):
                 key = parameter.name[len(PHYSICS_PREFIX):]
                 if key in configuration.SCHEMA:
-                    self.config[key] = parameter.value
+                    physics[key] = parameter.value
             changes[parameter.name] = parameter.value
+        if physics:
+            self.config = self.config.replaced(physics)
         for listener in self._listeners:
             listener(changes)
 

@@ -69,8 +69,7 @@ def preset_text(test: CompressionTest, result: FitResult, name: str,
                 bruise: BruiseCalibration | None = None,
                 today: datetime.date | None = None) -> str:
     """The preset file's text (comment header, keys, ``calibration:`` record)."""
-    config = dict(result.config)
-    config['fruit.name'] = name
+    config = {**result.config, 'fruit.name': name}
     if bruise is not None:
         config['fruit.bruise_pressure'] = bruise.bruise_pressure
     keys = {k: _plain(v) for k, v in config.items()
