@@ -5,7 +5,9 @@ CPU time of this process (``time.process_time``, the best of ``--repeat`` runs; 
 machine's load average is printed), side by side for ``gripper.finger.type`` flat and
 solid_pad: the apple (shell model, 64 nodes) on the table, the jaws starting 1 mm from
 it (from the fingers' fronts for the pad), closed in force mode to ``--force`` N, lifted
-1 cm and held 0.2 s at dt = 1 ms; with the outcome, steps, solves and Newton iterations.
+1 cm and held 0.2 s at dt = 1 ms; with the outcome, steps, solves, Newton iterations,
+and at the end the grip force, the contact length (both jaws) and the peak damage
+pressure (Hertz estimate).
 The flat finger takes its usual route (the modified mass method, the compiled whole
 step); the solid pad two meshed blocks in the state and the barrier contact on the
 generic Newton solver.
@@ -44,7 +46,8 @@ def grasp(finger: str, force: float) -> dict:
                             result.newton_iterations))
     return dict(cpu=time.process_time() - start, outcome=summary['outcome'],
                 steps=sim.last.step, solves=sim.gap_solves, newton=sum(iterations),
-                force=sim.last.grip_force)
+                force=sim.last.grip_force, contact=sim.last.deformation.contact_length,
+                pressure=sim.last.damage.peak_pressure)
 
 
 def main(argv=None) -> int:
@@ -59,10 +62,11 @@ def main(argv=None) -> int:
         runs = [grasp(finger, args.force) for _ in range(args.repeat)]
         rows[finger] = min(runs, key=lambda r: r['cpu'])
     print(f"{'finger':10s} {'CPU s':>8s} {'outcome':>8s} {'steps':>6s} {'solves':>7s} "
-          f"{'Newton':>7s} {'force N':>8s}")
+          f"{'Newton':>7s} {'force N':>8s} {'contact mm':>10s} {'Hertz kPa':>9s}")
     for finger, r in rows.items():
         print(f"{finger:10s} {r['cpu']:8.2f} {r['outcome']:>8s} {r['steps']:6d} "
-              f"{r['solves']:7d} {r['newton']:7d} {r['force']:8.3f}")
+              f"{r['solves']:7d} {r['newton']:7d} {r['force']:8.3f} "
+              f"{r['contact'] * 1e3:10.1f} {r['pressure'] * 1e-3:9.0f}")
     print(f"solid_pad / flat: {rows['solid_pad']['cpu'] / rows['flat']['cpu']:.1f}x")
     return 0
 

@@ -18,7 +18,7 @@ from gripper_sim.configuration import load_config
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.mesh import boundary_edges, mesh_outline, points_inside
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.errors import CommandError, ConfigError
+from gripper_sim.errors import CommandError, ConfigError, ConfigWarning
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
 RADIUS = 0.03
@@ -259,7 +259,17 @@ def test_errors_are_one_line():
     assert '\n' not in str(info.value)
 
 
-def test_a_force_out_of_range_is_a_command_error_with_soft_fingers():
+def test_a_gap_that_presses_the_fingers_together_is_a_command_error():
     sim = Simulation(load_config(overrides=['gripper.finger.type=solid_pad']))
-    with pytest.raises(CommandError):
-        sim.command_force(-1.0)
+    with pytest.raises(CommandError, match='press the two deformable fingers'):
+        sim.command_gap(0.011)  # two 6 mm pads
+    sim.command_gap(0.012)
+    assert sim.gripper_state.target_gap == 0.012
+
+
+@pytest.mark.parametrize('overrides,key', [
+    (['gripper.finger.type=solid_pad', 'contact.model=ipc'], 'contact.model'),
+    (['gripper.finger.solid_pad.thickness=0.004'], 'gripper.finger.solid_pad.thickness')])
+def test_keys_without_effect_are_warned_about(overrides, key):
+    with pytest.warns(ConfigWarning, match=f"'{key}' has no effect"):
+        load_config(overrides=overrides)

@@ -165,6 +165,10 @@ class SimulationFacade:
         if gap < 0 or gap > self.config['gripper.max_gap']:
             raise CommandError(f"gap {gap} m is out of range [0, "
                                f"{self.config['gripper.max_gap']}] m")
+        if self._soft is not None and gap < 2.0 * self._soft.thickness:
+            raise CommandError(f'gap {gap} m would press the two deformable fingers into each '
+                               f'other (each reaches {self._soft.thickness:g} m in front of '
+                               f'its jaw): the smallest gap is {2.0 * self._soft.thickness:g} m')
         speed = self._speed(speed, self.config['gripper.close_speed'])
         limit = self.config['gripper.max_force']
         if max_effort is None:
