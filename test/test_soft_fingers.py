@@ -210,6 +210,8 @@ def test_grasp_and_lift_of_the_apple_with_solid_pads():
     assert result.in_contact_with('left_jaw') and result.in_contact_with('right_jaw')
     assert np.all(result.fingers.contact_length > 0)
     assert result.deformation.contact_length > 0 and result.damage is not None
+    on_fingers = np.isin(result.contact_obstacle, [0, 1])
+    assert not result.slipping and np.all(result.contact_sticking[on_fingers])
 
 
 # ---------------------------------------------------------------------- bad configurations

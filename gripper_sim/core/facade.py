@@ -599,6 +599,7 @@ class SimulationFacade:
         # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
         # right_jaw (the fingers), then the faces
         self.contacts.obstacle = np.where(partner[:n] > 0, partner[:n] - 1, -1)
+        self._mark_sticking(grip_new)
         self.contact_forces = outcome.forces[:n]
         self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
                                    outcome.reaction[n:], partner[n:] == 0)
@@ -607,6 +608,18 @@ class SimulationFacade:
         wrenches = self._finger_wrenches(grip_new)
         self._jaw_force = (-float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0]))
         return outcome.iterations
+
+    def _mark_sticking(self, grip: GripperState) -> None:
+        """The modes of the fruit's contacts with deformable fingers and faces: STICK where
+        a node moves along its obstacle (a finger: along its backing) slower than the
+        barrier's friction smoothing speed, else SLIP."""
+        normals, _, velocities = self._obstacles(grip)
+        held = np.flatnonzero(self.contacts.obstacle >= 0)
+        which = self.contacts.obstacle[held]
+        relative = self.v[held] - velocities[which]
+        along = relative - np.sum(relative * normals[which], axis=1)[:, None] * normals[which]
+        creeping = np.linalg.norm(along, axis=1) < self._barrier.settings.friction_smoothing
+        self.contacts.mode[held] = np.where(creeping, cm.STICK, cm.SLIP)
 
     def _finger_wrenches(self, grip: GripperState) -> list[JawWrench]:
         """What each jaw feels at its deformable finger's base nodes (the reaction that
