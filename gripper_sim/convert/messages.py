@@ -494,9 +494,21 @@ def fruit_marker(result: StepResult, context: MessageContext, header: Header) ->
     return marker
 
 
+def soft_finger_marker(result: StepResult, header: Header) -> Marker:
+    """ns ``soft_fingers`` id 0, LINE_LIST: the deformable fingers' outlines that touch
+    the fruit (``StepResult.fingers``), as they deform, in the plane y = 0."""
+    fingers = result.fingers
+    lines = base_marker(header, 'soft_fingers', 0, Marker.LINE_LIST)
+    lines.scale.x = OUTLINE_WIDTH
+    lines.color = ColorRGBA(r=0.15, g=0.35, b=0.75, a=1.0)
+    lines.points = _points(world_xyz(fingers.positions)[fingers.surface_edges.ravel()])
+    return lines
+
+
 def markers(result: StepResult, context: MessageContext, header: Header) -> MarkerArray:
     """Fruit coloured by contact pressure, jaws, shaped fingers and pads
-    (``finger_markers``), table, force arrows (frame ``world``)."""
+    (``finger_markers``), deformable fingers (``soft_finger_marker``), table, force arrows
+    (frame ``world``)."""
     array = MarkerArray()
     array.markers.append(fruit_marker(result, context, header))
 
@@ -533,6 +545,8 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
     array.markers.extend(finger_markers(
         context.finger, header, [(float(face_x), -outward) for _, face_x, outward, _ in jaws],
         float(result.lift), width))
+    if result.fingers is not None:
+        array.markers.append(soft_finger_marker(result, header))
 
     if context.table:
         table = base_marker(header, 'table', 0, Marker.CUBE)

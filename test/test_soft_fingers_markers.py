@@ -1,0 +1,32 @@
+"""The node's markers of deformable fingers (ns ``soft_fingers``): their outlines, moving
+and deforming with them; none for rigid fingers."""
+import numpy as np
+import pytest
+
+from gripper_sim.configuration import load_config
+from gripper_sim.convert.messages import build_messages
+from gripper_sim.core.simulation import Simulation
+
+
+def _soft_markers(config):
+    sim = Simulation(config)
+    array = build_messages(sim.last, config, topics=['markers'])['markers']
+    return sim, [m for m in array.markers if m.ns == 'soft_fingers']
+
+
+def test_the_pads_outlines_are_drawn_where_the_pads_are():
+    config = load_config(overrides=['gripper.finger.type=solid_pad'])
+    sim, found = _soft_markers(config)
+    assert len(found) == 1
+    fingers = sim.last.fingers
+    points = np.array([(p.x, p.y, p.z) for p in found[0].points])
+    assert len(points) == 2 * len(fingers.surface_edges)
+    assert np.all(points[:, 1] == 0.0)
+    # the fronts of the undeformed pads: half the gap (between the backings) less a pad
+    front = 0.5 * sim.last.gap - config['gripper.finger.solid_pad.thickness']
+    assert np.min(np.abs(points[:, 0])) == pytest.approx(front)
+    assert points[:, 2].max() - points[:, 2].min() == pytest.approx(config['gripper.jaw_height'])
+
+
+def test_rigid_fingers_have_no_soft_finger_marker():
+    assert _soft_markers(load_config())[1] == []
