@@ -181,6 +181,9 @@ def _draw_boxes_2d(ax, frame: Frame) -> None:
         ax.add_patch(Rectangle((1e3 * low[0], 1e3 * low[2]), 1e3 * frame.table.size[0],
                                1e3 * frame.table.size[2], facecolor=(0.55, 0.4, 0.25),
                                edgecolor='none', gid='table'))
+    for segment in frame.finger_lines:
+        ax.plot(1e3 * segment[:, 0], 1e3 * segment[:, 2], color=(0.15, 0.35, 0.75), lw=1.5,
+                gid='finger')
 
 
 def _view_box(frames: list[Frame]) -> tuple[np.ndarray, np.ndarray]:

@@ -1,7 +1,8 @@
 """The geometry of chosen moments of a run, from the recorded ``~/markers`` and node cloud.
 
 A ``Frame`` holds the fruit (2D: the closed outline; 3D: the skin triangles), the contact
-pressure at each of its points, the jaw plates and the table, all in the world frame (m).
+pressure at each of its points, the jaw plates, the deformable fingers' outlines (if any)
+and the table, all in the world frame (m).
 
 The pressure is the damage estimate's contact pressure the node colours the fruit marker
 with (Hertz per node in 2D, normal force over vertex area in 3D), read back from the
@@ -21,9 +22,9 @@ from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.reader import BagReader
 from gripper_sim.recording.analysis.series import TimeSeries, stamp_ns
 
-#: marker namespaces of the fruit
-OUTLINE_NS, MESH_NS = 'fruit_outline', 'fruit_mesh'
-CUBE = 1
+#: marker namespaces of the fruit, and of the deformable fingers' outlines
+OUTLINE_NS, MESH_NS, SOFT_FINGERS_NS = 'fruit_outline', 'fruit_mesh', 'soft_fingers'
+CUBE, LINE_LIST = 1, 5
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,8 @@ class Frame:
         pressure: (k,) Pa at each point (NaN when the marker has no colours).
         jaws: the jaw plates; table: the table top, or None.
         label: what the moment is (e.g. 'grip'), for titles.
+        finger_lines: (s, 2, 3) m, the deformable fingers' outline segments (none for
+            rigid fingers: (0, 2, 3)).
     """
 
     row: int
@@ -60,6 +63,7 @@ class Frame:
     jaws: list[Box] = field(default_factory=list)
     table: Box | None = None
     label: str = ''
+    finger_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
 
 
 def pressure_from_colours(rgb: np.ndarray, bruise_pressure: float) -> np.ndarray:
@@ -80,6 +84,7 @@ def frame_of(markers: Any, row: int, time: float, bruise_pressure: float) -> Fra
     fruit = None
     jaws: list[Box] = []
     table = None
+    finger_lines = np.zeros((0, 2, 3))
     for marker in markers.markers:
         if marker.ns in (OUTLINE_NS, MESH_NS) and marker.points:
             fruit = marker
@@ -87,6 +92,9 @@ def frame_of(markers: Any, row: int, time: float, bruise_pressure: float) -> Fra
             jaws.append(_box(marker))
         elif marker.ns == 'table' and int(marker.type) == CUBE:
             table = _box(marker)
+        elif marker.ns == SOFT_FINGERS_NS and int(marker.type) == LINE_LIST:
+            finger_lines = np.array([[p.x, p.y, p.z] for p in marker.points],
+                                    dtype=float).reshape(-1, 2, 3)
     if fruit is None:
         return None
     points = np.array([[p.x, p.y, p.z] for p in fruit.points], dtype=float)
@@ -103,7 +111,7 @@ def frame_of(markers: Any, row: int, time: float, bruise_pressure: float) -> Fra
         pressure = pressure[first]
         triangles = np.asarray(inverse, dtype=int).reshape(-1, 3)
     return Frame(row=row, time=time, points=points, triangles=triangles, pressure=pressure,
-                 jaws=jaws, table=table)
+                 jaws=jaws, table=table, finger_lines=finger_lines)
 
 
 def read_frames(bag: BagReader, topic: str, series: TimeSeries, rows: list[int],

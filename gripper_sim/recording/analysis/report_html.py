@@ -242,7 +242,8 @@ def _colour_bar(dimension: int, top: float, bruise: float) -> dict:
 
 
 def _frame_traces(frame: Frame, dimension: int, top: float, bruise: float) -> list:
-    """The traces of one frame: table, left and right jaw, fruit (in that order)."""
+    """The traces of one frame: table, left and right jaw, (2D) the deformable fingers,
+    fruit (in that order)."""
     pressure_kpa = np.nan_to_num(frame.pressure) / 1e3
     jaws = list(frame.jaws) + [None] * (2 - len(frame.jaws))
     if dimension == 3:
@@ -267,6 +268,7 @@ def _frame_traces(frame: Frame, dimension: int, top: float, bruise: float) -> li
         _rectangle(frame.table, 'table', 'sienna'),
         _rectangle(jaws[0], 'left jaw', 'slategrey'),
         _rectangle(jaws[1], 'right jaw', 'slategrey'),
+        _segments(frame.finger_lines, 'fingers', 'rgb(38,89,191)'),
         go.Scatter(x=pts[:, 0], y=pts[:, 2], mode='lines+markers', name='fruit',
                    line={'color': 'rgb(90,90,90)', 'width': 1.5},
                    marker={'size': 7, 'color': pressure_kpa, 'colorscale': PRESSURE_COLOURS,
@@ -275,6 +277,14 @@ def _frame_traces(frame: Frame, dimension: int, top: float, bruise: float) -> li
                    hovertemplate='p = %{marker.color:.1f} kPa<extra>fruit</extra>',
                    showlegend=False),
     ]
+
+
+def _segments(lines: np.ndarray, name: str, colour: str) -> go.Scatter:
+    """Line segments (s, 2, 3) m drawn in the x-z plane (mm), one trace (may be empty)."""
+    xz = np.full((len(lines), 3, 2), np.nan)
+    xz[:, :2] = 1e3 * lines[:, :, [0, 2]]
+    return go.Scatter(x=xz[:, :, 0].ravel(), y=xz[:, :, 1].ravel(), mode='lines', name=name,
+                      line={'color': colour, 'width': 2}, hoverinfo='skip', showlegend=False)
 
 
 def _frame_title(series: TimeSeries, events: Events, frame: Frame, dimension: int) -> str:
@@ -357,7 +367,7 @@ def write_grasp_report(series: TimeSeries, summary: dict, frames: list[Frame],
             text=f'Colour: {pressure_name(dimension)} in kPa, from 0 to the largest value '
                  f'shown; the bruise threshold is '
                  f"{summary['bruise_threshold_pa'] / 1e3:.0f} kPa. Grey: the jaw plates; "
-                 'brown: the table. Move the slider or press play.'))
+                 'brown: the table; blue: deformable fingers. Move the slider or press play.'))
     title = (f"Grasp of {summary.get('fruit') or 'a fruit'} ({dimension}D): "
              + ('slipped' if summary['slipped'] else 'held' if summary['held']
                 else 'not gripped'))
