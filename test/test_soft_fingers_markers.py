@@ -1,11 +1,12 @@
 """The node's markers of deformable fingers (ns ``soft_fingers``): their outlines, moving
-and deforming with them; none for rigid fingers."""
+and deforming with them, read back by the recording's report; none for rigid fingers."""
 import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
 from gripper_sim.convert.messages import build_messages
 from gripper_sim.core.simulation import Simulation
+from gripper_sim.recording.analysis.frames import frame_of
 
 
 def _soft_markers(config):
@@ -30,3 +31,17 @@ def test_the_pads_outlines_are_drawn_where_the_pads_are():
 
 def test_rigid_fingers_have_no_soft_finger_marker():
     assert _soft_markers(load_config())[1] == []
+
+
+def test_the_report_reads_the_fingers_back_from_the_markers():
+    config = load_config(overrides=['gripper.finger.type=solid_pad'])
+    sim = Simulation(config)
+    array = build_messages(sim.last, config, topics=['markers'])['markers']
+    frame = frame_of(array, 0, 0.0, config['fruit.bruise_pressure'])
+    edges = sim.last.fingers.surface_edges
+    assert frame.finger_lines.shape == (len(edges), 2, 3)
+    assert frame.finger_lines[:, :, [0, 2]] == pytest.approx(
+        sim.last.fingers.positions[edges])
+    rigid = build_messages(Simulation(load_config()).last, load_config(),
+                           topics=['markers'])['markers']
+    assert frame_of(rigid, 0, 0.0, 2.6e5).finger_lines.shape == (0, 2, 3)
