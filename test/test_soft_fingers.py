@@ -9,12 +9,14 @@ The contact half-width is read from the contact forces: Hertz's pressure is elli
 p(s) = p0 sqrt(1 - s^2 / a^2), whose second moment about its centre is a^2 / 4, so
 a = 2 sqrt(sum f_i s_i^2 / sum f_i) over the nodes' normal contact forces f_i at s_i.
 """
+import ipctk
 import numpy as np
 import pytest
 
-from helpers import QUASI_STATIC
+from helpers import QUASI_STATIC, kernel_evaluation
 
 from gripper_sim.configuration import load_config
+from gripper_sim.core.barrier import BarrierContact, BarrierSettings, SoftBody
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.mesh import boundary_edges, mesh_outline, points_inside
 from gripper_sim.core.simulation import Simulation
@@ -61,6 +63,61 @@ def closed_outline(triangles: np.ndarray) -> np.ndarray:
             return np.array(loop)
         previous = here
         loop.append(step)
+
+
+DHAT = 1e-4
+
+
+def _two_way_barrier():
+    """A barrier between a three-node fruit chain (nodes 0-2) and a soft body's segment
+    (nodes 3, 4) hovering within dhat above it, the segment sliding along the chain since
+    the start of the step (so the lagged friction acts too); (barrier, positions (5, 2))."""
+    x = np.array([[0.0, 0.0], [1.0, 0.1], [2.0, 0.0], [0.6, 0.6], [1.6, 0.5]]) * DHAT
+    body = SoftBody(np.array([3, 4]), np.array([[3, 4]]), 0.5, 0.4)
+    barrier = BarrierContact(5, np.arange(3), np.array([[0, 1], [1, 2]]),
+                             BarrierSettings(dhat=DHAT, stiffness=0.5,
+                                             friction_smoothing=1e-3), bodies=(body,))
+    start = x.copy()
+    start[3:] -= np.array([0.05 * DHAT, 0.0])
+    barrier.begin_step(start, [], [], 1e-3)
+    return barrier, x
+
+
+def test_two_way_barrier_matches_finite_differences_on_both_bodies():
+    barrier, x = _two_way_barrier()
+    barrier.projection = ipctk.PSDProjectionMethod.NONE  # the exact Hessian (not its PSD part)
+    q = x.ravel() + 0.03 * DHAT * np.sin(np.arange(10.0))
+    ev = barrier.evaluate(q)
+    dense = barrier.hessian(q)
+    # both bodies feel the contact, equal and opposite
+    assert np.abs(ev.gradient[:6]).max() > 0 and np.abs(ev.gradient[6:]).max() > 0
+    assert ev.gradient.reshape(-1, 2).sum(axis=0) == pytest.approx(
+        np.zeros(2), abs=1e-9 * np.abs(ev.gradient).max())
+    h = 1e-4 * DHAT
+    eye = np.eye(q.size)
+    fd_grad = np.array([(barrier.value(q + h * e) - barrier.value(q - h * e)) / (2 * h)
+                        for e in eye])
+    fd_hess = np.array([(barrier.gradient(q + h * e) - barrier.gradient(q - h * e)) / (2 * h)
+                        for e in eye])
+    assert ev.gradient == pytest.approx(fd_grad, rel=1e-5, abs=1e-6 * np.abs(fd_grad).max())
+    assert np.abs(dense).max() > 0
+    assert dense == pytest.approx(fd_hess, rel=1e-4, abs=1e-5 * np.abs(fd_hess).max())
+    value, gradient, kernel_dense = kernel_evaluation(barrier, q)
+    assert value == pytest.approx(ev.value) and gradient == pytest.approx(ev.gradient)
+    assert kernel_dense == pytest.approx(dense)
+    # the solver's Hessian: each pair's PSD part, so the sum is PSD
+    barrier.projection = ipctk.PSDProjectionMethod.CLAMP
+    assert np.linalg.eigvalsh(barrier.hessian(q)).min() > -1e-9 * np.abs(dense).max()
+
+
+def test_two_way_collision_free_step_stops_a_finger_node_before_the_fruit():
+    barrier, x = _two_way_barrier()
+    q = x.ravel()
+    through = np.zeros_like(q)
+    through[7] = -10 * DHAT  # node 3 of the soft body straight down through the chain
+    fraction = barrier.max_step(q, through)
+    assert 0 < fraction < 0.1
+    assert barrier.max_step(q, -through) == 1.0
 
 
 class PenetrationCheck:

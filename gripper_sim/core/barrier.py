@@ -129,6 +129,9 @@ class BarrierContact(Energy):
     """
 
     elastic = False
+    #: how each pair's Hessian is made positive semi-definite (CLAMP: its negative
+    #: eigenvalues set to 0, so that Newton descends; NONE: the exact Hessian)
+    projection = ipctk.PSDProjectionMethod.CLAMP
 
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
                  settings: BarrierSettings, bodies: tuple = ()):
@@ -253,8 +256,7 @@ class BarrierContact(Energy):
                 return np.inf, None
             gradient[self.vertex_dofs] += self.potential.gradient(collisions, mesh, v)[:n_d]
             if hessian:
-                parts.append(self.potential.hessian(collisions, mesh, v,
-                                                    ipctk.PSDProjectionMethod.CLAMP))
+                parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
         if friction and len(self._tangential):
             velocity = np.asfortranarray((v - self._start) / self._dt)
             value += self._dt * self.friction(self._tangential, mesh, velocity)
@@ -262,7 +264,7 @@ class BarrierContact(Energy):
                 self._tangential, mesh, velocity)[:n_d]
             if hessian:
                 parts.append(self.friction.hessian(self._tangential, mesh, velocity,
-                                                   ipctk.PSDProjectionMethod.CLAMP) / self._dt)
+                                                   self.projection) / self._dt)
         if not hessian:
             return float(value), None
         blocks = [matrix.tocsc()[:n_d, :n_d].tocoo() for matrix in parts]

@@ -1,6 +1,7 @@
 """Deformable fingers in the 2D simulation: a ``FingerBody`` on each jaw, in the state.
 
-A deformable finger type (``DEFORMABLE_FINGERS``: ``gripper.finger.type`` solid_pad, ...)
+A deformable finger type (``DEFORMABLE_FINGERS``: ``gripper.finger.type`` solid_pad,
+fin_ray)
 puts one copy of its ``FingerBody`` on the left jaw and its mirror image (x -> -x) on
 the right one. The state vector holds the fruit's nodes, then the left finger's, then
 the right finger's: q = [fruit (n), left (m), right (m)], x and z per node. Their
@@ -10,10 +11,11 @@ backing plus their rest offset: for a deformable finger, the gap is the distance
 the two backings (the jaws' own stroke), so the fruit meets the fingers at a gap of its
 width plus both fingers' thickness. Gravity acts on the fingers as on the fruit. The
 fruit and the fingers touch through the barrier (``core.barrier``, ``SoftBody``), with
-the jaws' friction coefficients (``contact.jaw.*``).
+the jaws' friction coefficients (``contact.jaw.*``); the fruit and the table (and walls)
+too.
 
-The jaw feels the reaction at its finger's base nodes (``jaw_wrench``): that is the
-grip force the jaw drive reads.
+The jaw feels the reaction at its finger's base nodes (``StepResult.left_wrench`` and
+``right_wrench``): that is the grip force the jaw drive reads.
 """
 from __future__ import annotations
 
