@@ -1,6 +1,6 @@
 """Deformable fingers (``core.soft_fingers``): soft-on-soft barrier contact in the 2D core.
 
-Two equal elastic disks pressed together give Hertz's half-width with the combined
+The two-way barrier against finite differences; two equal elastic disks pressed together give Hertz's half-width with the combined
 modulus and radius; a disk pressed by pads as stiff as itself is symmetric; no vertex of
 either body ever gets inside the other (checked at every step); the default apple is
 picked with the solid pad in force mode; bad configurations are one-line errors.
