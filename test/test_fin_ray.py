@@ -84,7 +84,7 @@ def test_fin_ray_keys_without_a_fin_ray_have_no_effect():
 
 @pytest.mark.parametrize('override,key,words', [
     ('gripper.max_gap=0.05', 'gripper.finger.fin_ray.base_width', 'fill the jaw stroke'),
-    ('gripper.max_gap=0.1', 'gripper.max_gap', 'does not fit between the fin_ray fingers'),
+    ('gripper.max_gap=0.09', 'gripper.max_gap', 'does not fit between the fin_ray fingers'),
     ('gripper.initial_gap=0.09', 'gripper.initial_gap', 'does not fit'),
 ])
 def test_fingers_that_leave_no_room_for_the_fruit_are_refused(override, key, words):
@@ -94,7 +94,9 @@ def test_fingers_that_leave_no_room_for_the_fruit_are_refused(override, key, wor
 
 def test_the_simulation_puts_a_fin_ray_on_each_jaw():
     sim = Simulation(_config())
-    assert sim.initial_gap == pytest.approx(sim.fruit.rest_width + 0.01 + 2 * 0.025)
+    # the inclined front beam x = 12.5 mm + 0.4167 z meets the 31.75 mm circle at z = 12.2 mm
+    assert sim.touching_gap == pytest.approx(0.09380, abs=1e-4)
+    assert sim.initial_gap == pytest.approx(sim.touching_gap + 0.01)
     finger = fin_ray_from_config(_config(), sim.fruit.depth)
     result = sim.step()
     assert result.fingers.positions.shape == (2 * finger.n_nodes, 2)
