@@ -49,15 +49,16 @@ def grasp(finger: str, force: float) -> dict:
                 force=sim.last.grip_force)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
+    """The grasp with each of ``fingers`` (the reference first); prints a table."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument('--repeat', type=int, default=1, help='runs per finger (best kept)')
     parser.add_argument('--force', type=float, default=4.0, help='grip force, N')
     args = parser.parse_args(argv)
     print(f'load average {os.getloadavg()[0]:.2f}; CPU time (time.process_time), best of '
           f'{args.repeat}')
     rows = {}
-    for finger in FINGERS:
+    for finger in fingers:
         runs = [grasp(finger, args.force) for _ in range(args.repeat)]
         rows[finger] = min(runs, key=lambda r: r['cpu'])
     print(f"{'finger':10s} {'CPU s':>8s} {'outcome':>8s} {'steps':>6s} {'solves':>7s} "
@@ -65,8 +66,13 @@ def main(argv=None) -> int:
     for finger, r in rows.items():
         print(f"{finger:10s} {r['cpu']:8.2f} {r['outcome']:>8s} {r['steps']:6d} "
               f"{r['solves']:7d} {r['newton']:7d} {r['force']:8.3f}")
-    print(f"solid_pad / flat: {rows['solid_pad']['cpu'] / rows['flat']['cpu']:.1f}x")
+    reference, other = fingers
+    print(f"{other} / {reference}: {rows[other]['cpu'] / rows[reference]['cpu']:.1f}x")
     return 0
+
+
+def main(argv=None) -> int:
+    return compare(FINGERS, __doc__.splitlines()[0], argv)
 
 
 if __name__ == '__main__':

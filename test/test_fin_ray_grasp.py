@@ -46,8 +46,9 @@ def test_the_wrapping_finger_presses_less_than_the_rigid_one(squeezes, capsys):
     fin_ray, flat = squeezes['fin_ray', 8.0], squeezes['flat', 8.0]
     ratio = fin_ray.deformation.peak_contact_pressure / flat.deformation.peak_contact_pressure
     with capsys.disabled():
-        print(f'\n  peak line pressure at 8 N: flat {flat.deformation.peak_contact_pressure / 1e3:.0f}'
-              f' kPa, Fin Ray {fin_ray.deformation.peak_contact_pressure / 1e3:.0f} kPa '
+        print(f'\n  peak line pressure at 8 N: flat '
+              f'{flat.deformation.peak_contact_pressure / 1e3:.0f} kPa, Fin Ray '
+              f'{fin_ray.deformation.peak_contact_pressure / 1e3:.0f} kPa '
               f'({(ratio - 1) * 100:+.0f} %); Hertz estimate {flat.damage.pressure / 1e3:.0f} '
               f'-> {fin_ray.damage.pressure / 1e3:.0f} kPa')
     assert ratio < 0.7
