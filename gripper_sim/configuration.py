@@ -231,12 +231,15 @@ SCHEMA: dict[str, Key] = {
     'gripper.finger.fin_ray.rib_count': Key(4, '-', 'fin_ray: number of ribs (cross beams), '
                                             'equally spaced along the back beam', 'int', 1,
                                             40),
-    'gripper.finger.fin_ray.rib_angle': Key(0.0, 'deg', 'fin_ray: angle of the ribs to the '
+    'gripper.finger.fin_ray.rib_angle': Key(None, 'deg', 'fin_ray: angle of the ribs to the '
                                             'base (0: parallel to it; positive: front ends '
-                                            'towards the tip)', low=-60.0, high=60.0),
-    'gripper.finger.fin_ray.tip_offset': Key(0.0, 'm', 'fin_ray: x of the tip (0: the back '
-                                             'beam runs along the jaw; base_width / 2: an '
-                                             'isosceles finger)', low=0.0, high=0.2),
+                                            'towards the tip); null = perpendicular to the '
+                                            'back beam', low=-60.0, high=60.0,
+                                            nullable=True),
+    'gripper.finger.fin_ray.tip_offset': Key(0.02, 'm', 'fin_ray: x of the tip (0: the back '
+                                             'beam runs along the jaw; near base_width: the '
+                                             'front beam nearly parallel to the jaw)',
+                                             low=0.0, high=0.2),
     'gripper.finger.fin_ray.element_length': Key(0.002, 'm', 'fin_ray: rod element length '
                                                  'of the discretisation', low=0.0, high=0.05,
                                                  open_low=True),

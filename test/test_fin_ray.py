@@ -84,7 +84,7 @@ def test_fin_ray_keys_without_a_fin_ray_have_no_effect():
 
 @pytest.mark.parametrize('override,key,words', [
     ('gripper.max_gap=0.05', 'gripper.finger.fin_ray.base_width', 'fill the jaw stroke'),
-    ('gripper.max_gap=0.1', 'gripper.max_gap', 'does not fit between the fin_ray fingers'),
+    ('gripper.max_gap=0.09', 'gripper.max_gap', 'does not fit between the fin_ray fingers'),
     ('gripper.initial_gap=0.09', 'gripper.initial_gap', 'does not fit'),
 ])
 def test_fingers_that_leave_no_room_for_the_fruit_are_refused(override, key, words):
@@ -94,7 +94,9 @@ def test_fingers_that_leave_no_room_for_the_fruit_are_refused(override, key, wor
 
 def test_the_simulation_puts_a_fin_ray_on_each_jaw():
     sim = Simulation(_config())
-    assert sim.initial_gap == pytest.approx(sim.fruit.rest_width + 0.01 + 2 * 0.025)
+    # the front beam x = 22.5 mm + z / 12 meets the 31.75 mm circle at z = 2.6 mm
+    assert sim.touching_gap == pytest.approx(0.10871, abs=1e-4)
+    assert sim.initial_gap == pytest.approx(sim.touching_gap + 0.01)
     finger = fin_ray_from_config(_config(), sim.fruit.depth)
     result = sim.step()
     assert result.fingers.positions.shape == (2 * finger.n_nodes, 2)
@@ -213,13 +215,13 @@ def _front_cantilever(g: FinRayGeometry) -> FingerBody:
 
 @pytest.mark.parametrize('spread', [0.0, 0.01])
 def test_pressed_at_mid_height_the_tip_bends_towards_the_load(spread):
-    """The Fin Ray effect: 5 N pressing the front beam at mid-height (at a point, or over
+    """The Fin Ray effect: 6 N pressing the front beam at mid-height (at a point, or over
     its middle third as a fruit would) moves the tip towards the fruit (+x) by more than
     half a millimetre, while the front beam alone, a plain cantilever (pressed far less,
 it is far softer), swings its tip away, further than the pressed point."""
     g = _geometry()
     finger = fin_ray_body(g, MATERIALS['tpu'])
-    forces, mid = _press(finger, 5.0, spread)
+    forces, mid = _press(finger, 6.0, spread)
     moved = static_equilibrium(finger, forces).positions - finger.rest_positions
     assert moved[mid, 0] < -0.004, 'the front beam is pressed in by millimetres'
     assert moved[finger.tip_node, 0] > 0.5e-3

@@ -89,15 +89,17 @@ class SimulationFacade:
         else:
             centre_z = 0.0
         self.initial_positions = rest + self._in_plane(0.0, centre_z)
-        # deformable fingers: the gap is between their backings, which they stand in front of
-        fingers = 2.0 * self._soft.thickness if self._soft is not None else 0.0
-        self.initial_gap = (c['gripper.initial_gap'] if c['gripper.initial_gap'] is not None
-                            else min(self.fruit.rest_width + 0.01 + fingers,
-                                     c['gripper.max_gap']))
-        if self.initial_gap > c['gripper.max_gap']:
-            raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
         self.initial_lift = (c['gripper.initial_lift'] if c['gripper.initial_lift'] is not None
                              else centre_z)
+        # deformable fingers: the gap is between their backings, which they stand in front
+        # of: the jaws touch the fruit at a wider gap (m)
+        self.touching_gap = (self.fruit.rest_width if self._soft is None else
+                             self._soft.touching_gap(self.initial_positions
+                                                     - self._in_plane(0.0, self.initial_lift)))
+        self.initial_gap = (c['gripper.initial_gap'] if c['gripper.initial_gap'] is not None
+                            else min(self.touching_gap + 0.01, c['gripper.max_gap']))
+        if self.initial_gap > c['gripper.max_gap']:
+            raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
 
     def _make_solver(self, fast: bool | None = None) -> PatternCachingSolver:
         """The Newton solver of the fruit's energies, gravity, the pads and the

@@ -64,7 +64,8 @@ class Simulation(SimulationFacade):
                                      c['contact.jaw.kinetic_friction'])
         self._place_fruit()
         if self._soft is not None:
-            self._soft.check_fit(c, self.initial_gap, self.fruit.rest_width)
+            self._soft.check_fit(c, self.initial_gap, self.touching_gap,
+                                 self.fruit.rest_width)
         self.gravity = Gravity(self.fruit.masses, c['world.gravity'])
         self._facets = fingers.left_facets(c) if self._soft is None else []
         self._plain_jaws = (c['gripper.finger.type'] == 'flat' and self._soft is None

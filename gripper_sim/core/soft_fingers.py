@@ -136,9 +136,32 @@ class SoftFingers:
                                                 body.poisson_ratio, body.depth))
         return energies + body.rod_energies(self.nodes, rest)
 
-    def check_fit(self, config, open_gap: float, fruit_width: float) -> None:
+    def touching_gap(self, outline: np.ndarray) -> float:
+        """m, the gap between the backings at which the two fingers at rest first touch
+        the fruit's ``outline`` (n, 2) m, given relative to the jaws' centre: the fruit's
+        points at the height of a finger's surface edges, against the surface's reach in
+        front of its backing there (a solid pad: its thickness; a Fin Ray: its inclined
+        front beam)."""
+        x = self.body.rest_positions
+        edges = self.body.surface_edges
+        (x0, z0), (x1, z1) = x[edges[:, 0]].T, x[edges[:, 1]].T
+        qx, qz = outline[:, :1], outline[:, 1:]
+        low, high = np.minimum(z0, z1), np.maximum(z0, z1)
+        rise = np.where(z1 != z0, z1 - z0, 1.0)
+        along = np.where(z1 != z0, x0 + (qz - z0) / rise * (x1 - x0), np.maximum(x0, x1))
+        reach = np.where((qz >= low) & (qz <= high), along, -np.inf)
+        reach = reach.max(axis=1)                     # (n,) each point's finger in front
+        level = np.isfinite(reach)
+        if not np.any(level):
+            return 0.0
+        gaps = 2.0 * np.maximum(reach[level] - qx[level, 0], reach[level] + qx[level, 0])
+        return float(max(gaps.max(), 0.0))
+
+    def check_fit(self, config, open_gap: float, touching_gap: float,
+                  fruit_width: float) -> None:
         """ConfigError unless both fingers fit in the jaws' stroke with room between them,
-        and the fruit (``fruit_width`` m) fits between them at the open gap (m)."""
+        and the fruit (``fruit_width`` m) fits between them at the open gap (m): the
+        fingers touch it at ``touching_gap`` (m, ``touching_gap``)."""
         kind = config['gripper.finger.type']
         key = THICKNESS_KEYS.get(kind, 'gripper.finger.type')
         both = 2.0 * self.thickness
@@ -148,16 +171,15 @@ class SoftFingers:
                               f'{self.thickness * 1e3:.3g} mm thick fill the jaw stroke '
                               f"(gripper.max_gap = {stroke * 1e3:.3g} mm); make them thinner "
                               'or the stroke larger')
-        room = open_gap - both
-        if room <= fruit_width:
+        if open_gap <= touching_gap:
             gap_key = ('gripper.initial_gap' if config['gripper.initial_gap'] is not None
                        else 'gripper.max_gap')
             raise ConfigError(f"config key '{gap_key}': the fruit ({fruit_width * 1e3:.3g} mm "
                               f'wide) does not fit between the {kind} fingers at the open gap '
-                              f'({room * 1e3:.3g} mm between them: a gap of '
-                              f'{open_gap * 1e3:.3g} mm less two fingers of '
-                              f'{self.thickness * 1e3:.3g} mm, {key}); open the jaws wider '
-                              'or make the fingers thinner')
+                              f'({open_gap * 1e3:.3g} mm; they touch it at a gap of '
+                              f'{touching_gap * 1e3:.3g} mm: fingers reaching '
+                              f'{self.thickness * 1e3:.3g} mm in front of their jaws, {key}); '
+                              'open the jaws wider or make the fingers thinner')
 
     # ------------------------------------------------------------------ placement
     def placed(self, left_origin: np.ndarray, right_origin: np.ndarray) -> np.ndarray:

@@ -62,6 +62,9 @@ class FinRayGeometry:
         values = {name: config[PREFIX + name] for name in cls.__dataclass_fields__}
         if values['depth'] is None:
             values['depth'] = fruit_depth
+        if values['rib_angle'] is None:   # perpendicular to the back beam
+            values['rib_angle'] = -math.degrees(math.atan2(values['tip_offset'],
+                                                           values['length']))
         return cls(**values)
 
 
