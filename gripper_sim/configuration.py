@@ -244,9 +244,9 @@ SCHEMA: dict[str, Key] = {
                                                  'of the discretisation', low=0.0, high=0.05,
                                                  open_low=True),
     'gripper.finger.fin_ray.material': Key('tpu', '-', 'fin_ray: tpu (printed TPU, E = 100 '
-                                           'MPa); silicone (E = 1 MPa); custom '
-                                           '(gripper.finger.fin_ray.youngs_modulus and '
-                                           'density)', 'str', choices=MATERIAL_NAMES),
+                                           'MPa); silicone (Dragon Skin 30, E = 0.59 MPa); '
+                                           'custom (gripper.finger.fin_ray.youngs_modulus '
+                                           'and density)', 'str', choices=MATERIAL_NAMES),
     'gripper.finger.fin_ray.youngs_modulus': Key(None, 'Pa', 'fin_ray, custom material: '
                                                  'Young modulus E', low=1e3, high=1e11,
                                                  nullable=True),

@@ -36,10 +36,12 @@ MATERIALS: dict[str, FingerMaterial] = {
     'tpu': FingerMaterial(100.4e6, 1220.0,
                           'printed TPU, Eng. Proc. 2025, 113(1), 19 (100.4-145.8 MPa); '
                           'Haid et al. (24-247 MPa)'),
-    # Sylgard 184 silicone (PDMS): 200 - 1600 kPa (Table 2, "Mechanical properties of
-    # casting materials", PMC11019708); density an estimate (silicone rubbers 1.0-1.1)
-    'silicone': FingerMaterial(1.0e6, 1070.0,
-                               'Sylgard 184 silicone, 0.2-1.6 MPa (PMC11019708, Table 2)'),
+    # Dragon Skin 30 silicone: 100 % tensile modulus 86 psi (0.593 MPa, a secant modulus
+    # near the small-strain E of this rubber), specific gravity 1.08 (Smooth-On, Dragon
+    # Skin series technical bulletin; the solid pad finger's default too)
+    'silicone': FingerMaterial(0.593e6, 1080.0,
+                               'Dragon Skin 30, 100 % modulus 0.593 MPa (Smooth-On technical '
+                               'bulletin)'),
 }
 
 #: the material names ``gripper.finger.fin_ray.material`` accepts
