@@ -3,18 +3,19 @@
 Finger frame (as ``gripper_sim.core.finger_body``): x (m) from the jaw's backing (x = 0)
 towards the fruit, z (m) up, z = 0 at the jaw's centre height. The finger is a triangle
 of height ``length``: its base, ``base_width`` long along x, is on the jaw at the top
-(z = +length / 2, from x = 0 to x = base_width); the back beam runs down the backing
-(x = 0) to the tip (x = 0, z = -length / 2); the front beam, the side that touches the
-fruit, runs from the base's front corner (base_width, +length / 2) down to the tip. The
-two fingers thus open into a V towards their tips, as Fin Ray fingers on a parallel
-gripper do (Festo's gripper finger DHAS: two flexible polyurethane bands meeting at the
-tip, joined by intermediate bridges).
+(z = +length / 2, from x = 0 to x = base_width); the back beam runs down from the
+backing to the tip (x = ``tip_offset``, z = -length / 2); the front beam, the side that
+touches the fruit, runs from the base's front corner (base_width, +length / 2) down to
+the tip: two flexible bands meeting at the tip, joined by ribs (as Festo's gripper
+finger DHAS: polyurethane bands joined by intermediate bridges). With ``tip_offset`` 0
+the two fingers open into a V towards their tips; near ``base_width`` their front beams
+are nearly parallel to the jaws.
 
-``rib_count`` ribs start on the back beam at equal spacing between base and tip and run
-to the front beam at ``rib_angle`` to the base (0: parallel to the base, i.e. horizontal
-and perpendicular to the back beam; positive: their front ends lower, towards the tip).
-Every member (base, back beam, front beam, each rib) is a chain of rod elements about
-``element_length`` long along its centre line, with nodes where members meet.
+``rib_count`` ribs start on the back beam at equal spacing in height between base and
+tip and run to the front beam at ``rib_angle`` to the base (0: parallel to the base;
+positive: their front ends lower, towards the tip). Every member (base, back beam, front
+beam, each rib) is a chain of rod elements about ``element_length`` long along its
+centre line, with nodes where members meet.
 """
 from __future__ import annotations
 
@@ -41,8 +42,8 @@ class FinRayGeometry:
         rib_count: number of ribs (0: the rib-free frame of two beams).
         rib_angle: deg, of the ribs to the base (positive: front end towards the tip).
         element_length: rod element length of the discretisation.
-        tip_offset: x of the tip (0: the back beam runs along the backing; base_width / 2:
-            an isosceles finger).
+        tip_offset: x of the tip (0: the back beam runs along the backing; near
+            base_width: the front beam nearly parallel to the jaw).
     """
 
     length: float
