@@ -8,6 +8,7 @@ from gripper_sim.core3d.energies import Membrane
 from gripper_sim.core3d.energies.wrinkling_membrane import WrinklingMembrane
 from gripper_sim.core3d.meshes import geodesic_sphere
 
+from helpers import pressed_wrinkling_shell
 from reference_energies3d import (green_strains, principal_strains, wrinkling_membrane,
                                   wrinkling_states)
 
@@ -96,39 +97,6 @@ def test_relaxed_energy_of_stretch_states():
     assert sheet_svk.value(q) - sheet.value(q) == pytest.approx(excess)
 
 
-def _pressed_shell(wrinkling, ratios, subdivisions=12):
-    """A pressurised shell (turgor p, no bulk stiffness of the contents: constant
-    pressure) with a thin, stiff skin (E_s t / (p R) = 1000, bending length
-    sqrt(D / (p R / 2)) ~ 0.14 mm, small against the contact patch) pressed between two
-    plates by delta per plate. Returns (deltas in m, plate forces F in N, p R)."""
-    from gripper_sim.configuration import load_config
-    from gripper_sim.workflows.factory import make_simulation
-    turgor = 2e4
-    config = load_config(overrides=[
-        'dimension=3', 'fruit.model=shell', 'world.gravity=0', 'world.table=false',
-        'fruit.density=50', 'fruit.damping.mass=20', 'sim.dt=0.05',
-        'sim.max_contact_passes=30', f'fruit.shape.diameter={2 * RADIUS}',
-        f'fruit.pressure.turgor={turgor}', 'fruit.pressure.bulk_modulus=0',
-        'fruit.skin.youngs_modulus=6e10', 'fruit.skin.thickness=1e-5',
-        f'fruit.mesh.subdivisions={subdivisions}', 'fruit.mesh.jaw_refinement=0.5',
-        f'fruit.skin.wrinkling={str(wrinkling).lower()}'])
-    sim = make_simulation(config)
-    width = sim.fruit.rest_width
-    deltas, forces = [], []
-    for ratio in ratios:
-        delta = ratio * RADIUS
-        sim.command_gap(width - 2 * delta, 0.004)
-        while sim.gripper_state.gap > width - 2 * delta + 1e-12:
-            sim.step()
-        result = sim.run(0.2)
-        assert sim.fruit.pressure.pressure(sim.q.ravel()) == pytest.approx(turgor)
-        force = np.sum(result.contact_forces[result.contact_obstacle == 0, 0])  # left plate
-        assert force == pytest.approx(result.grip_force, rel=1e-6)
-        deltas.append(delta)
-        forces.append(force)
-    return np.array(deltas), np.array(forces), turgor * 0.5 * width
-
-
 @pytest.mark.slow
 def test_wrinkling_shell_on_a_plate_follows_the_cap_cut_law(capsys):
     """F ~ 2 pi p R delta (the inflated ball: the plate carries p times the flat cap cut
@@ -139,9 +107,9 @@ def test_wrinkling_shell_on_a_plate_follows_the_cap_cut_law(capsys):
     slope F / delta over delta/R = 0.02-0.05. The same skin without wrinkling (SVK)
     carries the cap's compression, E_s t delta / (3 R), itself: several times the law
     (on a coarser mesh; on this one its Newton steps do not converge)."""
-    deltas, forces, p_r = _pressed_shell(True, (0.02, 0.03, 0.04, 0.05))
+    deltas, forces, p_r = pressed_wrinkling_shell(True, (0.02, 0.03, 0.04, 0.05))
     slope = float(forces @ deltas / (deltas @ deltas))
-    _, svk_force, _ = _pressed_shell(False, (0.02,), subdivisions=8)  # finer: no convergence
+    _, svk_force, _ = pressed_wrinkling_shell(False, (0.02,), subdivisions=8)  # finer: no convergence
     svk_ratio = svk_force[0] / (2 * np.pi * p_r * deltas[0])
     with capsys.disabled():
         print('\n  wrinkling shell on a plate, F / (2 pi p R delta) at delta/R 0.02-0.05: '
