@@ -230,8 +230,19 @@ def pressed_wrinkling_shell(wrinkling, ratios, subdivisions=12, dt=0.05, radius=
         f'fruit.mesh.subdivisions={subdivisions}', 'fruit.mesh.jaw_refinement=0.5',
         f'fruit.skin.wrinkling={str(wrinkling).lower()}'])
     sim = make_simulation(config)
-    width = sim.fruit.rest_width
     deltas, forces = [], []
+    for delta, result, force in pressed_constant_pressure_shell(sim, radius, ratios, turgor):
+        deltas.append(delta)
+        forces.append(force)
+    return np.array(deltas), np.array(forces), turgor * 0.5 * sim.fruit.rest_width
+
+
+def pressed_constant_pressure_shell(sim, radius, ratios, turgor):
+    """Close the plates of ``sim`` (a shell of radius m at constant pressure turgor Pa)
+    by delta = ratio * radius each for every ratio in turn, settle 0.2 s; yields (delta
+    m, the settled result, the left plate's force N), checking that the pressure stayed
+    the turgor and that the plate force is the grip force."""
+    width = sim.fruit.rest_width
     for ratio in ratios:
         delta = ratio * radius
         sim.command_gap(width - 2 * delta, 0.004)
@@ -241,9 +252,7 @@ def pressed_wrinkling_shell(wrinkling, ratios, subdivisions=12, dt=0.05, radius=
         assert abs(sim.fruit.pressure.pressure(sim.q.ravel()) / turgor - 1) < 1e-6
         force = np.sum(result.contact_forces[result.contact_obstacle == 0, 0])  # left plate
         assert abs(force / result.grip_force - 1) < 1e-6
-        deltas.append(delta)
-        forces.append(force)
-    return np.array(deltas), np.array(forces), turgor * 0.5 * width
+        yield delta, result, force
 
 
 def kernel_evaluation(energy, q, hessian=True):

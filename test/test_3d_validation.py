@@ -9,7 +9,7 @@ from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
-from helpers import hertz_sphere_errors
+from helpers import hertz_sphere_errors, pressed_constant_pressure_shell
 
 #: a coarse uniform shell (162 nodes): enough for global balances and friction
 COARSE = ['dimension=3', 'fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=1']
@@ -253,17 +253,9 @@ def _pressed_membrane(skin_modulus, ratios=(0.02, 0.05)):
     sim = make_simulation(config)
     width = sim.fruit.rest_width
     out = {}
-    for ratio in ratios:
-        delta = ratio * radius
-        sim.command_gap(width - 2 * delta, 0.004)
-        while sim.gripper_state.gap > width - 2 * delta + 1e-12:
-            sim.step()
-        result = sim.run(0.2)
-        pressure = sim.fruit.pressure.pressure(sim.q.ravel())
-        assert pressure == pytest.approx(turgor)  # no bulk stiffness: constant pressure
+    for ratio, (delta, result, force) in zip(ratios, pressed_constant_pressure_shell(
+            sim, radius, ratios, turgor)):
         a = np.mean(result.deformation.jaw_contact_radii)
-        force = np.sum(result.contact_forces[result.contact_obstacle == 0, 0])  # left plate
-        assert force == pytest.approx(result.grip_force, rel=1e-6)
         out[ratio] = (force / (turgor * np.pi * a * a),
                       force / (2 * np.pi * turgor * 0.5 * width * delta))
     return out
