@@ -332,3 +332,12 @@ def test_a_gap_that_presses_the_fingers_together_is_a_command_error():
 def test_keys_without_effect_are_warned_about(overrides, key):
     with pytest.warns(ConfigWarning, match=f"'{key}' has no effect"):
         load_config(overrides=overrides)
+
+
+def test_the_solid_pad_preset_is_the_built_in_solid_pad():
+    preset = load_config(finger='solid_pad')
+    built_in = load_config(overrides=['gripper.finger.type=solid_pad'])
+    keys = [k for k in built_in if k.startswith('gripper.finger.solid_pad.')]
+    assert len(keys) == 5
+    assert {k: preset[k] for k in keys} == {k: built_in[k] for k in keys}
+    assert preset['gripper.finger.type'] == 'solid_pad'
