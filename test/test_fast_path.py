@@ -199,6 +199,53 @@ def test_grasp_and_lift_trajectory_matches_the_reference_path():
     assert fast_sim.last.lift > fast_sim.initial_lift + 1e-3
 
 
+@pytest.mark.parametrize('finger', ['vgroove', 'arc'])
+def test_shaped_fingers_match_the_reference_path(finger):
+    """Several faces per jaw (the facets of a V-groove or an arc) on the kernel: the same
+    grasp-and-lift trajectory as the reference path, nodes held by two facets included."""
+    overrides = ['fruit.nodes=32', f'gripper.finger.type={finger}',
+                 'gripper.initial_gap=0.0645', 'gripper.close_speed=0.05',
+                 'gripper.lift_acceleration=5', 'gripper.lift_speed=0.05']
+    config = load_config(overrides=overrides)
+    fast_sim, ref_sim = Simulation(config, fast=True), Simulation(config, fast=False)
+    assert fast_sim._fast.applies()
+    faces_held = set()
+
+    def drive(sim):
+        return GraspSequence(sim, 3.0, lift_height=0.005, hold_time=0.05)
+
+    def record(result):
+        faces_held.update(result.contact_obstacle[result.contact_obstacle >= 0].tolist())
+
+    fast_sim.add_observer(record)
+    assert _compare(fast_sim, ref_sim, 400, drive) > 250
+    assert fast_sim._fast.counts[kernels.C_SUBSTEPS] > 350
+    jaw_faces = [i for i, name in enumerate(fast_sim.obstacle_names) if 'jaw' in name]
+    assert len(jaw_faces) > 2
+    assert len(faces_held & set(jaw_faces)) >= 4  # at least two facets of each jaw
+    assert fast_sim.last.grip_force > 2.0
+
+
+def test_sliding_grasp_matches_the_reference_path():
+    """A grip too weak to carry the fruit: it slides down the jaws while they lift, with
+    the same trajectory (kinetic friction, slip distance) on both paths."""
+    overrides = ['fruit.nodes=32', 'sim.dt=0.00025', 'gripper.initial_gap=0.0645',
+                 'gripper.close_speed=0.05', 'gripper.lift_acceleration=5',
+                 'gripper.lift_speed=0.05']
+    config = load_config(overrides=overrides)
+    sims = Simulation(config, fast=True), Simulation(config, fast=False)
+    sliding = []
+
+    def drive(sim):
+        return GraspSequence(sim, 0.5, lift_height=0.01, hold_time=0.2)
+
+    sims[0].add_observer(lambda result: sliding.append(result.slipping))
+    _compare(*sims, 1400, drive)
+    assert sum(sliding) > 50
+    assert sims[0].last.slip_distance > 1e-4
+    assert sims[0].last.slip_distance == pytest.approx(sims[1].last.slip_distance, rel=1e-9)
+
+
 def test_damped_shell_dropped_on_the_table_matches_the_reference_path():
     config = load_config(overrides=['fruit.nodes=32', 'fruit.initial_height=0.045',
                                     'fruit.damping.mass=2', 'fruit.damping.stiffness=1e-4',
@@ -271,8 +318,8 @@ def test_parameter_changes_while_running_match_the_reference_path():
 SETUPS = [
     ([], 'kernel'),
     (['fruit.model=point'], 'kernel'),
-    (['gripper.finger.type=arc'], 'compiled'),
-    (['gripper.finger.type=vgroove'], 'compiled'),
+    (['gripper.finger.type=arc'], 'kernel'),
+    (['gripper.finger.type=vgroove'], 'kernel'),
     (['gripper.finger.pad.enabled=true'], 'compiled'),
     (['fruit.model=solid'], 'compiled'),
     (['fruit.model=solid', 'gripper.finger.type=arc'], 'compiled'),
@@ -284,8 +331,8 @@ SETUPS = [
 @pytest.mark.parametrize('overrides,route', SETUPS, ids=[' '.join(o) or 'default'
                                                          for o, _ in SETUPS])
 def test_every_setup_takes_a_compiled_route(overrides, route):
-    """No 2D set-up steps on the numpy energies: the flat-finger shell and point fruits
-    take the whole-step kernel, every other one the compiled energy kernels through the
+    """No 2D set-up steps on the numpy energies: the shell and point fruits with flat, arc
+    and V-groove fingers take the whole-step kernel, every other one the compiled energy kernels through the
     fixed-pattern solver (each energy has an ``evaluate_into``)."""
     sim = Simulation(load_config(overrides=overrides + ['fruit.nodes=32']))
     sim.command_force(1.0)

@@ -1,4 +1,5 @@
-"""The fast path of ``Simulation`` for ring (shell) and point fruit models.
+"""The fast path of ``Simulation`` for ring (shell) and point fruit models, with flat,
+arc or V-groove fingers (one face or several per jaw).
 
 ``FastPath`` runs a whole step - gripper faces, contact constraints, Newton, contact
 set updates, then the step's measures and damage of the end state - in one numba
@@ -9,8 +10,11 @@ numpy measures). It gives the same results as that reference path
 iterations) and is chosen automatically by ``Simulation`` when numba is installed,
 the fruit's energies are the ring energies (stretching, bending, enclosed-area
 pressure) and gravity, and the obstacles move as the kernels model them
-(``FastPath.applies``: jaws 0 and 1 with the gripper, the rest fixed); otherwise - the
-solid (neo-Hookean) model, other finger geometries - the generic path runs.
+(``FastPath.applies``: the jaws' faces with the gripper, the rest fixed); otherwise -
+the solid (neo-Hookean) model, soft pads - the generic path runs. A step whose contact
+filter the kernel cannot factorise (a node held by a face and pushed into a second,
+oblique one: a V-groove's apex, the joint of two arc facets) is done by the generic path
+(``FastPath.fallbacks`` counts them).
 ``Simulation(config, fast=False)`` or ``GRIPPER_SIM_FAST=0`` in the environment turns
 the fast path off.
 
@@ -163,7 +167,9 @@ class FastPath:
         self._names_of = None
         self._names_cache: tuple = ()
         self._applies = False
-        self.face_par = np.zeros((0, 7))
+        self.face_par = np.zeros((0, kernels.FP_SIZE))
+        #: steps the generic path did because the kernel cannot (kernels.UNSUPPORTED)
+        self.fallbacks = 0
         self.face_dyn = np.zeros((0, 6))
         self._energy_args = (model['edges'], model['spar'], model['triples'], model['bpar'],
                              model['ring'], model['press'], self.gravity_grad)
@@ -189,9 +195,9 @@ class FastPath:
 
     # ------------------------------------------------------------------ faces
     def applies(self) -> bool:
-        """Whether the kernels model the simulation's obstacles: faces 0 and 1 the jaws,
-        moving with the gripper as ``Simulation._faces`` moves them, the others fixed
-        (table, walls). Checked once per face set (``set_parameter`` makes a new one)."""
+        """Whether the kernels model the simulation's obstacles: the jaws' faces moving
+        with the gripper as ``Simulation._faces`` moves them, the others fixed (table,
+        walls). Checked once per face set (``set_parameter`` makes a new one)."""
         template = self.sim._faces_template
         if template is not self._checked:
             self._applies = self._faces_match(template)
@@ -210,10 +216,12 @@ class FastPath:
             return False
         if len(faces) != len(template):
             return False
+        sides, offsets = sim._face_side, sim._face_offsets
         for k, (face, rest) in enumerate(zip(faces, template)):
-            if k < 2:
-                sign = -1.0 if k == 0 else 1.0
-                origin = (grip.x + sign * (0.5 * grip.gap), grip.lift)
+            if k < len(sides):
+                sign = -1.0 if sides[k] == 0 else 1.0
+                origin = (grip.x + sign * (0.5 * grip.gap) + offsets[k][0],
+                          grip.lift + offsets[k][1])
                 velocity = (grip.x_rate + sign * (0.5 * grip.gap_rate), grip.lift_rate)
             else:
                 origin, velocity = tuple(rest.origin), tuple(rest.velocity)
@@ -228,9 +236,13 @@ class FastPath:
     def _face_arrays(self):
         template = self.sim._faces_template
         if template is not self._template:
-            self.face_par = np.array([[f.normal[0], f.normal[1], f.half_length, f.thickness,
-                                       f.static_friction, f.kinetic_friction, f.restitution]
-                                      for f in template], dtype=float).reshape(-1, 7)
+            sides, offsets = self.sim._face_side, self.sim._face_offsets
+            self.face_par = np.array(
+                [[f.normal[0], f.normal[1], f.half_length, f.thickness, f.static_friction,
+                  f.kinetic_friction, f.restitution]
+                 + ([sides[k], offsets[k][0], offsets[k][1]] if k < len(sides)
+                    else [-1.0, 0.0, 0.0])
+                 for k, f in enumerate(template)], dtype=float).reshape(-1, kernels.FP_SIZE)
             dyn = np.zeros((len(template), 6))
             for k, f in enumerate(template):
                 dyn[k, 0:2] = f.origin
@@ -291,6 +303,7 @@ class FastPath:
         if status != kernels.OK:
             self._measured = None
             if status == kernels.UNSUPPORTED:
+                self.fallbacks += 1
                 return sim._substep_hard(dt)
             history = [float(h) for h in self.history[:int(out[1])]]
             message = _FAILURES.get(
@@ -330,6 +343,8 @@ class FastPath:
         (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, _cvz, any_left, any_right,
          kinetic, elastic, gravitational, width, max_strain, contact_length,
          peak) = values
+        if not sim._plain_jaws:  # shaped fingers: each jaw's force along the closing axis
+            left_n, right_n = -lfx, rfx
         both = any_left > 0 and any_right > 0
         slip = sim._slip_distance(cz - grip.lift, both, any_left > 0 or any_right > 0)
         slipping = (any_left > 0 or any_right > 0) and self._sliding(v, contacts.obstacle)

@@ -21,10 +21,13 @@ see ``band_order``) has nbw = 4 for stretching + bending + pressure, so the Newt
 matrix (same block band) is factorised by a block LDL^T in O(N) time, with the
 rank-one pressure term added by Sherman-Morrison.
 
-Faces (rigid obstacles) are rows of two arrays: ``face_par`` (n_faces, 7)
+Faces (rigid obstacles) are rows of two arrays: ``face_par`` (n_faces, FP_SIZE)
 [normal x, normal z, half_length, thickness, static friction, kinetic friction,
-restitution] and ``face_dyn`` (n_faces, 6) [origin at the start of the step (x, z),
-origin at the end (x, z), velocity (x, z)].
+restitution, jaw (0 left, 1 right, -1 none), offset x, offset z] and ``face_dyn``
+(n_faces, 6) [origin at the start of the step (x, z), origin at the end (x, z), velocity
+(x, z)]. A jaw has one face (flat finger) or several (the facets of an arc or V-groove
+finger); each face of a jaw moves with it, its origin the jaw's origin plus its offset
+(m); the faces of no jaw (table, walls) are fixed.
 
 Import this module only where numba is installed (``gripper_sim.core.fast`` checks).
 """
@@ -55,6 +58,10 @@ PHI_ROUNDOFF = 1e-9
 
 #: shifts of the inertia-like diagonal tried when the Newton matrix gives no descent
 SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
+
+#: columns of ``face_par`` after the seven face parameters: the jaw of the face (-1: none)
+#: and the face origin's offset (x, z) m from the jaw origin
+FP_JAW, FP_OFFSET_X, FP_OFFSET_Z, FP_SIZE = 7, 8, 9, 10
 
 # fpar layout of ``substep`` / ``newton_solve``
 F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
@@ -1024,8 +1031,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         x_n, v_n: (n, 2) state at the start of the step.
         obstacle .. secondary_bounce: (n,) the contact state, updated in place (pass
             copies).
-        face_par, face_dyn: the faces (see the module doc); rows 0 and 1 of face_dyn
-            (the jaws) are set here from ``grip``.
+        face_par, face_dyn: the faces (see the module doc); the rows of face_dyn of the
+            jaws' faces are set here from ``grip``.
         grip: (gap, lift, x) at the start, (gap, lift, x, gap rate, lift rate, x rate)
             at the end, m and m/s (x: the gripper centre on the transport axis).
         masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
@@ -1052,14 +1059,18 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     dt = fpar[F_DT]
     counts[C_SUBSTEPS] += 1
     gap0, lift0, x0, gap1, lift1, x1, gap_rate, lift_rate, x_rate = grip
-    for side in range(2):
+    for f in range(face_par.shape[0]):
+        side = face_par[f, FP_JAW]
+        if side < 0:
+            continue
         sign = -1.0 if side == 0 else 1.0
-        face_dyn[side, 0] = x0 + sign * (0.5 * gap0)
-        face_dyn[side, 1] = lift0
-        face_dyn[side, 2] = x1 + sign * (0.5 * gap1)
-        face_dyn[side, 3] = lift1
-        face_dyn[side, 4] = x_rate + sign * (0.5 * gap_rate)
-        face_dyn[side, 5] = lift_rate
+        ox, oz = face_par[f, FP_OFFSET_X], face_par[f, FP_OFFSET_Z]
+        face_dyn[f, 0] = (x0 + sign * (0.5 * gap0)) + ox
+        face_dyn[f, 1] = lift0 + oz
+        face_dyn[f, 2] = (x1 + sign * (0.5 * gap1)) + ox
+        face_dyn[f, 3] = lift1 + oz
+        face_dyn[f, 4] = x_rate + sign * (0.5 * gap_rate)
+        face_dyn[f, 5] = lift_rate
     x_pred = np.empty((n, 2))
     for i in range(n):
         x_pred[i, 0] = x_n[i, 0] + dt * v_n[i, 0]
@@ -1153,20 +1164,20 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         elif secondary_bounce[i] > 0:
             secondary[i] = -1
             secondary_bounce[i] = 0.0
-    for side in range(2):
-        acc = 0.0
-        nx, nz = face_par[side, 0], face_par[side, 1]
-        for i in range(n):
-            if obstacle[i] == side:
-                acc += forces_out[i, 0] * nx + forces_out[i, 1] * nz
-        out[2 + side] = acc
+    out[2] = out[3] = 0.0
+    for i in range(n):  # each jaw's force along its closing axis, summed over its faces
+        f = obstacle[i]
+        if f >= 0 and face_par[f, FP_JAW] >= 0:
+            side = np.int64(face_par[f, FP_JAW])
+            out[2 + side] += forces_out[i, 0] if side == 0 else -forces_out[i, 0]
     out[0] = iterations
-    for e in range(4):
-        out[4 + e] = values[e]
     jaw_origins = np.empty((2, 2))
     for side in range(2):
-        jaw_origins[side, 0] = face_dyn[side, 2]
-        jaw_origins[side, 1] = face_dyn[side, 3]
+        sign = -1.0 if side == 0 else 1.0
+        jaw_origins[side, 0] = x1 + sign * (0.5 * gap1)
+        jaw_origins[side, 1] = lift1
+    for e in range(4):
+        out[4 + e] = values[e]
     step_measures(x_out, v_out, forces_out, obstacle, masses, surface, skin_edges,
                   rest_segments, face_par, jaw_origins, fpar[F_DEPTH], edges, spar, triples,
                   bpar, ring, press, gravity_grad, np.bool_(True), values, normal_out,
@@ -1199,9 +1210,9 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
 
 @njit(cache=True, error_model='numpy')
 def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
-    """Whether the fruit slides in the jaws, as ``slip.jaw_contacts_sliding`` with the
-    jaws being faces 0 and 1: on either, more than half of the nodes it holds move along it
-    faster than ``speed`` (m/s) relative to it.
+    """Whether the fruit slides in the jaws, as ``slip.jaw_contacts_sliding``: on either
+    jaw, more than half of the nodes its faces hold move along them faster than ``speed``
+    (m/s) relative to them.
 
     Args:
         v: (n, 2) m/s.  obstacle: (n,) holding face per node.  face_par: see the module
@@ -1211,16 +1222,17 @@ def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
     sliding = np.zeros(2, np.int64)
     for i in range(v.shape[0]):
         f = obstacle[i]
-        if f < 0 or f > 1:
+        if f < 0 or face_par[f, FP_JAW] < 0:
             continue
-        rx = v[i, 0] - jaw_velocities[f, 0]
-        rz = v[i, 1] - jaw_velocities[f, 1]
+        side = np.int64(face_par[f, FP_JAW])
+        rx = v[i, 0] - jaw_velocities[side, 0]
+        rz = v[i, 1] - jaw_velocities[side, 1]
         nx, nz = face_par[f, 0], face_par[f, 1]
         r_n = rx * nx + rz * nz
         ax, az = rx - r_n * nx, rz - r_n * nz
-        held[f] += 1
+        held[side] += 1
         if ax * ax + az * az > speed * speed:
-            sliding[f] += 1
+            sliding[side] += 1
     return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
 
 
@@ -1286,7 +1298,8 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         obstacle: (n,) holding obstacle per node.  masses: (n,) kg.
         surface: (n_s,) outline nodes.  skin_edges: (n_e, 2).  rest_segments: (n_e,) m,
         skin segment lengths of the rest shape.  face_par: see the module doc.
-        jaw_origins: (2, 2) m, left and right jaw face centres.  depth: m.
+        jaw_origins: (2, 2) m, left and right jaw origins (a jaw face's centre is its
+        origin plus the face's offset).  depth: m.
         edges .. gravity_grad: the energies (as ``newton_solve``).
         known: the energies at x are ``energies`` (4,) [stretching, bending, pressure,
         gravity] J, as ``substep`` reports them; else they are computed.
@@ -1302,7 +1315,8 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         ty = 0.0
         ox, oz = jaw_origins[side, 0], jaw_origins[side, 1]
         for i in range(n):
-            if obstacle[i] != side:
+            f = obstacle[i]
+            if f < 0 or face_par[f, FP_JAW] != side:
                 continue
             fx += forces[i, 0]
             fz += forces[i, 1]
@@ -1315,8 +1329,8 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         f = obstacle[i]
         if f >= 0:
             normal_out[i] = forces[i, 0] * face_par[f, 0] + forces[i, 1] * face_par[f, 1]
-            if f < 2:
-                out[M_LEFT_N + f] += normal_out[i]
+            if face_par[f, FP_JAW] >= 0:  # each jaw's force along its faces' normals
+                out[M_LEFT_N + np.int64(face_par[f, FP_JAW])] += normal_out[i]
     m_sum = 0.0
     for i in range(n):
         m_sum += masses[i]
@@ -1383,10 +1397,14 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         peak = max(peak, p)
     out[M_PEAK_PRESSURE] = peak
     length = 0.0
-    for side in range(2):
-        length += _face_contact_length(x, surface, obstacle, side, face_par[side, 0],
-                                       face_par[side, 1], jaw_origins[side, 0],
-                                       jaw_origins[side, 1])
+    for f in range(face_par.shape[0]):
+        if face_par[f, FP_JAW] < 0:
+            continue
+        side = np.int64(face_par[f, FP_JAW])
+        length += _face_contact_length(x, surface, obstacle, f, face_par[f, 0],
+                                       face_par[f, 1],
+                                       jaw_origins[side, 0] + face_par[f, FP_OFFSET_X],
+                                       jaw_origins[side, 1] + face_par[f, FP_OFFSET_Z])
     out[M_CONTACT_LENGTH] = length
 
 
