@@ -92,6 +92,7 @@ def _op_loops():
         n2 = q.shape[0]
         band = np.zeros((n2 // 2, nbw + 1, 2, 2))
         grads = np.empty((4, n2))
+        nopad, nopar = np.zeros(0, np.int64), np.zeros((0, k.PAD_SIZE))
         out = np.empty((6, n2))
         values = np.empty(4)
         acc = 0.0
@@ -99,7 +100,7 @@ def _op_loops():
             phi, c = k._evaluate(q, q_n, v_n, dt, m2, alpha, beta, filters, frn, frt, frb,
                                  frs, frn.shape[0], edges, spar, triples, bpar, ring, press,
                                  grav, pos, hessian, out[0], out[1], grads, band, out[2],
-                                 out[3], out[4], values)
+                                 out[3], out[4], values, nopad, nopar)
             acc += phi
         return acc
 
@@ -118,6 +119,7 @@ def _op_loops():
         for i in range(n):
             order[pos[i]] = i
         ab = np.empty((n, nbw + 1, 2, 2))
+        nopad, nopar = np.zeros(0, np.int64), np.zeros((0, k.PAD_SIZE))
         x = np.ones(n2)
         y = np.ones(n2)
         ok = 0
@@ -126,7 +128,7 @@ def _op_loops():
                 k._ldl_solve2(ab, x, y)
             else:
                 k._newton_matrix(band, m2, dt, alpha, beta, filters, frn, frt, frb, frs,
-                                 frn.shape[0], q, q_n, pos, order, 0.0, ab)
+                                 frn.shape[0], q, q_n, pos, order, 0.0, ab, nopad, nopar)
                 ok += k._ldl_blocks(ab)
         return ok
 

@@ -10,8 +10,10 @@ numpy measures). It gives the same results as that reference path
 iterations) and is chosen automatically by ``Simulation`` when numba is installed,
 the fruit's energies are the ring energies (stretching, bending, enclosed-area
 pressure) and gravity, and the obstacles move as the kernels model them
-(``FastPath.applies``: the jaws' faces with the gripper, the rest fixed); otherwise -
-the solid (neo-Hookean) model, soft pads - the generic path runs. A step whose contact
+(``FastPath.applies``: the jaws' faces with the gripper, the rest fixed), with or
+without soft pads (``pad.PadLayer``: the layer sets its rows for the step in Python, the
+kernel adds its energy to the step's Newton solve); otherwise - the solid (neo-Hookean)
+model - the generic path runs. A step whose contact
 filter the kernel cannot factorise (a node held by a face and pushed into a second,
 oblique one: a V-groove's apex, the joint of two arc facets) is done by the generic path
 (``FastPath.fallbacks`` counts them).
@@ -34,6 +36,7 @@ import numpy as np
 from gripper_sim.core import contact as cm
 from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
 from gripper_sim.core.energies import EnclosedAreaPressure, RingBending, Stretching
+from gripper_sim.core.measures import tributary_lengths
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
 from gripper_sim.core.slip import SLIDING_SPEED
 from gripper_sim.core.stepper import NewtonFailure
@@ -161,6 +164,7 @@ class FastPath:
         self._tracker = None
         self._tracker_seen = None
         self._damage_faces = None
+        self._no_pad = (np.zeros(0, np.int64), np.zeros((0, kernels.PAD_SIZE)))
         self._no_damage = (np.zeros((0, 3)), np.zeros(0), np.zeros(3), np.zeros(0),
                            np.zeros(0), np.zeros(0), np.zeros((0, kernels.P_SIZE)),
                            np.zeros(3))
@@ -185,9 +189,11 @@ class FastPath:
             return None
         solver_energies = list(sim.solver.energies)
         expected = list(sim.fruit.energies) + [sim.gravity]
+        if sim._pad is not None:
+            expected.append(sim._pad)
         if len(solver_energies) != len(expected) or any(
                 a is not b for a, b in zip(solver_energies, expected)):
-            return None  # another energy in the step (e.g. a pad layer): not modelled here
+            return None  # another energy in the step (a barrier): not modelled here
         model = ring_model(sim.fruit, sim.fruit.energies)
         if model is None:
             return None
@@ -285,7 +291,14 @@ class FastPath:
         v_n = sim.v if sim.v.flags.c_contiguous else np.ascontiguousarray(sim.v)
         model = self.model
         edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
-        damage = self._damage_inputs()
+        pad = sim._pad
+        if pad is None:
+            damage = self._damage_inputs()
+            pad_nodes, pad_par = self._no_pad
+        else:  # the measures and damage need the pads' forces: ``measure`` takes them
+            damage = self._no_damage
+            pad.begin_step(x_n, sim._pad_faces(grip), sim._pad_faces(grip_new), dt)
+            pad_nodes, pad_par = _pad_rows(pad)
         if timing:
             t1 = time.perf_counter()
         status = kernels.substep(
@@ -296,7 +309,7 @@ class FastPath:
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
             model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
-            self.measures, self.counts, *damage)
+            self.measures, self.counts, *damage, pad_nodes, pad_par)
         if timing:
             t2 = time.perf_counter()
         out = self.out
@@ -304,7 +317,12 @@ class FastPath:
             self._measured = None
             if status == kernels.UNSUPPORTED:
                 self.fallbacks += 1
-                return sim._substep_hard(dt)
+                iterations = sim._substep_hard(dt)  # the pads (if any) are set for the step
+                if pad is not None:
+                    pad.finish_step(sim.q.ravel())
+                    sim._jaw_force = (sim._jaw_force[0] + float(pad.side_force[0]),
+                                      sim._jaw_force[1] + float(pad.side_force[1]))
+                return iterations
             history = [float(h) for h in self.history[:int(out[1])]]
             message = _FAILURES.get(
                 status, f'no convergence in {sim.solver.max_iterations} iterations')
@@ -316,7 +334,13 @@ class FastPath:
         sim._grip = grip_new
         sim._time += dt
         sim._jaw_force = (float(out[2]), float(out[3]))
-        self._measured = (x, normal, pressure, self.measures.tolist(), damage)
+        if pad is None:
+            self._measured = (x, normal, pressure, self.measures.tolist(), damage)
+        else:
+            pad.finish_step(x.ravel())
+            sim._jaw_force = (sim._jaw_force[0] + float(pad.side_force[0]),
+                              sim._jaw_force[1] + float(pad.side_force[1]))
+            self._measured = None
         if timing:
             t3 = time.perf_counter()
             self.timers['glue'] += (t1 - t0) + (t3 - t2)
@@ -332,14 +356,22 @@ class FastPath:
             t0 = time.perf_counter()
         sim = self.sim
         fruit, grip = sim.fruit, sim._grip
-        x, v, forces = sim.q, sim.v, sim.contact_forces
+        x, v = sim.q, sim.v
         contacts = sim.contacts
+        # every contact force (the pads' included) and the obstacle holding each node
+        forces, holder = sim._contact_forces_and_holders()
         measured = self._measured
         damage_of_x = None
         if measured is not None and measured[0] is x:
             _, normal, pressure, values, damage_of_x = measured
         else:
-            values, normal, pressure = self._measure_kernel()
+            values, normal, pressure = self._measure_kernel(forces, holder)
+            if sim._pad is not None:  # the hard contacts' length, plus the pads'
+                on_pad = (contacts.obstacle < 0) & (sim._pad.holder >= 0)
+                values[kernels.M_CONTACT_LENGTH] = (
+                    self._measure_kernel(sim.contact_forces, contacts.obstacle)[0][
+                        kernels.M_CONTACT_LENGTH]
+                    + float(np.sum(tributary_lengths(fruit, x)[on_pad[fruit.surface]])))
         (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, _cvz, any_left, any_right,
          kinetic, elastic, gravitational, width, max_strain, contact_length,
          peak) = values
@@ -347,15 +379,15 @@ class FastPath:
             left_n, right_n = -lfx, rfx
         both = any_left > 0 and any_right > 0
         slip = sim._slip_distance(cz - grip.lift, both, any_left > 0 or any_right > 0)
-        slipping = (any_left > 0 or any_right > 0) and self._sliding(v, contacts.obstacle)
+        slipping = (any_left > 0 or any_right > 0) and self._sliding(v, holder)
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
         positions = x.copy()
-        damage = self._damage(positions, normal, contacts.obstacle, ratio, damage_of_x)
+        damage = self._damage(positions, normal, holder, ratio, damage_of_x)
         result = _build(StepResult, dict(
             time=sim._time, step=sim._step, positions=positions, velocities=v.copy(),
-            contact_forces=forces.copy(), contact_obstacle=contacts.obstacle.copy(),
+            contact_forces=forces.copy(), contact_obstacle=holder,
             contact_sticking=contacts.mode == cm.STICK,
             obstacle_names=self._names(), surface=fruit.surface,
             left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
@@ -466,7 +498,10 @@ class FastPath:
             peak_flesh_stress=tracker.peak_flesh_stress, crushed=tracker.crushed,
             node_pressure=node_pressure, contacts=patches))
 
-    def _measure_kernel(self):
+    def _measure_kernel(self, forces: np.ndarray, holder: np.ndarray):
+        """``step_measures`` of the present state with contact forces (n, 2) N and the
+        obstacle (n,) holding each node: (values (list), normal (n,) N, pressure (n_s,)
+        Pa)."""
         sim = self.sim
         grip = sim._grip
         face_par, _ = self._face_arrays()
@@ -478,11 +513,31 @@ class FastPath:
         edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
         kernels.step_measures(
             np.ascontiguousarray(sim.q, dtype=float), np.ascontiguousarray(sim.v, dtype=float),
-            np.ascontiguousarray(sim.contact_forces, dtype=float), sim.contacts.obstacle,
+            np.ascontiguousarray(forces, dtype=float), holder,
             self.masses, self.surface, self.skin_edges, self.rest_segments, face_par, origins,
             sim.fruit.depth, edges, spar, triples, bpar, ring, press, gravity_grad, False,
             np.zeros(4), normal, pressure, out)
         return out.tolist(), normal, pressure
+
+
+def _pad_rows(pad) -> tuple[np.ndarray, np.ndarray]:
+    """The substep kernel's pad arguments from a ``PadLayer`` set for the step
+    (``begin_step``): (m,) nodes and (m, kernels.PAD_SIZE) rows, one per node and face."""
+    nodes, rows = [], []
+    for face, active, lagged in zip(pad.faces, pad.active, pad.lagged):
+        if not active.size:
+            continue
+        row = np.empty((active.size, kernels.PAD_SIZE))
+        row[:, kernels.PAD_K] = pad.k[active]
+        row[:, kernels.PAD_BOUND] = pad.mu * lagged
+        row[:, kernels.PAD_OX:kernels.PAD_OZ + 1] = face.origin
+        row[:, kernels.PAD_NX:kernels.PAD_NZ + 1] = face.normal
+        row[:, kernels.PAD_SPEED] = face.speed
+        nodes.append(pad.surface[active])
+        rows.append(row)
+    if not nodes:
+        return np.zeros(0, np.int64), np.zeros((0, kernels.PAD_SIZE))
+    return np.concatenate(nodes), np.concatenate(rows)
 
 
 def _frozen_builder(cls):

@@ -63,6 +63,12 @@ SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
 #: and the face origin's offset (x, z) m from the jaw origin
 FP_JAW, FP_OFFSET_X, FP_OFFSET_Z, FP_SIZE = 7, 8, 9, 10
 
+#: columns of the soft pads' rows (``pad_par``, one row per node that may touch a pad face
+#: in the step, as ``pad.PadLayer.begin_step`` sets them): stiffness k N/m, friction bound
+#: mu * lagged normal force N, pad surface origin at the end of the step (x, z) m, its
+#: normal (x, z), the jaw's speed along the face m/s
+PAD_K, PAD_BOUND, PAD_OX, PAD_OZ, PAD_NX, PAD_NZ, PAD_SPEED, PAD_SIZE = range(8)
+
 # fpar layout of ``substep`` / ``newton_solve``
 F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
 # ipar layout
@@ -344,7 +350,8 @@ def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hes
 @njit(cache=True, error_model='numpy')
 def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
               fr_speed, n_fr, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
-              hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values):
+              hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values,
+              pad_nodes, pad_par):
     """Phi of stepper.ImplicitEulerSolver._evaluate, its gradient (into ``grad``) and the
     friction gradient (into ``fric_grad``); the elastic band Hessian into ``band``, the
     energies (4,) into ``values``.
@@ -402,7 +409,63 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         phi += acc
         for m in range(n2):
             grad[m] += fric_grad[m]
+    if pad_nodes.shape[0] > 0:
+        phi += _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad)
     return phi, c
+
+
+@njit(cache=True, error_model='numpy')
+def _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad):
+    """The soft pads' energy (J), as ``pad.PadLayer._face_terms`` (elastic foundation and
+    lagged smoothed friction); adds its gradient (N) into ``grad`` (2n,)."""
+    eps = FRICTION_SMOOTHING * dt
+    value = 0.0
+    for e in range(pad_nodes.shape[0]):
+        i = pad_nodes[e]
+        k, bound = pad_par[e, PAD_K], pad_par[e, PAD_BOUND]
+        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
+        tx, tz = -nz, nx
+        delta = max(0.0, -((q[2 * i] - pad_par[e, PAD_OX]) * nx
+                           + (q[2 * i + 1] - pad_par[e, PAD_OZ]) * nz))
+        u = (((q[2 * i] - q_n[2 * i]) * tx + (q[2 * i + 1] - q_n[2 * i + 1]) * tz)
+             - pad_par[e, PAD_SPEED] * dt)
+        a = abs(u)
+        if a < eps:
+            f0 = -a ** 3 / (3 * eps ** 2) + a ** 2 / eps + eps / 3
+            f1 = 2 * a / eps - a ** 2 / eps ** 2
+        else:
+            f0, f1 = a, 1.0
+        value += 0.5 * k * delta ** 2 + bound * f0
+        g_n = -k * delta
+        g_t = bound * f1 * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
+        grad[2 * i] += g_n * nx + g_t * tx
+        grad[2 * i + 1] += g_n * nz + g_t * tz
+    return value
+
+
+@njit(cache=True, error_model='numpy')
+def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
+    """Adds the pads' Hessian node blocks, filtered (S_i B S_i), to the band ``ab``."""
+    eps = FRICTION_SMOOTHING * dt
+    for e in range(pad_nodes.shape[0]):
+        i = pad_nodes[e]
+        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
+        tx, tz = -nz, nx
+        gap = (q[2 * i] - pad_par[e, PAD_OX]) * nx + (q[2 * i + 1] - pad_par[e, PAD_OZ]) * nz
+        h_n = pad_par[e, PAD_K] if gap < 0 else 0.0
+        u = (((q[2 * i] - q_n[2 * i]) * tx + (q[2 * i + 1] - q_n[2 * i + 1]) * tz)
+             - pad_par[e, PAD_SPEED] * dt)
+        a = abs(u)
+        h_t = pad_par[e, PAD_BOUND] * (2 / eps - 2 * a / eps ** 2) if a < eps else 0.0
+        snx = filters[i, 0, 0] * nx + filters[i, 0, 1] * nz  # S n (S symmetric)
+        snz = filters[i, 1, 0] * nx + filters[i, 1, 1] * nz
+        stx = filters[i, 0, 0] * tx + filters[i, 0, 1] * tz
+        stz = filters[i, 1, 0] * tx + filters[i, 1, 1] * tz
+        p = pos[i]
+        ab[p, 0, 0, 0] += h_n * snx * snx + h_t * stx * stx
+        ab[p, 0, 0, 1] += h_n * snx * snz + h_t * stx * stz
+        ab[p, 0, 1, 0] += h_n * snz * snx + h_t * stz * stx
+        ab[p, 0, 1, 1] += h_n * snz * snz + h_t * stz * stz
 
 
 @njit(cache=True, error_model='numpy')
@@ -537,7 +600,7 @@ def _ldl_solve2(ab, x, y):
 
 @njit(cache=True, error_model='numpy')
 def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-                   fr_speed, n_fr, q, q_n, pos, order, shift, ab):
+                   fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par):
     """Node-block band ab (n, nbw+1, 2, 2) of S H S + I - S + shift diag(S) m / dt^2.
 
     H = (m/dt^2 + alpha m/dt) I + (1 + beta/dt) C + friction, C = ``band``.
@@ -605,6 +668,7 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
         ab[p, 0, 0, 1] += g * ux * vz
         ab[p, 0, 1, 0] += g * uz * vx
         ab[p, 0, 1, 1] += g * uz * vz
+    _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab)
     # I - S + shift diag(S) m / dt^2
     for i in range(n):
         p = pos[i]
@@ -619,7 +683,8 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
 @njit(cache=True, error_model='numpy')
 def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
                  masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press,
-                 gravity_grad, pos, nbw, q_out, reaction_out, history, values, counts):
+                 gravity_grad, pos, nbw, q_out, reaction_out, history, values, counts,
+                 pad_nodes, pad_par):
     """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
 
     The same iterates as the reference: the evaluations the reference repeats at a point
@@ -640,6 +705,8 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         q_out, reaction_out: (2n,) outputs. history: (max_it,) output, m/s.
         values: (4,) output, J: stretching, bending, pressure and gravity at q_out.
         counts: (C_SIZE,) int64, work counters added to (see C_*).
+        pad_nodes: (m,) int64 nodes, pad_par: (m, PAD_SIZE) the soft pads' rows (m = 0:
+            no pads).
 
     Returns:
         (status, iterations, len(history)); status OK or a failure code.
@@ -678,7 +745,7 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                        fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
                        gravity_grad, pos, yes, grad, fric_grad, grads, band, area_grad, tmp,
-                       cdq, values)
+                       cdq, values, pad_nodes, pad_par)
     if not math.isfinite(phi):
         return INFEASIBLE_START, 0, n_hist
     for iteration in range(1, max_it + 1):
@@ -692,7 +759,8 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         slope = 0.0
         for shift in SHIFTS:
             _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
-                           fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab)
+                           fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab,
+                           pad_nodes, pad_par)
             counts[C_FACTORS] += 1
             if not _ldl_blocks(ab):
                 continue
@@ -758,7 +826,7 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
                 trial, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                 fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
                 gravity_grad, pos, not norm < tol, grad_t, fric_grad, grads, band, area_grad,
-                tmp, cdq, values)
+                tmp, cdq, values, pad_nodes, pad_par)
             if small or math.isfinite(phi_trial) and (
                     phi_trial <= phi + 1e-4 * step * slope
                     or (phi_trial <= phi + PHI_ROUNDOFF * abs(phi)
@@ -1022,7 +1090,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
             nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out, v_out,
             forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face, d_rest,
-            d_par, covered_in, covered_out, d_pressure, patches, d_out):
+            d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_nodes, pad_par):
     """One implicit Euler step with predictor-corrector contact, as
     ``contact_passes.contact_step``, and the measures of its end state, as
     ``Simulation._measure`` (``step_measures``).
@@ -1051,6 +1119,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             contact moduli] Pa, covered_in (n_s,) m the bruised cover so far, outputs
             covered_out (n_s,), d_pressure (n_s,) Pa, patches (n_s, P_SIZE) and d_out (3,)
             [patches, largest peak pressure Pa, bruised length m].
+        pad_nodes, pad_par: the soft pads (see ``newton_solve``); the measures and damage
+            of a step with pads are the caller's (they need the pads' forces).
 
     Returns:
         a status code (OK, or the failure of the last solve).
@@ -1099,7 +1169,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
             fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press,
-            gravity_grad, pos, nbw, q, reaction, history, values, counts)
+            gravity_grad, pos, nbw, q, reaction, history, values, counts, pad_nodes, pad_par)
         out[1] = n_hist
         if status != OK:
             return status

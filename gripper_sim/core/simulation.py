@@ -69,11 +69,10 @@ class Simulation(SimulationFacade):
             transport_acceleration=c['gripper.transport_acceleration'],
             max_speed=c['gripper.max_speed'])
         self._observers: list[Callable[[StepResult], None]] = []
-        self._fast = (FastPath.create(self) if fast is not False and self._pad is None
-                      and self._barrier is None else None)
+        self._fast = (FastPath.create(self) if fast is not False and self._barrier is None
+                      else None)
         if fast and self._fast is None:
-            raise ConfigError('the fast path needs numba, a shell or point fruit model and '
-                              'a finger without a pad')
+            raise ConfigError('the fast path needs numba and a shell or point fruit model')
         self.reset()
 
     def _make_damage(self) -> DamageTracker:
