@@ -11,9 +11,10 @@ iterations) and is chosen automatically by ``Simulation`` when numba is installe
 the fruit's energies are the ring energies (stretching, bending, enclosed-area
 pressure) and gravity, and the obstacles move as the kernels model them
 (``FastPath.applies``: the jaws' faces with the gripper, the rest fixed), with or
-without soft pads (``pad.PadLayer``: the layer sets its rows for the step in Python, the
-kernel adds its energy to the step's Newton solve); otherwise - the solid (neo-Hookean)
-model - the generic path runs. A step whose contact
+without soft pads (``pad.PadLayer``: the kernel sets the layer up for the step, adds its
+energy to the Newton solve and records its forces, as the layer's ``begin_step``,
+``evaluate`` and ``finish_step`` do); otherwise - the solid (neo-Hookean) model - the
+generic path runs. A step whose contact
 filter the kernel cannot factorise (a node held by a face and pushed into a second,
 oblique one: a V-groove's apex, the joint of two arc facets) is done by the generic path
 (``FastPath.fallbacks`` counts them).
@@ -164,7 +165,7 @@ class FastPath:
         self._tracker = None
         self._tracker_seen = None
         self._damage_faces = None
-        self._no_pad = (np.zeros(0, np.int64), np.zeros((0, kernels.PAD_SIZE)))
+        self._no_pad = np.zeros(0)
         self._no_damage = (np.zeros((0, 3)), np.zeros(0), np.zeros(3), np.zeros(0),
                            np.zeros(0), np.zeros(0), np.zeros((0, kernels.P_SIZE)),
                            np.zeros(3))
@@ -292,13 +293,13 @@ class FastPath:
         model = self.model
         edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
         pad = sim._pad
+        damage = self._damage_inputs()
         if pad is None:
-            damage = self._damage_inputs()
-            pad_nodes, pad_par = self._no_pad
-        else:  # the measures and damage need the pads' forces: ``measure`` takes them
-            damage = self._no_damage
-            pad.begin_step(x_n, sim._pad_faces(grip), sim._pad_faces(grip_new), dt)
-            pad_nodes, pad_par = _pad_rows(pad)
+            pad_k, pad_scalars = self._no_pad, self._no_pad
+            pad_out = (np.empty((0, 2)), np.empty(0), np.empty(0, np.int64), np.empty(2))
+        else:
+            pad_k, pad_scalars = pad.k, np.array([pad.thickness, pad.mu])
+            pad_out = (np.empty((n, 2)), np.empty(n), np.empty(n, np.int64), np.empty(2))
         if timing:
             t1 = time.perf_counter()
         status = kernels.substep(
@@ -309,7 +310,7 @@ class FastPath:
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
             model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
-            self.measures, self.counts, *damage, pad_nodes, pad_par)
+            self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out)
         if timing:
             t2 = time.perf_counter()
         out = self.out
@@ -317,12 +318,7 @@ class FastPath:
             self._measured = None
             if status == kernels.UNSUPPORTED:
                 self.fallbacks += 1
-                iterations = sim._substep_hard(dt)  # the pads (if any) are set for the step
-                if pad is not None:
-                    pad.finish_step(sim.q.ravel())
-                    sim._jaw_force = (sim._jaw_force[0] + float(pad.side_force[0]),
-                                      sim._jaw_force[1] + float(pad.side_force[1]))
-                return iterations
+                return sim._substep_generic(dt)
             history = [float(h) for h in self.history[:int(out[1])]]
             message = _FAILURES.get(
                 status, f'no convergence in {sim.solver.max_iterations} iterations')
@@ -333,14 +329,10 @@ class FastPath:
             secondary=secondary, secondary_bounce=secondary_bounce))
         sim._grip = grip_new
         sim._time += dt
-        sim._jaw_force = (float(out[2]), float(out[3]))
-        if pad is None:
-            self._measured = (x, normal, pressure, self.measures.tolist(), damage)
-        else:
-            pad.finish_step(x.ravel())
-            sim._jaw_force = (sim._jaw_force[0] + float(pad.side_force[0]),
-                              sim._jaw_force[1] + float(pad.side_force[1]))
-            self._measured = None
+        sim._jaw_force = (float(out[2]), float(out[3]))  # the pads' push included
+        if pad is not None:  # what PadLayer.finish_step records
+            pad.forces, pad.normal_forces, pad.holder, pad.side_force = pad_out
+        self._measured = (x, normal, pressure, self.measures.tolist(), damage)
         if timing:
             t3 = time.perf_counter()
             self.timers['glue'] += (t1 - t0) + (t3 - t2)
@@ -518,26 +510,6 @@ class FastPath:
             sim.fruit.depth, edges, spar, triples, bpar, ring, press, gravity_grad, False,
             np.zeros(4), normal, pressure, out)
         return out.tolist(), normal, pressure
-
-
-def _pad_rows(pad) -> tuple[np.ndarray, np.ndarray]:
-    """The substep kernel's pad arguments from a ``PadLayer`` set for the step
-    (``begin_step``): (m,) nodes and (m, kernels.PAD_SIZE) rows, one per node and face."""
-    nodes, rows = [], []
-    for face, active, lagged in zip(pad.faces, pad.active, pad.lagged):
-        if not active.size:
-            continue
-        row = np.empty((active.size, kernels.PAD_SIZE))
-        row[:, kernels.PAD_K] = pad.k[active]
-        row[:, kernels.PAD_BOUND] = pad.mu * lagged
-        row[:, kernels.PAD_OX:kernels.PAD_OZ + 1] = face.origin
-        row[:, kernels.PAD_NX:kernels.PAD_NZ + 1] = face.normal
-        row[:, kernels.PAD_SPEED] = face.speed
-        nodes.append(pad.surface[active])
-        rows.append(row)
-    if not nodes:
-        return np.zeros(0, np.int64), np.zeros((0, kernels.PAD_SIZE))
-    return np.concatenate(nodes), np.concatenate(rows)
 
 
 def _frozen_builder(cls):

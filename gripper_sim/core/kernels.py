@@ -599,6 +599,82 @@ def _ldl_solve2(ab, x, y):
 
 
 @njit(cache=True, error_model='numpy')
+def _pad_rows(x_n, surface, pad_k, thickness, mu, face_par, face_dyn):
+    """The pads' rows of a step, as ``pad.PadLayer.begin_step``: for each jaw face (the
+    rigid face behind its pad) the outline nodes over the pad and not far in front of it
+    at the start of the step. Returns (nodes (m,), rows (m, PAD_SIZE), face (m,))."""
+    n_s = surface.shape[0]
+    n_jaw = 0
+    for f in range(face_par.shape[0]):
+        if face_par[f, FP_JAW] >= 0:
+            n_jaw += 1
+    nodes = np.empty(n_jaw * n_s, np.int64)
+    rows = np.empty((n_jaw * n_s, PAD_SIZE))
+    face = np.empty(n_jaw * n_s, np.int64)
+    m = 0
+    for f in range(face_par.shape[0]):
+        if face_par[f, FP_JAW] < 0:
+            continue
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        tx, tz = -nz, nx
+        old_x = face_dyn[f, 0] + thickness * nx
+        old_z = face_dyn[f, 1] + thickness * nz
+        speed = face_dyn[f, 4] * tx + face_dyn[f, 5] * tz
+        for s in range(n_s):
+            i = surface[s]
+            gap = (x_n[i, 0] - old_x) * nx + (x_n[i, 1] - old_z) * nz
+            along = abs((x_n[i, 0] - old_x) * tx + (x_n[i, 1] - old_z) * tz)
+            if not (along <= face_par[f, 2] and gap < thickness
+                    and gap > -thickness - 1e-3):
+                continue
+            nodes[m] = i
+            face[m] = f
+            rows[m, PAD_K] = pad_k[s]
+            rows[m, PAD_BOUND] = mu * (pad_k[s] * max(0.0, -gap))
+            rows[m, PAD_OX] = face_dyn[f, 2] + thickness * nx
+            rows[m, PAD_OZ] = face_dyn[f, 3] + thickness * nz
+            rows[m, PAD_NX] = nx
+            rows[m, PAD_NZ] = nz
+            rows[m, PAD_SPEED] = speed
+            m += 1
+    return nodes[:m], rows[:m], face[:m]
+
+
+@njit(cache=True, error_model='numpy')
+def _pad_forces(x, x_n, dt, pad_nodes, pad_par, pad_face, face_par, forces, normal, holder,
+                side_force):
+    """The pads' forces on the fruit at the step's end positions x (n, 2), as
+    ``pad.PadLayer.finish_step`` records them (outputs: see ``substep``)."""
+    eps = FRICTION_SMOOTHING * dt
+    forces[:, :] = 0.0
+    normal[:] = 0.0
+    holder[:] = -1
+    side_force[:] = 0.0
+    best = np.zeros(x.shape[0])
+    for e in range(pad_nodes.shape[0]):
+        i = pad_nodes[e]
+        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
+        tx, tz = -nz, nx
+        gap = (x[i, 0] - pad_par[e, PAD_OX]) * nx + (x[i, 1] - pad_par[e, PAD_OZ]) * nz
+        f_n = pad_par[e, PAD_K] * max(0.0, -gap)
+        u = (((x[i, 0] - x_n[i, 0]) * tx + (x[i, 1] - x_n[i, 1]) * tz)
+             - pad_par[e, PAD_SPEED] * dt)
+        a = abs(u)
+        f1 = 2 * a / eps - a ** 2 / eps ** 2 if a < eps else 1.0
+        f_t = -pad_par[e, PAD_BOUND] * f1 * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
+        fx = f_n * nx + f_t * tx
+        forces[i, 0] += fx
+        forces[i, 1] += f_n * nz + f_t * tz
+        normal[i] += f_n
+        f = pad_face[e]
+        side = np.int64(face_par[f, FP_JAW])
+        side_force[side] += fx if side == 0 else -fx
+        if f_n > 0 and f_n > best[i]:
+            holder[i] = f
+            best[i] = f_n
+
+
+@njit(cache=True, error_model='numpy')
 def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
                    fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par):
     """Node-block band ab (n, nbw+1, 2, 2) of S H S + I - S + shift diag(S) m / dt^2.
@@ -1090,7 +1166,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
             nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out, v_out,
             forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face, d_rest,
-            d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_nodes, pad_par):
+            d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_k, pad_scalars,
+            pad_forces, pad_normal, pad_holder, pad_side):
     """One implicit Euler step with predictor-corrector contact, as
     ``contact_passes.contact_step``, and the measures of its end state, as
     ``Simulation._measure`` (``step_measures``).
@@ -1119,8 +1196,13 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             contact moduli] Pa, covered_in (n_s,) m the bruised cover so far, outputs
             covered_out (n_s,), d_pressure (n_s,) Pa, patches (n_s, P_SIZE) and d_out (3,)
             [patches, largest peak pressure Pa, bruised length m].
-        pad_nodes, pad_par: the soft pads (see ``newton_solve``); the measures and damage
-            of a step with pads are the caller's (they need the pads' forces).
+        pad_k: (n_s,) N/m, the soft pads' foundation stiffness per outline node (empty: no
+            pads), pad_scalars: (2,) [pad thickness m, pad friction mu]; outputs, as
+            ``pad.PadLayer.finish_step`` records them: pad_forces (n, 2) N, pad_normal (n,)
+            N, pad_holder (n,) int64 the jaw face whose pad presses each node hardest (-1:
+            none), pad_side (2,) N each jaw's pads' push along the closing axis. With pads
+            the measures and damage take every contact force (hard and pad) and each
+            node's holder (its hard face, else its pad's face), as ``Simulation._measure``.
 
     Returns:
         a status code (OK, or the failure of the last solve).
@@ -1141,6 +1223,14 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         face_dyn[f, 3] = lift1 + oz
         face_dyn[f, 4] = x_rate + sign * (0.5 * gap_rate)
         face_dyn[f, 5] = lift_rate
+    padded = pad_k.shape[0] > 0
+    if padded:
+        pad_nodes, pad_par, pad_face = _pad_rows(x_n, surface, pad_k, pad_scalars[0],
+                                                 pad_scalars[1], face_par, face_dyn)
+    else:
+        pad_nodes = np.zeros(0, np.int64)
+        pad_par = np.zeros((0, PAD_SIZE))
+        pad_face = np.zeros(0, np.int64)
     x_pred = np.empty((n, 2))
     for i in range(n):
         x_pred[i, 0] = x_n[i, 0] + dt * v_n[i, 0]
@@ -1248,22 +1338,48 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         jaw_origins[side, 1] = lift1
     for e in range(4):
         out[4 + e] = values[e]
-    step_measures(x_out, v_out, forces_out, obstacle, masses, surface, skin_edges,
+    holder = obstacle
+    forces_all = forces_out
+    if padded:
+        _pad_forces(x_out, x_n, dt, pad_nodes, pad_par, pad_face, face_par, pad_forces,
+                    pad_normal, pad_holder, pad_side)
+        out[2] += pad_side[0]
+        out[3] += pad_side[1]
+        holder = obstacle.copy()
+        forces_all = forces_out + pad_forces
+        for i in range(n):
+            if holder[i] < 0 and pad_holder[i] >= 0:
+                holder[i] = pad_holder[i]
+    step_measures(x_out, v_out, forces_all, holder, masses, surface, skin_edges,
                   rest_segments, face_par, jaw_origins, fpar[F_DEPTH], edges, spar, triples,
                   bpar, ring, press, gravity_grad, np.bool_(True), values, normal_out,
                   pressure_out, meas_out)
+    if padded:  # the hard contacts' length along the faces, plus the pads'
+        meas_out[M_CONTACT_LENGTH] = _jaw_contact_length(x_out, surface, obstacle, face_par,
+                                                         jaw_origins)
+        on_pad = 0.0
+        n_e = skin_edges.shape[0]
+        for s in range(surface.shape[0]):
+            i = surface[s]
+            if obstacle[i] < 0 and pad_holder[i] >= 0 and n_e > 0:
+                a, b = skin_edges[s, 0], skin_edges[s, 1]
+                seg = math.hypot(x_out[b, 0] - x_out[a, 0], x_out[b, 1] - x_out[a, 1])
+                a, b = skin_edges[(s - 1) % n_e, 0], skin_edges[(s - 1) % n_e, 1]
+                prev = math.hypot(x_out[b, 0] - x_out[a, 0], x_out[b, 1] - x_out[a, 1])
+                on_pad += 0.5 * (seg + prev)
+        meas_out[M_CONTACT_LENGTH] += on_pad
     if d_rest.shape[0] > 0:
         n_faces = d_face.shape[0]
         groups = np.empty(n_faces, np.int64)
         curvature = np.empty(n_faces)
-        padded = np.empty(n_faces)
+        padded_face = np.empty(n_faces)
         for f in range(n_faces):
             groups[f] = np.int64(d_face[f, 0])
             curvature[f] = d_face[f, 1]
-            padded[f] = d_face[f, 2]
+            padded_face[f] = d_face[f, 2]
         covered_out[:] = covered_in
         count, pressure, length = damage_update(
-            x_out, normal_out, obstacle, surface, groups, curvature, padded, d_rest,
+            x_out, normal_out, holder, surface, groups, curvature, padded_face, d_rest,
             d_par[0], d_par[1], d_par[2], covered_out, d_pressure, patches)
         d_out[0] = count
         d_out[1] = pressure
@@ -1466,6 +1582,12 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         pressure_out[s] = p
         peak = max(peak, p)
     out[M_PEAK_PRESSURE] = peak
+    out[M_CONTACT_LENGTH] = _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins)
+
+
+@njit(cache=True, error_model='numpy')
+def _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins):
+    """m, the outline's contact length summed over the jaws' faces."""
     length = 0.0
     for f in range(face_par.shape[0]):
         if face_par[f, FP_JAW] < 0:
@@ -1475,7 +1597,7 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
                                        face_par[f, 1],
                                        jaw_origins[side, 0] + face_par[f, FP_OFFSET_X],
                                        jaw_origins[side, 1] + face_par[f, FP_OFFSET_Z])
-    out[M_CONTACT_LENGTH] = length
+    return length
 
 
 # ---------------------------------------------------------------------- damage

@@ -148,6 +148,10 @@ class Simulation(SimulationFacade):
             return self._fast.substep(dt)
         return super()._substep(dt)
 
+    def _substep_generic(self, dt: float) -> int:
+        """The step the fast path cannot do, on the generic path."""
+        return super()._substep(dt)
+
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult:
         if self._fast is not None and self._fast.applies():  # all fields, damage included
