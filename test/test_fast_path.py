@@ -231,6 +231,25 @@ def test_shaped_fingers_and_pads_match_the_reference_path(finger):
     assert fast_sim.last.grip_force > 2.0
 
 
+def test_steps_the_kernel_cannot_do_take_the_generic_path_with_pads(monkeypatch):
+    """A step the kernel reports it cannot factorise (kernels.UNSUPPORTED: a node held by
+    two oblique faces) is done by the generic path, the pads set up and recorded for it:
+    the same trajectory as a simulation on the generic path alone (the same solver), and
+    the steps are counted."""
+    overrides = ['fruit.nodes=32', 'gripper.finger.pad.enabled=true',
+                 'gripper.initial_gap=0.0645', 'gripper.close_speed=0.05']
+    config = load_config(overrides=overrides)
+    sims = Simulation(config, fast=True), Simulation(config)
+    sims[1]._fast = None  # the generic path with the compiled solver, as the fallback's
+    monkeypatch.setattr(kernels, 'substep', lambda *args: kernels.UNSUPPORTED)
+    for sim in sims:
+        sim.command_force(2.0)
+    assert _compare(*sims, 150) > 50
+    assert sims[0]._fast.fallbacks >= 150  # every substep, the force drive's trials too
+    assert sims[0].last.grip_force > 0.5
+    np.testing.assert_allclose(sims[0]._pad.forces, sims[1]._pad.forces, rtol=0, atol=1e-9)
+
+
 def test_sliding_grasp_matches_the_reference_path():
     """A grip too weak to carry the fruit: it slides down the jaws while they lift, with
     the same trajectory (kinetic friction, slip distance) on both paths."""

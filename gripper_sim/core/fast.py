@@ -166,6 +166,8 @@ class FastPath:
         self._tracker_seen = None
         self._damage_faces = None
         self._no_pad = np.zeros(0)
+        #: the pad outputs of a step without pads (the kernel leaves them alone)
+        self._no_pad_out = (np.empty((0, 2)), np.empty(0), np.empty(0, np.int64), np.empty(2))
         self._no_damage = (np.zeros((0, 3)), np.zeros(0), np.zeros(3), np.zeros(0),
                            np.zeros(0), np.zeros(0), np.zeros((0, kernels.P_SIZE)),
                            np.zeros(3))
@@ -295,8 +297,7 @@ class FastPath:
         pad = sim._pad
         damage = self._damage_inputs()
         if pad is None:
-            pad_k, pad_scalars = self._no_pad, self._no_pad
-            pad_out = (np.empty((0, 2)), np.empty(0), np.empty(0, np.int64), np.empty(2))
+            pad_k, pad_scalars, pad_out = self._no_pad, self._no_pad, self._no_pad_out
         else:
             pad_k, pad_scalars = pad.k, np.array([pad.thickness, pad.mu])
             pad_out = (np.empty((n, 2)), np.empty(n), np.empty(n, np.int64), np.empty(2))
