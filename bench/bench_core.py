@@ -19,7 +19,8 @@ fruits with flat, arc and V-groove fingers, with or without soft pads); 'compile
 compiled energy kernels and the fixed-pattern Newton solver (``core.fast_solver``) driven
 by the contact passes (``core.contact_passes``): the solid fruit model. On the kernel
 route a step the kernel cannot factorise (a node held by a face and pushed into a second,
-oblique one) is done by the compiled route; the table counts those steps. Kernel route: glue, kernel and measures are timed with
+oblique one) is done by the compiled route; the table counts those steps.
+Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations) times the cost of each operation timed alone at the end
 state. Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
@@ -90,7 +91,7 @@ def _op_loops():
 
     @njit(cache=True)
     def evaluations(reps, hessian, q, q_n, v_n, dt, m2, alpha, beta, filters, frn, frt, frb,
-                    frs, edges, spar, triples, bpar, ring, press, grav, pos, nbw):
+                    frs, edges, spar, triples, bpar, ring, press, flesh, grav, pos, nbw):
         n2 = q.shape[0]
         band = np.zeros((n2 // 2, nbw + 1, 2, 2))
         grads = np.empty((4, n2))
@@ -100,7 +101,7 @@ def _op_loops():
         acc = 0.0
         for _ in range(reps):
             phi, c = k._evaluate(q, q_n, v_n, dt, m2, alpha, beta, filters, frn, frt, frb,
-                                 frs, frn.shape[0], edges, spar, triples, bpar, ring, press,
+                                 frs, frn.shape[0], edges, spar, triples, bpar, ring, press, flesh,
                                  grav, pos, hessian, out[0], out[1], grads, band, out[2],
                                  out[3], out[4], values, nopad, nopar)
             acc += phi
@@ -108,15 +109,15 @@ def _op_loops():
 
     @njit(cache=True)
     def factorisations(reps, q, q_n, dt, m2, alpha, beta, filters, frn, frt, frb, frs, edges,
-                       spar, triples, bpar, ring, press, grav, pos, nbw, solves):
+                       spar, triples, bpar, ring, press, flesh, grav, pos, nbw, solves):
         n2 = q.shape[0]
         n = n2 // 2
         band = np.zeros((n, nbw + 1, 2, 2))
         grads = np.empty((4, n2))
         area = np.empty(n2)
         values = np.empty(4)
-        k._energies(q, edges, spar, triples, bpar, ring, press, grav, pos, True, grads, band,
-                    area, values)
+        k._energies(q, edges, spar, triples, bpar, ring, press, flesh, grav, pos, True, grads,
+                    band, area, values)
         order = np.empty(n, np.int64)
         for i in range(n):
             order[pos[i]] = i
@@ -156,8 +157,8 @@ def _op_loops():
 
     @njit(cache=True)
     def measures(reps, x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
-                 face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, grav,
-                 d_face, d_rest, d_par, covered):
+                 face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, flesh,
+                 grav, d_face, d_rest, d_par, covered):
         n, ns = x.shape[0], surface.shape[0]
         normal, pressure, out = np.empty(n), np.empty(ns), np.empty(k.M_SIZE)
         values = np.zeros(4)
@@ -171,8 +172,8 @@ def _op_loops():
         for _ in range(reps):
             k.step_measures(x, v, forces, obstacle, masses, surface, skin_edges,
                             rest_segments, face_par, jaw_origins, depth, edges, spar, triples,
-                            bpar, ring, press, grav, np.bool_(True), values, normal, pressure,
-                            out)
+                            bpar, ring, press, flesh, grav, np.bool_(True), values, normal,
+                            pressure, out)
             if d_rest.shape[0]:
                 work = covered.copy()
                 total += k.damage_update(x, normal, obstacle, surface, groups, curvature,
@@ -213,7 +214,7 @@ def kernel_split(sim: Simulation) -> dict:
     frb, frs = frb[:n_fr].copy(), frs[:n_fr].copy()
     model = path.model
     energy = (model['edges'], model['spar'], model['triples'], model['bpar'], model['ring'],
-              model['press'], path.gravity_grad, model['pos'], model['nbw'])
+              model['press'], model['flesh'], path.gravity_grad, model['pos'], model['nbw'])
     q = x_n.ravel().copy()
     common = (q, x_n.ravel(), v_n.ravel(), dt, path.masses2, path.fpar[k.F_ALPHA],
               path.fpar[k.F_BETA], filters, frn, frt, frb, frs) + energy
@@ -230,7 +231,7 @@ def kernel_split(sim: Simulation) -> dict:
                         [grip.x + 0.5 * grip.gap, grip.lift]])
     meas = (x_n, v_n, sim.contact_forces, c.obstacle, path.masses, path.surface,
             path.skin_edges, path.rest_segments, face_par, origins, sim.fruit.depth,
-            *energy[:7], *damage[:4])
+            *energy[:8], *damage[:4])
     return dict(
         hessian_eval=_best_time(lambda r: evaluations(r, True, *common), 2000),
         eval=_best_time(lambda r: evaluations(r, False, *common), 2000),

@@ -109,9 +109,10 @@ def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction():
         q_n, v_n, dt, start, con.filters, con.friction_nodes, con.friction_tangents,
         con.friction_bounds, con.friction_obstacle_speed, solver.m, 5.0, 1e-4, 1e-9,
         solver.max_iterations, model['edges'], model['spar'], model['triples'],
-        model['bpar'], model['ring'], model['press'], gravity.grad, model['pos'],
-        model['nbw'], q, reaction, history, np.zeros(4), np.zeros(kernels.C_SIZE, np.int64),
-        np.zeros(0, np.int64), np.zeros((0, kernels.PAD_SIZE)))
+        model['bpar'], model['ring'], model['press'], model['flesh'], gravity.grad,
+        model['pos'], model['nbw'], q, reaction, history, np.zeros(4),
+        np.zeros(kernels.C_SIZE, np.int64), np.zeros(0, np.int64),
+        np.zeros((0, kernels.PAD_SIZE)))
     assert status == kernels.OK
     assert iterations == reference.iterations
     np.testing.assert_allclose(q, reference.q, rtol=0, atol=1e-12)
@@ -202,13 +203,16 @@ def test_grasp_and_lift_trajectory_matches_the_reference_path():
 
 @pytest.mark.parametrize('finger', [['gripper.finger.type=vgroove'],
                                     ['gripper.finger.type=arc'],
-                                    ['gripper.finger.pad.enabled=true']],
-                         ids=['vgroove', 'arc', 'pad'])
+                                    ['gripper.finger.pad.enabled=true'],
+                                    ['fruit.model=solid', 'gripper.finger.type=vgroove']],
+                         ids=['vgroove', 'arc', 'pad', 'solid-vgroove'])
 def test_shaped_fingers_and_pads_match_the_reference_path(finger):
-    """Several faces per jaw (the facets of a V-groove or an arc) and soft pads on the
-    kernel: the same grasp-and-lift trajectory as the reference path."""
-    overrides = ['fruit.nodes=32', *finger, 'gripper.initial_gap=0.0645', 'gripper.close_speed=0.05',
-                 'gripper.lift_acceleration=5', 'gripper.lift_speed=0.05']
+    """Several faces per jaw (the facets of a V-groove or an arc), soft pads and the solid
+    (neo-Hookean) fruit on the kernel: the same grasp-and-lift trajectory as the
+    reference path."""
+    overrides = ['fruit.nodes=32', *finger, 'gripper.initial_gap=0.0645',
+                 'gripper.close_speed=0.05', 'gripper.lift_acceleration=5',
+                 'gripper.lift_speed=0.05']
     config = load_config(overrides=overrides)
     fast_sim, ref_sim = Simulation(config, fast=True), Simulation(config, fast=False)
     assert fast_sim._fast.applies()
@@ -337,42 +341,33 @@ def test_parameter_changes_while_running_match_the_reference_path():
     assert sims[0].last.damage.bruised_length > 0  # low bruise threshold: the cover grows
 
 
-#: every 2D set-up: (overrides, route) with route 'kernel' (the whole step in one numba
-#: call) or 'compiled' (the compiled energies and the fixed-pattern Newton solver)
+#: every 2D set-up (with the default contact model)
 SETUPS = [
-    ([], 'kernel'),
-    (['fruit.model=point'], 'kernel'),
-    (['gripper.finger.type=arc'], 'kernel'),
-    (['gripper.finger.type=vgroove'], 'kernel'),
-    (['gripper.finger.pad.enabled=true'], 'kernel'),
-    (['fruit.model=solid'], 'compiled'),
-    (['fruit.model=solid', 'gripper.finger.type=arc'], 'compiled'),
-    (['fruit.model=solid', 'gripper.finger.type=vgroove'], 'compiled'),
-    (['fruit.model=solid', 'gripper.finger.pad.enabled=true'], 'compiled'),
+    [],
+    ['fruit.model=point'],
+    ['gripper.finger.type=arc'],
+    ['gripper.finger.type=vgroove'],
+    ['gripper.finger.pad.enabled=true'],
+    ['fruit.model=solid'],
+    ['fruit.model=solid', 'gripper.finger.type=arc'],
+    ['fruit.model=solid', 'gripper.finger.type=vgroove'],
+    ['fruit.model=solid', 'gripper.finger.pad.enabled=true'],
 ]
 
 
-@pytest.mark.parametrize('overrides,route', SETUPS, ids=[' '.join(o) or 'default'
-                                                         for o, _ in SETUPS])
-def test_every_setup_takes_a_compiled_route(overrides, route):
-    """No 2D set-up steps on the numpy energies: the shell and point fruits with flat, arc
-    and V-groove fingers and soft pads take the whole-step kernel, every other one the compiled energy kernels through the
-    fixed-pattern solver (each energy has an ``evaluate_into``)."""
+@pytest.mark.parametrize('overrides', SETUPS, ids=[' '.join(o) or 'default' for o in SETUPS])
+def test_every_setup_takes_the_whole_step_kernel(overrides):
+    """Every 2D set-up - shell, point and solid fruits; flat, arc and V-groove fingers;
+    soft pads - steps in the whole-step kernel, not on the generic solver."""
     sim = Simulation(load_config(overrides=overrides + ['fruit.nodes=32']))
     sim.command_force(1.0)
     for _ in range(5):
         sim.step()
-    if route == 'kernel':
-        assert sim._fast is not None and sim._fast.applies()
-        assert sim._fast.counts.sum() > 0
-        assert sim.solver.stats['passes'] == 0
-    else:
-        assert sim._fast is None
-        assert sim.solver.fast
-        assert all(hasattr(energy, 'evaluate_into') for energy in sim.solver.energies)
-        assert sim.solver.stats['passes'] >= 5
-        with pytest.raises(Exception, match='fast path'):
-            Simulation(load_config(overrides=overrides), fast=True)
+    assert sim._fast is not None and sim._fast.applies()
+    assert sim._fast.counts[kernels.C_SUBSTEPS] >= 5
+    assert sim._fast.fallbacks == 0
+    assert sim.solver.stats['passes'] == 0
+    Simulation(load_config(overrides=overrides), fast=True)  # no error: the kernel covers it
 
 
 def test_faces_the_kernels_do_not_model_fall_back_to_the_reference_path(monkeypatch):

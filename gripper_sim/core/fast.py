@@ -1,5 +1,5 @@
-"""The fast path of ``Simulation`` for ring (shell) and point fruit models, with flat,
-arc or V-groove fingers (one face or several per jaw).
+"""The fast path of ``Simulation``: shell, point and solid fruit models, flat, arc or
+V-groove fingers (one face or several per jaw), with or without soft pads.
 
 ``FastPath`` runs a whole step - gripper faces, contact constraints, Newton, contact
 set updates, then the step's measures and damage of the end state - in one numba
@@ -7,17 +7,17 @@ kernel call (``gripper_sim.core.kernels.substep``), and builds the StepResult fr
 numbers, instead of the generic numpy/scipy path (per-energy triplets, sparse LU,
 numpy measures). It gives the same results as that reference path
 (test/test_fast_path.py: trajectories within 1e-9, same contact sets and Newton
-iterations) and is chosen automatically by ``Simulation`` when numba is installed,
-the fruit's energies are the ring energies (stretching, bending, enclosed-area
-pressure) and gravity, and the obstacles move as the kernels model them
-(``FastPath.applies``: the jaws' faces with the gripper, the rest fixed), with or
-without soft pads (``pad.PadLayer``: the kernel sets the layer up for the step, adds its
-energy to the Newton solve and records its forces, as the layer's ``begin_step``,
-``evaluate`` and ``finish_step`` do); otherwise - the solid (neo-Hookean) model - the
-generic path runs. A step whose contact
-filter the kernel cannot factorise (a node held by a face and pushed into a second,
-oblique one: a V-groove's apex, the joint of two arc facets) is done by the generic path
-(``FastPath.fallbacks`` counts them).
+iterations) and is chosen automatically by ``Simulation`` when numba is installed, the
+contact model is the default one, the fruit's energies are the ring energies
+(stretching, bending, enclosed-area pressure), the solid's neo-Hookean triangles and
+gravity, and the obstacles move as the kernels model them (``FastPath.applies``: the
+jaws' faces with the gripper, the rest fixed). Soft pads (``pad.PadLayer``): the kernel
+sets the layer up for the step, adds its energy to the Newton solve and records its
+forces, as the layer's ``begin_step``, ``evaluate`` and ``finish_step`` do. A step
+whose contact filter the kernel cannot factorise (a node held by a face and pushed
+into a second, oblique one) is done by the generic path (``FastPath.fallbacks`` counts
+them). The node-block band of a ring is its interleaved outline (half-bandwidth 4); a
+solid's mesh is ordered by reverse Cuthill-McKee.
 ``Simulation(config, fast=False)`` or ``GRIPPER_SIM_FAST=0`` in the environment turns
 the fast path off.
 
@@ -33,10 +33,13 @@ import time
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
-from gripper_sim.core.energies import EnclosedAreaPressure, RingBending, Stretching
+from gripper_sim.core.energies import (EnclosedAreaPressure, NeoHookeanTriangles, RingBending,
+                                       Stretching)
 from gripper_sim.core.measures import tributary_lengths
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
 from gripper_sim.core.slip import SLIDING_SPEED
@@ -63,7 +66,9 @@ def available() -> bool:
 def _empty_model():
     return dict(edges=np.zeros((0, 2), np.int64), spar=np.zeros((0, 2)),
                 triples=np.zeros((0, 3), np.int64), bpar=np.zeros((0, 2)),
-                ring=np.zeros(0, np.int64), press=np.zeros(4))
+                ring=np.zeros(0, np.int64), press=np.zeros(4),
+                flesh=(np.zeros((0, 3), np.int64), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(2),
+                       np.zeros((0, 36), np.int64)))
 
 
 def ring_model(fruit, energies) -> dict | None:
@@ -74,19 +79,23 @@ def ring_model(fruit, energies) -> dict | None:
 
     Returns:
         dict with edges (n_e, 2), spar (n_e, 2) [L, EA/L], triples (n_t, 3),
-        bpar (n_t, 2) [phi0, k], ring (n_r,), press (4,) [A0, b, p0, K], pos (n,)
+        bpar (n_t, 2) [phi0, k], ring (n_r,), press (4,) [A0, b, p0, K], flesh (the
+        neo-Hookean triangles of a solid fruit, see ``kernels._energies``), pos (n,)
         band positions and nbw (node half-bandwidth).
     """
-    if fruit.flesh is not None:
-        return None
     n = fruit.n_nodes
     model = _empty_model()
     seen = set()
+    flesh = None
     for energy in energies:
         kind = type(energy)
-        if kind in seen or kind not in (Stretching, RingBending, EnclosedAreaPressure):
+        if kind in seen or kind not in (Stretching, RingBending, EnclosedAreaPressure,
+                                        NeoHookeanTriangles):
             return None
         seen.add(kind)
+        if kind is NeoHookeanTriangles:
+            flesh = energy
+            continue
         if kind is Stretching:
             model['edges'] = np.ascontiguousarray(energy.edges, dtype=np.int64)
             model['spar'] = np.ascontiguousarray(
@@ -102,30 +111,63 @@ def ring_model(fruit, energies) -> dict | None:
         else:
             model['ring'] = np.ascontiguousarray(energy.ring, dtype=np.int64)
             model['press'] = np.array([energy.a0, energy.b, energy.p0, energy.k])
-    # band order: the outline interleaved (0, N-1, 1, N-2, ...); a model whose energies
-    # touch nodes off the outline is not a ring model
-    surface = np.asarray(fruit.surface, dtype=np.int64)
-    if n == 1:
-        pos = np.zeros(1, np.int64)
-    else:
-        if len(surface) != n or set(surface.tolist()) != set(range(n)):
-            return None
-        pos = np.empty(n, np.int64)
-        pos[surface] = kernels.band_order(n) if kernels is not None else np.arange(n)
     pairs = [model['edges'], model['triples'][:, [0, 1]], model['triples'][:, [1, 2]],
              model['triples'][:, [0, 2]]]
     ring = model['ring']
     if len(ring):
         pairs.append(np.stack([ring, np.roll(ring, -1)], axis=1))
+    if flesh is not None:
+        tri = np.asarray(flesh.tri, dtype=np.int64)
+        pairs += [tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [0, 2]]]
+    for pair in pairs:
+        if len(pair) and (pair.min() < 0 or pair.max() >= n):
+            return None
+    # band order: a ring's outline interleaved (0, N-1, 1, N-2, ...); a meshed solid's
+    # nodes in reverse Cuthill-McKee order of the mesh graph
+    surface = np.asarray(fruit.surface, dtype=np.int64)
+    pos = np.empty(n, np.int64)
+    if n == 1:
+        pos[:] = 0
+    elif flesh is not None:
+        graph_pairs = np.concatenate([pair for pair in pairs if len(pair)])
+        graph = sp.coo_matrix((np.ones(len(graph_pairs)), (graph_pairs[:, 0],
+                                                            graph_pairs[:, 1])),
+                              shape=(n, n)).tocsr()
+        pos[reverse_cuthill_mckee(graph + graph.T, symmetric_mode=True)] = np.arange(n)
+    elif len(surface) == n and set(surface.tolist()) == set(range(n)):
+        pos[surface] = kernels.band_order(n) if kernels is not None else np.arange(n)
+    else:
+        return None  # energies on nodes off the outline without a mesh
     nbw = 0
     for pair in pairs:
         if len(pair):
             if pair.min() < 0 or pair.max() >= n:
                 return None
             nbw = max(nbw, int(np.max(np.abs(pos[pair[:, 0]] - pos[pair[:, 1]]))))
+    if flesh is not None:
+        nbw = max(nbw, 1)  # band[0, 1, 0, 0] takes the flesh's upper-side entries
+        model['flesh'] = (tri, np.ascontiguousarray(flesh.dm_inv, dtype=float),
+                          np.ascontiguousarray(flesh.volume, dtype=float),
+                          np.array([flesh.mu, flesh.lam], dtype=float),
+                          _band_scatter(tri, pos, nbw))
     model['pos'] = pos
     model['nbw'] = nbw
     return model
+
+
+def _band_scatter(tri: np.ndarray, pos: np.ndarray, nbw: int) -> np.ndarray:
+    """(n_tri, 36) flat indices into a node-block band (n, nbw + 1, 2, 2) of each
+    triangle's 6 x 6 Hessian entries (row r, column s: 6 r + s); the band keeps the block
+    of rows at position p and columns at p - d, an entry of the upper side goes to the
+    unused slot band[0, 1, 0, 0] (flat index 4)."""
+    local = np.arange(6)
+    rows = np.repeat(local, 6)  # (36,)
+    cols = np.tile(local, 6)
+    p_row = pos[tri[:, rows // 2]]  # (n_tri, 36)
+    p_col = pos[tri[:, cols // 2]]
+    d = p_row - p_col
+    index = ((p_row * (nbw + 1) + d) * 2 + rows % 2) * 2 + cols % 2
+    return np.ascontiguousarray(np.where(d >= 0, index, 4), dtype=np.int64)
 
 
 class FastPath:
@@ -179,7 +221,7 @@ class FastPath:
         self.fallbacks = 0
         self.face_dyn = np.zeros((0, 6))
         self._energy_args = (model['edges'], model['spar'], model['triples'], model['bpar'],
-                             model['ring'], model['press'], self.gravity_grad)
+                             model['ring'], model['press'], model['flesh'], self.gravity_grad)
         #: wall time (s) spent per part while ``timing`` is True
         self.timers = {'glue': 0.0, 'kernel': 0.0, 'measures': 0.0}
         self._measured = None
@@ -293,7 +335,7 @@ class FastPath:
         x_n = sim.q if sim.q.flags.c_contiguous else np.ascontiguousarray(sim.q)
         v_n = sim.v if sim.v.flags.c_contiguous else np.ascontiguousarray(sim.v)
         model = self.model
-        edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
+        edges, spar, triples, bpar, ring, press, flesh, gravity_grad = self._energy_args
         pad = sim._pad
         damage = self._damage_inputs()
         if pad is None:
@@ -309,7 +351,8 @@ class FastPath:
                                  grip_new.x, grip_new.gap_rate, grip_new.lift_rate,
                                  grip_new.x_rate),
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
-            model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
+            model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, flesh,
+            gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
             self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out)
         if timing:
@@ -430,7 +473,7 @@ class FastPath:
             # checked once per tracker (reset makes a new one) and face set
             self._tracker_seen = tracker
             self._damage_faces = sim._faces_template
-            if (type(tracker) is not DamageTracker or sim.fruit.flesh is not None
+            if (type(tracker) is not DamageTracker
                     or len(tracker.groups) != len(sim._faces_template)
                     or not np.array_equal(tracker.ring, self.surface)):
                 self._tracker = None
@@ -475,8 +518,11 @@ class FastPath:
             _build(Contact, dict(body=int(b), load=load, centre=np.array([cx, cz]), radius=a,
                                  peak_pressure=p0, equivalent_radius=re, modulus=modulus))
             for b, load, cx, cz, a, p0, re, modulus in table[:count].tolist())
-        # the rest of DamageTracker.update
-        stress = max(TRESCA_OVER_P0 * pressure, 0.0)
+        # the rest of DamageTracker.update (with the solid's von Mises stress)
+        flesh = sim.fruit.flesh
+        flesh_stress = (0.0 if flesh is None
+                        else float(np.max(flesh.von_mises(positions.ravel()), initial=0.0)))
+        stress = max(TRESCA_OVER_P0 * pressure, flesh_stress)
         tracker.peak_pressure = max(tracker.peak_pressure, pressure)
         tracker.peak_flesh_stress = max(tracker.peak_flesh_stress, stress)
         if tracker.peak_flesh_stress > tracker.failure_stress:
@@ -503,12 +549,12 @@ class FastPath:
         normal = np.empty(self.n)
         pressure = np.empty(len(self.surface))
         out = np.empty(kernels.M_SIZE)
-        edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
+        edges, spar, triples, bpar, ring, press, flesh, gravity_grad = self._energy_args
         kernels.step_measures(
             np.ascontiguousarray(sim.q, dtype=float), np.ascontiguousarray(sim.v, dtype=float),
             np.ascontiguousarray(forces, dtype=float), holder,
             self.masses, self.surface, self.skin_edges, self.rest_segments, face_par, origins,
-            sim.fruit.depth, edges, spar, triples, bpar, ring, press, gravity_grad, False,
+            sim.fruit.depth, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, False,
             np.zeros(4), normal, pressure, out)
         return out.tolist(), normal, pressure
 

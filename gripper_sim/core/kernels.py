@@ -38,6 +38,8 @@ import math
 import numpy as np
 from numba import njit
 
+from gripper_sim.core.energies.kernels import neohookean_triangles
+
 #: contact modes, as in contact.py
 FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
 
@@ -325,10 +327,16 @@ def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
 
 
 @njit(cache=True, error_model='numpy')
-def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hessian,
+def _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, hessian,
               grads, band, area_grad, values):
-    """All ring energies and gravity: grads (4, 2n) per energy, band = elastic Hessian,
-    values (4,) J: stretching, bending, pressure, gravity. Returns the rank-one c.
+    """All ring energies, the flesh and gravity: grads (4, 2n) per energy, band = elastic
+    Hessian, values (4,) J: stretching, bending, pressure (plus the flesh), gravity.
+    Returns the rank-one c.
+
+    ``flesh``: the neo-Hookean triangles of a solid fruit (``NeoHookeanTriangles``) as
+    (tri (n_tri, 3), dm_inv (n_tri, 2, 2), volume (n_tri,) m^3, [mu, lambda] Pa, scatter
+    (n_tri, 36) flat band indices of each element's Hessian entries; an entry of the
+    band's upper side goes to the unused slot band[0, 1, 0, 0]); n_tri = 0: none.
     """
     if hessian:
         flat = band.reshape(band.size)  # a flat loop: ~10x faster than band[:] = 0 in 4-D
@@ -337,6 +345,10 @@ def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hes
     values[0] = ring_stretching(q, edges, spar, pos, hessian, grads[0], band)
     values[1] = ring_bending(q, triples, bpar, pos, hessian, grads[1], band)
     vp, c = ring_pressure(q, ring, press, pos, hessian, grads[2], band, area_grad)
+    if flesh[0].shape[0] > 0:
+        vp += neohookean_triangles(q.reshape((q.shape[0] // 2, 2)), flesh[0], flesh[1],
+                                   flesh[2], flesh[3][0], flesh[3][1], grads[2],
+                                   band.reshape(band.size), flesh[4], hessian)
     values[2] = vp
     vg = 0.0
     for m in range(q.shape[0]):
@@ -349,7 +361,7 @@ def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hes
 # ---------------------------------------------------------------------- Newton
 @njit(cache=True, error_model='numpy')
 def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-              fr_speed, n_fr, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
+              fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
               hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values,
               pad_nodes, pad_par):
     """Phi of stepper.ImplicitEulerSolver._evaluate, its gradient (into ``grad``) and the
@@ -366,7 +378,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         phi_in += masses2[m] * inert ** 2
         grad[m] = masses2[m] * inert / dt ** 2
     phi = 0.5 * phi_in / dt ** 2
-    c = _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
+    c = _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
                   need_band, grads, band, area_grad, values)
     for e in range(4):
         phi += values[e]
@@ -485,21 +497,31 @@ def _ldl_blocks(ab):
 
     ab[p, d] is the block (p, p - d); afterwards ab[p, 0] holds D_p^-1 and ab[p, d] the
     block L[p, p - d]. The 2x2 blocks keep four independent sums in every inner loop.
+    Each row is factorised from its first non-zero block on (its envelope: L has no
+    entries before it), so a mesh in reverse Cuthill-McKee order, whose rows reach back
+    less far than the half-bandwidth, costs less than the full band.
     Returns False on a singular or non-finite pivot block (the reference's 'singular
     factor').
     """
     n = ab.shape[0]
     nbw = ab.shape[1] - 1
     w = np.empty((nbw + 1, 2, 2))  # w[p - k] = L[p, k] D_k of the current row
+    first = np.empty(n, np.int64)  # the first non-zero block of each row
     for p in range(n):
-        lo = max(0, p - nbw)
+        lo = p
+        for d in range(min(p, nbw), 0, -1):
+            if (ab[p, d, 0, 0] != 0.0 or ab[p, d, 0, 1] != 0.0 or ab[p, d, 1, 0] != 0.0
+                    or ab[p, d, 1, 1] != 0.0):
+                lo = p - d
+                break
+        first[p] = lo
         for j in range(lo, p):
             dj = p - j
             s00 = ab[p, dj, 0, 0]
             s01 = ab[p, dj, 0, 1]
             s10 = ab[p, dj, 1, 0]
             s11 = ab[p, dj, 1, 1]
-            for k in range(max(lo, j - nbw), j):
+            for k in range(max(lo, first[j]), j):
                 a = p - k
                 b = j - k
                 # S -= W L_jk^T
@@ -758,7 +780,7 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
 
 @njit(cache=True, error_model='numpy')
 def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
-                 masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press,
+                 masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press, flesh,
                  gravity_grad, pos, nbw, q_out, reaction_out, history, values, counts,
                  pad_nodes, pad_par):
     """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
@@ -775,7 +797,8 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         fr_nodes (k,), fr_t (k, 2), fr_bound (k,) N, fr_speed (k,) m/s: kinetic friction.
         masses2: (2n,) kg per dof.  alpha (1/s), beta (s): Rayleigh damping.
         tol: m/s.  max_it: iterations.
-        edges, spar, triples, bpar, ring, press: the energies (see ring_*).
+        edges, spar, triples, bpar, ring, press: the energies (see ring_*); flesh: the
+            neo-Hookean triangles (see ``_energies``).
         gravity_grad: (2n,) N, the constant gradient of gravity.
         pos: (n,) band positions; nbw: node half-bandwidth.
         q_out, reaction_out: (2n,) outputs. history: (max_it,) output, m/s.
@@ -819,7 +842,7 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     counts[C_SOLVES] += 1
     counts[C_HESSIAN_EVALS] += 1
     phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                       fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                       fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh,
                        gravity_grad, pos, yes, grad, fric_grad, grads, band, area_grad, tmp,
                        cdq, values, pad_nodes, pad_par)
     if not math.isfinite(phi):
@@ -900,7 +923,7 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
             counts[C_EVALS if norm < tol else C_HESSIAN_EVALS] += 1
             phi_trial, c_trial = _evaluate(
                 trial, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh,
                 gravity_grad, pos, not norm < tol, grad_t, fric_grad, grads, band, area_grad,
                 tmp, cdq, values, pad_nodes, pad_par)
             if small or math.isfinite(phi_trial) and (
@@ -1164,9 +1187,9 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secon
 @njit(cache=True, error_model='numpy')
 def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
             face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
-            nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out, v_out,
-            forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face, d_rest,
-            d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_k, pad_scalars,
+            nbw, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, fpar, ipar, x_out,
+            v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face,
+            d_rest, d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_k, pad_scalars,
             pad_forces, pad_normal, pad_holder, pad_side):
     """One implicit Euler step with predictor-corrector contact, as
     ``contact_passes.contact_step``, and the measures of its end state, as
@@ -1258,7 +1281,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         status, its, n_hist = newton_solve(
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
-            fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press,
+            fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press, flesh,
             gravity_grad, pos, nbw, q, reaction, history, values, counts, pad_nodes, pad_par)
         out[1] = n_hist
         if status != OK:
@@ -1352,7 +1375,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
                 holder[i] = pad_holder[i]
     step_measures(x_out, v_out, forces_all, holder, masses, surface, skin_edges,
                   rest_segments, face_par, jaw_origins, fpar[F_DEPTH], edges, spar, triples,
-                  bpar, ring, press, gravity_grad, np.bool_(True), values, normal_out,
+                  bpar, ring, press, flesh, gravity_grad, np.bool_(True), values, normal_out,
                   pressure_out, meas_out)
     if padded:  # the hard contacts' length along the faces, plus the pads'
         meas_out[M_CONTACT_LENGTH] = _jaw_contact_length(x_out, surface, obstacle, face_par,
@@ -1475,7 +1498,7 @@ def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
 
 @njit(cache=True, error_model='numpy')
 def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
-                  face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press,
+                  face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, flesh,
                   gravity_grad, known, energies, normal_out, pressure_out, out):
     """The numbers of ``Simulation._measure`` and ``measures.deformation``.
 
@@ -1543,6 +1566,9 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         elastic = ring_stretching(q, edges, spar, pos, no, grad, band)
         elastic += ring_bending(q, triples, bpar, pos, no, grad, band)
         vp, _c = ring_pressure(q, ring, press, pos, no, grad, band, area_grad)
+        if flesh[0].shape[0] > 0:
+            vp += neohookean_triangles(x, flesh[0], flesh[1], flesh[2], flesh[3][0],
+                                       flesh[3][1], grad, grad, flesh[4], no)
         out[M_ELASTIC] = elastic + vp
         grav = 0.0
         for m in range(2 * n):

@@ -72,7 +72,7 @@ class Simulation(SimulationFacade):
         self._fast = (FastPath.create(self) if fast is not False and self._barrier is None
                       else None)
         if fast and self._fast is None:
-            raise ConfigError('the fast path needs numba and a shell or point fruit model')
+            raise ConfigError('the fast path needs numba and the default contact model')
         self.reset()
 
     def _make_damage(self) -> DamageTracker:
