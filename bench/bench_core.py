@@ -14,10 +14,11 @@ mean Newton iterations per step, the route the step took, and where the time goe
 - measures: the step's outputs (StepResult, damage);
 - other: gripper kinematics, the grasp state machine, Python glue.
 
-Routes: 'kernel' = the whole step in one numba call (``core.fast``: shell and point
-fruits with flat, arc and V-groove fingers, with or without soft pads); 'compiled' = the
-compiled energy kernels and the fixed-pattern Newton solver (``core.fast_solver``) driven
-by the contact passes (``core.contact_passes``): the solid fruit model. On the kernel
+Routes: 'kernel' = the whole step in one numba call (``core.fast``: shell, point and
+solid fruits, flat, arc and V-groove fingers, with or without soft pads: every set-up
+here); 'compiled' = the compiled energy kernels and the fixed-pattern Newton solver
+(``core.fast_solver``) driven by the contact passes (``core.contact_passes``), which
+``--set`` of a barrier contact model or ``GRIPPER_SIM_FAST=0`` selects. On the kernel
 route a step the kernel cannot factorise (a node held by a face and pushed into a second,
 oblique one) is done by the compiled route; the table counts those steps.
 Kernel route: glue, kernel and measures are timed with
