@@ -467,6 +467,15 @@ class FastPath:
 
     def _damage_inputs(self) -> tuple:
         """Arguments of the substep kernel's damage part (empty ones skip it)."""
+        if not self._damage_supported():
+            return self._no_damage
+        n_s = len(self.surface)
+        return (self._damage_face, self._damage_rest, self._damage_par, self._tracker.covered,
+                np.empty(n_s), np.empty(n_s), np.empty((n_s, kernels.P_SIZE)), np.empty(3))
+
+    def _damage_supported(self) -> bool:
+        """Whether the damage kernel models the simulation's damage tracker (its arrays are
+        then kept)."""
         sim = self.sim
         tracker = sim._damage
         if tracker is not self._tracker_seen or sim._faces_template is not self._damage_faces:
@@ -485,11 +494,7 @@ class FastPath:
                 self._damage_rest = np.ascontiguousarray(tracker.rest_curvature, dtype=float)
                 self._damage_par = np.array([tracker.bruise_pressure, tracker.rigid_modulus,
                                              tracker.pad_modulus])
-        if self._tracker is None:
-            return self._no_damage
-        n_s = len(self.surface)
-        return (self._damage_face, self._damage_rest, self._damage_par, tracker.covered,
-                np.empty(n_s), np.empty(n_s), np.empty((n_s, kernels.P_SIZE)), np.empty(3))
+        return self._tracker is not None
 
     def _damage(self, positions, normal, obstacle, ratio, computed=None):
         """``Simulation._assess_damage``: the per-step part of ``DamageTracker.update`` from
@@ -497,7 +502,7 @@ class FastPath:
         in) or else the ``damage_update`` kernel; the tracker keeps the state."""
         sim = self.sim
         tracker = sim._damage
-        if self._damage_inputs() is self._no_damage:
+        if not self._damage_supported():
             return sim._assess_damage_of(positions, normal, obstacle, ratio)
         if (computed is not None and computed[3] is tracker.covered
                 and computed[0] is self._damage_face):
