@@ -14,10 +14,14 @@ mean Newton iterations per step, the route the step took, and where the time goe
 - measures: the step's outputs (StepResult, damage);
 - other: gripper kinematics, the grasp state machine, Python glue.
 
-Routes: 'kernel' = the whole step in one numba call (``core.fast``: shell and point
-fruits with flat fingers and no pad); 'compiled' = the compiled energy kernels and the
-fixed-pattern Newton solver (``core.fast_solver``) driven by the contact passes
-(``core.contact_passes``). Kernel route: glue, kernel and measures are timed with
+Routes: 'kernel' = the whole step in one numba call (``core.fast``: shell, point and
+solid fruits, flat, arc and V-groove fingers, with or without soft pads: every set-up
+here); 'compiled' = the compiled energy kernels and the fixed-pattern Newton solver
+(``core.fast_solver``) driven by the contact passes (``core.contact_passes``), which
+``--set`` of a barrier contact model or ``GRIPPER_SIM_FAST=0`` selects. On the kernel
+route a step the kernel cannot factorise (a node held by a face and pushed into a second,
+oblique one) is done by the compiled route; the table counts those steps.
+Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations) times the cost of each operation timed alone at the end
 state. Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
@@ -88,36 +92,38 @@ def _op_loops():
 
     @njit(cache=True)
     def evaluations(reps, hessian, q, q_n, v_n, dt, m2, alpha, beta, filters, frn, frt, frb,
-                    frs, edges, spar, triples, bpar, ring, press, grav, pos, nbw):
+                    frs, edges, spar, triples, bpar, ring, press, flesh, grav, pos, nbw):
         n2 = q.shape[0]
         band = np.zeros((n2 // 2, nbw + 1, 2, 2))
         grads = np.empty((4, n2))
+        nopad, nopar = np.zeros(0, np.int64), np.zeros((0, k.PAD_SIZE))
         out = np.empty((6, n2))
         values = np.empty(4)
         acc = 0.0
         for _ in range(reps):
             phi, c = k._evaluate(q, q_n, v_n, dt, m2, alpha, beta, filters, frn, frt, frb,
-                                 frs, frn.shape[0], edges, spar, triples, bpar, ring, press,
+                                 frs, frn.shape[0], edges, spar, triples, bpar, ring, press, flesh,
                                  grav, pos, hessian, out[0], out[1], grads, band, out[2],
-                                 out[3], out[4], values)
+                                 out[3], out[4], values, nopad, nopar)
             acc += phi
         return acc
 
     @njit(cache=True)
     def factorisations(reps, q, q_n, dt, m2, alpha, beta, filters, frn, frt, frb, frs, edges,
-                       spar, triples, bpar, ring, press, grav, pos, nbw, solves):
+                       spar, triples, bpar, ring, press, flesh, grav, pos, nbw, solves):
         n2 = q.shape[0]
         n = n2 // 2
         band = np.zeros((n, nbw + 1, 2, 2))
         grads = np.empty((4, n2))
         area = np.empty(n2)
         values = np.empty(4)
-        k._energies(q, edges, spar, triples, bpar, ring, press, grav, pos, True, grads, band,
-                    area, values)
+        k._energies(q, edges, spar, triples, bpar, ring, press, flesh, grav, pos, True, grads,
+                    band, area, values)
         order = np.empty(n, np.int64)
         for i in range(n):
             order[pos[i]] = i
         ab = np.empty((n, nbw + 1, 2, 2))
+        nopad, nopar = np.zeros(0, np.int64), np.zeros((0, k.PAD_SIZE))
         x = np.ones(n2)
         y = np.ones(n2)
         ok = 0
@@ -126,7 +132,7 @@ def _op_loops():
                 k._ldl_solve2(ab, x, y)
             else:
                 k._newton_matrix(band, m2, dt, alpha, beta, filters, frn, frt, frb, frs,
-                                 frn.shape[0], q, q_n, pos, order, 0.0, ab)
+                                 frn.shape[0], q, q_n, pos, order, 0.0, ab, nopad, nopar)
                 ok += k._ldl_blocks(ab)
         return ok
 
@@ -152,8 +158,8 @@ def _op_loops():
 
     @njit(cache=True)
     def measures(reps, x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
-                 face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, grav,
-                 d_face, d_rest, d_par, covered):
+                 face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, flesh,
+                 grav, d_face, d_rest, d_par, covered):
         n, ns = x.shape[0], surface.shape[0]
         normal, pressure, out = np.empty(n), np.empty(ns), np.empty(k.M_SIZE)
         values = np.zeros(4)
@@ -167,8 +173,8 @@ def _op_loops():
         for _ in range(reps):
             k.step_measures(x, v, forces, obstacle, masses, surface, skin_edges,
                             rest_segments, face_par, jaw_origins, depth, edges, spar, triples,
-                            bpar, ring, press, grav, np.bool_(True), values, normal, pressure,
-                            out)
+                            bpar, ring, press, flesh, grav, np.bool_(True), values, normal,
+                            pressure, out)
             if d_rest.shape[0]:
                 work = covered.copy()
                 total += k.damage_update(x, normal, obstacle, surface, groups, curvature,
@@ -209,7 +215,7 @@ def kernel_split(sim: Simulation) -> dict:
     frb, frs = frb[:n_fr].copy(), frs[:n_fr].copy()
     model = path.model
     energy = (model['edges'], model['spar'], model['triples'], model['bpar'], model['ring'],
-              model['press'], path.gravity_grad, model['pos'], model['nbw'])
+              model['press'], model['flesh'], path.gravity_grad, model['pos'], model['nbw'])
     q = x_n.ravel().copy()
     common = (q, x_n.ravel(), v_n.ravel(), dt, path.masses2, path.fpar[k.F_ALPHA],
               path.fpar[k.F_BETA], filters, frn, frt, frb, frs) + energy
@@ -221,10 +227,12 @@ def kernel_split(sim: Simulation) -> dict:
                sim.config['contact.max_correction_speed'],
                sim.config['contact.release_threshold'], max(5 * sim.gravity.g * dt, 1e-3))
     damage = path._damage_inputs()
-    origins = np.ascontiguousarray(face_dyn[:2, 2:4])
+    grip = sim._grip
+    origins = np.array([[grip.x - 0.5 * grip.gap, grip.lift],
+                        [grip.x + 0.5 * grip.gap, grip.lift]])
     meas = (x_n, v_n, sim.contact_forces, c.obstacle, path.masses, path.surface,
             path.skin_edges, path.rest_segments, face_par, origins, sim.fruit.depth,
-            *energy[:7], *damage[:4])
+            *energy[:8], *damage[:4])
     return dict(
         hessian_eval=_best_time(lambda r: evaluations(r, True, *common), 2000),
         eval=_best_time(lambda r: evaluations(r, False, *common), 2000),
@@ -262,19 +270,23 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
     config = load_config(overrides=SETUPS[name] + overrides)
     sim = Simulation(config)
     grasp(sim, 0.01)  # warm up: numba cache load, first-call costs
+    if sim._fast is not None:
+        sim._fast.fallbacks = 0
     runs = [grasp(sim, hold) for _ in range(repeat)]
     wall, cpu, steps, iterations, summary, per_step = min(runs, key=lambda r: r[1])
     sim_time = steps * sim.dt
     # the typical step, less exposed to other processes than the total: median and the
     # 10th percentile of single steps (each with its grasp update)
     median, p10 = np.median(per_step), np.percentile(per_step, 10)
-    row = dict(model=name, nodes=sim.fruit.n_nodes, path='kernel' if sim._fast else (
+    on_kernel = sim._fast is not None and sim._fast.applies()
+    row = dict(model=name, nodes=sim.fruit.n_nodes, path='kernel' if on_kernel else (
                    'compiled' if sim.solver.fast else 'numpy'),
+               fallbacks=sim._fast.fallbacks // repeat if on_kernel else 0,
                steps=steps, sim_time=sim_time, wall_per_sim=wall / sim_time,
                cpu_per_sim=cpu / sim_time, rtf=sim_time / wall, us_per_step=wall / steps * 1e6,
                iterations=iterations / steps, outcome=summary['outcome'],
                median_us=median * 1e6, p10_us=p10 * 1e6)
-    if sim._fast is not None:
+    if on_kernel:
         path = sim._fast
         path.timing = True
         path.timers = dict.fromkeys(path.timers, 0.0)
@@ -337,14 +349,16 @@ def main(argv=None) -> int:
             for name in args.setups.split(',')]
     print()
     print(f'{"set-up":<14} {"nodes":>5} {"route":<8} {"steps":>5} {"CPU us/step":>11} '
-          f'{"CPU s/sim s":>11} {"CPU RTF":>7} {"wall RTF":>8} {"Newton it/step":>14} outcome')
+          f'{"CPU s/sim s":>11} {"CPU RTF":>7} {"wall RTF":>8} {"Newton it/step":>14} '
+          f'{"off kernel":>10} outcome')
     for r in rows:
         print(f'{r["model"]:<14} {r["nodes"]:>5} {r["path"]:<8} {r["steps"]:>5} '
               f'{r["cpu_per_sim"] * r["sim_time"] / r["steps"] * 1e6:>11.1f} '
               f'{r["cpu_per_sim"]:>11.4f} {1 / r["cpu_per_sim"]:>7.2f} {r["rtf"]:>8.2f} '
-              f'{r["iterations"]:>14.2f} {r["outcome"]}')
+              f'{r["iterations"]:>14.2f} {r["fallbacks"]:>10} {r["outcome"]}')
     print('(CPU RTF = simulated s per CPU s of this process: what a quiet core gives; wall '
-          'RTF depends on the load)')
+          'RTF depends on the load; off kernel = steps of the kernel route done by the '
+          'compiled route)')
     flat = {r['model'].split('-')[0]: r['cpu_per_sim'] for r in rows if '-' not in r['model']}
     for r in rows:
         fruit = r['model'].split('-')[0]

@@ -109,8 +109,10 @@ def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction():
         q_n, v_n, dt, start, con.filters, con.friction_nodes, con.friction_tangents,
         con.friction_bounds, con.friction_obstacle_speed, solver.m, 5.0, 1e-4, 1e-9,
         solver.max_iterations, model['edges'], model['spar'], model['triples'],
-        model['bpar'], model['ring'], model['press'], gravity.grad, model['pos'],
-        model['nbw'], q, reaction, history, np.zeros(4), np.zeros(kernels.C_SIZE, np.int64))
+        model['bpar'], model['ring'], model['press'], model['flesh'], gravity.grad,
+        model['pos'], model['nbw'], q, reaction, history, np.zeros(4),
+        np.zeros(kernels.C_SIZE, np.int64), np.zeros(0, np.int64),
+        np.zeros((0, kernels.PAD_SIZE)))
     assert status == kernels.OK
     assert iterations == reference.iterations
     np.testing.assert_allclose(q, reference.q, rtol=0, atol=1e-12)
@@ -199,6 +201,79 @@ def test_grasp_and_lift_trajectory_matches_the_reference_path():
     assert fast_sim.last.lift > fast_sim.initial_lift + 1e-3
 
 
+@pytest.mark.parametrize('finger', [['gripper.finger.type=vgroove'],
+                                    ['gripper.finger.type=arc'],
+                                    ['gripper.finger.pad.enabled=true'],
+                                    ['fruit.model=solid', 'gripper.finger.type=vgroove']],
+                         ids=['vgroove', 'arc', 'pad', 'solid-vgroove'])
+def test_shaped_fingers_and_pads_match_the_reference_path(finger):
+    """Several faces per jaw (the facets of a V-groove or an arc), soft pads and the solid
+    (neo-Hookean) fruit on the kernel: the same grasp-and-lift trajectory as the
+    reference path."""
+    overrides = ['fruit.nodes=32', *finger, 'gripper.initial_gap=0.0645',
+                 'gripper.close_speed=0.05', 'gripper.lift_acceleration=5',
+                 'gripper.lift_speed=0.05']
+    config = load_config(overrides=overrides)
+    fast_sim, ref_sim = Simulation(config, fast=True), Simulation(config, fast=False)
+    assert fast_sim._fast.applies()
+    faces_held = set()
+
+    def drive(sim):
+        return GraspSequence(sim, 3.0, lift_height=0.005, hold_time=0.05)
+
+    def record(result):
+        faces_held.update(result.contact_obstacle[result.contact_obstacle >= 0].tolist())
+
+    fast_sim.add_observer(record)
+    assert _compare(fast_sim, ref_sim, 400, drive) > 250
+    assert fast_sim._fast.counts[kernels.C_SUBSTEPS] > 350
+    jaw_faces = [i for i, name in enumerate(fast_sim.obstacle_names) if 'jaw' in name]
+    if 'pad' in finger[0]:  # the pads carry the grip
+        assert np.any(fast_sim._pad.normal_forces > 0.1)
+    else:
+        assert len(faces_held & set(jaw_faces)) >= 4  # at least two facets of each jaw
+    assert fast_sim.last.grip_force > 2.0
+
+
+def test_steps_the_kernel_cannot_do_take_the_generic_path_with_pads(monkeypatch):
+    """A step the kernel reports it cannot factorise (kernels.UNSUPPORTED: a node held by
+    two oblique faces) is done by the generic path, the pads set up and recorded for it:
+    the same trajectory as a simulation on the generic path alone (the same solver), and
+    the steps are counted."""
+    overrides = ['fruit.nodes=32', 'gripper.finger.pad.enabled=true',
+                 'gripper.initial_gap=0.0645', 'gripper.close_speed=0.05']
+    config = load_config(overrides=overrides)
+    sims = Simulation(config, fast=True), Simulation(config)
+    sims[1]._fast = None  # the generic path with the compiled solver, as the fallback's
+    monkeypatch.setattr(kernels, 'substep', lambda *args: kernels.UNSUPPORTED)
+    for sim in sims:
+        sim.command_force(2.0)
+    assert _compare(*sims, 150) > 50
+    assert sims[0]._fast.fallbacks >= 150  # every substep, the force drive's trials too
+    assert sims[0].last.grip_force > 0.5
+    np.testing.assert_allclose(sims[0]._pad.forces, sims[1]._pad.forces, rtol=0, atol=1e-9)
+
+
+def test_sliding_grasp_matches_the_reference_path():
+    """A grip too weak to carry the fruit: it slides down the jaws while they lift, with
+    the same trajectory (kinetic friction, slip distance) on both paths."""
+    overrides = ['fruit.nodes=32', 'sim.dt=0.00025', 'gripper.initial_gap=0.0645',
+                 'gripper.close_speed=0.05', 'gripper.lift_acceleration=5',
+                 'gripper.lift_speed=0.05']
+    config = load_config(overrides=overrides)
+    sims = Simulation(config, fast=True), Simulation(config, fast=False)
+    sliding = []
+
+    def drive(sim):
+        return GraspSequence(sim, 0.5, lift_height=0.01, hold_time=0.2)
+
+    sims[0].add_observer(lambda result: sliding.append(result.slipping))
+    _compare(*sims, 1400, drive)
+    assert sum(sliding) > 50
+    assert sims[0].last.slip_distance > 1e-4
+    assert sims[0].last.slip_distance == pytest.approx(sims[1].last.slip_distance, rel=1e-9)
+
+
 def test_damped_shell_dropped_on_the_table_matches_the_reference_path():
     config = load_config(overrides=['fruit.nodes=32', 'fruit.initial_height=0.045',
                                     'fruit.damping.mass=2', 'fruit.damping.stiffness=1e-4',
@@ -266,42 +341,33 @@ def test_parameter_changes_while_running_match_the_reference_path():
     assert sims[0].last.damage.bruised_length > 0  # low bruise threshold: the cover grows
 
 
-#: every 2D set-up: (overrides, route) with route 'kernel' (the whole step in one numba
-#: call) or 'compiled' (the compiled energies and the fixed-pattern Newton solver)
+#: every 2D set-up (with the default contact model)
 SETUPS = [
-    ([], 'kernel'),
-    (['fruit.model=point'], 'kernel'),
-    (['gripper.finger.type=arc'], 'compiled'),
-    (['gripper.finger.type=vgroove'], 'compiled'),
-    (['gripper.finger.pad.enabled=true'], 'compiled'),
-    (['fruit.model=solid'], 'compiled'),
-    (['fruit.model=solid', 'gripper.finger.type=arc'], 'compiled'),
-    (['fruit.model=solid', 'gripper.finger.type=vgroove'], 'compiled'),
-    (['fruit.model=solid', 'gripper.finger.pad.enabled=true'], 'compiled'),
+    [],
+    ['fruit.model=point'],
+    ['gripper.finger.type=arc'],
+    ['gripper.finger.type=vgroove'],
+    ['gripper.finger.pad.enabled=true'],
+    ['fruit.model=solid'],
+    ['fruit.model=solid', 'gripper.finger.type=arc'],
+    ['fruit.model=solid', 'gripper.finger.type=vgroove'],
+    ['fruit.model=solid', 'gripper.finger.pad.enabled=true'],
 ]
 
 
-@pytest.mark.parametrize('overrides,route', SETUPS, ids=[' '.join(o) or 'default'
-                                                         for o, _ in SETUPS])
-def test_every_setup_takes_a_compiled_route(overrides, route):
-    """No 2D set-up steps on the numpy energies: the flat-finger shell and point fruits
-    take the whole-step kernel, every other one the compiled energy kernels through the
-    fixed-pattern solver (each energy has an ``evaluate_into``)."""
+@pytest.mark.parametrize('overrides', SETUPS, ids=[' '.join(o) or 'default' for o in SETUPS])
+def test_every_setup_takes_the_whole_step_kernel(overrides):
+    """Every 2D set-up - shell, point and solid fruits; flat, arc and V-groove fingers;
+    soft pads - steps in the whole-step kernel, not on the generic solver."""
     sim = Simulation(load_config(overrides=overrides + ['fruit.nodes=32']))
     sim.command_force(1.0)
     for _ in range(5):
         sim.step()
-    if route == 'kernel':
-        assert sim._fast is not None and sim._fast.applies()
-        assert sim._fast.counts.sum() > 0
-        assert sim.solver.stats['passes'] == 0
-    else:
-        assert sim._fast is None
-        assert sim.solver.fast
-        assert all(hasattr(energy, 'evaluate_into') for energy in sim.solver.energies)
-        assert sim.solver.stats['passes'] >= 5
-        with pytest.raises(Exception, match='fast path'):
-            Simulation(load_config(overrides=overrides), fast=True)
+    assert sim._fast is not None and sim._fast.applies()
+    assert sim._fast.counts[kernels.C_SUBSTEPS] >= 5
+    assert sim._fast.fallbacks == 0
+    assert sim.solver.stats['passes'] == 0
+    Simulation(load_config(overrides=overrides), fast=True)  # no error: the kernel covers it
 
 
 def test_faces_the_kernels_do_not_model_fall_back_to_the_reference_path(monkeypatch):

@@ -1,4 +1,5 @@
-"""The fast path of ``Simulation`` for ring (shell) and point fruit models.
+"""The fast path of ``Simulation``: shell, point and solid fruit models, flat, arc or
+V-groove fingers (one face or several per jaw), with or without soft pads.
 
 ``FastPath`` runs a whole step - gripper faces, contact constraints, Newton, contact
 set updates, then the step's measures and damage of the end state - in one numba
@@ -6,11 +7,17 @@ kernel call (``gripper_sim.core.kernels.substep``), and builds the StepResult fr
 numbers, instead of the generic numpy/scipy path (per-energy triplets, sparse LU,
 numpy measures). It gives the same results as that reference path
 (test/test_fast_path.py: trajectories within 1e-9, same contact sets and Newton
-iterations) and is chosen automatically by ``Simulation`` when numba is installed,
-the fruit's energies are the ring energies (stretching, bending, enclosed-area
-pressure) and gravity, and the obstacles move as the kernels model them
-(``FastPath.applies``: jaws 0 and 1 with the gripper, the rest fixed); otherwise - the
-solid (neo-Hookean) model, other finger geometries - the generic path runs.
+iterations) and is chosen automatically by ``Simulation`` when numba is installed, the
+contact model is the default one, the fruit's energies are the ring energies
+(stretching, bending, enclosed-area pressure), the solid's neo-Hookean triangles and
+gravity, and the obstacles move as the kernels model them (``FastPath.applies``: the
+jaws' faces with the gripper, the rest fixed). Soft pads (``pad.PadLayer``): the kernel
+sets the layer up for the step, adds its energy to the Newton solve and records its
+forces, as the layer's ``begin_step``, ``evaluate`` and ``finish_step`` do. A step
+whose contact filter the kernel cannot factorise (a node held by a face and pushed
+into a second, oblique one) is done by the generic path (``FastPath.fallbacks`` counts
+them). The node-block band of a ring is its interleaved outline (half-bandwidth 4); a
+solid's mesh is ordered by reverse Cuthill-McKee.
 ``Simulation(config, fast=False)`` or ``GRIPPER_SIM_FAST=0`` in the environment turns
 the fast path off.
 
@@ -26,10 +33,14 @@ import time
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
-from gripper_sim.core.energies import EnclosedAreaPressure, RingBending, Stretching
+from gripper_sim.core.energies import (EnclosedAreaPressure, NeoHookeanTriangles, RingBending,
+                                       Stretching)
+from gripper_sim.core.measures import tributary_lengths
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
 from gripper_sim.core.slip import SLIDING_SPEED
 from gripper_sim.core.stepper import NewtonFailure
@@ -55,7 +66,9 @@ def available() -> bool:
 def _empty_model():
     return dict(edges=np.zeros((0, 2), np.int64), spar=np.zeros((0, 2)),
                 triples=np.zeros((0, 3), np.int64), bpar=np.zeros((0, 2)),
-                ring=np.zeros(0, np.int64), press=np.zeros(4))
+                ring=np.zeros(0, np.int64), press=np.zeros(4),
+                flesh=(np.zeros((0, 3), np.int64), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(2),
+                       np.zeros((0, 36), np.int64)))
 
 
 def ring_model(fruit, energies) -> dict | None:
@@ -66,19 +79,23 @@ def ring_model(fruit, energies) -> dict | None:
 
     Returns:
         dict with edges (n_e, 2), spar (n_e, 2) [L, EA/L], triples (n_t, 3),
-        bpar (n_t, 2) [phi0, k], ring (n_r,), press (4,) [A0, b, p0, K], pos (n,)
+        bpar (n_t, 2) [phi0, k], ring (n_r,), press (4,) [A0, b, p0, K], flesh (the
+        neo-Hookean triangles of a solid fruit, see ``kernels._energies``), pos (n,)
         band positions and nbw (node half-bandwidth).
     """
-    if fruit.flesh is not None:
-        return None
     n = fruit.n_nodes
     model = _empty_model()
     seen = set()
+    flesh = None
     for energy in energies:
         kind = type(energy)
-        if kind in seen or kind not in (Stretching, RingBending, EnclosedAreaPressure):
+        if kind in seen or kind not in (Stretching, RingBending, EnclosedAreaPressure,
+                                        NeoHookeanTriangles):
             return None
         seen.add(kind)
+        if kind is NeoHookeanTriangles:
+            flesh = energy
+            continue
         if kind is Stretching:
             model['edges'] = np.ascontiguousarray(energy.edges, dtype=np.int64)
             model['spar'] = np.ascontiguousarray(
@@ -94,30 +111,63 @@ def ring_model(fruit, energies) -> dict | None:
         else:
             model['ring'] = np.ascontiguousarray(energy.ring, dtype=np.int64)
             model['press'] = np.array([energy.a0, energy.b, energy.p0, energy.k])
-    # band order: the outline interleaved (0, N-1, 1, N-2, ...); a model whose energies
-    # touch nodes off the outline is not a ring model
-    surface = np.asarray(fruit.surface, dtype=np.int64)
-    if n == 1:
-        pos = np.zeros(1, np.int64)
-    else:
-        if len(surface) != n or set(surface.tolist()) != set(range(n)):
-            return None
-        pos = np.empty(n, np.int64)
-        pos[surface] = kernels.band_order(n) if kernels is not None else np.arange(n)
     pairs = [model['edges'], model['triples'][:, [0, 1]], model['triples'][:, [1, 2]],
              model['triples'][:, [0, 2]]]
     ring = model['ring']
     if len(ring):
         pairs.append(np.stack([ring, np.roll(ring, -1)], axis=1))
+    if flesh is not None:
+        tri = np.asarray(flesh.tri, dtype=np.int64)
+        pairs += [tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [0, 2]]]
+    for pair in pairs:
+        if len(pair) and (pair.min() < 0 or pair.max() >= n):
+            return None
+    # band order: a ring's outline interleaved (0, N-1, 1, N-2, ...); a meshed solid's
+    # nodes in reverse Cuthill-McKee order of the mesh graph
+    surface = np.asarray(fruit.surface, dtype=np.int64)
+    pos = np.empty(n, np.int64)
+    if n == 1:
+        pos[:] = 0
+    elif flesh is not None:
+        graph_pairs = np.concatenate([pair for pair in pairs if len(pair)])
+        graph = sp.coo_matrix((np.ones(len(graph_pairs)), (graph_pairs[:, 0],
+                                                            graph_pairs[:, 1])),
+                              shape=(n, n)).tocsr()
+        pos[reverse_cuthill_mckee(graph + graph.T, symmetric_mode=True)] = np.arange(n)
+    elif len(surface) == n and set(surface.tolist()) == set(range(n)):
+        pos[surface] = kernels.band_order(n) if kernels is not None else np.arange(n)
+    else:
+        return None  # energies on nodes off the outline without a mesh
     nbw = 0
     for pair in pairs:
         if len(pair):
             if pair.min() < 0 or pair.max() >= n:
                 return None
             nbw = max(nbw, int(np.max(np.abs(pos[pair[:, 0]] - pos[pair[:, 1]]))))
+    if flesh is not None:
+        nbw = max(nbw, 1)  # band[0, 1, 0, 0] takes the flesh's upper-side entries
+        model['flesh'] = (tri, np.ascontiguousarray(flesh.dm_inv, dtype=float),
+                          np.ascontiguousarray(flesh.volume, dtype=float),
+                          np.array([flesh.mu, flesh.lam], dtype=float),
+                          _band_scatter(tri, pos, nbw))
     model['pos'] = pos
     model['nbw'] = nbw
     return model
+
+
+def _band_scatter(tri: np.ndarray, pos: np.ndarray, nbw: int) -> np.ndarray:
+    """(n_tri, 36) flat indices into a node-block band (n, nbw + 1, 2, 2) of each
+    triangle's 6 x 6 Hessian entries (row r, column s: 6 r + s); the band keeps the block
+    of rows at position p and columns at p - d, an entry of the upper side goes to the
+    unused slot band[0, 1, 0, 0] (flat index 4)."""
+    local = np.arange(6)
+    rows = np.repeat(local, 6)  # (36,)
+    cols = np.tile(local, 6)
+    p_row = pos[tri[:, rows // 2]]  # (n_tri, 36)
+    p_col = pos[tri[:, cols // 2]]
+    d = p_row - p_col
+    index = ((p_row * (nbw + 1) + d) * 2 + rows % 2) * 2 + cols % 2
+    return np.ascontiguousarray(np.where(d >= 0, index, 4), dtype=np.int64)
 
 
 class FastPath:
@@ -157,16 +207,21 @@ class FastPath:
         self._tracker = None
         self._tracker_seen = None
         self._damage_faces = None
+        self._no_pad = np.zeros(0)
+        #: the pad outputs of a step without pads (the kernel leaves them alone)
+        self._no_pad_out = (np.empty((0, 2)), np.empty(0), np.empty(0, np.int64), np.empty(2))
         self._no_damage = (np.zeros((0, 3)), np.zeros(0), np.zeros(3), np.zeros(0),
                            np.zeros(0), np.zeros(0), np.zeros((0, kernels.P_SIZE)),
                            np.zeros(3))
         self._names_of = None
         self._names_cache: tuple = ()
         self._applies = False
-        self.face_par = np.zeros((0, 7))
+        self.face_par = np.zeros((0, kernels.FP_SIZE))
+        #: steps the generic path did because the kernel cannot (kernels.UNSUPPORTED)
+        self.fallbacks = 0
         self.face_dyn = np.zeros((0, 6))
         self._energy_args = (model['edges'], model['spar'], model['triples'], model['bpar'],
-                             model['ring'], model['press'], self.gravity_grad)
+                             model['ring'], model['press'], model['flesh'], self.gravity_grad)
         #: wall time (s) spent per part while ``timing`` is True
         self.timers = {'glue': 0.0, 'kernel': 0.0, 'measures': 0.0}
         self._measured = None
@@ -179,9 +234,11 @@ class FastPath:
             return None
         solver_energies = list(sim.solver.energies)
         expected = list(sim.fruit.energies) + [sim.gravity]
+        if sim._pad is not None:
+            expected.append(sim._pad)
         if len(solver_energies) != len(expected) or any(
                 a is not b for a, b in zip(solver_energies, expected)):
-            return None  # another energy in the step (e.g. a pad layer): not modelled here
+            return None  # another energy in the step (a barrier): not modelled here
         model = ring_model(sim.fruit, sim.fruit.energies)
         if model is None:
             return None
@@ -189,9 +246,9 @@ class FastPath:
 
     # ------------------------------------------------------------------ faces
     def applies(self) -> bool:
-        """Whether the kernels model the simulation's obstacles: faces 0 and 1 the jaws,
-        moving with the gripper as ``Simulation._faces`` moves them, the others fixed
-        (table, walls). Checked once per face set (``set_parameter`` makes a new one)."""
+        """Whether the kernels model the simulation's obstacles: the jaws' faces moving
+        with the gripper as ``Simulation._faces`` moves them, the others fixed (table,
+        walls). Checked once per face set (``set_parameter`` makes a new one)."""
         template = self.sim._faces_template
         if template is not self._checked:
             self._applies = self._faces_match(template)
@@ -210,10 +267,12 @@ class FastPath:
             return False
         if len(faces) != len(template):
             return False
+        sides, offsets = sim._face_side, sim._face_offsets
         for k, (face, rest) in enumerate(zip(faces, template)):
-            if k < 2:
-                sign = -1.0 if k == 0 else 1.0
-                origin = (grip.x + sign * (0.5 * grip.gap), grip.lift)
+            if k < len(sides):
+                sign = -1.0 if sides[k] == 0 else 1.0
+                origin = (grip.x + sign * (0.5 * grip.gap) + offsets[k][0],
+                          grip.lift + offsets[k][1])
                 velocity = (grip.x_rate + sign * (0.5 * grip.gap_rate), grip.lift_rate)
             else:
                 origin, velocity = tuple(rest.origin), tuple(rest.velocity)
@@ -228,9 +287,13 @@ class FastPath:
     def _face_arrays(self):
         template = self.sim._faces_template
         if template is not self._template:
-            self.face_par = np.array([[f.normal[0], f.normal[1], f.half_length, f.thickness,
-                                       f.static_friction, f.kinetic_friction, f.restitution]
-                                      for f in template], dtype=float).reshape(-1, 7)
+            sides, offsets = self.sim._face_side, self.sim._face_offsets
+            self.face_par = np.array(
+                [[f.normal[0], f.normal[1], f.half_length, f.thickness, f.static_friction,
+                  f.kinetic_friction, f.restitution]
+                 + ([sides[k], offsets[k][0], offsets[k][1]] if k < len(sides)
+                    else [-1.0, 0.0, 0.0])
+                 for k, f in enumerate(template)], dtype=float).reshape(-1, kernels.FP_SIZE)
             dyn = np.zeros((len(template), 6))
             for k, f in enumerate(template):
                 dyn[k, 0:2] = f.origin
@@ -272,8 +335,14 @@ class FastPath:
         x_n = sim.q if sim.q.flags.c_contiguous else np.ascontiguousarray(sim.q)
         v_n = sim.v if sim.v.flags.c_contiguous else np.ascontiguousarray(sim.v)
         model = self.model
-        edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
+        edges, spar, triples, bpar, ring, press, flesh, gravity_grad = self._energy_args
+        pad = sim._pad
         damage = self._damage_inputs()
+        if pad is None:
+            pad_k, pad_scalars, pad_out = self._no_pad, self._no_pad, self._no_pad_out
+        else:
+            pad_k, pad_scalars = pad.k, np.array([pad.thickness, pad.mu])
+            pad_out = (np.empty((n, 2)), np.empty(n), np.empty(n, np.int64), np.empty(2))
         if timing:
             t1 = time.perf_counter()
         status = kernels.substep(
@@ -282,16 +351,18 @@ class FastPath:
                                  grip_new.x, grip_new.gap_rate, grip_new.lift_rate,
                                  grip_new.x_rate),
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
-            model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, gravity_grad,
+            model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, flesh,
+            gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
-            self.measures, self.counts, *damage)
+            self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out)
         if timing:
             t2 = time.perf_counter()
         out = self.out
         if status != kernels.OK:
             self._measured = None
             if status == kernels.UNSUPPORTED:
-                return sim._substep_hard(dt)
+                self.fallbacks += 1
+                return sim._substep_generic(dt)
             history = [float(h) for h in self.history[:int(out[1])]]
             message = _FAILURES.get(
                 status, f'no convergence in {sim.solver.max_iterations} iterations')
@@ -302,7 +373,9 @@ class FastPath:
             secondary=secondary, secondary_bounce=secondary_bounce))
         sim._grip = grip_new
         sim._time += dt
-        sim._jaw_force = (float(out[2]), float(out[3]))
+        sim._jaw_force = (float(out[2]), float(out[3]))  # the pads' push included
+        if pad is not None:  # what PadLayer.finish_step records
+            pad.forces, pad.normal_forces, pad.holder, pad.side_force = pad_out
         self._measured = (x, normal, pressure, self.measures.tolist(), damage)
         if timing:
             t3 = time.perf_counter()
@@ -319,28 +392,38 @@ class FastPath:
             t0 = time.perf_counter()
         sim = self.sim
         fruit, grip = sim.fruit, sim._grip
-        x, v, forces = sim.q, sim.v, sim.contact_forces
+        x, v = sim.q, sim.v
         contacts = sim.contacts
+        # every contact force (the pads' included) and the obstacle holding each node
+        forces, holder = sim._contact_forces_and_holders()
         measured = self._measured
         damage_of_x = None
         if measured is not None and measured[0] is x:
             _, normal, pressure, values, damage_of_x = measured
         else:
-            values, normal, pressure = self._measure_kernel()
+            values, normal, pressure = self._measure_kernel(forces, holder)
+            if sim._pad is not None:  # the hard contacts' length, plus the pads'
+                on_pad = (contacts.obstacle < 0) & (sim._pad.holder >= 0)
+                values[kernels.M_CONTACT_LENGTH] = (
+                    self._measure_kernel(sim.contact_forces, contacts.obstacle)[0][
+                        kernels.M_CONTACT_LENGTH]
+                    + float(np.sum(tributary_lengths(fruit, x)[on_pad[fruit.surface]])))
         (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, _cvz, any_left, any_right,
          kinetic, elastic, gravitational, width, max_strain, contact_length,
          peak) = values
+        if not sim._plain_jaws:  # shaped fingers: each jaw's force along the closing axis
+            left_n, right_n = -lfx, rfx
         both = any_left > 0 and any_right > 0
         slip = sim._slip_distance(cz - grip.lift, both, any_left > 0 or any_right > 0)
-        slipping = (any_left > 0 or any_right > 0) and self._sliding(v, contacts.obstacle)
+        slipping = (any_left > 0 or any_right > 0) and self._sliding(v, holder)
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
         positions = x.copy()
-        damage = self._damage(positions, normal, contacts.obstacle, ratio, damage_of_x)
+        damage = self._damage(positions, normal, holder, ratio, damage_of_x)
         result = _build(StepResult, dict(
             time=sim._time, step=sim._step, positions=positions, velocities=v.copy(),
-            contact_forces=forces.copy(), contact_obstacle=contacts.obstacle.copy(),
+            contact_forces=forces.copy(), contact_obstacle=holder,
             contact_sticking=contacts.mode == cm.STICK,
             obstacle_names=self._names(), surface=fruit.surface,
             left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
@@ -384,13 +467,22 @@ class FastPath:
 
     def _damage_inputs(self) -> tuple:
         """Arguments of the substep kernel's damage part (empty ones skip it)."""
+        if not self._damage_supported():
+            return self._no_damage
+        n_s = len(self.surface)
+        return (self._damage_face, self._damage_rest, self._damage_par, self._tracker.covered,
+                np.empty(n_s), np.empty(n_s), np.empty((n_s, kernels.P_SIZE)), np.empty(3))
+
+    def _damage_supported(self) -> bool:
+        """Whether the damage kernel models the simulation's damage tracker (its arrays are
+        then kept)."""
         sim = self.sim
         tracker = sim._damage
         if tracker is not self._tracker_seen or sim._faces_template is not self._damage_faces:
             # checked once per tracker (reset makes a new one) and face set
             self._tracker_seen = tracker
             self._damage_faces = sim._faces_template
-            if (type(tracker) is not DamageTracker or sim.fruit.flesh is not None
+            if (type(tracker) is not DamageTracker
                     or len(tracker.groups) != len(sim._faces_template)
                     or not np.array_equal(tracker.ring, self.surface)):
                 self._tracker = None
@@ -402,11 +494,7 @@ class FastPath:
                 self._damage_rest = np.ascontiguousarray(tracker.rest_curvature, dtype=float)
                 self._damage_par = np.array([tracker.bruise_pressure, tracker.rigid_modulus,
                                              tracker.pad_modulus])
-        if self._tracker is None:
-            return self._no_damage
-        n_s = len(self.surface)
-        return (self._damage_face, self._damage_rest, self._damage_par, tracker.covered,
-                np.empty(n_s), np.empty(n_s), np.empty((n_s, kernels.P_SIZE)), np.empty(3))
+        return self._tracker is not None
 
     def _damage(self, positions, normal, obstacle, ratio, computed=None):
         """``Simulation._assess_damage``: the per-step part of ``DamageTracker.update`` from
@@ -414,7 +502,7 @@ class FastPath:
         in) or else the ``damage_update`` kernel; the tracker keeps the state."""
         sim = self.sim
         tracker = sim._damage
-        if self._damage_inputs() is self._no_damage:
+        if not self._damage_supported():
             return sim._assess_damage_of(positions, normal, obstacle, ratio)
         if (computed is not None and computed[3] is tracker.covered
                 and computed[0] is self._damage_face):
@@ -435,8 +523,11 @@ class FastPath:
             _build(Contact, dict(body=int(b), load=load, centre=np.array([cx, cz]), radius=a,
                                  peak_pressure=p0, equivalent_radius=re, modulus=modulus))
             for b, load, cx, cz, a, p0, re, modulus in table[:count].tolist())
-        # the rest of DamageTracker.update
-        stress = max(TRESCA_OVER_P0 * pressure, 0.0)
+        # the rest of DamageTracker.update (with the solid's von Mises stress)
+        flesh = sim.fruit.flesh
+        flesh_stress = (0.0 if flesh is None
+                        else float(np.max(flesh.von_mises(positions.ravel()), initial=0.0)))
+        stress = max(TRESCA_OVER_P0 * pressure, flesh_stress)
         tracker.peak_pressure = max(tracker.peak_pressure, pressure)
         tracker.peak_flesh_stress = max(tracker.peak_flesh_stress, stress)
         if tracker.peak_flesh_stress > tracker.failure_stress:
@@ -451,7 +542,10 @@ class FastPath:
             peak_flesh_stress=tracker.peak_flesh_stress, crushed=tracker.crushed,
             node_pressure=node_pressure, contacts=patches))
 
-    def _measure_kernel(self):
+    def _measure_kernel(self, forces: np.ndarray, holder: np.ndarray):
+        """``step_measures`` of the present state with contact forces (n, 2) N and the
+        obstacle (n,) holding each node: (values (list), normal (n,) N, pressure (n_s,)
+        Pa)."""
         sim = self.sim
         grip = sim._grip
         face_par, _ = self._face_arrays()
@@ -460,12 +554,12 @@ class FastPath:
         normal = np.empty(self.n)
         pressure = np.empty(len(self.surface))
         out = np.empty(kernels.M_SIZE)
-        edges, spar, triples, bpar, ring, press, gravity_grad = self._energy_args
+        edges, spar, triples, bpar, ring, press, flesh, gravity_grad = self._energy_args
         kernels.step_measures(
             np.ascontiguousarray(sim.q, dtype=float), np.ascontiguousarray(sim.v, dtype=float),
-            np.ascontiguousarray(sim.contact_forces, dtype=float), sim.contacts.obstacle,
+            np.ascontiguousarray(forces, dtype=float), holder,
             self.masses, self.surface, self.skin_edges, self.rest_segments, face_par, origins,
-            sim.fruit.depth, edges, spar, triples, bpar, ring, press, gravity_grad, False,
+            sim.fruit.depth, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, False,
             np.zeros(4), normal, pressure, out)
         return out.tolist(), normal, pressure
 

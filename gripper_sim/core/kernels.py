@@ -21,10 +21,13 @@ see ``band_order``) has nbw = 4 for stretching + bending + pressure, so the Newt
 matrix (same block band) is factorised by a block LDL^T in O(N) time, with the
 rank-one pressure term added by Sherman-Morrison.
 
-Faces (rigid obstacles) are rows of two arrays: ``face_par`` (n_faces, 7)
+Faces (rigid obstacles) are rows of two arrays: ``face_par`` (n_faces, FP_SIZE)
 [normal x, normal z, half_length, thickness, static friction, kinetic friction,
-restitution] and ``face_dyn`` (n_faces, 6) [origin at the start of the step (x, z),
-origin at the end (x, z), velocity (x, z)].
+restitution, jaw (0 left, 1 right, -1 none), offset x, offset z] and ``face_dyn``
+(n_faces, 6) [origin at the start of the step (x, z), origin at the end (x, z), velocity
+(x, z)]. A jaw has one face (flat finger) or several (the facets of an arc or V-groove
+finger); each face of a jaw moves with it, its origin the jaw's origin plus its offset
+(m); the faces of no jaw (table, walls) are fixed.
 
 Import this module only where numba is installed (``gripper_sim.core.fast`` checks).
 """
@@ -34,6 +37,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from gripper_sim.core.energies.kernels import neohookean_triangles
 
 #: contact modes, as in contact.py
 FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
@@ -55,6 +60,16 @@ PHI_ROUNDOFF = 1e-9
 
 #: shifts of the inertia-like diagonal tried when the Newton matrix gives no descent
 SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
+
+#: columns of ``face_par`` after the seven face parameters: the jaw of the face (-1: none)
+#: and the face origin's offset (x, z) m from the jaw origin
+FP_JAW, FP_OFFSET_X, FP_OFFSET_Z, FP_SIZE = 7, 8, 9, 10
+
+#: columns of the soft pads' rows (``pad_par``, one row per node that may touch a pad face
+#: in the step, as ``pad.PadLayer.begin_step`` sets them): stiffness k N/m, friction bound
+#: mu * lagged normal force N, pad surface origin at the end of the step (x, z) m, its
+#: normal (x, z), the jaw's speed along the face m/s
+PAD_K, PAD_BOUND, PAD_OX, PAD_OZ, PAD_NX, PAD_NZ, PAD_SPEED, PAD_SIZE = range(8)
 
 # fpar layout of ``substep`` / ``newton_solve``
 F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
@@ -312,10 +327,16 @@ def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
 
 
 @njit(cache=True, error_model='numpy')
-def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hessian,
+def _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, hessian,
               grads, band, area_grad, values):
-    """All ring energies and gravity: grads (4, 2n) per energy, band = elastic Hessian,
-    values (4,) J: stretching, bending, pressure, gravity. Returns the rank-one c.
+    """All ring energies, the flesh and gravity: grads (4, 2n) per energy, band = elastic
+    Hessian, values (4,) J: stretching, bending, pressure (plus the flesh), gravity.
+    Returns the rank-one c.
+
+    ``flesh``: the neo-Hookean triangles of a solid fruit (``NeoHookeanTriangles``) as
+    (tri (n_tri, 3), dm_inv (n_tri, 2, 2), volume (n_tri,) m^3, [mu, lambda] Pa, scatter
+    (n_tri, 36) flat band indices of each element's Hessian entries; an entry of the
+    band's upper side goes to the unused slot band[0, 1, 0, 0]); n_tri = 0: none.
     """
     if hessian:
         flat = band.reshape(band.size)  # a flat loop: ~10x faster than band[:] = 0 in 4-D
@@ -324,6 +345,10 @@ def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hes
     values[0] = ring_stretching(q, edges, spar, pos, hessian, grads[0], band)
     values[1] = ring_bending(q, triples, bpar, pos, hessian, grads[1], band)
     vp, c = ring_pressure(q, ring, press, pos, hessian, grads[2], band, area_grad)
+    if flesh[0].shape[0] > 0:
+        vp += neohookean_triangles(q.reshape((q.shape[0] // 2, 2)), flesh[0], flesh[1],
+                                   flesh[2], flesh[3][0], flesh[3][1], grads[2],
+                                   band.reshape(band.size), flesh[4], hessian)
     values[2] = vp
     vg = 0.0
     for m in range(q.shape[0]):
@@ -336,8 +361,9 @@ def _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos, hes
 # ---------------------------------------------------------------------- Newton
 @njit(cache=True, error_model='numpy')
 def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-              fr_speed, n_fr, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
-              hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values):
+              fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
+              hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values,
+              pad_nodes, pad_par):
     """Phi of stepper.ImplicitEulerSolver._evaluate, its gradient (into ``grad``) and the
     friction gradient (into ``fric_grad``); the elastic band Hessian into ``band``, the
     energies (4,) into ``values``.
@@ -352,7 +378,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         phi_in += masses2[m] * inert ** 2
         grad[m] = masses2[m] * inert / dt ** 2
     phi = 0.5 * phi_in / dt ** 2
-    c = _energies(q, edges, spar, triples, bpar, ring, press, gravity_grad, pos,
+    c = _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
                   need_band, grads, band, area_grad, values)
     for e in range(4):
         phi += values[e]
@@ -395,7 +421,63 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         phi += acc
         for m in range(n2):
             grad[m] += fric_grad[m]
+    if pad_nodes.shape[0] > 0:
+        phi += _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad)
     return phi, c
+
+
+@njit(cache=True, error_model='numpy')
+def _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad):
+    """The soft pads' energy (J), as ``pad.PadLayer._face_terms`` (elastic foundation and
+    lagged smoothed friction); adds its gradient (N) into ``grad`` (2n,)."""
+    eps = FRICTION_SMOOTHING * dt
+    value = 0.0
+    for e in range(pad_nodes.shape[0]):
+        i = pad_nodes[e]
+        k, bound = pad_par[e, PAD_K], pad_par[e, PAD_BOUND]
+        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
+        tx, tz = -nz, nx
+        delta = max(0.0, -((q[2 * i] - pad_par[e, PAD_OX]) * nx
+                           + (q[2 * i + 1] - pad_par[e, PAD_OZ]) * nz))
+        u = (((q[2 * i] - q_n[2 * i]) * tx + (q[2 * i + 1] - q_n[2 * i + 1]) * tz)
+             - pad_par[e, PAD_SPEED] * dt)
+        a = abs(u)
+        if a < eps:
+            f0 = -a ** 3 / (3 * eps ** 2) + a ** 2 / eps + eps / 3
+            f1 = 2 * a / eps - a ** 2 / eps ** 2
+        else:
+            f0, f1 = a, 1.0
+        value += 0.5 * k * delta ** 2 + bound * f0
+        g_n = -k * delta
+        g_t = bound * f1 * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
+        grad[2 * i] += g_n * nx + g_t * tx
+        grad[2 * i + 1] += g_n * nz + g_t * tz
+    return value
+
+
+@njit(cache=True, error_model='numpy')
+def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
+    """Adds the pads' Hessian node blocks, filtered (S_i B S_i), to the band ``ab``."""
+    eps = FRICTION_SMOOTHING * dt
+    for e in range(pad_nodes.shape[0]):
+        i = pad_nodes[e]
+        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
+        tx, tz = -nz, nx
+        gap = (q[2 * i] - pad_par[e, PAD_OX]) * nx + (q[2 * i + 1] - pad_par[e, PAD_OZ]) * nz
+        h_n = pad_par[e, PAD_K] if gap < 0 else 0.0
+        u = (((q[2 * i] - q_n[2 * i]) * tx + (q[2 * i + 1] - q_n[2 * i + 1]) * tz)
+             - pad_par[e, PAD_SPEED] * dt)
+        a = abs(u)
+        h_t = pad_par[e, PAD_BOUND] * (2 / eps - 2 * a / eps ** 2) if a < eps else 0.0
+        snx = filters[i, 0, 0] * nx + filters[i, 0, 1] * nz  # S n (S symmetric)
+        snz = filters[i, 1, 0] * nx + filters[i, 1, 1] * nz
+        stx = filters[i, 0, 0] * tx + filters[i, 0, 1] * tz
+        stz = filters[i, 1, 0] * tx + filters[i, 1, 1] * tz
+        p = pos[i]
+        ab[p, 0, 0, 0] += h_n * snx * snx + h_t * stx * stx
+        ab[p, 0, 0, 1] += h_n * snx * snz + h_t * stx * stz
+        ab[p, 0, 1, 0] += h_n * snz * snx + h_t * stz * stx
+        ab[p, 0, 1, 1] += h_n * snz * snz + h_t * stz * stz
 
 
 @njit(cache=True, error_model='numpy')
@@ -415,21 +497,31 @@ def _ldl_blocks(ab):
 
     ab[p, d] is the block (p, p - d); afterwards ab[p, 0] holds D_p^-1 and ab[p, d] the
     block L[p, p - d]. The 2x2 blocks keep four independent sums in every inner loop.
+    Each row is factorised from its first non-zero block on (its envelope: L has no
+    entries before it), so a mesh in reverse Cuthill-McKee order, whose rows reach back
+    less far than the half-bandwidth, costs less than the full band.
     Returns False on a singular or non-finite pivot block (the reference's 'singular
     factor').
     """
     n = ab.shape[0]
     nbw = ab.shape[1] - 1
     w = np.empty((nbw + 1, 2, 2))  # w[p - k] = L[p, k] D_k of the current row
+    first = np.empty(n, np.int64)  # the first non-zero block of each row
     for p in range(n):
-        lo = max(0, p - nbw)
+        lo = p
+        for d in range(min(p, nbw), 0, -1):
+            if (ab[p, d, 0, 0] != 0.0 or ab[p, d, 0, 1] != 0.0 or ab[p, d, 1, 0] != 0.0
+                    or ab[p, d, 1, 1] != 0.0):
+                lo = p - d
+                break
+        first[p] = lo
         for j in range(lo, p):
             dj = p - j
             s00 = ab[p, dj, 0, 0]
             s01 = ab[p, dj, 0, 1]
             s10 = ab[p, dj, 1, 0]
             s11 = ab[p, dj, 1, 1]
-            for k in range(max(lo, j - nbw), j):
+            for k in range(max(lo, first[j]), j):
                 a = p - k
                 b = j - k
                 # S -= W L_jk^T
@@ -529,8 +621,84 @@ def _ldl_solve2(ab, x, y):
 
 
 @njit(cache=True, error_model='numpy')
+def _pad_rows(x_n, surface, pad_k, thickness, mu, face_par, face_dyn):
+    """The pads' rows of a step, as ``pad.PadLayer.begin_step``: for each jaw face (the
+    rigid face behind its pad) the outline nodes over the pad and not far in front of it
+    at the start of the step. Returns (nodes (m,), rows (m, PAD_SIZE), face (m,))."""
+    n_s = surface.shape[0]
+    n_jaw = 0
+    for f in range(face_par.shape[0]):
+        if face_par[f, FP_JAW] >= 0:
+            n_jaw += 1
+    nodes = np.empty(n_jaw * n_s, np.int64)
+    rows = np.empty((n_jaw * n_s, PAD_SIZE))
+    face = np.empty(n_jaw * n_s, np.int64)
+    m = 0
+    for f in range(face_par.shape[0]):
+        if face_par[f, FP_JAW] < 0:
+            continue
+        nx, nz = face_par[f, 0], face_par[f, 1]
+        tx, tz = -nz, nx
+        old_x = face_dyn[f, 0] + thickness * nx
+        old_z = face_dyn[f, 1] + thickness * nz
+        speed = face_dyn[f, 4] * tx + face_dyn[f, 5] * tz
+        for s in range(n_s):
+            i = surface[s]
+            gap = (x_n[i, 0] - old_x) * nx + (x_n[i, 1] - old_z) * nz
+            along = abs((x_n[i, 0] - old_x) * tx + (x_n[i, 1] - old_z) * tz)
+            if not (along <= face_par[f, 2] and gap < thickness
+                    and gap > -thickness - 1e-3):
+                continue
+            nodes[m] = i
+            face[m] = f
+            rows[m, PAD_K] = pad_k[s]
+            rows[m, PAD_BOUND] = mu * (pad_k[s] * max(0.0, -gap))
+            rows[m, PAD_OX] = face_dyn[f, 2] + thickness * nx
+            rows[m, PAD_OZ] = face_dyn[f, 3] + thickness * nz
+            rows[m, PAD_NX] = nx
+            rows[m, PAD_NZ] = nz
+            rows[m, PAD_SPEED] = speed
+            m += 1
+    return nodes[:m], rows[:m], face[:m]
+
+
+@njit(cache=True, error_model='numpy')
+def _pad_forces(x, x_n, dt, pad_nodes, pad_par, pad_face, face_par, forces, normal, holder,
+                side_force):
+    """The pads' forces on the fruit at the step's end positions x (n, 2), as
+    ``pad.PadLayer.finish_step`` records them (outputs: see ``substep``)."""
+    eps = FRICTION_SMOOTHING * dt
+    forces[:, :] = 0.0
+    normal[:] = 0.0
+    holder[:] = -1
+    side_force[:] = 0.0
+    best = np.zeros(x.shape[0])
+    for e in range(pad_nodes.shape[0]):
+        i = pad_nodes[e]
+        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
+        tx, tz = -nz, nx
+        gap = (x[i, 0] - pad_par[e, PAD_OX]) * nx + (x[i, 1] - pad_par[e, PAD_OZ]) * nz
+        f_n = pad_par[e, PAD_K] * max(0.0, -gap)
+        u = (((x[i, 0] - x_n[i, 0]) * tx + (x[i, 1] - x_n[i, 1]) * tz)
+             - pad_par[e, PAD_SPEED] * dt)
+        a = abs(u)
+        f1 = 2 * a / eps - a ** 2 / eps ** 2 if a < eps else 1.0
+        f_t = -pad_par[e, PAD_BOUND] * f1 * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
+        fx = f_n * nx + f_t * tx
+        forces[i, 0] += fx
+        forces[i, 1] += f_n * nz + f_t * tz
+        normal[i] += f_n
+        f = pad_face[e]
+        side = np.int64(face_par[f, FP_JAW])
+        side_force[side] += fx if side == 0 else -fx
+        if f_n > 0 and f_n > best[i]:
+            holder[i] = f
+            best[i] = f_n
+
+
+@njit(cache=True, error_model='numpy')
 def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-                   fr_speed, n_fr, q, q_n, pos, order, shift, ab):
+                   fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par):
     """Node-block band ab (n, nbw+1, 2, 2) of S H S + I - S + shift diag(S) m / dt^2.
 
     H = (m/dt^2 + alpha m/dt) I + (1 + beta/dt) C + friction, C = ``band``.
@@ -598,6 +766,7 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
         ab[p, 0, 0, 1] += g * ux * vz
         ab[p, 0, 1, 0] += g * uz * vx
         ab[p, 0, 1, 1] += g * uz * vz
+    _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab)
     # I - S + shift diag(S) m / dt^2
     for i in range(n):
         p = pos[i]
@@ -611,8 +780,9 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
 
 @njit(cache=True, error_model='numpy')
 def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
-                 masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press,
-                 gravity_grad, pos, nbw, q_out, reaction_out, history, values, counts):
+                 masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press, flesh,
+                 gravity_grad, pos, nbw, q_out, reaction_out, history, values, counts,
+                 pad_nodes, pad_par):
     """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
 
     The same iterates as the reference: the evaluations the reference repeats at a point
@@ -627,12 +797,15 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         fr_nodes (k,), fr_t (k, 2), fr_bound (k,) N, fr_speed (k,) m/s: kinetic friction.
         masses2: (2n,) kg per dof.  alpha (1/s), beta (s): Rayleigh damping.
         tol: m/s.  max_it: iterations.
-        edges, spar, triples, bpar, ring, press: the energies (see ring_*).
+        edges, spar, triples, bpar, ring, press: the energies (see ring_*); flesh: the
+            neo-Hookean triangles (see ``_energies``).
         gravity_grad: (2n,) N, the constant gradient of gravity.
         pos: (n,) band positions; nbw: node half-bandwidth.
         q_out, reaction_out: (2n,) outputs. history: (max_it,) output, m/s.
         values: (4,) output, J: stretching, bending, pressure and gravity at q_out.
         counts: (C_SIZE,) int64, work counters added to (see C_*).
+        pad_nodes: (m,) int64 nodes, pad_par: (m, PAD_SIZE) the soft pads' rows (m = 0:
+            no pads).
 
     Returns:
         (status, iterations, len(history)); status OK or a failure code.
@@ -669,9 +842,9 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     counts[C_SOLVES] += 1
     counts[C_HESSIAN_EVALS] += 1
     phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                       fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                       fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh,
                        gravity_grad, pos, yes, grad, fric_grad, grads, band, area_grad, tmp,
-                       cdq, values)
+                       cdq, values, pad_nodes, pad_par)
     if not math.isfinite(phi):
         return INFEASIBLE_START, 0, n_hist
     for iteration in range(1, max_it + 1):
@@ -685,7 +858,8 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         slope = 0.0
         for shift in SHIFTS:
             _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
-                           fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab)
+                           fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab,
+                           pad_nodes, pad_par)
             counts[C_FACTORS] += 1
             if not _ldl_blocks(ab):
                 continue
@@ -749,9 +923,9 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
             counts[C_EVALS if norm < tol else C_HESSIAN_EVALS] += 1
             phi_trial, c_trial = _evaluate(
                 trial, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh,
                 gravity_grad, pos, not norm < tol, grad_t, fric_grad, grads, band, area_grad,
-                tmp, cdq, values)
+                tmp, cdq, values, pad_nodes, pad_par)
             if small or math.isfinite(phi_trial) and (
                     phi_trial <= phi + 1e-4 * step * slope
                     or (phi_trial <= phi + PHI_ROUNDOFF * abs(phi)
@@ -1013,9 +1187,10 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secon
 @njit(cache=True, error_model='numpy')
 def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
             face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
-            nbw, edges, spar, triples, bpar, ring, press, gravity_grad, fpar, ipar, x_out, v_out,
-            forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face, d_rest,
-            d_par, covered_in, covered_out, d_pressure, patches, d_out):
+            nbw, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, fpar, ipar, x_out,
+            v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face,
+            d_rest, d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_k, pad_scalars,
+            pad_forces, pad_normal, pad_holder, pad_side):
     """One implicit Euler step with predictor-corrector contact, as
     ``contact_passes.contact_step``, and the measures of its end state, as
     ``Simulation._measure`` (``step_measures``).
@@ -1024,8 +1199,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         x_n, v_n: (n, 2) state at the start of the step.
         obstacle .. secondary_bounce: (n,) the contact state, updated in place (pass
             copies).
-        face_par, face_dyn: the faces (see the module doc); rows 0 and 1 of face_dyn
-            (the jaws) are set here from ``grip``.
+        face_par, face_dyn: the faces (see the module doc); the rows of face_dyn of the
+            jaws' faces are set here from ``grip``.
         grip: (gap, lift, x) at the start, (gap, lift, x, gap rate, lift rate, x rate)
             at the end, m and m/s (x: the gripper centre on the transport axis).
         masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
@@ -1044,6 +1219,13 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             contact moduli] Pa, covered_in (n_s,) m the bruised cover so far, outputs
             covered_out (n_s,), d_pressure (n_s,) Pa, patches (n_s, P_SIZE) and d_out (3,)
             [patches, largest peak pressure Pa, bruised length m].
+        pad_k: (n_s,) N/m, the soft pads' foundation stiffness per outline node (empty: no
+            pads), pad_scalars: (2,) [pad thickness m, pad friction mu]; outputs, as
+            ``pad.PadLayer.finish_step`` records them: pad_forces (n, 2) N, pad_normal (n,)
+            N, pad_holder (n,) int64 the jaw face whose pad presses each node hardest (-1:
+            none), pad_side (2,) N each jaw's pads' push along the closing axis. With pads
+            the measures and damage take every contact force (hard and pad) and each
+            node's holder (its hard face, else its pad's face), as ``Simulation._measure``.
 
     Returns:
         a status code (OK, or the failure of the last solve).
@@ -1052,14 +1234,26 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     dt = fpar[F_DT]
     counts[C_SUBSTEPS] += 1
     gap0, lift0, x0, gap1, lift1, x1, gap_rate, lift_rate, x_rate = grip
-    for side in range(2):
+    for f in range(face_par.shape[0]):
+        side = face_par[f, FP_JAW]
+        if side < 0:
+            continue
         sign = -1.0 if side == 0 else 1.0
-        face_dyn[side, 0] = x0 + sign * (0.5 * gap0)
-        face_dyn[side, 1] = lift0
-        face_dyn[side, 2] = x1 + sign * (0.5 * gap1)
-        face_dyn[side, 3] = lift1
-        face_dyn[side, 4] = x_rate + sign * (0.5 * gap_rate)
-        face_dyn[side, 5] = lift_rate
+        ox, oz = face_par[f, FP_OFFSET_X], face_par[f, FP_OFFSET_Z]
+        face_dyn[f, 0] = (x0 + sign * (0.5 * gap0)) + ox
+        face_dyn[f, 1] = lift0 + oz
+        face_dyn[f, 2] = (x1 + sign * (0.5 * gap1)) + ox
+        face_dyn[f, 3] = lift1 + oz
+        face_dyn[f, 4] = x_rate + sign * (0.5 * gap_rate)
+        face_dyn[f, 5] = lift_rate
+    padded = pad_k.shape[0] > 0
+    if padded:
+        pad_nodes, pad_par, pad_face = _pad_rows(x_n, surface, pad_k, pad_scalars[0],
+                                                 pad_scalars[1], face_par, face_dyn)
+    else:
+        pad_nodes = np.zeros(0, np.int64)
+        pad_par = np.zeros((0, PAD_SIZE))
+        pad_face = np.zeros(0, np.int64)
     x_pred = np.empty((n, 2))
     for i in range(n):
         x_pred[i, 0] = x_n[i, 0] + dt * v_n[i, 0]
@@ -1087,8 +1281,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         status, its, n_hist = newton_solve(
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
-            fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press,
-            gravity_grad, pos, nbw, q, reaction, history, values, counts)
+            fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press, flesh,
+            gravity_grad, pos, nbw, q, reaction, history, values, counts, pad_nodes, pad_par)
         out[1] = n_hist
         if status != OK:
             return status
@@ -1153,36 +1347,62 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         elif secondary_bounce[i] > 0:
             secondary[i] = -1
             secondary_bounce[i] = 0.0
-    for side in range(2):
-        acc = 0.0
-        nx, nz = face_par[side, 0], face_par[side, 1]
-        for i in range(n):
-            if obstacle[i] == side:
-                acc += forces_out[i, 0] * nx + forces_out[i, 1] * nz
-        out[2 + side] = acc
+    out[2] = out[3] = 0.0
+    for i in range(n):  # each jaw's force along its closing axis, summed over its faces
+        f = obstacle[i]
+        if f >= 0 and face_par[f, FP_JAW] >= 0:
+            side = np.int64(face_par[f, FP_JAW])
+            out[2 + side] += forces_out[i, 0] if side == 0 else -forces_out[i, 0]
     out[0] = iterations
-    for e in range(4):
-        out[4 + e] = values[e]
     jaw_origins = np.empty((2, 2))
     for side in range(2):
-        jaw_origins[side, 0] = face_dyn[side, 2]
-        jaw_origins[side, 1] = face_dyn[side, 3]
-    step_measures(x_out, v_out, forces_out, obstacle, masses, surface, skin_edges,
+        sign = -1.0 if side == 0 else 1.0
+        jaw_origins[side, 0] = x1 + sign * (0.5 * gap1)
+        jaw_origins[side, 1] = lift1
+    for e in range(4):
+        out[4 + e] = values[e]
+    holder = obstacle
+    forces_all = forces_out
+    if padded:
+        _pad_forces(x_out, x_n, dt, pad_nodes, pad_par, pad_face, face_par, pad_forces,
+                    pad_normal, pad_holder, pad_side)
+        out[2] += pad_side[0]
+        out[3] += pad_side[1]
+        holder = obstacle.copy()
+        forces_all = forces_out + pad_forces
+        for i in range(n):
+            if holder[i] < 0 and pad_holder[i] >= 0:
+                holder[i] = pad_holder[i]
+    step_measures(x_out, v_out, forces_all, holder, masses, surface, skin_edges,
                   rest_segments, face_par, jaw_origins, fpar[F_DEPTH], edges, spar, triples,
-                  bpar, ring, press, gravity_grad, np.bool_(True), values, normal_out,
+                  bpar, ring, press, flesh, gravity_grad, np.bool_(True), values, normal_out,
                   pressure_out, meas_out)
+    if padded:  # the hard contacts' length along the faces, plus the pads'
+        meas_out[M_CONTACT_LENGTH] = _jaw_contact_length(x_out, surface, obstacle, face_par,
+                                                         jaw_origins)
+        on_pad = 0.0
+        n_e = skin_edges.shape[0]
+        for s in range(surface.shape[0]):
+            i = surface[s]
+            if obstacle[i] < 0 and pad_holder[i] >= 0 and n_e > 0:
+                a, b = skin_edges[s, 0], skin_edges[s, 1]
+                seg = math.hypot(x_out[b, 0] - x_out[a, 0], x_out[b, 1] - x_out[a, 1])
+                a, b = skin_edges[(s - 1) % n_e, 0], skin_edges[(s - 1) % n_e, 1]
+                prev = math.hypot(x_out[b, 0] - x_out[a, 0], x_out[b, 1] - x_out[a, 1])
+                on_pad += 0.5 * (seg + prev)
+        meas_out[M_CONTACT_LENGTH] += on_pad
     if d_rest.shape[0] > 0:
         n_faces = d_face.shape[0]
         groups = np.empty(n_faces, np.int64)
         curvature = np.empty(n_faces)
-        padded = np.empty(n_faces)
+        padded_face = np.empty(n_faces)
         for f in range(n_faces):
             groups[f] = np.int64(d_face[f, 0])
             curvature[f] = d_face[f, 1]
-            padded[f] = d_face[f, 2]
+            padded_face[f] = d_face[f, 2]
         covered_out[:] = covered_in
         count, pressure, length = damage_update(
-            x_out, normal_out, obstacle, surface, groups, curvature, padded, d_rest,
+            x_out, normal_out, holder, surface, groups, curvature, padded_face, d_rest,
             d_par[0], d_par[1], d_par[2], covered_out, d_pressure, patches)
         d_out[0] = count
         d_out[1] = pressure
@@ -1199,9 +1419,9 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
 
 @njit(cache=True, error_model='numpy')
 def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
-    """Whether the fruit slides in the jaws, as ``slip.jaw_contacts_sliding`` with the
-    jaws being faces 0 and 1: on either, more than half of the nodes it holds move along it
-    faster than ``speed`` (m/s) relative to it.
+    """Whether the fruit slides in the jaws, as ``slip.jaw_contacts_sliding``: on either
+    jaw, more than half of the nodes its faces hold move along them faster than ``speed``
+    (m/s) relative to them.
 
     Args:
         v: (n, 2) m/s.  obstacle: (n,) holding face per node.  face_par: see the module
@@ -1211,16 +1431,17 @@ def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
     sliding = np.zeros(2, np.int64)
     for i in range(v.shape[0]):
         f = obstacle[i]
-        if f < 0 or f > 1:
+        if f < 0 or face_par[f, FP_JAW] < 0:
             continue
-        rx = v[i, 0] - jaw_velocities[f, 0]
-        rz = v[i, 1] - jaw_velocities[f, 1]
+        side = np.int64(face_par[f, FP_JAW])
+        rx = v[i, 0] - jaw_velocities[side, 0]
+        rz = v[i, 1] - jaw_velocities[side, 1]
         nx, nz = face_par[f, 0], face_par[f, 1]
         r_n = rx * nx + rz * nz
         ax, az = rx - r_n * nx, rz - r_n * nz
-        held[f] += 1
+        held[side] += 1
         if ax * ax + az * az > speed * speed:
-            sliding[f] += 1
+            sliding[side] += 1
     return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
 
 
@@ -1277,7 +1498,7 @@ def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
 
 @njit(cache=True, error_model='numpy')
 def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
-                  face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press,
+                  face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, flesh,
                   gravity_grad, known, energies, normal_out, pressure_out, out):
     """The numbers of ``Simulation._measure`` and ``measures.deformation``.
 
@@ -1286,7 +1507,8 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         obstacle: (n,) holding obstacle per node.  masses: (n,) kg.
         surface: (n_s,) outline nodes.  skin_edges: (n_e, 2).  rest_segments: (n_e,) m,
         skin segment lengths of the rest shape.  face_par: see the module doc.
-        jaw_origins: (2, 2) m, left and right jaw face centres.  depth: m.
+        jaw_origins: (2, 2) m, left and right jaw origins (a jaw face's centre is its
+        origin plus the face's offset).  depth: m.
         edges .. gravity_grad: the energies (as ``newton_solve``).
         known: the energies at x are ``energies`` (4,) [stretching, bending, pressure,
         gravity] J, as ``substep`` reports them; else they are computed.
@@ -1302,7 +1524,8 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         ty = 0.0
         ox, oz = jaw_origins[side, 0], jaw_origins[side, 1]
         for i in range(n):
-            if obstacle[i] != side:
+            f = obstacle[i]
+            if f < 0 or face_par[f, FP_JAW] != side:
                 continue
             fx += forces[i, 0]
             fz += forces[i, 1]
@@ -1315,8 +1538,8 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         f = obstacle[i]
         if f >= 0:
             normal_out[i] = forces[i, 0] * face_par[f, 0] + forces[i, 1] * face_par[f, 1]
-            if f < 2:
-                out[M_LEFT_N + f] += normal_out[i]
+            if face_par[f, FP_JAW] >= 0:  # each jaw's force along its faces' normals
+                out[M_LEFT_N + np.int64(face_par[f, FP_JAW])] += normal_out[i]
     m_sum = 0.0
     for i in range(n):
         m_sum += masses[i]
@@ -1343,6 +1566,9 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         elastic = ring_stretching(q, edges, spar, pos, no, grad, band)
         elastic += ring_bending(q, triples, bpar, pos, no, grad, band)
         vp, _c = ring_pressure(q, ring, press, pos, no, grad, band, area_grad)
+        if flesh[0].shape[0] > 0:
+            vp += neohookean_triangles(x, flesh[0], flesh[1], flesh[2], flesh[3][0],
+                                       flesh[3][1], grad, grad, flesh[4], no)
         out[M_ELASTIC] = elastic + vp
         grav = 0.0
         for m in range(2 * n):
@@ -1382,12 +1608,22 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
         pressure_out[s] = p
         peak = max(peak, p)
     out[M_PEAK_PRESSURE] = peak
+    out[M_CONTACT_LENGTH] = _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins)
+
+
+@njit(cache=True, error_model='numpy')
+def _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins):
+    """m, the outline's contact length summed over the jaws' faces."""
     length = 0.0
-    for side in range(2):
-        length += _face_contact_length(x, surface, obstacle, side, face_par[side, 0],
-                                       face_par[side, 1], jaw_origins[side, 0],
-                                       jaw_origins[side, 1])
-    out[M_CONTACT_LENGTH] = length
+    for f in range(face_par.shape[0]):
+        if face_par[f, FP_JAW] < 0:
+            continue
+        side = np.int64(face_par[f, FP_JAW])
+        length += _face_contact_length(x, surface, obstacle, f, face_par[f, 0],
+                                       face_par[f, 1],
+                                       jaw_origins[side, 0] + face_par[f, FP_OFFSET_X],
+                                       jaw_origins[side, 1] + face_par[f, FP_OFFSET_Z])
+    return length
 
 
 # ---------------------------------------------------------------------- damage

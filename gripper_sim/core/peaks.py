@@ -6,6 +6,8 @@ An observer: call it with every ``StepResult`` (2D or 3D). ``pick``, ``squeeze``
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from gripper_sim.core.results import StepResult
@@ -16,13 +18,21 @@ JAWS = ('left_jaw', 'right_jaw')
 TABLE = 'table'
 
 
+@lru_cache(maxsize=64)
+def _site_tables(names: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """(n_obstacles + 1,) bool each, indexed by obstacle + 1 (-1: free): the obstacle is a
+    face of a jaw, the table. Kept per obstacle-name tuple (one per face set)."""
+    base = [name.split('.')[0] for name in names]
+    jaw = np.array([False] + [name in JAWS for name in base])
+    table = np.array([False] + [name == TABLE for name in base])
+    return jaw, table
+
+
 def _sites(result: StepResult) -> tuple[np.ndarray, np.ndarray]:
     """(n_surface,) bool each: the surface node touches a jaw (any face of it), the table."""
-    owner = np.asarray(result.contact_obstacle)[result.surface]
-    base = [name.split('.')[0] for name in result.obstacle_names]
-    jaw = [i for i, name in enumerate(base) if name in JAWS]
-    table = [i for i, name in enumerate(base) if name == TABLE]
-    return np.isin(owner, jaw), np.isin(owner, table)
+    owner = np.asarray(result.contact_obstacle)[result.surface] + 1
+    jaw, table = _site_tables(tuple(result.obstacle_names))
+    return jaw[owner], table[owner]
 
 
 def damage_site(result: StepResult) -> str | None:

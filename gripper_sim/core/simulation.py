@@ -88,11 +88,10 @@ class Simulation(SimulationFacade):
             transport_acceleration=c['gripper.transport_acceleration'],
             max_speed=c['gripper.max_speed'])
         self._observers: list[Callable[[StepResult], None]] = []
-        self._fast = (FastPath.create(self) if fast is not False and self._plain_jaws
-                      and self._barrier is None else None)
+        self._fast = (FastPath.create(self) if fast is not False and self._barrier is None
+                      else None)
         if fast and self._fast is None:
-            raise ConfigError('the fast path needs numba, a shell or point fruit model and '
-                              'a flat finger without a pad')
+            raise ConfigError('the fast path needs numba and the default contact model')
         self.reset()
 
     def _make_damage(self) -> DamageTracker:
@@ -175,6 +174,10 @@ class Simulation(SimulationFacade):
     def _substep(self, dt: float) -> int:
         if self._fast is not None and self._fast.applies():
             return self._fast.substep(dt)
+        return super()._substep(dt)
+
+    def _substep_generic(self, dt: float) -> int:
+        """The step the fast path cannot do, on the generic path."""
         return super()._substep(dt)
 
     # ------------------------------------------------------------------ outputs
