@@ -14,7 +14,6 @@ from gripper_sim.configuration import load_config
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
@@ -230,12 +229,10 @@ def test_ipc_refuses_what_it_does_not_model(override, match):
         Simulation(load_config(overrides=['contact.model=ipc', override]))
 
 
-def test_ipc_refuses_the_fast_path_and_3d():
+def test_ipc_refuses_the_fast_path():
     config = load_config(overrides=['contact.model=ipc'])
     with pytest.raises(ConfigError, match='fast path'):
         Simulation(config, fast=True)
-    with pytest.raises(ConfigError, match='2D only'):
-        Simulation3D(load_config(overrides=['dimension=3', 'contact.model=ipc']))
 
 
 def test_ipc_takes_the_generic_step():
