@@ -1,28 +1,21 @@
 """The barrier contact model (``contact.model: ipc``, ``core.barrier``) in 3D.
 
-Its energy over a surface of triangles near a plate (vertex-face, edge-edge and
-face-vertex pairs) against finite differences, on the solver's fixed pattern, and its
-collision-free step bound; then the cross-check with the modified mass method on the 3D
-rigid-plate validation cases (a Hertz sphere between plates, a pressurised membrane
-pressed by plates, the friction hold): force and contact radius within 5 % of each
-other, and no surface node ever behind a plate (checked at every step).
+The cross-check with the modified mass method on the 3D rigid-plate validation cases (a
+Hertz sphere between plates, a pressurised membrane pressed by plates, the friction
+hold): force and contact radius within 5 % of each other, and no surface node ever
+behind a plate (checked at every step). The energy
+itself (a surface of triangles against finite differences, its fixed pattern, its
+collision-free step bound) is checked with the 2D one in ``test_contact_barrier.py``.
 """
-import ipctk
 import numpy as np
 import pytest
 
-from helpers import kernel_evaluation
-
 from gripper_sim.configuration import load_config
-from gripper_sim.core.barrier import BarrierContact, BarrierSettings
-from gripper_sim.core3d.obstacles import Plate
 from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
-DHAT = 1e-4
-SETTINGS = BarrierSettings(dhat=DHAT, stiffness=0.5, friction_smoothing=1e-3)
 MODELS = ('mmm', 'ipc')
 RADIUS = 0.03
 #: quasi-static plates: light, damped fruit, no gravity, no table, a large step; the jaws
@@ -31,70 +24,6 @@ QUASI_STATIC = ['dimension=3', 'world.gravity=0', 'world.table=false', 'fruit.de
                 'fruit.damping.mass=20', 'sim.dt=0.05', 'sim.max_contact_passes=30',
                 f'fruit.shape.diameter={2 * RADIUS}', f'gripper.initial_gap={2 * RADIUS + 1e-4}']
 
-
-def _plate(height, velocity=(0.0, 0.0, 0.0)):
-    """A square plate 4 dhat across facing +z at ``height`` (m)."""
-    return Plate('table', np.array([0.0, 0.0, height]), np.array([0.0, 0.0, 1.0]),
-                 np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
-                 half_extents=np.array([2 * DHAT, 2 * DHAT]), velocity=np.array(velocity),
-                 static_friction=0.5, kinetic_friction=0.4)
-
-
-def _tetrahedron():
-    """A barrier over a tetrahedron's surface with one corner and its three edges within
-    dhat of a plate that slides sideways and rises (so the lagged friction acts too);
-    (barrier, positions (4, 3))."""
-    x = np.array([[0.0, 0.0, 0.3], [1.0, 0.1, 0.5], [0.2, 1.0, 0.4], [0.4, 0.3, 1.5]]) * DHAT
-    triangles = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
-    edges = np.array([[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]])
-    barrier = BarrierContact(4, np.arange(4), edges, SETTINGS, dimension=3, triangles=triangles)
-    old, new = _plate(-0.1 * DHAT), _plate(0.0, velocity=(0.05, 0.02, 0.0))
-    new.origin = old.origin + np.array([0.05e-3, 0.02e-3, 0.1 * DHAT])
-    barrier.begin_step(x, [old], [new], 1e-3)
-    return barrier, x
-
-
-def test_barrier_3d_gradient_and_hessian_match_finite_differences():
-    barrier, x = _tetrahedron()
-    q = x.ravel() + 0.05 * DHAT * np.sin(np.arange(12.0))
-    kinds = ipctk.NormalCollisions()
-    kinds.build(barrier._mesh, barrier.vertices(q.reshape(-1, 3)), DHAT)
-    assert len(kinds.fv_collisions) and len(kinds.ee_collisions)
-    barrier.projection = ipctk.PSDProjectionMethod.NONE  # the exact Hessian
-    ev = barrier.evaluate(q)
-    dense = barrier.hessian(q)
-    h = 1e-4 * DHAT
-    fd_grad = np.array([(barrier.value(q + h * e) - barrier.value(q - h * e)) / (2 * h)
-                        for e in np.eye(q.size)])
-    fd_hess = np.array([(barrier.gradient(q + h * e) - barrier.gradient(q - h * e)) / (2 * h)
-                        for e in np.eye(q.size)])
-    assert ev.gradient == pytest.approx(fd_grad, rel=1e-5, abs=1e-6 * np.max(np.abs(fd_grad)))
-    assert dense == pytest.approx(fd_hess, rel=1e-4, abs=1e-5 * np.max(np.abs(fd_hess)))
-
-
-def test_barrier_3d_kernel_adds_the_same_hessian_into_the_triangles_pattern():
-    barrier, x = _tetrahedron()
-    q = x.ravel()
-    assert barrier.dofs.shape == (4, 9)  # one 9-dof block per surface triangle
-    value, gradient, dense = kernel_evaluation(barrier, q)
-    assert value == pytest.approx(barrier.value(q))
-    assert gradient == pytest.approx(barrier.gradient(q))
-    assert dense == pytest.approx(barrier.hessian(q))
-    assert np.all(np.linalg.eigvalsh(dense) > -1e-9 * np.max(np.abs(dense)))  # projected
-
-
-def test_collision_free_step_stops_before_the_plate():
-    barrier, x = _tetrahedron()
-    q = x.ravel()
-    through = np.zeros_like(q)
-    through[2::3] = -10 * DHAT  # every node straight through the plate
-    fraction = barrier.max_step(q, through)
-    assert 0 < fraction < 0.1
-    assert np.all((q + fraction * through)[2::3] > 0)
-    assert barrier.max_step(q, -through) == 1.0
-
-
-# ---------------------------------------------------------------------- cross-checks
 def _watch_plates(sim):
     """A list whose one entry is kept, after every step, at how far the surface node
     deepest behind a plate (jaws, table) within the plate's extent has been behind it
