@@ -1,6 +1,7 @@
 """Real-time factor of a 3D grasp-and-lift, and where the time goes.
 
     PYTHONPATH=. python bench/bench_3d.py [--quick] [--model shell|solid|both]
+    PYTHONPATH=. python bench/bench_3d.py --against OTHER_TREE [--rounds 3]
 
 For each 3D model (the apple preset as a ~640-vertex shell, and as a ~2000-tetrahedron
 solid) it runs the same grasp (close to a grip force of 2 mu N = 1.5 m g, settle, lift
@@ -11,19 +12,32 @@ over the wall time (the real-time factor; >= 1 is real time), the CPU time per s
 LU factorisations, conjugate-gradient iterations) and a breakdown of the CPU time by
 part (energy kernels, LU factorisation, triangular solves, the rest of Newton, contact
 bookkeeping, measures). Single thread; wall figures vary with the machine's load, which
-is printed. ``GRIPPER_SIM_FAST=0`` runs the numpy reference path instead.
+is printed. ``GRIPPER_SIM_FAST=0`` runs the generic Newton path (the same energy
+kernels as triplets, one LU per Newton iteration) instead.
+
+``--against DIR`` compares source trees side by side in one run (e.g. a checkout of an
+older commit, ``git archive COMMIT | tar -x -C DIR``): the grasp at the 20 ms step runs
+in a fresh process per tree (``GRIPPER_SIM_TREE``), the trees taking turns for
+``--rounds`` rounds so that the machine's load falls on both alike; it prints the CPU
+time per step and the real-time factor per core (simulated time over CPU time) of each.
 """
 from __future__ import annotations
 
 import argparse
 import cProfile
+import json
 import os
 import pstats
+import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+THIS_TREE = Path(__file__).resolve().parents[1]
+#: the source tree whose gripper_sim the benchmark imports (the child processes of
+#: ``--against`` set it)
+sys.path.insert(0, os.environ.get('GRIPPER_SIM_TREE', str(THIS_TREE)))
 
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.workflows.factory import make_simulation  # noqa: E402
@@ -138,13 +152,70 @@ def bench(model: str, quick: bool) -> None:
         print(f'     {label:50s} {seconds:7.2f} s  {seconds / cpu * 100:5.1f} %')
 
 
+#: the step of the side-by-side comparison (the 3D default, ``sim.dt``'s 3D default)
+COMPARE_DT = 0.02
+
+
+def one_grasp(model: str) -> dict:
+    """The grasp of ``model`` at ``COMPARE_DT`` in this process: CPU s, steps, simulated
+    s, outcome, peak grip force N."""
+    sim, summary, _, cpu, _ = grasp(MODELS[model], COMPARE_DT)
+    return dict(cpu=cpu, steps=sim.last.step, time=sim.time, outcome=summary['outcome'],
+                peak=summary['peak_grip_force'])
+
+
+def side_by_side(models: list[str], trees: list[Path], rounds: int) -> None:
+    """Print CPU per step and real-time factor per core of each tree, taking turns."""
+    runs = {(model, tree): [] for model in models for tree in trees}
+    loads = []
+    for round_ in range(rounds + 1):   # round 0 warms numba's cache of each tree
+        for model in models:
+            for tree in trees:
+                env = dict(os.environ, GRIPPER_SIM_TREE=str(tree), PYTHONPATH=str(tree))
+                child = subprocess.run([sys.executable, __file__, '--child', model],
+                                       env=env, capture_output=True, text=True)
+                if child.returncode != 0:
+                    last = (child.stderr.strip().splitlines() or ['no output'])[-1]
+                    raise SystemExit(f'error: the {model} grasp failed in {tree}: {last}')
+                if round_ > 0:
+                    runs[(model, tree)].append(json.loads(child.stdout.splitlines()[-1]))
+                    loads.append(os.getloadavg()[0])
+    print(f'side by side at dt {COMPARE_DT * 1e3:g} ms, {rounds} rounds taking turns, load '
+          f'{min(loads):.1f}-{max(loads):.1f} on {os.cpu_count()} cores; CPU time '
+          '(time.process_time) of the grasp, per step; real-time factor = simulated s / CPU s')
+    print(f'{"model":6} {"tree":40} {"outcome":8} {"peak N":>7} {"steps":>5} '
+          f'{"CPU ms/step (median, min-max)":>30} {"real-time factor per core":>26}')
+    for model in models:
+        for tree in trees:
+            rows = runs[(model, tree)]
+            per_step = [r['cpu'] / r['steps'] * 1e3 for r in rows]
+            factors = [r['time'] / r['cpu'] for r in rows]
+            print(f'{model:6} {str(tree)[-40:]:40} {rows[0]["outcome"]:8} '
+                  f'{rows[0]["peak"]:7.4f} {rows[0]["steps"]:5d} '
+                  f'{statistics.median(per_step):12.1f} ({min(per_step):.1f}-{max(per_step):.1f})'
+                  f'{"":6} {statistics.median(factors):8.3f} '
+                  f'({min(factors):.3f}-{max(factors):.3f})')
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true',
                         help='reference dt 5 ms, candidates 20 and 10 ms')
     parser.add_argument('--model', choices=('shell', 'solid', 'both'), default='both')
+    parser.add_argument('--against', type=Path, nargs='+', metavar='DIR',
+                        help='other source trees to compare with this one, side by side')
+    parser.add_argument('--rounds', type=int, default=3, help='with --against')
+    parser.add_argument('--child', choices=tuple(MODELS), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    for model in ('shell', 'solid') if args.model == 'both' else (args.model,):
+    if args.child:
+        print(json.dumps(one_grasp(args.child)))
+        return 0
+    models = ['shell', 'solid'] if args.model == 'both' else [args.model]
+    if args.against:
+        side_by_side(models, [THIS_TREE] + [tree.resolve() for tree in args.against],
+                     args.rounds)
+        return 0
+    for model in models:
         bench(model, args.quick)
     return 0
 

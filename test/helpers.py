@@ -175,6 +175,86 @@ def pick_and_place_forces(fruit, force, *overrides):
     return summary, peaks, min(lift, default=0.0), time.process_time() - start
 
 
+def hertz_sphere_errors(subdivisions, refinement, order=2, dt=0.05):
+    """Solid sphere between two plates, quasi-static (large dt, light, damped).
+
+    The jaws keep their default friction (sticking contact nodes): frictionless plates
+    leave the sphere free to turn about x, which costs many more Newton iterations,
+    and change the Hertz force by a few per cent only.
+
+    Returns ({D/R: (force error, contact radius error)}, deepest penetration of a skin
+    node into a plate over the approach) against Hertz:
+    F = (sqrt(2)/3) E* sqrt(R) D^(3/2), a = sqrt(R D / 2) (validation.md section 3).
+    """
+    radius, modulus, poisson = 0.03, 1e6, 0.3
+    config = load_config(overrides=[
+        'dimension=3', 'fruit.model=solid', 'fruit.skin.enabled=false',
+        f'fruit.mesh.subdivisions={subdivisions}', f'fruit.mesh.jaw_refinement={refinement}',
+        f'fruit.mesh.order={order}',
+        'world.gravity=0', 'world.table=false', 'fruit.density=50', 'fruit.damping.mass=20',
+        f'sim.dt={dt}', 'sim.max_contact_passes=30', f'fruit.shape.diameter={2 * radius}',
+        f'gripper.initial_gap={2 * radius}', f'fruit.flesh.youngs_modulus={modulus}',
+        f'fruit.flesh.poisson_ratio={poisson}'])
+    sim = make_simulation(config)
+    width = sim.fruit.rest_width
+    assert abs(width / (2 * radius) - 1) < 1e-9
+    errors, penetration = {}, 0.0
+    for ratio in (0.02, 0.05):
+        travel = ratio * radius
+        sim.command_gap(width - travel, 0.005 * radius / 0.05)
+        while sim.gripper_state.gap > width - travel + 1e-12:
+            sim.step()
+        result = sim.run(0.1)
+        hertz = (np.sqrt(2) / 3 * modulus / (1 - poisson ** 2) * np.sqrt(radius)
+                 * travel ** 1.5)
+        a = np.mean(result.deformation.jaw_contact_radii)
+        errors[ratio] = (result.grip_force / hertz - 1, a / np.sqrt(radius * travel / 2) - 1)
+        skin = result.positions[sim.fruit.surface, 0]
+        depth = max(result.left_jaw_x - skin.min(), skin.max() - result.right_jaw_x)
+        penetration = max(penetration, depth / travel)
+    return errors, penetration
+
+
+def pressed_wrinkling_shell(wrinkling, ratios, subdivisions=12, dt=0.05, radius=0.03):
+    """A pressurised shell (turgor p, no bulk stiffness of the contents: constant
+    pressure) with a thin, stiff skin (E_s t / (p R) = 1000, bending length
+    sqrt(D / (p R / 2)) ~ 0.14 mm, small against the contact patch) pressed between two
+    plates by delta per plate. Returns (deltas in m, plate forces F in N, p R)."""
+    turgor = 2e4
+    config = load_config(overrides=[
+        'dimension=3', 'fruit.model=shell', 'world.gravity=0', 'world.table=false',
+        'fruit.density=50', 'fruit.damping.mass=20', f'sim.dt={dt}',
+        'sim.max_contact_passes=30', f'fruit.shape.diameter={2 * radius}',
+        f'fruit.pressure.turgor={turgor}', 'fruit.pressure.bulk_modulus=0',
+        'fruit.skin.youngs_modulus=6e10', 'fruit.skin.thickness=1e-5',
+        f'fruit.mesh.subdivisions={subdivisions}', 'fruit.mesh.jaw_refinement=0.5',
+        f'fruit.skin.wrinkling={str(wrinkling).lower()}'])
+    sim = make_simulation(config)
+    deltas, forces = [], []
+    for delta, result, force in pressed_constant_pressure_shell(sim, radius, ratios, turgor):
+        deltas.append(delta)
+        forces.append(force)
+    return np.array(deltas), np.array(forces), turgor * 0.5 * sim.fruit.rest_width
+
+
+def pressed_constant_pressure_shell(sim, radius, ratios, turgor):
+    """Close the plates of ``sim`` (a shell of radius m at constant pressure turgor Pa)
+    by delta = ratio * radius each for every ratio in turn, settle 0.2 s; yields (delta
+    m, the settled result, the left plate's force N), checking that the pressure stayed
+    the turgor and that the plate force is the grip force."""
+    width = sim.fruit.rest_width
+    for ratio in ratios:
+        delta = ratio * radius
+        sim.command_gap(width - 2 * delta, 0.004)
+        while sim.gripper_state.gap > width - 2 * delta + 1e-12:
+            sim.step()
+        result = sim.run(0.2)
+        assert abs(sim.fruit.pressure.pressure(sim.q.ravel()) / turgor - 1) < 1e-6
+        force = np.sum(result.contact_forces[result.contact_obstacle == 0, 0])  # left plate
+        assert abs(force / result.grip_force - 1) < 1e-6
+        yield delta, result, force
+
+
 def kernel_evaluation(energy, q, hessian=True):
     """(value, gradient, dense Hessian incl. low-rank terms) from an energy's compiled
     ``evaluate_into``, with a dense (n, n) matrix standing in for the CSC values

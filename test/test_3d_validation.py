@@ -9,6 +9,8 @@ from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
+from helpers import hertz_sphere_errors, pressed_constant_pressure_shell
+
 #: a coarse uniform shell (162 nodes): enough for global balances and friction
 COARSE = ['dimension=3', 'fruit.mesh.subdivisions=4', 'fruit.mesh.jaw_refinement=1']
 
@@ -168,46 +170,6 @@ def test_cli_rejects_the_point_model_in_3d_naming_the_key():
     assert 'Traceback' not in run.stderr
 
 
-def _hertz_errors(subdivisions, refinement, order=2):
-    """Solid sphere between two plates, quasi-static (large dt, light, damped).
-
-    The jaws keep their default friction (sticking contact nodes): frictionless plates
-    leave the sphere free to turn about x, which costs many more Newton iterations,
-    and change the Hertz force by a few per cent only.
-
-    Returns ({D/R: (force error, contact radius error)}, deepest penetration of a skin
-    node into a plate over the approach) against Hertz:
-    F = (sqrt(2)/3) E* sqrt(R) D^(3/2), a = sqrt(R D / 2) (validation.md section 3).
-    """
-    radius, modulus, poisson = 0.03, 1e6, 0.3
-    config = load_config(overrides=[
-        'dimension=3', 'fruit.model=solid', 'fruit.skin.enabled=false',
-        f'fruit.mesh.subdivisions={subdivisions}', f'fruit.mesh.jaw_refinement={refinement}',
-        f'fruit.mesh.order={order}',
-        'world.gravity=0', 'world.table=false', 'fruit.density=50', 'fruit.damping.mass=20',
-        'sim.dt=0.05', 'sim.max_contact_passes=30', f'fruit.shape.diameter={2 * radius}',
-        f'gripper.initial_gap={2 * radius}', f'fruit.flesh.youngs_modulus={modulus}',
-        f'fruit.flesh.poisson_ratio={poisson}'])
-    sim = make_simulation(config)
-    width = sim.fruit.rest_width
-    assert width == pytest.approx(2 * radius, rel=1e-9)
-    errors, penetration = {}, 0.0
-    for ratio in (0.02, 0.05):
-        travel = ratio * radius
-        sim.command_gap(width - travel, 0.005 * radius / 0.05)
-        while sim.gripper_state.gap > width - travel + 1e-12:
-            sim.step()
-        result = sim.run(0.1)
-        hertz = (np.sqrt(2) / 3 * modulus / (1 - poisson ** 2) * np.sqrt(radius)
-                 * travel ** 1.5)
-        a = np.mean(result.deformation.jaw_contact_radii)
-        errors[ratio] = (result.grip_force / hertz - 1, a / np.sqrt(radius * travel / 2) - 1)
-        skin = result.positions[sim.fruit.surface, 0]
-        depth = max(result.left_jaw_x - skin.min(), skin.max() - result.right_jaw_x)
-        penetration = max(penetration, depth / travel)
-    return errors, penetration
-
-
 @pytest.mark.slow
 def test_hertz_sphere_between_plates_with_quadratic_tetrahedra(capsys):
     """Quadratic (10-node) tetrahedra: the Hertz force within 10 % at D/R = 0.02 and
@@ -216,8 +178,8 @@ def test_hertz_sphere_between_plates_with_quadratic_tetrahedra(capsys):
     inside a plate. Linear tetrahedra are stiff and converge from above, slowly (not
     volumetric locking: nu = 0 gives the same excess): +13 / +24 % at 922 nodes, +27 /
     +20 % at 1138 (README, the 3D model)."""
-    coarse, _ = _hertz_errors(4, 0.4)
-    fine, penetration = _hertz_errors(3, 0.25)
+    coarse, _ = hertz_sphere_errors(4, 0.4)
+    fine, penetration = hertz_sphere_errors(3, 0.25)
     with capsys.disabled():
         print('\n  Hertz, quadratic tets (force, radius error): coarse '
               + ', '.join(f'{r}: {f:+.3f}, {a:+.3f}' for r, (f, a) in coarse.items())
@@ -291,17 +253,9 @@ def _pressed_membrane(skin_modulus, ratios=(0.02, 0.05)):
     sim = make_simulation(config)
     width = sim.fruit.rest_width
     out = {}
-    for ratio in ratios:
-        delta = ratio * radius
-        sim.command_gap(width - 2 * delta, 0.004)
-        while sim.gripper_state.gap > width - 2 * delta + 1e-12:
-            sim.step()
-        result = sim.run(0.2)
-        pressure = sim.fruit.pressure.pressure(sim.q.ravel())
-        assert pressure == pytest.approx(turgor)  # no bulk stiffness: constant pressure
+    for ratio, (delta, result, force) in zip(ratios, pressed_constant_pressure_shell(
+            sim, radius, ratios, turgor)):
         a = np.mean(result.deformation.jaw_contact_radii)
-        force = np.sum(result.contact_forces[result.contact_obstacle == 0, 0])  # left plate
-        assert force == pytest.approx(result.grip_force, rel=1e-6)
         out[ratio] = (force / (turgor * np.pi * a * a),
                       force / (2 * np.pi * turgor * 0.5 * width * delta))
     return out

@@ -8,6 +8,10 @@ from gripper_sim.core3d.energies import Membrane
 from gripper_sim.core3d.energies.wrinkling_membrane import WrinklingMembrane
 from gripper_sim.core3d.meshes import geodesic_sphere
 
+from helpers import pressed_wrinkling_shell
+from reference_energies3d import (green_strains, principal_strains, wrinkling_membrane,
+                                  wrinkling_states)
+
 RADIUS = 0.03
 YOUNG, NU, THICK = 1e7, 0.3, 1e-4
 
@@ -27,10 +31,10 @@ def test_gradient_and_hessian_match_central_differences(scale):
     rng = np.random.default_rng(11)
     while True:  # no triangle within the differencing step of a region boundary
         q = (scale * x0 + rng.normal(scale=3e-4, size=x0.shape)).ravel()
-        e1, e2, _, _ = skin._principal(skin._green(skin.deformation_gradients(q)))
+        e1, e2, _, _ = principal_strains(green_strains(skin.deformation_gradients(q)))
         if min(np.min(np.abs(e2 + NU * e1)), np.min(np.abs(e1))) > 1e-4:
             break
-    counts = np.bincount(skin.states(q), minlength=3)
+    counts = np.bincount(wrinkling_states(skin, q), minlength=3)
     assert np.all(counts > 0), counts
     ev = skin.evaluate(q)
     h = 1e-7
@@ -48,17 +52,17 @@ def test_gradient_and_hessian_match_central_differences(scale):
 
 @pytest.mark.parametrize('scale', [0.99, 1.0, 1.01])
 def test_numba_kernel_matches_the_numpy_reference(scale):
-    """The fast solver's kernel (``evaluate_into``) gives the reference value, gradient
+    """The skin's kernel (``evaluate_into``) gives the numpy reference's value, gradient
     and Hessian for taut, wrinkled and slack triangles."""
     skin, _, x0 = _sphere_skin()
     q = (scale * x0 + np.random.default_rng(5).normal(scale=3e-4, size=x0.shape)).ravel()
-    assert np.all(np.bincount(skin.states(q), minlength=3) > 0)
+    assert np.all(np.bincount(wrinkling_states(skin, q), minlength=3) > 0)
     n = q.size
     m = skin.dofs.shape[1]
     scatter = np.repeat(skin.dofs, m, axis=1) * n + np.tile(skin.dofs, (1, m))
     grad, data = np.zeros(n), np.zeros(n * n)
     value, low_rank = skin.evaluate_into(q, grad, data, scatter, True)
-    ref = skin.evaluate(q)
+    ref = wrinkling_membrane(skin, q)
     assert low_rank == []
     assert value == pytest.approx(ref.value, rel=1e-12)
     assert np.max(np.abs(grad - ref.gradient)) <= 1e-12 * np.max(np.abs(ref.gradient))
@@ -85,45 +89,12 @@ def test_relaxed_energy_of_stretch_states():
     stretch = 1.05
     q = (flat * np.array([stretch, 0.97, 1.0])).ravel()  # E_2 < -nu E_1: wrinkled
     green = 0.5 * (stretch ** 2 - 1)
-    assert np.all(sheet.states(q) == 1)
+    assert np.all(wrinkling_states(sheet, q) == 1)
     assert sheet.value(q) == pytest.approx(0.5 * YOUNG * green ** 2 * THICK * 1e-4)
     # SVK's excess is the lateral compression beyond Poisson's: (lambda*/2 + mu) (E_2 + nu E_1)^2
     lateral = 0.5 * (0.97 ** 2 - 1)
     excess = 0.5 * YOUNG / (1 - NU ** 2) * (lateral + NU * green) ** 2 * THICK * 1e-4
     assert sheet_svk.value(q) - sheet.value(q) == pytest.approx(excess)
-
-
-def _pressed_shell(wrinkling, ratios, subdivisions=12):
-    """A pressurised shell (turgor p, no bulk stiffness of the contents: constant
-    pressure) with a thin, stiff skin (E_s t / (p R) = 1000, bending length
-    sqrt(D / (p R / 2)) ~ 0.14 mm, small against the contact patch) pressed between two
-    plates by delta per plate. Returns (deltas in m, plate forces F in N, p R)."""
-    from gripper_sim.configuration import load_config
-    from gripper_sim.workflows.factory import make_simulation
-    turgor = 2e4
-    config = load_config(overrides=[
-        'dimension=3', 'fruit.model=shell', 'world.gravity=0', 'world.table=false',
-        'fruit.density=50', 'fruit.damping.mass=20', 'sim.dt=0.05',
-        'sim.max_contact_passes=30', f'fruit.shape.diameter={2 * RADIUS}',
-        f'fruit.pressure.turgor={turgor}', 'fruit.pressure.bulk_modulus=0',
-        'fruit.skin.youngs_modulus=6e10', 'fruit.skin.thickness=1e-5',
-        f'fruit.mesh.subdivisions={subdivisions}', 'fruit.mesh.jaw_refinement=0.5',
-        f'fruit.skin.wrinkling={str(wrinkling).lower()}'])
-    sim = make_simulation(config)
-    width = sim.fruit.rest_width
-    deltas, forces = [], []
-    for ratio in ratios:
-        delta = ratio * RADIUS
-        sim.command_gap(width - 2 * delta, 0.004)
-        while sim.gripper_state.gap > width - 2 * delta + 1e-12:
-            sim.step()
-        result = sim.run(0.2)
-        assert sim.fruit.pressure.pressure(sim.q.ravel()) == pytest.approx(turgor)
-        force = np.sum(result.contact_forces[result.contact_obstacle == 0, 0])  # left plate
-        assert force == pytest.approx(result.grip_force, rel=1e-6)
-        deltas.append(delta)
-        forces.append(force)
-    return np.array(deltas), np.array(forces), turgor * 0.5 * width
 
 
 @pytest.mark.slow
@@ -136,9 +107,9 @@ def test_wrinkling_shell_on_a_plate_follows_the_cap_cut_law(capsys):
     slope F / delta over delta/R = 0.02-0.05. The same skin without wrinkling (SVK)
     carries the cap's compression, E_s t delta / (3 R), itself: several times the law
     (on a coarser mesh; on this one its Newton steps do not converge)."""
-    deltas, forces, p_r = _pressed_shell(True, (0.02, 0.03, 0.04, 0.05))
+    deltas, forces, p_r = pressed_wrinkling_shell(True, (0.02, 0.03, 0.04, 0.05))
     slope = float(forces @ deltas / (deltas @ deltas))
-    _, svk_force, _ = _pressed_shell(False, (0.02,), subdivisions=8)  # finer: no convergence
+    _, svk_force, _ = pressed_wrinkling_shell(False, (0.02,), subdivisions=8)  # finer: no convergence
     svk_ratio = svk_force[0] / (2 * np.pi * p_r * deltas[0])
     with capsys.disabled():
         print('\n  wrinkling shell on a plate, F / (2 pi p R delta) at delta/R 0.02-0.05: '

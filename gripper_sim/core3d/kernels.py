@@ -1,17 +1,16 @@
-"""Numba kernels of the 3D energies and of the Newton matrix filter.
+"""Numba kernels of the 3D energies.
 
-Free functions ``@njit(cache=True)`` on arrays. Each energy kernel computes the same
-value, gradient and Hessian as the numpy reference ``evaluate`` of its class in
-``gripper_sim.core3d.energies`` (test/test_3d_energies.py compares them), but adds the
+Free functions ``@njit(cache=True)`` on arrays, one kernel per energy of
+``gripper_sim.core3d.energies`` (its only implementation; the tests compare each with
+an independent numpy derivation in test/reference_energies3d.py). Each adds the
 gradient into a preallocated (n_dof,) vector and each element Hessian entry straight
-into the ``data`` array of a fixed CSC matrix: ``scatter[e, r * m + c]`` is the
-position in ``data`` of the entry (row ``dofs[e, r]``, column ``dofs[e, c]``) of element
-e (m dofs per element). With ``hessian`` False only the value and the gradient are
-computed (line searches).
+into the ``data`` array of a sparse matrix: ``scatter[e, r * m + c]`` is the position in
+``data`` of the entry (row ``dofs[e, r]``, column ``dofs[e, c]``) of element e (m dofs
+per element). With ``hessian`` False only the value and the gradient are computed (line
+searches).
 
 Positions x are (n_nodes, 3) (m); element dofs are [x, y, z] of each element node in
-order, as ``energies.common.element_dofs3``. Import this module only where numba is
-installed (``gripper_sim.core3d.fast_solver`` checks).
+order, as ``energies.common.element_dofs3``.
 """
 from __future__ import annotations
 

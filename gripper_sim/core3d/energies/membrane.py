@@ -14,13 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
-                                            scatter_gradient)
 from gripper_sim.core3d import kernels
-from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
+from gripper_sim.core3d.energies.common import KernelEnergy, element_dofs3
 
 
-class Membrane(Energy):
+class Membrane(KernelEnergy):
     """Args:
         triangles: (n_tri, 3) node indices.
         rest_positions: (n_nodes, 3) m, the stress-free shape.
@@ -77,52 +75,11 @@ class Membrane(Energy):
         small = np.sqrt(lam_min) - 1.0
         return np.where(np.abs(big) >= np.abs(small), big, small)
 
-    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        f = self.deformation_gradients(q)
-        c = np.einsum('eai,eaj->eij', f, f)
-        e = 0.5 * (c - np.eye(2))
-        tr = e[:, 0, 0] + e[:, 1, 1]
-        mu, lam = self.mu, self.lam
-        psi = 0.5 * lam * tr ** 2 + mu * np.einsum('eij,eij->e', e, e)
-        s = 2 * mu * e + (lam * tr)[:, None, None] * np.eye(2)
-        if not hessian:
-            return self.assemble(q.size, f, psi, s, None)
-        ffT = np.einsum('eaj,ebj->eab', f, f)
-        eye3, eye2 = np.eye(3), np.eye(2)
-        cmat = (np.einsum('ab,eij->eaibj', eye3, s)
-                + lam * np.einsum('eai,ebj->eaibj', f, f)
-                + mu * np.einsum('ij,eab->eaibj', eye2, ffT)
-                + mu * np.einsum('eaj,ebi->eaibj', f, f))
-        return self.assemble(q.size, f, psi, s, cmat)
-
-    def assemble(self, n_dof: int, f: np.ndarray, psi: np.ndarray, s: np.ndarray,
-                 cmat: np.ndarray | None) -> Evaluation:
-        """Energy, gradient and Hessian of the triangles from their material response.
-
-        Args:
-            n_dof: size of q.  f: (n_tri, 3, 2) deformation gradients (-).
-            psi: (n_tri,) energy densities (Pa).  s: (n_tri, 2, 2) PK2 stresses (Pa).
-            cmat: (n_tri, 3, 2, 3, 2) tangents dP_ai/dF_bj (Pa) of P = F S, or None for
-                no Hessian.
-        """
-        value = float(np.sum(self.weight * psi))
-        p = np.einsum('eai,eij->eaj', f, s)  # (n, 3, 2)
-        # dW/dx_(k, a) = w P_aj dN_k/dX_j
-        local = self.weight[:, None, None] * np.einsum('eaj,ekj->eka', p, self.grad_n)
-        grad = scatter_gradient(n_dof, self.dofs, local.reshape(len(self.tri), 9))
-        if cmat is None:
-            return Evaluation(value, grad, *empty_triplets())
-        # H_(k a)(l b) = w sum_ij dN_k/dX_i C_(a i)(b j) dN_l/dX_j
-        h = np.einsum('e,eki,eaibj,elj->ekalb', self.weight, self.grad_n, cmat, self.grad_n,
-                      optimize=True)
-        return Evaluation(value, grad, *hessian_triplets(self.dofs,
-                                                         h.reshape(len(self.tri), 9, 9)))
-
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
-        """The numba kernel of ``evaluate``: adds the gradient (N) into ``grad`` and the
-        Hessian (N/m) into the CSC values ``data`` at ``scatter`` (n_tri, 81); returns
-        (value in J, low-rank terms)."""
+        """The energy's kernel: adds the gradient (N) into ``grad`` and the Hessian (N/m)
+        into the sparse values ``data`` at ``scatter`` (n_tri, 81); returns (value in J,
+        low-rank terms)."""
         return kernels.membrane(q.reshape(-1, 3), self.tri, self.grad_n, self.weight,
                                 float(self.mu), float(self.lam), grad, data, scatter,
                                 hessian), []

@@ -13,12 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
-                                            scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
 from gripper_sim.core3d import kernels
-from gripper_sim.core3d.energies.common import (element_dofs3, empty_triplets,
-                                                fast_kernels)
+from gripper_sim.core3d.energies.common import KernelEnergy, element_dofs3
 
 
 def rest_tetrahedra(tetrahedra, rest_positions):
@@ -41,26 +38,7 @@ def rest_tetrahedra(tetrahedra, rest_positions):
     return tet, dm, det / 6.0
 
 
-def neohookean_response(f: np.ndarray, mu: float, lam: float):
-    """Density and stress of the module docstring at deformation gradients f (..., 3, 3).
-
-    Returns:
-        (psi (...) J/m^3, ln J (...), F^-1 (..., 3, 3), P (..., 3, 3) Pa), or None if
-        J <= 0 anywhere.
-    """
-    j = np.linalg.det(f)
-    if np.any(j <= 0):
-        return None
-    lnj = np.log(j)
-    psi = 0.5 * mu * (np.einsum('...ij,...ij->...', f, f) - 3) - mu * lnj \
-        + 0.5 * lam * lnj ** 2
-    finv = np.linalg.inv(f)
-    finv_t = np.swapaxes(finv, -1, -2)
-    piola = mu * (f - finv_t) + (lam * lnj)[..., None, None] * finv_t
-    return psi, lnj, finv, piola
-
-
-class NeoHookeanTets(Energy):
+class NeoHookeanTets(KernelEnergy):
     """Args:
         tetrahedra: (n_tet, 4) node indices, positively oriented at rest.
         rest_positions: (n_nodes, 3) m.
@@ -77,58 +55,17 @@ class NeoHookeanTets(Energy):
         shape = np.vstack([-np.ones((1, 3)), np.eye(3)])
         self.grad_n = np.ascontiguousarray(np.einsum('kc,ecj->ekj', shape, self.dm_inv))
 
-    def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
-        """(n_tet, 3, 3)."""
-        x = q.reshape(-1, 3)
-        return np.einsum('eki,ekj->eij', x[self.tet], self.grad_n)
-
     def von_mises(self, q: np.ndarray) -> np.ndarray:
         """(n_tet,) Pa, von Mises stress of the Cauchy stress (damage measure)."""
-        kernels = fast_kernels()
-        if kernels is None:
-            return self.von_mises_reference(q)
         out = np.empty(len(self.tet))
         kernels.neohookean_von_mises(q.reshape(-1, 3), self.tet, self.grad_n, float(self.mu),
                                      float(self.lam), out)
         return out
 
-    def von_mises_reference(self, q: np.ndarray) -> np.ndarray:
-        """``von_mises`` in numpy (the reference of the numba kernel)."""
-        f = self.deformation_gradients(q)
-        j = np.linalg.det(f)
-        b = f @ np.swapaxes(f, 1, 2)
-        lnj = np.log(np.maximum(j, 1e-12))
-        sigma = (self.mu * (b - np.eye(3)) + (self.lam * lnj)[:, None, None] * np.eye(3)) \
-            / j[:, None, None]
-        dev = sigma - np.trace(sigma, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
-        return np.sqrt(1.5 * np.einsum('eij,eij->e', dev, dev))
-
-    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        response = neohookean_response(self.deformation_gradients(q), self.mu, self.lam)
-        if response is None:
-            return Evaluation(np.inf, np.full(q.size, np.nan), *empty_triplets())
-        psi, lnj, finv, piola = response
-        mu, lam = self.mu, self.lam
-        value = float(np.sum(psi * self.volume))
-        local = self.volume[:, None, None] * np.einsum('eij,ekj->eki', piola, self.grad_n)
-        n = len(self.tet)
-        grad = scatter_gradient(q.size, self.dofs, local.reshape(n, 12))
-        if not hessian:
-            return Evaluation(value, grad, *empty_triplets())
-        eye = np.eye(3)
-        c = (mu * np.einsum('im,jn->ijmn', eye, eye)[None]
-             + (mu - lam * lnj)[:, None, None, None, None]
-             * np.einsum('eni,ejm->eijmn', finv, finv)
-             + lam * np.einsum('eji,enm->eijmn', finv, finv))
-        # H_(k i)(l m) = V sum_jn dN_k/dX_j C_(ij)(mn) dN_l/dX_n
-        h = np.einsum('e,ekj,eijmn,eln->ekilm', self.volume, self.grad_n, c, self.grad_n,
-                      optimize=True)
-        return Evaluation(value, grad, *hessian_triplets(self.dofs, h.reshape(n, 12, 12)))
-
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
-        """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
-        (n_tet, 144)); value inf, nothing added, if an element is inverted."""
+        """The energy's kernel (see ``Membrane.evaluate_into``; scatter (n_tet, 144));
+        value inf, nothing added, if an element is inverted."""
         return kernels.neohookean_tets(q.reshape(-1, 3), self.tet, self.grad_n, self.volume,
                                        float(self.mu), float(self.lam), grad, data, scatter,
                                        hessian), []

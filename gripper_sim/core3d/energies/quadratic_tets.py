@@ -14,12 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import (Energy, Evaluation, hessian_triplets,
-                                            scatter_gradient)
 from gripper_sim.core.energies.neohookean import lame_parameters
 from gripper_sim.core3d import kernels
-from gripper_sim.core3d.energies.common import element_dofs3, empty_triplets
-from gripper_sim.core3d.energies.neohookean import neohookean_response, rest_tetrahedra
+from gripper_sim.core3d.energies.common import KernelEnergy, element_dofs3
+from gripper_sim.core3d.energies.neohookean import rest_tetrahedra
 
 _EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
 _A, _B = 0.5854101966249685, 0.1381966011250105
@@ -47,7 +45,7 @@ def lumped_masses(tetrahedra: np.ndarray, volumes: np.ndarray, density: float,
     return np.bincount(tetrahedra.ravel(), weights=weights.ravel(), minlength=n_nodes)
 
 
-class QuadraticNeoHookeanTets(Energy):
+class QuadraticNeoHookeanTets(KernelEnergy):
     """Args:
         tetrahedra: (n_tet, 10) corners (positively oriented) then edge midpoints.
         rest_positions: (n_nodes, 3) m.
@@ -83,34 +81,10 @@ class QuadraticNeoHookeanTets(Energy):
         dev = sigma - np.trace(sigma, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
         return np.sqrt(1.5 * np.einsum('eij,eij->e', dev, dev)).reshape(-1, 4).max(axis=1)
 
-    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        response = neohookean_response(self.deformation_gradients(q), self.mu, self.lam)
-        if response is None:
-            return Evaluation(np.inf, np.full(q.size, np.nan), *empty_triplets())
-        psi, lnj, finv, piola = response
-        mu, lam, w = self.mu, self.lam, self.weight
-        value = float(np.sum(psi * w))
-        local = np.einsum('eg,egij,egaj->eai', w, piola, self.grad_n)
-        n = len(self.tet)
-        grad = scatter_gradient(q.size, self.dofs, local.reshape(n, 30))
-        if not hessian:
-            return Evaluation(value, grad, *empty_triplets())
-        # with G = B F^-1 (B_aj = dN_a/dX_j) the tangent dP/dF of the class docstring of
-        # NeoHookeanTets contracts to
-        #   H_(a i)(b m) = sum_g w [mu (B B^T)_ab d_im + (mu - lam ln J) G_am G_bi
-        #                           + lam G_ai G_bm]
-        b = self.grad_n
-        g = np.einsum('egaj,egji->egai', b, finv)
-        bb = np.einsum('eg,egaj,egbj->eab', mu * w, b, b)
-        h = np.einsum('eg,egam,egbi->eaibm', (mu - lam * lnj) * w, g, g, optimize=True)
-        h += np.einsum('eg,egai,egbm->eaibm', lam * w, g, g, optimize=True)
-        h += bb[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
-        return Evaluation(value, grad, *hessian_triplets(self.dofs, h.reshape(n, 30, 30)))
-
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
-        """The numba kernel of ``evaluate`` (see ``Membrane.evaluate_into``; scatter
-        (n_tet, 900)); value inf, nothing added, if J <= 0 at a quadrature point."""
+        """The energy's kernel (see ``Membrane.evaluate_into``; scatter (n_tet, 900));
+        value inf, nothing added, if J <= 0 at a quadrature point."""
         return kernels.neohookean_quadrature(q.reshape(-1, 3), self.tet, self.grad_n,
                                              self.weight, float(self.mu), float(self.lam),
                                              grad, data, scatter, hessian), []
