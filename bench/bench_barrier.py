@@ -12,6 +12,9 @@ machine's load average is printed), for each case and model, with Newton iterati
   ``mmm`` runs the whole step in one numba kernel (``core.fast``), which the barrier
   model does not have; ``mmm-numpy`` is the numpy reference path of the same method
   (``Simulation(config, fast=False)``).
+- ``hertz3d``: the 3D solid sphere (linear tetrahedra, 922 nodes, 307 on the surface)
+  pressed by D = 0.05 R between flat plates, 0.6 s at dt = 50 ms: the 3D model has one
+  solver (the fixed-pattern Newton solver) for both contact models.
 - ``pick``: the default apple gripped (2 mu N = 1.2 m g), lifted 2 cm and held 1 s,
   with the table, gravity and friction (``--pick`` to include it; about 10 s).
 
@@ -33,6 +36,9 @@ sys.path.insert(0, str(ROOT / 'test'))
 
 from helpers import pick, quasi_static_sim  # noqa: E402
 
+from gripper_sim.configuration import load_config  # noqa: E402
+from gripper_sim.workflows.factory import make_simulation  # noqa: E402
+
 RADIUS = 0.03
 
 
@@ -53,6 +59,19 @@ def membrane(model: str, fast=None):
     approach = 0.1 * RADIUS
     sim.command_gap(2 * RADIUS - 2 * approach, speed=2 * approach / 0.5)
     return sim, 1.5
+
+
+def hertz3d(model: str, fast=None):
+    sim = make_simulation(load_config(overrides=[
+        'dimension=3', 'world.gravity=0', 'world.table=false', 'fruit.density=50',
+        'fruit.damping.mass=20', 'sim.dt=0.05', 'sim.max_contact_passes=30',
+        f'fruit.shape.diameter={2 * RADIUS}', f'gripper.initial_gap={2 * RADIUS + 1e-4}',
+        'fruit.model=solid', 'fruit.skin.enabled=false', 'fruit.mesh.subdivisions=4',
+        'fruit.mesh.jaw_refinement=0.4', 'fruit.mesh.order=1',
+        'fruit.flesh.youngs_modulus=1e6', 'fruit.flesh.poisson_ratio=0.3',
+        f'contact.model={model}']))
+    sim.command_gap(sim.fruit.rest_width - 0.05 * RADIUS, 0.005 * RADIUS / 0.05)
+    return sim, 0.6
 
 
 def timed(case, model: str, fast=None):
@@ -80,7 +99,8 @@ def main(argv=None) -> int:
     print(f'load average {os.getloadavg()[0]:.2f}; CPU seconds, best of {args.repeat}')
     runs = [('hertz', hertz, 'mmm', None), ('hertz', hertz, 'ipc', None),
             ('membrane', membrane, 'mmm', None), ('membrane', membrane, 'mmm-numpy', False),
-            ('membrane', membrane, 'ipc', None)]
+            ('membrane', membrane, 'ipc', None),
+            ('hertz3d', hertz3d, 'mmm', None), ('hertz3d', hertz3d, 'ipc', None)]
     if args.pick:
         runs += [('pick', 'pick', 'mmm', None), ('pick', 'pick', 'ipc', None)]
     print(f"{'case':10s} {'model':10s} {'CPU s':>8s} {'Newton':>7s} {'force N':>9s} "
@@ -94,7 +114,7 @@ def main(argv=None) -> int:
         cpu, iterations, force, length = figures
         print(f'{name:10s} {label:10s} {cpu:8.2f} {iterations:7.0f} {force:9.4f} '
               f'{1e3 * length:10.3f}')
-    for name in ('hertz', 'membrane', 'pick'):
+    for name in ('hertz', 'membrane', 'hertz3d', 'pick'):
         if (name, 'ipc') in best:
             print(f'{name}: ipc / mmm CPU time = {best[name, "ipc"] / best[name, "mmm"]:.2f}')
     print(f'membrane: ipc / mmm-numpy CPU time = '

@@ -288,7 +288,7 @@ SCHEMA: dict[str, Key] = {
     'contact.model': Key('mmm', '-', 'contact with the rigid faces (jaws, table, walls): mmm '
                          '= the modified mass method (held nodes prescribed on the faces); '
                          'ipc = a barrier energy (Incremental Potential Contact, through '
-                         'ipctk; 2D, no soft pads, no restitution, the generic solver)', 'str',
+                         'ipctk; 2D and 3D, no soft pads, no restitution, the generic solver)', 'str',
                          choices=('mmm', 'ipc')),
     'contact.ipc.dhat': Key(1e-6, 'm', 'ipc: barrier activation distance dhat (the largest '
                             'gap that still carries force; nodes stay within it of a face)',

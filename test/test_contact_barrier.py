@@ -1,10 +1,13 @@
 """The barrier contact model (``contact.model: ipc``, ``core.barrier``).
 
-Its energy against finite differences and its collision-free step bound; then the
+Its energy against finite differences and its collision-free step bound, in 2D (an
+outline's points and edges) and 3D (a surface's triangles: point-triangle and edge-edge
+pairs; the 3D cross-checks are in ``test_contact_barrier_3d.py``); then the
 cross-check with the modified mass method on the rigid-finger validation cases (ring
 squeeze, pressurised membrane, 2D Hertz, friction hold): force and contact length within
 5 % of each other, and no node inside a jaw at any step.
 """
+import ipctk
 import numpy as np
 import pytest
 
@@ -13,8 +16,8 @@ from helpers import kernel_evaluation, pick, quasi_static_sim
 from gripper_sim.configuration import load_config
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
 from gripper_sim.core.obstacles import FlatFace
+from gripper_sim.core3d.obstacles import Plate
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
@@ -39,9 +42,42 @@ def _chain():
     return barrier, x
 
 
-def test_barrier_gradient_and_hessian_match_finite_differences():
-    barrier, x = _chain()
-    q = x.ravel() + 0.05 * DHAT * np.sin(np.arange(8.0))
+def _plate(height, velocity=(0.0, 0.0, 0.0)):
+    """A square plate 4 dhat across facing +z at ``height`` (m)."""
+    return Plate('table', np.array([0.0, 0.0, height]), np.array([0.0, 0.0, 1.0]),
+                 np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+                 half_extents=np.array([2 * DHAT, 2 * DHAT]), velocity=np.array(velocity),
+                 static_friction=0.5, kinetic_friction=0.4)
+
+
+def _tetrahedron():
+    """A barrier over a tetrahedron's surface with one corner and its three edges within
+    dhat of a plate that slides sideways and rises (so the lagged friction acts too);
+    (barrier, positions (4, 3))."""
+    x = np.array([[0.0, 0.0, 0.3], [1.0, 0.1, 0.5], [0.2, 1.0, 0.4], [0.4, 0.3, 1.5]]) * DHAT
+    triangles = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    edges = np.array([[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]])
+    barrier = BarrierContact(4, np.arange(4), edges, SETTINGS, dimension=3, triangles=triangles)
+    old, new = _plate(-0.1 * DHAT), _plate(0.0, velocity=(0.05, 0.02, 0.0))
+    new.origin = old.origin + np.array([0.05e-3, 0.02e-3, 0.1 * DHAT])
+    barrier.begin_step(x, [old], [new], 1e-3)
+    return barrier, x
+
+
+BODIES = pytest.mark.parametrize('body', [_chain, _tetrahedron], ids=['2d', '3d'])
+
+
+@BODIES
+def test_barrier_gradient_and_hessian_match_finite_differences(body):
+    barrier, x = body()
+    q = x.ravel() + 0.05 * DHAT * np.sin(np.arange(x.size))
+    if barrier.dimension == 3:
+        kinds = ipctk.NormalCollisions()
+        kinds.build(barrier._mesh, barrier.vertices(x), DHAT)
+        assert len(kinds.fv_collisions) and len(kinds.ee_collisions)
+    # the exact Hessian (the solver's is its per-pair PSD projection, equal to it where
+    # each pair is convex, which the 2D chain's gaps make it, not the 3D edge pairs)
+    barrier.projection = ipctk.PSDProjectionMethod.NONE
     ev = barrier.evaluate(q)
     dense = barrier.hessian(q)
     assert np.max(np.abs(ev.gradient)) > 0 and np.max(np.abs(dense)) > 0
@@ -51,28 +87,33 @@ def test_barrier_gradient_and_hessian_match_finite_differences():
     fd_hess = np.array([(barrier.gradient(q + h * e) - barrier.gradient(q - h * e)) / (2 * h)
                         for e in np.eye(q.size)])
     assert ev.gradient == pytest.approx(fd_grad, rel=1e-5, abs=1e-6 * np.max(np.abs(fd_grad)))
-    # the Hessian is the per-pair PSD projection of the exact one: equal where each pair
-    # is convex, which these gaps (all on the barrier's convex side) make it
     assert dense == pytest.approx(fd_hess, rel=1e-4, abs=1e-5 * np.max(np.abs(fd_hess)))
 
 
-def test_barrier_kernel_adds_the_same_hessian_into_a_fixed_pattern():
-    barrier, x = _chain()
+@BODIES
+def test_barrier_kernel_adds_the_same_hessian_into_a_fixed_pattern(body):
+    barrier, x = body()
     q = x.ravel()
+    d = barrier.dimension
+    # one block per skin edge (2D) or surface triangle (3D)
+    assert barrier.dofs.shape == ((3, 4) if d == 2 else (4, 9))
     value, gradient, dense = kernel_evaluation(barrier, q)
     assert value == pytest.approx(barrier.value(q))
     assert gradient == pytest.approx(barrier.gradient(q))
     assert dense == pytest.approx(barrier.hessian(q))
+    assert np.all(np.linalg.eigvalsh(dense) > -1e-9 * np.max(np.abs(dense)))  # projected
 
 
-def test_collision_free_step_stops_before_the_face():
-    barrier, x = _chain()
+@BODIES
+def test_collision_free_step_stops_before_the_face(body):
+    barrier, x = body()
     q = x.ravel()
+    d = barrier.dimension
     through = np.zeros_like(q)
-    through[1::2] = -10 * DHAT  # every node straight through the table
+    through[d - 1::d] = -10 * DHAT  # every node straight through the table
     fraction = barrier.max_step(q, through)
     assert 0 < fraction < 0.1
-    assert np.all((q + fraction * through)[1::2] > 0)
+    assert np.all((q + fraction * through)[d - 1::d] > 0)
     assert barrier.max_step(q, -through) == 1.0
 
 
@@ -230,12 +271,10 @@ def test_ipc_refuses_what_it_does_not_model(override, match):
         Simulation(load_config(overrides=['contact.model=ipc', override]))
 
 
-def test_ipc_refuses_the_fast_path_and_3d():
+def test_ipc_refuses_the_fast_path():
     config = load_config(overrides=['contact.model=ipc'])
     with pytest.raises(ConfigError, match='fast path'):
         Simulation(config, fast=True)
-    with pytest.raises(ConfigError, match='2D only'):
-        Simulation3D(load_config(overrides=['dimension=3', 'contact.model=ipc']))
 
 
 def test_ipc_takes_the_generic_step():

@@ -1,9 +1,10 @@
-"""Barrier contact (Incremental Potential Contact) of the fruit outline with rigid faces, 2D.
+"""Barrier contact (Incremental Potential Contact) of the fruit's surface with rigid faces.
 
 The alternative to the modified mass method (``core.contact_passes``), selected by
 ``contact.model: ipc``. Following Li et al. 2020 ("Incremental Potential Contact",
 ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
-- every pair of a vertex and an edge of different bodies closer than ``dhat`` adds the
+- every pair of primitives of different bodies closer than ``dhat`` (2D: a vertex and an
+  edge; 3D: a vertex and a triangle, or two edges) adds the
   barrier kappa b(d), b(d) = -(d - dhat)^2 ln(d / dhat) for 0 < d < dhat, 0 beyond;
   ipctk evaluates it on squared distances, b(d^2, dhat^2), and as its "physical"
   barrier divides it by dhat^3, so that kappa is a force (N): a vertex pressed with a
@@ -12,14 +13,17 @@ ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
   tangents of the start of the step, mu lambda f0(|v_t|) with f0 smoothed below the
   slip speed eps_v, added to the step as dt D(v) with v = (x - x_n) / dt;
 - every Newton line search starts from the continuous-collision bound: the largest
-  fraction of the step along which no vertex crosses an edge (their section 4).
+  fraction of the step along which no primitive crosses another (their section 4).
 The candidates, barrier, friction potential and CCD are the IPC Toolkit's (``ipctk``,
-MIT). Its collision mesh holds the fruit's outline (the surface nodes and skin edges)
-and one segment per rigid face (``FlatFace``: jaw faces, table, walls), which moves
-with its face; infinite faces (table, walls) become segments ``INFINITE_FACE_LENGTH``
-long. Only pairs of the fruit and an obstacle collide (no self-contact of the outline
-yet), so the barrier's Hessian stays on a fixed pattern: the surface nodes' 2 x 2
-blocks and the skin edges' pairs.
+MIT). One implementation for both dimensions (``dimension`` d = 2 or 3). Its collision
+mesh holds the fruit's surface: in 2D the outline (the surface nodes and skin edges), in
+3D the surface nodes, edges and triangles; and every rigid face: in 2D one segment per
+``FlatFace`` (jaw faces, table, walls), in 3D two triangles per ``Plate`` (its
+rectangle), each moving with its face; infinite faces (table, walls) become segments or
+squares ``INFINITE_FACE_LENGTH`` across. Only pairs of the fruit and an obstacle collide
+(no self-contact of the surface yet), so the barrier's Hessian stays on a fixed pattern:
+the node blocks of the skin edges (2D) or of the surface triangles (3D), which hold
+every vertex-face, edge-edge and face-vertex pair with a rigid face.
 
 Deformable bodies (``SoftBody``: the soft fingers, ``core.soft_fingers``) join the
 collision mesh with their outlines, whose vertices are degrees of freedom too: the
@@ -28,6 +32,7 @@ contact). A pair may couple any node of the fruit's outline with any of a soft b
 so the Hessian's fixed pattern holds every such pair of nodes (beside the outlines'
 edges); the solver's fast path keeps one pattern as for rigid faces. Still only pairs
 with the fruit collide: the fingers do not touch each other, the table or themselves.
+Soft bodies are 2D only so far.
 """
 from __future__ import annotations
 
@@ -43,8 +48,8 @@ from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
 
-#: m, length of the segment standing for an infinite face (table, walls), centred on
-#: the face's origin
+#: m, length of the segment (2D) or side of the square (3D) standing for an infinite
+#: face (table, walls), centred on the face's origin
 INFINITE_FACE_LENGTH = 4.0
 #: a start of step whose pushed nodes would stop this fraction of dhat from a face
 START_GAP_FRACTION = 0.5
@@ -77,9 +82,6 @@ def check_supported(config, dimension: int, fast: bool | None) -> None:
     """ConfigError if ``contact.model: ipc`` is asked where it is not built yet."""
     if config['contact.model'] != 'ipc':
         return
-    if dimension != 2:
-        raise ConfigError("config key 'contact.model': ipc is 2D only so far (dimension 3 "
-                          'uses mmm)')
     if config['gripper.finger.pad.enabled']:
         raise ConfigError("config key 'contact.model': ipc does not support soft pads yet "
                           '(gripper.finger.pad.enabled: false, or contact.model: mmm)')
@@ -107,14 +109,41 @@ class SoftBody:
     kinetic_friction: float
 
 
-def face_segments(faces) -> np.ndarray:
-    """(2 k, 2) m, the end points of the k faces (``FlatFace``), two rows per face."""
-    points = np.empty((2 * len(faces), 2))
+#: (2^(d-1), d-1) the corners of a face in units of its half-extents along its tangents,
+#: in order round the face, by dimension d
+_CORNERS = {2: np.array([[-1.0], [1.0]]),
+            3: np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])}
+#: per dimension, (edges (e, 2), triangles (t, 3)) of a face's corners: a segment, or a
+#: rectangle as two triangles (its diagonal among the edges)
+_FACE_ELEMENTS = {2: (np.array([[0, 1]]), np.zeros((0, 3), np.int64)),
+                  3: (np.array([[0, 1], [1, 2], [2, 3], [3, 0], [0, 2]]),
+                      np.array([[0, 1, 2], [0, 2, 3]]))}
+
+
+def _half_extents(face) -> np.ndarray:
+    """(d - 1,) m, the face's half-extents, infinite ones cut to ``INFINITE_FACE_LENGTH``."""
+    return np.minimum(np.asarray(face.half_extents, float), 0.5 * INFINITE_FACE_LENGTH)
+
+
+def face_corners(faces, dimension: int = 2) -> np.ndarray:
+    """(c k, d) m, the corners of the k faces (``FlatFace`` or ``Plate``), c = 2^(d-1)
+    rows per face: a segment's two ends, a rectangle's four corners in order round it."""
+    corners = _CORNERS[dimension]
+    c = corners.shape[0]
+    points = np.empty((c * len(faces), dimension))
     for k, face in enumerate(faces):
-        half = min(face.half_length, 0.5 * INFINITE_FACE_LENGTH)
-        points[2 * k] = face.origin - half * face.tangent
-        points[2 * k + 1] = face.origin + half * face.tangent
+        points[c * k:c * (k + 1)] = face.origin + (corners * _half_extents(face)) @ face.tangents
     return points
+
+
+def face_distances(face, points: np.ndarray) -> np.ndarray:
+    """(n,) m, the distance of points (n, d) from the face's segment or rectangle (as
+    ``face_corners`` cuts it)."""
+    half = _half_extents(face)
+    rel = points - face.origin
+    along = rel @ face.tangents.T
+    outside = along - np.clip(along, -half, half)
+    return np.sqrt((rel @ face.normal) ** 2 + np.sum(outside ** 2, axis=1))
 
 
 class BarrierContact(Energy):
@@ -122,10 +151,13 @@ class BarrierContact(Energy):
 
     Args:
         n_nodes: nodes of the state (the fruit's, then any soft bodies').
-        surface: (n_s,) the fruit outline's nodes.
-        skin_edges: (n_e, 2) the outline's edges (node indices), may be empty.
+        surface: (n_s,) the fruit surface's nodes.
+        skin_edges: (n_e, 2) the surface's edges (node indices), may be empty in 2D; in 3D
+            every edge of ``triangles``.
         settings: dhat, kappa, eps_v.
-        bodies: the soft bodies (``SoftBody``) whose outlines touch the fruit.
+        bodies: the soft bodies (``SoftBody``) whose outlines touch the fruit (2D).
+        dimension: d, 2 or 3.
+        triangles: (n_t, 3) the surface's triangles (node indices, outward), 3D only.
     """
 
     elastic = False
@@ -134,8 +166,10 @@ class BarrierContact(Energy):
     projection = ipctk.PSDProjectionMethod.CLAMP
 
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
-                 settings: BarrierSettings, bodies: tuple = ()):
-        self.n_dof = 2 * n_nodes
+                 settings: BarrierSettings, bodies: tuple = (), dimension: int = 2,
+                 triangles: np.ndarray | None = None):
+        self.dimension = d = dimension
+        self.n_dof = d * n_nodes
         self.surface = np.asarray(surface, dtype=np.int64)
         self.bodies = tuple(bodies)
         #: (n_v,) the node of each deformable vertex of the collision mesh: the fruit's
@@ -147,6 +181,8 @@ class BarrierContact(Energy):
         self.fruit_edges = local[np.asarray(skin_edges, dtype=np.int64).reshape(-1, 2)]
         self.body_edges = [local[np.asarray(b.edges, np.int64).reshape(-1, 2)]
                            for b in self.bodies]
+        self.fruit_triangles = (local[np.asarray(triangles, np.int64).reshape(-1, 3)]
+                                if triangles is not None else np.zeros((0, 3), np.int64))
         #: (n_v,) 0 for the fruit's vertices, 1 + b for soft body b's
         self.vertex_body = np.concatenate(
             [np.zeros(self.surface.size, np.int64)]
@@ -155,24 +191,28 @@ class BarrierContact(Energy):
         self.potential = ipctk.BarrierPotential(settings.dhat, settings.stiffness, True)
         self.friction = ipctk.FrictionPotential(settings.friction_smoothing)
         n_v = self.vertex_nodes.size
-        self.vertex_dofs = (2 * self.vertex_nodes[:, None] + np.arange(2)[None, :]).ravel()
+        self.vertex_dofs = element_dofs(self.vertex_nodes[:, None], d).ravel()
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
-        #: (solvers that keep one sparsity pattern read it): the fruit's skin edges (or
-        #: its lone surface nodes), and with soft bodies their outlines' edges and every
-        #: pair of a fruit outline node and a soft body's outline node
-        self.dofs = element_dofs(self._pattern_elements())
+        #: (solvers that keep one sparsity pattern read it): the fruit's surface triangles
+        #: (3D) or skin edges (2D; or its lone surface nodes), and with soft bodies their
+        #: outlines' edges and every pair of a fruit outline node and a soft body's
+        #: outline node
+        self.dofs = element_dofs(self._pattern_elements(), d)
         self._pattern_keys = self._hessian_pattern()
         self._mesh = None
         self._n_faces = -1
         self._dt = 1.0
-        self._obstacles_end = np.zeros((0, 2))
-        self._start = np.zeros((n_v, 2))
+        self._obstacles_end = np.zeros((0, d))
+        self._start = np.zeros((n_v, d))
+        self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()
         self._positions = None  # (scatter, CSC position of each pattern key)
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
         """(n_elem, k) node elements spanning the Hessian's pattern (see ``dofs``)."""
+        if self.fruit_triangles.size:
+            return self.surface[self.fruit_triangles]
         if not self.bodies:
             return (self.surface[self.fruit_edges] if self.fruit_edges.size
                     else self.surface[:, None])
@@ -187,35 +227,55 @@ class BarrierContact(Energy):
 
     def _hessian_pattern(self) -> np.ndarray:
         """Sorted keys col * n_dof + row of the fixed Hessian pattern: the entries of the
-        elements ``dofs`` (the skin edges, or the lone surface nodes of a point fruit)."""
+        elements ``dofs``."""
         m = self.dofs.shape[1]
         keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
         return np.unique(keys)
 
+    @property
+    def corners_per_face(self) -> int:
+        """Collision-mesh vertices of one rigid face: 2 (a segment) or 4 (a rectangle)."""
+        return _CORNERS[self.dimension].shape[0]
+
     def _build_mesh(self, obstacles: np.ndarray) -> None:
+        """The collision mesh of the surface at rest (``_rest``) and the faces' corners
+        ``obstacles`` (c k, d) m."""
         n_v = self.vertex_nodes.size
-        k = obstacles.shape[0] // 2
-        face_edges = n_v + np.arange(2 * k).reshape(k, 2)
-        edges = np.vstack([self.fruit_edges, *self.body_edges, face_edges]).astype(np.int32)
-        rest = np.vstack([np.zeros((n_v, 2)), obstacles])
-        self._mesh = ipctk.CollisionMesh(np.asfortranarray(rest), np.asfortranarray(edges))
+        c = self.corners_per_face
+        k = obstacles.shape[0] // c
+        offsets = n_v + c * np.arange(k)[:, None, None]
+        face_edges, face_triangles = _FACE_ELEMENTS[self.dimension]
+        edges = np.vstack([self.fruit_edges, *self.body_edges,
+                           (offsets + face_edges).reshape(-1, 2)]).astype(np.int32)
+        rest = np.asfortranarray(np.vstack([self._rest, obstacles]))
+        if self.dimension == 2:
+            self._mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges))
+        else:
+            triangles = np.vstack([self.fruit_triangles,
+                                   (offsets + face_triangles).reshape(-1, 3)]).astype(np.int32)
+            self._mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges),
+                                             np.asfortranarray(triangles))
         # the fruit against everything else: soft bodies and faces share one patch
         patches = np.concatenate([(self.vertex_body > 0).astype(np.int32),
-                                  np.ones(2 * k, np.int32)])
+                                  np.ones(c * k, np.int32)])
         self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
         self._n_faces = k
 
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
-        """(n_v + 2 k, 2) m, the collision mesh's vertices: the outlines (the fruit's, the
-        soft bodies') of ``positions`` (n, 2) and the faces' end points (default: where
-        they end this step)."""
+        """(n_v + c k, d) m, the collision mesh's vertices: the surfaces (the fruit's, the
+        soft bodies') of ``positions`` (n, d) and the faces' corners (default: where
+        they are at the end of this step)."""
         ends = self._obstacles_end if obstacles is None else obstacles
         return np.asfortranarray(np.vstack([positions[self.vertex_nodes], ends]))
 
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
-        """Set up a step of ``dt`` (s) from positions ``x_n`` (n, 2) m with the faces moving
+        """Set up a step of ``dt`` (s) from positions ``x_n`` (n, d) m with the faces moving
         from ``old_faces`` to ``new_faces``: the lagged friction of the start state."""
-        old, new = face_segments(old_faces), face_segments(new_faces)
+        old = face_corners(old_faces, self.dimension)
+        new = face_corners(new_faces, self.dimension)
+        if self._rest is None:
+            # the mollifier of nearly parallel edges (3D) scales with their rest lengths
+            self._rest = x_n[self.vertex_nodes].copy()
         if self._mesh is None or self._n_faces != len(new_faces):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
@@ -229,9 +289,11 @@ class BarrierContact(Energy):
         body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
         body_mu_k = np.array([0.0] + [b.kinetic_friction for b in self.bodies])
         mu_s = np.concatenate([body_mu_s[self.vertex_body],
-                               np.repeat([f.static_friction for f in new_faces], 2)])
+                               np.repeat([f.static_friction for f in new_faces],
+                                         self.corners_per_face)])
         mu_k = np.concatenate([body_mu_k[self.vertex_body],
-                               np.repeat([f.kinetic_friction for f in new_faces], 2)])
+                               np.repeat([f.kinetic_friction for f in new_faces],
+                                         self.corners_per_face)])
         self._tangential = ipctk.TangentialCollisions()
         if len(collisions):
             self._tangential.build(self._mesh, start, collisions, self.potential, mu_s, mu_k,
@@ -240,11 +302,11 @@ class BarrierContact(Energy):
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
                friction: bool = True):
-        """Barrier plus lagged friction (if ``friction``) at positions ``q`` (2 n,) m: adds
+        """Barrier plus lagged friction (if ``friction``) at positions ``q`` (d n,) m: adds
         the gradient (N) into ``gradient``; returns (value J, Hessian values N/m on the
         pattern's sorted keys, or None)."""
         mesh = self._mesh
-        v = self.vertices(q.reshape(-1, 2))
+        v = self.vertices(q.reshape(-1, self.dimension))
         collisions = ipctk.NormalCollisions()
         collisions.build(mesh, v, self.settings.dhat)
         parts = []
@@ -279,7 +341,7 @@ class BarrierContact(Energy):
         return float(value), vals
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        """Barrier plus lagged friction at fruit positions ``q`` (2 n,) m."""
+        """Barrier plus lagged friction at fruit positions ``q`` (d n,) m."""
         gradient = np.zeros(self.n_dof)
         value, vals = self._terms(q, gradient, hessian)
         if vals is None:
@@ -303,15 +365,16 @@ class BarrierContact(Energy):
         return value, []
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
-        """The largest fraction (0, 1] of the step ``dq`` (2 n,) m from ``q`` along which no
-        outline vertex crosses a face and no face end crosses the outline (CCD)."""
-        v0 = self.vertices(q.reshape(-1, 2))
-        v1 = self.vertices((q + dq).reshape(-1, 2))
+        """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
+        primitive of the surface crosses a face's and no face's crosses the surface's
+        (CCD)."""
+        v0 = self.vertices(q.reshape(-1, self.dimension))
+        v1 = self.vertices((q + dq).reshape(-1, self.dimension))
         return float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1))
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
-        """(n, 2) m, positions to start the step's Newton solve from: ``x_n``, with the
+        """(n, d) m, positions to start the step's Newton solve from: ``x_n``, with the
         outline nodes that a moving face would come closer than dhat / 2 to moved ahead
         of it (and along with it if they touch it). None if even that start is not
         reached without a crossing (the caller halves the step)."""
@@ -329,12 +392,12 @@ class BarrierContact(Energy):
             front = gap >= 0
             touching = front & (gap < dhat)
             start[nodes[front]] += push[front, None] * old.normal
-            start[nodes[touching]] += float(shift @ old.tangent) * old.tangent
+            start[nodes[touching]] += shift - advance * old.normal
         return start if self.reachable(x_n, start) else None
 
     def reachable(self, x_n: np.ndarray, start: np.ndarray) -> bool:
         """Whether the straight paths from ``x_n`` (the faces at the start of the step) to
-        ``start`` (the faces at its end), both (n, 2) m, cross nothing and end apart."""
+        ``start`` (the faces at its end), both (n, d) m, cross nothing and end apart."""
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
         exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
@@ -343,21 +406,21 @@ class BarrierContact(Energy):
 
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
-        """(n, 2) N, the faces' force on each node at ``q`` (2 n,) m: barrier + friction."""
+        """(n, d) N, the faces' force on each node at ``q`` (d n,) m: barrier + friction."""
         gradient = np.zeros(self.n_dof)
         self._terms(q, gradient, hessian=False)
-        return -gradient.reshape(-1, 2)
+        return -gradient.reshape(-1, self.dimension)
 
     def normal_forces(self, q: np.ndarray) -> np.ndarray:
-        """(n, 2) N, the barrier's (normal) part of ``contact_forces``, no friction."""
+        """(n, d) N, the barrier's (normal) part of ``contact_forces``, no friction."""
         gradient = np.zeros(self.n_dof)
         self._terms(q, gradient, hessian=False, friction=False)
-        return -gradient.reshape(-1, 2)
+        return -gradient.reshape(-1, self.dimension)
 
     def partners(self, q: np.ndarray) -> np.ndarray:
         """(n,) int, for every node of an outline the body its nearest pair within dhat
         at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
-        soft bodies); -1 for the nodes in no pair."""
+        soft bodies); -1 for the nodes in no pair. 2D."""
         v = self.vertices(q.reshape(-1, 2))
         collisions = ipctk.NormalCollisions()
         collisions.build(self._mesh, v, self.settings.dhat)
@@ -365,7 +428,7 @@ class BarrierContact(Energy):
         n_b = len(self.bodies)
         # the body of every collision-mesh vertex: outlines, then the faces' end points
         owner = np.concatenate([self.vertex_body,
-                                1 + n_b + np.arange(v.shape[0] - n_v) // 2])
+                                1 + n_b + np.arange(v.shape[0] - n_v) // self.corners_per_face])
         edges = self._mesh.edges
         partner = -np.ones(self.n_dof // 2, np.int64)
         best = np.full(self.n_dof // 2, np.inf)
@@ -382,17 +445,12 @@ class BarrierContact(Energy):
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
         """(n,) the face (index) each node with a contact force touches (its nearest face
-        within dhat), -1 for the others."""
+        within dhat), -1 for the others; positions ``x`` and ``forces`` (n, d)."""
         holder = -np.ones(x.shape[0], np.int64)
         best = np.full(x.shape[0], np.inf)
         loaded = np.flatnonzero(np.any(forces != 0.0, axis=1))
-        ends = face_segments(faces)
-        for k in range(len(faces)):
-            a, b = ends[2 * k], ends[2 * k + 1]
-            dist = np.array([ipctk.point_edge_distance(x[i], a, b) for i in loaded])
-            if not dist.size:
-                continue
-            dist = np.sqrt(dist)
+        for k, face in enumerate(faces):
+            dist = face_distances(face, x[loaded])
             closer = (dist < self.settings.dhat) & (dist < best[loaded])
             holder[loaded[closer]] = k
             best[loaded[closer]] = dist[closer]
@@ -401,7 +459,7 @@ class BarrierContact(Energy):
     @staticmethod
     def touching_faces(faces, x: np.ndarray, holder: np.ndarray) -> list:
         """The faces moved out along their normals to the mean gap of the nodes they hold
-        (``holder`` (n,), positions ``x`` (n, 2) m): the surfaces the outline lies on, for
+        (``holder`` (n,), positions ``x`` (n, d) m): the surfaces the outline lies on, for
         the measures that read gaps from a face (the contact length's edges)."""
         moved = []
         for k, face in enumerate(faces):
@@ -413,7 +471,7 @@ class BarrierContact(Energy):
         return moved
 
     def min_distance(self, x: np.ndarray) -> float:
-        """m, the smallest distance between the outline and a face at positions (n, 2)
+        """m, the smallest distance between the surface and a face at positions (n, d)
         (inf when none is within dhat)."""
         v = self.vertices(x)
         collisions = ipctk.NormalCollisions()
@@ -440,18 +498,18 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, old_faces: list, new_faces:
 
 def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                  old_faces: list, new_faces: list, dt: float) -> StepOutcome:
-    """One implicit step of ``dt`` (s) from (x_n, v_n) (n, 2) with the barrier model: one
+    """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) with the barrier model: one
     Newton solve of the incremental potential with the barrier among its energies (the
     solver holds ``barrier``), no contact passes.
 
     Raises:
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
-    n = x_n.shape[0]
+    n, d = x_n.shape
     start = _begin(barrier, x_n, old_faces, new_faces, dt)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(),
-                            StepConstraints.free(n, dim=2))
-    x = solution.q.reshape(-1, 2)
+                            StepConstraints.free(n, dim=d))
+    x = solution.q.reshape(-1, d)
     forces = barrier.contact_forces(solution.q)
     contacts = cm.ContactState.empty(n)
     contacts.obstacle = barrier.holders(x, new_faces, forces)
@@ -460,7 +518,7 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
         face = new_faces[k]
         nodes = np.flatnonzero(contacts.obstacle == k)
         contacts.normal_force[nodes] = forces[nodes] @ face.normal
-        slip = np.abs((v[nodes] - face.velocity) @ face.tangent)
+        slip = np.linalg.norm((v[nodes] - face.velocity) @ face.tangents.T, axis=1)
         contacts.mode[nodes] = np.where(slip < barrier.settings.friction_smoothing, cm.STICK,
                                         cm.SLIP)
     return StepOutcome(x, v, forces, contacts, solution.iterations)

@@ -46,6 +46,11 @@ class FlatFace:
         dimension-generic contact code reads ``tangents`` (d - 1, d))."""
         return np.array([[-self.normal[1], self.normal[0]]])
 
+    @property
+    def half_extents(self) -> np.ndarray:
+        """(1,) m, the half length as the half-extents along ``tangents`` (as a 3D plate's)."""
+        return np.array([self.half_length])
+
     def may_touch(self, low: np.ndarray, high: np.ndarray) -> bool:
         """Broad phase: can any point of the box [low, high] (2,) be inside the face?"""
         corners = np.array([[low[0], low[1]], [low[0], high[1]], [high[0], low[1]],

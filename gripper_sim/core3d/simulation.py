@@ -29,7 +29,8 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from gripper_sim.configuration import validate
-from gripper_sim.core.barrier import check_supported
+from gripper_sim.core.barrier import (START_GAP_FRACTION, BarrierContact, BarrierSettings,
+                                      check_supported)
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core.gripper import GripperKinematics
@@ -111,6 +112,13 @@ class Simulation3D(SimulationFacade):
         c = self.config
         self._place_fruit()
         self.gravity = Gravity(self.fruit.masses, c['world.gravity'], dim=3)
+        if c['contact.model'] == 'ipc':
+            self._barrier = BarrierContact(
+                self.fruit.n_nodes, self.fruit.surface, self.fruit.skin_edges,
+                BarrierSettings.from_config(c), dimension=3, triangles=self.fruit.triangles)
+            if c['fruit.initial_height'] is None and c['world.table']:
+                # a barrier needs a positive gap: the fruit starts just above the table
+                self.initial_positions[:, 2] += START_GAP_FRACTION * c['contact.ipc.dhat']
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
@@ -195,6 +203,8 @@ class Simulation3D(SimulationFacade):
         areas = meshes.vertex_areas(x, fruit.triangles, fruit.n_nodes)
         jaw_areas = (float(areas[on_left].sum()), float(areas[on_right].sum()))
         faces = self._faces(self._grip)
+        if self._barrier is not None:  # the surface lies a barrier gap off the faces
+            faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
         radii = tuple(self._patch_radius(x, faces[side], held, area) if self._plain_jaws
                       else math.sqrt(area / math.pi)
                       for side, held, area in ((LEFT, on_left, jaw_areas[0]),

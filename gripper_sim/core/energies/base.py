@@ -62,12 +62,11 @@ class Energy:
         return dense
 
 
-def element_dofs(nodes: np.ndarray) -> np.ndarray:
-    """(n_elem, k) node indices to (n_elem, 2k) dof indices [x, z] per node."""
-    dofs = np.empty((nodes.shape[0], 2 * nodes.shape[1]), dtype=np.int64)
-    dofs[:, 0::2] = 2 * nodes
-    dofs[:, 1::2] = 2 * nodes + 1
-    return dofs
+def element_dofs(nodes: np.ndarray, dim: int = 2) -> np.ndarray:
+    """(n_elem, k) node indices to (n_elem, dim k) dof indices, [x, z] (dim 2) or
+    [x, y, z] (dim 3) per node."""
+    nodes = np.asarray(nodes, dtype=np.int64)
+    return (dim * nodes[:, :, None] + np.arange(dim)).reshape(nodes.shape[0], -1)
 
 
 def scatter_gradient(n_dof: int, dofs: np.ndarray, local: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import Energy, Evaluation
+from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 
 _NO_VALUES = np.zeros(1)
 _NO_SCATTER = np.zeros((0, 0), np.int64)
@@ -20,8 +20,7 @@ _NO_SCATTER = np.zeros((0, 0), np.int64)
 
 def element_dofs3(nodes: np.ndarray) -> np.ndarray:
     """(n_elem, k) node indices to (n_elem, 3k) dof indices [x, y, z] per node."""
-    nodes = np.asarray(nodes, dtype=np.int64)
-    return (3 * nodes[:, :, None] + np.arange(3)[None, None, :]).reshape(len(nodes), -1)
+    return element_dofs(nodes, 3)
 
 
 class KernelEnergy(Energy):
