@@ -421,27 +421,30 @@ class FastPath:
         half = 0.5 * grip.gap
         positions = x.copy()
         damage = self._damage(positions, normal, holder, ratio, damage_of_x)
-        result = _build(StepResult, dict(
+        def wrenches_and_energies():
+            return dict(
+                left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
+                                                   torque=np.array([0.0, lty, 0.0]))),
+                right_wrench=_build(JawWrench, dict(force=np.array([rfx, 0.0, rfz]),
+                                                    torque=np.array([0.0, rty, 0.0]))),
+                energies=_build(Energies, dict(kinetic=kinetic, elastic=elastic,
+                                               gravitational=gravitational)))
+
+        result = _build_deferred(StepResult, dict(
             time=sim._time, step=sim._step, positions=positions, velocities=v.copy(),
             contact_forces=forces.copy(), contact_obstacle=holder,
             contact_sticking=contacts.mode == cm.STICK,
             obstacle_names=self._names(), surface=fruit.surface,
-            left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
-                                               torque=np.array([0.0, lty, 0.0]))),
-            right_wrench=_build(JawWrench, dict(force=np.array([rfx, 0.0, rfz]),
-                                                torque=np.array([0.0, rty, 0.0]))),
             left_jaw_x=grip.x - half, right_jaw_x=grip.x + half,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
             slipping=slipping, centroid=np.array([cx, cz]),
-            energies=_build(Energies, dict(kinetic=kinetic, elastic=elastic,
-                                           gravitational=gravitational)),
             deformation=_build(Deformation, dict(
                 compression=compression, compression_ratio=ratio, max_skin_strain=max_strain,
                 contact_length=contact_length, peak_contact_pressure=peak,
                 node_pressure=pressure)),
             newton_iterations=iterations, substeps=substeps, damage=damage,
-            gripper_x=grip.x, gripper_x_velocity=grip.x_rate))
+            gripper_x=grip.x, gripper_x_velocity=grip.x_rate), wrenches_and_energies)
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
@@ -519,10 +522,14 @@ class FastPath:
                 self._damage_rest, tracker.bruise_pressure, tracker.rigid_modulus,
                 tracker.pad_modulus, covered, node_pressure, table)
         tracker.covered = covered
-        patches = tuple(
-            _build(Contact, dict(body=int(b), load=load, centre=np.array([cx, cz]), radius=a,
-                                 peak_pressure=p0, equivalent_radius=re, modulus=modulus))
-            for b, load, cx, cz, a, p0, re, modulus in table[:count].tolist())
+
+        def patches():
+            return dict(contacts=tuple(
+                _build(Contact, dict(body=int(b), load=load, centre=np.array([cx, cz]),
+                                     radius=a, peak_pressure=p0, equivalent_radius=re,
+                                     modulus=modulus))
+                for b, load, cx, cz, a, p0, re, modulus in table[:count].tolist()))
+
         # the rest of DamageTracker.update (with the solid's von Mises stress)
         flesh = sim.fruit.flesh
         flesh_stress = (0.0 if flesh is None
@@ -535,12 +542,12 @@ class FastPath:
         if tracker.failure_strain is not None and ratio > tracker.failure_strain:
             tracker.crushed = True
         perimeter = tracker.perimeter
-        return _build(Damage, dict(
+        return _build_deferred(Damage, dict(
             bruised=tracker.peak_pressure > tracker.bruise_pressure, bruised_length=length,
             bruised_fraction=length / perimeter if perimeter > 0 else 0.0, pressure=pressure,
             peak_pressure=tracker.peak_pressure, flesh_stress=stress,
             peak_flesh_stress=tracker.peak_flesh_stress, crushed=tracker.crushed,
-            node_pressure=node_pressure, contacts=patches))
+            node_pressure=node_pressure), patches)
 
     def _measure_kernel(self, forces: np.ndarray, holder: np.ndarray):
         """``step_measures`` of the present state with contact forces (n, 2) N and the
@@ -602,3 +609,61 @@ _BUILDERS = {cls: _frozen_builder(cls) for cls in (StepResult, JawWrench, Energi
 
 def _build(cls, fields: dict):
     return _BUILDERS[cls](fields)
+
+
+class _Deferred:
+    """A field of a ``_deferred_class`` instance, filled on first read: the instance's
+    ``_fill()`` gives every deferred field at once; they then live in its ``__dict__``
+    (which this non-data descriptor yields to)."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        state = obj.__dict__
+        state.update(state.pop('_fill')())
+        return state[self.name]
+
+
+def _plain(cls, fields: dict):
+    """The ``cls`` instance of ``fields`` (what a deferred instance pickles and copies to)."""
+    return _build(cls, fields)
+
+
+def _deferred_class(cls, names: tuple[str, ...]):
+    """A subclass of the frozen dataclass ``cls`` whose fields ``names`` are built only when
+    read (nobody may read a step's wrenches or contact patches). It compares, prints,
+    pickles and copies as ``cls`` (pickles and copies become plain ``cls`` instances)."""
+    fields = [f.name for f in dataclasses.fields(cls)]
+
+    def as_plain(self):
+        return _plain, (cls, {name: getattr(self, name) for name in fields})
+
+    def __eq__(self, other):
+        if not isinstance(other, cls):
+            return NotImplemented
+        return (tuple(getattr(self, name) for name in fields)
+                == tuple(getattr(other, name) for name in fields))
+
+    namespace = {name: _Deferred(name) for name in names}
+    namespace.update(__reduce__=as_plain, __eq__=__eq__, __hash__=cls.__hash__,
+                     __qualname__=cls.__qualname__, __module__=cls.__module__,
+                     __doc__=cls.__doc__)
+    return type(cls.__name__, (cls,), namespace)
+
+
+#: StepResult and Damage with the parts observers rarely read built on first read
+_DEFERRED = {StepResult: _deferred_class(StepResult, ('left_wrench', 'right_wrench',
+                                                      'energies')),
+             Damage: _deferred_class(Damage, ('contacts',))}
+
+
+def _build_deferred(cls, fields: dict, fill):
+    """A ``cls`` instance of ``fields`` (a fresh dict given away) whose deferred fields
+    (``_DEFERRED``) ``fill()`` gives, as a dict, when first read."""
+    obj = object.__new__(_DEFERRED[cls])
+    fields['_fill'] = fill
+    object.__setattr__(obj, '__dict__', fields)
+    return obj

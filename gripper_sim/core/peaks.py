@@ -49,6 +49,10 @@ def damage_site(result: StepResult) -> str | None:
     return 'jaws' if on_jaw[node] else 'table' if on_table[node] else None
 
 
+#: (result, its contact_pressures): the last one computed (a run's observers all ask)
+_last_pressures: tuple = (None, (0.0, 0.0))
+
+
 def contact_pressures(result: StepResult) -> tuple[float, float]:
     """(jaw pressure, table pressure) in Pa: the largest contact pressure at a surface
     node held by a jaw (by any face of it), and at one resting on the table.
@@ -57,12 +61,19 @@ def contact_pressures(result: StepResult) -> tuple[float, float]:
     tributary length times the depth, a planar line contact; 3D: over the vertex area,
     resolved over the patch).
     """
+    global _last_pressures
+    last = _last_pressures
+    if last[0] is result:
+        return last[1]
     pressure = np.asarray(result.deformation.node_pressure)
     if not pressure.size:
-        return 0.0, 0.0
-    on_jaw, on_table = _sites(result)
-    return (float(pressure[on_jaw].max(initial=0.0)),
-            float(pressure[on_table].max(initial=0.0)))
+        pressures = 0.0, 0.0
+    else:
+        on_jaw, on_table = _sites(result)
+        pressures = (float(pressure[on_jaw].max(initial=0.0)),
+                     float(pressure[on_table].max(initial=0.0)))
+    _last_pressures = (result, pressures)
+    return pressures
 
 
 class RunPeaks:

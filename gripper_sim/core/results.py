@@ -164,6 +164,6 @@ class StepResult:
         """Whether any node touches the obstacle called ``name`` (or one of its faces,
         named ``name.part``, e.g. ``left_jaw.upper`` of a V-groove finger)."""
         if name in self.obstacle_names:
-            return bool(np.any(self.contact_obstacle == self.obstacle_names.index(name)))
+            return bool(self.obstacle_names.index(name) in self.contact_obstacle)
         parts = [i for i, n in enumerate(self.obstacle_names) if n.startswith(name + '.')]
         return bool(parts) and bool(np.any(np.isin(self.contact_obstacle, parts)))
