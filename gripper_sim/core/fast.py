@@ -4,7 +4,8 @@ V-groove fingers (one face or several per jaw), with or without soft pads.
 ``FastPath`` runs a whole step - gripper faces, contact constraints, Newton, contact
 set updates, then the step's measures and damage of the end state - in one numba
 kernel call (``gripper_sim.core.kernels.substep``), and builds the StepResult from its
-numbers, instead of the generic numpy/scipy path (per-energy triplets, sparse LU,
+numbers (the parts observers rarely read - jaw wrenches, energies, damage contact
+patches - on first read), instead of the generic numpy/scipy path (per-energy triplets, sparse LU,
 numpy measures). It gives the same results as that reference path
 (test/test_fast_path.py: trajectories within 1e-9, same contact sets and Newton
 iterations) and is chosen automatically by ``Simulation`` when numba is installed, the
