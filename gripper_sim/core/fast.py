@@ -4,9 +4,9 @@ V-groove fingers (one face or several per jaw), with or without soft pads.
 ``FastPath`` runs a whole step - gripper faces, contact constraints, Newton, contact
 set updates, then the step's measures and damage of the end state - in one numba
 kernel call (``gripper_sim.core.kernels.substep``), and builds the StepResult from its
-numbers (the parts observers rarely read - jaw wrenches, energies, damage contact
-patches - on first read), instead of the generic numpy/scipy path (per-energy triplets, sparse LU,
-numpy measures). It gives the same results as that reference path
+numbers (the parts observers rarely read - slipping, centroid, jaw wrenches, energies,
+damage contact patches - on first read), instead of the generic numpy/scipy path
+(per-energy triplets, sparse LU, numpy measures). It gives the same results as that reference path
 (test/test_fast_path.py: trajectories within 1e-9, same contact sets and Newton
 iterations) and is chosen automatically by ``Simulation`` when numba is installed, the
 contact model is the default one, the fruit's energies are the ring energies
@@ -415,15 +415,19 @@ class FastPath:
         if not sim._plain_jaws:  # shaped fingers: each jaw's force along the closing axis
             left_n, right_n = -lfx, rfx
         both = any_left > 0 and any_right > 0
-        slip = sim._slip_distance(cz - grip.lift, both, any_left > 0 or any_right > 0)
-        slipping = (any_left > 0 or any_right > 0) and self._sliding(v, holder)
+        touching = any_left > 0 or any_right > 0
+        slip = sim._slip_distance(cz - grip.lift, both, touching)
+        face_par = self._face_arrays()[0]
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
         positions = x.copy()
         damage = self._damage(positions, normal, holder, ratio, damage_of_x)
-        def wrenches_and_energies():
+
+        def rarely_read():
             return dict(
+                slipping=touching and self._sliding(v, holder, grip, face_par),
+                centroid=np.array([cx, cz]),
                 left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
                                                    torque=np.array([0.0, lty, 0.0]))),
                 right_wrench=_build(JawWrench, dict(force=np.array([rfx, 0.0, rfz]),
@@ -439,22 +443,21 @@ class FastPath:
             left_jaw_x=grip.x - half, right_jaw_x=grip.x + half,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
-            slipping=slipping, centroid=np.array([cx, cz]),
             deformation=_build(Deformation, dict(
                 compression=compression, compression_ratio=ratio, max_skin_strain=max_strain,
                 contact_length=contact_length, peak_contact_pressure=peak,
                 node_pressure=pressure)),
             newton_iterations=iterations, substeps=substeps, damage=damage,
-            gripper_x=grip.x, gripper_x_velocity=grip.x_rate), wrenches_and_energies)
+            gripper_x=grip.x, gripper_x_velocity=grip.x_rate), rarely_read)
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
 
-    def _sliding(self, v: np.ndarray, obstacle: np.ndarray) -> bool:
-        """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) on the kernels' faces:
-        0 and 1 the jaws, moving with the gripper."""
-        grip = self.sim._grip
-        face_par, _ = self._face_arrays()
+    def _sliding(self, v: np.ndarray, obstacle: np.ndarray, grip,
+                 face_par: np.ndarray) -> bool:
+        """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) on the kernels' faces
+        ``face_par`` with the gripper state ``grip``: 0 and 1 the jaws, moving with the
+        gripper."""
         half = 0.5 * grip.gap_rate
         jaw_velocities = np.array([[grip.x_rate - half, grip.lift_rate],
                                    [grip.x_rate + half, grip.lift_rate]])
@@ -656,8 +659,8 @@ def _deferred_class(cls, names: tuple[str, ...]):
 
 
 #: StepResult and Damage with the parts observers rarely read built on first read
-_DEFERRED = {StepResult: _deferred_class(StepResult, ('left_wrench', 'right_wrench',
-                                                      'energies')),
+_DEFERRED = {StepResult: _deferred_class(StepResult, ('slipping', 'centroid', 'left_wrench',
+                                                      'right_wrench', 'energies')),
              Damage: _deferred_class(Damage, ('contacts',))}
 
 
