@@ -303,13 +303,13 @@ class BarrierContact(Energy):
     def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
                friction: bool = True):
         """Barrier plus lagged friction (if ``friction``) at positions ``q`` (d n,) m: adds
-        the gradient (N) into ``gradient``; returns (value J, Hessian values N/m on the
-        pattern's sorted keys, or None)."""
+        the gradient (N) into ``gradient``; returns (value J, the Hessian's entries as
+        ``_pattern_entries`` gives them, or None)."""
         mesh = self._mesh
         v = self.vertices(q.reshape(-1, self.dimension))
         collisions = ipctk.NormalCollisions()
         collisions.build(mesh, v, self.settings.dhat)
-        parts = []
+        parts, scales = [], []  # the Hessians (scipy CSC) and their factors
         value = 0.0
         n_d = self.vertex_dofs.size
         if len(collisions):
@@ -319,6 +319,7 @@ class BarrierContact(Energy):
             gradient[self.vertex_dofs] += self.potential.gradient(collisions, mesh, v)[:n_d]
             if hessian:
                 parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
+                scales.append(1.0)
         if friction and len(self._tangential):
             velocity = np.asfortranarray((v - self._start) / self._dt)
             value += self._dt * self.friction(self._tangential, mesh, velocity)
@@ -326,26 +327,42 @@ class BarrierContact(Energy):
                 self._tangential, mesh, velocity)[:n_d]
             if hessian:
                 parts.append(self.friction.hessian(self._tangential, mesh, velocity,
-                                                   self.projection) / self._dt)
+                                                   self.projection))
+                scales.append(1.0 / self._dt)
         if not hessian:
             return float(value), None
-        blocks = [matrix.tocsc()[:n_d, :n_d].tocoo() for matrix in parts]
-        keys = [self.vertex_dofs[b.col] * self.n_dof + self.vertex_dofs[b.row] for b in blocks]
-        vals = np.zeros(self._pattern_keys.size)
-        for block, key in zip(blocks, keys):
-            where = np.minimum(np.searchsorted(self._pattern_keys, key),
-                               self._pattern_keys.size - 1)
-            if not np.array_equal(self._pattern_keys[where], key):
+        return float(value), self._pattern_entries(parts, scales)
+
+    def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
+        """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
+        dofs, each times its ``scales`` factor) on the deformable vertices: (their indices
+        in the pattern's sorted keys, their values N/m), duplicates not summed."""
+        n_d = self.vertex_dofs.size
+        last = self._pattern_keys.size - 1
+        where, vals = [], []
+        for matrix, scale in zip(parts, scales):
+            end = matrix.indptr[n_d]
+            rows = matrix.indices[:end]
+            cols = np.repeat(np.arange(n_d), np.diff(matrix.indptr[:n_d + 1]))
+            inside = rows < n_d
+            keys = self.vertex_dofs[cols[inside]] * self.n_dof + self.vertex_dofs[rows[inside]]
+            index = np.minimum(np.searchsorted(self._pattern_keys, keys), last)
+            if not np.array_equal(self._pattern_keys[index], keys):
                 raise AssertionError('barrier Hessian entry outside its pattern')
-            np.add.at(vals, where, block.data)
-        return float(value), vals
+            where.append(index)
+            vals.append(scale * matrix.data[:end][inside])
+        if not where:
+            return np.zeros(0, np.int64), np.zeros(0)
+        return np.concatenate(where), np.concatenate(vals)
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         """Barrier plus lagged friction at fruit positions ``q`` (d n,) m."""
         gradient = np.zeros(self.n_dof)
-        value, vals = self._terms(q, gradient, hessian)
-        if vals is None:
+        value, entries = self._terms(q, gradient, hessian)
+        if entries is None:
             return Evaluation(value, gradient, *_no_triplets())
+        vals = np.zeros(self._pattern_keys.size)
+        np.add.at(vals, *entries)
         cols, rows = np.divmod(self._pattern_keys, self.n_dof)
         return Evaluation(value, gradient, rows, cols, vals)
 
@@ -354,14 +371,15 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
-        value, vals = self._terms(q, grad, hessian)
-        if vals is not None:
+        value, entries = self._terms(q, grad, hessian)
+        if entries is not None:
             if self._positions is None or self._positions[0] is not scatter:
                 m = self.dofs.shape[1]
                 keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
                 first = np.unique(keys.ravel(), return_index=True)[1]
                 self._positions = (scatter, scatter.ravel()[first])
-            np.add.at(data, self._positions[1], vals)
+            where, vals = entries
+            np.add.at(data, self._positions[1][where], vals)
         return value, []
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
