@@ -448,17 +448,27 @@ class BarrierContact(Energy):
         owner = np.concatenate([self.vertex_body,
                                 1 + n_b + np.arange(v.shape[0] - n_v) // self.corners_per_face])
         edges = self._mesh.edges
+        ev = np.array([(c.vertex_id, c.edge_id) for c in collisions.ev_collisions],
+                      np.int64).reshape(-1, 2)
+        vv = np.array([(c.vertex0_id, c.vertex1_id) for c in collisions.vv_collisions],
+                      np.int64).reshape(-1, 2)
+        vertex, ends = ev[:, 0], edges[ev[:, 1]].astype(np.int64)     # (p,), (p, 2)
+        gap = np.min(np.linalg.norm(v[ends] - v[vertex, None], axis=2), axis=1)
+        gap_vv = np.linalg.norm(v[vv[:, 1]] - v[vv[:, 0]], axis=1)
+        # each pair's (node, other side, distance) rows, in the order of the pairs: the
+        # vertex against each end, each end against the vertex; the vv pair both ways
+        a = np.concatenate([np.stack([vertex, vertex, ends[:, 0], ends[:, 1]], 1).ravel(),
+                            vv.ravel()])
+        b = np.concatenate([np.stack([ends[:, 0], ends[:, 1], vertex, vertex], 1).ravel(),
+                            vv[:, ::-1].ravel()])
+        distance = np.concatenate([np.repeat(gap, 4), np.repeat(gap_vv, 2)])
+        keep = a < n_v
+        a, b, distance = self.vertex_nodes[a[keep]], owner[b[keep]], distance[keep]
+        # per node its nearest pair (the first of equally near ones)
+        order = np.lexsort((np.arange(a.size), distance, a))
+        first = order[np.r_[True, a[order][1:] != a[order][:-1]]] if a.size else order
         partner = -np.ones(self.n_dof // 2, np.int64)
-        best = np.full(self.n_dof // 2, np.inf)
-        pairs = [(c.vertex_id, edges[c.edge_id]) for c in collisions.ev_collisions]
-        pairs += [(c.vertex0_id, [c.vertex1_id]) for c in collisions.vv_collisions]
-        for vertex, others in pairs:
-            others = list(others)
-            distance = float(np.min(np.linalg.norm(v[others] - v[vertex], axis=1)))
-            for a, b in [(vertex, o) for o in others] + [(o, vertex) for o in others]:
-                if a < n_v and distance < best[self.vertex_nodes[a]]:
-                    partner[self.vertex_nodes[a]] = owner[b]
-                    best[self.vertex_nodes[a]] = distance
+        partner[a[first]] = b[first]
         return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
