@@ -57,6 +57,9 @@ START_GAP_FRACTION = 0.5
 #: the line search's CCD keeps ipctk's default, which stops short of 0.8 of the time of
 #: impact so that a Newton step never lands on a face)
 EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
+#: the candidates of a Newton step serve positions this fraction of dhat outside the box
+#: each vertex sweeps along it (round-off of q + s dq), their boxes inflated by as much
+SWEPT_MARGIN = 1e-2
 
 
 @dataclass(frozen=True)
@@ -207,6 +210,9 @@ class BarrierContact(Energy):
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()
         self._positions = None  # (scatter, CSC position of each pattern key)
+        #: the last Newton step's candidates: (lowest, highest (n_v, d) m corners of the
+        #: box each deformable vertex swept, ipctk.Candidates), see ``max_step``
+        self._swept = None
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -279,6 +285,7 @@ class BarrierContact(Energy):
         if self._mesh is None or self._n_faces != len(new_faces):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
+        self._swept = None
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
@@ -307,8 +314,7 @@ class BarrierContact(Energy):
         ``_pattern_entries`` gives them, or None)."""
         mesh = self._mesh
         v = self.vertices(q.reshape(-1, self.dimension))
-        collisions = ipctk.NormalCollisions()
-        collisions.build(mesh, v, self.settings.dhat)
+        collisions = self._collisions(v)
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
         value = 0.0
         n_d = self.vertex_dofs.size
@@ -385,10 +391,32 @@ class BarrierContact(Energy):
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
         primitive of the surface crosses a face's and no face's crosses the surface's
-        (CCD)."""
+        (CCD). Keeps the step's collision candidates for the line search along it."""
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices((q + dq).reshape(-1, self.dimension))
-        return float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1))
+        candidates = ipctk.Candidates()
+        candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        n_v = self.vertex_nodes.size
+        self._swept = (np.minimum(v0[:n_v], v1[:n_v]), np.maximum(v0[:n_v], v1[:n_v]),
+                       candidates)
+        return float(candidates.compute_collision_free_stepsize(self._mesh, v0, v1))
+
+    def _collisions(self, v: np.ndarray) -> ipctk.NormalCollisions:
+        """The pairs closer than dhat at the collision mesh's vertices ``v`` (``vertices``):
+        from the last Newton step's candidates when every deformable vertex lies in the
+        box it swept along that step (the faces stand still within a step), else from a
+        new broad phase. Boxes inflated by dhat / 2 each meet for every pair closer
+        than dhat, so the candidates hold every such pair."""
+        collisions = ipctk.NormalCollisions()
+        if self._swept is not None:
+            low, high, candidates = self._swept
+            slack = SWEPT_MARGIN * self.settings.dhat
+            inside = v[:low.shape[0]]
+            if np.all(inside >= low - slack) and np.all(inside <= high + slack):
+                collisions.build(candidates, self._mesh, v, self.settings.dhat)
+                return collisions
+        collisions.build(self._mesh, v, self.settings.dhat)
+        return collisions
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
@@ -440,8 +468,7 @@ class BarrierContact(Energy):
         at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
         soft bodies); -1 for the nodes in no pair. 2D."""
         v = self.vertices(q.reshape(-1, 2))
-        collisions = ipctk.NormalCollisions()
-        collisions.build(self._mesh, v, self.settings.dhat)
+        collisions = self._collisions(v)
         n_v = self.vertex_nodes.size
         n_b = len(self.bodies)
         # the body of every collision-mesh vertex: outlines, then the faces' end points
@@ -502,8 +529,7 @@ class BarrierContact(Energy):
         """m, the smallest distance between the surface and a face at positions (n, d)
         (inf when none is within dhat)."""
         v = self.vertices(x)
-        collisions = ipctk.NormalCollisions()
-        collisions.build(self._mesh, v, self.settings.dhat)
+        collisions = self._collisions(v)
         if not len(collisions):
             return np.inf
         return float(np.sqrt(collisions.compute_minimum_distance(self._mesh, v)))
