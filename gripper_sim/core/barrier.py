@@ -272,7 +272,11 @@ class BarrierContact(Energy):
         soft bodies') of ``positions`` (n, d) and the faces' corners (default: where
         they are at the end of this step)."""
         ends = self._obstacles_end if obstacles is None else obstacles
-        return np.asfortranarray(np.vstack([positions[self.vertex_nodes], ends]))
+        n_v = self.vertex_nodes.size
+        v = np.empty((n_v + ends.shape[0], self.dimension), order='F')
+        v[:n_v] = positions[self.vertex_nodes]
+        v[n_v:] = ends
+        return v
 
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set up a step of ``dt`` (s) from positions ``x_n`` (n, d) m with the faces moving
@@ -446,9 +450,12 @@ class BarrierContact(Energy):
         ``start`` (the faces at its end), both (n, d) m, cross nothing and end apart."""
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
-        exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
-                                                            narrow_phase_ccd=EXACT_CCD))
-        return exact >= 1.0 and self.min_distance(start) > 0.0
+        if not np.array_equal(v0, v1):  # nothing that stands still crosses anything
+            exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
+                                                                narrow_phase_ccd=EXACT_CCD))
+            if exact < 1.0:
+                return False
+        return self.min_distance(start) > 0.0
 
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
