@@ -213,6 +213,8 @@ class BarrierContact(Energy):
         #: the last Newton step's candidates: (lowest, highest (n_v, d) m corners of the
         #: box each deformable vertex swept, ipctk.Candidates), see ``max_step``
         self._swept = None
+        #: per Hessian part, its last CSC structure and ``_locate``'s answer for it
+        self._entry_cache = {}
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -348,22 +350,34 @@ class BarrierContact(Energy):
         dofs, each times its ``scales`` factor) on the deformable vertices: (their indices
         in the pattern's sorted keys, their values N/m), duplicates not summed."""
         n_d = self.vertex_dofs.size
-        last = self._pattern_keys.size - 1
         where, vals = [], []
-        for matrix, scale in zip(parts, scales):
+        for slot, (matrix, scale) in enumerate(zip(parts, scales)):
             end = matrix.indptr[n_d]
-            rows = matrix.indices[:end]
-            cols = np.repeat(np.arange(n_d), np.diff(matrix.indptr[:n_d + 1]))
-            inside = rows < n_d
-            keys = self.vertex_dofs[cols[inside]] * self.n_dof + self.vertex_dofs[rows[inside]]
-            index = np.minimum(np.searchsorted(self._pattern_keys, keys), last)
-            if not np.array_equal(self._pattern_keys[index], keys):
-                raise AssertionError('barrier Hessian entry outside its pattern')
-            where.append(index)
-            vals.append(scale * matrix.data[:end][inside])
+            indptr, rows = matrix.indptr[:n_d + 1], matrix.indices[:end]
+            kept = self._entry_cache.get(slot)
+            if kept is None or not (np.array_equal(kept[0], indptr)
+                                    and np.array_equal(kept[1], rows)):
+                kept = (indptr.copy(), rows.copy(), *self._locate(indptr, rows))
+                self._entry_cache[slot] = kept
+            where.append(kept[2])
+            vals.append(scale * matrix.data[:end][kept[3]])
         if not where:
             return np.zeros(0, np.int64), np.zeros(0)
         return np.concatenate(where), np.concatenate(vals)
+
+    def _locate(self, indptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For a Hessian's CSC structure over the deformable vertices' dofs (``indptr``
+        (n_d + 1,), row ``indices``): (the pattern's key index of each entry among the
+        deformable vertices, bool mask of those entries)."""
+        n_d = self.vertex_dofs.size
+        cols = np.repeat(np.arange(n_d), np.diff(indptr))
+        inside = rows < n_d
+        keys = self.vertex_dofs[cols[inside]] * self.n_dof + self.vertex_dofs[rows[inside]]
+        last = self._pattern_keys.size - 1
+        index = np.minimum(np.searchsorted(self._pattern_keys, keys), last)
+        if not np.array_equal(self._pattern_keys[index], keys):
+            raise AssertionError('barrier Hessian entry outside its pattern')
+        return index, inside
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         """Barrier plus lagged friction at fruit positions ``q`` (d n,) m."""
