@@ -57,6 +57,9 @@ START_GAP_FRACTION = 0.5
 #: the line search's CCD keeps ipctk's default, which stops short of 0.8 of the time of
 #: impact so that a Newton step never lands on a face)
 EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
+#: the candidates of a Newton step serve positions this fraction of dhat outside the box
+#: each vertex sweeps along it (round-off of q + s dq), their boxes inflated by as much
+SWEPT_MARGIN = 1e-2
 
 
 @dataclass(frozen=True)
@@ -207,6 +210,11 @@ class BarrierContact(Energy):
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()
         self._positions = None  # (scatter, CSC position of each pattern key)
+        #: the last Newton step's candidates: (lowest, highest (n_v, d) m corners of the
+        #: box each deformable vertex swept, ipctk.Candidates), see ``max_step``
+        self._swept = None
+        #: per Hessian part, its last CSC structure and ``_locate``'s answer for it
+        self._entry_cache = {}
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -266,7 +274,11 @@ class BarrierContact(Energy):
         soft bodies') of ``positions`` (n, d) and the faces' corners (default: where
         they are at the end of this step)."""
         ends = self._obstacles_end if obstacles is None else obstacles
-        return np.asfortranarray(np.vstack([positions[self.vertex_nodes], ends]))
+        n_v = self.vertex_nodes.size
+        v = np.empty((n_v + ends.shape[0], self.dimension), order='F')
+        v[:n_v] = positions[self.vertex_nodes]
+        v[n_v:] = ends
+        return v
 
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set up a step of ``dt`` (s) from positions ``x_n`` (n, d) m with the faces moving
@@ -279,6 +291,7 @@ class BarrierContact(Energy):
         if self._mesh is None or self._n_faces != len(new_faces):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
+        self._swept = None
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
@@ -303,13 +316,12 @@ class BarrierContact(Energy):
     def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
                friction: bool = True):
         """Barrier plus lagged friction (if ``friction``) at positions ``q`` (d n,) m: adds
-        the gradient (N) into ``gradient``; returns (value J, Hessian values N/m on the
-        pattern's sorted keys, or None)."""
+        the gradient (N) into ``gradient``; returns (value J, the Hessian's entries as
+        ``_pattern_entries`` gives them, or None)."""
         mesh = self._mesh
         v = self.vertices(q.reshape(-1, self.dimension))
-        collisions = ipctk.NormalCollisions()
-        collisions.build(mesh, v, self.settings.dhat)
-        parts = []
+        collisions = self._collisions(v)
+        parts, scales = [], []  # the Hessians (scipy CSC) and their factors
         value = 0.0
         n_d = self.vertex_dofs.size
         if len(collisions):
@@ -319,6 +331,7 @@ class BarrierContact(Energy):
             gradient[self.vertex_dofs] += self.potential.gradient(collisions, mesh, v)[:n_d]
             if hessian:
                 parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
+                scales.append(1.0)
         if friction and len(self._tangential):
             velocity = np.asfortranarray((v - self._start) / self._dt)
             value += self._dt * self.friction(self._tangential, mesh, velocity)
@@ -326,26 +339,54 @@ class BarrierContact(Energy):
                 self._tangential, mesh, velocity)[:n_d]
             if hessian:
                 parts.append(self.friction.hessian(self._tangential, mesh, velocity,
-                                                   self.projection) / self._dt)
+                                                   self.projection))
+                scales.append(1.0 / self._dt)
         if not hessian:
             return float(value), None
-        blocks = [matrix.tocsc()[:n_d, :n_d].tocoo() for matrix in parts]
-        keys = [self.vertex_dofs[b.col] * self.n_dof + self.vertex_dofs[b.row] for b in blocks]
-        vals = np.zeros(self._pattern_keys.size)
-        for block, key in zip(blocks, keys):
-            where = np.minimum(np.searchsorted(self._pattern_keys, key),
-                               self._pattern_keys.size - 1)
-            if not np.array_equal(self._pattern_keys[where], key):
-                raise AssertionError('barrier Hessian entry outside its pattern')
-            np.add.at(vals, where, block.data)
-        return float(value), vals
+        return float(value), self._pattern_entries(parts, scales)
+
+    def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
+        """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
+        dofs, each times its ``scales`` factor) on the deformable vertices: (their indices
+        in the pattern's sorted keys, their values N/m), duplicates not summed."""
+        n_d = self.vertex_dofs.size
+        where, vals = [], []
+        for slot, (matrix, scale) in enumerate(zip(parts, scales)):
+            end = matrix.indptr[n_d]
+            indptr, rows = matrix.indptr[:n_d + 1], matrix.indices[:end]
+            kept = self._entry_cache.get(slot)
+            if kept is None or not (np.array_equal(kept[0], indptr)
+                                    and np.array_equal(kept[1], rows)):
+                kept = (indptr.copy(), rows.copy(), *self._locate(indptr, rows))
+                self._entry_cache[slot] = kept
+            where.append(kept[2])
+            vals.append(scale * matrix.data[:end][kept[3]])
+        if not where:
+            return np.zeros(0, np.int64), np.zeros(0)
+        return np.concatenate(where), np.concatenate(vals)
+
+    def _locate(self, indptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For a Hessian's CSC structure over the deformable vertices' dofs (``indptr``
+        (n_d + 1,), row ``indices``): (the pattern's key index of each entry among the
+        deformable vertices, bool mask of those entries)."""
+        n_d = self.vertex_dofs.size
+        cols = np.repeat(np.arange(n_d), np.diff(indptr))
+        inside = rows < n_d
+        keys = self.vertex_dofs[cols[inside]] * self.n_dof + self.vertex_dofs[rows[inside]]
+        last = self._pattern_keys.size - 1
+        index = np.minimum(np.searchsorted(self._pattern_keys, keys), last)
+        if not np.array_equal(self._pattern_keys[index], keys):
+            raise AssertionError('barrier Hessian entry outside its pattern')
+        return index, inside
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         """Barrier plus lagged friction at fruit positions ``q`` (d n,) m."""
         gradient = np.zeros(self.n_dof)
-        value, vals = self._terms(q, gradient, hessian)
-        if vals is None:
+        value, entries = self._terms(q, gradient, hessian)
+        if entries is None:
             return Evaluation(value, gradient, *_no_triplets())
+        vals = np.zeros(self._pattern_keys.size)
+        np.add.at(vals, *entries)
         cols, rows = np.divmod(self._pattern_keys, self.n_dof)
         return Evaluation(value, gradient, rows, cols, vals)
 
@@ -354,23 +395,46 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
-        value, vals = self._terms(q, grad, hessian)
-        if vals is not None:
+        value, entries = self._terms(q, grad, hessian)
+        if entries is not None:
             if self._positions is None or self._positions[0] is not scatter:
                 m = self.dofs.shape[1]
                 keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
                 first = np.unique(keys.ravel(), return_index=True)[1]
                 self._positions = (scatter, scatter.ravel()[first])
-            np.add.at(data, self._positions[1], vals)
+            where, vals = entries
+            np.add.at(data, self._positions[1][where], vals)
         return value, []
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
         primitive of the surface crosses a face's and no face's crosses the surface's
-        (CCD)."""
+        (CCD). Keeps the step's collision candidates for the line search along it."""
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices((q + dq).reshape(-1, self.dimension))
-        return float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1))
+        candidates = ipctk.Candidates()
+        candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        n_v = self.vertex_nodes.size
+        self._swept = (np.minimum(v0[:n_v], v1[:n_v]), np.maximum(v0[:n_v], v1[:n_v]),
+                       candidates)
+        return float(candidates.compute_collision_free_stepsize(self._mesh, v0, v1))
+
+    def _collisions(self, v: np.ndarray) -> ipctk.NormalCollisions:
+        """The pairs closer than dhat at the collision mesh's vertices ``v`` (``vertices``):
+        from the last Newton step's candidates when every deformable vertex lies in the
+        box it swept along that step (the faces stand still within a step), else from a
+        new broad phase. Boxes inflated by dhat / 2 each meet for every pair closer
+        than dhat, so the candidates hold every such pair."""
+        collisions = ipctk.NormalCollisions()
+        if self._swept is not None:
+            low, high, candidates = self._swept
+            slack = SWEPT_MARGIN * self.settings.dhat
+            inside = v[:low.shape[0]]
+            if np.all(inside >= low - slack) and np.all(inside <= high + slack):
+                collisions.build(candidates, self._mesh, v, self.settings.dhat)
+                return collisions
+        collisions.build(self._mesh, v, self.settings.dhat)
+        return collisions
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
@@ -400,9 +464,12 @@ class BarrierContact(Energy):
         ``start`` (the faces at its end), both (n, d) m, cross nothing and end apart."""
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
-        exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
-                                                            narrow_phase_ccd=EXACT_CCD))
-        return exact >= 1.0 and self.min_distance(start) > 0.0
+        if not np.array_equal(v0, v1):  # nothing that stands still crosses anything
+            exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
+                                                                narrow_phase_ccd=EXACT_CCD))
+            if exact < 1.0:
+                return False
+        return self.min_distance(start) > 0.0
 
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
@@ -422,25 +489,34 @@ class BarrierContact(Energy):
         at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
         soft bodies); -1 for the nodes in no pair. 2D."""
         v = self.vertices(q.reshape(-1, 2))
-        collisions = ipctk.NormalCollisions()
-        collisions.build(self._mesh, v, self.settings.dhat)
+        collisions = self._collisions(v)
         n_v = self.vertex_nodes.size
         n_b = len(self.bodies)
         # the body of every collision-mesh vertex: outlines, then the faces' end points
         owner = np.concatenate([self.vertex_body,
                                 1 + n_b + np.arange(v.shape[0] - n_v) // self.corners_per_face])
         edges = self._mesh.edges
+        ev = np.array([(c.vertex_id, c.edge_id) for c in collisions.ev_collisions],
+                      np.int64).reshape(-1, 2)
+        vv = np.array([(c.vertex0_id, c.vertex1_id) for c in collisions.vv_collisions],
+                      np.int64).reshape(-1, 2)
+        vertex, ends = ev[:, 0], edges[ev[:, 1]].astype(np.int64)     # (p,), (p, 2)
+        gap = np.min(np.linalg.norm(v[ends] - v[vertex, None], axis=2), axis=1)
+        gap_vv = np.linalg.norm(v[vv[:, 1]] - v[vv[:, 0]], axis=1)
+        # each pair's (node, other side, distance) rows, in the order of the pairs: the
+        # vertex against each end, each end against the vertex; the vv pair both ways
+        a = np.concatenate([np.stack([vertex, vertex, ends[:, 0], ends[:, 1]], 1).ravel(),
+                            vv.ravel()])
+        b = np.concatenate([np.stack([ends[:, 0], ends[:, 1], vertex, vertex], 1).ravel(),
+                            vv[:, ::-1].ravel()])
+        distance = np.concatenate([np.repeat(gap, 4), np.repeat(gap_vv, 2)])
+        keep = a < n_v
+        a, b, distance = self.vertex_nodes[a[keep]], owner[b[keep]], distance[keep]
+        # per node its nearest pair (the first of equally near ones)
+        order = np.lexsort((np.arange(a.size), distance, a))
+        first = order[np.r_[True, a[order][1:] != a[order][:-1]]] if a.size else order
         partner = -np.ones(self.n_dof // 2, np.int64)
-        best = np.full(self.n_dof // 2, np.inf)
-        pairs = [(c.vertex_id, edges[c.edge_id]) for c in collisions.ev_collisions]
-        pairs += [(c.vertex0_id, [c.vertex1_id]) for c in collisions.vv_collisions]
-        for vertex, others in pairs:
-            others = list(others)
-            distance = float(np.min(np.linalg.norm(v[others] - v[vertex], axis=1)))
-            for a, b in [(vertex, o) for o in others] + [(o, vertex) for o in others]:
-                if a < n_v and distance < best[self.vertex_nodes[a]]:
-                    partner[self.vertex_nodes[a]] = owner[b]
-                    best[self.vertex_nodes[a]] = distance
+        partner[a[first]] = b[first]
         return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
@@ -474,8 +550,7 @@ class BarrierContact(Energy):
         """m, the smallest distance between the surface and a face at positions (n, d)
         (inf when none is within dhat)."""
         v = self.vertices(x)
-        collisions = ipctk.NormalCollisions()
-        collisions.build(self._mesh, v, self.settings.dhat)
+        collisions = self._collisions(v)
         if not len(collisions):
             return np.inf
         return float(np.sqrt(collisions.compute_minimum_distance(self._mesh, v)))
