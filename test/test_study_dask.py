@@ -48,6 +48,9 @@ CHILD = textwrap.dedent('''
     import gripper_sim.workflows.study_results as results
     from gripper_sim.cli.main import main
     results.FLUSH_ROWS = 1
+    # Ctrl-C as in a terminal, even where this test runs as a background job (whose
+    # children start with SIGINT ignored, so Python would not raise KeyboardInterrupt)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     action = os.environ.get('STUDY_HOOK', '')
     after = int(os.environ.get('STUDY_HOOK_ROWS', '0'))
     go = Path(os.environ.get('STUDY_HOOK_FILE', 'unused'))
