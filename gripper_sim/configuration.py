@@ -657,14 +657,20 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
         if key not in SCHEMA:
             raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
         user[key] = value
+    presets = dict(chosen)
     chosen.update(user)
     flat = flatten(defaults())
     if _coerce('dimension', chosen.get('dimension', flat['dimension'])) == 3:
         flat.update({key: spec.default_3d for key, spec in SCHEMA.items()
                      if spec.default_3d is not None})
+    baseline = {**flat, **presets}
     flat.update(chosen)
     config = validate(flat)
-    for message in no_effect_warnings(config, user, fruit_name):
+    # a key restated at the value it has anyway (a saved or recorded full configuration
+    # loaded again) is no choice of the user's: only changed keys are warned about
+    changed = {key: value for key, value in user.items()
+               if key not in baseline or config[key] != _coerce(key, baseline[key])}
+    for message in no_effect_warnings(config, changed, fruit_name):
         warnings.warn(message, ConfigWarning, stacklevel=2)
     return config
 

@@ -6,7 +6,7 @@ import warnings
 import pytest
 
 from gripper_sim.cli.main import main
-from gripper_sim.configuration import load_config, no_effect_reason
+from gripper_sim.configuration import load_config, no_effect_reason, to_yaml
 from gripper_sim.workflows.scenario import load_scenario, scenario_config
 from gripper_sim.errors import ConfigError, ConfigWarning
 
@@ -136,3 +136,15 @@ def test_a_bad_fruit_in_the_file_is_an_error(tmp_path):
     path = write(tmp_path, 'kiwi.yaml', 'fruit: kiwi\n')
     with pytest.raises(ConfigError, match="unknown fruit 'kiwi'"):
         load_config(config_file=path)
+
+
+def test_a_saved_configuration_loads_again_without_warnings(tmp_path):
+    """A full configuration written out (as ``to_yaml`` or a recording writes it) restates
+    every key at the value it has anyway: loading it back warns about nothing; a key
+    changed in it still warns."""
+    config = load_config()
+    path = write(tmp_path, 'saved.yaml', to_yaml(config))
+    no_warnings(config_file=path)
+    changed = write(tmp_path, 'changed.yaml', to_yaml({**config, 'contact.pad.friction': 0.6}))
+    with pytest.warns(ConfigWarning, match="'contact.pad.friction' has no effect"):
+        load_config(config_file=changed)
