@@ -557,7 +557,10 @@ def fruit_preset_path(name: str, base_dir: str | os.PathLike | None = None) -> P
 
 
 def validate(flat: Mapping[str, Any]) -> Parameters:
-    """Check every key is known and in range; returns the coerced flat mapping, frozen."""
+    """Check every key is known and in range; returns the coerced flat mapping, frozen
+    (a ``Parameters`` is returned as it is: it was validated when it was built)."""
+    if isinstance(flat, Parameters):
+        return flat
     result: dict[str, Any] = {}
     for key, value in flat.items():
         if key not in SCHEMA:

@@ -29,7 +29,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from gripper_sim.configuration import RUNTIME_KEYS, validate
+from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
 from gripper_sim.core.contact_passes import ContactSettings, contact_step

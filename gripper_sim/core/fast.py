@@ -142,8 +142,6 @@ def ring_model(fruit, energies) -> dict | None:
     nbw = 0
     for pair in pairs:
         if len(pair):
-            if pair.min() < 0 or pair.max() >= n:
-                return None
             nbw = max(nbw, int(np.max(np.abs(pos[pair[:, 0]] - pos[pair[:, 1]]))))
     if flesh is not None:
         nbw = max(nbw, 1)  # band[0, 1, 0, 0] takes the flesh's upper-side entries
