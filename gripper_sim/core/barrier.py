@@ -209,6 +209,16 @@ class BarrierContact(Energy):
         self._start = np.zeros((n_v, d))
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()
+        #: the broad phase of every candidate search (the meshes are small: sorting the
+        #: boxes along an axis beats the default hash grid 2-3x)
+        self._broad_phase = ipctk.SweepAndPrune()
+        #: the last collision set: (the vertices it was built at (n_v + c k, d) m, it)
+        self._last_collisions = None
+        #: the last potentials' evaluation: (q (d n,) m, value of the barrier J, of the
+        #: friction J, the barrier's gradient and the friction's (n_d,) N over
+        #: ``vertex_dofs``), for the outputs read at the solution (``contact_forces``,
+        #: ``normal_forces``)
+        self._last_terms = None
         self._positions = None  # (scatter, CSC position of each pattern key)
         #: the last Newton step's candidates: (lowest, highest (n_v, d) m corners of the
         #: box each deformable vertex swept, ipctk.Candidates), see ``max_step``
@@ -268,6 +278,7 @@ class BarrierContact(Energy):
                                   np.ones(c * k, np.int32)])
         self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
         self._n_faces = k
+        self._last_collisions = None
 
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
         """(n_v + c k, d) m, the collision mesh's vertices: the surfaces (the fruit's, the
@@ -292,11 +303,12 @@ class BarrierContact(Energy):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
         self._swept = None
+        self._last_terms = None
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
         collisions = ipctk.NormalCollisions()
-        collisions.build(self._mesh, start, self.settings.dhat)
+        collisions.build(self._mesh, start, self.settings.dhat, broad_phase=self._broad_phase)
         # per vertex; a pair takes the larger one: the face's or the soft body's, the
         # fruit's being 0
         body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
@@ -317,33 +329,49 @@ class BarrierContact(Energy):
                friction: bool = True):
         """Barrier plus lagged friction (if ``friction``) at positions ``q`` (d n,) m: adds
         the gradient (N) into ``gradient``; returns (value J, the Hessian's entries as
-        ``_pattern_entries`` gives them, or None)."""
-        mesh = self._mesh
-        v = self.vertices(q.reshape(-1, self.dimension))
-        collisions = self._collisions(v)
+        ``_pattern_entries`` gives them, or None). Without the Hessian, the values and
+        gradients of the last evaluation are reused when ``q`` is the same."""
+        last = self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
-        value = 0.0
-        n_d = self.vertex_dofs.size
-        if len(collisions):
-            value = self.potential(collisions, mesh, v)
-            if not np.isfinite(value):
-                return np.inf, None
-            gradient[self.vertex_dofs] += self.potential.gradient(collisions, mesh, v)[:n_d]
-            if hessian:
-                parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
-                scales.append(1.0)
-        if friction and len(self._tangential):
-            velocity = np.asfortranarray((v - self._start) / self._dt)
-            value += self._dt * self.friction(self._tangential, mesh, velocity)
-            gradient[self.vertex_dofs] += self.friction.gradient(
-                self._tangential, mesh, velocity)[:n_d]
-            if hessian:
-                parts.append(self.friction.hessian(self._tangential, mesh, velocity,
-                                                   self.projection))
-                scales.append(1.0 / self._dt)
+        if not hessian and last is not None and np.array_equal(last[0], q):
+            _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
+        else:
+            mesh = self._mesh
+            v = self.vertices(q.reshape(-1, self.dimension))
+            collisions = self._collisions(v)
+            n_d = self.vertex_dofs.size
+            barrier_value = friction_value = 0.0
+            barrier_gradient = friction_gradient = None
+            if len(collisions):
+                barrier_value = float(self.potential(collisions, mesh, v))
+                if not np.isfinite(barrier_value):
+                    return np.inf, None
+                barrier_gradient = self.potential.gradient(collisions, mesh, v)[:n_d]
+                if hessian:
+                    parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
+                    scales.append(1.0)
+            if len(self._tangential):
+                velocity = np.asfortranarray((v - self._start) / self._dt)
+                friction_value = self._dt * float(self.friction(self._tangential, mesh,
+                                                                velocity))
+                friction_gradient = self.friction.gradient(self._tangential, mesh,
+                                                           velocity)[:n_d]
+                if hessian and friction:
+                    parts.append(self.friction.hessian(self._tangential, mesh, velocity,
+                                                       self.projection))
+                    scales.append(1.0 / self._dt)
+            self._last_terms = (q.copy(), barrier_value, friction_value, barrier_gradient,
+                                friction_gradient)
+        value = barrier_value
+        if barrier_gradient is not None:
+            gradient[self.vertex_dofs] += barrier_gradient
+        if friction:
+            value += friction_value
+            if friction_gradient is not None:
+                gradient[self.vertex_dofs] += friction_gradient
         if not hessian:
-            return float(value), None
-        return float(value), self._pattern_entries(parts, scales)
+            return value, None
+        return value, self._pattern_entries(parts, scales)
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
         """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
@@ -413,7 +441,8 @@ class BarrierContact(Energy):
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices((q + dq).reshape(-1, self.dimension))
         candidates = ipctk.Candidates()
-        candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat,
+                         self._broad_phase)
         n_v = self.vertex_nodes.size
         self._swept = (np.minimum(v0[:n_v], v1[:n_v]), np.maximum(v0[:n_v], v1[:n_v]),
                        candidates)
@@ -424,24 +453,38 @@ class BarrierContact(Energy):
         from the last Newton step's candidates when every deformable vertex lies in the
         box it swept along that step (the faces stand still within a step), else from a
         new broad phase. Boxes inflated by dhat / 2 each meet for every pair closer
-        than dhat, so the candidates hold every such pair."""
+        than dhat, so the candidates hold every such pair. The set of the same ``v`` as
+        the last call is that call's."""
+        last = self._last_collisions
+        if last is not None and np.array_equal(last[0], v):
+            return last[1]
         collisions = ipctk.NormalCollisions()
-        if self._swept is not None:
-            low, high, candidates = self._swept
+        swept = self._swept
+        if swept is not None:
+            low, high, candidates = swept
             slack = SWEPT_MARGIN * self.settings.dhat
             inside = v[:low.shape[0]]
-            if np.all(inside >= low - slack) and np.all(inside <= high + slack):
-                collisions.build(candidates, self._mesh, v, self.settings.dhat)
-                return collisions
-        collisions.build(self._mesh, v, self.settings.dhat)
+            if not (np.all(inside >= low - slack) and np.all(inside <= high + slack)):
+                swept = None
+        if swept is not None:
+            collisions.build(candidates, self._mesh, v, self.settings.dhat)
+        else:
+            collisions.build(self._mesh, v, self.settings.dhat, broad_phase=self._broad_phase)
+        self._last_collisions = (v.copy(), collisions)
         return collisions
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
-        """(n, d) m, positions to start the step's Newton solve from: ``x_n``, with the
-        outline nodes that a moving face would come closer than dhat / 2 to moved ahead
-        of it (and along with it if they touch it). None if even that start is not
-        reached without a crossing (the caller halves the step)."""
+        """(n, d) m, positions to start the step's Newton solve from: ``pushed_start``, or
+        None if even that start is not reached without a crossing (the caller halves the
+        step)."""
+        start = self.pushed_start(x_n, old_faces, new_faces)
+        return start if self.reachable(x_n, start) else None
+
+    def pushed_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray:
+        """(n, d) m, ``x_n`` with the outline nodes that a moving face would come closer
+        than dhat / 2 to moved ahead of it (and along with it if they touch it); not
+        checked for crossings (``reachable``)."""
         start = x_n.copy()
         dhat = self.settings.dhat
         for old, new in zip(old_faces, new_faces):
@@ -457,7 +500,7 @@ class BarrierContact(Energy):
             touching = front & (gap < dhat)
             start[nodes[front]] += push[front, None] * old.normal
             start[nodes[touching]] += shift - advance * old.normal
-        return start if self.reachable(x_n, start) else None
+        return start
 
     def reachable(self, x_n: np.ndarray, start: np.ndarray) -> bool:
         """Whether the straight paths from ``x_n`` (the faces at the start of the step) to
@@ -465,8 +508,8 @@ class BarrierContact(Energy):
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
         if not np.array_equal(v0, v1):  # nothing that stands still crosses anything
-            exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
-                                                                narrow_phase_ccd=EXACT_CCD))
+            exact = float(ipctk.compute_collision_free_stepsize(
+                self._mesh, v0, v1, broad_phase=self._broad_phase, narrow_phase_ccd=EXACT_CCD))
             if exact < 1.0:
                 return False
         return self.min_distance(start) > 0.0
@@ -609,7 +652,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
 
     The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
     nothing, else from x_n (each with the fixed nodes at their targets and the outline
-    pushed ahead of moving faces, ``feasible_start``).
+    pushed ahead of moving faces, ``pushed_start``).
 
     Returns:
         The outcome; ``forces`` (n, 2) N the barrier's and friction's force on every node
@@ -622,7 +665,8 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
     n = x_n.shape[0]
-    pushed = _begin(barrier, x_n, old_faces, new_faces, dt)
+    barrier.begin_step(x_n, old_faces, new_faces, dt)
+    pushed = barrier.pushed_start(x_n, old_faces, new_faces)
     start = None
     for candidate in (pushed + dt * v_n, pushed):
         candidate = candidate.copy()
