@@ -14,8 +14,8 @@ ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
   slip speed eps_v, added to the step as dt D(v) with v = (x - x_n) / dt;
 - every Newton line search starts from the continuous-collision bound: the largest
   fraction of the step along which no primitive crosses another (their section 4).
-The candidates, barrier, friction potential and CCD are the IPC Toolkit's (``ipctk``,
-MIT). One implementation for both dimensions (``dimension`` d = 2 or 3). Its collision
+The candidates (its sweep-and-prune broad phase), barrier, friction potential and CCD
+are the IPC Toolkit's (``ipctk``, MIT). One implementation for both dimensions (``dimension`` d = 2 or 3). Its collision
 mesh holds the fruit's surface: in 2D the outline (the surface nodes and skin edges), in
 3D the surface nodes, edges and triangles; and every rigid face: in 2D one segment per
 ``FlatFace`` (jaw faces, table, walls), in 3D two triangles per ``Plate`` (its
