@@ -40,6 +40,7 @@ from gripper_sim.core3d import fingers3d, meshes
 from gripper_sim.core3d.damage import DamageTracker3D
 from gripper_sim.core3d.fingers_pad import PadLayer3D
 from gripper_sim.core3d.fruit import FruitModel3D, build_fruit3d
+from gripper_sim.core3d.layered_mesher import vertex_edge_lengths
 from gripper_sim.core3d.obstacles import Plate
 from gripper_sim.core3d.soft_barrier import SoftBarrier3D
 from gripper_sim.core3d.soft_fingers3d import SoftFingers3D, finger_body3d
@@ -154,12 +155,12 @@ class Simulation3D(SimulationFacade):
         its pattern's pairs from the fruit centred between the jaws at rest."""
         fruit, soft = self.fruit, self._soft
         outline = (self.initial_positions - self._in_plane(0.0, self.initial_lift))
-        edges = fruit.rest_positions[fruit.skin_edges]
-        longest = float(np.max(np.linalg.norm(edges[:, 1] - edges[:, 0], axis=1)))
+        with np.errstate(invalid='ignore'):  # the solid's inner nodes have no skin edge
+            spacing = vertex_edge_lengths(fruit.rest_positions, fruit.triangles)
         return SoftBarrier3D(
             fruit.n_nodes + soft.n_nodes, fruit.surface, fruit.skin_edges, fruit.triangles,
             BarrierSettings.from_config(self.config), soft.soft_bodies,
-            soft.contact_pairs(fruit.surface, outline[fruit.surface], longest))
+            soft.contact_pairs(fruit.surface, outline[fruit.surface], spacing[fruit.surface]))
 
     # ------------------------------------------------------------------ geometry
     def _make_faces(self) -> list[Plate]:

@@ -29,6 +29,7 @@ from gripper_sim.core.solid_pad import block_body
 from gripper_sim.core3d import meshes
 from gripper_sim.core3d.energies import NeoHookeanTets
 from gripper_sim.core3d.finger_body3d import FingerBody3D, extruded_body
+from gripper_sim.core3d.layered_mesher import vertex_edge_lengths
 from gripper_sim.core3d.mesh_geometry import surface_edges
 from gripper_sim.errors import ConfigError
 
@@ -39,9 +40,12 @@ IN_PLANE_CELL_RATIO = 0.5
 #: ... but no more cells than this along the height or the width
 MAX_IN_PLANE_CELLS = 16
 #: the pairs the barrier's pattern holds (``core3d.soft_barrier``): a fruit surface node
-#: and a finger surface node at most this many of the two meshes' longest surface edges
-#: (summed) apart across the closing axis at rest
-PAIR_REACH_EDGES = 2.0
+#: and a finger surface node at most this many times the sum of their mean surface edge
+#: lengths apart across the closing axis (y, z) at rest
+PAIR_REACH_EDGES = 1.5
+#: ... the fruit's nodes within this fraction of its half-width of its surface facing the
+#: finger (the fruit compressed by half its width reaches no further)
+PAIR_CAP_DEPTH = 0.5
 
 
 def solid_pad_body3d(config) -> FingerBody3D:
@@ -126,24 +130,25 @@ class SoftFingers3D(SoftFingers):
         return self._section.touching_gap(outline[across][:, [0, 2]])
 
     def contact_pairs(self, surface: np.ndarray, outline: np.ndarray,
-                      fruit_edge: float) -> np.ndarray:
+                      spacing: np.ndarray) -> np.ndarray:
         """(p, 2) the (fruit node, finger node) pairs of the barrier's pattern
-        (``core3d.soft_barrier``): the fruit's ``surface`` nodes at ``outline`` (n_s, 3) m
-        (relative to the jaws' centre) and each finger's surface nodes on its side of the
-        fruit, within ``PAIR_REACH_EDGES`` times (``fruit_edge`` + the finger's longest
-        surface edge, m) of each other in y and z."""
+        (``core3d.soft_barrier``), from the fruit's ``surface`` nodes (n_s,) at ``outline``
+        (n_s, 3) m relative to the jaws' centre, their mean surface edge lengths
+        ``spacing`` (n_s,) m: on each finger's side, the fruit nodes of the cap facing it
+        (``PAIR_CAP_DEPTH``) and the finger's surface nodes within ``PAIR_REACH_EDGES``
+        times the sum of the two nodes' mean edge lengths of each other in y and z."""
         x = self.body.rest_positions
-        t = self.body.surface_triangles
-        longest = float(np.max(np.linalg.norm(x[t] - x[np.roll(t, 1, axis=1)], axis=2)))
-        reach = PAIR_REACH_EDGES * (fruit_edge + longest)
+        outline_nodes = np.unique(self.body.surface_triangles)
+        with np.errstate(invalid='ignore'):  # the inner nodes have no surface edge
+            finger_spacing = vertex_edge_lengths(x, self.body.surface_triangles)[outline_nodes]
+        half_width = np.abs(outline[:, 0]).max()
         pairs = []
         for sign, nodes, frame in zip((-1.0, 1.0), self.nodes, self.frames):
-            outline_nodes = np.unique(t)
-            facing = np.flatnonzero(sign * outline[:, 0] > 0)
-            close = np.all(np.abs(outline[facing, None, 1:]
-                                  - frame[None, outline_nodes, 1:]) <= reach, axis=2)
-            i, j = np.nonzero(close)
-            pairs.append(np.column_stack([surface[facing[i]], nodes[outline_nodes[j]]]))
+            cap = np.flatnonzero(sign * outline[:, 0] > (1.0 - PAIR_CAP_DEPTH) * half_width)
+            reach = PAIR_REACH_EDGES * (spacing[cap, None] + finger_spacing[None, :])
+            apart = np.abs(outline[cap, None, 1:] - frame[None, outline_nodes, 1:])
+            i, j = np.nonzero(np.all(apart <= reach[:, :, None], axis=2))
+            pairs.append(np.column_stack([surface[cap[i]], nodes[outline_nodes[j]]]))
         return np.vstack(pairs)
 
     def at_rest(self, left_origin: np.ndarray, right_origin: np.ndarray) -> FingerState:
