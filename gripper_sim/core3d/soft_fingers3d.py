@@ -91,26 +91,24 @@ class SoftFingers3D(SoftFingers):
         static_friction, kinetic_friction: Coulomb coefficients fruit-finger.
     """
 
+    mirror = MIRROR
+
     def __init__(self, body: FingerBody3D, first: int, static_friction: float,
                  kinetic_friction: float):
-        m = body.n_nodes
-        self.body = body
-        self.first = int(first)
-        self.nodes = (self.first + np.arange(m), self.first + m + np.arange(m))
-        self.frames = (body.rest_positions, body.rest_positions * MIRROR)
-        self.thickness = float(body.rest_positions[:, 0].max())
-        self.masses = np.concatenate([body.masses, body.masses])
-        self.base = np.concatenate([side[body.base_nodes] for side in self.nodes])
-        self.energies = self._energies()
-        # mirroring reverses the winding: the right finger's triangles turn back
-        windings = (body.surface_triangles, body.surface_triangles[:, [0, 2, 1]])
-        self.surface_triangles = np.vstack([side * m + t for side, t in enumerate(windings)])
-        self.soft_bodies = tuple(
-            SoftBody(nodes[np.unique(t)], nodes[surface_edges(t)], static_friction,
-                     kinetic_friction, triangles=nodes[t])
-            for nodes, t in zip(self.nodes, windings))
+        super().__init__(body, first, static_friction, kinetic_friction)
         #: the 2D fingers of the section, whose outline gives the touching gap
         self._section = SoftFingers(body.section, 0, static_friction, kinetic_friction)
+
+    def _soft_bodies(self, static_friction: float, kinetic_friction: float) -> tuple:
+        """The two fingers' surfaces in the barrier, with their triangles (``SoftBody``);
+        sets ``surface_triangles`` (2 s, 3), both fingers' (indices into their nodes)."""
+        m = self.body.n_nodes
+        # mirroring reverses the winding: the right finger's triangles turn back
+        windings = (self.body.surface_triangles, self.body.surface_triangles[:, [0, 2, 1]])
+        self.surface_triangles = np.vstack([side * m + t for side, t in enumerate(windings)])
+        return tuple(SoftBody(nodes[np.unique(t)], nodes[surface_edges(t)], static_friction,
+                              kinetic_friction, triangles=nodes[t])
+                     for nodes, t in zip(self.nodes, windings))
 
     def _energies(self) -> list:
         body, m = self.body, self.body.n_nodes
