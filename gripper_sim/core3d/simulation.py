@@ -16,7 +16,9 @@ phase) and one vectorised gap test of every free surface node (narrow phase).
 
 Jaws: flat plates, or the 2D finger profiles (arc, vgroove) extruded along y as flat
 facets (``core3d.fingers3d``); a soft pad is an elastic-foundation energy on the jaw
-faces (``core3d.fingers_pad``). The grip force of shaped fingers is the force along the
+faces (``core3d.fingers_pad``); a deformable finger (solid pad) is a body of the state
+on each jaw (``core3d.soft_fingers3d``), touching the fruit through the barrier
+(``core3d.soft_barrier``) in the facade's soft-finger step. The grip force of shaped fingers is the force along the
 closing axis x, summed over a jaw's facets; wrench torques are about the centre of each
 jaw's front plane.
 """
