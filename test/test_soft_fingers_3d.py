@@ -66,8 +66,8 @@ def test_the_extruded_pad_is_a_conforming_tetrahedral_block():
 
 
 def _compressed_force(body, fixed_dofs) -> float:
-    """N/m, the force over DELTA pressing the pad's front face (x = T) by DELTA towards its backing,
-    the dofs ``fixed_dofs`` (bool (3 m,)) held: x of the front and back faces moved and
+    """N/m, the force over DELTA pressing the pad's front face (x = T) by DELTA towards
+    its backing, the dofs ``fixed_dofs`` (bool (3 m,)) held: x of the front and back faces moved and
     held, the rest of ``fixed_dofs`` at rest; a static Newton solve."""
     delta = 1e-3 * T
     x0 = body.rest_positions

@@ -18,9 +18,9 @@ Jaws: flat plates, or the 2D finger profiles (arc, vgroove) extruded along y as 
 facets (``core3d.fingers3d``); a soft pad is an elastic-foundation energy on the jaw
 faces (``core3d.fingers_pad``); a deformable finger (solid pad) is a body of the state
 on each jaw (``core3d.soft_fingers3d``), touching the fruit through the barrier
-(``core3d.soft_barrier``) in the facade's soft-finger step. The grip force of shaped fingers is the force along the
-closing axis x, summed over a jaw's facets; wrench torques are about the centre of each
-jaw's front plane.
+(``core3d.soft_barrier``) in the facade's soft-finger step. The grip force of shaped
+fingers is the force along the closing axis x, summed over a jaw's facets; wrench torques
+are about the centre of each jaw's front plane.
 """
 from __future__ import annotations
 
