@@ -65,10 +65,10 @@ def test_the_extruded_pad_is_a_conforming_tetrahedral_block():
     assert not np.any(np.all(np.isclose(p[:, :, 0], 0.0), axis=1))
 
 
-def _compressed_force(body, fixed_dofs) -> float:
-    """N/m, the force over DELTA pressing the pad's front face (x = T) by DELTA towards
-    its backing, the dofs ``fixed_dofs`` (bool (3 m,)) held: x of the front and back faces moved and
-    held, the rest of ``fixed_dofs`` at rest; a static Newton solve."""
+def _stiffness(body, fixed_dofs) -> float:
+    """N/m, the force over delta pressing the pad's front face (x = T) by delta = T / 1000
+    towards its backing (x = 0), the dofs ``fixed_dofs`` (bool (3 m,)) held: x of the
+    front face moved, the rest at rest; a static Newton solve."""
     delta = 1e-3 * T
     x0 = body.rest_positions
     energy = NeoHookeanTets(body.tetrahedra, x0, body.youngs_modulus, body.poisson_ratio)
@@ -104,16 +104,16 @@ def test_the_pad_alone_has_the_closed_form_stiffness():
     frictionless = axial.copy()
     frictionless[corners[0], 1:] = True
     frictionless[corners[1], 2] = True
-    uniaxial_stress = _compressed_force(body, frictionless.ravel())
+    uniaxial_stress = _stiffness(body, frictionless.ravel())
     assert uniaxial_stress == pytest.approx(E * area / T, rel=5e-3)
     confined = axial.copy()
     confined[:, 1:] = True
     constrained_modulus = E * (1 - NU) / ((1 + NU) * (1 - 2 * NU))
-    uniaxial_strain = _compressed_force(body, confined.ravel())
+    uniaxial_strain = _stiffness(body, confined.ravel())
     assert uniaxial_strain == pytest.approx(constrained_modulus * area / T, rel=5e-3)
     bonded = np.zeros((body.n_nodes, 3), bool)
     bonded[faces] = True
-    on_the_jaw = _compressed_force(body, bonded.ravel())
+    on_the_jaw = _stiffness(body, bonded.ravel())
     assert 1.2 * uniaxial_stress < on_the_jaw < uniaxial_strain
 
 
