@@ -32,7 +32,8 @@ contact). A pair may couple any node of the fruit's outline with any of a soft b
 so the Hessian's fixed pattern holds every such pair of nodes (beside the outlines'
 edges); the solver's fast path keeps one pattern as for rigid faces. Still only pairs
 with the fruit collide: the fingers do not touch each other, the table or themselves.
-Soft bodies are 2D only so far.
+In 3D a soft body's surface joins as triangles (``SoftBody.triangles``), and its pairs
+with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 """
 from __future__ import annotations
 
@@ -104,12 +105,15 @@ class SoftBody:
         nodes: (k,) its outline's nodes (global node indices of the state).
         edges: (e, 2) its outline's edges (global node indices).
         static_friction, kinetic_friction: Coulomb coefficients against the fruit.
+        triangles: (t, 3) its surface's outward triangles (global node indices), 3D
+            only (``edges`` then holds every edge of them); None in 2D.
     """
 
     nodes: np.ndarray
     edges: np.ndarray
     static_friction: float
     kinetic_friction: float
+    triangles: np.ndarray | None = None
 
 
 #: (2^(d-1), d-1) the corners of a face in units of its half-extents along its tangents,
@@ -167,6 +171,9 @@ class BarrierContact(Energy):
     #: how each pair's Hessian is made positive semi-definite (CLAMP: its negative
     #: eigenvalues set to 0, so that Newton descends; NONE: the exact Hessian)
     projection = ipctk.PSDProjectionMethod.CLAMP
+    #: whether Hessian entries outside the fixed pattern are left out of the Newton matrix
+    #: (a pattern of the likely pairs only, ``core3d.soft_barrier``) instead of an error
+    drop_outside_pattern = False
 
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
                  settings: BarrierSettings, bodies: tuple = (), dimension: int = 2,
@@ -186,6 +193,8 @@ class BarrierContact(Energy):
                            for b in self.bodies]
         self.fruit_triangles = (local[np.asarray(triangles, np.int64).reshape(-1, 3)]
                                 if triangles is not None else np.zeros((0, 3), np.int64))
+        self.body_triangles = [local[np.asarray(b.triangles, np.int64).reshape(-1, 3)]
+                               for b in self.bodies if b.triangles is not None]
         #: (n_v,) 0 for the fruit's vertices, 1 + b for soft body b's
         self.vertex_body = np.concatenate(
             [np.zeros(self.surface.size, np.int64)]
@@ -269,7 +278,7 @@ class BarrierContact(Energy):
         if self.dimension == 2:
             self._mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges))
         else:
-            triangles = np.vstack([self.fruit_triangles,
+            triangles = np.vstack([self.fruit_triangles, *self.body_triangles,
                                    (offsets + face_triangles).reshape(-1, 3)]).astype(np.int32)
             self._mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges),
                                              np.asfortranarray(triangles))
@@ -403,8 +412,12 @@ class BarrierContact(Energy):
         keys = self.vertex_dofs[cols[inside]] * self.n_dof + self.vertex_dofs[rows[inside]]
         last = self._pattern_keys.size - 1
         index = np.minimum(np.searchsorted(self._pattern_keys, keys), last)
-        if not np.array_equal(self._pattern_keys[index], keys):
-            raise AssertionError('barrier Hessian entry outside its pattern')
+        found = self._pattern_keys[index] == keys
+        if not np.all(found):
+            if not self.drop_outside_pattern:
+                raise AssertionError('barrier Hessian entry outside its pattern')
+            inside[inside] = found
+            index = index[found]
         return index, inside
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
@@ -645,9 +658,9 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
 def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
                    new_faces: list, dt: float) -> StepOutcome:
-    """One implicit step of ``dt`` (s) from (x_n, v_n) (n, 2) of the fruit and the soft
+    """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) of the fruit and the soft
     bodies in the barrier (``barrier.bodies``), nodes ``fixed`` (k,) prescribed at
-    ``fixed_targets`` (k, 2) m (a finger's base on its jaw: zero filters, the modified
+    ``fixed_targets`` (k, d) m (a finger's base on its jaw: zero filters, the modified
     mass method), the faces moving from ``old_faces`` to ``new_faces``.
 
     The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
@@ -655,8 +668,8 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     pushed ahead of moving faces, ``pushed_start``).
 
     Returns:
-        The outcome; ``forces`` (n, 2) N the barrier's and friction's force on every node
-        (both bodies of a pair), ``reaction`` (n, 2) N the force holding each fixed node
+        The outcome; ``forces`` (n, d) N the barrier's and friction's force on every node
+        (both bodies of a pair), ``reaction`` (n, d) N the force holding each fixed node
         at its target (0 elsewhere), ``contacts.obstacle`` (n,) the body each outline node
         touches as ``partners`` numbers them (0 the fruit, 1 + b soft body b, then the
         faces; -1 none).
@@ -664,7 +677,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     Raises:
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
-    n = x_n.shape[0]
+    n, d = x_n.shape
     barrier.begin_step(x_n, old_faces, new_faces, dt)
     pushed = barrier.pushed_start(x_n, old_faces, new_faces)
     start = None
@@ -676,12 +689,12 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
             break
     if start is None:
         raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
-    constraints = StepConstraints.free(n, dim=2)
+    constraints = StepConstraints.free(n, dim=d)
     constraints.filters[fixed] = 0.0
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
-    x = solution.q.reshape(-1, 2)
-    reaction = np.zeros((n, 2))
-    reaction[fixed] = solution.reaction.reshape(-1, 2)[fixed]
+    x = solution.q.reshape(-1, d)
+    reaction = np.zeros((n, d))
+    reaction[fixed] = solution.reaction.reshape(-1, d)[fixed]
     contacts = cm.ContactState.empty(n)
     contacts.obstacle = barrier.partners(solution.q)
     return StepOutcome(x, (x - x_n) / dt, barrier.contact_forces(solution.q), contacts,
