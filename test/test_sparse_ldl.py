@@ -63,9 +63,10 @@ def test_scatter_sends_the_upper_side_to_the_sink():
     scatter = pattern.scatter(tri)
     sink = pattern.sink * 4
     # of a triangle's 36 entries, 3 diagonal blocks and 3 lower blocks are stored
-    assert np.all(np.sum(scatter == sink, axis=1) == 12)
-    stored = scatter[scatter != sink]
-    assert stored.max() < sink and stored.min() >= 0
+    assert np.all(np.sum(scatter >= sink, axis=1) == 12)
+    assert scatter.max() < sink + 4
+    stored = scatter[scatter < sink]
+    assert stored.min() >= 0 and len(np.unique(stored)) > 0.5 * len(stored) / 6
 
 
 def test_an_indefinite_matrix_is_reported_and_still_solved():

@@ -727,7 +727,10 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
             if d == 0:
                 h00 += _inertia(masses2, dt, alpha, 2 * i)
                 h11 += _inertia(masses2, dt, alpha, 2 * i + 1)
-            _filtered_block(filters, kind, i, order[p - d], h00, h01, h10, h11, ab, p, d)
+            j = order[p - d]
+            (ab[p, d, 0, 0], ab[p, d, 0, 1], ab[p, d, 1, 0],
+             ab[p, d, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j, h00, h01, h10,
+                                               h11)
     _friction_blocks(q, q_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, n_fr, pos, ab)
     _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab)
     _held_diagonal(filters, masses2, dt, shift, pos, ab)
@@ -757,28 +760,21 @@ def _inertia(masses2, dt, alpha, m):
 
 
 @njit(cache=True, error_model='numpy')
-def _filtered_block(filters, kind, i, j, h00, h01, h10, h11, ab, p, d):
-    """ab[p, d] (2, 2) = S_i H S_j for the node block H = [[h00, h01], [h10, h11]] of
-    rows i and columns j (kind: ``_filter_kinds``)."""
-    if kind[i] == 0 or kind[j] == 0:
-        ab[p, d, 0, 0] = 0.0
-        ab[p, d, 0, 1] = 0.0
-        ab[p, d, 1, 0] = 0.0
-        ab[p, d, 1, 1] = 0.0
-    elif kind[i] == 1 and kind[j] == 1:
-        ab[p, d, 0, 0] = h00
-        ab[p, d, 0, 1] = h01
-        ab[p, d, 1, 0] = h10
-        ab[p, d, 1, 1] = h11
-    else:  # S_i H S_j
-        t00 = filters[i, 0, 0] * h00 + filters[i, 0, 1] * h10
-        t01 = filters[i, 0, 0] * h01 + filters[i, 0, 1] * h11
-        t10 = filters[i, 1, 0] * h00 + filters[i, 1, 1] * h10
-        t11 = filters[i, 1, 0] * h01 + filters[i, 1, 1] * h11
-        ab[p, d, 0, 0] = t00 * filters[j, 0, 0] + t01 * filters[j, 1, 0]
-        ab[p, d, 0, 1] = t00 * filters[j, 0, 1] + t01 * filters[j, 1, 1]
-        ab[p, d, 1, 0] = t10 * filters[j, 0, 0] + t11 * filters[j, 1, 0]
-        ab[p, d, 1, 1] = t10 * filters[j, 0, 1] + t11 * filters[j, 1, 1]
+def _filtered_block(filters, kind_i, kind_j, i, j, h00, h01, h10, h11):
+    """S_i H S_j (4 values, row-major) of the node block H = [[h00, h01], [h10, h11]] of
+    rows i and columns j (kind_i, kind_j: their ``_filter_kinds``)."""
+    if kind_i == 0 or kind_j == 0:
+        return 0.0, 0.0, 0.0, 0.0
+    if kind_i == 1 and kind_j == 1:
+        return h00, h01, h10, h11
+    t00 = filters[i, 0, 0] * h00 + filters[i, 0, 1] * h10
+    t01 = filters[i, 0, 0] * h01 + filters[i, 0, 1] * h11
+    t10 = filters[i, 1, 0] * h00 + filters[i, 1, 1] * h10
+    t11 = filters[i, 1, 0] * h01 + filters[i, 1, 1] * h11
+    return (t00 * filters[j, 0, 0] + t01 * filters[j, 1, 0],
+            t00 * filters[j, 0, 1] + t01 * filters[j, 1, 1],
+            t10 * filters[j, 0, 0] + t11 * filters[j, 1, 0],
+            t10 * filters[j, 0, 1] + t11 * filters[j, 1, 1])
 
 
 @njit(cache=True, error_model='numpy')
@@ -860,13 +856,19 @@ def _solid_newton_matrix(hvals, masses2, dt, alpha, beta, filters, fr_nodes, fr_
         i = order[k]
         h00 = scale * hvals[k, 0, 0, 0] + _inertia(masses2, dt, alpha, 2 * i)
         h11 = scale * hvals[k, 0, 1, 1] + _inertia(masses2, dt, alpha, 2 * i + 1)
-        _filtered_block(filters, kind, i, i, h00, scale * hvals[k, 0, 0, 1],
-                        scale * hvals[k, 0, 1, 0], h11, ab, k, 0)
+        (ab[k, 0, 0, 0], ab[k, 0, 0, 1], ab[k, 0, 1, 0],
+         ab[k, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[i], i, i, h00,
+                                           scale * hvals[k, 0, 0, 1],
+                                           scale * hvals[k, 0, 1, 0], h11)
         for m in range(a_ptr[k], a_ptr[k + 1]):
             b = n + m
-            _filtered_block(filters, kind, i, order[a_col[m]], scale * hvals[b, 0, 0, 0],
-                            scale * hvals[b, 0, 0, 1], scale * hvals[b, 0, 1, 0],
-                            scale * hvals[b, 0, 1, 1], ab, b, 0)
+            j = order[a_col[m]]
+            (ab[b, 0, 0, 0], ab[b, 0, 0, 1], ab[b, 0, 1, 0],
+             ab[b, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j,
+                                               scale * hvals[b, 0, 0, 0],
+                                               scale * hvals[b, 0, 0, 1],
+                                               scale * hvals[b, 0, 1, 0],
+                                               scale * hvals[b, 0, 1, 1])
     _friction_blocks(q, q_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, n_fr, pos, ab)
     _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab)
     _held_diagonal(filters, masses2, dt, shift, pos, ab)

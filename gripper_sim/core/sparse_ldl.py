@@ -218,7 +218,10 @@ class SparsePattern:
         index = index.reshape(n_elem, size * size)
         transposed = transposed.reshape(n_elem, size * size)
         flat = (index * b + (r % b)[None, :]) * b + (s % b)[None, :]
-        return np.where(transposed, self.sink * b * b, flat).astype(np.int64)
+        # upper-side entries in turn over the sink's b^2 values: fewer adds in a row to
+        # one address (each waits for the one before)
+        sink = self.sink * b * b + np.arange(size * size) % (b * b)
+        return np.where(transposed, sink[None, :], flat).astype(np.int64)
 
 
 #: the tuple ``SparsePattern.arrays`` the kernels take, by name
