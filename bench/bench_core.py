@@ -128,13 +128,13 @@ def _op_loops():
         # the rank-one term needs a second right-hand side (the shell's pressure)
         two = ring.shape[0] > 0
         ok = 0
-        for _ in range(1 if solves else reps):
-            ok += k._newton_factor(band, m2, dt, alpha, beta, filters, frn, frt, frb, frs,
-                                   frn.shape[0], q, q_n, pos, order, 0.0, ab, nopad, nopar,
-                                   flesh, l_values, d_inv)
-        if solves:
-            for _ in range(reps):
+        for rep in range(reps):
+            if solves and rep > 0:
                 k._newton_inverse(ab, l_values, d_inv, flesh, x, y, two)
+            else:  # solves: on the factors of one factorisation
+                ok += k._newton_factor(band, m2, dt, alpha, beta, filters, frn, frt, frb, frs,
+                                       frn.shape[0], q, q_n, pos, order, 0.0, ab, nopad,
+                                       nopar, flesh, l_values, d_inv)
         return ok
 
     @njit(cache=True)
