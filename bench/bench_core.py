@@ -9,7 +9,9 @@ CPU time per simulated second, the real-time factor (simulated seconds per CPU s
 mean Newton iterations per step, the route the step took, and where the time goes:
 
 - assembly: energies, gradients and Hessians, and building the Newton matrix;
-- solve: factorising the Newton matrix and solving with it (with the rank-one term);
+- solve: factorising the Newton matrix and solving with it: the shell's node-block band
+  (with its rank-one pressure term), the solid's sparse LDL^T (``core.sparse_ldl``,
+  minimum-degree order);
 - contact: contact constraints, contact-set updates and the rest of a step's passes;
 - measures: the step's outputs (StepResult, damage);
 - other: gripper kinematics, the grasp state machine, Python glue.

@@ -19,7 +19,10 @@ position p (row) and the node at position p - d (column), d = 0 .. nbw; ``pos[i]
 is the band position of node i. A ring numbered 0, N-1, 1, N-2, ... (interleaved,
 see ``band_order``) has nbw = 4 for stretching + bending + pressure, so the Newton
 matrix (same block band) is factorised by a block LDL^T in O(N) time, with the
-rank-one pressure term added by Sherman-Morrison.
+rank-one pressure term added by Sherman-Morrison. A meshed solid's Hessian and Newton
+matrix are sparse instead (``core.sparse_ldl``: 2 x 2 node blocks in a minimum-degree
+order, one block per row of the same 4-D arrays, ``pos[i]`` the position of node i; see
+the solid's section below), factorised by the sparse block LDL^T.
 
 Faces (rigid obstacles) are rows of two arrays: ``face_par`` (n_faces, FP_SIZE)
 [normal x, normal z, half_length, thickness, static friction, kinetic friction,
@@ -334,10 +337,12 @@ def _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, p
     Hessian, values (4,) J: stretching, bending, pressure (plus the flesh), gravity.
     Returns the rank-one c.
 
-    ``flesh``: the neo-Hookean triangles of a solid fruit (``NeoHookeanTriangles``) as
-    (tri (n_tri, 3), dm_inv (n_tri, 2, 2), volume (n_tri,) m^3, [mu, lambda] Pa, scatter
-    (n_tri, 36) flat band indices of each element's Hessian entries; an entry of the
-    band's upper side goes to the unused slot band[0, 1, 0, 0]); n_tri = 0: none.
+    ``flesh``: the neo-Hookean triangles of a solid fruit (``NeoHookeanTriangles``) and
+    the solid's sparse Newton matrix as (tri (n_tri, 3), dm_inv (n_tri, 2, 2), volume
+    (n_tri,) m^3, [mu, lambda] Pa, scatter (n_tri, 36) flat indices of each element's
+    Hessian entries into the sparse values, the skin's arrays (``fast._solid_skin``), the
+    pattern's ``SparsePattern.arrays``); n_tri = 0: none (the band). A solid's energies
+    are ``_solid_energies``.
     """
     if flesh[0].shape[0] > 0:  # a meshed solid: its sparse Hessian
         return _solid_energies(q, edges, triples, flesh, gravity_grad, hessian, grads, band,
