@@ -485,12 +485,7 @@ def solve(arrays, l_values, d_inv, x):
     t = np.empty(b)
     for i in range(n):  # L z = x, by columns
         for p in range(l_ptr[i], l_ptr[i + 1]):
-            j = l_row[p]
-            for r in range(b):
-                acc = 0.0
-                for s in range(b):
-                    acc += l_values[p, r, s] * x[b * i + s]
-                x[b * j + r] -= acc
+            _subtract_product(l_values[p], False, x, b * i, b * l_row[p])
     for i in range(n):  # D y = z
         for r in range(b):
             acc = 0.0
@@ -501,12 +496,18 @@ def solve(arrays, l_values, d_inv, x):
             x[b * i + r] = t[r]
     for i in range(n - 1, -1, -1):  # L^T x = y, by columns of L (rows of L^T)
         for p in range(l_ptr[i], l_ptr[i + 1]):
-            j = l_row[p]
-            for s in range(b):
-                acc = 0.0
-                for r in range(b):
-                    acc += l_values[p, r, s] * x[b * j + r]
-                x[b * i + s] -= acc
+            _subtract_product(l_values[p], True, x, b * l_row[p], b * i)
+
+
+@njit(cache=True)
+def _subtract_product(block, transposed, x, source, target):
+    """x[target:target + b] -= B x[source:source + b], B = block (b, b) or its transpose."""
+    b = block.shape[0]
+    for r in range(b):
+        acc = 0.0
+        for s in range(b):
+            acc += (block[s, r] if transposed else block[r, s]) * x[source + s]
+        x[target + r] -= acc
 
 
 @njit(cache=True)

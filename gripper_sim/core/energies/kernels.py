@@ -168,6 +168,19 @@ def area_pressure_hessian(de_da, data, scatter):
 
 
 @njit(cache=True)
+def _deformation_gradient(x, tri, dm_inv, t):
+    """F (f00, f01, f10, f11) of triangle t: its edge matrix times dm_inv[t]."""
+    i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
+    a = dm_inv[t]
+    d00 = x[i1, 0] - x[i0, 0]
+    d01 = x[i2, 0] - x[i0, 0]
+    d10 = x[i1, 1] - x[i0, 1]
+    d11 = x[i2, 1] - x[i0, 1]
+    return (d00 * a[0, 0] + d01 * a[1, 0], d00 * a[0, 1] + d01 * a[1, 1],
+            d10 * a[0, 0] + d11 * a[1, 0], d10 * a[0, 1] + d11 * a[1, 1])
+
+
+@njit(cache=True)
 def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, hessian):
     """Plane-strain neo-Hookean linear triangles (``NeoHookeanTriangles``).
 
@@ -181,16 +194,7 @@ def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, h
     """
     n_tri = tri.shape[0]
     for t in range(n_tri):
-        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
-        d00 = x[i1, 0] - x[i0, 0]
-        d01 = x[i2, 0] - x[i0, 0]
-        d10 = x[i1, 1] - x[i0, 1]
-        d11 = x[i2, 1] - x[i0, 1]
-        a = dm_inv[t]
-        f00 = d00 * a[0, 0] + d01 * a[1, 0]
-        f01 = d00 * a[0, 1] + d01 * a[1, 1]
-        f10 = d10 * a[0, 0] + d11 * a[1, 0]
-        f11 = d10 * a[0, 1] + d11 * a[1, 1]
+        f00, f01, f10, f11 = _deformation_gradient(x, tri, dm_inv, t)
         if f00 * f11 - f01 * f10 <= 0.0:
             return np.inf
     value = 0.0
@@ -201,14 +205,7 @@ def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, h
         g1x, g1z = a[0, 0], a[0, 1]
         g2x, g2z = a[1, 0], a[1, 1]
         g0x, g0z = -(g1x + g2x), -(g1z + g2z)
-        d00 = x[i1, 0] - x[i0, 0]
-        d01 = x[i2, 0] - x[i0, 0]
-        d10 = x[i1, 1] - x[i0, 1]
-        d11 = x[i2, 1] - x[i0, 1]
-        f00 = d00 * a[0, 0] + d01 * a[1, 0]
-        f01 = d00 * a[0, 1] + d01 * a[1, 1]
-        f10 = d10 * a[0, 0] + d11 * a[1, 0]
-        f11 = d10 * a[0, 1] + d11 * a[1, 1]
+        f00, f01, f10, f11 = _deformation_gradient(x, tri, dm_inv, t)
         jdet = f00 * f11 - f01 * f10
         lnj = math.log(jdet)
         vol = volume[t]
@@ -270,16 +267,7 @@ def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, h
 def neohookean_von_mises(x, tri, dm_inv, mu, lam, out):
     """(n_tri,) Pa written into out: ``NeoHookeanTriangles.von_mises``."""
     for t in range(tri.shape[0]):
-        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
-        a = dm_inv[t]
-        d00 = x[i1, 0] - x[i0, 0]
-        d01 = x[i2, 0] - x[i0, 0]
-        d10 = x[i1, 1] - x[i0, 1]
-        d11 = x[i2, 1] - x[i0, 1]
-        f00 = d00 * a[0, 0] + d01 * a[1, 0]
-        f01 = d00 * a[0, 1] + d01 * a[1, 1]
-        f10 = d10 * a[0, 0] + d11 * a[1, 0]
-        f11 = d10 * a[0, 1] + d11 * a[1, 1]
+        f00, f01, f10, f11 = _deformation_gradient(x, tri, dm_inv, t)
         j = f00 * f11 - f01 * f10
         lnj = math.log(max(j, 1e-12))
         bxx = f00 * f00 + f01 * f01
