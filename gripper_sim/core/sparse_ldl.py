@@ -26,8 +26,9 @@ node i; ``order`` its inverse):
 - the factor: l_values (n_factor, b, b), block p the block L[l_row[p], column] of the
   column whose entries are l_ptr[column] .. l_ptr[column + 1] - 1 (rows ascending),
   and d_inv (n_nodes, b, b) the inverses of D's blocks.
-- vectors in position order for the kernels: x[b position[i] + a] is dof a of node i.
-  ``SparseLDL`` wraps the kernels for node-order vectors.
+- vectors: ``solve`` works in position order, x[b position[i] + a] is dof a of node
+  i; ``multiply`` in node order (x[b i + a]). ``SparseLDL`` wraps the kernels for
+  node-order vectors.
 
 The numba kernels take ``SparsePattern.arrays`` (a tuple, see ``KernelArrays``).
 Import this module only where numba is installed.
