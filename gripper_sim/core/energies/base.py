@@ -1,4 +1,13 @@
-"""The energy protocol and the triplet assembly helper."""
+"""The energy protocol, the triplet form of a compiled energy, and assembly helpers.
+
+Every energy of the fruit and of the fingers, 2D and 3D, is computed by one numba kernel
+(its ``evaluate_into``: the gradient added into a vector, each element Hessian entry
+added into the values of a sparse matrix at a scatter index). ``KernelEnergy`` gives that
+kernel the ``Energy.evaluate`` protocol (IJV triplets) for the callers that assemble
+their own matrix (the generic stepper, the shell's relaxation at build, the tests). The
+numpy references the kernels are tested against live in ``test/reference_energies2d.py``
+and ``test/reference_energies3d.py``.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -60,6 +69,51 @@ class Energy:
         for c, u in ev.low_rank:
             dense += c * np.outer(u, u)
         return dense
+
+
+_NO_VALUES = np.zeros(1)
+_NO_SCATTER = np.zeros((0, 0), np.int64)
+
+
+class KernelEnergy(Energy):
+    """An energy whose one implementation is its kernel ``evaluate_into(q, grad, data,
+    scatter, hessian) -> (value J, rank-one terms)``; subclasses set ``dofs`` (n_elem,
+    m), the dofs of each element, or None for an energy without a Hessian."""
+
+    dofs: np.ndarray | None
+    _triplets: tuple | None = None
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        raise NotImplementedError
+
+    def _triplet_pattern(self):
+        """(rows, cols) (n_elem m^2,) of the element Hessians and the scatter (n_elem,
+        m^2) that writes each entry to its own triplet."""
+        if self._triplets is None:
+            if self.dofs is None:
+                empty = np.zeros(0, np.int64)
+                self._triplets = (empty, empty, _NO_SCATTER)
+            else:
+                n_elem, m = self.dofs.shape
+                rows = np.repeat(self.dofs, m, axis=1).ravel()
+                cols = np.tile(self.dofs, (1, m)).ravel()
+                scatter = np.arange(n_elem * m * m, dtype=np.int64).reshape(n_elem, m * m)
+                self._triplets = (rows, cols, scatter)
+        return self._triplets
+
+    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
+        """The kernel's value (J), gradient (n_dof,) N and Hessian as IJV triplets (N/m)
+        plus rank-one terms; an inverted element gives value inf."""
+        grad = np.zeros(q.size)
+        if not hessian:
+            value, low_rank = self.evaluate_into(q, grad, _NO_VALUES, _NO_SCATTER, False)
+            empty = np.zeros(0, np.int64)
+            return Evaluation(float(value), grad, empty, empty, np.zeros(0), low_rank)
+        rows, cols, scatter = self._triplet_pattern()
+        vals = np.zeros(rows.size)
+        value, low_rank = self.evaluate_into(q, grad, vals, scatter, True)
+        return Evaluation(float(value), grad, rows, cols, vals, low_rank)
 
 
 def element_dofs(nodes: np.ndarray, dim: int = 2) -> np.ndarray:
