@@ -17,7 +17,20 @@ import numpy as np
 
 from gripper_sim.core.energies import (ConstantForce, EnclosedAreaPressure,
                                        NeoHookeanTriangles, RodBending, Stretching)
-from gripper_sim.core.energies.base import Evaluation, hessian_triplets, scatter_gradient
+from gripper_sim.core.energies.base import Evaluation
+
+
+def scatter_gradient(n_dof: int, dofs: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """Sum element gradients (n_elem, m) into a (n_dof,) vector."""
+    return np.bincount(dofs.ravel(), weights=local.ravel(), minlength=n_dof)
+
+
+def hessian_triplets(dofs: np.ndarray, local: np.ndarray):
+    """Element Hessians (n_elem, m, m) to IJV triplets."""
+    m = dofs.shape[1]
+    rows = np.repeat(dofs, m, axis=1).ravel()
+    cols = np.tile(dofs, (1, m)).ravel()
+    return rows, cols, local.ravel()
 
 
 def _no_triplets():

@@ -14,13 +14,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import Evaluation, hessian_triplets, scatter_gradient
+from gripper_sim.core.energies.base import Evaluation
 from gripper_sim.core3d.energies.hinge import HingeBending
 from gripper_sim.core3d.energies.membrane import Membrane
 from gripper_sim.core3d.energies.neohookean import NeoHookeanTets
 from gripper_sim.core3d.energies.pressure import EnclosedVolumePressure
 from gripper_sim.core3d.energies.quadratic_tets import QuadraticNeoHookeanTets
 from gripper_sim.core3d.energies.wrinkling_membrane import WrinklingMembrane
+
+from reference_energies2d import hessian_triplets, scatter_gradient
 
 
 def _no_triplets():

@@ -16,7 +16,16 @@ section 3):
   Rf adds curvature -1/Rf in plane; equivalent radius Re = sqrt(R1' R2) (Johnson,
   Contact Mechanics, 1985, ch. 4);
 - the contact modulus is E* = 1 / ((1 - nu^2) / E + (1 - nu_p^2) / E_p) with a soft pad
-  (two elastic bodies, Hertz) and E / (1 - nu^2) on a rigid face;
+  or a deformable finger of E_p, nu_p (two elastic bodies, Hertz) and E / (1 - nu^2) on
+  a rigid face;
+- on a deformable finger (a Fin Ray, a solid pad) the in-plane curvature is measured,
+  not assumed: the simulation resolves how the finger wraps and yields in the plane, so
+  the patch's in-plane half-width is read from its node forces f_i at distances s_i
+  from the centre, each spread over its tributary length l_i (the second moment of
+  Hertz's elliptical pressure is a^2 / 4): a1 = 2 sqrt(sum f_i (s_i^2 + l_i^2 / 12) /
+  sum f_i), and R1' is the radius with which plane-strain Hertz gives that half-width
+  at the line load F' = F / b, R1' = pi E* a1^2 / (4 F') (Johnson 1985, eq. 4.43); for
+  two elastic half-planes that is R1 again, for a finger that wraps it is larger;
 - contact radius a = (3 F Re / (4 E*))^(1/3), peak pressure p0 = 3 F / (2 pi a^2), and
   pressure p(s) = p0 sqrt(1 - s^2 / a^2) at distance s from the centre: that is the
   per-node pressure reported;
@@ -37,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gripper_sim.core.energies.bending import turning_angles
+from gripper_sim.core.measures import tributary_lengths
 
 #: Tresca stress below a Hertz contact over its peak pressure (2 x 0.31, fruit-data.md)
 TRESCA_OVER_P0 = 0.62
@@ -106,6 +116,27 @@ def contact_modulus(youngs_modulus: float, poisson_ratio: float,
     return 1.0 / compliance
 
 
+def line_contact(load_per_depth: float, radius: float, modulus: float) -> tuple[float, float]:
+    """(a, p0): plane-strain Hertz half-width (m) and peak pressure (Pa) of a cylinder of
+    relative radius ``radius`` (m) pressed with ``load_per_depth`` (N/m) against a
+    half-plane, contact modulus ``modulus`` (Pa): a = sqrt(4 F' R / (pi E*)),
+    p0 = 2 F' / (pi a) (Johnson, Contact Mechanics, 1985, eqs. 4.43-4.44)."""
+    if load_per_depth <= 0:
+        return 0.0, 0.0
+    a = math.sqrt(4.0 * load_per_depth * radius / (math.pi * modulus))
+    return a, 2.0 * load_per_depth / (math.pi * a)
+
+
+def measured_half_width(distance: np.ndarray, force: np.ndarray,
+                        tributary: np.ndarray) -> float:
+    """m, the half-width of an elliptical (Hertz) pressure with the second moment of the
+    node forces ``force`` (k,) N at ``distance`` (k,) m from the patch centre, each node's
+    force spread evenly over its ``tributary`` (k,) m: 2 sqrt(sum f (s^2 + l^2 / 12) /
+    sum f)."""
+    moment = float(force @ (distance ** 2 + tributary ** 2 / 12.0)) / float(force.sum())
+    return 2.0 * math.sqrt(moment)
+
+
 def hertz(load: float, equivalent_radius: float, modulus: float) -> tuple[float, float]:
     """(a, p0): Hertz contact radius (m) and peak pressure (Pa) of a load (N)."""
     if load <= 0:
@@ -126,10 +157,13 @@ class DamageTracker:
         face_padded: per obstacle index, whether a soft pad covers it.
         pad_material: (E Pa, nu) of what covers the padded faces (a deformable finger);
             None: the soft pad's (``gripper.finger.pad.*``).
+        face_deformable: per obstacle index, whether it is a deformable finger whose
+            in-plane curvature is measured from the patch (module docstring); None: none.
     """
 
     def __init__(self, fruit, config, face_groups, face_curvature, face_padded,
-                 pad_material: tuple[float, float] | None = None):
+                 pad_material: tuple[float, float] | None = None,
+                 face_deformable: list[bool] | None = None):
         self.fruit = fruit
         self.bruise_pressure = float(config['fruit.bruise_pressure'])
         self.failure_stress = float(config['fruit.failure_stress'])
@@ -143,6 +177,9 @@ class DamageTracker:
         self.groups = list(face_groups)
         self.curvature = list(face_curvature)
         self.padded = list(face_padded)
+        self.deformable = (list(face_deformable) if face_deformable is not None
+                           else [False] * len(self.padded))
+        self.depth = float(fruit.depth)
         ring = np.asarray(fruit.surface)
         self.ring = ring
         rest = fruit.rest_positions
@@ -200,6 +237,7 @@ class DamageTracker:
         """
         ring = self.ring
         out = []
+        tributary = None
         for body, run in self._runs(obstacle[ring]):
             nodes = ring[run]
             f = np.maximum(normal_force[nodes], 0.0)
@@ -212,12 +250,20 @@ class DamageTracker:
             if k1 <= 0:
                 k1 = 1e-3  # a flat or concave piece of outline: a 1 km radius
             faces = obstacle[nodes]
-            face_k = float(np.mean([self.curvature[o] for o in faces]))
-            # a face more curved than the fruit conforms to it: keep 1/1000 of its curvature
-            k1_eff = max(k1 + face_k, 1e-3 * k1)
-            re = 1.0 / math.sqrt(k1_eff * k1)
             padded = np.mean([self.padded[o] for o in faces]) >= 0.5
             modulus = self.pad_modulus if padded else self.rigid_modulus
+            if np.mean([self.deformable[o] for o in faces]) >= 0.5:
+                if tributary is None:
+                    tributary = tributary_lengths(self.fruit, positions)
+                half_width = measured_half_width(
+                    np.linalg.norm(positions[nodes] - centre, axis=1), f, tributary[run])
+                k1_eff = 4.0 * load / self.depth / (math.pi * modulus * half_width ** 2)
+            else:
+                face_k = float(np.mean([self.curvature[o] for o in faces]))
+                # a face more curved than the fruit conforms to it: keep 1/1000 of its
+                # curvature
+                k1_eff = max(k1 + face_k, 1e-3 * k1)
+            re = 1.0 / math.sqrt(k1_eff * k1)
             a, p0 = hertz(load, re, modulus)
             out.append((Contact(body, load, centre, a, p0, re, modulus), run, near))
         return out

@@ -121,16 +121,3 @@ def element_dofs(nodes: np.ndarray, dim: int = 2) -> np.ndarray:
     [x, y, z] (dim 3) per node."""
     nodes = np.asarray(nodes, dtype=np.int64)
     return (dim * nodes[:, :, None] + np.arange(dim)).reshape(nodes.shape[0], -1)
-
-
-def scatter_gradient(n_dof: int, dofs: np.ndarray, local: np.ndarray) -> np.ndarray:
-    """Sum element gradients (n_elem, m) into a (n_dof,) vector."""
-    return np.bincount(dofs.ravel(), weights=local.ravel(), minlength=n_dof)
-
-
-def hessian_triplets(dofs: np.ndarray, local: np.ndarray):
-    """Element Hessians (n_elem, m, m) to IJV triplets."""
-    m = dofs.shape[1]
-    rows = np.repeat(dofs, m, axis=1).ravel()
-    cols = np.tile(dofs, (1, m)).ravel()
-    return rows, cols, local.ravel()
