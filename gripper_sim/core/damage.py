@@ -18,14 +18,15 @@ section 3):
 - the contact modulus is E* = 1 / ((1 - nu^2) / E + (1 - nu_p^2) / E_p) with a soft pad
   or a deformable finger of E_p, nu_p (two elastic bodies, Hertz) and E / (1 - nu^2) on
   a rigid face;
-- on a deformable finger (a Fin Ray, a solid pad) the in-plane curvature is measured,
-  not assumed: the simulation resolves how the finger wraps and yields in the plane, so
-  the patch's in-plane half-width is read from its node forces f_i at distances s_i
-  from the centre, each spread over its tributary length l_i (the second moment of
-  Hertz's elliptical pressure is a^2 / 4): a1 = 2 sqrt(sum f_i (s_i^2 + l_i^2 / 12) /
-  sum f_i), and R1' is the radius with which plane-strain Hertz gives that half-width
-  at the line load F' = F / b, R1' = pi E* a1^2 / (4 F') (Johnson 1985, eq. 4.43); for
-  two elastic half-planes that is R1 again, for a finger that wraps it is larger;
+- on a deformable finger (a Fin Ray, a solid pad) the in-plane radius is measured, not
+  assumed: the simulation resolves how the finger yields and wraps in the plane, and
+  shows it as the patch's peak line pressure p_l (the largest node force over its
+  tributary length and b, as ``Deformation.peak_contact_pressure``). R1' is the radius
+  with which plane-strain Hertz has that peak at the patch's line load F' = F / b:
+  p_l = sqrt(F' E* / (pi R1')) (Johnson 1985, eqs. 4.43-4.44), R1' = F' E* / (pi p_l^2).
+  For two elastic half-planes that is the fruit's R1 again; a finger that wraps spreads
+  the load, so R1' grows and p0 falls; a finger that presses harder at a rib raises p_l
+  there and p0 with it;
 - contact radius a = (3 F Re / (4 E*))^(1/3), peak pressure p0 = 3 F / (2 pi a^2), and
   pressure p(s) = p0 sqrt(1 - s^2 / a^2) at distance s from the centre: that is the
   per-node pressure reported;
@@ -116,27 +117,6 @@ def contact_modulus(youngs_modulus: float, poisson_ratio: float,
     return 1.0 / compliance
 
 
-def line_contact(load_per_depth: float, radius: float, modulus: float) -> tuple[float, float]:
-    """(a, p0): plane-strain Hertz half-width (m) and peak pressure (Pa) of a cylinder of
-    relative radius ``radius`` (m) pressed with ``load_per_depth`` (N/m) against a
-    half-plane, contact modulus ``modulus`` (Pa): a = sqrt(4 F' R / (pi E*)),
-    p0 = 2 F' / (pi a) (Johnson, Contact Mechanics, 1985, eqs. 4.43-4.44)."""
-    if load_per_depth <= 0:
-        return 0.0, 0.0
-    a = math.sqrt(4.0 * load_per_depth * radius / (math.pi * modulus))
-    return a, 2.0 * load_per_depth / (math.pi * a)
-
-
-def measured_half_width(distance: np.ndarray, force: np.ndarray,
-                        tributary: np.ndarray) -> float:
-    """m, the half-width of an elliptical (Hertz) pressure with the second moment of the
-    node forces ``force`` (k,) N at ``distance`` (k,) m from the patch centre, each node's
-    force spread evenly over its ``tributary`` (k,) m: 2 sqrt(sum f (s^2 + l^2 / 12) /
-    sum f)."""
-    moment = float(force @ (distance ** 2 + tributary ** 2 / 12.0)) / float(force.sum())
-    return 2.0 * math.sqrt(moment)
-
-
 def hertz(load: float, equivalent_radius: float, modulus: float) -> tuple[float, float]:
     """(a, p0): Hertz contact radius (m) and peak pressure (Pa) of a load (N)."""
     if load <= 0:
@@ -157,8 +137,9 @@ class DamageTracker:
         face_padded: per obstacle index, whether a soft pad covers it.
         pad_material: (E Pa, nu) of what covers the padded faces (a deformable finger);
             None: the soft pad's (``gripper.finger.pad.*``).
-        face_deformable: per obstacle index, whether it is a deformable finger whose
-            in-plane curvature is measured from the patch (module docstring); None: none.
+        face_deformable: per obstacle index, whether it is a deformable finger, whose
+            in-plane radius is measured from the patch's peak line pressure (module
+            docstring); None: none is.
     """
 
     def __init__(self, fruit, config, face_groups, face_curvature, face_padded,
@@ -255,9 +236,8 @@ class DamageTracker:
             if np.mean([self.deformable[o] for o in faces]) >= 0.5:
                 if tributary is None:
                     tributary = tributary_lengths(self.fruit, positions)
-                half_width = measured_half_width(
-                    np.linalg.norm(positions[nodes] - centre, axis=1), f, tributary[run])
-                k1_eff = 4.0 * load / self.depth / (math.pi * modulus * half_width ** 2)
+                line_peak = float(np.max(f / tributary[run])) / self.depth
+                k1_eff = math.pi * line_peak ** 2 / (load / self.depth * modulus)
             else:
                 face_k = float(np.mean([self.curvature[o] for o in faces]))
                 # a face more curved than the fruit conforms to it: keep 1/1000 of its
