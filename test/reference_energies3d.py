@@ -354,12 +354,3 @@ def reference_evaluation(energy, q: np.ndarray, hessian: bool = True) -> Evaluat
         if isinstance(energy, cls):
             return reference(energy, q, hessian)
     return energy.evaluate(q, hessian)
-
-
-def dense_hessian(evaluation: Evaluation, n_dof: int) -> np.ndarray:
-    """(n_dof, n_dof) N/m: the triplets summed, plus the rank-one terms."""
-    dense = np.zeros((n_dof, n_dof))
-    np.add.at(dense, (evaluation.rows, evaluation.cols), evaluation.vals)
-    for c, u in evaluation.low_rank:
-        dense += c * np.outer(u, u)
-    return dense
