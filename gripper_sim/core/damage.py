@@ -47,7 +47,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from gripper_sim.core.energies.bending import turning_angles
-from gripper_sim.core.measures import tributary_lengths
 
 #: Tresca stress below a Hertz contact over its peak pressure (2 x 0.31, fruit-data.md)
 TRESCA_OVER_P0 = 0.62
@@ -234,8 +233,10 @@ class DamageTracker:
             padded = np.mean([self.padded[o] for o in faces]) >= 0.5
             modulus = self.pad_modulus if padded else self.rigid_modulus
             if np.mean([self.deformable[o] for o in faces]) >= 0.5:
-                if tributary is None:
-                    tributary = tributary_lengths(self.fruit, positions)
+                if tributary is None:  # half the outline segments at each node (m)
+                    seg = np.linalg.norm(np.roll(positions[ring], -1, axis=0)
+                                         - positions[ring], axis=1)
+                    tributary = 0.5 * (seg + np.roll(seg, 1))
                 line_peak = float(np.max(f / tributary[run])) / self.depth
                 k1_eff = math.pi * line_peak ** 2 / (load / self.depth * modulus)
             else:
