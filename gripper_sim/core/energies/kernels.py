@@ -1,8 +1,9 @@
 """Numba kernels of the 2D energies (the ``evaluate_into`` of each energy class).
 
-Free functions ``@njit(cache=True)`` on arrays. Each computes the value, gradient and
-Hessian of the numpy ``evaluate`` of its class in ``gripper_sim.core.energies``
-(test/test_energies.py compares them), adding the gradient into a preallocated (n_dof,)
+Free functions ``@njit(cache=True)`` on arrays: the one implementation of each energy
+(the value, gradient and Hessian of its class in ``gripper_sim.core.energies``, which
+the tests compare with the numpy references of ``test/reference_energies2d.py`` and
+with central differences), adding the gradient into a preallocated (n_dof,)
 vector and each element Hessian entry straight into the ``data`` array of a fixed CSC
 matrix: ``scatter[e, r * m + c]`` is the position in ``data`` of the entry (row
 ``dofs[e, r]``, column ``dofs[e, c]``) of element e with m dofs (``base.element_dofs``
@@ -80,6 +81,22 @@ def _angle_hessian(vx, vz, out, sign):
     out[1, 0] = out[0, 1]
 
 
+@njit(cache=True, inline='always')
+def _turning_angle(ax, az, bx, bz):
+    """Signed angle (rad) from edge a to edge b."""
+    return math.atan2(ax * bz - az * bx, ax * bx + az * bz)
+
+
+@njit(cache=True)
+def turning_angles(x, triples, out):
+    """Signed turning angles (n_t,) rad at the middle node of each triple (previous,
+    middle, next), between the edges x_i - x_p and x_n - x_i, written into out."""
+    for t in range(triples.shape[0]):
+        p, i, n = triples[t, 0], triples[t, 1], triples[t, 2]
+        out[t] = _turning_angle(x[i, 0] - x[p, 0], x[i, 1] - x[p, 1],
+                                x[n, 0] - x[i, 0], x[n, 1] - x[i, 1])
+
+
 @njit(cache=True)
 def bending(x, triples, phi0, k, grad, data, scatter, hessian):
     """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RodBending``).
@@ -102,7 +119,7 @@ def bending(x, triples, phi0, k, grad, data, scatter, hessian):
         p, i, n = triples[t, 0], triples[t, 1], triples[t, 2]
         ax, az = x[i, 0] - x[p, 0], x[i, 1] - x[p, 1]
         bx, bz = x[n, 0] - x[i, 0], x[n, 1] - x[i, 1]
-        dphi = math.atan2(ax * bz - az * bx, ax * bx + az * bz) - phi0[t]
+        dphi = _turning_angle(ax, az, bx, bz) - phi0[t]
         dphi = (dphi + math.pi) % (2 * math.pi) - math.pi
         value += 0.5 * k[t] * dphi * dphi
         _angle_gradient(ax, az, ga, -1.0)
