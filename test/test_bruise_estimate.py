@@ -112,7 +112,9 @@ def squeezes():
 #: Rigid flat: Hertz, the node forces sampling the pressure over about a third of the
 #: half-width each. Soft pad layer: an elastic foundation 3 mm thick under a patch
 #: 3.4 mm wide is stiffer than the half-space Hertz assumes, so its estimate (which the
-#: compiled step computes too) stays low. Deformable fingers: the measured radius.
+#: compiled step computes too) stays low. Deformable fingers: the radius is measured from
+#: the simulated patch, so equality here checks that the estimate reads that patch (and not
+#: the rest radius); whether the radius is right is the next test's check.
 AGREEMENT = {'flat': (0.75, 1.1), 'soft_pad': (0.55, 0.8), 'solid_pad': (0.999, 1.001),
              'fin_ray': (0.999, 1.001)}
 
