@@ -309,7 +309,24 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._perm_indices = (new_keys[gather] % n).astype(np.int32)
         self._perm_indptr = np.searchsorted(new_keys[gather] // n,
                                             np.arange(n + 1)).astype(np.int32)
-        self._ordering = None  # 'mmd' or 'nd', chosen at the first factorisation
+        self._ordering = self._sparser_ordering()
+        self._matvec_indptr = self._indptr.astype(np.int64)
+        self._matvec_indices = self._indices.astype(np.int64)
+
+    def _sparser_ordering(self) -> str:
+        """'nd' (nested dissection) or 'mmd' (the solver's ``lu_options``): the order
+        whose LU factors of a matrix on the pattern are sparser. With diagonal pivots
+        the fill depends on the pattern only, so a diagonally dominant stand-in (-1 off
+        the diagonal, the column's entry count on it) decides once, before any step."""
+        counts = np.diff(self._indptr).astype(float)
+        values = -np.ones(self._nnz)
+        values[self._diag_pos] = counts[:self.n] + 1.0
+        self._ordering = 'mmd'
+        mmd = self._factorise(values).nnz
+        self._ordering = 'nd'
+        nd = self._factorise(values).nnz
+        self.stats['factorisations'] = 0
+        return 'nd' if nd < mmd else 'mmd'
 
     def _kink_step(self, q, q_n, dq, dt, con: StepConstraints) -> float:
         """The line search's first step for sliding nodes: a Newton step that turns a
@@ -373,23 +390,18 @@ class PatternCachingSolver(ImplicitEulerSolver):
     def _factorise(self, values: np.ndarray) -> _SinglePrecisionLU:
         """Single-precision LU of A (CSC ``values`` on the pattern): with the solver's
         ordering (``lu_options``) or of P A P^T in the nested-dissection order, whichever
-        gave the sparser factors the first time. Raises RuntimeError (singular)."""
+        gives the sparser factors (``_sparser_ordering``). Raises RuntimeError
+        (singular)."""
         self.stats['factorisations'] += 1
         options = self.lu_options or {}
-        if self._ordering != 'nd':
-            lu = _SinglePrecisionLU(spla.splu(self._csc(values.astype(np.float32)), **options),
-                                    np.arange(self.n))
-            if self._ordering == 'mmd':
-                return lu
+        if self._ordering == 'mmd':
+            return _SinglePrecisionLU(spla.splu(self._csc(values.astype(np.float32)), **options),
+                                      np.arange(self.n))
         permuted = sp.csc_matrix((values[self._perm_gather].astype(np.float32),
                                   self._perm_indices, self._perm_indptr),
                                  shape=(self.n, self.n))
-        nd = _SinglePrecisionLU(spla.splu(permuted, **dict(options, permc_spec='NATURAL')),
-                                self._perm)
-        if self._ordering is None:
-            self._ordering = 'nd' if nd.nnz < lu.nnz else 'mmd'
-            return nd if self._ordering == 'nd' else lu
-        return nd
+        return _SinglePrecisionLU(spla.splu(permuted, **dict(options, permc_spec='NATURAL')),
+                                  self._perm)
 
     def _linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
                       dt: float, filters: np.ndarray):
@@ -455,7 +467,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
                x: np.ndarray) -> np.ndarray:
         """(A + u diag(c) u^T) x, A the CSC ``values`` on the pattern."""
         ax = np.empty(self.n)
-        kernels.symmetric_matvec(self._indptr, self._indices, values, x, ax)
+        kernels.csc_matvec(self._matvec_indptr, self._matvec_indices, values, x, ax)
         if c.size:
             ax += u @ (c * (u.T @ x))
         return ax
@@ -471,6 +483,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
         r = rhs.copy()
         z = precondition(r)
         residual_0, error_0 = max_abs(r), max_abs(z)
+        if error_0 <= error_limit:
+            return x  # the error estimate of dq = 0 passes already (a converged Newton)
         p = z.copy()
         rz = float(r @ z)
         for it in range(1, CG_MAX_ITERATIONS + 1):

@@ -95,14 +95,14 @@ def add_diagonal(data, diag_pos, values):
 
 
 @njit(cache=True)
-def symmetric_matvec(indptr, indices, data, x, out):
-    """out (n,) = A x for a symmetric A given by its CSC values on (indptr, indices): each
-    column's entries are its row's, so out[j] is the dot product of column j with x."""
+def csc_matvec(indptr, indices, data, x, out):
+    """out (n,) = A x for A given by its CSC values on (indptr, indices) (n + 1,), (nnz,)
+    int64."""
+    out[:] = 0.0
     for j in range(indptr.shape[0] - 1):
-        acc = 0.0
+        xj = x[j]
         for p in range(indptr[j], indptr[j + 1]):
-            acc += data[p] * x[indices[p]]
-        out[j] = acc
+            out[indices[p]] += data[p] * xj
 
 
 @njit(cache=True)
