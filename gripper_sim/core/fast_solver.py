@@ -32,7 +32,10 @@ iteration (same line search, shifts and stopping rule) with less work:
   the directions the new filter leaves free), and after a Newton step below
   ``HESSIAN_REUSE`` times the tolerance the next iteration reuses the Newton matrix;
 - the line search's first trial evaluates the Hessian with the gradient when a new
-  Hessian follows (the full step is usually taken).
+  Hessian follows (the full step is usually taken), and it stops where a sliding
+  node's slip velocity, turning round, comes nearest to zero (``_kink_step``: past it
+  the step overshoots the kink of the smoothed friction law and the search halves it
+  again and again).
 The fast path follows the reference path to the Newton tolerance over a grasp
 (test/test_3d_energies.py::test_fast_solver_follows_the_numpy_reference_path).
 """
