@@ -486,8 +486,6 @@ class PatternCachingSolver(ImplicitEulerSolver):
         r = rhs.copy()
         z = precondition(r)
         residual_0, error_0 = max_abs(r), max_abs(z)
-        if error_0 <= error_limit:
-            return x  # the error estimate of dq = 0 passes already (a converged Newton)
         p = z.copy()
         rz = float(r @ z)
         for it in range(1, CG_MAX_ITERATIONS + 1):
