@@ -32,7 +32,10 @@ iteration (same line search, shifts and stopping rule) with less work:
   the directions the new filter leaves free), and after a Newton step below
   ``HESSIAN_REUSE`` times the tolerance the next iteration reuses the Newton matrix;
 - the line search's first trial evaluates the Hessian with the gradient when a new
-  Hessian follows (the full step is usually taken).
+  Hessian follows (the full step is usually taken), and it stops where a sliding
+  node's slip velocity, turning round, comes nearest to zero (``_kink_step``: past it
+  the step overshoots the kink of the smoothed friction law and the search halves it
+  again and again).
 The fast path follows the reference path to the Newton tolerance over a grasp
 (test/test_3d_energies.py::test_fast_solver_follows_the_numpy_reference_path).
 """
@@ -45,9 +48,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from gripper_sim.core.stepper import (ImplicitEulerSolver, NewtonFailure, StepConstraints,
-                                      StepSolution, descent_direction, line_search,
-                                      stack_low_rank, woodbury_terms)
+from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
+                                      StepConstraints, StepSolution, descent_direction,
+                                      line_search, stack_low_rank, woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
     from gripper_sim.core import solver_kernels as kernels
@@ -78,6 +81,9 @@ REFINEMENT_SWEEPS = 3
 #: the Newton matrix (a chord step: near convergence the Hessian barely changes, and
 #: the step's size, which decides convergence, is as well estimated)
 HESSIAN_REUSE = 100.0
+#: a sliding node's Newton step is cut at the kink of the friction law only if it
+#: slips faster than this multiple of the smoothing speed (slower: inside the kink)
+KINK_FACTOR = 10.0
 
 
 def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
@@ -95,23 +101,30 @@ def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
 
 class _SinglePrecisionLU:
     """SuperLU of P A P^T in single precision standing for A^-1 as a preconditioner:
-    x[perm] = LU^-1 b[perm] (perm None: SuperLU's own column order, no permutation).
+    x[perm] = LU^-1 b[perm] (perm the identity: SuperLU's own column order).
 
     Single precision makes the factorisation about a third and the triangular solves
     a sixth faster; conjugate gradients in double precision make up the accuracy."""
 
-    def __init__(self, lu, perm: np.ndarray | None):
+    def __init__(self, lu, perm: np.ndarray):
         self.lu, self.perm = lu, perm
+        self._rhs = np.empty(perm.size, np.float32)
 
     @property
     def nnz(self) -> int:
         return self.lu.L.nnz + self.lu.U.nnz
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        if self.perm is None:
-            return self.lu.solve(b.astype(np.float32)).astype(float)
+        """A^-1 b for b (n,) or (n, k)."""
         x = np.empty(b.shape)
         x[self.perm] = self.lu.solve(np.ascontiguousarray(b[self.perm], dtype=np.float32))
+        return x
+
+    def solve_filtered(self, filters: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """A^-1 S b (n,), S the node filters (n_nodes, d, d)."""
+        kernels.filter_and_permute(filters, b, self.perm, self._rhs)
+        x = np.empty(b.shape)
+        kernels.unpermute(self.lu.solve(self._rhs), self.perm, x)
         return x
 
 
@@ -299,7 +312,46 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._perm_indices = (new_keys[gather] % n).astype(np.int32)
         self._perm_indptr = np.searchsorted(new_keys[gather] // n,
                                             np.arange(n + 1)).astype(np.int32)
-        self._ordering = None  # 'mmd' or 'nd', chosen at the first factorisation
+        self._ordering = self._sparser_ordering()
+        self._matvec_indptr = self._indptr.astype(np.int64)
+        self._matvec_indices = self._indices.astype(np.int64)
+
+    def _sparser_ordering(self) -> str:
+        """'nd' (nested dissection) or 'mmd' (the solver's ``lu_options``): the order
+        whose LU factors of a matrix on the pattern are sparser. With diagonal pivots
+        the fill depends on the pattern only, so a diagonally dominant stand-in (-1 off
+        the diagonal, the column's entry count on it) decides once, before any step."""
+        counts = np.diff(self._indptr).astype(float)
+        values = -np.ones(self._nnz)
+        values[self._diag_pos] = counts[:self.n] + 1.0
+        self._ordering = 'mmd'
+        mmd = self._factorise(values).nnz
+        self._ordering = 'nd'
+        nd = self._factorise(values).nnz
+        self.stats['factorisations'] = 0
+        return 'nd' if nd < mmd else 'mmd'
+
+    def _kink_step(self, q, q_n, dq, dt, con: StepConstraints) -> float:
+        """The line search's first step for sliding nodes: a Newton step that turns a
+        node's slip velocity s around (s . ds < 0) past the point nearest to zero
+        overshoots the kink of the smoothed friction law (its curvature along s is
+        eps^2 / |s|^3, next to nothing while |s| >> eps): stop there first."""
+        k = con.friction_nodes
+        if not k.size:
+            return 1.0
+        d = self.dim
+        t = con.friction_tangents
+        s0 = (np.einsum('kad,kd->ka', t, q.reshape(-1, d)[k] - q_n.reshape(-1, d)[k]) / dt
+              - con.friction_obstacle_speed)
+        ds = np.einsum('kad,kd->ka', t, dq.reshape(-1, d)[k]) / dt
+        along = np.sum(s0 * ds, axis=1)
+        size = np.sum(ds * ds, axis=1)
+        fast = np.sum(s0 * s0, axis=1) > (KINK_FACTOR * FRICTION_SMOOTHING) ** 2
+        turning = (along < 0) & (size > 0) & fast
+        if not np.any(turning):
+            return 1.0
+        nearest = -along[turning] / size[turning]
+        return float(min(1.0, nearest.min()))
 
     def _csc(self, data: np.ndarray) -> sp.csc_matrix:
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
@@ -318,9 +370,17 @@ class PatternCachingSolver(ImplicitEulerSolver):
             phi += value
             low_rank.extend(terms)
         phi += self._mass_damping(q - q_n, dt, grad)
-        phi_f, fric_grad, blocks = self._friction(q, q_n, dt, con, grad)
-        phi += phi_f
         k = con.friction_nodes
+        fric_grad = np.zeros(self.n)
+        if k.size:
+            blocks = np.empty((k.size, self.dim, self.dim))
+            phi += kernels.cone_friction(
+                q.reshape(-1, self.dim), q_n.reshape(-1, self.dim), k.astype(np.int64),
+                np.ascontiguousarray(con.friction_tangents, dtype=float),
+                np.ascontiguousarray(con.friction_bounds, dtype=float),
+                np.ascontiguousarray(con.friction_obstacle_speed, dtype=float), dt,
+                FRICTION_SMOOTHING, fric_grad, blocks)
+            grad += fric_grad
         if not hessian:
             return phi, grad, fric_grad, None
         diag = self.m / dt ** 2 + (self.alpha * self.m / dt if self.alpha > 0 else 0.0)
@@ -330,44 +390,42 @@ class PatternCachingSolver(ImplicitEulerSolver):
                                     np.ascontiguousarray(blocks))
         return phi, grad, fric_grad, (data, low_rank)
 
-    def _factorise(self, a: sp.csc_matrix) -> _SinglePrecisionLU:
-        """Single-precision LU of A: with the solver's ordering (``lu_options``) or of
-        P A P^T in the nested-dissection order, whichever gave the sparser factors the
-        first time. Raises RuntimeError (singular)."""
+    def _factorise(self, values: np.ndarray) -> _SinglePrecisionLU:
+        """Single-precision LU of A (CSC ``values`` on the pattern): with the solver's
+        ordering (``lu_options``) or of P A P^T in the nested-dissection order, whichever
+        gives the sparser factors (``_sparser_ordering``). Raises RuntimeError
+        (singular)."""
         self.stats['factorisations'] += 1
         options = self.lu_options or {}
-        if self._ordering != 'nd':
-            lu = _SinglePrecisionLU(spla.splu(a.astype(np.float32), **options), None)
-            if self._ordering == 'mmd':
-                return lu
-        permuted = sp.csc_matrix((a.data[self._perm_gather].astype(np.float32),
-                                  self._perm_indices, self._perm_indptr), shape=a.shape)
-        nd = _SinglePrecisionLU(spla.splu(permuted, **dict(options, permc_spec='NATURAL')),
-                                self._perm)
-        if self._ordering is None:
-            self._ordering = 'nd' if nd.nnz < lu.nnz else 'mmd'
-            return nd if self._ordering == 'nd' else lu
-        return nd
+        if self._ordering == 'mmd':
+            return _SinglePrecisionLU(spla.splu(self._csc(values.astype(np.float32)), **options),
+                                      np.arange(self.n))
+        permuted = sp.csc_matrix((values[self._perm_gather].astype(np.float32),
+                                  self._perm_indices, self._perm_indptr),
+                                 shape=(self.n, self.n))
+        return _SinglePrecisionLU(spla.splu(permuted, **dict(options, permc_spec='NATURAL')),
+                                  self._perm)
 
-    def _linear_solve(self, a: sp.csc_matrix, rhs: np.ndarray, low_rank, fresh: bool,
-                      dt: float, project=None):
-        """dq with (A + sum c u u^T) dq = rhs by conjugate gradients preconditioned with
-        the kept LU, factorised afresh when CG does not converge fast (or ``fresh``).
-        Raises RuntimeError (singular)."""
+    def _linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
+                      dt: float, filters: np.ndarray):
+        """dq with (A + sum c u u^T) dq = rhs (A: CSC ``values`` on the pattern) by
+        conjugate gradients preconditioned with the kept LU, factorised afresh when CG
+        does not converge fast (or ``fresh``), in the range of the filters S (n_nodes, d,
+        d). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
         u, c = stack_low_rank(low_rank, self.n)
         if self._lu is not None and not fresh and not self._stale:
-            dq = self._pcg(a, rhs, u, c, dt, project)
+            dq = self._pcg(values, rhs, u, c, dt, filters)
             if dq is not None:
                 return dq
         self._stale = False
-        self._lu = self._factorise(a)
+        self._lu = self._factorise(values)
         self._woodbury = None
         if c.size:
             # the preconditioner keeps these rank-one terms with the factorisation
             a_inv_u, capacitance = woodbury_terms(self._lu.solve, u, c)
             self._woodbury = (u, a_inv_u, np.linalg.inv(capacitance))
-        dq = self._pcg(a, rhs, u, c, dt, project)
+        dq = self._pcg(values, rhs, u, c, dt, filters)
         if dq is not None:
             return dq
         # CG failed even on a fresh factorisation (negative curvature: an indefinite
@@ -375,11 +433,12 @@ class PatternCachingSolver(ImplicitEulerSolver):
         precondition = self._preconditioner(u, c)
         dq = precondition(rhs)
         for _ in range(REFINEMENT_SWEEPS):
-            dq += precondition(rhs - self._apply(a, u, c, dq))
+            dq += precondition(rhs - self._apply(values, u, c, dq))
         return dq
 
-    def _preconditioner(self, u: np.ndarray, c: np.ndarray, project=None):
-        """r -> (kept LU + rank-one terms)^-1 r, projected by ``project`` if given."""
+    def _preconditioner(self, u: np.ndarray, c: np.ndarray, filters: np.ndarray | None = None):
+        """r -> (kept LU + rank-one terms)^-1 r, projected by the filters S (n_nodes, d,
+        d) if given: S (LU + ...)^-1 S r."""
         lu = self._lu
         kept = self._woodbury
         if kept is not None and kept[0].shape[1] == c.size:
@@ -389,55 +448,59 @@ class PatternCachingSolver(ImplicitEulerSolver):
             u_w, small_inv = u, np.linalg.inv(capacitance)
         else:
             u_w = None
-        if u_w is None:
-            precondition = lu.solve
+        if filters is None:
+            solve = lu.solve
         else:
-            def precondition(r):
-                y = lu.solve(r)
-                return y - a_inv_u @ (small_inv @ (u_w.T @ y))
-        if project is None:
-            return precondition
-        # the system lives in the range of S (its held directions are the identity and
-        # the right-hand side is zero there): the preconditioner S P^-1 S is exact on
-        # them even when P was factorised with another contact set
-        return lambda r: project(precondition(project(r)))
+            # the system lives in the range of S (its held directions are the identity
+            # and the right-hand side is zero there): the preconditioner S P^-1 S is exact
+            # on them even when P was factorised with another contact set
+            def solve(r):
+                return lu.solve_filtered(filters, r)
 
-    @staticmethod
-    def _apply(a: sp.csc_matrix, u: np.ndarray, c: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """(A + u diag(c) u^T) x."""
-        ax = a @ x
+        def precondition(r):
+            y = solve(r)
+            if u_w is not None:
+                y -= a_inv_u @ (small_inv @ (u_w.T @ y))
+            if filters is not None:
+                kernels.apply_filters(filters, y.copy(), y)
+            return y
+        return precondition
+
+    def _apply(self, values: np.ndarray, u: np.ndarray, c: np.ndarray,
+               x: np.ndarray) -> np.ndarray:
+        """(A + u diag(c) u^T) x, A the CSC ``values`` on the pattern."""
+        ax = np.empty(self.n)
+        kernels.csc_matvec(self._matvec_indptr, self._matvec_indices, values, x, ax)
         if c.size:
             ax += u @ (c * (u.T @ x))
         return ax
 
-    def _pcg(self, a, rhs, u, c, dt, project=None):
+    def _pcg(self, values, rhs, u, c, dt, filters):
         """Preconditioned CG from zero; None if it fails to converge in time."""
-        precondition = self._preconditioner(u, c, project)
-        limit = CG_TOLERANCE * float(np.max(np.abs(rhs)))
+        precondition = self._preconditioner(u, c, filters)
+        max_abs = kernels.max_abs
+        limit = CG_TOLERANCE * max_abs(rhs)
         error_limit = CG_ERROR_FRACTION * self.tolerance * dt
         step_floor = CG_RELATIVE_FLOOR * self.tolerance * dt
         x = np.zeros_like(rhs)
         r = rhs.copy()
         z = precondition(r)
-        residual_0, error_0 = float(np.max(np.abs(r))), float(np.max(np.abs(z)))
+        residual_0, error_0 = max_abs(r), max_abs(z)
         p = z.copy()
         rz = float(r @ z)
         for it in range(1, CG_MAX_ITERATIONS + 1):
-            ap = self._apply(a, u, c, p)
+            ap = self._apply(values, u, c, p)
             curvature = float(p @ ap)
             if not curvature > 0 or not np.isfinite(curvature):
                 self.stats['cg_iterations'] += it
                 return None
-            step = rz / curvature
-            x += step * p
-            r -= step * ap
-            residual = float(np.max(np.abs(r)))
-            if residual <= limit and float(np.max(np.abs(x))) >= step_floor:
+            residual, largest = kernels.cg_update(x, r, p, ap, rz / curvature)
+            if residual <= limit and largest >= step_floor:
                 self.stats['cg_iterations'] += it
                 self._stale = it > CG_STALE_ITERATIONS
                 return x
             z = precondition(r)
-            error = float(np.max(np.abs(z)))
+            error = max_abs(z)
             if error <= error_limit:
                 self.stats['cg_iterations'] += it
                 self._stale = it > CG_STALE_ITERATIONS
@@ -449,7 +512,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 self.stats['cg_iterations'] += it
                 return None
             rz_new = float(r @ z)
-            p = z + (rz_new / rz) * p
+            kernels.cg_direction(z, p, rz_new / rz)
             rz = rz_new
         self.stats['cg_iterations'] += CG_MAX_ITERATIONS
         return None
@@ -498,20 +561,20 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 if not (reuse and shift == 0.0):
                     kernels.filter_blocks(hdata, self._block_pos, self._block_nodes,
                                           filters, shift * s_diag * self.m / dt ** 2, out)
-                    matrix = self._csc(out.copy())
-                return self._linear_solve(matrix, -g_f, low, shift > 0, dt, filtered)
+                    matrix = out.copy()
+                return self._linear_solve(matrix, -g_f, low, shift > 0, dt, filters)
 
             dq, slope = descent_direction(solve_shifted, g_f, history)
-            if float(np.max(np.abs(dq))) / dt < self.tolerance:
+            if kernels.max_abs(dq) / dt < self.tolerance:
                 q = q + dq
                 _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
-                history.append(float(np.max(np.abs(dq))) / dt)
+                history.append(kernels.max_abs(dq) / dt)
                 self._warm = (q_n.copy(), dt, q)
                 return StepSolution(q, grad - fric_grad, iteration, history)
             # a full step this large is followed by a new Hessian: the line search's
             # first trial (usually taken) evaluates it with the gradient
             full_step_hessian = (reuse or
-                                 float(np.max(np.abs(dq))) / dt >= HESSIAN_REUSE * self.tolerance)
+                                 kernels.max_abs(dq) / dt >= HESSIAN_REUSE * self.tolerance)
             first_trial = []
 
             def evaluate(x):
@@ -522,9 +585,11 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 return self._evaluate_fast(x, q_n, v_n, dt, con, False)[:2]
 
             q, phi, grad, step = line_search(evaluate, q, dq, phi, slope,
-                                             float(np.max(np.abs(g_f))), filtered, history,
-                                             first_step=self.max_step(q, dq))
-            norm = float(np.max(np.abs(step * dq))) / dt
+                                             kernels.max_abs(g_f), filtered, history,
+                                             first_step=min(self.max_step(q, dq),
+                                                            self._kink_step(q, q_n, dq, dt,
+                                                                            con)))
+            norm = step * kernels.max_abs(dq) / dt
             history.append(norm)
             if norm < self.tolerance:
                 _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)

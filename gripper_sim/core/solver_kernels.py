@@ -92,3 +92,117 @@ def add_diagonal(data, diag_pos, values):
     """data[diag_pos[d]] += values[d] for every dof d."""
     for d in range(values.shape[0]):
         data[diag_pos[d]] += values[d]
+
+
+@njit(cache=True)
+def csc_matvec(indptr, indices, data, x, out):
+    """out (n,) = A x for A given by its CSC values on (indptr, indices) (n + 1,), (nnz,)
+    int64."""
+    out[:] = 0.0
+    for j in range(indptr.shape[0] - 1):
+        xj = x[j]
+        for p in range(indptr[j], indptr[j + 1]):
+            out[indices[p]] += data[p] * xj
+
+
+@njit(cache=True)
+def cg_update(x, r, p, ap, step):
+    """x += step p, r -= step ap (n,); returns (max |r|, max |x|)."""
+    residual = 0.0
+    largest = 0.0
+    for i in range(x.shape[0]):
+        x[i] += step * p[i]
+        r[i] -= step * ap[i]
+        residual = max(residual, abs(r[i]))
+        largest = max(largest, abs(x[i]))
+    return residual, largest
+
+
+@njit(cache=True)
+def cg_direction(z, p, beta):
+    """p = z + beta p (n,), in place."""
+    for i in range(p.shape[0]):
+        p[i] = z[i] + beta * p[i]
+
+
+@njit(cache=True)
+def filter_and_permute(filters, vec, perm, out):
+    """out[k] (d n,) = (S vec)[perm[k]], S the node filters (n, d, d); out may be single
+    precision (the right-hand side of a single-precision factorisation)."""
+    d = filters.shape[1]
+    for k in range(perm.shape[0]):
+        dof = perm[k]
+        i = dof // d
+        a = dof - d * i
+        acc = 0.0
+        for b in range(d):
+            acc += filters[i, a, b] * vec[d * i + b]
+        out[k] = acc
+
+
+@njit(cache=True)
+def unpermute(vec, perm, out):
+    """out[perm[k]] = vec[k] (n,), in double precision."""
+    for k in range(perm.shape[0]):
+        out[perm[k]] = vec[k]
+
+
+@njit(cache=True)
+def max_abs(vec):
+    """max |vec[i]| of a (n,) array (0 for an empty one)."""
+    largest = 0.0
+    for i in range(vec.shape[0]):
+        largest = max(largest, abs(vec[i]))
+    return largest
+
+
+@njit(cache=True)
+def cone_friction(x, x_n, nodes, tangents, bounds, obstacle_speed, dt, eps, fric_grad,
+                  blocks):
+    """Kinetic friction of sliding nodes (``ImplicitEulerSolver._cone_friction``).
+
+    With T (m, d) a node's tangents and s = T (x - x_n) / dt - v_obstacle (m/s), the
+    potential b dt sqrt(|s|^2 + eps^2) has the gradient b T^T s / root and the Hessian
+    (b / dt) T^T (I / root - s s^T / root^3) T.
+
+    Args:
+        x, x_n: (n, d) m.  nodes: (k,).  tangents: (k, m, d).  bounds: (k,) N.
+        obstacle_speed: (k, m) m/s.  dt: s.  eps: m/s, the smoothing speed.
+        fric_grad: (d n,) N, the gradient added into it.  blocks: (k, d, d) N/m, written.
+
+    Returns:
+        The potential (J).
+    """
+    d = x.shape[1]
+    m = tangents.shape[1]
+    s = np.empty(m)
+    phi = 0.0
+    for r in range(nodes.shape[0]):
+        i = nodes[r]
+        t = tangents[r]
+        sq = 0.0
+        for a in range(m):
+            acc = 0.0
+            for c in range(d):
+                acc += t[a, c] * (x[i, c] - x_n[i, c])
+            s[a] = acc / dt - obstacle_speed[r, a]
+            sq += s[a] * s[a]
+        root = np.sqrt(sq + eps * eps)
+        b = bounds[r]
+        phi += b * dt * root
+        for c in range(d):
+            acc = 0.0
+            for a in range(m):
+                acc += s[a] * t[a, c]
+            fric_grad[d * i + c] += b / root * acc
+        for c in range(d):
+            for e in range(d):
+                acc = 0.0
+                proj_c = 0.0
+                proj_e = 0.0
+                for a in range(m):
+                    acc += t[a, c] * t[a, e]
+                    proj_c += s[a] * t[a, c]
+                    proj_e += s[a] * t[a, e]
+                blocks[r, c, e] = b / dt * (acc / root - proj_c * proj_e / root ** 3)
+    return phi

@@ -1,0 +1,109 @@
+"""The fast Newton solver's own parts (``core.fast_solver``, ``core.solver_kernels``):
+the compiled friction against the stepper's numpy version, the line search's first step
+at the kink of the friction law, and the factor ordering chosen from the pattern."""
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+from gripper_sim.configuration import load_config
+from gripper_sim.core import solver_kernels
+from gripper_sim.core.fast_solver import KINK_FACTOR, PatternCachingSolver, as_cone
+from gripper_sim.core.stepper import FRICTION_SMOOTHING, ImplicitEulerSolver, StepConstraints
+from gripper_sim.workflows.factory import make_simulation
+
+
+def _sliding(dim: int, k: int, seed: int):
+    """Positions q, q_n (n dim,) and the constraints of k sliding nodes of 2k nodes."""
+    rng = np.random.default_rng(seed)
+    n = 2 * k
+    q_n = rng.normal(size=n * dim)
+    q = q_n + 1e-3 * rng.normal(size=n * dim)
+    nodes = rng.choice(n, size=k, replace=False).astype(np.int64)
+    if dim == 2:
+        t = rng.normal(size=(k, 2))
+        tangents = t / np.linalg.norm(t, axis=1)[:, None]
+        speed = 0.01 * rng.normal(size=k)
+    else:
+        tangents = np.stack([np.linalg.qr(rng.normal(size=(3, 3)))[0][:, :2].T
+                             for _ in range(k)])
+        speed = 0.01 * rng.normal(size=(k, 2))
+    filters = np.tile(np.eye(dim), (n, 1, 1))
+    con = StepConstraints(filters, nodes, tangents, rng.uniform(0.1, 2.0, size=k), speed)
+    return q, q_n, con
+
+
+@pytest.mark.parametrize('dim', [2, 3])
+def test_compiled_friction_is_the_steppers_cone(dim):
+    q, q_n, con = _sliding(dim, 7, seed=dim)
+    con = as_cone(con)
+    dt = 0.02
+    solver = ImplicitEulerSolver(np.ones(q.size // dim), [], dim=dim)
+    reference_grad = np.zeros(q.size)
+    phi, blocks = solver._cone_friction(q, q_n, dt, con, reference_grad)
+    grad = np.zeros(q.size)
+    out = np.empty((con.friction_nodes.size, dim, dim))
+    value = solver_kernels.cone_friction(
+        q.reshape(-1, dim), q_n.reshape(-1, dim), con.friction_nodes,
+        np.ascontiguousarray(con.friction_tangents), con.friction_bounds,
+        np.ascontiguousarray(con.friction_obstacle_speed, dtype=float), dt,
+        FRICTION_SMOOTHING, grad, out)
+    assert phi > 0 and np.max(np.abs(reference_grad)) > 0 and np.max(np.abs(blocks)) > 0
+    assert value == pytest.approx(phi, rel=1e-12)
+    np.testing.assert_allclose(grad, reference_grad, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(out, blocks, rtol=1e-10, atol=1e-12 * np.max(np.abs(blocks)))
+
+
+def _one_sliding_node(slip: np.ndarray, dt: float = 0.02):
+    """A 3D solver with one node sliding on the plane z = 0 (tangents x and y) at the
+    slip velocity ``slip`` (2,) m/s; (solver, q, q_n, constraints)."""
+    solver = PatternCachingSolver(np.ones(1), [], dim=3, fast=False)
+    q_n = np.zeros(3)
+    q = np.array([slip[0] * dt, slip[1] * dt, 0.0])
+    con = StepConstraints(np.eye(3)[None], np.array([0]), np.eye(3)[None, :2],
+                          np.array([1.0]), np.zeros((1, 2)))
+    return solver, q, q_n, con
+
+
+def test_first_step_stops_a_turning_slip_where_it_is_nearest_zero():
+    dt = 0.02
+    slip = np.array([0.3, 0.1])
+    solver, q, q_n, con = _one_sliding_node(slip, dt)
+    # a Newton step that turns the slip velocity round to -3 times itself: it passes
+    # zero at a quarter of the step
+    dq = np.append(-4.0 * slip * dt, 0.0)
+    assert solver._kink_step(q, q_n, dq, dt, con) == pytest.approx(0.25)
+    # a step that speeds the slip up, or one that stops short of zero, is taken whole
+    assert solver._kink_step(q, q_n, -dq, dt, con) == 1.0
+    assert solver._kink_step(q, q_n, 0.5 * dq / 4.0, dt, con) == 1.0
+    # a node slipping within the smoothing speed is inside the kink already
+    slow = 0.5 * KINK_FACTOR * FRICTION_SMOOTHING * slip / np.linalg.norm(slip)
+    solver, q, q_n, con = _one_sliding_node(slow, dt)
+    assert solver._kink_step(q, q_n, np.append(-4.0 * slow * dt, 0.0), dt, con) == 1.0
+
+
+@pytest.mark.parametrize('model', [['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
+                                   ['fruit.model=solid', 'fruit.skin.enabled=false',
+                                    'fruit.mesh.subdivisions=3']], ids=['shell', 'solid'])
+def test_the_ordering_chosen_from_the_pattern_gives_the_sparser_factors(model):
+    """The order picked from a stand-in matrix when the solver is built is the one whose
+    factors of a real Newton matrix (the fruit's Hessian at rest) are sparser."""
+    sim = make_simulation(load_config(overrides=['dimension=3'] + model))
+    solver = sim.solver
+    assert solver.fast
+    dt = sim.dt
+    q = sim.q.ravel()
+    data = np.zeros(solver._nnz)
+    for energy, scatter in zip(solver.energies, solver._scatter):
+        energy.evaluate_into(q, np.zeros(q.size), data, scatter, True)
+    solver_kernels.add_diagonal(data, solver._diag_pos, solver.m / dt ** 2)
+    chosen = solver._ordering
+    sizes = {}
+    for ordering in ('mmd', 'nd'):
+        solver._ordering = ordering
+        lu = solver._factorise(data)
+        sizes[ordering] = lu.nnz
+        rhs = np.linspace(-1.0, 1.0, q.size)
+        exact = spla.spsolve(solver._csc(data).tocsc(), rhs)
+        # single precision: a preconditioner, not a solution
+        assert np.max(np.abs(lu.solve(rhs) - exact)) < 1e-2 * np.max(np.abs(exact))
+    assert sizes[chosen] == min(sizes.values())
