@@ -123,7 +123,7 @@ def _add_off(band, pos, i, j, h00, h01, h10, h11):
         band[pj, d, 1, 1] += h11
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def band_matvec(band, order, v, out):
     """out = B v for a symmetric node-block band (n, nbw+1, 2, 2), v and out (2n,)."""
     n = band.shape[0]
@@ -159,7 +159,7 @@ def band_to_dense(band, order, out):
 
 
 # ---------------------------------------------------------------------- energies
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def ring_stretching(q, edges, spar, pos, hessian, grad, band):
     """Skin stretching E = sum EA (l - L)^2 / (2 L) (energies/stretching.py).
 
@@ -199,7 +199,7 @@ def ring_stretching(q, edges, spar, pos, hessian, grad, band):
     return 0.5 * value
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def ring_bending(q, triples, bpar, pos, hessian, grad, band):
     """Ring bending E = sum k (phi - phi0)^2 / 2 (energies/bending.py).
 
@@ -280,7 +280,7 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
     return 0.5 * value
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
     """Enclosed-area pressure (energies/pressure.py).
 
@@ -326,7 +326,7 @@ def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
     return value, c
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, hessian,
               grads, band, area_grad, values):
     """All ring energies, the flesh and gravity: grads (4, 2n) per energy, band = elastic
@@ -426,7 +426,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
     return phi, c
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad):
     """The soft pads' energy (J), as ``pad.PadLayer._face_terms`` (elastic foundation and
     lagged smoothed friction); adds its gradient (N) into ``grad`` (2n,)."""
@@ -480,7 +480,7 @@ def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
         ab[p, 0, 1, 1] += h_n * snz * snz + h_t * stz * stz
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _filtered_max(filters, g):
     """max |S g| over dofs."""
     out = 0.0
@@ -963,7 +963,7 @@ def _covers(face_par, origin_x, origin_z, f, px, pz):
         f, 3]
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred, face_par,
                         face_dyn, dt, v_corr, start, filters, fr_nodes, fr_t, fr_bound,
                         fr_speed):
@@ -1090,7 +1090,7 @@ def _capped_rebound(v, rebound, v_start, dx, reaction, mass, dt):
     return min(max((-br + math.sqrt(discriminant)) / rr, 0.0), 1.0)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
                     x, x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
                     released, slipped):
@@ -1496,7 +1496,7 @@ def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
     return length
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
                   face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, flesh,
                   gravity_grad, known, energies, normal_out, pressure_out, out):
@@ -1631,7 +1631,7 @@ def _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins):
 (P_BODY, P_LOAD, P_CX, P_CZ, P_RADIUS, P_PEAK, P_RE, P_MODULUS, P_SIZE) = range(9)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_curvature,
                   bruise_pressure, rigid_modulus, pad_modulus, covered, node_pressure,
                   patches):
