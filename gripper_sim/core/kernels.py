@@ -213,22 +213,20 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
     nt = triples.shape[0]
     if nt == 0:
         return 0.0
-    # per edge b_t = x[t2] - x[t1]: d atan2 / d b and its Hessian; a_t = b_{t-1}
-    ex = np.empty(nt)
-    ez = np.empty(nt)
-    gx = np.empty(nt)
-    gz = np.empty(nt)
+    # per edge b_t = x[t2] - x[t1]: d atan2 / d b (g) and its Hessian; a_t = b_{t-1}, the
+    # previous triple's edge, carried over (no scratch arrays: a step evaluates this often)
+    i1, i2 = triples[nt - 1, 1], triples[nt - 1, 2]
+    ax = q[2 * i2] - q[2 * i1]
+    az = q[2 * i2 + 1] - q[2 * i1 + 1]
+    r2 = ax ** 2 + az ** 2
+    gx_a, gz_a = -az / r2, ax / r2
+    value = 0.0
     for t in range(nt):
         i1, i2 = triples[t, 1], triples[t, 2]
         bx = q[2 * i2] - q[2 * i1]
         bz = q[2 * i2 + 1] - q[2 * i1 + 1]
         r2 = bx ** 2 + bz ** 2
-        ex[t], ez[t] = bx, bz
-        gx[t], gz[t] = -bz / r2, bx / r2
-    value = 0.0
-    for t in range(nt):
-        a = t - 1 if t > 0 else nt - 1
-        ax, az, bx, bz = ex[a], ez[a], ex[t], ez[t]
+        gx_b, gz_b = -bz / r2, bx / r2
         cross = ax * bz - az * bx
         dot = ax * bx + az * bz
         dphi = math.atan2(cross, dot) - bpar[t, 0]
@@ -239,8 +237,8 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
             dphi = y % (2 * np.pi) - np.pi
         k = bpar[t, 1]
         value += k * dphi ** 2
-        gax, gaz = -gx[a], -gz[a]
-        gbx, gbz = gx[t], gz[t]
+        gax, gaz = -gx_a, -gz_a
+        gbx, gbz = gx_b, gz_b
         j0, j1 = -gax, -gaz
         j2, j3 = gax - gbx, gaz - gbz
         j4, j5 = gbx, gbz
@@ -277,6 +275,7 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
                      k * (j5 * j2) - pb01, k * (j5 * j3) + pb00)
             _add_off(band, pos, i2, i0, k * (j4 * j0), k * (j4 * j1), k * (j5 * j0),
                      k * (j5 * j1))
+        ax, az, gx_a, gz_a = bx, bz, gx_b, gz_b
     return 0.5 * value
 
 
