@@ -5,9 +5,9 @@ CPU time of this process (``time.process_time``, the best of ``--repeat`` runs; 
 machine's load average is printed), for each case and model, with Newton iterations:
 
 - ``hertz``: the solid disk (256 surface nodes) pressed to 1.5 N by flat jaws, 1.5 s of
-  simulated time at dt = 10 ms. Both models take the same route here (the compiled
-  energies and the fixed-pattern Newton solver, ``core.fast_solver``): the figure that
-  compares the contact models themselves.
+  simulated time at dt = 10 ms. ``mmm`` runs the compiled whole step (``core.fast``,
+  which now covers the solid fruit too), the barrier model the compiled energies on the
+  fixed-pattern Newton solver (``core.fast_solver``).
 - ``membrane``: the pressurised ring (256 nodes) squeezed by 10 % of its radius.
   ``mmm`` runs the whole step in one numba kernel (``core.fast``), which the barrier
   model does not have; ``mmm-numpy`` is the numpy reference path of the same method

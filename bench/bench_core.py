@@ -9,7 +9,9 @@ CPU time per simulated second, the real-time factor (simulated seconds per CPU s
 mean Newton iterations per step, the route the step took, and where the time goes:
 
 - assembly: energies, gradients and Hessians, and building the Newton matrix;
-- solve: factorising the Newton matrix and solving with it (with the rank-one term);
+- solve: factorising the Newton matrix and solving with it: the shell's node-block band
+  (with its rank-one pressure term), the solid's sparse LDL^T (``core.sparse_ldl``,
+  minimum-degree order);
 - contact: contact constraints, contact-set updates and the rest of a step's passes;
 - measures: the step's outputs (StepResult, damage);
 - other: gripper kinematics, the grasp state machine, Python glue.
@@ -94,7 +96,7 @@ def _op_loops():
     def evaluations(reps, hessian, q, q_n, v_n, dt, m2, alpha, beta, filters, frn, frt, frb,
                     frs, edges, spar, triples, bpar, ring, press, flesh, grav, pos, nbw):
         n2 = q.shape[0]
-        band = np.zeros((n2 // 2, nbw + 1, 2, 2))
+        band = k._newton_storage(n2 // 2, nbw, flesh)[0]
         grads = np.empty((4, n2))
         nopad, nopar = np.zeros(0, np.int64), np.zeros((0, k.PAD_SIZE))
         out = np.empty((6, n2))
@@ -113,7 +115,7 @@ def _op_loops():
                        spar, triples, bpar, ring, press, flesh, grav, pos, nbw, solves):
         n2 = q.shape[0]
         n = n2 // 2
-        band = np.zeros((n, nbw + 1, 2, 2))
+        band, ab, l_values, d_inv = k._newton_storage(n, nbw, flesh)
         grads = np.empty((4, n2))
         area = np.empty(n2)
         values = np.empty(4)
@@ -122,18 +124,19 @@ def _op_loops():
         order = np.empty(n, np.int64)
         for i in range(n):
             order[pos[i]] = i
-        ab = np.empty((n, nbw + 1, 2, 2))
         nopad, nopar = np.zeros(0, np.int64), np.zeros((0, k.PAD_SIZE))
         x = np.ones(n2)
         y = np.ones(n2)
+        # the rank-one term needs a second right-hand side (the shell's pressure)
+        two = ring.shape[0] > 0
         ok = 0
-        for _ in range(reps):
-            if solves:
-                k._ldl_solve2(ab, x, y)
-            else:
-                k._newton_matrix(band, m2, dt, alpha, beta, filters, frn, frt, frb, frs,
-                                 frn.shape[0], q, q_n, pos, order, 0.0, ab, nopad, nopar)
-                ok += k._ldl_blocks(ab)
+        for rep in range(reps):
+            if solves and rep > 0:
+                k._newton_inverse(ab, l_values, d_inv, flesh, x, y, two)
+            else:  # solves: on the factors of one factorisation
+                ok += k._newton_factor(band, m2, dt, alpha, beta, filters, frn, frt, frb, frs,
+                                       frn.shape[0], q, q_n, pos, order, 0.0, ab, nopad,
+                                       nopar, flesh, l_values, d_inv)
         return ok
 
     @njit(cache=True)

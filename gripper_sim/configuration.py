@@ -204,8 +204,9 @@ SCHEMA: dict[str, Key] = {
                                '(concave circular arc of radius gripper.finger.radius); '
                                'vgroove (a V of opening gripper.finger.groove_angle); '
                                'solid_pad (a deformable elastic block on the jaw, '
-                               'gripper.finger.solid_pad.*; 2D); fin_ray (a deformable Fin Ray '
-                               'finger, gripper.finger.fin_ray.*; 2D)', 'str',
+                               'gripper.finger.solid_pad.*; 3D: as wide as '
+                               'gripper.jaw_width); fin_ray (a deformable Fin Ray finger, '
+                               'gripper.finger.fin_ray.*; 2D)', 'str',
                                choices=RIGID_FINGERS + ('solid_pad', 'fin_ray')),
     'gripper.finger.radius': Key(0.05, 'm', 'arc: radius of the concave face (its chord is '
                                  'gripper.jaw_height)', low=1e-3, high=10.0),
@@ -576,10 +577,10 @@ def validate(flat: Mapping[str, Any]) -> Parameters:
     if result.get('gripper.finger.type') == 'arc':
         check_finger(result)
     check_fin_ray(result)
-    if result.get('dimension') == 3 and result.get('gripper.finger.type') not in RIGID_FINGERS:
-        raise ConfigError(f"config key 'gripper.finger.type' = {result['gripper.finger.type']}"
-                          ': deformable fingers are 2D only so far (dimension 3 takes '
-                          f"{', '.join(RIGID_FINGERS)})")
+    if result.get('dimension') == 3 and result.get('gripper.finger.type') == 'fin_ray':
+        raise ConfigError("config key 'gripper.finger.type' = fin_ray: the Fin Ray finger is "
+                          f"2D only so far (dimension 3 takes {', '.join(RIGID_FINGERS)} "
+                          'or solid_pad)')
     return Parameters._restore(result)
 
 

@@ -14,13 +14,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import Evaluation, hessian_triplets, scatter_gradient
+from gripper_sim.core.energies.base import Evaluation
 from gripper_sim.core3d.energies.hinge import HingeBending
 from gripper_sim.core3d.energies.membrane import Membrane
 from gripper_sim.core3d.energies.neohookean import NeoHookeanTets
 from gripper_sim.core3d.energies.pressure import EnclosedVolumePressure
 from gripper_sim.core3d.energies.quadratic_tets import QuadraticNeoHookeanTets
 from gripper_sim.core3d.energies.wrinkling_membrane import WrinklingMembrane
+
+from reference_energies2d import hessian_triplets, scatter_gradient
 
 
 def _no_triplets():
@@ -352,12 +354,3 @@ def reference_evaluation(energy, q: np.ndarray, hessian: bool = True) -> Evaluat
         if isinstance(energy, cls):
             return reference(energy, q, hessian)
     return energy.evaluate(q, hessian)
-
-
-def dense_hessian(evaluation: Evaluation, n_dof: int) -> np.ndarray:
-    """(n_dof, n_dof) N/m: the triplets summed, plus the rank-one terms."""
-    dense = np.zeros((n_dof, n_dof))
-    np.add.at(dense, (evaluation.rows, evaluation.cols), evaluation.vals)
-    for c, u in evaluation.low_rank:
-        dense += c * np.outer(u, u)
-    return dense

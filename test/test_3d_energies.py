@@ -10,7 +10,8 @@ from gripper_sim.core3d.meshes import (TET10_EDGES, body_surface, enclosed_volum
                                        geodesic_sphere, hinges, signed_volumes)
 
 from helpers import kernel_evaluation
-from reference_energies3d import dense_hessian, neohookean_von_mises, reference_evaluation
+from reference_energies2d import dense_hessian
+from reference_energies3d import neohookean_von_mises, reference_evaluation
 
 RNG = np.random.default_rng(7)
 RADIUS = 0.03

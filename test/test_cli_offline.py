@@ -40,6 +40,18 @@ def test_squeeze_to_gap_stops_at_the_gap():
     assert data['force'][-1] > 0
 
 
+@pytest.mark.parametrize('dimension', [2, 3])
+def test_squeeze_with_solid_pads_stops_at_the_force(dimension):
+    """The jaws close towards the smallest gap the pads allow (not 0) and stop at the
+    force; in 3D the pads are the extruded block."""
+    run = gripper_sim('squeeze', '--set', f'dimension={dimension}', '--set',
+                      'gripper.finger.type=solid_pad', '--to-force', '2', '--json')
+    assert run.returncode == 0, run.stderr
+    data = json.loads(run.stdout)
+    assert data['force'][-1] >= 2.0
+    assert data['gap'][-1] > 2 * 0.006  # two default pads
+
+
 def test_pick_json_reports_outcome():
     run = gripper_sim('pick', '--force', '3', '--lift', '0.02', '--hold', '0.3', '--json')
     assert run.returncode == 0, run.stderr

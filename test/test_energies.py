@@ -1,15 +1,19 @@
-"""Finite-difference checks of every energy's gradient and Hessian."""
+"""Every 2D energy's one implementation (its numba kernel): gradient and Hessian against
+central differences, and value, gradient and Hessian against the numpy references of
+``reference_energies2d.py``."""
 import numpy as np
 import pytest
 
 from gripper_sim.core.energies import (EnclosedAreaPressure, Gravity, NeoHookeanTriangles,
                                        RingBending, Stretching)
+from gripper_sim.core.energies.bending import turning_angles as ring_turning_angles
 from gripper_sim.core.mesh import mesh_outline
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.geometry.shapes import circle
 
 from helpers import kernel_evaluation
+from reference_energies2d import dense_hessian, enclosed_area, reference, turning_angles, von_mises
 
 RNG = np.random.default_rng(42)
 
@@ -97,18 +101,23 @@ def _compiled_cases():
 @pytest.mark.parametrize('name,energy,q', _compiled_cases(),
                          ids=[e[0] for e in _compiled_cases()])
 def test_compiled_kernel_matches_the_numpy_reference(name, energy, q):
-    """Each energy's ``evaluate_into`` (what the solver runs) gives the value, gradient
-    and Hessian of its numpy ``evaluate``."""
+    """Each energy's ``evaluate_into`` (what the solvers run) gives the value, gradient
+    and Hessian of its numpy reference (the pad: of its own triplet form), and so do
+    ``evaluate``, ``value``, ``gradient`` and ``hessian`` (built on it)."""
     value, grad, hess = kernel_evaluation(energy, q)
-    reference = energy.evaluate(q, hessian=False)
-    assert value == pytest.approx(reference.value, rel=1e-12, abs=1e-18)
+    ref = (energy.evaluate(q) if isinstance(energy, PadLayer) else reference(energy, q))
+    ref_hess = dense_hessian(ref, q.size)
+    assert value == pytest.approx(ref.value, rel=1e-12, abs=1e-18)
     assert energy.value(q) == pytest.approx(value, rel=1e-12, abs=1e-18)
     assert np.max(np.abs(grad)) > 0, 'gradient is trivially zero'
-    assert np.max(np.abs(grad - reference.gradient)) <= 1e-12 * np.max(np.abs(grad))
-    ref_hess = energy.hessian(q)
+    assert np.max(np.abs(grad - ref.gradient)) <= 1e-12 * np.max(np.abs(grad))
     if energy.dofs is not None:
         assert np.max(np.abs(ref_hess)) > 0, 'Hessian is trivially zero'
     assert np.max(np.abs(hess - ref_hess)) <= 1e-11 * max(np.max(np.abs(ref_hess)), 1.0)
+    triplets = energy.evaluate(q)
+    assert triplets.value == value and np.array_equal(triplets.gradient, grad)
+    assert np.max(np.abs(energy.hessian(q) - hess)) <= 1e-12 * max(np.max(np.abs(hess)), 1.0)
+    assert np.array_equal(energy.gradient(q), grad)
     value_only, grad_only, untouched = kernel_evaluation(energy, q, hessian=False)
     assert value_only == value and np.array_equal(grad_only, grad)
     assert not np.any(untouched)
@@ -120,7 +129,20 @@ def test_compiled_von_mises_matches_the_numpy_reference():
     q = _perturbed(nodes, 5e-4)
     stress = flesh.von_mises(q)
     assert np.max(stress) > 0
-    np.testing.assert_allclose(stress, flesh.von_mises_reference(q), rtol=1e-12)
+    np.testing.assert_allclose(stress, von_mises(flesh, q), rtol=1e-12)
+
+
+def test_compiled_turning_angles_and_pressure_match_the_numpy_reference():
+    x0, ring, _, _ = _ring()
+    x = _perturbed(x0, 2e-3).reshape(-1, 2)
+    triples = np.stack([np.roll(ring, 1), ring, np.roll(ring, -1)], axis=1)
+    angles = ring_turning_angles(x, triples)
+    assert np.all(angles > 0)  # a counter-clockwise ring turns left everywhere
+    np.testing.assert_allclose(angles, turning_angles(x, triples), rtol=1e-13)
+    pressure = EnclosedAreaPressure(ring, np.pi * 0.03 ** 2, 0.04, 2e4, 3e6)
+    expected = 2e4 - 3e6 * (enclosed_area(x, ring) - pressure.a0) / pressure.a0
+    assert pressure.pressure(x.ravel()) == pytest.approx(expected, rel=1e-12)
+    assert abs(expected - 2e4) > 100  # the perturbation changes the area
 
 
 def test_compiled_kernel_of_an_inverted_triangle_is_infinite_and_adds_nothing():

@@ -81,15 +81,19 @@ def test_energy_kernels_match_the_numpy_energies(name):
                                atol=1e-11 * np.max(np.abs(reference)))
 
 
-def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction():
-    fruit, model = _shell('fruit.nodes=24', 'fruit.pressure.turgor=3e4',
-                          'fruit.damping.mass=5', 'fruit.damping.stiffness=1e-4')
+@pytest.mark.parametrize('fruit_model, noise', [
+    (['fruit.nodes=24', 'fruit.pressure.turgor=3e4'], 5e-4),  # the band, rank-one term
+    (['fruit.model=solid'], 1e-4)],  # the sparse LDL^T
+    ids=['shell', 'solid'])
+def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction(fruit_model,
+                                                                              noise):
+    fruit, model = _shell(*fruit_model, 'fruit.damping.mass=5', 'fruit.damping.stiffness=1e-4')
     from gripper_sim.core.energies import Gravity
     gravity = Gravity(fruit.masses, 9.81)
     solver = ImplicitEulerSolver(fruit.masses, list(fruit.energies) + [gravity],
                                  damping_mass=5.0, damping_stiffness=1e-4, tolerance=1e-9)
     n = fruit.n_nodes
-    q_n = _perturbed(fruit, 5e-4)
+    q_n = _perturbed(fruit, noise)
     rng = np.random.default_rng(3)
     v_n = rng.normal(scale=0.01, size=q_n.size)
     dt = 1e-3

@@ -120,6 +120,52 @@ def test_two_way_collision_free_step_stops_a_finger_node_before_the_fruit():
     assert barrier.max_step(q, -through) == 1.0
 
 
+def _pairs(collisions) -> list:
+    """The (kind, ids) of the pairs of an ipctk NormalCollisions (a vertex pair in either
+    order), sorted."""
+    return sorted([('ev', c.vertex_id, c.edge_id) for c in collisions.ev_collisions]
+                  + [('vv', *sorted((c.vertex0_id, c.vertex1_id)))
+                     for c in collisions.vv_collisions])
+
+
+def test_the_barrier_broad_phase_finds_the_pairs_of_the_default_one():
+    barrier, x = _two_way_barrier()
+    found = 0
+    for k in range(20):
+        q = x.ravel() + 0.3 * DHAT * np.sin(np.arange(10.0) * (k + 1))
+        v = barrier.vertices(q.reshape(-1, 2))
+        default = ipctk.NormalCollisions()
+        default.build(barrier._mesh, v, DHAT)
+        assert _pairs(barrier._collisions(v)) == _pairs(default)
+        found += len(default)
+    assert found > 0
+
+
+def test_the_outputs_read_again_at_a_solution_equal_a_fresh_evaluation():
+    """The barrier keeps its last evaluation for the outputs read at the same positions;
+    other positions in between, and a new step, give what a fresh barrier gives."""
+    barrier, x = _two_way_barrier()
+    fresh, _ = _two_way_barrier()
+    q1 = x.ravel() + 0.03 * DHAT * np.sin(np.arange(10.0))
+    q2 = x.ravel() + 0.05 * DHAT * np.cos(np.arange(10.0))
+    barrier.evaluate(q1)
+    assert np.abs(barrier.contact_forces(q1)).max() > 0
+    assert barrier.contact_forces(q1) == pytest.approx(fresh.contact_forces(q1), rel=1e-12)
+    barrier.evaluate(q2, hessian=False)
+    for q in (q1, q2):
+        assert barrier.normal_forces(q) == pytest.approx(fresh.normal_forces(q), rel=1e-12)
+        assert barrier.contact_forces(q) == pytest.approx(fresh.contact_forces(q), rel=1e-12)
+        assert np.array_equal(barrier.partners(q), fresh.partners(q))
+    # a new step (another start: another lagged friction) forgets the kept evaluation
+    before = barrier.contact_forces(q1)
+    later = x + np.array([0.02 * DHAT, 0.0])
+    barrier.begin_step(later, [], [], 1e-3)
+    fresh.begin_step(later, [], [], 1e-3)
+    after = barrier.contact_forces(q1)
+    assert not np.allclose(after, before, rtol=1e-6, atol=0.0)
+    assert after == pytest.approx(fresh.contact_forces(q1), rel=1e-12)
+
+
 class PenetrationCheck:
     """Called after every step: the smallest signed clearance so far, negative once a
     vertex of the fruit is inside a finger or a finger's vertex inside the fruit."""
@@ -294,9 +340,9 @@ def test_a_fruit_that_does_not_fit_between_the_fingers_is_refused(override, key)
         Simulation(config)
 
 
-def test_deformable_fingers_in_3d_are_refused_naming_the_key():
-    with pytest.raises(ConfigError, match="'gripper.finger.type' = solid_pad.*2D only"):
-        load_config(overrides=['dimension=3', 'gripper.finger.type=solid_pad'])
+def test_a_fin_ray_finger_in_3d_is_refused_naming_the_key():
+    with pytest.raises(ConfigError, match="'gripper.finger.type' = fin_ray.*2D only"):
+        load_config(overrides=['dimension=3', 'gripper.finger.type=fin_ray'])
 
 
 @pytest.mark.parametrize('override,match', [('gripper.finger.pad.enabled=true', 'pad.enabled'),
@@ -307,10 +353,10 @@ def test_unsupported_combinations_are_refused(override, match):
 
 
 def test_errors_are_one_line():
-    for overrides in (['gripper.finger.solid_pad.thickness=0'],
-                      ['dimension=3']):
+    for overrides in (['gripper.finger.type=solid_pad', 'gripper.finger.solid_pad.thickness=0'],
+                      ['gripper.finger.type=fin_ray', 'dimension=3']):
         with pytest.raises(ConfigError) as info:
-            load_config(overrides=['gripper.finger.type=solid_pad', *overrides])
+            load_config(overrides=overrides)
         assert '\n' not in str(info.value)
     with pytest.raises(ConfigError) as info:
         Simulation(load_config(overrides=['gripper.finger.type=solid_pad',

@@ -496,7 +496,8 @@ def fruit_marker(result: StepResult, context: MessageContext, header: Header) ->
 
 def soft_finger_marker(result: StepResult, header: Header) -> Marker:
     """ns ``soft_fingers`` id 0, LINE_LIST: the deformable fingers' outlines that touch
-    the fruit (``StepResult.fingers``), as they deform, in the plane y = 0."""
+    the fruit (``StepResult.fingers``), as they deform, in the plane y = 0 (3D: the edges
+    of their surface triangles)."""
     fingers = result.fingers
     lines = base_marker(header, 'soft_fingers', 0, Marker.LINE_LIST)
     lines.scale.x = OUTLINE_WIDTH

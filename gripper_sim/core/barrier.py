@@ -14,8 +14,8 @@ ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
   slip speed eps_v, added to the step as dt D(v) with v = (x - x_n) / dt;
 - every Newton line search starts from the continuous-collision bound: the largest
   fraction of the step along which no primitive crosses another (their section 4).
-The candidates, barrier, friction potential and CCD are the IPC Toolkit's (``ipctk``,
-MIT). One implementation for both dimensions (``dimension`` d = 2 or 3). Its collision
+The candidates (its sweep-and-prune broad phase), barrier, friction potential and CCD
+are the IPC Toolkit's (``ipctk``, MIT). One implementation for both dimensions (``dimension`` d = 2 or 3). Its collision
 mesh holds the fruit's surface: in 2D the outline (the surface nodes and skin edges), in
 3D the surface nodes, edges and triangles; and every rigid face: in 2D one segment per
 ``FlatFace`` (jaw faces, table, walls), in 3D two triangles per ``Plate`` (its
@@ -32,7 +32,8 @@ contact). A pair may couple any node of the fruit's outline with any of a soft b
 so the Hessian's fixed pattern holds every such pair of nodes (beside the outlines'
 edges); the solver's fast path keeps one pattern as for rigid faces. Still only pairs
 with the fruit collide: the fingers do not touch each other, the table or themselves.
-Soft bodies are 2D only so far.
+In 3D a soft body's surface joins as triangles (``SoftBody.triangles``), and its pairs
+with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 """
 from __future__ import annotations
 
@@ -104,12 +105,15 @@ class SoftBody:
         nodes: (k,) its outline's nodes (global node indices of the state).
         edges: (e, 2) its outline's edges (global node indices).
         static_friction, kinetic_friction: Coulomb coefficients against the fruit.
+        triangles: (t, 3) its surface's outward triangles (global node indices), 3D
+            only (``edges`` then holds every edge of them); None in 2D.
     """
 
     nodes: np.ndarray
     edges: np.ndarray
     static_friction: float
     kinetic_friction: float
+    triangles: np.ndarray | None = None
 
 
 #: (2^(d-1), d-1) the corners of a face in units of its half-extents along its tangents,
@@ -167,6 +171,9 @@ class BarrierContact(Energy):
     #: how each pair's Hessian is made positive semi-definite (CLAMP: its negative
     #: eigenvalues set to 0, so that Newton descends; NONE: the exact Hessian)
     projection = ipctk.PSDProjectionMethod.CLAMP
+    #: whether Hessian entries outside the fixed pattern are left out of the Newton matrix
+    #: (a pattern of the likely pairs only, ``core3d.soft_barrier``) instead of an error
+    drop_outside_pattern = False
 
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
                  settings: BarrierSettings, bodies: tuple = (), dimension: int = 2,
@@ -186,6 +193,8 @@ class BarrierContact(Energy):
                            for b in self.bodies]
         self.fruit_triangles = (local[np.asarray(triangles, np.int64).reshape(-1, 3)]
                                 if triangles is not None else np.zeros((0, 3), np.int64))
+        self.body_triangles = [local[np.asarray(b.triangles, np.int64).reshape(-1, 3)]
+                               for b in self.bodies if b.triangles is not None]
         #: (n_v,) 0 for the fruit's vertices, 1 + b for soft body b's
         self.vertex_body = np.concatenate(
             [np.zeros(self.surface.size, np.int64)]
@@ -209,6 +218,16 @@ class BarrierContact(Energy):
         self._start = np.zeros((n_v, d))
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()
+        #: the broad phase of every candidate search (the meshes are small: sorting the
+        #: boxes along an axis beats the default hash grid 2-3x)
+        self._broad_phase = ipctk.SweepAndPrune()
+        #: the last collision set: (the vertices it was built at (n_v + c k, d) m, it)
+        self._last_collisions = None
+        #: the last potentials' evaluation: (q (d n,) m, value of the barrier J, of the
+        #: friction J, the barrier's gradient and the friction's (n_d,) N over
+        #: ``vertex_dofs``), for the outputs read at the solution (``contact_forces``,
+        #: ``normal_forces``)
+        self._last_terms = None
         self._positions = None  # (scatter, CSC position of each pattern key)
         #: the last Newton step's candidates: (lowest, highest (n_v, d) m corners of the
         #: box each deformable vertex swept, ipctk.Candidates), see ``max_step``
@@ -259,7 +278,7 @@ class BarrierContact(Energy):
         if self.dimension == 2:
             self._mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges))
         else:
-            triangles = np.vstack([self.fruit_triangles,
+            triangles = np.vstack([self.fruit_triangles, *self.body_triangles,
                                    (offsets + face_triangles).reshape(-1, 3)]).astype(np.int32)
             self._mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges),
                                              np.asfortranarray(triangles))
@@ -268,6 +287,7 @@ class BarrierContact(Energy):
                                   np.ones(c * k, np.int32)])
         self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
         self._n_faces = k
+        self._last_collisions = None
 
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
         """(n_v + c k, d) m, the collision mesh's vertices: the surfaces (the fruit's, the
@@ -292,11 +312,12 @@ class BarrierContact(Energy):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
         self._swept = None
+        self._last_terms = None
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
         collisions = ipctk.NormalCollisions()
-        collisions.build(self._mesh, start, self.settings.dhat)
+        collisions.build(self._mesh, start, self.settings.dhat, broad_phase=self._broad_phase)
         # per vertex; a pair takes the larger one: the face's or the soft body's, the
         # fruit's being 0
         body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
@@ -317,33 +338,49 @@ class BarrierContact(Energy):
                friction: bool = True):
         """Barrier plus lagged friction (if ``friction``) at positions ``q`` (d n,) m: adds
         the gradient (N) into ``gradient``; returns (value J, the Hessian's entries as
-        ``_pattern_entries`` gives them, or None)."""
-        mesh = self._mesh
-        v = self.vertices(q.reshape(-1, self.dimension))
-        collisions = self._collisions(v)
+        ``_pattern_entries`` gives them, or None). Without the Hessian, the values and
+        gradients of the last evaluation are reused when ``q`` is the same."""
+        last = self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
-        value = 0.0
-        n_d = self.vertex_dofs.size
-        if len(collisions):
-            value = self.potential(collisions, mesh, v)
-            if not np.isfinite(value):
-                return np.inf, None
-            gradient[self.vertex_dofs] += self.potential.gradient(collisions, mesh, v)[:n_d]
-            if hessian:
-                parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
-                scales.append(1.0)
-        if friction and len(self._tangential):
-            velocity = np.asfortranarray((v - self._start) / self._dt)
-            value += self._dt * self.friction(self._tangential, mesh, velocity)
-            gradient[self.vertex_dofs] += self.friction.gradient(
-                self._tangential, mesh, velocity)[:n_d]
-            if hessian:
-                parts.append(self.friction.hessian(self._tangential, mesh, velocity,
-                                                   self.projection))
-                scales.append(1.0 / self._dt)
+        if not hessian and last is not None and np.array_equal(last[0], q):
+            _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
+        else:
+            mesh = self._mesh
+            v = self.vertices(q.reshape(-1, self.dimension))
+            collisions = self._collisions(v)
+            n_d = self.vertex_dofs.size
+            barrier_value = friction_value = 0.0
+            barrier_gradient = friction_gradient = None
+            if len(collisions):
+                barrier_value = float(self.potential(collisions, mesh, v))
+                if not np.isfinite(barrier_value):
+                    return np.inf, None
+                barrier_gradient = self.potential.gradient(collisions, mesh, v)[:n_d]
+                if hessian:
+                    parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
+                    scales.append(1.0)
+            if len(self._tangential):
+                velocity = np.asfortranarray((v - self._start) / self._dt)
+                friction_value = self._dt * float(self.friction(self._tangential, mesh,
+                                                                velocity))
+                friction_gradient = self.friction.gradient(self._tangential, mesh,
+                                                           velocity)[:n_d]
+                if hessian and friction:
+                    parts.append(self.friction.hessian(self._tangential, mesh, velocity,
+                                                       self.projection))
+                    scales.append(1.0 / self._dt)
+            self._last_terms = (q.copy(), barrier_value, friction_value, barrier_gradient,
+                                friction_gradient)
+        value = barrier_value
+        if barrier_gradient is not None:
+            gradient[self.vertex_dofs] += barrier_gradient
+        if friction:
+            value += friction_value
+            if friction_gradient is not None:
+                gradient[self.vertex_dofs] += friction_gradient
         if not hessian:
-            return float(value), None
-        return float(value), self._pattern_entries(parts, scales)
+            return value, None
+        return value, self._pattern_entries(parts, scales)
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
         """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
@@ -375,8 +412,12 @@ class BarrierContact(Energy):
         keys = self.vertex_dofs[cols[inside]] * self.n_dof + self.vertex_dofs[rows[inside]]
         last = self._pattern_keys.size - 1
         index = np.minimum(np.searchsorted(self._pattern_keys, keys), last)
-        if not np.array_equal(self._pattern_keys[index], keys):
-            raise AssertionError('barrier Hessian entry outside its pattern')
+        found = self._pattern_keys[index] == keys
+        if not np.all(found):
+            if not self.drop_outside_pattern:
+                raise AssertionError('barrier Hessian entry outside its pattern')
+            inside[inside] = found
+            index = index[found]
         return index, inside
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
@@ -413,7 +454,8 @@ class BarrierContact(Energy):
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices((q + dq).reshape(-1, self.dimension))
         candidates = ipctk.Candidates()
-        candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat,
+                         self._broad_phase)
         n_v = self.vertex_nodes.size
         self._swept = (np.minimum(v0[:n_v], v1[:n_v]), np.maximum(v0[:n_v], v1[:n_v]),
                        candidates)
@@ -424,24 +466,38 @@ class BarrierContact(Energy):
         from the last Newton step's candidates when every deformable vertex lies in the
         box it swept along that step (the faces stand still within a step), else from a
         new broad phase. Boxes inflated by dhat / 2 each meet for every pair closer
-        than dhat, so the candidates hold every such pair."""
+        than dhat, so the candidates hold every such pair. The set of the same ``v`` as
+        the last call is that call's."""
+        last = self._last_collisions
+        if last is not None and np.array_equal(last[0], v):
+            return last[1]
         collisions = ipctk.NormalCollisions()
-        if self._swept is not None:
-            low, high, candidates = self._swept
+        swept = self._swept
+        if swept is not None:
+            low, high, candidates = swept
             slack = SWEPT_MARGIN * self.settings.dhat
             inside = v[:low.shape[0]]
-            if np.all(inside >= low - slack) and np.all(inside <= high + slack):
-                collisions.build(candidates, self._mesh, v, self.settings.dhat)
-                return collisions
-        collisions.build(self._mesh, v, self.settings.dhat)
+            if not (np.all(inside >= low - slack) and np.all(inside <= high + slack)):
+                swept = None
+        if swept is not None:
+            collisions.build(candidates, self._mesh, v, self.settings.dhat)
+        else:
+            collisions.build(self._mesh, v, self.settings.dhat, broad_phase=self._broad_phase)
+        self._last_collisions = (v.copy(), collisions)
         return collisions
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
-        """(n, d) m, positions to start the step's Newton solve from: ``x_n``, with the
-        outline nodes that a moving face would come closer than dhat / 2 to moved ahead
-        of it (and along with it if they touch it). None if even that start is not
-        reached without a crossing (the caller halves the step)."""
+        """(n, d) m, positions to start the step's Newton solve from: ``pushed_start``, or
+        None if even that start is not reached without a crossing (the caller halves the
+        step)."""
+        start = self.pushed_start(x_n, old_faces, new_faces)
+        return start if self.reachable(x_n, start) else None
+
+    def pushed_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray:
+        """(n, d) m, ``x_n`` with the outline nodes that a moving face would come closer
+        than dhat / 2 to moved ahead of it (and along with it if they touch it); not
+        checked for crossings (``reachable``)."""
         start = x_n.copy()
         dhat = self.settings.dhat
         for old, new in zip(old_faces, new_faces):
@@ -457,7 +513,7 @@ class BarrierContact(Energy):
             touching = front & (gap < dhat)
             start[nodes[front]] += push[front, None] * old.normal
             start[nodes[touching]] += shift - advance * old.normal
-        return start if self.reachable(x_n, start) else None
+        return start
 
     def reachable(self, x_n: np.ndarray, start: np.ndarray) -> bool:
         """Whether the straight paths from ``x_n`` (the faces at the start of the step) to
@@ -465,8 +521,8 @@ class BarrierContact(Energy):
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
         if not np.array_equal(v0, v1):  # nothing that stands still crosses anything
-            exact = float(ipctk.compute_collision_free_stepsize(self._mesh, v0, v1,
-                                                                narrow_phase_ccd=EXACT_CCD))
+            exact = float(ipctk.compute_collision_free_stepsize(
+                self._mesh, v0, v1, broad_phase=self._broad_phase, narrow_phase_ccd=EXACT_CCD))
             if exact < 1.0:
                 return False
         return self.min_distance(start) > 0.0
@@ -602,18 +658,18 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
 def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
                    new_faces: list, dt: float) -> StepOutcome:
-    """One implicit step of ``dt`` (s) from (x_n, v_n) (n, 2) of the fruit and the soft
+    """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) of the fruit and the soft
     bodies in the barrier (``barrier.bodies``), nodes ``fixed`` (k,) prescribed at
-    ``fixed_targets`` (k, 2) m (a finger's base on its jaw: zero filters, the modified
+    ``fixed_targets`` (k, d) m (a finger's base on its jaw: zero filters, the modified
     mass method), the faces moving from ``old_faces`` to ``new_faces``.
 
     The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
     nothing, else from x_n (each with the fixed nodes at their targets and the outline
-    pushed ahead of moving faces, ``feasible_start``).
+    pushed ahead of moving faces, ``pushed_start``).
 
     Returns:
-        The outcome; ``forces`` (n, 2) N the barrier's and friction's force on every node
-        (both bodies of a pair), ``reaction`` (n, 2) N the force holding each fixed node
+        The outcome; ``forces`` (n, d) N the barrier's and friction's force on every node
+        (both bodies of a pair), ``reaction`` (n, d) N the force holding each fixed node
         at its target (0 elsewhere), ``contacts.obstacle`` (n,) the body each outline node
         touches as ``partners`` numbers them (0 the fruit, 1 + b soft body b, then the
         faces; -1 none).
@@ -621,8 +677,9 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     Raises:
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
-    n = x_n.shape[0]
-    pushed = _begin(barrier, x_n, old_faces, new_faces, dt)
+    n, d = x_n.shape
+    barrier.begin_step(x_n, old_faces, new_faces, dt)
+    pushed = barrier.pushed_start(x_n, old_faces, new_faces)
     start = None
     for candidate in (pushed + dt * v_n, pushed):
         candidate = candidate.copy()
@@ -632,12 +689,12 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
             break
     if start is None:
         raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
-    constraints = StepConstraints.free(n, dim=2)
+    constraints = StepConstraints.free(n, dim=d)
     constraints.filters[fixed] = 0.0
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
-    x = solution.q.reshape(-1, 2)
-    reaction = np.zeros((n, 2))
-    reaction[fixed] = solution.reaction.reshape(-1, 2)[fixed]
+    x = solution.q.reshape(-1, d)
+    reaction = np.zeros((n, d))
+    reaction[fixed] = solution.reaction.reshape(-1, d)[fixed]
     contacts = cm.ContactState.empty(n)
     contacts.obstacle = barrier.partners(solution.q)
     return StepOutcome(x, (x - x_n) / dt, barrier.contact_forces(solution.q), contacts,

@@ -16,7 +16,17 @@ section 3):
   Rf adds curvature -1/Rf in plane; equivalent radius Re = sqrt(R1' R2) (Johnson,
   Contact Mechanics, 1985, ch. 4);
 - the contact modulus is E* = 1 / ((1 - nu^2) / E + (1 - nu_p^2) / E_p) with a soft pad
-  (two elastic bodies, Hertz) and E / (1 - nu^2) on a rigid face;
+  or a deformable finger of E_p, nu_p (two elastic bodies, Hertz) and E / (1 - nu^2) on
+  a rigid face;
+- on a deformable finger (a Fin Ray, a solid pad) the in-plane radius is measured, not
+  assumed: the simulation resolves how the finger yields and wraps in the plane, and
+  shows it as the patch's peak line pressure p_l (the largest node force over its
+  tributary length and b, as ``Deformation.peak_contact_pressure``). R1' is the radius
+  with which plane-strain Hertz has that peak at the patch's line load F' = F / b:
+  p_l = sqrt(F' E* / (pi R1')) (Johnson 1985, eqs. 4.43-4.44), R1' = F' E* / (pi p_l^2).
+  For two elastic half-planes that is the fruit's R1 again; a finger that wraps spreads
+  the load, so R1' grows and p0 falls; a finger that presses harder at a rib raises p_l
+  there and p0 with it;
 - contact radius a = (3 F Re / (4 E*))^(1/3), peak pressure p0 = 3 F / (2 pi a^2), and
   pressure p(s) = p0 sqrt(1 - s^2 / a^2) at distance s from the centre: that is the
   per-node pressure reported;
@@ -126,10 +136,14 @@ class DamageTracker:
         face_padded: per obstacle index, whether a soft pad covers it.
         pad_material: (E Pa, nu) of what covers the padded faces (a deformable finger);
             None: the soft pad's (``gripper.finger.pad.*``).
+        face_deformable: per obstacle index, whether it is a deformable finger, whose
+            in-plane radius is measured from the patch's peak line pressure (module
+            docstring); None: none is.
     """
 
     def __init__(self, fruit, config, face_groups, face_curvature, face_padded,
-                 pad_material: tuple[float, float] | None = None):
+                 pad_material: tuple[float, float] | None = None,
+                 face_deformable: list[bool] | None = None):
         self.fruit = fruit
         self.bruise_pressure = float(config['fruit.bruise_pressure'])
         self.failure_stress = float(config['fruit.failure_stress'])
@@ -143,6 +157,9 @@ class DamageTracker:
         self.groups = list(face_groups)
         self.curvature = list(face_curvature)
         self.padded = list(face_padded)
+        self.deformable = (list(face_deformable) if face_deformable is not None
+                           else [False] * len(self.padded))
+        self.depth = float(fruit.depth)
         ring = np.asarray(fruit.surface)
         self.ring = ring
         rest = fruit.rest_positions
@@ -200,6 +217,7 @@ class DamageTracker:
         """
         ring = self.ring
         out = []
+        tributary = None
         for body, run in self._runs(obstacle[ring]):
             nodes = ring[run]
             f = np.maximum(normal_force[nodes], 0.0)
@@ -212,12 +230,21 @@ class DamageTracker:
             if k1 <= 0:
                 k1 = 1e-3  # a flat or concave piece of outline: a 1 km radius
             faces = obstacle[nodes]
-            face_k = float(np.mean([self.curvature[o] for o in faces]))
-            # a face more curved than the fruit conforms to it: keep 1/1000 of its curvature
-            k1_eff = max(k1 + face_k, 1e-3 * k1)
-            re = 1.0 / math.sqrt(k1_eff * k1)
             padded = np.mean([self.padded[o] for o in faces]) >= 0.5
             modulus = self.pad_modulus if padded else self.rigid_modulus
+            if np.mean([self.deformable[o] for o in faces]) >= 0.5:
+                if tributary is None:  # half the outline segments at each node (m)
+                    seg = np.linalg.norm(np.roll(positions[ring], -1, axis=0)
+                                         - positions[ring], axis=1)
+                    tributary = 0.5 * (seg + np.roll(seg, 1))
+                line_peak = float(np.max(f / tributary[run])) / self.depth
+                k1_eff = math.pi * line_peak ** 2 / (load / self.depth * modulus)
+            else:
+                face_k = float(np.mean([self.curvature[o] for o in faces]))
+                # a face more curved than the fruit conforms to it: keep 1/1000 of its
+                # curvature
+                k1_eff = max(k1 + face_k, 1e-3 * k1)
+            re = 1.0 / math.sqrt(k1_eff * k1)
             a, p0 = hertz(load, re, modulus)
             out.append((Contact(body, load, centre, a, p0, re, modulus), run, near))
         return out

@@ -167,10 +167,10 @@ class SimulationFacade:
         if gap < 0 or gap > self.config['gripper.max_gap']:
             raise CommandError(f"gap {gap} m is out of range [0, "
                                f"{self.config['gripper.max_gap']}] m")
-        if self._soft is not None and gap < 2.0 * self._soft.thickness:
+        if gap < self.smallest_gap:
             raise CommandError(f'gap {gap} m would press the two deformable fingers into each '
                                f'other (each reaches {self._soft.thickness:g} m in front of '
-                               f'its jaw): the smallest gap is {2.0 * self._soft.thickness:g} m')
+                               f'its jaw): the smallest gap is {self.smallest_gap:g} m')
         speed = self._speed(speed, self.config['gripper.close_speed'])
         limit = self.config['gripper.max_force']
         if max_effort is None:
@@ -180,6 +180,12 @@ class SimulationFacade:
             raise CommandError(f'max_effort {max_effort} N is out of range (0, {limit}] N')
         self._grip = replace(self._grip, mode='position', target_gap=gap, speed=speed,
                              max_effort=max_effort)
+
+    @property
+    def smallest_gap(self) -> float:
+        """m, the smallest gap a command may ask for: 0, or with deformable fingers the gap
+        at which their fronts at rest would meet."""
+        return 2.0 * self._soft.thickness if self._soft is not None else 0.0
 
     def command_force(self, force: float, speed: float | None = None) -> None:
         """Force mode: close until the mean jaw normal force is ``force`` (N), hold it."""

@@ -19,7 +19,8 @@ forces, as the layer's ``begin_step``, ``evaluate`` and ``finish_step`` do. A st
 whose contact filter the kernel cannot factorise (a node held by a face and pushed
 into a second, oblique one) is done by the generic path (``FastPath.fallbacks`` counts
 them). The node-block band of a ring is its interleaved outline (half-bandwidth 4); a
-solid's mesh is ordered by reverse Cuthill-McKee.
+meshed solid's Newton matrix is a sparse one (``sparse_ldl``: minimum-degree order, sparse
+LDL^T), its energies assembled into it through precomputed scatter maps.
 ``Simulation(config, fast=False)`` or ``GRIPPER_SIM_FAST=0`` in the environment turns
 the fast path off.
 
@@ -35,8 +36,6 @@ import time
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
@@ -48,9 +47,9 @@ from gripper_sim.core.slip import SLIDING_SPEED
 from gripper_sim.core.stepper import NewtonFailure
 
 try:  # numba is optional: without it every model takes the generic path
-    from gripper_sim.core import kernels
+    from gripper_sim.core import kernels, sparse_ldl
 except ImportError:  # pragma: no cover - depends on the environment
-    kernels = None
+    kernels = sparse_ldl = None
 
 if TYPE_CHECKING:
     from gripper_sim.core.simulation import Simulation
@@ -70,7 +69,21 @@ def _empty_model():
                 triples=np.zeros((0, 3), np.int64), bpar=np.zeros((0, 2)),
                 ring=np.zeros(0, np.int64), press=np.zeros(4),
                 flesh=(np.zeros((0, 3), np.int64), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(2),
-                       np.zeros((0, 36), np.int64)))
+                       np.zeros((0, 36), np.int64), _solid_skin(None, None, None, None),
+                       sparse_ldl.analyse(0, np.zeros((0, 2), np.int64), 2).arrays))
+
+
+def _solid_skin(model: dict | None, pattern, edges, triples) -> tuple:
+    """The skin's arrays of a meshed solid's sparse assembly (``kernels._solid_energies``):
+    stretching rest lengths (n_e,) m, stiffnesses EA/L (n_e,) N/m, scatter (n_e, 16);
+    bending rest angles (n_t,) rad, stiffnesses EI/l (n_t,) N m, scatter (n_t, 36)."""
+    if model is None:
+        return (np.zeros(0), np.zeros(0), np.zeros((0, 16), np.int64), np.zeros(0),
+                np.zeros(0), np.zeros((0, 36), np.int64))
+    return (np.ascontiguousarray(model['spar'][:, 0]), np.ascontiguousarray(model['spar'][:, 1]),
+            pattern.scatter(edges).reshape(-1, 16),
+            np.ascontiguousarray(model['bpar'][:, 0]), np.ascontiguousarray(model['bpar'][:, 1]),
+            pattern.scatter(triples).reshape(-1, 36))
 
 
 def ring_model(fruit, energies) -> dict | None:
@@ -82,8 +95,9 @@ def ring_model(fruit, energies) -> dict | None:
     Returns:
         dict with edges (n_e, 2), spar (n_e, 2) [L, EA/L], triples (n_t, 3),
         bpar (n_t, 2) [phi0, k], ring (n_r,), press (4,) [A0, b, p0, K], flesh (the
-        neo-Hookean triangles of a solid fruit, see ``kernels._energies``), pos (n,)
-        band positions and nbw (node half-bandwidth).
+        neo-Hookean triangles of a solid fruit and its sparse Newton matrix, see
+        ``kernels._energies``), pos (n,) band positions (a solid's: its sparse order) and
+        nbw (node half-bandwidth; 0 for a solid).
     """
     n = fruit.n_nodes
     model = _empty_model()
@@ -124,18 +138,15 @@ def ring_model(fruit, energies) -> dict | None:
     for pair in pairs:
         if len(pair) and (pair.min() < 0 or pair.max() >= n):
             return None
-    # band order: a ring's outline interleaved (0, N-1, 1, N-2, ...); a meshed solid's
-    # nodes in reverse Cuthill-McKee order of the mesh graph
+    if flesh is not None:
+        if len(ring):
+            return None  # a pressurised solid: its rank-one term is the band's alone
+        return _solid_model(model, flesh, pairs, n)
+    # band order: a ring's outline interleaved (0, N-1, 1, N-2, ...)
     surface = np.asarray(fruit.surface, dtype=np.int64)
     pos = np.empty(n, np.int64)
     if n == 1:
         pos[:] = 0
-    elif flesh is not None:
-        graph_pairs = np.concatenate([pair for pair in pairs if len(pair)])
-        graph = sp.coo_matrix((np.ones(len(graph_pairs)), (graph_pairs[:, 0],
-                                                            graph_pairs[:, 1])),
-                              shape=(n, n)).tocsr()
-        pos[reverse_cuthill_mckee(graph + graph.T, symmetric_mode=True)] = np.arange(n)
     elif len(surface) == n and set(surface.tolist()) == set(range(n)):
         pos[surface] = kernels.band_order(n) if kernels is not None else np.arange(n)
     else:
@@ -144,30 +155,27 @@ def ring_model(fruit, energies) -> dict | None:
     for pair in pairs:
         if len(pair):
             nbw = max(nbw, int(np.max(np.abs(pos[pair[:, 0]] - pos[pair[:, 1]]))))
-    if flesh is not None:
-        nbw = max(nbw, 1)  # band[0, 1, 0, 0] takes the flesh's upper-side entries
-        model['flesh'] = (tri, np.ascontiguousarray(flesh.dm_inv, dtype=float),
-                          np.ascontiguousarray(flesh.volume, dtype=float),
-                          np.array([flesh.mu, flesh.lam], dtype=float),
-                          _band_scatter(tri, pos, nbw))
     model['pos'] = pos
     model['nbw'] = nbw
     return model
 
 
-def _band_scatter(tri: np.ndarray, pos: np.ndarray, nbw: int) -> np.ndarray:
-    """(n_tri, 36) flat indices into a node-block band (n, nbw + 1, 2, 2) of each
-    triangle's 6 x 6 Hessian entries (row r, column s: 6 r + s); the band keeps the block
-    of rows at position p and columns at p - d, an entry of the upper side goes to the
-    unused slot band[0, 1, 0, 0] (flat index 4)."""
-    local = np.arange(6)
-    rows = np.repeat(local, 6)  # (36,)
-    cols = np.tile(local, 6)
-    p_row = pos[tri[:, rows // 2]]  # (n_tri, 36)
-    p_col = pos[tri[:, cols // 2]]
-    d = p_row - p_col
-    index = ((p_row * (nbw + 1) + d) * 2 + rows % 2) * 2 + cols % 2
-    return np.ascontiguousarray(np.where(d >= 0, index, 4), dtype=np.int64)
+def _solid_model(model: dict, flesh: NeoHookeanTriangles, pairs: list, n: int) -> dict:
+    """``model`` completed for a meshed solid: its Newton matrix is a sparse one of 2 x 2
+    node blocks (``sparse_ldl``, minimum-degree order) that the energies are assembled
+    into through scatter maps: flesh = (tri, dm_inv, volume, [mu, lambda], the triangles'
+    scatter (n_tri, 36), the skin's arrays (``_solid_skin``), the pattern's kernel arrays
+    (``SparsePattern.arrays``)); pos its order, nbw 0."""
+    tri = np.ascontiguousarray(flesh.tri, dtype=np.int64)
+    pattern = sparse_ldl.analyse(n, np.concatenate([pair for pair in pairs if len(pair)]), 2)
+    model['flesh'] = (tri, np.ascontiguousarray(flesh.dm_inv, dtype=float),
+                      np.ascontiguousarray(flesh.volume, dtype=float),
+                      np.array([flesh.mu, flesh.lam], dtype=float), pattern.scatter(tri),
+                      _solid_skin(model, pattern, model['edges'], model['triples']),
+                      pattern.arrays)
+    model['pos'] = pattern.position
+    model['nbw'] = 0
+    return model
 
 
 class FastPath:

@@ -19,7 +19,10 @@ position p (row) and the node at position p - d (column), d = 0 .. nbw; ``pos[i]
 is the band position of node i. A ring numbered 0, N-1, 1, N-2, ... (interleaved,
 see ``band_order``) has nbw = 4 for stretching + bending + pressure, so the Newton
 matrix (same block band) is factorised by a block LDL^T in O(N) time, with the
-rank-one pressure term added by Sherman-Morrison.
+rank-one pressure term added by Sherman-Morrison. A meshed solid's Hessian and Newton
+matrix are sparse instead (``core.sparse_ldl``: 2 x 2 node blocks in a minimum-degree
+order, one block per row of the same 4-D arrays, ``pos[i]`` the position of node i; see
+the solid's section below), factorised by the sparse block LDL^T.
 
 Faces (rigid obstacles) are rows of two arrays: ``face_par`` (n_faces, FP_SIZE)
 [normal x, normal z, half_length, thickness, static friction, kinetic friction,
@@ -38,7 +41,8 @@ import math
 import numpy as np
 from numba import njit
 
-from gripper_sim.core.energies.kernels import neohookean_triangles
+from gripper_sim.core import sparse_ldl
+from gripper_sim.core.energies.kernels import bending, neohookean_triangles, stretching
 
 #: contact modes, as in contact.py
 FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
@@ -332,11 +336,16 @@ def _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, p
     Hessian, values (4,) J: stretching, bending, pressure (plus the flesh), gravity.
     Returns the rank-one c.
 
-    ``flesh``: the neo-Hookean triangles of a solid fruit (``NeoHookeanTriangles``) as
-    (tri (n_tri, 3), dm_inv (n_tri, 2, 2), volume (n_tri,) m^3, [mu, lambda] Pa, scatter
-    (n_tri, 36) flat band indices of each element's Hessian entries; an entry of the
-    band's upper side goes to the unused slot band[0, 1, 0, 0]); n_tri = 0: none.
+    ``flesh``: the neo-Hookean triangles of a solid fruit (``NeoHookeanTriangles``) and
+    the solid's sparse Newton matrix as (tri (n_tri, 3), dm_inv (n_tri, 2, 2), volume
+    (n_tri,) m^3, [mu, lambda] Pa, scatter (n_tri, 36) flat indices of each element's
+    Hessian entries into the sparse values, the skin's arrays (``fast._solid_skin``), the
+    pattern's ``SparsePattern.arrays``); n_tri = 0: none (the band). A solid's energies
+    are ``_solid_energies``.
     """
+    if flesh[0].shape[0] > 0:  # a meshed solid: its sparse Hessian
+        return _solid_energies(q, edges, triples, flesh, gravity_grad, hessian, grads, band,
+                               values)
     if hessian:
         flat = band.reshape(band.size)  # a flat loop: ~10x faster than band[:] = 0 in 4-D
         for m in range(flat.shape[0]):
@@ -344,10 +353,6 @@ def _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, p
     values[0] = ring_stretching(q, edges, spar, pos, hessian, grads[0], band)
     values[1] = ring_bending(q, triples, bpar, pos, hessian, grads[1], band)
     vp, c = ring_pressure(q, ring, press, pos, hessian, grads[2], band, area_grad)
-    if flesh[0].shape[0] > 0:
-        vp += neohookean_triangles(q.reshape((q.shape[0] // 2, 2)), flesh[0], flesh[1],
-                                   flesh[2], flesh[3][0], flesh[3][1], grads[2],
-                                   band.reshape(band.size), flesh[4], hessian)
     values[2] = vp
     vg = 0.0
     for m in range(q.shape[0]):
@@ -394,11 +399,15 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         phi += 0.5 * alpha * acc / dt
         for m in range(n2):
             grad[m] += alpha * masses2[m] * dq_tmp[m] / dt
-    if beta > 0 and edges.shape[0] + triples.shape[0] + ring.shape[0] > 0:
-        order = np.empty(pos.shape[0], np.int64)
-        for i in range(pos.shape[0]):
-            order[pos[i]] = i
-        band_matvec(band, order, dq_tmp, cdq)
+    solid = flesh[0].shape[0] > 0
+    if beta > 0 and (solid or edges.shape[0] + triples.shape[0] + ring.shape[0] > 0):
+        if solid:
+            sparse_ldl.multiply(flesh[6], band.reshape((band.shape[0], 2, 2)), dq_tmp, cdq)
+        else:
+            order = np.empty(pos.shape[0], np.int64)
+            for i in range(pos.shape[0]):
+                order[pos[i]] = i
+            band_matvec(band, order, dq_tmp, cdq)
         acc = 0.0
         for m in range(n2):
             acc += dq_tmp[m] * cdq[m]
@@ -705,7 +714,37 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
     n = band.shape[0]
     nbw = band.shape[1] - 1
     scale = 1.0 + (beta / dt if beta > 0 else 0.0)
-    kind = np.empty(n, np.int64)  # 0: S = 0, 1: S = I, 2: other
+    kind = _filter_kinds(filters)
+    for p in range(n):
+        i = order[p]
+        for d in range(nbw + 1):
+            if d > p:
+                ab[p, d, 0, 0] = 0.0
+                ab[p, d, 0, 1] = 0.0
+                ab[p, d, 1, 0] = 0.0
+                ab[p, d, 1, 1] = 0.0
+                continue
+            h00 = scale * band[p, d, 0, 0]
+            h01 = scale * band[p, d, 0, 1]
+            h10 = scale * band[p, d, 1, 0]
+            h11 = scale * band[p, d, 1, 1]
+            if d == 0:
+                h00 += _inertia(masses2, dt, alpha, 2 * i)
+                h11 += _inertia(masses2, dt, alpha, 2 * i + 1)
+            j = order[p - d]
+            (ab[p, d, 0, 0], ab[p, d, 0, 1], ab[p, d, 1, 0],
+             ab[p, d, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j, h00, h01, h10,
+                                               h11)
+    _friction_blocks(q, q_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, n_fr, pos, ab)
+    _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab)
+    _held_diagonal(filters, masses2, dt, shift, pos, ab)
+
+
+@njit(cache=True, error_model='numpy')
+def _filter_kinds(filters):
+    """(n,) int64, each node's contact filter: 0 S = 0, 1 S = I, 2 other."""
+    n = filters.shape[0]
+    kind = np.empty(n, np.int64)
     for i in range(n):
         f00, f01, f10, f11 = filters[i, 0, 0], filters[i, 0, 1], filters[i, 1, 0], filters[
             i, 1, 1]
@@ -715,40 +754,37 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
             kind[i] = 1
         else:
             kind[i] = 2
-    for p in range(n):
-        i = order[p]
-        for d in range(nbw + 1):
-            if d > p or kind[i] == 0 or kind[order[p - d]] == 0:
-                ab[p, d, 0, 0] = 0.0
-                ab[p, d, 0, 1] = 0.0
-                ab[p, d, 1, 0] = 0.0
-                ab[p, d, 1, 1] = 0.0
-                continue
-            j = order[p - d]
-            h00 = scale * band[p, d, 0, 0]
-            h01 = scale * band[p, d, 0, 1]
-            h10 = scale * band[p, d, 1, 0]
-            h11 = scale * band[p, d, 1, 1]
-            if d == 0:
-                h00 += masses2[2 * i] / dt ** 2 + (alpha * masses2[2 * i] / dt
-                                                   if alpha > 0 else 0.0)
-                h11 += masses2[2 * i + 1] / dt ** 2 + (alpha * masses2[2 * i + 1] / dt
-                                                       if alpha > 0 else 0.0)
-            if kind[i] == 1 and kind[j] == 1:
-                ab[p, d, 0, 0] = h00
-                ab[p, d, 0, 1] = h01
-                ab[p, d, 1, 0] = h10
-                ab[p, d, 1, 1] = h11
-            else:  # S_i H S_j
-                t00 = filters[i, 0, 0] * h00 + filters[i, 0, 1] * h10
-                t01 = filters[i, 0, 0] * h01 + filters[i, 0, 1] * h11
-                t10 = filters[i, 1, 0] * h00 + filters[i, 1, 1] * h10
-                t11 = filters[i, 1, 0] * h01 + filters[i, 1, 1] * h11
-                ab[p, d, 0, 0] = t00 * filters[j, 0, 0] + t01 * filters[j, 1, 0]
-                ab[p, d, 0, 1] = t00 * filters[j, 0, 1] + t01 * filters[j, 1, 1]
-                ab[p, d, 1, 0] = t10 * filters[j, 0, 0] + t11 * filters[j, 1, 0]
-                ab[p, d, 1, 1] = t10 * filters[j, 0, 1] + t11 * filters[j, 1, 1]
-    # friction blocks  S_k (g t t^T) S_k
+    return kind
+
+
+@njit(cache=True, error_model='numpy')
+def _inertia(masses2, dt, alpha, m):
+    """The inertia (and mass damping) on the diagonal of dof m: m/dt^2 + alpha m/dt."""
+    return masses2[m] / dt ** 2 + (alpha * masses2[m] / dt if alpha > 0 else 0.0)
+
+
+@njit(cache=True, error_model='numpy')
+def _filtered_block(filters, kind_i, kind_j, i, j, h00, h01, h10, h11):
+    """S_i H S_j (4 values, row-major) of the node block H = [[h00, h01], [h10, h11]] of
+    rows i and columns j (kind_i, kind_j: their ``_filter_kinds``)."""
+    if kind_i == 0 or kind_j == 0:
+        return 0.0, 0.0, 0.0, 0.0
+    if kind_i == 1 and kind_j == 1:
+        return h00, h01, h10, h11
+    t00 = filters[i, 0, 0] * h00 + filters[i, 0, 1] * h10
+    t01 = filters[i, 0, 0] * h01 + filters[i, 0, 1] * h11
+    t10 = filters[i, 1, 0] * h00 + filters[i, 1, 1] * h10
+    t11 = filters[i, 1, 0] * h01 + filters[i, 1, 1] * h11
+    return (t00 * filters[j, 0, 0] + t01 * filters[j, 1, 0],
+            t00 * filters[j, 0, 1] + t01 * filters[j, 1, 1],
+            t10 * filters[j, 0, 0] + t11 * filters[j, 1, 0],
+            t10 * filters[j, 0, 1] + t11 * filters[j, 1, 1])
+
+
+@njit(cache=True, error_model='numpy')
+def _friction_blocks(q, q_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, n_fr, pos, ab):
+    """Adds the kinetic friction's node blocks S_k (g t t^T) S_k to the diagonal blocks
+    ab[pos[k], 0]."""
     for f in range(n_fr):
         k = fr_nodes[f]
         s = ((q[2 * k] - q_n[2 * k]) * fr_t[f, 0]
@@ -765,9 +801,12 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
         ab[p, 0, 0, 1] += g * ux * vz
         ab[p, 0, 1, 0] += g * uz * vx
         ab[p, 0, 1, 1] += g * uz * vz
-    _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab)
-    # I - S + shift diag(S) m / dt^2
-    for i in range(n):
+
+
+@njit(cache=True, error_model='numpy')
+def _held_diagonal(filters, masses2, dt, shift, pos, ab):
+    """Adds I - S + shift diag(S) m / dt^2 to the diagonal blocks ab[pos[i], 0]."""
+    for i in range(filters.shape[0]):
         p = pos[i]
         ab[p, 0, 0, 0] += 1.0 - filters[i, 0, 0] + shift * filters[i, 0, 0] * masses2[
             2 * i] / dt ** 2
@@ -775,6 +814,112 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
         ab[p, 0, 1, 0] += 0.0 - filters[i, 1, 0]
         ab[p, 0, 1, 1] += 1.0 - filters[i, 1, 1] + shift * filters[i, 1, 1] * masses2[
             2 * i + 1] / dt ** 2
+
+
+# ---------------------------------------------------------------------- the solid's matrix
+# A meshed solid's Newton matrix is sparse (``core.sparse_ldl``, 2 x 2 node blocks in a
+# minimum-degree order): ``flesh[6]`` holds its pattern (``SparsePattern.arrays``), the
+# Hessian C and the Newton matrix are its values (n_blocks + 1, 1, 2, 2) (the band's
+# layout with one block per row: the diagonal block of node i at pos[i], 0), assembled
+# through the element scatter maps of ``flesh[4]`` and ``flesh[5]``.
+@njit(cache=True, error_model='numpy')
+def _solid_energies(q, edges, triples, flesh, gravity_grad, hessian, grads, hvals, values):
+    """``_energies`` of a meshed solid (skin stretching and bending, the flesh, gravity)
+    with the elastic Hessian into the sparse values ``hvals``. Returns the rank-one c (0)."""
+    x = q.reshape((q.shape[0] // 2, 2))
+    flat = hvals.reshape(hvals.size)
+    if hessian:
+        for m in range(flat.shape[0]):
+            flat[m] = 0.0
+    for e in range(3):
+        for m in range(q.shape[0]):
+            grads[e, m] = 0.0
+    rest, k_stretch, s_scatter, phi0, k_bend, b_scatter = flesh[5]
+    values[0] = stretching(x, edges, rest, k_stretch, grads[0], flat, s_scatter, hessian)
+    values[1] = bending(x, triples, phi0, k_bend, grads[1], flat, b_scatter, hessian)
+    values[2] = neohookean_triangles(x, flesh[0], flesh[1], flesh[2], flesh[3][0],
+                                     flesh[3][1], grads[2], flat, flesh[4], hessian)
+    vg = 0.0
+    for m in range(q.shape[0]):
+        vg += gravity_grad[m] * q[m]
+        grads[3, m] = gravity_grad[m]
+    values[3] = vg
+    return 0.0
+
+
+@njit(cache=True, error_model='numpy')
+def _solid_newton_matrix(hvals, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
+                         fr_speed, n_fr, q, q_n, pos, arrays, shift, ab, pad_nodes, pad_par):
+    """``_newton_matrix`` on the solid's sparse values: ab (n_blocks + 1, 1, 2, 2) from
+    the elastic Hessian hvals (same layout)."""
+    order, a_ptr, a_col = arrays[0], arrays[2], arrays[3]
+    n = order.shape[0]
+    scale = 1.0 + (beta / dt if beta > 0 else 0.0)
+    kind = _filter_kinds(filters)
+    for k in range(n):
+        i = order[k]
+        h00 = scale * hvals[k, 0, 0, 0] + _inertia(masses2, dt, alpha, 2 * i)
+        h11 = scale * hvals[k, 0, 1, 1] + _inertia(masses2, dt, alpha, 2 * i + 1)
+        (ab[k, 0, 0, 0], ab[k, 0, 0, 1], ab[k, 0, 1, 0],
+         ab[k, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[i], i, i, h00,
+                                           scale * hvals[k, 0, 0, 1],
+                                           scale * hvals[k, 0, 1, 0], h11)
+        for m in range(a_ptr[k], a_ptr[k + 1]):
+            b = n + m
+            j = order[a_col[m]]
+            (ab[b, 0, 0, 0], ab[b, 0, 0, 1], ab[b, 0, 1, 0],
+             ab[b, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j,
+                                               scale * hvals[b, 0, 0, 0],
+                                               scale * hvals[b, 0, 0, 1],
+                                               scale * hvals[b, 0, 1, 0],
+                                               scale * hvals[b, 0, 1, 1])
+    _friction_blocks(q, q_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, n_fr, pos, ab)
+    _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab)
+    _held_diagonal(filters, masses2, dt, shift, pos, ab)
+
+
+@njit(cache=True, error_model='numpy')
+def _newton_storage(n, nbw, flesh):
+    """The Hessian and Newton matrix arrays of ``newton_solve``: (C, A, L's blocks, D^-1):
+    the node-block band (n, nbw+1, 2, 2) twice, or a meshed solid's sparse values
+    (n_blocks + 1, 1, 2, 2) twice and its factor (n_factor, 2, 2), (n, 2, 2)."""
+    if flesh[0].shape[0] == 0:
+        return (np.zeros((n, nbw + 1, 2, 2)), np.empty((n, nbw + 1, 2, 2)),
+                np.empty((0, 2, 2)), np.empty((0, 2, 2)))
+    arrays = flesh[6]
+    rows = n + arrays[3].shape[0] + 1
+    return (np.zeros((rows, 1, 2, 2)), np.empty((rows, 1, 2, 2)),
+            np.empty((arrays[5].shape[0], 2, 2)), np.empty((n, 2, 2)))
+
+
+@njit(cache=True, error_model='numpy')
+def _newton_factor(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
+                   fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par, flesh,
+                   l_values, d_inv):
+    """The Newton matrix (``_newton_matrix``) factorised: the band's block LDL^T in ab,
+    or a meshed solid's sparse LDL^T in (l_values, d_inv). False if singular."""
+    if flesh[0].shape[0] == 0:
+        _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
+                       fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par)
+        return _ldl_blocks(ab)
+    _solid_newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
+                         fr_speed, n_fr, q, q_n, pos, flesh[6], shift, ab, pad_nodes, pad_par)
+    return sparse_ldl.factor(flesh[6], ab.reshape((ab.shape[0], 2, 2)), l_values, d_inv) >= 0
+
+
+@njit(cache=True, error_model='numpy')
+def _newton_inverse(ab, l_values, d_inv, flesh, x, y, two):
+    """x (and y when ``two``) <- A^-1 in place after ``_newton_factor``, in band
+    positions (pos)."""
+    if flesh[0].shape[0] == 0:
+        if two:
+            _ldl_solve2(ab, x, y)
+        else:
+            _ldl_solve(ab, x)
+        return
+    sparse_ldl.solve(flesh[6], l_values, d_inv, x)
+    if two:
+        sparse_ldl.solve(flesh[6], l_values, d_inv, y)
 
 
 @njit(cache=True, error_model='numpy')
@@ -820,7 +965,7 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     for i in range(n):
         if filters[i, 0, 1] != filters[i, 1, 0]:
             return UNSUPPORTED, 0, 0
-    band = np.zeros((n, nbw + 1, 2, 2))
+    band, ab, l_values, d_inv = _newton_storage(n, nbw, flesh)
     grads = np.empty((4, n2))
     grad = np.empty(n2)
     grad_t = np.empty(n2)
@@ -834,7 +979,6 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     y = np.empty(n2)
     u = np.empty(n2)
     trial = np.empty(n2)
-    ab = np.empty((n, nbw + 1, 2, 2))
     q = q_out
     q[:] = q_start
     n_hist = 0
@@ -856,24 +1000,23 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         found = False
         slope = 0.0
         for shift in SHIFTS:
-            _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
-                           fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab,
-                           pad_nodes, pad_par)
             counts[C_FACTORS] += 1
-            if not _ldl_blocks(ab):
+            if not _newton_factor(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                                  fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab,
+                                  pad_nodes, pad_par, flesh, l_values, d_inv):
                 continue
             for i in range(n):
                 p = pos[i]
                 x[2 * p] = -g_f[2 * i]
                 x[2 * p + 1] = -g_f[2 * i + 1]
             if c == 0.0:
-                _ldl_solve(ab, x)
+                _newton_inverse(ab, l_values, d_inv, flesh, x, y, False)
             else:
                 for i in range(n):
                     p = pos[i]
                     y[2 * p] = u[2 * i]
                     y[2 * p + 1] = u[2 * i + 1]
-                _ldl_solve2(ab, x, y)
+                _newton_inverse(ab, l_values, d_inv, flesh, x, y, True)
                 ux = 0.0
                 uy = 0.0
                 for i in range(n):

@@ -76,9 +76,14 @@ class FingerResult:
         tip_displacement: (2, 2) m, each finger's tip (left, right) moved from where the
             jaw carries its rest position, in the finger's frame: x towards the fruit,
             z up (a Fin Ray finger's tip bending towards the fruit has x > 0).
-        contact_length: (2,) m, the length of each finger's outline touching the fruit.
+        contact_length: (2,) m, the length of each finger's outline touching the fruit
+            (3D: the diameter 2 sqrt(A / pi) of the circle of its contact area).
         surface_edges: (e, 2) the fingers' outline edges that may touch the fruit
-            (indices into ``positions``).
+            (indices into ``positions``; 3D: the edges of their surface triangles).
+        contact_area: (2,) m^2, 3D: each finger's surface area touching the fruit; None
+            in 2D.
+
+    In 3D the (.., 2) arrays are (.., 3) (x, y, z).
     """
 
     positions: np.ndarray
@@ -86,6 +91,7 @@ class FingerResult:
     tip_displacement: np.ndarray
     contact_length: np.ndarray
     surface_edges: np.ndarray
+    contact_area: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -101,7 +101,8 @@ class Simulation(SimulationFacade):
             return DamageTracker(self.fruit, self.config, face_groups=list(range(n)),
                                  face_curvature=[0.0] * n,
                                  face_padded=[i < 2 for i in range(n)],
-                                 pad_material=(body.youngs_modulus, body.poisson_ratio))
+                                 pad_material=(body.youngs_modulus, body.poisson_ratio),
+                                 face_deformable=[i < 2 for i in range(n)])
         return DamageTracker(
             self.fruit, self.config, face_groups=self._face_groups(),
             face_curvature=self._face_curvatures(),

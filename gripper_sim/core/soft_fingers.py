@@ -96,6 +96,9 @@ class SoftFingers:
         static_friction, kinetic_friction: Coulomb coefficients fruit-finger.
     """
 
+    #: (d,) the mirror taking the left finger's frame to the right one's
+    mirror = MIRROR
+
     def __init__(self, body: FingerBody, first: int, static_friction: float,
                  kinetic_friction: float):
         m = body.n_nodes
@@ -104,17 +107,21 @@ class SoftFingers:
         #: (m,) the global nodes of the left and of the right finger
         self.nodes = (self.first + np.arange(m), self.first + m + np.arange(m))
         #: (m, 2) m, each finger's rest positions in its jaw frame (world x direction)
-        self.frames = (body.rest_positions, body.rest_positions * MIRROR)
+        self.frames = (body.rest_positions, body.rest_positions * self.mirror)
         #: m, how far the finger reaches in front of its backing
         self.thickness = float(body.rest_positions[:, 0].max())
         self.masses = np.concatenate([body.masses, body.masses])
         #: (2 k,) global base nodes: the left finger's, then the right one's
         self.base = np.concatenate([side[body.base_nodes] for side in self.nodes])
         self.energies = self._energies()
-        outline = np.unique(body.surface_edges)
-        self.soft_bodies = tuple(
-            SoftBody(side[outline], side[body.surface_edges], static_friction,
-                     kinetic_friction) for side in self.nodes)
+        self.soft_bodies = self._soft_bodies(static_friction, kinetic_friction)
+
+    def _soft_bodies(self, static_friction: float, kinetic_friction: float) -> tuple:
+        """The two fingers' outlines in the barrier (``SoftBody``), left then right."""
+        edges = self.body.surface_edges
+        outline = np.unique(edges)
+        return tuple(SoftBody(side[outline], side[edges], static_friction, kinetic_friction)
+                     for side in self.nodes)
 
     @property
     def n_nodes(self) -> int:

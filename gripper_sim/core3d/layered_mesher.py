@@ -156,20 +156,27 @@ def layered_tetrahedra(positions: np.ndarray, triangles: np.ndarray, layers: int
     n_s = len(surface)
     nodes = np.vstack([surface] + [centre + (rho[k] / radius)[:, None] * ray
                                    for k in range(1, layers + 1)] + [centre[None, :]])
+    tets = [prism_tetrahedra(tris, k * n_s, (k + 1) * n_s) for k in range(layers)]
     ordered = np.sort(tris, axis=1)
     a, b, c = ordered[:, 0], ordered[:, 1], ordered[:, 2]
-    tets = []
-    for k in range(layers):
-        outer, inner = k * n_s, (k + 1) * n_s
-        tets += [np.stack([a + outer, b + outer, c + outer, c + inner], axis=1),
-                 np.stack([a + outer, b + outer, b + inner, c + inner], axis=1),
-                 np.stack([a + outer, a + inner, b + inner, c + inner], axis=1)]
     last = layers * n_s
     tets.append(np.stack([a + last, b + last, c + last, np.full_like(a, len(nodes) - 1)], 1))
     tets = np.vstack(tets)
     negative = signed_volumes(nodes, tets) < 0
     tets[negative] = tets[negative][:, [0, 2, 1, 3]]
     return nodes, tets
+
+
+def prism_tetrahedra(triangles: np.ndarray, outer: int, inner: int) -> np.ndarray:
+    """(3 n_tri, 4) the tetrahedra of the prisms spanned by ``triangles`` (n_tri, 3) of one
+    layer of nodes (node i + ``outer``) over the same triangles of another (node i +
+    ``inner``), cut by Dompierre's rule (module docstring), not yet oriented: every
+    quadrilateral face cut the same way from both sides, so prisms sharing it conform."""
+    ordered = np.sort(np.asarray(triangles, dtype=np.int64), axis=1)
+    a, b, c = ordered[:, 0], ordered[:, 1], ordered[:, 2]
+    return np.vstack([np.stack([a + outer, b + outer, c + outer, c + inner], axis=1),
+                      np.stack([a + outer, b + outer, b + inner, c + inner], axis=1),
+                      np.stack([a + outer, a + inner, b + inner, c + inner], axis=1)])
 
 
 #: the six edges of a tetrahedron and, for each, the two corners off it

@@ -16,9 +16,11 @@ phase) and one vectorised gap test of every free surface node (narrow phase).
 
 Jaws: flat plates, or the 2D finger profiles (arc, vgroove) extruded along y as flat
 facets (``core3d.fingers3d``); a soft pad is an elastic-foundation energy on the jaw
-faces (``core3d.fingers_pad``). The grip force of shaped fingers is the force along the
-closing axis x, summed over a jaw's facets; wrench torques are about the centre of each
-jaw's front plane.
+faces (``core3d.fingers_pad``); a deformable finger (solid pad) is a body of the state
+on each jaw (``core3d.soft_fingers3d``), touching the fruit through the barrier
+(``core3d.soft_barrier``) in the facade's soft-finger step. The grip force of shaped
+fingers is the force along the closing axis x, summed over a jaw's facets; wrench torques
+are about the centre of each jaw's front plane.
 """
 from __future__ import annotations
 
@@ -35,11 +37,15 @@ from gripper_sim.core.energies import Gravity
 from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core.gripper import GripperKinematics
 from gripper_sim.core.results import Deformation, StepResult
+from gripper_sim.core.soft_fingers import check_soft_fingers, is_deformable
 from gripper_sim.core3d import fingers3d, meshes
 from gripper_sim.core3d.damage import DamageTracker3D
 from gripper_sim.core3d.fingers_pad import PadLayer3D
 from gripper_sim.core3d.fruit import FruitModel3D, build_fruit3d
+from gripper_sim.core3d.layered_mesher import vertex_edge_lengths
 from gripper_sim.core3d.obstacles import Plate
+from gripper_sim.core3d.soft_barrier import SoftBarrier3D
+from gripper_sim.core3d.soft_fingers3d import SoftFingers3D, finger_body3d
 from gripper_sim.errors import ConfigError
 
 LEFT, RIGHT = 0, 1
@@ -110,15 +116,24 @@ class Simulation3D(SimulationFacade):
         self.fruit: FruitModel3D = build_fruit3d(self.config)
         self.dt = float(self.config['sim.dt'])
         c = self.config
+        if is_deformable(c):
+            check_soft_fingers(c, None)
+            self._soft = SoftFingers3D(finger_body3d(c), self.fruit.n_nodes,
+                                       c['contact.jaw.static_friction'],
+                                       c['contact.jaw.kinetic_friction'])
         self._place_fruit()
         self.gravity = Gravity(self.fruit.masses, c['world.gravity'], dim=3)
-        if c['contact.model'] == 'ipc':
+        if self._soft is not None:
+            self._soft.check_fit(c, self.initial_gap, self.touching_gap, self.fruit.rest_width)
+            self._barrier = self._soft_barrier()
+        elif c['contact.model'] == 'ipc':
             self._barrier = BarrierContact(
                 self.fruit.n_nodes, self.fruit.surface, self.fruit.skin_edges,
                 BarrierSettings.from_config(c), dimension=3, triangles=self.fruit.triangles)
-            if c['fruit.initial_height'] is None and c['world.table']:
-                # a barrier needs a positive gap: the fruit starts just above the table
-                self.initial_positions[:, 2] += START_GAP_FRACTION * c['contact.ipc.dhat']
+        if (self._barrier is not None and c['fruit.initial_height'] is None
+                and c['world.table']):
+            # a barrier needs a positive gap: the fruit starts just above the table
+            self.initial_positions[:, 2] += START_GAP_FRACTION * c['contact.ipc.dhat']
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
@@ -137,6 +152,18 @@ class Simulation3D(SimulationFacade):
     def _make_damage(self) -> DamageTracker3D:
         return DamageTracker3D(self.fruit, self.config)
 
+    def _soft_barrier(self) -> SoftBarrier3D:
+        """The barrier of the fruit and the deformable fingers (``core3d.soft_barrier``),
+        its pattern's pairs from the fruit centred between the jaws at rest."""
+        fruit, soft = self.fruit, self._soft
+        outline = (self.initial_positions - self._in_plane(0.0, self.initial_lift))
+        with np.errstate(invalid='ignore'):  # the solid's inner nodes have no skin edge
+            spacing = vertex_edge_lengths(fruit.rest_positions, fruit.triangles)
+        return SoftBarrier3D(
+            fruit.n_nodes + soft.n_nodes, fruit.surface, fruit.skin_edges, fruit.triangles,
+            BarrierSettings.from_config(self.config), soft.soft_bodies,
+            soft.contact_pairs(fruit.surface, outline[fruit.surface], spacing[fruit.surface]))
+
     # ------------------------------------------------------------------ geometry
     def _make_faces(self) -> list[Plate]:
         c = self.config
@@ -146,7 +173,9 @@ class Simulation3D(SimulationFacade):
                    static_friction=c['contact.jaw.static_friction'],
                    kinetic_friction=c['contact.jaw.kinetic_friction'])
         jaw_tangents = np.stack([_Y, _Z])
-        if self._plain_jaws:
+        if self._soft is not None:  # the deformable fingers are no faces
+            faces, self._face_side, self._face_offsets = [], [], []
+        elif self._plain_jaws:
             faces = [Plate('left_jaw', np.zeros(3), _X.copy(), jaw_tangents, **jaw),
                      Plate('right_jaw', np.zeros(3), -_X, jaw_tangents, **jaw)]
             self._face_side, self._face_offsets = [LEFT, RIGHT], [np.zeros(3), np.zeros(3)]
@@ -203,7 +232,7 @@ class Simulation3D(SimulationFacade):
         areas = meshes.vertex_areas(x, fruit.triangles, fruit.n_nodes)
         jaw_areas = (float(areas[on_left].sum()), float(areas[on_right].sum()))
         faces = self._faces(self._grip)
-        if self._barrier is not None:  # the surface lies a barrier gap off the faces
+        if self._plain_jaws and self._barrier is not None:  # a barrier gap off the faces
             faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
         radii = tuple(self._patch_radius(x, faces[side], held, area) if self._plain_jaws
                       else math.sqrt(area / math.pi)

@@ -57,7 +57,7 @@ def squeeze(sim, speed: float, to_force: float | None = None,
     if to_gap is not None and to_gap >= sim.initial_gap:
         raise GripperSimError(f'--to-gap {to_gap} m is not below the initial gap '
                               f'{sim.initial_gap:.4g} m')
-    sim.command_gap(to_gap if to_gap is not None else 0.0, speed)
+    sim.command_gap(to_gap if to_gap is not None else sim.smallest_gap, speed)
     peak_force = 0.0
     while sim.time < SQUEEZE_TIME_LIMIT:
         result = sim.step()
@@ -68,7 +68,7 @@ def squeeze(sim, speed: float, to_force: float | None = None,
             return result
         if stopped_at_max_effort(sim, result):
             return result
-        if result.gap <= 0.0:
+        if result.gap <= sim.smallest_gap:
             break
     raise GripperSimError(f'the squeeze did not reach the target (peak force '
                           f'{peak_force:.4g} N, final gap {sim.last.gap:.4g} m)')

@@ -13,37 +13,19 @@ from __future__ import annotations
 import numpy as np
 
 from gripper_sim.core.energies import kernels
-from gripper_sim.core.energies.base import (Energy, Evaluation, element_dofs,
-                                            hessian_triplets, scatter_gradient)
+from gripper_sim.core.energies.base import KernelEnergy, element_dofs
 
 
 def turning_angles(x: np.ndarray, triples: np.ndarray) -> np.ndarray:
-    """Signed turning angles (n_triple,) rad at the middle node of each triple."""
-    a = x[triples[:, 1]] - x[triples[:, 0]]
-    b = x[triples[:, 2]] - x[triples[:, 1]]
-    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    dot = a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]
-    return np.arctan2(cross, dot)
+    """Signed turning angles (n_triple,) rad at the middle node of each triple of
+    ``triples`` (n_triple, 3) (previous, middle, next) of positions x (n_nodes, 2) m."""
+    out = np.empty(len(triples))
+    kernels.turning_angles(np.ascontiguousarray(x, dtype=float),
+                           np.ascontiguousarray(triples, dtype=np.int64), out)
+    return out
 
 
-def _angle_gradient(v: np.ndarray) -> np.ndarray:
-    """d atan2(v_z, v_x) / dv, (n, 2)."""
-    r2 = v[:, 0] ** 2 + v[:, 1] ** 2
-    return np.stack([-v[:, 1], v[:, 0]], axis=1) / r2[:, None]
-
-
-def _angle_hessian(v: np.ndarray) -> np.ndarray:
-    """d^2 atan2(v_z, v_x) / dv^2, (n, 2, 2)."""
-    vx, vz = v[:, 0], v[:, 1]
-    r4 = (vx ** 2 + vz ** 2) ** 2
-    h = np.empty((v.shape[0], 2, 2))
-    h[:, 0, 0] = 2 * vx * vz / r4
-    h[:, 1, 1] = -h[:, 0, 0]
-    h[:, 0, 1] = h[:, 1, 0] = (vz ** 2 - vx ** 2) / r4
-    return h
-
-
-class RodBending(Energy):
+class RodBending(KernelEnergy):
     """Args:
         triples: (n_t, 3) node indices (previous, middle, next), bent at the middle one.
         rest_positions: (n_nodes, 2) m, the rest shape giving phi0 and lengths.
@@ -67,38 +49,9 @@ class RodBending(Energy):
         self.k = np.ascontiguousarray(ei / lengths)
         self.dofs = element_dofs(self.triples)
 
-    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        x = q.reshape(-1, 2)
-        a = x[self.triples[:, 1]] - x[self.triples[:, 0]]
-        b = x[self.triples[:, 2]] - x[self.triples[:, 1]]
-        dphi = turning_angles(x, self.triples) - self.phi0
-        dphi = (dphi + np.pi) % (2 * np.pi) - np.pi
-        value = float(0.5 * np.sum(self.k * dphi ** 2))
-        ga = -_angle_gradient(a)
-        gb = _angle_gradient(b)
-        jac = np.hstack([-ga, ga - gb, gb])  # d phi / d (x_{i-1}, x_i, x_{i+1})
-        grad = scatter_gradient(q.size, self.dofs, (self.k * dphi)[:, None] * jac)
-        if not hessian:
-            return Evaluation(value, grad, np.zeros(0, np.int64), np.zeros(0, np.int64),
-                              np.zeros(0))
-        ha = -_angle_hessian(a)
-        hb = _angle_hessian(b)
-        hphi = np.zeros((len(self.k), 6, 6))
-        # a = x_i - x_{i-1}: selector [-I, I, 0]; b = x_{i+1} - x_i: [0, -I, I]
-        for (si, ci), (sj, cj) in (((0, -1), (0, -1)), ((0, -1), (2, 1)),
-                                   ((2, 1), (0, -1)), ((2, 1), (2, 1))):
-            hphi[:, si:si + 2, sj:sj + 2] += ci * cj * ha
-        for (si, ci), (sj, cj) in (((2, -1), (2, -1)), ((2, -1), (4, 1)),
-                                   ((4, 1), (2, -1)), ((4, 1), (4, 1))):
-            hphi[:, si:si + 2, sj:sj + 2] += ci * cj * hb
-        local = self.k[:, None, None] * (jac[:, :, None] * jac[:, None, :]
-                                         + dphi[:, None, None] * hphi)
-        return Evaluation(value, grad, *hessian_triplets(self.dofs, local))
-
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
-        """The numba kernel of ``evaluate`` (see ``Stretching.evaluate_into``; scatter
-        (n_triple, 36))."""
+        """The energy's kernel (see ``Stretching.evaluate_into``; scatter (n_triple, 36))."""
         return kernels.bending(q.reshape(-1, 2), self.triples, self.phi0, self.k, grad, data,
                                scatter, hessian), []
 

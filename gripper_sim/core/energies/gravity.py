@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core.energies.base import Energy, Evaluation
+from gripper_sim.core.energies.base import KernelEnergy
 
 
-class ConstantForce(Energy):
+class ConstantForce(KernelEnergy):
     """Args:
         forces: (n_dof,) N, the force on each coordinate of q (a point load, a
             distributed load lumped on nodes), the same in every configuration.
@@ -20,18 +20,12 @@ class ConstantForce(Energy):
     def __init__(self, forces: np.ndarray):
         self.grad = -np.asarray(forces, dtype=float).copy()
 
-    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        empty = np.zeros(0, np.int64)
-        return Evaluation(float(self.grad @ q), self.grad.copy(), empty, empty, np.zeros(0))
-
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter, hessian: bool = True):
-        """``evaluate`` for the fast solver: adds the gradient into ``grad``."""
+        """Adds the gradient -f (N) into ``grad``; returns (value J, no rank-one
+        terms); no Hessian."""
         grad += self.grad
         return float(self.grad @ q), []
-
-    def value(self, q: np.ndarray) -> float:
-        return float(self.grad @ q)
 
 
 class Gravity(ConstantForce):

@@ -1,8 +1,9 @@
 """Numba kernels of the 2D energies (the ``evaluate_into`` of each energy class).
 
-Free functions ``@njit(cache=True)`` on arrays. Each computes the value, gradient and
-Hessian of the numpy ``evaluate`` of its class in ``gripper_sim.core.energies``
-(test/test_energies.py compares them), adding the gradient into a preallocated (n_dof,)
+Free functions ``@njit(cache=True)`` on arrays: the one implementation of each energy
+(the value, gradient and Hessian of its class in ``gripper_sim.core.energies``, which
+the tests compare with the numpy references of ``test/reference_energies2d.py`` and
+with central differences), adding the gradient into a preallocated (n_dof,)
 vector and each element Hessian entry straight into the ``data`` array of a fixed CSC
 matrix: ``scatter[e, r * m + c]`` is the position in ``data`` of the entry (row
 ``dofs[e, r]``, column ``dofs[e, c]``) of element e with m dofs (``base.element_dofs``
@@ -80,6 +81,22 @@ def _angle_hessian(vx, vz, out, sign):
     out[1, 0] = out[0, 1]
 
 
+@njit(cache=True, inline='always')
+def _turning_angle(ax, az, bx, bz):
+    """Signed angle (rad) from edge a to edge b."""
+    return math.atan2(ax * bz - az * bx, ax * bx + az * bz)
+
+
+@njit(cache=True)
+def turning_angles(x, triples, out):
+    """Signed turning angles (n_t,) rad at the middle node of each triple (previous,
+    middle, next), between the edges x_i - x_p and x_n - x_i, written into out."""
+    for t in range(triples.shape[0]):
+        p, i, n = triples[t, 0], triples[t, 1], triples[t, 2]
+        out[t] = _turning_angle(x[i, 0] - x[p, 0], x[i, 1] - x[p, 1],
+                                x[n, 0] - x[i, 0], x[n, 1] - x[i, 1])
+
+
 @njit(cache=True)
 def bending(x, triples, phi0, k, grad, data, scatter, hessian):
     """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RodBending``).
@@ -102,7 +119,7 @@ def bending(x, triples, phi0, k, grad, data, scatter, hessian):
         p, i, n = triples[t, 0], triples[t, 1], triples[t, 2]
         ax, az = x[i, 0] - x[p, 0], x[i, 1] - x[p, 1]
         bx, bz = x[n, 0] - x[i, 0], x[n, 1] - x[i, 1]
-        dphi = math.atan2(ax * bz - az * bx, ax * bx + az * bz) - phi0[t]
+        dphi = _turning_angle(ax, az, bx, bz) - phi0[t]
         dphi = (dphi + math.pi) % (2 * math.pi) - math.pi
         value += 0.5 * k[t] * dphi * dphi
         _angle_gradient(ax, az, ga, -1.0)
@@ -168,6 +185,19 @@ def area_pressure_hessian(de_da, data, scatter):
 
 
 @njit(cache=True)
+def _deformation_gradient(x, tri, dm_inv, t):
+    """F (f00, f01, f10, f11) of triangle t: its edge matrix times dm_inv[t]."""
+    i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
+    a = dm_inv[t]
+    d00 = x[i1, 0] - x[i0, 0]
+    d01 = x[i2, 0] - x[i0, 0]
+    d10 = x[i1, 1] - x[i0, 1]
+    d11 = x[i2, 1] - x[i0, 1]
+    return (d00 * a[0, 0] + d01 * a[1, 0], d00 * a[0, 1] + d01 * a[1, 1],
+            d10 * a[0, 0] + d11 * a[1, 0], d10 * a[0, 1] + d11 * a[1, 1])
+
+
+@njit(cache=True)
 def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, hessian):
     """Plane-strain neo-Hookean linear triangles (``NeoHookeanTriangles``).
 
@@ -181,78 +211,72 @@ def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, h
     """
     n_tri = tri.shape[0]
     for t in range(n_tri):
-        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
-        d00 = x[i1, 0] - x[i0, 0]
-        d01 = x[i2, 0] - x[i0, 0]
-        d10 = x[i1, 1] - x[i0, 1]
-        d11 = x[i2, 1] - x[i0, 1]
-        a = dm_inv[t]
-        f00 = d00 * a[0, 0] + d01 * a[1, 0]
-        f01 = d00 * a[0, 1] + d01 * a[1, 1]
-        f10 = d10 * a[0, 0] + d11 * a[1, 0]
-        f11 = d10 * a[0, 1] + d11 * a[1, 1]
+        f00, f01, f10, f11 = _deformation_gradient(x, tri, dm_inv, t)
         if f00 * f11 - f01 * f10 <= 0.0:
             return np.inf
     value = 0.0
-    f = np.empty((2, 2))
-    finv = np.empty((2, 2))
-    piola = np.empty(4)
-    b = np.empty((4, 6))  # dF_(ij) / dx_local
-    c = np.empty((4, 4))
-    cb = np.empty((4, 6))
     for t in range(n_tri):
-        nodes = (tri[t, 0], tri[t, 1], tri[t, 2])
+        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
         a = dm_inv[t]
-        for i in range(2):
-            for j in range(2):
-                f[i, j] = ((x[nodes[1], i] - x[nodes[0], i]) * a[0, j]
-                           + (x[nodes[2], i] - x[nodes[0], i]) * a[1, j])
-        jdet = f[0, 0] * f[1, 1] - f[0, 1] * f[1, 0]
+        # shape-function gradients g_k (1/m): dF_ij / dx_(k, i) = g_k[j]
+        g1x, g1z = a[0, 0], a[0, 1]
+        g2x, g2z = a[1, 0], a[1, 1]
+        g0x, g0z = -(g1x + g2x), -(g1z + g2z)
+        f00, f01, f10, f11 = _deformation_gradient(x, tri, dm_inv, t)
+        jdet = f00 * f11 - f01 * f10
         lnj = math.log(jdet)
-        value += volume[t] * (0.5 * mu * (f[0, 0] ** 2 + f[0, 1] ** 2 + f[1, 0] ** 2
-                                          + f[1, 1] ** 2 - 2.0)
-                              - mu * lnj + 0.5 * lam * lnj * lnj)
-        finv[0, 0], finv[1, 1] = f[1, 1] / jdet, f[0, 0] / jdet
-        finv[0, 1], finv[1, 0] = -f[0, 1] / jdet, -f[1, 0] / jdet
-        for i in range(2):
-            for j in range(2):
-                piola[2 * i + j] = mu * (f[i, j] - finv[j, i]) + lam * lnj * finv[j, i]
-        b[:, :] = 0.0
-        for i in range(2):
-            for j in range(2):
-                for kk in range(2):
-                    b[2 * i + j, 2 * (kk + 1) + i] += a[kk, j]
-                    b[2 * i + j, i] -= a[kk, j]
-        for r in range(6):
-            acc = 0.0
-            for q in range(4):
-                acc += piola[q] * b[q, r]
-            grad[2 * nodes[r // 2] + r % 2] += volume[t] * acc
+        vol = volume[t]
+        value += vol * (0.5 * mu * (f00 * f00 + f01 * f01 + f10 * f10 + f11 * f11 - 2.0)
+                        - mu * lnj + 0.5 * lam * lnj * lnj)
+        v00, v01 = f11 / jdet, -f01 / jdet  # F^-1
+        v10, v11 = -f10 / jdet, f00 / jdet
+        # h_k = F^-T g_k: h_k[i] = sum_j g_k[j] F^-1[j, i]
+        h0x, h0z = g0x * v00 + g0z * v10, g0x * v01 + g0z * v11
+        h1x, h1z = g1x * v00 + g1z * v10, g1x * v01 + g1z * v11
+        h2x, h2z = g2x * v00 + g2z * v10, g2x * v01 + g2z * v11
+        # dE/dx_(k, i) = V (mu F g_k + (lam lnJ - mu) h_k)[i]  (P = mu (F - F^-T)
+        # + lam lnJ F^-T, Bonet & Wood eq. 6.28)
+        cg = vol * mu
+        ch = vol * (lam * lnj - mu)
+        grad[2 * i0] += cg * (f00 * g0x + f01 * g0z) + ch * h0x
+        grad[2 * i0 + 1] += cg * (f10 * g0x + f11 * g0z) + ch * h0z
+        grad[2 * i1] += cg * (f00 * g1x + f01 * g1z) + ch * h1x
+        grad[2 * i1 + 1] += cg * (f10 * g1x + f11 * g1z) + ch * h1z
+        grad[2 * i2] += cg * (f00 * g2x + f01 * g2z) + ch * h2x
+        grad[2 * i2 + 1] += cg * (f10 * g2x + f11 * g2z) + ch * h2z
         if not hessian:
             continue
-        # dP_ij/dF_mn = mu d_im d_jn + (mu - lam lnJ) Finv_ni Finv_jm + lam Finv_ji Finv_nm
-        for i in range(2):
-            for j in range(2):
-                for m in range(2):
-                    for n in range(2):
-                        v = ((mu - lam * lnj) * finv[n, i] * finv[j, m]
-                             + lam * finv[j, i] * finv[n, m])
-                        if i == m and j == n:
-                            v += mu
-                        c[2 * i + j, 2 * m + n] = v
-        for p in range(4):
-            for r in range(6):
-                acc = 0.0
-                for q in range(4):
-                    acc += c[p, q] * b[q, r]
-                cb[p, r] = acc
+        # with dP_ij/dF_mn = mu d_im d_jn + (mu - lam lnJ) Finv_ni Finv_jm
+        # + lam Finv_ji Finv_nm the block (k, i), (l, n) of the element Hessian is
+        # V (mu d_in g_k.g_l + (mu - lam lnJ) h_k[n] h_l[i] + lam h_k[i] h_l[n])
+        c2 = vol * (mu - lam * lnj)
+        c3 = vol * lam
         sc = scatter[t]
-        for r in range(6):
-            for s in range(6):
-                acc = 0.0
-                for p in range(4):
-                    acc += b[p, r] * cb[p, s]
-                data[sc[6 * r + s]] += volume[t] * acc
+        for k in range(3):
+            gkx = g0x if k == 0 else (g1x if k == 1 else g2x)
+            gkz = g0z if k == 0 else (g1z if k == 1 else g2z)
+            hkx = h0x if k == 0 else (h1x if k == 1 else h2x)
+            hkz = h0z if k == 0 else (h1z if k == 1 else h2z)
+            for m in range(k, 3):
+                glx = g0x if m == 0 else (g1x if m == 1 else g2x)
+                glz = g0z if m == 0 else (g1z if m == 1 else g2z)
+                hlx = h0x if m == 0 else (h1x if m == 1 else h2x)
+                hlz = h0z if m == 0 else (h1z if m == 1 else h2z)
+                gg = cg * (gkx * glx + gkz * glz)
+                kxx = gg + c2 * hkx * hlx + c3 * hkx * hlx
+                kxz = c2 * hkz * hlx + c3 * hkx * hlz
+                kzx = c2 * hkx * hlz + c3 * hkz * hlx
+                kzz = gg + c2 * hkz * hlz + c3 * hkz * hlz
+                r, c = 2 * k, 2 * m
+                data[sc[6 * r + c]] += kxx
+                data[sc[6 * r + c + 1]] += kxz
+                data[sc[6 * (r + 1) + c]] += kzx
+                data[sc[6 * (r + 1) + c + 1]] += kzz
+                if m != k:
+                    data[sc[6 * c + r]] += kxx
+                    data[sc[6 * c + r + 1]] += kzx
+                    data[sc[6 * (c + 1) + r]] += kxz
+                    data[sc[6 * (c + 1) + r + 1]] += kzz
     return value
 
 
@@ -260,16 +284,7 @@ def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, h
 def neohookean_von_mises(x, tri, dm_inv, mu, lam, out):
     """(n_tri,) Pa written into out: ``NeoHookeanTriangles.von_mises``."""
     for t in range(tri.shape[0]):
-        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
-        a = dm_inv[t]
-        d00 = x[i1, 0] - x[i0, 0]
-        d01 = x[i2, 0] - x[i0, 0]
-        d10 = x[i1, 1] - x[i0, 1]
-        d11 = x[i2, 1] - x[i0, 1]
-        f00 = d00 * a[0, 0] + d01 * a[1, 0]
-        f01 = d00 * a[0, 1] + d01 * a[1, 1]
-        f10 = d10 * a[0, 0] + d11 * a[1, 0]
-        f11 = d10 * a[0, 1] + d11 * a[1, 1]
+        f00, f01, f10, f11 = _deformation_gradient(x, tri, dm_inv, t)
         j = f00 * f11 - f01 * f10
         lnj = math.log(max(j, 1e-12))
         bxx = f00 * f00 + f01 * f01

@@ -12,8 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from gripper_sim.core.energies import kernels
-from gripper_sim.core.energies.base import (Energy, Evaluation, element_dofs,
-                                            hessian_triplets, scatter_gradient)
+from gripper_sim.core.energies.base import KernelEnergy, element_dofs
 
 
 def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
@@ -23,7 +22,7 @@ def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float,
     return mu, lam
 
 
-class NeoHookeanTriangles(Energy):
+class NeoHookeanTriangles(KernelEnergy):
     """Args:
         triangles: (n_tri, 3) node indices, counter-clockwise in the rest shape.
         rest_positions: (n_nodes, 2) m.
@@ -43,21 +42,6 @@ class NeoHookeanTriangles(Energy):
         self.volume = 0.5 * det * depth  # m^3 per element
         self.mu, self.lam = lame_parameters(youngs_modulus, poisson_ratio)
         self.dofs = element_dofs(self.tri)
-        # dF_flat / dx_local: F_ij = sum_k Ds_ik Dminv_kj, Ds_:k = x_{k+1} - x_0
-        n = len(self.tri)
-        self.b = np.zeros((n, 4, 6))
-        for i in range(2):
-            for j in range(2):
-                for k in range(2):
-                    self.b[:, 2 * i + j, 2 * (k + 1) + i] += self.dm_inv[:, k, j]
-                    self.b[:, 2 * i + j, i] -= self.dm_inv[:, k, j]
-
-    def deformation_gradients(self, q: np.ndarray) -> np.ndarray:
-        """(n_tri, 2, 2) deformation gradients."""
-        x = q.reshape(-1, 2)
-        ds = np.stack([x[self.tri[:, 1]] - x[self.tri[:, 0]],
-                       x[self.tri[:, 2]] - x[self.tri[:, 0]]], axis=2)
-        return ds @ self.dm_inv
 
     def von_mises(self, q: np.ndarray) -> np.ndarray:
         """(n_tri,) Pa, plane-strain von Mises of the Cauchy stress (damage measure)."""
@@ -66,51 +50,10 @@ class NeoHookeanTriangles(Energy):
                                      float(self.lam), out)
         return out
 
-    def von_mises_reference(self, q: np.ndarray) -> np.ndarray:
-        """``von_mises`` in numpy (the reference of the numba kernel)."""
-        f = self.deformation_gradients(q)
-        j = np.linalg.det(f)
-        b = f @ np.swapaxes(f, 1, 2)
-        lnj = np.log(np.maximum(j, 1e-12))
-        eye = np.eye(2)
-        sigma = (self.mu * (b - eye) + self.lam * lnj[:, None, None] * eye) / j[:, None, None]
-        s33 = (self.lam * lnj) / j  # out-of-plane (F33 = 1: b33 - 1 = 0)
-        sxx, szz, sxz = sigma[:, 0, 0], sigma[:, 1, 1], sigma[:, 0, 1]
-        return np.sqrt(0.5 * ((sxx - szz) ** 2 + (szz - s33) ** 2 + (s33 - sxx) ** 2)
-                       + 3 * sxz ** 2)
-
-    def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
-        f = self.deformation_gradients(q)
-        j = f[:, 0, 0] * f[:, 1, 1] - f[:, 0, 1] * f[:, 1, 0]
-        if np.any(j <= 0):
-            empty = np.zeros(0, np.int64)
-            return Evaluation(np.inf, np.full(q.size, np.nan), empty, empty, np.zeros(0))
-        lnj = np.log(j)
-        mu, lam = self.mu, self.lam
-        psi = 0.5 * mu * (np.sum(f * f, axis=(1, 2)) - 2) - mu * lnj + 0.5 * lam * lnj ** 2
-        value = float(np.sum(psi * self.volume))
-        finv = np.empty_like(f)
-        finv[:, 0, 0], finv[:, 1, 1] = f[:, 1, 1] / j, f[:, 0, 0] / j
-        finv[:, 0, 1], finv[:, 1, 0] = -f[:, 0, 1] / j, -f[:, 1, 0] / j
-        finv_t = np.swapaxes(finv, 1, 2)
-        piola = mu * (f - finv_t) + lam * lnj[:, None, None] * finv_t
-        local_grad = np.einsum('e,ea,eak->ek', self.volume, piola.reshape(-1, 4), self.b)
-        grad = scatter_gradient(q.size, self.dofs, local_grad)
-        if not hessian:
-            empty = np.zeros(0, np.int64)
-            return Evaluation(value, grad, empty, empty, np.zeros(0))
-        # dP_ij/dF_mn = mu d_im d_jn + (mu - lam lnJ) Finv_ni Finv_jm + lam Finv_ji Finv_nm
-        c = (mu * np.eye(4)[None]
-             + ((mu - lam * lnj)[:, None, None, None, None]
-                * np.einsum('eni,ejm->eijmn', finv, finv)).reshape(-1, 4, 4)
-             + lam * np.einsum('eji,enm->eijmn', finv, finv).reshape(-1, 4, 4))
-        local = np.einsum('e,eak,eab,ebl->ekl', self.volume, self.b, c, self.b)
-        return Evaluation(value, grad, *hessian_triplets(self.dofs, local))
-
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
-        """The numba kernel of ``evaluate`` (see ``Stretching.evaluate_into``; scatter
-        (n_tri, 36)); value inf, nothing added, if an element is inverted."""
+        """The energy's kernel (see ``Stretching.evaluate_into``; scatter (n_tri, 36));
+        value inf, nothing added, if an element is inverted."""
         return kernels.neohookean_triangles(q.reshape(-1, 2), self.tri, self.dm_inv,
                                             self.volume, float(self.mu), float(self.lam), grad,
                                             data, scatter, hessian), []

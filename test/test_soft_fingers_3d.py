@@ -1,0 +1,224 @@
+"""Deformable fingers in 3D (``core3d.soft_fingers3d``): the solid pad extruded over the jaw
+width, in barrier contact with the 3D fruit.
+
+- The mesh: positive tetrahedra, conforming (the boundary is the box's six faces), the
+  mass the block's, the backing bonded and left out of the contact surface.
+- The pad alone, closed form (small strain, linear isotropic elasticity; Timoshenko &
+  Goodier, Theory of Elasticity, 3rd ed., sec. 3, Hooke's law): compressed by delta
+  between two frictionless plates (uniaxial stress) the force is E A delta / t exactly
+  (linear tetrahedra hold any homogeneous strain); with its sides held too (uniaxial
+  strain) M A delta / t, M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) the constrained (P-wave)
+  modulus; bonded to its backing and to the plate (the pad on its jaw against a sticking
+  fruit) it lies between the two, every added constraint stiffening it (minimum
+  potential energy).
+- On the default (turgid shell) apple in force mode: no vertex of either body inside
+  the other and no pair closer than 0 at any step, the grip force met, left and right
+  symmetric. The fruit's contact area equals the rigid flat finger's at equal force
+  (within the fruit mesh's resolution): a membrane under turgor p carries a contact
+  pressure p wherever it lies against a face, so its area is F / p whatever presses it.
+  On the solid apple (a Hertz-like contact) the pad's compliance spreads the contact.
+"""
+import ipctk
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from gripper_sim.configuration import load_config
+from gripper_sim.convert.messages import build_messages
+from gripper_sim.core.solid_pad import block_body
+from gripper_sim.core3d import meshes
+from gripper_sim.core3d.energies import NeoHookeanTets
+from gripper_sim.core3d.finger_body3d import extruded_body
+from gripper_sim.core3d.mesh_geometry import signed_volumes
+from gripper_sim.core3d.simulation import Simulation3D
+from gripper_sim.errors import ConfigError
+
+PAD_3D = ['dimension=3', 'gripper.finger.type=solid_pad']
+T, H, W = 0.006, 0.04, 0.03
+E, NU, RHO = 0.6e6, 0.45, 1080.0
+
+
+def _pad(layers=3, rows=8, slices=6):
+    return extruded_body(block_body('solid_pad', T, H, layers, rows, W, E, NU, RHO), W, slices)
+
+
+def test_the_extruded_pad_is_a_conforming_tetrahedral_block():
+    layers, rows, slices = 3, 8, 6
+    body = _pad(layers, rows, slices)
+    x = body.rest_positions
+    assert body.n_nodes == (layers + 1) * (rows + 1) * (slices + 1)
+    assert np.all(signed_volumes(x, body.tetrahedra) > 0)
+    assert signed_volumes(x, body.tetrahedra).sum() == pytest.approx(T * H * W)
+    assert body.masses.sum() == pytest.approx(RHO * T * H * W)
+    assert np.ptp(x, axis=0) == pytest.approx([T, W, H])
+    # the backing's nodes are bonded; the surface is the box's other five faces, two
+    # triangles per cell face, wound outward
+    assert np.all(x[body.base_nodes, 0] == 0.0)
+    assert body.base_nodes.size == (rows + 1) * (slices + 1)
+    faces = body.surface_triangles
+    assert len(faces) == 2 * (rows * slices + 2 * layers * slices + 2 * layers * rows)
+    p = x[faces]
+    normals = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    outward = p.mean(axis=1) - x.mean(axis=0)
+    assert np.all(np.einsum('ij,ij->i', normals, outward) > 0)
+    assert not np.any(np.all(np.isclose(p[:, :, 0], 0.0), axis=1))
+
+
+def _stiffness(body, fixed_dofs) -> float:
+    """N/m, the force over delta pressing the pad's front face (x = T) by delta = T / 1000
+    towards its backing (x = 0), the dofs ``fixed_dofs`` (bool (3 m,)) held: x of the
+    front face moved, the rest at rest; a static Newton solve."""
+    delta = 1e-3 * T
+    x0 = body.rest_positions
+    energy = NeoHookeanTets(body.tetrahedra, x0, body.youngs_modulus, body.poisson_ratio)
+    q = x0.copy()
+    front = np.isclose(x0[:, 0], T)
+    q[front, 0] -= delta
+    q = q.ravel()
+    free = ~fixed_dofs
+    for _ in range(10):
+        ev = energy.evaluate(q)
+        hessian = sp.csc_matrix((ev.vals, (ev.rows, ev.cols)), shape=(q.size, q.size))
+        step = spla.spsolve(hessian[free][:, free].tocsc(), -ev.gradient[free])
+        q[free] += step
+        if np.max(np.abs(step)) < 1e-15:
+            break
+    gradient = energy.evaluate(q, hessian=False).gradient.reshape(-1, 3)
+    assert np.max(np.abs(gradient.ravel()[free])) < 1e-9
+    # the plate holds the front nodes against their elastic force -gradient
+    return -float(gradient[front, 0].sum()) / delta  # N/m: the stiffness
+
+
+def test_the_pad_alone_has_the_closed_form_stiffness():
+    body = _pad()
+    x0 = body.rest_positions
+    faces = np.isclose(x0[:, 0], T) | np.isclose(x0[:, 0], 0.0)
+    area = H * W
+    axial = np.zeros((body.n_nodes, 3), bool)
+    axial[faces, 0] = True
+    # frictionless plates: the rigid motions across them pinned at two backing corners
+    corners = np.flatnonzero(faces & np.isclose(x0[:, 0], 0.0)
+                             & np.isclose(np.abs(x0[:, 1]), W / 2)
+                             & np.isclose(x0[:, 2], -H / 2))
+    frictionless = axial.copy()
+    frictionless[corners[0], 1:] = True
+    frictionless[corners[1], 2] = True
+    uniaxial_stress = _stiffness(body, frictionless.ravel())
+    assert uniaxial_stress == pytest.approx(E * area / T, rel=5e-3)
+    confined = axial.copy()
+    confined[:, 1:] = True
+    constrained_modulus = E * (1 - NU) / ((1 + NU) * (1 - 2 * NU))
+    uniaxial_strain = _stiffness(body, confined.ravel())
+    assert uniaxial_strain == pytest.approx(constrained_modulus * area / T, rel=5e-3)
+    bonded = np.zeros((body.n_nodes, 3), bool)
+    bonded[faces] = True
+    on_the_jaw = _stiffness(body, bonded.ravel())
+    assert 1.2 * uniaxial_stress < on_the_jaw < uniaxial_strain
+
+
+def _no_crossing_watch(sim):
+    """A list of the smallest distance (m) between the fruit's and the fingers' surfaces
+    at each step; raises AssertionError as soon as the two surfaces intersect."""
+    barrier = sim._barrier
+    distances = []
+
+    def check(result):
+        positions = np.vstack([result.positions, result.fingers.positions])
+        v = barrier.vertices(positions)
+        assert not ipctk.has_intersections(barrier._mesh, v)
+        distances.append(barrier.min_distance(positions))
+
+    sim.add_observer(check)
+    return distances
+
+
+def _squeeze(overrides, force=2.0, settle=0.1):
+    sim = Simulation3D(load_config(overrides=overrides))
+    watch = _no_crossing_watch(sim) if sim._soft is not None else []
+    sim.command_force(force)
+    for _ in range(80):
+        result = sim.step()
+        if abs(result.grip_force - force) < 0.01 * force and result.step > 5:
+            break
+    return sim, sim.run(settle), watch
+
+
+@pytest.fixture(scope='module')
+def default_apple_squeezes():
+    return _squeeze(PAD_3D), _squeeze(['dimension=3'])
+
+
+def test_the_pad_squeezes_the_default_apple_without_crossing(default_apple_squeezes):
+    (sim, result, distances), _ = default_apple_squeezes
+    assert result.grip_force == pytest.approx(2.0, rel=0.01)
+    assert len(distances) == result.step and min(distances) > 0.0
+    # the grip is the base reaction: each jaw's wrench along the closing axis
+    assert -result.left_wrench.force[0] == pytest.approx(2.0, rel=0.02)
+    assert result.right_wrench.force[0] == pytest.approx(2.0, rel=0.02)
+    # the fruit pushes the pads' front faces back (x < 0 in each finger's frame)
+    fingers = result.fingers
+    assert fingers.positions.shape == (sim._soft.n_nodes, 3)
+    assert np.all(fingers.tip_displacement[:, 0] < 0)
+    # equal and opposite contact forces: the fruit's on the fingers and theirs on the
+    # fruit's nodes they hold (obstacles 0 and 1; the table is the next)
+    on_fingers = result.contact_obstacle <= 1
+    assert fingers.contact_forces.sum(axis=0) == pytest.approx(
+        -result.contact_forces[on_fingers].sum(axis=0), abs=1e-9)
+    assert np.all(fingers.contact_area > 0)
+
+
+def test_left_and_right_are_symmetric(default_apple_squeezes):
+    (sim, result, _), _ = default_apple_squeezes
+    left, right = result.deformation.jaw_contact_areas
+    assert left == pytest.approx(right, rel=0.03)
+    # a finger's area counts its nodes in a pair closer than dhat (1 um): at the rim of
+    # the patch a node is in or out, so the two fingers agree within one node's area
+    # (its largest at rest, and 5 % for its deformation)
+    body = sim._soft.body
+    node_area = meshes.vertex_areas(body.rest_positions, body.surface_triangles,
+                                    body.n_nodes).max()
+    assert abs(np.subtract(*result.fingers.contact_area)) <= 1.05 * node_area
+    assert -result.left_wrench.force[0] == pytest.approx(result.right_wrench.force[0],
+                                                         rel=0.03)
+
+
+def test_on_the_turgid_apple_the_contact_area_is_force_over_turgor(default_apple_squeezes):
+    (_, pad, _), (_, flat, _) = default_apple_squeezes
+    assert flat.grip_force == pytest.approx(pad.grip_force, rel=0.01)
+    assert pad.deformation.contact_area == pytest.approx(flat.deformation.contact_area,
+                                                         rel=0.03)
+
+
+def test_on_the_solid_apple_the_pad_spreads_the_contact():
+    solid = ['fruit.model=solid', 'fruit.mesh.subdivisions=6', 'fruit.mesh.jaw_refinement=0.3']
+    _, pad, distances = _squeeze(PAD_3D + solid)
+    _, flat, _ = _squeeze(['dimension=3'] + solid)
+    assert min(distances) > 0.0
+    assert pad.deformation.contact_area > 1.3 * flat.deformation.contact_area
+    assert pad.deformation.peak_contact_pressure < flat.deformation.peak_contact_pressure
+
+
+def test_the_markers_draw_the_3d_pads():
+    config = load_config(overrides=PAD_3D)
+    sim = Simulation3D(config)
+    array = build_messages(sim.last, config, topics=['markers'])['markers']
+    found = [m for m in array.markers if m.ns == 'soft_fingers']
+    assert len(found) == 1
+    points = np.array([(p.x, p.y, p.z) for p in found[0].points])
+    fingers = sim.last.fingers
+    assert points == pytest.approx(fingers.positions[fingers.surface_edges.ravel()])
+    assert np.ptp(points[:, 1]) == pytest.approx(config['gripper.jaw_width'])
+
+
+@pytest.mark.parametrize('overrides,match', [
+    (['gripper.finger.solid_pad.thickness=0.04', 'gripper.max_gap=0.075'],
+     "'gripper.finger.solid_pad.thickness'.*fill the jaw stroke"),
+    (['gripper.jaw_width=0'], "'gripper.jaw_width'"),
+    (['gripper.initial_gap=0.07'], "'gripper.initial_gap'.*does not fit"),
+    (['gripper.finger.pad.enabled=true'], "'gripper.finger.pad.enabled'"),
+])
+def test_bad_3d_pads_are_one_line_errors_naming_the_key(overrides, match):
+    with pytest.raises(ConfigError, match=match) as info:
+        Simulation3D(load_config(overrides=PAD_3D + overrides))
+    assert '\n' not in str(info.value)
