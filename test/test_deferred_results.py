@@ -1,7 +1,7 @@
-"""The fast path's step results build their rarely read parts (slipping, centroid, jaw
-wrenches, energies, damage contact patches) on first read, with the values an eager
-build gives, and pickle and copy as plain results; a run's observers share one
-computation of a step's contact pressures."""
+"""The fast path's step results build their rarely read parts (velocities, contact forces
+and sticking, slipping, centroid, jaw wrenches, energies, damage contact patches) on first
+read, with the values an eager build gives, and pickle and copy as plain results; a run's
+observers share one computation of a step's contact pressures."""
 import copy
 import dataclasses
 import pickle
@@ -9,13 +9,15 @@ import pickle
 import numpy as np
 
 from gripper_sim.configuration import load_config
+from gripper_sim.core import contact as cm
 from gripper_sim.core import peaks
 from gripper_sim.core.damage import Damage
 from gripper_sim.core.results import StepResult
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.workflows.grasp import GraspSequence
 
-DEFERRED = ('slipping', 'centroid', 'left_wrench', 'right_wrench', 'energies')
+DEFERRED = ('velocities', 'contact_forces', 'contact_sticking', 'slipping', 'centroid',
+            'left_wrench', 'right_wrench', 'energies')
 
 
 def _gripped_result() -> tuple[Simulation, StepResult]:
@@ -48,6 +50,11 @@ def test_deferred_fields_are_built_on_first_read_with_the_eager_values():
     # what the measures of the state give eagerly (Simulation._measure's reference path
     # builds each field; the fast path's kernel measures are compared in test_fast_path)
     v, grip = sim.v, sim.gripper_state
+    np.testing.assert_array_equal(result.velocities, v)
+    assert result.velocities is not v  # a copy, as the eager build gives
+    np.testing.assert_array_equal(result.contact_forces, sim.contact_forces)
+    np.testing.assert_array_equal(result.contact_sticking, sim.contacts.mode == cm.STICK)
+    assert result.contact_sticking.any()  # the jaws hold the fruit
     assert result.left_wrench.force[0] < 0 < result.right_wrench.force[0]  # pushed apart
     assert result.energies.total == (result.energies.kinetic + result.energies.elastic
                                      + result.energies.gravitational)

@@ -4,8 +4,9 @@ V-groove fingers (one face or several per jaw), with or without soft pads.
 ``FastPath`` runs a whole step - gripper faces, contact constraints, Newton, contact
 set updates, then the step's measures and damage of the end state - in one numba
 kernel call (``gripper_sim.core.kernels.substep``), and builds the StepResult from its
-numbers (the parts observers rarely read - slipping, centroid, jaw wrenches, energies,
-damage contact patches - on first read), instead of the generic numpy/scipy path
+numbers (the parts observers rarely read - velocities, contact forces and sticking,
+slipping, centroid, jaw wrenches, energies, damage contact patches - on first read),
+instead of the generic numpy/scipy path
 (per-energy triplets, sparse LU, numpy measures). It gives the same results as that reference path
 (test/test_fast_path.py: trajectories within 1e-9, same contact sets and Newton
 iterations) and is chosen automatically by ``Simulation`` when numba is installed, the
@@ -430,8 +431,12 @@ class FastPath:
         positions = x.copy()
         damage = self._damage(positions, normal, holder, ratio, damage_of_x)
 
+        mode = contacts.mode
+
         def rarely_read():
             return dict(
+                velocities=v.copy(), contact_forces=forces.copy(),
+                contact_sticking=mode == cm.STICK,
                 slipping=touching and self._sliding(v, holder, grip, face_par),
                 centroid=np.array([cx, cz]),
                 left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
@@ -442,9 +447,7 @@ class FastPath:
                                                gravitational=gravitational)))
 
         result = _build_deferred(StepResult, dict(
-            time=sim._time, step=sim._step, positions=positions, velocities=v.copy(),
-            contact_forces=forces.copy(), contact_obstacle=holder,
-            contact_sticking=contacts.mode == cm.STICK,
+            time=sim._time, step=sim._step, positions=positions, contact_obstacle=holder,
             obstacle_names=self._names(), surface=fruit.surface,
             left_jaw_x=grip.x - half, right_jaw_x=grip.x + half,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
@@ -665,7 +668,9 @@ def _deferred_class(cls, names: tuple[str, ...]):
 
 
 #: StepResult and Damage with the parts observers rarely read built on first read
-_DEFERRED = {StepResult: _deferred_class(StepResult, ('slipping', 'centroid', 'left_wrench',
+_DEFERRED = {StepResult: _deferred_class(StepResult, ('velocities', 'contact_forces',
+                                                      'contact_sticking', 'slipping',
+                                                      'centroid', 'left_wrench',
                                                       'right_wrench', 'energies')),
              Damage: _deferred_class(Damage, ('contacts',))}
 

@@ -127,7 +127,7 @@ def _add_off(band, pos, i, j, h00, h01, h10, h11):
         band[pj, d, 1, 1] += h11
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def band_matvec(band, order, v, out):
     """out = B v for a symmetric node-block band (n, nbw+1, 2, 2), v and out (2n,)."""
     n = band.shape[0]
@@ -163,7 +163,7 @@ def band_to_dense(band, order, out):
 
 
 # ---------------------------------------------------------------------- energies
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def ring_stretching(q, edges, spar, pos, hessian, grad, band):
     """Skin stretching E = sum EA (l - L)^2 / (2 L) (energies/stretching.py).
 
@@ -203,7 +203,7 @@ def ring_stretching(q, edges, spar, pos, hessian, grad, band):
     return 0.5 * value
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def ring_bending(q, triples, bpar, pos, hessian, grad, band):
     """Ring bending E = sum k (phi - phi0)^2 / 2 (energies/bending.py).
 
@@ -217,22 +217,20 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
     nt = triples.shape[0]
     if nt == 0:
         return 0.0
-    # per edge b_t = x[t2] - x[t1]: d atan2 / d b and its Hessian; a_t = b_{t-1}
-    ex = np.empty(nt)
-    ez = np.empty(nt)
-    gx = np.empty(nt)
-    gz = np.empty(nt)
+    # per edge b_t = x[t2] - x[t1]: d atan2 / d b (g) and its Hessian; a_t = b_{t-1}, the
+    # previous triple's edge, carried over (no scratch arrays: a step evaluates this often)
+    i1, i2 = triples[nt - 1, 1], triples[nt - 1, 2]
+    ax = q[2 * i2] - q[2 * i1]
+    az = q[2 * i2 + 1] - q[2 * i1 + 1]
+    r2 = ax ** 2 + az ** 2
+    gx_a, gz_a = -az / r2, ax / r2
+    value = 0.0
     for t in range(nt):
         i1, i2 = triples[t, 1], triples[t, 2]
         bx = q[2 * i2] - q[2 * i1]
         bz = q[2 * i2 + 1] - q[2 * i1 + 1]
         r2 = bx ** 2 + bz ** 2
-        ex[t], ez[t] = bx, bz
-        gx[t], gz[t] = -bz / r2, bx / r2
-    value = 0.0
-    for t in range(nt):
-        a = t - 1 if t > 0 else nt - 1
-        ax, az, bx, bz = ex[a], ez[a], ex[t], ez[t]
+        gx_b, gz_b = -bz / r2, bx / r2
         cross = ax * bz - az * bx
         dot = ax * bx + az * bz
         dphi = math.atan2(cross, dot) - bpar[t, 0]
@@ -243,8 +241,8 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
             dphi = y % (2 * np.pi) - np.pi
         k = bpar[t, 1]
         value += k * dphi ** 2
-        gax, gaz = -gx[a], -gz[a]
-        gbx, gbz = gx[t], gz[t]
+        gax, gaz = -gx_a, -gz_a
+        gbx, gbz = gx_b, gz_b
         j0, j1 = -gax, -gaz
         j2, j3 = gax - gbx, gaz - gbz
         j4, j5 = gbx, gbz
@@ -281,10 +279,11 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
                      k * (j5 * j2) - pb01, k * (j5 * j3) + pb00)
             _add_off(band, pos, i2, i0, k * (j4 * j0), k * (j4 * j1), k * (j5 * j0),
                      k * (j5 * j1))
+        ax, az, gx_a, gz_a = bx, bz, gx_b, gz_b
     return 0.5 * value
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
     """Enclosed-area pressure (energies/pressure.py).
 
@@ -330,7 +329,7 @@ def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
     return value, c
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, hessian,
               grads, band, area_grad, values):
     """All ring energies, the flesh and gravity: grads (4, 2n) per energy, band = elastic
@@ -435,7 +434,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
     return phi, c
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad):
     """The soft pads' energy (J), as ``pad.PadLayer._face_terms`` (elastic foundation and
     lagged smoothed friction); adds its gradient (N) into ``grad`` (2n,)."""
@@ -489,7 +488,7 @@ def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
         ab[p, 0, 1, 1] += h_n * snz * snz + h_t * stz * stz
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _filtered_max(filters, g):
     """max |S g| over dofs."""
     out = 0.0
@@ -1106,7 +1105,7 @@ def _covers(face_par, origin_x, origin_z, f, px, pz):
         f, 3]
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred, face_par,
                         face_dyn, dt, v_corr, start, filters, fr_nodes, fr_t, fr_bound,
                         fr_speed):
@@ -1233,7 +1232,7 @@ def _capped_rebound(v, rebound, v_start, dx, reaction, mass, dt):
     return min(max((-br + math.sqrt(discriminant)) / rr, 0.0), 1.0)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
                     x, x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
                     released, slipped):
@@ -1639,7 +1638,7 @@ def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
     return length
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
                   face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, flesh,
                   gravity_grad, known, energies, normal_out, pressure_out, out):
@@ -1774,7 +1773,7 @@ def _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins):
 (P_BODY, P_LOAD, P_CX, P_CZ, P_RADIUS, P_PEAK, P_RE, P_MODULUS, P_SIZE) = range(9)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_curvature,
                   bruise_pressure, rigid_modulus, pad_modulus, covered, node_pressure,
                   patches):

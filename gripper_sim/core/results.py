@@ -170,6 +170,7 @@ class StepResult:
         """Whether any node touches the obstacle called ``name`` (or one of its faces,
         named ``name.part``, e.g. ``left_jaw.upper`` of a V-groove finger)."""
         if name in self.obstacle_names:
-            return bool(self.obstacle_names.index(name) in self.contact_obstacle)
+            # a list scan: a few times faster than ndarray.__contains__ on a step's nodes
+            return self.obstacle_names.index(name) in self.contact_obstacle.tolist()
         parts = [i for i, n in enumerate(self.obstacle_names) if n.startswith(name + '.')]
         return bool(parts) and bool(np.any(np.isin(self.contact_obstacle, parts)))
