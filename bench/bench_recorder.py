@@ -202,8 +202,9 @@ def publisher_main(args: argparse.Namespace) -> None:
 
 def bench_live(seconds: float, steps_per_second: float) -> None:
     from gripper_sim.recording.reader import BagReader
+    from gripper_sim.ros.process import pick_domain_id
 
-    domain = 100 + os.getpid() % 90
+    domain = pick_domain_id()
     env = _env(domain)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'live.mcap'
@@ -241,9 +242,9 @@ def bench_live(seconds: float, steps_per_second: float) -> None:
 
 def bench_node(seconds: float) -> None:
     from gripper_sim.recording.reader import BagReader
-    from gripper_sim.ros.process import node_process
+    from gripper_sim.ros.process import node_process, pick_domain_id
 
-    domain = 100 + (os.getpid() + 1) % 90
+    domain = pick_domain_id()
     env = _env(domain)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / 'node.mcap'

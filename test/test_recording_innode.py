@@ -18,7 +18,7 @@ from gripper_sim.convert import messages  # noqa: E402
 from gripper_sim.recording.node_recording import NodeRecording  # noqa: E402
 from gripper_sim.recording.offline import CONFIG_METADATA  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
-from gripper_sim.ros.process import ros_environment  # noqa: E402
+from gripper_sim.ros.process import free_domain_id, ros_environment  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -29,7 +29,7 @@ _ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATI
 @pytest.fixture
 def sim_node():
     from gripper_sim.ros.node import SimNode
-    domain = 100 + (os.getpid() * 11 + 3) % 100
+    domain = free_domain_id(os.getpid())
     env = ros_environment(domain)
     saved = {k: os.environ.get(k) for k in _ENV_KEYS}
     for key in _ENV_KEYS:

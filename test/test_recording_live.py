@@ -27,17 +27,16 @@ from gripper_sim.recording import qos  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
 from gripper_sim.recording.recover import recover  # noqa: E402
 from gripper_sim.recording.writer import BagWriter  # noqa: E402
-from gripper_sim.ros.process import RosProcess, ros_environment  # noqa: E402
+from gripper_sim.ros.process import RosProcess, free_domain_id, ros_environment  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 TIMEOUT = 60.0  # s: generous, for a slow busy machine
-_counter = [0]
 
 
 def _domain() -> int:
-    _counter[0] += 1
-    return 100 + (os.getpid() * 7 + _counter[0]) % 100
+    """A domain no process on this machine uses and no test of this session got before."""
+    return free_domain_id(os.getpid())
 
 
 _ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',

@@ -26,7 +26,8 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from gripper_sim.recording.analysis import analyze  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
-from gripper_sim.ros.process import RosProcess, node_process, ros_environment  # noqa: E402
+from gripper_sim.ros.process import (  # noqa: E402
+    RosProcess, free_domain_id, node_process, ros_environment)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -70,7 +71,7 @@ def spin_until(executor, condition, timeout: float = TIMEOUT, what: str = '') ->
 
 
 def test_analyze_reproduces_the_peaks_the_node_reported_live(tmp_path):
-    domain = 100 + (os.getpid() * 13 + 5) % 100
+    domain = free_domain_id(os.getpid())
     env = ros_environment(domain)
     out = tmp_path / 'grasp.mcap'
     node_proc = node_process({'real_time_factor': 0.0, 'publish_rate': 200.0}, env=env,

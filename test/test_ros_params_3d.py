@@ -9,12 +9,12 @@ from rclpy.parameter import Parameter
 
 from gripper_sim.configuration import SCHEMA
 from gripper_sim.ros.node import SimNode
-from gripper_sim.ros.process import ros_environment
+from gripper_sim.ros.process import free_domain_id, ros_environment
 from test_recording_innode import _ENV_KEYS
 
 
 def test_a_3d_node_declares_the_3d_defaults(monkeypatch):
-    domain = 100 + (os.getpid() * 13 + 5) % 100
+    domain = free_domain_id(os.getpid())
     env = ros_environment(domain)
     for key in _ENV_KEYS:
         monkeypatch.setenv(key, env[key])
