@@ -22,7 +22,6 @@ ROS_DOMAIN_ID. Usage::
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import subprocess
 import sys
