@@ -23,7 +23,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import sys
+import threading
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
@@ -31,6 +33,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
@@ -149,7 +152,12 @@ def main(args: list[str] | None = None) -> int:
         overrides.append(Parameter('force', value=float(options.force)))
     if options.sim_node:
         overrides.append(Parameter('sim_node', value=options.sim_node))
-    rclpy.init(args=argv)
+    # Our own SIGINT/SIGTERM handling instead of rclpy's: rclpy's shuts the context down
+    # at once, and a spin under way then fails on the invalid context with a traceback.
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    stopping = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stopping.set())
     node = None
     try:
         try:
@@ -157,7 +165,8 @@ def main(args: list[str] | None = None) -> int:
         except Exception as err:   # invalid parameter overrides: say so, no traceback
             rclpy.logging.get_logger('gripper_force_controller').error(f'cannot start: {err}')
             return 2
-        rclpy.spin(node)
+        while not stopping.is_set() and rclpy.ok():
+            rclpy.spin_once(node, timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
