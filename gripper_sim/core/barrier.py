@@ -165,6 +165,10 @@ class BarrierContact(Energy):
         bodies: the soft bodies (``SoftBody``) whose outlines touch the fruit (2D).
         dimension: d, 2 or 3.
         triangles: (n_t, 3) the surface's triangles (node indices, outward), 3D only.
+        pairs: (p, 2) the (fruit node, soft body node) pairs the Hessian's pattern holds
+            (2D; ``pattern_pairs``): the likely ones; the coupling of a pair outside
+            them is left out of the Newton matrix (``drop_outside_pattern``). None: every
+            pair of a fruit outline node and a soft body's outline node.
     """
 
     elastic = False
@@ -177,8 +181,14 @@ class BarrierContact(Energy):
 
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
                  settings: BarrierSettings, bodies: tuple = (), dimension: int = 2,
-                 triangles: np.ndarray | None = None):
+                 triangles: np.ndarray | None = None, pairs: np.ndarray | None = None):
         self.dimension = d = dimension
+        #: (p, 2) the (fruit node, soft body node) pairs whose coupling the Hessian's
+        #: pattern holds (2D); None: every pair of their outlines' nodes
+        self.pattern_pairs = (None if pairs is None
+                              else np.asarray(pairs, np.int64).reshape(-1, 2))
+        if pairs is not None:
+            self.drop_outside_pattern = True
         self.n_dof = d * n_nodes
         self.surface = np.asarray(surface, dtype=np.int64)
         self.bodies = tuple(bodies)
@@ -246,10 +256,13 @@ class BarrierContact(Energy):
         fruit = (self.surface[self.fruit_edges] if self.fruit_edges.size
                  else np.stack([self.surface, self.surface], axis=1))
         nodes = [fruit] + [self.vertex_nodes[edges] for edges in self.body_edges]
-        for body in self.bodies:
-            outline = np.asarray(body.nodes, np.int64)
-            nodes.append(np.stack([np.repeat(self.surface, outline.size),
-                                   np.tile(outline, self.surface.size)], axis=1))
+        if self.pattern_pairs is not None:
+            nodes.append(self.pattern_pairs)
+        else:
+            for body in self.bodies:
+                outline = np.asarray(body.nodes, np.int64)
+                nodes.append(np.stack([np.repeat(self.surface, outline.size),
+                                       np.tile(outline, self.surface.size)], axis=1))
         return np.vstack(nodes)
 
     def _hessian_pattern(self) -> np.ndarray:
