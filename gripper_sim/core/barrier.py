@@ -165,10 +165,13 @@ class BarrierContact(Energy):
         bodies: the soft bodies (``SoftBody``) whose outlines touch the fruit (2D).
         dimension: d, 2 or 3.
         triangles: (n_t, 3) the surface's triangles (node indices, outward), 3D only.
-        pairs: (p, 2) the (fruit node, soft body node) pairs the Hessian's pattern holds
-            (2D; ``pattern_pairs``): the likely ones; the coupling of a pair outside
-            them is left out of the Newton matrix (``drop_outside_pattern``). None: every
-            pair of a fruit outline node and a soft body's outline node.
+        pairs: (p, 2) the node pairs the Hessian's pattern holds (2D; ``pattern_pairs``):
+            the likely ones; the coupling of a pair outside them is left out of the
+            Newton matrix (``drop_outside_pattern``). None: every pair of a fruit outline
+            node and a soft body's outline node.
+        self_contact: the soft bodies' self-contact instead (2D): each body's outline
+            against itself (a vertex and an edge of the same body that do not share a
+            node), no fruit (``surface`` and ``skin_edges`` empty), no faces.
     """
 
     elastic = False
@@ -181,10 +184,13 @@ class BarrierContact(Energy):
 
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
                  settings: BarrierSettings, bodies: tuple = (), dimension: int = 2,
-                 triangles: np.ndarray | None = None, pairs: np.ndarray | None = None):
+                 triangles: np.ndarray | None = None, pairs: np.ndarray | None = None,
+                 self_contact: bool = False):
         self.dimension = d = dimension
-        #: (p, 2) the (fruit node, soft body node) pairs whose coupling the Hessian's
-        #: pattern holds (2D); None: every pair of their outlines' nodes
+        self.self_contact = bool(self_contact)
+        #: (p, 2) the node pairs whose coupling the Hessian's pattern holds (2D): (fruit
+        #: node, soft body node), or with ``self_contact`` two nodes of one body; None:
+        #: every pair of a fruit outline node and a soft body's outline node
         self.pattern_pairs = (None if pairs is None
                               else np.asarray(pairs, np.int64).reshape(-1, 2))
         if pairs is not None:
@@ -295,10 +301,15 @@ class BarrierContact(Energy):
                                    (offsets + face_triangles).reshape(-1, 3)]).astype(np.int32)
             self._mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges),
                                              np.asfortranarray(triangles))
-        # the fruit against everything else: soft bodies and faces share one patch
-        patches = np.concatenate([(self.vertex_body > 0).astype(np.int32),
-                                  np.ones(c * k, np.int32)])
-        self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
+        if self.self_contact:
+            # a body's vertices with its own edges only (ipctk skips an edge's own ends)
+            self._mesh.can_collide = ~ipctk.make_vertex_patches_filter(
+                self.vertex_body.astype(np.int32))
+        else:
+            # the fruit against everything else: soft bodies and faces share one patch
+            patches = np.concatenate([(self.vertex_body > 0).astype(np.int32),
+                                      np.ones(c * k, np.int32)])
+            self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
         self._n_faces = k
         self._last_collisions = None
 
@@ -342,7 +353,7 @@ class BarrierContact(Energy):
                                np.repeat([f.kinetic_friction for f in new_faces],
                                          self.corners_per_face)])
         self._tangential = ipctk.TangentialCollisions()
-        if len(collisions):
+        if len(collisions) and (np.any(mu_s > 0) or np.any(mu_k > 0)):
             self._tangential.build(self._mesh, start, collisions, self.potential, mu_s, mu_k,
                                    max)
 
@@ -670,11 +681,13 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
 
 def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
-                   new_faces: list, dt: float) -> StepOutcome:
+                   new_faces: list, dt: float,
+                   self_contact: BarrierContact | None = None) -> StepOutcome:
     """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) of the fruit and the soft
     bodies in the barrier (``barrier.bodies``), nodes ``fixed`` (k,) prescribed at
     ``fixed_targets`` (k, d) m (a finger's base on its jaw: zero filters, the modified
-    mass method), the faces moving from ``old_faces`` to ``new_faces``.
+    mass method), the faces moving from ``old_faces`` to ``new_faces``; with the soft
+    bodies' ``self_contact`` barrier (among the solver's energies too) if given.
 
     The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
     nothing, else from x_n (each with the fixed nodes at their targets and the outline
@@ -692,12 +705,16 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     """
     n, d = x_n.shape
     barrier.begin_step(x_n, old_faces, new_faces, dt)
+    barriers = [barrier]
+    if self_contact is not None:
+        self_contact.begin_step(x_n, [], [], dt)
+        barriers.append(self_contact)
     pushed = barrier.pushed_start(x_n, old_faces, new_faces)
     start = None
     for candidate in (pushed + dt * v_n, pushed):
         candidate = candidate.copy()
         candidate[fixed] = fixed_targets
-        if barrier.reachable(x_n, candidate):
+        if all(b.reachable(x_n, candidate) for b in barriers):
             start = candidate
             break
     if start is None:

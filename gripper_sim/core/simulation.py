@@ -61,7 +61,8 @@ class Simulation(SimulationFacade):
                 finger = finger_body(c, self.fruit.depth)
             self._soft = SoftFingers(finger, self.fruit.n_nodes,
                                      c['contact.jaw.static_friction'],
-                                     c['contact.jaw.kinetic_friction'])
+                                     c['contact.jaw.kinetic_friction'],
+                                     barrier.BarrierSettings.from_config(c))
         self._place_fruit()
         if self._soft is not None:
             self._soft.check_fit(c, self.initial_gap, self.touching_gap,

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gripper_sim.core.barrier import SoftBody
+from gripper_sim.core.barrier import BarrierContact, BarrierSettings, SoftBody
 from gripper_sim.core.energies import NeoHookeanTriangles
 from gripper_sim.core.fin_ray import fin_ray_from_config
 from gripper_sim.core.finger_body import FingerBody
@@ -102,13 +102,15 @@ class SoftFingers:
         first: index of the left finger's first node in the state (the fruit's nodes
             come before).
         static_friction, kinetic_friction: Coulomb coefficients fruit-finger.
+        self_contact: the barrier settings of each finger's self-contact (its beams and
+            ribs against each other, ``FingerBody.self_contact``); None: none.
     """
 
     #: (d,) the mirror taking the left finger's frame to the right one's
     mirror = MIRROR
 
     def __init__(self, body: FingerBody, first: int, static_friction: float,
-                 kinetic_friction: float):
+                 kinetic_friction: float, self_contact: BarrierSettings | None = None):
         m = body.n_nodes
         self.body = body
         self.first = int(first)
@@ -121,7 +123,12 @@ class SoftFingers:
         self.masses = np.concatenate([body.masses, body.masses])
         #: (2 k,) global base nodes: the left finger's, then the right one's
         self.base = np.concatenate([side[body.base_nodes] for side in self.nodes])
-        self.energies = self._energies()
+        #: the fingers' self-contact barrier (each finger against itself), or None; its
+        #: steps begin with the fruit's barrier's (``barrier.soft_body_step``)
+        self.self_contact: BarrierContact | None = (
+            body.self_contact(self_contact, self.nodes, self.first + 2 * m)
+            if self_contact is not None else None)
+        self.energies = self._energies() + ([self.self_contact] if self.self_contact else [])
         self.soft_bodies = self._soft_bodies(static_friction, kinetic_friction)
 
     def _soft_bodies(self, static_friction: float, kinetic_friction: float) -> tuple:
