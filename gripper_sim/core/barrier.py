@@ -61,6 +61,10 @@ EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
 #: the candidates of a Newton step serve positions this fraction of dhat outside the box
 #: each vertex sweeps along it (round-off of q + s dq), their boxes inflated by as much
 SWEPT_MARGIN = 1e-2
+#: m, how far apart a self-contact's primitives are sought at the start of a step
+#: (``BarrierContact.quiet``): a step whose vertices stay within half the gap found, less
+#: dhat, of their start has no pair within dhat and skips the barrier's work
+QUIET_SEARCH = 1e-3
 
 
 @dataclass(frozen=True)
@@ -250,6 +254,9 @@ class BarrierContact(Energy):
         self._swept = None
         #: per Hessian part, its last CSC structure and ``_locate``'s answer for it
         self._entry_cache = {}
+        #: self-contact only: (the deformable vertices at the step's start (n_v, d) m, how
+        #: far m each may move from there with no pair coming within dhat), or None
+        self._quiet = None
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -340,8 +347,6 @@ class BarrierContact(Energy):
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
-        collisions = ipctk.NormalCollisions()
-        collisions.build(self._mesh, start, self.settings.dhat, broad_phase=self._broad_phase)
         # per vertex; a pair takes the larger one: the face's or the soft body's, the
         # fruit's being 0
         body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
@@ -353,9 +358,33 @@ class BarrierContact(Energy):
                                np.repeat([f.kinetic_friction for f in new_faces],
                                          self.corners_per_face)])
         self._tangential = ipctk.TangentialCollisions()
-        if len(collisions) and (np.any(mu_s > 0) or np.any(mu_k > 0)):
+        collisions = ipctk.NormalCollisions()
+        if np.any(mu_s > 0) or np.any(mu_k > 0):
+            collisions.build(self._mesh, start, self.settings.dhat,
+                             broad_phase=self._broad_phase)
+        if len(collisions):
             self._tangential.build(self._mesh, start, collisions, self.potential, mu_s, mu_k,
                                    max)
+        self._quiet = None
+        if self.self_contact:
+            near = ipctk.NormalCollisions()
+            near.build(self._mesh, start, QUIET_SEARCH, broad_phase=self._broad_phase)
+            gap = (float(np.sqrt(near.compute_minimum_distance(self._mesh, start)))
+                   if len(near) else QUIET_SEARCH)
+            if gap > 2.0 * self.settings.dhat:
+                self._quiet = (start[:self.vertex_nodes.size].copy(),
+                               0.5 * (gap - self.settings.dhat))
+
+    def quiet(self, q: np.ndarray) -> bool:
+        """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
+        self-contact whose vertices all lie within the step's free reach of their start
+        (each vertex and edge moved by at most that reach: their gap shrank by at most
+        twice it). Always False for the fruit's barrier."""
+        if self._quiet is None:
+            return False
+        start, reach = self._quiet
+        moved = q.reshape(-1, self.dimension)[self.vertex_nodes] - start
+        return float(np.max(np.einsum('ij,ij->i', moved, moved))) <= reach * reach
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
@@ -364,6 +393,8 @@ class BarrierContact(Energy):
         the gradient (N) into ``gradient``; returns (value J, the Hessian's entries as
         ``_pattern_entries`` gives them, or None). Without the Hessian, the values and
         gradients of the last evaluation are reused when ``q`` is the same."""
+        if self.quiet(q):
+            return 0.0, ((np.zeros(0, np.int64), np.zeros(0)) if hessian else None)
         last = self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
         if not hessian and last is not None and np.array_equal(last[0], q):
@@ -475,6 +506,8 @@ class BarrierContact(Energy):
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
         primitive of the surface crosses a face's and no face's crosses the surface's
         (CCD). Keeps the step's collision candidates for the line search along it."""
+        if self.quiet(q) and self.quiet(q + dq):
+            return 1.0
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices((q + dq).reshape(-1, self.dimension))
         candidates = ipctk.Candidates()
@@ -542,6 +575,8 @@ class BarrierContact(Energy):
     def reachable(self, x_n: np.ndarray, start: np.ndarray) -> bool:
         """Whether the straight paths from ``x_n`` (the faces at the start of the step) to
         ``start`` (the faces at its end), both (n, d) m, cross nothing and end apart."""
+        if self.quiet(start.ravel()):
+            return True
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
         if not np.array_equal(v0, v1):  # nothing that stands still crosses anything
