@@ -44,6 +44,8 @@ import ipctk
 import numpy as np
 
 from gripper_sim.core import contact as cm
+from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
+                                              nearest_partners)
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
@@ -65,6 +67,9 @@ SWEPT_MARGIN = 1e-2
 #: (``BarrierContact.quiet``): a step whose vertices stay within half the gap found, less
 #: dhat, of their start has no pair within dhat and skips the barrier's work
 QUIET_SEARCH = 1e-3
+#: m, the compiled barrier's candidates (2D) are sought this much beyond dhat / 2 around
+#: each primitive and serve while every vertex stays within it of where they were sought
+CANDIDATE_MARGIN = 1e-4
 
 
 @dataclass(frozen=True)
@@ -224,6 +229,7 @@ class BarrierContact(Energy):
         self.friction = ipctk.FrictionPotential(settings.friction_smoothing)
         n_v = self.vertex_nodes.size
         self.vertex_dofs = element_dofs(self.vertex_nodes[:, None], d).ravel()
+        self._vertex_dof_pairs = self.vertex_dofs.reshape(-1, d)
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
         #: (solvers that keep one sparsity pattern read it): the fruit's surface triangles
         #: (3D) or skin edges (2D; or its lone surface nodes), and with soft bodies their
@@ -257,6 +263,9 @@ class BarrierContact(Energy):
         #: self-contact only: (the deformable vertices at the step's start (n_v, d) m, how
         #: far m each may move from there with no pair coming within dhat), or None
         self._quiet = None
+        #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
+        #: they were sought, the (edge, vertex) pairs (k, 2)), or None
+        self._pairs = None
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -319,6 +328,11 @@ class BarrierContact(Energy):
             self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
         self._n_faces = k
         self._last_collisions = None
+        #: the mesh's edges (n_e, 2) and each vertex's state dofs (n_v + c k, d), -1 for
+        #: the faces' corners (for the compiled barrier)
+        self._mesh_edges = edges.astype(np.int64)
+        self._mesh_dofs = -np.ones((rest.shape[0], self.dimension), np.int64)
+        self._mesh_dofs[:self.vertex_nodes.size] = self.vertex_dofs.reshape(-1, self.dimension)
 
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
         """(n_v + c k, d) m, the collision mesh's vertices: the surfaces (the fruit's, the
@@ -343,6 +357,7 @@ class BarrierContact(Energy):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
         self._swept = None
+        self._pairs = None
         self._last_terms = None
         self._dt = dt
         start = self.vertices(x_n, old)
@@ -366,6 +381,9 @@ class BarrierContact(Energy):
             self._tangential.build(self._mesh, start, collisions, self.potential, mu_s, mu_k,
                                    max)
         self._quiet = None
+        #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
+        #: they were sought, the (edge, vertex) pairs (k, 2)), or None
+        self._pairs = None
         if self.self_contact:
             near = ipctk.NormalCollisions()
             near.build(self._mesh, start, QUIET_SEARCH, broad_phase=self._broad_phase)
@@ -383,8 +401,7 @@ class BarrierContact(Energy):
         if self._quiet is None:
             return False
         start, reach = self._quiet
-        moved = q.reshape(-1, self.dimension)[self.vertex_nodes] - start
-        return float(np.max(np.einsum('ij,ij->i', moved, moved))) <= reach * reach
+        return largest_move(q, self._vertex_dof_pairs, start) <= reach
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
@@ -397,16 +414,21 @@ class BarrierContact(Energy):
             return 0.0, ((np.zeros(0, np.int64), np.zeros(0)) if hessian else None)
         last = self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
+        compiled = None  # the compiled barrier's Hessian entries (2D)
         if not hessian and last is not None and np.array_equal(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
         else:
             mesh = self._mesh
             v = self.vertices(q.reshape(-1, self.dimension))
-            collisions = self._collisions(v)
             n_d = self.vertex_dofs.size
             barrier_value = friction_value = 0.0
             barrier_gradient = friction_gradient = None
-            if len(collisions):
+            if self.dimension == 2:
+                barrier_value, barrier_gradient, compiled = self._compiled_barrier(q, v,
+                                                                                   hessian)
+                if not np.isfinite(barrier_value):
+                    return np.inf, None
+            elif len(collisions := self._collisions(v)):
                 barrier_value = float(self.potential(collisions, mesh, v))
                 if not np.isfinite(barrier_value):
                     return np.inf, None
@@ -435,7 +457,39 @@ class BarrierContact(Energy):
                 gradient[self.vertex_dofs] += friction_gradient
         if not hessian:
             return value, None
-        return value, self._pattern_entries(parts, scales)
+        where, vals = self._pattern_entries(parts, scales)
+        if compiled is not None:
+            where, vals = np.concatenate([where, compiled[0]]), np.concatenate([vals, compiled[1]])
+        return value, (where, vals)
+
+    def _compiled_barrier(self, q: np.ndarray, v: np.ndarray, hessian: bool):
+        """The barrier at positions ``q`` (2 n,) m, the collision mesh's vertices ``v`` (2D,
+        ``barrier_kernels``) over the candidates of ``_candidate_pairs``: (value J, gradient (n_d,) N over
+        ``vertex_dofs`` or None, the Hessian's entries (pattern key indices, values N/m)
+        or None)."""
+        candidates = self._candidate_pairs(q, v)
+        if not len(candidates):
+            return 0.0, None, None
+        gradient = np.zeros(self.n_dof)
+        size = 36 * len(candidates) if hessian else 0
+        index, values = np.empty(size, np.int64), np.empty(size)
+        value, written = edge_vertex_barrier(
+            v, self._mesh_edges, candidates, self.settings.dhat, self.settings.stiffness,
+            self._mesh_dofs, gradient, hessian,
+            self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys,
+            self.n_dof, index, values)
+        if not np.isfinite(value):
+            return np.inf, None, None
+        entries = None
+        if hessian:
+            index, values = index[:written], values[:written]
+            inside = index >= 0
+            if not np.all(inside):
+                if not self.drop_outside_pattern:
+                    raise AssertionError('barrier Hessian entry outside its pattern')
+                index, values = index[inside], values[inside]
+            entries = (index, values)
+        return value, gradient[self.vertex_dofs], entries
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
         """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
@@ -529,19 +583,42 @@ class BarrierContact(Energy):
         if last is not None and np.array_equal(last[0], v):
             return last[1]
         collisions = ipctk.NormalCollisions()
-        swept = self._swept
-        if swept is not None:
-            low, high, candidates = swept
-            slack = SWEPT_MARGIN * self.settings.dhat
-            inside = v[:low.shape[0]]
-            if not (np.all(inside >= low - slack) and np.all(inside <= high + slack)):
-                swept = None
-        if swept is not None:
-            collisions.build(candidates, self._mesh, v, self.settings.dhat)
-        else:
-            collisions.build(self._mesh, v, self.settings.dhat, broad_phase=self._broad_phase)
+        collisions.build(self._candidates(v), self._mesh, v, self.settings.dhat)
         self._last_collisions = (v.copy(), collisions)
         return collisions
+
+    def _candidates(self, v: np.ndarray) -> ipctk.Candidates:
+        """The candidates (ipctk) holding every pair closer than dhat at the collision
+        mesh's vertices ``v``: the last Newton step's when every deformable vertex lies in
+        the box it swept along that step (the faces stand still within a step), else
+        those of a new broad phase. Boxes inflated by dhat / 2 each meet for every pair
+        closer than dhat."""
+        swept = self._swept
+        if swept is not None:
+            low, high, kept = swept
+            slack = SWEPT_MARGIN * self.settings.dhat
+            inside = v[:low.shape[0]]
+            if np.all(inside >= low - slack) and np.all(inside <= high + slack):
+                return kept
+        candidates = ipctk.Candidates()
+        candidates.build(self._mesh, v, 0.5 * self.settings.dhat, self._broad_phase)
+        return candidates
+
+    def _candidate_pairs(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(k, 2) the (edge, vertex) pairs holding every pair closer than dhat at positions
+        ``q`` (n d,) m, the collision mesh's vertices ``v``: ipctk's candidates of boxes
+        inflated by dhat / 2 + ``CANDIDATE_MARGIN``, sought again once a vertex has moved
+        further than the margin from where they were sought (each side of a pair moved
+        by at most the margin: the pair came at most twice it closer)."""
+        kept = self._pairs
+        if kept is None or largest_move(q, self._vertex_dof_pairs, kept[0]) > CANDIDATE_MARGIN:
+            candidates = ipctk.Candidates()
+            candidates.build(self._mesh, v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN,
+                             self._broad_phase)
+            pairs = np.array([(c.edge_id, c.vertex_id) for c in candidates.ev_candidates],
+                             np.int64).reshape(-1, 2)
+            kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs)
+        return kept[1]
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
@@ -604,34 +681,14 @@ class BarrierContact(Energy):
         at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
         soft bodies); -1 for the nodes in no pair. 2D."""
         v = self.vertices(q.reshape(-1, 2))
-        collisions = self._collisions(v)
         n_v = self.vertex_nodes.size
-        n_b = len(self.bodies)
         # the body of every collision-mesh vertex: outlines, then the faces' end points
-        owner = np.concatenate([self.vertex_body,
-                                1 + n_b + np.arange(v.shape[0] - n_v) // self.corners_per_face])
-        edges = self._mesh.edges
-        ev = np.array([(c.vertex_id, c.edge_id) for c in collisions.ev_collisions],
-                      np.int64).reshape(-1, 2)
-        vv = np.array([(c.vertex0_id, c.vertex1_id) for c in collisions.vv_collisions],
-                      np.int64).reshape(-1, 2)
-        vertex, ends = ev[:, 0], edges[ev[:, 1]].astype(np.int64)     # (p,), (p, 2)
-        gap = np.min(np.linalg.norm(v[ends] - v[vertex, None], axis=2), axis=1)
-        gap_vv = np.linalg.norm(v[vv[:, 1]] - v[vv[:, 0]], axis=1)
-        # each pair's (node, other side, distance) rows, in the order of the pairs: the
-        # vertex against each end, each end against the vertex; the vv pair both ways
-        a = np.concatenate([np.stack([vertex, vertex, ends[:, 0], ends[:, 1]], 1).ravel(),
-                            vv.ravel()])
-        b = np.concatenate([np.stack([ends[:, 0], ends[:, 1], vertex, vertex], 1).ravel(),
-                            vv[:, ::-1].ravel()])
-        distance = np.concatenate([np.repeat(gap, 4), np.repeat(gap_vv, 2)])
-        keep = a < n_v
-        a, b, distance = self.vertex_nodes[a[keep]], owner[b[keep]], distance[keep]
-        # per node its nearest pair (the first of equally near ones)
-        order = np.lexsort((np.arange(a.size), distance, a))
-        first = order[np.r_[True, a[order][1:] != a[order][:-1]]] if a.size else order
+        owner = np.concatenate([self.vertex_body, 1 + len(self.bodies)
+                                + np.arange(v.shape[0] - n_v) // self.corners_per_face])
+        other = nearest_partners(v, self._mesh_edges, self._candidate_pairs(q, v),
+                                 self.settings.dhat, n_v)
         partner = -np.ones(self.n_dof // 2, np.int64)
-        partner[a[first]] = b[first]
+        partner[self.vertex_nodes] = np.where(other >= 0, owner[other], -1)
         return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
