@@ -14,26 +14,33 @@ ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
   slip speed eps_v, added to the step as dt D(v) with v = (x - x_n) / dt;
 - every Newton line search starts from the continuous-collision bound: the largest
   fraction of the step along which no primitive crosses another (their section 4).
-The candidates (its sweep-and-prune broad phase), barrier, friction potential and CCD
-are the IPC Toolkit's (``ipctk``, MIT). One implementation for both dimensions (``dimension`` d = 2 or 3). Its collision
-mesh holds the fruit's surface: in 2D the outline (the surface nodes and skin edges), in
-3D the surface nodes, edges and triangles; and every rigid face: in 2D one segment per
-``FlatFace`` (jaw faces, table, walls), in 3D two triangles per ``Plate`` (its
-rectangle), each moving with its face; infinite faces (table, walls) become segments or
-squares ``INFINITE_FACE_LENGTH`` across. Only pairs of the fruit and an obstacle collide
-(no self-contact of the surface yet), so the barrier's Hessian stays on a fixed pattern:
-the node blocks of the skin edges (2D) or of the surface triangles (3D), which hold
-every vertex-face, edge-edge and face-vertex pair with a rigid face.
+The candidates (its sweep-and-prune broad phase), friction potential and CCD are the IPC
+Toolkit's (``ipctk``, MIT), and so is the barrier in 3D; in 2D the barrier over ipctk's
+candidates is one compiled pass (``core.barrier_kernels``, equal to ipctk's to 1e-10),
+its candidates sought once and kept while no vertex moves further than
+``CANDIDATE_MARGIN``. One implementation for both dimensions (``dimension`` d = 2 or
+3). Its collision mesh holds the fruit's surface: in 2D the outline (the surface nodes
+and skin edges), in 3D the surface nodes, edges and triangles; and every rigid face: in
+2D one segment per ``FlatFace`` (jaw faces, table, walls), in 3D two triangles per
+``Plate`` (its rectangle), each moving with its face; infinite faces (table, walls)
+become segments or squares ``INFINITE_FACE_LENGTH`` across. Only pairs of the fruit and
+an obstacle collide (no self-contact of the surface yet), so the barrier's Hessian stays
+on a fixed pattern: the node blocks of the skin edges (2D) or of the surface triangles
+(3D), which hold every vertex-face, edge-edge and face-vertex pair with a rigid face.
 
 Deformable bodies (``SoftBody``: the soft fingers, ``core.soft_fingers``) join the
 collision mesh with their outlines, whose vertices are degrees of freedom too: the
 contact is two-way, both bodies' nodes feel the barrier and the friction (soft-on-soft
-contact). A pair may couple any node of the fruit's outline with any of a soft body's,
-so the Hessian's fixed pattern holds every such pair of nodes (beside the outlines'
-edges); the solver's fast path keeps one pattern as for rigid faces. Still only pairs
-with the fruit collide: the fingers do not touch each other, the table or themselves.
-In 3D a soft body's surface joins as triangles (``SoftBody.triangles``), and its pairs
-with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
+contact). A pair may couple any node of the fruit's outline with any of a soft body's;
+the Hessian's fixed pattern (the solver's fast path keeps one, as for rigid faces) holds
+the outlines' edges and the likely pairs (``pairs``: in 2D those ``SoftFingers``
+chooses), or by default every pair; a pair outside it keeps its exact gradient, its
+coupling is left out of the Newton matrix. Only pairs with the fruit collide: the
+fingers do not touch each other or the table. A finger's self-contact (its beams and
+ribs against each other, ``FingerBody.self_contact``) is a second barrier of this class
+(``self_contact``): each soft body against itself alone, no fruit, no faces, no
+friction. In 3D a soft body's surface joins as triangles (``SoftBody.triangles``), and
+its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 """
 from __future__ import annotations
 
@@ -459,14 +466,15 @@ class BarrierContact(Energy):
             return value, None
         where, vals = self._pattern_entries(parts, scales)
         if compiled is not None:
-            where, vals = np.concatenate([where, compiled[0]]), np.concatenate([vals, compiled[1]])
+            where = np.concatenate([where, compiled[0]])
+            vals = np.concatenate([vals, compiled[1]])
         return value, (where, vals)
 
     def _compiled_barrier(self, q: np.ndarray, v: np.ndarray, hessian: bool):
         """The barrier at positions ``q`` (2 n,) m, the collision mesh's vertices ``v`` (2D,
-        ``barrier_kernels``) over the candidates of ``_candidate_pairs``: (value J, gradient (n_d,) N over
-        ``vertex_dofs`` or None, the Hessian's entries (pattern key indices, values N/m)
-        or None)."""
+        ``barrier_kernels``) over the candidates of ``_candidate_pairs``: (value J,
+        gradient (n_d,) N over ``vertex_dofs`` or None, the Hessian's entries (pattern
+        key indices, values N/m) or None)."""
         candidates = self._candidate_pairs(q, v)
         if not len(candidates):
             return 0.0, None, None
