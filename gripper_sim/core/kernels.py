@@ -11,7 +11,8 @@ reference elsewhere in the core, in the same order of operations where it matter
   ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
 - ``step_measures``: the numbers ``Simulation._measure`` and ``measures.deformation``
   report; ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
-- ``damage_update``: the per-step part of ``damage.DamageTracker.update``.
+- ``damage_update``: ``damage.damage_patches`` (the rule ``DamageTracker.update`` calls)
+  on this module's faces.
 
 Layout. Positions are flat, q = [x0, z0, x1, z1, ...] (m). Hessians are kept as a
 symmetric node-block band: ``band[p, d]`` (2, 2) is the block of the node at band
@@ -42,6 +43,9 @@ import numpy as np
 from numba import njit
 
 from gripper_sim.core import sparse_ldl
+from gripper_sim.core.damage import P_SIZE  # noqa: F401 (the patch table's width, for fast.py)
+from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_SIZE,
+                                     damage_patches)
 from gripper_sim.core.energies.kernels import bending, neohookean_triangles, stretching
 
 #: contact modes, as in contact.py
@@ -1769,16 +1773,12 @@ def _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins):
 
 
 # ---------------------------------------------------------------------- damage
-#: columns of the ``damage_update`` patch table
-(P_BODY, P_LOAD, P_CX, P_CZ, P_RADIUS, P_PEAK, P_RE, P_MODULUS, P_SIZE) = range(9)
-
-
-@njit(cache=True, error_model='numpy', inline='always')
+@njit(cache=True, error_model='numpy')
 def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_curvature,
                   bruise_pressure, rigid_modulus, pad_modulus, covered, node_pressure,
                   patches):
-    """The per-step part of ``DamageTracker.update`` (damage.py): contact patches by
-    Hertz, per-node pressure and the bruised cover.
+    """``damage.damage_patches`` for the faces of this module's steps (rigid faces, soft
+    pads; no deformable finger): the per-step part of ``DamageTracker.update``.
 
     Args:
         x: (n, 2) m.  normal: (n,) N, normal reactions.  obstacle: (n,) holding obstacle.
@@ -1791,122 +1791,12 @@ def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_cur
     Returns:
         (number of patches, largest peak pressure Pa, bruised length sum(covered) m).
     """
-    n = ring.shape[0]
-    node_pressure[:] = 0.0
-    body = np.empty(n, np.int64)
-    any_held = False
-    for r in range(n):
-        o = obstacle[ring[r]]
-        body[r] = groups[o] if o >= 0 else -1
-        any_held = any_held or body[r] >= 0
-    if not any_held:
-        return 0, 0.0, _total(covered)
-    start = 0
-    uniform = True
-    for r in range(n):
-        if body[r] != body[0]:
-            uniform = False
-    if not uniform:
-        for r in range(n):
-            if body[r] != body[(r - 1) % n]:
-                start = r
-                break
-    seg = np.empty(n)
-    for r in range(n):
-        i, j = ring[r], ring[(r + 1) % n]
-        seg[r] = math.sqrt((x[j, 0] - x[i, 0]) ** 2 + (x[j, 1] - x[i, 1]) ** 2)
-    run = np.empty(n, np.int64)
-    n_patches = 0
-    k = 0
-    while k < n:
-        r0 = (start + k) % n
-        b = body[r0]
-        length = 0
-        while k < n and body[(start + k) % n] == b:
-            run[length] = (start + k) % n
-            length += 1
-            k += 1
-        if b < 0:
-            continue
-        load = 0.0
-        cx = 0.0
-        cz = 0.0
-        for m in range(length):
-            node = ring[run[m]]
-            f = max(normal[node], 0.0)
-            load += f
-            cx += f * x[node, 0]
-            cz += f * x[node, 1]
-        if load <= 0:
-            continue
-        cx /= load
-        cz /= load
-        near = run[0]
-        best = np.inf
-        face_k = 0.0
-        pad = 0.0
-        for m in range(length):
-            node = ring[run[m]]
-            dist = math.sqrt((x[node, 0] - cx) ** 2 + (x[node, 1] - cz) ** 2)
-            if dist < best:
-                best = dist
-                near = run[m]
-            face_k += curvature[obstacle[node]]
-            pad += padded[obstacle[node]]
-        face_k /= length
-        k1 = rest_curvature[near]
-        if k1 <= 0:
-            k1 = 1e-3
-        k1_eff = max(k1 + face_k, 1e-3 * k1)
-        re = 1.0 / math.sqrt(k1_eff * k1)
-        modulus = pad_modulus if pad / length >= 0.5 else rigid_modulus
-        a = (3.0 * load * re / (4.0 * modulus)) ** (1.0 / 3.0)
-        p0 = 3.0 * load / (2.0 * math.pi * a * a)
-        row = patches[n_patches]
-        row[P_BODY], row[P_LOAD], row[P_CX], row[P_CZ] = b, load, cx, cz
-        row[P_RADIUS], row[P_PEAK], row[P_RE], row[P_MODULUS] = a, p0, re, modulus
-        n_patches += 1
-        for m in range(length):
-            node = ring[run[m]]
-            s = math.sqrt((x[node, 0] - cx) ** 2 + (x[node, 1] - cz) ** 2)
-            node_pressure[run[m]] = p0 * math.sqrt(max(0.0, 1.0 - (s / a) ** 2))
-        if p0 > bruise_pressure and n >= 3:
-            _cover(x, ring, near, cx, cz, seg,
-                   a * math.sqrt(1.0 - (bruise_pressure / p0) ** 2), covered)
-    pressure = 0.0
-    for m in range(n_patches):
-        pressure = max(pressure, patches[m, P_PEAK])
-    return n_patches, pressure, _total(covered)
-
-
-@njit(cache=True, error_model='numpy')
-def _total(values):
-    """sum(values)."""
-    return np.sum(values)
-
-
-@njit(cache=True, error_model='numpy')
-def _cover(x, ring, near, cx, cz, seg, radius, covered):
-    """DamageTracker._cover: the outline within ``radius`` (m, along it) of the centre."""
-    n = ring.shape[0]
-    rel = np.zeros(n)
-    ahead = n // 2
-    acc = 0.0
-    for k in range(ahead):
-        acc += seg[(near + k) % n]
-        rel[(near + 1 + k) % n] = acc
-    acc = 0.0
-    for k in range(n - 1 - ahead):
-        r = (near - 1 - k) % n
-        acc += seg[r]
-        rel[r] = -acc
-    i0, i1, i2 = ring[(near - 1) % n], ring[near], ring[(near + 1) % n]
-    tx, tz = x[i2, 0] - x[i0, 0], x[i2, 1] - x[i0, 1]
-    norm = max(math.sqrt(tx * tx + tz * tz), 1e-300)
-    tx, tz = tx / norm, tz / norm
-    offset = (cx - x[i1, 0]) * tx + (cz - x[i1, 1]) * tz
-    for r in range(n):
-        lo = rel[r] - 0.5 * seg[(r - 1) % n]
-        hi = rel[r] + 0.5 * seg[r]
-        cover = max(min(hi, offset + radius) - max(lo, offset - radius), 0.0)
-        covered[r] = max(covered[r], cover)
+    faces = np.zeros((groups.shape[0], FACE_SIZE))
+    for f in range(groups.shape[0]):
+        faces[f, FACE_BODY] = groups[f]
+        faces[f, FACE_CURVATURE] = curvature[f]
+        faces[f, FACE_PADDED] = padded[f]
+    near = np.empty(ring.shape[0], np.int64)
+    return damage_patches(x, normal, obstacle, ring, faces, rest_curvature, bruise_pressure,
+                          rigid_modulus, pad_modulus, 1.0, covered, node_pressure, patches,
+                          near)
