@@ -9,8 +9,9 @@ reference elsewhere in the core, in the same order of operations where it matter
 - ``newton_solve``: ``ImplicitEulerSolver.solve`` (stepper.py);
 - ``contact_constraints``, ``update_contacts``, ``substep``: ``Simulation._constraints``,
   ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
-- ``step_measures``: the numbers ``Simulation._measure`` and ``measures.deformation``
-  report; ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
+- ``step_measures``: the numbers ``Simulation._measure`` reports, the outline's by
+  ``measures.outline_measures`` and ``measures.face_contact_length_of`` (as
+  ``measures.deformation``); ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
 - ``damage_update``: ``damage.damage_patches`` (the rule ``DamageTracker.update`` calls)
   on this module's faces.
 
@@ -46,6 +47,7 @@ from gripper_sim.core import sparse_ldl
 from gripper_sim.core.damage import P_SIZE  # noqa: F401 (the patch table's width, for fast.py)
 from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_SIZE,
                                      damage_patches)
+from gripper_sim.core.measures import face_contact_length_of, outline_measures
 from gripper_sim.core.energies.kernels import bending, neohookean_triangles, stretching
 
 #: contact modes, as in contact.py
@@ -1591,57 +1593,6 @@ def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
     return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
 
 
-@njit(cache=True, error_model='numpy')
-def _separation_offset(x, ring, start, step, nx, nz, ox, oz):
-    """measures._separation_offset for a face of normal (nx, nz) through (ox, oz)."""
-    n = ring.shape[0]
-    node0 = ring[start % n]
-    f1 = ring[(start + step) % n]
-    f2 = ring[(start + 2 * step) % n]
-    g1 = (x[f1, 0] - ox) * nx + (x[f1, 1] - oz) * nz
-    g2 = (x[f2, 0] - ox) * nx + (x[f2, 1] - oz) * nz
-    tx, tz = -nz, nx
-    h0 = abs((x[f1, 0] - x[node0, 0]) * tx + (x[f1, 1] - x[node0, 1]) * tz)
-    h1 = abs((x[f2, 0] - x[f1, 0]) * tx + (x[f2, 1] - x[f1, 1]) * tz)
-    if g1 <= 0 or g2 <= g1 or h1 <= 0:
-        return 0.5 * h0
-    s1 = h1 / (math.sqrt(g2 / g1) - 1.0)
-    return min(max(h0 - s1, 0.0), h0)
-
-
-@njit(cache=True, error_model='numpy')
-def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
-    """measures.face_contact_length for the face ``side``."""
-    n = ring.shape[0]
-    if n < 5:
-        return 0.0
-    tx, tz = -nz, nx
-    top = np.int64(-1)  # not literals: one compiled _separation_offset
-    bottom = np.int64(-1)
-    a_top = 0.0
-    a_bottom = 0.0
-    for r in range(n):
-        i = ring[r]
-        if obstacle[i] != side:
-            continue
-        along = x[i, 0] * tx + x[i, 1] * tz
-        if top < 0 or along > a_top:
-            top, a_top = r, along
-        if bottom < 0 or along < a_bottom:
-            bottom, a_bottom = r, along
-    if top < 0:
-        return 0.0
-    length = a_top - a_bottom
-    forward, backward = np.int64(1), np.int64(-1)
-    for k in range(2):
-        end = top if k == 0 else bottom
-        if obstacle[ring[(end + 1) % n]] != side:
-            length += _separation_offset(x, ring, end, forward, nx, nz, ox, oz)
-        elif obstacle[ring[(end - 1) % n]] != side:
-            length += _separation_offset(x, ring, end, backward, nx, nz, ox, oz)
-    return length
-
-
 @njit(cache=True, error_model='numpy', inline='always')
 def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
                   face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, flesh,
@@ -1721,38 +1672,10 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
             grav += gravity_grad[m] * q[m]
         out[M_GRAVITY] = grav
     # deformation
-    ns = surface.shape[0]
-    lo = np.inf
-    hi = -np.inf
-    for s in range(ns):
-        lo = min(lo, x[surface[s], 0])
-        hi = max(hi, x[surface[s], 0])
-    out[M_WIDTH] = hi - lo
-    best = 0.0
-    strain_max = 0.0
-    for e in range(skin_edges.shape[0]):
-        i, j = skin_edges[e, 0], skin_edges[e, 1]
-        strain = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1]) / rest_segments[e] - 1.0
-        if e == 0 or abs(strain) > best:
-            best = abs(strain)
-            strain_max = strain
+    width, strain_max, peak = outline_measures(x, surface, skin_edges, rest_segments,
+                                               normal_out, depth, pressure_out)
+    out[M_WIDTH] = width
     out[M_MAX_STRAIN] = strain_max
-    n_e = skin_edges.shape[0]
-    peak = 0.0
-    for s in range(ns):
-        trib = 0.0
-        if n_e > 0:
-            i, j = skin_edges[s, 0], skin_edges[s, 1]
-            seg = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1])
-            k = (s - 1) % n_e
-            i, j = skin_edges[k, 0], skin_edges[k, 1]
-            prev = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1])
-            trib = 0.5 * (seg + prev)
-        p = 0.0
-        if trib > 0:
-            p = max(normal_out[surface[s]], 0.0) / (trib * depth)
-        pressure_out[s] = p
-        peak = max(peak, p)
     out[M_PEAK_PRESSURE] = peak
     out[M_CONTACT_LENGTH] = _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins)
 
@@ -1765,10 +1688,10 @@ def _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins):
         if face_par[f, FP_JAW] < 0:
             continue
         side = np.int64(face_par[f, FP_JAW])
-        length += _face_contact_length(x, surface, obstacle, f, face_par[f, 0],
-                                       face_par[f, 1],
-                                       jaw_origins[side, 0] + face_par[f, FP_OFFSET_X],
-                                       jaw_origins[side, 1] + face_par[f, FP_OFFSET_Z])
+        length += face_contact_length_of(x, surface, obstacle, f, face_par[f, 0],
+                                         face_par[f, 1],
+                                         jaw_origins[side, 0] + face_par[f, FP_OFFSET_X],
+                                         jaw_origins[side, 1] + face_par[f, FP_OFFSET_Z])
     return length
 
 
