@@ -48,6 +48,9 @@ from gripper_sim.core.damage import P_SIZE  # noqa: F401 (the patch table's widt
 from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_SIZE,
                                      damage_patches)
 from gripper_sim.core.measures import face_contact_length_of, outline_measures
+from gripper_sim.core.pad import (PAD_NX, PAD_NZ, PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X,
+                                  PF_NEW_Z, PF_NX, PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE,
+                                  PF_SPEED, pad_forces, pad_point, pad_rows, pad_terms)
 from gripper_sim.core.energies.kernels import bending, neohookean_triangles, stretching
 
 #: contact modes, as in contact.py
@@ -75,11 +78,6 @@ SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
 #: and the face origin's offset (x, z) m from the jaw origin
 FP_JAW, FP_OFFSET_X, FP_OFFSET_Z, FP_SIZE = 7, 8, 9, 10
 
-#: columns of the soft pads' rows (``pad_par``, one row per node that may touch a pad face
-#: in the step, as ``pad.PadLayer.begin_step`` sets them): stiffness k N/m, friction bound
-#: mu * lagged normal force N, pad surface origin at the end of the step (x, z) m, its
-#: normal (x, z), the jaw's speed along the face m/s
-PAD_K, PAD_BOUND, PAD_OX, PAD_OZ, PAD_NX, PAD_NZ, PAD_SPEED, PAD_SIZE = range(8)
 
 # fpar layout of ``substep`` / ``newton_solve``
 F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
@@ -436,53 +434,20 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         for m in range(n2):
             grad[m] += fric_grad[m]
     if pad_nodes.shape[0] > 0:
-        phi += _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad)
+        phi += pad_terms(q, q_n, dt, pad_nodes, pad_par, grad)
     return phi, c
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad):
-    """The soft pads' energy (J), as ``pad.PadLayer._face_terms`` (elastic foundation and
-    lagged smoothed friction); adds its gradient (N) into ``grad`` (2n,)."""
-    eps = FRICTION_SMOOTHING * dt
-    value = 0.0
-    for e in range(pad_nodes.shape[0]):
-        i = pad_nodes[e]
-        k, bound = pad_par[e, PAD_K], pad_par[e, PAD_BOUND]
-        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
-        tx, tz = -nz, nx
-        delta = max(0.0, -((q[2 * i] - pad_par[e, PAD_OX]) * nx
-                           + (q[2 * i + 1] - pad_par[e, PAD_OZ]) * nz))
-        u = (((q[2 * i] - q_n[2 * i]) * tx + (q[2 * i + 1] - q_n[2 * i + 1]) * tz)
-             - pad_par[e, PAD_SPEED] * dt)
-        a = abs(u)
-        if a < eps:
-            f0 = -a ** 3 / (3 * eps ** 2) + a ** 2 / eps + eps / 3
-            f1 = 2 * a / eps - a ** 2 / eps ** 2
-        else:
-            f0, f1 = a, 1.0
-        value += 0.5 * k * delta ** 2 + bound * f0
-        g_n = -k * delta
-        g_t = bound * f1 * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
-        grad[2 * i] += g_n * nx + g_t * tx
-        grad[2 * i + 1] += g_n * nz + g_t * tz
-    return value
 
 
 @njit(cache=True, error_model='numpy')
 def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
-    """Adds the pads' Hessian node blocks, filtered (S_i B S_i), to the band ``ab``."""
-    eps = FRICTION_SMOOTHING * dt
+    """Adds the pads' Hessian node blocks (``pad.pad_point``), filtered (S_i B S_i), to the
+    band ``ab``."""
     for e in range(pad_nodes.shape[0]):
         i = pad_nodes[e]
+        _v, _gx, _gz, h_n, h_t, _f_n = pad_point(q[2 * i], q[2 * i + 1], q_n[2 * i],
+                                                 q_n[2 * i + 1], pad_par[e], dt)
         nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
         tx, tz = -nz, nx
-        gap = (q[2 * i] - pad_par[e, PAD_OX]) * nx + (q[2 * i + 1] - pad_par[e, PAD_OZ]) * nz
-        h_n = pad_par[e, PAD_K] if gap < 0 else 0.0
-        u = (((q[2 * i] - q_n[2 * i]) * tx + (q[2 * i + 1] - q_n[2 * i + 1]) * tz)
-             - pad_par[e, PAD_SPEED] * dt)
-        a = abs(u)
-        h_t = pad_par[e, PAD_BOUND] * (2 / eps - 2 * a / eps ** 2) if a < eps else 0.0
         snx = filters[i, 0, 0] * nx + filters[i, 0, 1] * nz  # S n (S symmetric)
         snz = filters[i, 1, 0] * nx + filters[i, 1, 1] * nz
         stx = filters[i, 0, 0] * tx + filters[i, 0, 1] * tz
@@ -636,78 +601,36 @@ def _ldl_solve2(ab, x, y):
 
 @njit(cache=True, error_model='numpy')
 def _pad_rows(x_n, surface, pad_k, thickness, mu, face_par, face_dyn):
-    """The pads' rows of a step, as ``pad.PadLayer.begin_step``: for each jaw face (the
-    rigid face behind its pad) the outline nodes over the pad and not far in front of it
-    at the start of the step. Returns (nodes (m,), rows (m, PAD_SIZE), face (m,))."""
-    n_s = surface.shape[0]
+    """``pad.pad_rows`` of a step on the jaw faces of ``face_par`` / ``face_dyn`` (set for
+    the step): (nodes (m,), rows (m, PAD_SIZE), face (m,))."""
     n_jaw = 0
     for f in range(face_par.shape[0]):
         if face_par[f, FP_JAW] >= 0:
             n_jaw += 1
-    nodes = np.empty(n_jaw * n_s, np.int64)
-    rows = np.empty((n_jaw * n_s, PAD_SIZE))
-    face = np.empty(n_jaw * n_s, np.int64)
+    faces = np.empty((n_jaw, PF_SIZE))
     m = 0
     for f in range(face_par.shape[0]):
         if face_par[f, FP_JAW] < 0:
             continue
         nx, nz = face_par[f, 0], face_par[f, 1]
-        tx, tz = -nz, nx
-        old_x = face_dyn[f, 0] + thickness * nx
-        old_z = face_dyn[f, 1] + thickness * nz
-        speed = face_dyn[f, 4] * tx + face_dyn[f, 5] * tz
-        for s in range(n_s):
-            i = surface[s]
-            gap = (x_n[i, 0] - old_x) * nx + (x_n[i, 1] - old_z) * nz
-            along = abs((x_n[i, 0] - old_x) * tx + (x_n[i, 1] - old_z) * tz)
-            if not (along <= face_par[f, 2] and gap < thickness
-                    and gap > -thickness - 1e-3):
-                continue
-            nodes[m] = i
-            face[m] = f
-            rows[m, PAD_K] = pad_k[s]
-            rows[m, PAD_BOUND] = mu * (pad_k[s] * max(0.0, -gap))
-            rows[m, PAD_OX] = face_dyn[f, 2] + thickness * nx
-            rows[m, PAD_OZ] = face_dyn[f, 3] + thickness * nz
-            rows[m, PAD_NX] = nx
-            rows[m, PAD_NZ] = nz
-            rows[m, PAD_SPEED] = speed
-            m += 1
-    return nodes[:m], rows[:m], face[:m]
+        faces[m, PF_OLD_X], faces[m, PF_OLD_Z] = face_dyn[f, 0], face_dyn[f, 1]
+        faces[m, PF_NEW_X], faces[m, PF_NEW_Z] = face_dyn[f, 2], face_dyn[f, 3]
+        faces[m, PF_NX], faces[m, PF_NZ] = nx, nz
+        faces[m, PF_HALF] = face_par[f, 2]
+        faces[m, PF_SPEED] = face_dyn[f, 4] * -nz + face_dyn[f, 5] * nx
+        faces[m, PF_SIDE] = face_par[f, FP_JAW]
+        faces[m, PF_INDEX] = f
+        m += 1
+    positions, rows, face = pad_rows(x_n, surface, pad_k, thickness, mu, faces)
+    return surface[positions], rows, face
 
 
 @njit(cache=True, error_model='numpy')
 def _pad_forces(x, x_n, dt, pad_nodes, pad_par, pad_face, face_par, forces, normal, holder,
                 side_force):
-    """The pads' forces on the fruit at the step's end positions x (n, 2), as
-    ``pad.PadLayer.finish_step`` records them (outputs: see ``substep``)."""
-    eps = FRICTION_SMOOTHING * dt
-    forces[:, :] = 0.0
-    normal[:] = 0.0
-    holder[:] = -1
-    side_force[:] = 0.0
-    best = np.zeros(x.shape[0])
-    for e in range(pad_nodes.shape[0]):
-        i = pad_nodes[e]
-        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
-        tx, tz = -nz, nx
-        gap = (x[i, 0] - pad_par[e, PAD_OX]) * nx + (x[i, 1] - pad_par[e, PAD_OZ]) * nz
-        f_n = pad_par[e, PAD_K] * max(0.0, -gap)
-        u = (((x[i, 0] - x_n[i, 0]) * tx + (x[i, 1] - x_n[i, 1]) * tz)
-             - pad_par[e, PAD_SPEED] * dt)
-        a = abs(u)
-        f1 = 2 * a / eps - a ** 2 / eps ** 2 if a < eps else 1.0
-        f_t = -pad_par[e, PAD_BOUND] * f1 * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
-        fx = f_n * nx + f_t * tx
-        forces[i, 0] += fx
-        forces[i, 1] += f_n * nz + f_t * tz
-        normal[i] += f_n
-        f = pad_face[e]
-        side = np.int64(face_par[f, FP_JAW])
-        side_force[side] += fx if side == 0 else -fx
-        if f_n > 0 and f_n > best[i]:
-            holder[i] = f
-            best[i] = f_n
+    """``pad.pad_forces``: the pads' forces on the fruit at the step's end positions x
+    (n, 2), as ``pad.PadLayer.finish_step`` records them (outputs: see ``substep``)."""
+    pad_forces(x, x_n, dt, pad_nodes, pad_par, pad_face, forces, normal, holder, side_force)
 
 
 @njit(cache=True, error_model='numpy')
