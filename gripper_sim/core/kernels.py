@@ -4,8 +4,9 @@ Free functions ``@njit(cache=True)`` on arrays with preallocated outputs; the Py
 glue is ``gripper_sim.core.fast``. Each kernel computes the same thing as a numpy
 reference elsewhere in the core, in the same order of operations where it matters:
 
-- ``ring_stretching``, ``ring_bending``, ``ring_pressure``: the energies of
-  ``energies/stretching.py``, ``energies/bending.py``, ``energies/pressure.py``;
+- ``ring_stretching``, ``ring_bending``, ``ring_pressure``: the band assembly of the
+  energies' element functions (``energies.kernels``: ``edge_spring``, ``hinge``,
+  ``area_pressure``), which their classes' CSC kernels call too;
 - ``newton_solve``: ``ImplicitEulerSolver.solve`` (stepper.py);
 - ``contact_constraints``, ``update_contacts``, ``substep``: ``Simulation._constraints``,
   ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
@@ -51,7 +52,9 @@ from gripper_sim.core.measures import face_contact_length_of, outline_measures
 from gripper_sim.core.pad import (PAD_NX, PAD_NZ, PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X,
                                   PF_NEW_Z, PF_NX, PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE,
                                   PF_SPEED, pad_forces, pad_point, pad_rows, pad_terms)
-from gripper_sim.core.energies.kernels import bending, neohookean_triangles, stretching
+from gripper_sim.core.energies.kernels import (area_and_gradient, area_pressure, bending,
+                                               edge_spring, hinge, hinge_block,
+                                               neohookean_triangles, stretching)
 
 #: contact modes, as in contact.py
 FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
@@ -169,7 +172,8 @@ def band_to_dense(band, order, out):
 # ---------------------------------------------------------------------- energies
 @njit(cache=True, error_model='numpy', inline='always')
 def ring_stretching(q, edges, spar, pos, hessian, grad, band):
-    """Skin stretching E = sum EA (l - L)^2 / (2 L) (energies/stretching.py).
+    """Skin stretching (energies/stretching.py): ``energies.kernels.edge_spring`` per edge,
+    its Hessian into the band.
 
     Args:
         q: (2n,) m.  edges: (n_edge, 2) nodes.  spar: (n_edge, 2) [L (m), EA / L (N/m)].
@@ -183,75 +187,39 @@ def ring_stretching(q, edges, spar, pos, hessian, grad, band):
     value = 0.0
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
-        ex = q[2 * j] - q[2 * i]
-        ez = q[2 * j + 1] - q[2 * i + 1]
-        length = math.sqrt(ex * ex + ez * ez)
-        stretch = length - spar[e, 0]
-        k = spar[e, 1]
-        value += k * stretch ** 2
-        ux, uz = ex / length, ez / length
-        ks = k * stretch
-        fx, fz = ks * ux, ks * uz
-        grad[2 * i] += -fx
-        grad[2 * i + 1] += -fz
+        v, fx, fz, b00, b01, b11 = edge_spring(q[2 * j] - q[2 * i], q[2 * j + 1] - q[2 * i + 1],
+                                               spar[e, 0], spar[e, 1])
+        value += v
+        grad[2 * i] -= fx
+        grad[2 * i + 1] -= fz
         grad[2 * j] += fx
         grad[2 * j + 1] += fz
         if hessian:
-            ratio = stretch / length
-            b00 = k * (ux * ux + ratio * (1.0 - ux * ux))
-            b01 = k * (ux * uz + ratio * (0.0 - ux * uz))
-            b11 = k * (uz * uz + ratio * (1.0 - uz * uz))
             _add_diag(band, pos, i, b00, b01, b01, b11)
             _add_diag(band, pos, j, b00, b01, b01, b11)
             _add_off(band, pos, i, j, -b00, -b01, -b01, -b11)
-    return 0.5 * value
+    return value
 
 
 @njit(cache=True, error_model='numpy', inline='always')
 def ring_bending(q, triples, bpar, pos, hessian, grad, band):
-    """Ring bending E = sum k (phi - phi0)^2 / 2 (energies/bending.py).
+    """Ring bending (energies/bending.py): ``energies.kernels.hinge`` per triple, its
+    Hessian blocks (``hinge_block``) into the band.
 
     Args:
-        triples: (n_t, 3) nodes (previous, middle, next) of a closed ring in order:
-            triples[t, 0:2] == triples[t - 1, 1:3] (as RingBending builds them).
+        triples: (n_t, 3) nodes (previous, middle, next).
         bpar: (n_t, 2) [phi0 (rad), k = EI / l (N m)].
         Others as ``ring_stretching``.
     """
     grad[:] = 0.0
-    nt = triples.shape[0]
-    if nt == 0:
-        return 0.0
-    # per edge b_t = x[t2] - x[t1]: d atan2 / d b (g) and its Hessian; a_t = b_{t-1}, the
-    # previous triple's edge, carried over (no scratch arrays: a step evaluates this often)
-    i1, i2 = triples[nt - 1, 1], triples[nt - 1, 2]
-    ax = q[2 * i2] - q[2 * i1]
-    az = q[2 * i2 + 1] - q[2 * i1 + 1]
-    r2 = ax ** 2 + az ** 2
-    gx_a, gz_a = -az / r2, ax / r2
     value = 0.0
-    for t in range(nt):
-        i1, i2 = triples[t, 1], triples[t, 2]
-        bx = q[2 * i2] - q[2 * i1]
-        bz = q[2 * i2 + 1] - q[2 * i1 + 1]
-        r2 = bx ** 2 + bz ** 2
-        gx_b, gz_b = -bz / r2, bx / r2
-        cross = ax * bz - az * bx
-        dot = ax * bx + az * bz
-        dphi = math.atan2(cross, dot) - bpar[t, 0]
-        y = dphi + np.pi
-        if 0.0 <= y < 2 * np.pi:
-            dphi = y - np.pi
-        else:
-            dphi = y % (2 * np.pi) - np.pi
-        k = bpar[t, 1]
-        value += k * dphi ** 2
-        gax, gaz = -gx_a, -gz_a
-        gbx, gbz = gx_b, gz_b
-        j0, j1 = -gax, -gaz
-        j2, j3 = gax - gbx, gaz - gbz
-        j4, j5 = gbx, gbz
-        kd = k * dphi
+    for t in range(triples.shape[0]):
         i0, i1, i2 = triples[t, 0], triples[t, 1], triples[t, 2]
+        k = bpar[t, 1]
+        v, kd, j0, j1, j2, j3, j4, j5, ha00, ha01, hb00, hb01 = hinge(
+            q[2 * i1] - q[2 * i0], q[2 * i1 + 1] - q[2 * i0 + 1], q[2 * i2] - q[2 * i1],
+            q[2 * i2 + 1] - q[2 * i1 + 1], bpar[t, 0], k)
+        value += v
         grad[2 * i0] += kd * j0
         grad[2 * i0 + 1] += kd * j1
         grad[2 * i1] += kd * j2
@@ -259,37 +227,25 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
         grad[2 * i2] += kd * j4
         grad[2 * i2 + 1] += kd * j5
         if hessian:
-            r4a = (ax ** 2 + az ** 2) ** 2
-            r4b = (bx ** 2 + bz ** 2) ** 2
-            # ha = -H(a), hb = H(b), H(v) = [[2 vx vz, vz^2 - vx^2], [., -2 vx vz]] / |v|^4
-            ha00 = -(2 * ax * az / r4a)
-            ha01 = -((az ** 2 - ax ** 2) / r4a)
-            hb00 = 2 * bx * bz / r4b
-            hb01 = (bz ** 2 - bx ** 2) / r4b
-            # dphi-weighted parts of the blocks (p,p) ha, (i,p) -ha, (i,i) ha + hb,
-            # (n,i) -hb, (n,n) hb, (n,p) 0
-            pa00, pa01 = kd * ha00, kd * ha01
-            pb00, pb01 = kd * hb00, kd * hb01
-            _add_diag(band, pos, i0, k * (j0 * j0) + pa00, k * (j0 * j1) + pa01,
-                      k * (j1 * j0) + pa01, k * (j1 * j1) - pa00)
-            _add_diag(band, pos, i1, k * (j2 * j2) + (pa00 + pb00),
-                      k * (j2 * j3) + (pa01 + pb01), k * (j3 * j2) + (pa01 + pb01),
-                      k * (j3 * j3) - (pa00 + pb00))
-            _add_diag(band, pos, i2, k * (j4 * j4) + pb00, k * (j4 * j5) + pb01,
-                      k * (j5 * j4) + pb01, k * (j5 * j5) - pb00)
-            _add_off(band, pos, i1, i0, k * (j2 * j0) - pa00, k * (j2 * j1) - pa01,
-                     k * (j3 * j0) - pa01, k * (j3 * j1) + pa00)
-            _add_off(band, pos, i2, i1, k * (j4 * j2) - pb00, k * (j4 * j3) - pb01,
-                     k * (j5 * j2) - pb01, k * (j5 * j3) + pb00)
-            _add_off(band, pos, i2, i0, k * (j4 * j0), k * (j4 * j1), k * (j5 * j0),
-                     k * (j5 * j1))
-        ax, az, gx_a, gz_a = bx, bz, gx_b, gz_b
-    return 0.5 * value
+            b00, b01, b10, b11 = hinge_block(k, kd, j0, j1, j0, j1, ha00, ha01)
+            _add_diag(band, pos, i0, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j2, j3, j2, j3, ha00 + hb00, ha01 + hb01)
+            _add_diag(band, pos, i1, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j4, j5, j4, j5, hb00, hb01)
+            _add_diag(band, pos, i2, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j2, j3, j0, j1, -ha00, -ha01)
+            _add_off(band, pos, i1, i0, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j4, j5, j2, j3, -hb00, -hb01)
+            _add_off(band, pos, i2, i1, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j4, j5, j0, j1, 0.0, 0.0)
+            _add_off(band, pos, i2, i0, b00, b01, b10, b11)
+    return value
 
 
 @njit(cache=True, error_model='numpy', inline='always')
 def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
-    """Enclosed-area pressure (energies/pressure.py).
+    """Enclosed-area pressure (energies/pressure.py): ``energies.kernels.area_and_gradient``
+    and ``area_pressure``, the sparse part of its Hessian into the band.
 
     Args:
         ring: (n_r,) nodes counter-clockwise (empty: no pressure).
@@ -301,35 +257,19 @@ def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
         (energy J, rank-one coefficient c = b K / A0 (0 if none)); the Hessian is the
         band part plus c u u^T.
     """
-    grad[:] = 0.0
-    area_grad[:] = 0.0
     n = ring.shape[0]
     if n == 0:
+        grad[:] = 0.0
+        area_grad[:] = 0.0
         return 0.0, 0.0
-    a0, b, p0, kb = press[0], press[1], press[2], press[3]
-    area = 0.0
-    for r in range(n):
-        i = ring[r]
-        j = ring[(r + 1) % n]
-        area += q[2 * i] * q[2 * j + 1] - q[2 * j] * q[2 * i + 1]
-    da = 0.5 * area - a0
-    value = b * (-p0 * da + 0.5 * kb * da ** 2 / a0)
-    de_da = b * (-p0 + kb * da / a0)
-    for r in range(n):
-        i = ring[r]
-        prv = ring[(r - 1) % n]
-        nxt = ring[(r + 1) % n]
-        area_grad[2 * i] = 0.5 * (q[2 * nxt + 1] - q[2 * prv + 1])
-        area_grad[2 * i + 1] = 0.5 * (q[2 * prv] - q[2 * nxt])
+    area = area_and_gradient(q.reshape((q.shape[0] // 2, 2)), ring, area_grad)
+    value, de_da, c = area_pressure(area, press[0], press[1], press[2], press[3])
     for m in range(q.shape[0]):
         grad[m] = de_da * area_grad[m]
     if hessian:
         h = de_da * 0.5
         for r in range(n):
-            i = ring[r]
-            nxt = ring[(r + 1) % n]
-            _add_off(band, pos, i, nxt, 0.0, h, -h, 0.0)
-    c = b * kb / a0 if kb > 0 else 0.0
+            _add_off(band, pos, ring[r], ring[(r + 1) % n], 0.0, h, -h, 0.0)
     return value, c
 
 
