@@ -48,13 +48,13 @@ from gripper_sim.core import sparse_ldl
 from gripper_sim.core.damage import P_SIZE  # noqa: F401 (the patch table's width, for fast.py)
 from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_SIZE,
                                      damage_patches)
-from gripper_sim.core.measures import face_contact_length_of, outline_measures
-from gripper_sim.core.pad import (PAD_NX, PAD_NZ, PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X,
-                                  PF_NEW_Z, PF_NX, PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE,
-                                  PF_SPEED, pad_forces, pad_point, pad_rows, pad_terms)
 from gripper_sim.core.energies.kernels import (area_and_gradient, area_pressure, bending,
                                                edge_spring, hinge, hinge_block,
                                                neohookean_triangles, stretching)
+from gripper_sim.core.measures import face_contact_length_of, outline_measures
+from gripper_sim.core.pad import (PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X, PF_NEW_Z, PF_NX,
+                                  PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE, PF_SPEED,
+                                  pad_blocks, pad_forces, pad_rows, pad_terms)
 
 #: contact modes, as in contact.py
 FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
@@ -380,23 +380,20 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
 
 @njit(cache=True, error_model='numpy')
 def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
-    """Adds the pads' Hessian node blocks (``pad.pad_point``), filtered (S_i B S_i), to the
-    band ``ab``."""
+    """Adds the pads' Hessian node blocks B (``pad.pad_blocks``), filtered (S_i B S_i), to
+    the band ``ab``."""
+    blocks = np.empty((pad_nodes.shape[0], 2, 2))
+    pad_blocks(q, q_n, dt, pad_nodes, pad_par, blocks)
     for e in range(pad_nodes.shape[0]):
         i = pad_nodes[e]
-        _v, _gx, _gz, h_n, h_t, _f_n = pad_point(q[2 * i], q[2 * i + 1], q_n[2 * i],
-                                                 q_n[2 * i + 1], pad_par[e], dt)
-        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
-        tx, tz = -nz, nx
-        snx = filters[i, 0, 0] * nx + filters[i, 0, 1] * nz  # S n (S symmetric)
-        snz = filters[i, 1, 0] * nx + filters[i, 1, 1] * nz
-        stx = filters[i, 0, 0] * tx + filters[i, 0, 1] * tz
-        stz = filters[i, 1, 0] * tx + filters[i, 1, 1] * tz
         p = pos[i]
-        ab[p, 0, 0, 0] += h_n * snx * snx + h_t * stx * stx
-        ab[p, 0, 0, 1] += h_n * snx * snz + h_t * stx * stz
-        ab[p, 0, 1, 0] += h_n * snz * snx + h_t * stz * stx
-        ab[p, 0, 1, 1] += h_n * snz * snz + h_t * stz * stz
+        for r in range(2):
+            for c in range(2):
+                acc = 0.0
+                for m in range(2):
+                    for l in range(2):
+                        acc += filters[i, r, m] * blocks[e, m, l] * filters[i, l, c]
+                ab[p, 0, r, c] += acc
 
 
 @njit(cache=True, error_model='numpy', inline='always')
