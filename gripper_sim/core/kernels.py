@@ -1,8 +1,11 @@
 """Numba array kernels of the fast path for the ring (shell) and point fruit models.
 
 Free functions ``@njit(cache=True)`` on arrays with preallocated outputs; the Python
-glue is ``gripper_sim.core.fast``. Each kernel computes the same thing as a numpy
-reference elsewhere in the core, in the same order of operations where it matters:
+glue is ``gripper_sim.core.fast``. What an element does (an edge, a bending triple, the
+enclosed area, a soft pad point, a measure, the damage rule) is a compiled function of
+its own module, which the generic route calls too; this module assembles them in its
+layout. The rest follows the generic route's Python, in the same order of operations
+where it matters:
 
 - ``ring_stretching``, ``ring_bending``, ``ring_pressure``: the band assembly of the
   energies' element functions (``energies.kernels``: ``edge_spring``, ``hinge``,
@@ -14,7 +17,8 @@ reference elsewhere in the core, in the same order of operations where it matter
   ``measures.outline_measures`` and ``measures.face_contact_length_of`` (as
   ``measures.deformation``); ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
 - ``damage_update``: ``damage.damage_patches`` (the rule ``DamageTracker.update`` calls)
-  on this module's faces.
+  on this module's faces; ``_pad_rows``, ``_pad_forces``, ``_pad_blocks``: the soft pad's
+  ``pad.pad_rows``, ``pad.pad_forces``, ``pad.pad_blocks`` on them.
 
 Layout. Positions are flat, q = [x0, z0, x1, z1, ...] (m). Hessians are kept as a
 symmetric node-block band: ``band[p, d]`` (2, 2) is the block of the node at band
