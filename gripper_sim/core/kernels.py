@@ -85,7 +85,6 @@ SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
 #: and the face origin's offset (x, z) m from the jaw origin
 FP_JAW, FP_OFFSET_X, FP_OFFSET_Z, FP_SIZE = 7, 8, 9, 10
 
-
 # fpar layout of ``substep`` / ``newton_solve``
 F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
 # ipar layout
