@@ -30,10 +30,11 @@ def edge_spring(ex, ez, rest, k):
         (b00, b01 = b10, b11) N/m ((i, i) the same, (i, j) and (j, i) minus it)).
     """
     length = math.sqrt(ex * ex + ez * ez)
+    inverse = 1.0 / length
     stretch = length - rest
-    ux, uz = ex / length, ez / length
+    ux, uz = ex * inverse, ez * inverse
     ks = k * stretch
-    ratio = stretch / length
+    ratio = stretch * inverse
     return (0.5 * ks * stretch, ks * ux, ks * uz, k * (ux * ux + ratio * (1.0 - ux * ux)),
             k * (ux * uz - ratio * ux * uz), k * (uz * uz + ratio * (1.0 - uz * uz)))
 
@@ -100,21 +101,21 @@ def hinge(ax, az, bx, bz, phi0, k):
         each symmetric with h11 = -h00). The Hessian is k J J^T + k dphi d^2 phi / dx^2;
         its 2x2 node blocks are ``hinge_block``.
     """
-    r2a = ax * ax + az * az
-    r2b = bx * bx + bz * bz
-    gax, gaz = az / r2a, -ax / r2a  # d phi / da = -d atan2(a) / da
-    gbx, gbz = -bz / r2b, bx / r2b  # d phi / db
+    ia = 1.0 / (ax * ax + az * az)  # 1 / |a|^2 (one division per edge: a step does many)
+    ib = 1.0 / (bx * bx + bz * bz)
+    gax, gaz = az * ia, -ax * ia  # d phi / da = -d atan2(a) / da
+    gbx, gbz = -bz * ib, bx * ib  # d phi / db
     dphi = math.atan2(ax * bz - az * bx, ax * bx + az * bz) - phi0
     y = dphi + math.pi  # dphi into [-pi, pi)
     if 0.0 <= y < 2 * math.pi:
         dphi = y - math.pi
     else:
         dphi = y % (2 * math.pi) - math.pi
-    r4a = r2a * r2a
-    r4b = r2b * r2b
+    ia2 = ia * ia
+    ib2 = ib * ib
     return (0.5 * k * dphi * dphi, k * dphi, -gax, -gaz, gax - gbx, gaz - gbz, gbx, gbz,
-            -(2.0 * ax * az / r4a), -((az * az - ax * ax) / r4a),
-            2.0 * bx * bz / r4b, (bz * bz - bx * bx) / r4b)
+            -2.0 * ax * az * ia2, (ax * ax - az * az) * ia2,
+            2.0 * bx * bz * ib2, (bz * bz - bx * bx) * ib2)
 
 
 @njit(cache=True, inline='always')
