@@ -375,8 +375,11 @@ def capped_rebound_scale(v, rebound, v_start, dx, reaction, mass, dt):
         return 1.0
     discriminant = br * br - rr * (bb - budget)
     if discriminant < 0.0:
-        return 0.0
-    return min(max((-br + math.sqrt(discriminant)) / rr, 0.0), 1.0)
+        return 0.0  # no scale fits
+    root = math.sqrt(discriminant)
+    if (-br - root) / rr > 1.0:
+        return 0.0  # only scales beyond the full rebound would fit
+    return min(max((-br + root) / rr, 0.0), 1.0)
 
 
 @njit(cache=True, error_model='numpy')
