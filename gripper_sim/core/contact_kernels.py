@@ -112,7 +112,7 @@ def release(state, i):
     secondary_bounce[i] = 0.0
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def constraints(state, faces, x_n, x_pred, dt, v_corr, start, filters, fr_nodes, fr_t,
                 fr_bound, fr_speed):
     """The start positions of a solve with the held nodes at their targets, the step
@@ -220,7 +220,7 @@ def _rebound_speed(faces, f, x_n, v_n, x, i, dt, v_min):
     return e * approach if approach > v_min else 0.0
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def update(state, faces, x, x_n, v_n, reaction, surface, dt, threshold, v_min,
            deepest_first, released, slipped):
     """Correct the contact set after a solve: pulling nodes are released (not IMPACT
@@ -382,7 +382,7 @@ def capped_rebound_scale(v, rebound, v_start, dx, reaction, mass, dt):
     return min(max((-br + root) / rr, 0.0), 1.0)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def finish(state, faces, x, x_n, v_n, reaction, masses, dt, v_out, forces_out):
     """The end of a step after its last pass: velocities and contact forces, then the
     one-step holds let go (IMPACT nodes, rebounding corner holds).
