@@ -3,14 +3,17 @@
 A 2D set-up embedded in 3D (the y axis added as a second tangent of every face) gives
 the same targets, filters and contact-set changes; a corner's filter is a symmetric
 projector that keeps the node on both faces; the Coulomb cone is round in 3D; the
-deepest-first rule; restitution that never adds energy.
+deepest-first rule; restitution that never adds energy; a node in an oblique corner
+stays in the 2D whole-step kernel.
 """
 import numpy as np
 import pytest
 
+from gripper_sim.configuration import load_config
 from gripper_sim.core import contact as cm
 from gripper_sim.core import contact_kernels as ck
 from gripper_sim.core.obstacles import FlatFace
+from gripper_sim.core.simulation import Simulation
 from gripper_sim.core3d.obstacles import Plate
 
 _Y = np.array([0.0, 1.0, 0.0])
@@ -225,3 +228,26 @@ def test_a_capped_rebound_never_adds_energy(dim):
     normal = np.eye(dim)[0]
     assert ck.capped_rebound_scale(-normal, normal, 0.5 * normal, np.zeros(dim),
                                    np.zeros(dim), 1.0, 0.01) == 0.0
+
+
+def test_a_node_in_an_oblique_corner_stays_in_the_whole_step_kernel():
+    """A point sliding on a frictionless table into the lower flank of a V-groove jaw
+    (85 degrees to the table) is held by both: the 2D kernel steps it (no step left to
+    the shared route) on the same trajectory as the shared route."""
+    config = load_config(overrides=[
+        'fruit.model=point', 'gripper.finger.type=vgroove', 'gripper.finger.groove_angle=170',
+        'gripper.initial_lift=0.002', 'gripper.initial_gap=0.012',
+        'fruit.initial_velocity.x=0.1', 'contact.table.static_friction=0',
+        'contact.table.kinetic_friction=0'])
+    kernel, shared = Simulation(config, fast=True), Simulation(config, fast=False)
+    in_corner = 0
+    for _ in range(300):
+        a, b = kernel.step(), shared.step()
+        np.testing.assert_allclose(a.positions, b.positions, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(kernel.contacts.secondary, shared.contacts.secondary)
+        in_corner += int(kernel.contacts.secondary[0] >= 0)
+    assert in_corner > 200
+    assert kernel._fast.fallbacks == 0
+    assert kernel.contacts.obstacle[0] == 4  # held by the table, the right jaw's flank
+    assert kernel.contacts.secondary[0] == 2  # its second face
+    assert a.positions[0, 1] == pytest.approx(0.0, abs=1e-9)  # on the table
