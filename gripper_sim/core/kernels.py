@@ -44,9 +44,6 @@ from numba import njit
 from gripper_sim.core import contact_kernels, sparse_ldl
 from gripper_sim.core.energies.kernels import bending, neohookean_triangles, stretching
 
-#: contact modes, as in contact.py
-FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
-
 #: substep / newton_solve status codes
 OK = 0
 INFEASIBLE_START = 1
