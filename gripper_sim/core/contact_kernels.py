@@ -8,7 +8,8 @@ and the 2D whole-step kernel ``kernels.substep`` (around its compiled Newton sol
 Per pass: ``constraints`` (z targets, S filters, the sliding nodes' kinetic friction),
 the solve, ``update`` (release, stick/slip, corners, newly caught nodes); after the last
 pass ``finish`` (end velocities with restitution capped so it adds no energy, the
-contact forces, the one-step holds let go).
+contact forces, the one-step holds let go). These three are inlined into a compiled
+caller (the 2D kernel), so no arrays are handed over between them there.
 
 Faces are a tuple ``faces`` of arrays, F flat faces translating during the step:
     normal (F, d): unit normals towards the fruit side;
