@@ -8,8 +8,9 @@ and the 2D whole-step kernel ``kernels.substep`` (around its compiled Newton sol
 Per pass: ``constraints`` (z targets, S filters, the sliding nodes' kinetic friction),
 the solve, ``update`` (release, stick/slip, corners, newly caught nodes); after the last
 pass ``finish`` (end velocities with restitution capped so it adds no energy, the
-contact forces, the one-step holds let go). These three are inlined into a compiled
-caller (the 2D kernel), so no arrays are handed over between them there.
+contact forces, the one-step holds let go). Every function here is inlined into its
+compiled callers (the 2D kernel, and each other), so that no arrays are handed over
+(and reference-counted) node by node.
 
 Faces are a tuple ``faces`` of arrays, F flat faces translating during the step:
     normal (F, d): unit normals towards the fruit side;
@@ -67,7 +68,7 @@ def face_arrays(old_faces: list, new_faces: list, dim: int) -> tuple:
     return normal, tangents, half_extents, props, origin_start, origin_end, velocity
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _gap(origin, normal, f, x, i):
     """Signed distance (m) of point i of x (n, d) from the plane of face f through
     ``origin[f]``; < 0 inside."""
@@ -77,7 +78,7 @@ def _gap(origin, normal, f, x, i):
     return gap
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _along(vector, tangents, f, a):
     """Component of ``vector`` (d,) along tangent a of face f."""
     total = 0.0
@@ -86,7 +87,7 @@ def _along(vector, tangents, f, a):
     return total
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _covers(faces, f, x, i):
     """Whether point i of x (n, d) is within face f's extent at the end of the step and
     not beyond its back."""
@@ -101,7 +102,7 @@ def _covers(faces, f, x, i):
     return _gap(origin, normal, f, x, i) > -props[f, THICKNESS]
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def release(state, i):
     """Node i is free (no face, no corner, no rebound)."""
     obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce = state
@@ -143,7 +144,6 @@ def constraints(state, faces, x_n, x_pred, dt, v_corr, start, filters, fr_nodes,
             start[i, a] = x_pred[i, a]
             for b in range(d):
                 filters[i, a, b] = 1.0 if a == b else 0.0
-    along = np.empty(d - 1)
     n_fr = 0
     for f in range(normal.shape[0]):
         for i in range(n):
@@ -155,13 +155,12 @@ def constraints(state, faces, x_n, x_pred, dt, v_corr, start, filters, fr_nodes,
             for c in range(d):
                 start[i, c] += correction * normal[f, c]
             if mode[i] == STICK:
-                for a in range(d - 1):
-                    along[a] = (_along(x_n[i], tangents, f, a)
-                                + dt * _along(velocity[f], tangents, f, a)
-                                - _along(start[i], tangents, f, a))
-                for a in range(d - 1):
+                for a in range(d - 1):  # the tangents are orthonormal: one at a time
+                    along = (_along(x_n[i], tangents, f, a)
+                             + dt * _along(velocity[f], tangents, f, a)
+                             - _along(start[i], tangents, f, a))
                     for c in range(d):
-                        start[i, c] += along[a] * tangents[f, a, c]
+                        start[i, c] += along * tangents[f, a, c]
                 for a in range(d):
                     for b in range(d):
                         filters[i, a, b] = 0.0
@@ -177,11 +176,11 @@ def constraints(state, faces, x_n, x_pred, dt, v_corr, start, filters, fr_nodes,
                     fr_speed[n_fr, a] = _along(velocity[f], tangents, f, a)
                 fr_bound[n_fr] = props[f, KINETIC_FRICTION] * max(normal_force[i], 0.0)
                 n_fr += 1
-    u = np.empty(d)
     for i in range(n):
         f = secondary[i]
         if f < 0:
             continue
+        u = np.empty(d)  # S n, the move that keeps the first face's gap
         uu = 0.0
         for a in range(d):
             u[a] = 0.0
@@ -199,7 +198,7 @@ def constraints(state, faces, x_n, x_pred, dt, v_corr, start, filters, fr_nodes,
     return n_fr
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _rebound_speed(faces, f, x_n, v_n, x, i, dt, v_min):
     """Outgoing normal speed (m/s) relative to face f of node i found inside it (0: no
     rebound): the node rebounds if it met the face faster than ``v_min`` and the face has
@@ -301,56 +300,52 @@ def update(state, faces, x, x_n, v_n, reaction, surface, dt, threshold, v_min,
             secondary[i] = -1
             secondary_bounce[i] = 0.0
             changed = True
-    # corners: held nodes pushed into a second face
-    held = np.empty(n, np.bool_)
-    for i in range(n):
-        held[i] = obstacle[i] >= 0 and secondary[i] < 0
+    # corners: held nodes pushed into a second face (one at most: a node given one here
+    # is not looked at again)
     for f in range(n_faces):
         for i in range(n):
-            if not held[i] or obstacle[i] == f:
+            if obstacle[i] < 0 or secondary[i] >= 0 or obstacle[i] == f:
                 continue
-            if _covers(faces, f, x, i) and _gap(origin_end, normal, f, x, i) < 0:
+            if _gap(origin_end, normal, f, x, i) < 0 and _covers(faces, f, x, i):
                 secondary[i] = f
                 if mode[i] == STICK:
                     mode[i] = SLIP
                 secondary_bounce[i] = _rebound_speed(faces, f, x_n, v_n, x, i, dt, v_min)
-                held[i] = False
                 changed = True
-    # free surface nodes inside a face: each to its deepest face
-    m = surface.shape[0]
-    chosen = np.full(m, -1, np.int64)
-    depth = np.zeros(m)
-    deepest = np.zeros(n_faces)
-    caught = False
-    for s in range(m):
-        i = surface[s]
-        if obstacle[i] >= 0 or released[i]:
-            continue
-        for f in range(n_faces):
-            gap = _gap(origin_end, normal, f, x, i)
-            if gap < 0 and -gap > depth[s] and _covers(faces, f, x, i):
-                depth[s] = -gap
-                chosen[s] = f
-        if chosen[s] >= 0:
-            caught = True
-            deepest[chosen[s]] = max(deepest[chosen[s]], depth[s])
-    if not caught:
-        return changed
-    for s in range(m):
-        f = chosen[s]
-        if f < 0 or depth[s] < deepest_first * deepest[f]:
-            continue  # the deepest first: shallower nodes often come free once they hold
-        i = surface[s]
-        obstacle[i] = f
-        mode[i] = STICK if props[f, STATIC_FRICTION] > 0 else SLIP
-        normal_force[i] = 0.0
-        bounce_speed[i] = _rebound_speed(faces, f, x_n, v_n, x, i, dt, v_min)
-        if bounce_speed[i] > 0:
-            mode[i] = IMPACT
-    return True
+    # free surface nodes inside a face, each to its deepest face; with deepest_first a
+    # first sweep finds each face's deepest node, the second catches
+    deepest = np.zeros(n_faces)  # m
+    sweeps = 2 if deepest_first > 0 else 1
+    for sweep in range(sweeps):
+        for s in range(surface.shape[0]):
+            i = surface[s]
+            if obstacle[i] >= 0 or released[i]:
+                continue
+            chosen = np.int64(-1)
+            depth = 0.0
+            for f in range(n_faces):
+                gap = _gap(origin_end, normal, f, x, i)
+                if gap < 0 and -gap > depth and _covers(faces, f, x, i):
+                    depth = -gap
+                    chosen = f
+            if chosen < 0:
+                continue
+            if sweep < sweeps - 1:
+                deepest[chosen] = max(deepest[chosen], depth)
+                continue
+            if depth < deepest_first * deepest[chosen]:
+                continue  # shallower nodes often come free once the deepest hold
+            obstacle[i] = chosen
+            mode[i] = STICK if props[chosen, STATIC_FRICTION] > 0 else SLIP
+            normal_force[i] = 0.0
+            bounce_speed[i] = _rebound_speed(faces, chosen, x_n, v_n, x, i, dt, v_min)
+            if bounce_speed[i] > 0:
+                mode[i] = IMPACT
+            changed = True
+    return changed
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def capped_rebound_scale(v, rebound, v_start, dx, reaction, mass, dt):
     """The factor s in [0, 1] by which one node's rebound (d,) m/s is scaled so that it
     adds no energy: |v - (1 - s) rebound|^2 <= |v_start|^2 + 2 F . dx / m, with F =
