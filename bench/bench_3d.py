@@ -55,8 +55,6 @@ MODELS = {
 
 #: (function name in the profile, part) for the time breakdown
 PARTS = [
-    ('_constraints', 'contact: constraints'),
-    ('_update_contacts', 'contact: update (stick/slip/release/detect)'),
     ('_measure', 'measures (wrenches, areas, damage)'),
 ]
 _FACTOR = '<built-in method scipy.sparse.linalg._dsolve._superlu.gstrf>'
@@ -101,6 +99,8 @@ def breakdown(profiler, total: float) -> list[tuple[str, float]]:
             ('triangular solves (CG preconditioner, direct)', trisolve),
             ('Newton rest (filter S H S, CG, friction, search)',
              newton - energies - factor - trisolve)]
+    rows.append(('contact passes (constraints, updates, end velocities)',
+                 cum.get('contact_step', 0.0) - newton))
     for name, label in PARTS:
         rows.append((label, cum.get(name, 0.0)))
     rows.append(('total CPU (profiled)', total))

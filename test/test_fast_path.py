@@ -240,8 +240,9 @@ def test_shaped_fingers_and_pads_match_the_reference_path(finger):
 
 
 def test_steps_the_kernel_cannot_do_take_the_generic_path_with_pads(monkeypatch):
-    """A step the kernel reports it cannot factorise (kernels.UNSUPPORTED: a node held by
-    two oblique faces) is done by the generic path, the pads set up and recorded for it:
+    """A step the kernel reports it cannot factorise (kernels.UNSUPPORTED: a filter that
+    is not symmetric, which the contact passes no longer give, so the test makes every
+    step report it) is done by the generic path, the pads set up and recorded for it:
     the same trajectory as a simulation on the generic path alone (the same solver), and
     the steps are counted."""
     overrides = ['fruit.nodes=32', 'gripper.finger.pad.enabled=true',

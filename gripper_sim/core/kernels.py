@@ -11,8 +11,8 @@ where it matters:
   energies' element functions (``energies.kernels``: ``edge_spring``, ``hinge``,
   ``area_pressure``), which their classes' CSC kernels call too;
 - ``newton_solve``: ``ImplicitEulerSolver.solve`` (stepper.py);
-- ``contact_constraints``, ``update_contacts``, ``substep``: ``Simulation._constraints``,
-  ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
+- ``substep``: ``contact_passes.contact_step`` (the contact passes themselves are
+  ``contact_kernels``, shared with it);
 - ``step_measures``: the numbers ``Simulation._measure`` reports, the outline's by
   ``measures.outline_measures`` and ``measures.face_contact_length_of`` (as
   ``measures.deformation``); ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
@@ -48,7 +48,7 @@ import math
 import numpy as np
 from numba import njit
 
-from gripper_sim.core import sparse_ldl
+from gripper_sim.core import contact_kernels, sparse_ldl
 from gripper_sim.core.damage import P_SIZE  # noqa: F401 (the patch table's width, for fast.py)
 from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_SIZE,
                                      damage_patches)
@@ -59,9 +59,6 @@ from gripper_sim.core.measures import face_contact_length_of, outline_measures
 from gripper_sim.core.pad import (PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X, PF_NEW_Z, PF_NX,
                                   PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE, PF_SPEED,
                                   pad_blocks, pad_forces, pad_rows, pad_terms)
-
-#: contact modes, as in contact.py
-FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
 
 #: substep / newton_solve status codes
 OK = 0
@@ -961,238 +958,29 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
 
 # ---------------------------------------------------------------------- contact
 @njit(cache=True, error_model='numpy')
-def _gap(face_par, origin_x, origin_z, f, px, pz):
-    return (px - origin_x) * face_par[f, 0] + (pz - origin_z) * face_par[f, 1]
-
-
-@njit(cache=True, error_model='numpy')
-def _covers(face_par, origin_x, origin_z, f, px, pz):
-    nx, nz = face_par[f, 0], face_par[f, 1]
-    tx, tz = -nz, nx
-    along = abs((px - origin_x) * tx + (pz - origin_z) * tz)
-    return along <= face_par[f, 2] and (px - origin_x) * nx + (pz - origin_z) * nz > -face_par[
-        f, 3]
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred, face_par,
-                        face_dyn, dt, v_corr, start, filters, fr_nodes, fr_t, fr_bound,
-                        fr_speed):
-    """Start positions and step filters, as ``contact_passes._constraints``.
-
-    Args:
-        obstacle, mode, normal_force, secondary: (n,) the contact state.
-        x_n, x_pred: (n, 2) m, positions at the start of the step and predicted.
-        Outputs: start (n, 2), filters (n, 2, 2), fr_nodes (n,), fr_t (n, 2),
-        fr_bound (n,), fr_speed (n,).
-
-    Returns:
-        the number of friction entries.
-    """
-    n = x_n.shape[0]
-    n_fr = 0
-    for i in range(n):
-        start[i, 0] = x_pred[i, 0]
-        start[i, 1] = x_pred[i, 1]
-        filters[i, 0, 0] = 1.0
-        filters[i, 0, 1] = 0.0
-        filters[i, 1, 0] = 0.0
-        filters[i, 1, 1] = 1.0
-    for f in range(face_par.shape[0]):
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        tx, tz = -nz, nx
-        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        for i in range(n):
-            if obstacle[i] != f:
-                continue
-            md = mode[i]
-            penetration = max(0.0, -_gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f,
-                                         x_n[i, 0], x_n[i, 1]))
-            target = -max(0.0, penetration - v_corr * dt)
-            corr = target - _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, start[i, 0],
-                                 start[i, 1])
-            start[i, 0] += corr * nx
-            start[i, 1] += corr * nz
-            if md == STICK:
-                along = (x_n[i, 0] * tx + x_n[i, 1] * tz) + dt * (vx * tx + vz * tz)
-                corr = along - (start[i, 0] * tx + start[i, 1] * tz)
-                start[i, 0] += corr * tx
-                start[i, 1] += corr * tz
-                filters[i, 0, 0] = 0.0
-                filters[i, 0, 1] = 0.0
-                filters[i, 1, 0] = 0.0
-                filters[i, 1, 1] = 0.0
-            else:
-                filters[i, 0, 0] = 1.0 - nx * nx
-                filters[i, 0, 1] = 0.0 - nx * nz
-                filters[i, 1, 0] = 0.0 - nz * nx
-                filters[i, 1, 1] = 1.0 - nz * nz
-            if md == SLIP and face_par[f, 5] > 0:
-                fr_nodes[n_fr] = i
-                fr_t[n_fr, 0] = tx
-                fr_t[n_fr, 1] = tz
-                fr_bound[n_fr] = face_par[f, 5] * max(normal_force[i], 0.0)
-                fr_speed[n_fr] = vx * tx + vz * tz
-                n_fr += 1
-    for i in range(n):
-        f = secondary[i]
-        if f < 0:
-            continue
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        corr = 0.0 - _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, start[i, 0],
-                          start[i, 1])
-        start[i, 0] += corr * nx
-        start[i, 1] += corr * nz
-        s00, s01, s10, s11 = filters[i, 0, 0], filters[i, 0, 1], filters[i, 1, 0], filters[
-            i, 1, 1]
-        filters[i, 0, 0] = s00 - (nx * nx * s00 + nx * nz * s10)
-        filters[i, 0, 1] = s01 - (nx * nx * s01 + nx * nz * s11)
-        filters[i, 1, 0] = s10 - (nz * nx * s00 + nz * nz * s10)
-        filters[i, 1, 1] = s11 - (nz * nx * s01 + nz * nz * s11)
-    return n_fr
-
-
-@njit(cache=True, error_model='numpy')
-def _release(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce, i):
-    obstacle[i] = -1
-    mode[i] = FREE
-    normal_force[i] = 0.0
-    bounce_speed[i] = 0.0
-    secondary[i] = -1
-    secondary_bounce[i] = 0.0
-
-
-@njit(cache=True, error_model='numpy')
-def _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i, dt, v_min):
-    """Outgoing normal speed (m/s) of node i found inside face f, as
-    ``contact_passes._rebound_speeds`` (0: no rebound)."""
-    e = face_par[f, 6]
-    if e <= 0:
-        return 0.0
-    nx, nz = face_par[f, 0], face_par[f, 1]
-    vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-    gap_start = _gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f, x_n[i, 0], x_n[i, 1])
-    gap_end = _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, x[i, 0], x[i, 1])
-    tau = min(max(gap_start / (gap_start - gap_end), 0.0), 1.0) if gap_start > 0 else 0.0
-    v_start = (v_n[i, 0] - vx) * nx + (v_n[i, 1] - vz) * nz
-    v_end = (((x[i, 0] - x_n[i, 0]) / dt - vx) * nx
-             + ((x[i, 1] - x_n[i, 1]) / dt - vz) * nz)
-    approach = -(v_start + tau * (v_end - v_start))
-    return e * approach if approach > v_min else 0.0
-
-
-@njit(cache=True, error_model='numpy')
-def _capped_rebound(v, rebound, v_start, dx, reaction, mass, dt):
-    """The scale s in [0, 1] of one node's rebound (2,) m/s, as
-    ``contact_passes.capped_rebound``; v (2,) its end velocity with the full rebound."""
-    work = 0.0
-    for c in range(2):
-        work += (mass * (dx[c] / dt - v_start[c]) / dt - reaction[c]) * dx[c]
-    budget = (v_start[0] * v_start[0] + v_start[1] * v_start[1]) + 2.0 * work / mass
-    b0, b1 = v[0] - rebound[0], v[1] - rebound[1]
-    bb = b0 * b0 + b1 * b1
-    br = b0 * rebound[0] + b1 * rebound[1]
-    rr = rebound[0] * rebound[0] + rebound[1] * rebound[1]
-    if rr == 0.0 or bb + 2.0 * br + rr <= budget:
-        return 1.0
-    discriminant = br * br - rr * (bb - budget)
-    if discriminant < 0.0:
-        return 0.0
-    return min(max((-br + math.sqrt(discriminant)) / rr, 0.0), 1.0)
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
-                    x, x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
-                    released, slipped):
-    """Correct the contact set after a solve, as ``contact_passes._update_contacts``
-    (with ``_add_corners`` and ``_add_penetrating``). Returns True if it changed.
-    """
-    n = x.shape[0]
+def contact_faces(face_par, face_dyn):
+    """The faces of the step as the contact passes take them (the ``faces`` tuple of
+    ``contact_kernels``) from the rows of ``face_par`` and ``face_dyn`` (module doc)."""
     n_faces = face_par.shape[0]
-    changed = False
+    normal = np.empty((n_faces, 2))
+    tangents = np.empty((n_faces, 1, 2))
+    half_extents = np.empty((n_faces, 1))
+    props = np.empty((n_faces, 4))
+    origin_start = np.empty((n_faces, 2))
+    origin_end = np.empty((n_faces, 2))
+    velocity = np.empty((n_faces, 2))
     for f in range(n_faces):
         nx, nz = face_par[f, 0], face_par[f, 1]
-        tx, tz = -nz, nx
-        mu_s, mu_k = face_par[f, 4], face_par[f, 5]
-        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        for i in range(n):
-            if obstacle[i] != f:
-                continue
-            r_n = reaction[i, 0] * nx + reaction[i, 1] * nz
-            r_t = reaction[i, 0] * tx + reaction[i, 1] * tz
-            md = mode[i]
-            if r_n < -threshold and md != IMPACT:
-                _release(obstacle, mode, normal_force, bounce_speed, secondary,
-                         secondary_bounce, i)
-                released[i] = True
-                changed = True
-                continue
-            if md == STICK and abs(r_t) > mu_s * r_n:
-                mode[i] = SLIP
-                slipped[i] = True
-                changed = True
-            if md == SLIP:
-                rel = (((x[i, 0] - x_n[i, 0]) / dt - vx) * tx
-                       + ((x[i, 1] - x_n[i, 1]) / dt - vz) * tz)
-                to_stick = abs(rel) < 2 * FRICTION_SMOOTHING and not slipped[i] and mu_s > 0
-                if to_stick:
-                    mode[i] = STICK
-                    changed = True
-                lag = normal_force[i]
-                if not to_stick and abs(r_n - lag) > 0.02 * abs(lag) + 1e-9 and mu_k > 0:
-                    changed = True
-            normal_force[i] = r_n
-    for i in range(n):
-        f = secondary[i]
-        if f < 0 or secondary_bounce[i] > 0:
-            continue
-        if reaction[i, 0] * face_par[f, 0] + reaction[i, 1] * face_par[f, 1] < -threshold:
-            secondary[i] = -1
-            changed = True
-    # corners: held nodes pushed into a second face
-    held = np.zeros(n, np.bool_)
-    for i in range(n):
-        held[i] = obstacle[i] >= 0 and secondary[i] < 0
-    for f in range(n_faces):
-        ox, oz = face_dyn[f, 2], face_dyn[f, 3]
-        for i in range(n):
-            if not held[i] or obstacle[i] == f:
-                continue
-            if _covers(face_par, ox, oz, f, x[i, 0], x[i, 1]) and _gap(
-                    face_par, ox, oz, f, x[i, 0], x[i, 1]) < 0:
-                secondary[i] = f
-                secondary_bounce[i] = _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i,
-                                                     dt, v_min)
-                if mode[i] == STICK:
-                    mode[i] = SLIP
-                held[i] = False
-                changed = True
-    # penetrating free surface nodes
-    hit_any = False
-    for s in range(surface.shape[0]):
-        i = surface[s]
-        if obstacle[i] >= 0 or released[i]:
-            continue
-        depth = 0.0
-        chosen = np.int64(-1)  # not a literal: one compiled _gap
-        for f in range(n_faces):
-            ox, oz = face_dyn[f, 2], face_dyn[f, 3]
-            gap = _gap(face_par, ox, oz, f, x[i, 0], x[i, 1])
-            if _covers(face_par, ox, oz, f, x[i, 0], x[i, 1]) and gap < 0 and -gap > depth:
-                depth = -gap
-                chosen = f
-        if chosen < 0:
-            continue
-        hit_any = True
-        f = chosen
-        obstacle[i] = f
-        mode[i] = STICK if face_par[f, 4] > 0 else SLIP
-        normal_force[i] = 0.0
-        bounce_speed[i] = _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i, dt, v_min)
-        if bounce_speed[i] > 0:
-            mode[i] = IMPACT
-    return changed or hit_any
+        normal[f, 0], normal[f, 1] = nx, nz
+        tangents[f, 0, 0], tangents[f, 0, 1] = -nz, nx
+        half_extents[f, 0] = face_par[f, 2]
+        for c in range(4):  # thickness, static and kinetic friction, restitution
+            props[f, c] = face_par[f, 3 + c]
+        for c in range(2):
+            origin_start[f, c] = face_dyn[f, c]
+            origin_end[f, c] = face_dyn[f, 2 + c]
+            velocity[f, c] = face_dyn[f, 4 + c]
+    return normal, tangents, half_extents, props, origin_start, origin_end, velocity
 
 
 @njit(cache=True, error_model='numpy')
@@ -1273,12 +1061,16 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     v_flat = v_n.reshape(2 * n)
     released = np.zeros(n, np.bool_)
     slipped = np.zeros(n, np.bool_)
+    faces = contact_faces(face_par, face_dyn)
+    state = (obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce)
     start = np.empty((n, 2))
     filters = np.empty((n, 2, 2))
     fr_nodes = np.empty(n, np.int64)
-    fr_t = np.empty((n, 2))
+    fr_tangents = np.empty((n, 1, 2))
+    fr_t = fr_tangents.reshape((n, 2))  # one tangent per row in 2D
     fr_bound = np.empty(n)
-    fr_speed = np.empty(n)
+    fr_speeds = np.empty((n, 1))
+    fr_speed = fr_speeds.reshape(n)
     q = np.empty(2 * n)
     reaction = np.empty(2 * n)
     values = np.zeros(4)
@@ -1286,9 +1078,9 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     iterations = 0
     n_hist = 0
     for _ in range(ipar[I_MAX_PASSES]):
-        n_fr = contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred,
-                                   face_par, face_dyn, dt, fpar[F_VCORR], start, filters,
-                                   fr_nodes, fr_t, fr_bound, fr_speed)
+        n_fr = contact_kernels.constraints(state, faces, x_n, x_pred, dt, fpar[F_VCORR],
+                                           start, filters, fr_nodes, fr_tangents, fr_bound,
+                                           fr_speeds)
         status, its, n_hist = newton_solve(
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
@@ -1300,64 +1092,13 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         iterations += its
         x = q.reshape((n, 2))
         r = reaction.reshape((n, 2))
-        if not update_contacts(obstacle, mode, normal_force, bounce_speed, secondary,
-                               secondary_bounce, x, x_n, v_n, r, face_par, face_dyn, surface,
-                               dt, fpar[F_RELEASE], v_min, released, slipped):
+        if not contact_kernels.update(state, faces, x, x_n, v_n, r, surface, dt,
+                                      fpar[F_RELEASE], v_min, 0.0, released, slipped):
             break
     x = q.reshape((n, 2))
     r = reaction.reshape((n, 2))
-    for i in range(n):
-        x_out[i, 0] = x[i, 0]
-        x_out[i, 1] = x[i, 1]
-        v_out[i, 0] = (x[i, 0] - x_n[i, 0]) / dt
-        v_out[i, 1] = (x[i, 1] - x_n[i, 1]) / dt
-        forces_out[i, 0] = 0.0
-        forces_out[i, 1] = 0.0
-    for f in range(face_par.shape[0]):
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        tx, tz = -nz, nx
-        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        for i in range(n):
-            if obstacle[i] != f:
-                continue
-            v_t = v_out[i, 0] * tx + v_out[i, 1] * tz
-            if mode[i] == STICK:
-                v_t = vx * tx + vz * tz
-            v_nn = (vx * nx + vz * nz) + bounce_speed[i]
-            v_out[i, 0] = v_nn * nx + v_t * tx
-            v_out[i, 1] = v_nn * nz + v_t * tz
-            forces_out[i, 0] = r[i, 0]
-            forces_out[i, 1] = r[i, 1]
-    rebound = np.zeros(2)
-    for i in range(n):
-        f = secondary[i]
-        if f < 0:
-            continue
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        dv = (vx * nx + vz * nz) + secondary_bounce[i] - (v_out[i, 0] * nx + v_out[i, 1] * nz)
-        v_out[i, 0] += dv * nx
-        v_out[i, 1] += dv * nz
-    for i in range(n):  # restitution never adds energy (contact_passes.capped_rebound)
-        f = obstacle[i]
-        if f < 0 or (bounce_speed[i] == 0.0 and secondary_bounce[i] == 0.0):
-            continue
-        rebound[0] = bounce_speed[i] * face_par[f, 0]
-        rebound[1] = bounce_speed[i] * face_par[f, 1]
-        if secondary[i] >= 0:
-            rebound[0] += secondary_bounce[i] * face_par[secondary[i], 0]
-            rebound[1] += secondary_bounce[i] * face_par[secondary[i], 1]
-        scale = _capped_rebound(v_out[i], rebound, v_n[i], x[i] - x_n[i], r[i],
-                                masses[i], dt)
-        v_out[i, 0] -= (1.0 - scale) * rebound[0]
-        v_out[i, 1] -= (1.0 - scale) * rebound[1]
-    for i in range(n):
-        if mode[i] == IMPACT:
-            _release(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
-                     i)
-        elif secondary_bounce[i] > 0:
-            secondary[i] = -1
-            secondary_bounce[i] = 0.0
+    x_out[:] = x
+    contact_kernels.finish(state, faces, x, x_n, v_n, r, masses, dt, v_out, forces_out)
     out[2] = out[3] = 0.0
     for i in range(n):  # each jaw's force along its closing axis, summed over its faces
         f = obstacle[i]
