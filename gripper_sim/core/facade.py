@@ -741,7 +741,7 @@ def _next_gap(tried: list, stiffness: float, goal: float, lo: float, hi: float,
         return lo
     if guess >= high_gap and not under:
         return hi
-    if low[2] and high[2]:
+    if low is not None and high is not None and low[2] and high[2]:
         h_low, h_high = _contact_measure(goal + low[1]), _contact_measure(goal + high[1])
         fraction = (h_low - target) / (h_low - h_high)
         if 0.05 < fraction < 0.95:
