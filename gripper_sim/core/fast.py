@@ -234,6 +234,8 @@ class FastPath:
         self.timers = {'glue': 0.0, 'kernel': 0.0, 'measures': 0.0}
         self._measured = None
         self.timing = False
+        #: the substep kernel's scratch space, allocated once (``kernels.substep_scratch``)
+        self._scratch = kernels.substep_scratch(model['pos'], model['nbw'], model['flesh'])
 
     @classmethod
     def create(cls, sim: 'Simulation') -> 'FastPath | None':
@@ -359,10 +361,9 @@ class FastPath:
                                  grip_new.x, grip_new.gap_rate, grip_new.lift_rate,
                                  grip_new.x_rate),
             self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
-            model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, flesh,
-            gravity_grad,
+            model['pos'], edges, spar, triples, bpar, ring, press, flesh, gravity_grad,
             fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
-            self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out)
+            self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out, *self._scratch)
         if timing:
             t2 = time.perf_counter()
         out = self.out

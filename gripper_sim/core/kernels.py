@@ -923,10 +923,46 @@ def _newton_inverse(ab, l_values, d_inv, flesh, x, y, two):
 
 
 @njit(cache=True, error_model='numpy')
+def newton_scratch(n, nbw, flesh):
+    """The scratch space of ``_newton_solve`` for n nodes, allocated once and reused by
+    every solve: (order (n,) int64 - the node at each band position, to be filled from
+    ``pos`` (``band_order_inverse``) -, the Newton storage (``_newton_storage``), work
+    (NEWTON_WORK * 2n,) float64)."""
+    return (np.empty(n, np.int64), _newton_storage(n, nbw, flesh),
+            np.empty(NEWTON_WORK * 2 * n))
+
+
+@njit(cache=True, error_model='numpy')
+def band_order_inverse(pos, order):
+    """order[pos[i]] = i: the node at each band position."""
+    for i in range(pos.shape[0]):
+        order[pos[i]] = i
+
+
+@njit(cache=True, error_model='numpy')
 def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
                  masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press, flesh,
                  gravity_grad, pos, nbw, q_out, reaction_out, history, values, counts,
                  pad_nodes, pad_par):
+    """``_newton_solve`` with scratch space of its own (see there for the arguments)."""
+    order, storage, work = newton_scratch(pos.shape[0], nbw, flesh)
+    band_order_inverse(pos, order)
+    return _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
+                         masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring,
+                         press, flesh, gravity_grad, pos, q_out, reaction_out, history, values,
+                         counts, pad_nodes, pad_par, order, storage, work)
+
+
+#: float vectors of 2n in ``_newton_solve``'s work array: grads (4 of them), grad, grad_t,
+#: fric_grad, area_grad, tmp, cdq, g_f, dq, x, y, u, trial
+NEWTON_WORK = 16
+
+
+@njit(cache=True, error_model='numpy')
+def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
+                  masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press,
+                  flesh, gravity_grad, pos, q_out, reaction_out, history, values, counts,
+                  pad_nodes, pad_par, order, storage, work):
     """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
 
     The same iterates as the reference: the evaluations the reference repeats at a point
@@ -944,12 +980,14 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         edges, spar, triples, bpar, ring, press: the energies (see ring_*); flesh: the
             neo-Hookean triangles (see ``_energies``).
         gravity_grad: (2n,) N, the constant gradient of gravity.
-        pos: (n,) band positions; nbw: node half-bandwidth.
+        pos: (n,) band positions.
         q_out, reaction_out: (2n,) outputs. history: (max_it,) output, m/s.
         values: (4,) output, J: stretching, bending, pressure and gravity at q_out.
         counts: (C_SIZE,) int64, work counters added to (see C_*).
         pad_nodes: (m,) int64 nodes, pad_par: (m, PAD_SIZE) the soft pads' rows (m = 0:
             no pads).
+        order, storage, work: scratch space (``newton_scratch``; order filled from pos);
+            reused from solve to solve, no allocation here.
 
     Returns:
         (status, iterations, len(history)); status OK or a failure code.
@@ -959,26 +997,24 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     n_fr = fr_nodes.shape[0]
     # a flag as a variable, not a literal: one compiled _evaluate for all call sites
     yes = np.bool_(True)
-    order = np.empty(n, np.int64)
-    for i in range(n):
-        order[pos[i]] = i
     for i in range(n):
         if filters[i, 0, 1] != filters[i, 1, 0]:
             return UNSUPPORTED, 0, 0
-    band, ab, l_values, d_inv = _newton_storage(n, nbw, flesh)
-    grads = np.empty((4, n2))
-    grad = np.empty(n2)
-    grad_t = np.empty(n2)
-    fric_grad = np.empty(n2)
-    area_grad = np.zeros(n2)
-    tmp = np.empty(n2)
-    cdq = np.empty(n2)
-    g_f = np.empty(n2)
-    dq = np.empty(n2)
-    x = np.empty(n2)
-    y = np.empty(n2)
-    u = np.empty(n2)
-    trial = np.empty(n2)
+    band, ab, l_values, d_inv = storage
+    grads = work[:4 * n2].reshape((4, n2))
+    grad = work[4 * n2:5 * n2]
+    grad_t = work[5 * n2:6 * n2]
+    fric_grad = work[6 * n2:7 * n2]
+    area_grad = work[7 * n2:8 * n2]
+    area_grad[:] = 0.0  # only a ring's pressure writes it
+    tmp = work[8 * n2:9 * n2]
+    cdq = work[9 * n2:10 * n2]
+    g_f = work[10 * n2:11 * n2]
+    dq = work[11 * n2:12 * n2]
+    x = work[12 * n2:13 * n2]
+    y = work[13 * n2:14 * n2]
+    u = work[14 * n2:15 * n2]
+    trial = work[15 * n2:16 * n2]
     q = q_out
     q[:] = q_start
     n_hist = 0
@@ -1326,13 +1362,31 @@ def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secon
     return changed or hit_any
 
 
+#: float scratch of ``substep`` besides the Newton solve's: SUBSTEP_WORK per node (x_pred,
+#: start, filters, friction rows, q, reaction) and SUBSTEP_WORK_EXTRA (energies, rebound,
+#: jaw origins)
+SUBSTEP_WORK, SUBSTEP_WORK_EXTRA = 16, 10
+
+
+@njit(cache=True, error_model='numpy')
+def substep_scratch(pos, nbw, flesh):
+    """The scratch space of ``substep`` for the fruit of band positions ``pos`` (n,),
+    allocated once: (work float64, iwork int64, bwork bool, Newton storage)."""
+    n = pos.shape[0]
+    order, storage, newton_work = newton_scratch(n, nbw, flesh)
+    work = np.empty(SUBSTEP_WORK * n + SUBSTEP_WORK_EXTRA + newton_work.shape[0])
+    iwork = np.empty(2 * n, np.int64)
+    band_order_inverse(pos, iwork[:n])
+    return work, iwork, np.empty(2 * n, np.bool_), storage
+
+
 @njit(cache=True, error_model='numpy')
 def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
             face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
-            nbw, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, fpar, ipar, x_out,
+            edges, spar, triples, bpar, ring, press, flesh, gravity_grad, fpar, ipar, x_out,
             v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face,
             d_rest, d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_k, pad_scalars,
-            pad_forces, pad_normal, pad_holder, pad_side):
+            pad_forces, pad_normal, pad_holder, pad_side, work, iwork, bwork, storage):
     """One implicit Euler step with predictor-corrector contact, as
     ``contact_passes.contact_step``, and the measures of its end state, as
     ``Simulation._measure`` (``step_measures``).
@@ -1346,7 +1400,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         grip: (gap, lift, x) at the start, (gap, lift, x, gap rate, lift rate, x rate)
             at the end, m and m/s (x: the gripper centre on the transport axis).
         masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
-            ``step_measures``; pos, nbw and edges .. gravity_grad: see ``newton_solve``.
+            ``step_measures``; pos and edges .. gravity_grad: see ``newton_solve``.
         fpar: (8,) [dt, alpha, beta, tolerance, gravity, release threshold, correction
             speed, depth].  ipar: (2,) [max Newton iterations, max contact passes].
         x_out, v_out, forces_out: (n, 2) the new state and contact forces (N).
@@ -1368,6 +1422,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             none), pad_side (2,) N each jaw's pads' push along the closing axis. With pads
             the measures and damage take every contact force (hard and pad) and each
             node's holder (its hard face, else its pad's face), as ``Simulation._measure``.
+        work, iwork, bwork, storage: scratch space (``substep_scratch``), reused from step
+            to step: no array is allocated here for a fruit without pads.
 
     Returns:
         a status code (OK, or the failure of the last solve).
@@ -1396,23 +1452,30 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         pad_nodes = np.zeros(0, np.int64)
         pad_par = np.zeros((0, PAD_SIZE))
         pad_face = np.zeros(0, np.int64)
-    x_pred = np.empty((n, 2))
+    x_pred = work[:2 * n].reshape((n, 2))
     for i in range(n):
         x_pred[i, 0] = x_n[i, 0] + dt * v_n[i, 0]
         x_pred[i, 1] = x_n[i, 1] + dt * v_n[i, 1]
     q_n = x_n.reshape(2 * n)  # x_n is C-contiguous
     v_flat = v_n.reshape(2 * n)
-    released = np.zeros(n, np.bool_)
-    slipped = np.zeros(n, np.bool_)
-    start = np.empty((n, 2))
-    filters = np.empty((n, 2, 2))
-    fr_nodes = np.empty(n, np.int64)
-    fr_t = np.empty((n, 2))
-    fr_bound = np.empty(n)
-    fr_speed = np.empty(n)
-    q = np.empty(2 * n)
-    reaction = np.empty(2 * n)
-    values = np.zeros(4)
+    released = bwork[:n]
+    slipped = bwork[n:2 * n]
+    released[:] = False
+    slipped[:] = False
+    start = work[2 * n:4 * n].reshape((n, 2))
+    filters = work[4 * n:8 * n].reshape((n, 2, 2))
+    fr_t = work[8 * n:10 * n].reshape((n, 2))
+    fr_bound = work[10 * n:11 * n]
+    fr_speed = work[11 * n:12 * n]
+    q = work[12 * n:14 * n]
+    reaction = work[14 * n:16 * n]
+    values = work[16 * n:16 * n + 4]
+    values[:] = 0.0
+    rebound = work[16 * n + 4:16 * n + 6]
+    jaw_origins = work[16 * n + 6:16 * n + 10].reshape((2, 2))
+    newton_work = work[SUBSTEP_WORK * n + SUBSTEP_WORK_EXTRA:]
+    order = iwork[:n]
+    fr_nodes = iwork[n:2 * n]
     v_min = max(5.0 * fpar[F_GRAVITY] * dt, 1e-3)
     iterations = 0
     n_hist = 0
@@ -1420,11 +1483,12 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         n_fr = contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred,
                                    face_par, face_dyn, dt, fpar[F_VCORR], start, filters,
                                    fr_nodes, fr_t, fr_bound, fr_speed)
-        status, its, n_hist = newton_solve(
+        status, its, n_hist = _newton_solve(
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
             fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press, flesh,
-            gravity_grad, pos, nbw, q, reaction, history, values, counts, pad_nodes, pad_par)
+            gravity_grad, pos, q, reaction, history, values, counts, pad_nodes, pad_par,
+            order, storage, newton_work)
         out[1] = n_hist
         if status != OK:
             return status
@@ -1459,7 +1523,6 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             v_out[i, 1] = v_nn * nz + v_t * tz
             forces_out[i, 0] = r[i, 0]
             forces_out[i, 1] = r[i, 1]
-    rebound = np.zeros(2)
     for i in range(n):
         f = secondary[i]
         if f < 0:
@@ -1496,7 +1559,6 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             side = np.int64(face_par[f, FP_JAW])
             out[2 + side] += forces_out[i, 0] if side == 0 else -forces_out[i, 0]
     out[0] = iterations
-    jaw_origins = np.empty((2, 2))
     for side in range(2):
         sign = -1.0 if side == 0 else 1.0
         jaw_origins[side, 0] = x1 + sign * (0.5 * gap1)
