@@ -42,7 +42,8 @@ import numpy as np
 from numba import njit
 
 from gripper_sim.core import sparse_ldl
-from gripper_sim.core.energies.kernels import bending, neohookean_triangles, stretching
+from gripper_sim.core.energies.kernels import (bending, neohookean_triangles,
+                                               neohookean_von_mises, stretching)
 
 #: contact modes, as in contact.py
 FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
@@ -1371,22 +1372,76 @@ SUBSTEP_WORK, SUBSTEP_WORK_EXTRA = 16, 10
 @njit(cache=True, error_model='numpy')
 def substep_scratch(pos, nbw, flesh):
     """The scratch space of ``substep`` for the fruit of band positions ``pos`` (n,),
-    allocated once: (work float64, iwork int64, bwork bool, Newton storage)."""
+    allocated once: (work float64, iwork int64, bwork bool, Newton storage, stress
+    (n_tri,) float64)."""
     n = pos.shape[0]
     order, storage, newton_work = newton_scratch(n, nbw, flesh)
     work = np.empty(SUBSTEP_WORK * n + SUBSTEP_WORK_EXTRA + newton_work.shape[0])
     iwork = np.empty(2 * n, np.int64)
     band_order_inverse(pos, iwork[:n])
-    return work, iwork, np.empty(2 * n, np.bool_), storage
+    return work, iwork, np.empty(2 * n, np.bool_), storage, np.empty(flesh[0].shape[0])
+
+
+#: slots of the fruit's constant arrays packed for ``substep`` (``pack_constants``): the
+#: float arrays, then the int64 ones; the flesh's as in ``fast._solid_model`` (its skin's
+#: arrays, ``fast._solid_skin``, and its pattern's nine ``SparsePattern.arrays``)
+(KF_MASSES2, KF_MASSES, KF_REST_SEGMENTS, KF_SPAR, KF_BPAR, KF_PRESS, KF_GRAVITY, KF_DM_INV,
+ KF_VOLUME, KF_LAME, KF_SKIN_REST, KF_SKIN_STRETCH, KF_SKIN_PHI0, KF_SKIN_BEND,
+ KI_SURFACE, KI_SKIN_EDGES, KI_POS, KI_EDGES, KI_TRIPLES, KI_RING, KI_TRI, KI_TRI_SCATTER,
+ KI_SKIN_S_SCATTER, KI_SKIN_B_SCATTER, KI_PATTERN) = range(25)
+K_SLOTS = KI_PATTERN + 9
+
+
+def pack_constants(floats: list, ints: list) -> tuple:
+    """The fruit's constant arrays as ``substep`` takes them: one float64 array, one int64
+    array and their layout (K_SLOTS, 4) int64 [offset, shape...] per slot (floats in the
+    KF_* order, then ints in the KI_* order; up to three dimensions each). One call of a
+    kernel with ~40 array arguments fewer: numba's dispatch costs ~0.1 us per array."""
+    arrays = list(floats) + list(ints)
+    if len(arrays) != K_SLOTS:
+        raise ValueError(f'{len(arrays)} arrays to pack, {K_SLOTS} slots')
+    layout = np.zeros((K_SLOTS, 4), np.int64)
+    offsets = [0, 0]
+    for k, array in enumerate(arrays):
+        kind = 0 if k < len(floats) else 1
+        layout[k, 0] = offsets[kind]
+        layout[k, 1:1 + array.ndim] = array.shape
+        offsets[kind] += array.size
+    pieces = ([np.ravel(a) for a in floats] or [np.zeros(0)],
+              [np.ravel(a) for a in ints] or [np.zeros(0, np.int64)])
+    return (np.concatenate(pieces[0]).astype(np.float64),
+            np.concatenate(pieces[1]).astype(np.int64), layout)
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def _packed1(flat, layout, k):
+    """Slot k of a ``pack_constants`` array: a 1-D view."""
+    start = layout[k, 0]
+    return flat[start:start + layout[k, 1]]
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def _packed2(flat, layout, k):
+    """Slot k of a ``pack_constants`` array: a 2-D view."""
+    start = layout[k, 0]
+    return flat[start:start + layout[k, 1] * layout[k, 2]].reshape((layout[k, 1], layout[k, 2]))
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def _packed3(flat, layout, k):
+    """Slot k of a ``pack_constants`` array: a 3-D view."""
+    start = layout[k, 0]
+    size = layout[k, 1] * layout[k, 2] * layout[k, 3]
+    return flat[start:start + size].reshape((layout[k, 1], layout[k, 2], layout[k, 3]))
 
 
 @njit(cache=True, error_model='numpy')
 def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
-            face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
-            edges, spar, triples, bpar, ring, press, flesh, gravity_grad, fpar, ipar, x_out,
+            face_par, face_dyn, grip, fconst, iconst, layout, fpar, ipar, x_out,
             v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face,
             d_rest, d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_k, pad_scalars,
-            pad_forces, pad_normal, pad_holder, pad_side, work, iwork, bwork, storage):
+            pad_forces, pad_normal, pad_holder, pad_side, work, iwork, bwork, storage,
+            stress):
     """One implicit Euler step with predictor-corrector contact, as
     ``contact_passes.contact_step``, and the measures of its end state, as
     ``Simulation._measure`` (``step_measures``).
@@ -1399,14 +1454,17 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             jaws' faces are set here from ``grip``.
         grip: (gap, lift, x) at the start, (gap, lift, x, gap rate, lift rate, x rate)
             at the end, m and m/s (x: the gripper centre on the transport axis).
-        masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
+        fconst, iconst, layout: the fruit's constant arrays (``pack_constants``):
+            masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
             ``step_measures``; pos and edges .. gravity_grad: see ``newton_solve``.
         fpar: (8,) [dt, alpha, beta, tolerance, gravity, release threshold, correction
             speed, depth].  ipar: (2,) [max Newton iterations, max contact passes].
         x_out, v_out, forces_out: (n, 2) the new state and contact forces (N).
         history: (max_it,) Newton history of the last solve.
-        out: (8,) [iterations, len(history), left jaw normal force N, right jaw normal
-            force N, then the stretching, bending, pressure and gravity energies J].
+        out: (9,) [iterations, len(history), left jaw normal force N, right jaw normal
+            force N, then the stretching, bending, pressure and gravity energies J, the
+            flesh's largest von Mises stress Pa (as ``NeoHookeanTriangles.von_mises``; 0
+            without flesh)].
         normal_out, pressure_out, meas_out: the outputs of ``step_measures``.
         counts: (C_SIZE,) int64, work counters added to (see C_*).
         d_face .. d_out: damage of the end state by ``damage_update``, skipped when
@@ -1422,12 +1480,38 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             none), pad_side (2,) N each jaw's pads' push along the closing axis. With pads
             the measures and damage take every contact force (hard and pad) and each
             node's holder (its hard face, else its pad's face), as ``Simulation._measure``.
-        work, iwork, bwork, storage: scratch space (``substep_scratch``), reused from step
-            to step: no array is allocated here for a fruit without pads.
+        work, iwork, bwork, storage, stress: scratch space (``substep_scratch``), reused
+            from step to step: no array is allocated here for a fruit without pads.
 
     Returns:
         a status code (OK, or the failure of the last solve).
     """
+    masses2 = _packed1(fconst, layout, KF_MASSES2)
+    masses = _packed1(fconst, layout, KF_MASSES)
+    rest_segments = _packed1(fconst, layout, KF_REST_SEGMENTS)
+    spar = _packed2(fconst, layout, KF_SPAR)
+    bpar = _packed2(fconst, layout, KF_BPAR)
+    press = _packed1(fconst, layout, KF_PRESS)
+    gravity_grad = _packed1(fconst, layout, KF_GRAVITY)
+    surface = _packed1(iconst, layout, KI_SURFACE)
+    skin_edges = _packed2(iconst, layout, KI_SKIN_EDGES)
+    pos = _packed1(iconst, layout, KI_POS)
+    edges = _packed2(iconst, layout, KI_EDGES)
+    triples = _packed2(iconst, layout, KI_TRIPLES)
+    ring = _packed1(iconst, layout, KI_RING)
+    kp = KI_PATTERN
+    flesh = (_packed2(iconst, layout, KI_TRI), _packed3(fconst, layout, KF_DM_INV),
+             _packed1(fconst, layout, KF_VOLUME), _packed1(fconst, layout, KF_LAME),
+             _packed2(iconst, layout, KI_TRI_SCATTER),
+             (_packed1(fconst, layout, KF_SKIN_REST), _packed1(fconst, layout, KF_SKIN_STRETCH),
+              _packed2(iconst, layout, KI_SKIN_S_SCATTER),
+              _packed1(fconst, layout, KF_SKIN_PHI0), _packed1(fconst, layout, KF_SKIN_BEND),
+              _packed2(iconst, layout, KI_SKIN_B_SCATTER)),
+             (_packed1(iconst, layout, kp), _packed1(iconst, layout, kp + 1),
+              _packed1(iconst, layout, kp + 2), _packed1(iconst, layout, kp + 3),
+              _packed1(iconst, layout, kp + 4), _packed1(iconst, layout, kp + 5),
+              _packed1(iconst, layout, kp + 6), _packed1(iconst, layout, kp + 7),
+              _packed1(iconst, layout, kp + 8)))
     n = x_n.shape[0]
     dt = fpar[F_DT]
     counts[C_SUBSTEPS] += 1
@@ -1611,6 +1695,14 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         d_out[0] = count
         d_out[1] = pressure
         d_out[2] = length
+    out[8] = 0.0
+    if flesh[0].shape[0] > 0:  # the damage tracker's flesh stress: np.max(initial=0.0)
+        neohookean_von_mises(x_out, flesh[0], flesh[1], flesh[3][0], flesh[3][1], stress)
+        for t in range(stress.shape[0]):
+            if math.isnan(stress[t]):
+                out[8] = stress[t]
+                break
+            out[8] = max(out[8], stress[t])
     return OK
 
 
