@@ -86,6 +86,7 @@ $(STAMPS)/interface-%: $(VENV_STAMP) scripts/build_interface.sh scripts/fix_ros_
 # at install time so a user's first run does not pay the compile.
 $(KERNEL_STAMP): $(VENV_STAMP) gripper_sim/core/kernels.py gripper_sim/core/fast.py \
 		gripper_sim/core/energies/kernels.py gripper_sim/core/solver_kernels.py \
+		gripper_sim/core/damage.py gripper_sim/core/measures.py gripper_sim/core/pad.py \
 		gripper_sim/core3d/kernels.py gripper_sim/core3d/energies/wrinkling_membrane.py \
 		gripper_sim/workflows/compile_kernels.py
 	@echo "== kernels: compiling the numba fast paths (2D, 3D) into their cache (~1-2 min, once)"

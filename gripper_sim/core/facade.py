@@ -600,7 +600,8 @@ class SimulationFacade:
         outcome = soft_body_step(self.solver, self._barrier,
                                  np.vstack([self.q, finger.positions]),
                                  np.vstack([self.v, finger.velocities]), soft.base, targets,
-                                 self._faces(self._grip), new_faces, dt)
+                                 self._faces(self._grip), new_faces, dt,
+                                 self_contact=soft.self_contact)
         partner = outcome.contacts.obstacle
         self.q, self.v = outcome.x[:n], outcome.v[:n]
         self.contacts = cm.ContactState.empty(n)
