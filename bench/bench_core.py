@@ -27,24 +27,34 @@ Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations) times the cost of each operation timed alone at the end
 state. Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
-Times are the best of ``--repeat`` runs. Usage::
+Times are the best of ``--repeat`` runs.
+
+``--baseline DIR`` compares with another checkout of the project (e.g. ``git worktree add
+/tmp/base main``, its kernels compiled once): for each set-up, runs of this tree and of
+DIR alternate, each in a fresh process (this script on the other tree, through the
+GRIPPER_SIM_TREE environment variable), and the table gives both CPU times per step
+(best of ``--repeat`` each), their ratio, and whether the two grasps ended alike
+(outcome, steps, final gap). Usage::
 
     python bench/bench_core.py [--repeat N] [--hold S] [--setups shell,solid-vgroove,...]
-        [--set key=value ...]
+        [--set key=value ...] [--baseline DIR]
 """
 from __future__ import annotations
 
 import argparse
 import cProfile
+import json
 import os
 import pstats
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+#: the checkout whose gripper_sim is measured: this one, or GRIPPER_SIM_TREE (--baseline)
+ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(ROOT))
 
 from gripper_sim.configuration import load_config  # noqa: E402
@@ -329,6 +339,64 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
     return row
 
 
+def plain_run(name: str, overrides: list[str], repeat: int, hold: float) -> dict:
+    """CPU us per step (best of ``repeat`` grasps after a warm-up one) and how the grasp
+    ended: outcome, steps, final gap (m, as repr)."""
+    sim = Simulation(load_config(overrides=SETUPS[name] + overrides))
+    grasp(sim, 0.01)
+    runs = [grasp(sim, hold) for _ in range(repeat)]
+    _wall, cpu, steps, _iterations, summary, _per_step = min(runs, key=lambda r: r[1])
+    return dict(us_per_step=cpu / steps * 1e6, dt=sim.dt, steps=steps,
+                outcome=summary['outcome'], gap=repr(sim.gripper_state.gap),
+                package=sys.modules['gripper_sim'].__file__)
+
+
+def compare(baseline: Path, names: list[str], overrides: list[str], repeat: int,
+            hold: float) -> None:
+    """Print this tree's CPU time per step beside ``baseline``'s, runs alternated in fresh
+    processes (see the module doc)."""
+    script = Path(__file__).resolve()
+    trees = {'this': Path(__file__).resolve().parents[1], 'baseline': baseline.resolve()}
+    best: dict = {}
+    for name in names:
+        for _ in range(repeat):
+            for label, tree in trees.items():
+                env = dict(os.environ, GRIPPER_SIM_TREE=str(tree))
+                command = [sys.executable, str(script), '--plain', '--repeat', '1',
+                           '--hold', str(hold), '--setups', name]
+                for item in overrides:
+                    command += ['--set', item]
+                done = subprocess.run(command, env=env, capture_output=True, text=True,
+                                      check=True)
+                row = json.loads(done.stdout.strip().splitlines()[-1])[name]
+                if not Path(row['package']).is_relative_to(tree):
+                    raise RuntimeError(f'the run for {tree} imported {row["package"]}')
+                key = (name, label)
+                if key not in best or row['us_per_step'] < best[key]['us_per_step']:
+                    best[key] = row
+    print(f'CPU us per step, best of {repeat} runs each, alternated: this tree '
+          f'({trees["this"]}) and baseline ({trees["baseline"]}); load average '
+          f'{os.getloadavg()[0]:.2f} at the end')
+    print(f'{"set-up":<14} {"this":>8} {"baseline":>9} {"ratio":>6} {"RTF":>6} '
+          f'{"RTF base":>8}  same end (outcome, steps, gap)   (RTF: real-time factor, CPU)')
+    for name in names:
+        mine, base = best[(name, 'this')], best[(name, 'baseline')]
+        same = all(mine[k] == base[k] for k in ('outcome', 'steps', 'gap'))
+        print(f'{name:<14} {mine["us_per_step"]:>8.1f} {base["us_per_step"]:>9.1f} '
+              f'{mine["us_per_step"] / base["us_per_step"]:>6.2f} '
+              f'{mine["dt"] * 1e6 / mine["us_per_step"]:>6.1f} '
+              f'{base["dt"] * 1e6 / base["us_per_step"]:>8.1f}  '
+              f'{"yes" if same else "NO"} ({mine["outcome"]}, {mine["steps"]}, {mine["gap"]}'
+              + ('' if same else f'; baseline {base["outcome"]}, {base["steps"]}, '
+                 f'{base["gap"]}') + ')')
+    for label in trees:
+        flat = {name: best[(name, label)]['us_per_step'] for name in names if '-' not in name}
+        ratios = [f'{name} {best[(name, label)]["us_per_step"] / flat[name.split("-")[0]]:.2f}'
+                  for name in names if '-' in name and name.split('-')[0] in flat]
+        if ratios:
+            print(f'x the flat fingers of the same fruit, {label}: {", ".join(ratios)}')
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--repeat', type=int, default=3, help='runs per set-up (best CPU time)')
@@ -337,12 +405,32 @@ def main(argv=None) -> int:
                         help=f'comma-separated, of: {", ".join(SETUPS)}')
     parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
                         help='configuration override for every set-up')
+    parser.add_argument('--baseline', type=Path, metavar='DIR',
+                        help='another checkout to compare with, side by side')
+    parser.add_argument('--plain', action='store_true',
+                        help='only the CPU time per step and the end of each grasp, as JSON '
+                             '(what --baseline runs)')
     args = parser.parse_args(argv)
-    unknown = [name for name in args.setups.split(',') if name not in SETUPS]
+    names = args.setups.split(',')
+    unknown = [name for name in names if name not in SETUPS]
     if unknown:
         print(f'error: unknown set-up {unknown[0]!r} (choose from {", ".join(SETUPS)})',
               file=sys.stderr)
         return 2
+    if args.repeat < 1:
+        print(f'error: --repeat must be at least 1, got {args.repeat}', file=sys.stderr)
+        return 2
+    if args.plain:
+        print(json.dumps({name: plain_run(name, args.set, args.repeat, args.hold)
+                          for name in names}))
+        return 0
+    if args.baseline is not None:
+        if not (args.baseline / 'gripper_sim' / 'core').is_dir():
+            print(f'error: --baseline {args.baseline} is not a checkout of this project '
+                  '(no gripper_sim/core in it)', file=sys.stderr)
+            return 2
+        compare(args.baseline, names, args.set, args.repeat, args.hold)
+        return 0
     print(f'numba: {"available" if fast.available() else "NOT available"}; '
           f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')
     print(f'grasp-and-lift: close to {FORCE} N, lift {LIFT * 100:.0f} cm, hold {args.hold} s; '

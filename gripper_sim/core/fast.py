@@ -205,7 +205,7 @@ class FastPath:
         self.fpar[kernels.F_TOL] = solver.tolerance
         self.ipar = np.array([solver.max_iterations, 1], np.int64)
         self.history = np.zeros(solver.max_iterations)
-        self.out = np.zeros(8)
+        self.out = np.zeros(9)
         self.measures = np.zeros(kernels.M_SIZE)
         #: work done so far (see kernels.C_*): solves, evaluations, factorisations
         self.counts = np.zeros(kernels.C_SIZE, np.int64)
@@ -234,6 +234,19 @@ class FastPath:
         self.timers = {'glue': 0.0, 'kernel': 0.0, 'measures': 0.0}
         self._measured = None
         self.timing = False
+        self._config_seen = None
+        #: the kernel steps the fruit's flesh (and measures its von Mises stress)
+        self._flesh_in_kernel = len(model['flesh'][0]) > 0
+        #: the substep kernel's scratch space, allocated once (``kernels.substep_scratch``)
+        self._scratch = kernels.substep_scratch(model['pos'], model['nbw'], model['flesh'])
+        tri, dm_inv, volume, lame, tri_scatter, skin, pattern = model['flesh']
+        #: the fruit's constant arrays as the substep kernel takes them
+        self._constants = kernels.pack_constants(
+            [self.masses2, self.masses, self.rest_segments, model['spar'], model['bpar'],
+             model['press'], self.gravity_grad, dm_inv, volume, lame, skin[0], skin[1],
+             skin[3], skin[4]],
+            [self.surface, self.skin_edges, model['pos'], model['edges'], model['triples'],
+             model['ring'], tri, tri_scatter, skin[2], skin[5], *pattern])
 
     @classmethod
     def create(cls, sim: 'Simulation') -> 'FastPath | None':
@@ -325,14 +338,15 @@ class FastPath:
         grip = sim._grip
         grip_new = sim._advance_gripper(dt)
         face_par, face_dyn = self._face_arrays()
-        config = sim.config
         fpar = self.fpar
         fpar[0] = dt
         fpar[4] = sim.gravity.g
-        fpar[5] = config['contact.release_threshold']
-        fpar[6] = config['contact.max_correction_speed']
         fpar[7] = sim.fruit.depth
-        self.ipar[1] = config['sim.max_contact_passes']
+        if sim.config is not self._config_seen:  # a frozen Parameters: read once per config
+            config = self._config_seen = sim.config
+            fpar[5] = config['contact.release_threshold']
+            fpar[6] = config['contact.max_correction_speed']
+            self.ipar[1] = config['sim.max_contact_passes']
         c = sim.contacts
         obstacle, mode, secondary = c.obstacle.copy(), c.mode.copy(), c.secondary.copy()
         normal_force, bounce, secondary_bounce = (c.normal_force.copy(), c.bounce_speed.copy(),
@@ -342,8 +356,6 @@ class FastPath:
         normal, pressure = np.empty(n), np.empty(len(self.surface))
         x_n = sim.q if sim.q.flags.c_contiguous else np.ascontiguousarray(sim.q)
         v_n = sim.v if sim.v.flags.c_contiguous else np.ascontiguousarray(sim.v)
-        model = self.model
-        edges, spar, triples, bpar, ring, press, flesh, gravity_grad = self._energy_args
         pad = sim._pad
         damage = self._damage_inputs()
         if pad is None:
@@ -358,11 +370,9 @@ class FastPath:
             face_par, face_dyn, (grip.gap, grip.lift, grip.x, grip_new.gap, grip_new.lift,
                                  grip_new.x, grip_new.gap_rate, grip_new.lift_rate,
                                  grip_new.x_rate),
-            self.masses2, self.masses, self.surface, self.skin_edges, self.rest_segments,
-            model['pos'], model['nbw'], edges, spar, triples, bpar, ring, press, flesh,
-            gravity_grad,
-            fpar, self.ipar, x, v, forces, self.history, self.out, normal, pressure,
-            self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out)
+            *self._constants, fpar, self.ipar, x, v, forces, self.history, self.out, normal,
+            pressure, self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out,
+            *self._scratch)
         if timing:
             t2 = time.perf_counter()
         out = self.out
@@ -384,7 +394,7 @@ class FastPath:
         sim._jaw_force = (float(out[2]), float(out[3]))  # the pads' push included
         if pad is not None:  # what PadLayer.finish_step records
             pad.forces, pad.normal_forces, pad.holder, pad.side_force = pad_out
-        self._measured = (x, normal, pressure, self.measures.tolist(), damage)
+        self._measured = (x, normal, pressure, self.measures.tolist(), damage, float(out[8]))
         if timing:
             t3 = time.perf_counter()
             self.timers['glue'] += (t1 - t0) + (t3 - t2)
@@ -405,9 +415,9 @@ class FastPath:
         # every contact force (the pads' included) and the obstacle holding each node
         forces, holder = sim._contact_forces_and_holders()
         measured = self._measured
-        damage_of_x = None
+        damage_of_x = flesh_stress = None
         if measured is not None and measured[0] is x:
-            _, normal, pressure, values, damage_of_x = measured
+            _, normal, pressure, values, damage_of_x, flesh_stress = measured
         else:
             values, normal, pressure = self._measure_kernel(forces, holder)
             if sim._pad is not None:  # the hard contacts' length, plus the pads'
@@ -429,7 +439,7 @@ class FastPath:
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
         positions = x.copy()
-        damage = self._damage(positions, normal, holder, ratio, damage_of_x)
+        damage = self._damage(positions, normal, holder, ratio, damage_of_x, flesh_stress)
 
         mode = contacts.mode
 
@@ -512,10 +522,11 @@ class FastPath:
                                              tracker.pad_modulus])
         return self._tracker is not None
 
-    def _damage(self, positions, normal, obstacle, ratio, computed=None):
+    def _damage(self, positions, normal, obstacle, ratio, computed=None, flesh_stress=None):
         """``Simulation._assess_damage``: the per-step part of ``DamageTracker.update`` from
-        the substep kernel (``computed``: its damage arguments, for the state it ended
-        in) or else the ``damage_update`` kernel; the tracker keeps the state."""
+        the substep kernel (``computed``: its damage arguments, ``flesh_stress``: the
+        flesh's largest von Mises stress Pa, for the state it ended in) or else the
+        ``damage_update`` kernel; the tracker keeps the state."""
         sim = self.sim
         tracker = sim._damage
         if not self._damage_supported():
@@ -545,8 +556,10 @@ class FastPath:
 
         # the rest of DamageTracker.update (with the solid's von Mises stress)
         flesh = sim.fruit.flesh
-        flesh_stress = (0.0 if flesh is None
-                        else float(np.max(flesh.von_mises(positions.ravel()), initial=0.0)))
+        if flesh is None:
+            flesh_stress = 0.0
+        elif flesh_stress is None or not self._flesh_in_kernel:
+            flesh_stress = float(np.max(flesh.von_mises(positions.ravel()), initial=0.0))
         stress = max(TRESCA_OVER_P0 * pressure, flesh_stress)
         tracker.peak_pressure = max(tracker.peak_pressure, pressure)
         tracker.peak_flesh_stress = max(tracker.peak_flesh_stress, stress)

@@ -54,7 +54,8 @@ from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FAC
                                      damage_patches)
 from gripper_sim.core.energies.kernels import (area_and_gradient, area_pressure, bending,
                                                edge_spring, hinge, hinge_block,
-                                               neohookean_triangles, stretching)
+                                               neohookean_triangles, neohookean_von_mises,
+                                               stretching)
 from gripper_sim.core.measures import face_contact_length_of, outline_measures
 from gripper_sim.core.pad import (PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X, PF_NEW_Z, PF_NX,
                                   PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE, PF_SPEED,
@@ -789,10 +790,46 @@ def _newton_inverse(ab, l_values, d_inv, flesh, x, y, two):
 
 
 @njit(cache=True, error_model='numpy')
+def newton_scratch(n, nbw, flesh):
+    """The scratch space of ``_newton_solve`` for n nodes, allocated once and reused by
+    every solve: (order (n,) int64 - the node at each band position, to be filled from
+    ``pos`` (``band_order_inverse``) -, the Newton storage (``_newton_storage``), work
+    (NEWTON_WORK * 2n,) float64)."""
+    return (np.empty(n, np.int64), _newton_storage(n, nbw, flesh),
+            np.empty(NEWTON_WORK * 2 * n))
+
+
+@njit(cache=True, error_model='numpy')
+def band_order_inverse(pos, order):
+    """order[pos[i]] = i: the node at each band position."""
+    for i in range(pos.shape[0]):
+        order[pos[i]] = i
+
+
+@njit(cache=True, error_model='numpy')
 def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
                  masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press, flesh,
                  gravity_grad, pos, nbw, q_out, reaction_out, history, values, counts,
                  pad_nodes, pad_par):
+    """``_newton_solve`` with scratch space of its own (see there for the arguments)."""
+    order, storage, work = newton_scratch(pos.shape[0], nbw, flesh)
+    band_order_inverse(pos, order)
+    return _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
+                         masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring,
+                         press, flesh, gravity_grad, pos, q_out, reaction_out, history, values,
+                         counts, pad_nodes, pad_par, order, storage, work)
+
+
+#: float vectors of 2n in ``_newton_solve``'s work array: grads (4 of them), grad, grad_t,
+#: fric_grad, area_grad, tmp, cdq, g_f, dq, x, y, u, trial
+NEWTON_WORK = 16
+
+
+@njit(cache=True, error_model='numpy')
+def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_speed,
+                  masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press,
+                  flesh, gravity_grad, pos, q_out, reaction_out, history, values, counts,
+                  pad_nodes, pad_par, order, storage, work):
     """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
 
     The same iterates as the reference: the evaluations the reference repeats at a point
@@ -810,12 +847,14 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
         edges, spar, triples, bpar, ring, press: the energies (see ring_*); flesh: the
             neo-Hookean triangles (see ``_energies``).
         gravity_grad: (2n,) N, the constant gradient of gravity.
-        pos: (n,) band positions; nbw: node half-bandwidth.
+        pos: (n,) band positions.
         q_out, reaction_out: (2n,) outputs. history: (max_it,) output, m/s.
         values: (4,) output, J: stretching, bending, pressure and gravity at q_out.
         counts: (C_SIZE,) int64, work counters added to (see C_*).
         pad_nodes: (m,) int64 nodes, pad_par: (m, PAD_SIZE) the soft pads' rows (m = 0:
             no pads).
+        order, storage, work: scratch space (``newton_scratch``; order filled from pos);
+            reused from solve to solve, no allocation here.
 
     Returns:
         (status, iterations, len(history)); status OK or a failure code.
@@ -825,26 +864,24 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
     n_fr = fr_nodes.shape[0]
     # a flag as a variable, not a literal: one compiled _evaluate for all call sites
     yes = np.bool_(True)
-    order = np.empty(n, np.int64)
-    for i in range(n):
-        order[pos[i]] = i
     for i in range(n):
         if filters[i, 0, 1] != filters[i, 1, 0]:
             return UNSUPPORTED, 0, 0
-    band, ab, l_values, d_inv = _newton_storage(n, nbw, flesh)
-    grads = np.empty((4, n2))
-    grad = np.empty(n2)
-    grad_t = np.empty(n2)
-    fric_grad = np.empty(n2)
-    area_grad = np.zeros(n2)
-    tmp = np.empty(n2)
-    cdq = np.empty(n2)
-    g_f = np.empty(n2)
-    dq = np.empty(n2)
-    x = np.empty(n2)
-    y = np.empty(n2)
-    u = np.empty(n2)
-    trial = np.empty(n2)
+    band, ab, l_values, d_inv = storage
+    grads = work[:4 * n2].reshape((4, n2))
+    grad = work[4 * n2:5 * n2]
+    grad_t = work[5 * n2:6 * n2]
+    fric_grad = work[6 * n2:7 * n2]
+    area_grad = work[7 * n2:8 * n2]
+    area_grad[:] = 0.0  # only a ring's pressure writes it
+    tmp = work[8 * n2:9 * n2]
+    cdq = work[9 * n2:10 * n2]
+    g_f = work[10 * n2:11 * n2]
+    dq = work[11 * n2:12 * n2]
+    x = work[12 * n2:13 * n2]
+    y = work[13 * n2:14 * n2]
+    u = work[14 * n2:15 * n2]
+    trial = work[15 * n2:16 * n2]
     q = q_out
     q[:] = q_start
     n_hist = 0
@@ -983,13 +1020,85 @@ def contact_faces(face_par, face_dyn):
     return normal, tangents, half_extents, props, origin_start, origin_end, velocity
 
 
+#: float scratch of ``substep`` besides the Newton solve's: SUBSTEP_WORK per node (x_pred,
+#: start, filters, friction rows, q, reaction) and SUBSTEP_WORK_EXTRA (energies, rebound,
+#: jaw origins)
+SUBSTEP_WORK, SUBSTEP_WORK_EXTRA = 16, 10
+
+
+@njit(cache=True, error_model='numpy')
+def substep_scratch(pos, nbw, flesh):
+    """The scratch space of ``substep`` for the fruit of band positions ``pos`` (n,),
+    allocated once: (work float64, iwork int64, bwork bool, Newton storage, stress
+    (n_tri,) float64)."""
+    n = pos.shape[0]
+    order, storage, newton_work = newton_scratch(n, nbw, flesh)
+    work = np.empty(SUBSTEP_WORK * n + SUBSTEP_WORK_EXTRA + newton_work.shape[0])
+    iwork = np.empty(2 * n, np.int64)
+    band_order_inverse(pos, iwork[:n])
+    return work, iwork, np.empty(2 * n, np.bool_), storage, np.empty(flesh[0].shape[0])
+
+
+#: slots of the fruit's constant arrays packed for ``substep`` (``pack_constants``): the
+#: float arrays, then the int64 ones; the flesh's as in ``fast._solid_model`` (its skin's
+#: arrays, ``fast._solid_skin``, and its pattern's nine ``SparsePattern.arrays``)
+(KF_MASSES2, KF_MASSES, KF_REST_SEGMENTS, KF_SPAR, KF_BPAR, KF_PRESS, KF_GRAVITY, KF_DM_INV,
+ KF_VOLUME, KF_LAME, KF_SKIN_REST, KF_SKIN_STRETCH, KF_SKIN_PHI0, KF_SKIN_BEND,
+ KI_SURFACE, KI_SKIN_EDGES, KI_POS, KI_EDGES, KI_TRIPLES, KI_RING, KI_TRI, KI_TRI_SCATTER,
+ KI_SKIN_S_SCATTER, KI_SKIN_B_SCATTER, KI_PATTERN) = range(25)
+K_SLOTS = KI_PATTERN + 9
+
+
+def pack_constants(floats: list, ints: list) -> tuple:
+    """The fruit's constant arrays as ``substep`` takes them: one float64 array, one int64
+    array and their layout (K_SLOTS, 4) int64 [offset, shape...] per slot (floats in the
+    KF_* order, then ints in the KI_* order; up to three dimensions each). One call of a
+    kernel with ~40 array arguments fewer: numba's dispatch costs ~0.1 us per array."""
+    arrays = list(floats) + list(ints)
+    if len(arrays) != K_SLOTS:
+        raise ValueError(f'{len(arrays)} arrays to pack, {K_SLOTS} slots')
+    layout = np.zeros((K_SLOTS, 4), np.int64)
+    offsets = [0, 0]
+    for k, array in enumerate(arrays):
+        kind = 0 if k < len(floats) else 1
+        layout[k, 0] = offsets[kind]
+        layout[k, 1:1 + array.ndim] = array.shape
+        offsets[kind] += array.size
+    pieces = ([np.ravel(a) for a in floats] or [np.zeros(0)],
+              [np.ravel(a) for a in ints] or [np.zeros(0, np.int64)])
+    return (np.concatenate(pieces[0]).astype(np.float64),
+            np.concatenate(pieces[1]).astype(np.int64), layout)
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def _packed1(flat, layout, k):
+    """Slot k of a ``pack_constants`` array: a 1-D view."""
+    start = layout[k, 0]
+    return flat[start:start + layout[k, 1]]
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def _packed2(flat, layout, k):
+    """Slot k of a ``pack_constants`` array: a 2-D view."""
+    start = layout[k, 0]
+    return flat[start:start + layout[k, 1] * layout[k, 2]].reshape((layout[k, 1], layout[k, 2]))
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def _packed3(flat, layout, k):
+    """Slot k of a ``pack_constants`` array: a 3-D view."""
+    start = layout[k, 0]
+    size = layout[k, 1] * layout[k, 2] * layout[k, 3]
+    return flat[start:start + size].reshape((layout[k, 1], layout[k, 2], layout[k, 3]))
+
+
 @njit(cache=True, error_model='numpy')
 def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
-            face_par, face_dyn, grip, masses2, masses, surface, skin_edges, rest_segments, pos,
-            nbw, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, fpar, ipar, x_out,
+            face_par, face_dyn, grip, fconst, iconst, layout, fpar, ipar, x_out,
             v_out, forces_out, history, out, normal_out, pressure_out, meas_out, counts, d_face,
             d_rest, d_par, covered_in, covered_out, d_pressure, patches, d_out, pad_k, pad_scalars,
-            pad_forces, pad_normal, pad_holder, pad_side):
+            pad_forces, pad_normal, pad_holder, pad_side, work, iwork, bwork, storage,
+            stress):
     """One implicit Euler step with predictor-corrector contact, as
     ``contact_passes.contact_step``, and the measures of its end state, as
     ``Simulation._measure`` (``step_measures``).
@@ -1002,14 +1111,17 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             jaws' faces are set here from ``grip``.
         grip: (gap, lift, x) at the start, (gap, lift, x, gap rate, lift rate, x rate)
             at the end, m and m/s (x: the gripper centre on the transport axis).
-        masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
-            ``step_measures``; pos, nbw and edges .. gravity_grad: see ``newton_solve``.
+        fconst, iconst, layout: the fruit's constant arrays (``pack_constants``):
+            masses2 (2n,), masses (n,) kg; surface, skin_edges, rest_segments: see
+            ``step_measures``; pos and edges .. gravity_grad: see ``newton_solve``.
         fpar: (8,) [dt, alpha, beta, tolerance, gravity, release threshold, correction
             speed, depth].  ipar: (2,) [max Newton iterations, max contact passes].
         x_out, v_out, forces_out: (n, 2) the new state and contact forces (N).
         history: (max_it,) Newton history of the last solve.
-        out: (8,) [iterations, len(history), left jaw normal force N, right jaw normal
-            force N, then the stretching, bending, pressure and gravity energies J].
+        out: (9,) [iterations, len(history), left jaw normal force N, right jaw normal
+            force N, then the stretching, bending, pressure and gravity energies J, the
+            flesh's largest von Mises stress Pa (as ``NeoHookeanTriangles.von_mises``; 0
+            without flesh)].
         normal_out, pressure_out, meas_out: the outputs of ``step_measures``.
         counts: (C_SIZE,) int64, work counters added to (see C_*).
         d_face .. d_out: damage of the end state by ``damage_update``, skipped when
@@ -1025,10 +1137,38 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             none), pad_side (2,) N each jaw's pads' push along the closing axis. With pads
             the measures and damage take every contact force (hard and pad) and each
             node's holder (its hard face, else its pad's face), as ``Simulation._measure``.
+        work, iwork, bwork, storage, stress: scratch space (``substep_scratch``), reused
+            from step to step: no array is allocated here for a fruit without pads.
 
     Returns:
         a status code (OK, or the failure of the last solve).
     """
+    masses2 = _packed1(fconst, layout, KF_MASSES2)
+    masses = _packed1(fconst, layout, KF_MASSES)
+    rest_segments = _packed1(fconst, layout, KF_REST_SEGMENTS)
+    spar = _packed2(fconst, layout, KF_SPAR)
+    bpar = _packed2(fconst, layout, KF_BPAR)
+    press = _packed1(fconst, layout, KF_PRESS)
+    gravity_grad = _packed1(fconst, layout, KF_GRAVITY)
+    surface = _packed1(iconst, layout, KI_SURFACE)
+    skin_edges = _packed2(iconst, layout, KI_SKIN_EDGES)
+    pos = _packed1(iconst, layout, KI_POS)
+    edges = _packed2(iconst, layout, KI_EDGES)
+    triples = _packed2(iconst, layout, KI_TRIPLES)
+    ring = _packed1(iconst, layout, KI_RING)
+    kp = KI_PATTERN
+    flesh = (_packed2(iconst, layout, KI_TRI), _packed3(fconst, layout, KF_DM_INV),
+             _packed1(fconst, layout, KF_VOLUME), _packed1(fconst, layout, KF_LAME),
+             _packed2(iconst, layout, KI_TRI_SCATTER),
+             (_packed1(fconst, layout, KF_SKIN_REST), _packed1(fconst, layout, KF_SKIN_STRETCH),
+              _packed2(iconst, layout, KI_SKIN_S_SCATTER),
+              _packed1(fconst, layout, KF_SKIN_PHI0), _packed1(fconst, layout, KF_SKIN_BEND),
+              _packed2(iconst, layout, KI_SKIN_B_SCATTER)),
+             (_packed1(iconst, layout, kp), _packed1(iconst, layout, kp + 1),
+              _packed1(iconst, layout, kp + 2), _packed1(iconst, layout, kp + 3),
+              _packed1(iconst, layout, kp + 4), _packed1(iconst, layout, kp + 5),
+              _packed1(iconst, layout, kp + 6), _packed1(iconst, layout, kp + 7),
+              _packed1(iconst, layout, kp + 8)))
     n = x_n.shape[0]
     dt = fpar[F_DT]
     counts[C_SUBSTEPS] += 1
@@ -1053,27 +1193,33 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         pad_nodes = np.zeros(0, np.int64)
         pad_par = np.zeros((0, PAD_SIZE))
         pad_face = np.zeros(0, np.int64)
-    x_pred = np.empty((n, 2))
+    x_pred = work[:2 * n].reshape((n, 2))
     for i in range(n):
         x_pred[i, 0] = x_n[i, 0] + dt * v_n[i, 0]
         x_pred[i, 1] = x_n[i, 1] + dt * v_n[i, 1]
     q_n = x_n.reshape(2 * n)  # x_n is C-contiguous
     v_flat = v_n.reshape(2 * n)
-    released = np.zeros(n, np.bool_)
-    slipped = np.zeros(n, np.bool_)
+    released = bwork[:n]
+    slipped = bwork[n:2 * n]
+    released[:] = False
+    slipped[:] = False
     faces = contact_faces(face_par, face_dyn)
     state = (obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce)
-    start = np.empty((n, 2))
-    filters = np.empty((n, 2, 2))
-    fr_nodes = np.empty(n, np.int64)
-    fr_tangents = np.empty((n, 1, 2))
-    fr_t = fr_tangents.reshape((n, 2))  # one tangent per row in 2D
-    fr_bound = np.empty(n)
-    fr_speeds = np.empty((n, 1))
-    fr_speed = fr_speeds.reshape(n)
-    q = np.empty(2 * n)
-    reaction = np.empty(2 * n)
-    values = np.zeros(4)
+    start = work[2 * n:4 * n].reshape((n, 2))
+    filters = work[4 * n:8 * n].reshape((n, 2, 2))
+    fr_tangents = work[8 * n:10 * n].reshape((n, 1, 2))  # one tangent per row in 2D
+    fr_t = work[8 * n:10 * n].reshape((n, 2))
+    fr_bound = work[10 * n:11 * n]
+    fr_speeds = work[11 * n:12 * n].reshape((n, 1))
+    fr_speed = work[11 * n:12 * n]
+    q = work[12 * n:14 * n]
+    reaction = work[14 * n:16 * n]
+    values = work[16 * n:16 * n + 4]
+    values[:] = 0.0
+    jaw_origins = work[16 * n + 6:16 * n + 10].reshape((2, 2))
+    newton_work = work[SUBSTEP_WORK * n + SUBSTEP_WORK_EXTRA:]
+    order = iwork[:n]
+    fr_nodes = iwork[n:2 * n]
     v_min = max(5.0 * fpar[F_GRAVITY] * dt, 1e-3)
     iterations = 0
     n_hist = 0
@@ -1081,11 +1227,12 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         n_fr = contact_kernels.constraints(state, faces, x_n, x_pred, dt, fpar[F_VCORR],
                                            start, filters, fr_nodes, fr_tangents, fr_bound,
                                            fr_speeds)
-        status, its, n_hist = newton_solve(
+        status, its, n_hist = _newton_solve(
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
             fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press, flesh,
-            gravity_grad, pos, nbw, q, reaction, history, values, counts, pad_nodes, pad_par)
+            gravity_grad, pos, q, reaction, history, values, counts, pad_nodes, pad_par,
+            order, storage, newton_work)
         out[1] = n_hist
         if status != OK:
             return status
@@ -1106,7 +1253,6 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             side = np.int64(face_par[f, FP_JAW])
             out[2 + side] += forces_out[i, 0] if side == 0 else -forces_out[i, 0]
     out[0] = iterations
-    jaw_origins = np.empty((2, 2))
     for side in range(2):
         sign = -1.0 if side == 0 else 1.0
         jaw_origins[side, 0] = x1 + sign * (0.5 * gap1)
@@ -1159,6 +1305,14 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         d_out[0] = count
         d_out[1] = pressure
         d_out[2] = length
+    out[8] = 0.0
+    if flesh[0].shape[0] > 0:  # the damage tracker's flesh stress: np.max(initial=0.0)
+        neohookean_von_mises(x_out, flesh[0], flesh[1], flesh[3][0], flesh[3][1], stress)
+        for t in range(stress.shape[0]):
+            if math.isnan(stress[t]):
+                out[8] = stress[t]
+                break
+            out[8] = max(out[8], stress[t])
     return OK
 
 

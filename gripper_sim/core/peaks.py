@@ -49,6 +49,8 @@ def damage_site(result: StepResult) -> str | None:
     return 'jaws' if on_jaw[node] else 'table' if on_table[node] else None
 
 
+_largest = np.maximum.reduce
+
 #: (result, its contact_pressures): the last one computed (a run's observers all ask)
 _last_pressures: tuple = (None, (0.0, 0.0))
 
@@ -70,8 +72,10 @@ def contact_pressures(result: StepResult) -> tuple[float, float]:
         pressures = 0.0, 0.0
     else:
         on_jaw, on_table = _sites(result)
-        pressures = (float(pressure[on_jaw].max(initial=0.0)),
-                     float(pressure[on_table].max(initial=0.0)))
+        # the ufunc's masked reduction: the same maximum as pressure[mask].max(initial=0.0)
+        # in half the time (no copy, no ndarray.max wrapper), every step of a run
+        pressures = (float(_largest(pressure, where=on_jaw, initial=0.0)),
+                     float(_largest(pressure, where=on_table, initial=0.0)))
     _last_pressures = (result, pressures)
     return pressures
 

@@ -169,8 +169,14 @@ class StepResult:
     def in_contact_with(self, name: str) -> bool:
         """Whether any node touches the obstacle called ``name`` (or one of its faces,
         named ``name.part``, e.g. ``left_jaw.upper`` of a V-groove finger)."""
-        if name in self.obstacle_names:
-            # a list scan: a few times faster than ndarray.__contains__ on a step's nodes
-            return self.obstacle_names.index(name) in self.contact_obstacle.tolist()
-        parts = [i for i, n in enumerate(self.obstacle_names) if n.startswith(name + '.')]
-        return bool(parts) and bool(np.any(np.isin(self.contact_obstacle, parts)))
+        names = self.obstacle_names
+        # list scans: several times faster than ndarray.__contains__ or np.isin on a step's
+        # nodes (np.isin takes tens of us, this ~1 us)
+        if name in names:
+            return names.index(name) in self.contact_obstacle.tolist()
+        prefix = name + '.'
+        parts = [i for i, n in enumerate(names) if n.startswith(prefix)]
+        if not parts:
+            return False
+        held = set(self.contact_obstacle.tolist())
+        return any(i in held for i in parts)
