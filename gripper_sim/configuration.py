@@ -577,10 +577,6 @@ def validate(flat: Mapping[str, Any]) -> Parameters:
     if result.get('gripper.finger.type') == 'arc':
         check_finger(result)
     check_fin_ray(result)
-    if result.get('dimension') == 3 and result.get('gripper.finger.type') == 'fin_ray':
-        raise ConfigError("config key 'gripper.finger.type' = fin_ray: the Fin Ray finger is "
-                          f"2D only so far (dimension 3 takes {', '.join(RIGID_FINGERS)} "
-                          'or solid_pad)')
     return Parameters._restore(result)
 
 

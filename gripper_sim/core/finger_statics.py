@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gripper_sim.core.energies import ConstantForce
+from gripper_sim.core.energies import ConstantForce, Energy
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
 
@@ -21,8 +21,8 @@ STATIC_STEP = 1.0
 @dataclass(frozen=True)
 class StaticState:
     """Attributes:
-        positions: (n_nodes, 2) m, the deformed finger.
-        base_reaction: (2,) N, the force the base exerts on the finger (x, z).
+        positions: (n_nodes, d) m, the deformed finger.
+        base_reaction: (d,) N, the force the base exerts on the finger (x, z; 3D x, y, z).
     """
 
     positions: np.ndarray
@@ -30,28 +30,34 @@ class StaticState:
 
 
 def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8,
-                       tolerance: float = 1e-10) -> StaticState:
+                       tolerance: float = 1e-10,
+                       elastic: list[Energy] | None = None) -> StaticState:
     """The finger under ``forces`` with its base nodes fixed at rest.
 
     Args:
-        forces: (n_nodes, 2) N, constant loads on the nodes (x, z).
+        body: the finger (a 2D ``FingerBody``, or a 3D body with ``elastic`` given: any
+            body with rest_positions (n_nodes, d), masses and base_nodes).
+        forces: (n_nodes, d) N, constant loads on the nodes (x, z; 3D x, y, z).
         increments: load steps from 0 to the full load (each a Newton solve).
         tolerance: m, Newton stops when the largest update is below it.
+        elastic: the body's elastic energies on its own q; None: its rods'.
 
     Raises:
         NewtonFailure: no equilibrium found.
     """
-    constraints = StepConstraints.free(body.n_nodes)
+    dim = body.rest_positions.shape[1]
+    constraints = StepConstraints.free(body.n_nodes, dim)
     constraints.filters[body.base_nodes] = 0.0
-    elastic = body.rod_energies()
+    if elastic is None:
+        elastic = body.rod_energies()
     q = body.rest_positions.ravel().copy()
     still = np.zeros_like(q)
     solution = None
     for fraction in list(np.linspace(1.0 / increments, 1.0, increments)) + [1.0]:
         load = ConstantForce(fraction * np.asarray(forces, dtype=float).ravel())
-        solver = ImplicitEulerSolver(body.masses, elastic + [load],
+        solver = ImplicitEulerSolver(body.masses, elastic + [load], dim=dim,
                                      tolerance=tolerance / STATIC_STEP, max_iterations=100)
         solution = solver.solve(q, still, STATIC_STEP, q.copy(), constraints)
         q = solution.q
-    reaction = solution.reaction.reshape(-1, 2)[body.base_nodes]
-    return StaticState(q.reshape(-1, 2), reaction.sum(axis=0))
+    reaction = solution.reaction.reshape(-1, dim)[body.base_nodes]
+    return StaticState(q.reshape(-1, dim), reaction.sum(axis=0))
