@@ -18,7 +18,6 @@ width, in barrier contact with the 3D fruit.
   pressure p wherever it lies against a face, so its area is F / p whatever presses it.
   On the solid apple (a Hertz-like contact) the pad's compliance spreads the contact.
 """
-import ipctk
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -33,6 +32,7 @@ from gripper_sim.core3d.finger_body3d import extruded_body
 from gripper_sim.core3d.mesh_geometry import signed_volumes
 from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
+from squeeze3d import squeeze
 
 PAD_3D = ['dimension=3', 'gripper.finger.type=solid_pad']
 T, H, W = 0.006, 0.04, 0.03
@@ -117,36 +117,9 @@ def test_the_pad_alone_has_the_closed_form_stiffness():
     assert 1.2 * uniaxial_stress < on_the_jaw < uniaxial_strain
 
 
-def _no_crossing_watch(sim):
-    """A list of the smallest distance (m) between the fruit's and the fingers' surfaces
-    at each step; raises AssertionError as soon as the two surfaces intersect."""
-    barrier = sim._barrier
-    distances = []
-
-    def check(result):
-        positions = np.vstack([result.positions, result.fingers.positions])
-        v = barrier.vertices(positions)
-        assert not ipctk.has_intersections(barrier._mesh, v)
-        distances.append(barrier.min_distance(positions))
-
-    sim.add_observer(check)
-    return distances
-
-
-def _squeeze(overrides, force=2.0, settle=0.1):
-    sim = Simulation3D(load_config(overrides=overrides))
-    watch = _no_crossing_watch(sim) if sim._soft is not None else []
-    sim.command_force(force)
-    for _ in range(80):
-        result = sim.step()
-        if abs(result.grip_force - force) < 0.01 * force and result.step > 5:
-            break
-    return sim, sim.run(settle), watch
-
-
 @pytest.fixture(scope='module')
 def default_apple_squeezes():
-    return _squeeze(PAD_3D), _squeeze(['dimension=3'])
+    return squeeze(PAD_3D), squeeze(['dimension=3'])
 
 
 def test_the_pad_squeezes_the_default_apple_without_crossing(default_apple_squeezes):
@@ -192,8 +165,8 @@ def test_on_the_turgid_apple_the_contact_area_is_force_over_turgor(default_apple
 
 def test_on_the_solid_apple_the_pad_spreads_the_contact():
     solid = ['fruit.model=solid', 'fruit.mesh.subdivisions=6', 'fruit.mesh.jaw_refinement=0.3']
-    _, pad, distances = _squeeze(PAD_3D + solid)
-    _, flat, _ = _squeeze(['dimension=3'] + solid)
+    _, pad, distances = squeeze(PAD_3D + solid)
+    _, flat, _ = squeeze(['dimension=3'] + solid)
     assert min(distances) > 0.0
     assert pad.deformation.contact_area > 1.3 * flat.deformation.contact_area
     assert pad.deformation.peak_contact_pressure < flat.deformation.peak_contact_pressure
