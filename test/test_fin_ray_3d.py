@@ -268,11 +268,11 @@ def test_the_markers_draw_the_3d_fin_ray():
 
 
 @pytest.mark.parametrize('overrides,match', [
-    (['gripper.finger.fin_ray.rib_count=40'], "'gripper.finger.fin_ray.rib_count'.*intersect"),
+    (['gripper.finger.fin_ray.rib_count=30', 'gripper.finger.fin_ray.rib_thickness=0.0025'],
+     "'gripper.finger.fin_ray.rib_count'.*intersect"),
     (['gripper.finger.fin_ray.beam_thickness=0'], "'gripper.finger.fin_ray.beam_thickness'"),
     (['gripper.finger.fin_ray.depth=0'], "'gripper.finger.fin_ray.depth'"),
-    (['gripper.finger.fin_ray.base_width=0.1', 'gripper.max_gap=0.15'],
-     "'gripper.finger.fin_ray.base_width'.*fill the jaw stroke"),
+    (['gripper.max_gap=0.05'], "'gripper.finger.fin_ray.base_width'.*fill the jaw stroke"),
     (['gripper.initial_gap=0.1'], "'gripper.initial_gap'.*does not fit"),
     (['gripper.finger.pad.enabled=true'], "'gripper.finger.pad.enabled'"),
     (['contact.restitution=0.3'], "'contact.restitution'"),
