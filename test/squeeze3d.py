@@ -2,6 +2,7 @@
 solid pad's and the Fin Ray's tests share them)."""
 import ipctk
 import numpy as np
+import pytest
 
 from gripper_sim.configuration import load_config
 from gripper_sim.core3d.simulation import Simulation3D
@@ -35,3 +36,19 @@ def squeeze(overrides, force=2.0, settle=0.1, max_steps=80):
         if abs(result.grip_force - force) < 0.01 * force and result.step > 5:
             break
     return sim, sim.run(settle), watch
+
+
+def assert_squeezed(sim, result, distances, force=2.0):
+    """The checks every deformable finger's squeeze passes: the grip met, no crossing and
+    no pair closer than 0 at any step, the grip as the base reaction (each jaw's wrench
+    along the closing axis), the fruit's force on the fingers equal and opposite to
+    theirs on the fruit's nodes they hold (obstacles 0 and 1; the table is the next)."""
+    assert result.grip_force == pytest.approx(force, rel=0.01)
+    assert len(distances) == result.step and min(distances) > 0.0
+    assert -result.left_wrench.force[0] == pytest.approx(force, rel=0.02)
+    assert result.right_wrench.force[0] == pytest.approx(force, rel=0.02)
+    fingers = result.fingers
+    assert fingers.positions.shape == (sim._soft.n_nodes, 3)
+    on_fingers = result.contact_obstacle <= 1
+    assert fingers.contact_forces.sum(axis=0) == pytest.approx(
+        -result.contact_forces[on_fingers].sum(axis=0), abs=1e-9)
