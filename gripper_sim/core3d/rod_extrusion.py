@@ -13,17 +13,22 @@ the bending exactly for cylindrical bending with any element length, as the 2D r
 
 Energies (``energies.Membrane`` and ``energies.HingeBending``, the fruit skin's):
 - membrane: St. Venant-Kirchhoff constant-strain triangles of the member's thickness;
-- bending along the members (hinges on the extrusion edges (j_s, j_s+1)): one hinge per
-  2D bending triple (i, j, k) and slice, between the triangles of the strips of (i, j)
-  and (j, k). Its k (J per rad^2) is the triple's 2D energy per unit depth over the
-  slice width |e|, EI / (2 l b) |e|, times 1 / (1 - nu^2): the members are plates as
-  wide as the finger, bent cylindrically (plane strain across the width: a strip of
-  width b, thickness t bent to radius R keeps its cross-section straight when
-  b^2 / (R t) >> 1, Searle's parameter; Timoshenko & Woinowsky-Krieger, Theory of Plates
-  and Shells, sec. 2), so the stiffness per unit width is D = E t^3 / (12 (1 - nu^2)),
-  not the 2D finger's E t^3 / 12 (plane stress). The rigid joints between members and the
-  clamp on the base keep their 2D meaning (``core.fin_ray``: the joint triples' series
-  stiffness);
+- bending along the members (hinges on the extrusion edges (j_s, j_s+1)): for each 2D
+  bending triple (i, j, k) and slice two hinges, (j_s, j_s+1; i_s, k_s) and
+  (j_s, j_s+1; i_s+1, k_s+1), each half the stiffness: taking both wings' corners in the
+  same section keeps a twist of the strip (w ~ x y) from changing the hinge's angle
+  (a hinge across the mesh's own triangles, one wing's corner in section s and the
+  other's in s + 1, couples the two, and the strip twisted under a tip load spread
+  evenly across its width, 50 % softer with 6 slices). The pair's k (J per rad^2) is
+  the triple's 2D energy per unit depth over the slice width |e|, EI / (2 l b) |e|,
+  times 1 / (1 - nu^2): the members are plates as wide as the finger, bent
+  cylindrically (plane strain across the width: a strip of width b and thickness t bent
+  to radius R keeps its cross-section straight but for its edges when b^2 / (R t) >> 1,
+  Searle's parameter; Timoshenko & Woinowsky-Krieger, Theory of Plates and Shells, ch. 1,
+  bending of long plates to a cylindrical surface), so the stiffness per unit width is
+  D = E t^3 / (12 (1 - nu^2)), not the 2D finger's E t^3 / 12 (plane stress). The rigid
+  joints between members and the clamp on the base keep their 2D meaning
+  (``core.fin_ray``: the joint triples' series stiffness);
 - bending across the width and twist (hinges on the other inner edges of each strip: the
   edges (a_s, b_s) between slices and the quads' diagonals): the discrete-shell hinges
   with D = E t^3 / (12 (1 - nu^2)). A deformation the same in every slice leaves these
@@ -94,8 +99,9 @@ def extruded_rod_body(section: FingerBody, width: float, slices: int) -> FingerB
     # bending along the members: the 2D triples, two hinges per slice
     i, j, k = section.bend_triples.T
     joint0, joint1 = j[:, None] + n * s, j[:, None] + n * (s + 1)
-    along = np.stack([np.stack([joint0, joint1, i[:, None] + n * (s + c), k[:, None] + n * (s + c)],
-                               axis=-1) for c in (0, 1)], axis=2).reshape(-1, 4)
+    along = np.stack([np.stack([joint0, joint1, i[:, None] + n * (s + c),
+                                k[:, None] + n * (s + c)], axis=-1) for c in (0, 1)],
+                     axis=2).reshape(-1, 4)
     lengths = (section.bend_lengths if len(section.bend_lengths) else 0.5 * (
         np.linalg.norm(section.rest_positions[j] - section.rest_positions[i], axis=1)
         + np.linalg.norm(section.rest_positions[k] - section.rest_positions[j], axis=1)))
