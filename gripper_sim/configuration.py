@@ -36,7 +36,7 @@ PROVENANCE_KEY = 'calibration'
 #: keys that select a preset (in a file's top level, a scenario, ``--set fruit=plum``)
 #: rather than set a value
 SELECTORS = ('fruit', 'finger')
-#: the finger types whose faces are rigid (the others are deformable bodies, 2D only)
+#: the finger types whose faces are rigid (the others are deformable bodies)
 RIGID_FINGERS = ('flat', 'arc', 'vgroove')
 
 
