@@ -83,12 +83,15 @@ $(STAMPS)/interface-%: $(VENV_STAMP) scripts/build_interface.sh scripts/fix_ros_
 	touch $@
 
 # numba compiles the fast-path kernels once and caches them next to the sources: do it
-# at install time so a user's first run does not pay the compile.
-$(KERNEL_STAMP): $(VENV_STAMP) gripper_sim/core/kernels.py gripper_sim/core/fast.py \
-		gripper_sim/core/energies/kernels.py gripper_sim/core/solver_kernels.py \
-		gripper_sim/core3d/kernels.py gripper_sim/core3d/energies/wrinkling_membrane.py \
-		gripper_sim/workflows/compile_kernels.py
+# at install time so a user's first run does not pay the compile. numba checks a cached
+# kernel against its own file only, not the modules of the functions compiled into it
+# (contact_kernels into kernels, ...): any change of the physics sources recompiles all.
+KERNEL_SOURCES := $(wildcard gripper_sim/core/*.py gripper_sim/core/energies/*.py \
+	gripper_sim/core3d/*.py gripper_sim/core3d/energies/*.py) \
+	gripper_sim/workflows/compile_kernels.py
+$(KERNEL_STAMP): $(VENV_STAMP) $(KERNEL_SOURCES)
 	@echo "== kernels: compiling the numba fast paths (2D, 3D) into their cache (~1-2 min, once)"
+	find gripper_sim -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(PY) -m gripper_sim.workflows.compile_kernels
 	touch $@
 

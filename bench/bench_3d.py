@@ -55,8 +55,6 @@ MODELS = {
 
 #: (function name in the profile, part) for the time breakdown
 PARTS = [
-    ('_constraints', 'contact: constraints'),
-    ('_update_contacts', 'contact: update (stick/slip/release/detect)'),
     ('_measure', 'measures (wrenches, areas, damage)'),
 ]
 _FACTOR = '<built-in method scipy.sparse.linalg._dsolve._superlu.gstrf>'
@@ -101,6 +99,8 @@ def breakdown(profiler, total: float) -> list[tuple[str, float]]:
             ('triangular solves (CG preconditioner, direct)', trisolve),
             ('Newton rest (filter S H S, CG, friction, search)',
              newton - energies - factor - trisolve)]
+    rows.append(('contact passes (constraints, updates, end velocities)',
+                 cum.get('contact_step', 0.0) - newton))
     for name, label in PARTS:
         rows.append((label, cum.get(name, 0.0)))
     rows.append(('total CPU (profiled)', total))
@@ -143,9 +143,10 @@ def bench(model: str, quick: bool) -> None:
           f'{sim.time / cpu:.3f} x real time on a quiet core')
     stats = getattr(sim.solver, 'stats', None)
     if stats and stats.get('systems'):
-        print('     per step: ' + ', '.join(f'{stats[k] / steps:.2f} {label}' for k, label in (
-            ('passes', 'Newton solves (contact passes)'), ('systems', 'Newton systems'),
-            ('factorisations', 'LU factorisations'), ('cg_iterations', 'CG iterations'))))
+        print(f'     per step: {sim.gap_solves / steps:.2f} solves of the jaw drive (gaps), '
+              + ', '.join(f'{stats[k] / steps:.2f} {label}' for k, label in (
+                  ('passes', 'Newton solves (contact passes)'), ('systems', 'Newton systems'),
+                  ('factorisations', 'LU factorisations'), ('cg_iterations', 'CG iterations'))))
     sim, summary, wall, cpu, profiler = grasp(overrides, chosen, profile=True)
     print(f'     CPU time by part (under the profiler, {cpu / steps * 1e3:.1f} ms per step):')
     for label, seconds in breakdown(profiler, cpu):
@@ -160,8 +161,10 @@ def one_grasp(model: str) -> dict:
     """The grasp of ``model`` at ``COMPARE_DT`` in this process: CPU s, steps, simulated
     s, outcome, peak grip force N."""
     sim, summary, _, cpu, _ = grasp(MODELS[model], COMPARE_DT)
+    stats = getattr(sim.solver, 'stats', {})
     return dict(cpu=cpu, steps=sim.last.step, time=sim.time, outcome=summary['outcome'],
-                peak=summary['peak_grip_force'])
+                peak=summary['peak_grip_force'], gap_solves=sim.gap_solves,
+                passes=stats.get('passes', 0), systems=stats.get('systems', 0))
 
 
 def side_by_side(models: list[str], trees: list[Path], rounds: int) -> None:
@@ -184,7 +187,8 @@ def side_by_side(models: list[str], trees: list[Path], rounds: int) -> None:
           f'{min(loads):.1f}-{max(loads):.1f} on {os.cpu_count()} cores; CPU time '
           '(time.process_time) of the grasp, per step; real-time factor = simulated s / CPU s')
     print(f'{"model":6} {"tree":40} {"outcome":8} {"peak N":>7} {"steps":>5} '
-          f'{"CPU ms/step (median, min-max)":>30} {"real-time factor per core":>26}')
+          f'{"CPU ms/step (median, min-max)":>30} {"real-time factor per core":>26}  '
+          'per step: gap solves, contact passes, Newton systems')
     for model in models:
         for tree in trees:
             rows = runs[(model, tree)]
@@ -194,7 +198,9 @@ def side_by_side(models: list[str], trees: list[Path], rounds: int) -> None:
                   f'{rows[0]["peak"]:7.4f} {rows[0]["steps"]:5d} '
                   f'{statistics.median(per_step):12.1f} ({min(per_step):.1f}-{max(per_step):.1f})'
                   f'{"":6} {statistics.median(factors):8.3f} '
-                  f'({min(factors):.3f}-{max(factors):.3f})')
+                  f'({min(factors):.3f}-{max(factors):.3f})  '
+                  + ', '.join(f'{rows[0].get(k, 0) / rows[0]["steps"]:.2f}'
+                              for k in ('gap_solves', 'passes', 'systems')))
 
 
 def main(argv=None) -> int:

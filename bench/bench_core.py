@@ -90,6 +90,7 @@ def _op_loops():
     """numba loops timing single kernel operations (compiled on first use)."""
     from numba import njit
 
+    from gripper_sim.core import contact_kernels
     from gripper_sim.core import kernels as k
 
     @njit(cache=True)
@@ -141,22 +142,20 @@ def _op_loops():
 
     @njit(cache=True)
     def contact_passes(reps, obstacle, mode, normal_force, bounce, secondary, secondary_bounce,
-                       x_n, v_n, reaction, face_par, face_dyn, surface, dt, v_corr, threshold,
-                       v_min):
+                       x_n, v_n, reaction, faces, surface, dt, v_corr, threshold, v_min):
         n = x_n.shape[0]
         start, filters = np.empty((n, 2)), np.empty((n, 2, 2))
-        frn, frt = np.empty(n, np.int64), np.empty((n, 2))
-        frb, frs = np.empty(n), np.empty(n)
+        frn, frt = np.empty(n, np.int64), np.empty((n, 1, 2))
+        frb, frs = np.empty(n), np.empty((n, 1))
         released, toggled = np.zeros(n, np.bool_), np.zeros(n, np.bool_)
         changed = 0
         for _ in range(reps):
-            o, m, nf = obstacle.copy(), mode.copy(), normal_force.copy()
-            b, s, sb = bounce.copy(), secondary.copy(), secondary_bounce.copy()
-            k.contact_constraints(o, m, nf, s, x_n, x_n, face_par, face_dyn, dt, v_corr,
-                                  start, filters, frn, frt, frb, frs)
-            changed += k.update_contacts(o, m, nf, b, s, sb, x_n, x_n, v_n, reaction, face_par,
-                                         face_dyn, surface, dt, threshold, v_min, released,
-                                         toggled)
+            state = (obstacle.copy(), mode.copy(), normal_force.copy(), bounce.copy(),
+                     secondary.copy(), secondary_bounce.copy())
+            contact_kernels.constraints(state, faces, x_n, x_n, dt, v_corr, start, filters,
+                                        frn, frt, frb, frs)
+            changed += contact_kernels.update(state, faces, x_n, x_n, v_n, reaction, surface,
+                                              dt, threshold, v_min, 0.0, released, toggled)
         return changed
 
     @njit(cache=True)
@@ -201,6 +200,7 @@ def _best_time(fn, reps: int) -> float:
 
 def kernel_split(sim: Simulation) -> dict:
     """Seconds per operation at the current state: evaluations, factorisation, solve."""
+    from gripper_sim.core import contact_kernels
     from gripper_sim.core import kernels as k
     evaluations, factorisations, contact_passes, measures = _op_loops()
     path = sim._fast
@@ -208,14 +208,14 @@ def kernel_split(sim: Simulation) -> dict:
     x_n, v_n = sim.q, sim.v
     c = sim.contacts
     start, filters = np.empty((n, 2)), np.empty((n, 2, 2))
-    frn, frt = np.empty(n, np.int64), np.empty((n, 2))
-    frb, frs = np.empty(n), np.empty(n)
+    frn, frt = np.empty(n, np.int64), np.empty((n, 1, 2))
+    frb, frs = np.empty(n), np.empty((n, 1))
     face_par, face_dyn = path._face_arrays()
-    n_fr = k.contact_constraints(c.obstacle, c.mode, c.normal_force, c.secondary, x_n,
-                                 x_n + dt * v_n, face_par, face_dyn, dt, 0.05, start, filters,
-                                 frn, frt, frb, frs)
-    frn, frt = frn[:n_fr].copy(), frt[:n_fr].copy()
-    frb, frs = frb[:n_fr].copy(), frs[:n_fr].copy()
+    faces = k.contact_faces(face_par, face_dyn)
+    n_fr = contact_kernels.constraints(c.arrays(), faces, x_n, x_n + dt * v_n, dt, 0.05, start,
+                                       filters, frn, frt, frb, frs)
+    frn, frt = frn[:n_fr].copy(), frt[:n_fr, 0].copy()
+    frb, frs = frb[:n_fr].copy(), frs[:n_fr, 0].copy()
     model = path.model
     energy = (model['edges'], model['spar'], model['triples'], model['bpar'], model['ring'],
               model['press'], model['flesh'], path.gravity_grad, model['pos'], model['nbw'])
@@ -225,8 +225,7 @@ def kernel_split(sim: Simulation) -> dict:
     fac = (q, x_n.ravel(), dt, path.masses2, path.fpar[k.F_ALPHA], path.fpar[k.F_BETA],
            filters, frn, frt, frb, frs) + energy
     contact = (c.obstacle, c.mode, c.normal_force, c.bounce_speed, c.secondary,
-               c.secondary_bounce, x_n, v_n, sim.contact_forces, face_par, face_dyn,
-               path.surface, dt,
+               c.secondary_bounce, x_n, v_n, sim.contact_forces, faces, path.surface, dt,
                sim.config['contact.max_correction_speed'],
                sim.config['contact.release_threshold'], max(5 * sim.gravity.g * dt, 1e-3))
     damage = path._damage_inputs()

@@ -187,6 +187,14 @@ class SimClient:
         if run:
             self.pause(False)
 
+    def caught_up(self, *suffixes: str, timeout: float = 60.0) -> None:
+        """Until the latest messages on ``suffixes`` are at least as recent (sim time) as
+        the latest ``fruit/state``: topics arrive independently, and under load one can
+        lag another by several steps."""
+        now = self.stamp_ns('fruit/state')
+        self.spin_until(lambda: all((self.stamp_ns(s) or -1) >= now for s in suffixes),
+                        timeout, f'{", ".join(suffixes)} to catch up with fruit/state')
+
     def wait_sim_time(self, seconds: float, timeout: float = 60.0) -> None:
         """Until the node's published sim time has advanced by ``seconds``."""
         start = self.spin_until(lambda: 'fruit/state' in self.latest, timeout) and \

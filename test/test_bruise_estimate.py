@@ -69,7 +69,7 @@ def test_a_deformable_finger_patch_gives_hertz_with_its_measured_width(spread):
     normal = load * share / share.sum()
     obstacle = np.where(on, 0, -1)
     assert on.sum() >= 10
-    [(contact, _, near)] = tracker.contacts(x, normal, obstacle)
+    [(contact, near)] = tracker.contacts(x, normal, obstacle)
     k2 = tracker.rest_curvature[near]
     in_plane = contact.equivalent_radius ** 2 * k2  # Re = sqrt(R1' R2)
     assert in_plane == pytest.approx(spread ** 2 * radius, rel=0.03)

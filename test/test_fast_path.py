@@ -240,8 +240,9 @@ def test_shaped_fingers_and_pads_match_the_reference_path(finger):
 
 
 def test_steps_the_kernel_cannot_do_take_the_generic_path_with_pads(monkeypatch):
-    """A step the kernel reports it cannot factorise (kernels.UNSUPPORTED: a node held by
-    two oblique faces) is done by the generic path, the pads set up and recorded for it:
+    """A step the kernel reports it cannot factorise (kernels.UNSUPPORTED: a filter that
+    is not symmetric, which the contact passes no longer give, so the test makes every
+    step report it) is done by the generic path, the pads set up and recorded for it:
     the same trajectory as a simulation on the generic path alone (the same solver), and
     the steps are counted."""
     overrides = ['fruit.nodes=32', 'gripper.finger.pad.enabled=true',
@@ -387,48 +388,3 @@ def test_faces_the_kernels_do_not_model_fall_back_to_the_reference_path(monkeypa
     assert sim._fast is not None and not sim._fast.applies()
     sim.step()  # the reference path
     assert sim._fast.counts.sum() == 0
-
-
-@pytest.mark.parametrize('seed', [0, 1, 2])
-def test_damage_kernel_matches_the_damage_tracker(seed):
-    from gripper_sim.core.damage import DamageTracker
-    config = load_config(overrides=['fruit.nodes=40', 'fruit.bruise_pressure=2e4'])
-    fruit = build_fruit(config)
-    n_faces = 4
-    groups, curvature = [0, 0, 1, 2], [0.0, -20.0, 5.0, 0.0]  # faces 0, 1 one body
-    padded = [False, True, True, False]
-    reference = DamageTracker(fruit, config, groups, curvature, padded)
-    tracker = DamageTracker(fruit, config, groups, curvature, padded)
-    rng = np.random.default_rng(seed)
-    n = fruit.n_nodes
-    for _ in range(3):
-        x = fruit.rest_positions + rng.normal(scale=2e-4, size=(n, 2))
-        obstacle = -np.ones(n, np.int64)
-        # runs of held nodes, one across the start of the outline
-        for start, length in ((n - 3, 6), (10, 5), (20, 4)):
-            obstacle[(start + np.arange(length)) % n] = rng.integers(0, n_faces)
-        normal = np.where(obstacle >= 0, rng.uniform(0.0, 2.0, n), 0.0)
-        expected = reference.update(x, normal, obstacle, 0.0)
-        covered = tracker.covered.copy()
-        node_pressure = np.zeros(n)
-        patches = np.zeros((n, kernels.P_SIZE))
-        count, pressure, length = kernels.damage_update(
-            x, normal, obstacle, np.asarray(fruit.surface, np.int64),
-            np.array(groups, np.int64), np.array(curvature), np.array(padded, float),
-            tracker.rest_curvature, tracker.bruise_pressure, tracker.rigid_modulus,
-            tracker.pad_modulus, covered, node_pressure, patches)
-        tracker.covered = covered
-        assert count == len(expected.contacts) >= 2
-        assert pressure == pytest.approx(expected.pressure, rel=1e-12)
-        assert length == pytest.approx(expected.bruised_length, rel=1e-12, abs=1e-15)
-        assert length > 0
-        np.testing.assert_allclose(node_pressure, expected.node_pressure, rtol=1e-12, atol=1e-6)
-        for row, contact in zip(patches[:count], expected.contacts):
-            assert row[kernels.P_BODY] == contact.body
-            np.testing.assert_allclose(
-                row[[kernels.P_LOAD, kernels.P_RADIUS, kernels.P_PEAK, kernels.P_RE,
-                     kernels.P_MODULUS]],
-                [contact.load, contact.radius, contact.peak_pressure,
-                 contact.equivalent_radius, contact.modulus], rtol=1e-12)
-            np.testing.assert_allclose(row[[kernels.P_CX, kernels.P_CZ]], contact.centre,
-                                       rtol=0, atol=1e-15)

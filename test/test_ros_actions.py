@@ -125,9 +125,11 @@ def test_a_new_goal_preempts_the_active_grasp_and_cancel_holds_the_jaws(client):
     assert 'canceled' in result.message and not result.success
     # the jaws are held: gap and lift stay where the cancel left them
     client.wait_sim_time(0.05)
+    client.caught_up('joint_states')
     gap = client.latest['fruit/state'].gap
     lift = client.latest['joint_states'].position[2]
     client.wait_sim_time(0.3)
+    client.caught_up('joint_states')
     assert client.latest['fruit/state'].gap == pytest.approx(gap, abs=2e-5)
     assert client.latest['joint_states'].position[2] == pytest.approx(lift, abs=2e-5)
     assert client.latest['fruit/state'].grip_force > 3.0   # still gripping

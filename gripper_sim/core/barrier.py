@@ -14,26 +14,33 @@ ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
   slip speed eps_v, added to the step as dt D(v) with v = (x - x_n) / dt;
 - every Newton line search starts from the continuous-collision bound: the largest
   fraction of the step along which no primitive crosses another (their section 4).
-The candidates (its sweep-and-prune broad phase), barrier, friction potential and CCD
-are the IPC Toolkit's (``ipctk``, MIT). One implementation for both dimensions (``dimension`` d = 2 or 3). Its collision
-mesh holds the fruit's surface: in 2D the outline (the surface nodes and skin edges), in
-3D the surface nodes, edges and triangles; and every rigid face: in 2D one segment per
-``FlatFace`` (jaw faces, table, walls), in 3D two triangles per ``Plate`` (its
-rectangle), each moving with its face; infinite faces (table, walls) become segments or
-squares ``INFINITE_FACE_LENGTH`` across. Only pairs of the fruit and an obstacle collide
-(no self-contact of the surface yet), so the barrier's Hessian stays on a fixed pattern:
-the node blocks of the skin edges (2D) or of the surface triangles (3D), which hold
-every vertex-face, edge-edge and face-vertex pair with a rigid face.
+The candidates (its sweep-and-prune broad phase), friction potential and CCD are the IPC
+Toolkit's (``ipctk``, MIT), and so is the barrier in 3D; in 2D the barrier over ipctk's
+candidates is one compiled pass (``core.barrier_kernels``, equal to ipctk's to 1e-10),
+its candidates sought once and kept while no vertex moves further than
+``CANDIDATE_MARGIN``. One implementation for both dimensions (``dimension`` d = 2 or
+3). Its collision mesh holds the fruit's surface: in 2D the outline (the surface nodes
+and skin edges), in 3D the surface nodes, edges and triangles; and every rigid face: in
+2D one segment per ``FlatFace`` (jaw faces, table, walls), in 3D two triangles per
+``Plate`` (its rectangle), each moving with its face; infinite faces (table, walls)
+become segments or squares ``INFINITE_FACE_LENGTH`` across. Only pairs of the fruit and
+an obstacle collide (no self-contact of the surface yet), so the barrier's Hessian stays
+on a fixed pattern: the node blocks of the skin edges (2D) or of the surface triangles
+(3D), which hold every vertex-face, edge-edge and face-vertex pair with a rigid face.
 
 Deformable bodies (``SoftBody``: the soft fingers, ``core.soft_fingers``) join the
 collision mesh with their outlines, whose vertices are degrees of freedom too: the
 contact is two-way, both bodies' nodes feel the barrier and the friction (soft-on-soft
-contact). A pair may couple any node of the fruit's outline with any of a soft body's,
-so the Hessian's fixed pattern holds every such pair of nodes (beside the outlines'
-edges); the solver's fast path keeps one pattern as for rigid faces. Still only pairs
-with the fruit collide: the fingers do not touch each other, the table or themselves.
-In 3D a soft body's surface joins as triangles (``SoftBody.triangles``), and its pairs
-with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
+contact). A pair may couple any node of the fruit's outline with any of a soft body's;
+the Hessian's fixed pattern (the solver's fast path keeps one, as for rigid faces) holds
+the outlines' edges and the likely pairs (``pairs``: in 2D those ``SoftFingers``
+chooses), or by default every pair; a pair outside it keeps its exact gradient, its
+coupling is left out of the Newton matrix. Only pairs with the fruit collide: the
+fingers do not touch each other or the table. A finger's self-contact (its beams and
+ribs against each other, ``FingerBody.self_contact``) is a second barrier of this class
+(``self_contact``): each soft body against itself alone, no fruit, no faces, no
+friction. In 3D a soft body's surface joins as triangles (``SoftBody.triangles``), and
+its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 """
 from __future__ import annotations
 
@@ -44,6 +51,8 @@ import ipctk
 import numpy as np
 
 from gripper_sim.core import contact as cm
+from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
+                                              nearest_partners)
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
@@ -61,6 +70,13 @@ EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
 #: the candidates of a Newton step serve positions this fraction of dhat outside the box
 #: each vertex sweeps along it (round-off of q + s dq), their boxes inflated by as much
 SWEPT_MARGIN = 1e-2
+#: m, how far apart a self-contact's primitives are sought at the start of a step
+#: (``BarrierContact.quiet``): a step whose vertices stay within half the gap found, less
+#: dhat, of their start has no pair within dhat and skips the barrier's work
+QUIET_SEARCH = 1e-3
+#: m, the compiled barrier's candidates (2D) are sought this much beyond dhat / 2 around
+#: each primitive and serve while every vertex stays within it of where they were sought
+CANDIDATE_MARGIN = 1e-4
 
 
 @dataclass(frozen=True)
@@ -165,6 +181,13 @@ class BarrierContact(Energy):
         bodies: the soft bodies (``SoftBody``) whose outlines touch the fruit (2D).
         dimension: d, 2 or 3.
         triangles: (n_t, 3) the surface's triangles (node indices, outward), 3D only.
+        pairs: (p, 2) the node pairs the Hessian's pattern holds (2D; ``pattern_pairs``):
+            the likely ones; the coupling of a pair outside them is left out of the
+            Newton matrix (``drop_outside_pattern``). None: every pair of a fruit outline
+            node and a soft body's outline node.
+        self_contact: the soft bodies' self-contact instead (2D): each body's outline
+            against itself (a vertex and an edge of the same body that do not share a
+            node), no fruit (``surface`` and ``skin_edges`` empty), no faces.
     """
 
     elastic = False
@@ -177,8 +200,17 @@ class BarrierContact(Energy):
 
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
                  settings: BarrierSettings, bodies: tuple = (), dimension: int = 2,
-                 triangles: np.ndarray | None = None):
+                 triangles: np.ndarray | None = None, pairs: np.ndarray | None = None,
+                 self_contact: bool = False):
         self.dimension = d = dimension
+        self.self_contact = bool(self_contact)
+        #: (p, 2) the node pairs whose coupling the Hessian's pattern holds (2D): (fruit
+        #: node, soft body node), or with ``self_contact`` two nodes of one body; None:
+        #: every pair of a fruit outline node and a soft body's outline node
+        self.pattern_pairs = (None if pairs is None
+                              else np.asarray(pairs, np.int64).reshape(-1, 2))
+        if pairs is not None:
+            self.drop_outside_pattern = True
         self.n_dof = d * n_nodes
         self.surface = np.asarray(surface, dtype=np.int64)
         self.bodies = tuple(bodies)
@@ -204,6 +236,7 @@ class BarrierContact(Energy):
         self.friction = ipctk.FrictionPotential(settings.friction_smoothing)
         n_v = self.vertex_nodes.size
         self.vertex_dofs = element_dofs(self.vertex_nodes[:, None], d).ravel()
+        self._vertex_dof_pairs = self.vertex_dofs.reshape(-1, d)
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
         #: (solvers that keep one sparsity pattern read it): the fruit's surface triangles
         #: (3D) or skin edges (2D; or its lone surface nodes), and with soft bodies their
@@ -234,6 +267,12 @@ class BarrierContact(Energy):
         self._swept = None
         #: per Hessian part, its last CSC structure and ``_locate``'s answer for it
         self._entry_cache = {}
+        #: self-contact only: (the deformable vertices at the step's start (n_v, d) m, how
+        #: far m each may move from there with no pair coming within dhat), or None
+        self._quiet = None
+        #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
+        #: they were sought, the (edge, vertex) pairs (k, 2)), or None
+        self._pairs = None
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -246,10 +285,13 @@ class BarrierContact(Energy):
         fruit = (self.surface[self.fruit_edges] if self.fruit_edges.size
                  else np.stack([self.surface, self.surface], axis=1))
         nodes = [fruit] + [self.vertex_nodes[edges] for edges in self.body_edges]
-        for body in self.bodies:
-            outline = np.asarray(body.nodes, np.int64)
-            nodes.append(np.stack([np.repeat(self.surface, outline.size),
-                                   np.tile(outline, self.surface.size)], axis=1))
+        if self.pattern_pairs is not None:
+            nodes.append(self.pattern_pairs)
+        else:
+            for body in self.bodies:
+                outline = np.asarray(body.nodes, np.int64)
+                nodes.append(np.stack([np.repeat(self.surface, outline.size),
+                                       np.tile(outline, self.surface.size)], axis=1))
         return np.vstack(nodes)
 
     def _hessian_pattern(self) -> np.ndarray:
@@ -282,12 +324,22 @@ class BarrierContact(Energy):
                                    (offsets + face_triangles).reshape(-1, 3)]).astype(np.int32)
             self._mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges),
                                              np.asfortranarray(triangles))
-        # the fruit against everything else: soft bodies and faces share one patch
-        patches = np.concatenate([(self.vertex_body > 0).astype(np.int32),
-                                  np.ones(c * k, np.int32)])
-        self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
+        if self.self_contact:
+            # a body's vertices with its own edges only (ipctk skips an edge's own ends)
+            self._mesh.can_collide = ~ipctk.make_vertex_patches_filter(
+                self.vertex_body.astype(np.int32))
+        else:
+            # the fruit against everything else: soft bodies and faces share one patch
+            patches = np.concatenate([(self.vertex_body > 0).astype(np.int32),
+                                      np.ones(c * k, np.int32)])
+            self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
         self._n_faces = k
         self._last_collisions = None
+        #: the mesh's edges (n_e, 2) and each vertex's state dofs (n_v + c k, d), -1 for
+        #: the faces' corners (for the compiled barrier)
+        self._mesh_edges = edges.astype(np.int64)
+        self._mesh_dofs = -np.ones((rest.shape[0], self.dimension), np.int64)
+        self._mesh_dofs[:self.vertex_nodes.size] = self.vertex_dofs.reshape(-1, self.dimension)
 
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
         """(n_v + c k, d) m, the collision mesh's vertices: the surfaces (the fruit's, the
@@ -312,12 +364,11 @@ class BarrierContact(Energy):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
         self._swept = None
+        self._pairs = None
         self._last_terms = None
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
-        collisions = ipctk.NormalCollisions()
-        collisions.build(self._mesh, start, self.settings.dhat, broad_phase=self._broad_phase)
         # per vertex; a pair takes the larger one: the face's or the soft body's, the
         # fruit's being 0
         body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
@@ -329,9 +380,35 @@ class BarrierContact(Energy):
                                np.repeat([f.kinetic_friction for f in new_faces],
                                          self.corners_per_face)])
         self._tangential = ipctk.TangentialCollisions()
+        collisions = ipctk.NormalCollisions()
+        if np.any(mu_s > 0) or np.any(mu_k > 0):
+            collisions.build(self._mesh, start, self.settings.dhat,
+                             broad_phase=self._broad_phase)
         if len(collisions):
             self._tangential.build(self._mesh, start, collisions, self.potential, mu_s, mu_k,
                                    max)
+        self._quiet = None
+        #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
+        #: they were sought, the (edge, vertex) pairs (k, 2)), or None
+        self._pairs = None
+        if self.self_contact:
+            near = ipctk.NormalCollisions()
+            near.build(self._mesh, start, QUIET_SEARCH, broad_phase=self._broad_phase)
+            gap = (float(np.sqrt(near.compute_minimum_distance(self._mesh, start)))
+                   if len(near) else QUIET_SEARCH)
+            if gap > 2.0 * self.settings.dhat:
+                self._quiet = (start[:self.vertex_nodes.size].copy(),
+                               0.5 * (gap - self.settings.dhat))
+
+    def quiet(self, q: np.ndarray) -> bool:
+        """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
+        self-contact whose vertices all lie within the step's free reach of their start
+        (each vertex and edge moved by at most that reach: their gap shrank by at most
+        twice it). Always False for the fruit's barrier."""
+        if self._quiet is None:
+            return False
+        start, reach = self._quiet
+        return largest_move(q, self._vertex_dof_pairs, start) <= reach
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
@@ -340,18 +417,25 @@ class BarrierContact(Energy):
         the gradient (N) into ``gradient``; returns (value J, the Hessian's entries as
         ``_pattern_entries`` gives them, or None). Without the Hessian, the values and
         gradients of the last evaluation are reused when ``q`` is the same."""
+        if self.quiet(q):
+            return 0.0, ((np.zeros(0, np.int64), np.zeros(0)) if hessian else None)
         last = self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
+        compiled = None  # the compiled barrier's Hessian entries (2D)
         if not hessian and last is not None and np.array_equal(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
         else:
             mesh = self._mesh
             v = self.vertices(q.reshape(-1, self.dimension))
-            collisions = self._collisions(v)
             n_d = self.vertex_dofs.size
             barrier_value = friction_value = 0.0
             barrier_gradient = friction_gradient = None
-            if len(collisions):
+            if self.dimension == 2:
+                barrier_value, barrier_gradient, compiled = self._compiled_barrier(q, v,
+                                                                                   hessian)
+                if not np.isfinite(barrier_value):
+                    return np.inf, None
+            elif len(collisions := self._collisions(v)):
                 barrier_value = float(self.potential(collisions, mesh, v))
                 if not np.isfinite(barrier_value):
                     return np.inf, None
@@ -380,7 +464,40 @@ class BarrierContact(Energy):
                 gradient[self.vertex_dofs] += friction_gradient
         if not hessian:
             return value, None
-        return value, self._pattern_entries(parts, scales)
+        where, vals = self._pattern_entries(parts, scales)
+        if compiled is not None:
+            where = np.concatenate([where, compiled[0]])
+            vals = np.concatenate([vals, compiled[1]])
+        return value, (where, vals)
+
+    def _compiled_barrier(self, q: np.ndarray, v: np.ndarray, hessian: bool):
+        """The barrier at positions ``q`` (2 n,) m, the collision mesh's vertices ``v`` (2D,
+        ``barrier_kernels``) over the candidates of ``_candidate_pairs``: (value J,
+        gradient (n_d,) N over ``vertex_dofs`` or None, the Hessian's entries (pattern
+        key indices, values N/m) or None)."""
+        candidates = self._candidate_pairs(q, v)
+        if not len(candidates):
+            return 0.0, None, None
+        gradient = np.zeros(self.n_dof)
+        size = 36 * len(candidates) if hessian else 0
+        index, values = np.empty(size, np.int64), np.empty(size)
+        value, written = edge_vertex_barrier(
+            v, self._mesh_edges, candidates, self.settings.dhat, self.settings.stiffness,
+            self._mesh_dofs, gradient, hessian,
+            self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys,
+            self.n_dof, index, values)
+        if not np.isfinite(value):
+            return np.inf, None, None
+        entries = None
+        if hessian:
+            index, values = index[:written], values[:written]
+            inside = index >= 0
+            if not np.all(inside):
+                if not self.drop_outside_pattern:
+                    raise AssertionError('barrier Hessian entry outside its pattern')
+                index, values = index[inside], values[inside]
+            entries = (index, values)
+        return value, gradient[self.vertex_dofs], entries
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
         """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
@@ -451,6 +568,8 @@ class BarrierContact(Energy):
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
         primitive of the surface crosses a face's and no face's crosses the surface's
         (CCD). Keeps the step's collision candidates for the line search along it."""
+        if self.quiet(q) and self.quiet(q + dq):
+            return 1.0
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices((q + dq).reshape(-1, self.dimension))
         candidates = ipctk.Candidates()
@@ -472,19 +591,42 @@ class BarrierContact(Energy):
         if last is not None and np.array_equal(last[0], v):
             return last[1]
         collisions = ipctk.NormalCollisions()
-        swept = self._swept
-        if swept is not None:
-            low, high, candidates = swept
-            slack = SWEPT_MARGIN * self.settings.dhat
-            inside = v[:low.shape[0]]
-            if not (np.all(inside >= low - slack) and np.all(inside <= high + slack)):
-                swept = None
-        if swept is not None:
-            collisions.build(candidates, self._mesh, v, self.settings.dhat)
-        else:
-            collisions.build(self._mesh, v, self.settings.dhat, broad_phase=self._broad_phase)
+        collisions.build(self._candidates(v), self._mesh, v, self.settings.dhat)
         self._last_collisions = (v.copy(), collisions)
         return collisions
+
+    def _candidates(self, v: np.ndarray) -> ipctk.Candidates:
+        """The candidates (ipctk) holding every pair closer than dhat at the collision
+        mesh's vertices ``v``: the last Newton step's when every deformable vertex lies in
+        the box it swept along that step (the faces stand still within a step), else
+        those of a new broad phase. Boxes inflated by dhat / 2 each meet for every pair
+        closer than dhat."""
+        swept = self._swept
+        if swept is not None:
+            low, high, kept = swept
+            slack = SWEPT_MARGIN * self.settings.dhat
+            inside = v[:low.shape[0]]
+            if np.all(inside >= low - slack) and np.all(inside <= high + slack):
+                return kept
+        candidates = ipctk.Candidates()
+        candidates.build(self._mesh, v, 0.5 * self.settings.dhat, self._broad_phase)
+        return candidates
+
+    def _candidate_pairs(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(k, 2) the (edge, vertex) pairs holding every pair closer than dhat at positions
+        ``q`` (n d,) m, the collision mesh's vertices ``v``: ipctk's candidates of boxes
+        inflated by dhat / 2 + ``CANDIDATE_MARGIN``, sought again once a vertex has moved
+        further than the margin from where they were sought (each side of a pair moved
+        by at most the margin: the pair came at most twice it closer)."""
+        kept = self._pairs
+        if kept is None or largest_move(q, self._vertex_dof_pairs, kept[0]) > CANDIDATE_MARGIN:
+            candidates = ipctk.Candidates()
+            candidates.build(self._mesh, v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN,
+                             self._broad_phase)
+            pairs = np.array([(c.edge_id, c.vertex_id) for c in candidates.ev_candidates],
+                             np.int64).reshape(-1, 2)
+            kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs)
+        return kept[1]
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
@@ -518,6 +660,8 @@ class BarrierContact(Energy):
     def reachable(self, x_n: np.ndarray, start: np.ndarray) -> bool:
         """Whether the straight paths from ``x_n`` (the faces at the start of the step) to
         ``start`` (the faces at its end), both (n, d) m, cross nothing and end apart."""
+        if self.quiet(start.ravel()):
+            return True
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
         if not np.array_equal(v0, v1):  # nothing that stands still crosses anything
@@ -545,34 +689,14 @@ class BarrierContact(Energy):
         at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
         soft bodies); -1 for the nodes in no pair. 2D."""
         v = self.vertices(q.reshape(-1, 2))
-        collisions = self._collisions(v)
         n_v = self.vertex_nodes.size
-        n_b = len(self.bodies)
         # the body of every collision-mesh vertex: outlines, then the faces' end points
-        owner = np.concatenate([self.vertex_body,
-                                1 + n_b + np.arange(v.shape[0] - n_v) // self.corners_per_face])
-        edges = self._mesh.edges
-        ev = np.array([(c.vertex_id, c.edge_id) for c in collisions.ev_collisions],
-                      np.int64).reshape(-1, 2)
-        vv = np.array([(c.vertex0_id, c.vertex1_id) for c in collisions.vv_collisions],
-                      np.int64).reshape(-1, 2)
-        vertex, ends = ev[:, 0], edges[ev[:, 1]].astype(np.int64)     # (p,), (p, 2)
-        gap = np.min(np.linalg.norm(v[ends] - v[vertex, None], axis=2), axis=1)
-        gap_vv = np.linalg.norm(v[vv[:, 1]] - v[vv[:, 0]], axis=1)
-        # each pair's (node, other side, distance) rows, in the order of the pairs: the
-        # vertex against each end, each end against the vertex; the vv pair both ways
-        a = np.concatenate([np.stack([vertex, vertex, ends[:, 0], ends[:, 1]], 1).ravel(),
-                            vv.ravel()])
-        b = np.concatenate([np.stack([ends[:, 0], ends[:, 1], vertex, vertex], 1).ravel(),
-                            vv[:, ::-1].ravel()])
-        distance = np.concatenate([np.repeat(gap, 4), np.repeat(gap_vv, 2)])
-        keep = a < n_v
-        a, b, distance = self.vertex_nodes[a[keep]], owner[b[keep]], distance[keep]
-        # per node its nearest pair (the first of equally near ones)
-        order = np.lexsort((np.arange(a.size), distance, a))
-        first = order[np.r_[True, a[order][1:] != a[order][:-1]]] if a.size else order
+        owner = np.concatenate([self.vertex_body, 1 + len(self.bodies)
+                                + np.arange(v.shape[0] - n_v) // self.corners_per_face])
+        other = nearest_partners(v, self._mesh_edges, self._candidate_pairs(q, v),
+                                 self.settings.dhat, n_v)
         partner = -np.ones(self.n_dof // 2, np.int64)
-        partner[a[first]] = b[first]
+        partner[self.vertex_nodes] = np.where(other >= 0, owner[other], -1)
         return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
@@ -657,11 +781,13 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
 
 def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
-                   new_faces: list, dt: float) -> StepOutcome:
+                   new_faces: list, dt: float,
+                   self_contact: BarrierContact | None = None) -> StepOutcome:
     """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) of the fruit and the soft
     bodies in the barrier (``barrier.bodies``), nodes ``fixed`` (k,) prescribed at
     ``fixed_targets`` (k, d) m (a finger's base on its jaw: zero filters, the modified
-    mass method), the faces moving from ``old_faces`` to ``new_faces``.
+    mass method), the faces moving from ``old_faces`` to ``new_faces``; with the soft
+    bodies' ``self_contact`` barrier (among the solver's energies too) if given.
 
     The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
     nothing, else from x_n (each with the fixed nodes at their targets and the outline
@@ -679,12 +805,16 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     """
     n, d = x_n.shape
     barrier.begin_step(x_n, old_faces, new_faces, dt)
+    barriers = [barrier]
+    if self_contact is not None:
+        self_contact.begin_step(x_n, [], [], dt)
+        barriers.append(self_contact)
     pushed = barrier.pushed_start(x_n, old_faces, new_faces)
     start = None
     for candidate in (pushed + dt * v_n, pushed):
         candidate = candidate.copy()
         candidate[fixed] = fixed_targets
-        if barrier.reachable(x_n, candidate):
+        if all(b.reachable(x_n, candidate) for b in barriers):
             start = candidate
             break
     if start is None:

@@ -57,6 +57,12 @@ class ContactState:
                             self.bounce_speed.copy(), self.secondary.copy(),
                             self.secondary_bounce.copy())
 
+    def arrays(self) -> tuple:
+        """(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce): the
+        state as the compiled passes take it (``core.contact_kernels``), the same arrays."""
+        return (self.obstacle, self.mode, self.normal_force, self.bounce_speed,
+                self.secondary, self.secondary_bounce)
+
     def release(self, nodes) -> None:
         self.obstacle[nodes] = -1
         self.mode[nodes] = FREE

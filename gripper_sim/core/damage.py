@@ -45,6 +45,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from gripper_sim.core.energies.bending import turning_angles
 
@@ -116,6 +117,7 @@ def contact_modulus(youngs_modulus: float, poisson_ratio: float,
     return 1.0 / compliance
 
 
+@njit(cache=True, error_model='numpy')
 def hertz(load: float, equivalent_radius: float, modulus: float) -> tuple[float, float]:
     """(a, p0): Hertz contact radius (m) and peak pressure (Pa) of a load (N)."""
     if load <= 0:
@@ -124,6 +126,155 @@ def hertz(load: float, equivalent_radius: float, modulus: float) -> tuple[float,
     return a, 3.0 * load / (2.0 * math.pi * a * a)
 
 
+# ---------------------------------------------------------------------- the rule, compiled
+#: columns of the face table of ``damage_patches`` (one row per obstacle index): the id of
+#: the body the face belongs to, its in-plane curvature 1/m, 1.0 where a soft pad covers
+#: it, 1.0 where it is a deformable finger
+FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_DEFORMABLE, FACE_SIZE = range(5)
+#: columns of the patch table of ``damage_patches`` (one row per contact patch): body id,
+#: load N, centre (x, z) m, Hertz radius a m, peak pressure p0 Pa, equivalent radius Re m,
+#: contact modulus E* Pa
+(P_BODY, P_LOAD, P_CX, P_CZ, P_RADIUS, P_PEAK, P_RE, P_MODULUS, P_SIZE) = range(9)
+
+
+@njit(cache=True, error_model='numpy')
+def damage_patches(x, normal, obstacle, ring, faces, rest_curvature, bruise_pressure,
+                   rigid_modulus, pad_modulus, depth, covered, node_pressure, patches, near_out):
+    """The per-step rule of the module docstring: the contact patches by Hertz, the
+    per-node pressure and the bruised cover.
+
+    Args:
+        x: (n, 2) m.  normal: (n,) N, each node's normal reaction (0 if free).
+        obstacle: (n,) int64, the obstacle index holding each node, -1 if free.
+        ring: (n_s,) int64 outline nodes in order.  faces: (n_faces, FACE_SIZE) the face
+        table (FACE_* columns).  rest_curvature: (n_s,) 1/m, of the rest outline.
+        bruise_pressure, rigid_modulus, pad_modulus: Pa (E* against a rigid face and
+        against what covers the padded faces).  depth: m, out-of-plane depth b.
+        covered: (n_s,) m, bruised length per outline position, raised in place.
+        node_pressure: (n_s,) Pa, output.  patches: (n_s, P_SIZE) output rows.
+        near_out: (n_s,) int64 output, per patch the outline position nearest its centre.
+
+    Returns:
+        (number of patches, largest peak pressure Pa, bruised length sum(covered) m).
+    """
+    n = ring.shape[0]
+    node_pressure[:] = 0.0
+    body = np.empty(n, np.int64)
+    any_held = False
+    for r in range(n):
+        o = obstacle[ring[r]]
+        body[r] = np.int64(faces[o, FACE_BODY]) if o >= 0 else -1
+        any_held = any_held or body[r] >= 0
+    if not any_held:
+        return 0, 0.0, np.sum(covered)
+    start = 0  # a position where the body changes (0 if one body holds all), then once around
+    for r in range(n):
+        if body[r] != body[(r - 1) % n]:
+            start = r
+            break
+    seg = np.empty(n)  # m, outline position r -> r + 1
+    for r in range(n):
+        i, j = ring[r], ring[(r + 1) % n]
+        seg[r] = math.sqrt((x[j, 0] - x[i, 0]) ** 2 + (x[j, 1] - x[i, 1]) ** 2)
+    run = np.empty(n, np.int64)
+    n_patches = 0
+    k = 0
+    while k < n:
+        b = body[(start + k) % n]
+        length = 0
+        while k < n and body[(start + k) % n] == b:
+            run[length] = (start + k) % n
+            length += 1
+            k += 1
+        if b < 0:
+            continue
+        load = cx = cz = 0.0
+        for m in range(length):
+            node = ring[run[m]]
+            f = max(normal[node], 0.0)
+            load += f
+            cx += f * x[node, 0]
+            cz += f * x[node, 1]
+        if load <= 0:
+            continue
+        cx /= load
+        cz /= load
+        near = run[0]
+        best = np.inf
+        face_k = padded = deformable = line_peak = 0.0
+        for m in range(length):
+            r = run[m]
+            node = ring[r]
+            dist = math.sqrt((x[node, 0] - cx) ** 2 + (x[node, 1] - cz) ** 2)
+            if dist < best:
+                best = dist
+                near = r
+            o = obstacle[node]
+            face_k += faces[o, FACE_CURVATURE]
+            padded += faces[o, FACE_PADDED]
+            deformable += faces[o, FACE_DEFORMABLE]
+            tributary = 0.5 * (seg[r] + seg[(r - 1) % n])  # m
+            line_peak = max(line_peak, max(normal[node], 0.0) / tributary)
+        k1 = rest_curvature[near]
+        if k1 <= 0:
+            k1 = 1e-3  # a flat or concave piece of outline: a 1 km radius
+        modulus = pad_modulus if padded / length >= 0.5 else rigid_modulus
+        if deformable / length >= 0.5:  # R1' from the patch's peak line pressure
+            line_peak /= depth
+            k1_eff = math.pi * line_peak ** 2 / (load / depth * modulus)
+        else:  # a face more curved than the fruit conforms to it: 1/1000 of its curvature
+            k1_eff = max(k1 + face_k / length, 1e-3 * k1)
+        re = 1.0 / math.sqrt(k1_eff * k1)
+        a, p0 = hertz(load, re, modulus)
+        row = patches[n_patches]
+        row[P_BODY], row[P_LOAD], row[P_CX], row[P_CZ] = b, load, cx, cz
+        row[P_RADIUS], row[P_PEAK], row[P_RE], row[P_MODULUS] = a, p0, re, modulus
+        near_out[n_patches] = near
+        n_patches += 1
+        for m in range(length):
+            node = ring[run[m]]
+            s = math.sqrt((x[node, 0] - cx) ** 2 + (x[node, 1] - cz) ** 2)
+            node_pressure[run[m]] = p0 * math.sqrt(max(0.0, 1.0 - (s / a) ** 2))
+        if p0 > bruise_pressure and n >= 3:
+            _cover(x, ring, near, cx, cz, seg,
+                   a * math.sqrt(1.0 - (bruise_pressure / p0) ** 2), covered)
+    pressure = 0.0
+    for m in range(n_patches):
+        pressure = max(pressure, patches[m, P_PEAK])
+    return n_patches, pressure, np.sum(covered)
+
+
+@njit(cache=True, error_model='numpy')
+def _cover(x, ring, near, cx, cz, seg, radius, covered):
+    """Raise ``covered`` (n_s,) m to the length of each outline position's share (half
+    the segments on either side) lying within ``radius`` (m, along the outline) of the
+    centre (cx, cz) m, measured from the position ``near`` along the outline's tangent
+    there. ``seg`` (n_s,) m: outline position r -> r + 1."""
+    n = ring.shape[0]
+    rel = np.zeros(n)  # m, each position's distance along the outline from ``near``
+    ahead = n // 2
+    acc = 0.0
+    for k in range(ahead):
+        acc += seg[(near + k) % n]
+        rel[(near + 1 + k) % n] = acc
+    acc = 0.0
+    for k in range(n - 1 - ahead):
+        r = (near - 1 - k) % n
+        acc += seg[r]
+        rel[r] = -acc
+    i0, i1, i2 = ring[(near - 1) % n], ring[near], ring[(near + 1) % n]
+    tx, tz = x[i2, 0] - x[i0, 0], x[i2, 1] - x[i0, 1]
+    norm = max(math.sqrt(tx * tx + tz * tz), 1e-300)
+    tx, tz = tx / norm, tz / norm
+    offset = (cx - x[i1, 0]) * tx + (cz - x[i1, 1]) * tz
+    for r in range(n):
+        lo = rel[r] - 0.5 * seg[(r - 1) % n]
+        hi = rel[r] + 0.5 * seg[r]
+        cover = max(min(hi, offset + radius) - max(lo, offset - radius), 0.0)
+        covered[r] = max(covered[r], cover)
+
+
+# ---------------------------------------------------------------------- the tracker
 class DamageTracker:
     """Accumulates damage step by step.
 
@@ -159,8 +310,14 @@ class DamageTracker:
         self.padded = list(face_padded)
         self.deformable = (list(face_deformable) if face_deformable is not None
                            else [False] * len(self.padded))
+        #: (n_faces, FACE_SIZE) the face table of ``damage_patches``
+        self.faces = np.zeros((len(self.groups), FACE_SIZE))
+        self.faces[:, FACE_BODY] = self.groups
+        self.faces[:, FACE_CURVATURE] = self.curvature
+        self.faces[:, FACE_PADDED] = self.padded
+        self.faces[:, FACE_DEFORMABLE] = self.deformable
         self.depth = float(fruit.depth)
-        ring = np.asarray(fruit.surface)
+        ring = np.ascontiguousarray(fruit.surface, dtype=np.int64)
         self.ring = ring
         rest = fruit.rest_positions
         if len(ring) >= 3:
@@ -182,74 +339,39 @@ class DamageTracker:
         self.peak_flesh_stress = 0.0
         self.crushed = False
 
-    # ------------------------------------------------------------------ contacts
-    def _runs(self, obstacle_of_surface: np.ndarray) -> list[tuple[int, np.ndarray]]:
-        """Runs of consecutive surface positions held by one body: (body, positions)."""
-        n = len(obstacle_of_surface)
-        body = np.array([self.groups[o] if o >= 0 else -1 for o in obstacle_of_surface])
-        if not np.any(body >= 0):
-            return []
-        if np.all(body == body[0]):
-            return [(int(body[0]), np.arange(n))]
-        # start at a position where the body changes, then walk once around
-        start = int(np.flatnonzero(body != np.roll(body, 1))[0])
-        runs, current, positions = [], None, []
-        for k in range(n):
-            i = (start + k) % n
-            if body[i] != current:
-                if current is not None and current >= 0:
-                    runs.append((current, np.array(positions)))
-                current, positions = body[i], []
-            positions.append(i)
-        if current is not None and current >= 0:
-            runs.append((current, np.array(positions)))
-        return runs
+    def _patches(self, positions: np.ndarray, normal_force: np.ndarray, obstacle: np.ndarray,
+                 covered: np.ndarray):
+        """``damage_patches`` raising ``covered``: (contacts, the outline position nearest
+        each one's centre (k,), node pressure (n_surface,) Pa, largest peak pressure Pa,
+        bruised length m)."""
+        n = len(self.ring)
+        node_pressure = np.empty(n)
+        table = np.empty((n, P_SIZE))
+        near = np.empty(n, np.int64)
+        count, pressure, length = damage_patches(
+            np.ascontiguousarray(positions, dtype=float),
+            np.ascontiguousarray(normal_force, dtype=float),
+            np.ascontiguousarray(obstacle, dtype=np.int64), self.ring, self.faces,
+            self.rest_curvature, self.bruise_pressure, self.rigid_modulus, self.pad_modulus,
+            self.depth, covered, node_pressure, table, near)
+        contacts = tuple(Contact(int(b), load, np.array([cx, cz]), a, p0, re, modulus)
+                         for b, load, cx, cz, a, p0, re, modulus in table[:count].tolist())
+        return contacts, near[:count], node_pressure, pressure, length
 
     def contacts(self, positions: np.ndarray, normal_force: np.ndarray,
-                 obstacle: np.ndarray) -> list[tuple[Contact, np.ndarray, int]]:
-        """The contact patches: (Contact, surface positions of its nodes, the position
-        nearest its centre).
+                 obstacle: np.ndarray) -> list[tuple[Contact, int]]:
+        """The contact patches, each with the outline position nearest its centre; the
+        tracker's state stays as it is.
 
         Args:
             positions: (n_nodes, 2) m.  normal_force: (n_nodes,) N, each node's normal
             reaction (0 if free).  obstacle: (n_nodes,) the obstacle index holding each
             node, -1 if free.
         """
-        ring = self.ring
-        out = []
-        tributary = None
-        for body, run in self._runs(obstacle[ring]):
-            nodes = ring[run]
-            f = np.maximum(normal_force[nodes], 0.0)
-            load = float(f.sum())
-            if load <= 0:
-                continue
-            centre = (f @ positions[nodes]) / load
-            near = run[int(np.argmin(np.linalg.norm(positions[nodes] - centre, axis=1)))]
-            k1 = float(self.rest_curvature[near])
-            if k1 <= 0:
-                k1 = 1e-3  # a flat or concave piece of outline: a 1 km radius
-            faces = obstacle[nodes]
-            padded = np.mean([self.padded[o] for o in faces]) >= 0.5
-            modulus = self.pad_modulus if padded else self.rigid_modulus
-            if np.mean([self.deformable[o] for o in faces]) >= 0.5:
-                if tributary is None:  # half the outline segments at each node (m)
-                    seg = np.linalg.norm(np.roll(positions[ring], -1, axis=0)
-                                         - positions[ring], axis=1)
-                    tributary = 0.5 * (seg + np.roll(seg, 1))
-                line_peak = float(np.max(f / tributary[run])) / self.depth
-                k1_eff = math.pi * line_peak ** 2 / (load / self.depth * modulus)
-            else:
-                face_k = float(np.mean([self.curvature[o] for o in faces]))
-                # a face more curved than the fruit conforms to it: keep 1/1000 of its
-                # curvature
-                k1_eff = max(k1 + face_k, 1e-3 * k1)
-            re = 1.0 / math.sqrt(k1_eff * k1)
-            a, p0 = hertz(load, re, modulus)
-            out.append((Contact(body, load, centre, a, p0, re, modulus), run, near))
-        return out
+        contacts, near, *_ = self._patches(positions, normal_force, obstacle,
+                                           self.covered.copy())
+        return list(zip(contacts, near.tolist()))
 
-    # ------------------------------------------------------------------ update
     def update(self, positions: np.ndarray, normal_force: np.ndarray, obstacle: np.ndarray,
                compression_ratio: float, flesh_stress: float = 0.0) -> Damage:
         """Damage after a step.
@@ -259,21 +381,8 @@ class DamageTracker:
             (n_nodes,) int.  compression_ratio: width loss over the rest width.
             flesh_stress: Pa, a resolved flesh stress (the solid's von Mises), 0 if none.
         """
-        ring = self.ring
-        n = len(ring)
-        node_pressure = np.zeros(n)
-        x = positions[ring]
-        seg = np.linalg.norm(np.roll(x, -1, axis=0) - x, axis=1)  # i -> i+1
-        patches = []
-        for contact, run, near in self.contacts(positions, normal_force, obstacle):
-            patches.append(contact)
-            a, p0 = contact.radius, contact.peak_pressure
-            s = np.linalg.norm(x[run] - contact.centre, axis=1)
-            node_pressure[run] = p0 * np.sqrt(np.maximum(0.0, 1.0 - (s / a) ** 2))
-            if p0 > self.bruise_pressure and n >= 3:
-                self._cover(x, near, contact.centre, seg,
-                            a * math.sqrt(1.0 - (self.bruise_pressure / p0) ** 2))
-        pressure = max((c.peak_pressure for c in patches), default=0.0)
+        contacts, _, node_pressure, pressure, length = self._patches(
+            positions, normal_force, obstacle, self.covered)
         stress = max(TRESCA_OVER_P0 * pressure, float(flesh_stress))
         self.peak_pressure = max(self.peak_pressure, pressure)
         self.peak_flesh_stress = max(self.peak_flesh_stress, stress)
@@ -281,33 +390,9 @@ class DamageTracker:
             self.crushed = True
         if self.failure_strain is not None and compression_ratio > self.failure_strain:
             self.crushed = True
-        length = float(self.covered.sum())
         return Damage(bruised=self.peak_pressure > self.bruise_pressure, bruised_length=length,
                       bruised_fraction=length / self.perimeter if self.perimeter > 0 else 0.0,
                       pressure=pressure, peak_pressure=self.peak_pressure,
                       flesh_stress=stress, peak_flesh_stress=self.peak_flesh_stress,
                       crushed=self.crushed, node_pressure=node_pressure,
-                      contacts=tuple(patches))
-
-    def _cover(self, x: np.ndarray, near: int, centre: np.ndarray, seg: np.ndarray,
-               radius: float) -> None:
-        """Mark the outline within ``radius`` (m, along the outline) of ``centre``.
-
-        Args:
-            x: (n_surface, 2) m, current outline.  near: surface position nearest the
-            centre.  seg: (n_surface,) m, length from each position to the next.
-        """
-        n = len(x)
-        rel = np.zeros(n)
-        ahead = n // 2
-        idx = (near + 1 + np.arange(ahead)) % n
-        rel[idx] = np.cumsum(seg[(near + np.arange(ahead)) % n])
-        idx = (near - 1 - np.arange(n - 1 - ahead)) % n
-        rel[idx] = -np.cumsum(seg[idx])
-        tangent = x[(near + 1) % n] - x[(near - 1) % n]
-        tangent = tangent / max(float(np.linalg.norm(tangent)), 1e-300)
-        offset = float((centre - x[near]) @ tangent)
-        lo, hi = rel - 0.5 * np.roll(seg, 1), rel + 0.5 * seg
-        cover = np.clip(np.minimum(hi, offset + radius) - np.maximum(lo, offset - radius),
-                        0.0, None)
-        self.covered = np.maximum(self.covered, cover)
+                      contacts=contacts)

@@ -340,11 +340,12 @@ class SimulationFacade:
         stiffness = self._grip.stiffness
         iterations = 0
         tried: list[tuple[float, float, bool]] = []   # (gap, force - goal, both touch)
+        ends: list = []   # the contact set at the end of each solve in ``tried``
         gap = None
         try:
             for _ in range(MAX_GAP_SOLVES):
                 try:
-                    iterations += self._solve_at(gap, dt)
+                    iterations += self._solve_at(gap, dt, _nearest(tried, ends, gap))
                 except NewtonFailure:
                     if not tried:
                         raise
@@ -357,20 +358,22 @@ class SimulationFacade:
                 gap = self._grip.gap
                 miss = (0.5 * (left_n + right_n) if both else 0.0) - goal
                 tried.append((gap, miss, both))
-                stiffness = _secant_stiffness(tried, stiffness)
+                ends.append(self.contacts)
+                stiffness = _secant_stiffness(tried, stiffness, goal)
                 if abs(miss) <= FORCE_TOLERANCE * goal:
                     return self._kept_stiffness(stiffness, iterations)
                 if (miss < 0 and gap <= lo + 1e-12) or (miss > 0 and gap >= hi - 1e-12):
                     break   # the speed limit: no gap of this step does better
-                gap = _next_gap(tried, stiffness, lo, hi)
+                gap = _next_gap(tried, stiffness, goal, lo, hi,
+                                math.inf if both else self._jaw_clearance())
                 self._restore(saved)
                 if gap is None:
                     break
             # no gap within the tolerance: the best one solved (the last, if it is)
-            best = min(tried, key=lambda t: abs(t[1]))
-            if best is not tried[-1] or gap != best[0]:
+            best = min(range(len(tried)), key=lambda i: abs(tried[i][1]))
+            if best != len(tried) - 1 or gap != tried[best][0]:
                 self._restore(saved)
-                iterations += self._solve_at(best[0], dt)
+                iterations += self._solve_at(tried[best][0], dt, ends[best])
         finally:
             self._gap_override = None
         return self._kept_stiffness(stiffness, iterations)
@@ -382,9 +385,13 @@ class SimulationFacade:
             self._grip = replace(self._grip, stiffness=stiffness)
         return iterations
 
-    def _solve_at(self, gap: float | None, dt: float) -> int:
+    def _solve_at(self, gap: float | None, dt: float, contacts=None) -> int:
         """``_substep(dt)`` with the jaws at ``gap`` (m; None: where the kinematics put
-        them); Newton iterations."""
+        them), its contact passes starting from the contact set ``contacts`` (an earlier
+        solve's of this step, at a nearby gap: it is mostly the right one, and the passes
+        only correct it) or from the step's start (None); Newton iterations."""
+        if contacts is not None:
+            self.contacts = contacts
         self._gap_override = gap
         self.gap_solves += 1
         return self._substep(dt)
@@ -600,7 +607,8 @@ class SimulationFacade:
         outcome = soft_body_step(self.solver, self._barrier,
                                  np.vstack([self.q, finger.positions]),
                                  np.vstack([self.v, finger.velocities]), soft.base, targets,
-                                 self._faces(self._grip), new_faces, dt)
+                                 self._faces(self._grip), new_faces, dt,
+                                 self_contact=soft.self_contact)
         partner = outcome.contacts.obstacle
         self.q, self.v = outcome.x[:n], outcome.v[:n]
         self.contacts = cm.ContactState.empty(n)
@@ -672,40 +680,82 @@ class SimulationFacade:
                 f'only repeat these sub-steps')
 
 
-def _secant_stiffness(tried: list, stiffness: float) -> float:
-    """N/m, -d force / d gap between the last two solves of a step if both jaws held
-    the fruit in each (``tried``: (gap, force miss, both touch) per solve), else
-    ``stiffness``."""
+def _contact_measure(force: float) -> float:
+    """N^(2/3), the grip force in the variable that the jaw search treats as linear in
+    the gap: Hertz's law F ~ delta^(3/2) (Johnson 1985, Contact Mechanics, eq. 4.22)
+    makes F^(2/3) linear in the approach delta. Secant steps on it neither overshoot
+    from a first light touch (a chord of F there is far too soft) nor undershoot much on
+    a membrane-dominated fruit (F closer to linear in delta)."""
+    return max(force, 0.0) ** (2.0 / 3.0)
+
+
+def _measure_slope(stiffness: float, goal: float) -> float:
+    """N^(2/3)/m, d F^(2/3) / d(-gap) of the Hertz law whose stiffness -dF/d gap at the
+    force ``goal`` (N) is ``stiffness`` (N/m)."""
+    return stiffness / (1.5 * max(goal, 1e-12) ** (1.0 / 3.0))
+
+
+def _secant_stiffness(tried: list, stiffness: float, goal: float) -> float:
+    """N/m, -d force / d gap at the force ``goal`` (N), from the last two solves of a
+    step if both jaws held the fruit in each (``tried``: (gap, force - goal, both
+    touch) per solve; the secant of F^(2/3), ``_contact_measure``), else ``stiffness``."""
     if len(tried) < 2:
         return stiffness
     (g1, m1, both1), (g2, m2, both2) = tried[-2], tried[-1]
-    if both1 and both2 and g1 != g2 and (m1 - m2) / (g2 - g1) > 0:
-        return (m1 - m2) / (g2 - g1)
-    return stiffness
+    if not (both1 and both2 and g1 != g2):
+        return stiffness
+    slope = (_contact_measure(goal + m1) - _contact_measure(goal + m2)) / (g2 - g1)
+    return 1.5 * goal ** (1.0 / 3.0) * slope if slope > 0 else stiffness
 
 
-def _next_gap(tried: list, stiffness: float, lo: float, hi: float) -> float | None:
-    """m, the next gap to solve a step at so that the force meets its goal, from the
+def _next_gap(tried: list, stiffness: float, goal: float, lo: float, hi: float,
+              clearance: float) -> float | None:
+    """m, the next gap to solve a step at so that the force meets ``goal`` (N), from the
     solves so far (``tried``: (gap, force - goal, both touch) each; the force falls as
-    the gap grows), within [lo, hi]: a secant step (slope ``stiffness``, N/m) from the
-    last solve if it stays inside the bracket the solves so far leave, else the end of
-    the range not yet tried, else the bracket's middle; None when the bracket has
-    closed."""
-    over = [t[0] for t in tried if t[1] > 0]      # too much force: the gap must grow
-    under = [t[0] for t in tried if t[1] <= 0]
-    low = max(over) if over else lo
-    high = min(under) if under else hi
-    if high - low <= 1e-12:
+    the gap grows), within [lo, hi]: a secant step on F^(2/3) (``_contact_measure``; its
+    slope from ``stiffness``, N/m at the goal) from the last solve if it stays inside
+    the bracket the solves so far leave, else the end of the range not yet tried, else
+    the bracket's interpolation (F^(2/3) linear between its ends) or middle; None when
+    the bracket has closed. After a solve in which a jaw did not touch, the step closes
+    the gap by ``clearance`` (m, how far that jaw is from the fruit; inf if unknown)
+    plus the approach that gives the goal."""
+    over = [t for t in tried if t[1] > 0]      # too much force: the gap must grow
+    under = [t for t in tried if t[1] <= 0]
+    low = max(over) if over else None
+    high = min(under) if under else None
+    low_gap = low[0] if low else lo
+    high_gap = high[0] if high else hi
+    if high_gap - low_gap <= 1e-12:
         return None
-    gap, miss, _ = tried[-1]
-    guess = gap + miss / stiffness
-    if low < guess < high:
+    slope = _measure_slope(stiffness, goal)
+    target = _contact_measure(goal)
+    gap, miss, both = tried[-1]
+    if both:
+        guess = gap + (_contact_measure(goal + miss) - target) / slope
+    elif math.isfinite(clearance):
+        guess = gap - clearance - target / slope
+    else:
+        guess = gap + miss / stiffness
+    if low_gap < guess < high_gap:
         return guess
-    if guess <= low and not over:
+    if guess <= low_gap and not over:
         return lo
-    if guess >= high and not under:
+    if guess >= high_gap and not under:
         return hi
-    return 0.5 * (low + high)
+    if low is not None and high is not None and low[2] and high[2]:
+        h_low, h_high = _contact_measure(goal + low[1]), _contact_measure(goal + high[1])
+        fraction = (h_low - target) / (h_low - h_high)
+        if 0.05 < fraction < 0.95:
+            return low_gap + fraction * (high_gap - low_gap)
+    return 0.5 * (low_gap + high_gap)
+
+
+def _nearest(tried: list, ends: list, gap: float | None):
+    """The contact set at the end of the solve in ``tried`` (gap, ...) whose gap is
+    nearest to ``gap`` (m), None if none (or ``gap`` is None: the first solve)."""
+    if gap is None or not tried:
+        return None
+    return ends[min(range(len(tried)), key=lambda i: abs(tried[i][0] - gap))]
 
 
 def _wrench(r: np.ndarray, f: np.ndarray) -> JawWrench:

@@ -171,6 +171,24 @@ class PatternCachingSolver(ImplicitEulerSolver):
         if self.fast:
             self._build_fast_pattern()
 
+    def load_kernels(self, q: np.ndarray, dt: float) -> None:
+        """Run every kernel of the fast path once, on one Newton solve from positions
+        ``q`` (n_dof,) m at rest over ``dt`` (s) with a sliding node, and forget it: numba
+        loads each kernel's compiled code from its cache on first use (about 10-20 ms
+        each), which then happens here, when the simulation is built, and not in its
+        first steps (a real-time loop would fall behind there)."""
+        if not self.fast:
+            return
+        d = self.dim
+        con = StepConstraints(np.tile(np.eye(d), (self.n // d, 1, 1)), np.zeros(1, np.int64),
+                              np.eye(d)[None, 1:], np.zeros(1), np.zeros((1, d - 1)))
+        try:
+            self.solve(q, np.zeros(self.n), dt, q.copy(), con)
+        except NewtonFailure:
+            pass
+        self.reset()
+        self.stats = dict.fromkeys(self.stats, 0)
+
     def reset(self) -> None:
         """Forget the kept factorisation (a restarted simulation repeats its results)."""
         self._lu = None

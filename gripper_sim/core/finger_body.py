@@ -15,7 +15,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gripper_sim.core.barrier import BarrierContact, BarrierSettings, SoftBody
 from gripper_sim.core.energies import Energy, RodBending, Stretching
+
+#: the node pairs of a finger whose coupling its self-contact's Hessian pattern holds:
+#: those this many rod element lengths (the longest) apart or closer at rest (pairs
+#: further apart still feel their exact barrier force, ``BarrierContact.pairs``)
+SELF_PAIR_REACH_ELEMENTS = 2.0
 
 
 def _ints(shape) -> np.ndarray:
@@ -89,3 +95,42 @@ class FingerBody:
                                        rest_positions, np.tile(self.bend_stiffness, n),
                                        lengths))
         return energies
+
+    def self_pairs(self) -> np.ndarray:
+        """(p, 2) the node pairs (i < j) of the body's self-contact pattern: nodes at
+        most ``SELF_PAIR_REACH_ELEMENTS`` rod element lengths apart at rest that no rod
+        element joins."""
+        x = self.rest_positions
+        lengths = np.linalg.norm(x[self.rod_edges[:, 1]] - x[self.rod_edges[:, 0]], axis=1)
+        reach = SELF_PAIR_REACH_ELEMENTS * (lengths.max() if lengths.size else 0.0)
+        apart = np.linalg.norm(x[:, None] - x[None, :], axis=2)
+        near = np.triu(apart <= reach, 1)
+        near[tuple(np.sort(self.rod_edges, axis=1).T)] = False
+        return np.argwhere(near)
+
+    def self_contact(self, settings: BarrierSettings,
+                     copies: tuple[np.ndarray, ...] | None = None,
+                     n_nodes: int | None = None) -> BarrierContact | None:
+        """The barrier between the body's own rod elements (a vertex and an element that
+        do not share a node; frictionless), so that its beams and ribs never cross:
+        None for a body without rods.
+
+        Args:
+            settings: the barrier's dhat and stiffness.
+            copies: for a state holding several copies of the body, each copy's
+                (n_nodes,) global node indices (each copy touches only itself); None:
+                the body alone.
+            n_nodes: nodes of the state (None: the body's).
+        """
+        if not len(self.rod_edges):
+            return None
+        if copies is None:
+            copies, n_nodes = (np.arange(self.n_nodes),), self.n_nodes
+        nodes = np.unique(self.rod_edges)
+        pairs = self.self_pairs()
+        bodies = tuple(SoftBody(copy[nodes], copy[self.rod_edges], 0.0, 0.0)
+                       for copy in copies)
+        no_fruit = np.zeros(0, np.int64)
+        return BarrierContact(n_nodes, no_fruit, no_fruit.reshape(0, 2), settings, bodies,
+                              pairs=np.vstack([copy[pairs] for copy in copies]),
+                              self_contact=True)

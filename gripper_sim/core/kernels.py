@@ -1,17 +1,24 @@
 """Numba array kernels of the fast path for the ring (shell) and point fruit models.
 
 Free functions ``@njit(cache=True)`` on arrays with preallocated outputs; the Python
-glue is ``gripper_sim.core.fast``. Each kernel computes the same thing as a numpy
-reference elsewhere in the core, in the same order of operations where it matters:
+glue is ``gripper_sim.core.fast``. What an element does (an edge, a bending triple, the
+enclosed area, a soft pad point, a measure, the damage rule) is a compiled function of
+its own module, which the generic route calls too; this module assembles them in its
+layout. The rest follows the generic route's Python, in the same order of operations
+where it matters:
 
-- ``ring_stretching``, ``ring_bending``, ``ring_pressure``: the energies of
-  ``energies/stretching.py``, ``energies/bending.py``, ``energies/pressure.py``;
+- ``ring_stretching``, ``ring_bending``, ``ring_pressure``: the band assembly of the
+  energies' element functions (``energies.kernels``: ``edge_spring``, ``hinge``,
+  ``area_pressure``), which their classes' CSC kernels call too;
 - ``newton_solve``: ``ImplicitEulerSolver.solve`` (stepper.py);
-- ``contact_constraints``, ``update_contacts``, ``substep``: ``Simulation._constraints``,
-  ``Simulation._update_contacts`` and ``Simulation._substep`` (simulation.py);
-- ``step_measures``: the numbers ``Simulation._measure`` and ``measures.deformation``
-  report; ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
-- ``damage_update``: the per-step part of ``damage.DamageTracker.update``.
+- ``substep``: ``contact_passes.contact_step`` (the contact passes themselves are
+  ``contact_kernels``, shared with it);
+- ``step_measures``: the numbers ``Simulation._measure`` reports, the outline's by
+  ``measures.outline_measures`` and ``measures.face_contact_length_of`` (as
+  ``measures.deformation``); ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
+- ``damage_update``: ``damage.damage_patches`` (the rule ``DamageTracker.update`` calls)
+  on this module's faces; ``_pad_rows``, ``_pad_forces``, ``_pad_blocks``: the soft pad's
+  ``pad.pad_rows``, ``pad.pad_forces``, ``pad.pad_blocks`` on them.
 
 Layout. Positions are flat, q = [x0, z0, x1, z1, ...] (m). Hessians are kept as a
 symmetric node-block band: ``band[p, d]`` (2, 2) is the block of the node at band
@@ -41,11 +48,17 @@ import math
 import numpy as np
 from numba import njit
 
-from gripper_sim.core import sparse_ldl
-from gripper_sim.core.energies.kernels import bending, neohookean_triangles, stretching
-
-#: contact modes, as in contact.py
-FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
+from gripper_sim.core import contact_kernels, sparse_ldl
+from gripper_sim.core.damage import P_SIZE  # noqa: F401 (the patch table's width, for fast.py)
+from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_SIZE,
+                                     damage_patches)
+from gripper_sim.core.energies.kernels import (area_and_gradient, area_pressure, bending,
+                                               edge_spring, hinge, hinge_block,
+                                               neohookean_triangles, stretching)
+from gripper_sim.core.measures import face_contact_length_of, outline_measures
+from gripper_sim.core.pad import (PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X, PF_NEW_Z, PF_NX,
+                                  PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE, PF_SPEED,
+                                  pad_blocks, pad_forces, pad_rows, pad_terms)
 
 #: substep / newton_solve status codes
 OK = 0
@@ -68,12 +81,6 @@ SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
 #: columns of ``face_par`` after the seven face parameters: the jaw of the face (-1: none)
 #: and the face origin's offset (x, z) m from the jaw origin
 FP_JAW, FP_OFFSET_X, FP_OFFSET_Z, FP_SIZE = 7, 8, 9, 10
-
-#: columns of the soft pads' rows (``pad_par``, one row per node that may touch a pad face
-#: in the step, as ``pad.PadLayer.begin_step`` sets them): stiffness k N/m, friction bound
-#: mu * lagged normal force N, pad surface origin at the end of the step (x, z) m, its
-#: normal (x, z), the jaw's speed along the face m/s
-PAD_K, PAD_BOUND, PAD_OX, PAD_OZ, PAD_NX, PAD_NZ, PAD_SPEED, PAD_SIZE = range(8)
 
 # fpar layout of ``substep`` / ``newton_solve``
 F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
@@ -165,7 +172,8 @@ def band_to_dense(band, order, out):
 # ---------------------------------------------------------------------- energies
 @njit(cache=True, error_model='numpy', inline='always')
 def ring_stretching(q, edges, spar, pos, hessian, grad, band):
-    """Skin stretching E = sum EA (l - L)^2 / (2 L) (energies/stretching.py).
+    """Skin stretching (energies/stretching.py): ``energies.kernels.edge_spring`` per edge,
+    its Hessian into the band.
 
     Args:
         q: (2n,) m.  edges: (n_edge, 2) nodes.  spar: (n_edge, 2) [L (m), EA / L (N/m)].
@@ -179,75 +187,39 @@ def ring_stretching(q, edges, spar, pos, hessian, grad, band):
     value = 0.0
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
-        ex = q[2 * j] - q[2 * i]
-        ez = q[2 * j + 1] - q[2 * i + 1]
-        length = math.sqrt(ex * ex + ez * ez)
-        stretch = length - spar[e, 0]
-        k = spar[e, 1]
-        value += k * stretch ** 2
-        ux, uz = ex / length, ez / length
-        ks = k * stretch
-        fx, fz = ks * ux, ks * uz
-        grad[2 * i] += -fx
-        grad[2 * i + 1] += -fz
+        v, fx, fz, b00, b01, b11 = edge_spring(q[2 * j] - q[2 * i], q[2 * j + 1] - q[2 * i + 1],
+                                               spar[e, 0], spar[e, 1])
+        value += v
+        grad[2 * i] -= fx
+        grad[2 * i + 1] -= fz
         grad[2 * j] += fx
         grad[2 * j + 1] += fz
         if hessian:
-            ratio = stretch / length
-            b00 = k * (ux * ux + ratio * (1.0 - ux * ux))
-            b01 = k * (ux * uz + ratio * (0.0 - ux * uz))
-            b11 = k * (uz * uz + ratio * (1.0 - uz * uz))
             _add_diag(band, pos, i, b00, b01, b01, b11)
             _add_diag(band, pos, j, b00, b01, b01, b11)
             _add_off(band, pos, i, j, -b00, -b01, -b01, -b11)
-    return 0.5 * value
+    return value
 
 
 @njit(cache=True, error_model='numpy', inline='always')
 def ring_bending(q, triples, bpar, pos, hessian, grad, band):
-    """Ring bending E = sum k (phi - phi0)^2 / 2 (energies/bending.py).
+    """Ring bending (energies/bending.py): ``energies.kernels.hinge`` per triple, its
+    Hessian blocks (``hinge_block``) into the band.
 
     Args:
-        triples: (n_t, 3) nodes (previous, middle, next) of a closed ring in order:
-            triples[t, 0:2] == triples[t - 1, 1:3] (as RingBending builds them).
+        triples: (n_t, 3) nodes (previous, middle, next).
         bpar: (n_t, 2) [phi0 (rad), k = EI / l (N m)].
         Others as ``ring_stretching``.
     """
     grad[:] = 0.0
-    nt = triples.shape[0]
-    if nt == 0:
-        return 0.0
-    # per edge b_t = x[t2] - x[t1]: d atan2 / d b (g) and its Hessian; a_t = b_{t-1}, the
-    # previous triple's edge, carried over (no scratch arrays: a step evaluates this often)
-    i1, i2 = triples[nt - 1, 1], triples[nt - 1, 2]
-    ax = q[2 * i2] - q[2 * i1]
-    az = q[2 * i2 + 1] - q[2 * i1 + 1]
-    r2 = ax ** 2 + az ** 2
-    gx_a, gz_a = -az / r2, ax / r2
     value = 0.0
-    for t in range(nt):
-        i1, i2 = triples[t, 1], triples[t, 2]
-        bx = q[2 * i2] - q[2 * i1]
-        bz = q[2 * i2 + 1] - q[2 * i1 + 1]
-        r2 = bx ** 2 + bz ** 2
-        gx_b, gz_b = -bz / r2, bx / r2
-        cross = ax * bz - az * bx
-        dot = ax * bx + az * bz
-        dphi = math.atan2(cross, dot) - bpar[t, 0]
-        y = dphi + np.pi
-        if 0.0 <= y < 2 * np.pi:
-            dphi = y - np.pi
-        else:
-            dphi = y % (2 * np.pi) - np.pi
-        k = bpar[t, 1]
-        value += k * dphi ** 2
-        gax, gaz = -gx_a, -gz_a
-        gbx, gbz = gx_b, gz_b
-        j0, j1 = -gax, -gaz
-        j2, j3 = gax - gbx, gaz - gbz
-        j4, j5 = gbx, gbz
-        kd = k * dphi
+    for t in range(triples.shape[0]):
         i0, i1, i2 = triples[t, 0], triples[t, 1], triples[t, 2]
+        k = bpar[t, 1]
+        v, kd, j0, j1, j2, j3, j4, j5, ha00, ha01, hb00, hb01 = hinge(
+            q[2 * i1] - q[2 * i0], q[2 * i1 + 1] - q[2 * i0 + 1], q[2 * i2] - q[2 * i1],
+            q[2 * i2 + 1] - q[2 * i1 + 1], bpar[t, 0], k)
+        value += v
         grad[2 * i0] += kd * j0
         grad[2 * i0 + 1] += kd * j1
         grad[2 * i1] += kd * j2
@@ -255,37 +227,25 @@ def ring_bending(q, triples, bpar, pos, hessian, grad, band):
         grad[2 * i2] += kd * j4
         grad[2 * i2 + 1] += kd * j5
         if hessian:
-            r4a = (ax ** 2 + az ** 2) ** 2
-            r4b = (bx ** 2 + bz ** 2) ** 2
-            # ha = -H(a), hb = H(b), H(v) = [[2 vx vz, vz^2 - vx^2], [., -2 vx vz]] / |v|^4
-            ha00 = -(2 * ax * az / r4a)
-            ha01 = -((az ** 2 - ax ** 2) / r4a)
-            hb00 = 2 * bx * bz / r4b
-            hb01 = (bz ** 2 - bx ** 2) / r4b
-            # dphi-weighted parts of the blocks (p,p) ha, (i,p) -ha, (i,i) ha + hb,
-            # (n,i) -hb, (n,n) hb, (n,p) 0
-            pa00, pa01 = kd * ha00, kd * ha01
-            pb00, pb01 = kd * hb00, kd * hb01
-            _add_diag(band, pos, i0, k * (j0 * j0) + pa00, k * (j0 * j1) + pa01,
-                      k * (j1 * j0) + pa01, k * (j1 * j1) - pa00)
-            _add_diag(band, pos, i1, k * (j2 * j2) + (pa00 + pb00),
-                      k * (j2 * j3) + (pa01 + pb01), k * (j3 * j2) + (pa01 + pb01),
-                      k * (j3 * j3) - (pa00 + pb00))
-            _add_diag(band, pos, i2, k * (j4 * j4) + pb00, k * (j4 * j5) + pb01,
-                      k * (j5 * j4) + pb01, k * (j5 * j5) - pb00)
-            _add_off(band, pos, i1, i0, k * (j2 * j0) - pa00, k * (j2 * j1) - pa01,
-                     k * (j3 * j0) - pa01, k * (j3 * j1) + pa00)
-            _add_off(band, pos, i2, i1, k * (j4 * j2) - pb00, k * (j4 * j3) - pb01,
-                     k * (j5 * j2) - pb01, k * (j5 * j3) + pb00)
-            _add_off(band, pos, i2, i0, k * (j4 * j0), k * (j4 * j1), k * (j5 * j0),
-                     k * (j5 * j1))
-        ax, az, gx_a, gz_a = bx, bz, gx_b, gz_b
-    return 0.5 * value
+            b00, b01, b10, b11 = hinge_block(k, kd, j0, j1, j0, j1, ha00, ha01)
+            _add_diag(band, pos, i0, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j2, j3, j2, j3, ha00 + hb00, ha01 + hb01)
+            _add_diag(band, pos, i1, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j4, j5, j4, j5, hb00, hb01)
+            _add_diag(band, pos, i2, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j2, j3, j0, j1, -ha00, -ha01)
+            _add_off(band, pos, i1, i0, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j4, j5, j2, j3, -hb00, -hb01)
+            _add_off(band, pos, i2, i1, b00, b01, b10, b11)
+            b00, b01, b10, b11 = hinge_block(k, kd, j4, j5, j0, j1, 0.0, 0.0)
+            _add_off(band, pos, i2, i0, b00, b01, b10, b11)
+    return value
 
 
 @njit(cache=True, error_model='numpy', inline='always')
 def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
-    """Enclosed-area pressure (energies/pressure.py).
+    """Enclosed-area pressure (energies/pressure.py): ``energies.kernels.area_and_gradient``
+    and ``area_pressure``, the sparse part of its Hessian into the band.
 
     Args:
         ring: (n_r,) nodes counter-clockwise (empty: no pressure).
@@ -297,35 +257,19 @@ def ring_pressure(q, ring, press, pos, hessian, grad, band, area_grad):
         (energy J, rank-one coefficient c = b K / A0 (0 if none)); the Hessian is the
         band part plus c u u^T.
     """
-    grad[:] = 0.0
-    area_grad[:] = 0.0
     n = ring.shape[0]
     if n == 0:
+        grad[:] = 0.0
+        area_grad[:] = 0.0
         return 0.0, 0.0
-    a0, b, p0, kb = press[0], press[1], press[2], press[3]
-    area = 0.0
-    for r in range(n):
-        i = ring[r]
-        j = ring[(r + 1) % n]
-        area += q[2 * i] * q[2 * j + 1] - q[2 * j] * q[2 * i + 1]
-    da = 0.5 * area - a0
-    value = b * (-p0 * da + 0.5 * kb * da ** 2 / a0)
-    de_da = b * (-p0 + kb * da / a0)
-    for r in range(n):
-        i = ring[r]
-        prv = ring[(r - 1) % n]
-        nxt = ring[(r + 1) % n]
-        area_grad[2 * i] = 0.5 * (q[2 * nxt + 1] - q[2 * prv + 1])
-        area_grad[2 * i + 1] = 0.5 * (q[2 * prv] - q[2 * nxt])
+    area = area_and_gradient(q.reshape((q.shape[0] // 2, 2)), ring, area_grad)
+    value, de_da, c = area_pressure(area, press[0], press[1], press[2], press[3])
     for m in range(q.shape[0]):
         grad[m] = de_da * area_grad[m]
     if hessian:
         h = de_da * 0.5
         for r in range(n):
-            i = ring[r]
-            nxt = ring[(r + 1) % n]
-            _add_off(band, pos, i, nxt, 0.0, h, -h, 0.0)
-    c = b * kb / a0 if kb > 0 else 0.0
+            _add_off(band, pos, ring[r], ring[(r + 1) % n], 0.0, h, -h, 0.0)
     return value, c
 
 
@@ -430,62 +374,26 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         for m in range(n2):
             grad[m] += fric_grad[m]
     if pad_nodes.shape[0] > 0:
-        phi += _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad)
+        phi += pad_terms(q, q_n, dt, pad_nodes, pad_par, grad)
     return phi, c
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def _pad_terms(q, q_n, dt, pad_nodes, pad_par, grad):
-    """The soft pads' energy (J), as ``pad.PadLayer._face_terms`` (elastic foundation and
-    lagged smoothed friction); adds its gradient (N) into ``grad`` (2n,)."""
-    eps = FRICTION_SMOOTHING * dt
-    value = 0.0
-    for e in range(pad_nodes.shape[0]):
-        i = pad_nodes[e]
-        k, bound = pad_par[e, PAD_K], pad_par[e, PAD_BOUND]
-        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
-        tx, tz = -nz, nx
-        delta = max(0.0, -((q[2 * i] - pad_par[e, PAD_OX]) * nx
-                           + (q[2 * i + 1] - pad_par[e, PAD_OZ]) * nz))
-        u = (((q[2 * i] - q_n[2 * i]) * tx + (q[2 * i + 1] - q_n[2 * i + 1]) * tz)
-             - pad_par[e, PAD_SPEED] * dt)
-        a = abs(u)
-        if a < eps:
-            f0 = -a ** 3 / (3 * eps ** 2) + a ** 2 / eps + eps / 3
-            f1 = 2 * a / eps - a ** 2 / eps ** 2
-        else:
-            f0, f1 = a, 1.0
-        value += 0.5 * k * delta ** 2 + bound * f0
-        g_n = -k * delta
-        g_t = bound * f1 * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
-        grad[2 * i] += g_n * nx + g_t * tx
-        grad[2 * i + 1] += g_n * nz + g_t * tz
-    return value
 
 
 @njit(cache=True, error_model='numpy')
 def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
-    """Adds the pads' Hessian node blocks, filtered (S_i B S_i), to the band ``ab``."""
-    eps = FRICTION_SMOOTHING * dt
+    """Adds the pads' Hessian node blocks B (``pad.pad_blocks``), filtered (S_i B S_i), to
+    the band ``ab``."""
+    blocks = np.empty((pad_nodes.shape[0], 2, 2))
+    pad_blocks(q, q_n, dt, pad_nodes, pad_par, blocks)
     for e in range(pad_nodes.shape[0]):
         i = pad_nodes[e]
-        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
-        tx, tz = -nz, nx
-        gap = (q[2 * i] - pad_par[e, PAD_OX]) * nx + (q[2 * i + 1] - pad_par[e, PAD_OZ]) * nz
-        h_n = pad_par[e, PAD_K] if gap < 0 else 0.0
-        u = (((q[2 * i] - q_n[2 * i]) * tx + (q[2 * i + 1] - q_n[2 * i + 1]) * tz)
-             - pad_par[e, PAD_SPEED] * dt)
-        a = abs(u)
-        h_t = pad_par[e, PAD_BOUND] * (2 / eps - 2 * a / eps ** 2) if a < eps else 0.0
-        snx = filters[i, 0, 0] * nx + filters[i, 0, 1] * nz  # S n (S symmetric)
-        snz = filters[i, 1, 0] * nx + filters[i, 1, 1] * nz
-        stx = filters[i, 0, 0] * tx + filters[i, 0, 1] * tz
-        stz = filters[i, 1, 0] * tx + filters[i, 1, 1] * tz
         p = pos[i]
-        ab[p, 0, 0, 0] += h_n * snx * snx + h_t * stx * stx
-        ab[p, 0, 0, 1] += h_n * snx * snz + h_t * stx * stz
-        ab[p, 0, 1, 0] += h_n * snz * snx + h_t * stz * stx
-        ab[p, 0, 1, 1] += h_n * snz * snz + h_t * stz * stz
+        for r in range(2):
+            for c in range(2):
+                acc = 0.0
+                for m in range(2):
+                    for l in range(2):
+                        acc += filters[i, r, m] * blocks[e, m, l] * filters[i, l, c]
+                ab[p, 0, r, c] += acc
 
 
 @njit(cache=True, error_model='numpy', inline='always')
@@ -630,78 +538,36 @@ def _ldl_solve2(ab, x, y):
 
 @njit(cache=True, error_model='numpy')
 def _pad_rows(x_n, surface, pad_k, thickness, mu, face_par, face_dyn):
-    """The pads' rows of a step, as ``pad.PadLayer.begin_step``: for each jaw face (the
-    rigid face behind its pad) the outline nodes over the pad and not far in front of it
-    at the start of the step. Returns (nodes (m,), rows (m, PAD_SIZE), face (m,))."""
-    n_s = surface.shape[0]
+    """``pad.pad_rows`` of a step on the jaw faces of ``face_par`` / ``face_dyn`` (set for
+    the step): (nodes (m,), rows (m, PAD_SIZE), face (m,))."""
     n_jaw = 0
     for f in range(face_par.shape[0]):
         if face_par[f, FP_JAW] >= 0:
             n_jaw += 1
-    nodes = np.empty(n_jaw * n_s, np.int64)
-    rows = np.empty((n_jaw * n_s, PAD_SIZE))
-    face = np.empty(n_jaw * n_s, np.int64)
+    faces = np.empty((n_jaw, PF_SIZE))
     m = 0
     for f in range(face_par.shape[0]):
         if face_par[f, FP_JAW] < 0:
             continue
         nx, nz = face_par[f, 0], face_par[f, 1]
-        tx, tz = -nz, nx
-        old_x = face_dyn[f, 0] + thickness * nx
-        old_z = face_dyn[f, 1] + thickness * nz
-        speed = face_dyn[f, 4] * tx + face_dyn[f, 5] * tz
-        for s in range(n_s):
-            i = surface[s]
-            gap = (x_n[i, 0] - old_x) * nx + (x_n[i, 1] - old_z) * nz
-            along = abs((x_n[i, 0] - old_x) * tx + (x_n[i, 1] - old_z) * tz)
-            if not (along <= face_par[f, 2] and gap < thickness
-                    and gap > -thickness - 1e-3):
-                continue
-            nodes[m] = i
-            face[m] = f
-            rows[m, PAD_K] = pad_k[s]
-            rows[m, PAD_BOUND] = mu * (pad_k[s] * max(0.0, -gap))
-            rows[m, PAD_OX] = face_dyn[f, 2] + thickness * nx
-            rows[m, PAD_OZ] = face_dyn[f, 3] + thickness * nz
-            rows[m, PAD_NX] = nx
-            rows[m, PAD_NZ] = nz
-            rows[m, PAD_SPEED] = speed
-            m += 1
-    return nodes[:m], rows[:m], face[:m]
+        faces[m, PF_OLD_X], faces[m, PF_OLD_Z] = face_dyn[f, 0], face_dyn[f, 1]
+        faces[m, PF_NEW_X], faces[m, PF_NEW_Z] = face_dyn[f, 2], face_dyn[f, 3]
+        faces[m, PF_NX], faces[m, PF_NZ] = nx, nz
+        faces[m, PF_HALF] = face_par[f, 2]
+        faces[m, PF_SPEED] = face_dyn[f, 4] * -nz + face_dyn[f, 5] * nx
+        faces[m, PF_SIDE] = face_par[f, FP_JAW]
+        faces[m, PF_INDEX] = f
+        m += 1
+    positions, rows, face = pad_rows(x_n, surface, pad_k, thickness, mu, faces)
+    return surface[positions], rows, face
 
 
 @njit(cache=True, error_model='numpy')
 def _pad_forces(x, x_n, dt, pad_nodes, pad_par, pad_face, face_par, forces, normal, holder,
                 side_force):
-    """The pads' forces on the fruit at the step's end positions x (n, 2), as
-    ``pad.PadLayer.finish_step`` records them (outputs: see ``substep``)."""
-    eps = FRICTION_SMOOTHING * dt
-    forces[:, :] = 0.0
-    normal[:] = 0.0
-    holder[:] = -1
-    side_force[:] = 0.0
-    best = np.zeros(x.shape[0])
-    for e in range(pad_nodes.shape[0]):
-        i = pad_nodes[e]
-        nx, nz = pad_par[e, PAD_NX], pad_par[e, PAD_NZ]
-        tx, tz = -nz, nx
-        gap = (x[i, 0] - pad_par[e, PAD_OX]) * nx + (x[i, 1] - pad_par[e, PAD_OZ]) * nz
-        f_n = pad_par[e, PAD_K] * max(0.0, -gap)
-        u = (((x[i, 0] - x_n[i, 0]) * tx + (x[i, 1] - x_n[i, 1]) * tz)
-             - pad_par[e, PAD_SPEED] * dt)
-        a = abs(u)
-        f1 = 2 * a / eps - a ** 2 / eps ** 2 if a < eps else 1.0
-        f_t = -pad_par[e, PAD_BOUND] * f1 * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
-        fx = f_n * nx + f_t * tx
-        forces[i, 0] += fx
-        forces[i, 1] += f_n * nz + f_t * tz
-        normal[i] += f_n
-        f = pad_face[e]
-        side = np.int64(face_par[f, FP_JAW])
-        side_force[side] += fx if side == 0 else -fx
-        if f_n > 0 and f_n > best[i]:
-            holder[i] = f
-            best[i] = f_n
+    """``pad.pad_forces``: the pads' forces on the fruit at the step's end positions x
+    (n, 2), as ``pad.PadLayer.finish_step`` records them (outputs: see ``substep``)."""
+    pad_forces(x, x_n, dt, pad_nodes, pad_par, pad_face, forces, normal, holder, side_force)
 
 
 @njit(cache=True, error_model='numpy')
@@ -1092,238 +958,29 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
 
 # ---------------------------------------------------------------------- contact
 @njit(cache=True, error_model='numpy')
-def _gap(face_par, origin_x, origin_z, f, px, pz):
-    return (px - origin_x) * face_par[f, 0] + (pz - origin_z) * face_par[f, 1]
-
-
-@njit(cache=True, error_model='numpy')
-def _covers(face_par, origin_x, origin_z, f, px, pz):
-    nx, nz = face_par[f, 0], face_par[f, 1]
-    tx, tz = -nz, nx
-    along = abs((px - origin_x) * tx + (pz - origin_z) * tz)
-    return along <= face_par[f, 2] and (px - origin_x) * nx + (pz - origin_z) * nz > -face_par[
-        f, 3]
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred, face_par,
-                        face_dyn, dt, v_corr, start, filters, fr_nodes, fr_t, fr_bound,
-                        fr_speed):
-    """Start positions and step filters, as ``contact_passes._constraints``.
-
-    Args:
-        obstacle, mode, normal_force, secondary: (n,) the contact state.
-        x_n, x_pred: (n, 2) m, positions at the start of the step and predicted.
-        Outputs: start (n, 2), filters (n, 2, 2), fr_nodes (n,), fr_t (n, 2),
-        fr_bound (n,), fr_speed (n,).
-
-    Returns:
-        the number of friction entries.
-    """
-    n = x_n.shape[0]
-    n_fr = 0
-    for i in range(n):
-        start[i, 0] = x_pred[i, 0]
-        start[i, 1] = x_pred[i, 1]
-        filters[i, 0, 0] = 1.0
-        filters[i, 0, 1] = 0.0
-        filters[i, 1, 0] = 0.0
-        filters[i, 1, 1] = 1.0
-    for f in range(face_par.shape[0]):
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        tx, tz = -nz, nx
-        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        for i in range(n):
-            if obstacle[i] != f:
-                continue
-            md = mode[i]
-            penetration = max(0.0, -_gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f,
-                                         x_n[i, 0], x_n[i, 1]))
-            target = -max(0.0, penetration - v_corr * dt)
-            corr = target - _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, start[i, 0],
-                                 start[i, 1])
-            start[i, 0] += corr * nx
-            start[i, 1] += corr * nz
-            if md == STICK:
-                along = (x_n[i, 0] * tx + x_n[i, 1] * tz) + dt * (vx * tx + vz * tz)
-                corr = along - (start[i, 0] * tx + start[i, 1] * tz)
-                start[i, 0] += corr * tx
-                start[i, 1] += corr * tz
-                filters[i, 0, 0] = 0.0
-                filters[i, 0, 1] = 0.0
-                filters[i, 1, 0] = 0.0
-                filters[i, 1, 1] = 0.0
-            else:
-                filters[i, 0, 0] = 1.0 - nx * nx
-                filters[i, 0, 1] = 0.0 - nx * nz
-                filters[i, 1, 0] = 0.0 - nz * nx
-                filters[i, 1, 1] = 1.0 - nz * nz
-            if md == SLIP and face_par[f, 5] > 0:
-                fr_nodes[n_fr] = i
-                fr_t[n_fr, 0] = tx
-                fr_t[n_fr, 1] = tz
-                fr_bound[n_fr] = face_par[f, 5] * max(normal_force[i], 0.0)
-                fr_speed[n_fr] = vx * tx + vz * tz
-                n_fr += 1
-    for i in range(n):
-        f = secondary[i]
-        if f < 0:
-            continue
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        corr = 0.0 - _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, start[i, 0],
-                          start[i, 1])
-        start[i, 0] += corr * nx
-        start[i, 1] += corr * nz
-        s00, s01, s10, s11 = filters[i, 0, 0], filters[i, 0, 1], filters[i, 1, 0], filters[
-            i, 1, 1]
-        filters[i, 0, 0] = s00 - (nx * nx * s00 + nx * nz * s10)
-        filters[i, 0, 1] = s01 - (nx * nx * s01 + nx * nz * s11)
-        filters[i, 1, 0] = s10 - (nz * nx * s00 + nz * nz * s10)
-        filters[i, 1, 1] = s11 - (nz * nx * s01 + nz * nz * s11)
-    return n_fr
-
-
-@njit(cache=True, error_model='numpy')
-def _release(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce, i):
-    obstacle[i] = -1
-    mode[i] = FREE
-    normal_force[i] = 0.0
-    bounce_speed[i] = 0.0
-    secondary[i] = -1
-    secondary_bounce[i] = 0.0
-
-
-@njit(cache=True, error_model='numpy')
-def _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i, dt, v_min):
-    """Outgoing normal speed (m/s) of node i found inside face f, as
-    ``contact_passes._rebound_speeds`` (0: no rebound)."""
-    e = face_par[f, 6]
-    if e <= 0:
-        return 0.0
-    nx, nz = face_par[f, 0], face_par[f, 1]
-    vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-    gap_start = _gap(face_par, face_dyn[f, 0], face_dyn[f, 1], f, x_n[i, 0], x_n[i, 1])
-    gap_end = _gap(face_par, face_dyn[f, 2], face_dyn[f, 3], f, x[i, 0], x[i, 1])
-    tau = min(max(gap_start / (gap_start - gap_end), 0.0), 1.0) if gap_start > 0 else 0.0
-    v_start = (v_n[i, 0] - vx) * nx + (v_n[i, 1] - vz) * nz
-    v_end = (((x[i, 0] - x_n[i, 0]) / dt - vx) * nx
-             + ((x[i, 1] - x_n[i, 1]) / dt - vz) * nz)
-    approach = -(v_start + tau * (v_end - v_start))
-    return e * approach if approach > v_min else 0.0
-
-
-@njit(cache=True, error_model='numpy')
-def _capped_rebound(v, rebound, v_start, dx, reaction, mass, dt):
-    """The scale s in [0, 1] of one node's rebound (2,) m/s, as
-    ``contact_passes.capped_rebound``; v (2,) its end velocity with the full rebound."""
-    work = 0.0
-    for c in range(2):
-        work += (mass * (dx[c] / dt - v_start[c]) / dt - reaction[c]) * dx[c]
-    budget = (v_start[0] * v_start[0] + v_start[1] * v_start[1]) + 2.0 * work / mass
-    b0, b1 = v[0] - rebound[0], v[1] - rebound[1]
-    bb = b0 * b0 + b1 * b1
-    br = b0 * rebound[0] + b1 * rebound[1]
-    rr = rebound[0] * rebound[0] + rebound[1] * rebound[1]
-    if rr == 0.0 or bb + 2.0 * br + rr <= budget:
-        return 1.0
-    discriminant = br * br - rr * (bb - budget)
-    if discriminant < 0.0:
-        return 0.0
-    return min(max((-br + math.sqrt(discriminant)) / rr, 0.0), 1.0)
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def update_contacts(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
-                    x, x_n, v_n, reaction, face_par, face_dyn, surface, dt, threshold, v_min,
-                    released, slipped):
-    """Correct the contact set after a solve, as ``contact_passes._update_contacts``
-    (with ``_add_corners`` and ``_add_penetrating``). Returns True if it changed.
-    """
-    n = x.shape[0]
+def contact_faces(face_par, face_dyn):
+    """The faces of the step as the contact passes take them (the ``faces`` tuple of
+    ``contact_kernels``) from the rows of ``face_par`` and ``face_dyn`` (module doc)."""
     n_faces = face_par.shape[0]
-    changed = False
+    normal = np.empty((n_faces, 2))
+    tangents = np.empty((n_faces, 1, 2))
+    half_extents = np.empty((n_faces, 1))
+    props = np.empty((n_faces, 4))
+    origin_start = np.empty((n_faces, 2))
+    origin_end = np.empty((n_faces, 2))
+    velocity = np.empty((n_faces, 2))
     for f in range(n_faces):
         nx, nz = face_par[f, 0], face_par[f, 1]
-        tx, tz = -nz, nx
-        mu_s, mu_k = face_par[f, 4], face_par[f, 5]
-        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        for i in range(n):
-            if obstacle[i] != f:
-                continue
-            r_n = reaction[i, 0] * nx + reaction[i, 1] * nz
-            r_t = reaction[i, 0] * tx + reaction[i, 1] * tz
-            md = mode[i]
-            if r_n < -threshold and md != IMPACT:
-                _release(obstacle, mode, normal_force, bounce_speed, secondary,
-                         secondary_bounce, i)
-                released[i] = True
-                changed = True
-                continue
-            if md == STICK and abs(r_t) > mu_s * r_n:
-                mode[i] = SLIP
-                slipped[i] = True
-                changed = True
-            if md == SLIP:
-                rel = (((x[i, 0] - x_n[i, 0]) / dt - vx) * tx
-                       + ((x[i, 1] - x_n[i, 1]) / dt - vz) * tz)
-                to_stick = abs(rel) < 2 * FRICTION_SMOOTHING and not slipped[i] and mu_s > 0
-                if to_stick:
-                    mode[i] = STICK
-                    changed = True
-                lag = normal_force[i]
-                if not to_stick and abs(r_n - lag) > 0.02 * abs(lag) + 1e-9 and mu_k > 0:
-                    changed = True
-            normal_force[i] = r_n
-    for i in range(n):
-        f = secondary[i]
-        if f < 0 or secondary_bounce[i] > 0:
-            continue
-        if reaction[i, 0] * face_par[f, 0] + reaction[i, 1] * face_par[f, 1] < -threshold:
-            secondary[i] = -1
-            changed = True
-    # corners: held nodes pushed into a second face
-    held = np.zeros(n, np.bool_)
-    for i in range(n):
-        held[i] = obstacle[i] >= 0 and secondary[i] < 0
-    for f in range(n_faces):
-        ox, oz = face_dyn[f, 2], face_dyn[f, 3]
-        for i in range(n):
-            if not held[i] or obstacle[i] == f:
-                continue
-            if _covers(face_par, ox, oz, f, x[i, 0], x[i, 1]) and _gap(
-                    face_par, ox, oz, f, x[i, 0], x[i, 1]) < 0:
-                secondary[i] = f
-                secondary_bounce[i] = _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i,
-                                                     dt, v_min)
-                if mode[i] == STICK:
-                    mode[i] = SLIP
-                held[i] = False
-                changed = True
-    # penetrating free surface nodes
-    hit_any = False
-    for s in range(surface.shape[0]):
-        i = surface[s]
-        if obstacle[i] >= 0 or released[i]:
-            continue
-        depth = 0.0
-        chosen = np.int64(-1)  # not a literal: one compiled _gap
-        for f in range(n_faces):
-            ox, oz = face_dyn[f, 2], face_dyn[f, 3]
-            gap = _gap(face_par, ox, oz, f, x[i, 0], x[i, 1])
-            if _covers(face_par, ox, oz, f, x[i, 0], x[i, 1]) and gap < 0 and -gap > depth:
-                depth = -gap
-                chosen = f
-        if chosen < 0:
-            continue
-        hit_any = True
-        f = chosen
-        obstacle[i] = f
-        mode[i] = STICK if face_par[f, 4] > 0 else SLIP
-        normal_force[i] = 0.0
-        bounce_speed[i] = _rebound_speed(face_par, face_dyn, f, x_n, v_n, x, i, dt, v_min)
-        if bounce_speed[i] > 0:
-            mode[i] = IMPACT
-    return changed or hit_any
+        normal[f, 0], normal[f, 1] = nx, nz
+        tangents[f, 0, 0], tangents[f, 0, 1] = -nz, nx
+        half_extents[f, 0] = face_par[f, 2]
+        for c in range(4):  # thickness, static and kinetic friction, restitution
+            props[f, c] = face_par[f, 3 + c]
+        for c in range(2):
+            origin_start[f, c] = face_dyn[f, c]
+            origin_end[f, c] = face_dyn[f, 2 + c]
+            velocity[f, c] = face_dyn[f, 4 + c]
+    return normal, tangents, half_extents, props, origin_start, origin_end, velocity
 
 
 @njit(cache=True, error_model='numpy')
@@ -1404,12 +1061,16 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     v_flat = v_n.reshape(2 * n)
     released = np.zeros(n, np.bool_)
     slipped = np.zeros(n, np.bool_)
+    faces = contact_faces(face_par, face_dyn)
+    state = (obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce)
     start = np.empty((n, 2))
     filters = np.empty((n, 2, 2))
     fr_nodes = np.empty(n, np.int64)
-    fr_t = np.empty((n, 2))
+    fr_tangents = np.empty((n, 1, 2))
+    fr_t = fr_tangents.reshape((n, 2))  # one tangent per row in 2D
     fr_bound = np.empty(n)
-    fr_speed = np.empty(n)
+    fr_speeds = np.empty((n, 1))
+    fr_speed = fr_speeds.reshape(n)
     q = np.empty(2 * n)
     reaction = np.empty(2 * n)
     values = np.zeros(4)
@@ -1417,9 +1078,9 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     iterations = 0
     n_hist = 0
     for _ in range(ipar[I_MAX_PASSES]):
-        n_fr = contact_constraints(obstacle, mode, normal_force, secondary, x_n, x_pred,
-                                   face_par, face_dyn, dt, fpar[F_VCORR], start, filters,
-                                   fr_nodes, fr_t, fr_bound, fr_speed)
+        n_fr = contact_kernels.constraints(state, faces, x_n, x_pred, dt, fpar[F_VCORR],
+                                           start, filters, fr_nodes, fr_tangents, fr_bound,
+                                           fr_speeds)
         status, its, n_hist = newton_solve(
             q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
             fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
@@ -1431,64 +1092,13 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
         iterations += its
         x = q.reshape((n, 2))
         r = reaction.reshape((n, 2))
-        if not update_contacts(obstacle, mode, normal_force, bounce_speed, secondary,
-                               secondary_bounce, x, x_n, v_n, r, face_par, face_dyn, surface,
-                               dt, fpar[F_RELEASE], v_min, released, slipped):
+        if not contact_kernels.update(state, faces, x, x_n, v_n, r, surface, dt,
+                                      fpar[F_RELEASE], v_min, 0.0, released, slipped):
             break
     x = q.reshape((n, 2))
     r = reaction.reshape((n, 2))
-    for i in range(n):
-        x_out[i, 0] = x[i, 0]
-        x_out[i, 1] = x[i, 1]
-        v_out[i, 0] = (x[i, 0] - x_n[i, 0]) / dt
-        v_out[i, 1] = (x[i, 1] - x_n[i, 1]) / dt
-        forces_out[i, 0] = 0.0
-        forces_out[i, 1] = 0.0
-    for f in range(face_par.shape[0]):
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        tx, tz = -nz, nx
-        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        for i in range(n):
-            if obstacle[i] != f:
-                continue
-            v_t = v_out[i, 0] * tx + v_out[i, 1] * tz
-            if mode[i] == STICK:
-                v_t = vx * tx + vz * tz
-            v_nn = (vx * nx + vz * nz) + bounce_speed[i]
-            v_out[i, 0] = v_nn * nx + v_t * tx
-            v_out[i, 1] = v_nn * nz + v_t * tz
-            forces_out[i, 0] = r[i, 0]
-            forces_out[i, 1] = r[i, 1]
-    rebound = np.zeros(2)
-    for i in range(n):
-        f = secondary[i]
-        if f < 0:
-            continue
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        vx, vz = face_dyn[f, 4], face_dyn[f, 5]
-        dv = (vx * nx + vz * nz) + secondary_bounce[i] - (v_out[i, 0] * nx + v_out[i, 1] * nz)
-        v_out[i, 0] += dv * nx
-        v_out[i, 1] += dv * nz
-    for i in range(n):  # restitution never adds energy (contact_passes.capped_rebound)
-        f = obstacle[i]
-        if f < 0 or (bounce_speed[i] == 0.0 and secondary_bounce[i] == 0.0):
-            continue
-        rebound[0] = bounce_speed[i] * face_par[f, 0]
-        rebound[1] = bounce_speed[i] * face_par[f, 1]
-        if secondary[i] >= 0:
-            rebound[0] += secondary_bounce[i] * face_par[secondary[i], 0]
-            rebound[1] += secondary_bounce[i] * face_par[secondary[i], 1]
-        scale = _capped_rebound(v_out[i], rebound, v_n[i], x[i] - x_n[i], r[i],
-                                masses[i], dt)
-        v_out[i, 0] -= (1.0 - scale) * rebound[0]
-        v_out[i, 1] -= (1.0 - scale) * rebound[1]
-    for i in range(n):
-        if mode[i] == IMPACT:
-            _release(obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce,
-                     i)
-        elif secondary_bounce[i] > 0:
-            secondary[i] = -1
-            secondary_bounce[i] = 0.0
+    x_out[:] = x
+    contact_kernels.finish(state, faces, x, x_n, v_n, r, masses, dt, v_out, forces_out)
     out[2] = out[3] = 0.0
     for i in range(n):  # each jaw's force along its closing axis, summed over its faces
         f = obstacle[i]
@@ -1587,57 +1197,6 @@ def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
     return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
 
 
-@njit(cache=True, error_model='numpy')
-def _separation_offset(x, ring, start, step, nx, nz, ox, oz):
-    """measures._separation_offset for a face of normal (nx, nz) through (ox, oz)."""
-    n = ring.shape[0]
-    node0 = ring[start % n]
-    f1 = ring[(start + step) % n]
-    f2 = ring[(start + 2 * step) % n]
-    g1 = (x[f1, 0] - ox) * nx + (x[f1, 1] - oz) * nz
-    g2 = (x[f2, 0] - ox) * nx + (x[f2, 1] - oz) * nz
-    tx, tz = -nz, nx
-    h0 = abs((x[f1, 0] - x[node0, 0]) * tx + (x[f1, 1] - x[node0, 1]) * tz)
-    h1 = abs((x[f2, 0] - x[f1, 0]) * tx + (x[f2, 1] - x[f1, 1]) * tz)
-    if g1 <= 0 or g2 <= g1 or h1 <= 0:
-        return 0.5 * h0
-    s1 = h1 / (math.sqrt(g2 / g1) - 1.0)
-    return min(max(h0 - s1, 0.0), h0)
-
-
-@njit(cache=True, error_model='numpy')
-def _face_contact_length(x, ring, obstacle, side, nx, nz, ox, oz):
-    """measures.face_contact_length for the face ``side``."""
-    n = ring.shape[0]
-    if n < 5:
-        return 0.0
-    tx, tz = -nz, nx
-    top = np.int64(-1)  # not literals: one compiled _separation_offset
-    bottom = np.int64(-1)
-    a_top = 0.0
-    a_bottom = 0.0
-    for r in range(n):
-        i = ring[r]
-        if obstacle[i] != side:
-            continue
-        along = x[i, 0] * tx + x[i, 1] * tz
-        if top < 0 or along > a_top:
-            top, a_top = r, along
-        if bottom < 0 or along < a_bottom:
-            bottom, a_bottom = r, along
-    if top < 0:
-        return 0.0
-    length = a_top - a_bottom
-    forward, backward = np.int64(1), np.int64(-1)
-    for k in range(2):
-        end = top if k == 0 else bottom
-        if obstacle[ring[(end + 1) % n]] != side:
-            length += _separation_offset(x, ring, end, forward, nx, nz, ox, oz)
-        elif obstacle[ring[(end - 1) % n]] != side:
-            length += _separation_offset(x, ring, end, backward, nx, nz, ox, oz)
-    return length
-
-
 @njit(cache=True, error_model='numpy', inline='always')
 def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segments,
                   face_par, jaw_origins, depth, edges, spar, triples, bpar, ring, press, flesh,
@@ -1717,38 +1276,10 @@ def step_measures(x, v, forces, obstacle, masses, surface, skin_edges, rest_segm
             grav += gravity_grad[m] * q[m]
         out[M_GRAVITY] = grav
     # deformation
-    ns = surface.shape[0]
-    lo = np.inf
-    hi = -np.inf
-    for s in range(ns):
-        lo = min(lo, x[surface[s], 0])
-        hi = max(hi, x[surface[s], 0])
-    out[M_WIDTH] = hi - lo
-    best = 0.0
-    strain_max = 0.0
-    for e in range(skin_edges.shape[0]):
-        i, j = skin_edges[e, 0], skin_edges[e, 1]
-        strain = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1]) / rest_segments[e] - 1.0
-        if e == 0 or abs(strain) > best:
-            best = abs(strain)
-            strain_max = strain
+    width, strain_max, peak = outline_measures(x, surface, skin_edges, rest_segments,
+                                               normal_out, depth, pressure_out)
+    out[M_WIDTH] = width
     out[M_MAX_STRAIN] = strain_max
-    n_e = skin_edges.shape[0]
-    peak = 0.0
-    for s in range(ns):
-        trib = 0.0
-        if n_e > 0:
-            i, j = skin_edges[s, 0], skin_edges[s, 1]
-            seg = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1])
-            k = (s - 1) % n_e
-            i, j = skin_edges[k, 0], skin_edges[k, 1]
-            prev = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1])
-            trib = 0.5 * (seg + prev)
-        p = 0.0
-        if trib > 0:
-            p = max(normal_out[surface[s]], 0.0) / (trib * depth)
-        pressure_out[s] = p
-        peak = max(peak, p)
     out[M_PEAK_PRESSURE] = peak
     out[M_CONTACT_LENGTH] = _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins)
 
@@ -1761,24 +1292,20 @@ def _jaw_contact_length(x, surface, obstacle, face_par, jaw_origins):
         if face_par[f, FP_JAW] < 0:
             continue
         side = np.int64(face_par[f, FP_JAW])
-        length += _face_contact_length(x, surface, obstacle, f, face_par[f, 0],
-                                       face_par[f, 1],
-                                       jaw_origins[side, 0] + face_par[f, FP_OFFSET_X],
-                                       jaw_origins[side, 1] + face_par[f, FP_OFFSET_Z])
+        length += face_contact_length_of(x, surface, obstacle, f, face_par[f, 0],
+                                         face_par[f, 1],
+                                         jaw_origins[side, 0] + face_par[f, FP_OFFSET_X],
+                                         jaw_origins[side, 1] + face_par[f, FP_OFFSET_Z])
     return length
 
 
 # ---------------------------------------------------------------------- damage
-#: columns of the ``damage_update`` patch table
-(P_BODY, P_LOAD, P_CX, P_CZ, P_RADIUS, P_PEAK, P_RE, P_MODULUS, P_SIZE) = range(9)
-
-
-@njit(cache=True, error_model='numpy', inline='always')
+@njit(cache=True, error_model='numpy')
 def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_curvature,
                   bruise_pressure, rigid_modulus, pad_modulus, covered, node_pressure,
                   patches):
-    """The per-step part of ``DamageTracker.update`` (damage.py): contact patches by
-    Hertz, per-node pressure and the bruised cover.
+    """``damage.damage_patches`` for the faces of this module's steps (rigid faces, soft
+    pads; no deformable finger): the per-step part of ``DamageTracker.update``.
 
     Args:
         x: (n, 2) m.  normal: (n,) N, normal reactions.  obstacle: (n,) holding obstacle.
@@ -1791,122 +1318,12 @@ def damage_update(x, normal, obstacle, ring, groups, curvature, padded, rest_cur
     Returns:
         (number of patches, largest peak pressure Pa, bruised length sum(covered) m).
     """
-    n = ring.shape[0]
-    node_pressure[:] = 0.0
-    body = np.empty(n, np.int64)
-    any_held = False
-    for r in range(n):
-        o = obstacle[ring[r]]
-        body[r] = groups[o] if o >= 0 else -1
-        any_held = any_held or body[r] >= 0
-    if not any_held:
-        return 0, 0.0, _total(covered)
-    start = 0
-    uniform = True
-    for r in range(n):
-        if body[r] != body[0]:
-            uniform = False
-    if not uniform:
-        for r in range(n):
-            if body[r] != body[(r - 1) % n]:
-                start = r
-                break
-    seg = np.empty(n)
-    for r in range(n):
-        i, j = ring[r], ring[(r + 1) % n]
-        seg[r] = math.sqrt((x[j, 0] - x[i, 0]) ** 2 + (x[j, 1] - x[i, 1]) ** 2)
-    run = np.empty(n, np.int64)
-    n_patches = 0
-    k = 0
-    while k < n:
-        r0 = (start + k) % n
-        b = body[r0]
-        length = 0
-        while k < n and body[(start + k) % n] == b:
-            run[length] = (start + k) % n
-            length += 1
-            k += 1
-        if b < 0:
-            continue
-        load = 0.0
-        cx = 0.0
-        cz = 0.0
-        for m in range(length):
-            node = ring[run[m]]
-            f = max(normal[node], 0.0)
-            load += f
-            cx += f * x[node, 0]
-            cz += f * x[node, 1]
-        if load <= 0:
-            continue
-        cx /= load
-        cz /= load
-        near = run[0]
-        best = np.inf
-        face_k = 0.0
-        pad = 0.0
-        for m in range(length):
-            node = ring[run[m]]
-            dist = math.sqrt((x[node, 0] - cx) ** 2 + (x[node, 1] - cz) ** 2)
-            if dist < best:
-                best = dist
-                near = run[m]
-            face_k += curvature[obstacle[node]]
-            pad += padded[obstacle[node]]
-        face_k /= length
-        k1 = rest_curvature[near]
-        if k1 <= 0:
-            k1 = 1e-3
-        k1_eff = max(k1 + face_k, 1e-3 * k1)
-        re = 1.0 / math.sqrt(k1_eff * k1)
-        modulus = pad_modulus if pad / length >= 0.5 else rigid_modulus
-        a = (3.0 * load * re / (4.0 * modulus)) ** (1.0 / 3.0)
-        p0 = 3.0 * load / (2.0 * math.pi * a * a)
-        row = patches[n_patches]
-        row[P_BODY], row[P_LOAD], row[P_CX], row[P_CZ] = b, load, cx, cz
-        row[P_RADIUS], row[P_PEAK], row[P_RE], row[P_MODULUS] = a, p0, re, modulus
-        n_patches += 1
-        for m in range(length):
-            node = ring[run[m]]
-            s = math.sqrt((x[node, 0] - cx) ** 2 + (x[node, 1] - cz) ** 2)
-            node_pressure[run[m]] = p0 * math.sqrt(max(0.0, 1.0 - (s / a) ** 2))
-        if p0 > bruise_pressure and n >= 3:
-            _cover(x, ring, near, cx, cz, seg,
-                   a * math.sqrt(1.0 - (bruise_pressure / p0) ** 2), covered)
-    pressure = 0.0
-    for m in range(n_patches):
-        pressure = max(pressure, patches[m, P_PEAK])
-    return n_patches, pressure, _total(covered)
-
-
-@njit(cache=True, error_model='numpy')
-def _total(values):
-    """sum(values)."""
-    return np.sum(values)
-
-
-@njit(cache=True, error_model='numpy')
-def _cover(x, ring, near, cx, cz, seg, radius, covered):
-    """DamageTracker._cover: the outline within ``radius`` (m, along it) of the centre."""
-    n = ring.shape[0]
-    rel = np.zeros(n)
-    ahead = n // 2
-    acc = 0.0
-    for k in range(ahead):
-        acc += seg[(near + k) % n]
-        rel[(near + 1 + k) % n] = acc
-    acc = 0.0
-    for k in range(n - 1 - ahead):
-        r = (near - 1 - k) % n
-        acc += seg[r]
-        rel[r] = -acc
-    i0, i1, i2 = ring[(near - 1) % n], ring[near], ring[(near + 1) % n]
-    tx, tz = x[i2, 0] - x[i0, 0], x[i2, 1] - x[i0, 1]
-    norm = max(math.sqrt(tx * tx + tz * tz), 1e-300)
-    tx, tz = tx / norm, tz / norm
-    offset = (cx - x[i1, 0]) * tx + (cz - x[i1, 1]) * tz
-    for r in range(n):
-        lo = rel[r] - 0.5 * seg[(r - 1) % n]
-        hi = rel[r] + 0.5 * seg[r]
-        cover = max(min(hi, offset + radius) - max(lo, offset - radius), 0.0)
-        covered[r] = max(covered[r], cover)
+    faces = np.zeros((groups.shape[0], FACE_SIZE))
+    for f in range(groups.shape[0]):
+        faces[f, FACE_BODY] = groups[f]
+        faces[f, FACE_CURVATURE] = curvature[f]
+        faces[f, FACE_PADDED] = padded[f]
+    near = np.empty(ring.shape[0], np.int64)
+    return damage_patches(x, normal, obstacle, ring, faces, rest_curvature, bruise_pressure,
+                          rigid_modulus, pad_modulus, 1.0, covered, node_pressure, patches,
+                          near)

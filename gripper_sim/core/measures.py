@@ -1,19 +1,164 @@
-"""Deformation measures of the fruit from its node positions and contact forces."""
+"""Deformation measures of the fruit from its node positions and contact forces.
+
+The measures are compiled functions on arrays (``@njit``), called by the generic route
+(``deformation``, ``face_contact_length``, ``tributary_lengths`` below) and by the
+compiled step (``kernels.step_measures``): each measure is written once.
+"""
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from gripper_sim.core.fruit import FruitModel
 from gripper_sim.core.results import Deformation
 
 
+# ---------------------------------------------------------------------- compiled measures
+@njit(cache=True, error_model='numpy')
+def tributary_lengths_of(x, skin_edges, n_surface, out):
+    """Fill ``out`` (n_surface,) m with half the length of the two skin segments at each
+    outline node (0 without skin).
+
+    Args:
+        x: (n, 2) m.  skin_edges: (n_e, 2) int64, edge s from outline node s to s + 1
+        (n_e = n_surface, or 0 for a fruit without skin).
+    """
+    n_e = skin_edges.shape[0]
+    for s in range(n_surface):
+        if n_e == 0:
+            out[s] = 0.0
+            continue
+        i, j = skin_edges[s, 0], skin_edges[s, 1]
+        seg = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1])
+        k = (s - 1) % n_e
+        i, j = skin_edges[k, 0], skin_edges[k, 1]
+        prev = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1])
+        out[s] = 0.5 * (seg + prev)
+
+
+@njit(cache=True, error_model='numpy')
+def outline_measures(x, surface, skin_edges, rest_segments, normal, depth, pressure_out):
+    """The outline's width, largest skin strain and line contact pressures.
+
+    Args:
+        x: (n, 2) m.  surface: (n_s,) int64 outline nodes.  skin_edges: (n_e, 2) int64
+        (see ``tributary_lengths_of``).  rest_segments: (n_e,) m, their rest lengths.
+        normal: (n,) N, each node's normal contact force.  depth: m, out-of-plane b.
+        pressure_out: (n_s,) Pa, output: each outline node's force over its tributary
+        length and b (0 where the length is 0).
+
+    Returns:
+        (width m (extent along x), the skin strain of largest magnitude, the largest
+        line contact pressure Pa).
+    """
+    ns = surface.shape[0]
+    lo = np.inf
+    hi = -np.inf
+    for s in range(ns):
+        lo = min(lo, x[surface[s], 0])
+        hi = max(hi, x[surface[s], 0])
+    best = 0.0
+    strain_max = 0.0
+    for e in range(skin_edges.shape[0]):
+        i, j = skin_edges[e, 0], skin_edges[e, 1]
+        strain = math.hypot(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1]) / rest_segments[e] - 1.0
+        if e == 0 or abs(strain) > best:
+            best = abs(strain)
+            strain_max = strain
+    tributary_lengths_of(x, skin_edges, ns, pressure_out)
+    peak = 0.0
+    for s in range(ns):
+        trib = pressure_out[s]
+        p = 0.0
+        if trib > 0:
+            p = max(normal[surface[s]], 0.0) / (trib * depth)
+        pressure_out[s] = p
+        peak = max(peak, p)
+    return hi - lo, strain_max, peak
+
+
+@njit(cache=True, error_model='numpy')
+def separation_offset(x, ring, start, step, nx, nz, ox, oz):
+    """Distance (m) along a face from the last contact node to where the outline leaves it.
+
+    The gap of the free outline just past the contact edge grows like s^2 (a smooth
+    surface leaving a flat face tangentially); the next two free nodes fix where it is
+    zero. Falls back to half the segment when their gaps do not fit that.
+
+    Args:
+        x: (n, 2) m.  ring: (n_s,) outline nodes.  start: the outline position of the
+        last contact node.  step: +1 or -1, the direction of the free nodes.
+        nx, nz: the face's unit normal.  ox, oz: m, a point of the face.
+    """
+    n = ring.shape[0]
+    node0 = ring[start % n]
+    f1 = ring[(start + step) % n]
+    f2 = ring[(start + 2 * step) % n]
+    g1 = (x[f1, 0] - ox) * nx + (x[f1, 1] - oz) * nz
+    g2 = (x[f2, 0] - ox) * nx + (x[f2, 1] - oz) * nz
+    tx, tz = -nz, nx
+    h0 = abs((x[f1, 0] - x[node0, 0]) * tx + (x[f1, 1] - x[node0, 1]) * tz)
+    h1 = abs((x[f2, 0] - x[f1, 0]) * tx + (x[f2, 1] - x[f1, 1]) * tz)
+    if g1 <= 0 or g2 <= g1 or h1 <= 0:
+        return 0.5 * h0
+    s1 = h1 / (math.sqrt(g2 / g1) - 1.0)
+    return min(max(h0 - s1, 0.0), h0)
+
+
+@njit(cache=True, error_model='numpy')
+def face_contact_length_of(x, ring, holder, face, nx, nz, ox, oz):
+    """Length (m) of the outline lying on a flat face: the span of the outline nodes it
+    holds along the face, extended at each end to where the outline leaves it
+    (``separation_offset``); 0 for an outline of fewer than 5 nodes.
+
+    Args:
+        x: (n, 2) m.  ring: (n_s,) outline nodes.  holder: (n,) int64, the face holding
+        each node.  face: the face's index in ``holder``.  nx, nz: its unit normal.
+        ox, oz: m, a point of it.
+    """
+    n = ring.shape[0]
+    if n < 5:
+        return 0.0
+    tx, tz = -nz, nx
+    top = np.int64(-1)  # not literals: one compiled separation_offset
+    bottom = np.int64(-1)
+    a_top = 0.0
+    a_bottom = 0.0
+    for r in range(n):
+        i = ring[r]
+        if holder[i] != face:
+            continue
+        along = x[i, 0] * tx + x[i, 1] * tz
+        if top < 0 or along > a_top:
+            top, a_top = r, along
+        if bottom < 0 or along < a_bottom:
+            bottom, a_bottom = r, along
+    if top < 0:
+        return 0.0
+    length = a_top - a_bottom
+    forward, backward = np.int64(1), np.int64(-1)
+    for k in range(2):
+        end = top if k == 0 else bottom
+        if holder[ring[(end + 1) % n]] != face:
+            length += separation_offset(x, ring, end, forward, nx, nz, ox, oz)
+        elif holder[ring[(end - 1) % n]] != face:
+            length += separation_offset(x, ring, end, backward, nx, nz, ox, oz)
+    return length
+
+
+# ---------------------------------------------------------------------- on a fruit model
+def _skin(fruit: FruitModel) -> np.ndarray:
+    """(n_e, 2) int64, the fruit's skin edges as the compiled measures take them."""
+    return np.ascontiguousarray(fruit.skin_edges, dtype=np.int64).reshape(-1, 2)
+
+
 def tributary_lengths(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
     """(n_surface,) m, half the length of the two skin segments at each surface node."""
-    if not len(fruit.skin_edges):
-        return np.zeros(len(fruit.surface))
-    e = x[fruit.skin_edges[:, 1]] - x[fruit.skin_edges[:, 0]]
-    seg = np.hypot(e[:, 0], e[:, 1])
-    return 0.5 * (seg + np.roll(seg, 1))
+    out = np.empty(len(fruit.surface))
+    tributary_lengths_of(np.ascontiguousarray(x, dtype=float), _skin(fruit), len(out), out)
+    return out
 
 
 def touching_length(x: np.ndarray, edges: np.ndarray, touching: np.ndarray) -> float:
@@ -23,59 +168,18 @@ def touching_length(x: np.ndarray, edges: np.ndarray, touching: np.ndarray) -> f
     return float(np.sum(seg * 0.5 * touching[edges].sum(axis=1)))
 
 
-def skin_strains(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
-    """(n_surface,) engineering strains of the skin segments."""
-    rest = fruit.rest_positions
-    e = x[fruit.skin_edges[:, 1]] - x[fruit.skin_edges[:, 0]]
-    e0 = rest[fruit.skin_edges[:, 1]] - rest[fruit.skin_edges[:, 0]]
-    return np.hypot(e[:, 0], e[:, 1]) / np.hypot(e0[:, 0], e0[:, 1]) - 1.0
-
-
-def _separation_offset(x, ring_order, start, step, face) -> float:
-    """Distance (m) along the face from the last contact node to where the surface leaves it.
-
-    The gap of the free surface just past the contact edge grows like s^2 (a smooth
-    surface leaving a flat face tangentially); the next two free nodes fix where it is
-    zero. Falls back to half the segment when their gaps do not fit that.
-    """
-    n = len(ring_order)
-    node0 = ring_order[start % n]
-    f1, f2 = ring_order[(start + step) % n], ring_order[(start + 2 * step) % n]
-    g1, g2 = float(face.gap(x[f1])), float(face.gap(x[f2]))
-    t = face.tangent
-    h0 = abs(float((x[f1] - x[node0]) @ t))
-    h1 = abs(float((x[f2] - x[f1]) @ t))
-    if g1 <= 0 or g2 <= g1 or h1 <= 0:
-        return 0.5 * h0
-    s1 = h1 / (np.sqrt(g2 / g1) - 1.0)
-    return float(min(max(h0 - s1, 0.0), h0))
-
-
 def face_contact_length(fruit: FruitModel, x: np.ndarray, face, held: np.ndarray) -> float:
-    """Length (m) of the fruit outline lying on a flat face.
-
-    The span of the held surface nodes along the face, extended at each end to where
-    the outline leaves the face (see ``_separation_offset``).
+    """Length (m) of the fruit outline lying on a flat face (``face_contact_length_of``).
 
     Args:
-        face: a FlatFace.  held: (n_nodes,) bool, node held by that face.
+        x: (n_nodes, 2) m.  face: a FlatFace.  held: (n_nodes,) bool, node held by that
+        face.
     """
-    ring = fruit.surface
-    in_contact = held[ring]
-    if not np.any(in_contact) or len(ring) < 5:
-        return 0.0
-    t = face.tangent
-    along = x[ring] @ t
-    idx = np.flatnonzero(in_contact)
-    top, bottom = idx[np.argmax(along[idx])], idx[np.argmin(along[idx])]
-    length = float(along[top] - along[bottom])
-    n = len(ring)
-    for end in (top, bottom):
-        if not in_contact[(end + 1) % n]:
-            length += _separation_offset(x, ring, end, 1, face)
-        elif not in_contact[(end - 1) % n]:
-            length += _separation_offset(x, ring, end, -1, face)
-    return length
+    holder = np.where(held, 0, -1).astype(np.int64)
+    return face_contact_length_of(
+        np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(fruit.surface, np.int64),
+        holder, 0, float(face.normal[0]), float(face.normal[1]), float(face.origin[0]),
+        float(face.origin[1]))
 
 
 def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,
@@ -85,23 +189,23 @@ def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,
     Args:
         normal_force: (n_nodes,) N, normal contact reaction at each node (0 if free).
         jaw_contact: (n_nodes,) bool, node held by a jaw.
+        jaw_contact_length: m, the contact length; None: the tributary length of the
+            outline nodes the jaws hold.
     """
-    surface = fruit.surface
-    xs = x[surface]
-    width = float(np.ptp(xs[:, 0]))
+    x = np.ascontiguousarray(x, dtype=float)
+    surface = np.ascontiguousarray(fruit.surface, np.int64)
+    skin = _skin(fruit)
+    rest = fruit.rest_positions
+    rest_segments = np.hypot(*(rest[skin[:, 1]] - rest[skin[:, 0]]).T)
+    pressure = np.empty(len(surface))
+    width, max_strain, peak = outline_measures(
+        x, surface, skin, np.ascontiguousarray(rest_segments),
+        np.ascontiguousarray(normal_force, dtype=float), float(fruit.depth), pressure)
     compression = fruit.rest_width - width
     ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
-    strains = skin_strains(fruit, x)
-    max_strain = float(strains[np.argmax(np.abs(strains))]) if strains.size else 0.0
-    trib = tributary_lengths(fruit, x)
     if jaw_contact_length is None:
+        trib = tributary_lengths(fruit, x)
         jaw_contact_length = float(np.sum(trib[jaw_contact[surface]]))
-    contact_length = jaw_contact_length
-    with np.errstate(divide='ignore', invalid='ignore'):
-        pressure = np.where(trib > 0, np.maximum(normal_force[surface], 0.0)
-                            / (trib * fruit.depth), 0.0)
-    return Deformation(compression=compression,
-                       compression_ratio=ratio,
-                       max_skin_strain=max_strain, contact_length=contact_length,
-                       peak_contact_pressure=float(pressure.max(initial=0.0)),
-                       node_pressure=pressure)
+    return Deformation(compression=compression, compression_ratio=ratio,
+                       max_skin_strain=max_strain, contact_length=jaw_contact_length,
+                       peak_contact_pressure=peak, node_pressure=pressure)

@@ -25,9 +25,8 @@ behind it, which the ordinary (hard) contact handles.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+from numba import njit, vectorize
 
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING
@@ -37,20 +36,6 @@ def foundation_modulus(youngs_modulus: float, poisson_ratio: float) -> float:
     """K (Pa): constrained modulus of a thin bonded layer."""
     nu = poisson_ratio
     return (1 - nu) * youngs_modulus / ((1 + nu) * (1 - 2 * nu))
-
-
-@dataclass
-class _PadFace:
-    """A pad surface during one step: origin (2,), normal (2,), tangent (2,), half
-    length, tangential speed of the jaw (m/s), jaw side (0 left, 1 right), obstacle index."""
-
-    origin: np.ndarray
-    normal: np.ndarray
-    tangent: np.ndarray
-    half_length: float
-    speed: float
-    side: int
-    index: int
 
 
 class PadState(Energy):
@@ -107,6 +92,10 @@ class PadState(Energy):
 class PadLayer(PadState):
     """The pads of both jaws as one energy of the fruit node positions.
 
+    Each outline node that may touch a pad face in a step is one row of a table
+    (``pad_rows``); the force law of a row is ``pad_point``, the compiled function the
+    compiled step (``kernels``) calls too.
+
     Args:
         surface: (n_s,) surface node indices (outline order).
         tributary: (n_s,) m, rest tributary length of each surface node.
@@ -122,6 +111,13 @@ class PadLayer(PadState):
                          youngs_modulus, poisson_ratio, friction, n_nodes, dim=2)
         #: each surface node one element of the Hessian's pattern (its 2x2 node block)
         self.dofs = element_dofs(self.surface[:, None])
+        self._set_rows(np.zeros(0, np.int64), np.zeros((0, PAD_SIZE)), np.zeros(0, np.int64))
+
+    def _set_rows(self, positions: np.ndarray, rows: np.ndarray, faces: np.ndarray) -> None:
+        """The step's rows: outline positions (m,), rows (m, PAD_SIZE), obstacle index of
+        each row's face (m,)."""
+        self.positions, self.rows, self.row_face = positions, rows, faces
+        self.nodes = self.surface[positions]
 
     # ------------------------------------------------------------------ per step
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
@@ -134,117 +130,210 @@ class PadLayer(PadState):
         """
         self.x_start = np.array(x_n, dtype=float)
         self.dt = float(dt)
-        self.faces, self.active, self.lagged = [], [], []
-        xs = self.x_start[self.surface]
-        for (old, side, index), (new, _, _) in zip(old_faces, new_faces):
-            origin = new.origin + self.thickness * new.normal
-            pad = _PadFace(origin, new.normal, new.tangent, new.half_length,
-                           float(new.velocity @ new.tangent), side, index)
-            old_origin = old.origin + self.thickness * old.normal
-            gap = (xs - old_origin) @ old.normal
-            along = np.abs((xs - old_origin) @ old.tangent)
-            # nodes over the pad and not far in front of it can touch it during the step
-            near = (along <= old.half_length) & (gap < self.thickness) & \
-                (gap > -self.thickness - 1e-3)
-            self.faces.append(pad)
-            self.active.append(np.flatnonzero(near))
-            self.lagged.append(self.k[near] * np.maximum(0.0, -gap[near]))
+        table = np.zeros((len(old_faces), PF_SIZE))
+        for row, ((old, side, index), (new, _, _)) in zip(table, zip(old_faces, new_faces)):
+            row[[PF_OLD_X, PF_OLD_Z]] = old.origin
+            row[[PF_NEW_X, PF_NEW_Z]] = new.origin
+            row[[PF_NX, PF_NZ]] = new.normal
+            row[PF_HALF], row[PF_SPEED] = new.half_length, float(new.velocity @ new.tangent)
+            row[PF_SIDE], row[PF_INDEX] = side, index
+        self._set_rows(*pad_rows(self.x_start, self.surface, self.k, self.thickness, self.mu,
+                                 table))
 
     def finish_step(self, q: np.ndarray) -> None:
         """Record the pad forces on the fruit at the step's end positions ``q``."""
-        x = q.reshape(-1, 2)
         self._clear_forces()
-        for face, active, lagged in zip(self.faces, self.active, self.lagged):
-            if not active.size:
-                continue
-            nodes = self.surface[active]
-            f_n, f_t = self._node_forces(x[nodes], face, active, lagged)
-            self._record(face, nodes, f_n[:, None] * face.normal + f_t[:, None] * face.tangent,
-                         f_n)
-
-    def _node_forces(self, x, face, active, lagged):
-        """Normal (penalty) and tangential (friction) force on the nodes, N."""
-        gap = (x - face.origin) @ face.normal
-        f_n = self.k[active] * np.maximum(0.0, -gap)
-        u = ((x - self.x_start[self.surface[active]]) @ face.tangent) - face.speed * self.dt
-        f_t = -self.mu * lagged * _f1(np.abs(u), FRICTION_SMOOTHING * self.dt) * np.sign(u)
-        return f_n, f_t
+        pad_forces(np.ascontiguousarray(q, dtype=float).reshape(-1, 2), self.x_start, self.dt,
+                   self.nodes, self.rows, self.row_face, self.forces, self.normal_forces,
+                   self.holder, self.side_force)
 
     # ------------------------------------------------------------------ energy
-    def _face_terms(self, x: np.ndarray, face, active: np.ndarray, lagged: np.ndarray,
-                    hessian: bool):
-        """One pad face's energy (J), its gradient (k, 2) N on the active surface nodes and
-        their Hessian blocks (k, 2, 2) N/m (None without ``hessian``)."""
-        eps = FRICTION_SMOOTHING * self.dt
-        nodes = self.surface[active]
-        k = self.k[active]
-        gap = (x[nodes] - face.origin) @ face.normal
-        delta = np.maximum(0.0, -gap)
-        u = ((x[nodes] - self.x_start[nodes]) @ face.tangent) - face.speed * self.dt
-        a = np.abs(u)
-        bound = self.mu * lagged
-        value = 0.5 * float(np.sum(k * delta ** 2)) + float(np.sum(bound * _f0(a, eps)))
-        g_n = -k * delta  # d E / d gap, along the normal
-        g_t = bound * _f1(a, eps) * np.sign(u)
-        local = g_n[:, None] * face.normal + g_t[:, None] * face.tangent
+    def _terms(self, q: np.ndarray, grad: np.ndarray, hessian: bool):
+        """Adds the gradient (N) into ``grad`` (2 n,); returns (value J, the rows' node
+        blocks (m, 2, 2) N/m or None without ``hessian``)."""
+        q = np.ascontiguousarray(q, dtype=float)
+        q_n = self.x_start.reshape(-1)
+        value = pad_terms(q, q_n, self.dt, self.nodes, self.rows, grad)
         if not hessian:
-            return value, local, None
-        h_n = np.where(delta > 0, k, 0.0)
-        h_t = bound * _df1(a, eps)
-        n, t = face.normal, face.tangent
-        blocks = (h_n[:, None, None] * np.outer(n, n)[None]
-                  + h_t[:, None, None] * np.outer(t, t)[None])
-        return value, local, blocks
-
-    def _accumulate(self, q: np.ndarray, grad: np.ndarray, hessian: bool):
-        """Adds every face's gradient (N) into ``grad`` (2 n,); returns (value in J,
-        [(active surface indices (k,), Hessian blocks (k, 2, 2) N/m)] if ``hessian``)."""
-        x = q.reshape(-1, 2)
-        value = 0.0
-        parts = []
-        for face, active, lagged in zip(self.faces, self.active, self.lagged):
-            if not active.size:
-                continue
-            nodes = self.surface[active]
-            face_value, local, blocks = self._face_terms(x, face, active, lagged, hessian)
-            value += face_value
-            np.add.at(grad, 2 * nodes, local[:, 0])
-            np.add.at(grad, 2 * nodes + 1, local[:, 1])
-            if hessian:
-                parts.append((active, blocks))
-        return value, parts
+            return value, None
+        blocks = np.empty((len(self.nodes), 2, 2))
+        pad_blocks(q, q_n, self.dt, self.nodes, self.rows, blocks)
+        return value, blocks
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         grad = np.zeros(q.size)
-        value, parts = self._accumulate(q, grad, hessian)
-        if not parts:
+        value, blocks = self._terms(q, grad, hessian)
+        if blocks is None or not len(blocks):
             empty = np.zeros(0, np.int64)
             return Evaluation(value, grad, empty, empty, np.zeros(0))
-        dofs = [self.dofs[active] for active, _ in parts]
-        return Evaluation(value, grad,
-                          np.concatenate([np.repeat(d, 2, axis=1).ravel() for d in dofs]),
-                          np.concatenate([np.tile(d, (1, 2)).ravel() for d in dofs]),
-                          np.concatenate([blocks.ravel() for _, blocks in parts]))
+        dofs = self.dofs[self.positions]
+        return Evaluation(value, grad, np.repeat(dofs, 2, axis=1).ravel(),
+                          np.tile(dofs, (1, 2)).ravel(), blocks.ravel())
 
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
         """``evaluate`` for the fast solver: adds the gradient (N) into ``grad`` and the
         node blocks (N/m) into the CSC values ``data`` at ``scatter`` (n_s, 4), one
         element per surface node; returns (value in J, no low-rank terms)."""
-        value, parts = self._accumulate(q, grad, hessian)
-        for active, blocks in parts:
-            np.add.at(data, scatter[active], blocks.reshape(-1, 4))
+        value, blocks = self._terms(q, grad, hessian)
+        if blocks is not None:
+            np.add.at(data, scatter[self.positions], blocks.reshape(-1, 4))
         return value, []
 
 
+# ---------------------------------------------------------------------- compiled, per point
+@vectorize(['float64(float64, float64)'], cache=True)
 def _f0(y, eps):
-    """IPC's f0: y^3/(3 eps^2) ... integral of f1, C1 at eps (m)."""
-    return np.where(y < eps, -y ** 3 / (3 * eps ** 2) + y ** 2 / eps + eps / 3, y)
+    """IPC's f0 (m): -y^3/(3 eps^2) + y^2/eps + eps/3 below eps, y above; the integral
+    of f1, C1 at eps (m)."""
+    return -y ** 3 / (3 * eps ** 2) + y ** 2 / eps + eps / 3 if y < eps else y
 
 
+@vectorize(['float64(float64, float64)'], cache=True)
 def _f1(y, eps):
-    return np.where(y < eps, 2 * y / eps - y ** 2 / eps ** 2, 1.0)
+    """IPC's f1 (-): 2y/eps - y^2/eps^2 below eps, 1 above."""
+    return 2 * y / eps - y ** 2 / eps ** 2 if y < eps else 1.0
 
 
+@vectorize(['float64(float64, float64)'], cache=True)
 def _df1(y, eps):
-    return np.where(y < eps, 2 / eps - 2 * y / eps ** 2, 0.0)
+    """f1' (1/m)."""
+    return 2 / eps - 2 * y / eps ** 2 if y < eps else 0.0
+
+
+#: columns of a pad row (one per outline node that may touch a pad face in the step, as
+#: ``pad_rows`` sets them): stiffness k N/m, friction bound mu * lagged normal force N,
+#: pad surface origin at the end of the step (x, z) m, its normal (x, z), the jaw's speed
+#: along the face m/s, the jaw side (0 left, 1 right)
+PAD_K, PAD_BOUND, PAD_OX, PAD_OZ, PAD_NX, PAD_NZ, PAD_SPEED, PAD_SIDE, PAD_SIZE = range(9)
+#: columns of the face table of ``pad_rows`` (one per jaw face): the rigid face's origin
+#: at the start and the end of the step (x, z) m, its normal, half length m, the jaw's
+#: speed along it m/s, the jaw side, the face's obstacle index
+(PF_OLD_X, PF_OLD_Z, PF_NEW_X, PF_NEW_Z, PF_NX, PF_NZ, PF_HALF, PF_SPEED, PF_SIDE, PF_INDEX,
+ PF_SIZE) = range(11)
+
+
+@njit(cache=True, error_model='numpy')
+def pad_rows(x_n, surface, k, thickness, mu, faces):
+    """The pad rows of a step: for each jaw face (the rigid face behind its pad), the
+    outline nodes over the pad and not far in front of it at the start of the step, with
+    their normal force there lagged into the friction bound.
+
+    Args:
+        x_n: (n, 2) m, positions at the start of the step.  surface: (n_s,) int64.
+        k: (n_s,) N/m, foundation stiffness per outline node.  thickness: m.  mu: -.
+        faces: (n_faces, PF_SIZE) the face table (PF_* columns).
+
+    Returns:
+        (outline positions (m,) int64, rows (m, PAD_SIZE), obstacle index per row (m,)).
+    """
+    n_s = surface.shape[0]
+    positions = np.empty(faces.shape[0] * n_s, np.int64)
+    rows = np.empty((faces.shape[0] * n_s, PAD_SIZE))
+    index = np.empty(faces.shape[0] * n_s, np.int64)
+    m = 0
+    for f in range(faces.shape[0]):
+        nx, nz = faces[f, PF_NX], faces[f, PF_NZ]
+        tx, tz = -nz, nx
+        old_x = faces[f, PF_OLD_X] + thickness * nx
+        old_z = faces[f, PF_OLD_Z] + thickness * nz
+        for s in range(n_s):
+            i = surface[s]
+            gap = (x_n[i, 0] - old_x) * nx + (x_n[i, 1] - old_z) * nz
+            along = abs((x_n[i, 0] - old_x) * tx + (x_n[i, 1] - old_z) * tz)
+            if not (along <= faces[f, PF_HALF] and gap < thickness
+                    and gap > -thickness - 1e-3):
+                continue
+            positions[m] = s
+            index[m] = np.int64(faces[f, PF_INDEX])
+            rows[m, PAD_K] = k[s]
+            rows[m, PAD_BOUND] = mu * (k[s] * max(0.0, -gap))
+            rows[m, PAD_OX] = faces[f, PF_NEW_X] + thickness * nx
+            rows[m, PAD_OZ] = faces[f, PF_NEW_Z] + thickness * nz
+            rows[m, PAD_NX] = nx
+            rows[m, PAD_NZ] = nz
+            rows[m, PAD_SPEED] = faces[f, PF_SPEED]
+            rows[m, PAD_SIDE] = faces[f, PF_SIDE]
+            m += 1
+    return positions[:m], rows[:m], index[:m]
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def pad_point(px, pz, px0, pz0, row, dt):
+    """One pad point's force law (module docstring): the node at (px, pz) m that was at
+    (px0, pz0) at the start of the step against the pad of ``row`` (PAD_* columns) over
+    ``dt`` s.
+
+    Returns:
+        (energy J, gradient (gx, gz) N, normal stiffness h_n N/m (its Hessian is
+        h_n n n^T + h_t t t^T), tangential stiffness h_t N/m, normal force f_n N).
+    """
+    eps = FRICTION_SMOOTHING * dt
+    k, bound = row[PAD_K], row[PAD_BOUND]
+    nx, nz = row[PAD_NX], row[PAD_NZ]
+    tx, tz = -nz, nx
+    gap = (px - row[PAD_OX]) * nx + (pz - row[PAD_OZ]) * nz
+    delta = max(0.0, -gap)
+    u = ((px - px0) * tx + (pz - pz0) * tz) - row[PAD_SPEED] * dt
+    a = abs(u)
+    value = 0.5 * k * delta ** 2 + bound * _f0(a, eps)
+    g_n = -k * delta  # d E / d gap, along the normal
+    g_t = bound * _f1(a, eps) * (1.0 if u > 0 else -1.0 if u < 0 else 0.0)
+    h_n = k if gap < 0 else 0.0
+    h_t = bound * _df1(a, eps)
+    return value, g_n * nx + g_t * tx, g_n * nz + g_t * tz, h_n, h_t, k * delta
+
+
+@njit(cache=True, error_model='numpy')
+def pad_terms(q, q_n, dt, nodes, rows, grad):
+    """The pads' energy (J) at q (2n,) m from q_n (2n,) m: adds its gradient (N) into
+    ``grad`` (2n,).  nodes: (m,) the rows' nodes.  rows: (m, PAD_SIZE)."""
+    value = 0.0
+    for e in range(nodes.shape[0]):
+        i = nodes[e]
+        v, gx, gz, _h_n, _h_t, _f_n = pad_point(q[2 * i], q[2 * i + 1], q_n[2 * i],
+                                                q_n[2 * i + 1], rows[e], dt)
+        value += v
+        grad[2 * i] += gx
+        grad[2 * i + 1] += gz
+    return value
+
+
+@njit(cache=True, error_model='numpy')
+def pad_blocks(q, q_n, dt, nodes, rows, blocks):
+    """The rows' Hessian node blocks (m, 2, 2) N/m into ``blocks``."""
+    for e in range(nodes.shape[0]):
+        i = nodes[e]
+        _v, _gx, _gz, h_n, h_t, _f_n = pad_point(q[2 * i], q[2 * i + 1], q_n[2 * i],
+                                                 q_n[2 * i + 1], rows[e], dt)
+        nx, nz = rows[e, PAD_NX], rows[e, PAD_NZ]
+        tx, tz = -nz, nx
+        blocks[e, 0, 0] = h_n * nx * nx + h_t * tx * tx
+        blocks[e, 0, 1] = h_n * nx * nz + h_t * tx * tz
+        blocks[e, 1, 0] = h_n * nz * nx + h_t * tz * tx
+        blocks[e, 1, 1] = h_n * nz * nz + h_t * tz * tz
+
+
+@njit(cache=True, error_model='numpy')
+def pad_forces(x, x_n, dt, nodes, rows, row_face, forces, normal, holder, side_force):
+    """The pads' forces on the fruit at the step's end positions x (n, 2) m from x_n
+    (n, 2) m: forces (n, 2) N (minus the gradient), normal (n,) N, holder (n,) the face
+    (``row_face`` (m,)) pressing each node hardest (-1: none), side_force (2,) N each
+    jaw's pads' push along the closing axis; all zeroed first."""
+    forces[:, :] = 0.0
+    normal[:] = 0.0
+    holder[:] = -1
+    side_force[:] = 0.0
+    best = np.zeros(x.shape[0])
+    for e in range(nodes.shape[0]):
+        i = nodes[e]
+        _v, gx, gz, _h_n, _h_t, f_n = pad_point(x[i, 0], x[i, 1], x_n[i, 0], x_n[i, 1],
+                                                rows[e], dt)
+        forces[i, 0] -= gx
+        forces[i, 1] -= gz
+        normal[i] += f_n
+        side = np.int64(rows[e, PAD_SIDE])
+        side_force[side] += -gx if side == 0 else gx
+        if f_n > 0 and f_n > best[i]:
+            holder[i] = row_face[e]
+            best[i] = f_n

@@ -61,7 +61,8 @@ class Simulation(SimulationFacade):
                 finger = finger_body(c, self.fruit.depth)
             self._soft = SoftFingers(finger, self.fruit.n_nodes,
                                      c['contact.jaw.static_friction'],
-                                     c['contact.jaw.kinetic_friction'])
+                                     c['contact.jaw.kinetic_friction'],
+                                     barrier.BarrierSettings.from_config(c))
         self._place_fruit()
         if self._soft is not None:
             self._soft.check_fit(c, self.initial_gap, self.touching_gap,
@@ -74,10 +75,13 @@ class Simulation(SimulationFacade):
         barrier.check_supported(c, self.dimension, fast)
         if c['contact.model'] == 'ipc' or self._soft is not None:
             soft = self._soft
+            outline = (self.initial_positions
+                       - self._in_plane(0.0, self.initial_lift))[self.fruit.surface]
             self._barrier = barrier.BarrierContact(
                 self.fruit.n_nodes + (soft.n_nodes if soft else 0), self.fruit.surface,
                 self.fruit.skin_edges, barrier.BarrierSettings.from_config(c),
-                bodies=soft.soft_bodies if soft else ())
+                bodies=soft.soft_bodies if soft else (),
+                pairs=soft.contact_pairs(self.fruit.surface, outline) if soft else None)
             if c['fruit.initial_height'] is None and c['world.table']:
                 # a barrier needs a positive gap: the fruit starts just above the table
                 self.initial_positions[:, 1] += barrier.START_GAP_FRACTION * c['contact.ipc.dhat']

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gripper_sim.core.barrier import SoftBody
+from gripper_sim.core.barrier import BarrierContact, BarrierSettings, SoftBody
 from gripper_sim.core.energies import NeoHookeanTriangles
 from gripper_sim.core.fin_ray import fin_ray_from_config
 from gripper_sim.core.finger_body import FingerBody
@@ -41,6 +41,14 @@ THICKNESS_KEYS = {'solid_pad': 'gripper.finger.solid_pad.thickness',
 
 #: the right finger is the left one mirrored in x
 MIRROR = np.array([-1.0, 1.0])
+#: the fruit-finger pairs the barrier's Hessian pattern holds (``BarrierContact``'s
+#: ``pairs``): a fruit outline node and a finger surface node at most this many times
+#: the sum of their node spacings apart in z at rest (the fingers close along x; in a
+#: grasp the fruit slides along a finger by far less)
+PAIR_REACH_SPACINGS = 2.0
+#: ... the fruit's nodes within this fraction of its half-width of its side facing the
+#: finger (the fruit compressed by half its width reaches no further)
+PAIR_SIDE_DEPTH = 0.5
 
 
 @dataclass(frozen=True)
@@ -94,13 +102,15 @@ class SoftFingers:
         first: index of the left finger's first node in the state (the fruit's nodes
             come before).
         static_friction, kinetic_friction: Coulomb coefficients fruit-finger.
+        self_contact: the barrier settings of each finger's self-contact (its beams and
+            ribs against each other, ``FingerBody.self_contact``); None: none.
     """
 
     #: (d,) the mirror taking the left finger's frame to the right one's
     mirror = MIRROR
 
     def __init__(self, body: FingerBody, first: int, static_friction: float,
-                 kinetic_friction: float):
+                 kinetic_friction: float, self_contact: BarrierSettings | None = None):
         m = body.n_nodes
         self.body = body
         self.first = int(first)
@@ -113,7 +123,12 @@ class SoftFingers:
         self.masses = np.concatenate([body.masses, body.masses])
         #: (2 k,) global base nodes: the left finger's, then the right one's
         self.base = np.concatenate([side[body.base_nodes] for side in self.nodes])
-        self.energies = self._energies()
+        #: the fingers' self-contact barrier (each finger against itself), or None; its
+        #: steps begin with the fruit's barrier's (``barrier.soft_body_step``)
+        self.self_contact: BarrierContact | None = (
+            body.self_contact(self_contact, self.nodes, self.first + 2 * m)
+            if self_contact is not None else None)
+        self.energies = self._energies() + ([self.self_contact] if self.self_contact else [])
         self.soft_bodies = self._soft_bodies(static_friction, kinetic_friction)
 
     def _soft_bodies(self, static_friction: float, kinetic_friction: float) -> tuple:
@@ -163,6 +178,32 @@ class SoftFingers:
             return 0.0
         gaps = 2.0 * np.maximum(reach[level] - qx[level, 0], reach[level] + qx[level, 0])
         return float(max(gaps.max(), 0.0))
+
+    def contact_pairs(self, surface: np.ndarray, outline: np.ndarray) -> np.ndarray:
+        """(p, 2) the (fruit node, finger node) pairs of the barrier's Hessian pattern:
+        the fruit's ``surface`` nodes (n_s,) at ``outline`` (n_s, 2) m, relative to the
+        jaws' centre, on the side facing each finger (``PAIR_SIDE_DEPTH``), and that
+        finger's surface nodes at rest within ``PAIR_REACH_SPACINGS`` times the sum of
+        the two nodes' spacings of each other in z. A node's spacing: the distance to
+        its nearest neighbour on its outline (m)."""
+        x = self.body.rest_positions
+        edges = self.body.surface_edges
+        finger = np.unique(edges)
+        finger_spacing = np.full(x.shape[0], np.inf)
+        lengths = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
+        np.minimum.at(finger_spacing, edges.ravel(), np.repeat(lengths, 2))
+        apart = np.linalg.norm(outline[:, None] - outline[None, :], axis=2)
+        np.fill_diagonal(apart, np.inf)
+        fruit_spacing = apart.min(axis=1)
+        half_width = np.abs(outline[:, 0]).max()
+        pairs = []
+        for sign, nodes, frame in zip((-1.0, 1.0), self.nodes, self.frames):
+            side = np.flatnonzero(sign * outline[:, 0] > (1.0 - PAIR_SIDE_DEPTH) * half_width)
+            reach = PAIR_REACH_SPACINGS * (fruit_spacing[side, None]
+                                           + finger_spacing[None, finger])
+            i, j = np.nonzero(np.abs(outline[side, None, 1] - frame[None, finger, 1]) <= reach)
+            pairs.append(np.column_stack([surface[side[i]], nodes[finger[j]]]))
+        return np.vstack(pairs)
 
     def check_fit(self, config, open_gap: float, touching_gap: float,
                   fruit_width: float) -> None:

@@ -138,6 +138,9 @@ class Simulation3D(SimulationFacade):
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
         self.solver = self._make_solver()
+        if self._soft is None and self._barrier is None and self._pad is None:
+            # (the pads and barriers are set up for a step only by reset())
+            self.solver.load_kernels(self.initial_positions.ravel(), self.dt)
         # first guess of d force / d gap for the force regulator (it adapts): a Hertz
         # contact of the flesh at a 1 % approach
         radius = 0.5 * self.fruit.rest_width

@@ -3,9 +3,10 @@
 ``python -m gripper_sim.workflows.compile_kernels`` (``make install`` runs it) steps small
 fruits in every route, so that no user pays numba's compile time on a first run (a cold
 compile takes ~15-20 s of CPU in 2D, ~30 s in 3D): in 2D a shell, a point fruit, a
-solid with a V-groove finger and a shell with a soft pad (the whole-step kernel, the
-energy kernels and the solver's); in 3D shells with a plain and a wrinkling skin and
-solids of linear and of quadratic tetrahedra.
+solid with a V-groove finger, a shell with a soft pad and one between Fin Ray fingers
+(the whole-step kernel, the energy kernels, the solver's and the barrier's); in 3D
+shells with a plain and a wrinkling skin and solids of linear and of quadratic
+tetrahedra.
 """
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ from gripper_sim.workflows.factory import make_simulation
 SETUPS_2D = (('fruit.model=shell', 'fruit.nodes=16'),
              ('fruit.model=point', 'fruit.nodes=16'),
              ('fruit.model=solid', 'gripper.finger.type=vgroove', 'fruit.nodes=16'),
-             ('fruit.model=shell', 'gripper.finger.pad.enabled=true', 'fruit.nodes=16'))
+             ('fruit.model=shell', 'gripper.finger.pad.enabled=true', 'fruit.nodes=16'),
+             ('fruit.model=shell', 'gripper.finger.type=fin_ray', 'fruit.nodes=16'))
 
 _SMALL_3D = ('dimension=3', 'fruit.mesh.subdivisions=3')
 #: ``--set`` overrides of the small 3D set-ups that together reach every 3D kernel

@@ -20,9 +20,28 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline='always')
+def edge_spring(ex, ez, rest, k):
+    """One edge's axial spring E = k (l - L)^2 / 2 (``Stretching``), the edge vector
+    (ex, ez) = x_j - x_i m, rest length L m, stiffness k = EA / L N/m.
+
+    Returns:
+        (energy J, dE/dx_j (fx, fz) N (dE/dx_i = -that), the Hessian's (j, j) block
+        (b00, b01 = b10, b11) N/m ((i, i) the same, (i, j) and (j, i) minus it)).
+    """
+    length = math.sqrt(ex * ex + ez * ez)
+    inverse = 1.0 / length
+    stretch = length - rest
+    ux, uz = ex * inverse, ez * inverse
+    ks = k * stretch
+    ratio = stretch * inverse
+    return (0.5 * ks * stretch, ks * ux, ks * uz, k * (ux * ux + ratio * (1.0 - ux * ux)),
+            k * (ux * uz - ratio * ux * uz), k * (uz * uz + ratio * (1.0 - uz * uz)))
+
+
 @njit(cache=True)
 def stretching(x, edges, rest, k, grad, data, scatter, hessian):
-    """Axial springs E = k (l - L)^2 / 2 per edge (``Stretching``).
+    """Axial springs E = k (l - L)^2 / 2 per edge (``Stretching``, ``edge_spring``).
 
     Args:
         x: (n, 2) m.  edges: (n_edge, 2).  rest: (n_edge,) L (m).  k: (n_edge,) EA / L
@@ -35,50 +54,24 @@ def stretching(x, edges, rest, k, grad, data, scatter, hessian):
     value = 0.0
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
-        ex = x[j, 0] - x[i, 0]
-        ez = x[j, 1] - x[i, 1]
-        length = math.hypot(ex, ez)
-        stretch = length - rest[e]
-        value += 0.5 * k[e] * stretch * stretch
-        ux, uz = ex / length, ez / length
-        fx, fz = k[e] * stretch * ux, k[e] * stretch * uz
+        v, fx, fz, b00, b01, b11 = edge_spring(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], rest[e],
+                                               k[e])
+        value += v
         grad[2 * i] -= fx
         grad[2 * i + 1] -= fz
         grad[2 * j] += fx
         grad[2 * j + 1] += fz
         if not hessian:
             continue
-        ratio = stretch / length
-        b00 = k[e] * (ux * ux + ratio * (1.0 - ux * ux))
-        b01 = k[e] * (ux * uz - ratio * ux * uz)
-        b11 = k[e] * (uz * uz + ratio * (1.0 - uz * uz))
         sc = scatter[e]
         for r in range(4):
             for c in range(4):
                 a, b = r % 2, c % 2
-                v = b00 if a + b == 0 else (b11 if a + b == 2 else b01)
+                h = b00 if a + b == 0 else (b11 if a + b == 2 else b01)
                 if (r < 2) != (c < 2):
-                    v = -v
-                data[sc[4 * r + c]] += v
+                    h = -h
+                data[sc[4 * r + c]] += h
     return value
-
-
-@njit(cache=True, inline='always')
-def _angle_gradient(vx, vz, out, sign):
-    """out (2,) = sign d atan2(v_z, v_x) / dv."""
-    r2 = vx * vx + vz * vz
-    out[0] = -sign * vz / r2
-    out[1] = sign * vx / r2
-
-
-@njit(cache=True, inline='always')
-def _angle_hessian(vx, vz, out, sign):
-    """out (2, 2) = sign d^2 atan2(v_z, v_x) / dv^2."""
-    r4 = (vx * vx + vz * vz) ** 2
-    out[0, 0] = sign * 2.0 * vx * vz / r4
-    out[1, 1] = -out[0, 0]
-    out[0, 1] = sign * (vz * vz - vx * vx) / r4
-    out[1, 0] = out[0, 1]
 
 
 @njit(cache=True, inline='always')
@@ -97,9 +90,48 @@ def turning_angles(x, triples, out):
                                 x[n, 0] - x[i, 0], x[n, 1] - x[i, 1])
 
 
+@njit(cache=True, inline='always')
+def hinge(ax, az, bx, bz, phi0, k):
+    """One bending triple (p, i, n) (``RodBending``): E = k (phi - phi0)^2 / 2, phi the
+    turning angle from edge a = x_i - x_p to edge b = x_n - x_i (m), phi0 rad, k N m.
+
+    Returns:
+        (energy J, k dphi N m, dphi / dx (j0 .. j5) 1/m over [x_p, z_p, x_i, z_i, x_n,
+        z_n], and (ha00, ha01), (hb00, hb01) 1/m^2: d^2 phi / da^2 and d^2 phi / db^2,
+        each symmetric with h11 = -h00). The Hessian is k J J^T + k dphi d^2 phi / dx^2;
+        its 2x2 node blocks are ``hinge_block``.
+    """
+    ia = 1.0 / (ax * ax + az * az)  # 1 / |a|^2 (one division per edge: a step does many)
+    ib = 1.0 / (bx * bx + bz * bz)
+    gax, gaz = az * ia, -ax * ia  # d phi / da = -d atan2(a) / da
+    gbx, gbz = -bz * ib, bx * ib  # d phi / db
+    dphi = math.atan2(ax * bz - az * bx, ax * bx + az * bz) - phi0
+    y = dphi + math.pi  # dphi into [-pi, pi)
+    if 0.0 <= y < 2 * math.pi:
+        dphi = y - math.pi
+    else:
+        dphi = y % (2 * math.pi) - math.pi
+    ia2 = ia * ia
+    ib2 = ib * ib
+    return (0.5 * k * dphi * dphi, k * dphi, -gax, -gaz, gax - gbx, gaz - gbz, gbx, gbz,
+            -2.0 * ax * az * ia2, (ax * ax - az * az) * ia2,
+            2.0 * bx * bz * ib2, (bz * bz - bx * bx) * ib2)
+
+
+@njit(cache=True, inline='always')
+def hinge_block(k, kd, jr0, jr1, jc0, jc1, h00, h01):
+    """A 2x2 node block (b00, b01, b10, b11) N/m of a hinge's Hessian (``hinge``): rows of
+    a node with Jacobian (jr0, jr1), columns of a node with (jc0, jc1), and that block of
+    d^2 phi / dx^2 (h00, h01; h11 = -h00): with nodes p, i, n it is ha at (p, p), -ha at
+    (p, i), ha + hb at (i, i), -hb at (i, n), hb at (n, n) and 0 at (p, n)."""
+    return (k * (jr0 * jc0) + kd * h00, k * (jr0 * jc1) + kd * h01,
+            k * (jr1 * jc0) + kd * h01, k * (jr1 * jc1) - kd * h00)
+
+
 @njit(cache=True)
 def bending(x, triples, phi0, k, grad, data, scatter, hessian):
-    """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RodBending``).
+    """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RodBending``,
+    ``hinge``).
 
     Args:
         x: (n, 2) m.  triples: (n_t, 3) previous, middle, next node.  phi0: (n_t,) rad.
@@ -109,48 +141,38 @@ def bending(x, triples, phi0, k, grad, data, scatter, hessian):
         Energy (J).
     """
     value = 0.0
-    ga = np.empty(2)
-    gb = np.empty(2)
     jac = np.empty(6)
-    ha = np.empty((2, 2))
-    hb = np.empty((2, 2))
-    hphi = np.empty((6, 6))
     for t in range(triples.shape[0]):
         p, i, n = triples[t, 0], triples[t, 1], triples[t, 2]
-        ax, az = x[i, 0] - x[p, 0], x[i, 1] - x[p, 1]
-        bx, bz = x[n, 0] - x[i, 0], x[n, 1] - x[i, 1]
-        dphi = _turning_angle(ax, az, bx, bz) - phi0[t]
-        dphi = (dphi + math.pi) % (2 * math.pi) - math.pi
-        value += 0.5 * k[t] * dphi * dphi
-        _angle_gradient(ax, az, ga, -1.0)
-        _angle_gradient(bx, bz, gb, 1.0)
-        for a in range(2):
-            jac[a] = -ga[a]
-            jac[2 + a] = ga[a] - gb[a]
-            jac[4 + a] = gb[a]
+        (v, kd, jac[0], jac[1], jac[2], jac[3], jac[4], jac[5], ha00, ha01, hb00,
+         hb01) = hinge(x[i, 0] - x[p, 0], x[i, 1] - x[p, 1], x[n, 0] - x[i, 0],
+                       x[n, 1] - x[i, 1], phi0[t], k[t])
+        value += v
         nodes = (p, i, n)
         for m in range(3):
             for a in range(2):
-                grad[2 * nodes[m] + a] += k[t] * dphi * jac[2 * m + a]
+                grad[2 * nodes[m] + a] += kd * jac[2 * m + a]
         if not hessian:
             continue
-        _angle_hessian(ax, az, ha, -1.0)
-        _angle_hessian(bx, bz, hb, 1.0)
-        hphi[:, :] = 0.0
-        # a = x_i - x_{i-1}: selector [-I, I, 0]; b = x_{i+1} - x_i: [0, -I, I]
-        for r in range(2):
-            for c in range(2):
-                hphi[r, c] += ha[r, c]
-                hphi[r, 2 + c] -= ha[r, c]
-                hphi[2 + r, c] -= ha[r, c]
-                hphi[2 + r, 2 + c] += ha[r, c] + hb[r, c]
-                hphi[2 + r, 4 + c] -= hb[r, c]
-                hphi[4 + r, 2 + c] -= hb[r, c]
-                hphi[4 + r, 4 + c] += hb[r, c]
         sc = scatter[t]
-        for r in range(6):
-            for c in range(6):
-                data[sc[6 * r + c]] += k[t] * (jac[r] * jac[c] + dphi * hphi[r, c])
+        for r in range(3):
+            for c in range(3):
+                # the pair's block of d^2 phi / dx^2 (see hinge_block)
+                if r == c:
+                    h00 = (ha00 if r < 2 else 0.0) + (hb00 if r > 0 else 0.0)
+                    h01 = (ha01 if r < 2 else 0.0) + (hb01 if r > 0 else 0.0)
+                elif r + c == 1:
+                    h00, h01 = -ha00, -ha01
+                elif r + c == 3:
+                    h00, h01 = -hb00, -hb01
+                else:
+                    h00, h01 = 0.0, 0.0
+                b00, b01, b10, b11 = hinge_block(k[t], kd, jac[2 * r], jac[2 * r + 1],
+                                                 jac[2 * c], jac[2 * c + 1], h00, h01)
+                data[sc[6 * (2 * r) + 2 * c]] += b00
+                data[sc[6 * (2 * r) + 2 * c + 1]] += b01
+                data[sc[6 * (2 * r + 1) + 2 * c]] += b10
+                data[sc[6 * (2 * r + 1) + 2 * c + 1]] += b11
     return value
 
 
@@ -168,6 +190,17 @@ def area_and_gradient(x, ring, ga):
         ga[2 * i] += 0.5 * (x[nxt, 1] - x[prv, 1])
         ga[2 * i + 1] += 0.5 * (x[prv, 0] - x[nxt, 0])
     return 0.5 * area
+
+
+@njit(cache=True, inline='always')
+def area_pressure(area, a0, b, p0, kb):
+    """The enclosed-area pressure law (``EnclosedAreaPressure``) at area A (m^2), rest
+    area A0, depth b m, turgor p0 Pa, bulk modulus K Pa: (energy J, dE/dA N/m, the
+    rank-one coefficient c = b K / A0 N/m^3 (0 without K))."""
+    da = area - a0
+    value = b * (-p0 * da + 0.5 * kb * da ** 2 / a0)
+    de_da = b * (-p0 + kb * da / a0)
+    return value, de_da, (b * kb / a0 if kb > 0 else 0.0)
 
 
 @njit(cache=True)

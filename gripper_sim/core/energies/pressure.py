@@ -45,11 +45,10 @@ class EnclosedAreaPressure(KernelEnergy):
         """The energy's kernel (see ``Stretching.evaluate_into``; scatter (n_ring, 16));
         returns (value J, the rank-one term b K / A0 dA/dq dA/dq^T if K > 0)."""
         ga = np.empty(q.size)
-        da = kernels.area_and_gradient(q.reshape(-1, 2), self.ring, ga) - self.a0
-        value = self.b * (-self.p0 * da + 0.5 * self.k * da ** 2 / self.a0)
-        de_da = self.b * (-self.p0 + self.k * da / self.a0)
+        area = kernels.area_and_gradient(q.reshape(-1, 2), self.ring, ga)
+        value, de_da, c = kernels.area_pressure(area, self.a0, self.b, self.p0, self.k)
         grad += de_da * ga
         if not hessian:
             return value, []
         kernels.area_pressure_hessian(de_da, data, scatter)
-        return value, ([(self.b * self.k / self.a0, ga)] if self.k > 0 else [])
+        return value, ([(c, ga)] if self.k > 0 else [])

@@ -1,0 +1,300 @@
+"""Compiled 2D barrier terms: the IPC barrier of edge-vertex pairs (``core.barrier``).
+
+The same potential as ipctk's ``BarrierPotential(dhat, kappa, use_physical_barrier=True)``
+on the collision set it builds from edge-vertex candidates (Li et al. 2020, "Incremental
+Potential Contact", eq. 6 and section 4.1), evaluated here in one pass over the
+candidates instead of through ipctk's collision objects and sparse matrices:
+
+- per candidate (edge e0-e1, vertex p) its distance type: the parameter t of p's
+  projection on the edge's line, t < 0 the point-point distance to e0, t > 1 to e1,
+  else the point-line distance; s the squared distance of that type;
+- a candidate with s < dhat^2 adds kappa b(s, dhat^2) / dhat^3, with
+  b(s, S) = -(s - S)^2 ln(s / S) (ipctk's clamped log barrier on squared distances, its
+  physical scaling dhat / units, units = (dhat^2)^2); ipctk merges the point-point
+  pairs of several candidates into one pair of their summed weights, the same sum;
+- its Hessian f'' grad s grad s^T + f' hess s, projected onto the positive
+  semi-definite cone by clamping its negative eigenvalues to 0 (ipctk's
+  ``PSDProjectionMethod.CLAMP``).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _barrier_derivatives(s, s_hat, scale):
+    """(value, first, second derivative) of scale * b(s, s_hat) in s."""
+    ratio = s_hat / s
+    log = np.log(s / s_hat)
+    value = -(s - s_hat) ** 2 * log * scale
+    first = (s_hat - s) * (2.0 * log - ratio + 1.0) * scale
+    second = ((ratio + 2.0) * ratio - 2.0 * log - 3.0) * scale
+    return value, first, second
+
+
+@njit(cache=True)
+def _point_point(p, q, grad, hess):
+    """Squared distance of p and q (2,); its gradient (4,) and Hessian (4, 4) over
+    (p, q) into ``grad`` and ``hess``."""
+    dx, dy = p[0] - q[0], p[1] - q[1]
+    grad[0], grad[1], grad[2], grad[3] = 2 * dx, 2 * dy, -2 * dx, -2 * dy
+    hess[:] = 0.0
+    for a in range(2):
+        hess[a, a] = 2.0
+        hess[a + 2, a + 2] = 2.0
+        hess[a, a + 2] = -2.0
+        hess[a + 2, a] = -2.0
+    return dx * dx + dy * dy
+
+
+@njit(cache=True)
+def _line_second_derivatives():
+    """The constant second derivatives (6, 6) over (p, a, b) of c = (a - p) x (b - p)
+    and of L = |b - a|^2 (``_point_line``)."""
+    ddc = np.zeros((6, 6))
+    ddl = np.zeros((6, 6))
+    # c = a0 b1 - a0 p1 - p0 b1 - a1 b0 + a1 p0 + p1 b0 (the p0 p1 terms cancel)
+    cross_terms = ((2, 5, 1.0), (2, 1, -1.0), (0, 5, -1.0), (3, 4, -1.0), (3, 0, 1.0),
+                   (1, 4, 1.0))
+    for i, j, value in cross_terms:
+        ddc[i, j] += value
+        ddc[j, i] += value
+    for k in range(2):
+        ddl[2 + k, 2 + k] = 2.0
+        ddl[4 + k, 4 + k] = 2.0
+        ddl[2 + k, 4 + k] = -2.0
+        ddl[4 + k, 2 + k] = -2.0
+    return ddc, ddl
+
+
+@njit(cache=True)
+def _point_line(p, a, b, ddc, ddl, dc, dl, grad, hess):
+    """Squared distance of p from the line through a and b (2,): c^2 / L with
+    c = cross(a - p, b - p), L = |b - a|^2; its gradient (6,) and Hessian (6, 6) over
+    (p, a, b) into ``grad`` and ``hess`` (``dc``, ``dl`` (6,) work space; ``ddc``,
+    ``ddl`` from ``_line_second_derivatives``)."""
+    ax, ay, bx, by = a[0] - p[0], a[1] - p[1], b[0] - p[0], b[1] - p[1]
+    c = ax * by - ay * bx
+    ex, ey = b[0] - a[0], b[1] - a[1]
+    length = ex * ex + ey * ey
+    dc[0], dc[1], dc[2], dc[3], dc[4], dc[5] = -(by - ay), bx - ax, by, -bx, -ay, ax
+    dl[0], dl[1], dl[2], dl[3], dl[4], dl[5] = 0.0, 0.0, -2 * ex, -2 * ey, 2 * ex, 2 * ey
+    l1, l2, l3 = 1.0 / length, 1.0 / length ** 2, 1.0 / length ** 3
+    for i in range(6):
+        grad[i] = 2 * c * dc[i] * l1 - c * c * dl[i] * l2
+        for j in range(6):
+            hess[i, j] = (2 * dc[i] * dc[j] * l1 + 2 * c * ddc[i, j] * l1
+                          - 2 * c * (dc[i] * dl[j] + dl[i] * dc[j]) * l2
+                          - c * c * ddl[i, j] * l2 + 2 * c * c * dl[i] * dl[j] * l3)
+    return c * c * l1
+
+
+#: sweeps of the cyclic Jacobi eigenvalue method (a 6 x 6 matrix converges to round-off
+#: in 5-6; it stops earlier once the off-diagonal part vanishes)
+JACOBI_SWEEPS = 12
+
+
+@njit(cache=True)
+def _clamp_to_psd(matrix):
+    """``matrix`` (k, k) symmetric with its negative eigenvalues set to 0: its
+    eigensystem by cyclic Jacobi rotations (Golub & Van Loan, Matrix Computations,
+    section 8.5), much cheaper than a LAPACK call for k <= 6."""
+    k = matrix.shape[0]
+    a = matrix.copy()
+    vectors = np.eye(k)
+    scale = 0.0
+    for i in range(k):
+        for j in range(k):
+            scale = max(scale, abs(a[i, j]))
+    if scale == 0.0:
+        return matrix
+    for _ in range(JACOBI_SWEEPS):
+        off = 0.0
+        for i in range(k):
+            for j in range(i + 1, k):
+                off = max(off, abs(a[i, j]))
+        if off <= 1e-17 * scale:
+            break
+        for p in range(k - 1):
+            for q in range(p + 1, k):
+                if a[p, q] == 0.0:
+                    continue
+                theta = (a[q, q] - a[p, p]) / (2.0 * a[p, q])
+                t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                s = t * c
+                for r in range(k):       # A <- A J (columns p, q)
+                    arp, arq = a[r, p], a[r, q]
+                    a[r, p] = c * arp - s * arq
+                    a[r, q] = s * arp + c * arq
+                for r in range(k):       # A <- J^T A (rows p, q)
+                    apr, aqr = a[p, r], a[q, r]
+                    a[p, r] = c * apr - s * aqr
+                    a[q, r] = s * apr + c * aqr
+                for r in range(k):       # V <- V J
+                    vrp, vrq = vectors[r, p], vectors[r, q]
+                    vectors[r, p] = c * vrp - s * vrq
+                    vectors[r, q] = s * vrp + c * vrq
+    negative = False
+    for i in range(k):
+        if a[i, i] < 0.0:
+            negative = True
+    if not negative:
+        return matrix
+    out = np.zeros((k, k))
+    for m in range(k):
+        value = a[m, m]
+        if value <= 0.0:
+            continue
+        for i in range(k):
+            for j in range(k):
+                out[i, j] += value * vectors[i, m] * vectors[j, m]
+    return out
+
+
+@njit(cache=True)
+def largest_move(q, dofs, start):
+    """m, the largest distance of a vertex at positions ``q`` (n_dof,) from ``start``
+    (k, 2), its coordinates at ``dofs`` (k, 2)."""
+    largest = 0.0
+    for i in range(dofs.shape[0]):
+        dx = q[dofs[i, 0]] - start[i, 0]
+        dy = q[dofs[i, 1]] - start[i, 1]
+        largest = max(largest, dx * dx + dy * dy)
+    return np.sqrt(largest)
+
+
+@njit(cache=True)
+def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, gradient,
+                        want_hessian, project, pattern_keys, n_dof, entry_index, entry_value):
+    """The barrier of the edge-vertex ``candidates`` at the collision mesh's vertices.
+
+    Args:
+        v: (n_m, 2) m, the collision mesh's vertices.
+        edges: (n_e, 2) its edges.  candidates: (k, 2) (edge, vertex) pairs.
+        dhat: m.  stiffness: N, kappa.
+        vertex_dofs: (n_m, 2) the state's dof of each vertex coordinate, -1 for the
+            vertices that are no degrees of freedom (faces' corners).
+        gradient: (n_dof,) N, the barrier's gradient is added into it.
+        want_hessian: whether to give the Hessian's entries.
+        project: whether each pair's Hessian is clamped to its positive semi-definite
+            part (else the exact one).
+        pattern_keys: (p,) sorted keys col n_dof + row of the Hessian's pattern.
+        entry_index, entry_value: (>= 36 k,) out: each Hessian entry's index in
+            ``pattern_keys`` (-1: outside it) and its value N/m.
+
+    Returns:
+        (value J, the Hessian's entries written); value inf if a pair touches.
+    """
+    s_hat = dhat * dhat
+    scale = stiffness / dhat ** 3
+    total = 0.0
+    written = 0
+    grad4 = np.empty(4)
+    hess4 = np.empty((4, 4))
+    grad6 = np.empty(6)
+    hess6 = np.empty((6, 6))
+    ids = np.empty(3, np.int64)
+    ddc, ddl = _line_second_derivatives()
+    dc, dl = np.empty(6), np.empty(6)
+    local6 = np.empty((6, 6))
+    local4 = np.empty((4, 4))
+    for k in range(candidates.shape[0]):
+        edge, vertex = candidates[k, 0], candidates[k, 1]
+        p, a, b = v[vertex], v[edges[edge, 0]], v[edges[edge, 1]]
+        ex, ey = b[0] - a[0], b[1] - a[1]
+        t = (ex * (p[0] - a[0]) + ey * (p[1] - a[1])) / (ex * ex + ey * ey)
+        ids[0] = vertex
+        if t < 0.0 or t > 1.0:
+            ids[1] = edges[edge, 0] if t < 0.0 else edges[edge, 1]
+            s = _point_point(p, a if t < 0.0 else b, grad4, hess4)
+            m, grad, hess = 2, grad4, hess4
+        else:
+            ids[1], ids[2] = edges[edge, 0], edges[edge, 1]
+            s = _point_line(p, a, b, ddc, ddl, dc, dl, grad6, hess6)
+            m, grad, hess = 3, grad6, hess6
+        if s >= s_hat:
+            continue
+        if s <= 0.0:
+            return np.inf, 0
+        value, first, second = _barrier_derivatives(s, s_hat, scale)
+        total += value
+        for i in range(m):
+            for c in range(2):
+                dof = vertex_dofs[ids[i], c]
+                if dof >= 0:
+                    gradient[dof] += first * grad[2 * i + c]
+        if not want_hessian:
+            continue
+        local = local6 if m == 3 else local4
+        for i in range(2 * m):
+            for j in range(2 * m):
+                local[i, j] = second * grad[i] * grad[j] + first * hess[i, j]
+        if project:
+            local = _clamp_to_psd(local)
+        for i in range(m):
+            for j in range(m):
+                for ci in range(2):
+                    row = vertex_dofs[ids[i], ci]
+                    if row < 0:
+                        continue
+                    for cj in range(2):
+                        col = vertex_dofs[ids[j], cj]
+                        if col < 0:
+                            continue
+                        key = col * n_dof + row
+                        where = np.searchsorted(pattern_keys, key)
+                        if where >= pattern_keys.size or pattern_keys[where] != key:
+                            where = -1
+                        entry_index[written] = where
+                        entry_value[written] = local[2 * i + ci, 2 * j + cj]
+                        written += 1
+    return total, written
+
+
+@njit(cache=True)
+def _offer(node, other, gap, n_deformable, best, partner):
+    if node < n_deformable and gap < best[node]:
+        best[node] = gap
+        partner[node] = other
+
+
+@njit(cache=True)
+def nearest_partners(v, edges, candidates, dhat, n_deformable):
+    """(n_deformable,) for each deformable vertex of the collision mesh the vertex on the
+    other side of its nearest pair within dhat (-1: in none), over the edge-vertex
+    ``candidates`` (k, 2) at the vertices ``v`` (n_m, 2) m, ``edges`` (n_e, 2).
+
+    A point-line pair couples its vertex with both ends of its edge at the distance of
+    the nearer end, a point-point pair its two vertices at their distance; of equally
+    near pairs the first counts."""
+    best = np.full(n_deformable, np.inf)
+    partner = -np.ones(n_deformable, np.int64)
+    s_hat = dhat * dhat
+    for k in range(candidates.shape[0]):
+        edge, vertex = candidates[k, 0], candidates[k, 1]
+        e0, e1 = edges[edge, 0], edges[edge, 1]
+        p, a, b = v[vertex], v[e0], v[e1]
+        ex, ey = b[0] - a[0], b[1] - a[1]
+        t = (ex * (p[0] - a[0]) + ey * (p[1] - a[1])) / (ex * ex + ey * ey)
+        to_a = (p[0] - a[0]) ** 2 + (p[1] - a[1]) ** 2
+        to_b = (p[0] - b[0]) ** 2 + (p[1] - b[1]) ** 2
+        if t < 0.0 or t > 1.0:
+            end = e0 if t < 0.0 else e1
+            squared = to_a if t < 0.0 else to_b
+            if squared >= s_hat:
+                continue
+            gap = np.sqrt(squared)
+            _offer(vertex, end, gap, n_deformable, best, partner)
+            _offer(end, vertex, gap, n_deformable, best, partner)
+            continue
+        cross = (a[0] - p[0]) * (b[1] - p[1]) - (a[1] - p[1]) * (b[0] - p[0])
+        if cross * cross / (ex * ex + ey * ey) >= s_hat:
+            continue
+        gap = np.sqrt(min(to_a, to_b))
+        _offer(vertex, e0, gap, n_deformable, best, partner)
+        _offer(vertex, e1, gap, n_deformable, best, partner)
+        _offer(e0, vertex, gap, n_deformable, best, partner)
+        _offer(e1, vertex, gap, n_deformable, best, partner)
+    return partner

@@ -1,0 +1,84 @@
+"""The 2D outline measures are compiled functions (``core.measures``) that the generic
+route and the compiled step both call; they equal the numpy reference
+(``reference_measures2d``) to round-off."""
+import numpy as np
+import pytest
+
+import reference_measures2d as reference
+from gripper_sim.configuration import load_config
+from gripper_sim.core import kernels
+from gripper_sim.core.fast import ring_model
+from gripper_sim.core.fruit import build_fruit
+from gripper_sim.core.measures import deformation, face_contact_length, tributary_lengths
+from gripper_sim.core.obstacles import FlatFace
+
+MODELS = (['fruit.nodes=40'], ['fruit.model=solid', 'fruit.nodes=48'])
+
+
+def _pressed(fruit, seed):
+    """An outline pressed flat against a face at x = 0.9 of its right extent, perturbed;
+    (positions (n, 2) m, the face, the nodes it holds (n,) bool, normal forces (n,) N)."""
+    rng = np.random.default_rng(seed)
+    x = fruit.rest_positions + rng.normal(scale=1e-4, size=(fruit.n_nodes, 2))
+    wall = 0.9 * x[fruit.surface, 0].max()
+    held = np.zeros(fruit.n_nodes, bool)
+    held[fruit.surface] = x[fruit.surface, 0] >= wall
+    x[held, 0] = wall
+    face = FlatFace('right_jaw', np.array([wall, 0.0]), np.array([-1.0, 0.0]))
+    normal = np.where(held, rng.uniform(0.1, 1.0, fruit.n_nodes), 0.0)
+    return x, face, held, normal
+
+
+@pytest.mark.parametrize('model', MODELS, ids=['shell', 'solid'])
+@pytest.mark.parametrize('seed', [0, 1])
+def test_the_measures_equal_the_numpy_reference(model, seed):
+    fruit = build_fruit(load_config(overrides=model))
+    x, face, held, normal = _pressed(fruit, seed)
+    assert held.sum() >= 3
+    length = face_contact_length(fruit, x, face, held)
+    assert length > 0
+    assert length == pytest.approx(reference.face_contact_length(fruit, x, face, held),
+                                   rel=1e-12)
+    np.testing.assert_allclose(tributary_lengths(fruit, x),
+                               reference.tributary_lengths(fruit, x), rtol=1e-14)
+    shape = deformation(fruit, x, normal, held)
+    width, strain, peak, pressure = reference.outline(fruit, x, normal)
+    assert shape.compression == pytest.approx(fruit.rest_width - width, rel=1e-12)
+    assert shape.max_skin_strain == pytest.approx(strain, rel=1e-12)
+    assert shape.peak_contact_pressure == pytest.approx(peak, rel=1e-12) and peak > 0
+    np.testing.assert_allclose(shape.node_pressure, pressure, rtol=1e-12)
+    assert shape.contact_length == pytest.approx(
+        float(np.sum(reference.tributary_lengths(fruit, x)[held[fruit.surface]])), rel=1e-12)
+
+
+def test_the_compiled_step_measures_with_the_same_functions():
+    """``kernels.step_measures`` (the compiled step's measures) gives the outline measures
+    of ``measures.deformation`` and ``face_contact_length`` bit for bit."""
+    fruit = build_fruit(load_config(overrides=['fruit.nodes=40']))
+    x, face, held, normal = _pressed(fruit, 3)
+    n = fruit.n_nodes
+    obstacle = np.where(held, 1, -1).astype(np.int64)  # face 1: the right jaw
+    forces = np.zeros((n, 2))
+    forces[:, 0] = -normal  # along the face normal (-1, 0)
+    face_par = np.zeros((2, kernels.FP_SIZE))
+    face_par[0, :2], face_par[1, :2] = (1.0, 0.0), (-1.0, 0.0)
+    face_par[:, kernels.FP_JAW] = (0, 1)
+    jaw_origins = np.array([[-1.0, 0.0], [face.origin[0], 0.0]])
+    skin = np.ascontiguousarray(fruit.skin_edges, np.int64)
+    rest = fruit.rest_positions
+    rest_segments = np.hypot(*(rest[skin[:, 1]] - rest[skin[:, 0]]).T)
+    normal_out, pressure, out = np.empty(n), np.empty(len(fruit.surface)), np.empty(
+        kernels.M_SIZE)
+    model = ring_model(fruit, fruit.energies)
+    kernels.step_measures(
+        x, np.zeros((n, 2)), forces, obstacle, fruit.masses, np.asarray(fruit.surface, np.int64),
+        skin, rest_segments, face_par, jaw_origins, fruit.depth, *(model[key] for key in (
+            'edges', 'spar', 'triples', 'bpar', 'ring', 'press', 'flesh')), np.zeros(2 * n),
+        True, np.zeros(4), normal_out, pressure, out)
+    shape = deformation(fruit, x, normal, held)
+    assert np.array_equal(normal_out, normal)
+    assert out[kernels.M_WIDTH] == fruit.rest_width - shape.compression
+    assert out[kernels.M_MAX_STRAIN] == shape.max_skin_strain
+    assert out[kernels.M_PEAK_PRESSURE] == shape.peak_contact_pressure
+    assert np.array_equal(pressure, shape.node_pressure)
+    assert out[kernels.M_CONTACT_LENGTH] == face_contact_length(fruit, x, face, held) > 0
