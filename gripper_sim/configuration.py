@@ -36,7 +36,7 @@ PROVENANCE_KEY = 'calibration'
 #: keys that select a preset (in a file's top level, a scenario, ``--set fruit=plum``)
 #: rather than set a value
 SELECTORS = ('fruit', 'finger')
-#: the finger types whose faces are rigid (the others are deformable bodies, 2D only)
+#: the finger types whose faces are rigid (the others are deformable bodies)
 RIGID_FINGERS = ('flat', 'arc', 'vgroove')
 
 
@@ -206,7 +206,8 @@ SCHEMA: dict[str, Key] = {
                                'solid_pad (a deformable elastic block on the jaw, '
                                'gripper.finger.solid_pad.*; 3D: as wide as '
                                'gripper.jaw_width); fin_ray (a deformable Fin Ray finger, '
-                               'gripper.finger.fin_ray.*; 2D)', 'str',
+                               'gripper.finger.fin_ray.*; 3D: extruded into thin shells)',
+                               'str',
                                choices=RIGID_FINGERS + ('solid_pad', 'fin_ray')),
     'gripper.finger.radius': Key(0.05, 'm', 'arc: radius of the concave face (its chord is '
                                  'gripper.jaw_height)', low=1e-3, high=10.0),
@@ -222,7 +223,8 @@ SCHEMA: dict[str, Key] = {
                                              'jaw at the base)', low=0.002, high=0.2),
     'gripper.finger.fin_ray.depth': Key(None, 'm', 'fin_ray: width of the finger along the '
                                         'jaw (out of the plane); null = the fruit\'s depth '
-                                        '(fruit.depth), as the planar model assumes',
+                                        '(fruit.depth), as the planar model assumes; 3D: '
+                                        'null = gripper.jaw_width',
                                         low=1e-3, high=0.5, nullable=True),
     'gripper.finger.fin_ray.beam_thickness': Key(0.0012, 'm', 'fin_ray: thickness of the '
                                                  'front and back beams', low=0.0, high=0.02,
@@ -577,10 +579,6 @@ def validate(flat: Mapping[str, Any]) -> Parameters:
     if result.get('gripper.finger.type') == 'arc':
         check_finger(result)
     check_fin_ray(result)
-    if result.get('dimension') == 3 and result.get('gripper.finger.type') == 'fin_ray':
-        raise ConfigError("config key 'gripper.finger.type' = fin_ray: the Fin Ray finger is "
-                          f"2D only so far (dimension 3 takes {', '.join(RIGID_FINGERS)} "
-                          'or solid_pad)')
     return Parameters._restore(result)
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gripper_sim.core.barrier import BarrierSettings
-from gripper_sim.core.energies import ConstantForce
+from gripper_sim.core.energies import ConstantForce, Energy
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
 
@@ -22,8 +22,8 @@ STATIC_STEP = 1.0
 @dataclass(frozen=True)
 class StaticState:
     """Attributes:
-        positions: (n_nodes, 2) m, the deformed finger.
-        base_reaction: (2,) N, the force the base exerts on the finger (x, z).
+        positions: (n_nodes, d) m, the deformed finger.
+        base_reaction: (d,) N, the force the base exerts on the finger (x, z; 3D x, y, z).
     """
 
     positions: np.ndarray
@@ -33,27 +33,31 @@ class StaticState:
 def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8,
                        tolerance: float = 1e-10, self_contact: BarrierSettings | None = None,
                        on_increment=None, step: float = STATIC_STEP,
-                       hold: int = 1) -> StaticState:
+                       hold: int = 1, elastic: list[Energy] | None = None) -> StaticState:
     """The finger under ``forces`` with its base nodes fixed at rest.
 
     Args:
-        forces: (n_nodes, 2) N, constant loads on the nodes (x, z).
+        body: the finger (a 2D ``FingerBody``, or a 3D body with ``elastic`` given: any
+            body with rest_positions (n_nodes, d), masses and base_nodes).
+        forces: (n_nodes, d) N, constant loads on the nodes (x, z; 3D x, y, z).
         increments: load steps from 0 to the full load (each a Newton solve).
         tolerance: m, Newton stops when the largest update is below it.
         self_contact: the barrier of the finger's self-contact
             (``FingerBody.self_contact``); None: its members pass through each other.
-        on_increment: called with the positions (n_nodes, 2) m after each increment.
+        on_increment: called with the positions (n_nodes, d) m after each increment.
         step: s, the implicit Euler step of each increment (each starts at rest): a short
             one makes the increments an overdamped motion that follows a snap-through,
             where the long default jumps to the loaded equilibrium if one is near.
         hold: further increments at the full load.
+        elastic: the body's elastic energies on its own q; None: its rods'.
 
     Raises:
         NewtonFailure: no equilibrium found.
     """
-    constraints = StepConstraints.free(body.n_nodes)
+    dim = body.rest_positions.shape[1]
+    constraints = StepConstraints.free(body.n_nodes, dim)
     constraints.filters[body.base_nodes] = 0.0
-    elastic = body.rod_energies()
+    elastic = body.rod_energies() if elastic is None else list(elastic)
     barrier = body.self_contact(self_contact) if self_contact is not None else None
     if barrier is not None:
         elastic.append(barrier)
@@ -62,13 +66,13 @@ def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8
     solution = None
     for fraction in list(np.linspace(1.0 / increments, 1.0, increments)) + [1.0] * hold:
         load = ConstantForce(fraction * np.asarray(forces, dtype=float).ravel())
-        solver = ImplicitEulerSolver(body.masses, elastic + [load],
+        solver = ImplicitEulerSolver(body.masses, elastic + [load], dim=dim,
                                      tolerance=tolerance / step, max_iterations=100)
         if barrier is not None:
             barrier.begin_step(q.reshape(-1, 2), [], [], step)
         solution = solver.solve(q, still, step, q.copy(), constraints)
         q = solution.q
         if on_increment is not None:
-            on_increment(q.reshape(-1, 2))
-    reaction = solution.reaction.reshape(-1, 2)[body.base_nodes]
-    return StaticState(q.reshape(-1, 2), reaction.sum(axis=0))
+            on_increment(q.reshape(-1, dim))
+    reaction = solution.reaction.reshape(-1, dim)[body.base_nodes]
+    return StaticState(q.reshape(-1, dim), reaction.sum(axis=0))

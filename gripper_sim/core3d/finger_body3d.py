@@ -1,4 +1,4 @@
-"""A deformable finger body in 3D: a 2D finger body's section extruded over the jaw width.
+"""A deformable finger body in 3D: a 2D finger body's section extruded over its width.
 
 Frame: the finger's own jaw frame, as the 2D body's (``core.finger_body``) with y added:
 x (m) from the jaw's rigid backing (x = 0) towards the fruit, y (m) along the jaw width,
@@ -8,6 +8,9 @@ width the 3D rigid fingers are extruded over, ``core3d.fingers3d``) in ``slices`
 slices: every triangle spans a column of triangular prisms, each cut into three
 tetrahedra by the layered mesher's rule (``layered_mesher.prism_tetrahedra``), so
 neighbouring prisms conform. The material is the 2D body's, as neo-Hookean tetrahedra.
+A section of rods (the Fin Ray's beams and ribs) is extruded into thin shells instead
+(``core3d.rod_extrusion``): the body then holds shell triangles and hinges, no
+tetrahedra.
 
 Masses: the 2D body's lumped masses are its density times the section area per node
 times its depth; divided by that depth they are per unit width, and each slice's copy of
@@ -21,11 +24,13 @@ nearest).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.finger_body import FingerBody
+from gripper_sim.core3d.energies import HingeBending, Membrane, NeoHookeanTets
 from gripper_sim.core3d.layered_mesher import prism_tetrahedra
 from gripper_sim.core3d.mesh_geometry import signed_volumes
 from gripper_sim.errors import ConfigError
@@ -45,8 +50,13 @@ class FingerBody3D:
         surface_triangles: (s, 3) the outward boundary triangles that may touch the fruit.
         tip_node: the node whose displacement is the finger's tip displacement.
         width: m, the extent along y.
-        tetrahedra: (n_tet, 4) positively oriented.
+        tetrahedra: (n_tet, 4) positively oriented (none for a shell body).
         youngs_modulus: Pa.  poisson_ratio: -.
+        shell_triangles: (n_sh, 3) the thin shells' triangles (their mid-surface), with
+            shell_thickness (n_sh,) m each (a membrane, ``energies.Membrane``).
+        hinges: (n_h, 4) the shells' bending hinges (``energies.HingeBending``), with
+            hinge_stiffness (n_h,) N m: the plate bending stiffness D each hinge's
+            k = D |e|^2 / (2 A) is computed with (``core3d.rod_extrusion``).
     """
 
     name: str
@@ -60,10 +70,49 @@ class FingerBody3D:
     tetrahedra: np.ndarray
     youngs_modulus: float
     poisson_ratio: float
+    shell_triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    shell_thickness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    hinges: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.int64))
+    hinge_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n_nodes(self) -> int:
         return len(self.masses)
+
+    def elastic_energies(self, copies: tuple[np.ndarray, ...] | None = None,
+                         rest_positions: np.ndarray | None = None,
+                         mirrored: tuple[bool, ...] | None = None) -> list[Energy]:
+        """The body's elastic energies: neo-Hookean tetrahedra, shell membranes and hinges.
+
+        Args:
+            copies: for a state holding several copies of the body (the two jaws'
+                fingers), each copy's (n_nodes,) global node indices; None: the body
+                alone, q of ``3 n_nodes``.
+            rest_positions: (N, 3) m, the global rest positions (each copy's rest shape
+                at its nodes); None with ``copies`` None.
+            mirrored: per copy, whether its rest shape is the body's mirror image (its
+                tetrahedra are turned back to positive volume); None: none is.
+        """
+        if copies is None:
+            copies, rest_positions = (np.arange(self.n_nodes),), self.rest_positions
+        if mirrored is None:
+            mirrored = (False,) * len(copies)
+        n = len(copies)
+        energies: list[Energy] = []
+        if len(self.tetrahedra):
+            tets = np.vstack([nodes[self.tetrahedra[:, [0, 2, 1, 3]] if turned
+                                    else self.tetrahedra]
+                              for nodes, turned in zip(copies, mirrored)])
+            energies.append(NeoHookeanTets(tets, rest_positions, self.youngs_modulus,
+                                           self.poisson_ratio))
+        if len(self.shell_triangles):
+            energies.append(Membrane(np.vstack([nodes[self.shell_triangles] for nodes in copies]),
+                                     rest_positions, self.youngs_modulus, self.poisson_ratio,
+                                     np.tile(self.shell_thickness, n)))
+        if len(self.hinges):
+            energies.append(HingeBending(np.vstack([nodes[self.hinges] for nodes in copies]),
+                                         rest_positions, np.tile(self.hinge_stiffness, n)))
+        return energies
 
 
 def boundary_triangles(tetrahedra: np.ndarray) -> np.ndarray:

@@ -9,12 +9,17 @@ the reaction at its finger's base nodes (the grip force). The bodies are the 2D 
 extruded over the jaw width (``core3d.finger_body3d``), neo-Hookean tetrahedra (the
 solid fruit's energy, ``core3d.energies.NeoHookeanTets``).
 
-Built so far: ``solid_pad``. The pad's section is the 2D pad's block
+Built: ``solid_pad`` and ``fin_ray``. The pad's section is the 2D pad's block
 (``core.solid_pad.block_body``: ``gripper.finger.solid_pad.layers`` cells across the
 thickness t); along the height and the width its cells are ``IN_PLANE_CELL_RATIO`` t
 long (and no more than ``MAX_IN_PLANE_CELLS`` along either), coarser than in 2D, where
 cells are square: the fruit's 3D surface mesh is itself a few mm coarse, and the
 contact needs no finer face than that.
+
+The Fin Ray's section is the 2D finger of rods (``core.fin_ray``), as wide as
+``gripper.finger.fin_ray.depth`` (null: ``gripper.jaw_width``), extruded into thin shells
+(``core3d.rod_extrusion``) in slices about ``WIDTH_CELL_RATIO`` rod elements wide (at
+least 2, at most ``MAX_IN_PLANE_CELLS``).
 """
 from __future__ import annotations
 
@@ -23,13 +28,14 @@ import math
 import numpy as np
 
 from gripper_sim.core.barrier import SoftBody
+from gripper_sim.core.fin_ray import fin_ray_from_config
 from gripper_sim.core.results import FingerResult
 from gripper_sim.core.soft_fingers import FingerState, SoftFingers
 from gripper_sim.core.solid_pad import block_body
 from gripper_sim.core3d import meshes
-from gripper_sim.core3d.energies import NeoHookeanTets
 from gripper_sim.core3d.finger_body3d import FingerBody3D, extruded_body
 from gripper_sim.core3d.layered_mesher import vertex_edge_lengths
+from gripper_sim.core3d.rod_extrusion import extruded_rod_body
 from gripper_sim.core3d.mesh_geometry import surface_edges
 from gripper_sim.errors import ConfigError
 
@@ -39,6 +45,8 @@ MIRROR = np.array([-1.0, 1.0, 1.0])
 IN_PLANE_CELL_RATIO = 0.5
 #: ... but no more cells than this along the height or the width
 MAX_IN_PLANE_CELLS = 16
+#: a 3D Fin Ray's slices across its width, in rod elements (``element_length``)
+WIDTH_CELL_RATIO = 2.0
 #: the pairs the barrier's pattern holds (``core3d.soft_barrier``): a fruit surface node
 #: and a finger surface node at most this many times the sum of their mean surface edge
 #: lengths apart across the closing axis (y, z) at rest
@@ -64,8 +72,17 @@ def solid_pad_body3d(config) -> FingerBody3D:
     return extruded_body(section, width, slices)
 
 
+def fin_ray_body3d(config) -> FingerBody3D:
+    """The 3D Fin Ray of ``config`` (see the module docstring)."""
+    depth = config['gripper.finger.fin_ray.depth']
+    width = float(config['gripper.jaw_width'] if depth is None else depth)
+    cell = WIDTH_CELL_RATIO * float(config['gripper.finger.fin_ray.element_length'])
+    slices = min(MAX_IN_PLANE_CELLS, max(2, int(round(width / cell))))
+    return extruded_rod_body(fin_ray_from_config(config, width), width, slices)
+
+
 #: the deformable finger types built in 3D and their builders: config -> FingerBody3D
-DEFORMABLE_FINGERS_3D = {'solid_pad': solid_pad_body3d}
+DEFORMABLE_FINGERS_3D = {'solid_pad': solid_pad_body3d, 'fin_ray': fin_ray_body3d}
 
 
 def finger_body3d(config) -> FingerBody3D:
@@ -111,13 +128,11 @@ class SoftFingers3D(SoftFingers):
                      for nodes, t in zip(self.nodes, windings))
 
     def _energies(self) -> list:
-        body, m = self.body, self.body.n_nodes
+        m = self.body.n_nodes
         rest = np.zeros((self.first + 2 * m, 3))
         rest[self.nodes[0]] = self.frames[0]
         rest[self.nodes[1]] = self.frames[1]
-        tets = np.vstack([self.nodes[0][body.tetrahedra],
-                          self.nodes[1][body.tetrahedra[:, [0, 2, 1, 3]]]])
-        return [NeoHookeanTets(tets, rest, body.youngs_modulus, body.poisson_ratio)]
+        return self.body.elastic_energies(self.nodes, rest, mirrored=(False, True))
 
     def touching_gap(self, outline: np.ndarray) -> float:
         """m, the gap between the backings at which the fingers at rest first touch the

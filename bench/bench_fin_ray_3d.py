@@ -1,0 +1,85 @@
+"""Benchmark of the 3D deformable fingers: the CLI's squeeze of the default apple to a grip
+force (``gripper-sim squeeze --set dimension=3 --set gripper.finger.type=... --to-force
+2``) with the rigid flat finger, the solid pad and the Fin Ray. Prints figures; asserts
+nothing.
+
+CPU time of this process (``time.process_time``, the best of ``--repeat`` runs; the
+machine's load average is printed), building the simulation included: the jaws close in
+force mode until the grip is within 1 % of ``--force`` N, then hold 0.1 s; with the
+steps, Newton iterations, the fingers' nodes, the fruit's contact area (both jaws), the
+peak contact pressure and each finger's tip displacement towards the fruit.
+
+Usage::
+
+    nice python bench/bench_fin_ray_3d.py [--repeat N] [--force N] [--set key=value ...]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from gripper_sim.configuration import load_config  # noqa: E402
+from gripper_sim.core3d.simulation import Simulation3D  # noqa: E402
+
+#: the fingers compared, the reference first
+FINGERS = ('flat', 'solid_pad', 'fin_ray')
+#: s, held at the force once reached
+SETTLE = 0.1
+
+
+def squeeze(finger: str, force: float, overrides: list[str]) -> dict:
+    """One squeeze to ``force`` N; its CPU time (s) and figures."""
+    start = time.process_time()
+    sim = Simulation3D(load_config(overrides=['dimension=3', f'gripper.finger.type={finger}',
+                                              *overrides]))
+    iterations = 0
+    sim.command_force(force)
+    for _ in range(200):
+        result = sim.step()
+        iterations += result.newton_iterations
+        if abs(result.grip_force - force) < 0.01 * force and result.step > 5:
+            break
+    for _ in range(round(SETTLE / sim.dt)):
+        result = sim.step()
+        iterations += result.newton_iterations
+    fingers = result.fingers
+    return dict(cpu=time.process_time() - start, steps=result.step, newton=iterations,
+                nodes=0 if fingers is None else len(fingers.positions),
+                force=result.grip_force, area=result.deformation.contact_area,
+                pressure=result.deformation.peak_contact_pressure,
+                tip=None if fingers is None else fingers.tip_displacement[:, 0].mean())
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--repeat', type=int, default=1, help='runs per finger (best kept)')
+    parser.add_argument('--force', type=float, default=2.0, help='grip force, N')
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                        help='a configuration override for every run (e.g. fruit.model=solid)')
+    args = parser.parse_args(argv)
+    print(f'load average {os.getloadavg()[0]:.2f}; CPU time (time.process_time), best of '
+          f'{args.repeat}')
+    print(f"{'finger':10s} {'CPU s':>7s} {'steps':>6s} {'Newton':>7s} {'nodes':>6s} "
+          f"{'force N':>8s} {'area mm^2':>9s} {'peak kPa':>8s} {'tip mm':>7s}")
+    rows = {}
+    for finger in FINGERS:
+        r = min((squeeze(finger, args.force, args.set) for _ in range(args.repeat)),
+                key=lambda run: run['cpu'])
+        rows[finger] = r
+        tip = '' if r['tip'] is None else f"{r['tip'] * 1e3:+7.3f}"
+        print(f"{finger:10s} {r['cpu']:7.1f} {r['steps']:6d} {r['newton']:7d} {r['nodes']:6d} "
+              f"{r['force']:8.3f} {r['area'] * 1e6:9.1f} {r['pressure'] * 1e-3:8.1f} {tip:>7s}",
+              flush=True)
+    for finger in FINGERS[1:]:
+        print(f"{finger} / flat: {rows[finger]['cpu'] / rows['flat']['cpu']:.1f}x")
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
