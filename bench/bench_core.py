@@ -21,8 +21,9 @@ solid fruits, flat, arc and V-groove fingers, with or without soft pads: every s
 here); 'compiled' = the compiled energy kernels and the fixed-pattern Newton solver
 (``core.fast_solver``) driven by the contact passes (``core.contact_passes``), which
 ``--set`` of a barrier contact model or ``GRIPPER_SIM_FAST=0`` selects. On the kernel
-route a step the kernel cannot factorise (a node held by a face and pushed into a second,
-oblique one) is done by the compiled route; the table counts those steps.
+route a step the kernel could not factorise (a non-symmetric contact filter, a guard: the
+shared contact passes give symmetric ones) would be done by the compiled route; the table
+counts those steps.
 Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations) times the cost of each operation timed alone at the end

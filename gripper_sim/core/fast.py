@@ -15,10 +15,11 @@ contact model is the default one, the fruit's energies are the ring energies
 gravity, and the obstacles move as the kernels model them (``FastPath.applies``: the
 jaws' faces with the gripper, the rest fixed). Soft pads (``pad.PadLayer``): the kernel
 sets the layer up for the step, adds its energy to the Newton solve and records its
-forces, as the layer's ``begin_step``, ``evaluate`` and ``finish_step`` do. A step
-whose contact filter the kernel cannot factorise (a node held by a face and pushed
-into a second, oblique one) is done by the generic path (``FastPath.fallbacks`` counts
-them). The node-block band of a ring is its interleaved outline (half-bandwidth 4); a
+forces, as the layer's ``begin_step``, ``evaluate`` and ``finish_step`` do. The contact
+passes are the shared compiled ones (``contact_kernels``), whose filters are symmetric
+projectors, so a node held by two faces (a V-groove flank and the table) stays in the
+kernel; a step whose filter were not symmetric would be done by the generic path
+(``kernels.UNSUPPORTED``, a guard; ``FastPath.fallbacks`` counts such steps). The node-block band of a ring is its interleaved outline (half-bandwidth 4); a
 meshed solid's Newton matrix is a sparse one (``sparse_ldl``: minimum-degree order, sparse
 LDL^T), its energies assembled into it through precomputed scatter maps.
 ``Simulation(config, fast=False)`` or ``GRIPPER_SIM_FAST=0`` in the environment turns
