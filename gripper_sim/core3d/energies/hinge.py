@@ -43,10 +43,10 @@ class HingeBending(KernelEnergy):
     """Args:
         hinges: (n_hinge, 4) nodes (p0, p1, p2, p3), see ``meshes.hinges``.
         rest_positions: (n_nodes, 3) m, the stress-free shape (theta0, |e0|, A0).
-        bending_stiffness: D, N m.
+        bending_stiffness: D, N m: one for all hinges, or (n_hinge,) one per hinge.
     """
 
-    def __init__(self, hinges: np.ndarray, rest_positions: np.ndarray, bending_stiffness: float):
+    def __init__(self, hinges: np.ndarray, rest_positions: np.ndarray, bending_stiffness):
         self.hinges = np.asarray(hinges, dtype=np.int64)
         x0 = np.asarray(rest_positions, dtype=float)
         self.theta0 = dihedral_angles(x0, self.hinges)

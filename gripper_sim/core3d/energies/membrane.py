@@ -22,11 +22,13 @@ class Membrane(KernelEnergy):
     """Args:
         triangles: (n_tri, 3) node indices.
         rest_positions: (n_nodes, 3) m, the stress-free shape.
-        youngs_modulus: E_s, Pa.  poisson_ratio: nu (-).  thickness: t, m.
+        youngs_modulus: E_s, Pa.  poisson_ratio: nu (-).
+        thickness: t, m: one for all triangles, or (n_tri,) one per triangle (a Fin Ray
+            finger's members of different thickness).
     """
 
     def __init__(self, triangles, rest_positions, youngs_modulus: float,
-                 poisson_ratio: float, thickness: float):
+                 poisson_ratio: float, thickness):
         self.tri = np.asarray(triangles, dtype=np.int64)
         x0 = np.asarray(rest_positions, dtype=float)
         e1 = x0[self.tri[:, 1]] - x0[self.tri[:, 0]]
