@@ -1021,9 +1021,9 @@ def contact_faces(face_par, face_dyn):
 
 
 #: float scratch of ``substep`` besides the Newton solve's: SUBSTEP_WORK per node (x_pred,
-#: start, filters, friction rows, q, reaction) and SUBSTEP_WORK_EXTRA (energies, rebound,
-#: jaw origins)
-SUBSTEP_WORK, SUBSTEP_WORK_EXTRA = 16, 10
+#: start, filters, friction rows, q, reaction) and SUBSTEP_WORK_EXTRA (energies, jaw
+#: origins)
+SUBSTEP_WORK, SUBSTEP_WORK_EXTRA = 16, 8
 
 
 @njit(cache=True, error_model='numpy')
@@ -1138,7 +1138,8 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
             the measures and damage take every contact force (hard and pad) and each
             node's holder (its hard face, else its pad's face), as ``Simulation._measure``.
         work, iwork, bwork, storage, stress: scratch space (``substep_scratch``), reused
-            from step to step: no array is allocated here for a fruit without pads.
+            from step to step: for a fruit without pads only the step's face arrays
+            (``contact_faces``, a few per face) are allocated here.
 
     Returns:
         a status code (OK, or the failure of the last solve).
@@ -1216,7 +1217,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     reaction = work[14 * n:16 * n]
     values = work[16 * n:16 * n + 4]
     values[:] = 0.0
-    jaw_origins = work[16 * n + 6:16 * n + 10].reshape((2, 2))
+    jaw_origins = work[16 * n + 4:16 * n + 8].reshape((2, 2))
     newton_work = work[SUBSTEP_WORK * n + SUBSTEP_WORK_EXTRA:]
     order = iwork[:n]
     fr_nodes = iwork[n:2 * n]
