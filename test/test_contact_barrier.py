@@ -16,7 +16,7 @@ from helpers import kernel_evaluation, pick, quasi_static_sim
 from gripper_sim.configuration import load_config
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
 from gripper_sim.core.obstacles import FlatFace
-from gripper_sim.core3d.obstacles import Plate
+from gripper_sim.core.obstacles import Plate
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp

@@ -14,7 +14,7 @@ from gripper_sim.core import contact as cm
 from gripper_sim.core import contact_kernels as ck
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core3d.obstacles import Plate
+from gripper_sim.core.obstacles import Plate
 
 _Y = np.array([0.0, 1.0, 0.0])
 

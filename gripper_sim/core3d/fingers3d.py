@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gripper_sim.core3d.obstacles import Plate
+from gripper_sim.core.obstacles import Plate
 from gripper_sim.geometry import fingers
 
 LEFT, RIGHT = 0, 1

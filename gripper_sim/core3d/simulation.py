@@ -43,7 +43,7 @@ from gripper_sim.core3d.damage import DamageTracker3D
 from gripper_sim.core3d.fingers_pad import PadLayer3D
 from gripper_sim.core3d.fruit import FruitModel3D, build_fruit3d
 from gripper_sim.core3d.layered_mesher import vertex_edge_lengths
-from gripper_sim.core3d.obstacles import Plate
+from gripper_sim.core.obstacles import Plate
 from gripper_sim.core3d.soft_barrier import SoftBarrier3D
 from gripper_sim.core3d.soft_fingers3d import SoftFingers3D, finger_body3d
 from gripper_sim.errors import ConfigError
