@@ -54,6 +54,7 @@ from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
                                               nearest_partners)
 from gripper_sim.core.contact_passes import StepOutcome
+from gripper_sim.core.friction_kernels import friction_terms, lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
@@ -250,7 +251,9 @@ class BarrierContact(Energy):
         self._obstacles_end = np.zeros((0, d))
         self._start = np.zeros((n_v, d))
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
-        self._tangential = ipctk.TangentialCollisions()
+        self._tangential = ipctk.TangentialCollisions()  # the lagged friction's pairs (3D)
+        #: the compiled lagged friction's pairs (2D, ``_lagged_friction``), or None
+        self._friction_pairs = None
         #: the broad phase of every candidate search (the meshes are small: sorting the
         #: boxes along an axis beats the default hash grid 2-3x)
         self._broad_phase = ipctk.SweepAndPrune()
@@ -380,13 +383,18 @@ class BarrierContact(Energy):
                                np.repeat([f.kinetic_friction for f in new_faces],
                                          self.corners_per_face)])
         self._tangential = ipctk.TangentialCollisions()
-        collisions = ipctk.NormalCollisions()
-        if np.any(mu_s > 0) or np.any(mu_k > 0):
+        self._friction_pairs = None
+        if not (np.any(mu_s > 0) or np.any(mu_k > 0)):
+            pass
+        elif self.dimension == 2:
+            self._friction_pairs = self._lagged_friction(start, mu_s, mu_k)
+        else:
+            collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
                              broad_phase=self._broad_phase)
-        if len(collisions):
-            self._tangential.build(self._mesh, start, collisions, self.potential, mu_s, mu_k,
-                                   max)
+            if len(collisions):
+                self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
+                                       mu_k, max)
         self._quiet = None
         #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
         #: they were sought, the (edge, vertex) pairs (k, 2)), or None
@@ -399,6 +407,54 @@ class BarrierContact(Energy):
             if gap > 2.0 * self.settings.dhat:
                 self._quiet = (start[:self.vertex_nodes.size].copy(),
                                0.5 * (gap - self.settings.dhat))
+
+    def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray):
+        """The compiled friction's pairs (2D, ``friction_kernels.lagged_friction``) at the
+        collision mesh's start vertices ``start`` with per-vertex coefficients ``mu_s``,
+        ``mu_k`` (n_m,): (vertex ids, weights, tangents, forces, coefficients), or None
+        when no pair is within dhat."""
+        candidates = ipctk.Candidates()
+        candidates.build(self._mesh, start, 0.5 * self.settings.dhat, self._broad_phase)
+        pairs = _edge_vertex_pairs(candidates)
+        k = len(pairs)
+        if not k:
+            return None
+        ids, weights = np.empty((k, 3), np.int64), np.empty((k, 3))
+        tangents, forces, coefficients = np.empty((k, 2)), np.empty(k), np.empty((k, 2))
+        count = lagged_friction(np.ascontiguousarray(start), self._mesh_edges, pairs,
+                                self.settings.dhat, self.settings.stiffness, mu_s, mu_k, ids,
+                                weights, tangents, forces, coefficients)
+        if not count:
+            return None
+        return (ids[:count], weights[:count], tangents[:count], forces[:count],
+                coefficients[:count])
+
+    def _compiled_friction(self, v: np.ndarray, hessian: bool):
+        """The lagged friction (2D, ``friction_kernels``) at the collision mesh's vertices
+        ``v``: (value J, gradient (n_d,) N over ``vertex_dofs``, the Hessian's entries
+        (pattern key indices, values N/m) or None)."""
+        ids, weights, tangents, forces, coefficients = self._friction_pairs
+        gradient = np.zeros(self.n_dof)
+        size = 36 * len(forces) if hessian else 0
+        index, values = np.empty(size, np.int64), np.empty(size)
+        value, written = friction_terms(
+            v, self._start, self._dt, self.settings.friction_smoothing, ids, weights, tangents,
+            forces, coefficients, self._mesh_dofs, gradient, hessian, self._pattern_keys,
+            self.n_dof, index, values)
+        entries = None
+        if hessian:
+            entries = self._inside_pattern(index[:written], values[:written])
+        return value, gradient[self.vertex_dofs], entries
+
+    def _inside_pattern(self, index: np.ndarray, values: np.ndarray):
+        """The compiled Hessian entries (pattern key ``index``, ``values``) inside the
+        pattern (AssertionError for one outside unless ``drop_outside_pattern``)."""
+        inside = index >= 0
+        if not np.all(inside):
+            if not self.drop_outside_pattern:
+                raise AssertionError('barrier Hessian entry outside its pattern')
+            index, values = index[inside], values[inside]
+        return index, values
 
     def quiet(self, q: np.ndarray) -> bool:
         """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
@@ -443,7 +499,14 @@ class BarrierContact(Energy):
                 if hessian:
                     parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
                     scales.append(1.0)
-            if len(self._tangential):
+            if self._friction_pairs is not None:
+                friction_value, friction_gradient, friction_entries = self._compiled_friction(
+                    v, hessian and friction)
+                if friction_entries is not None:
+                    compiled = (friction_entries if compiled is None else
+                                (np.concatenate([compiled[0], friction_entries[0]]),
+                                 np.concatenate([compiled[1], friction_entries[1]])))
+            elif len(self._tangential):
                 velocity = np.asfortranarray((v - self._start) / self._dt)
                 friction_value = self._dt * float(self.friction(self._tangential, mesh,
                                                                 velocity))
@@ -488,15 +551,7 @@ class BarrierContact(Energy):
             self.n_dof, index, values)
         if not np.isfinite(value):
             return np.inf, None, None
-        entries = None
-        if hessian:
-            index, values = index[:written], values[:written]
-            inside = index >= 0
-            if not np.all(inside):
-                if not self.drop_outside_pattern:
-                    raise AssertionError('barrier Hessian entry outside its pattern')
-                index, values = index[inside], values[inside]
-            entries = (index, values)
+        entries = self._inside_pattern(index[:written], values[:written]) if hessian else None
         return value, gradient[self.vertex_dofs], entries
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
@@ -623,8 +678,7 @@ class BarrierContact(Energy):
             candidates = ipctk.Candidates()
             candidates.build(self._mesh, v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN,
                              self._broad_phase)
-            pairs = np.array([(c.edge_id, c.vertex_id) for c in candidates.ev_candidates],
-                             np.int64).reshape(-1, 2)
+            pairs = _edge_vertex_pairs(candidates)
             kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs)
         return kept[1]
 
@@ -734,6 +788,12 @@ class BarrierContact(Energy):
         if not len(collisions):
             return np.inf
         return float(np.sqrt(collisions.compute_minimum_distance(self._mesh, v)))
+
+
+def _edge_vertex_pairs(candidates: ipctk.Candidates) -> np.ndarray:
+    """(k, 2) the (edge, vertex) pairs of ipctk's edge-vertex ``candidates``."""
+    return np.array([(c.edge_id, c.vertex_id) for c in candidates.ev_candidates],
+                    np.int64).reshape(-1, 2)
 
 
 def _no_triplets():
