@@ -53,6 +53,7 @@ import numpy as np
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
                                               nearest_partners)
+from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.friction_kernels import friction_terms, lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -329,13 +330,15 @@ class BarrierContact(Energy):
                                              np.asfortranarray(triangles))
         if self.self_contact:
             # a body's vertices with its own edges only (ipctk skips an edge's own ends)
+            self._mesh_groups = self.vertex_body.astype(np.int64)
             self._mesh.can_collide = ~ipctk.make_vertex_patches_filter(
-                self.vertex_body.astype(np.int32))
+                self._mesh_groups.astype(np.int32))
         else:
             # the fruit against everything else: soft bodies and faces share one patch
-            patches = np.concatenate([(self.vertex_body > 0).astype(np.int32),
-                                      np.ones(c * k, np.int32)])
-            self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
+            self._mesh_groups = np.concatenate([(self.vertex_body > 0).astype(np.int64),
+                                                np.ones(c * k, np.int64)])
+            self._mesh.can_collide = ipctk.make_vertex_patches_filter(
+                self._mesh_groups.astype(np.int32))
         self._n_faces = k
         self._last_collisions = None
         #: the mesh's edges (n_e, 2) and each vertex's state dofs (n_v + c k, d), -1 for
@@ -413,9 +416,7 @@ class BarrierContact(Energy):
         collision mesh's start vertices ``start`` with per-vertex coefficients ``mu_s``,
         ``mu_k`` (n_m,): (vertex ids, weights, tangents, forces, coefficients), or None
         when no pair is within dhat."""
-        candidates = ipctk.Candidates()
-        candidates.build(self._mesh, start, 0.5 * self.settings.dhat, self._broad_phase)
-        pairs = _edge_vertex_pairs(candidates)
+        pairs = self._static_candidates(start, 0.5 * self.settings.dhat)
         k = len(pairs)
         if not k:
             return None
@@ -627,6 +628,11 @@ class BarrierContact(Energy):
             return 1.0
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices((q + dq).reshape(-1, self.dimension))
+        if self.dimension == 2:
+            pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
+                                           self.self_contact,
+                                           (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+            return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
         candidates = ipctk.Candidates()
         candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat,
                          self._broad_phase)
@@ -675,12 +681,15 @@ class BarrierContact(Energy):
         by at most the margin: the pair came at most twice it closer)."""
         kept = self._pairs
         if kept is None or largest_move(q, self._vertex_dof_pairs, kept[0]) > CANDIDATE_MARGIN:
-            candidates = ipctk.Candidates()
-            candidates.build(self._mesh, v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN,
-                             self._broad_phase)
-            pairs = _edge_vertex_pairs(candidates)
+            pairs = self._static_candidates(v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
             kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs)
         return kept[1]
+
+    def _static_candidates(self, v: np.ndarray, radius: float) -> np.ndarray:
+        """(k, 2) the (edge, vertex) pairs of the collision mesh's vertices ``v`` (2D) whose
+        boxes inflated by ``radius`` (m) meet (``barrier_search``)."""
+        return edge_vertex_candidates(v, v, self._mesh_edges, self._mesh_groups,
+                                      self.self_contact, radius)
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
@@ -788,12 +797,6 @@ class BarrierContact(Energy):
         if not len(collisions):
             return np.inf
         return float(np.sqrt(collisions.compute_minimum_distance(self._mesh, v)))
-
-
-def _edge_vertex_pairs(candidates: ipctk.Candidates) -> np.ndarray:
-    """(k, 2) the (edge, vertex) pairs of ipctk's edge-vertex ``candidates``."""
-    return np.array([(c.edge_id, c.vertex_id) for c in candidates.ev_candidates],
-                    np.int64).reshape(-1, 2)
 
 
 def _no_triplets():
