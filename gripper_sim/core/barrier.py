@@ -53,7 +53,8 @@ import numpy as np
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
                                               nearest_partners)
-from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
+from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
+                                             smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.friction_kernels import friction_terms, lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -403,10 +404,7 @@ class BarrierContact(Energy):
         #: they were sought, the (edge, vertex) pairs (k, 2)), or None
         self._pairs = None
         if self.self_contact:
-            near = ipctk.NormalCollisions()
-            near.build(self._mesh, start, QUIET_SEARCH, broad_phase=self._broad_phase)
-            gap = (float(np.sqrt(near.compute_minimum_distance(self._mesh, start)))
-                   if len(near) else QUIET_SEARCH)
+            gap = self._nearest(start, QUIET_SEARCH)
             if gap > 2.0 * self.settings.dhat:
                 self._quiet = (start[:self.vertex_nodes.size].copy(),
                                0.5 * (gap - self.settings.dhat))
@@ -691,6 +689,13 @@ class BarrierContact(Energy):
         return edge_vertex_candidates(v, v, self._mesh_edges, self._mesh_groups,
                                       self.self_contact, radius)
 
+    def _nearest(self, v: np.ndarray, reach: float, beyond: float | None = None) -> float:
+        """m, the smallest distance of a pair of the collision mesh's vertices ``v`` (2D),
+        or ``beyond`` (default ``reach``) if none is nearer than ``reach`` (m)."""
+        pairs = self._static_candidates(v, 0.5 * reach)
+        distance = smallest_distance(v, self._mesh_edges, pairs, reach)
+        return float(distance) if distance < reach or beyond is None else beyond
+
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
         """(n, d) m, positions to start the step's Newton solve from: ``pushed_start``, or
@@ -793,6 +798,8 @@ class BarrierContact(Energy):
         """m, the smallest distance between the surface and a face at positions (n, d)
         (inf when none is within dhat)."""
         v = self.vertices(x)
+        if self.dimension == 2:
+            return self._nearest(v, self.settings.dhat, np.inf)
         collisions = self._collisions(v)
         if not len(collisions):
             return np.inf

@@ -154,3 +154,16 @@ def collision_free_step(v0, v1, edges, candidates):
         if step == 0.0:
             break
     return step
+
+
+@njit(cache=True)
+def smallest_distance(v, edges, candidates, beyond):
+    """m, the smallest point-segment distance of the (edge, vertex) ``candidates`` (k, 2)
+    at the vertices ``v`` (n_m, 2), or ``beyond`` if none is nearer."""
+    smallest = beyond
+    for k in range(candidates.shape[0]):
+        e, i = candidates[k, 0], candidates[k, 1]
+        a, b = edges[e, 0], edges[e, 1]
+        smallest = min(smallest, _point_segment_distance(v[i, 0], v[i, 1], v[a, 0], v[a, 1],
+                                                         v[b, 0], v[b, 1]))
+    return smallest
