@@ -61,15 +61,14 @@ def _friction(seed: int, speed: float, mu_s, mu_k):
                             ids, weights, tangents, forces, mus)
     n_dof = 2 * n
     mine = np.zeros(n_dof)
-    index, entries = np.empty(36 * k, np.int64), np.empty(36 * k)
-    total, written = friction_terms(now, start, DT, EPS_V, ids[:count], weights[:count],
-                                    tangents[:count], forces[:count], mus[:count],
-                                    np.arange(n_dof).reshape(n, 2), mine, True,
-                                    np.arange(n_dof ** 2, dtype=np.int64), n_dof, index,
-                                    entries)
+    keys = np.arange(n_dof ** 2, dtype=np.int64)      # a full pattern
     matrix = np.zeros(n_dof ** 2)
-    np.add.at(matrix, index[:written], entries[:written])
-    matrix = matrix.reshape(n_dof, n_dof).T
+    total, outside = friction_terms(now, start, DT, EPS_V, ids[:count], weights[:count],
+                                    tangents[:count], forces[:count], mus[:count],
+                                    np.arange(n_dof).reshape(n, 2), mine, True, keys, n_dof,
+                                    keys, matrix)
+    assert outside == 0
+    matrix = matrix.reshape(n_dof, n_dof).T           # keys are col n_dof + row
     return (value, gradient, hessian), (total, mine, matrix)
 
 

@@ -428,32 +428,25 @@ class BarrierContact(Energy):
         return (ids[:count], weights[:count], tangents[:count], forces[:count],
                 coefficients[:count])
 
-    def _compiled_friction(self, v: np.ndarray, hessian: bool):
+    def _compiled_friction(self, v: np.ndarray, into):
         """The lagged friction (2D, ``friction_kernels``) at the collision mesh's vertices
-        ``v``: (value J, gradient (n_d,) N over ``vertex_dofs``, the Hessian's entries
-        (pattern key indices, values N/m) or None)."""
+        ``v``: (value J, gradient (n_d,) N over ``vertex_dofs``); its Hessian added as
+        ``_terms``'s ``into`` says (None: not wanted)."""
         ids, weights, tangents, forces, coefficients = self._friction_pairs
         gradient = np.zeros(self.n_dof)
-        size = 36 * len(forces) if hessian else 0
-        index, values = np.empty(size, np.int64), np.empty(size)
-        value, written = friction_terms(
+        values, slots = into if into is not None else (np.zeros(0), np.zeros(0, np.int64))
+        value, outside = friction_terms(
             v, self._start, self._dt, self.settings.friction_smoothing, ids, weights, tangents,
-            forces, coefficients, self._mesh_dofs, gradient, hessian, self._pattern_keys,
-            self.n_dof, index, values)
-        entries = None
-        if hessian:
-            entries = self._inside_pattern(index[:written], values[:written])
-        return value, gradient[self.vertex_dofs], entries
+            forces, coefficients, self._mesh_dofs, gradient, into is not None,
+            self._pattern_keys, self.n_dof, slots, values)
+        self._check_outside(outside)
+        return value, gradient[self.vertex_dofs]
 
-    def _inside_pattern(self, index: np.ndarray, values: np.ndarray):
-        """The compiled Hessian entries (pattern key ``index``, ``values``) inside the
-        pattern (AssertionError for one outside unless ``drop_outside_pattern``)."""
-        inside = index >= 0
-        if not np.all(inside):
-            if not self.drop_outside_pattern:
-                raise AssertionError('barrier Hessian entry outside its pattern')
-            index, values = index[inside], values[inside]
-        return index, values
+    def _check_outside(self, outside: int) -> None:
+        """AssertionError if compiled Hessian entries fell outside the pattern, unless
+        ``drop_outside_pattern``."""
+        if outside and not self.drop_outside_pattern:
+            raise AssertionError('barrier Hessian entry outside its pattern')
 
     def quiet(self, q: np.ndarray) -> bool:
         """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
@@ -466,18 +459,18 @@ class BarrierContact(Energy):
         return largest_move(q, self._vertex_dof_pairs, start) <= reach
 
     # ------------------------------------------------------------------ the energy
-    def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
-               friction: bool = True):
+    def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
+               friction: bool = True) -> float:
         """Barrier plus lagged friction (if ``friction``) at positions ``q`` (d n,) m: adds
-        the gradient (N) into ``gradient``; returns (value J, the Hessian's entries as
-        ``_pattern_entries`` gives them, or None). Without the Hessian, the values and
+        the gradient (N) into ``gradient`` and, if ``into`` = (values, slots (p,)) is
+        given, the Hessian (N/m) into ``values``, each entry of the pattern's sorted keys
+        k at ``slots[k]``; returns the value J. Without the Hessian, the values and
         gradients of the last evaluation are reused when ``q`` is the same."""
         if self.quiet(q):
-            return 0.0, ((np.zeros(0, np.int64), np.zeros(0)) if hessian else None)
+            return 0.0
         last = self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
-        compiled = None  # the compiled barrier's Hessian entries (2D)
-        if not hessian and last is not None and np.array_equal(last[0], q):
+        if into is None and last is not None and np.array_equal(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
         else:
             mesh = self._mesh
@@ -486,32 +479,27 @@ class BarrierContact(Energy):
             barrier_value = friction_value = 0.0
             barrier_gradient = friction_gradient = None
             if self.dimension == 2:
-                barrier_value, barrier_gradient, compiled = self._compiled_barrier(q, v,
-                                                                                   hessian)
+                barrier_value, barrier_gradient = self._compiled_barrier(q, v, into)
                 if not np.isfinite(barrier_value):
-                    return np.inf, None
+                    return np.inf
             elif len(collisions := self._collisions(v)):
                 barrier_value = float(self.potential(collisions, mesh, v))
                 if not np.isfinite(barrier_value):
-                    return np.inf, None
+                    return np.inf
                 barrier_gradient = self.potential.gradient(collisions, mesh, v)[:n_d]
-                if hessian:
+                if into is not None:
                     parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
                     scales.append(1.0)
             if self._friction_pairs is not None:
-                friction_value, friction_gradient, friction_entries = self._compiled_friction(
-                    v, hessian and friction)
-                if friction_entries is not None:
-                    compiled = (friction_entries if compiled is None else
-                                (np.concatenate([compiled[0], friction_entries[0]]),
-                                 np.concatenate([compiled[1], friction_entries[1]])))
+                friction_value, friction_gradient = self._compiled_friction(
+                    v, into if friction else None)
             elif len(self._tangential):
                 velocity = np.asfortranarray((v - self._start) / self._dt)
                 friction_value = self._dt * float(self.friction(self._tangential, mesh,
                                                                 velocity))
                 friction_gradient = self.friction.gradient(self._tangential, mesh,
                                                            velocity)[:n_d]
-                if hessian and friction:
+                if into is not None and friction:
                     parts.append(self.friction.hessian(self._tangential, mesh, velocity,
                                                        self.projection))
                     scales.append(1.0 / self._dt)
@@ -524,34 +512,30 @@ class BarrierContact(Energy):
             value += friction_value
             if friction_gradient is not None:
                 gradient[self.vertex_dofs] += friction_gradient
-        if not hessian:
-            return value, None
-        where, vals = self._pattern_entries(parts, scales)
-        if compiled is not None:
-            where = np.concatenate([where, compiled[0]])
-            vals = np.concatenate([vals, compiled[1]])
-        return value, (where, vals)
+        if parts:
+            where, vals = self._pattern_entries(parts, scales)
+            np.add.at(into[0], into[1][where], vals)
+        return value
 
-    def _compiled_barrier(self, q: np.ndarray, v: np.ndarray, hessian: bool):
+    def _compiled_barrier(self, q: np.ndarray, v: np.ndarray, into):
         """The barrier at positions ``q`` (2 n,) m, the collision mesh's vertices ``v`` (2D,
         ``barrier_kernels``) over the candidates of ``_candidate_pairs``: (value J,
-        gradient (n_d,) N over ``vertex_dofs`` or None, the Hessian's entries (pattern
-        key indices, values N/m) or None)."""
+        gradient (n_d,) N over ``vertex_dofs`` or None); its Hessian added as ``_terms``'s
+        ``into`` says (None: not wanted)."""
         candidates = self._candidate_pairs(q, v)
         if not len(candidates):
-            return 0.0, None, None
+            return 0.0, None
         gradient = np.zeros(self.n_dof)
-        size = 36 * len(candidates) if hessian else 0
-        index, values = np.empty(size, np.int64), np.empty(size)
-        value, written = edge_vertex_barrier(
+        values, slots = into if into is not None else (np.zeros(0), np.zeros(0, np.int64))
+        value, outside = edge_vertex_barrier(
             v, self._mesh_edges, candidates, self.settings.dhat, self.settings.stiffness,
-            self._mesh_dofs, gradient, hessian,
+            self._mesh_dofs, gradient, into is not None,
             self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys,
-            self.n_dof, index, values)
+            self.n_dof, slots, values)
         if not np.isfinite(value):
-            return np.inf, None, None
-        entries = self._inside_pattern(index[:written], values[:written]) if hessian else None
-        return value, gradient[self.vertex_dofs], entries
+            return np.inf, None
+        self._check_outside(outside)
+        return value, gradient[self.vertex_dofs]
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
         """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
@@ -594,11 +578,10 @@ class BarrierContact(Energy):
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         """Barrier plus lagged friction at fruit positions ``q`` (d n,) m."""
         gradient = np.zeros(self.n_dof)
-        value, entries = self._terms(q, gradient, hessian)
-        if entries is None:
-            return Evaluation(value, gradient, *_no_triplets())
+        if not hessian:
+            return Evaluation(self._terms(q, gradient), gradient, *_no_triplets())
         vals = np.zeros(self._pattern_keys.size)
-        np.add.at(vals, *entries)
+        value = self._terms(q, gradient, (vals, np.arange(vals.size)))
         cols, rows = np.divmod(self._pattern_keys, self.n_dof)
         return Evaluation(value, gradient, rows, cols, vals)
 
@@ -607,16 +590,15 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
-        value, entries = self._terms(q, grad, hessian)
-        if entries is not None:
+        into = None
+        if hessian:
             if self._positions is None or self._positions[0] is not scatter:
                 m = self.dofs.shape[1]
                 keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
                 first = np.unique(keys.ravel(), return_index=True)[1]
                 self._positions = (scatter, scatter.ravel()[first])
-            where, vals = entries
-            np.add.at(data, self._positions[1][where], vals)
-        return value, []
+            into = (data, self._positions[1])
+        return self._terms(q, grad, into), []
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
@@ -756,13 +738,13 @@ class BarrierContact(Energy):
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, d) N, the faces' force on each node at ``q`` (d n,) m: barrier + friction."""
         gradient = np.zeros(self.n_dof)
-        self._terms(q, gradient, hessian=False)
+        self._terms(q, gradient)
         return -gradient.reshape(-1, self.dimension)
 
     def normal_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, d) N, the barrier's (normal) part of ``contact_forces``, no friction."""
         gradient = np.zeros(self.n_dof)
-        self._terms(q, gradient, hessian=False, friction=False)
+        self._terms(q, gradient, friction=False)
         return -gradient.reshape(-1, self.dimension)
 
     def partners(self, q: np.ndarray) -> np.ndarray:

@@ -134,8 +134,8 @@ def lagged_friction(v, edges, candidates, dhat, stiffness, mu_s, mu_k, vertex_id
 
 @njit(cache=True)
 def friction_terms(v, start, dt, eps_v, vertex_ids, weights, tangents, forces, coefficients,
-                   vertex_dofs, gradient, want_hessian, pattern_keys, n_dof, entry_index,
-                   entry_value):
+                   vertex_dofs, gradient, want_hessian, pattern_keys, n_dof, slots,
+                   hessian_values):
     """The lagged friction potential of the pairs of ``lagged_friction`` at vertices ``v``.
 
     Args:
@@ -146,14 +146,14 @@ def friction_terms(v, start, dt, eps_v, vertex_ids, weights, tangents, forces, c
         gradient: (n_dof,) N, the potential's gradient in positions is added into it.
         want_hessian: whether to give the Hessian's entries.
         pattern_keys: (p,) sorted keys col n_dof + row of the Hessian's pattern.
-        entry_index, entry_value: (>= 36 k,) out: each Hessian entry's index in
-            ``pattern_keys`` (-1: outside it) and its value N/m.
+        slots: (p,) where in ``hessian_values`` each key of the pattern adds.
+        hessian_values: the Hessian's entries (N/m) are added into it.
 
     Returns:
-        (value J, the Hessian's entries written).
+        (value J, the Hessian's entries outside the pattern, left out).
     """
     total = 0.0
-    written = 0
+    outside = 0
     g = np.empty(6)
     for k in range(forces.shape[0]):
         m = 3 if vertex_ids[k, 2] >= 0 else 2
@@ -191,8 +191,7 @@ def friction_terms(v, start, dt, eps_v, vertex_ids, weights, tangents, forces, c
                         key = col * n_dof + row
                         where = np.searchsorted(pattern_keys, key)
                         if where >= pattern_keys.size or pattern_keys[where] != key:
-                            where = -1
-                        entry_index[written] = where
-                        entry_value[written] = stiffness * g[2 * i + ci] * g[2 * j + cj]
-                        written += 1
-    return total, written
+                            outside += 1
+                            continue
+                        hessian_values[slots[where]] += stiffness * g[2 * i + ci] * g[2 * j + cj]
+    return total, outside
