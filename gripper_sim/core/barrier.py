@@ -14,13 +14,16 @@ ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
   slip speed eps_v, added to the step as dt D(v) with v = (x - x_n) / dt;
 - every Newton line search starts from the continuous-collision bound: the largest
   fraction of the step along which no primitive crosses another (their section 4).
-The candidates (its sweep-and-prune broad phase), friction potential and CCD are the IPC
-Toolkit's (``ipctk``, MIT), and so is the barrier in 3D; in 2D the barrier over ipctk's
-candidates is one compiled pass (``core.barrier_kernels``, equal to ipctk's to 1e-10),
-its candidates sought once and kept while no vertex moves further than
-``CANDIDATE_MARGIN``. One implementation for both dimensions (``dimension`` d = 2 or
-3). Its collision mesh holds the fruit's surface: in 2D the outline (the surface nodes
-and skin edges), in 3D the surface nodes, edges and triangles; and every rigid face: in
+In 3D the candidates (its sweep-and-prune broad phase), barrier, friction potential and
+CCD are the IPC Toolkit's (``ipctk``, MIT). In 2D they are compiled: the barrier
+(``core.barrier_kernels``) and the lagged friction (``core.friction_kernels``), each
+equal to ipctk's to 1e-10, over the candidates of a compiled sort and sweep
+(``core.barrier_search``), the barrier's kept while no vertex moves further than
+``CANDIDATE_MARGIN``; the line search's bound is that module's additive CCD, and only a
+start of step whose path it cannot clear goes to ipctk's exact CCD. One implementation
+for both dimensions (``dimension`` d = 2 or 3). Its collision mesh holds the fruit's
+surface: in 2D the outline (the surface nodes and skin edges), in 3D the surface nodes,
+edges and triangles; and every rigid face: in
 2D one segment per ``FlatFace`` (jaw faces, table, walls), in 3D two triangles per
 ``Plate`` (its rectangle), each moving with its face; infinite faces (table, walls)
 become segments or squares ``INFINITE_FACE_LENGTH`` across. Only pairs of the fruit and
@@ -603,7 +606,8 @@ class BarrierContact(Energy):
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
         primitive of the surface crosses a face's and no face's crosses the surface's
-        (CCD). Keeps the step's collision candidates for the line search along it."""
+        (CCD: in 2D compiled, ``_step_bound``; in 3D ipctk's, keeping the step's collision
+        candidates for the line search along it)."""
         if self.quiet(q) and self.quiet(q + dq):
             return 1.0
         v0 = self.vertices(q.reshape(-1, self.dimension))
