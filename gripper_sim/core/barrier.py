@@ -391,11 +391,9 @@ class BarrierContact(Energy):
                                          self.corners_per_face)])
         self._tangential = ipctk.TangentialCollisions()
         self._friction_pairs = None
-        if not (np.any(mu_s > 0) or np.any(mu_k > 0)):
-            pass
-        elif self.dimension == 2:
+        if self.dimension == 2 and (np.any(mu_s > 0) or np.any(mu_k > 0)):
             self._friction_pairs = self._lagged_friction(start, mu_s, mu_k)
-        else:
+        elif np.any(mu_s > 0) or np.any(mu_k > 0):
             collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
                              broad_phase=self._broad_phase)
@@ -403,9 +401,6 @@ class BarrierContact(Energy):
                 self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
                                        mu_k, max)
         self._quiet = None
-        #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
-        #: they were sought, the (edge, vertex) pairs (k, 2)), or None
-        self._pairs = None
         if self.self_contact:
             gap = self._nearest(start, QUIET_SEARCH)
             if gap > 2.0 * self.settings.dhat:
