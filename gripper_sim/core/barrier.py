@@ -14,13 +14,16 @@ ACM Trans. Graph. 39(4) 49), contact is an energy of the implicit Euler step:
   slip speed eps_v, added to the step as dt D(v) with v = (x - x_n) / dt;
 - every Newton line search starts from the continuous-collision bound: the largest
   fraction of the step along which no primitive crosses another (their section 4).
-The candidates (its sweep-and-prune broad phase), friction potential and CCD are the IPC
-Toolkit's (``ipctk``, MIT), and so is the barrier in 3D; in 2D the barrier over ipctk's
-candidates is one compiled pass (``core.barrier_kernels``, equal to ipctk's to 1e-10),
-its candidates sought once and kept while no vertex moves further than
-``CANDIDATE_MARGIN``. One implementation for both dimensions (``dimension`` d = 2 or
-3). Its collision mesh holds the fruit's surface: in 2D the outline (the surface nodes
-and skin edges), in 3D the surface nodes, edges and triangles; and every rigid face: in
+In 3D the candidates (its sweep-and-prune broad phase), barrier, friction potential and
+CCD are the IPC Toolkit's (``ipctk``, MIT). In 2D they are compiled: the barrier
+(``core.barrier_kernels``) and the lagged friction (``core.friction_kernels``), each
+equal to ipctk's to 1e-10, over the candidates of a compiled sort and sweep
+(``core.barrier_search``), the barrier's kept while no vertex moves further than
+``CANDIDATE_MARGIN``; the line search's bound is that module's additive CCD, and only a
+start of step whose path it cannot clear goes to ipctk's exact CCD. One implementation
+for both dimensions (``dimension`` d = 2 or 3). Its collision mesh holds the fruit's
+surface: in 2D the outline (the surface nodes and skin edges), in 3D the surface nodes,
+edges and triangles; and every rigid face: in
 2D one segment per ``FlatFace`` (jaw faces, table, walls), in 3D two triangles per
 ``Plate`` (its rectangle), each moving with its face; infinite faces (table, walls)
 become segments or squares ``INFINITE_FACE_LENGTH`` across. Only pairs of the fruit and
@@ -53,7 +56,10 @@ import numpy as np
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
                                               nearest_partners)
+from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
+                                             smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
+from gripper_sim.core.friction_kernels import friction_terms, lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
@@ -250,7 +256,9 @@ class BarrierContact(Energy):
         self._obstacles_end = np.zeros((0, d))
         self._start = np.zeros((n_v, d))
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
-        self._tangential = ipctk.TangentialCollisions()
+        self._tangential = ipctk.TangentialCollisions()  # the lagged friction's pairs (3D)
+        #: the compiled lagged friction's pairs (2D, ``_lagged_friction``), or None
+        self._friction_pairs = None
         #: the broad phase of every candidate search (the meshes are small: sorting the
         #: boxes along an axis beats the default hash grid 2-3x)
         self._broad_phase = ipctk.SweepAndPrune()
@@ -326,13 +334,15 @@ class BarrierContact(Energy):
                                              np.asfortranarray(triangles))
         if self.self_contact:
             # a body's vertices with its own edges only (ipctk skips an edge's own ends)
+            self._mesh_groups = self.vertex_body.astype(np.int64)
             self._mesh.can_collide = ~ipctk.make_vertex_patches_filter(
-                self.vertex_body.astype(np.int32))
+                self._mesh_groups.astype(np.int32))
         else:
             # the fruit against everything else: soft bodies and faces share one patch
-            patches = np.concatenate([(self.vertex_body > 0).astype(np.int32),
-                                      np.ones(c * k, np.int32)])
-            self._mesh.can_collide = ipctk.make_vertex_patches_filter(patches)
+            self._mesh_groups = np.concatenate([(self.vertex_body > 0).astype(np.int64),
+                                                np.ones(c * k, np.int64)])
+            self._mesh.can_collide = ipctk.make_vertex_patches_filter(
+                self._mesh_groups.astype(np.int32))
         self._n_faces = k
         self._last_collisions = None
         #: the mesh's edges (n_e, 2) and each vertex's state dofs (n_v + c k, d), -1 for
@@ -380,25 +390,61 @@ class BarrierContact(Energy):
                                np.repeat([f.kinetic_friction for f in new_faces],
                                          self.corners_per_face)])
         self._tangential = ipctk.TangentialCollisions()
-        collisions = ipctk.NormalCollisions()
-        if np.any(mu_s > 0) or np.any(mu_k > 0):
+        self._friction_pairs = None
+        if self.dimension == 2 and (np.any(mu_s > 0) or np.any(mu_k > 0)):
+            self._friction_pairs = self._lagged_friction(start, mu_s, mu_k)
+        elif np.any(mu_s > 0) or np.any(mu_k > 0):
+            collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
                              broad_phase=self._broad_phase)
-        if len(collisions):
-            self._tangential.build(self._mesh, start, collisions, self.potential, mu_s, mu_k,
-                                   max)
+            if len(collisions):
+                self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
+                                       mu_k, max)
         self._quiet = None
-        #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
-        #: they were sought, the (edge, vertex) pairs (k, 2)), or None
-        self._pairs = None
         if self.self_contact:
-            near = ipctk.NormalCollisions()
-            near.build(self._mesh, start, QUIET_SEARCH, broad_phase=self._broad_phase)
-            gap = (float(np.sqrt(near.compute_minimum_distance(self._mesh, start)))
-                   if len(near) else QUIET_SEARCH)
+            gap = self._nearest(start, QUIET_SEARCH)
             if gap > 2.0 * self.settings.dhat:
                 self._quiet = (start[:self.vertex_nodes.size].copy(),
                                0.5 * (gap - self.settings.dhat))
+
+    def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray):
+        """The compiled friction's pairs (2D, ``friction_kernels.lagged_friction``) at the
+        collision mesh's start vertices ``start`` with per-vertex coefficients ``mu_s``,
+        ``mu_k`` (n_m,): (vertex ids, weights, tangents, forces, coefficients), or None
+        when no pair is within dhat."""
+        pairs = self._static_candidates(start, 0.5 * self.settings.dhat)
+        k = len(pairs)
+        if not k:
+            return None
+        ids, weights = np.empty((k, 3), np.int64), np.empty((k, 3))
+        tangents, forces, coefficients = np.empty((k, 2)), np.empty(k), np.empty((k, 2))
+        count = lagged_friction(np.ascontiguousarray(start), self._mesh_edges, pairs,
+                                self.settings.dhat, self.settings.stiffness, mu_s, mu_k, ids,
+                                weights, tangents, forces, coefficients)
+        if not count:
+            return None
+        return (ids[:count], weights[:count], tangents[:count], forces[:count],
+                coefficients[:count])
+
+    def _compiled_friction(self, v: np.ndarray, into):
+        """The lagged friction (2D, ``friction_kernels``) at the collision mesh's vertices
+        ``v``: (value J, gradient (n_d,) N over ``vertex_dofs``); its Hessian added as
+        ``_terms``'s ``into`` says (None: not wanted)."""
+        ids, weights, tangents, forces, coefficients = self._friction_pairs
+        gradient = np.zeros(self.n_dof)
+        values, slots = into if into is not None else (np.zeros(0), np.zeros(0, np.int64))
+        value, outside = friction_terms(
+            v, self._start, self._dt, self.settings.friction_smoothing, ids, weights, tangents,
+            forces, coefficients, self._mesh_dofs, gradient, into is not None,
+            self._pattern_keys, self.n_dof, slots, values)
+        self._check_outside(outside)
+        return value, gradient[self.vertex_dofs]
+
+    def _check_outside(self, outside: int) -> None:
+        """AssertionError if compiled Hessian entries fell outside the pattern, unless
+        ``drop_outside_pattern``."""
+        if outside and not self.drop_outside_pattern:
+            raise AssertionError('barrier Hessian entry outside its pattern')
 
     def quiet(self, q: np.ndarray) -> bool:
         """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
@@ -411,18 +457,18 @@ class BarrierContact(Energy):
         return largest_move(q, self._vertex_dof_pairs, start) <= reach
 
     # ------------------------------------------------------------------ the energy
-    def _terms(self, q: np.ndarray, gradient: np.ndarray, hessian: bool,
-               friction: bool = True):
+    def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
+               friction: bool = True) -> float:
         """Barrier plus lagged friction (if ``friction``) at positions ``q`` (d n,) m: adds
-        the gradient (N) into ``gradient``; returns (value J, the Hessian's entries as
-        ``_pattern_entries`` gives them, or None). Without the Hessian, the values and
+        the gradient (N) into ``gradient`` and, if ``into`` = (values, slots (p,)) is
+        given, the Hessian (N/m) into ``values``, each entry of the pattern's sorted keys
+        k at ``slots[k]``; returns the value J. Without the Hessian, the values and
         gradients of the last evaluation are reused when ``q`` is the same."""
         if self.quiet(q):
-            return 0.0, ((np.zeros(0, np.int64), np.zeros(0)) if hessian else None)
+            return 0.0
         last = self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
-        compiled = None  # the compiled barrier's Hessian entries (2D)
-        if not hessian and last is not None and np.array_equal(last[0], q):
+        if into is None and last is not None and np.array_equal(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
         else:
             mesh = self._mesh
@@ -431,25 +477,27 @@ class BarrierContact(Energy):
             barrier_value = friction_value = 0.0
             barrier_gradient = friction_gradient = None
             if self.dimension == 2:
-                barrier_value, barrier_gradient, compiled = self._compiled_barrier(q, v,
-                                                                                   hessian)
+                barrier_value, barrier_gradient = self._compiled_barrier(q, v, into)
                 if not np.isfinite(barrier_value):
-                    return np.inf, None
+                    return np.inf
             elif len(collisions := self._collisions(v)):
                 barrier_value = float(self.potential(collisions, mesh, v))
                 if not np.isfinite(barrier_value):
-                    return np.inf, None
+                    return np.inf
                 barrier_gradient = self.potential.gradient(collisions, mesh, v)[:n_d]
-                if hessian:
+                if into is not None:
                     parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
                     scales.append(1.0)
-            if len(self._tangential):
+            if self._friction_pairs is not None:
+                friction_value, friction_gradient = self._compiled_friction(
+                    v, into if friction else None)
+            elif len(self._tangential):
                 velocity = np.asfortranarray((v - self._start) / self._dt)
                 friction_value = self._dt * float(self.friction(self._tangential, mesh,
                                                                 velocity))
                 friction_gradient = self.friction.gradient(self._tangential, mesh,
                                                            velocity)[:n_d]
-                if hessian and friction:
+                if into is not None and friction:
                     parts.append(self.friction.hessian(self._tangential, mesh, velocity,
                                                        self.projection))
                     scales.append(1.0 / self._dt)
@@ -462,42 +510,30 @@ class BarrierContact(Energy):
             value += friction_value
             if friction_gradient is not None:
                 gradient[self.vertex_dofs] += friction_gradient
-        if not hessian:
-            return value, None
-        where, vals = self._pattern_entries(parts, scales)
-        if compiled is not None:
-            where = np.concatenate([where, compiled[0]])
-            vals = np.concatenate([vals, compiled[1]])
-        return value, (where, vals)
+        if parts:
+            where, vals = self._pattern_entries(parts, scales)
+            np.add.at(into[0], into[1][where], vals)
+        return value
 
-    def _compiled_barrier(self, q: np.ndarray, v: np.ndarray, hessian: bool):
+    def _compiled_barrier(self, q: np.ndarray, v: np.ndarray, into):
         """The barrier at positions ``q`` (2 n,) m, the collision mesh's vertices ``v`` (2D,
         ``barrier_kernels``) over the candidates of ``_candidate_pairs``: (value J,
-        gradient (n_d,) N over ``vertex_dofs`` or None, the Hessian's entries (pattern
-        key indices, values N/m) or None)."""
+        gradient (n_d,) N over ``vertex_dofs`` or None); its Hessian added as ``_terms``'s
+        ``into`` says (None: not wanted)."""
         candidates = self._candidate_pairs(q, v)
         if not len(candidates):
-            return 0.0, None, None
+            return 0.0, None
         gradient = np.zeros(self.n_dof)
-        size = 36 * len(candidates) if hessian else 0
-        index, values = np.empty(size, np.int64), np.empty(size)
-        value, written = edge_vertex_barrier(
+        values, slots = into if into is not None else (np.zeros(0), np.zeros(0, np.int64))
+        value, outside = edge_vertex_barrier(
             v, self._mesh_edges, candidates, self.settings.dhat, self.settings.stiffness,
-            self._mesh_dofs, gradient, hessian,
+            self._mesh_dofs, gradient, into is not None,
             self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys,
-            self.n_dof, index, values)
+            self.n_dof, slots, values)
         if not np.isfinite(value):
-            return np.inf, None, None
-        entries = None
-        if hessian:
-            index, values = index[:written], values[:written]
-            inside = index >= 0
-            if not np.all(inside):
-                if not self.drop_outside_pattern:
-                    raise AssertionError('barrier Hessian entry outside its pattern')
-                index, values = index[inside], values[inside]
-            entries = (index, values)
-        return value, gradient[self.vertex_dofs], entries
+            return np.inf, None
+        self._check_outside(outside)
+        return value, gradient[self.vertex_dofs]
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
         """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
@@ -540,11 +576,10 @@ class BarrierContact(Energy):
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         """Barrier plus lagged friction at fruit positions ``q`` (d n,) m."""
         gradient = np.zeros(self.n_dof)
-        value, entries = self._terms(q, gradient, hessian)
-        if entries is None:
-            return Evaluation(value, gradient, *_no_triplets())
+        if not hessian:
+            return Evaluation(self._terms(q, gradient), gradient, *_no_triplets())
         vals = np.zeros(self._pattern_keys.size)
-        np.add.at(vals, *entries)
+        value = self._terms(q, gradient, (vals, np.arange(vals.size)))
         cols, rows = np.divmod(self._pattern_keys, self.n_dof)
         return Evaluation(value, gradient, rows, cols, vals)
 
@@ -553,25 +588,27 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
-        value, entries = self._terms(q, grad, hessian)
-        if entries is not None:
+        into = None
+        if hessian:
             if self._positions is None or self._positions[0] is not scatter:
                 m = self.dofs.shape[1]
                 keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
                 first = np.unique(keys.ravel(), return_index=True)[1]
                 self._positions = (scatter, scatter.ravel()[first])
-            where, vals = entries
-            np.add.at(data, self._positions[1][where], vals)
-        return value, []
+            into = (data, self._positions[1])
+        return self._terms(q, grad, into), []
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
         primitive of the surface crosses a face's and no face's crosses the surface's
-        (CCD). Keeps the step's collision candidates for the line search along it."""
+        (CCD: in 2D compiled, ``_step_bound``; in 3D ipctk's, keeping the step's collision
+        candidates for the line search along it)."""
         if self.quiet(q) and self.quiet(q + dq):
             return 1.0
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices((q + dq).reshape(-1, self.dimension))
+        if self.dimension == 2:
+            return self._step_bound(v0, v1)
         candidates = ipctk.Candidates()
         candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat,
                          self._broad_phase)
@@ -620,13 +657,22 @@ class BarrierContact(Energy):
         by at most the margin: the pair came at most twice it closer)."""
         kept = self._pairs
         if kept is None or largest_move(q, self._vertex_dof_pairs, kept[0]) > CANDIDATE_MARGIN:
-            candidates = ipctk.Candidates()
-            candidates.build(self._mesh, v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN,
-                             self._broad_phase)
-            pairs = np.array([(c.edge_id, c.vertex_id) for c in candidates.ev_candidates],
-                             np.int64).reshape(-1, 2)
+            pairs = self._static_candidates(v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
             kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs)
         return kept[1]
+
+    def _static_candidates(self, v: np.ndarray, radius: float) -> np.ndarray:
+        """(k, 2) the (edge, vertex) pairs of the collision mesh's vertices ``v`` (2D) whose
+        boxes inflated by ``radius`` (m) meet (``barrier_search``)."""
+        return edge_vertex_candidates(v, v, self._mesh_edges, self._mesh_groups,
+                                      self.self_contact, radius)
+
+    def _nearest(self, v: np.ndarray, reach: float, beyond: float | None = None) -> float:
+        """m, the smallest distance of a pair of the collision mesh's vertices ``v`` (2D),
+        or ``beyond`` (default ``reach``) if none is nearer than ``reach`` (m)."""
+        pairs = self._static_candidates(v, 0.5 * reach)
+        distance = smallest_distance(v, self._mesh_edges, pairs, reach)
+        return float(distance) if distance < reach or beyond is None else beyond
 
     # ------------------------------------------------------------------ the start
     def feasible_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray | None:
@@ -664,24 +710,40 @@ class BarrierContact(Energy):
             return True
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
-        if not np.array_equal(v0, v1):  # nothing that stands still crosses anything
+        # nothing that stands still crosses anything; in 2D the compiled (conservative)
+        # bound clears most paths, the exact CCD decides the others
+        if not np.array_equal(v0, v1) and not self._clear_path(v0, v1):
             exact = float(ipctk.compute_collision_free_stepsize(
                 self._mesh, v0, v1, broad_phase=self._broad_phase, narrow_phase_ccd=EXACT_CCD))
             if exact < 1.0:
                 return False
         return self.min_distance(start) > 0.0
 
+    def _step_bound(self, v0: np.ndarray, v1: np.ndarray) -> float:
+        """The compiled CCD's (2D, ``barrier_search``) largest fraction (0, 1] of the
+        straight motion of the collision mesh's vertices from ``v0`` to ``v1`` (n_m, 2) m
+        free of crossings (conservative: each pair keeps ``SEPARATION`` of its gap)."""
+        pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
+                                       self.self_contact,
+                                       (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
+
+    def _clear_path(self, v0: np.ndarray, v1: np.ndarray) -> bool:
+        """Whether the compiled CCD (2D) finds the straight motion from ``v0`` to ``v1``
+        free of crossings for certain (3D: never, the exact CCD decides)."""
+        return self.dimension == 2 and self._step_bound(v0, v1) == 1.0
+
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, d) N, the faces' force on each node at ``q`` (d n,) m: barrier + friction."""
         gradient = np.zeros(self.n_dof)
-        self._terms(q, gradient, hessian=False)
+        self._terms(q, gradient)
         return -gradient.reshape(-1, self.dimension)
 
     def normal_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, d) N, the barrier's (normal) part of ``contact_forces``, no friction."""
         gradient = np.zeros(self.n_dof)
-        self._terms(q, gradient, hessian=False, friction=False)
+        self._terms(q, gradient, friction=False)
         return -gradient.reshape(-1, self.dimension)
 
     def partners(self, q: np.ndarray) -> np.ndarray:
@@ -730,6 +792,8 @@ class BarrierContact(Energy):
         """m, the smallest distance between the surface and a face at positions (n, d)
         (inf when none is within dhat)."""
         v = self.vertices(x)
+        if self.dimension == 2:
+            return self._nearest(v, self.settings.dhat, np.inf)
         collisions = self._collisions(v)
         if not len(collisions):
             return np.inf

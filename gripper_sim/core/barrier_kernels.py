@@ -167,7 +167,7 @@ def largest_move(q, dofs, start):
 
 @njit(cache=True)
 def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, gradient,
-                        want_hessian, project, pattern_keys, n_dof, entry_index, entry_value):
+                        want_hessian, project, pattern_keys, n_dof, slots, hessian_values):
     """The barrier of the edge-vertex ``candidates`` at the collision mesh's vertices.
 
     Args:
@@ -181,16 +181,17 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
         project: whether each pair's Hessian is clamped to its positive semi-definite
             part (else the exact one).
         pattern_keys: (p,) sorted keys col n_dof + row of the Hessian's pattern.
-        entry_index, entry_value: (>= 36 k,) out: each Hessian entry's index in
-            ``pattern_keys`` (-1: outside it) and its value N/m.
+        slots: (p,) where in ``hessian_values`` each key of the pattern adds.
+        hessian_values: the Hessian's entries (N/m) are added into it.
 
     Returns:
-        (value J, the Hessian's entries written); value inf if a pair touches.
+        (value J, the Hessian's entries outside the pattern, left out); value inf if a
+        pair touches.
     """
     s_hat = dhat * dhat
     scale = stiffness / dhat ** 3
     total = 0.0
-    written = 0
+    outside = 0
     grad4 = np.empty(4)
     hess4 = np.empty((4, 4))
     grad6 = np.empty(6)
@@ -246,11 +247,10 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
                         key = col * n_dof + row
                         where = np.searchsorted(pattern_keys, key)
                         if where >= pattern_keys.size or pattern_keys[where] != key:
-                            where = -1
-                        entry_index[written] = where
-                        entry_value[written] = local[2 * i + ci, 2 * j + cj]
-                        written += 1
-    return total, written
+                            outside += 1
+                            continue
+                        hessian_values[slots[where]] += local[2 * i + ci, 2 * j + cj]
+    return total, outside
 
 
 @njit(cache=True)

@@ -1,0 +1,78 @@
+"""The compiled 2D collision search (``core.barrier_search``) against ipctk's.
+
+Candidates: on random outlines moving along random straight paths, every pair ipctk's
+broad phase finds (same inflation, same patches filter) is among the compiled search's,
+once each. Step bound: never past the first crossing ipctk's exact CCD finds (the
+motion scaled by the bound crosses nothing), and a point falling head-on on a segment
+stops at 0.8 of its time of impact.
+"""
+import ipctk
+import numpy as np
+import pytest
+
+from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
+
+DHAT = 1e-3
+EXACT = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
+
+
+def _outlines(seed: int):
+    """Two zig-zag outlines 0-1.2 dhat apart and their moves (up to 3 dhat): (start
+    (n, 2) m, end (n, 2) m, edges (e, 2), the outline of each vertex (n,))."""
+    rng = np.random.default_rng(seed)
+    n = 10
+    x = np.linspace(0.0, 0.01, n)
+    lower = np.stack([x, -rng.uniform(0.1, 1.2, n) * DHAT], axis=1)
+    upper = np.stack([x + rng.uniform(-4e-4, 4e-4, n), np.zeros(n)], axis=1)
+    start = np.vstack([lower, upper])
+    end = start + rng.uniform(-3 * DHAT, 3 * DHAT, start.shape)
+    edges = np.array([(i, i + 1) for i in range(n - 1)]
+                     + [(n + i, n + i + 1) for i in range(n - 1)])
+    return start, end, edges, (np.arange(2 * n) >= n).astype(np.int64)
+
+
+def _mesh(start, edges, groups):
+    mesh = ipctk.CollisionMesh(np.asfortranarray(start),
+                               np.asfortranarray(edges.astype(np.int32)))
+    mesh.can_collide = ipctk.make_vertex_patches_filter(groups.astype(np.int32))
+    return mesh
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_the_candidates_hold_ipctks(seed):
+    start, end, edges, groups = _outlines(seed)
+    mesh = _mesh(start, edges, groups)
+    reference = ipctk.Candidates()
+    reference.build(mesh, np.asfortranarray(start), np.asfortranarray(end), 0.5 * DHAT)
+    theirs = {(c.edge_id, c.vertex_id) for c in reference.ev_candidates}
+    mine = edge_vertex_candidates(start, end, edges, groups, False, 0.5 * DHAT)
+    pairs = [tuple(p) for p in mine]
+    assert len(pairs) == len(set(pairs))
+    assert theirs and theirs <= set(pairs)
+    assert all(groups[v] != groups[edges[e, 0]] for e, v in pairs)
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_the_step_bound_stops_short_of_every_crossing(seed):
+    start, end, edges, groups = _outlines(seed)
+    mesh = _mesh(start, edges, groups)
+    pairs = edge_vertex_candidates(start, end, edges, groups, False, 0.5 * DHAT)
+    step = collision_free_step(start, end, edges, pairs)
+    exact = ipctk.compute_collision_free_stepsize(mesh, np.asfortranarray(start),
+                                                  np.asfortranarray(end),
+                                                  narrow_phase_ccd=EXACT)
+    assert 0.0 < step <= exact
+    if exact < 1.0:
+        assert step >= 0.5 * exact
+    moved = np.asfortranarray(start + step * (end - start))
+    assert ipctk.compute_collision_free_stepsize(
+        mesh, np.asfortranarray(start), moved, narrow_phase_ccd=EXACT) == 1.0
+
+
+def test_a_head_on_point_stops_at_four_fifths_of_its_impact():
+    start = np.array([[0.0, 0.0], [1e-2, 0.0], [5e-3, 1e-3]])
+    end = start.copy()
+    end[2, 1] = -1e-3                        # through the segment at half the step
+    pairs = np.array([[0, 2]])
+    step = collision_free_step(start, end, np.array([[0, 1]]), pairs)
+    assert step == pytest.approx(0.4, rel=1e-9)
