@@ -16,7 +16,9 @@ G_* order; mode 1.0 = force, 0.0 = position] and ``run`` (R_SIZE,) [time s, each
 closing force N at the last step, slip reference m (NaN: none yet), held slip m, the
 damage tracker's peak pressure Pa, peak flesh stress Pa, crushed (1.0/0.0), then the
 counts of the call: steps, Newton iterations of its last step, gap solves, Newton
-iterations of all its steps].
+iterations of all its steps; then a pick-and-place's slide along the jaws m, its largest,
+the largest slip distance m, each as it was before the last step, and the time of the
+step before the last s (see ``S_SLIDE``)].
 """
 from __future__ import annotations
 
@@ -43,15 +45,21 @@ from gripper_sim.core.kernels import (KI_SURFACE, M_ANY_LEFT, M_ANY_RIGHT, M_CZ,
  K_FLESH, K_BRUISE, K_FAILURE_STRESS, K_FAILURE_STRAIN, K_SIZE) = range(13)
 #: ``run`` slots (module doc)
 (R_TIME, R_JAW_LEFT, R_JAW_RIGHT, R_SLIP_REF, R_HELD_SLIP, R_PEAK_PRESSURE, R_PEAK_STRESS,
- R_CRUSHED, R_STEPS, R_ITERATIONS, R_SOLVES, R_NEWTON, R_SIZE) = range(13)
+ R_CRUSHED, R_STEPS, R_ITERATIONS, R_SOLVES, R_NEWTON, R_SLIDE, R_MAX_SLIP, R_MAX_DROP,
+ R_PREVIOUS_TIME, R_SIZE) = range(17)
 #: ``rules`` slots (``multistep.StopRules``): stop after a step where both jaws touch and
 #: the grip force is at least S_FORCE N; the time is past S_DEADLINE s; S_GAP_CLOSED
 #: (1/0) and the gap is 0; the time since S_PHASE_START is at least S_ELAPSED s;
-#: S_LIFTED (1/0) and the lift reached its target at rest; S_DROP (1/0) and no jaw
-#: touches or the slip exceeds S_DROP_SLIP m; S_BRUISE (1/0) and the fruit is bruised
-#: where a jaw or the table presses; the time reached S_END s; S_MAX_STEPS steps run
-(S_FORCE, S_DEADLINE, S_GAP_CLOSED, S_PHASE_START, S_ELAPSED, S_LIFTED, S_DROP, S_DROP_SLIP,
- S_BRUISE, S_END, S_MAX_STEPS, S_SIZE) = range(12)
+#: S_LIFTED and S_MOVED (1/0) and the lift, the transport (each asked for) reached
+#: its target at rest; the gap is within 1e-9 m of S_GAP_AT (NaN: off); S_DROP (1/0) and
+#: no jaw touches or the slip exceeds S_DROP_SLIP m; S_BRUISE (1/0) and the fruit is
+#: bruised where a jaw or the table presses; S_DAMAGED (1/0) and it is bruised or
+#: crushed; the time reached S_END s; S_MAX_STEPS steps run; the slide exceeds
+#: S_SLIDE_LIMIT m. S_SLIDE (1/0): the slide of the fruit along the jaws is integrated
+#: (``scenario.PickAndPlace._slide``) and the largest slip distance kept
+(S_FORCE, S_DEADLINE, S_GAP_CLOSED, S_PHASE_START, S_ELAPSED, S_LIFTED, S_MOVED, S_GAP_AT,
+ S_DROP, S_DROP_SLIP, S_BRUISE, S_DAMAGED, S_END, S_MAX_STEPS, S_SLIDE, S_SLIDE_LIMIT,
+ S_SIZE) = range(17)
 #: ``peaks`` (P_SIZE,): the run's largest grip force N, compression m, jaw and table
 #: contact pressure Pa over the steps of the call
 PEAK_GRIP, PEAK_COMPRESSION, PEAK_JAW, PEAK_TABLE, PEAK_SIZE = range(5)
@@ -144,6 +152,35 @@ def _holder(c_int, pad_holder, padded, i):
     if c_int[0, i] >= 0 or not padded:
         return c_int[0, i]
     return pad_holder[i]
+
+
+@njit(cache=True)
+def pairwise_sum(values, count):
+    """The sum of values[:count] as numpy's ``add.reduce`` adds a contiguous float64
+    array (pairwise, eight partial sums per block of up to 128), so that a mean taken
+    here equals ``np.mean`` of the same numbers to the last bit."""
+    if count < 8:
+        total = 0.0
+        for i in range(count):
+            total += values[i]
+        return total
+    if count <= 128:
+        r = np.empty(8)
+        for j in range(8):
+            r[j] = values[j]
+        i = 8
+        while i < count - count % 8:
+            for j in range(8):
+                r[j] += values[i + j]
+            i += 8
+        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        while i < count:
+            total += values[i]
+            i += 1
+        return total
+    half = count // 2
+    half -= half % 8
+    return pairwise_sum(values, half) + pairwise_sum(values[half:], count - half)
 
 
 @njit(cache=True)
@@ -272,6 +309,7 @@ def advance(x, v, c_int, c_float, forces, grip, run, kin, rules, peaks, site, fi
     padded = pad[0].shape[0] > 0
     surface_nodes = _packed1(fixed[3], fixed[4], KI_SURFACE)
     new = np.empty(G_SIZE)
+    lifts = np.empty(x.shape[0])
     tried = np.zeros((jaw_drive.MAX_GAP_SOLVES, 3))
     jaw = np.empty(2)
     n_steps = 0
@@ -291,6 +329,7 @@ def advance(x, v, c_int, c_float, forces, grip, run, kin, rules, peaks, site, fi
         c_int[:] = work_int
         c_float[:] = work_float
         grip[:] = new
+        run[R_PREVIOUS_TIME] = run[R_TIME]
         run[R_TIME] += dt
         run[R_JAW_LEFT], run[R_JAW_RIGHT] = out[2], out[3]
         n_steps += 1
@@ -344,22 +383,53 @@ def advance(x, v, c_int, c_float, forces, grip, run, kin, rules, peaks, site, fi
                 peaks[PEAK_JAW] = max(peaks[PEAK_JAW], pressure_out[s])
             elif where == 2:
                 peaks[PEAK_TABLE] = max(peaks[PEAK_TABLE], pressure_out[s])
+        # a pick-and-place's slide along the jaws (PickAndPlace._slide) and largest slip
+        slide, max_slip, max_drop = run[R_SLIDE], run[R_MAX_SLIP], run[R_MAX_DROP]
+        if rules[S_SLIDE] > 0:
+            max_drop = max(max_drop, slip)
+            step_dt = time - run[R_PREVIOUS_TIME]
+            count = 0
+            for i in range(x.shape[0]):
+                if site[_holder(c_int, pad_holder, padded, i) + 1] == 1:
+                    lifts[count] = v[i, 1]
+                    count += 1
+            if step_dt > 0 and count > 0:
+                relative = pairwise_sum(lifts, count) / count - grip[G_LIFT_RATE]
+                slide = max(0.0, slide - relative * step_dt)
+                max_slip = max(max_slip, slide)
         # the stop rules
-        if both and grip_force >= rules[S_FORCE]:
+        if _stops(rules, grip, time, n_steps, both, touching, grip_force, slip, max_slip,
+                  damage_site, bruised or run[R_CRUSHED] > 0):
             return STOPPED
-        if time > rules[S_DEADLINE]:
-            return STOPPED
-        if rules[S_GAP_CLOSED] > 0 and grip[G_GAP] <= 0.0:
-            return STOPPED
-        if time - rules[S_PHASE_START] >= rules[S_ELAPSED]:
-            return STOPPED
-        if (rules[S_LIFTED] > 0 and grip[G_LIFT] == grip[G_TARGET_LIFT]
-                and grip[G_LIFT_RATE] == 0.0):
-            return STOPPED
-        if rules[S_DROP] > 0 and (not touching or slip > rules[S_DROP_SLIP]):
-            return STOPPED
-        if damage_site == 1 or damage_site == 2:
-            return STOPPED
-        if time >= rules[S_END] or n_steps >= rules[S_MAX_STEPS]:
-            return STOPPED
-    return STOPPED
+        run[R_SLIDE], run[R_MAX_SLIP], run[R_MAX_DROP] = slide, max_slip, max_drop
+    return STOPPED  # not reached: the loop returns
+
+
+@njit(cache=True)
+def _stops(rules, grip, time, n_steps, both, touching, grip_force, slip, max_slip,
+           damage_site, damaged):
+    """Whether a stop rule (S_*) fires after a step with these measures."""
+    if both and grip_force >= rules[S_FORCE]:
+        return True
+    if time > rules[S_DEADLINE]:
+        return True
+    if rules[S_GAP_CLOSED] > 0 and grip[G_GAP] <= 0.0:
+        return True
+    if time - rules[S_PHASE_START] >= rules[S_ELAPSED]:
+        return True
+    lifted = grip[G_LIFT] == grip[G_TARGET_LIFT] and grip[G_LIFT_RATE] == 0.0
+    moved = grip[G_X] == grip[G_TARGET_X] and grip[G_X_RATE] == 0.0
+    if ((rules[S_LIFTED] > 0 or rules[S_MOVED] > 0) and (lifted or rules[S_LIFTED] == 0)
+            and (moved or rules[S_MOVED] == 0)):
+        return True
+    if abs(grip[G_GAP] - rules[S_GAP_AT]) < 1e-9:
+        return True
+    if rules[S_DROP] > 0 and (not touching or slip > rules[S_DROP_SLIP]):
+        return True
+    if max_slip > rules[S_SLIDE_LIMIT]:
+        return True
+    if damage_site == 1 or damage_site == 2:
+        return True
+    if rules[S_DAMAGED] > 0 and damaged:
+        return True
+    return time >= rules[S_END] or n_steps >= rules[S_MAX_STEPS]

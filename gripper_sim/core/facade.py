@@ -297,9 +297,9 @@ class SimulationFacade:
             callback(self._last)
         return self._last
 
-    def advance(self, rules) -> 'tuple[StepResult, tuple] | None':
+    def advance(self, rules) -> 'tuple[StepResult, Any] | None':
         """Many steps at once until ``rules`` (``core.multistep.StopRules``) stop: (the last
-        step's result, the peaks of the steps run), or None where only ``step`` applies
+        step's result, ``core.multistep.Skipped``), or None where only ``step`` applies
         (here: always; the 2D kernel route has it, see ``core.multistep``)."""
         return None
 

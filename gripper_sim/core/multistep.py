@@ -1,8 +1,9 @@
 """Many steps in one compiled call, for runs that nobody watches step by step.
 
 ``Simulation.advance(rules)`` steps until the first step after which a grasp machine has
-something to decide (``StopRules``) and returns that step's ``StepResult`` only, with the
-peaks of the steps it ran (``core.peaks.RunPeaks.include`` takes them). The steps are
+something to decide (``StopRules``) and returns that step's ``StepResult`` only, with what
+the steps before it leave to the machine (``Skipped``: their peaks, which
+``core.peaks.RunPeaks.include`` takes, a pick-and-place's slide). The steps are
 those of ``Simulation.step`` - the same jaw drive (``core.jaw_drive``), whole-step kernel,
 measures and damage - run by ``core.advance_kernels.advance`` on the 2D kernel route
 (``core.fast``) when nothing observes every step. Where it does not apply (no kernel
@@ -43,12 +44,18 @@ class StopRules:
         deadline: s; the time is past it.
         gap_closed: the gap is 0.
         phase_start, elapsed: s; the time since ``phase_start`` is at least ``elapsed``.
-        lifted: the lift reached its target and stopped.
+        lifted, moved: the lift, the transport (each one asked for) reached its target
+            and stopped.
+        gap_at: m; the gap is within 1e-9 m of it (NaN: off).
         drop: no jaw touches the fruit, or its slip exceeds ``drop_slip`` (m).
         bruise: the fruit is bruised where a jaw or the table presses (the step a run's
             ``RunPeaks.bruised_at`` is taken from).
+        damaged: the fruit is bruised or crushed.
         end: s; the time reached it.
         max_steps: steps run.
+        slide: integrate the fruit's slide along the jaws from ``slide_from`` (m: slide,
+            largest slide, largest slip distance; ``scenario.PickAndPlace._slide``);
+            stop when the largest slide exceeds ``slide_limit`` (m).
     """
 
     grip_force: float = math.inf
@@ -57,11 +64,17 @@ class StopRules:
     phase_start: float = 0.0
     elapsed: float = math.inf
     lifted: bool = False
+    moved: bool = False
+    gap_at: float = math.nan
     drop: bool = False
     drop_slip: float = math.inf
     bruise: bool = False
+    damaged: bool = False
     end: float = math.inf
     max_steps: int = 1 << 40
+    slide: bool = False
+    slide_from: tuple = (0.0, 0.0, 0.0)
+    slide_limit: float = math.inf
 
     def array(self) -> np.ndarray:
         """The rules as ``advance_kernels.advance`` takes them (S_SIZE,)."""
@@ -72,12 +85,35 @@ class StopRules:
         values[ak.S_PHASE_START] = self.phase_start
         values[ak.S_ELAPSED] = self.elapsed
         values[ak.S_LIFTED] = float(self.lifted)
+        values[ak.S_MOVED] = float(self.moved)
+        values[ak.S_GAP_AT] = self.gap_at
         values[ak.S_DROP] = float(self.drop)
         values[ak.S_DROP_SLIP] = self.drop_slip
         values[ak.S_BRUISE] = float(self.bruise)
+        values[ak.S_DAMAGED] = float(self.damaged)
         values[ak.S_END] = self.end
         values[ak.S_MAX_STEPS] = float(self.max_steps)
+        values[ak.S_SLIDE] = float(self.slide)
+        values[ak.S_SLIDE_LIMIT] = self.slide_limit
         return values
+
+
+@dataclass
+class Skipped:
+    """What the steps before the last of a ``Simulation.advance`` call leave to a grasp
+    machine that did not see them.
+
+    Attributes:
+        peaks: the largest (grip force N, compression m, jaw pressure Pa, table pressure
+            Pa) of the steps run, the last included (``RunPeaks.include``).
+        slide: (slide m, largest slide m, largest slip distance m) before the last step
+            (``StopRules.slide``).
+        previous_time: s, the time of the step before the last.
+    """
+
+    peaks: tuple
+    slide: tuple
+    previous_time: float
 
 
 def grip_array(grip: GripperState) -> np.ndarray:
@@ -123,10 +159,9 @@ class MultiStep:
             self._site_of = template
         return self._site
 
-    def advance(self, rules: StopRules) -> 'tuple[StepResult, tuple] | None':
-        """Steps until ``rules`` stop (see the module doc): (the last step's result, the
-        peaks of the steps run (grip force N, compression m, jaw and table pressure Pa)),
-        or None when no step could be run here."""
+    def advance(self, rules: StopRules) -> 'tuple[StepResult, Skipped] | None':
+        """Steps until ``rules`` stop (see the module doc): (the last step's result, what
+        the steps before it leave), or None when no step could be run here."""
         if not self.applies():
             return None
         path = self.path
@@ -152,6 +187,7 @@ class MultiStep:
         run[ak.R_PEAK_PRESSURE] = tracker.peak_pressure
         run[ak.R_PEAK_STRESS] = tracker.peak_flesh_stress
         run[ak.R_CRUSHED] = float(tracker.crushed)
+        run[ak.R_SLIDE], run[ak.R_MAX_SLIP], run[ak.R_MAX_DROP] = rules.slide_from
         kinematics = sim.kinematics
         failure_strain = tracker.failure_strain
         kin = np.array([kinematics.max_gap, kinematics.max_speed,
@@ -209,7 +245,10 @@ class MultiStep:
                           float(path.out[8]))
         sim.newton_iterations += int(run[ak.R_NEWTON])
         sim._last = sim._measure(int(run[ak.R_ITERATIONS]), 1)
-        return sim._last, tuple(peaks.tolist())
+        return sim._last, Skipped(
+            tuple(peaks.tolist()),
+            (float(run[ak.R_SLIDE]), float(run[ak.R_MAX_SLIP]), float(run[ak.R_MAX_DROP])),
+            float(run[ak.R_PREVIOUS_TIME]))
 
     def _clearance_applies(self) -> bool:
         """Whether ``SimulationFacade._jaw_clearance`` measures a flat jaw's clearance."""
@@ -217,3 +256,19 @@ class MultiStep:
         return (config.get('gripper.finger.type', 'flat') == 'flat'
                 and self.path.sim._soft is None
                 and not config.get('gripper.finger.pad.enabled', False))
+
+
+def next_result(sim, machine, end: float, watched: bool) -> 'tuple[StepResult, Skipped | None]':
+    """The next result a grasp machine (``workflows.grasp.GraspMachine``) is to see: of
+    one ``sim.step()``, or - when nothing ``watched`` every step and the machine gives
+    ``stop_rules(end)`` (``StopRules``, None: the next step) - of the last step of a
+    ``sim.advance`` call, whose skipped steps the machine then ``include``s; (the
+    result, the ``Skipped`` or None)."""
+    if not watched and hasattr(machine, 'stop_rules'):
+        rules = machine.stop_rules(end)
+        if rules is not None:
+            ran = sim.advance(rules)
+            if ran is not None:
+                machine.include(ran[1])
+                return ran
+    return sim.step(), None

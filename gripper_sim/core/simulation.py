@@ -187,7 +187,7 @@ class Simulation(SimulationFacade):
         """The step the fast path cannot do, on the generic path."""
         return super()._substep(dt)
 
-    def advance(self, rules) -> 'tuple[StepResult, tuple] | None':
+    def advance(self, rules) -> 'tuple[StepResult, Any] | None':
         """``SimulationFacade.advance`` on the compiled multi-step advance
         (``core.multistep``) where it applies."""
         if self._fast is None:

@@ -16,7 +16,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Protocol
 
-from gripper_sim.core.multistep import StopRules
+from gripper_sim.core.multistep import Skipped, StopRules, next_result
 from gripper_sim.core.peaks import RunPeaks
 from gripper_sim.core.results import StepResult
 from gripper_sim.core.simulation import Simulation
@@ -175,10 +175,10 @@ class GraspSequence:
             return None
         return rules
 
-    def include(self, peaks: tuple) -> None:
-        """The peaks of steps ``Simulation.advance`` ran without showing them
-        (``RunPeaks.include``)."""
-        self.peaks.include(peaks)
+    def include(self, skipped: Skipped) -> None:
+        """What the steps ``Simulation.advance`` ran without showing them leave: their
+        peaks."""
+        self.peaks.include(skipped.peaks)
 
     def summary(self) -> dict:
         """The grasp's result under the vocabulary's keys (``core.vocabulary``; the
@@ -213,7 +213,7 @@ class GraspMachine(Protocol):
     """What ``evaluate`` needs of a state machine (``GraspSequence``, ``PickAndPlace``).
 
     A machine that also has ``stop_rules(end)`` (``core.multistep.StopRules`` or None)
-    and ``include(peaks)`` lets ``evaluate`` run the steps at which it decides nothing
+    and ``include(skipped)`` (``core.multistep.Skipped``) lets ``evaluate`` run the steps at which it decides nothing
     in one compiled call (``Simulation.advance``) when nothing watches every step.
     """
 
@@ -302,21 +302,11 @@ def evaluate(sim, machine: GraspMachine, force: float,
     peaks = RunPeaks()
     start_step = sim.last.step
     end = sim.time + time_limit
-    skips = on_step is None and hasattr(machine, 'stop_rules')
     try:
         while not machine.done and sim.time < end:
-            ran = None
-            if skips:
-                rules = machine.stop_rules(end)
-                if rules is not None:
-                    rules.bruise = rules.bruise or peaks.bruised_at is None
-                    ran = sim.advance(rules)
-            if ran is None:
-                result = sim.step()
-            else:
-                result, seen = ran
-                peaks.include(seen)
-                machine.include(seen)
+            result, skipped = next_result(sim, machine, end, on_step is not None)
+            if skipped is not None:
+                peaks.include(skipped.peaks)
             peaks(result)
             machine.update(result)
             if on_step is not None:
