@@ -25,15 +25,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from numba import njit
 
 from gripper_sim.core import jaw_drive
 from gripper_sim.core.damage import TRESCA_OVER_P0
 from gripper_sim.core.kernels import (KI_SURFACE, M_ANY_LEFT, M_ANY_RIGHT, M_CZ, M_LEFT_FX,
                                       M_LEFT_N, M_RIGHT_FX, M_RIGHT_N, M_WIDTH, OK, UNSUPPORTED,
-                                      _packed1, substep)
+                                      _packed1, borrowed, substep)
 
 #: the grip's slots (``GripperState``'s fields)
 (G_GAP, G_GAP_RATE, G_LIFT, G_LIFT_RATE, G_MODE, G_TARGET_GAP, G_TARGET_FORCE, G_SPEED,
@@ -69,27 +67,6 @@ PEAK_GRIP, PEAK_COMPRESSION, PEAK_JAW, PEAK_TABLE, PEAK_SIZE = range(5)
 #: ``advance`` status: a stop rule fired after the last step; the next step needs the
 #: per-step route (no step of it was kept)
 STOPPED, NEEDS_STEP = 0, 1
-
-
-@intrinsic
-def _borrowed(typingctx, array):
-    """A view of ``array`` that numba does not reference-count (no meminfo): the views
-    and slices taken of it below are not counted either. Each count is an atomic
-    increment and decrement of the array's shared count (~20 ns), and a step of the
-    whole-step kernel takes ~1,500 of them from views of the arrays ``advance`` passes
-    down; those arrays live in the caller (Python) for the whole call."""
-    if not isinstance(array, types.Array):
-        return None
-
-    def codegen(context, builder, signature, args):
-        source = context.make_array(array)(context, builder, value=args[0])
-        view = context.make_array(array)(context, builder)
-        for name in ('nitems', 'itemsize', 'data', 'shape', 'strides'):
-            setattr(view, name, getattr(source, name))
-        view.meminfo = cgutils.get_null_value(view.meminfo.type)
-        view.parent = cgutils.get_null_value(view.parent.type)
-        return view._getvalue()
-    return array(array), codegen
 
 
 @njit(cache=True)
@@ -325,7 +302,7 @@ def advance(x, v, c_int, c_float, forces, grip, run, kin, rules, peaks, site, fi
         STOPPED or NEEDS_STEP; ``run`` counts the steps kept, the last one's Newton
         iterations and the gap solves of all.
     """
-    b = _borrowed
+    b = borrowed  # the caller keeps every array alive for the call
     fixed = (b(fixed[0]), b(fixed[1]), b(fixed[2]), b(fixed[3]), b(fixed[4]), b(fixed[5]),
              b(fixed[6]))
     outs = (b(outs[0]), b(outs[1]), b(outs[2]), b(outs[3]), b(outs[4]), b(outs[5]))

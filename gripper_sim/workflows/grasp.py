@@ -213,8 +213,9 @@ class GraspMachine(Protocol):
     """What ``evaluate`` needs of a state machine (``GraspSequence``, ``PickAndPlace``).
 
     A machine that also has ``stop_rules(end)`` (``core.multistep.StopRules`` or None)
-    and ``include(skipped)`` (``core.multistep.Skipped``) lets ``evaluate`` run the steps at which it decides nothing
-    in one compiled call (``Simulation.advance``) when nothing watches every step.
+    and ``include(skipped)`` (``core.multistep.Skipped``) lets ``evaluate`` run the steps
+    at which it decides nothing in one compiled call (``Simulation.advance``) when nothing
+    watches every step.
     """
 
     phase: str
