@@ -24,6 +24,12 @@ here); 'compiled' = the compiled energy kernels and the fixed-pattern Newton sol
 route a step the kernel could not factorise (a non-symmetric contact filter, a guard: the
 shared contact passes give symmetric ones) would be done by the compiled route; the table
 counts those steps.
+The grasp runs as ``pick`` and studies run it: ``run_grasp`` without a per-step callback,
+so the steps at which the grasp decides nothing run many at a time in one compiled call
+(``Simulation.advance``, ``core.multistep``: jaw drive, whole-step kernel, measures,
+damage and the run's peaks inside numba); the 'watched' column gives the CPU time per
+step with a callback that sees every step (the per-step route ``Simulation.step``, as
+the ROS node and the recorders step).
 Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations) times the cost of each operation timed alone at the end
@@ -466,12 +472,13 @@ def main(argv=None) -> int:
             ops = ', '.join(f'{key} {value:.2f}' for key, value in r['ops_us'].items())
             per = ', '.join(f'{key} {value:.2f}' for key, value in r['counts_per_step'].items())
             print(f'\n{r["model"]} kernel operations, us each: {ops}')
-            print(f'{r["model"]} per step: {per}; whole kernel {r["kernel_us"]:.1f} us, of '
-                  f'which {r["kernel_rest_us"]:.1f} us dispatch and Newton bookkeeping; Python '
-                  f'glue around it {r["glue_us"]:.1f} us (gripper kinematics, state copies)')
-            print(f'{r["model"]} "other" = that glue and bookkeeping, Simulation.step and the '
-                  f'grasp state machine; "measures" = StepResult, damage (Python objects and '
-                  f'kernel)')
+            print(f'{r["model"]} per step: {per}; kernels {r["kernel_us"]:.1f} us, of '
+                  f'which {r["kernel_rest_us"]:.1f} us the jaw drive, Newton bookkeeping and '
+                  f'calls; Python glue around them {r["glue_us"]:.1f} us (steps run one by '
+                  f'one)')
+            print(f'{r["model"]} "other" = that glue and bookkeeping, the grasp state '
+                  f'machine; "measures" = the kernel\'s measures and damage, the StepResult '
+                  f'and damage objects of the steps the machine sees')
     return 0
 
 
