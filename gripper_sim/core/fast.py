@@ -25,6 +25,10 @@ LDL^T), its energies assembled into it through precomputed scatter maps.
 ``Simulation(config, fast=False)`` or ``GRIPPER_SIM_FAST=0`` in the environment turns
 the fast path off.
 
+A run that nobody watches step by step runs many of these steps in one call, the jaw
+drive and the run's bookkeeping included (``core.multistep``, ``Simulation.advance``),
+on this class's constants and scratch space.
+
 numba's compiled kernels are cached on disk (``cache=True``, next to the sources);
 ``gripper_sim.workflows.compile_kernels`` compiles them once, at install time
 (``make install`` does). A cold compile takes ~15-20 s of CPU.
