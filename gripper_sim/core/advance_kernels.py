@@ -75,15 +75,11 @@ def _moved(grip, dt, gap, grip_force, kin, new):
     at ``gap`` (m), the lift and transport advanced; ``grip_force`` N measured at ``grip``."""
     new[:] = grip
     new[G_GAP] = gap
-    new[G_GAP_RATE] = (gap - grip[G_GAP]) / dt
-    new[G_LIFT], new[G_LIFT_RATE] = jaw_drive.trapezoid(
-        grip[G_LIFT], grip[G_LIFT_RATE], grip[G_TARGET_LIFT], grip[G_LIFT_SPEED],
-        kin[K_LIFT_ACC], dt)
-    if grip[G_X] != grip[G_TARGET_X] or grip[G_X_RATE] != 0.0:
-        new[G_X], new[G_X_RATE] = jaw_drive.trapezoid(
-            grip[G_X], grip[G_X_RATE], grip[G_TARGET_X], grip[G_X_SPEED], kin[K_X_ACC], dt)
-    else:
-        new[G_X_RATE] = 0.0
+    (new[G_GAP_RATE], new[G_LIFT], new[G_LIFT_RATE], new[G_X],
+     new[G_X_RATE]) = jaw_drive.moved(
+        grip[G_GAP], gap, grip[G_LIFT], grip[G_LIFT_RATE], grip[G_TARGET_LIFT],
+        grip[G_LIFT_SPEED], kin[K_LIFT_ACC], grip[G_X], grip[G_X_RATE], grip[G_TARGET_X],
+        grip[G_X_SPEED], kin[K_X_ACC], dt)
     new[G_MEASURED_FORCE] = grip_force
     new[G_MEASURED_GAP] = grip[G_GAP]
 

@@ -9,7 +9,8 @@ facade (``core.facade.SimulationFacade``) then solves the step and, if the force
 measures misses the target, re-solves the step at a corrected gap (``_drive_jaws``), so
 the force holds whatever dt. The lift moves the jaw centre height towards a target with
 a trapezoidal speed profile, and the transport moves the gripper centre sideways (x)
-the same way.
+the same way. The arithmetic of each rule is a compiled function of ``core.jaw_drive``,
+which the 2D multi-step advance (``core.advance_kernels``) calls too.
 """
 from __future__ import annotations
 
@@ -17,7 +18,6 @@ import math
 from dataclasses import dataclass
 
 from gripper_sim.core import jaw_drive
-from gripper_sim.core.jaw_drive import trapezoid
 
 
 @dataclass(slots=True)
@@ -102,13 +102,10 @@ class GripperKinematics:
               grip_force: float) -> GripperState:
         """The state after ``dt`` (s) with the jaws at ``gap`` (m) and the lift and the
         transport advanced; ``grip_force`` (N) the force measured at ``state``."""
-        rate = (gap - state.gap) / dt
-        lift, lift_rate = self._advance_lift(state, dt)
-        if state.x != state.target_x or state.x_rate != 0.0:
-            x, x_rate = trapezoid(state.x, state.x_rate, state.target_x, state.x_speed,
-                                  self.transport_acceleration, dt)
-        else:
-            x, x_rate = state.x, 0.0
+        rate, lift, lift_rate, x, x_rate = jaw_drive.moved(
+            state.gap, gap, state.lift, state.lift_rate, state.target_lift, state.lift_speed,
+            self.lift_acceleration, state.x, state.x_rate, state.target_x, state.x_speed,
+            self.transport_acceleration, dt)
         return GripperState(gap, rate, lift, lift_rate, state.mode, state.target_gap,
                             state.target_force, state.speed, state.target_lift,
                             state.lift_speed, state.stiffness, grip_force, state.gap, x,
@@ -128,8 +125,4 @@ class GripperKinematics:
         return jaw_drive.gap_bounds(state.gap, state.speed, self.max_speed,
                                     state.mode == 'force' and state.measured_force > 0.0,
                                     self.max_gap, dt)
-
-    def _advance_lift(self, state: GripperState, dt: float) -> tuple[float, float]:
-        return trapezoid(state.lift, state.lift_rate, state.target_lift, state.lift_speed,
-                         self.lift_acceleration, dt)
 

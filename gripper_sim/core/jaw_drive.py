@@ -4,7 +4,8 @@
 advance (``core.advance_kernels``, the 2D kernel route) call these same functions, so a
 grasp driven either way moves its jaws by the same arithmetic:
 
-- ``trapezoid``: one step of a lift or transport move at speed and acceleration limits;
+- ``trapezoid``, ``moved``: one step of the lift and the transport at their speed and
+  acceleration limits;
 - ``servo_gap``, ``gap_bounds``, ``predicted_gap``: the gap a step starts its solve at;
 - ``contact_measure``, ``secant_stiffness``, ``next_gap``: the gap search of
   ``core.facade.SimulationFacade._drive_jaws`` when a solved step misses its force goal.
@@ -43,6 +44,22 @@ def trapezoid(position, rate, target, speed, acceleration, dt):
     if abs(distance) <= max(abs(rate) * dt, 1e-12):
         return target, distance / dt
     return position + rate * dt, rate
+
+
+@njit(cache=True)
+def moved(gap0, gap, lift, lift_rate, target_lift, lift_speed, lift_acceleration, x, x_rate,
+          target_x, x_speed, x_acceleration, dt):
+    """The gripper after ``dt`` (s) with the jaws moved from ``gap0`` to ``gap`` (m) and
+    the lift and the transport advanced by their ``trapezoid`` moves (m, m/s, m/s^2):
+    (gap rate m/s, lift m, lift rate m/s, x m, x rate m/s)."""
+    rate = (gap - gap0) / dt
+    lift, lift_rate = trapezoid(lift, lift_rate, target_lift, lift_speed, lift_acceleration,
+                                dt)
+    if x != target_x or x_rate != 0.0:
+        x, x_rate = trapezoid(x, x_rate, target_x, x_speed, x_acceleration, dt)
+    else:
+        x_rate = 0.0
+    return rate, lift, lift_rate, x, x_rate
 
 
 @njit(cache=True)
