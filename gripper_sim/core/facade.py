@@ -18,7 +18,9 @@ position mode the servo moves the gap towards its target but stops where the gri
 reaches the maximum effort. After a step is solved at the gap ``GripperKinematics``
 predicts, a force that misses its goal restores the step's start and solves it again at
 a gap corrected by secant steps on force(gap) (bracketed, at most ``MAX_GAP_SOLVES``
-solves), so the force does not depend on dt.
+solves), so the force does not depend on dt. The drive's rules (prediction, bounds,
+secant and bracket steps) are the compiled functions of ``core.jaw_drive``; the 2D
+multi-step advance (``core.advance_kernels``) runs this same loop on them in numba.
 """
 from __future__ import annotations
 
@@ -31,11 +33,13 @@ import numpy as np
 
 from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
+from gripper_sim.core import jaw_drive
 from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
+from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
 from gripper_sim.core.results import Energies, JawWrench, StepResult
 from gripper_sim.core.soft_fingers import FingerState, SoftFingers
 from gripper_sim.core.slip import jaw_contacts_sliding
@@ -44,11 +48,6 @@ from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
 
 LEFT, RIGHT = 0, 1
 
-#: relative miss of the grip force (of its command, or of the maximum effort) a step
-#: accepts before it is solved again at a corrected gap
-FORCE_TOLERANCE = 0.005
-#: solves of one step at most, the first included (then the best one is solved again)
-MAX_GAP_SOLVES = 8
 
 #: configuration keys that may change while the simulation runs (the schema's runtime keys)
 DYNAMIC_KEYS = RUNTIME_KEYS
@@ -150,6 +149,8 @@ class SimulationFacade:
         self._gap_override: float | None = None
         #: solves of the steps so far, gap corrections included (``_drive_jaws``)
         self.gap_solves = 0
+        #: Newton iterations of the steps so far
+        self.newton_iterations = 0
         self._damage = self._make_damage()
         if self._pad is not None:
             self._pad.begin_step(self.q, self._pad_faces(self._grip),
@@ -292,10 +293,17 @@ class SimulationFacade:
             self._restore(saved)
             raise
         self._step += 1
+        self.newton_iterations += iterations
         self._last = self._measure(iterations, substeps)
         for callback in self._observers:
             callback(self._last)
         return self._last
+
+    def advance(self, rules) -> 'tuple[StepResult, Any] | None':
+        """Many steps at once until ``rules`` (``core.multistep.StopRules``) stop: (the last
+        step's result, ``core.multistep.Skipped``), or None where only ``step`` applies
+        (here: always; the 2D kernel route has it, see ``core.multistep``)."""
+        return None
 
     def run(self, duration: float) -> StepResult:
         """Step for ``duration`` seconds; returns the last result."""
@@ -680,74 +688,29 @@ class SimulationFacade:
                 f'only repeat these sub-steps')
 
 
-def _contact_measure(force: float) -> float:
-    """N^(2/3), the grip force in the variable that the jaw search treats as linear in
-    the gap: Hertz's law F ~ delta^(3/2) (Johnson 1985, Contact Mechanics, eq. 4.22)
-    makes F^(2/3) linear in the approach delta. Secant steps on it neither overshoot
-    from a first light touch (a chord of F there is far too soft) nor undershoot much on
-    a membrane-dominated fruit (F closer to linear in delta)."""
-    return max(force, 0.0) ** (2.0 / 3.0)
-
-
-def _measure_slope(stiffness: float, goal: float) -> float:
-    """N^(2/3)/m, d F^(2/3) / d(-gap) of the Hertz law whose stiffness -dF/d gap at the
-    force ``goal`` (N) is ``stiffness`` (N/m)."""
-    return stiffness / (1.5 * max(goal, 1e-12) ** (1.0 / 3.0))
+def _tried_rows(tried: list) -> np.ndarray:
+    """The solves ``tried`` ((gap, force - goal, both touch) each) as ``jaw_drive`` takes
+    them: rows of (MAX_GAP_SOLVES, 3) floats."""
+    rows = np.zeros((max(MAX_GAP_SOLVES, len(tried)), 3))
+    for k, (gap, miss, both) in enumerate(tried):
+        rows[k] = gap, miss, 1.0 if both else 0.0
+    return rows
 
 
 def _secant_stiffness(tried: list, stiffness: float, goal: float) -> float:
-    """N/m, -d force / d gap at the force ``goal`` (N), from the last two solves of a
-    step if both jaws held the fruit in each (``tried``: (gap, force - goal, both
-    touch) per solve; the secant of F^(2/3), ``_contact_measure``), else ``stiffness``."""
-    if len(tried) < 2:
-        return stiffness
-    (g1, m1, both1), (g2, m2, both2) = tried[-2], tried[-1]
-    if not (both1 and both2 and g1 != g2):
-        return stiffness
-    slope = (_contact_measure(goal + m1) - _contact_measure(goal + m2)) / (g2 - g1)
-    return 1.5 * goal ** (1.0 / 3.0) * slope if slope > 0 else stiffness
+    """N/m, ``jaw_drive.secant_stiffness`` of the solves ``tried`` ((gap, force - goal,
+    both touch) each)."""
+    return jaw_drive.secant_stiffness(_tried_rows(tried), len(tried), float(stiffness),
+                                      float(goal))
 
 
 def _next_gap(tried: list, stiffness: float, goal: float, lo: float, hi: float,
               clearance: float) -> float | None:
-    """m, the next gap to solve a step at so that the force meets ``goal`` (N), from the
-    solves so far (``tried``: (gap, force - goal, both touch) each; the force falls as
-    the gap grows), within [lo, hi]: a secant step on F^(2/3) (``_contact_measure``; its
-    slope from ``stiffness``, N/m at the goal) from the last solve if it stays inside
-    the bracket the solves so far leave, else the end of the range not yet tried, else
-    the bracket's interpolation (F^(2/3) linear between its ends) or middle; None when
-    the bracket has closed. After a solve in which a jaw did not touch, the step closes
-    the gap by ``clearance`` (m, how far that jaw is from the fruit; inf if unknown)
-    plus the approach that gives the goal."""
-    over = [t for t in tried if t[1] > 0]      # too much force: the gap must grow
-    under = [t for t in tried if t[1] <= 0]
-    low = max(over) if over else None
-    high = min(under) if under else None
-    low_gap = low[0] if low else lo
-    high_gap = high[0] if high else hi
-    if high_gap - low_gap <= 1e-12:
-        return None
-    slope = _measure_slope(stiffness, goal)
-    target = _contact_measure(goal)
-    gap, miss, both = tried[-1]
-    if both:
-        guess = gap + (_contact_measure(goal + miss) - target) / slope
-    elif math.isfinite(clearance):
-        guess = gap - clearance - target / slope
-    else:
-        guess = gap + miss / stiffness
-    if low_gap < guess < high_gap:
-        return guess
-    if guess <= low_gap and not over:
-        return lo
-    if guess >= high_gap and not under:
-        return hi
-    if low is not None and high is not None and low[2] and high[2]:
-        h_low, h_high = _contact_measure(goal + low[1]), _contact_measure(goal + high[1])
-        fraction = (h_low - target) / (h_low - h_high)
-        if 0.05 < fraction < 0.95:
-            return low_gap + fraction * (high_gap - low_gap)
-    return 0.5 * (low_gap + high_gap)
+    """m, ``jaw_drive.next_gap`` of the solves ``tried`` ((gap, force - goal, both touch)
+    each); None when the bracket has closed."""
+    gap = jaw_drive.next_gap(_tried_rows(tried), len(tried), float(stiffness), float(goal),
+                             float(lo), float(hi), float(clearance))
+    return None if math.isnan(gap) else gap
 
 
 def _nearest(tried: list, ends: list, gap: float | None):

@@ -25,6 +25,10 @@ LDL^T), its energies assembled into it through precomputed scatter maps.
 ``Simulation(config, fast=False)`` or ``GRIPPER_SIM_FAST=0`` in the environment turns
 the fast path off.
 
+A run that nobody watches step by step runs many of these steps in one call, the jaw
+drive and the run's bookkeeping included (``core.multistep``, ``Simulation.advance``),
+on this class's constants and scratch space.
+
 numba's compiled kernels are cached on disk (``cache=True``, next to the sources);
 ``gripper_sim.workflows.compile_kernels`` compiles them once, at install time
 (``make install`` does). A cold compile takes ~15-20 s of CPU.
@@ -326,6 +330,19 @@ class FastPath:
         return self.face_par, self.face_dyn
 
     # ------------------------------------------------------------------ stepping
+    def prepare(self, dt: float) -> None:
+        """The substep kernel's parameters ``fpar`` and ``ipar`` for a step of ``dt`` s."""
+        sim = self.sim
+        fpar = self.fpar
+        fpar[0] = dt
+        fpar[4] = sim.gravity.g
+        fpar[7] = sim.fruit.depth
+        if sim.config is not self._config_seen:  # a frozen Parameters: read once per config
+            config = self._config_seen = sim.config
+            fpar[5] = config['contact.release_threshold']
+            fpar[6] = config['contact.max_correction_speed']
+            self.ipar[1] = config['sim.max_contact_passes']
+
     def substep(self, dt: float) -> int:
         """``Simulation._substep`` on the kernels; returns Newton iterations.
 
@@ -339,15 +356,7 @@ class FastPath:
         grip = sim._grip
         grip_new = sim._advance_gripper(dt)
         face_par, face_dyn = self._face_arrays()
-        fpar = self.fpar
-        fpar[0] = dt
-        fpar[4] = sim.gravity.g
-        fpar[7] = sim.fruit.depth
-        if sim.config is not self._config_seen:  # a frozen Parameters: read once per config
-            config = self._config_seen = sim.config
-            fpar[5] = config['contact.release_threshold']
-            fpar[6] = config['contact.max_correction_speed']
-            self.ipar[1] = config['sim.max_contact_passes']
+        self.prepare(dt)
         c = sim.contacts
         obstacle, mode, secondary = c.obstacle.copy(), c.mode.copy(), c.secondary.copy()
         normal_force, bounce, secondary_bounce = (c.normal_force.copy(), c.bounce_speed.copy(),
@@ -371,7 +380,7 @@ class FastPath:
             face_par, face_dyn, (grip.gap, grip.lift, grip.x, grip_new.gap, grip_new.lift,
                                  grip_new.x, grip_new.gap_rate, grip_new.lift_rate,
                                  grip_new.x_rate),
-            *self._constants, fpar, self.ipar, x, v, forces, self.history, self.out, normal,
+            *self._constants, self.fpar, self.ipar, x, v, forces, self.history, self.out, normal,
             pressure, self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out,
             *self._scratch)
         if timing:

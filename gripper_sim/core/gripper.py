@@ -9,12 +9,15 @@ facade (``core.facade.SimulationFacade``) then solves the step and, if the force
 measures misses the target, re-solves the step at a corrected gap (``_drive_jaws``), so
 the force holds whatever dt. The lift moves the jaw centre height towards a target with
 a trapezoidal speed profile, and the transport moves the gripper centre sideways (x)
-the same way.
+the same way. The arithmetic of each rule is a compiled function of ``core.jaw_drive``,
+which the 2D multi-step advance (``core.advance_kernels``) calls too.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+from gripper_sim.core import jaw_drive
 
 
 @dataclass(slots=True)
@@ -88,35 +91,21 @@ class GripperKinematics:
         the travel that gives the target force at the present stiffness: a large step
         then lands the jaw on the fruit instead of driving it through the surface.
         """
-        stiffness = state.stiffness
-        if state.mode == 'force':
-            if grip_force <= 0.0 or not both_in_contact:
-                # one jaw alone only pushes the fruit (e.g. across the table): that force
-                # is no grip, so close at the commanded speed until both jaws touch
-                landing = (max(clearance, 0.0) + state.target_force / stiffness) / dt
-                rate = -min(state.speed, landing)
-            else:
-                rate = -(state.target_force - grip_force) / (stiffness * dt)
-        else:
-            rate = (self.servo_gap(state, dt) - state.gap) / dt
-            if rate < 0 and both_in_contact and grip_force > 0:
-                # the servo closes no further than where the force reaches its limit
-                rate = max(rate, -(state.max_effort - grip_force) / (stiffness * dt))
         lo, hi = self.gap_bounds(state, dt)
-        gap = min(max(state.gap + rate * dt, lo), hi)
+        gap = jaw_drive.predicted_gap(
+            state.mode == 'force', state.gap, state.target_gap, state.target_force,
+            state.speed, state.stiffness, state.max_effort, grip_force, both_in_contact,
+            clearance, lo, hi, self.max_gap, dt)
         return self.moved(state, dt, gap, grip_force)
 
     def moved(self, state: GripperState, dt: float, gap: float,
               grip_force: float) -> GripperState:
         """The state after ``dt`` (s) with the jaws at ``gap`` (m) and the lift and the
         transport advanced; ``grip_force`` (N) the force measured at ``state``."""
-        rate = (gap - state.gap) / dt
-        lift, lift_rate = self._advance_lift(state, dt)
-        if state.x != state.target_x or state.x_rate != 0.0:
-            x, x_rate = trapezoid(state.x, state.x_rate, state.target_x, state.x_speed,
-                                  self.transport_acceleration, dt)
-        else:
-            x, x_rate = state.x, 0.0
+        rate, lift, lift_rate, x, x_rate = jaw_drive.moved(
+            state.gap, gap, state.lift, state.lift_rate, state.target_lift, state.lift_speed,
+            self.lift_acceleration, state.x, state.x_rate, state.target_x, state.x_speed,
+            self.transport_acceleration, dt)
         return GripperState(gap, rate, lift, lift_rate, state.mode, state.target_gap,
                             state.target_force, state.speed, state.target_lift,
                             state.lift_speed, state.stiffness, grip_force, state.gap, x,
@@ -125,9 +114,7 @@ class GripperKinematics:
     def servo_gap(self, state: GripperState, dt: float) -> float:
         """m, the gap after ``dt`` (s) of the position servo's move towards its target at
         the commanded speed, before any force limit."""
-        travel = state.speed * dt
-        return min(max(state.target_gap, state.gap - travel, 0.0), state.gap + travel,
-                   self.max_gap)
+        return jaw_drive.servo_gap(state.gap, state.target_gap, state.speed, self.max_gap, dt)
 
     def gap_bounds(self, state: GripperState, dt: float) -> tuple[float, float]:
         """(smallest, largest) gap (m) the drive can reach from ``state`` in ``dt`` (s):
@@ -135,32 +122,7 @@ class GripperKinematics:
         mode, a force measured) it closes and opens at up to its own top speed
         ``max_speed``, as a force-controlled drive does (a soft plum lifted off the table
         lost 10-12 % of its grip force while the drive re-closed at the approach speed)."""
-        fastest = max(state.speed, self.max_speed)
-        gripping = state.mode == 'force' and state.measured_force > 0.0
-        closing = fastest if gripping else state.speed
-        return (max(state.gap - closing * dt, 0.0),
-                min(state.gap + fastest * dt, self.max_gap))
+        return jaw_drive.gap_bounds(state.gap, state.speed, self.max_speed,
+                                    state.mode == 'force' and state.measured_force > 0.0,
+                                    self.max_gap, dt)
 
-    def _advance_lift(self, state: GripperState, dt: float) -> tuple[float, float]:
-        return trapezoid(state.lift, state.lift_rate, state.target_lift, state.lift_speed,
-                         self.lift_acceleration, dt)
-
-
-def trapezoid(position: float, rate: float, target: float, speed: float,
-              acceleration: float, dt: float) -> tuple[float, float]:
-    """One step of ``dt`` (s) of a move to ``target`` at speed and acceleration limits.
-
-    The rate is the fastest from which the move can still stop at the target decelerating
-    at ``acceleration`` after this step (v dt + v^2 / (2 a) = distance), so the move ends
-    at a rate of about ``acceleration`` dt whatever dt. Returns the new position (m) and
-    the rate over the step (m/s): the step that reaches the target moves at the distance
-    left over dt (the jaws' faces move with that velocity).
-    """
-    distance = target - position
-    a = acceleration
-    v_stop = math.copysign(
-        min(speed, -a * dt + math.sqrt((a * dt) ** 2 + 2 * a * abs(distance))), distance)
-    rate = rate + min(max(v_stop - rate, -a * dt), a * dt)
-    if abs(distance) <= max(abs(rate) * dt, 1e-12):
-        return target, distance / dt
-    return position + rate * dt, rate

@@ -28,6 +28,13 @@ def _site_tables(names: tuple) -> tuple[np.ndarray, np.ndarray]:
     return jaw, table
 
 
+def site_codes(names: tuple) -> np.ndarray:
+    """(n_obstacles + 1,) int64, indexed by obstacle + 1 (0: free): 1 a face of a jaw, 2 the
+    table, else 0 (the tables of ``contact_pressures``, for the compiled advance)."""
+    jaw, table = _site_tables(tuple(names))
+    return np.where(jaw, 1, np.where(table, 2, 0)).astype(np.int64)
+
+
 def _sites(result: StepResult) -> tuple[np.ndarray, np.ndarray]:
     """(n_surface,) bool each: the surface node touches a jaw (any face of it), the table."""
     owner = np.asarray(result.contact_obstacle)[result.surface] + 1
@@ -105,6 +112,16 @@ class RunPeaks:
         self.table_pressure = max(self.table_pressure, table)
         if self.bruised_at is None and result.damage is not None and result.damage.bruised:
             self.bruised_at = damage_site(result)
+
+    def include(self, peaks: tuple) -> None:
+        """Raise the peaks to those of steps this object did not see: (grip force N,
+        compression m, jaw pressure Pa, table pressure Pa), as
+        ``Simulation.advance`` gives them."""
+        grip_force, compression, jaw, table = peaks
+        self.grip_force = max(self.grip_force, grip_force)
+        self.compression = max(self.compression, compression)
+        self.jaw_pressure = max(self.jaw_pressure, jaw)
+        self.table_pressure = max(self.table_pressure, table)
 
     def as_dict(self) -> dict[str, float]:
         """The peaks under their vocabulary keys (``gripper_sim.core.vocabulary``)."""

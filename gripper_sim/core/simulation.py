@@ -21,6 +21,7 @@ from gripper_sim.core.fast import FastPath
 from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics
 from gripper_sim.core.measures import deformation, face_contact_length, tributary_lengths
+from gripper_sim.core.multistep import MultiStep
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
 from gripper_sim.core.results import StepResult
@@ -94,6 +95,7 @@ class Simulation(SimulationFacade):
         self._observers: list[Callable[[StepResult], None]] = []
         self._fast = (FastPath.create(self) if fast is not False and self._barrier is None
                       else None)
+        self._multistep: MultiStep | None = None
         if fast and self._fast is None:
             raise ConfigError('the fast path needs numba and the default contact model')
         self.reset()
@@ -184,6 +186,15 @@ class Simulation(SimulationFacade):
     def _substep_generic(self, dt: float) -> int:
         """The step the fast path cannot do, on the generic path."""
         return super()._substep(dt)
+
+    def advance(self, rules) -> 'tuple[StepResult, Any] | None':
+        """``SimulationFacade.advance`` on the compiled multi-step advance
+        (``core.multistep``) where it applies."""
+        if self._fast is None:
+            return None
+        if self._multistep is None:
+            self._multistep = MultiStep(self._fast)
+        return self._multistep.advance(rules)
 
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult:

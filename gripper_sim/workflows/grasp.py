@@ -4,7 +4,9 @@ and ``evaluate``, the one function that runs a grasp and measures it.
 Used by the offline ``pick`` command and by the node's Grasp action alike: after every
 ``sim.step()`` call ``update(result)``; it issues the simulation's commands itself.
 ``evaluate`` drives any such machine (``GraspSequence`` for ``pick``, the scenario's
-``PickAndPlace`` for the grasp window and for studies) to its end and returns a
+``PickAndPlace`` for the grasp window and for studies) to its end - the steps at which
+the machine decides nothing in one compiled call where it can (``Simulation.advance``,
+``core.multistep``) when no ``on_step`` watches every step - and returns a
 ``GraspEvaluation``: the outcome, the peaks of force, compression and pressure, the
 damage, and the solver's error if it failed.
 """
@@ -14,6 +16,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Protocol
 
+from gripper_sim.core.multistep import Skipped, StopRules, next_result
 from gripper_sim.core.peaks import RunPeaks
 from gripper_sim.core.results import StepResult
 from gripper_sim.core.simulation import Simulation
@@ -146,6 +149,37 @@ class GraspSequence:
                     self._enter(DONE)
         return self.phase
 
+    def stop_rules(self, end: float) -> StopRules | None:
+        """When ``Simulation.advance`` must hand the next step back to ``update``: the
+        first step at which this phase could end (or a drop, a bruise, the time ``end``
+        s); None when every step must be seen (releasing at the lift's end, done)."""
+        sim = self.sim
+        rules = StopRules(bruise=self.peaks.bruised_at is None, end=end)
+        if self.phase in (LIFTING, HOLDING):
+            rules.drop, rules.drop_slip = True, DROP_SLIP
+        if self.phase == CLOSING:
+            rules.grip_force = FORCE_REACHED * self.target_force
+            rules.deadline, rules.gap_closed = self.closing_deadline, True
+        elif self.phase == SQUEEZING:
+            rules.phase_start, rules.elapsed = self.phase_start, SETTLE_TIME
+        elif self.phase == LIFTING:
+            rules.lifted = True
+        elif self.phase == HOLDING:
+            rules.phase_start, rules.elapsed = self.phase_start, self.hold_time - 0.5 * sim.dt
+        elif self.phase == RELEASING:
+            grip = sim.gripper_state
+            if grip.lift == grip.target_lift and grip.lift_rate == 0.0:
+                return None
+            rules.lifted = True
+        else:
+            return None
+        return rules
+
+    def include(self, skipped: Skipped) -> None:
+        """What the steps ``Simulation.advance`` ran without showing them leave: their
+        peaks."""
+        self.peaks.include(skipped.peaks)
+
     def summary(self) -> dict:
         """The grasp's result under the vocabulary's keys (``core.vocabulary``; the
         Grasp action's result maps its fields onto them)."""
@@ -176,7 +210,13 @@ class GraspSequence:
 
 
 class GraspMachine(Protocol):
-    """What ``evaluate`` needs of a state machine (``GraspSequence``, ``PickAndPlace``)."""
+    """What ``evaluate`` needs of a state machine (``GraspSequence``, ``PickAndPlace``).
+
+    A machine that also has ``stop_rules(end)`` (``core.multistep.StopRules`` or None)
+    and ``include(skipped)`` (``core.multistep.Skipped``) lets ``evaluate`` run the steps
+    at which it decides nothing in one compiled call (``Simulation.advance``) when nothing
+    watches every step.
+    """
 
     phase: str
 
@@ -265,7 +305,9 @@ def evaluate(sim, machine: GraspMachine, force: float,
     end = sim.time + time_limit
     try:
         while not machine.done and sim.time < end:
-            result = sim.step()
+            result, skipped = next_result(sim, machine, end, on_step is not None)
+            if skipped is not None:
+                peaks.include(skipped.peaks)
             peaks(result)
             machine.update(result)
             if on_step is not None:

@@ -45,6 +45,7 @@ import numpy as np
 from gripper_sim.configuration import (Key, flatten, load_config, package_config_dir,
                                        parse_override, read_yaml)
 from gripper_sim.core.fruit import build_fruit
+from gripper_sim.core.multistep import Skipped, StopRules, next_result
 from gripper_sim.core.peaks import RunPeaks
 from gripper_sim.core.slip import SLIP_TOLERANCE
 from gripper_sim.core.vocabulary import DROP_SLIP, damage_fields
@@ -57,6 +58,8 @@ FORCE_REACHED = 0.97
 
 PHASES = ('approach', 'close', 'squeeze', 'lift', 'transport', 'lower', 'open', 'retreat',
           'settle', 'done')
+#: the phases in which the fruit's slide along the jaws is integrated (``_slide``)
+SLIDING_PHASES = ('lift', 'transport', 'lower', 'hold')
 
 #: every scenario key: unit, range, meaning (Key of gripper_sim.configuration)
 SCENARIO_SCHEMA: dict[str, Key] = {
@@ -293,6 +296,8 @@ class PickAndPlace:
         self.placed = False
         self.reached_grip = False
         self.last = sim.last
+        #: s, the time of the step before the one ``update`` sees (the slide's time step)
+        self._previous_time = sim.last.time
         self.closing_deadline = math.inf
         sim.command_lift(self.grasp_lift, scenario['approach.speed'])
         if self.start_x != sim.gripper_state.x:
@@ -347,7 +352,7 @@ class PickAndPlace:
             jaws = [name.split('.')[0] in ('left_jaw', 'right_jaw')
                     for name in result.obstacle_names]
             self._jaw_faces = np.array([False, *jaws])
-        dt = result.time - self.last.time
+        dt = result.time - self._previous_time
         nodes = self._jaw_faces[result.contact_obstacle + 1]
         if dt > 0 and np.any(nodes):
             # the last column is the height: z of (x, z) in 2D, of (x, y, z) in 3D
@@ -358,9 +363,10 @@ class PickAndPlace:
     def update(self, result) -> str:
         """Advance after a step; returns the phase."""
         sim, sc = self.sim, self.scenario
-        if self.phase in ('lift', 'transport', 'lower', 'hold'):
+        if self.phase in SLIDING_PHASES:
             self._slide(result)
         self.last = result
+        self._previous_time = result.time
         self.peaks(result)
         elapsed = sim.time - self.phase_start
         gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
@@ -451,6 +457,49 @@ class PickAndPlace:
                 self._enter('done')
         return self.phase
 
+    def stop_rules(self, end: float) -> StopRules | None:
+        """When ``Simulation.advance`` must hand the next step back to ``update``: the
+        first step at which this phase could end (or a drop, a slip or damage it stops
+        on, a bruise, the time ``end`` s); None when every step must be seen (done)."""
+        sc, sim = self.scenario, self.sim
+        phase = self.phase
+        rules = StopRules(bruise=self.peaks.bruised_at is None, damaged=self.stop_on_bruise,
+                          end=end)
+        if phase in SLIDING_PHASES:
+            rules.slide, rules.slide_from = True, (self.slide, self.max_slip, self.max_drop)
+            rules.drop, rules.drop_slip = True, DROP_SLIP
+            if self.stop_on_slip and phase != 'hold':
+                rules.slide_limit = SLIP_TOLERANCE
+        settle = 0.5 * sim.dt
+        if phase == 'approach':
+            rules.lifted = rules.moved = True
+        elif phase == 'close':
+            if sc['close.mode'] == 'force':
+                rules.grip_force = FORCE_REACHED * sc['close.force']
+            else:
+                rules.gap_at = sc['close.gap']
+            rules.deadline, rules.gap_closed = self.closing_deadline, True
+        elif phase in ('squeeze', 'hold', 'settle'):
+            wait = sc['settle.time'] if phase == 'settle' else sc['squeeze.time']
+            rules.phase_start, rules.elapsed = self.phase_start, wait - settle
+        elif phase in ('lift', 'lower', 'retreat'):
+            rules.lifted = True
+        elif phase == 'transport':
+            rules.moved = True
+        elif phase == 'open':
+            rules.gap_at = sim.initial_gap
+        else:
+            return None
+        return rules
+
+    def include(self, skipped: Skipped) -> None:
+        """What the steps ``Simulation.advance`` ran without showing them leave: their
+        peaks, the slide along the jaws, the time of the step before the last."""
+        self.peaks.include(skipped.peaks)
+        if self.phase in SLIDING_PHASES:
+            self.slide, self.max_slip, self.max_drop = skipped.slide
+        self._previous_time = skipped.previous_time
+
     def _judge_placement(self, result) -> None:
         sc = self.scenario
         target = self.start_x + sc['transport.distance']
@@ -526,7 +575,7 @@ def run_scenario(sim, scenario: Scenario, on_step=None, time_limit: float = 120.
     machine = PickAndPlace(sim, scenario, **options)
     end = sim.time + time_limit
     while not machine.done and sim.time < end:
-        result = sim.step()
+        result, _skipped = next_result(sim, machine, end, on_step is not None)
         machine.update(result)
         if on_step is not None:
             on_step(result, machine.phase)

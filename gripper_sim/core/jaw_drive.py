@@ -1,0 +1,187 @@
+"""The jaw drive's scalar rules, compiled once and used by both routes that step a grasp.
+
+``GripperKinematics`` (the per-step route, every set-up) and the compiled multi-step
+advance (``core.advance_kernels``, the 2D kernel route) call these same functions, so a
+grasp driven either way moves its jaws by the same arithmetic:
+
+- ``trapezoid``, ``moved``: one step of the lift and the transport at their speed and
+  acceleration limits;
+- ``servo_gap``, ``gap_bounds``, ``predicted_gap``: the gap a step starts its solve at;
+- ``contact_measure``, ``secant_stiffness``, ``next_gap``: the gap search of
+  ``core.facade.SimulationFacade._drive_jaws`` when a solved step misses its force goal.
+
+The gap search's solves so far are rows of ``tried`` (MAX_GAP_SOLVES, 3) [gap m, force -
+goal N, both jaws touch (1.0/0.0)], the first ``count`` of them filled.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+#: relative miss of the grip force (of its command, or of the maximum effort) a step
+#: accepts before it is solved again at a corrected gap
+FORCE_TOLERANCE = 0.005
+#: solves of one step at most, the first included (then the best one is solved again)
+MAX_GAP_SOLVES = 8
+
+
+@njit(cache=True)
+def trapezoid(position, rate, target, speed, acceleration, dt):
+    """One step of ``dt`` (s) of a move to ``target`` at speed and acceleration limits.
+
+    The rate is the fastest from which the move can still stop at the target decelerating
+    at ``acceleration`` after this step (v dt + v^2 / (2 a) = distance), so the move ends
+    at a rate of about ``acceleration`` dt whatever dt. Returns the new position (m) and
+    the rate over the step (m/s): the step that reaches the target moves at the distance
+    left over dt (the jaws' faces move with that velocity).
+    """
+    distance = target - position
+    a = acceleration
+    v_stop = math.copysign(
+        min(speed, -a * dt + math.sqrt((a * dt) * (a * dt) + 2 * a * abs(distance))), distance)
+    rate = rate + min(max(v_stop - rate, -a * dt), a * dt)
+    if abs(distance) <= max(abs(rate) * dt, 1e-12):
+        return target, distance / dt
+    return position + rate * dt, rate
+
+
+@njit(cache=True)
+def moved(gap0, gap, lift, lift_rate, target_lift, lift_speed, lift_acceleration, x, x_rate,
+          target_x, x_speed, x_acceleration, dt):
+    """The gripper after ``dt`` (s) with the jaws moved from ``gap0`` to ``gap`` (m) and
+    the lift and the transport advanced by their ``trapezoid`` moves (m, m/s, m/s^2):
+    (gap rate m/s, lift m, lift rate m/s, x m, x rate m/s)."""
+    rate = (gap - gap0) / dt
+    lift, lift_rate = trapezoid(lift, lift_rate, target_lift, lift_speed, lift_acceleration,
+                                dt)
+    if x != target_x or x_rate != 0.0:
+        x, x_rate = trapezoid(x, x_rate, target_x, x_speed, x_acceleration, dt)
+    else:
+        x_rate = 0.0
+    return rate, lift, lift_rate, x, x_rate
+
+
+@njit(cache=True)
+def servo_gap(gap, target_gap, speed, max_gap, dt):
+    """m, the gap after ``dt`` (s) of the position servo's move from ``gap`` towards
+    ``target_gap`` at ``speed`` (m/s), before any force limit."""
+    travel = speed * dt
+    return min(max(target_gap, gap - travel, 0.0), gap + travel, max_gap)
+
+
+@njit(cache=True)
+def gap_bounds(gap, speed, max_speed, gripping, max_gap, dt):
+    """(smallest, largest) gap (m) the drive can reach from ``gap`` in ``dt`` (s): it
+    closes at the commanded ``speed`` until it grips (``gripping``: force mode with a
+    force measured); then it closes and opens at up to its own top speed ``max_speed``
+    (m/s), as a force-controlled drive does."""
+    fastest = max(speed, max_speed)
+    closing = fastest if gripping else speed
+    return max(gap - closing * dt, 0.0), min(gap + fastest * dt, max_gap)
+
+
+@njit(cache=True)
+def predicted_gap(force_mode, gap, target_gap, target_force, speed, stiffness, max_effort,
+                  grip_force, both_in_contact, clearance, lo, hi, max_gap, dt):
+    """m, the gap a step is first solved at (``GripperKinematics.advance``): where the
+    grip force (N, measured at the step's start) would meet its target (force mode) or
+    the effort limit (position mode) at ``stiffness`` (N/m), within [lo, hi]."""
+    if force_mode:
+        if grip_force <= 0.0 or not both_in_contact:
+            landing = (max(clearance, 0.0) + target_force / stiffness) / dt
+            rate = -min(speed, landing)
+        else:
+            rate = -(target_force - grip_force) / (stiffness * dt)
+    else:
+        rate = (servo_gap(gap, target_gap, speed, max_gap, dt) - gap) / dt
+        if rate < 0 and both_in_contact and grip_force > 0:
+            rate = max(rate, -(max_effort - grip_force) / (stiffness * dt))
+    return min(max(gap + rate * dt, lo), hi)
+
+
+@njit(cache=True)
+def contact_measure(force):
+    """N^(2/3), the grip force in the variable that the jaw search treats as linear in
+    the gap: Hertz's law F ~ delta^(3/2) (Johnson 1985, Contact Mechanics, eq. 4.22)
+    makes F^(2/3) linear in the approach delta. Secant steps on it neither overshoot
+    from a first light touch (a chord of F there is far too soft) nor undershoot much on
+    a membrane-dominated fruit (F closer to linear in delta)."""
+    return max(force, 0.0) ** (2.0 / 3.0)
+
+
+@njit(cache=True)
+def measure_slope(stiffness, goal):
+    """N^(2/3)/m, d F^(2/3) / d(-gap) of the Hertz law whose stiffness -dF/d gap at the
+    force ``goal`` (N) is ``stiffness`` (N/m)."""
+    return stiffness / (1.5 * max(goal, 1e-12) ** (1.0 / 3.0))
+
+
+@njit(cache=True)
+def secant_stiffness(tried, count, stiffness, goal):
+    """N/m, -d force / d gap at the force ``goal`` (N), from the last two solves of a
+    step if both jaws held the fruit in each (the secant of F^(2/3),
+    ``contact_measure``), else ``stiffness``."""
+    if count < 2:
+        return stiffness
+    g1, m1, both1 = tried[count - 2, 0], tried[count - 2, 1], tried[count - 2, 2]
+    g2, m2, both2 = tried[count - 1, 0], tried[count - 1, 1], tried[count - 1, 2]
+    if not (both1 > 0 and both2 > 0 and g1 != g2):
+        return stiffness
+    slope = (contact_measure(goal + m1) - contact_measure(goal + m2)) / (g2 - g1)
+    return 1.5 * goal ** (1.0 / 3.0) * slope if slope > 0 else stiffness
+
+
+@njit(cache=True)
+def _row_before(tried, a, b):
+    """Whether row a of ``tried`` sorts before row b (gap, then miss, then both)."""
+    for c in range(3):
+        if tried[a, c] != tried[b, c]:
+            return tried[a, c] < tried[b, c]
+    return False
+
+
+@njit(cache=True)
+def next_gap(tried, count, stiffness, goal, lo, hi, clearance):
+    """m, the next gap to solve a step at so that the force meets ``goal`` (N), from the
+    solves so far (the force falls as the gap grows), within [lo, hi]: a secant step on
+    F^(2/3) (``contact_measure``; its slope from ``stiffness``, N/m at the goal) from the
+    last solve if it stays inside the bracket the solves so far leave, else the end of
+    the range not yet tried, else the bracket's interpolation (F^(2/3) linear between its
+    ends) or middle; NaN when the bracket has closed. After a solve in which a jaw did
+    not touch, the step closes the gap by ``clearance`` (m, how far that jaw is from the
+    fruit; inf if unknown) plus the approach that gives the goal."""
+    low = -1    # the widest solve with too much force: the gap must grow from it
+    high = -1   # the narrowest solve with too little force
+    for k in range(count):
+        if tried[k, 1] > 0:
+            if low < 0 or _row_before(tried, low, k):
+                low = k
+        elif high < 0 or _row_before(tried, k, high):
+            high = k
+    low_gap = tried[low, 0] if low >= 0 else lo
+    high_gap = tried[high, 0] if high >= 0 else hi
+    if high_gap - low_gap <= 1e-12:
+        return math.nan
+    slope = measure_slope(stiffness, goal)
+    target = contact_measure(goal)
+    gap, miss, both = tried[count - 1, 0], tried[count - 1, 1], tried[count - 1, 2] > 0
+    if both:
+        guess = gap + (contact_measure(goal + miss) - target) / slope
+    elif math.isfinite(clearance):
+        guess = gap - clearance - target / slope
+    else:
+        guess = gap + miss / stiffness
+    if low_gap < guess < high_gap:
+        return guess
+    if guess <= low_gap and low < 0:
+        return lo
+    if guess >= high_gap and high < 0:
+        return hi
+    if low >= 0 and high >= 0 and tried[low, 2] > 0 and tried[high, 2] > 0:
+        h_low = contact_measure(goal + tried[low, 1])
+        h_high = contact_measure(goal + tried[high, 1])
+        fraction = (h_low - target) / (h_low - h_high)
+        if 0.05 < fraction < 0.95:
+            return low_gap + fraction * (high_gap - low_gap)
+    return 0.5 * (low_gap + high_gap)
