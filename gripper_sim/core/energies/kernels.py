@@ -230,6 +230,30 @@ def _deformation_gradient(x, tri, dm_inv, t):
             d10 * a[0, 0] + d11 * a[1, 0], d10 * a[0, 1] + d11 * a[1, 1])
 
 
+@njit(cache=True, inline='always')
+def _neohookean_block(data, sc, k, m, cg, c2, c3, gkx, gkz, hkx, hkz, glx, glz, hlx, hlz):
+    """Adds the node block (k, m) of a triangle's Hessian (``neohookean_triangles``) at
+    its scatter positions sc (36,), and for m != k its transpose at (m, k): with
+    dP_ij/dF_mn = mu d_im d_jn + (mu - lam lnJ) Finv_ni Finv_jm + lam Finv_ji Finv_nm
+    the block (k, i), (l, n) is V (mu d_in g_k.g_l + (mu - lam lnJ) h_k[n] h_l[i]
+    + lam h_k[i] h_l[n]); cg = V mu, c2 = V (mu - lam lnJ), c3 = V lam."""
+    gg = cg * (gkx * glx + gkz * glz)
+    kxx = gg + c2 * hkx * hlx + c3 * hkx * hlx
+    kxz = c2 * hkz * hlx + c3 * hkx * hlz
+    kzx = c2 * hkx * hlz + c3 * hkz * hlx
+    kzz = gg + c2 * hkz * hlz + c3 * hkz * hlz
+    r, c = 2 * k, 2 * m
+    data[sc[6 * r + c]] += kxx
+    data[sc[6 * r + c + 1]] += kxz
+    data[sc[6 * (r + 1) + c]] += kzx
+    data[sc[6 * (r + 1) + c + 1]] += kzz
+    if m != k:
+        data[sc[6 * c + r]] += kxx
+        data[sc[6 * c + r + 1]] += kzx
+        data[sc[6 * (c + 1) + r]] += kxz
+        data[sc[6 * (c + 1) + r + 1]] += kzz
+
+
 @njit(cache=True)
 def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, hessian):
     """Plane-strain neo-Hookean linear triangles (``NeoHookeanTriangles``).
@@ -279,37 +303,16 @@ def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, h
         grad[2 * i2 + 1] += cg * (f10 * g2x + f11 * g2z) + ch * h2z
         if not hessian:
             continue
-        # with dP_ij/dF_mn = mu d_im d_jn + (mu - lam lnJ) Finv_ni Finv_jm
-        # + lam Finv_ji Finv_nm the block (k, i), (l, n) of the element Hessian is
-        # V (mu d_in g_k.g_l + (mu - lam lnJ) h_k[n] h_l[i] + lam h_k[i] h_l[n])
+        # the element Hessian's six node blocks (k <= l), written out
         c2 = vol * (mu - lam * lnj)
         c3 = vol * lam
         sc = scatter[t]
-        for k in range(3):
-            gkx = g0x if k == 0 else (g1x if k == 1 else g2x)
-            gkz = g0z if k == 0 else (g1z if k == 1 else g2z)
-            hkx = h0x if k == 0 else (h1x if k == 1 else h2x)
-            hkz = h0z if k == 0 else (h1z if k == 1 else h2z)
-            for m in range(k, 3):
-                glx = g0x if m == 0 else (g1x if m == 1 else g2x)
-                glz = g0z if m == 0 else (g1z if m == 1 else g2z)
-                hlx = h0x if m == 0 else (h1x if m == 1 else h2x)
-                hlz = h0z if m == 0 else (h1z if m == 1 else h2z)
-                gg = cg * (gkx * glx + gkz * glz)
-                kxx = gg + c2 * hkx * hlx + c3 * hkx * hlx
-                kxz = c2 * hkz * hlx + c3 * hkx * hlz
-                kzx = c2 * hkx * hlz + c3 * hkz * hlx
-                kzz = gg + c2 * hkz * hlz + c3 * hkz * hlz
-                r, c = 2 * k, 2 * m
-                data[sc[6 * r + c]] += kxx
-                data[sc[6 * r + c + 1]] += kxz
-                data[sc[6 * (r + 1) + c]] += kzx
-                data[sc[6 * (r + 1) + c + 1]] += kzz
-                if m != k:
-                    data[sc[6 * c + r]] += kxx
-                    data[sc[6 * c + r + 1]] += kzx
-                    data[sc[6 * (c + 1) + r]] += kxz
-                    data[sc[6 * (c + 1) + r + 1]] += kzz
+        _neohookean_block(data, sc, 0, 0, cg, c2, c3, g0x, g0z, h0x, h0z, g0x, g0z, h0x, h0z)
+        _neohookean_block(data, sc, 1, 1, cg, c2, c3, g1x, g1z, h1x, h1z, g1x, g1z, h1x, h1z)
+        _neohookean_block(data, sc, 2, 2, cg, c2, c3, g2x, g2z, h2x, h2z, g2x, g2z, h2x, h2z)
+        _neohookean_block(data, sc, 0, 1, cg, c2, c3, g0x, g0z, h0x, h0z, g1x, g1z, h1x, h1z)
+        _neohookean_block(data, sc, 0, 2, cg, c2, c3, g0x, g0z, h0x, h0z, g2x, g2z, h2x, h2z)
+        _neohookean_block(data, sc, 1, 2, cg, c2, c3, g1x, g1z, h1x, h1z, g2x, g2z, h2x, h2z)
     return value
 
 
