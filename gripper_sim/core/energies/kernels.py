@@ -128,6 +128,21 @@ def hinge_block(k, kd, jr0, jr1, jc0, jc1, h00, h01):
             k * (jr1 * jc0) + kd * h01, k * (jr1 * jc1) - kd * h00)
 
 
+@njit(cache=True, inline='always')
+def _add_block(data, sc, m, r, c, b00, b01, b10, b11):
+    """Adds the node block (r, c) (b00, b01, b10, b11) of an element matrix with m dofs at
+    its scatter positions sc (m^2,), and for r != c its transpose at (c, r)."""
+    data[sc[m * (2 * r) + 2 * c]] += b00
+    data[sc[m * (2 * r) + 2 * c + 1]] += b01
+    data[sc[m * (2 * r + 1) + 2 * c]] += b10
+    data[sc[m * (2 * r + 1) + 2 * c + 1]] += b11
+    if r != c:
+        data[sc[m * (2 * c) + 2 * r]] += b00
+        data[sc[m * (2 * c) + 2 * r + 1]] += b10
+        data[sc[m * (2 * c + 1) + 2 * r]] += b01
+        data[sc[m * (2 * c + 1) + 2 * r + 1]] += b11
+
+
 @njit(cache=True)
 def bending(x, triples, phi0, k, grad, data, scatter, hessian):
     """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RodBending``,
@@ -141,38 +156,36 @@ def bending(x, triples, phi0, k, grad, data, scatter, hessian):
         Energy (J).
     """
     value = 0.0
-    jac = np.empty(6)
     for t in range(triples.shape[0]):
         p, i, n = triples[t, 0], triples[t, 1], triples[t, 2]
-        (v, kd, jac[0], jac[1], jac[2], jac[3], jac[4], jac[5], ha00, ha01, hb00,
-         hb01) = hinge(x[i, 0] - x[p, 0], x[i, 1] - x[p, 1], x[n, 0] - x[i, 0],
-                       x[n, 1] - x[i, 1], phi0[t], k[t])
+        kt = k[t]
+        v, kd, j0, j1, j2, j3, j4, j5, ha00, ha01, hb00, hb01 = hinge(
+            x[i, 0] - x[p, 0], x[i, 1] - x[p, 1], x[n, 0] - x[i, 0], x[n, 1] - x[i, 1],
+            phi0[t], kt)
         value += v
-        nodes = (p, i, n)
-        for m in range(3):
-            for a in range(2):
-                grad[2 * nodes[m] + a] += kd * jac[2 * m + a]
+        grad[2 * p] += kd * j0
+        grad[2 * p + 1] += kd * j1
+        grad[2 * i] += kd * j2
+        grad[2 * i + 1] += kd * j3
+        grad[2 * n] += kd * j4
+        grad[2 * n + 1] += kd * j5
         if not hessian:
             continue
         sc = scatter[t]
-        for r in range(3):
-            for c in range(3):
-                # the pair's block of d^2 phi / dx^2 (see hinge_block)
-                if r == c:
-                    h00 = (ha00 if r < 2 else 0.0) + (hb00 if r > 0 else 0.0)
-                    h01 = (ha01 if r < 2 else 0.0) + (hb01 if r > 0 else 0.0)
-                elif r + c == 1:
-                    h00, h01 = -ha00, -ha01
-                elif r + c == 3:
-                    h00, h01 = -hb00, -hb01
-                else:
-                    h00, h01 = 0.0, 0.0
-                b00, b01, b10, b11 = hinge_block(k[t], kd, jac[2 * r], jac[2 * r + 1],
-                                                 jac[2 * c], jac[2 * c + 1], h00, h01)
-                data[sc[6 * (2 * r) + 2 * c]] += b00
-                data[sc[6 * (2 * r) + 2 * c + 1]] += b01
-                data[sc[6 * (2 * r + 1) + 2 * c]] += b10
-                data[sc[6 * (2 * r + 1) + 2 * c + 1]] += b11
+        # the pairs' blocks of d^2 phi / dx^2 (see hinge_block): ha at (p, p), ha + hb
+        # at (i, i), hb at (n, n), -ha at (i, p), -hb at (n, i), 0 at (n, p)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j0, j1, j0, j1, ha00, ha01)
+        _add_block(data, sc, 6, 0, 0, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j2, j3, j2, j3, ha00 + hb00, ha01 + hb01)
+        _add_block(data, sc, 6, 1, 1, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j4, j5, j4, j5, 0.0 + hb00, 0.0 + hb01)
+        _add_block(data, sc, 6, 2, 2, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j2, j3, j0, j1, -ha00, -ha01)
+        _add_block(data, sc, 6, 1, 0, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j4, j5, j2, j3, -hb00, -hb01)
+        _add_block(data, sc, 6, 2, 1, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j4, j5, j0, j1, 0.0, 0.0)
+        _add_block(data, sc, 6, 2, 0, b00, b01, b10, b11)
     return value
 
 
