@@ -27,7 +27,9 @@ counts those steps.
 Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations) times the cost of each operation timed alone at the end
-state. Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
+state; one more step's kernel call is then repeated on its own arguments (warm caches)
+and numba's dispatch of those arguments timed alone (a kernel that does nothing).
+Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
 Times are the best of ``--repeat`` runs.
 
 ``--baseline DIR`` compares with another checkout of the project (e.g. ``git worktree add

@@ -32,6 +32,12 @@ node i; ``order`` its inverse):
 
 The numba kernels take ``SparsePattern.arrays`` (a tuple, see ``KernelArrays``).
 Import this module only where numba is installed.
+
+Supernodes do not pay at the solid fruit's size (208 nodes, 2149 blocks of L, ~12,300
+block updates a factorisation): 108 of its 129 fundamental supernodes are single
+columns, and a left-looking supernodal factorisation (Ng & Peyton 1993) took 51-57 us
+where this one takes 37-40 us, an up-looking one summing each supernode's updates in a
+dense buffer 45 us (README, Benchmarks).
 """
 from __future__ import annotations
 
