@@ -255,16 +255,7 @@ def _neohookean_block(data, sc, k, m, cg, c2, c3, gkx, gkz, hkx, hkz, glx, glz, 
     kxz = c2 * hkz * hlx + c3 * hkx * hlz
     kzx = c2 * hkx * hlz + c3 * hkz * hlx
     kzz = gg + c2 * hkz * hlz + c3 * hkz * hlz
-    r, c = 2 * k, 2 * m
-    data[sc[6 * r + c]] += kxx
-    data[sc[6 * r + c + 1]] += kxz
-    data[sc[6 * (r + 1) + c]] += kzx
-    data[sc[6 * (r + 1) + c + 1]] += kzz
-    if m != k:
-        data[sc[6 * c + r]] += kxx
-        data[sc[6 * c + r + 1]] += kzx
-        data[sc[6 * (c + 1) + r]] += kxz
-        data[sc[6 * (c + 1) + r + 1]] += kzz
+    _add_block(data, sc, 6, k, m, kxx, kxz, kzx, kzz)
 
 
 @njit(cache=True)
