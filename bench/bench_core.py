@@ -33,7 +33,9 @@ the ROS node and the recorders step).
 Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations) times the cost of each operation timed alone at the end
-state. Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
+state; one more step's kernel call is then repeated on its own arguments (warm caches)
+and numba's dispatch of those arguments timed alone (a kernel that does nothing).
+Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
 Times are the best of ``--repeat`` runs.
 
 ``--baseline DIR`` compares with another checkout of the project (e.g. ``git worktree add
@@ -256,6 +258,34 @@ def kernel_split(sim: Simulation) -> dict:
         kernel_measures=_best_time(lambda r: measures(r, *meas), 2000))
 
 
+def hot_kernel(args: tuple) -> tuple[float, float]:
+    """Seconds per call of the substep kernel repeated on one step's arguments ``args``
+    (warm caches; the contact state, arguments 2-7, copied each call as ``FastPath``
+    does), and of numba's dispatch of the same arguments to a kernel that does nothing."""
+    from numba import njit
+
+    from gripper_sim.core import kernels as k
+
+    @njit(cache=True)
+    def nothing(*arguments):
+        return len(arguments)
+
+    args = tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args)
+
+    def repeated(reps):
+        for _ in range(reps):
+            call = list(args)
+            for i in range(2, 8):
+                call[i] = args[i].copy()
+            k.substep(*call)
+
+    def dispatched(reps):
+        for _ in range(reps):
+            nothing(*args)
+
+    return _best_time(repeated, 200), _best_time(dispatched, 2000)
+
+
 def profile_generic(sim: Simulation, hold: float) -> dict:
     """Fractions of CPU time in the compiled route's parts, from a cProfile run."""
     profiler = cProfile.Profile(time.process_time)
@@ -312,6 +342,18 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
         counts = path.counts.copy()
         ops = kernel_split(sim)
         from gripper_sim.core import kernels as k
+        substep, last = k.substep, {}
+
+        def spy(*args):  # the arguments of one more step, for ``hot_kernel``
+            last['args'] = args
+            return substep(*args)
+
+        k.substep = spy
+        try:
+            sim.step()
+        finally:
+            k.substep = substep
+        hot, dispatch = hot_kernel(last['args'])
         assembly = (counts[k.C_HESSIAN_EVALS] * ops['hessian_eval']
                     + counts[k.C_EVALS] * ops['eval'])
         solve = counts[k.C_FACTORS] * (ops['factor'] + ops['solve'])
@@ -334,6 +376,8 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
             evals=counts[k.C_EVALS] / steps, factorisations=counts[k.C_FACTORS] / steps)
         row['glue_us'] = timers['glue'] / steps * 1e6
         row['kernel_us'] = kernel / steps * 1e6
+        row['hot_us'], row['dispatch_us'] = hot * 1e6, dispatch * 1e6
+        row['n_args'] = len(last['args'])
     else:
         row['split'] = profile_generic(sim, hold)
     return row
@@ -476,6 +520,11 @@ def main(argv=None) -> int:
                   f'which {r["kernel_rest_us"]:.1f} us the jaw drive, Newton bookkeeping and '
                   f'calls; Python glue around them {r["glue_us"]:.1f} us (steps run one by '
                   f'one)')
+            print(f'{r["model"]} the last step\'s kernel call repeated (warm caches): '
+                  f'{r["hot_us"]:.1f} us, of which {r["dispatch_us"]:.1f} us numba\'s dispatch '
+                  f'of its {r["n_args"]} arguments; the rest of the whole kernel\'s time in the '
+                  f'grasp: caches and branch predictors cold after the Python around each '
+                  f'step, other processes on the core')
             print(f'{r["model"]} "other" = that glue and bookkeeping, the grasp state '
                   f'machine; "measures" = the kernel\'s measures and damage, the StepResult '
                   f'and damage objects of the steps the machine sees')

@@ -128,6 +128,21 @@ def hinge_block(k, kd, jr0, jr1, jc0, jc1, h00, h01):
             k * (jr1 * jc0) + kd * h01, k * (jr1 * jc1) - kd * h00)
 
 
+@njit(cache=True, inline='always')
+def _add_block(data, sc, m, r, c, b00, b01, b10, b11):
+    """Adds the node block (r, c) (b00, b01, b10, b11) of an element matrix with m dofs at
+    its scatter positions sc (m^2,), and for r != c its transpose at (c, r)."""
+    data[sc[m * (2 * r) + 2 * c]] += b00
+    data[sc[m * (2 * r) + 2 * c + 1]] += b01
+    data[sc[m * (2 * r + 1) + 2 * c]] += b10
+    data[sc[m * (2 * r + 1) + 2 * c + 1]] += b11
+    if r != c:
+        data[sc[m * (2 * c) + 2 * r]] += b00
+        data[sc[m * (2 * c) + 2 * r + 1]] += b10
+        data[sc[m * (2 * c + 1) + 2 * r]] += b01
+        data[sc[m * (2 * c + 1) + 2 * r + 1]] += b11
+
+
 @njit(cache=True)
 def bending(x, triples, phi0, k, grad, data, scatter, hessian):
     """Turning-angle bending E = k (phi - phi0)^2 / 2 per triple (``RodBending``,
@@ -141,38 +156,36 @@ def bending(x, triples, phi0, k, grad, data, scatter, hessian):
         Energy (J).
     """
     value = 0.0
-    jac = np.empty(6)
     for t in range(triples.shape[0]):
         p, i, n = triples[t, 0], triples[t, 1], triples[t, 2]
-        (v, kd, jac[0], jac[1], jac[2], jac[3], jac[4], jac[5], ha00, ha01, hb00,
-         hb01) = hinge(x[i, 0] - x[p, 0], x[i, 1] - x[p, 1], x[n, 0] - x[i, 0],
-                       x[n, 1] - x[i, 1], phi0[t], k[t])
+        kt = k[t]
+        v, kd, j0, j1, j2, j3, j4, j5, ha00, ha01, hb00, hb01 = hinge(
+            x[i, 0] - x[p, 0], x[i, 1] - x[p, 1], x[n, 0] - x[i, 0], x[n, 1] - x[i, 1],
+            phi0[t], kt)
         value += v
-        nodes = (p, i, n)
-        for m in range(3):
-            for a in range(2):
-                grad[2 * nodes[m] + a] += kd * jac[2 * m + a]
+        grad[2 * p] += kd * j0
+        grad[2 * p + 1] += kd * j1
+        grad[2 * i] += kd * j2
+        grad[2 * i + 1] += kd * j3
+        grad[2 * n] += kd * j4
+        grad[2 * n + 1] += kd * j5
         if not hessian:
             continue
         sc = scatter[t]
-        for r in range(3):
-            for c in range(3):
-                # the pair's block of d^2 phi / dx^2 (see hinge_block)
-                if r == c:
-                    h00 = (ha00 if r < 2 else 0.0) + (hb00 if r > 0 else 0.0)
-                    h01 = (ha01 if r < 2 else 0.0) + (hb01 if r > 0 else 0.0)
-                elif r + c == 1:
-                    h00, h01 = -ha00, -ha01
-                elif r + c == 3:
-                    h00, h01 = -hb00, -hb01
-                else:
-                    h00, h01 = 0.0, 0.0
-                b00, b01, b10, b11 = hinge_block(k[t], kd, jac[2 * r], jac[2 * r + 1],
-                                                 jac[2 * c], jac[2 * c + 1], h00, h01)
-                data[sc[6 * (2 * r) + 2 * c]] += b00
-                data[sc[6 * (2 * r) + 2 * c + 1]] += b01
-                data[sc[6 * (2 * r + 1) + 2 * c]] += b10
-                data[sc[6 * (2 * r + 1) + 2 * c + 1]] += b11
+        # the pairs' blocks of d^2 phi / dx^2 (see hinge_block): ha at (p, p), ha + hb
+        # at (i, i), hb at (n, n), -ha at (i, p), -hb at (n, i), 0 at (n, p)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j0, j1, j0, j1, ha00, ha01)
+        _add_block(data, sc, 6, 0, 0, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j2, j3, j2, j3, ha00 + hb00, ha01 + hb01)
+        _add_block(data, sc, 6, 1, 1, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j4, j5, j4, j5, 0.0 + hb00, 0.0 + hb01)
+        _add_block(data, sc, 6, 2, 2, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j2, j3, j0, j1, -ha00, -ha01)
+        _add_block(data, sc, 6, 1, 0, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j4, j5, j2, j3, -hb00, -hb01)
+        _add_block(data, sc, 6, 2, 1, b00, b01, b10, b11)
+        b00, b01, b10, b11 = hinge_block(kt, kd, j4, j5, j0, j1, 0.0, 0.0)
+        _add_block(data, sc, 6, 2, 0, b00, b01, b10, b11)
     return value
 
 
@@ -230,6 +243,21 @@ def _deformation_gradient(x, tri, dm_inv, t):
             d10 * a[0, 0] + d11 * a[1, 0], d10 * a[0, 1] + d11 * a[1, 1])
 
 
+@njit(cache=True, inline='always')
+def _neohookean_block(data, sc, k, m, cg, c2, c3, gkx, gkz, hkx, hkz, glx, glz, hlx, hlz):
+    """Adds the node block (k, m) of a triangle's Hessian (``neohookean_triangles``) at
+    its scatter positions sc (36,), and for m != k its transpose at (m, k): with
+    dP_ij/dF_mn = mu d_im d_jn + (mu - lam lnJ) Finv_ni Finv_jm + lam Finv_ji Finv_nm
+    the block (k, i), (l, n) is V (mu d_in g_k.g_l + (mu - lam lnJ) h_k[n] h_l[i]
+    + lam h_k[i] h_l[n]); cg = V mu, c2 = V (mu - lam lnJ), c3 = V lam."""
+    gg = cg * (gkx * glx + gkz * glz)
+    kxx = gg + c2 * hkx * hlx + c3 * hkx * hlx
+    kxz = c2 * hkz * hlx + c3 * hkx * hlz
+    kzx = c2 * hkx * hlz + c3 * hkz * hlx
+    kzz = gg + c2 * hkz * hlz + c3 * hkz * hlz
+    _add_block(data, sc, 6, k, m, kxx, kxz, kzx, kzz)
+
+
 @njit(cache=True)
 def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, hessian):
     """Plane-strain neo-Hookean linear triangles (``NeoHookeanTriangles``).
@@ -279,37 +307,16 @@ def neohookean_triangles(x, tri, dm_inv, volume, mu, lam, grad, data, scatter, h
         grad[2 * i2 + 1] += cg * (f10 * g2x + f11 * g2z) + ch * h2z
         if not hessian:
             continue
-        # with dP_ij/dF_mn = mu d_im d_jn + (mu - lam lnJ) Finv_ni Finv_jm
-        # + lam Finv_ji Finv_nm the block (k, i), (l, n) of the element Hessian is
-        # V (mu d_in g_k.g_l + (mu - lam lnJ) h_k[n] h_l[i] + lam h_k[i] h_l[n])
+        # the element Hessian's six node blocks (k <= l), written out
         c2 = vol * (mu - lam * lnj)
         c3 = vol * lam
         sc = scatter[t]
-        for k in range(3):
-            gkx = g0x if k == 0 else (g1x if k == 1 else g2x)
-            gkz = g0z if k == 0 else (g1z if k == 1 else g2z)
-            hkx = h0x if k == 0 else (h1x if k == 1 else h2x)
-            hkz = h0z if k == 0 else (h1z if k == 1 else h2z)
-            for m in range(k, 3):
-                glx = g0x if m == 0 else (g1x if m == 1 else g2x)
-                glz = g0z if m == 0 else (g1z if m == 1 else g2z)
-                hlx = h0x if m == 0 else (h1x if m == 1 else h2x)
-                hlz = h0z if m == 0 else (h1z if m == 1 else h2z)
-                gg = cg * (gkx * glx + gkz * glz)
-                kxx = gg + c2 * hkx * hlx + c3 * hkx * hlx
-                kxz = c2 * hkz * hlx + c3 * hkx * hlz
-                kzx = c2 * hkx * hlz + c3 * hkz * hlx
-                kzz = gg + c2 * hkz * hlz + c3 * hkz * hlz
-                r, c = 2 * k, 2 * m
-                data[sc[6 * r + c]] += kxx
-                data[sc[6 * r + c + 1]] += kxz
-                data[sc[6 * (r + 1) + c]] += kzx
-                data[sc[6 * (r + 1) + c + 1]] += kzz
-                if m != k:
-                    data[sc[6 * c + r]] += kxx
-                    data[sc[6 * c + r + 1]] += kzx
-                    data[sc[6 * (c + 1) + r]] += kxz
-                    data[sc[6 * (c + 1) + r + 1]] += kzz
+        _neohookean_block(data, sc, 0, 0, cg, c2, c3, g0x, g0z, h0x, h0z, g0x, g0z, h0x, h0z)
+        _neohookean_block(data, sc, 1, 1, cg, c2, c3, g1x, g1z, h1x, h1z, g1x, g1z, h1x, h1z)
+        _neohookean_block(data, sc, 2, 2, cg, c2, c3, g2x, g2z, h2x, h2z, g2x, g2z, h2x, h2z)
+        _neohookean_block(data, sc, 0, 1, cg, c2, c3, g0x, g0z, h0x, h0z, g1x, g1z, h1x, h1z)
+        _neohookean_block(data, sc, 0, 2, cg, c2, c3, g0x, g0z, h0x, h0z, g2x, g2z, h2x, h2z)
+        _neohookean_block(data, sc, 1, 2, cg, c2, c3, g1x, g1z, h1x, h1z, g2x, g2z, h2x, h2z)
     return value
 
 
