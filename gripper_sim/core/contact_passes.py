@@ -106,7 +106,8 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
     slipped = np.zeros(n, bool)
     v_min = max(5.0 * settings.gravity * dt, 1e-3)  # m/s, the slowest approach that bounces
     iterations = 0
-    for _ in range(settings.max_passes):
+    lag_history = (np.zeros(n), np.zeros(n), np.zeros(n, bool))
+    for pass_ in range(settings.max_passes):
         start, filters = np.empty((n, d)), np.empty((n, d, d))
         fr_nodes, fr_bound = np.empty(n, np.int64), np.empty(n)
         fr_tangents, fr_speed = np.empty((n, d - 1, d)), np.empty((n, d - 1))
@@ -118,10 +119,13 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
         iterations += solution.iterations
         x = np.ascontiguousarray(solution.q.reshape(-1, d))
         reaction = np.ascontiguousarray(solution.reaction.reshape(-1, d))
+        before = tuple(field.copy() for field in state)
         if not ck.update(state, faces, x, x_n, v_n, reaction, surface, dt,
                          settings.release_threshold, v_min, settings.deepest_first, released,
                          slipped):
             break
+        if pass_ < settings.max_passes - 1:
+            ck.extrapolate_lag(state, before, lag_history)
     v, forces = np.empty((n, d)), np.empty((n, d))
     masses = np.ascontiguousarray(solver.m[::d], dtype=float)
     ck.finish(state, faces, x, x_n, v_n, reaction, masses, dt, v, forces)
