@@ -34,7 +34,7 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core import contact_kernels as ck
-from gripper_sim.core.stepper import StepConstraints
+from gripper_sim.core.stepper import StepConstraints, StepSolution
 
 
 @dataclass(frozen=True)
@@ -130,3 +130,26 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
     masses = np.ascontiguousarray(solver.m[::d], dtype=float)
     ck.finish(state, faces, x, x_n, v_n, reaction, masses, dt, v, forces)
     return StepOutcome(x, v, forces, contacts, iterations)
+
+
+def load_kernels(masses: np.ndarray, surface: np.ndarray, x: np.ndarray, faces: list,
+                 dt: float, settings: ContactSettings) -> None:
+    """Run each compiled function of a contact pass once, on a throwaway step from
+    positions ``x`` (n, d) m at rest with the faces ``faces`` standing still and a solve
+    that returns its start: numba loads a kernel's compiled code from its cache on first
+    use (10-20 ms each), which then happens here, when a simulation is built, and not in
+    its first steps. ``masses``: (d n,) kg per dof; ``surface``: (m,) node indices."""
+    n, d = x.shape
+
+    class _Start:
+        m = masses
+
+        @staticmethod
+        def solve(q_n, v_n, dt_, q_start, constraints):
+            return StepSolution(q_start, np.zeros_like(q_start), 0, [])
+
+    outcome = contact_step(_Start, surface, cm.ContactState.empty(n), x, np.zeros((n, d)),
+                           faces, faces, dt, settings)
+    state = outcome.contacts.arrays()
+    ck.extrapolate_lag(state, tuple(field.copy() for field in state),
+                       (np.zeros(n), np.zeros(n), np.zeros(n, bool)))

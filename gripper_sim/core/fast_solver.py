@@ -186,6 +186,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
             self.solve(q, np.zeros(self.n), dt, q.copy(), con)
         except NewtonFailure:
             pass
+        kernels.cg_direction(np.zeros(1), np.zeros(1), 0.0)  # CG ended in one iteration
         self.reset()
         self.stats = dict.fromkeys(self.stats, 0)
 
