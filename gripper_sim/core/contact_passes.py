@@ -47,6 +47,10 @@ class ContactSettings:
         gravity: m/s^2, sets the slowest approach that bounces (5 g dt, at least 1 mm/s).
         deepest_first: a pass adds, of the free nodes inside a face, those at least this
             fraction of the deepest one's depth (0: all of them).
+        extrapolate_lag: a sliding node's lagged normal force goes to the secant
+            estimate of its fixed point (``contact_kernels.extrapolate_lag``) between
+            passes. On in 3D; off in 2D, whose whole-step kernel (``core.kernels``) has
+            not got it yet and whose reference path must match it.
     """
 
     max_passes: int
@@ -54,13 +58,14 @@ class ContactSettings:
     release_threshold: float
     gravity: float
     deepest_first: float = 0.0
+    extrapolate_lag: bool = False
 
     @classmethod
     def from_config(cls, config, deepest_first: float = 0.0) -> 'ContactSettings':
         return cls(int(config['sim.max_contact_passes']),
                    float(config['contact.max_correction_speed']),
                    float(config['contact.release_threshold']), float(config['world.gravity']),
-                   deepest_first)
+                   deepest_first, int(config.get('dimension', 2)) == 3)
 
 
 @dataclass
@@ -119,12 +124,12 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
         iterations += solution.iterations
         x = np.ascontiguousarray(solution.q.reshape(-1, d))
         reaction = np.ascontiguousarray(solution.reaction.reshape(-1, d))
-        before = tuple(field.copy() for field in state)
+        before = tuple(field.copy() for field in state) if settings.extrapolate_lag else None
         if not ck.update(state, faces, x, x_n, v_n, reaction, surface, dt,
                          settings.release_threshold, v_min, settings.deepest_first, released,
                          slipped):
             break
-        if pass_ < settings.max_passes - 1:
+        if settings.extrapolate_lag and pass_ < settings.max_passes - 1:
             ck.extrapolate_lag(state, before, lag_history)
     v, forces = np.empty((n, d)), np.empty((n, d))
     masses = np.ascontiguousarray(solver.m[::d], dtype=float)
