@@ -79,8 +79,9 @@ CG_RELATIVE_FLOOR = 10.0
 #: CG iterations before the matrix is factorised afresh
 CG_MAX_ITERATIONS = 20
 #: a system that took more CG iterations than this gets a new factorisation next time
-#: (a factorisation costs about 25 of the solid apple's CG iterations)
-CG_STALE_ITERATIONS = 5
+#: (a factorisation costs about 25 of the solid apple's CG iterations; 3 to 5 give the
+#: same 3D grasp times, 3 the 2D Fin Ray grasp's best: 2.3 s against 2.4-2.8 s at 5)
+CG_STALE_ITERATIONS = 3
 #: iterative-refinement sweeps of the direct solve when CG cannot be used (indefinite)
 REFINEMENT_SWEEPS = 3
 #: after a Newton step below this multiple of the tolerance the next iteration reuses
