@@ -9,8 +9,8 @@ solid) it runs the same grasp (close to a grip force of 2 mu N = 1.5 m g, settle
 peak grip force is within 2 % of the reference, and prints for it the simulated time
 over the wall time (the real-time factor; >= 1 is real time), the CPU time per step
 (what the step costs on a quiet core), the linear algebra per step (Newton systems,
-LU factorisations, conjugate-gradient iterations) and a breakdown of the CPU time by
-part (energy kernels, LU factorisation, triangular solves, the rest of Newton, contact
+LDL^T factorisations, conjugate-gradient iterations) and a breakdown of the CPU time by
+part (energy kernels, LDL^T factorisation, triangular solves, the rest of Newton, contact
 bookkeeping, measures). Single thread; wall figures vary with the machine's load, which
 is printed. ``GRIPPER_SIM_FAST=0`` runs the generic Newton path (the same energy
 kernels as triplets, one LU per Newton iteration) instead.
@@ -57,8 +57,10 @@ MODELS = {
 PARTS = [
     ('_measure', 'measures (wrenches, areas, damage)'),
 ]
-_FACTOR = '<built-in method scipy.sparse.linalg._dsolve._superlu.gstrf>'
-_TRISOLVE = "<method 'solve' of 'SuperLU' objects>"
+#: the kept preconditioner's kernels (``core.solver_kernels``): block LDL^T factorisation
+#: and solve
+_FACTOR = 'ldl_factor_3'
+_TRISOLVE = 'ldl_solve_3'
 
 
 def grasp(overrides: list[str], dt: float, profile: bool = False):
@@ -95,7 +97,7 @@ def breakdown(profiler, total: float) -> list[tuple[str, float]]:
     trisolve = own.get(_TRISOLVE, 0.0)
     newton = cum.get('solve', 0.0)
     rows = [('energy kernels (value, gradient, Hessian)', energies),
-            ('sparse LU factorisation (SuperLU)', factor),
+            ('block LDL^T factorisation', factor),
             ('triangular solves (CG preconditioner, direct)', trisolve),
             ('Newton rest (filter S H S, CG, friction, search)',
              newton - energies - factor - trisolve)]
@@ -115,7 +117,7 @@ def bench(model: str, quick: bool) -> None:
     fruit = sim.fruit
     print(f'\n{model}: {fruit.n_nodes} vertices ({len(fruit.surface)} on the surface), '
           f'{len(fruit.tetrahedra)} tetrahedra, {fruit.total_mass * 1e3:.0f} g; solver: '
-          + ('fast (numba kernels, CG on a kept LU)' if getattr(sim.solver, 'fast', False)
+          + ('fast (numba kernels, CG on a kept LDL^T)' if getattr(sim.solver, 'fast', False)
              else 'numpy reference'))
     print(f'  reference dt {reference_dt * 1e3:g} ms: outcome {ref["outcome"]}, peak grip '
           f'force {ref["peak_grip_force"]:.4f} N, slip {ref["slip_distance"] * 1e3:.2f} mm, '
@@ -146,7 +148,7 @@ def bench(model: str, quick: bool) -> None:
         print(f'     per step: {sim.gap_solves / steps:.2f} solves of the jaw drive (gaps), '
               + ', '.join(f'{stats[k] / steps:.2f} {label}' for k, label in (
                   ('passes', 'Newton solves (contact passes)'), ('systems', 'Newton systems'),
-                  ('factorisations', 'LU factorisations'), ('cg_iterations', 'CG iterations'))))
+                  ('factorisations', 'LDL^T factorisations'), ('cg_iterations', 'CG iterations'))))
     sim, summary, wall, cpu, profiler = grasp(overrides, chosen, profile=True)
     print(f'     CPU time by part (under the profiler, {cpu / steps * 1e3:.1f} ms per step):')
     for label, seconds in breakdown(profiler, cpu):

@@ -6,7 +6,7 @@ import pytest
 import scipy.sparse.linalg as spla
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import solver_kernels
+from gripper_sim.core import solver_kernels, sparse_ldl
 from gripper_sim.core.fast_solver import KINK_FACTOR, PatternCachingSolver, as_cone
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, ImplicitEulerSolver, StepConstraints
 from gripper_sim.workflows.factory import make_simulation
@@ -84,9 +84,10 @@ def test_first_step_stops_a_turning_slip_where_it_is_nearest_zero():
 @pytest.mark.parametrize('model', [['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
                                    ['fruit.model=solid', 'fruit.skin.enabled=false',
                                     'fruit.mesh.subdivisions=3']], ids=['shell', 'solid'])
-def test_the_ordering_chosen_from_the_pattern_gives_the_sparser_factors(model):
-    """The order picked from a stand-in matrix when the solver is built is the one whose
-    factors of a real Newton matrix (the fruit's Hessian at rest) are sparser."""
+def test_the_block_ldl_preconditioner_solves_a_newton_matrix(model):
+    """The kept factorisation (block LDL^T, its 3 x 3 kernels) of a real Newton matrix
+    (the fruit's Hessian at rest plus the inertia) solves it to round-off, filtered too,
+    and its factors are those of the generic ``sparse_ldl.factor``."""
     sim = make_simulation(load_config(overrides=['dimension=3'] + model))
     solver = sim.solver
     assert solver.fast
@@ -96,14 +97,23 @@ def test_the_ordering_chosen_from_the_pattern_gives_the_sparser_factors(model):
     for energy, scatter in zip(solver.energies, solver._scatter):
         energy.evaluate_into(q, np.zeros(q.size), data, scatter, True)
     solver_kernels.add_diagonal(data, solver._diag_pos, solver.m / dt ** 2)
-    chosen = solver._ordering
-    sizes = {}
-    for ordering in ('mmd', 'nd'):
-        solver._ordering = ordering
-        lu = solver._factorise(data)
-        sizes[ordering] = lu.nnz
-        rhs = np.linspace(-1.0, 1.0, q.size)
-        exact = spla.spsolve(solver._csc(data).tocsc(), rhs)
-        # single precision: a preconditioner, not a solution
-        assert np.max(np.abs(lu.solve(rhs) - exact)) < 1e-2 * np.max(np.abs(exact))
-    assert sizes[chosen] == min(sizes.values())
+    ldl = solver._factorise(data)
+    matrix = solver._csc(data).tocsc()
+    rhs = np.linspace(-1.0, 1.0, q.size)
+    exact = spla.spsolve(matrix, rhs)
+    assert np.max(np.abs(ldl.solve(rhs) - exact)) < 1e-9 * np.max(np.abs(exact))
+    # a node held in every direction (S_0 = 0): the filtered solve is A^-1 S b
+    filters = np.tile(np.eye(3), (q.size // 3, 1, 1))
+    filters[0] = 0.0
+    filtered = ldl.solve_filtered(filters, rhs)
+    assert np.max(np.abs(filtered - ldl.solve(np.where(np.arange(q.size) < 3, 0.0, rhs)))) \
+        < 1e-12 * np.max(np.abs(exact))
+    pattern = ldl.pattern
+    values = pattern.new_values()
+    target, source = solver._ldl_gather
+    values.reshape(-1)[target] = data[source]
+    l_values = np.empty_like(ldl.l_values)
+    d_inv = np.empty_like(ldl.d_inv)
+    assert sparse_ldl.factor(pattern.arrays, values, l_values, d_inv) == 0
+    assert np.allclose(l_values, ldl.l_values, rtol=1e-10, atol=1e-12 * np.abs(l_values).max())
+    assert np.allclose(d_inv, ldl.d_inv, rtol=1e-10, atol=1e-12 * np.abs(d_inv).max())

@@ -345,6 +345,63 @@ def update(state, faces, x, x_n, v_n, reaction, surface, dt, threshold, v_min,
     return changed
 
 
+#: a sliding node's normal force is extrapolated (``extrapolate_lag``) only where the
+#: plain update converges or diverges no worse than this: |dR/dL| < 1 converges, and
+#: 1 - dR/dL >= 0.1 keeps the secant's fixed point within ten times the last change
+LAG_SLOPE_RANGE = (-10.0, 0.9)
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def extrapolate_lag(state, before, history):
+    """After ``update`` asked for another pass: set each sliding node's lagged normal
+    force to the secant estimate of its fixed point instead of the last reaction.
+
+    A pass that slides node i with the friction bound mu_k L (L = its lagged normal
+    force) ends with the normal reaction R(L); the next pass uses L' = R, so a gap
+    |R - L| shrinks by the factor |dR/dL| per pass (about 1/2 for a node on a lifted
+    jaw: many passes before the 2 % rule of ``update`` holds). With the pairs (L, R)
+    of two passes of the same contact set, the slope s = dR/dL is known and the fixed
+    point L = R(L) is (R - s L) / (1 - s) (the secant method on R(L) - L). The test
+    that ends the passes is unchanged: the friction bound used within 2 % of the
+    reaction it produced.
+
+    Args:
+        state: the contact state (see the module doc) after ``update``; its
+            normal_force is changed at the extrapolated nodes.
+        before: a copy of the state during the solve (before ``update``): its
+            normal_force the lagged normal forces the friction bounds used.
+        history: (previous lag (n,) N, previous reaction (n,) N, known (n,) bool), each
+            sliding node's pair from the previous pass of the step (updated; a change
+            of the contact set forgets every pair, since the reactions then move for
+            another reason).
+    """
+    obstacle, mode, normal_force, _, secondary, _ = state
+    obstacle_before, mode_before, lag_used, _, secondary_before, _ = before
+    previous_lag, previous_reaction, known = history
+    n = obstacle.shape[0]
+    same_set = True
+    for i in range(n):
+        if (obstacle[i] != obstacle_before[i] or mode[i] != mode_before[i]
+                or secondary[i] != secondary_before[i]):
+            same_set = False
+    for i in range(n):
+        sliding = obstacle[i] >= 0 and mode[i] == SLIP and mode_before[i] == SLIP
+        if not (same_set and sliding):
+            known[i] = False
+            continue
+        lag = lag_used[i]
+        reaction = normal_force[i]
+        if known[i] and abs(lag - previous_lag[i]) > 1e-9:
+            slope = (reaction - previous_reaction[i]) / (lag - previous_lag[i])
+            if LAG_SLOPE_RANGE[0] <= slope <= LAG_SLOPE_RANGE[1]:
+                estimate = (reaction - slope * lag) / (1.0 - slope)
+                if estimate > 0.0:
+                    normal_force[i] = estimate
+        previous_lag[i] = lag
+        previous_reaction[i] = reaction
+        known[i] = True
+
+
 @njit(cache=True, error_model='numpy', inline='always')
 def capped_rebound_scale(v, rebound, v_start, dx, reaction, mass, dt):
     """The factor s in [0, 1] by which one node's rebound (d,) m/s is scaled so that it

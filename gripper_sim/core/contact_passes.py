@@ -34,7 +34,7 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core import contact_kernels as ck
-from gripper_sim.core.stepper import StepConstraints
+from gripper_sim.core.stepper import StepConstraints, StepSolution
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,10 @@ class ContactSettings:
         gravity: m/s^2, sets the slowest approach that bounces (5 g dt, at least 1 mm/s).
         deepest_first: a pass adds, of the free nodes inside a face, those at least this
             fraction of the deepest one's depth (0: all of them).
+        extrapolate_lag: a sliding node's lagged normal force goes to the secant
+            estimate of its fixed point (``contact_kernels.extrapolate_lag``) between
+            passes. On in 3D; off in 2D, whose whole-step kernel (``core.kernels``) has
+            not got it yet and whose reference path must match it.
     """
 
     max_passes: int
@@ -54,13 +58,14 @@ class ContactSettings:
     release_threshold: float
     gravity: float
     deepest_first: float = 0.0
+    extrapolate_lag: bool = False
 
     @classmethod
     def from_config(cls, config, deepest_first: float = 0.0) -> 'ContactSettings':
         return cls(int(config['sim.max_contact_passes']),
                    float(config['contact.max_correction_speed']),
                    float(config['contact.release_threshold']), float(config['world.gravity']),
-                   deepest_first)
+                   deepest_first, int(config.get('dimension', 2)) == 3)
 
 
 @dataclass
@@ -106,7 +111,8 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
     slipped = np.zeros(n, bool)
     v_min = max(5.0 * settings.gravity * dt, 1e-3)  # m/s, the slowest approach that bounces
     iterations = 0
-    for _ in range(settings.max_passes):
+    lag_history = (np.zeros(n), np.zeros(n), np.zeros(n, bool))
+    for pass_ in range(settings.max_passes):
         start, filters = np.empty((n, d)), np.empty((n, d, d))
         fr_nodes, fr_bound = np.empty(n, np.int64), np.empty(n)
         fr_tangents, fr_speed = np.empty((n, d - 1, d)), np.empty((n, d - 1))
@@ -118,11 +124,37 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
         iterations += solution.iterations
         x = np.ascontiguousarray(solution.q.reshape(-1, d))
         reaction = np.ascontiguousarray(solution.reaction.reshape(-1, d))
+        before = tuple(field.copy() for field in state) if settings.extrapolate_lag else None
         if not ck.update(state, faces, x, x_n, v_n, reaction, surface, dt,
                          settings.release_threshold, v_min, settings.deepest_first, released,
                          slipped):
             break
+        if settings.extrapolate_lag and pass_ < settings.max_passes - 1:
+            ck.extrapolate_lag(state, before, lag_history)
     v, forces = np.empty((n, d)), np.empty((n, d))
     masses = np.ascontiguousarray(solver.m[::d], dtype=float)
     ck.finish(state, faces, x, x_n, v_n, reaction, masses, dt, v, forces)
     return StepOutcome(x, v, forces, contacts, iterations)
+
+
+def load_kernels(masses: np.ndarray, surface: np.ndarray, x: np.ndarray, faces: list,
+                 dt: float, settings: ContactSettings) -> None:
+    """Run each compiled function of a contact pass once, on a throwaway step from
+    positions ``x`` (n, d) m at rest with the faces ``faces`` standing still and a solve
+    that returns its start: numba loads a kernel's compiled code from its cache on first
+    use (10-20 ms each), which then happens here, when a simulation is built, and not in
+    its first steps. ``masses``: (d n,) kg per dof; ``surface``: (m,) node indices."""
+    n, d = x.shape
+
+    class _Start:
+        m = masses
+
+        @staticmethod
+        def solve(q_n, v_n, dt_, q_start, constraints):
+            return StepSolution(q_start, np.zeros_like(q_start), 0, [])
+
+    outcome = contact_step(_Start, surface, cm.ContactState.empty(n), x, np.zeros((n, d)),
+                           faces, faces, dt, settings)
+    state = outcome.contacts.arrays()
+    ck.extrapolate_lag(state, tuple(field.copy() for field in state),
+                       (np.zeros(n), np.zeros(n), np.zeros(n, bool)))

@@ -15,19 +15,21 @@ iteration (same line search, shifts and stopping rule) with less work:
   S H S + (I - S) is one kernel over the d x d node blocks (``core.solver_kernels``), on
   the same pattern; kinetic friction is the Coulomb cone of the stepper, a 2D tangent
   being a cone with one tangent;
-- each Newton system is solved by conjugate gradients preconditioned with a
-  single-precision LU factorisation kept from an earlier Newton iteration or step (the
-  matrix changes little between them), its rank-one terms by the Woodbury identity and
-  the whole projected by the step's filter S; a new LU is made only after CG needed
-  more than ``CG_STALE_ITERATIONS`` (or would not converge in time), and CG runs after
-  it too, so the precision of the solution is that of CG, not of the factors;
+- each Newton system is solved by conjugate gradients preconditioned with a block
+  LDL^T factorisation (``core.sparse_ldl``, d x d node blocks, no pivoting across
+  blocks) kept from an earlier Newton iteration or step (the matrix changes little
+  between them), its rank-one terms by the Woodbury identity and the whole projected
+  by the step's filter S; a new factorisation is made only after CG needed more than
+  ``CG_STALE_ITERATIONS`` (or would not converge in time), and CG runs after it too,
+  so the precision of the solution is that of CG, not of the factors;
 - CG is an inexact Newton solve (Dembo, Eisenstat & Steihaug 1982): it stops at a
   relative residual of ``CG_TOLERANCE`` while the step is large, and otherwise when its
   error estimate (the preconditioned residual) is below ``CG_ERROR_FRACTION`` of the
   Newton tolerance, so the step that ends the iteration is accurate;
-- SuperLU factorises P A P^T in METIS's nested-dissection order of the node graph when
-  that gives sparser factors than its own minimum-degree order (the shell: half the
-  time);
+- the factorisation is in METIS's nested-dissection order of the node graph, and for
+  d = 3 by kernels written out for 3 x 3 blocks (``solver_kernels.ldl_factor_3``,
+  ``ldl_solve_3``): on the 3D fruits a factorisation takes 0.4 and a solve 0.5-0.7 of
+  the time of the single-precision SuperLU used before, in double precision;
 - a later contact pass of the same step starts from the previous pass's solution (in
   the directions the new filter leaves free), and after a Newton step below
   ``HESSIAN_REUSE`` times the tolerance the next iteration reuses the Newton matrix;
@@ -46,7 +48,6 @@ import os
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
                                       StepConstraints, StepSolution, descent_direction,
@@ -54,16 +55,20 @@ from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, N
 
 try:  # numba is optional: without it the numpy reference path runs
     from gripper_sim.core import solver_kernels as kernels
+    from gripper_sim.core import sparse_ldl
 except ImportError:  # pragma: no cover - depends on the environment
-    kernels = None
+    kernels = sparse_ldl = None
 
-#: SuperLU settings for the Newton systems (symmetric pattern: minimum degree on
-#: A^T + A and diagonal pivots, about twice as fast as the defaults for the 3D fruit)
+#: SuperLU settings for the reference path's Newton systems (symmetric pattern:
+#: minimum degree on A^T + A and diagonal pivots, about twice as fast as the defaults
+#: for the 3D fruit)
 SYMMETRIC_LU_OPTIONS = dict(permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
                             options=dict(SymmetricMode=True))
 
-#: relative residual (infinity norms) at which the preconditioned CG stops
-CG_TOLERANCE = 1e-1
+#: relative residual (infinity norms) at which the preconditioned CG stops (0.1 took
+#: 12 % more Newton systems on the solid apple's grasp: a fruit held at two nodes has a
+#: soft mode that a loose residual leaves to the next Newton step)
+CG_TOLERANCE = 1e-2
 #: ... or when the preconditioned residual (the error estimate of dq) is below this
 #: fraction of the Newton tolerance (times dt): the last Newton iterations, whose dq
 #: are tiny, need no relative accuracy
@@ -74,7 +79,9 @@ CG_RELATIVE_FLOOR = 10.0
 #: CG iterations before the matrix is factorised afresh
 CG_MAX_ITERATIONS = 20
 #: a system that took more CG iterations than this gets a new factorisation next time
-CG_STALE_ITERATIONS = 8
+#: (a factorisation costs about 25 of the solid apple's CG iterations; 3 to 5 give the
+#: same 3D grasp times, 3 the 2D Fin Ray grasp's best: 2.3 s against 2.4-2.8 s at 5)
+CG_STALE_ITERATIONS = 3
 #: iterative-refinement sweeps of the direct solve when CG cannot be used (indefinite)
 REFINEMENT_SWEEPS = 3
 #: after a Newton step below this multiple of the tolerance the next iteration reuses
@@ -88,9 +95,8 @@ KINK_FACTOR = 10.0
 
 def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
     """Fill-reducing order (n,) of a graph's nodes: METIS's multilevel nested dissection
-    (Karypis & Kumar 1998, SIAM J. Sci. Comput. 20(1)), whose separators leave ~6 %
-    fewer factor entries on the shell than SuperLU's minimum degree or level-set
-    bisection."""
+    (Karypis & Kumar 1998, SIAM J. Sci. Comput. 20(1)): on the 3D fruits' node graphs
+    2-6 % fewer factor blocks than ``sparse_ldl.minimum_degree``."""
     import pymetis
     graph = sp.csr_matrix(graph)
     graph.setdiag(0)
@@ -99,32 +105,63 @@ def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
     return np.asarray(order, dtype=np.int64)
 
 
-class _SinglePrecisionLU:
-    """SuperLU of P A P^T in single precision standing for A^-1 as a preconditioner:
-    x[perm] = LU^-1 b[perm] (perm the identity: SuperLU's own column order).
+class _BlockLDL:
+    """A = L D L^T in d x d node blocks (``core.sparse_ldl``) standing for A^-1 as the
+    preconditioner, in the nested-dissection order of the node graph: x[perm] =
+    (L D L^T)^-1 b[perm], perm (n,) the dofs in factor order.
 
-    Single precision makes the factorisation about a third and the triangular solves
-    a sixth faster; conjugate gradients in double precision make up the accuracy."""
+    Args:
+        pattern: the ``sparse_ldl.SparsePattern`` of the Newton matrix.
+        gather: (target (m,) into the flat block values, source (m,) into the CSC
+            values): the matrix's stored blocks taken from its CSC values.
+        perm: (n,) dofs in the factor's position order.
+    """
 
-    def __init__(self, lu, perm: np.ndarray):
-        self.lu, self.perm = lu, perm
-        self._rhs = np.empty(perm.size, np.float32)
+    def __init__(self, pattern, gather: tuple, perm: np.ndarray):
+        self.pattern, self.gather, self.perm = pattern, gather, perm
+        b = pattern.block
+        self.l_values = np.empty((pattern.n_factor, b, b))
+        self.d_inv = np.empty((pattern.n_nodes, b, b))
+        self._rhs = np.empty(perm.size)
 
-    @property
-    def nnz(self) -> int:
-        return self.lu.L.nnz + self.lu.U.nnz
+    def factorise(self, data: np.ndarray) -> None:
+        """Factorise the matrix of CSC values ``data``. Raises RuntimeError (a singular
+        pivot block)."""
+        values = self.pattern.new_values()
+        target, source = self.gather
+        values.reshape(-1)[target] = data[source]
+        if self.pattern.block == 3:
+            status = kernels.ldl_factor_3(self.pattern.arrays, values.reshape(-1, 9),
+                                          self.l_values.reshape(-1, 9),
+                                          self.d_inv.reshape(-1, 9))
+        else:
+            status = sparse_ldl.factor(self.pattern.arrays, values, self.l_values, self.d_inv)
+        if status < 0:
+            raise RuntimeError('singular Newton matrix')
+
+    def _solve_in_place(self, x: np.ndarray) -> None:
+        if self.pattern.block == 3:
+            kernels.ldl_solve_3(self.pattern.l_ptr, self.pattern.l_row,
+                                self.l_values.reshape(-1, 9), self.d_inv.reshape(-1, 9), x)
+        else:
+            sparse_ldl.solve(self.pattern.arrays, self.l_values, self.d_inv, x)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b for b (n,) or (n, k)."""
-        x = np.empty(b.shape)
-        x[self.perm] = self.lu.solve(np.ascontiguousarray(b[self.perm], dtype=np.float32))
-        return x
+        columns = b.reshape(b.shape[0], -1)
+        out = np.empty(columns.shape)
+        for c in range(columns.shape[1]):
+            x = np.ascontiguousarray(columns[self.perm, c], dtype=float)
+            self._solve_in_place(x)
+            out[self.perm, c] = x
+        return out.reshape(b.shape)
 
     def solve_filtered(self, filters: np.ndarray, b: np.ndarray) -> np.ndarray:
         """A^-1 S b (n,), S the node filters (n_nodes, d, d)."""
         kernels.filter_and_permute(filters, b, self.perm, self._rhs)
+        self._solve_in_place(self._rhs)
         x = np.empty(b.shape)
-        kernels.unpermute(self.lu.solve(self._rhs), self.perm, x)
+        kernels.unpermute(self._rhs, self.perm, x)
         return x
 
 
@@ -161,8 +198,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
             fast = fast_available()
         self.fast = bool(fast and kernels is not None and self.beta == 0
                          and all(hasattr(e, 'evaluate_into') for e in self.energies))
-        #: counts of the fast path: Newton solves (contact passes), Newton systems, LU
-        #: factorisations, CG iterations
+        #: counts of the fast path: Newton solves (contact passes), Newton systems,
+        #: (LDL^T) factorisations, CG iterations
         self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
         self._lu = None
         self._woodbury = None  # (u, A^-1 u, (C^-1 + u^T A^-1 u)^-1) at the factorisation
@@ -186,6 +223,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
             self.solve(q, np.zeros(self.n), dt, q.copy(), con)
         except NewtonFailure:
             pass
+        kernels.cg_direction(np.zeros(1), np.zeros(1), 0.0)  # CG ended in one iteration
         self.reset()
         self.stats = dict.fromkeys(self.stats, 0)
 
@@ -315,39 +353,20 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._block_nodes = np.stack([brow, bcol], axis=1).astype(np.int64)
         self._diag_block_pos = self._block_pos[brow == bcol][np.argsort(brow[brow == bcol])]
         self._diag_pos = np.searchsorted(unique, np.arange(n) * n + np.arange(n))
-        # the nested-dissection order of the node graph, dof by dof, and the gather
-        # index that permutes the CSC values to the pattern of P A P^T
+        # the block LDL^T preconditioner in the nested-dissection order of the node graph
+        # (dof by dof), and where its blocks come from in the CSC values
+        off = brow != bcol
         graph = sp.csr_matrix((np.ones(len(bcol)), (brow, bcol)), shape=(nodes, nodes))
         node_order = nested_dissection(graph)
-        perm = (d * node_order[:, None] + a[None, :]).ravel()
-        inverse = np.empty(n, np.int64)
-        inverse[perm] = np.arange(n)
-        col = np.repeat(np.arange(n), np.diff(self._indptr))
-        new_keys = inverse[col] * n + inverse[self._indices]
-        gather = np.argsort(new_keys)
-        self._perm = perm
-        self._perm_gather = gather
-        self._perm_indices = (new_keys[gather] % n).astype(np.int32)
-        self._perm_indptr = np.searchsorted(new_keys[gather] // n,
-                                            np.arange(n + 1)).astype(np.int32)
-        self._ordering = self._sparser_ordering()
+        self._ldl_pattern = sparse_ldl.analyse(
+            nodes, np.stack([brow[off], bcol[off]], axis=1), d, order=node_order)
+        index, transposed = self._ldl_pattern.block_index(brow, bcol)
+        stored = ~transposed
+        target = (d * d * index[stored])[:, None, None] + d * a[:, None] + a[None, :]
+        self._ldl_gather = (target.ravel(), self._block_pos[stored].ravel())
+        self._perm = (d * node_order[:, None] + a[None, :]).ravel()
         self._matvec_indptr = self._indptr.astype(np.int64)
         self._matvec_indices = self._indices.astype(np.int64)
-
-    def _sparser_ordering(self) -> str:
-        """'nd' (nested dissection) or 'mmd' (the solver's ``lu_options``): the order
-        whose LU factors of a matrix on the pattern are sparser. With diagonal pivots
-        the fill depends on the pattern only, so a diagonally dominant stand-in (-1 off
-        the diagonal, the column's entry count on it) decides once, before any step."""
-        counts = np.diff(self._indptr).astype(float)
-        values = -np.ones(self._nnz)
-        values[self._diag_pos] = counts[:self.n] + 1.0
-        self._ordering = 'mmd'
-        mmd = self._factorise(values).nnz
-        self._ordering = 'nd'
-        nd = self._factorise(values).nnz
-        self.stats['factorisations'] = 0
-        return 'nd' if nd < mmd else 'mmd'
 
     def _kink_step(self, q, q_n, dq, dt, con: StepConstraints) -> float:
         """The line search's first step for sliding nodes: a Newton step that turns a
@@ -408,26 +427,18 @@ class PatternCachingSolver(ImplicitEulerSolver):
                                     np.ascontiguousarray(blocks))
         return phi, grad, fric_grad, (data, low_rank)
 
-    def _factorise(self, values: np.ndarray) -> _SinglePrecisionLU:
-        """Single-precision LU of A (CSC ``values`` on the pattern): with the solver's
-        ordering (``lu_options``) or of P A P^T in the nested-dissection order, whichever
-        gives the sparser factors (``_sparser_ordering``). Raises RuntimeError
+    def _factorise(self, values: np.ndarray) -> _BlockLDL:
+        """The block LDL^T of A (CSC ``values`` on the pattern). Raises RuntimeError
         (singular)."""
         self.stats['factorisations'] += 1
-        options = self.lu_options or {}
-        if self._ordering == 'mmd':
-            return _SinglePrecisionLU(spla.splu(self._csc(values.astype(np.float32)), **options),
-                                      np.arange(self.n))
-        permuted = sp.csc_matrix((values[self._perm_gather].astype(np.float32),
-                                  self._perm_indices, self._perm_indptr),
-                                 shape=(self.n, self.n))
-        return _SinglePrecisionLU(spla.splu(permuted, **dict(options, permc_spec='NATURAL')),
-                                  self._perm)
+        ldl = _BlockLDL(self._ldl_pattern, self._ldl_gather, self._perm)
+        ldl.factorise(values)
+        return ldl
 
     def _linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
                       dt: float, filters: np.ndarray):
         """dq with (A + sum c u u^T) dq = rhs (A: CSC ``values`` on the pattern) by
-        conjugate gradients preconditioned with the kept LU, factorised afresh when CG
+        conjugate gradients preconditioned with the kept LDL^T, factorised afresh when CG
         does not converge fast (or ``fresh``), in the range of the filters S (n_nodes, d,
         d). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
@@ -455,8 +466,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
         return dq
 
     def _preconditioner(self, u: np.ndarray, c: np.ndarray, filters: np.ndarray | None = None):
-        """r -> (kept LU + rank-one terms)^-1 r, projected by the filters S (n_nodes, d,
-        d) if given: S (LU + ...)^-1 S r."""
+        """r -> (kept LDL^T + rank-one terms)^-1 r, projected by the filters S (n_nodes,
+        d, d) if given: S (LDL^T + ...)^-1 S r."""
         lu = self._lu
         kept = self._woodbury
         if kept is not None and kept[0].shape[1] == c.size:

@@ -547,20 +547,25 @@ def neohookean_tets(x, tet, grad_n, volume, mu, lam, grad, data, scatter, hessia
         if not hessian:
             continue
         # H_(k i)(l m) = V [mu d_im (gn_k . gn_l) + (mu - lam ln J) B_l[i] B_k[m]
-        #                   + lam B_k[i] B_l[m]],   B_k[m] = sum_j gn[k, j] Finv[j, m]
+        #                   + lam B_k[i] B_l[m]],   B_k[m] = sum_j gn[k, j] Finv[j, m];
+        # symmetric: the blocks l >= k are computed, the (l, k) ones are their transposes
         _shape_times_inverse(gn, finv, bk, 4)
-        c2 = mu - lam * lnj
+        c2 = vol * (mu - lam * lnj)
+        c3 = vol * lam
         sc = scatter[t]
         for k in range(4):
-            for l in range(4):
-                dot = gn[k, 0] * gn[l, 0] + gn[k, 1] * gn[l, 1] + gn[k, 2] * gn[l, 2]
+            for l in range(k, 4):
+                dot = vol * mu * (gn[k, 0] * gn[l, 0] + gn[k, 1] * gn[l, 1]
+                                  + gn[k, 2] * gn[l, 2])
                 for i in range(3):
                     row = (3 * k + i) * 12 + 3 * l
                     for m in range(3):
-                        v = c2 * bk[l, i] * bk[k, m] + lam * bk[k, i] * bk[l, m]
+                        v = c2 * bk[l, i] * bk[k, m] + c3 * bk[k, i] * bk[l, m]
                         if i == m:
-                            v += mu * dot
-                        data[sc[row + m]] += vol * v
+                            v += dot
+                        data[sc[row + m]] += v
+                        if l != k:
+                            data[sc[(3 * l + m) * 12 + 3 * k + i]] += v
     return value
 
 

@@ -33,6 +33,8 @@ import numpy as np
 from gripper_sim.configuration import validate
 from gripper_sim.core.barrier import (START_GAP_FRACTION, BarrierContact, BarrierSettings,
                                       check_supported)
+from gripper_sim.core.contact_passes import ContactSettings
+from gripper_sim.core.contact_passes import load_kernels as load_contact_kernels
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core.gripper import GripperKinematics
@@ -151,6 +153,10 @@ class Simulation3D(SimulationFacade):
             max_speed=c['gripper.max_speed'])
         self._observers: list[Callable[[StepResult3D], None]] = []
         self.reset()
+        if self._soft is None and self._barrier is None:
+            load_contact_kernels(self.solver.m, self.fruit.surface, self.q,
+                                 self._faces(self._grip), self.dt,
+                                 ContactSettings.from_config(self.config, self.deepest_first))
 
     def _make_damage(self) -> DamageTracker3D:
         return DamageTracker3D(self.fruit, self.config)
