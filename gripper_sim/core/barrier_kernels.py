@@ -234,23 +234,42 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
                 local[i, j] = second * grad[i] * grad[j] + first * hess[i, j]
         if project:
             local = _clamp_to_psd(local)
-        for i in range(m):
-            for j in range(m):
-                for ci in range(2):
-                    row = vertex_dofs[ids[i], ci]
-                    if row < 0:
-                        continue
-                    for cj in range(2):
-                        col = vertex_dofs[ids[j], cj]
-                        if col < 0:
-                            continue
-                        key = col * n_dof + row
-                        where = np.searchsorted(pattern_keys, key)
-                        if where >= pattern_keys.size or pattern_keys[where] != key:
-                            outside += 1
-                            continue
-                        hessian_values[slots[where]] += local[2 * i + ci, 2 * j + cj]
+        outside += add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
+                                     hessian_values)
     return total, outside
+
+
+@njit(cache=True)
+def add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
+                      hessian_values):
+    """Add a pair's local Hessian into a CSC matrix's values; returns how many of its
+    entries fall outside the pattern (left out).
+
+    Args:
+        local: (2 m, 2 m) N/m, over the (x, y) dofs of the pair's vertices ``ids[:m]``.
+        vertex_dofs: (n_v, 2) each vertex's dof per coordinate, -1 where fixed.
+        n_dof: the matrix's size.  pattern_keys: sorted (nnz,) keys col * n_dof + row of
+        the pattern.  slots: (nnz,) the value index of each key.
+        hessian_values: the CSC values, added into.
+    """
+    outside = 0
+    for i in range(m):
+        for j in range(m):
+            for ci in range(2):
+                row = vertex_dofs[ids[i], ci]
+                if row < 0:
+                    continue
+                for cj in range(2):
+                    col = vertex_dofs[ids[j], cj]
+                    if col < 0:
+                        continue
+                    key = col * n_dof + row
+                    where = np.searchsorted(pattern_keys, key)
+                    if where >= pattern_keys.size or pattern_keys[where] != key:
+                        outside += 1
+                        continue
+                    hessian_values[slots[where]] += local[2 * i + ci, 2 * j + cj]
+    return outside
 
 
 @njit(cache=True)

@@ -25,6 +25,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from gripper_sim.core.barrier_kernels import add_local_hessian
+
 
 @njit(cache=True)
 def _blend(mu_s, mu_k, y, eps_v):
@@ -155,6 +157,7 @@ def friction_terms(v, start, dt, eps_v, vertex_ids, weights, tangents, forces, c
     total = 0.0
     outside = 0
     g = np.empty(6)
+    local = np.zeros((6, 6))
     for k in range(forces.shape[0]):
         m = 3 if vertex_ids[k, 2] >= 0 else 2
         tx, ty = tangents[k, 0], tangents[k, 1]
@@ -178,20 +181,9 @@ def friction_terms(v, start, dt, eps_v, vertex_ids, weights, tangents, forces, c
         if not want_hessian or slope <= 0.0:
             continue
         stiffness = forces[k] * slope / dt
-        for i in range(m):
-            for ci in range(2):
-                row = vertex_dofs[vertex_ids[k, i], ci]
-                if row < 0:
-                    continue
-                for j in range(m):
-                    for cj in range(2):
-                        col = vertex_dofs[vertex_ids[k, j], cj]
-                        if col < 0:
-                            continue
-                        key = col * n_dof + row
-                        where = np.searchsorted(pattern_keys, key)
-                        if where >= pattern_keys.size or pattern_keys[where] != key:
-                            outside += 1
-                            continue
-                        hessian_values[slots[where]] += stiffness * g[2 * i + ci] * g[2 * j + cj]
+        for i in range(2 * m):
+            for j in range(2 * m):
+                local[i, j] = stiffness * g[i] * g[j]
+        outside += add_local_hessian(local, vertex_ids[k], m, vertex_dofs, n_dof, pattern_keys,
+                                     slots, hessian_values)
     return total, outside
