@@ -237,19 +237,29 @@ def test_the_fin_ray_squeezes_the_default_apple_without_crossing(default_apple_s
     assert_squeezed(sim, result, distances)
     fingers = result.fingers
     # the front beam touches over an area on each finger. Left and right alike in force
-    # (above) and tips (below); their areas (nodes in a pair closer than dhat) only
-    # roughly: the front beam lies along the wrapped skin over a wide rim at nearly no
-    # pressure, whose nodes go in or out of dhat with round-off (runs of the same squeeze
-    # differ there: the two fingers by 0 to 5 of their ~18 nodes)
+    # (above) and tips (below); their areas (nodes in a pair closer than dhat) less so:
+    # the front beam lies along the wrapped skin over a wide rim at nearly no pressure,
+    # whose nodes go in or out of dhat as the fruit drifts sideways by micrometres (the
+    # mirror-symmetric squeeze is so only up to round-off: 134 and 165 mm^2)
     assert np.all(fingers.contact_area > 0)
-    assert fingers.contact_area[0] == pytest.approx(fingers.contact_area[1], rel=0.4)
+    assert fingers.contact_area[0] == pytest.approx(fingers.contact_area[1], rel=0.25)
     # the tips move by tens of micrometres (the front beam is pressed in by a millimetre)
     assert fingers.tip_displacement[0] == pytest.approx(fingers.tip_displacement[1],
                                                         abs=5e-6)
-    # the fruit's patches likewise (0 to 10 % apart in the runs seen)
+    # the fruit's patches likewise (138 and 158 mm^2)
     left, right = result.deformation.jaw_contact_areas
-    assert left == pytest.approx(right, rel=0.2)
+    assert left == pytest.approx(right, rel=0.15)
     assert result.damage is not None
+
+
+def test_the_same_squeeze_twice_ends_in_the_same_state(default_apple_squeezes):
+    """Bit for bit: the barrier's pairs come in the same order every run (ipctk in one
+    thread, ``core.barrier``), so the squeeze takes the same steps to the same state."""
+    _, first, _ = default_apple_squeezes['fin_ray']
+    _, again, _ = squeeze(FIN_RAY_3D)
+    assert again.step == first.step
+    assert np.array_equal(again.positions, first.positions)
+    assert np.array_equal(again.fingers.positions, first.fingers.positions)
 
 
 def test_on_the_turgid_apple_the_wrap_spreads_the_contact(default_apple_squeezes, capsys):
