@@ -26,6 +26,7 @@ from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.finger_statics import static_equilibrium
 from gripper_sim.core3d import meshes
 from gripper_sim.core3d.rod_extrusion import extruded_rod_body, plate_stiffness
+from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.core3d.soft_fingers3d import fin_ray_body3d
 from gripper_sim.geometry.fin_ray import FinRayGeometry
 from gripper_sim.geometry.finger_materials import MATERIALS, FingerMaterial
@@ -199,6 +200,18 @@ def test_pressed_over_its_middle_third_the_3d_tip_bends_towards_the_load():
 
 
 # --- on the jaws
+
+
+def test_the_contact_pattern_is_the_grasps_wherever_the_jaws_start():
+    """The barrier's pattern pairs (fruit node, finger node) are those of the fruit
+    centred on the jaws in height, where they grasp it: a pick that starts the jaws 2 cm
+    above (``approach.height``) gets the same pairs (pairs from the start would miss the
+    grasp, and its first touch would not converge)."""
+    centred = Simulation3D(load_config(overrides=FIN_RAY_3D))
+    above = Simulation3D(load_config(overrides=FIN_RAY_3D + [
+        f'gripper.initial_lift={centred.initial_lift + 0.02}']))
+    assert above.initial_lift == pytest.approx(centred.initial_lift + 0.02)
+    assert np.array_equal(above._barrier.pairs, centred._barrier.pairs)
 
 
 def _squeezes(*overrides: str, force: float = 2.0, max_steps: int = 80,

@@ -18,10 +18,10 @@ import pytest
 from gripper_sim.configuration import load_config
 from gripper_sim.core.fin_ray import fin_ray_body
 from gripper_sim.core.finger_statics import static_equilibrium
+from gripper_sim.core3d.mesh_geometry import surface_edges
 from gripper_sim.core3d.rod_extrusion import extruded_rod_body
 from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.core3d.soft_fingers3d import fin_ray_body3d
-from gripper_sim.core3d.mesh_geometry import surface_edges
 from gripper_sim.geometry.finger_materials import MATERIALS
 from test_fin_ray import _geometry, _press
 from test_fin_ray_3d import _line_load

@@ -156,7 +156,12 @@ class SoftFingers3D(SoftFingers):
         (n_s, 3) m relative to the jaws' centre, their mean surface edge lengths
         ``spacing`` (n_s,) m: on each finger's side, the fruit nodes of the cap facing it
         (``PAIR_CAP_DEPTH``) and the finger's surface nodes within ``PAIR_REACH_EDGES``
-        times the sum of the two nodes' mean edge lengths of each other in y and z."""
+        times the sum of the two nodes' mean edge lengths of each other in y and z, with
+        the fruit's middle height (the middle of the outline's extent in z) at the jaws'
+        centre: the height at which the jaws grasp it, wherever they start (a pick starts
+        them above it, ``approach.height``; pairs from there would miss the grasp)."""
+        outline = outline - np.array([0.0, 0.0, 0.5 * (outline[:, 2].max()
+                                                         + outline[:, 2].min())])
         x = self.body.rest_positions
         outline_nodes = np.unique(self.body.surface_triangles)
         with np.errstate(invalid='ignore'):  # the inner nodes have no surface edge
