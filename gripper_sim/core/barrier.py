@@ -64,6 +64,12 @@ from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
 
+# ipctk runs its broad phase and its sums over the pairs in TBB threads, whose split of
+# the work (and so the pairs' order and the round-off of every sum over them) changes from
+# run to run: with one thread repeated runs are bit-identical (the 3D Fin Ray squeeze
+# ended on 32 or 33 steps with two), and on a loaded 2-core machine cheaper in CPU time
+ipctk.set_num_threads(1)
+
 #: m, length of the segment (2D) or side of the square (3D) standing for an infinite
 #: face (table, walls), centred on the face's origin
 INFINITE_FACE_LENGTH = 4.0

@@ -69,7 +69,7 @@ def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8
         solver = ImplicitEulerSolver(body.masses, elastic + [load], dim=dim,
                                      tolerance=tolerance / step, max_iterations=100)
         if barrier is not None:
-            barrier.begin_step(q.reshape(-1, 2), [], [], step)
+            barrier.begin_step(q.reshape(-1, dim), [], [], step)
         solution = solver.solve(q, still, step, q.copy(), constraints)
         q = solution.q
         if on_increment is not None:

@@ -28,11 +28,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gripper_sim.core.barrier import BarrierContact, BarrierSettings, SoftBody
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core3d.energies import HingeBending, Membrane, NeoHookeanTets
 from gripper_sim.core3d.layered_mesher import prism_tetrahedra
-from gripper_sim.core3d.mesh_geometry import signed_volumes
+from gripper_sim.core3d.mesh_geometry import signed_volumes, surface_edges
 from gripper_sim.errors import ConfigError
 
 #: the four faces of a tetrahedron (a, b, c, d positively oriented), each outward
@@ -57,6 +58,8 @@ class FingerBody3D:
         hinges: (n_h, 4) the shells' bending hinges (``energies.HingeBending``), with
             hinge_stiffness (n_h,) N m: the plate bending stiffness D each hinge's
             k = D |e|^2 / (2 A) is computed with (``core3d.rod_extrusion``).
+        self_contact_settings: the barrier settings of the shells' self-contact
+            (``self_contact``; ``contact.ipc.*``), None: none.
     """
 
     name: str
@@ -74,6 +77,7 @@ class FingerBody3D:
     shell_thickness: np.ndarray = field(default_factory=lambda: np.zeros(0))
     hinges: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.int64))
     hinge_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    self_contact_settings: BarrierSettings | None = None
 
     @property
     def n_nodes(self) -> int:
@@ -113,6 +117,49 @@ class FingerBody3D:
             energies.append(HingeBending(np.vstack([nodes[self.hinges] for nodes in copies]),
                                          rest_positions, np.tile(self.hinge_stiffness, n)))
         return energies
+
+
+    def self_pairs(self) -> np.ndarray:
+        """(p, 2) the node pairs of the shells' self-contact pattern: the section's
+        (``FingerBody.self_pairs``: near at rest, joined by no rod element) within each
+        slice and between neighbouring slices (a vertex meets a triangle of its own slice
+        or of a neighbouring one when the members fold alike across the width)."""
+        n = self.section.n_nodes
+        copies = self.n_nodes // n
+        pairs = self.section.self_pairs()
+        both = np.vstack([pairs, pairs[:, ::-1]])
+        within = [pairs + n * c for c in range(copies)]
+        across = [both + n * np.array([c, c + 1]) for c in range(copies - 1)]
+        return np.vstack(within + across)
+
+    def self_contact(self, settings: BarrierSettings,
+                     copies: tuple[np.ndarray, ...] | None = None,
+                     n_nodes: int | None = None) -> BarrierContact | None:
+        """The barrier between the body's own shell triangles (a vertex and a triangle,
+        or two edges, that share no node; frictionless; ipctk's 3D pairs), so that its
+        beams and ribs never cross: None for a body without shells. As
+        ``FingerBody.self_contact`` in 2D.
+
+        Args:
+            settings: the barrier's dhat and stiffness.
+            copies: for a state holding several copies of the body, each copy's
+                (n_nodes,) global node indices (each copy touches only itself); None:
+                the body alone.
+            n_nodes: nodes of the state (None: the body's).
+        """
+        if not len(self.shell_triangles):
+            return None
+        if copies is None:
+            copies, n_nodes = (np.arange(self.n_nodes),), self.n_nodes
+        triangles = self.shell_triangles
+        nodes, edges = np.unique(triangles), surface_edges(triangles)
+        pairs = self.self_pairs()
+        bodies = tuple(SoftBody(copy[nodes], copy[edges], 0.0, 0.0, triangles=copy[triangles])
+                       for copy in copies)
+        no_fruit = np.zeros(0, np.int64)
+        return BarrierContact(n_nodes, no_fruit, no_fruit.reshape(0, 2), settings, bodies,
+                              dimension=3, pairs=np.vstack([copy[pairs] for copy in copies]),
+                              self_contact=True)
 
 
 def boundary_triangles(tetrahedra: np.ndarray) -> np.ndarray:

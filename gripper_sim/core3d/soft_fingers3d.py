@@ -19,15 +19,18 @@ contact needs no finer face than that.
 The Fin Ray's section is the 2D finger of rods (``core.fin_ray``), as wide as
 ``gripper.finger.fin_ray.depth`` (null: ``gripper.jaw_width``), extruded into thin shells
 (``core3d.rod_extrusion``) in slices about ``WIDTH_CELL_RATIO`` rod elements wide (at
-least 2, at most ``MAX_IN_PLANE_CELLS``).
+least 2, at most ``MAX_IN_PLANE_CELLS``). Each Fin Ray has its self-contact, as in 2D:
+the barrier (``contact.ipc.dhat``, ``contact.ipc.stiffness``) between its own shell
+triangles (``FingerBody3D.self_contact``), so that its members never cross.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
-from gripper_sim.core.barrier import SoftBody
+from gripper_sim.core.barrier import BarrierSettings, SoftBody
 from gripper_sim.core.fin_ray import fin_ray_from_config
 from gripper_sim.core.results import FingerResult
 from gripper_sim.core.soft_fingers import FingerState, SoftFingers
@@ -78,7 +81,9 @@ def fin_ray_body3d(config) -> FingerBody3D:
     width = float(config['gripper.jaw_width'] if depth is None else depth)
     cell = WIDTH_CELL_RATIO * float(config['gripper.finger.fin_ray.element_length'])
     slices = min(MAX_IN_PLANE_CELLS, max(2, int(round(width / cell))))
-    return extruded_rod_body(fin_ray_from_config(config, width), width, slices)
+    return dataclasses.replace(extruded_rod_body(fin_ray_from_config(config, width), width,
+                                                 slices),
+                               self_contact_settings=BarrierSettings.from_config(config))
 
 
 #: the deformable finger types built in 3D and their builders: config -> FingerBody3D
@@ -103,7 +108,8 @@ class SoftFingers3D(SoftFingers):
     """The two deformable fingers of a 3D simulation (see the module docstring).
 
     Args:
-        body: the left finger's body (the right one is its mirror image).
+        body: the left finger's body (the right one is its mirror image); with its
+            ``self_contact_settings`` each finger has its self-contact.
         first: index of the left finger's first node in the state.
         static_friction, kinetic_friction: Coulomb coefficients fruit-finger.
     """
@@ -112,7 +118,8 @@ class SoftFingers3D(SoftFingers):
 
     def __init__(self, body: FingerBody3D, first: int, static_friction: float,
                  kinetic_friction: float):
-        super().__init__(body, first, static_friction, kinetic_friction)
+        super().__init__(body, first, static_friction, kinetic_friction,
+                         body.self_contact_settings)
         #: the 2D fingers of the section, whose outline gives the touching gap
         self._section = SoftFingers(body.section, 0, static_friction, kinetic_friction)
 
@@ -149,7 +156,12 @@ class SoftFingers3D(SoftFingers):
         (n_s, 3) m relative to the jaws' centre, their mean surface edge lengths
         ``spacing`` (n_s,) m: on each finger's side, the fruit nodes of the cap facing it
         (``PAIR_CAP_DEPTH``) and the finger's surface nodes within ``PAIR_REACH_EDGES``
-        times the sum of the two nodes' mean edge lengths of each other in y and z."""
+        times the sum of the two nodes' mean edge lengths of each other in y and z, with
+        the fruit's middle height (the middle of the outline's extent in z) at the jaws'
+        centre: the height at which the jaws grasp it, wherever they start (a pick starts
+        them above it, ``approach.height``; pairs from there would miss the grasp)."""
+        outline = outline - np.array([0.0, 0.0, 0.5 * (outline[:, 2].max()
+                                                         + outline[:, 2].min())])
         x = self.body.rest_positions
         outline_nodes = np.unique(self.body.surface_triangles)
         with np.errstate(invalid='ignore'):  # the inner nodes have no surface edge
