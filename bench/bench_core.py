@@ -33,8 +33,9 @@ the ROS node and the recorders step).
 Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
 (evaluations, factorisations, solves with a factor) times the cost of each operation
-timed alone at the end state; one more step's kernel call is then repeated on its own arguments (warm caches)
-and numba's dispatch of those arguments timed alone (a kernel that does nothing).
+timed alone at the end state; one more step's kernel call is then repeated on its own
+arguments (warm caches) and numba's dispatch of those arguments timed alone (a kernel
+that does nothing).
 Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
 Times are the best of ``--repeat`` runs.
 
