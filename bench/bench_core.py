@@ -32,9 +32,10 @@ step with a callback that sees every step (the per-step route ``Simulation.step`
 the ROS node and the recorders step).
 Kernel route: glue, kernel and measures are timed with
 perf_counter around each part; the kernel's own split comes from its work counters
-(evaluations, factorisations) times the cost of each operation timed alone at the end
-state; one more step's kernel call is then repeated on its own arguments (warm caches)
-and numba's dispatch of those arguments timed alone (a kernel that does nothing).
+(evaluations, factorisations, solves with a factor) times the cost of each operation
+timed alone at the end state; one more step's kernel call is then repeated on its own
+arguments (warm caches) and numba's dispatch of those arguments timed alone (a kernel
+that does nothing).
 Compiled route: fractions of a cProfile run applied to the plain run's CPU time.
 Times are the best of ``--repeat`` runs.
 
@@ -356,7 +357,10 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
         hot, dispatch = hot_kernel(last['args'])
         assembly = (counts[k.C_HESSIAN_EVALS] * ops['hessian_eval']
                     + counts[k.C_EVALS] * ops['eval'])
-        solve = counts[k.C_FACTORS] * (ops['factor'] + ops['solve'])
+        # solves with a factor: one a Newton direction (a kept factor's too); a tree
+        # without the counter solves once a factorisation
+        directions = counts[getattr(k, 'C_DIRECTIONS', k.C_FACTORS)]
+        solve = counts[k.C_FACTORS] * ops['factor'] + directions * ops['solve']
         contact = counts[k.C_SOLVES] * ops['contact_pass']
         substeps = counts[k.C_SUBSTEPS]
         kernel_measures = substeps * ops['kernel_measures']
@@ -373,7 +377,8 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
         row['ops_us'] = {key: value * 1e6 for key, value in ops.items()}
         row['counts_per_step'] = dict(
             passes=counts[k.C_SOLVES] / steps, hessian_evals=counts[k.C_HESSIAN_EVALS] / steps,
-            evals=counts[k.C_EVALS] / steps, factorisations=counts[k.C_FACTORS] / steps)
+            evals=counts[k.C_EVALS] / steps, factorisations=counts[k.C_FACTORS] / steps,
+            solves=directions / steps)
         row['glue_us'] = timers['glue'] / steps * 1e6
         row['kernel_us'] = kernel / steps * 1e6
         row['hot_us'], row['dispatch_us'] = hot * 1e6, dispatch * 1e6

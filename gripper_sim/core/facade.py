@@ -109,18 +109,26 @@ class SimulationFacade:
             masses = np.concatenate([masses, self._soft.masses])
             gravity = Gravity(masses, c['world.gravity'], self.dimension)
             fingers = self._soft.energies
-        return PatternCachingSolver(
+        solver = PatternCachingSolver(
             masses, list(self.fruit.energies) + [gravity] + fingers
             + ([self._pad] if self._pad is not None else [])
             + ([self._barrier] if self._barrier is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
             dim=self.dimension, lu_options=SYMMETRIC_LU_OPTIONS, fast=fast)
+        # the rule of the 2D whole-step kernel (kernels._newton_solve), which it checks
+        solver.keep_factor = self.dimension == 2 and self._barrier is None
+        return solver
+
+    def _forget_factor(self) -> None:
+        """Drop the Newton factorisations kept by a compiled step (none here)."""
 
     def reset(self) -> None:
         """Back to the initial state and commands, time 0."""
         n = self.fruit.n_nodes
         self.solver.reset()
+        self.solver.forget_factor()
+        self._forget_factor()
         self.q = self.initial_positions.copy()
         self.v = np.tile(self._in_plane(self.config['fruit.initial_velocity.x'],
                                         self.config['fruit.initial_velocity.z']), (n, 1))

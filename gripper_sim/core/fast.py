@@ -343,6 +343,10 @@ class FastPath:
             fpar[6] = config['contact.max_correction_speed']
             self.ipar[1] = config['sim.max_contact_passes']
 
+    def forget_factor(self) -> None:
+        """Drop the Newton factorisation the kernel keeps (``kernels.forget_kept``)."""
+        kernels.forget_kept(self._scratch[0])
+
     def substep(self, dt: float) -> int:
         """``Simulation._substep`` on the kernels; returns Newton iterations.
 

@@ -62,6 +62,7 @@ from gripper_sim.core.measures import face_contact_length_of, outline_measures
 from gripper_sim.core.pad import (PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X, PF_NEW_Z, PF_NX,
                                   PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE, PF_SPEED,
                                   pad_blocks, pad_forces, pad_rows, pad_terms)
+from gripper_sim.core.stepper import CONTRACTION, MAX_FACTOR_AGE
 
 #: substep / newton_solve status codes
 OK = 0
@@ -90,8 +91,9 @@ F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
 # ipar layout
 I_MAX_IT, I_MAX_PASSES = range(2)
 #: work counters: Newton solves (contact passes), energy evaluations with and without
-#: the Hessian, Newton matrix factorisations, substeps
-C_SOLVES, C_HESSIAN_EVALS, C_EVALS, C_FACTORS, C_SUBSTEPS, C_SIZE = range(6)
+#: the Hessian, Newton matrix factorisations, substeps, solves with a factor (Newton
+#: directions)
+C_SOLVES, C_HESSIAN_EVALS, C_EVALS, C_FACTORS, C_SUBSTEPS, C_DIRECTIONS, C_SIZE = range(7)
 
 
 def band_order(n_nodes: int) -> np.ndarray:
@@ -797,8 +799,9 @@ def newton_scratch(n, nbw, flesh):
     every solve: (order (n,) int64 - the node at each band position, to be filled from
     ``pos`` (``band_order_inverse``) -, the Newton storage (``_newton_storage``), work
     (NEWTON_WORK * 2n,) float64)."""
-    return (np.empty(n, np.int64), _newton_storage(n, nbw, flesh),
-            np.empty(NEWTON_WORK * 2 * n))
+    work = np.empty(NEWTON_WORK * 2 * n + KEPT_PER_NODE * n + KEPT_META)
+    work[-KEPT_META + K_VALID] = 0.0  # no factor kept yet
+    return np.empty(n, np.int64), _newton_storage(n, nbw, flesh), work
 
 
 @njit(cache=True, error_model='numpy')
@@ -823,8 +826,116 @@ def newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_sp
 
 
 #: float vectors of 2n in ``_newton_solve``'s work array: grads (4 of them), grad, grad_t,
-#: fric_grad, area_grad, tmp, cdq, g_f, dq, x, y, u, trial
+#: fric_grad, area_grad, tmp, cdq, g_f, dq, x, y, u, trial; after them the kept factor
+#: (``_kept_key``): KEPT_PER_NODE floats a node and KEPT_META more
 NEWTON_WORK = 16
+KEPT_PER_NODE = 8
+#: the kept factor's metadata: valid (1.0 or 0.0), the step dt (s) it was made for, the
+#: solves it has served, its kinetic friction nodes and soft pad rows (counts), its
+#: rank-one coefficient c
+K_VALID, K_DT, K_AGE, K_FRICTION, K_PADS, K_C, KEPT_META = range(7)
+
+
+@njit(cache=True, error_model='numpy')
+def _kept_key(kept, n):
+    """The kept factor's record in the tail of ``_newton_solve``'s work array: (filters
+    (n, 2, 2) it was made with, friction mask (n,) and pad mask (n,) 1.0 at its kinetic
+    friction nodes and soft pad rows' nodes, its rank-one direction S u (2n,),
+    metadata (KEPT_META,))."""
+    return (kept[:4 * n].reshape((n, 2, 2)), kept[4 * n:5 * n], kept[5 * n:6 * n],
+            kept[6 * n:8 * n], kept[8 * n:8 * n + KEPT_META])
+
+
+def forget_kept(work: np.ndarray) -> None:
+    """Drops the factor ``_newton_solve`` keeps in ``work`` (its work array, or
+    ``substep``'s, whose tail it is): the next solve makes it afresh."""
+    work[work.shape[0] - KEPT_META + K_VALID] = 0.0
+
+
+@njit(cache=True, error_model='numpy')
+def _kept_fits(kept, filters, fr_nodes, dt, pad_nodes):
+    """Whether the kept factor was made for this step's constraints: the same filters S,
+    kinetic friction nodes, soft pad rows and dt, and is younger than MAX_FACTOR_AGE solves."""
+    n = filters.shape[0]
+    key_filters, fr_mask, pad_mask, _, meta = _kept_key(kept, n)
+    if (meta[K_VALID] == 0.0 or meta[K_DT] != dt or meta[K_AGE] >= MAX_FACTOR_AGE
+            or meta[K_FRICTION] != fr_nodes.shape[0] or meta[K_PADS] != pad_nodes.shape[0]):
+        return False
+    for f in range(fr_nodes.shape[0]):
+        if fr_mask[fr_nodes[f]] == 0.0:
+            return False
+    for e in range(pad_nodes.shape[0]):
+        if pad_mask[pad_nodes[e]] == 0.0:
+            return False
+    for i in range(n):
+        for a in range(2):
+            for b in range(2):
+                if key_filters[i, a, b] != filters[i, a, b]:
+                    return False
+    return True
+
+
+@njit(cache=True, error_model='numpy')
+def _keep(kept, filters, fr_nodes, dt, pad_nodes, u, c):
+    """Records the constraints of a factor just made (see ``_kept_fits``) and its
+    rank-one term c S u S (u (2n,) filtered)."""
+    n = filters.shape[0]
+    key_filters, fr_mask, pad_mask, kept_u, meta = _kept_key(kept, n)
+    key_filters[:] = filters
+    fr_mask[:] = 0.0
+    for f in range(fr_nodes.shape[0]):
+        fr_mask[fr_nodes[f]] = 1.0
+    pad_mask[:] = 0.0
+    for e in range(pad_nodes.shape[0]):
+        pad_mask[pad_nodes[e]] = 1.0
+    kept_u[:] = u
+    meta[K_VALID] = 1.0
+    meta[K_DT] = dt
+    meta[K_AGE] = 0.0
+    meta[K_FRICTION] = fr_nodes.shape[0]
+    meta[K_PADS] = pad_nodes.shape[0]
+    meta[K_C] = c
+
+
+@njit(cache=True, error_model='numpy')
+def _direction(ab, l_values, d_inv, flesh, pos, g_f, u, c, x, y, dq):
+    """The step dq (2n,) = -(A + c u u^T)^-1 S g: A factorised (``_newton_factor``), the
+    pressure's rank-one term c u u^T (u = S dA/dq) by Sherman-Morrison. Returns (finite,
+    slope S g . dq)."""
+    n = pos.shape[0]
+    n2 = 2 * n
+    for i in range(n):
+        p = pos[i]
+        x[2 * p] = -g_f[2 * i]
+        x[2 * p + 1] = -g_f[2 * i + 1]
+    if c == 0.0:
+        _newton_inverse(ab, l_values, d_inv, flesh, x, y, False)
+    else:
+        for i in range(n):
+            p = pos[i]
+            y[2 * p] = u[2 * i]
+            y[2 * p + 1] = u[2 * i + 1]
+        _newton_inverse(ab, l_values, d_inv, flesh, x, y, True)
+        ux = 0.0
+        uy = 0.0
+        for i in range(n):
+            p = pos[i]
+            ux += u[2 * i] * x[2 * p] + u[2 * i + 1] * x[2 * p + 1]
+            uy += u[2 * i] * y[2 * p] + u[2 * i + 1] * y[2 * p + 1]
+        w = ux / (1.0 / c + uy)
+        for m in range(n2):
+            x[m] -= y[m] * w
+    finite = True
+    slope = 0.0
+    for i in range(n):
+        p = pos[i]
+        dq[2 * i] = x[2 * p]
+        dq[2 * i + 1] = x[2 * p + 1]
+    for m in range(n2):
+        if not math.isfinite(dq[m]):
+            finite = False
+        slope += g_f[m] * dq[m]
+    return finite, slope
 
 
 @njit(cache=True, error_model='numpy')
@@ -834,10 +945,14 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
                   pad_nodes, pad_par, order, storage, work):
     """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
 
-    The same iterates as the reference: the evaluations the reference repeats at a point
-    it has already evaluated (the Hessian after an accepted line-search step, the
-    gradient after convergence) are taken from the line search's evaluation instead,
-    which then includes the Hessian whenever the iteration will go on.
+    The Newton matrix (with its rank-one pressure term) is kept, factorised, from
+    iteration to iteration and from solve to solve - a chord (modified Newton) method,
+    as ``ImplicitEulerSolver.solve`` -: while it fits (``_kept_fits``: the same
+    constraints and dt, at most MAX_FACTOR_AGE solves old) and each whole step with it cuts the
+    filtered residual max |S g| below CONTRACTION of the last. It is made afresh from the
+    Hessian at the iterate when it does not fit, and when a step with it fails (no
+    descent, or no decrease at the whole step: that iteration is done again) or
+    contracts too slowly. Convergence is the same test: max |dq| / dt < tol.
 
     Args:
         q_n, v_n: (2n,) m and m/s at the start of the step.  dt: s.
@@ -856,7 +971,8 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
         pad_nodes: (m,) int64 nodes, pad_par: (m, PAD_SIZE) the soft pads' rows (m = 0:
             no pads).
         order, storage, work: scratch space (``newton_scratch``; order filled from pos);
-            reused from solve to solve, no allocation here.
+            reused from solve to solve, no allocation here; storage and the tail of
+            work hold the kept factor and its key.
 
     Returns:
         (status, iterations, len(history)); status OK or a failure code.
@@ -864,8 +980,9 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
     n2 = q_n.shape[0]
     n = n2 // 2
     n_fr = fr_nodes.shape[0]
-    # a flag as a variable, not a literal: one compiled _evaluate for all call sites
+    # flags as variables, not literals: one compiled _evaluate for all call sites
     yes = np.bool_(True)
+    no = np.bool_(False)
     for i in range(n):
         if filters[i, 0, 1] != filters[i, 1, 0]:
             return UNSUPPORTED, 0, 0
@@ -884,18 +1001,27 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
     y = work[13 * n2:14 * n2]
     u = work[14 * n2:15 * n2]
     trial = work[15 * n2:16 * n2]
+    kept = work[16 * n2:]
+    _, _, _, kept_u, meta = _kept_key(kept, n)
     q = q_out
     q[:] = q_start
     n_hist = 0
     counts[C_SOLVES] += 1
-    counts[C_HESSIAN_EVALS] += 1
+    # fresh: the Hessian at q is in band and the next step needs a new factor
+    fresh = not _kept_fits(kept, filters, fr_nodes, dt, pad_nodes)
+    if not fresh:
+        meta[K_AGE] += 1.0
+    counts[C_HESSIAN_EVALS if fresh else C_EVALS] += 1
+    hessian = yes if fresh else no
     phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                        fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh,
-                       gravity_grad, pos, yes, grad, fric_grad, grads, band, area_grad, tmp,
-                       cdq, values, pad_nodes, pad_par)
+                       gravity_grad, pos, hessian, grad, fric_grad, grads, band,
+                       area_grad, tmp, cdq, values, pad_nodes, pad_par)
     if not math.isfinite(phi):
         return INFEASIBLE_START, 0, n_hist
-    for iteration in range(1, max_it + 1):
+    iteration = 0
+    while iteration < max_it:
+        iteration += 1
         for i in range(n):
             for a in range(2):
                 g_f[2 * i + a] = (filters[i, a, 0] * grad[2 * i]
@@ -904,49 +1030,28 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
                                 + filters[i, a, 1] * area_grad[2 * i + 1])
         found = False
         slope = 0.0
-        for shift in SHIFTS:
-            counts[C_FACTORS] += 1
-            if not _newton_factor(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
-                                  fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab,
-                                  pad_nodes, pad_par, flesh, l_values, d_inv):
-                continue
-            for i in range(n):
-                p = pos[i]
-                x[2 * p] = -g_f[2 * i]
-                x[2 * p + 1] = -g_f[2 * i + 1]
-            if c == 0.0:
-                _newton_inverse(ab, l_values, d_inv, flesh, x, y, False)
-            else:
-                for i in range(n):
-                    p = pos[i]
-                    y[2 * p] = u[2 * i]
-                    y[2 * p + 1] = u[2 * i + 1]
-                _newton_inverse(ab, l_values, d_inv, flesh, x, y, True)
-                ux = 0.0
-                uy = 0.0
-                for i in range(n):
-                    p = pos[i]
-                    ux += u[2 * i] * x[2 * p] + u[2 * i + 1] * x[2 * p + 1]
-                    uy += u[2 * i] * y[2 * p] + u[2 * i + 1] * y[2 * p + 1]
-                w = ux / (1.0 / c + uy)
-                for m in range(n2):
-                    x[m] -= y[m] * w
-            finite = True
-            slope = 0.0
-            for i in range(n):
-                p = pos[i]
-                dq[2 * i] = x[2 * p]
-                dq[2 * i + 1] = x[2 * p + 1]
-            for m in range(n2):
-                if not math.isfinite(dq[m]):
-                    finite = False
-                slope += g_f[m] * dq[m]
-            if finite and slope <= 0:
-                found = True
-                break
-        if not found:
-            return NO_DESCENT, iteration, n_hist
-        step = 1.0
+        if fresh:
+            meta[K_VALID] = 0.0
+            for shift in SHIFTS:
+                counts[C_FACTORS] += 1
+                if not _newton_factor(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                                      fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab,
+                                      pad_nodes, pad_par, flesh, l_values, d_inv):
+                    continue
+                counts[C_DIRECTIONS] += 1
+                finite, slope = _direction(ab, l_values, d_inv, flesh, pos, g_f, u, c, x, y,
+                                           dq)
+                if finite and slope <= 0:
+                    found = True
+                    break
+            if not found:
+                return NO_DESCENT, iteration, n_hist
+            _keep(kept, filters, fr_nodes, dt, pad_nodes, u, c)
+        else:
+            counts[C_DIRECTIONS] += 1
+            finite, slope = _direction(ab, l_values, d_inv, flesh, pos, g_f, kept_u,
+                                       meta[K_C], x, y, dq)
+            found = finite and slope <= 0
         residual = 0.0
         dq_max = 0.0
         for m in range(n2):
@@ -959,19 +1064,21 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
         phi_trial = 0.0
         c_trial = 0.0
         norm = 0.0
-        for _ in range(30):
+        step = 1.0
+        # a step with the kept factor is tried whole only
+        tries = 30 if fresh else (1 if found else 0)
+        for _ in range(tries):
             for m in range(n2):
                 trial[m] = q[m] + step * dq[m]
             norm = 0.0
             for m in range(n2):
                 norm = max(norm, abs(step * dq[m]))
             norm /= dt
-            # the Hessian is needed at the trial point only if Newton goes on from it
-            counts[C_EVALS if norm < tol else C_HESSIAN_EVALS] += 1
+            counts[C_EVALS] += 1
             phi_trial, c_trial = _evaluate(
                 trial, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                 fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh,
-                gravity_grad, pos, not norm < tol, grad_t, fric_grad, grads, band, area_grad,
+                gravity_grad, pos, no, grad_t, fric_grad, grads, band, area_grad,
                 tmp, cdq, values, pad_nodes, pad_par)
             if small or math.isfinite(phi_trial) and (
                     phi_trial <= phi + 1e-4 * step * slope
@@ -981,17 +1088,30 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
                 break
             step *= 0.5
         if not accepted:
-            return LINE_SEARCH_FAILED, iteration, n_hist
-        q[:] = trial
-        phi = phi_trial
-        c = c_trial
-        grad[:] = grad_t
-        history[n_hist] = norm
-        n_hist += 1
-        if norm < tol:
-            for m in range(n2):
-                reaction_out[m] = grad[m] - fric_grad[m]
-            return OK, iteration, n_hist
+            if fresh:
+                return LINE_SEARCH_FAILED, iteration, n_hist
+            # the kept factor failed here: this iteration again with the Hessian at q
+            iteration -= 1
+        else:
+            q[:] = trial
+            phi = phi_trial
+            c = c_trial
+            grad[:] = grad_t
+            history[n_hist] = norm
+            n_hist += 1
+            if norm < tol:
+                for m in range(n2):
+                    reaction_out[m] = grad[m] - fric_grad[m]
+                return OK, iteration, n_hist
+            if fresh or _filtered_max(filters, grad) < CONTRACTION * residual:
+                fresh = False
+                continue
+        fresh = True
+        counts[C_HESSIAN_EVALS] += 1
+        phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
+                           fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
+                           flesh, gravity_grad, pos, yes, grad, fric_grad, grads, band,
+                           area_grad, tmp, cdq, values, pad_nodes, pad_par)
     return NO_CONVERGENCE, max_it, n_hist
 
 
@@ -1036,6 +1156,7 @@ def substep_scratch(pos, nbw, flesh):
     n = pos.shape[0]
     order, storage, newton_work = newton_scratch(n, nbw, flesh)
     work = np.empty(SUBSTEP_WORK * n + SUBSTEP_WORK_EXTRA + newton_work.shape[0])
+    work[SUBSTEP_WORK * n + SUBSTEP_WORK_EXTRA:] = newton_work
     iwork = np.empty(2 * n, np.int64)
     band_order_inverse(pos, iwork[:n])
     return work, iwork, np.empty(2 * n, np.bool_), storage, np.empty(flesh[0].shape[0])

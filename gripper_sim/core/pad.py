@@ -119,6 +119,10 @@ class PadLayer(PadState):
         self.positions, self.rows, self.row_face = positions, rows, faces
         self.nodes = self.surface[positions]
 
+    def factor_key(self) -> tuple:
+        """The step's rows (``Energy.factor_key``): (count, frozenset of their nodes)."""
+        return len(self.nodes), frozenset(self.nodes.tolist())
+
     # ------------------------------------------------------------------ per step
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set the pad surfaces for a step from ``x_n`` over ``dt``.

@@ -177,6 +177,10 @@ class Simulation(SimulationFacade):
                         c['gripper.finger.pad.poisson_ratio'], c['contact.pad.friction'],
                         self.fruit.n_nodes)
 
+    def _forget_factor(self) -> None:
+        if self._fast is not None:
+            self._fast.forget_factor()
+
     # ------------------------------------------------------------------ stepping
     def _substep(self, dt: float) -> int:
         if self._fast is not None and self._fast.applies():

@@ -28,6 +28,13 @@ from gripper_sim.core.energies.base import Energy
 #: regularisation speed (m/s) of the kinetic friction law |s| ~ sqrt(s^2 + eps^2)
 FRICTION_SMOOTHING = 1e-4
 
+#: a Newton step with a kept factorisation must cut the filtered residual max |S g| below
+#: this fraction of the last one, else the matrix is assembled and factorised afresh
+CONTRACTION = 0.25
+
+#: Newton solves a kept factorisation serves at most before it is made afresh
+MAX_FACTOR_AGE = 20
+
 
 class NewtonFailure(Exception):
     """Newton did not converge on this step (the caller halves the step)."""
@@ -67,6 +74,30 @@ class StepConstraints:
 
 
 @dataclass
+class KeptFactor:
+    """A Newton matrix's factorisation kept across iterations and solves.
+
+    Attributes:
+        key: what it was made for: (filters (n_nodes, dim, dim), kinetic friction nodes
+            (count, frozenset), the energies' ``factor_key``s (tuple), dt s).
+        lu: the factorisation of S H S + (I - S) + shift S M / dt^2.
+        low: its rank-one terms [(c, S u)].
+        age: Newton solves it has served since it was made.
+    """
+
+    key: tuple
+    lu: object
+    low: list
+    age: int = 0
+
+    def fits(self, key: tuple) -> bool:
+        """Made for these constraints and dt, and younger than MAX_FACTOR_AGE solves."""
+        filters, friction, energies, dt = key
+        return (self.age < MAX_FACTOR_AGE and self.key[3] == dt and self.key[1] == friction
+                and self.key[2] == energies and np.array_equal(self.key[0], filters))
+
+
+@dataclass
 class StepSolution:
     """Attributes:
         q: (n_dof,) m, positions at the end of the step.
@@ -95,6 +126,11 @@ class ImplicitEulerSolver:
             defaults), e.g. a symmetric ordering for the larger 3D systems.
     """
 
+    #: keep the Newton matrix's factorisation from iteration to iteration and from solve
+    #: to solve (a chord method, see ``solve``); the 2D simulation with the default
+    #: contact model sets it, as its whole-step kernel (``kernels._newton_solve``) does
+    keep_factor = False
+
     def __init__(self, masses: np.ndarray, energies: list[Energy], damping_mass: float = 0.0,
                  damping_stiffness: float = 0.0, tolerance: float = 1e-6,
                  max_iterations: int = 25, dim: int = 2, lu_options: dict | None = None):
@@ -107,6 +143,11 @@ class ImplicitEulerSolver:
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.n = self.m.size
+        self._kept: KeptFactor | None = None
+
+    def forget_factor(self) -> None:
+        """Drop the kept factorisation (a restarted simulation repeats its results)."""
+        self._kept = None
 
     def _evaluate(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
         """Phi, its gradient, the gradient of the friction part, and the Hessian parts."""
@@ -233,6 +274,16 @@ class ImplicitEulerSolver:
               con: StepConstraints) -> StepSolution:
         """Newton iterations from ``q_start`` (constrained dofs already at their targets).
 
+        With ``keep_factor`` the Newton matrix (S H S + (I - S), its rank-one terms
+        filtered) is kept, factorised, from iteration to iteration and from solve to
+        solve - a chord (modified Newton) method - while it fits (``KeptFactor.fits``:
+        the same filters, kinetic friction nodes, energies' keys and dt, at most
+        MAX_FACTOR_AGE solves old) and each whole step with it cuts the filtered
+        residual max |S g| below CONTRACTION of the last. It is made afresh from the
+        Hessian at the iterate when it does not fit, when a step with it fails (no
+        descent, or no decrease at the whole step: that iteration is done again) or
+        contracts too slowly. The stopping test is the same: max |dq| / dt < tolerance.
+
         Raises:
             NewtonFailure: no convergence within ``max_iterations``, or no descent.
         """
@@ -241,35 +292,91 @@ class ImplicitEulerSolver:
         complement = eye - s
         q = q_start.copy()
         history: list[float] = []
-        phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=True)
+        key = self._factor_key(con, dt) if self.keep_factor else None
+        kept = self._kept if key is not None and self._kept is not None else None
+        fresh = kept is None or not kept.fits(key)  # the next step needs a new factor
+        if not fresh:
+            kept.age += 1
+        phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=fresh)
         if not np.isfinite(phi):
             raise NewtonFailure('start of step is infeasible (inverted element)', history)
-        for iteration in range(1, self.max_iterations + 1):
-            hess, low_rank = parts
+        iteration = 0
+        while iteration < self.max_iterations:
+            iteration += 1
             g_f = s @ grad
-            filtered = s @ hess @ s
-            inertia = sp.diags(s.diagonal() * self.m / dt ** 2)
-            low = [(c, s @ u) for c, u in low_rank]
-            dq, slope = descent_direction(
-                lambda shift: _solve_with_low_rank((filtered + complement + shift * inertia)
-                                                   .tocsc(), -g_f, low, self.lu_options),
-                g_f, history)
-            if float(np.max(np.abs(dq))) / dt < self.tolerance:
+            if fresh:
+                self._kept = None
+                kept = self._factorised(parts, s, complement, dt, key)
+                dq, slope = descent_direction(
+                    lambda shift: kept.solve(shift, -g_f), g_f, history)
+                found = True
+                if key is not None:
+                    self._kept = kept
+            else:
+                dq = _solve_low_rank(kept.lu, -g_f, kept.low)
+                slope = float(g_f @ dq)
+                found = bool(np.all(np.isfinite(dq))) and slope <= 0
+            residual = float(np.max(np.abs(g_f)))
+            if found and float(np.max(np.abs(dq))) / dt < self.tolerance:
                 q = q + dq
                 _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con, hessian=False)
                 history.append(float(np.max(np.abs(dq))) / dt)
                 return StepSolution(q, grad - fric_grad, iteration, history)
-            q, phi, grad, step = line_search(
-                lambda x: self._evaluate(x, q_n, v_n, dt, con, hessian=False)[:2],
-                q, dq, phi, slope, float(np.max(np.abs(g_f))), lambda g: s @ g, history,
-                first_step=self.max_step(q, dq))
-            norm = float(np.max(np.abs(step * dq))) / dt
-            history.append(norm)
-            if norm < self.tolerance:
-                _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con, hessian=False)
-                return StepSolution(q, grad - fric_grad, iteration, history)
+            try:
+                if not found:
+                    raise NewtonFailure('no descent with the kept factor', history)
+                q, phi, grad, step = line_search(
+                    lambda x: self._evaluate(x, q_n, v_n, dt, con, hessian=False)[:2],
+                    q, dq, phi, slope, residual, lambda g: s @ g, history,
+                    first_step=self.max_step(q, dq), halvings=30 if fresh else 1)
+            except NewtonFailure:
+                if fresh:
+                    raise
+                iteration -= 1  # this iteration again, with the Hessian at q
+            else:
+                norm = float(np.max(np.abs(step * dq))) / dt
+                history.append(norm)
+                if norm < self.tolerance:
+                    _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con,
+                                                           hessian=False)
+                    return StepSolution(q, grad - fric_grad, iteration, history)
+                if key is not None and (fresh or float(np.max(np.abs(s @ grad)))
+                                        < CONTRACTION * residual):
+                    fresh = False
+                    continue
+            fresh = True
             phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=True)
         raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
+
+    def _factor_key(self, con: StepConstraints, dt: float) -> tuple:
+        """What a kept factorisation must have been made for (``KeptFactor.key``)."""
+        friction = con.friction_nodes.tolist()
+        return (con.filters.copy(), (len(friction), frozenset(friction)),
+                tuple(energy.factor_key() for energy in self.energies), dt)
+
+    def _factorised(self, parts, s, complement, dt: float, key) -> '_ShiftedFactor':
+        """The Newton matrix of the Hessian ``parts`` (hess, low_rank), to be factorised
+        with a shift (``_ShiftedFactor.solve``)."""
+        hess, low_rank = parts
+        return _ShiftedFactor(key, s @ hess @ s + complement,
+                              sp.diags(s.diagonal() * self.m / dt ** 2),
+                              [(c, s @ u) for c, u in low_rank], self.lu_options)
+
+
+class _ShiftedFactor(KeptFactor):
+    """A ``KeptFactor`` made by its first successful ``solve``: the matrix plus ``shift``
+    times the filtered inertia, factorised."""
+
+    def __init__(self, key, matrix, inertia, low, lu_options):
+        super().__init__(key, None, low)
+        self.matrix, self.inertia, self.lu_options = matrix, inertia, lu_options
+
+    def solve(self, shift: float, rhs: np.ndarray) -> np.ndarray:
+        """(A + shift M_S + sum c u u^T)^-1 rhs; the factorisation is kept. RuntimeError
+        if singular."""
+        a = (self.matrix + shift * self.inertia).tocsc()
+        self.lu = spla.splu(a) if self.lu_options is None else spla.splu(a, **self.lu_options)
+        return _solve_low_rank(self.lu, rhs, self.low)
 
 
 #: relative rise of the incremental potential that the line search's gradient test lets
@@ -311,9 +418,10 @@ def descent_direction(solve_shifted, gradient: np.ndarray, history: list[float])
 
 
 def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: float,
-                residual: float, project, history: list[float], first_step: float = 1.0):
+                residual: float, project, history: list[float], first_step: float = 1.0,
+                halvings: int = 30):
     """Backtracking from the Newton step ``dq``: the first of the steps s, s/2, s/4, ...
-    (30 halvings; s = ``first_step``, 1 unless a barrier's collision-free bound is
+    (``halvings`` trials; s = ``first_step``, 1 unless a barrier's collision-free bound is
     smaller) with sufficient decrease (Armijo, 1e-4 of ``slope``) or, with the potential
     risen by at most ``PHI_ROUNDOFF`` of itself, a projected gradient below half of
     ``residual``.
@@ -329,7 +437,7 @@ def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: floa
         NewtonFailure: no acceptable step.
     """
     step = first_step
-    for _ in range(30):
+    for _ in range(halvings):
         trial = q + step * dq
         phi_trial, grad_trial = evaluate(trial)
         if np.isfinite(phi_trial) and (
@@ -357,13 +465,12 @@ def woodbury_terms(solve, u: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.
     return a_inv_u, np.diag(1.0 / c) + u.T @ a_inv_u
 
 
-def _solve_with_low_rank(a: sp.csc_matrix, rhs: np.ndarray, low_rank,
-                         lu_options: dict | None = None) -> np.ndarray:
-    """Solve (A + sum c u u^T) x = rhs by one sparse LU and the Woodbury identity."""
-    lu = spla.splu(a) if lu_options is None else spla.splu(a, **lu_options)
+def _solve_low_rank(lu, rhs: np.ndarray, low_rank) -> np.ndarray:
+    """Solve (A + sum c u u^T) x = rhs with A's sparse LU ``lu`` and the Woodbury
+    identity."""
     x = lu.solve(rhs)
     if not low_rank:
         return x
-    u, c = stack_low_rank(low_rank, a.shape[0])
+    u, c = stack_low_rank(low_rank, rhs.shape[0])
     a_inv_u, capacitance = woodbury_terms(lu.solve, u, c)
     return x - a_inv_u @ np.linalg.solve(capacitance, u.T @ x)

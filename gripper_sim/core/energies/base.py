@@ -44,6 +44,12 @@ class Energy:
         empty = np.zeros(0, dtype=np.int64)
         return Evaluation(0.0, np.zeros_like(q), empty, empty, np.zeros(0))
 
+    def factor_key(self):
+        """What of this energy's Hessian changes with the step's set-up (a soft pad's
+        rows): a Newton matrix factorised under another key is not kept
+        (``ImplicitEulerSolver.keep_factor``). None: nothing."""
+        return None
+
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction of the step ``dq`` from ``q`` (both (n_dof,) m) this energy
         allows (a contact barrier: no crossing along it); 1 = no bound."""
