@@ -1,12 +1,13 @@
-"""The jaw drive's gap search (``core.facade``: ``_secant_stiffness``, ``_next_gap``) on
-force-gap laws with a known answer: the search that ``_drive_jaws`` runs, each solve
-replaced by the law."""
+"""The jaw drive's gap search (``core.jaw_drive``: ``record_solve``, ``secant_stiffness``,
+``next_gap``) on force-gap laws with a known answer: the search that both ``_drive_jaws``
+loops run, each solve replaced by the law."""
 import math
 
+import numpy as np
 import pytest
 
-from gripper_sim.core.facade import (FORCE_TOLERANCE, MAX_GAP_SOLVES, _next_gap,
-                                     _secant_stiffness)
+from gripper_sim.core import jaw_drive
+from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
 
 #: the fruit's width (m): both jaws touch below this gap
 TOUCH = 0.0635
@@ -27,20 +28,29 @@ def search(force, first_gap: float, stiffness: float, goal: float, lo: float = 0
     """The gaps (m) the drive solves at, from ``first_gap`` with the kept ``stiffness``
     (N/m), until the force is within the tolerance of ``goal`` (N). Above
     ``one_jaw_until`` only one jaw touches; the other's clearance is known."""
-    tried, gaps = [], []
+    tried, count, gaps = np.empty((MAX_GAP_SOLVES, 3)), 0, []
     gap = first_gap
     for _ in range(MAX_GAP_SOLVES):
         gaps.append(gap)
         both = gap < one_jaw_until
         miss = (force(gap) if both else 0.0) - goal
-        tried.append((gap, miss, both))
-        stiffness = _secant_stiffness(tried, stiffness, goal)
-        if abs(miss) <= FORCE_TOLERANCE * goal:
+        count, stiffness, action = jaw_drive.record_solve(tried, count, gap, miss, both,
+                                                          stiffness, goal, lo, hi)
+        if action == jaw_drive.DONE:
             return gaps
-        gap = _next_gap(tried, stiffness, goal, lo, hi,
-                        math.inf if both else gap - one_jaw_until)
-        assert gap is not None and lo <= gap <= hi
+        assert action == jaw_drive.SEARCH
+        gap = jaw_drive.next_gap(tried, count, stiffness, goal, lo, hi,
+                                 math.inf if both else gap - one_jaw_until)
+        assert lo <= gap <= hi
     pytest.fail(f'no gap within the tolerance in {MAX_GAP_SOLVES} solves: {gaps}')
+
+
+def rows(tried: list) -> tuple[np.ndarray, int]:
+    """Solves (gap m, force - goal N, both touch) as ``jaw_drive``'s rows and count."""
+    table = np.zeros((MAX_GAP_SOLVES, 3))
+    for k, (gap, miss, both) in enumerate(tried):
+        table[k] = gap, miss, 1.0 if both else 0.0
+    return table, len(tried)
 
 
 def test_secant_stiffness_is_the_hertz_stiffness_at_the_goal():
@@ -51,15 +61,16 @@ def test_secant_stiffness_is_the_hertz_stiffness_at_the_goal():
     goal = 2.0
     g1, g2 = TOUCH - 0.0001, TOUCH - 0.00015
     tried = [(g1, force(g1) - goal, True), (g2, force(g2) - goal, True)]
-    stiffness = _secant_stiffness(tried, 1.0, goal)
+    stiffness = jaw_drive.secant_stiffness(*rows(tried), 1.0, goal)
     assert stiffness == pytest.approx(1.5 * goal / 0.001, rel=1e-9)
     chord = (force(g2) - force(g1)) / (g1 - g2)
     assert chord < 0.4 * stiffness
 
 
 def test_secant_stiffness_needs_two_solves_with_both_jaws():
-    assert _secant_stiffness([(0.063, -1.0, True)], 123.0, 2.0) == 123.0
-    assert _secant_stiffness([(0.064, -2.0, False), (0.063, -1.0, True)], 123.0, 2.0) == 123.0
+    assert jaw_drive.secant_stiffness(*rows([(0.063, -1.0, True)]), 123.0, 2.0) == 123.0
+    assert jaw_drive.secant_stiffness(*rows([(0.064, -2.0, False), (0.063, -1.0, True)]),
+                                      123.0, 2.0) == 123.0
 
 
 @pytest.mark.parametrize('factor', [0.5, 1.0, 2.0])
@@ -96,12 +107,14 @@ def test_the_search_stays_in_the_speed_range_and_stops_at_its_end():
     range's end (the drive keeps the best solve) instead of leaving it."""
     force = linear(1000.0)
     lo = TOUCH - 0.0005        # at most 0.5 N
-    tried = []
+    tried, count = np.empty((MAX_GAP_SOLVES, 3)), 0
     gap = TOUCH - 0.0002
     for _ in range(MAX_GAP_SOLVES):
-        tried.append((gap, force(gap) - 2.0, True))
-        gap = _next_gap(tried, _secant_stiffness(tried, 1000.0, 2.0), 2.0, lo, 0.08,
-                        math.inf)
-        if gap is None or gap <= lo:
+        count, stiffness, action = jaw_drive.record_solve(tried, count, gap, force(gap) - 2.0,
+                                                          True, 1000.0, 2.0, lo, 0.08)
+        if action == jaw_drive.SETTLE:
+            break
+        gap = jaw_drive.next_gap(tried, count, stiffness, 2.0, lo, 0.08, math.inf)
+        if math.isnan(gap) or gap <= lo:
             break
     assert gap == lo

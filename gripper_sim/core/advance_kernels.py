@@ -180,19 +180,6 @@ def pairwise_sum(values, count):
 
 
 @njit(cache=True)
-def _nearest(tried, count, gap):
-    """Index of the solve in ``tried`` whose gap is nearest to ``gap`` (the first of equals),
-    -1 if none (or ``gap`` is NaN: the first solve)."""
-    if math.isnan(gap) or count == 0:
-        return -1
-    best = 0
-    for k in range(1, count):
-        if abs(tried[k, 0] - gap) < abs(tried[best, 0] - gap):
-            best = k
-    return best
-
-
-@njit(cache=True)
 def _drive_jaws(x, v, start_int, start_float, c_int, c_float, ends_int, ends_float, grip, new,
                 jaw, kin, x_out, v_out, forces_out, fixed, outs, dmg, pad, scratch, tried):
     """One step whose end meets the jaw drive's force goal, as
@@ -216,7 +203,7 @@ def _drive_jaws(x, v, start_int, start_float, c_int, c_float, ends_int, ends_flo
     count = 0
     gap = math.nan
     for _ in range(jaw_drive.MAX_GAP_SOLVES):
-        near = _nearest(tried, count, gap)
+        near = jaw_drive.nearest_solve(tried, count, gap)
         if near < 0:
             c_int[:] = start_int
             c_float[:] = start_float
@@ -229,34 +216,28 @@ def _drive_jaws(x, v, start_int, start_float, c_int, c_float, ends_int, ends_flo
         if status != OK:
             if count == 0 or status == UNSUPPORTED:
                 return status, iterations, solves
-            gap = 0.5 * (gap + tried[count - 1, 0])
+            gap = jaw_drive.halfway(tried, count, gap)
             continue
         iterations += np.int64(out[0])
         left_n, right_n = out[2], out[3]
         both = left_n > 0 and right_n > 0
         gap = new[G_GAP]
         miss = (0.5 * (left_n + right_n) if both else 0.0) - goal
-        tried[count, 0] = gap
-        tried[count, 1] = miss
-        tried[count, 2] = 1.0 if both else 0.0
         ends_int[count] = c_int
         ends_float[count] = c_float
-        count += 1
-        stiffness = jaw_drive.secant_stiffness(tried, count, stiffness, goal)
-        if abs(miss) <= jaw_drive.FORCE_TOLERANCE * goal:
+        count, stiffness, action = jaw_drive.record_solve(tried, count, gap, miss, both,
+                                                          stiffness, goal, lo, hi)
+        if action == jaw_drive.DONE:
             new[G_STIFFNESS] = stiffness
             return OK, iterations, solves
-        if (miss < 0 and gap <= lo + 1e-12) or (miss > 0 and gap >= hi - 1e-12):
+        if action == jaw_drive.SETTLE:
             break
         clearance = math.inf if both else _clearance(x_out, new, left_n, right_n, kin)
         gap = jaw_drive.next_gap(tried, count, stiffness, goal, lo, hi, clearance)
         if math.isnan(gap):
             break
-    best = 0
-    for k in range(1, count):
-        if abs(tried[k, 1]) < abs(tried[best, 1]):
-            best = k
-    if best != count - 1 or gap != tried[best, 0]:
+    best = jaw_drive.settle_on(tried, count, gap)
+    if best >= 0:
         c_int[:] = ends_int[best]
         c_float[:] = ends_float[best]
         solves += 1

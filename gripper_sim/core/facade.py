@@ -355,41 +355,42 @@ class SimulationFacade:
         goal, lo, hi = self._grip_force_goal(self._grip, dt)
         stiffness = self._grip.stiffness
         iterations = 0
-        tried: list[tuple[float, float, bool]] = []   # (gap, force - goal, both touch)
+        tried = np.empty((MAX_GAP_SOLVES, 3))   # the solves' rows, see ``jaw_drive``
+        count = 0
         ends: list = []   # the contact set at the end of each solve in ``tried``
-        gap = None
+        gap = math.nan    # the first solve: at the predicted gap
         try:
             for _ in range(MAX_GAP_SOLVES):
+                near = jaw_drive.nearest_solve(tried, count, gap)
                 try:
-                    iterations += self._solve_at(gap, dt, _nearest(tried, ends, gap))
+                    iterations += self._solve_at(None if math.isnan(gap) else gap, dt,
+                                                 ends[near] if near >= 0 else None)
                 except NewtonFailure:
-                    if not tried:
+                    if count == 0:
                         raise
-                    # a corrected gap the solver cannot follow: halfway back to the last
                     self._restore(saved)
-                    gap = 0.5 * (gap + tried[-1][0])
+                    gap = jaw_drive.halfway(tried, count, gap)
                     continue
                 left_n, right_n = self._jaw_force
                 both = left_n > 0 and right_n > 0
                 gap = self._grip.gap
                 miss = (0.5 * (left_n + right_n) if both else 0.0) - goal
-                tried.append((gap, miss, both))
                 ends.append(self.contacts)
-                stiffness = _secant_stiffness(tried, stiffness, goal)
-                if abs(miss) <= FORCE_TOLERANCE * goal:
+                count, stiffness, action = jaw_drive.record_solve(
+                    tried, count, gap, miss, both, stiffness, goal, lo, hi)
+                if action == jaw_drive.DONE:
                     return self._kept_stiffness(stiffness, iterations)
-                if (miss < 0 and gap <= lo + 1e-12) or (miss > 0 and gap >= hi - 1e-12):
-                    break   # the speed limit: no gap of this step does better
-                gap = _next_gap(tried, stiffness, goal, lo, hi,
-                                math.inf if both else self._jaw_clearance())
-                self._restore(saved)
-                if gap is None:
+                if action == jaw_drive.SETTLE:
                     break
-            # no gap within the tolerance: the best one solved (the last, if it is)
-            best = min(range(len(tried)), key=lambda i: abs(tried[i][1]))
-            if best != len(tried) - 1 or gap != tried[best][0]:
+                gap = jaw_drive.next_gap(tried, count, stiffness, goal, lo, hi,
+                                         math.inf if both else self._jaw_clearance())
                 self._restore(saved)
-                iterations += self._solve_at(tried[best][0], dt, ends[best])
+                if math.isnan(gap):
+                    break
+            best = jaw_drive.settle_on(tried, count, gap)
+            if best >= 0:
+                self._restore(saved)
+                iterations += self._solve_at(tried[best, 0], dt, ends[best])
         finally:
             self._gap_override = None
         return self._kept_stiffness(stiffness, iterations)
@@ -694,39 +695,6 @@ class SimulationFacade:
         return (f"raise sim.max_newton_iterations (now {c['sim.max_newton_iterations']}) "
                 f"or sim.max_halvings (now {c['sim.max_halvings']}); a smaller sim.dt would "
                 f'only repeat these sub-steps')
-
-
-def _tried_rows(tried: list) -> np.ndarray:
-    """The solves ``tried`` ((gap, force - goal, both touch) each) as ``jaw_drive`` takes
-    them: rows of (MAX_GAP_SOLVES, 3) floats."""
-    rows = np.zeros((max(MAX_GAP_SOLVES, len(tried)), 3))
-    for k, (gap, miss, both) in enumerate(tried):
-        rows[k] = gap, miss, 1.0 if both else 0.0
-    return rows
-
-
-def _secant_stiffness(tried: list, stiffness: float, goal: float) -> float:
-    """N/m, ``jaw_drive.secant_stiffness`` of the solves ``tried`` ((gap, force - goal,
-    both touch) each)."""
-    return jaw_drive.secant_stiffness(_tried_rows(tried), len(tried), float(stiffness),
-                                      float(goal))
-
-
-def _next_gap(tried: list, stiffness: float, goal: float, lo: float, hi: float,
-              clearance: float) -> float | None:
-    """m, ``jaw_drive.next_gap`` of the solves ``tried`` ((gap, force - goal, both touch)
-    each); None when the bracket has closed."""
-    gap = jaw_drive.next_gap(_tried_rows(tried), len(tried), float(stiffness), float(goal),
-                             float(lo), float(hi), float(clearance))
-    return None if math.isnan(gap) else gap
-
-
-def _nearest(tried: list, ends: list, gap: float | None):
-    """The contact set at the end of the solve in ``tried`` (gap, ...) whose gap is
-    nearest to ``gap`` (m), None if none (or ``gap`` is None: the first solve)."""
-    if gap is None or not tried:
-        return None
-    return ends[min(range(len(tried)), key=lambda i: abs(tried[i][0] - gap))]
 
 
 def _wrench(r: np.ndarray, f: np.ndarray) -> JawWrench:

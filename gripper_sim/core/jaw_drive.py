@@ -7,8 +7,13 @@ grasp driven either way moves its jaws by the same arithmetic:
 - ``trapezoid``, ``moved``: one step of the lift and the transport at their speed and
   acceleration limits;
 - ``servo_gap``, ``gap_bounds``, ``predicted_gap``: the gap a step starts its solve at;
-- ``contact_measure``, ``secant_stiffness``, ``next_gap``: the gap search of
-  ``core.facade.SimulationFacade._drive_jaws`` when a solved step misses its force goal.
+- the gap search when a solved step misses its force goal: ``record_solve`` (keep a
+  solve, update the stiffness, decide: done, settle, or search on), ``next_gap`` (with
+  ``contact_measure``, ``secant_stiffness``), ``nearest_solve`` (whose end contact set a
+  solve starts from), ``halfway`` (after a failed solve) and ``settle_on`` (which solve
+  stands when none met the goal). Both loops that run the search -
+  ``core.facade.SimulationFacade._drive_jaws`` and ``core.advance_kernels._drive_jaws`` -
+  only solve and call these.
 
 The gap search's solves so far are rows of ``tried`` (MAX_GAP_SOLVES, 3) [gap m, force -
 goal N, both jaws touch (1.0/0.0)], the first ``count`` of them filled.
@@ -24,6 +29,9 @@ from numba import njit
 FORCE_TOLERANCE = 0.005
 #: solves of one step at most, the first included (then the best one is solved again)
 MAX_GAP_SOLVES = 8
+#: what the gap search does after a solve (``record_solve``): solve again at
+#: ``next_gap``; the solve met the goal; no gap of this step does better (``settle_on``)
+SEARCH, DONE, SETTLE = 0, 1, 2
 
 
 @njit(cache=True)
@@ -185,3 +193,61 @@ def next_gap(tried, count, stiffness, goal, lo, hi, clearance):
         if 0.05 < fraction < 0.95:
             return low_gap + fraction * (high_gap - low_gap)
     return 0.5 * (low_gap + high_gap)
+
+
+@njit(cache=True)
+def record_solve(tried, count, gap, miss, both, stiffness, goal, lo, hi):
+    """Keep a solve as row ``count`` of ``tried`` and decide what the search does next.
+
+    Args:
+        gap: m, the gap the step was solved at.  miss: N, its grip force - ``goal``.
+        both: whether both jaws held the fruit.  stiffness: N/m, the search's so far.
+        goal: N.  lo, hi: m, the gaps this step's speed limit allows.
+
+    Returns:
+        (count + 1, the stiffness after this solve (``secant_stiffness``), SEARCH, DONE
+        or SETTLE: at a limit of the range with the force on the wrong side).
+    """
+    tried[count, 0] = gap
+    tried[count, 1] = miss
+    tried[count, 2] = 1.0 if both else 0.0
+    count += 1
+    stiffness = secant_stiffness(tried, count, stiffness, goal)
+    if abs(miss) <= FORCE_TOLERANCE * goal:
+        return count, stiffness, DONE
+    if (miss < 0 and gap <= lo + 1e-12) or (miss > 0 and gap >= hi - 1e-12):
+        return count, stiffness, SETTLE
+    return count, stiffness, SEARCH
+
+
+@njit(cache=True)
+def nearest_solve(tried, count, gap):
+    """Index of the solve in ``tried`` whose gap is nearest to ``gap`` (m; the first of
+    equals): the next solve starts from its end contact set; -1 if none (or ``gap`` is
+    NaN: the step's first solve starts from the step's start)."""
+    if math.isnan(gap) or count == 0:
+        return -1
+    best = 0
+    for k in range(1, count):
+        if abs(tried[k, 0] - gap) < abs(tried[best, 0] - gap):
+            best = k
+    return best
+
+
+@njit(cache=True)
+def halfway(tried, count, gap):
+    """m, the gap to try after a solve at ``gap`` failed (a corrected gap the solver
+    cannot follow): halfway back to the last solve that worked (``count`` > 0)."""
+    return 0.5 * (gap + tried[count - 1, 0])
+
+
+@njit(cache=True)
+def settle_on(tried, count, gap):
+    """When no solve met the goal: the index of the solve with the smallest miss (the
+    first of equals) to solve again at, or -1 if the state is already that solve's (it
+    was the last, at ``gap``, m; NaN after the state was put back)."""
+    best = 0
+    for k in range(1, count):
+        if abs(tried[k, 1]) < abs(tried[best, 1]):
+            best = k
+    return best if best != count - 1 or gap != tried[best, 0] else -1
