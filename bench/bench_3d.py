@@ -57,7 +57,7 @@ MODELS = {
 PARTS = [
     ('_measure', 'measures (wrenches, areas, damage)'),
 ]
-#: the kept preconditioner's kernels (``core.solver_kernels``): block LDL^T factorisation
+#: the kept preconditioner's kernels (``core.sparse_ldl``): block LDL^T factorisation
 #: and solve
 _FACTOR = 'ldl_factor_3'
 _TRISOLVE = 'ldl_solve_3'

@@ -27,7 +27,7 @@ iteration (same line search, shifts and stopping rule) with less work:
   error estimate (the preconditioned residual) is below ``CG_ERROR_FRACTION`` of the
   Newton tolerance, so the step that ends the iteration is accurate;
 - the factorisation is in METIS's nested-dissection order of the node graph, and for
-  d = 3 by kernels written out for 3 x 3 blocks (``solver_kernels.ldl_factor_3``,
+  d = 3 by kernels written out for 3 x 3 blocks (``sparse_ldl.ldl_factor_3``,
   ``ldl_solve_3``): on the 3D fruits a factorisation takes 0.4 and a solve 0.5-0.7 of
   the time of the single-precision SuperLU used before, in double precision;
 - a later contact pass of the same step starts from the previous pass's solution (in
@@ -131,7 +131,7 @@ class _BlockLDL:
         target, source = self.gather
         values.reshape(-1)[target] = data[source]
         if self.pattern.block == 3:
-            status = kernels.ldl_factor_3(self.pattern.arrays, values.reshape(-1, 9),
+            status = sparse_ldl.ldl_factor_3(self.pattern.arrays, values.reshape(-1, 9),
                                           self.l_values.reshape(-1, 9),
                                           self.d_inv.reshape(-1, 9))
         else:
@@ -141,7 +141,7 @@ class _BlockLDL:
 
     def _solve_in_place(self, x: np.ndarray) -> None:
         if self.pattern.block == 3:
-            kernels.ldl_solve_3(self.pattern.l_ptr, self.pattern.l_row,
+            sparse_ldl.ldl_solve_3(self.pattern.l_ptr, self.pattern.l_row,
                                 self.l_values.reshape(-1, 9), self.d_inv.reshape(-1, 9), x)
         else:
             sparse_ldl.solve(self.pattern.arrays, self.l_values, self.d_inv, x)
