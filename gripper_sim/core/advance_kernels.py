@@ -96,16 +96,10 @@ def _bounds(grip, kin, dt):
 def _clearance(x, grip, left_n, right_n, kin):
     """``SimulationFacade._jaw_clearance`` of positions x (n, 2) m, the grip and the jaw
     forces N."""
-    if left_n > 0 and right_n > 0:
+    if (left_n > 0 and right_n > 0) or kin[K_CLEARANCE] == 0.0:
         return math.inf
-    if kin[K_CLEARANCE] == 0.0:
-        return math.inf
-    result = math.inf
-    if not left_n > 0:
-        result = min(result, np.min(x[:, 0]) - (grip[G_X] - 0.5 * grip[G_GAP]))
-    if not right_n > 0:
-        result = min(result, (grip[G_X] + 0.5 * grip[G_GAP]) - np.max(x[:, 0]))
-    return result
+    return jaw_drive.clearance(np.min(x[:, 0]), np.max(x[:, 0]), grip[G_X], grip[G_GAP],
+                               left_n > 0, right_n > 0)
 
 
 @njit(cache=True)

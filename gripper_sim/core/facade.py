@@ -425,22 +425,20 @@ class SimulationFacade:
 
     def _jaw_clearance(self) -> float:
         """m, the distance along x from the fruit to the nearest flat jaw face that does
-        not touch it; inf when both jaws touch, and for arc and V-groove fingers and soft
-        pads (the fruit enters their recess or layer: no plane gives their clearance)."""
+        not touch it (``jaw_drive.clearance``); inf when both jaws touch, and where no
+        plane gives it (``_clearance_is_planar``)."""
         left_n, right_n = self._jaw_force
-        if left_n > 0 and right_n > 0:
+        if (left_n > 0 and right_n > 0) or not self._clearance_is_planar():
             return math.inf
-        if (self.config.get('gripper.finger.type', 'flat') != 'flat' or self._soft is not None
-                or self.config.get('gripper.finger.pad.enabled', False)):
-            return math.inf
-        grip = self._grip
         x = self.q[:, 0]
-        gaps = []
-        if not left_n > 0:
-            gaps.append(float(x.min()) - (grip.x - 0.5 * grip.gap))
-        if not right_n > 0:
-            gaps.append((grip.x + 0.5 * grip.gap) - float(x.max()))
-        return min(gaps)
+        return jaw_drive.clearance(float(x.min()), float(x.max()), self._grip.x,
+                                   self._grip.gap, left_n > 0, right_n > 0)
+
+    def _clearance_is_planar(self) -> bool:
+        """Whether a jaw's clearance is a flat face's: not for arc and V-groove fingers
+        and soft pads (the fruit enters their recess or layer)."""
+        return (self.config.get('gripper.finger.type', 'flat') == 'flat' and self._soft is None
+                and not self.config.get('gripper.finger.pad.enabled', False))
 
     # ------------------------------------------------------------------ jaws
     def _jaw_origin(self, grip: GripperState, side: int) -> np.ndarray:

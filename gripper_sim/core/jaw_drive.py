@@ -11,7 +11,8 @@ grasp driven either way moves its jaws by the same arithmetic:
   solve, update the stiffness, decide: done, settle, or search on), ``next_gap`` (with
   ``contact_measure``, ``secant_stiffness``), ``nearest_solve`` (whose end contact set a
   solve starts from), ``halfway`` (after a failed solve) and ``settle_on`` (which solve
-  stands when none met the goal). Both loops that run the search -
+  stands when none met the goal), ``clearance`` (how far a jaw that does not touch is
+  from the fruit). Both loops that run the search -
   ``core.facade.SimulationFacade._drive_jaws`` and ``core.advance_kernels._drive_jaws`` -
   only solve and call these.
 
@@ -251,3 +252,16 @@ def settle_on(tried, count, gap):
         if abs(tried[k, 1]) < abs(tried[best, 1]):
             best = k
     return best if best != count - 1 or gap != tried[best, 0] else -1
+
+
+@njit(cache=True)
+def clearance(x_min, x_max, centre, gap, left_touches, right_touches):
+    """m, the distance along x from the fruit, which spans [x_min, x_max] (m), to the
+    nearest flat jaw face that does not touch it, the faces at ``centre`` -/+ ``gap`` / 2
+    (m); inf when both touch."""
+    result = math.inf
+    if not left_touches:
+        result = min(result, x_min - (centre - 0.5 * gap))
+    if not right_touches:
+        result = min(result, (centre + 0.5 * gap) - x_max)
+    return result

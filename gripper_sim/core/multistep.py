@@ -193,7 +193,7 @@ class MultiStep:
         kin = np.array([kinematics.max_gap, kinematics.max_speed,
                         kinematics.lift_acceleration, kinematics.transport_acceleration, dt,
                         sim.fruit.rest_width, float(sim._plain_jaws),
-                        float(self._clearance_applies()), float(path._flesh_in_kernel),
+                        float(sim._clearance_is_planar()), float(path._flesh_in_kernel),
                         tracker.bruise_pressure, tracker.failure_stress,
                         math.nan if failure_strain is None else failure_strain], dtype=float)
         peaks = np.zeros(ak.PEAK_SIZE)
@@ -249,13 +249,6 @@ class MultiStep:
             tuple(peaks.tolist()),
             (float(run[ak.R_SLIDE]), float(run[ak.R_MAX_SLIP]), float(run[ak.R_MAX_DROP])),
             float(run[ak.R_PREVIOUS_TIME]))
-
-    def _clearance_applies(self) -> bool:
-        """Whether ``SimulationFacade._jaw_clearance`` measures a flat jaw's clearance."""
-        config = self.path.sim.config
-        return (config.get('gripper.finger.type', 'flat') == 'flat'
-                and self.path.sim._soft is None
-                and not config.get('gripper.finger.pad.enabled', False))
 
 
 def next_result(sim, machine, end: float, watched: bool) -> 'tuple[StepResult, Skipped | None]':
