@@ -98,7 +98,7 @@ def grasp(sim: Simulation, hold: float, watch: bool = False) -> tuple:
     summary = run_grasp(sim, sequence, on_step=(lambda _result, _phase: None) if watch
                         else None)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-    return wall, cpu, sim._step, getattr(sim, 'newton_iterations', 0), summary
+    return wall, cpu, sim.last.step, getattr(sim, 'newton_iterations', 0), summary
 
 
 def _op_loops():
@@ -225,7 +225,7 @@ def kernel_split(sim: Simulation) -> dict:
     start, filters = np.empty((n, 2)), np.empty((n, 2, 2))
     frn, frt = np.empty(n, np.int64), np.empty((n, 1, 2))
     frb, frs = np.empty(n), np.empty((n, 1))
-    face_par, face_dyn = path._face_arrays()
+    face_par, face_dyn = path.face_arrays()
     faces = k.contact_faces(face_par, face_dyn)
     n_fr = contact_kernels.constraints(c.arrays(), faces, x_n, x_n + dt * v_n, dt, 0.05, start,
                                        filters, frn, frt, frb, frs)
@@ -243,8 +243,8 @@ def kernel_split(sim: Simulation) -> dict:
                c.secondary_bounce, x_n, v_n, sim.contact_forces, faces, path.surface, dt,
                sim.config['contact.max_correction_speed'],
                sim.config['contact.release_threshold'], max(5 * sim.gravity.g * dt, 1e-3))
-    damage = path._damage_inputs()
-    grip = sim._grip
+    damage = path.damage_inputs()
+    grip = sim.gripper_state
     origins = np.array([[grip.x - 0.5 * grip.gap, grip.lift],
                         [grip.x + 0.5 * grip.gap, grip.lift]])
     meas = (x_n, v_n, sim.contact_forces, c.obstacle, path.masses, path.surface,

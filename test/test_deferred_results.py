@@ -62,7 +62,7 @@ def test_deferred_fields_are_built_on_first_read_with_the_eager_values():
     np.testing.assert_allclose(result.centroid, masses @ result.positions / masses.sum(),
                                rtol=1e-12, atol=1e-15)
     assert result.slipping is sim._fast._sliding(v, result.contact_obstacle, grip,
-                                                 sim._fast._face_arrays()[0])
+                                                 sim._fast.face_arrays()[0])
     assert len(result.damage.contacts) >= 2  # a patch on each jaw
     assert all(name in vars(result) for name in DEFERRED)
 

@@ -28,7 +28,7 @@ def _squeezed(sim: Simulation, steps: int = 300) -> Simulation:
 def test_packed_constants_give_back_every_array(model):
     sim = _simulation(model)
     path = sim._fast
-    fconst, iconst, layout = path._constants
+    fconst, iconst, layout = path.constants
     tri, dm_inv, volume, lame, tri_scatter, skin, pattern = path.model['flesh']
     floats = {kernels.KF_MASSES2: path.masses2, kernels.KF_MASSES: path.masses,
               kernels.KF_REST_SEGMENTS: path.rest_segments,
@@ -64,7 +64,7 @@ def test_steps_do_not_depend_on_what_the_scratch_space_held(model):
     clean, spoiled = _simulation(model), _simulation(model)
     clean.command_force(2.0, 0.05)
     spoiled.command_force(2.0, 0.05)
-    scratch = spoiled._fast._scratch
+    scratch = spoiled._fast.scratch
     # the Newton matrix's kept factor (storage's last three arrays) and its record at the
     # work array's end are state carried from step to step, not scratch
     kept = kernels.KEPT_PER_NODE * spoiled.fruit.n_nodes + kernels.KEPT_META
@@ -80,7 +80,7 @@ def test_steps_do_not_depend_on_what_the_scratch_space_held(model):
     np.testing.assert_array_equal(spoiled.v, clean.v)
     np.testing.assert_array_equal(spoiled.contacts.obstacle, clean.contacts.obstacle)
     assert spoiled.last.grip_force == clean.last.grip_force
-    assert spoiled._fast._scratch[0] is scratch[0]  # reused, not reallocated
+    assert spoiled._fast.scratch[0] is scratch[0]  # reused, not reallocated
 
 
 @pytest.mark.parametrize('model', ['shell', 'solid'])

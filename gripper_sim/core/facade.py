@@ -8,6 +8,12 @@ soft pads (if any) are set up around the step, and one implicit step with contac
 ``core3d.simulation.Simulation3D``) build the fruit, the gravity, pads and kinematics,
 and provide ``_make_faces()`` (which also sets ``_face_side`` and ``_face_offsets``),
 ``_make_damage()`` and ``_measure(iterations, substeps)``.
+The facade owns its state: a step's end is taken in one place, ``commit_step`` (the
+generic, soft and compiled routes all commit there), a compiled multi-step run's in
+``commit_advance``; the compiled routes (``core.fast``, ``core.multistep``) read what
+they need through public read-only properties (``faces_template``, ``face_sides``,
+``face_offsets``, ``pad``, ``damage_tracker``, ``jaw_forces``, ...) and methods
+(``faces_at``, ``gripper_after``, ``measure_slip``, ``contact_forces_and_holders``).
 Commands validate their values (``CommandError``, the simulation unchanged) and take
 effect on the next step.
 
@@ -150,7 +156,7 @@ class SimulationFacade:
         if self._soft is not None:
             self._finger = self._soft.at_rest(self._jaw_origin(self._grip, LEFT),
                                               self._jaw_origin(self._grip, RIGHT))
-            faces = self._faces(self._grip)
+            faces = self.faces_at(self._grip)
             self._barrier.begin_step(np.vstack([self.q, self._finger.positions]), faces,
                                      faces, self.dt)
         self._jaw_force = (0.0, 0.0)
@@ -240,11 +246,13 @@ class SimulationFacade:
         self._slip_reference = float(self._last.centroid[-1] - self._grip.lift)
         self._held_slip = 0.0
 
-    def _slip_distance(self, relative_z: float, both: bool, touching: bool) -> float:
+    def measure_slip(self, relative_z: float, both: bool, touching: bool) -> float:
         """m, the fruit's vertical motion relative to the jaws since both jaws first held
         it (or since ``mark_slip_reference``), from ``relative_z`` (m, centroid height over
         the jaw centre). While no jaw touches the fruit (released, or dropped) it stays at
-        its last value: the fruit is then no longer moving in the jaws."""
+        its last value: the fruit is then no longer moving in the jaws. A step's measure:
+        it sets the slip reference when both jaws first hold (``both``) and keeps the slip
+        while a jaw touches (``touching``)."""
         if both and self._slip_reference is None:
             self._slip_reference = relative_z
         if self._slip_reference is None:
@@ -272,7 +280,13 @@ class SimulationFacade:
     # ------------------------------------------------------------------ state
     @property
     def time(self) -> float:
+        """s, the simulated time since ``reset``."""
         return self._time
+
+    @property
+    def step_count(self) -> int:
+        """The steps taken since ``reset`` (``StepResult.step`` of the last one)."""
+        return self._step
 
     @property
     def gripper_state(self) -> GripperState:
@@ -286,6 +300,110 @@ class SimulationFacade:
     def add_observer(self, callback: Callable[[StepResult], None]) -> None:
         """Call ``callback(result)`` after every step."""
         self._observers.append(callback)
+
+    @property
+    def has_observers(self) -> bool:
+        """Whether a callback sees every step (``add_observer``)."""
+        return bool(self._observers)
+
+    # ------------------------------------------------------------------ what a step reads
+    # Read-only views for the compiled routes (``core.fast``, ``core.multistep``), which
+    # step this simulation and hand back what they computed (``commit_step``,
+    # ``commit_advance``).
+    @property
+    def faces_template(self) -> list:
+        """The obstacles as configured (``_make_faces``): the jaw faces first, each at
+        its jaw's origin offset by ``face_offsets``, then the fixed ones (table, walls).
+        A new list after ``reset`` and ``set_parameter``: compare it by identity to know
+        when it changed. Read only."""
+        return self._faces_template
+
+    @property
+    def face_sides(self) -> list[int]:
+        """The jaw (LEFT 0, RIGHT 1) of each of the first ``len(face_sides)`` obstacles
+        of ``faces_template``, the jaw faces."""
+        return self._face_side
+
+    @property
+    def face_offsets(self) -> list[np.ndarray]:
+        """(d,) m, each jaw face's origin relative to its jaw's origin
+        (``_jaw_origin``)."""
+        return self._face_offsets
+
+    @property
+    def plain_jaws(self) -> bool:
+        """Whether the jaws are one flat rigid face each (no shaped finger, pad or
+        deformable finger): a jaw's force is then the normal force on its face."""
+        return self._plain_jaws
+
+    @property
+    def pad(self):
+        """The soft pad layer on the jaw faces (``core.pad.PadLayer``, 3D
+        ``core3d.pad3d.PadLayer3D``), None without pads."""
+        return self._pad
+
+    @property
+    def damage_tracker(self):
+        """The damage tracker of this run (``core.damage.DamageTracker``; a new one
+        after ``reset``)."""
+        return self._damage
+
+    @property
+    def jaw_forces(self) -> tuple[float, float]:
+        """(left, right) N, each jaw's force on the fruit along its closing axis at the
+        end of the last solve (the pads' push included): what the jaw drive reads."""
+        return self._jaw_force
+
+    @property
+    def slip_reference(self) -> float | None:
+        """m, the centroid's height over the jaw centre when slip began to be measured
+        (``measure_slip``), None before both jaws held the fruit."""
+        return self._slip_reference
+
+    @property
+    def held_slip(self) -> float:
+        """m, the slip distance at the last step a jaw touched the fruit."""
+        return self._held_slip
+
+    # ------------------------------------------------------------------ committing
+    def commit_step(self, positions: np.ndarray, velocities: np.ndarray,
+                    contacts: cm.ContactState, contact_forces: np.ndarray,
+                    grip: GripperState, jaw_forces: tuple[float, float], dt: float) -> None:
+        """Take the end of one solved step of ``dt`` s as the state: the fruit's
+        positions (n, d) m and velocities (n, d) m/s, its contact set and contact forces
+        (n, d) N, the gripper state ``grip`` and the jaw forces (left, right) N
+        (``jaw_forces``). Every route of a step (generic, soft, compiled) commits here."""
+        self.q, self.v, self.contacts = positions, velocities, contacts
+        self.contact_forces = contact_forces
+        self._grip = grip
+        self._time += dt
+        self._jaw_force = jaw_forces
+
+    def commit_advance(self, positions: np.ndarray, velocities: np.ndarray,
+                       contacts: cm.ContactState, contact_forces: np.ndarray, *,
+                       grip: GripperState, jaw_forces: tuple[float, float], time: float,
+                       steps: int, solves: int, newton_iterations: int,
+                       slip_reference: float | None, held_slip: float,
+                       last_iterations: int) -> StepResult:
+        """Take the end of ``steps`` steps run at once (``core.multistep``) as the
+        state, as ``commit_step`` and ``step`` would have left it: the fruit's positions,
+        velocities, contact set and contact forces, the gripper state, the jaw forces (N),
+        the time (s), the ``gap_solves`` (``solves``) and ``newton_iterations`` they took,
+        the slip reference and held slip (m, ``slip_reference``, ``held_slip``). Measures
+        the last step (``last_iterations``: its Newton iterations) and returns its result
+        (``last``); no observer is called (a run with observers steps with ``step``)."""
+        self.q, self.v, self.contacts = positions, velocities, contacts
+        self.contact_forces = contact_forces
+        self._grip = grip
+        self._time = time
+        self._jaw_force = jaw_forces
+        self._slip_reference = slip_reference
+        self._held_slip = held_slip
+        self._step += steps
+        self.gap_solves += solves
+        self.newton_iterations += newton_iterations
+        self._last = self._measure(last_iterations, 1)
+        return self._last
 
     # ------------------------------------------------------------------ stepping
     def step(self) -> StepResult:
@@ -319,9 +437,10 @@ class SimulationFacade:
             self.step()
         return self._last
 
-    def _advance_gripper(self, dt: float) -> GripperState:
-        """The gripper state after ``dt`` (s), from the last step's jaw forces; the jaws at
-        the drive's corrected gap while ``_drive_jaws`` re-solves a step."""
+    def gripper_after(self, dt: float) -> GripperState:
+        """The gripper state after a step of ``dt`` (s) from the present one, from the
+        last step's jaw forces; the jaws at the drive's corrected gap while
+        ``_drive_jaws`` re-solves a step. Changes nothing."""
         left_n, right_n = self._jaw_force
         force = 0.5 * (left_n + right_n)
         if self._gap_override is not None:
@@ -426,15 +545,16 @@ class SimulationFacade:
     def _jaw_clearance(self) -> float:
         """m, the distance along x from the fruit to the nearest flat jaw face that does
         not touch it (``jaw_drive.clearance``); inf when both jaws touch, and where no
-        plane gives it (``_clearance_is_planar``)."""
+        plane gives it (``clearance_is_planar``)."""
         left_n, right_n = self._jaw_force
-        if (left_n > 0 and right_n > 0) or not self._clearance_is_planar():
+        if (left_n > 0 and right_n > 0) or not self.clearance_is_planar:
             return math.inf
         x = self.q[:, 0]
         return jaw_drive.clearance(float(x.min()), float(x.max()), self._grip.x,
                                    self._grip.gap, left_n > 0, right_n > 0)
 
-    def _clearance_is_planar(self) -> bool:
+    @property
+    def clearance_is_planar(self) -> bool:
         """Whether a jaw's clearance is a flat face's: not for arc and V-groove fingers
         and soft pads (the fruit enters their recess or layer)."""
         return (self.config.get('gripper.finger.type', 'flat') == 'flat' and self._soft is None
@@ -450,8 +570,9 @@ class SimulationFacade:
         """(d,) the point (x, z) of the gripper's plane (y = 0 in 3D)."""
         return np.array([x, z]) if self.dimension == 2 else np.array([x, 0.0, z])
 
-    def _faces(self, grip: GripperState) -> list:
-        """The obstacles with the jaw faces where ``grip`` puts them, moving with it."""
+    def faces_at(self, grip: GripperState) -> list:
+        """The obstacles (``faces_template``) with the jaw faces where the gripper state
+        ``grip`` puts them, moving with it; fresh copies."""
         # shallow copies: the moving faces get new origin and velocity arrays
         faces = [copy.copy(f) for f in self._faces_template]
         for index, side in enumerate(self._face_side):
@@ -467,7 +588,7 @@ class SimulationFacade:
 
     def _pad_faces(self, grip: GripperState) -> list:
         """(face, jaw side, obstacle index) of every jaw face, for the pads."""
-        faces = self._faces(grip)
+        faces = self.faces_at(grip)
         return [(faces[i], side, i) for i, side in enumerate(self._face_side)]
 
     @property
@@ -479,7 +600,7 @@ class SimulationFacade:
         """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
         (``obstacle_names``) where ``grip`` puts them; a deformable finger counts as a face
         along its backing."""
-        faces = self._faces(grip)
+        faces = self.faces_at(grip)
         normals = [f.normal for f in faces]
         velocities = [f.velocity for f in faces]
         sides = list(self._face_side) + [-1] * (len(faces) - len(self._face_side))
@@ -539,7 +660,7 @@ class SimulationFacade:
         centroid = masses @ x / masses.sum()
         touching = bool(np.any(sides[LEFT]) or np.any(sides[RIGHT]))
         both = bool(np.any(sides[LEFT]) and np.any(sides[RIGHT]))
-        slip = self._slip_distance(float(centroid[-1] - grip.lift), both, touching)
+        slip = self.measure_slip(float(centroid[-1] - grip.lift), both, touching)
         slipping = jaw_contacts_sliding(v, obstacle, face_sides, normals, face_velocities)
         energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
                             elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
@@ -561,7 +682,7 @@ class SimulationFacade:
                                                   self._jaw_origin(grip, RIGHT))
         return fields, normal, sides
 
-    def _contact_forces_and_holders(self) -> tuple[np.ndarray, np.ndarray]:
+    def contact_forces_and_holders(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, d) N every contact force on the fruit and (n,) the obstacle holding each
         node: the hard contacts' reactions, plus the pads' forces on the nodes that press
         a pad (held by the pad's face) if there are pads."""
@@ -582,7 +703,7 @@ class SimulationFacade:
         Newton iterations. Raises NewtonFailure (the caller halves the step)."""
         if self._pad is None:
             return self._substep_hard(dt)
-        grip_new = self._advance_gripper(dt)
+        grip_new = self.gripper_after(dt)
         self._pad.begin_step(self.q, self._pad_faces(self._grip), self._pad_faces(grip_new), dt)
         iterations = self._substep_hard(dt)
         self._pad.finish_step(self.q.ravel())
@@ -593,24 +714,21 @@ class SimulationFacade:
 
     def _substep_hard(self, dt: float) -> int:
         """One step with the hard contacts (the pads, if any, set up by the caller)."""
-        grip_new = self._advance_gripper(dt)
-        new_faces = self._faces(grip_new)
+        grip_new = self.gripper_after(dt)
+        new_faces = self.faces_at(grip_new)
         if self._soft is not None:
             return self._substep_soft(dt, grip_new, new_faces)
         if self._barrier is not None:
             outcome = barrier_step(self.solver, self._barrier, self.q, self.v,
-                                   self._faces(self._grip), new_faces, dt)
+                                   self.faces_at(self._grip), new_faces, dt)
         else:
             outcome = contact_step(self.solver, self.fruit.surface, self.contacts, self.q,
-                                   self.v, self._faces(self._grip), new_faces, dt,
+                                   self.v, self.faces_at(self._grip), new_faces, dt,
                                    ContactSettings.from_config(self.config,
                                                                self.deepest_first))
-        self.q, self.v, self.contacts = outcome.x, outcome.v, outcome.contacts
-        self.contact_forces = outcome.forces
-        self._grip = grip_new
-        self._time += dt
-        self._jaw_force = self._closing_forces(outcome.forces, outcome.contacts.obstacle,
-                                               new_faces)
+        self.commit_step(outcome.x, outcome.v, outcome.contacts, outcome.forces, grip_new,
+                         self._closing_forces(outcome.forces, outcome.contacts.obstacle,
+                                              new_faces), dt)
         return outcome.iterations
 
     def _substep_soft(self, dt: float, grip_new: GripperState, new_faces: list) -> int:
@@ -622,35 +740,36 @@ class SimulationFacade:
         outcome = soft_body_step(self.solver, self._barrier,
                                  np.vstack([self.q, finger.positions]),
                                  np.vstack([self.v, finger.velocities]), soft.base, targets,
-                                 self._faces(self._grip), new_faces, dt,
+                                 self.faces_at(self._grip), new_faces, dt,
                                  self_contact=soft.self_contact)
         partner = outcome.contacts.obstacle
-        self.q, self.v = outcome.x[:n], outcome.v[:n]
-        self.contacts = cm.ContactState.empty(n)
+        v = outcome.v[:n]
+        contacts = cm.ContactState.empty(n)
         # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
         # right_jaw (the fingers), then the faces
-        self.contacts.obstacle = np.where(partner[:n] > 0, partner[:n] - 1, -1)
-        self._mark_sticking(grip_new)
-        self.contact_forces = outcome.forces[:n]
+        contacts.obstacle = np.where(partner[:n] > 0, partner[:n] - 1, -1)
+        self._mark_sticking(contacts, v, grip_new)
         self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
                                    outcome.reaction[n:], partner[n:] == 0)
-        self._grip = grip_new
-        self._time += dt
         wrenches = self._finger_wrenches(grip_new)
-        self._jaw_force = (-float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0]))
+        self.commit_step(outcome.x[:n], v, contacts, outcome.forces[:n], grip_new,
+                         (-float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])),
+                         dt)
         return outcome.iterations
 
-    def _mark_sticking(self, grip: GripperState) -> None:
-        """The modes of the fruit's contacts with deformable fingers and faces: STICK where
-        a node moves along its obstacle (a finger: along its backing) slower than the
-        barrier's friction smoothing speed, else SLIP."""
+    def _mark_sticking(self, contacts: cm.ContactState, v: np.ndarray,
+                       grip: GripperState) -> None:
+        """The modes (``contacts.mode``) of the fruit's contacts with deformable fingers
+        and faces, the fruit's nodes at velocities ``v`` (n, d) m/s: STICK where a node
+        moves along its obstacle (a finger: along its backing) slower than the barrier's
+        friction smoothing speed, else SLIP."""
         normals, _, velocities = self._obstacles(grip)
-        held = np.flatnonzero(self.contacts.obstacle >= 0)
-        which = self.contacts.obstacle[held]
-        relative = self.v[held] - velocities[which]
+        held = np.flatnonzero(contacts.obstacle >= 0)
+        which = contacts.obstacle[held]
+        relative = v[held] - velocities[which]
         along = relative - np.sum(relative * normals[which], axis=1)[:, None] * normals[which]
         creeping = np.linalg.norm(along, axis=1) < self._barrier.settings.friction_smoothing
-        self.contacts.mode[held] = np.where(creeping, cm.STICK, cm.SLIP)
+        contacts.mode[held] = np.where(creeping, cm.STICK, cm.SLIP)
 
     def _finger_wrenches(self, grip: GripperState) -> list[JawWrench]:
         """What each jaw feels at its deformable finger's base nodes (the reaction that

@@ -241,12 +241,12 @@ class FastPath:
         self.timing = False
         self._config_seen = None
         #: the kernel steps the fruit's flesh (and measures its von Mises stress)
-        self._flesh_in_kernel = len(model['flesh'][0]) > 0
+        self.flesh_in_kernel = len(model['flesh'][0]) > 0
         #: the substep kernel's scratch space, allocated once (``kernels.substep_scratch``)
-        self._scratch = kernels.substep_scratch(model['pos'], model['nbw'], model['flesh'])
+        self.scratch = kernels.substep_scratch(model['pos'], model['nbw'], model['flesh'])
         tri, dm_inv, volume, lame, tri_scatter, skin, pattern = model['flesh']
         #: the fruit's constant arrays as the substep kernel takes them
-        self._constants = kernels.pack_constants(
+        self.constants = kernels.pack_constants(
             [self.masses2, self.masses, self.rest_segments, model['spar'], model['bpar'],
              model['press'], self.gravity_grad, dm_inv, volume, lame, skin[0], skin[1],
              skin[3], skin[4]],
@@ -260,8 +260,8 @@ class FastPath:
             return None
         solver_energies = list(sim.solver.energies)
         expected = list(sim.fruit.energies) + [sim.gravity]
-        if sim._pad is not None:
-            expected.append(sim._pad)
+        if sim.pad is not None:
+            expected.append(sim.pad)
         if len(solver_energies) != len(expected) or any(
                 a is not b for a, b in zip(solver_energies, expected)):
             return None  # another energy in the step (a barrier): not modelled here
@@ -275,7 +275,7 @@ class FastPath:
         """Whether the kernels model the simulation's obstacles: the jaws' faces moving
         with the gripper as ``Simulation._faces`` moves them, the others fixed (table,
         walls). Checked once per face set (``set_parameter`` makes a new one)."""
-        template = self.sim._faces_template
+        template = self.sim.faces_template
         if template is not self._checked:
             self._applies = self._faces_match(template)
             self._checked = template
@@ -286,14 +286,14 @@ class FastPath:
         if len(template) < 2:
             return False
         try:  # an arbitrary gripper state: do the faces move as the kernel moves them?
-            grip = dataclasses.replace(sim._grip, gap=0.031, lift=0.17, x=0.013,
+            grip = dataclasses.replace(sim.gripper_state, gap=0.031, lift=0.17, x=0.013,
                                        gap_rate=-0.007, lift_rate=0.011, x_rate=0.005)
-            faces = sim._faces(grip)
+            faces = sim.faces_at(grip)
         except (TypeError, ValueError, AttributeError):
             return False
         if len(faces) != len(template):
             return False
-        sides, offsets = sim._face_side, sim._face_offsets
+        sides, offsets = sim.face_sides, sim.face_offsets
         for k, (face, rest) in enumerate(zip(faces, template)):
             if k < len(sides):
                 sign = -1.0 if sides[k] == 0 else 1.0
@@ -310,10 +310,14 @@ class FastPath:
                 return False
         return True
 
-    def _face_arrays(self):
-        template = self.sim._faces_template
+    def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """The obstacles as the kernels take them, kept per face set: (face_par (k,
+        ``kernels.FP_SIZE``): normal, half length m, thickness m, friction coefficients,
+        restitution, jaw side (-1: fixed) and offset m from the jaw's origin; face_dyn
+        (k, 6): origin m at the step's start and end, velocity m/s)."""
+        template = self.sim.faces_template
         if template is not self._template:
-            sides, offsets = self.sim._face_side, self.sim._face_offsets
+            sides, offsets = self.sim.face_sides, self.sim.face_offsets
             self.face_par = np.array(
                 [[f.normal[0], f.normal[1], f.half_length, f.thickness, f.static_friction,
                   f.kinetic_friction, f.restitution]
@@ -345,10 +349,37 @@ class FastPath:
 
     def forget_factor(self) -> None:
         """Drop the Newton factorisation the kernel keeps (``kernels.forget_kept``)."""
-        kernels.forget_kept(self._scratch[0])
+        kernels.forget_kept(self.scratch[0])
 
-    def substep(self, dt: float) -> int:
-        """``Simulation._substep`` on the kernels; returns Newton iterations.
+    def pad_arguments(self, pad) -> tuple:
+        """The substep kernel's pad arguments for the pad layer ``pad`` (None: no pads):
+        (stiffnesses (n,) N/m per node, [thickness m, friction coefficient], the outputs:
+        (forces (n, 2) N, normal forces (n,) N, holder (n,), side forces (2,) N)), the
+        outputs fresh arrays that ``record_pad`` gives the layer after the step."""
+        if pad is None:
+            return self._no_pad, self._no_pad, self._no_pad_out
+        n = self.n
+        return (pad.k, np.array([pad.thickness, pad.mu]),
+                (np.empty((n, 2)), np.empty(n), np.empty(n, np.int64), np.empty(2)))
+
+    def keep_end_measures(self, x: np.ndarray, normal: np.ndarray, pressure: np.ndarray,
+                          damage: tuple) -> None:
+        """Keep what the kernel measured at the end state ``x`` (n, 2) m (normal forces
+        (n,) N, node pressures (n_s,) Pa, the step measures and the flesh's largest von
+        Mises stress from ``measures`` and ``out``, the damage arguments ``damage``) for
+        ``measure`` of that state."""
+        self._measured = (x, normal, pressure, self.measures.tolist(), damage,
+                          float(self.out[8]))
+
+    def forget_end_measures(self) -> None:
+        """The state did not come from the kernel: ``measure`` measures it afresh."""
+        self._measured = None
+
+    def substep(self, dt: float) -> int | None:
+        """``Simulation._substep`` on the kernels, committed to the simulation
+        (``commit_step``); returns Newton iterations, or None for a step the kernel cannot
+        do (``kernels.UNSUPPORTED``, counted in ``fallbacks``; nothing changed: the
+        caller does it on the generic path).
 
         Raises:
             NewtonFailure: as the reference solver (the caller halves the step).
@@ -357,9 +388,9 @@ class FastPath:
         timing = self.timing
         if timing:
             t0 = time.perf_counter()
-        grip = sim._grip
-        grip_new = sim._advance_gripper(dt)
-        face_par, face_dyn = self._face_arrays()
+        grip = sim.gripper_state
+        grip_new = sim.gripper_after(dt)
+        face_par, face_dyn = self.face_arrays()
         self.prepare(dt)
         c = sim.contacts
         obstacle, mode, secondary = c.obstacle.copy(), c.mode.copy(), c.secondary.copy()
@@ -370,13 +401,9 @@ class FastPath:
         normal, pressure = np.empty(n), np.empty(len(self.surface))
         x_n = sim.q if sim.q.flags.c_contiguous else np.ascontiguousarray(sim.q)
         v_n = sim.v if sim.v.flags.c_contiguous else np.ascontiguousarray(sim.v)
-        pad = sim._pad
-        damage = self._damage_inputs()
-        if pad is None:
-            pad_k, pad_scalars, pad_out = self._no_pad, self._no_pad, self._no_pad_out
-        else:
-            pad_k, pad_scalars = pad.k, np.array([pad.thickness, pad.mu])
-            pad_out = (np.empty((n, 2)), np.empty(n), np.empty(n, np.int64), np.empty(2))
+        pad = sim.pad
+        damage = self.damage_inputs()
+        pad_k, pad_scalars, pad_out = self.pad_arguments(pad)
         if timing:
             t1 = time.perf_counter()
         status = kernels.substep(
@@ -384,31 +411,28 @@ class FastPath:
             face_par, face_dyn, (grip.gap, grip.lift, grip.x, grip_new.gap, grip_new.lift,
                                  grip_new.x, grip_new.gap_rate, grip_new.lift_rate,
                                  grip_new.x_rate),
-            *self._constants, self.fpar, self.ipar, x, v, forces, self.history, self.out, normal,
+            *self.constants, self.fpar, self.ipar, x, v, forces, self.history, self.out, normal,
             pressure, self.measures, self.counts, *damage, pad_k, pad_scalars, *pad_out,
-            *self._scratch)
+            *self.scratch)
         if timing:
             t2 = time.perf_counter()
         out = self.out
         if status != kernels.OK:
-            self._measured = None
+            self.forget_end_measures()
             if status == kernels.UNSUPPORTED:
                 self.fallbacks += 1
-                return sim._substep_generic(dt)
+                return None
             history = [float(h) for h in self.history[:int(out[1])]]
             message = _FAILURES.get(
                 status, f'no convergence in {sim.solver.max_iterations} iterations')
             raise NewtonFailure(message, history)
-        sim.q, sim.v, sim.contact_forces = x, v, forces
-        sim.contacts = _build(cm.ContactState, dict(
+        contacts = _build(cm.ContactState, dict(
             obstacle=obstacle, mode=mode, normal_force=normal_force, bounce_speed=bounce,
             secondary=secondary, secondary_bounce=secondary_bounce))
-        sim._grip = grip_new
-        sim._time += dt
-        sim._jaw_force = (float(out[2]), float(out[3]))  # the pads' push included
-        if pad is not None:  # what PadLayer.finish_step records
-            pad.forces, pad.normal_forces, pad.holder, pad.side_force = pad_out
-        self._measured = (x, normal, pressure, self.measures.tolist(), damage, float(out[8]))
+        # the jaw forces with the pads' push included
+        sim.commit_step(x, v, contacts, forces, grip_new, (float(out[2]), float(out[3])), dt)
+        record_pad(pad, pad_out)
+        self.keep_end_measures(x, normal, pressure, damage)
         if timing:
             t3 = time.perf_counter()
             self.timers['glue'] += (t1 - t0) + (t3 - t2)
@@ -423,19 +447,20 @@ class FastPath:
         if self.timing:
             t0 = time.perf_counter()
         sim = self.sim
-        fruit, grip = sim.fruit, sim._grip
+        fruit, grip = sim.fruit, sim.gripper_state
         x, v = sim.q, sim.v
         contacts = sim.contacts
         # every contact force (the pads' included) and the obstacle holding each node
-        forces, holder = sim._contact_forces_and_holders()
+        forces, holder = sim.contact_forces_and_holders()
         measured = self._measured
         damage_of_x = flesh_stress = None
         if measured is not None and measured[0] is x:
             _, normal, pressure, values, damage_of_x, flesh_stress = measured
         else:
             values, normal, pressure = self._measure_kernel(forces, holder)
-            if sim._pad is not None:  # the hard contacts' length, plus the pads'
-                on_pad = (contacts.obstacle < 0) & (sim._pad.holder >= 0)
+            pad = sim.pad
+            if pad is not None:  # the hard contacts' length, plus the pads'
+                on_pad = (contacts.obstacle < 0) & (pad.holder >= 0)
                 values[kernels.M_CONTACT_LENGTH] = (
                     self._measure_kernel(sim.contact_forces, contacts.obstacle)[0][
                         kernels.M_CONTACT_LENGTH]
@@ -443,12 +468,12 @@ class FastPath:
         (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, _cvz, any_left, any_right,
          kinetic, elastic, gravitational, width, max_strain, contact_length,
          peak) = values
-        if not sim._plain_jaws:  # shaped fingers: each jaw's force along the closing axis
+        if not sim.plain_jaws:  # shaped fingers: each jaw's force along the closing axis
             left_n, right_n = -lfx, rfx
         both = any_left > 0 and any_right > 0
         touching = any_left > 0 or any_right > 0
-        slip = sim._slip_distance(cz - grip.lift, both, touching)
-        face_par = self._face_arrays()[0]
+        slip = sim.measure_slip(cz - grip.lift, both, touching)
+        face_par = self.face_arrays()[0]
         compression = fruit.rest_width - width
         ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
         half = 0.5 * grip.gap
@@ -471,8 +496,8 @@ class FastPath:
                                                gravitational=gravitational)))
 
         result = _build_deferred(StepResult, dict(
-            time=sim._time, step=sim._step, positions=positions, contact_obstacle=holder,
-            obstacle_names=self._names(), surface=fruit.surface,
+            time=sim.time, step=sim.step_count, positions=positions, contact_obstacle=holder,
+            obstacle_names=self.obstacle_names(), surface=fruit.surface,
             left_jaw_x=grip.x - half, right_jaw_x=grip.x + half,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
@@ -497,33 +522,34 @@ class FastPath:
         return bool(kernels.jaw_sliding(v, obstacle, face_par, jaw_velocities,
                                         SLIDING_SPEED))
 
-    def _names(self) -> tuple:
+    def obstacle_names(self) -> tuple:
         """``Simulation.obstacle_names``, kept per face set."""
-        template = self.sim._faces_template
+        template = self.sim.faces_template
         if self._names_of is not template:
             self._names_cache = self.sim.obstacle_names
             self._names_of = template
         return self._names_cache
 
-    def _damage_inputs(self) -> tuple:
+    def damage_inputs(self) -> tuple:
         """Arguments of the substep kernel's damage part (empty ones skip it)."""
-        if not self._damage_supported():
+        if not self.damage_supported():
             return self._no_damage
         n_s = len(self.surface)
         return (self._damage_face, self._damage_rest, self._damage_par, self._tracker.covered,
                 np.empty(n_s), np.empty(n_s), np.empty((n_s, kernels.P_SIZE)), np.empty(3))
 
-    def _damage_supported(self) -> bool:
+    def damage_supported(self) -> bool:
         """Whether the damage kernel models the simulation's damage tracker (its arrays are
         then kept)."""
         sim = self.sim
-        tracker = sim._damage
-        if tracker is not self._tracker_seen or sim._faces_template is not self._damage_faces:
+        tracker = sim.damage_tracker
+        template = sim.faces_template
+        if tracker is not self._tracker_seen or template is not self._damage_faces:
             # checked once per tracker (reset makes a new one) and face set
             self._tracker_seen = tracker
-            self._damage_faces = sim._faces_template
+            self._damage_faces = template
             if (type(tracker) is not DamageTracker
-                    or len(tracker.groups) != len(sim._faces_template)
+                    or len(tracker.groups) != len(template)
                     or not np.array_equal(tracker.ring, self.surface)):
                 self._tracker = None
             else:
@@ -537,14 +563,14 @@ class FastPath:
         return self._tracker is not None
 
     def _damage(self, positions, normal, obstacle, ratio, computed=None, flesh_stress=None):
-        """``Simulation._assess_damage``: the per-step part of ``DamageTracker.update`` from
+        """``Simulation.assess_damage``: the per-step part of ``DamageTracker.update`` from
         the substep kernel (``computed``: its damage arguments, ``flesh_stress``: the
         flesh's largest von Mises stress Pa, for the state it ended in) or else the
         ``damage_update`` kernel; the tracker keeps the state."""
         sim = self.sim
-        tracker = sim._damage
-        if not self._damage_supported():
-            return sim._assess_damage_of(positions, normal, obstacle, ratio)
+        tracker = sim.damage_tracker
+        if not self.damage_supported():
+            return sim.assess_damage(positions, normal, obstacle, ratio)
         if (computed is not None and computed[3] is tracker.covered
                 and computed[0] is self._damage_face):
             _, _, _, _, covered, node_pressure, table, d_out = computed
@@ -572,7 +598,7 @@ class FastPath:
         flesh = sim.fruit.flesh
         if flesh is None:
             flesh_stress = 0.0
-        elif flesh_stress is None or not self._flesh_in_kernel:
+        elif flesh_stress is None or not self.flesh_in_kernel:
             flesh_stress = float(np.max(flesh.von_mises(positions.ravel()), initial=0.0))
         stress = max(TRESCA_OVER_P0 * pressure, flesh_stress)
         tracker.peak_pressure = max(tracker.peak_pressure, pressure)
@@ -594,8 +620,8 @@ class FastPath:
         obstacle (n,) holding each node: (values (list), normal (n,) N, pressure (n_s,)
         Pa)."""
         sim = self.sim
-        grip = sim._grip
-        face_par, _ = self._face_arrays()
+        grip = sim.gripper_state
+        face_par, _ = self.face_arrays()
         origins = np.array([[grip.x - 0.5 * grip.gap, grip.lift],
                             [grip.x + 0.5 * grip.gap, grip.lift]])
         normal = np.empty(self.n)
@@ -609,6 +635,13 @@ class FastPath:
             sim.fruit.depth, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, False,
             np.zeros(4), normal, pressure, out)
         return out.tolist(), normal, pressure
+
+
+def record_pad(pad, outputs: tuple) -> None:
+    """Give the pad layer ``pad`` (None: no pads) the outputs of a kernel's step
+    (``FastPath.pad_arguments``): what ``PadLayer.finish_step`` records."""
+    if pad is not None:
+        pad.forces, pad.normal_forces, pad.holder, pad.side_force = outputs
 
 
 def _frozen_builder(cls):

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gripper_sim.core import contact as cm
+from gripper_sim.core.fast import record_pad
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.peaks import site_codes
 
@@ -146,16 +147,17 @@ class MultiStep:
         self._site = np.zeros(1, np.int64)
 
     def applies(self) -> bool:
-        """Whether the simulation's steps can run here now."""
+        """Whether the simulation's steps can run here now: its kernel models the
+        obstacles and the damage tracker, and nothing observes every step. (A
+        ``FastPath`` exists only for the modified mass method's contact and rigid
+        fingers: no barrier, no deformable fingers.)"""
         path = self.path
-        sim = path.sim
-        return (not sim._observers and path.applies() and path._damage_supported()
-                and sim._soft is None and sim._barrier is None)
+        return (not path.sim.has_observers and path.applies() and path.damage_supported())
 
     def _sites(self) -> np.ndarray:
-        template = self.path.sim._faces_template
+        template = self.path.sim.faces_template
         if self._site_of is not template:
-            self._site = site_codes(self.path._names())
+            self._site = site_codes(self.path.obstacle_names())
             self._site_of = template
         return self._site
 
@@ -169,21 +171,21 @@ class MultiStep:
         n = path.n
         dt = sim.dt
         path.prepare(dt)
-        face_par, face_dyn = path._face_arrays()
+        face_par, face_dyn = path.face_arrays()
         c = sim.contacts
         x = np.array(sim.q, dtype=float, order='C')
         v = np.array(sim.v, dtype=float, order='C')
         c_int = np.array([c.obstacle, c.mode, c.secondary], dtype=np.int64)
         c_float = np.array([c.normal_force, c.bounce_speed, c.secondary_bounce], dtype=float)
         forces = np.empty((n, 2))
-        grip = grip_array(sim._grip)
-        tracker = sim._damage
-        reference = sim._slip_reference
+        grip = grip_array(sim.gripper_state)
+        tracker = sim.damage_tracker
+        reference = sim.slip_reference
         run = np.zeros(ak.R_SIZE)
-        run[ak.R_TIME] = sim._time
-        run[ak.R_JAW_LEFT], run[ak.R_JAW_RIGHT] = sim._jaw_force
+        run[ak.R_TIME] = sim.time
+        run[ak.R_JAW_LEFT], run[ak.R_JAW_RIGHT] = sim.jaw_forces
         run[ak.R_SLIP_REF] = math.nan if reference is None else reference
-        run[ak.R_HELD_SLIP] = sim._held_slip
+        run[ak.R_HELD_SLIP] = sim.held_slip
         run[ak.R_PEAK_PRESSURE] = tracker.peak_pressure
         run[ak.R_PEAK_STRESS] = tracker.peak_flesh_stress
         run[ak.R_CRUSHED] = float(tracker.crushed)
@@ -192,60 +194,51 @@ class MultiStep:
         failure_strain = tracker.failure_strain
         kin = np.array([kinematics.max_gap, kinematics.max_speed,
                         kinematics.lift_acceleration, kinematics.transport_acceleration, dt,
-                        sim.fruit.rest_width, float(sim._plain_jaws),
-                        float(sim._clearance_is_planar()), float(path._flesh_in_kernel),
+                        sim.fruit.rest_width, float(sim.plain_jaws),
+                        float(sim.clearance_is_planar), float(path.flesh_in_kernel),
                         tracker.bruise_pressure, tracker.failure_stress,
                         math.nan if failure_strain is None else failure_strain], dtype=float)
         peaks = np.zeros(ak.PEAK_SIZE)
         normal, pressure = np.empty(n), np.empty(len(path.surface))
-        damage = list(path._damage_inputs())
+        damage = list(path.damage_inputs())
         damage[3] = damage[3].copy()  # the cover before each step, kept by the kernel
         damage = tuple(damage)
-        pad = sim._pad
-        if pad is None:
-            pad_args = (path._no_pad, path._no_pad) + path._no_pad_out
-        else:
-            pad_args = (pad.k, np.array([pad.thickness, pad.mu]), np.empty((n, 2)),
-                        np.empty(n), np.empty(n, np.int64), np.empty(2))
+        pad = sim.pad
+        pad_k, pad_scalars, pad_out = path.pad_arguments(pad)
         timing = path.timing
         if timing:
             t0 = time.perf_counter()
         ak.advance(x, v, c_int, c_float, forces, grip, run, kin, rules.array(), peaks,
-                   self._sites(), (face_par, face_dyn, *path._constants, path.fpar, path.ipar),
+                   self._sites(), (face_par, face_dyn, *path.constants, path.fpar, path.ipar),
                    (path.history, path.out, normal, pressure, path.measures, path.counts),
-                   damage, pad_args, path._scratch, self._work_int, self._work_float,
+                   damage, (pad_k, pad_scalars, *pad_out), path.scratch, self._work_int,
+                   self._work_float,
                    self._ends_int, self._ends_float, self._x_out, self._v_out)
         if timing:
             path.timers['kernel'] += time.perf_counter() - t0
         steps = int(run[ak.R_STEPS])
         if steps == 0:
-            path._measured = None
+            path.forget_end_measures()
             return None
-        sim.q, sim.v, sim.contact_forces = x, v, forces
-        sim.contacts = cm.ContactState(obstacle=c_int[0].copy(), mode=c_int[1].copy(),
-                                       normal_force=c_float[0].copy(),
-                                       bounce_speed=c_float[1].copy(),
-                                       secondary=c_int[2].copy(),
-                                       secondary_bounce=c_float[2].copy())
-        sim._grip = grip_state(grip)
-        sim._time = float(run[ak.R_TIME])
-        sim._jaw_force = (float(run[ak.R_JAW_LEFT]), float(run[ak.R_JAW_RIGHT]))
-        slip_reference = float(run[ak.R_SLIP_REF])
-        sim._slip_reference = None if math.isnan(slip_reference) else slip_reference
-        sim._held_slip = float(run[ak.R_HELD_SLIP])
-        sim._step += steps
-        sim.gap_solves += int(run[ak.R_SOLVES])
         tracker.peak_pressure = float(run[ak.R_PEAK_PRESSURE])
         tracker.peak_flesh_stress = float(run[ak.R_PEAK_STRESS])
         tracker.crushed = bool(run[ak.R_CRUSHED])
         tracker.covered = damage[3]  # the last step's measure takes its cover from it
-        if pad is not None:  # what PadLayer.finish_step records
-            pad.forces, pad.normal_forces, pad.holder, pad.side_force = pad_args[2:]
-        path._measured = (x, normal, pressure, path.measures.tolist(), damage,
-                          float(path.out[8]))
-        sim.newton_iterations += int(run[ak.R_NEWTON])
-        sim._last = sim._measure(int(run[ak.R_ITERATIONS]), 1)
-        return sim._last, Skipped(
+        record_pad(pad, pad_out)
+        path.keep_end_measures(x, normal, pressure, damage)
+        slip_reference = float(run[ak.R_SLIP_REF])
+        contacts = cm.ContactState(obstacle=c_int[0].copy(), mode=c_int[1].copy(),
+                                   normal_force=c_float[0].copy(),
+                                   bounce_speed=c_float[1].copy(), secondary=c_int[2].copy(),
+                                   secondary_bounce=c_float[2].copy())
+        last = sim.commit_advance(
+            x, v, contacts, forces, grip=grip_state(grip),
+            jaw_forces=(float(run[ak.R_JAW_LEFT]), float(run[ak.R_JAW_RIGHT])),
+            time=float(run[ak.R_TIME]), steps=steps, solves=int(run[ak.R_SOLVES]),
+            newton_iterations=int(run[ak.R_NEWTON]),
+            slip_reference=None if math.isnan(slip_reference) else slip_reference,
+            held_slip=float(run[ak.R_HELD_SLIP]), last_iterations=int(run[ak.R_ITERATIONS]))
+        return last, Skipped(
             tuple(peaks.tolist()),
             (float(run[ak.R_SLIDE]), float(run[ak.R_MAX_SLIP]), float(run[ak.R_MAX_DROP])),
             float(run[ak.R_PREVIOUS_TIME]))

@@ -183,18 +183,19 @@ class Simulation(SimulationFacade):
 
     # ------------------------------------------------------------------ stepping
     def _substep(self, dt: float) -> int:
+        """``SimulationFacade._substep`` on the fast path where it applies, else (and for
+        a step its kernel cannot do) on the generic path."""
         if self._fast is not None and self._fast.applies():
-            return self._fast.substep(dt)
-        return super()._substep(dt)
-
-    def _substep_generic(self, dt: float) -> int:
-        """The step the fast path cannot do, on the generic path."""
+            iterations = self._fast.substep(dt)
+            if iterations is not None:
+                return iterations
         return super()._substep(dt)
 
     def advance(self, rules) -> 'tuple[StepResult, Any] | None':
         """``SimulationFacade.advance`` on the compiled multi-step advance
-        (``core.multistep``) where it applies."""
-        if self._fast is None:
+        (``core.multistep``) where it applies: not with observers, which see every
+        step."""
+        if self._fast is None or self._observers:
             return None
         if self._multistep is None:
             self._multistep = MultiStep(self._fast)
@@ -205,10 +206,10 @@ class Simulation(SimulationFacade):
         if self._fast is not None and self._fast.applies():  # all fields, damage included
             return self._fast.measure(iterations, substeps)
         x = self.q
-        forces, obstacle = self._contact_forces_and_holders()
+        forces, obstacle = self.contact_forces_and_holders()
         fields, normal, (on_left, on_right) = self._common_measures(
             x, self.v, forces, obstacle, iterations, substeps)
-        fruit, faces = self.fruit, self._faces(self._grip)
+        fruit, faces = self.fruit, self.faces_at(self._grip)
         if self._soft is not None:  # the fruit's outline in pairs with the fingers
             on_finger = (on_left | on_right)[fruit.surface]
             length = float(np.sum(tributary_lengths(fruit, x)[on_finger]))
@@ -222,13 +223,13 @@ class Simulation(SimulationFacade):
             on_pad = (self.contacts.obstacle < 0) & (self._pad.holder >= 0)
             length += float(np.sum(tributary_lengths(fruit, x)[on_pad[fruit.surface]]))
         shape = deformation(fruit, x, normal, on_left | on_right, length)
-        return StepResult(**fields, deformation=shape, damage=self._assess_damage_of(
+        return StepResult(**fields, deformation=shape, damage=self.assess_damage(
             x, normal, obstacle, shape.compression_ratio))
 
-    def _assess_damage_of(self, positions, normal, obstacle, compression_ratio: float):
+    def assess_damage(self, positions, normal, obstacle, compression_ratio: float):
         """Bruising and crushing after this step (``gripper_sim.core.damage``) from
         positions (n, 2) m, normal contact forces (n,) N, holding obstacles (n,) and the
-        compression ratio."""
+        compression ratio; the damage tracker (``damage_tracker``) keeps its peaks."""
         stress = 0.0
         if self.fruit.flesh is not None:
             stress = float(np.max(self.fruit.flesh.von_mises(positions.ravel()), initial=0.0))

@@ -155,7 +155,7 @@ class Simulation3D(SimulationFacade):
         self.reset()
         if self._soft is None and self._barrier is None:
             load_contact_kernels(self.solver.m, self.fruit.surface, self.q,
-                                 self._faces(self._grip), self.dt,
+                                 self.faces_at(self._grip), self.dt,
                                  ContactSettings.from_config(self.config, self.deepest_first))
 
     def _make_damage(self) -> DamageTracker3D:
@@ -217,7 +217,7 @@ class Simulation3D(SimulationFacade):
     # ------------------------------------------------------------------ outputs
     def _measure(self, iterations: int, substeps: int) -> StepResult3D:
         x = self.q
-        forces, obstacle = self._contact_forces_and_holders()
+        forces, obstacle = self.contact_forces_and_holders()
         fields, normal, (on_left, on_right) = self._common_measures(
             x, self.v, forces, obstacle, iterations, substeps)
         deformation = self._deformation(x, normal, on_left, on_right)
@@ -240,7 +240,7 @@ class Simulation3D(SimulationFacade):
         max_strain = float(strains[np.argmax(np.abs(strains))]) if strains.size else 0.0
         areas = meshes.vertex_areas(x, fruit.triangles, fruit.n_nodes)
         jaw_areas = (float(areas[on_left].sum()), float(areas[on_right].sum()))
-        faces = self._faces(self._grip)
+        faces = self.faces_at(self._grip)
         if self._plain_jaws and self._barrier is not None:  # a barrier gap off the faces
             faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
         radii = tuple(self._patch_radius(x, faces[side], held, area) if self._plain_jaws
