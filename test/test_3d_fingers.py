@@ -23,7 +23,7 @@ def test_3d_finger_faces_are_the_2d_profile_extruded_along_y():
         names = sim.obstacle_names
         assert sum(n.startswith('left_jaw') for n in names) == count
         assert sum(n.startswith('right_jaw') for n in names) == count
-        faces = sim._faces(sim.gripper_state)
+        faces = sim.faces_at(sim.gripper_state)
         for face in faces[:2 * count]:
             assert face.normal[1] == 0.0  # normals in the x-z plane
             assert face.half_extents[0] == pytest.approx(0.5 * sim.config['gripper.jaw_width'])
@@ -37,7 +37,7 @@ def test_3d_vgroove_grip_force_is_the_closing_force_of_the_inclined_flanks():
     sim.command_force(4.0, 0.02)
     result = sim.run(1.8)
     assert result.grip_force == pytest.approx(4.0, rel=0.01)
-    faces = sim._faces(sim.gripper_state)
+    faces = sim.faces_at(sim.gripper_state)
     for side, prefix in ((0, 'left_jaw'), (1, 'right_jaw')):
         flanks = [i for i, n in enumerate(result.obstacle_names) if n.startswith(prefix)]
         load = 0.0

@@ -32,7 +32,7 @@ def _watch_plates(sim):
 
     def check(result):
         x = result.positions[result.surface]
-        for plate in sim._faces(sim.gripper_state):
+        for plate in sim.faces_at(sim.gripper_state):
             facing = plate.covers(x)
             if np.any(facing):
                 deepest[0] = max(deepest[0], float(-np.min(plate.gap(x[facing]))))

@@ -377,14 +377,14 @@ def test_every_setup_takes_the_whole_step_kernel(overrides):
 
 
 def test_faces_the_kernels_do_not_model_fall_back_to_the_reference_path(monkeypatch):
-    original = Simulation._faces
+    original = Simulation.faces_at
 
     def table_moves_with_the_gripper(self, grip):
         faces = original(self, grip)
         faces[2].origin = faces[2].origin + np.array([0.0, 1e-3 * grip.lift])
         return faces
 
-    monkeypatch.setattr(Simulation, '_faces', table_moves_with_the_gripper)
+    monkeypatch.setattr(Simulation, 'faces_at', table_moves_with_the_gripper)
     sim = Simulation(load_config())
     assert sim._fast is not None and not sim._fast.applies()
     sim.step()  # the reference path

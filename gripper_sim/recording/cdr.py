@@ -50,7 +50,9 @@ class CdrTrimmer:
         # (type, start offset mod 8) -> bytes a fixed-size structure takes from there
         self.fixed_sizes: dict[tuple[str, int], int] = {}
 
-    def _fields(self, type_name: str) -> list:
+    def fields_of(self, type_name: str) -> list:
+        """The field definitions of the message type ``type_name`` (rosbags' typestore
+        ``fielddefs``: (name, (kind, spec)) each), registered on first use."""
         if type_name not in self._known:
             with self._lock:
                 if type_name not in self._known:
@@ -99,7 +101,7 @@ class _Walk:
             end = pos + size
         else:
             end = pos
-            for _, (kind, spec) in self.trimmer._fields(type_name):
+            for _, (kind, spec) in self.trimmer.fields_of(type_name):
                 end = self.field(kind, spec, end)
             if self._fixed(Nodetype.NAME, type_name):
                 self.trimmer.fixed_sizes[key] = end - pos
@@ -155,6 +157,6 @@ class _Walk:
             return self._fixed(element_kind, element_spec)
         fixed = self.trimmer.fixed_types.get(spec)
         if fixed is None:
-            fixed = all(self._fixed(k, s) for _, (k, s) in self.trimmer._fields(spec))
+            fixed = all(self._fixed(k, s) for _, (k, s) in self.trimmer.fields_of(spec))
             self.trimmer.fixed_types[spec] = fixed
         return fixed
