@@ -187,7 +187,9 @@ class FastPath:
     """Steps and measures a ``Simulation`` with the numba kernels.
 
     Built by ``Simulation.__init__`` through ``FastPath.create``; holds only constant
-    arrays and scratch space - the state stays in the simulation's attributes.
+    arrays and scratch space - the state stays the simulation's: the path reads it through
+    the simulation's public properties and hands a step's end back through
+    ``Simulation.commit_step`` (``core.multistep``: ``commit_advance``).
     """
 
     def __init__(self, sim: 'Simulation', model: dict):

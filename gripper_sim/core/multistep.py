@@ -212,8 +212,7 @@ class MultiStep:
                    self._sites(), (face_par, face_dyn, *path.constants, path.fpar, path.ipar),
                    (path.history, path.out, normal, pressure, path.measures, path.counts),
                    damage, (pad_k, pad_scalars, *pad_out), path.scratch, self._work_int,
-                   self._work_float,
-                   self._ends_int, self._ends_float, self._x_out, self._v_out)
+                   self._work_float, self._ends_int, self._ends_float, self._x_out, self._v_out)
         if timing:
             path.timers['kernel'] += time.perf_counter() - t0
         steps = int(run[ak.R_STEPS])

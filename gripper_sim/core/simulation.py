@@ -193,9 +193,8 @@ class Simulation(SimulationFacade):
 
     def advance(self, rules) -> 'tuple[StepResult, Any] | None':
         """``SimulationFacade.advance`` on the compiled multi-step advance
-        (``core.multistep``) where it applies: not with observers, which see every
-        step."""
-        if self._fast is None or self._observers:
+        (``core.multistep``) where it applies."""
+        if self._fast is None:
             return None
         if self._multistep is None:
             self._multistep = MultiStep(self._fast)
