@@ -372,6 +372,33 @@ class DamageTracker:
                                            self.covered.copy())
         return list(zip(contacts, near.tolist()))
 
+    def record(self, covered: np.ndarray, pressure: float, flesh_stress: float,
+               compression_ratio: float) -> float:
+        """Take a step's damage measures into the run's: the outline's cover after it
+        (n_surface,) (kept), its largest contact peak pressure (Pa) and resolved flesh
+        stress (Pa), its compression ratio; the peaks rise and the fruit is crushed past
+        the failure stress or strain. Returns the step's flesh stress (Pa): the larger of
+        the contact's Tresca stress and ``flesh_stress``."""
+        self.covered = covered
+        stress = max(TRESCA_OVER_P0 * pressure, float(flesh_stress))
+        self.peak_pressure = max(self.peak_pressure, pressure)
+        self.peak_flesh_stress = max(self.peak_flesh_stress, stress)
+        if self.peak_flesh_stress > self.failure_stress:
+            self.crushed = True
+        if self.failure_strain is not None and compression_ratio > self.failure_strain:
+            self.crushed = True
+        return stress
+
+    def take_run(self, covered: np.ndarray, peak_pressure: float, peak_flesh_stress: float,
+                 crushed: bool) -> None:
+        """Take the state a run of steps computed elsewhere left (``core.multistep``):
+        the outline's cover (n_surface,), the peak pressure and flesh stress (Pa) and
+        whether the fruit is crushed."""
+        self.covered = covered
+        self.peak_pressure = peak_pressure
+        self.peak_flesh_stress = peak_flesh_stress
+        self.crushed = crushed
+
     def update(self, positions: np.ndarray, normal_force: np.ndarray, obstacle: np.ndarray,
                compression_ratio: float, flesh_stress: float = 0.0) -> Damage:
         """Damage after a step.
@@ -383,13 +410,7 @@ class DamageTracker:
         """
         contacts, _, node_pressure, pressure, length = self._patches(
             positions, normal_force, obstacle, self.covered)
-        stress = max(TRESCA_OVER_P0 * pressure, float(flesh_stress))
-        self.peak_pressure = max(self.peak_pressure, pressure)
-        self.peak_flesh_stress = max(self.peak_flesh_stress, stress)
-        if self.peak_flesh_stress > self.failure_stress:
-            self.crushed = True
-        if self.failure_strain is not None and compression_ratio > self.failure_strain:
-            self.crushed = True
+        stress = self.record(self.covered, pressure, flesh_stress, compression_ratio)
         return Damage(bruised=self.peak_pressure > self.bruise_pressure, bruised_length=length,
                       bruised_fraction=length / self.perimeter if self.perimeter > 0 else 0.0,
                       pressure=pressure, peak_pressure=self.peak_pressure,

@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gripper_sim.core import contact as cm
-from gripper_sim.core.damage import TRESCA_OVER_P0, Contact, Damage, DamageTracker
+from gripper_sim.core.damage import Contact, Damage, DamageTracker
 from gripper_sim.core.energies import (EnclosedAreaPressure, NeoHookeanTriangles, RingBending,
                                        Stretching)
 from gripper_sim.core.measures import tributary_lengths
@@ -587,7 +587,6 @@ class FastPath:
                 np.ascontiguousarray(face[:, 1]), np.ascontiguousarray(face[:, 2]),
                 self._damage_rest, tracker.bruise_pressure, tracker.rigid_modulus,
                 tracker.pad_modulus, covered, node_pressure, table)
-        tracker.covered = covered
 
         def patches():
             return dict(contacts=tuple(
@@ -602,13 +601,7 @@ class FastPath:
             flesh_stress = 0.0
         elif flesh_stress is None or not self.flesh_in_kernel:
             flesh_stress = float(np.max(flesh.von_mises(positions.ravel()), initial=0.0))
-        stress = max(TRESCA_OVER_P0 * pressure, flesh_stress)
-        tracker.peak_pressure = max(tracker.peak_pressure, pressure)
-        tracker.peak_flesh_stress = max(tracker.peak_flesh_stress, stress)
-        if tracker.peak_flesh_stress > tracker.failure_stress:
-            tracker.crushed = True
-        if tracker.failure_strain is not None and ratio > tracker.failure_strain:
-            tracker.crushed = True
+        stress = tracker.record(covered, pressure, flesh_stress, ratio)
         perimeter = tracker.perimeter
         return _build_deferred(Damage, dict(
             bruised=tracker.peak_pressure > tracker.bruise_pressure, bruised_length=length,

@@ -219,10 +219,9 @@ class MultiStep:
         if steps == 0:
             path.forget_end_measures()
             return None
-        tracker.peak_pressure = float(run[ak.R_PEAK_PRESSURE])
-        tracker.peak_flesh_stress = float(run[ak.R_PEAK_STRESS])
-        tracker.crushed = bool(run[ak.R_CRUSHED])
-        tracker.covered = damage[3]  # the last step's measure takes its cover from it
+        # the last step's measure takes its cover from damage[3]
+        tracker.take_run(damage[3], float(run[ak.R_PEAK_PRESSURE]),
+                         float(run[ak.R_PEAK_STRESS]), bool(run[ak.R_CRUSHED]))
         record_pad(pad, pad_out)
         path.keep_end_measures(x, normal, pressure, damage)
         slip_reference = float(run[ak.R_SLIP_REF])
