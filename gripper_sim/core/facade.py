@@ -339,13 +339,13 @@ class SimulationFacade:
     @property
     def pad(self):
         """The soft pad layer on the jaw faces (``core.pad.PadLayer``, 3D
-        ``core3d.pad3d.PadLayer3D``), None without pads."""
+        ``core3d.fingers_pad.PadLayer3D``), None without pads."""
         return self._pad
 
     @property
     def damage_tracker(self):
-        """The damage tracker of this run (``core.damage.DamageTracker``; a new one
-        after ``reset``)."""
+        """The damage tracker of this run (``core.damage.DamageTracker``, 3D
+        ``core3d.damage.DamageTracker3D``; a new one after ``reset``)."""
         return self._damage
 
     @property

@@ -218,7 +218,13 @@ class FastPath:
         self.counts = np.zeros(kernels.C_SIZE, np.int64)
         self.n = n
         self._template = None
+        #: the simulation's face set (``faces_template``) as ``applies`` last took it: the
+        #: one the per-face-set caches here are kept for
         self._checked = None
+        #: the simulation's pad layer (None: no pads) and whether its jaws are plain flat
+        #: faces, both fixed when it is built
+        self._pad = sim.pad
+        self._plain_jaws = sim.plain_jaws
         self._tracker = None
         self._tracker_seen = None
         self._damage_faces = None
@@ -276,7 +282,10 @@ class FastPath:
     def applies(self) -> bool:
         """Whether the kernels model the simulation's obstacles: the jaws' faces moving
         with the gripper as ``Simulation._faces`` moves them, the others fixed (table,
-        walls). Checked once per face set (``set_parameter`` makes a new one)."""
+        walls). Checked once per face set (``reset`` and ``set_parameter`` make a new
+        one); the face set it takes is the one ``face_arrays``, ``obstacle_names`` and
+        ``damage_supported`` work on (the simulation asks before every step and
+        measure)."""
         template = self.sim.faces_template
         if template is not self._checked:
             self._applies = self._faces_match(template)
@@ -317,7 +326,7 @@ class FastPath:
         ``kernels.FP_SIZE``): normal, half length m, thickness m, friction coefficients,
         restitution, jaw side (-1: fixed) and offset m from the jaw's origin; face_dyn
         (k, 6): origin m at the step's start and end, velocity m/s)."""
-        template = self.sim.faces_template
+        template = self._checked
         if template is not self._template:
             sides, offsets = self.sim.face_sides, self.sim.face_offsets
             self.face_par = np.array(
@@ -403,7 +412,7 @@ class FastPath:
         normal, pressure = np.empty(n), np.empty(len(self.surface))
         x_n = sim.q if sim.q.flags.c_contiguous else np.ascontiguousarray(sim.q)
         v_n = sim.v if sim.v.flags.c_contiguous else np.ascontiguousarray(sim.v)
-        pad = sim.pad
+        pad = self._pad
         damage = self.damage_inputs()
         pad_k, pad_scalars, pad_out = self.pad_arguments(pad)
         if timing:
@@ -460,7 +469,7 @@ class FastPath:
             _, normal, pressure, values, damage_of_x, flesh_stress = measured
         else:
             values, normal, pressure = self._measure_kernel(forces, holder)
-            pad = sim.pad
+            pad = self._pad
             if pad is not None:  # the hard contacts' length, plus the pads'
                 on_pad = (contacts.obstacle < 0) & (pad.holder >= 0)
                 values[kernels.M_CONTACT_LENGTH] = (
@@ -470,7 +479,7 @@ class FastPath:
         (lfx, lfz, lty, rfx, rfz, rty, left_n, right_n, cx, cz, _cvx, _cvz, any_left, any_right,
          kinetic, elastic, gravitational, width, max_strain, contact_length,
          peak) = values
-        if not sim.plain_jaws:  # shaped fingers: each jaw's force along the closing axis
+        if not self._plain_jaws:  # shaped fingers: each jaw's force along the closing axis
             left_n, right_n = -lfx, rfx
         both = any_left > 0 and any_right > 0
         touching = any_left > 0 or any_right > 0
@@ -526,7 +535,7 @@ class FastPath:
 
     def obstacle_names(self) -> tuple:
         """``Simulation.obstacle_names``, kept per face set."""
-        template = self.sim.faces_template
+        template = self._checked
         if self._names_of is not template:
             self._names_cache = self.sim.obstacle_names
             self._names_of = template
@@ -545,7 +554,7 @@ class FastPath:
         then kept)."""
         sim = self.sim
         tracker = sim.damage_tracker
-        template = sim.faces_template
+        template = self._checked
         if tracker is not self._tracker_seen or template is not self._damage_faces:
             # checked once per tracker (reset makes a new one) and face set
             self._tracker_seen = tracker
@@ -570,9 +579,9 @@ class FastPath:
         flesh's largest von Mises stress Pa, for the state it ended in) or else the
         ``damage_update`` kernel; the tracker keeps the state."""
         sim = self.sim
-        tracker = sim.damage_tracker
         if not self.damage_supported():
             return sim.assess_damage(positions, normal, obstacle, ratio)
+        tracker = self._tracker  # the simulation's
         if (computed is not None and computed[3] is tracker.covered
                 and computed[0] is self._damage_face):
             _, _, _, _, covered, node_pressure, table, d_out = computed
