@@ -47,8 +47,6 @@ def test_config_table_lists_the_presets_values_beside_the_built_in_default():
 PRIVATE_REACHES_ALLOWED = {
     # numba's struct proxies (cgutils) give their LLVM value only as ``_getvalue()``
     ('core/kernels.py', 'view._getvalue'),
-    # the type ``add_subparsers`` returns: argparse has no public name for it
-    ('cli/bag_commands.py', 'argparse._SubParsersAction'),
     # a copy of ``self`` made in its own method: the same class's state
     ('convert/messages.py', 'copy._node_bruised'),
     # rclpy's Node has no public getter of the parameter overrides it was started with; the

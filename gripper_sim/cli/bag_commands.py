@@ -42,7 +42,7 @@ def _byte_count(text: str) -> int:
     return value * scale
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers) -> None:
     p = subparsers.add_parser(
         'record', help='record live topics to a rosbag2 bag folder (MCAP)',
         description='Subscribe (raw) to live topics of any node and write them as '
