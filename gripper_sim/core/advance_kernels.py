@@ -138,7 +138,7 @@ def _solve(x, v, c_int, c_float, grip, new, gap, jaw_left, jaw_right, kin, x_out
 @njit(cache=True)
 def _holder(c_int, pad_holder, padded, i):
     """The obstacle holding node i: its hard contact's, else its pad's face (-1: none), as
-    ``Simulation._contact_forces_and_holders``."""
+    ``Simulation.contact_forces_and_holders``."""
     if c_int[0, i] >= 0 or not padded:
         return c_int[0, i]
     return pad_holder[i]

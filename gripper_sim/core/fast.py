@@ -281,7 +281,7 @@ class FastPath:
     # ------------------------------------------------------------------ faces
     def applies(self) -> bool:
         """Whether the kernels model the simulation's obstacles: the jaws' faces moving
-        with the gripper as ``Simulation._faces`` moves them, the others fixed (table,
+        with the gripper as ``Simulation.faces_at`` moves them, the others fixed (table,
         walls). Checked once per face set (``reset`` and ``set_parameter`` make a new
         one); the face set it takes is the one ``face_arrays``, ``obstacle_names`` and
         ``damage_supported`` work on (the simulation asks before every step and
