@@ -486,7 +486,7 @@ def parse_override(text: str) -> tuple[str, Any]:
     key, _, raw = text.partition('=')
     key = key.strip()
     if key not in SCHEMA and key not in SELECTORS:
-        raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
+        raise ConfigError(f"unknown config key '{key}'{key_suggestion(key)}")
     try:
         value = yaml.safe_load(raw) if raw.strip() else None
     except yaml.YAMLError as err:
@@ -496,7 +496,9 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, value
 
 
-def _suggest(key: str) -> str:
+def key_suggestion(key: str) -> str:
+    """' (did you mean ...?)' naming the configuration key (or preset selector) closest
+    to the unknown ``key``, or '' if none is close: the tail of an unknown-key error."""
     import difflib
     close = difflib.get_close_matches(key, list(SCHEMA) + list(SELECTORS), n=1)
     return f" (did you mean '{close[0]}'?)" if close else ''
@@ -567,7 +569,7 @@ def validate(flat: Mapping[str, Any]) -> Parameters:
     result: dict[str, Any] = {}
     for key, value in flat.items():
         if key not in SCHEMA:
-            raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
+            raise ConfigError(f"unknown config key '{key}'{key_suggestion(key)}")
         result[key] = _coerce(key, value)
     if result['contact.jaw.kinetic_friction'] > result['contact.jaw.static_friction']:
         raise ConfigError("config key 'contact.jaw.kinetic_friction' must not exceed "
@@ -657,7 +659,7 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
         if key in SELECTORS:
             continue
         if key not in SCHEMA:
-            raise ConfigError(f"unknown config key '{key}'{_suggest(key)}")
+            raise ConfigError(f"unknown config key '{key}'{key_suggestion(key)}")
         user[key] = value
     presets = dict(chosen)
     chosen.update(user)
@@ -771,7 +773,7 @@ def _checked_flatten(data: Mapping, source: str) -> dict[str, Any]:
     flat = flatten(data)
     for key in flat:
         if key not in SCHEMA:
-            raise ConfigError(f"unknown config key '{key}' in {source}{_suggest(key)}")
+            raise ConfigError(f"unknown config key '{key}' in {source}{key_suggestion(key)}")
     return flat
 
 

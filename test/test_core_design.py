@@ -96,6 +96,37 @@ def test_no_module_reaches_into_another_objects_private_state():
     assert not PRIVATE_REACHES_ALLOWED - reaches, 'stale allowances: drop them'
 
 
+#: (module, imported name) pairs of ``private_imports`` that stay, and why: compiled
+#: (numba) helpers inlined into another module's kernels, whose names their own modules
+#: keep private
+PRIVATE_IMPORTS_ALLOWED = {
+    ('core/advance_kernels.py', 'gripper_sim.core.kernels._packed1'),
+    ('core3d/fingers_pad.py', 'gripper_sim.core.pad._f0'),
+    ('core3d/fingers_pad.py', 'gripper_sim.core.pad._f1'),
+    ('core3d/fingers_pad.py', 'gripper_sim.core.pad._df1'),
+}
+
+
+def private_imports(source: str) -> list[str]:
+    """Every ``from gripper_sim.<module> import _name`` in ``source``: a module using
+    another's private helper."""
+    return [f'{node.module}.{alias.name}' for node in ast.walk(ast.parse(source))
+            if isinstance(node, ast.ImportFrom) and (node.module or '').startswith('gripper_sim')
+            for alias in node.names
+            if alias.name.startswith('_') and not alias.name.startswith('__')]
+
+
+def test_no_module_imports_another_modules_private_helpers():
+    package = ROOT / 'gripper_sim'
+    imports = {(path.relative_to(package).as_posix(), name)
+               for path in sorted(package.rglob('*.py'))
+               for name in private_imports(path.read_text())}
+    assert not imports - PRIVATE_IMPORTS_ALLOWED, (
+        f'private helpers imported from another module (make them public): '
+        f'{sorted(imports - PRIVATE_IMPORTS_ALLOWED)}')
+    assert not PRIVATE_IMPORTS_ALLOWED - imports, 'stale allowances: drop them'
+
+
 @pytest.mark.parametrize('source, expected', [
     ('sim._grip = grip', ['sim._grip']),
     ('x = self.sim._faces_template', ['self.sim._faces_template']),
@@ -106,3 +137,9 @@ def test_no_module_reaches_into_another_objects_private_state():
 ])
 def test_the_private_reach_scan_sees_what_it_should(source, expected):
     assert private_reaches(source) == expected
+
+
+def test_the_private_import_scan_sees_what_it_should():
+    source = ('from gripper_sim.core.pad import PadLayer, _f0\n'
+              'from numpy import _private\nfrom gripper_sim import __version__')
+    assert private_imports(source) == ['gripper_sim.core.pad._f0']

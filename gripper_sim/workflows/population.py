@@ -24,7 +24,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from gripper_sim.configuration import SCHEMA, _suggest
+from gripper_sim.configuration import SCHEMA, key_suggestion
 from gripper_sim.errors import ConfigError
 
 #: the parameters of each distribution
@@ -129,7 +129,7 @@ def _integer(value: Any, where: str, low: int, high: int) -> int:
 def _distribution(key: str, spec: Any, where: str) -> Distribution:
     if key not in DERIVED_KEYS:
         if key not in SCHEMA:
-            raise ConfigError(f"unknown population key '{key}'{_suggest(key)}")
+            raise ConfigError(f"unknown population key '{key}'{key_suggestion(key)}")
         if SCHEMA[key].kind not in ('float', 'int'):
             raise ConfigError(f"population key '{key}' is not numeric: put it in 'axes'")
     if not isinstance(spec, Mapping) or 'distribution' not in spec:

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from gripper_sim.configuration import (SCHEMA, _suggest, load_config, package_config_dir,
+from gripper_sim.configuration import (SCHEMA, key_suggestion, load_config, package_config_dir,
                                        read_yaml)
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.population import Population, parse_population
@@ -198,7 +198,7 @@ def _base(data: Mapping) -> dict[str, Any]:
         raise ConfigError("study key 'base.set' must map configuration keys to values")
     for key in overrides:
         if key not in SCHEMA:
-            raise ConfigError(f"unknown config key '{key}' in base.set{_suggest(key)}")
+            raise ConfigError(f"unknown config key '{key}' in base.set{key_suggestion(key)}")
     return dict(fruit=data.get('fruit') or scenario['fruit'],
                 finger=data.get('finger') or scenario['finger'],
                 scenario=scenario, set=dict(overrides))
@@ -228,7 +228,7 @@ def _axes(data: Mapping, scenario: Scenario) -> dict[str, tuple]:
             for value in values:  # validates each value
                 scenario.with_values(**{name.replace('.', '__'): value})
         elif key not in PRESET_AXES and key not in SCHEMA:
-            raise ConfigError(f"unknown axis key '{key}'{_suggest(key)} (an axis is "
+            raise ConfigError(f"unknown axis key '{key}'{key_suggestion(key)} (an axis is "
                               "'fruit', 'finger', 'force', 'scenario.KEY' or a configuration "
                               'key)')
         if len(set(map(repr, values))) != len(values):
