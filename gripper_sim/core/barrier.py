@@ -55,7 +55,7 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
-                                              nearest_partners)
+                                              largest_relative_move, nearest_partners)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
@@ -83,9 +83,13 @@ EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
 #: each vertex sweeps along it (round-off of q + s dq), their boxes inflated by as much
 SWEPT_MARGIN = 1e-2
 #: m, how far apart a self-contact's primitives are sought at the start of a step
-#: (``BarrierContact.quiet``): a step whose vertices stay within half the gap found, less
-#: dhat, of their start has no pair within dhat and skips the barrier's work
+#: (``BarrierContact.quiet``): positions whose vertices, each body's mean move taken off,
+#: stay within half the gap found, less dhat, of where it was sought have no pair within
+#: dhat and skip the barrier's work
 QUIET_SEARCH = 1e-3
+#: a self-contact's quiet region serves the next steps too while their starts have used
+#: at most this fraction of its reach (then it is sought again)
+QUIET_KEEP = 0.5
 #: m, the compiled barrier's candidates (2D) are sought this much beyond dhat / 2 around
 #: each primitive and serve while every vertex stays within it of where they were sought
 CANDIDATE_MARGIN = 1e-4
@@ -281,9 +285,12 @@ class BarrierContact(Energy):
         self._swept = None
         #: per Hessian part, its last CSC structure and ``_locate``'s answer for it
         self._entry_cache = {}
-        #: self-contact only: (the deformable vertices at the step's start (n_v, d) m, how
-        #: far m each may move from there with no pair coming within dhat), or None
+        #: self-contact only: (the deformable vertices where the gaps were sought (n_v, d)
+        #: m, how far m each may move from there, its body's mean move taken off, with no
+        #: pair coming within dhat), or None
         self._quiet = None
+        #: (the faces' (static, kinetic) coefficients, ``_coefficients``'s answer), or None
+        self._friction_coefficients = None
         #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
         #: they were sought, the (edge, vertex) pairs (k, 2)), or None
         self._pairs = None
@@ -385,33 +392,56 @@ class BarrierContact(Energy):
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
-        # per vertex; a pair takes the larger one: the face's or the soft body's, the
-        # fruit's being 0
-        body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
-        body_mu_k = np.array([0.0] + [b.kinetic_friction for b in self.bodies])
-        mu_s = np.concatenate([body_mu_s[self.vertex_body],
-                               np.repeat([f.static_friction for f in new_faces],
-                                         self.corners_per_face)])
-        mu_k = np.concatenate([body_mu_k[self.vertex_body],
-                               np.repeat([f.kinetic_friction for f in new_faces],
-                                         self.corners_per_face)])
+        mu_s, mu_k, rubbing = self._coefficients(new_faces)
         self._tangential = ipctk.TangentialCollisions()
         self._friction_pairs = None
-        if self.dimension == 2 and (np.any(mu_s > 0) or np.any(mu_k > 0)):
+        if self.dimension == 2 and rubbing:
             self._friction_pairs = self._lagged_friction(start, mu_s, mu_k)
-        elif np.any(mu_s > 0) or np.any(mu_k > 0):
+        elif rubbing:
             collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
                              broad_phase=self._broad_phase)
             if len(collisions):
                 self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
                                        mu_k, max)
-        self._quiet = None
         if self.self_contact:
-            gap = self._nearest(start, QUIET_SEARCH)
-            if gap > 2.0 * self.settings.dhat:
-                self._quiet = (start[:self.vertex_nodes.size].copy(),
-                               0.5 * (gap - self.settings.dhat))
+            self._quiet = self._quiet_region(x_n, start)
+
+    def _coefficients(self, faces) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Each collision-mesh vertex's static and kinetic friction coefficients (n_m,)
+        with the ``faces`` (a pair takes the larger one: the face's or the soft body's,
+        the fruit's being 0), and whether any is positive; kept while the faces'
+        coefficients stay."""
+        key = tuple((f.static_friction, f.kinetic_friction) for f in faces)
+        if self._friction_coefficients is None or self._friction_coefficients[0] != key:
+            body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
+            body_mu_k = np.array([0.0] + [b.kinetic_friction for b in self.bodies])
+            face_mu = np.array(key, float).reshape(-1, 2)
+            c = self.corners_per_face
+            mu_s = np.concatenate([body_mu_s[self.vertex_body], np.repeat(face_mu[:, 0], c)])
+            mu_k = np.concatenate([body_mu_k[self.vertex_body], np.repeat(face_mu[:, 1], c)])
+            rubbing = bool(np.any(mu_s > 0) or np.any(mu_k > 0))
+            self._friction_coefficients = (key, mu_s, mu_k, rubbing)
+        return self._friction_coefficients[1:]
+
+    def _quiet_region(self, x_n: np.ndarray, start: np.ndarray):
+        """The self-contact's quiet region (``_quiet``) for a step from positions ``x_n``
+        (n, 2) m, the collision mesh's vertices ``start``: the last one while the step
+        starts well inside it (``QUIET_KEEP``), else sought again; None if a pair is
+        within 2 dhat."""
+        kept = self._quiet
+        if kept is not None and self._relative_move(x_n.ravel(), kept[0]) <= QUIET_KEEP * kept[1]:
+            return kept
+        gap = self._nearest(start, QUIET_SEARCH)
+        if gap > 2.0 * self.settings.dhat:
+            return start[:self.vertex_nodes.size].copy(), 0.5 * (gap - self.settings.dhat)
+        return None
+
+    def _relative_move(self, q: np.ndarray, anchor: np.ndarray) -> float:
+        """m, how far a vertex at positions ``q`` (n d,) moved from ``anchor`` (n_v, 2) m
+        besides its body's mean move (``largest_relative_move``)."""
+        return largest_relative_move(q, self._vertex_dof_pairs, anchor, self.vertex_body,
+                                     len(self.bodies) + 1)
 
     def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray):
         """The compiled friction's pairs (2D, ``friction_kernels.lagged_friction``) at the
@@ -454,13 +484,14 @@ class BarrierContact(Energy):
 
     def quiet(self, q: np.ndarray) -> bool:
         """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
-        self-contact whose vertices all lie within the step's free reach of their start
-        (each vertex and edge moved by at most that reach: their gap shrank by at most
-        twice it). Always False for the fruit's barrier."""
+        self-contact whose vertices all lie within the quiet region's reach of where it
+        was sought, each body's mean move taken off (each vertex and edge moved by at most
+        that reach against its body: their gap shrank by at most twice it). Always False
+        for the fruit's barrier."""
         if self._quiet is None:
             return False
-        start, reach = self._quiet
-        return largest_move(q, self._vertex_dof_pairs, start) <= reach
+        anchor, reach = self._quiet
+        return self._relative_move(q, anchor) <= reach
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
