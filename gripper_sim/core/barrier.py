@@ -57,7 +57,7 @@ from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
                                               largest_relative_move, nearest_partners)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
-                                             smallest_distance)
+                                             paths_clear, smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.friction_kernels import friction_terms, lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -747,9 +747,12 @@ class BarrierContact(Energy):
             return True
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
-        # nothing that stands still crosses anything; in 2D the compiled (conservative)
-        # bound clears most paths, the exact CCD decides the others
-        if not np.array_equal(v0, v1) and not self._clear_path(v0, v1):
+        # in 2D the compiled (conservative) check clears most paths, and with them their
+        # ends (it clears no pair that ends touching; the others' boxes stay apart); the
+        # exact CCD decides the others; nothing that stands still crosses anything
+        if self._clear_path(v0, v1):
+            return True
+        if not np.array_equal(v0, v1):
             exact = float(ipctk.compute_collision_free_stepsize(
                 self._mesh, v0, v1, broad_phase=self._broad_phase, narrow_phase_ccd=EXACT_CCD))
             if exact < 1.0:
@@ -766,9 +769,16 @@ class BarrierContact(Energy):
         return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
 
     def _clear_path(self, v0: np.ndarray, v1: np.ndarray) -> bool:
-        """Whether the compiled CCD (2D) finds the straight motion from ``v0`` to ``v1``
-        free of crossings for certain (3D: never, the exact CCD decides)."""
-        return self.dimension == 2 and self._step_bound(v0, v1) == 1.0
+        """Whether the compiled check (2D, ``barrier_search.paths_clear``) finds the
+        straight motion of the collision mesh's vertices from ``v0`` to ``v1`` (n_m, 2) m
+        free of crossings, every pair ending apart, for certain (3D: never, the exact
+        CCD decides)."""
+        if self.dimension != 2:
+            return False
+        pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
+                                       self.self_contact,
+                                       (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        return bool(paths_clear(v0, v1, self._mesh_edges, pairs))
 
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
