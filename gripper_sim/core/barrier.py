@@ -291,6 +291,8 @@ class BarrierContact(Energy):
         self._quiet = None
         #: (the faces' (static, kinetic) coefficients, ``_coefficients``'s answer), or None
         self._friction_coefficients = None
+        #: (n_m,) the body of each collision-mesh vertex as ``partners`` numbers them
+        self._owners = None
         #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
         #: they were sought, the (edge, vertex) pairs (k, 2)), or None
         self._pairs = None
@@ -799,12 +801,15 @@ class BarrierContact(Energy):
         soft bodies); -1 for the nodes in no pair. 2D."""
         v = self.vertices(q.reshape(-1, 2))
         n_v = self.vertex_nodes.size
-        # the body of every collision-mesh vertex: outlines, then the faces' end points
-        owner = np.concatenate([self.vertex_body, 1 + len(self.bodies)
-                                + np.arange(v.shape[0] - n_v) // self.corners_per_face])
+        owner = self._owners
+        if owner is None or owner.size != v.shape[0]:
+            # the body of every collision-mesh vertex: outlines, then the faces' end points
+            owner = self._owners = np.concatenate(
+                [self.vertex_body, 1 + len(self.bodies)
+                 + np.arange(v.shape[0] - n_v) // self.corners_per_face])
         other = nearest_partners(v, self._mesh_edges, self._candidate_pairs(q, v),
                                  self.settings.dhat, n_v)
-        partner = -np.ones(self.n_dof // 2, np.int64)
+        partner = np.full(self.n_dof // 2, -1, np.int64)
         partner[self.vertex_nodes] = np.where(other >= 0, owner[other], -1)
         return partner
 
