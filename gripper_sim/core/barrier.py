@@ -642,12 +642,13 @@ class BarrierContact(Energy):
         primitive of the surface crosses a face's and no face's crosses the surface's
         (CCD: in 2D compiled, ``_step_bound``; in 3D ipctk's, keeping the step's collision
         candidates for the line search along it)."""
-        if self.quiet(q) and self.quiet(q + dq):
+        end = q + dq
+        if self.quiet(q) and self.quiet(end):
             return 1.0
         v0 = self.vertices(q.reshape(-1, self.dimension))
-        v1 = self.vertices((q + dq).reshape(-1, self.dimension))
+        v1 = self.vertices(end.reshape(-1, self.dimension))
         if self.dimension == 2:
-            return self._step_bound(v0, v1)
+            return self._step_bound(q, end, v0, v1)
         candidates = ipctk.Candidates()
         candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat,
                          self._broad_phase)
@@ -761,13 +762,24 @@ class BarrierContact(Energy):
                 return False
         return self.min_distance(start) > 0.0
 
-    def _step_bound(self, v0: np.ndarray, v1: np.ndarray) -> float:
+    def _step_bound(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray,
+                    v1: np.ndarray) -> float:
         """The compiled CCD's (2D, ``barrier_search``) largest fraction (0, 1] of the
-        straight motion of the collision mesh's vertices from ``v0`` to ``v1`` (n_m, 2) m
-        free of crossings (conservative: each pair keeps ``SEPARATION`` of its gap)."""
-        pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
-                                       self.self_contact,
-                                       (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        straight motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's
+        vertices ``v0`` to ``v1`` (n_m, 2) m, free of crossings (conservative: each pair
+        keeps ``SEPARATION`` of its gap). Its pairs: the barrier's kept candidates
+        (``_candidate_pairs``) when both ends lie within ``CANDIDATE_MARGIN`` of where
+        they were sought (so does every point between: a pair not among them stays
+        further than dhat apart all along), else those of the boxes the vertices sweep."""
+        kept = self._pairs
+        if (kept is not None
+                and largest_move(q0, self._vertex_dof_pairs, kept[0]) <= CANDIDATE_MARGIN
+                and largest_move(q1, self._vertex_dof_pairs, kept[0]) <= CANDIDATE_MARGIN):
+            pairs = kept[1]
+        else:
+            pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
+                                           self.self_contact,
+                                           (0.5 + SWEPT_MARGIN) * self.settings.dhat)
         return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
 
     def _clear_path(self, v0: np.ndarray, v1: np.ndarray) -> bool:
