@@ -131,9 +131,9 @@ class SoftFingers:
         self.energies = self._energies() + ([self.self_contact] if self.self_contact else [])
         self.soft_bodies = self._soft_bodies(static_friction, kinetic_friction)
         #: (2 e, 2) both fingers' outline edges (indices into their nodes, left then
-        #: right; ``FingerResult.surface_edges``, read-only: every result shares it)
-        self._surface_edges = np.vstack([body.surface_edges, m + body.surface_edges])
-        self._surface_edges.flags.writeable = False
+        #: right; ``FingerResult.surface_edges``, read-only: every result shares it),
+        #: built by the first ``result``
+        self._surface_edges = None
 
     def _soft_bodies(self, static_friction: float, kinetic_friction: float) -> tuple:
         """The two fingers' outlines in the barrier (``SoftBody``), left then right."""
@@ -266,6 +266,10 @@ class SoftFingers:
                                      (x[m + tip] - (right_origin + self.frames[1][tip]))
                                      * MIRROR])
         edges = self._surface_edges
+        if edges is None:
+            edges = np.vstack([self.body.surface_edges, m + self.body.surface_edges])
+            edges.flags.writeable = False
+            self._surface_edges = edges
         if np.any(touching):
             half = edges.shape[0] // 2
             lengths = [touching_length(x, side_edges, touching)
