@@ -294,7 +294,8 @@ class BarrierContact(Energy):
         #: (n_m,) the body of each collision-mesh vertex as ``partners`` numbers them
         self._owners = None
         #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
-        #: they were sought, the (edge, vertex) pairs (k, 2)), or None
+        #: they were sought, the (edge, vertex) pairs (k, 2), the faces' corners then
+        #: (c k, d) m), or None
         self._pairs = None
 
     # ------------------------------------------------------------------ set-up
@@ -398,7 +399,8 @@ class BarrierContact(Energy):
         self._tangential = ipctk.TangentialCollisions()
         self._friction_pairs = None
         if self.dimension == 2 and rubbing:
-            self._friction_pairs = self._lagged_friction(start, mu_s, mu_k)
+            self._friction_pairs = self._lagged_friction(
+                start, mu_s, mu_k, self._start_candidates(start, old, new))
         elif rubbing:
             collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
@@ -445,12 +447,25 @@ class BarrierContact(Energy):
         return largest_relative_move(q, self._vertex_dof_pairs, anchor, self.vertex_body,
                                      len(self.bodies) + 1)
 
-    def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray):
+    def _start_candidates(self, start: np.ndarray, old: np.ndarray,
+                          new: np.ndarray) -> np.ndarray:
+        """(k, 2) the (edge, vertex) candidates at the collision mesh's start vertices
+        ``start`` (2D; the faces' corners ``old`` (c k, 2) m where they start), boxes
+        inflated by dhat / 2 + ``CANDIDATE_MARGIN``: every pair within dhat there. They
+        serve as the barrier's kept candidates (``_candidate_pairs``) when no corner
+        moves further than the margin to where it ends (``new``)."""
+        pairs = self._static_candidates(start, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
+        if not old.size or _largest_shift(old, new) <= CANDIDATE_MARGIN:
+            self._pairs = (start[:self.vertex_nodes.size].copy(), pairs, old)
+        return pairs
+
+    def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray,
+                         pairs: np.ndarray):
         """The compiled friction's pairs (2D, ``friction_kernels.lagged_friction``) at the
         collision mesh's start vertices ``start`` with per-vertex coefficients ``mu_s``,
-        ``mu_k`` (n_m,): (vertex ids, weights, tangents, forces, coefficients), or None
+        ``mu_k`` (n_m,), of the (edge, vertex) candidates ``pairs`` (k, 2) (holding every
+        pair within dhat): (vertex ids, weights, tangents, forces, coefficients), or None
         when no pair is within dhat."""
-        pairs = self._static_candidates(start, 0.5 * self.settings.dhat)
         k = len(pairs)
         if not k:
             return None
@@ -694,12 +709,35 @@ class BarrierContact(Energy):
         ``q`` (n d,) m, the collision mesh's vertices ``v``: ipctk's candidates of boxes
         inflated by dhat / 2 + ``CANDIDATE_MARGIN``, sought again once a vertex has moved
         further than the margin from where they were sought (each side of a pair moved
-        by at most the margin: the pair came at most twice it closer)."""
+        by at most the margin: the pair came at most twice it closer; the faces' corners
+        stand still within a step, at most the margin from where they were sought, see
+        ``_start_candidates``)."""
         kept = self._pairs
         if kept is None or largest_move(q, self._vertex_dof_pairs, kept[0]) > CANDIDATE_MARGIN:
             pairs = self._static_candidates(v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
-            kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs)
+            kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs,
+                                  self._obstacles_end)
         return kept[1]
+
+    def _kept_along(self, q0: np.ndarray, q1: np.ndarray,
+                    faces_move: bool) -> np.ndarray | None:
+        """The kept candidates (``_candidate_pairs``) if they hold every pair that comes
+        within dhat along the straight motion from positions ``q0`` to ``q1`` (2 n,) m,
+        the faces' corners where they end, or with ``faces_move`` moving from where they
+        start: both ends within ``CANDIDATE_MARGIN`` of where they were sought (so is
+        every point between: a pair not among them stays further than dhat apart all
+        along; kept candidates always have the faces' ends within it); else None."""
+        kept = self._pairs
+        if kept is None:
+            return None
+        anchor, pairs, corners = kept
+        for q in (q0, q1):
+            if largest_move(q, self._vertex_dof_pairs, anchor) > CANDIDATE_MARGIN:
+                return None
+        if (faces_move and corners.size
+                and _largest_shift(corners, self._obstacles_start) > CANDIDATE_MARGIN):
+            return None
+        return pairs
 
     def _static_candidates(self, v: np.ndarray, radius: float) -> np.ndarray:
         """(k, 2) the (edge, vertex) pairs of the collision mesh's vertices ``v`` (2D) whose
@@ -753,7 +791,7 @@ class BarrierContact(Energy):
         # in 2D the compiled (conservative) check clears most paths, and with them their
         # ends (it clears no pair that ends touching; the others' boxes stay apart); the
         # exact CCD decides the others; nothing that stands still crosses anything
-        if self._clear_path(v0, v1):
+        if self._clear_path(x_n.ravel(), start.ravel(), v0, v1):
             return True
         if not np.array_equal(v0, v1):
             exact = float(ipctk.compute_collision_free_stepsize(
@@ -771,27 +809,33 @@ class BarrierContact(Energy):
         (``_candidate_pairs``) when both ends lie within ``CANDIDATE_MARGIN`` of where
         they were sought (so does every point between: a pair not among them stays
         further than dhat apart all along), else those of the boxes the vertices sweep."""
-        kept = self._pairs
-        if (kept is not None
-                and largest_move(q0, self._vertex_dof_pairs, kept[0]) <= CANDIDATE_MARGIN
-                and largest_move(q1, self._vertex_dof_pairs, kept[0]) <= CANDIDATE_MARGIN):
-            pairs = kept[1]
-        else:
+        pairs = self._pairs_along(q0, q1, v0, v1, False)
+        return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
+
+    def _pairs_along(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray, v1: np.ndarray,
+                     faces_move: bool) -> np.ndarray:
+        """(k, 2) candidates holding every pair that comes within dhat along the straight
+        motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's vertices
+        ``v0`` to ``v1`` (n_m, 2) m (``faces_move``: the faces' corners among them from
+        where they start to where they end): the kept ones (``_kept_along``), else those
+        of the boxes the vertices sweep."""
+        pairs = self._kept_along(q0, q1, faces_move)
+        if pairs is None:
             pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
                                            self.self_contact,
                                            (0.5 + SWEPT_MARGIN) * self.settings.dhat)
-        return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
+        return pairs
 
-    def _clear_path(self, v0: np.ndarray, v1: np.ndarray) -> bool:
+    def _clear_path(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray,
+                    v1: np.ndarray) -> bool:
         """Whether the compiled check (2D, ``barrier_search.paths_clear``) finds the
-        straight motion of the collision mesh's vertices from ``v0`` to ``v1`` (n_m, 2) m
-        free of crossings, every pair ending apart, for certain (3D: never, the exact
-        CCD decides)."""
+        straight motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's
+        vertices ``v0`` to ``v1`` (n_m, 2) m (the faces from where they start to where
+        they end), free of crossings, every pair ending apart, for certain (3D: never,
+        the exact CCD decides)."""
         if self.dimension != 2:
             return False
-        pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
-                                       self.self_contact,
-                                       (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        pairs = self._pairs_along(q0, q1, v0, v1, True)
         return bool(paths_clear(v0, v1, self._mesh_edges, pairs))
 
     # ------------------------------------------------------------------ outputs
@@ -862,6 +906,11 @@ class BarrierContact(Energy):
         if not len(collisions):
             return np.inf
         return float(np.sqrt(collisions.compute_minimum_distance(self._mesh, v)))
+
+
+def _largest_shift(a: np.ndarray, b: np.ndarray) -> float:
+    """m, the largest distance between matching rows of points ``a`` and ``b`` (k, d)."""
+    return float(np.sqrt(np.max(np.sum((b - a) ** 2, axis=1))))
 
 
 def _no_triplets():
