@@ -4,13 +4,14 @@ Random outlines pressed within dhat of each other (point-line and point-point pa
 several candidates sharing an end point), each evaluated by ipctk (its candidates,
 collision set, ``BarrierPotential`` with the physical barrier, the Hessian projected by
 clamping) and by the kernel on the same candidates: value, gradient and Hessian agree
-to 1e-10 relative.
+to 1e-10 relative. A self-contact's quiet test measures each vertex's move against its
+body's mean move: a body carried along rigidly has not moved.
 """
 import ipctk
 import numpy as np
 import pytest
 
-from gripper_sim.core.barrier_kernels import edge_vertex_barrier
+from gripper_sim.core.barrier_kernels import edge_vertex_barrier, largest_relative_move
 
 DHAT = 1e-3
 KAPPA = 0.1
@@ -73,3 +74,15 @@ def test_a_touching_pair_is_infinite():
                                    np.zeros(0, np.int64), 6, np.zeros(0, np.int64),
                                    np.zeros(0))
     assert total == np.inf
+
+
+def test_a_bodys_move_is_measured_against_its_mean_move():
+    start = np.arange(16, dtype=float).reshape(8, 2) * 1e-3
+    body = np.repeat([0, 1], 4)
+    dofs = np.arange(16).reshape(8, 2)
+    q = start.copy()
+    q[body == 1] += [1.0, 2.0]                       # the second body carried along
+    assert largest_relative_move(q.ravel(), dofs, start, body, 2) == pytest.approx(0.0,
+                                                                                    abs=1e-12)
+    q[0, 0] += 4e-3                                  # one vertex of the first body moves
+    assert largest_relative_move(q.ravel(), dofs, start, body, 2) == pytest.approx(3e-3)

@@ -4,13 +4,16 @@ Candidates: on random outlines moving along random straight paths, every pair ip
 broad phase finds (same inflation, same patches filter) is among the compiled search's,
 once each. Step bound: never past the first crossing ipctk's exact CCD finds (the
 motion scaled by the bound crosses nothing), and a point falling head-on on a segment
-stops at 0.8 of its time of impact.
+stops at 0.8 of its time of impact. Clear paths: only motions ipctk's exact CCD finds
+free of crossings, and a point pushed from far to a small gap (which the step bound
+stops).
 """
 import ipctk
 import numpy as np
 import pytest
 
-from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
+from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
+                                             paths_clear)
 
 DHAT = 1e-3
 EXACT = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
@@ -76,3 +79,28 @@ def test_a_head_on_point_stops_at_four_fifths_of_its_impact():
     pairs = np.array([[0, 2]])
     step = collision_free_step(start, end, np.array([[0, 1]]), pairs)
     assert step == pytest.approx(0.4, rel=1e-9)
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_paths_are_cleared_only_without_a_crossing(seed):
+    start, end, edges, groups = _outlines(seed)
+    mesh = _mesh(start, edges, groups)
+    for scale in (0.05, 0.2, 1.0):
+        moved = start + scale * (end - start)
+        pairs = edge_vertex_candidates(start, moved, edges, groups, False, 0.5 * DHAT)
+        if paths_clear(start, moved, edges, pairs):
+            assert ipctk.compute_collision_free_stepsize(
+                mesh, np.asfortranarray(start), np.asfortranarray(moved),
+                narrow_phase_ccd=EXACT) == 1.0
+
+
+def test_a_point_pushed_to_a_small_gap_is_cleared_and_one_through_is_not():
+    start = np.array([[0.0, 0.0], [1e-2, 0.0], [5e-3, 50 * DHAT]])
+    edges, pairs = np.array([[0, 1]]), np.array([[0, 2]])
+    end = start.copy()
+    end[2, 1] = 0.5 * DHAT                   # pushed ahead of the segment
+    assert collision_free_step(start, end, edges, pairs) < 1.0
+    assert paths_clear(start, end, edges, pairs)
+    for stop in (0.0, -DHAT):                # onto the segment, through it
+        end[2, 1] = stop
+        assert not paths_clear(start, end, edges, pairs)

@@ -55,9 +55,9 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
-                                              nearest_partners)
+                                              largest_relative_move, nearest_partners)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
-                                             smallest_distance)
+                                             paths_clear, smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.friction_kernels import friction_terms, lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -83,9 +83,13 @@ EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
 #: each vertex sweeps along it (round-off of q + s dq), their boxes inflated by as much
 SWEPT_MARGIN = 1e-2
 #: m, how far apart a self-contact's primitives are sought at the start of a step
-#: (``BarrierContact.quiet``): a step whose vertices stay within half the gap found, less
-#: dhat, of their start has no pair within dhat and skips the barrier's work
+#: (``BarrierContact.quiet``): positions whose vertices, each body's mean move taken off,
+#: stay within half the gap found, less dhat, of where it was sought have no pair within
+#: dhat and skip the barrier's work
 QUIET_SEARCH = 1e-3
+#: a self-contact's quiet region serves the next steps too while their starts have used
+#: at most this fraction of its reach (then it is sought again)
+QUIET_KEEP = 0.5
 #: m, the compiled barrier's candidates (2D) are sought this much beyond dhat / 2 around
 #: each primitive and serve while every vertex stays within it of where they were sought
 CANDIDATE_MARGIN = 1e-4
@@ -281,11 +285,17 @@ class BarrierContact(Energy):
         self._swept = None
         #: per Hessian part, its last CSC structure and ``_locate``'s answer for it
         self._entry_cache = {}
-        #: self-contact only: (the deformable vertices at the step's start (n_v, d) m, how
-        #: far m each may move from there with no pair coming within dhat), or None
+        #: self-contact only: (the deformable vertices where the gaps were sought (n_v, d)
+        #: m, how far m each may move from there, its body's mean move taken off, with no
+        #: pair coming within dhat), or None
         self._quiet = None
+        #: (the faces' (static, kinetic) coefficients, ``_coefficients``'s answer), or None
+        self._friction_coefficients = None
+        #: (n_m,) the body of each collision-mesh vertex as ``partners`` numbers them
+        self._owners = None
         #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
-        #: they were sought, the (edge, vertex) pairs (k, 2)), or None
+        #: they were sought, the (edge, vertex) pairs (k, 2), the faces' corners then
+        #: (c k, d) m), or None
         self._pairs = None
 
     # ------------------------------------------------------------------ set-up
@@ -385,40 +395,77 @@ class BarrierContact(Energy):
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
-        # per vertex; a pair takes the larger one: the face's or the soft body's, the
-        # fruit's being 0
-        body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
-        body_mu_k = np.array([0.0] + [b.kinetic_friction for b in self.bodies])
-        mu_s = np.concatenate([body_mu_s[self.vertex_body],
-                               np.repeat([f.static_friction for f in new_faces],
-                                         self.corners_per_face)])
-        mu_k = np.concatenate([body_mu_k[self.vertex_body],
-                               np.repeat([f.kinetic_friction for f in new_faces],
-                                         self.corners_per_face)])
+        mu_s, mu_k, rubbing = self._coefficients(new_faces)
         self._tangential = ipctk.TangentialCollisions()
         self._friction_pairs = None
-        if self.dimension == 2 and (np.any(mu_s > 0) or np.any(mu_k > 0)):
-            self._friction_pairs = self._lagged_friction(start, mu_s, mu_k)
-        elif np.any(mu_s > 0) or np.any(mu_k > 0):
+        if self.dimension == 2 and rubbing:
+            self._friction_pairs = self._lagged_friction(
+                start, mu_s, mu_k, self._start_candidates(start, old, new))
+        elif rubbing:
             collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
                              broad_phase=self._broad_phase)
             if len(collisions):
                 self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
                                        mu_k, max)
-        self._quiet = None
         if self.self_contact:
-            gap = self._nearest(start, QUIET_SEARCH)
-            if gap > 2.0 * self.settings.dhat:
-                self._quiet = (start[:self.vertex_nodes.size].copy(),
-                               0.5 * (gap - self.settings.dhat))
+            self._quiet = self._quiet_region(x_n, start)
 
-    def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray):
+    def _coefficients(self, faces) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Each collision-mesh vertex's static and kinetic friction coefficients (n_m,)
+        with the ``faces`` (a pair takes the larger one: the face's or the soft body's,
+        the fruit's being 0), and whether any is positive; kept while the faces'
+        coefficients stay."""
+        key = tuple((f.static_friction, f.kinetic_friction) for f in faces)
+        if self._friction_coefficients is None or self._friction_coefficients[0] != key:
+            body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
+            body_mu_k = np.array([0.0] + [b.kinetic_friction for b in self.bodies])
+            face_mu = np.array(key, float).reshape(-1, 2)
+            c = self.corners_per_face
+            mu_s = np.concatenate([body_mu_s[self.vertex_body], np.repeat(face_mu[:, 0], c)])
+            mu_k = np.concatenate([body_mu_k[self.vertex_body], np.repeat(face_mu[:, 1], c)])
+            rubbing = bool(np.any(mu_s > 0) or np.any(mu_k > 0))
+            self._friction_coefficients = (key, mu_s, mu_k, rubbing)
+        return self._friction_coefficients[1:]
+
+    def _quiet_region(self, x_n: np.ndarray, start: np.ndarray):
+        """The self-contact's quiet region (``_quiet``) for a step from positions ``x_n``
+        (n, 2) m, the collision mesh's vertices ``start``: the last one while the step
+        starts well inside it (``QUIET_KEEP``), else sought again; None if a pair is
+        within 2 dhat."""
+        kept = self._quiet
+        if kept is not None and self._relative_move(x_n.ravel(), kept[0]) <= QUIET_KEEP * kept[1]:
+            return kept
+        gap = self._nearest(start, QUIET_SEARCH)
+        if gap > 2.0 * self.settings.dhat:
+            return start[:self.vertex_nodes.size].copy(), 0.5 * (gap - self.settings.dhat)
+        return None
+
+    def _relative_move(self, q: np.ndarray, anchor: np.ndarray) -> float:
+        """m, how far a vertex at positions ``q`` (n d,) moved from ``anchor`` (n_v, 2) m
+        besides its body's mean move (``largest_relative_move``)."""
+        return largest_relative_move(q, self._vertex_dof_pairs, anchor, self.vertex_body,
+                                     len(self.bodies) + 1)
+
+    def _start_candidates(self, start: np.ndarray, old: np.ndarray,
+                          new: np.ndarray) -> np.ndarray:
+        """(k, 2) the (edge, vertex) candidates at the collision mesh's start vertices
+        ``start`` (2D; the faces' corners ``old`` (c k, 2) m where they start), boxes
+        inflated by dhat / 2 + ``CANDIDATE_MARGIN``: every pair within dhat there. They
+        serve as the barrier's kept candidates (``_candidate_pairs``) when no corner
+        moves further than the margin to where it ends (``new``)."""
+        pairs = self._static_candidates(start, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
+        if not old.size or _largest_shift(old, new) <= CANDIDATE_MARGIN:
+            self._pairs = (start[:self.vertex_nodes.size].copy(), pairs, old)
+        return pairs
+
+    def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray,
+                         pairs: np.ndarray):
         """The compiled friction's pairs (2D, ``friction_kernels.lagged_friction``) at the
         collision mesh's start vertices ``start`` with per-vertex coefficients ``mu_s``,
-        ``mu_k`` (n_m,): (vertex ids, weights, tangents, forces, coefficients), or None
+        ``mu_k`` (n_m,), of the (edge, vertex) candidates ``pairs`` (k, 2) (holding every
+        pair within dhat): (vertex ids, weights, tangents, forces, coefficients), or None
         when no pair is within dhat."""
-        pairs = self._static_candidates(start, 0.5 * self.settings.dhat)
         k = len(pairs)
         if not k:
             return None
@@ -454,13 +501,14 @@ class BarrierContact(Energy):
 
     def quiet(self, q: np.ndarray) -> bool:
         """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
-        self-contact whose vertices all lie within the step's free reach of their start
-        (each vertex and edge moved by at most that reach: their gap shrank by at most
-        twice it). Always False for the fruit's barrier."""
+        self-contact whose vertices all lie within the quiet region's reach of where it
+        was sought, each body's mean move taken off (each vertex and edge moved by at most
+        that reach against its body: their gap shrank by at most twice it). Always False
+        for the fruit's barrier."""
         if self._quiet is None:
             return False
-        start, reach = self._quiet
-        return largest_move(q, self._vertex_dof_pairs, start) <= reach
+        anchor, reach = self._quiet
+        return self._relative_move(q, anchor) <= reach
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
@@ -609,12 +657,13 @@ class BarrierContact(Energy):
         primitive of the surface crosses a face's and no face's crosses the surface's
         (CCD: in 2D compiled, ``_step_bound``; in 3D ipctk's, keeping the step's collision
         candidates for the line search along it)."""
-        if self.quiet(q) and self.quiet(q + dq):
+        end = q + dq
+        if self.quiet(q) and self.quiet(end):
             return 1.0
         v0 = self.vertices(q.reshape(-1, self.dimension))
-        v1 = self.vertices((q + dq).reshape(-1, self.dimension))
+        v1 = self.vertices(end.reshape(-1, self.dimension))
         if self.dimension == 2:
-            return self._step_bound(v0, v1)
+            return self._step_bound(q, end, v0, v1)
         candidates = ipctk.Candidates()
         candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat,
                          self._broad_phase)
@@ -660,12 +709,35 @@ class BarrierContact(Energy):
         ``q`` (n d,) m, the collision mesh's vertices ``v``: ipctk's candidates of boxes
         inflated by dhat / 2 + ``CANDIDATE_MARGIN``, sought again once a vertex has moved
         further than the margin from where they were sought (each side of a pair moved
-        by at most the margin: the pair came at most twice it closer)."""
+        by at most the margin: the pair came at most twice it closer; the faces' corners
+        stand still within a step, at most the margin from where they were sought, see
+        ``_start_candidates``)."""
         kept = self._pairs
         if kept is None or largest_move(q, self._vertex_dof_pairs, kept[0]) > CANDIDATE_MARGIN:
             pairs = self._static_candidates(v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
-            kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs)
+            kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs,
+                                  self._obstacles_end)
         return kept[1]
+
+    def _kept_along(self, q0: np.ndarray, q1: np.ndarray,
+                    faces_move: bool) -> np.ndarray | None:
+        """The kept candidates (``_candidate_pairs``) if they hold every pair that comes
+        within dhat along the straight motion from positions ``q0`` to ``q1`` (2 n,) m,
+        the faces' corners where they end, or with ``faces_move`` moving from where they
+        start: both ends within ``CANDIDATE_MARGIN`` of where they were sought (so is
+        every point between: a pair not among them stays further than dhat apart all
+        along; kept candidates always have the faces' ends within it); else None."""
+        kept = self._pairs
+        if kept is None:
+            return None
+        anchor, pairs, corners = kept
+        for q in (q0, q1):
+            if largest_move(q, self._vertex_dof_pairs, anchor) > CANDIDATE_MARGIN:
+                return None
+        if (faces_move and corners.size
+                and _largest_shift(corners, self._obstacles_start) > CANDIDATE_MARGIN):
+            return None
+        return pairs
 
     def _static_candidates(self, v: np.ndarray, radius: float) -> np.ndarray:
         """(k, 2) the (edge, vertex) pairs of the collision mesh's vertices ``v`` (2D) whose
@@ -716,28 +788,55 @@ class BarrierContact(Energy):
             return True
         v0 = self.vertices(x_n, self._obstacles_start)
         v1 = self.vertices(start)
-        # nothing that stands still crosses anything; in 2D the compiled (conservative)
-        # bound clears most paths, the exact CCD decides the others
-        if not np.array_equal(v0, v1) and not self._clear_path(v0, v1):
+        # in 2D the compiled (conservative) check clears most paths, and with them their
+        # ends (it clears no pair that ends touching; the others' boxes stay apart); the
+        # exact CCD decides the others; nothing that stands still crosses anything
+        if self._clear_path(x_n.ravel(), start.ravel(), v0, v1):
+            return True
+        if not np.array_equal(v0, v1):
             exact = float(ipctk.compute_collision_free_stepsize(
                 self._mesh, v0, v1, broad_phase=self._broad_phase, narrow_phase_ccd=EXACT_CCD))
             if exact < 1.0:
                 return False
         return self.min_distance(start) > 0.0
 
-    def _step_bound(self, v0: np.ndarray, v1: np.ndarray) -> float:
+    def _step_bound(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray,
+                    v1: np.ndarray) -> float:
         """The compiled CCD's (2D, ``barrier_search``) largest fraction (0, 1] of the
-        straight motion of the collision mesh's vertices from ``v0`` to ``v1`` (n_m, 2) m
-        free of crossings (conservative: each pair keeps ``SEPARATION`` of its gap)."""
-        pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
-                                       self.self_contact,
-                                       (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        straight motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's
+        vertices ``v0`` to ``v1`` (n_m, 2) m, free of crossings (conservative: each pair
+        keeps ``SEPARATION`` of its gap). Its pairs: the barrier's kept candidates
+        (``_candidate_pairs``) when both ends lie within ``CANDIDATE_MARGIN`` of where
+        they were sought (so does every point between: a pair not among them stays
+        further than dhat apart all along), else those of the boxes the vertices sweep."""
+        pairs = self._pairs_along(q0, q1, v0, v1, False)
         return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
 
-    def _clear_path(self, v0: np.ndarray, v1: np.ndarray) -> bool:
-        """Whether the compiled CCD (2D) finds the straight motion from ``v0`` to ``v1``
-        free of crossings for certain (3D: never, the exact CCD decides)."""
-        return self.dimension == 2 and self._step_bound(v0, v1) == 1.0
+    def _pairs_along(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray, v1: np.ndarray,
+                     faces_move: bool) -> np.ndarray:
+        """(k, 2) candidates holding every pair that comes within dhat along the straight
+        motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's vertices
+        ``v0`` to ``v1`` (n_m, 2) m (``faces_move``: the faces' corners among them from
+        where they start to where they end): the kept ones (``_kept_along``), else those
+        of the boxes the vertices sweep."""
+        pairs = self._kept_along(q0, q1, faces_move)
+        if pairs is None:
+            pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
+                                           self.self_contact,
+                                           (0.5 + SWEPT_MARGIN) * self.settings.dhat)
+        return pairs
+
+    def _clear_path(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray,
+                    v1: np.ndarray) -> bool:
+        """Whether the compiled check (2D, ``barrier_search.paths_clear``) finds the
+        straight motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's
+        vertices ``v0`` to ``v1`` (n_m, 2) m (the faces from where they start to where
+        they end), free of crossings, every pair ending apart, for certain (3D: never,
+        the exact CCD decides)."""
+        if self.dimension != 2:
+            return False
+        pairs = self._pairs_along(q0, q1, v0, v1, True)
+        return bool(paths_clear(v0, v1, self._mesh_edges, pairs))
 
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
@@ -758,12 +857,15 @@ class BarrierContact(Energy):
         soft bodies); -1 for the nodes in no pair. 2D."""
         v = self.vertices(q.reshape(-1, 2))
         n_v = self.vertex_nodes.size
-        # the body of every collision-mesh vertex: outlines, then the faces' end points
-        owner = np.concatenate([self.vertex_body, 1 + len(self.bodies)
-                                + np.arange(v.shape[0] - n_v) // self.corners_per_face])
+        owner = self._owners
+        if owner is None or owner.size != v.shape[0]:
+            # the body of every collision-mesh vertex: outlines, then the faces' end points
+            owner = self._owners = np.concatenate(
+                [self.vertex_body, 1 + len(self.bodies)
+                 + np.arange(v.shape[0] - n_v) // self.corners_per_face])
         other = nearest_partners(v, self._mesh_edges, self._candidate_pairs(q, v),
                                  self.settings.dhat, n_v)
-        partner = -np.ones(self.n_dof // 2, np.int64)
+        partner = np.full(self.n_dof // 2, -1, np.int64)
         partner[self.vertex_nodes] = np.where(other >= 0, owner[other], -1)
         return partner
 
@@ -804,6 +906,11 @@ class BarrierContact(Energy):
         if not len(collisions):
             return np.inf
         return float(np.sqrt(collisions.compute_minimum_distance(self._mesh, v)))
+
+
+def _largest_shift(a: np.ndarray, b: np.ndarray) -> float:
+    """m, the largest distance between matching rows of points ``a`` and ``b`` (k, d)."""
+    return float(np.sqrt(np.max(np.sum((b - a) ** 2, axis=1))))
 
 
 def _no_triplets():

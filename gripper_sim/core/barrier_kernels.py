@@ -14,7 +14,8 @@ candidates instead of through ipctk's collision objects and sparse matrices:
   pairs of several candidates into one pair of their summed weights, the same sum;
 - its Hessian f'' grad s grad s^T + f' hess s, projected onto the positive
   semi-definite cone by clamping its negative eigenvalues to 0 (ipctk's
-  ``PSDProjectionMethod.CLAMP``).
+  ``PSDProjectionMethod.CLAMP``), in the subspace free of the pair's translations
+  (``_clamp_pair_to_psd``).
 """
 from __future__ import annotations
 
@@ -154,6 +155,70 @@ def _clamp_to_psd(matrix):
 
 
 @njit(cache=True)
+def _clamp_2x2_to_psd(matrix):
+    """``matrix`` (2, 2) symmetric with its negative eigenvalues set to 0, in closed form
+    (a negative and a positive eigenvalue l1 < 0 <= l2: l2 (A - l1 I) / (l2 - l1))."""
+    a, b, d = matrix[0, 0], matrix[0, 1], matrix[1, 1]
+    mean = 0.5 * (a + d)
+    radius = np.sqrt((0.5 * (a - d)) ** 2 + b * b)
+    low, high = mean - radius, mean + radius
+    if low >= 0.0:
+        return matrix
+    out = np.zeros((2, 2))
+    if high <= 0.0:
+        return out
+    factor = high / (high - low)
+    out[0, 0], out[1, 1] = factor * (a - low), factor * (d - low)
+    out[0, 1] = out[1, 0] = factor * b
+    return out
+
+
+@njit(cache=True)
+def _clamp_pair_to_psd(local, m):
+    """A pair's Hessian ``local`` (2 m, 2 m) over its m = 2 or 3 vertices' (x, y) with its
+    negative eigenvalues set to 0 (``_clamp_to_psd`` of it, to round-off).
+
+    The barrier depends on the differences of the pair's positions only, so its Hessian
+    maps both translations to 0 and acts on their orthogonal complement: with an
+    orthonormal basis Q = B (x) I_2 of it (B (m, m - 1), orthonormal columns summing to
+    zero), L = Q (Q^T L Q) Q^T and the clamped L is Q clamp(Q^T L Q) Q^T, a 2 x 2 in
+    closed form (point-point) or a 4 x 4 by Jacobi (point-line) instead of a 4 x 4 or
+    6 x 6 by Jacobi."""
+    r = m - 1
+    basis = np.zeros((m, r))
+    if m == 2:
+        basis[0, 0], basis[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
+    else:
+        basis[0, 0], basis[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
+        basis[0, 1] = basis[1, 1] = 1.0 / np.sqrt(6.0)
+        basis[2, 1] = -2.0 / np.sqrt(6.0)
+    reduced = np.zeros((2 * r, 2 * r))
+    for i in range(r):
+        for j in range(r):
+            for k in range(m):
+                for n in range(m):
+                    w = basis[k, i] * basis[n, j]
+                    if w == 0.0:
+                        continue
+                    for c in range(2):
+                        for e in range(2):
+                            reduced[2 * i + c, 2 * j + e] += w * local[2 * k + c, 2 * n + e]
+    clamped = _clamp_2x2_to_psd(reduced) if r == 1 else _clamp_to_psd(reduced)
+    out = np.zeros((2 * m, 2 * m))
+    for k in range(m):
+        for n in range(m):
+            for i in range(r):
+                for j in range(r):
+                    w = basis[k, i] * basis[n, j]
+                    if w == 0.0:
+                        continue
+                    for c in range(2):
+                        for e in range(2):
+                            out[2 * k + c, 2 * n + e] += w * clamped[2 * i + c, 2 * j + e]
+    return out
+
+
+@njit(cache=True)
 def largest_move(q, dofs, start):
     """m, the largest distance of a vertex at positions ``q`` (n_dof,) from ``start``
     (k, 2), its coordinates at ``dofs`` (k, 2)."""
@@ -161,6 +226,32 @@ def largest_move(q, dofs, start):
     for i in range(dofs.shape[0]):
         dx = q[dofs[i, 0]] - start[i, 0]
         dy = q[dofs[i, 1]] - start[i, 1]
+        largest = max(largest, dx * dx + dy * dy)
+    return np.sqrt(largest)
+
+
+@njit(cache=True)
+def largest_relative_move(q, dofs, start, body, n_bodies):
+    """m, the largest distance of a vertex at positions ``q`` (n_dof,) from ``start``
+    (k, 2), its coordinates at ``dofs`` (k, 2), once its body's mean move is taken off
+    (``body`` (k,) each vertex's body in 0 .. ``n_bodies`` - 1): a bound on how far a
+    body's own primitives came closer to each other, whatever the bodies' translations."""
+    mean = np.zeros((n_bodies, 2))
+    count = np.zeros(n_bodies)
+    for i in range(dofs.shape[0]):
+        b = body[i]
+        mean[b, 0] += q[dofs[i, 0]] - start[i, 0]
+        mean[b, 1] += q[dofs[i, 1]] - start[i, 1]
+        count[b] += 1.0
+    for b in range(n_bodies):
+        if count[b] > 0.0:
+            mean[b, 0] /= count[b]
+            mean[b, 1] /= count[b]
+    largest = 0.0
+    for i in range(dofs.shape[0]):
+        b = body[i]
+        dx = q[dofs[i, 0]] - start[i, 0] - mean[b, 0]
+        dy = q[dofs[i, 1]] - start[i, 1] - mean[b, 1]
         largest = max(largest, dx * dx + dy * dy)
     return np.sqrt(largest)
 
@@ -233,7 +324,7 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
             for j in range(2 * m):
                 local[i, j] = second * grad[i] * grad[j] + first * hess[i, j]
         if project:
-            local = _clamp_to_psd(local)
+            local = _clamp_pair_to_psd(local, m)
         outside += add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
                                      hessian_values)
     return total, outside

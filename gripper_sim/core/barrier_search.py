@@ -14,6 +14,10 @@ candidates (broad phase) and the largest collision-free fraction of a step (CCD)
   close in, (1 - s) d0 / l_p first, then 0.9 d / l_p (l_p the bound on the relative
   speed of the pair after removing their mean motion), stopping before the distance
   falls below s d0; the bound is conservative (never at or past a crossing).
+- Clear paths (a start of step's check): the same advance, stopping below s min(d0,
+  d1), d1 the pair's distance at the end: a path that closes a gap to a small
+  fraction of its start and no further (a node pushed ahead of a face) is cleared,
+  which the step bound's floor s d0 would stop.
 """
 from __future__ import annotations
 
@@ -100,9 +104,10 @@ def _point_segment_distance(px, py, ax, ay, bx, by):
 
 
 @njit(cache=True)
-def _additive_ccd(p, a, b, dp, da, db, limit):
+def _additive_ccd(p, a, b, dp, da, db, limit, to_end):
     """The time in [0, limit] the point p and segment a-b (2,) may move along dp, da, db
-    (2,) with their distance staying at least ``SEPARATION`` of the start's."""
+    (2,) with their distance staying at least ``SEPARATION`` of the start's, or with
+    ``to_end`` of the smaller of the start's and the end's (0 if that is 0)."""
     mx = (dp[0] + da[0] + db[0]) / 3.0
     my = (dp[1] + da[1] + db[1]) / 3.0
     dpx, dpy = dp[0] - mx, dp[1] - my
@@ -110,16 +115,23 @@ def _additive_ccd(p, a, b, dp, da, db, limit):
     dbx, dby = db[0] - mx, db[1] - my
     reach = (np.sqrt(dpx * dpx + dpy * dpy)
              + max(np.sqrt(dax * dax + day * day), np.sqrt(dbx * dbx + dby * dby)))
-    if reach == 0.0:
-        return limit
     px, py, ax, ay, bx, by = p[0], p[1], a[0], a[1], b[0], b[1]
     distance = _point_segment_distance(px, py, ax, ay, bx, by)
+    floor = SEPARATION * distance
+    if to_end:
+        floor = min(floor, SEPARATION * _point_segment_distance(
+            px + dp[0], py + dp[1], ax + da[0], ay + da[1], bx + db[0], by + db[1]))
+        if floor <= 0.0:
+            return 0.0
+    if reach == 0.0:
+        return limit
     if distance <= 0.0:
         return 0.0
-    floor = SEPARATION * distance
     t = 0.0
     advance = (1.0 - SEPARATION) * distance / reach
     for _ in range(CCD_MAX_ADVANCES):
+        if to_end:  # the end itself is checked, not a point past it
+            advance = min(advance, limit - t)
         px += advance * dpx
         py += advance * dpy
         ax += advance * dax
@@ -141,6 +153,20 @@ def collision_free_step(v0, v1, edges, candidates):
     """The largest fraction (0, 1] of the straight motion from ``v0`` to ``v1`` (n_m, 2)
     m along which no candidate (edge, vertex) pair (k, 2) closes below ``SEPARATION``
     of its start distance (0 if one starts touching)."""
+    return _bounded_step(v0, v1, edges, candidates, False)
+
+
+@njit(cache=True)
+def paths_clear(v0, v1, edges, candidates):
+    """Whether along the straight motion from ``v0`` to ``v1`` (n_m, 2) m no candidate
+    (edge, vertex) pair (k, 2) closes below ``SEPARATION`` of the smaller of its start
+    and end distances: no crossing for certain (False: maybe one)."""
+    return _bounded_step(v0, v1, edges, candidates, True) == 1.0
+
+
+@njit(cache=True)
+def _bounded_step(v0, v1, edges, candidates, to_end):
+    """``collision_free_step``, or with ``to_end`` the floor of ``paths_clear``."""
     step = 1.0
     dp, da, db = np.empty(2), np.empty(2), np.empty(2)
     for k in range(candidates.shape[0]):
@@ -150,7 +176,7 @@ def collision_free_step(v0, v1, edges, candidates):
             dp[c] = v1[i, c] - v0[i, c]
             da[c] = v1[a, c] - v0[a, c]
             db[c] = v1[b, c] - v0[b, c]
-        step = _additive_ccd(v0[i], v0[a], v0[b], dp, da, db, step)
+        step = _additive_ccd(v0[i], v0[a], v0[b], dp, da, db, step, to_end)
         if step == 0.0:
             break
     return step

@@ -130,6 +130,10 @@ class SoftFingers:
             if self_contact is not None else None)
         self.energies = self._energies() + ([self.self_contact] if self.self_contact else [])
         self.soft_bodies = self._soft_bodies(static_friction, kinetic_friction)
+        #: (2 e, 2) both fingers' outline edges (indices into their nodes, left then
+        #: right; ``FingerResult.surface_edges``, read-only: every result shares it),
+        #: built by the first ``result``
+        self._surface_edges = None
 
     def _soft_bodies(self, static_friction: float, kinetic_friction: float) -> tuple:
         """The two fingers' outlines in the barrier (``SoftBody``), left then right."""
@@ -257,13 +261,21 @@ class SoftFingers:
         """The fingers' outputs in ``state``, the backings centred at the origins (2,) m."""
         x, forces, touching = state.positions, state.contact_forces, state.touching
         m = self.body.n_nodes
-        rest = self.placed(left_origin, right_origin)
         tip = self.body.tip_node
-        moved = x - rest
-        tip_displacement = np.array([moved[tip], moved[m + tip] * MIRROR])
-        edges = self.body.surface_edges
-        lengths = [touching_length(x, side * m + edges, touching) for side in range(2)]
+        tip_displacement = np.array([x[tip] - (left_origin + self.frames[0][tip]),
+                                     (x[m + tip] - (right_origin + self.frames[1][tip]))
+                                     * MIRROR])
+        edges = self._surface_edges
+        if edges is None:
+            edges = np.vstack([self.body.surface_edges, m + self.body.surface_edges])
+            edges.flags.writeable = False
+            self._surface_edges = edges
+        if np.any(touching):
+            half = edges.shape[0] // 2
+            lengths = [touching_length(x, side_edges, touching)
+                       for side_edges in (edges[:half], edges[half:])]
+        else:
+            lengths = [0.0, 0.0]
         return FingerResult(positions=x.copy(), contact_forces=forces.copy(),
                             tip_displacement=tip_displacement,
-                            contact_length=np.array(lengths),
-                            surface_edges=np.vstack([edges, m + edges]))
+                            contact_length=np.array(lengths), surface_edges=edges)

@@ -1,0 +1,157 @@
+"""Where the CPU time of a barrier-contact run goes: the 2D Fin Ray grasp-and-lift of
+``bench_fin_ray.py`` (``fin_ray``) or the pressurised ring squeeze of
+``bench_barrier.py`` (``ring``). Prints figures; asserts nothing.
+
+One warm-up run (numba's caches loaded), then two timed runs (CPU time of this process,
+``time.process_time``; the load average is printed):
+
+- by part: each listed method is wrapped by a timer (inclusive times: a part contains
+  the parts it calls; a few microseconds per call of overhead), with its calls and CPU
+  time per call. Methods that a build no longer has are left out;
+- compiled and not: every numba kernel bound in a ``gripper_sim`` module is wrapped,
+  the time inside them (their call overhead included) against the rest (the Python
+  around them, numpy, ipctk).
+
+Usage::
+
+    nice python bench/profile_barrier.py [fin_ray|ring]
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import functools
+import os
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / 'bench'))
+sys.path.insert(0, str(ROOT / 'test'))
+
+from numba.core.registry import CPUDispatcher  # noqa: E402
+
+from gripper_sim.core import barrier, facade, fast_solver, simulation, soft_fingers  # noqa: E402
+
+#: (label, owner, attribute) of the parts timed
+PARTS = (
+    ('step', simulation.Simulation, 'step'),
+    ('  measures (StepResult)', simulation.Simulation, '_measure'),
+    ('  barrier step', facade, 'soft_body_step'),
+    ('  barrier step', facade, 'barrier_step'),
+    ('    Newton solve', fast_solver.PatternCachingSolver, 'solve'),
+    ('      evaluation with Hessian', fast_solver.PatternCachingSolver, '_evaluate_fast'),
+    ('      linear solve', fast_solver.PatternCachingSolver, '_linear_solve'),
+    ('      barrier evaluate_into', barrier.BarrierContact, 'evaluate_into'),
+    ('      barrier max_step (CCD)', barrier.BarrierContact, 'max_step'),
+    ('    barrier begin_step', barrier.BarrierContact, 'begin_step'),
+    ('    barrier pushed_start', barrier.BarrierContact, 'pushed_start'),
+    ('    barrier reachable', barrier.BarrierContact, 'reachable'),
+    ('    barrier partners', barrier.BarrierContact, 'partners'),
+    ('    barrier contact_forces', barrier.BarrierContact, 'contact_forces'),
+    ('    barrier holders', barrier.BarrierContact, 'holders'),
+    ('  fingers: sticking marks', simulation.Simulation, '_mark_sticking'),
+    ('  fingers: jaw wrenches', simulation.Simulation, '_finger_wrenches'),
+    ('  fingers: result', soft_fingers.SoftFingers, 'result'),
+)
+
+
+def _timed(function, label, times, calls, split=None):
+    @functools.wraps(function)
+    def wrapper(*args, **kwargs):
+        key = label
+        if split is not None:
+            key = split(label, args, kwargs)
+        start = time.process_time()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            times[key] += time.process_time() - start
+            calls[key] += 1
+    return wrapper
+
+
+def _hessian_or_not(label, args, kwargs):
+    hessian = kwargs.get('hessian', args[-1] if len(args) > 6 else True)
+    return label if hessian else label.replace('with Hessian', 'gradient only')
+
+
+def _self_contact_or_not(label, args, kwargs):
+    return label + (' [self-contact]' if args[0].self_contact else '')
+
+
+def wrap_parts(times, calls) -> None:
+    """Wrap the methods of ``PARTS`` that this build has."""
+    for label, owner, name in PARTS:
+        function = getattr(owner, name, None)
+        if function is None:
+            continue
+        split = (_hessian_or_not if name == '_evaluate_fast' else
+                 _self_contact_or_not if owner is barrier.BarrierContact else None)
+        setattr(owner, name, _timed(function, label, times, calls, split))
+
+
+def wrap_kernels(times, calls) -> None:
+    """Wrap every numba kernel bound in a loaded ``gripper_sim`` module (one timer each,
+    under the label 'compiled kernels')."""
+    wrappers = {}
+    for name, module in list(sys.modules.items()):
+        if not name.startswith('gripper_sim') or module is None:
+            continue
+        for attribute, value in list(vars(module).items()):
+            if isinstance(value, CPUDispatcher):
+                if id(value) not in wrappers:
+                    wrappers[id(value)] = _timed(value, 'compiled kernels', times, calls)
+                setattr(module, attribute, wrappers[id(value)])
+
+
+def _in_order(times) -> list:
+    """The labels timed, in the order of ``PARTS`` (each with its variants)."""
+    order = list(dict.fromkeys(label for label, _, _ in PARTS))
+    rank = {label: k for k, label in enumerate(order)}
+
+    def key(label):
+        base = label.replace(' [self-contact]', '').replace('gradient only', 'with Hessian')
+        return rank.get(base, len(order)), label
+    return sorted(times, key=key)
+
+
+def run(case: str):
+    """One run of ``case``; (steps, Newton iterations)."""
+    if case == 'ring':
+        from bench_barrier import membrane, timed
+        _, iterations, _, _ = timed(membrane, 'ipc')
+        return 150, iterations
+    from bench_soft_fingers import grasp
+    figures = grasp('fin_ray', 4.0)
+    return figures['steps'], figures['newton']
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('case', nargs='?', default='fin_ray', choices=('fin_ray', 'ring'))
+    args = parser.parse_args(argv)
+    run(args.case)
+    for wrap in (wrap_parts, wrap_kernels):
+        times, calls = collections.defaultdict(float), collections.Counter()
+        wrap(times, calls)
+        start = time.process_time()
+        steps, iterations = run(args.case)
+        total = time.process_time() - start
+        print(f'{args.case}: load average {os.getloadavg()[0]:.2f}; {total:.3f} CPU s, '
+              f'{steps} steps, {iterations} Newton iterations')
+        for label in _in_order(times):
+            seconds = times[label]
+            print(f'{label:44s} {seconds:7.3f} s {100 * seconds / total:5.1f} % '
+                  f'{calls[label]:7d} calls {1e6 * seconds / calls[label]:8.1f} us')
+        if wrap is wrap_kernels:
+            rest = total - times['compiled kernels']
+            print(f'{"the rest (Python, numpy, ipctk)":44s} {rest:7.3f} s '
+                  f'{100 * rest / total:5.1f} %')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
