@@ -1,6 +1,7 @@
 """Benchmark of the 3D deformable fingers: the CLI's squeeze of the default apple to a grip
 force (``gripper-sim squeeze --set dimension=3 --set gripper.finger.type=... --to-force
-2``) with the rigid flat finger, the solid pad and the Fin Ray. Prints figures; asserts
+2``) with the rigid flat finger, the solid pad and the Fin Ray, the Fin Ray also with the
+1 um fruit contact gap it had before its own (``fin_ray_1um``). Prints figures; asserts
 nothing.
 
 CPU time of this process (``time.process_time``, the best of ``--repeat`` runs; the
@@ -34,8 +35,11 @@ import ipctk  # noqa: E402
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core3d.simulation import Simulation3D  # noqa: E402
 
-#: the fingers compared, the reference first
-FINGERS = ('flat', 'solid_pad', 'fin_ray')
+#: the runs compared, the reference first: (label, finger, its own overrides); the Fin Ray
+#: with its fruit contact's gap (gripper.finger.fin_ray.contact_dhat, null: 0.1 mm) and
+#: with the 1 um of contact.ipc.dhat it had before (the baseline)
+FINGERS = (('flat', 'flat', ()), ('solid_pad', 'solid_pad', ()), ('fin_ray', 'fin_ray', ()),
+           ('fin_ray_1um', 'fin_ray', ('gripper.finger.fin_ray.contact_dhat=1e-6',)))
 #: s, held at the force once reached
 SETTLE = 0.1
 
@@ -76,19 +80,19 @@ def main(argv=None) -> int:
         ipctk.set_num_threads(args.ipctk_threads)
     print(f'ipctk threads {ipctk.get_num_threads()}; load average {os.getloadavg()[0]:.2f}; CPU time (time.process_time), best of '
           f'{args.repeat}')
-    print(f"{'finger':10s} {'CPU s':>7s} {'steps':>6s} {'Newton':>7s} {'nodes':>6s} "
+    print(f"{'finger':11s} {'CPU s':>7s} {'steps':>6s} {'Newton':>7s} {'nodes':>6s} "
           f"{'force N':>8s} {'area mm^2':>9s} {'peak kPa':>8s} {'tip mm':>7s}")
     rows = {}
-    for finger in FINGERS:
-        r = min((squeeze(finger, args.force, args.set) for _ in range(args.repeat)),
+    for label, finger, own in FINGERS:
+        r = min((squeeze(finger, args.force, [*args.set, *own]) for _ in range(args.repeat)),
                 key=lambda run: run['cpu'])
-        rows[finger] = r
+        rows[label] = r
         tip = '' if r['tip'] is None else f"{r['tip'] * 1e3:+7.3f}"
-        print(f"{finger:10s} {r['cpu']:7.1f} {r['steps']:6d} {r['newton']:7d} {r['nodes']:6d} "
+        print(f"{label:11s} {r['cpu']:7.1f} {r['steps']:6d} {r['newton']:7d} {r['nodes']:6d} "
               f"{r['force']:8.3f} {r['area'] * 1e6:9.1f} {r['pressure'] * 1e-3:8.1f} {tip:>7s}",
               flush=True)
-    for finger in FINGERS[1:]:
-        print(f"{finger} / flat: {rows[finger]['cpu'] / rows['flat']['cpu']:.1f}x")
+    for label, _, _ in FINGERS[1:]:
+        print(f"{label} / flat: {rows[label]['cpu'] / rows['flat']['cpu']:.1f}x")
     return 0
 
 

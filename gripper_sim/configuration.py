@@ -255,6 +255,13 @@ SCHEMA: dict[str, Key] = {
                                                  nullable=True),
     'gripper.finger.fin_ray.density': Key(1200.0, 'kg/m^3', 'fin_ray, custom material: '
                                           'density', low=50.0, high=20000.0),
+    'gripper.finger.fin_ray.contact_dhat': Key(None, 'm', 'fin_ray, 3D: barrier activation '
+                                               'distance of the fruit contact (and the '
+                                               "table's, in the same barrier); null = 1e-4 "
+                                               "(within the front beam's half thickness: the "
+                                               'contact acts on its mid-surface); 2D: '
+                                               'contact.ipc.dhat', low=1e-9, high=1e-3,
+                                               nullable=True),
     'gripper.finger.pad.enabled': Key(False, '-', 'a soft elastic pad (silicone-like) on '
                                       'the jaw face', 'bool'),
     'gripper.finger.pad.thickness': Key(0.003, 'm', 'pad thickness t', low=0.0, high=0.05,
@@ -716,6 +723,8 @@ def no_effect_reason(key: str, config: Mapping[str, Any]) -> str | None:
         return f"the finger is {finger}, not a V-groove: set 'gripper.finger.type' = vgroove"
     if key.startswith('gripper.finger.fin_ray.') and finger != 'fin_ray':
         return f"the finger is {finger}, not a Fin Ray: set 'gripper.finger.type' = fin_ray"
+    if key == 'gripper.finger.fin_ray.contact_dhat' and config['dimension'] != 3:
+        return "in 2D the Fin Ray's fruit contact is 'contact.ipc.dhat'"
     if (key in ('gripper.finger.fin_ray.youngs_modulus', 'gripper.finger.fin_ray.density')
             and config['gripper.finger.fin_ray.material'] != 'custom'):
         return ("the Fin Ray's material is "

@@ -253,15 +253,17 @@ def test_the_fin_ray_squeezes_the_default_apple_without_crossing(default_apple_s
     # (above) and tips (below); their areas (nodes in a pair closer than dhat) less so:
     # the front beam lies along the wrapped skin over a wide rim at nearly no pressure,
     # whose nodes go in or out of dhat as the fruit drifts sideways by micrometres (the
-    # mirror-symmetric squeeze is so only up to round-off: 142 and 149 mm^2)
+    # mirror-symmetric squeeze is so only up to round-off: 142 and 149 mm^2 with the 1 um gap)
     assert np.all(fingers.contact_area > 0)
     assert fingers.contact_area[0] == pytest.approx(fingers.contact_area[1], rel=0.25)
     # the tips move by tens of micrometres (the front beam is pressed in by a millimetre)
     assert fingers.tip_displacement[0] == pytest.approx(fingers.tip_displacement[1],
                                                         abs=5e-6)
-    # the fruit's patches likewise (158 and 143 mm^2)
+    # the fruit's patches likewise (252 and 212 mm^2: their nodes within the Fin Ray's
+    # contact gap, 0.1 mm, take in more of that rim than the 1 um of contact.ipc.dhat did,
+    # 158 and 143 mm^2)
     left, right = result.deformation.jaw_contact_areas
-    assert left == pytest.approx(right, rel=0.15)
+    assert left == pytest.approx(right, rel=0.25)
     assert result.damage is not None
 
 

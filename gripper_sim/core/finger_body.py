@@ -113,7 +113,7 @@ class FingerBody:
                      n_nodes: int | None = None) -> BarrierContact | None:
         """The barrier between the body's own rod elements (a vertex and an element that
         do not share a node; frictionless), so that its beams and ribs never cross:
-        None for a body without rods.
+        None for a body without rods (``self_contact_barrier`` over ``rod_edges``).
 
         Args:
             settings: the barrier's dhat and stiffness.
@@ -122,15 +122,44 @@ class FingerBody:
                 the body alone.
             n_nodes: nodes of the state (None: the body's).
         """
-        if not len(self.rod_edges):
-            return None
-        if copies is None:
-            copies, n_nodes = (np.arange(self.n_nodes),), self.n_nodes
-        nodes = np.unique(self.rod_edges)
-        pairs = self.self_pairs()
-        bodies = tuple(SoftBody(copy[nodes], copy[self.rod_edges], 0.0, 0.0)
-                       for copy in copies)
-        no_fruit = np.zeros(0, np.int64)
-        return BarrierContact(n_nodes, no_fruit, no_fruit.reshape(0, 2), settings, bodies,
-                              pairs=np.vstack([copy[pairs] for copy in copies]),
-                              self_contact=True)
+        return self_contact_barrier(self.n_nodes, self.rod_edges, self.self_pairs, settings,
+                                    copies, n_nodes)
+
+
+def self_contact_barrier(body_nodes: int, edges: np.ndarray, self_pairs,
+                         settings: BarrierSettings,
+                         copies: tuple[np.ndarray, ...] | None = None,
+                         n_nodes: int | None = None,
+                         triangles: np.ndarray | None = None) -> BarrierContact | None:
+    """A finger body's self-contact: the frictionless barrier between its own elements
+    that share no node, each copy of the body touching only itself; None for a body
+    without elements. The element kind: rod ``edges`` (2D, a vertex and an edge), or
+    with ``triangles`` shell triangles (3D, ipctk's vertex-triangle and edge-edge pairs).
+
+    Args:
+        body_nodes: the body's node count.
+        edges: (e, 2) the touching elements' edges (body node indices): the rod edges, or
+            every edge of ``triangles``.
+        self_pairs: () -> (p, 2) the body node pairs whose coupling the barrier's Hessian
+            pattern holds (called for a body with elements only).
+        settings: the barrier's dhat and stiffness.
+        copies: for a state holding several copies of the body, each copy's (body_nodes,)
+            global node indices; None: the body alone.
+        n_nodes: nodes of the state (None: the body's).
+        triangles: (t, 3) the shell triangles (body node indices), 3D; None in 2D.
+    """
+    elements = edges if triangles is None else triangles
+    if not len(elements):
+        return None
+    if copies is None:
+        copies, n_nodes = (np.arange(body_nodes),), body_nodes
+    nodes = np.unique(elements)
+    pairs = self_pairs()
+    bodies = tuple(SoftBody(copy[nodes], copy[edges], 0.0, 0.0,
+                            triangles=None if triangles is None else copy[triangles])
+                   for copy in copies)
+    no_fruit = np.zeros(0, np.int64)
+    return BarrierContact(n_nodes, no_fruit, no_fruit.reshape(0, 2), settings, bodies,
+                          dimension=2 if triangles is None else 3,
+                          pairs=np.vstack([copy[pairs] for copy in copies]),
+                          self_contact=True)

@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gripper_sim.core.barrier import BarrierContact, BarrierSettings, SoftBody
+from gripper_sim.core.barrier import BarrierContact, BarrierSettings
 from gripper_sim.core.energies.base import Energy
-from gripper_sim.core.finger_body import FingerBody
+from gripper_sim.core.finger_body import FingerBody, self_contact_barrier
 from gripper_sim.core3d.energies import HingeBending, Membrane, NeoHookeanTets
 from gripper_sim.core3d.layered_mesher import prism_tetrahedra
 from gripper_sim.core3d.mesh_geometry import signed_volumes, surface_edges
@@ -138,7 +138,7 @@ class FingerBody3D:
         """The barrier between the body's own shell triangles (a vertex and a triangle,
         or two edges, that share no node; frictionless; ipctk's 3D pairs), so that its
         beams and ribs never cross: None for a body without shells. As
-        ``FingerBody.self_contact`` in 2D.
+        ``FingerBody.self_contact`` in 2D (``core.finger_body.self_contact_barrier``).
 
         Args:
             settings: the barrier's dhat and stiffness.
@@ -147,19 +147,9 @@ class FingerBody3D:
                 the body alone.
             n_nodes: nodes of the state (None: the body's).
         """
-        if not len(self.shell_triangles):
-            return None
-        if copies is None:
-            copies, n_nodes = (np.arange(self.n_nodes),), self.n_nodes
         triangles = self.shell_triangles
-        nodes, edges = np.unique(triangles), surface_edges(triangles)
-        pairs = self.self_pairs()
-        bodies = tuple(SoftBody(copy[nodes], copy[edges], 0.0, 0.0, triangles=copy[triangles])
-                       for copy in copies)
-        no_fruit = np.zeros(0, np.int64)
-        return BarrierContact(n_nodes, no_fruit, no_fruit.reshape(0, 2), settings, bodies,
-                              dimension=3, pairs=np.vstack([copy[pairs] for copy in copies]),
-                              self_contact=True)
+        return self_contact_barrier(self.n_nodes, surface_edges(triangles), self.self_pairs,
+                                    settings, copies, n_nodes, triangles=triangles)
 
 
 def boundary_triangles(tetrahedra: np.ndarray) -> np.ndarray:

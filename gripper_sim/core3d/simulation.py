@@ -47,7 +47,8 @@ from gripper_sim.core3d.fruit import FruitModel3D, build_fruit3d
 from gripper_sim.core3d.layered_mesher import vertex_edge_lengths
 from gripper_sim.core.obstacles import Plate
 from gripper_sim.core3d.soft_barrier import SoftBarrier3D
-from gripper_sim.core3d.soft_fingers3d import SoftFingers3D, finger_body3d
+from gripper_sim.core3d.soft_fingers3d import (SoftFingers3D, finger_body3d,
+                                              fruit_barrier_settings)
 from gripper_sim.errors import ConfigError
 
 LEFT, RIGHT = 0, 1
@@ -135,7 +136,7 @@ class Simulation3D(SimulationFacade):
         if (self._barrier is not None and c['fruit.initial_height'] is None
                 and c['world.table']):
             # a barrier needs a positive gap: the fruit starts just above the table
-            self.initial_positions[:, 2] += START_GAP_FRACTION * c['contact.ipc.dhat']
+            self.initial_positions[:, 2] += START_GAP_FRACTION * self._barrier.settings.dhat
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
                             and not c['gripper.finger.pad.enabled'])
         self._pad = self._make_pad() if c['gripper.finger.pad.enabled'] else None
@@ -170,7 +171,7 @@ class Simulation3D(SimulationFacade):
             spacing = vertex_edge_lengths(fruit.rest_positions, fruit.triangles)
         return SoftBarrier3D(
             fruit.n_nodes + soft.n_nodes, fruit.surface, fruit.skin_edges, fruit.triangles,
-            BarrierSettings.from_config(self.config), soft.soft_bodies,
+            fruit_barrier_settings(self.config), soft.soft_bodies,
             soft.contact_pairs(fruit.surface, outline[fruit.surface], spacing[fruit.surface]))
 
     # ------------------------------------------------------------------ geometry

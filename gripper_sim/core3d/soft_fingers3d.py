@@ -21,7 +21,8 @@ The Fin Ray's section is the 2D finger of rods (``core.fin_ray``), as wide as
 (``core3d.rod_extrusion``) in slices about ``WIDTH_CELL_RATIO`` rod elements wide (at
 least 2, at most ``MAX_IN_PLANE_CELLS``). Each Fin Ray has its self-contact, as in 2D:
 the barrier (``contact.ipc.dhat``, ``contact.ipc.stiffness``) between its own shell
-triangles (``FingerBody3D.self_contact``), so that its members never cross.
+triangles (``FingerBody3D.self_contact``), so that its members never cross. Its fruit
+contact acts within ``FIN_RAY_CONTACT_DHAT`` (``fruit_barrier_settings``).
 """
 from __future__ import annotations
 
@@ -84,6 +85,27 @@ def fin_ray_body3d(config) -> FingerBody3D:
     return dataclasses.replace(extruded_rod_body(fin_ray_from_config(config, width), width,
                                                  slices),
                                self_contact_settings=BarrierSettings.from_config(config))
+
+
+#: m, the 3D Fin Ray's fruit contact dhat unless set (``gripper.finger.fin_ray.contact_dhat``):
+#: a Newton step of the front beam wrapping or sliding on the fruit moves the surfaces by
+#: tens of micrometres, and pairs further apart than dhat are not in the Newton matrix:
+#: with ``contact.ipc.dhat`` (1 um) every iteration's collision-free bound cut the step to
+#: a few per cent. 0.1 mm (IPC's usual 1e-3 of the scene, the fruit) lies well within the
+#: beam's half thickness, the contact acting on its mid-surface.
+FIN_RAY_CONTACT_DHAT = 1e-4
+
+
+def fruit_barrier_settings(config) -> BarrierSettings:
+    """The settings of the barrier of the fruit with the deformable fingers (and the
+    table): ``contact.ipc.*``, with the Fin Ray's dhat ``gripper.finger.fin_ray.contact_dhat``
+    (null: ``FIN_RAY_CONTACT_DHAT``)."""
+    settings = BarrierSettings.from_config(config)
+    if config['gripper.finger.type'] != 'fin_ray':
+        return settings
+    dhat = config['gripper.finger.fin_ray.contact_dhat']
+    return dataclasses.replace(settings,
+                               dhat=FIN_RAY_CONTACT_DHAT if dhat is None else float(dhat))
 
 
 #: the deformable finger types built in 3D and their builders: config -> FingerBody3D
