@@ -49,9 +49,10 @@ import os
 import numpy as np
 import scipy.sparse as sp
 
+from gripper_sim.core import newton
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
-                                      StepConstraints, StepSolution, descent_direction,
-                                      line_search, stack_low_rank, woodbury_terms)
+                                      StepConstraints, StepSolution, stack_low_rank,
+                                      woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
     from gripper_sim.core import solver_kernels as kernels
@@ -84,10 +85,9 @@ CG_MAX_ITERATIONS = 20
 CG_STALE_ITERATIONS = 3
 #: iterative-refinement sweeps of the direct solve when CG cannot be used (indefinite)
 REFINEMENT_SWEEPS = 3
-#: after a Newton step below this multiple of the tolerance the next iteration reuses
-#: the Newton matrix (a chord step: near convergence the Hessian barely changes, and
-#: the step's size, which decides convergence, is as well estimated)
-HESSIAN_REUSE = 100.0
+#: the Newton matrix is kept only after a step below this multiple of the tolerance
+#: (near convergence the Hessian barely changes; farther, a new one pays)
+KEEP_BELOW = 100.0
 #: a sliding node's Newton step is cut at the kink of the friction law only if it
 #: slips faster than this multiple of the smoothing speed (slower: inside the kink)
 KINK_FACTOR = 10.0
@@ -201,6 +201,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
         #: counts of the fast path: Newton solves (contact passes), Newton systems,
         #: (LDL^T) factorisations, CG iterations
         self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
+        #: the Newton iteration's work counters (``newton.C_*``)
+        self.counts = np.zeros(newton.C_SIZE, np.int64)
         self._lu = None
         self._woodbury = None  # (u, A^-1 u, (C^-1 + u^T A^-1 u)^-1) at the factorisation
         self._stale = False
@@ -226,12 +228,14 @@ class PatternCachingSolver(ImplicitEulerSolver):
         kernels.cg_direction(np.zeros(1), np.zeros(1), 0.0)  # CG ended in one iteration
         self.reset()
         self.stats = dict.fromkeys(self.stats, 0)
+        self.counts[:] = 0
 
     def reset(self) -> None:
         """Forget the kept factorisation (a restarted simulation repeats its results)."""
         self._lu = None
         self._woodbury = None
         self._warm = None
+        self._kept = None
 
     def _assemble(self, rows: list, cols: list, vals: list) -> sp.csc_matrix:
         signature = tuple(r.size for r in rows)
@@ -548,86 +552,160 @@ class PatternCachingSolver(ImplicitEulerSolver):
 
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:
-        """``ImplicitEulerSolver.solve`` (same Newton iteration, line search and
-        shifts), on the fast path when it applies."""
+        """One implicit Euler step: ``newton.newton_iteration`` (interpreted) on this
+        solver's pattern (``_NewtonProblem``); without the fast path the reference
+        ``ImplicitEulerSolver.solve``. A later contact pass of the same step starts from
+        the last pass's solution in the directions the new filter leaves free.
+
+        Raises:
+            NewtonFailure: no convergence, no descent, or an infeasible start.
+        """
         con = as_cone(con)
         if not self.fast:
             return super().solve(q_n, v_n, dt, q_start, con)
         self.stats['passes'] += 1
-        filters = np.ascontiguousarray(con.filters, dtype=float)
-        s_diag = np.einsum('naa->na', filters).ravel()
-
-        def filtered(vec):
-            out = np.empty(self.n)
-            kernels.apply_filters(filters, np.ascontiguousarray(vec), out)
-            return out
-
-        q = q_start.copy()
-        history: list[float] = []
-        phi = np.inf
+        problem = _NewtonProblem(self, q_n, v_n, dt, con)
+        history = np.zeros(self.max_iterations)
         warm = self._warm
+        status = newton.INFEASIBLE_START
         if warm is not None and warm[1] == dt and np.array_equal(warm[0], q_n):
-            # another contact pass of the same step: start from the last pass's solution
-            # in the free directions, the prescribed values in the held ones
-            q = q_start + filtered(warm[2] - q_start)
-            phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
-        if not np.isfinite(phi):
+            q = q_start + problem.filtered(warm[2] - q_start)
+            status, iterations, n_hist = newton.newton_iteration_interpreted(
+                problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
+        if status == newton.INFEASIBLE_START:
             q = q_start.copy()
-            phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
+            status, iterations, n_hist = newton.newton_iteration_interpreted(
+                problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
+        done = history[:n_hist].tolist()
+        if status != newton.OK:
+            raise NewtonFailure(FAILURES[status].format(self.max_iterations), done)
+        self._warm = (q_n.copy(), dt, q)
+        return StepSolution(q, problem.reaction, iterations, done)
+
+
+#: NewtonFailure's message for each status of ``newton.newton_iteration``
+FAILURES = {newton.INFEASIBLE_START: 'start of step is infeasible (inverted element)',
+            newton.NO_DESCENT: 'no descent direction found',
+            newton.LINE_SEARCH_FAILED: 'line search failed',
+            newton.NO_CONVERGENCE: 'no convergence in {} iterations'}
+
+
+class _KeptMatrix:
+    """The Newton matrix kept by ``_NewtonProblem.keep`` (``newton``'s chord rule).
+
+    Attributes:
+        key: what it was made for (``ImplicitEulerSolver._factor_key``).
+        values: its CSC values on the solver's pattern.  low: its rank-one terms
+            [(c, S u)].  age: Newton solves it has served since it was made.
+    """
+
+    def __init__(self, key: tuple, values: np.ndarray, low: list):
+        self.key, self.values, self.low, self.age = key, values, low, 0
+
+    def fits(self, key: tuple) -> bool:
+        """Made for these constraints and dt, and younger than MAX_FACTOR_AGE solves."""
+        filters, friction, energies, dt = key
+        return (self.age < newton.MAX_FACTOR_AGE and self.key[3] == dt
+                and self.key[1] == friction and self.key[2] == energies
+                and np.array_equal(self.key[0], filters))
+
+
+class _NewtonProblem:
+    """One ``PatternCachingSolver.solve``'s problem for ``newton.newton_iteration``: its
+    hooks as methods (see ``core.newton``). The Newton matrix is the CSC values of
+    S H S + (I - S) + shift S M / dt^2 with the energies' rank-one terms, solved by the
+    solver's preconditioned CG (``_linear_solve``); the kept matrix lives in the
+    solver (``_kept``), from solve to solve.
+
+    Args:
+        solver: the ``PatternCachingSolver`` (fast path).
+        q_n, v_n: (n_dof,) m, m/s at the start of the step.  dt: s.
+        con: the step's constraints, 2D friction as a cone (``as_cone``).
+    """
+
+    def __init__(self, solver: PatternCachingSolver, q_n: np.ndarray, v_n: np.ndarray,
+                 dt: float, con: StepConstraints):
+        self.solver, self.q_n, self.v_n, self.dt, self.con = solver, q_n, v_n, dt, con
+        self.filters = np.ascontiguousarray(con.filters, dtype=float)
+        self.s_diag = np.einsum('naa->na', self.filters).ravel()
+        self.key = solver._factor_key(con, dt)
+        self._vectors = tuple(np.empty(solver.n) for _ in range(5))
+        self._filtered = np.empty(solver.n)
+        self.parts = None  # (Hessian CSC values, rank-one terms) of the last evaluation
+        self.fric_grad = None
+        self.matrix = self.low = None
+        self.shift = 0.0
+        self.reaction = None
+
+    def filtered(self, vec: np.ndarray) -> np.ndarray:
+        """S vec (n_dof,)."""
+        out = np.empty(self.solver.n)
+        kernels.apply_filters(self.filters, np.ascontiguousarray(vec), out)
+        return out
+
+    def vectors(self):
+        return self._vectors
+
+    def kept_fits(self) -> bool:
+        kept = self.solver._kept
+        if kept is None or not kept.fits(self.key):
+            return False
+        kept.age += 1
+        return True
+
+    def evaluate(self, x, hessian, grad) -> float:
+        phi, g, fric_grad, parts = self.solver._evaluate_fast(x, self.q_n, self.v_n, self.dt,
+                                                              self.con, hessian)
         if not np.isfinite(phi):
-            raise NewtonFailure('start of step is infeasible (inverted element)', history)
-        out = np.empty(self._nnz)
-        reuse = False
-        matrix = low = None
-        for iteration in range(1, self.max_iterations + 1):
-            g_f = filtered(grad)
-            if not reuse:
-                hdata, low_rank = parts
-                low = [(coef, filtered(vec)) for coef, vec in low_rank]
+            return np.inf
+        grad[:] = g
+        self.fric_grad = fric_grad
+        if hessian:
+            self.parts = parts
+        return phi
 
-            def solve_shifted(shift):
-                nonlocal matrix
-                if not (reuse and shift == 0.0):
-                    kernels.filter_blocks(hdata, self._block_pos, self._block_nodes,
-                                          filters, shift * s_diag * self.m / dt ** 2, out)
-                    matrix = out.copy()
-                return self._linear_solve(matrix, -g_f, low, shift > 0, dt, filters)
+    def project(self, grad, g_f) -> None:
+        kernels.apply_filters(self.filters, grad, g_f)
 
-            dq, slope = descent_direction(solve_shifted, g_f, history)
-            if kernels.max_abs(dq) / dt < self.tolerance:
-                q = q + dq
-                _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
-                history.append(kernels.max_abs(dq) / dt)
-                self._warm = (q_n.copy(), dt, q)
-                return StepSolution(q, grad - fric_grad, iteration, history)
-            # a full step this large is followed by a new Hessian: the line search's
-            # first trial (usually taken) evaluates it with the gradient
-            full_step_hessian = (reuse or
-                                 kernels.max_abs(dq) / dt >= HESSIAN_REUSE * self.tolerance)
-            first_trial = []
+    def forget(self) -> None:
+        self.solver._kept = None
 
-            def evaluate(x):
-                if full_step_hessian and not first_trial:
-                    phi_x, grad_x, _, parts_x = self._evaluate_fast(x, q_n, v_n, dt, con, True)
-                    first_trial.append(parts_x)
-                    return phi_x, grad_x
-                return self._evaluate_fast(x, q_n, v_n, dt, con, False)[:2]
+    def keep(self) -> None:
+        self.solver._kept = _KeptMatrix(self.key, self.matrix, self.low)
 
-            q, phi, grad, step = line_search(evaluate, q, dq, phi, slope,
-                                             kernels.max_abs(g_f), filtered, history,
-                                             first_step=min(self.max_step(q, dq),
-                                                            self._kink_step(q, q_n, dq, dt,
-                                                                            con)))
-            norm = step * kernels.max_abs(dq) / dt
-            history.append(norm)
-            if norm < self.tolerance:
-                _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
-                self._warm = (q_n.copy(), dt, q)
-                return StepSolution(q, grad - fric_grad, iteration, history)
-            reuse = not reuse and norm < HESSIAN_REUSE * self.tolerance
-            if not reuse:
-                if step == 1.0 and first_trial:
-                    parts = first_trial[0]
-                else:
-                    phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, True)
-        raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
+    def factorise(self, x, shift) -> bool:
+        solver = self.solver
+        hdata, low_rank = self.parts
+        self.matrix = np.empty(solver._nnz)
+        kernels.filter_blocks(hdata, solver._block_pos, solver._block_nodes, self.filters,
+                              shift * self.s_diag * solver.m / self.dt ** 2, self.matrix)
+        self.low = [(coef, self.filtered(vec)) for coef, vec in low_rank]
+        self.shift = shift
+        return True
+
+    def direction(self, g_f, dq, fresh) -> tuple[bool, float]:
+        if fresh:
+            matrix, low, refactor = self.matrix, self.low, self.shift > 0
+        else:
+            kept = self.solver._kept
+            matrix, low, refactor = kept.values, kept.low, False
+        try:
+            x = self.solver._linear_solve(matrix, -g_f, low, refactor, self.dt, self.filters)
+        except RuntimeError:  # a singular factor
+            return False, 0.0
+        dq[:] = x
+        return bool(np.all(np.isfinite(x))), float(g_f @ x)
+
+    def step_bound(self, x, dq) -> float:
+        return min(self.solver.max_step(x, dq),
+                   self.solver._kink_step(x, self.q_n, dq, self.dt, self.con))
+
+    def keep_limit(self) -> float:
+        return KEEP_BELOW * self.solver.tolerance
+
+    def filtered_max(self, g) -> float:
+        kernels.apply_filters(self.filters, g, self._filtered)
+        return kernels.max_abs(self._filtered)
+
+    def finish(self, x, grad) -> None:
+        self.reaction = grad - self.fric_grad
