@@ -26,6 +26,9 @@ The iteration (a chord or modified Newton method, Ortega & Rheinboldt 1970, sec.
   filtered residual max |S g| below ``CONTRACTION`` of the last; a step with the kept
   matrix is tried whole only, and if it fails (no descent, no decrease) that iteration
   is done again fresh;
+- the matrix is kept only after steps below the problem's ``keep_limit`` (m/s; the 2D
+  kernels: no limit); a first line-search trial above it evaluates the Hessian with
+  the gradient (the full step is usually taken, and a new matrix follows);
 - line search: backtracking from the problem's ``step_bound`` (1, or less where a
   contact barrier bounds the step or a sliding node's slip turns round) by halves, up
   to ``HALVINGS`` trials, accepting sufficient decrease (Armijo, ``ARMIJO`` of the
@@ -43,6 +46,7 @@ Hooks (problem first; arrays (n_dof,) float64):
     ``direction(g_f, dq, fresh)`` -> (finite, slope g_f . dq): dq = -A^-1 g_f with the
         matrix just factorised (``fresh``) or the kept one.
     ``step_bound(x, dq)`` -> the line search's first step (<= 1).
+    ``keep_limit`` -> m/s, the step size below which the matrix is kept.
     ``filtered_max(g)`` -> max |S g|.
     ``finish(x, grad)``: the converged iterate's reaction (the problem's output).
 """
@@ -218,11 +222,16 @@ def newton_iteration(problem, q, dt, tol, max_it, history, counts):
         tries = HALVINGS if fresh else (1 if found else 0)
         if tries > 0 and not small:
             step = step_bound(problem, q, dq)
-        for _ in range(tries):
+        limit = keep_limit(problem)
+        hessian_at_trial = False
+        for trial_index in range(tries):
             _trial_point(trial, q, step, dq)
             norm = step * dq_max / dt
-            counts[C_EVALS] += 1
-            phi_trial = evaluate(problem, trial, False, grad_t)
+            # a first trial this large, if taken, is followed by a new matrix: its
+            # Hessian is evaluated with it
+            hessian_at_trial = trial_index == 0 and norm >= limit
+            counts[C_HESSIAN_EVALS if hessian_at_trial else C_EVALS] += 1
+            phi_trial = evaluate(problem, trial, hessian_at_trial, grad_t)
             if small or math.isfinite(phi_trial) and (
                     phi_trial <= phi + ARMIJO * step * slope
                     or (phi_trial <= phi + PHI_ROUNDOFF * abs(phi)
@@ -244,13 +253,14 @@ def newton_iteration(problem, q, dt, tol, max_it, history, counts):
             if norm < tol:
                 finish(problem, q, grad)
                 return OK, iteration, n_hist
-            if norm < keep_limit(problem) and (
+            if norm < limit and (
                     fresh or filtered_max(problem, grad) < CONTRACTION * residual):
                 fresh = False
                 continue
         fresh = True
-        counts[C_HESSIAN_EVALS] += 1
-        phi = evaluate(problem, q, True, grad)
+        if not (accepted and hessian_at_trial):
+            counts[C_HESSIAN_EVALS] += 1
+            phi = evaluate(problem, q, True, grad)
     return NO_CONVERGENCE, max_it, n_hist
 
 
