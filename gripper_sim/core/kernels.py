@@ -986,7 +986,7 @@ def _is_problem(problem):
     return isinstance(problem, types.BaseTuple)
 
 
-@overload(newton.vectors, jit_options=dict(error_model='numpy'))
+@overload(newton.vectors, jit_options=dict(error_model='numpy'), inline='always')
 def _vectors(problem):
     if _is_problem(problem):
         def impl(problem):
@@ -998,7 +998,7 @@ def _vectors(problem):
         return impl
 
 
-@overload(newton.kept_fits, jit_options=dict(error_model='numpy'))
+@overload(newton.kept_fits, jit_options=dict(error_model='numpy'), inline='always')
 def _kept_fits_hook(problem):
     if _is_problem(problem):
         def impl(problem):
@@ -1014,7 +1014,7 @@ def _kept_fits_hook(problem):
         return impl
 
 
-@overload(newton.evaluate, jit_options=dict(error_model='numpy'))
+@overload(newton.evaluate, jit_options=dict(error_model='numpy'), inline='always')
 def _evaluate_hook(problem, x, hessian, grad):
     if _is_problem(problem):
         def impl(problem, x, hessian, grad):
@@ -1034,7 +1034,7 @@ def _evaluate_hook(problem, x, hessian, grad):
         return impl
 
 
-@overload(newton.project, jit_options=dict(error_model='numpy'))
+@overload(newton.project, jit_options=dict(error_model='numpy'), inline='always')
 def _project_hook(problem, grad, g_f):
     if _is_problem(problem):
         def impl(problem, grad, g_f):
@@ -1051,7 +1051,7 @@ def _project_hook(problem, grad, g_f):
         return impl
 
 
-@overload(newton.forget, jit_options=dict(error_model='numpy'))
+@overload(newton.forget, jit_options=dict(error_model='numpy'), inline='always')
 def _forget_hook(problem):
     if _is_problem(problem):
         def impl(problem):
@@ -1060,7 +1060,7 @@ def _forget_hook(problem):
         return impl
 
 
-@overload(newton.keep, jit_options=dict(error_model='numpy'))
+@overload(newton.keep, jit_options=dict(error_model='numpy'), inline='always')
 def _keep_hook(problem):
     if _is_problem(problem):
         def impl(problem):
@@ -1073,7 +1073,7 @@ def _keep_hook(problem):
         return impl
 
 
-@overload(newton.factorise, jit_options=dict(error_model='numpy'))
+@overload(newton.factorise, jit_options=dict(error_model='numpy'), inline='always')
 def _factorise_hook(problem, x, shift):
     if _is_problem(problem):
         def impl(problem, x, shift):
@@ -1087,7 +1087,7 @@ def _factorise_hook(problem, x, shift):
         return impl
 
 
-@overload(newton.direction, jit_options=dict(error_model='numpy'))
+@overload(newton.direction, jit_options=dict(error_model='numpy'), inline='always')
 def _direction_hook(problem, g_f, dq, fresh):
     if _is_problem(problem):
         def impl(problem, g_f, dq, fresh):
@@ -1104,7 +1104,7 @@ def _direction_hook(problem, g_f, dq, fresh):
         return impl
 
 
-@overload(newton.step_bound, jit_options=dict(error_model='numpy'))
+@overload(newton.step_bound, jit_options=dict(error_model='numpy'), inline='always')
 def _step_bound_hook(problem, x, dq):
     if _is_problem(problem):
         def impl(problem, x, dq):
@@ -1112,7 +1112,7 @@ def _step_bound_hook(problem, x, dq):
         return impl
 
 
-@overload(newton.keep_limit, jit_options=dict(error_model='numpy'))
+@overload(newton.keep_limit, jit_options=dict(error_model='numpy'), inline='always')
 def _keep_limit_hook(problem):
     if _is_problem(problem):
         def impl(problem):
@@ -1120,7 +1120,7 @@ def _keep_limit_hook(problem):
         return impl
 
 
-@overload(newton.filtered_max, jit_options=dict(error_model='numpy'))
+@overload(newton.filtered_max, jit_options=dict(error_model='numpy'), inline='always')
 def _filtered_max_hook(problem, g):
     if _is_problem(problem):
         def impl(problem, g):
@@ -1128,7 +1128,7 @@ def _filtered_max_hook(problem, g):
         return impl
 
 
-@overload(newton.finish, jit_options=dict(error_model='numpy'))
+@overload(newton.finish, jit_options=dict(error_model='numpy'), inline='always')
 def _finish_hook(problem, x, grad):
     if _is_problem(problem):
         def impl(problem, x, grad):

@@ -147,21 +147,21 @@ def finish(problem, x, grad):
 
 
 # ---------------------------------------------------------------------- vector helpers
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _trial_point(trial, q, step, dq):
     """trial = q + step dq."""
     for m in range(q.shape[0]):
         trial[m] = q[m] + step * dq[m]
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _copy(target, source):
     for m in range(source.shape[0]):
         target[m] = source[m]
 
 
 # ---------------------------------------------------------------------- the iteration
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def newton_iteration(problem, q, dt, tol, max_it, history, counts):
     """One implicit Euler step by Newton (see the module's docstring).
 
