@@ -7,9 +7,10 @@ incremental potential, gradient and Hessian as the base class (up to round-off i
 summation order); without numba it sums each evaluation's triplets into the pattern
 with one ``np.bincount``.
 
-The fast path (numba installed, no stiffness damping, every energy with an
-``evaluate_into`` kernel; ``GRIPPER_SIM_FAST=0`` turns it off) solves the same Newton
-iteration (same line search, shifts and stopping rule) with less work:
+The fast path (no stiffness damping, every energy with an ``evaluate_into`` kernel;
+``GRIPPER_SIM_FAST=0`` turns it off) runs the one Newton iteration
+(``core.newton.newton_iteration``, interpreted, on ``_NewtonProblem``) with less work
+per iteration:
 - the energies add their gradients and Hessians straight into the CSC values through
   precomputed scatter indices (``core.energies.kernels``, ``core3d.kernels``), and
   S H S + (I - S) is one kernel over the d x d node blocks (``core.solver_kernels``), on
@@ -31,13 +32,12 @@ iteration (same line search, shifts and stopping rule) with less work:
   ``ldl_solve_3``): on the 3D fruits a factorisation takes 0.4 and a solve 0.5-0.7 of
   the time of the single-precision SuperLU used before, in double precision;
 - a later contact pass of the same step starts from the previous pass's solution (in
-  the directions the new filter leaves free), and after a Newton step below
-  ``HESSIAN_REUSE`` times the tolerance the next iteration reuses the Newton matrix;
-- the line search's first trial evaluates the Hessian with the gradient when a new
-  Hessian follows (the full step is usually taken), and it stops where a sliding
-  node's slip velocity, turning round, comes nearest to zero (``_kink_step``: past it
-  the step overshoots the kink of the smoothed friction law and the search halves it
-  again and again).
+  the directions the new filter leaves free); the iteration keeps the Newton matrix
+  (its chord rule) after steps below ``KEEP_BELOW`` times the tolerance, within a solve,
+  and a larger step's first line-search trial evaluates the Hessian with the gradient;
+- the line search starts where a sliding node's slip velocity, turning round, comes
+  nearest to zero (``_kink_step``: past it the step overshoots the kink of the smoothed
+  friction law and the search halves it again and again).
 The fast path follows the reference path to the Newton tolerance over a grasp
 (test/test_3d_energies.py::test_fast_solver_follows_the_numpy_reference_path).
 """
@@ -50,9 +50,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from gripper_sim.core import newton
-from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
-                                      StepConstraints, StepSolution, stack_low_rank,
-                                      woodbury_terms)
+from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES,
+                                      ImplicitEulerSolver, NewtonFailure, StepConstraints,
+                                      StepSolution, stack_low_rank, woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
     from gripper_sim.core import solver_kernels as kernels
@@ -577,16 +577,9 @@ class PatternCachingSolver(ImplicitEulerSolver):
                 problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
         done = history[:n_hist].tolist()
         if status != newton.OK:
-            raise NewtonFailure(FAILURES[status].format(self.max_iterations), done)
+            raise NewtonFailure(NEWTON_FAILURES[status].format(self.max_iterations), done)
         self._warm = (q_n.copy(), dt, q)
         return StepSolution(q, problem.reaction, iterations, done)
-
-
-#: NewtonFailure's message for each status of ``newton.newton_iteration``
-FAILURES = {newton.INFEASIBLE_START: 'start of step is infeasible (inverted element)',
-            newton.NO_DESCENT: 'no descent direction found',
-            newton.LINE_SEARCH_FAILED: 'line search failed',
-            newton.NO_CONVERGENCE: 'no convergence in {} iterations'}
 
 
 class _NewtonProblem:

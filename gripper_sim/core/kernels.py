@@ -10,7 +10,8 @@ where it matters:
 - ``ring_stretching``, ``ring_bending``, ``ring_pressure``: the band assembly of the
   energies' element functions (``energies.kernels``: ``edge_spring``, ``hinge``,
   ``area_pressure``), which their classes' CSC kernels call too;
-- ``newton_solve``: ``ImplicitEulerSolver.solve`` (stepper.py);
+- ``newton_solve``: the one Newton iteration (``newton.newton_iteration``) compiled on
+  this module's Newton matrices, its hooks the overloads of the Newton section;
 - ``substep``: ``contact_passes.contact_step`` (the contact passes themselves are
   ``contact_kernels``, shared with it);
 - ``step_measures``: the numbers ``Simulation._measure`` reports, the outline's by

@@ -8,12 +8,15 @@ iterates on is a *problem* reached only through the hook functions below:
   hook has a compiled implementation for it registered with ``numba.extending.overload``
   by the module that builds the tuple (``core.kernels``: the 2D shell's block band with
   the pressure's rank one, the 2D solid's sparse block LDL^T);
-- interpreted (``newton_iteration.py_func``, the same source run by Python): the problem
-  is an object whose methods of the hooks' names do the work (``core.fast_solver``:
-  the 3D fruits, the barrier model, soft fingers - energies in Python calling compiled
-  kernels, Newton systems by conjugate gradients with a kept block LDL^T). The loop's
-  vector work is in small compiled helpers, so interpreting it costs microseconds an
-  iteration.
+- interpreted (``newton_iteration_interpreted``: ``newton_iteration.py_func``, the same
+  source run by Python): the problem is an object whose methods of the hooks' names do
+  the work - ``fast_solver._NewtonProblem`` (the 3D fruits, the barrier model, soft
+  fingers: energies in Python calling compiled kernels into a fixed CSC pattern, Newton
+  systems by conjugate gradients with a kept block LDL^T) and
+  ``stepper._SparseProblem`` (the reference, ``GRIPPER_SIM_FAST=0`` and the set-ups
+  the fast path does not take: triplets summed into a sparse matrix, SuperLU). The
+  loop's vector work is in small compiled helpers, so interpreting it costs
+  microseconds an iteration.
 
 The iteration (a chord or modified Newton method, Ortega & Rheinboldt 1970, sec. 7.1):
 - convergence: max |dq| / dt < tol (m/s); a step that small is taken whole;
