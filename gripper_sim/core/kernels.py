@@ -385,7 +385,7 @@ def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
                 ab[p, 0, r, c] += acc
 
 
-@njit(cache=True, error_model='numpy', inline='always')
+@njit(cache=True, error_model='numpy')
 def _filtered_max(filters, g):
     """max |S g| over dofs."""
     out = 0.0
