@@ -830,7 +830,8 @@ def _kept_key(kept, n):
             kept[6 * n:8 * n], kept[8 * n:8 * n + KEPT_META])
 
 
-def forget_kept(work: np.ndarray) -> None:
+@njit(cache=True, error_model='numpy')
+def forget_kept(work):
     """Drops the factor ``_newton_solve`` keeps in ``work`` (its work array, or
     ``substep``'s, whose tail it is): the next solve makes it afresh."""
     work[work.shape[0] - KEPT_META + K_VALID] = 0.0
@@ -1056,8 +1057,7 @@ def _project_hook(problem, grad, g_f):
 def _forget_hook(problem):
     if _is_problem(problem):
         def impl(problem):
-            work = problem[26]
-            work[work.shape[0] - KEPT_META + K_VALID] = 0.0
+            forget_kept(problem[26])
         return impl
 
 
