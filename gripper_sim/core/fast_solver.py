@@ -36,7 +36,7 @@ per iteration:
   (its chord rule) after steps below ``KEEP_BELOW`` times the tolerance, within a solve,
   and a larger step's first line-search trial evaluates the Hessian with the gradient;
 - the line search starts where a sliding node's slip velocity, turning round, comes
-  nearest to zero (``_kink_step``: past it the step overshoots the kink of the smoothed
+  nearest to zero (``kink_step``: past it the step overshoots the kink of the smoothed
   friction law and the search halves it again and again).
 The fast path follows the reference path to the Newton tolerance over a grasp
 (test/test_3d_energies.py::test_fast_solver_follows_the_numpy_reference_path).
@@ -250,7 +250,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         data = np.bincount(inverse, weights=np.concatenate(vals), minlength=nnz)
         return sp.csc_matrix((data, indices, indptr), shape=(self.n, self.n))
 
-    def _evaluate(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+    def incremental_potential(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
         grad = self.m * inertia / dt ** 2
@@ -371,7 +371,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._matvec_indptr = self._indptr.astype(np.int64)
         self._matvec_indices = self._indices.astype(np.int64)
 
-    def _kink_step(self, q, q_n, dq, dt, con: StepConstraints) -> float:
+    def kink_step(self, q, q_n, dq, dt, con: StepConstraints) -> float:
         """The line search's first step for sliding nodes: a Newton step that turns a
         node's slip velocity s around (s . ds < 0) past the point nearest to zero
         overshoots the kink of the smoothed friction law (its curvature along s is
@@ -396,8 +396,8 @@ class PatternCachingSolver(ImplicitEulerSolver):
     def _csc(self, data: np.ndarray) -> sp.csc_matrix:
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
 
-    def _evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
-        """As ``_evaluate``, with the Hessian as CSC values on the fixed pattern."""
+    def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+        """As ``incremental_potential``, with the Hessian as CSC values on the fixed pattern."""
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
         grad = self.m * inertia / dt ** 2
@@ -430,6 +430,15 @@ class PatternCachingSolver(ImplicitEulerSolver):
                                     np.ascontiguousarray(blocks))
         return phi, grad, fric_grad, (data, low_rank)
 
+    def newton_matrix(self, hdata: np.ndarray, filters: np.ndarray,
+                      diagonal: np.ndarray) -> np.ndarray:
+        """CSC values of S H S + (I - S) + diag(``diagonal`` (n_dof,)), H the CSC values
+        ``hdata`` on the pattern, S the node filters (n_nodes, d, d)."""
+        out = np.empty(self._nnz)
+        kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, filters,
+                              diagonal, out)
+        return out
+
     def _factorise(self, values: np.ndarray) -> _BlockLDL:
         """The block LDL^T of A (CSC ``values`` on the pattern). Raises RuntimeError
         (singular)."""
@@ -438,7 +447,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         ldl.factorise(values)
         return ldl
 
-    def _linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
+    def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
                       dt: float, filters: np.ndarray):
         """dq with (A + sum c u u^T) dq = rhs (A: CSC ``values`` on the pattern) by
         conjugate gradients preconditioned with the kept LDL^T, factorised afresh when CG
@@ -586,7 +595,7 @@ class _NewtonProblem:
     """One ``PatternCachingSolver.solve``'s problem for ``newton.newton_iteration``: its
     hooks as methods (see ``core.newton``). The Newton matrix is the CSC values of
     S H S + (I - S) + shift S M / dt^2 with the energies' rank-one terms, solved by the
-    solver's preconditioned CG (``_linear_solve``, whose LDL^T preconditioner is kept
+    solver's preconditioned CG (``linear_solve``, whose LDL^T preconditioner is kept
     from solve to solve). The kept Newton matrix serves this solve only, after steps
     below ``KEEP_BELOW`` times the tolerance: a solve's first step is far larger, and
     a matrix kept from the last solve took 15 % more Newton systems on the solid apple's
@@ -625,7 +634,7 @@ class _NewtonProblem:
         return False  # a new solve: nothing kept (``keep``)
 
     def evaluate(self, x, hessian, grad) -> float:
-        phi, g, fric_grad, parts = self.solver._evaluate_fast(x, self.q_n, self.v_n, self.dt,
+        phi, g, fric_grad, parts = self.solver.evaluate_fast(x, self.q_n, self.v_n, self.dt,
                                                               self.con, hessian)
         if not np.isfinite(phi):
             return np.inf
@@ -647,9 +656,8 @@ class _NewtonProblem:
     def factorise(self, x, shift) -> bool:
         solver = self.solver
         hdata, low_rank = self.parts
-        self.matrix = np.empty(solver._nnz)
-        kernels.filter_blocks(hdata, solver._block_pos, solver._block_nodes, self.filters,
-                              shift * self.s_diag * solver.m / self.dt ** 2, self.matrix)
+        self.matrix = solver.newton_matrix(hdata, self.filters,
+                                           shift * self.s_diag * solver.m / self.dt ** 2)
         self.low = [(coef, self.filtered(vec)) for coef, vec in low_rank]
         self.shift = shift
         return True
@@ -660,7 +668,7 @@ class _NewtonProblem:
         else:
             (matrix, low), refactor = self.kept, False
         try:
-            x = self.solver._linear_solve(matrix, -g_f, low, refactor, self.dt, self.filters)
+            x = self.solver.linear_solve(matrix, -g_f, low, refactor, self.dt, self.filters)
         except RuntimeError:  # a singular factor
             return False, 0.0
         dq[:] = x
@@ -668,7 +676,7 @@ class _NewtonProblem:
 
     def step_bound(self, x, dq) -> float:
         return min(self.solver.max_step(x, dq),
-                   self.solver._kink_step(x, self.q_n, dq, self.dt, self.con))
+                   self.solver.kink_step(x, self.q_n, dq, self.dt, self.con))
 
     def keep_limit(self) -> float:
         return KEEP_BELOW * self.solver.tolerance

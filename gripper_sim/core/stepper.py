@@ -144,13 +144,13 @@ class ImplicitEulerSolver:
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.n = self.m.size
-        self._kept: KeptFactor | None = None
+        self.kept_factor: KeptFactor | None = None
 
     def forget_factor(self) -> None:
         """Drop the kept factorisation (a restarted simulation repeats its results)."""
-        self._kept = None
+        self.kept_factor = None
 
-    def _evaluate(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+    def incremental_potential(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
         """Phi, its gradient, the gradient of the friction part, and the Hessian parts."""
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
@@ -258,7 +258,7 @@ class ImplicitEulerSolver:
         barrier: the continuous-collision step, ``Energy.max_step``)."""
         return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
 
-    def _filter_matrix(self, filters: np.ndarray) -> sp.csc_matrix:
+    def filter_matrix(self, filters: np.ndarray) -> sp.csc_matrix:
         n_nodes = filters.shape[0]
         if self.dim != 2:
             d = self.dim
@@ -297,7 +297,7 @@ class ImplicitEulerSolver:
             raise NewtonFailure(NEWTON_FAILURES[status].format(self.max_iterations), done)
         return StepSolution(q, problem.reaction, iterations, done)
 
-    def _factor_key(self, con: StepConstraints, dt: float) -> tuple:
+    def factor_key(self, con: StepConstraints, dt: float) -> tuple:
         """What a kept factorisation must have been made for (``KeptFactor.key``)."""
         friction = con.friction_nodes.tolist()
         return (con.filters.copy(), (len(friction), frozenset(friction)),
@@ -327,9 +327,9 @@ class _SparseProblem:
     def __init__(self, solver: ImplicitEulerSolver, q_n: np.ndarray, v_n: np.ndarray,
                  dt: float, con: StepConstraints):
         self.solver, self.q_n, self.v_n, self.dt, self.con = solver, q_n, v_n, dt, con
-        self.s = solver._filter_matrix(con.filters)
+        self.s = solver.filter_matrix(con.filters)
         self.complement = sp.identity(solver.n, format='csc') - self.s
-        self.key = solver._factor_key(con, dt) if solver.keep_factor else None
+        self.key = solver.factor_key(con, dt) if solver.keep_factor else None
         self._vectors = tuple(np.empty(solver.n) for _ in range(5))
         self.parts = None  # (Hessian, rank-one terms) of the last Hessian evaluation
         self.fric_grad = None
@@ -340,14 +340,14 @@ class _SparseProblem:
         return self._vectors
 
     def kept_fits(self) -> bool:
-        kept = self.solver._kept
+        kept = self.solver.kept_factor
         if self.key is None or kept is None or not kept.fits(self.key):
             return False
         kept.age += 1
         return True
 
     def evaluate(self, x, hessian, grad) -> float:
-        phi, g, fric_grad, parts = self.solver._evaluate(x, self.q_n, self.v_n, self.dt,
+        phi, g, fric_grad, parts = self.solver.incremental_potential(x, self.q_n, self.v_n, self.dt,
                                                          self.con, bool(hessian))
         if not np.isfinite(phi):
             return np.inf
@@ -361,11 +361,11 @@ class _SparseProblem:
         g_f[:] = self.s @ grad
 
     def forget(self) -> None:
-        self.solver._kept = None
+        self.solver.kept_factor = None
 
     def keep(self) -> None:
         if self.key is not None:
-            self.solver._kept = self.factor
+            self.solver.kept_factor = self.factor
 
     def factorise(self, x, shift) -> bool:
         solver, s = self.solver, self.s
@@ -381,7 +381,7 @@ class _SparseProblem:
         return True
 
     def direction(self, g_f, dq, fresh) -> tuple[bool, float]:
-        factor = self.factor if fresh else self.solver._kept
+        factor = self.factor if fresh else self.solver.kept_factor
         dq[:] = _solve_low_rank(factor.lu, -g_f, factor.low)
         return bool(np.all(np.isfinite(dq))), float(g_f @ dq)
 
