@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from gripper_sim.core.solver_kernels import max_abs
