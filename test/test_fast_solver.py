@@ -71,14 +71,14 @@ def test_first_step_stops_a_turning_slip_where_it_is_nearest_zero():
     # a Newton step that turns the slip velocity round to -3 times itself: it passes
     # zero at a quarter of the step
     dq = np.append(-4.0 * slip * dt, 0.0)
-    assert solver._kink_step(q, q_n, dq, dt, con) == pytest.approx(0.25)
+    assert solver.kink_step(q, q_n, dq, dt, con) == pytest.approx(0.25)
     # a step that speeds the slip up, or one that stops short of zero, is taken whole
-    assert solver._kink_step(q, q_n, -dq, dt, con) == 1.0
-    assert solver._kink_step(q, q_n, 0.5 * dq / 4.0, dt, con) == 1.0
+    assert solver.kink_step(q, q_n, -dq, dt, con) == 1.0
+    assert solver.kink_step(q, q_n, 0.5 * dq / 4.0, dt, con) == 1.0
     # a node slipping within the smoothing speed is inside the kink already
     slow = 0.5 * KINK_FACTOR * FRICTION_SMOOTHING * slip / np.linalg.norm(slip)
     solver, q, q_n, con = _one_sliding_node(slow, dt)
-    assert solver._kink_step(q, q_n, np.append(-4.0 * slow * dt, 0.0), dt, con) == 1.0
+    assert solver.kink_step(q, q_n, np.append(-4.0 * slow * dt, 0.0), dt, con) == 1.0
 
 
 @pytest.mark.parametrize('model', [['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
