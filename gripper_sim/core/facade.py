@@ -80,6 +80,14 @@ class SimulationFacade:
     _soft: SoftFingers | None = None
     #: the deformable fingers' state, None for rigid fingers
     _finger: FingerState | None = None
+    #: the obstacles' normals and sides, kept per face set (``_obstacles``)
+    _obstacles_kept: tuple | None = None
+    #: (finger state, the jaws' (x, gap, lift) m, their jaw wrenches), the last
+    #: ``_finger_wrenches``
+    _wrenches_kept: tuple | None = None
+    #: per jaw (LEFT, RIGHT), (its finger's base nodes, its finger's nodes) as indices
+    #: into the fingers' state (``_finger_wrenches``)
+    _jaw_bases: tuple | None = None
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -599,17 +607,29 @@ class SimulationFacade:
     def _obstacles(self, grip: GripperState):
         """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
         (``obstacle_names``) where ``grip`` puts them; a deformable finger counts as a face
-        along its backing."""
-        faces = self.faces_at(grip)
-        normals = [f.normal for f in faces]
-        velocities = [f.velocity for f in faces]
-        sides = list(self._face_side) + [-1] * (len(faces) - len(self._face_side))
-        if self._soft is not None:
-            normals = [self._in_plane(1.0, 0.0), self._in_plane(-1.0, 0.0)] + normals
-            velocities = [self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
-                                         grip.lift_rate) for sign in (-1.0, 1.0)] + velocities
-            sides = [LEFT, RIGHT] + sides
-        return np.array(normals), np.array(sides, np.int64), np.array(velocities)
+        along its backing. The normals and sides are kept per face set (read only)."""
+        template = self._faces_template
+        kept = self._obstacles_kept
+        if kept is None or kept[0] is not template:
+            faces = list(template)
+            normals = [f.normal for f in faces]
+            velocities = [f.velocity for f in faces]
+            sides = list(self._face_side) + [-1] * (len(faces) - len(self._face_side))
+            if self._soft is not None:
+                normals = [self._in_plane(1.0, 0.0), self._in_plane(-1.0, 0.0)] + normals
+                velocities = [self._in_plane(0.0, 0.0)] * 2 + velocities
+                sides = [LEFT, RIGHT] + sides
+            normals, sides = np.array(normals, float), np.array(sides, np.int64)
+            normals.flags.writeable = sides.flags.writeable = False
+            jaws = sides >= 0
+            kept = self._obstacles_kept = (template, normals, sides, np.array(velocities, float),
+                                           jaws, np.where(sides[jaws] == LEFT, -1.0, 1.0))
+        _, normals, sides, velocities, jaws, sign = kept
+        velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
+        velocities[jaws] = 0.0
+        velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
+        velocities[jaws, -1] = grip.lift_rate
+        return normals, sides, velocities
 
     def _closing_forces(self, forces, obstacle, faces) -> tuple:
         """(left, right) N, each jaw's hard-contact force on the fruit along its closing
@@ -623,6 +643,18 @@ class SimulationFacade:
     # ------------------------------------------------------------------ measures
     def _common_measures(self, x: np.ndarray, v: np.ndarray, forces: np.ndarray,
                          obstacle: np.ndarray, iterations: int, substeps: int):
+        """``_step_measures`` with every field built at once: (StepResult fields (dict),
+        normal (n,) N, (on_left, on_right) (n,) bool)."""
+        fields, rarely_read, normal, sides = self._step_measures(x, v, forces, obstacle,
+                                                                 iterations, substeps)
+        fields.update(rarely_read())
+        return fields, normal, sides
+
+    #: the StepResult fields ``_step_measures`` leaves to first read
+    DEFERRED_MEASURES = ('slipping', 'energies', 'fingers')
+
+    def _step_measures(self, x: np.ndarray, v: np.ndarray, forces: np.ndarray,
+                       obstacle: np.ndarray, iterations: int, substeps: int):
         """What the 2D and 3D step results share, at the present gripper state.
 
         Args:
@@ -631,16 +663,17 @@ class SimulationFacade:
             holding each node (pads included), -1 if none.
 
         Returns:
-            (StepResult fields (dict), normal (n,) N each node's normal contact force,
-            (on_left, on_right) (n,) bool the nodes each jaw holds).
+            (StepResult fields (dict) but ``DEFERRED_MEASURES``, a callable giving those
+            (dict; of this step's state, whenever called), normal (n,) N each node's
+            normal contact force, (on_left, on_right) (n,) bool the nodes each jaw holds).
         """
-        grip, fruit = self._grip, self.fruit
+        grip, fruit, finger = self._grip, self.fruit, self._finger
         normals, face_sides, face_velocities = self._obstacles(grip)
         held = obstacle >= 0
         normal = np.zeros(len(obstacle))
         if self._soft is not None:  # the barrier's force is normal to the finger's outline
             soft_normal = self._barrier.normal_forces(
-                np.vstack([x, self._finger.positions]).ravel())
+                np.vstack([x, finger.positions]).ravel())
             normal[held] = np.linalg.norm(soft_normal[:len(obstacle)][held], axis=1)
         else:
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
@@ -661,10 +694,6 @@ class SimulationFacade:
         touching = bool(np.any(sides[LEFT]) or np.any(sides[RIGHT]))
         both = bool(np.any(sides[LEFT]) and np.any(sides[RIGHT]))
         slip = self.measure_slip(float(centroid[-1] - grip.lift), both, touching)
-        slipping = jaw_contacts_sliding(v, obstacle, face_sides, normals, face_velocities)
-        energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
-                            elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
-                            gravitational=float(self.gravity.value(x.ravel())))
         fields = dict(
             time=self._time, step=self._step, positions=x.copy(), velocities=v.copy(),
             contact_forces=forces.copy(), contact_obstacle=obstacle.copy(),
@@ -674,13 +703,22 @@ class SimulationFacade:
             left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
-            slipping=slipping, centroid=centroid, energies=energies,
-            newton_iterations=iterations, substeps=substeps, gripper_x=grip.x,
-            gripper_x_velocity=grip.x_rate)
-        if self._soft is not None:
-            fields['fingers'] = self._soft.result(self._finger, self._jaw_origin(grip, LEFT),
-                                                  self._jaw_origin(grip, RIGHT))
-        return fields, normal, sides
+            centroid=centroid, newton_iterations=iterations, substeps=substeps,
+            gripper_x=grip.x, gripper_x_velocity=grip.x_rate)
+        x, v, obstacle = fields['positions'], fields['velocities'], fields['contact_obstacle']
+        soft = self._soft
+        origins = (self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT))
+
+        def rarely_read() -> dict:
+            return dict(
+                slipping=jaw_contacts_sliding(v, obstacle, face_sides, normals,
+                                              face_velocities),
+                energies=Energies(
+                    kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
+                    elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
+                    gravitational=float(self.gravity.value(x.ravel()))),
+                fingers=soft.result(finger, *origins) if soft is not None else None)
+        return fields, rarely_read, normal, sides
 
     def contact_forces_and_holders(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, d) N every contact force on the fruit and (n,) the obstacle holding each
@@ -774,17 +812,25 @@ class SimulationFacade:
     def _finger_wrenches(self, grip: GripperState) -> list[JawWrench]:
         """What each jaw feels at its deformable finger's base nodes (the reaction that
         holds them on it), about the backing's centre; zero for a finger that does not
-        touch the fruit (its inertia and weight are no grip)."""
-        soft, finger = self._soft, self._finger
-        base = soft.base - soft.first
-        m = soft.body.n_nodes
+        touch the fruit (its inertia and weight are no grip). Kept for the present finger
+        state and ``grip`` (the step's solve and its measures ask for the same)."""
+        finger = self._finger
+        where = (grip.x, grip.gap, grip.lift)  # what the jaws' origins depend on
+        kept = self._wrenches_kept
+        if kept is not None and kept[0] is finger and kept[1] == where:
+            return kept[2]
+        if self._jaw_bases is None:
+            soft = self._soft
+            base, m = soft.base - soft.first, soft.body.n_nodes
+            self._jaw_bases = tuple((base[mine], slice(side * m, (side + 1) * m))
+                                    for side, mine in zip((LEFT, RIGHT), soft.sides_of_base()))
         wrenches = []
-        for side, mine in zip((LEFT, RIGHT), soft.sides_of_base()):
-            nodes = base[mine]
-            if not np.any(finger.touching[side * m:(side + 1) * m]):
+        for side, (nodes, own) in enumerate(self._jaw_bases):
+            if not finger.touching[own].any():
                 nodes = nodes[:0]
             wrenches.append(_wrench(finger.positions[nodes] - self._jaw_origin(grip, side),
                                     -finger.reaction[nodes]))
+        self._wrenches_kept = (finger, where, wrenches)
         return wrenches
 
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:
