@@ -253,6 +253,10 @@ class BarrierContact(Energy):
         n_v = self.vertex_nodes.size
         self.vertex_dofs = element_dofs(self.vertex_nodes[:, None], d).ravel()
         self._vertex_dof_pairs = self.vertex_dofs.reshape(-1, d)
+        #: per coordinate, the dofs of the deformable vertices (``vertices`` gathers them
+        #: column by column into its Fortran-ordered array: 3-4x faster than a row gather)
+        self._vertex_dof_columns = tuple(np.ascontiguousarray(self._vertex_dof_pairs[:, k])
+                                         for k in range(d))
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
         #: (solvers that keep one sparsity pattern read it): the fruit's surface triangles
         #: (3D) or skin edges (2D; or its lone surface nodes), and with soft bodies their
@@ -374,7 +378,9 @@ class BarrierContact(Energy):
         ends = self._obstacles_end if obstacles is None else obstacles
         n_v = self.vertex_nodes.size
         v = np.empty((n_v + ends.shape[0], self.dimension), order='F')
-        v[:n_v] = positions[self.vertex_nodes]
+        flat = positions.ravel()
+        for k, dofs in enumerate(self._vertex_dof_columns):
+            v[:n_v, k] = flat[dofs]
         v[n_v:] = ends
         return v
 

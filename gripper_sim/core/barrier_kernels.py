@@ -408,3 +408,25 @@ def nearest_partners(v, edges, candidates, dhat, n_deformable):
         _offer(e0, vertex, gap, n_deformable, best, partner)
         _offer(e1, vertex, gap, n_deformable, best, partner)
     return partner
+
+
+@njit(cache=True)
+def mark_sticking(velocities, obstacle, normals, obstacle_velocities, smoothing, stick,
+                  slip, mode):
+    """Set ``mode`` (n,) of each node held by an obstacle (``obstacle`` (n,) >= 0) to
+    ``stick`` where it moves along that obstacle (velocities (n, d) m/s, the obstacles'
+    unit normals and velocities (k, d)) slower than ``smoothing`` m/s, else ``slip``:
+    the barrier's friction creeps below that speed (its static friction)."""
+    d = velocities.shape[1]
+    for i in range(obstacle.shape[0]):
+        k = obstacle[i]
+        if k < 0:
+            continue
+        normal_speed = 0.0
+        for c in range(d):
+            normal_speed += (velocities[i, c] - obstacle_velocities[k, c]) * normals[k, c]
+        along = 0.0
+        for c in range(d):
+            a = (velocities[i, c] - obstacle_velocities[k, c]) - normal_speed * normals[k, c]
+            along += a * a
+        mode[i] = stick if np.sqrt(along) < smoothing else slip

@@ -41,6 +41,7 @@ from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
 from gripper_sim.core import jaw_drive
 from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
+from gripper_sim.core.barrier_kernels import mark_sticking
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
@@ -802,12 +803,9 @@ class SimulationFacade:
         moves along its obstacle (a finger: along its backing) slower than the barrier's
         friction smoothing speed, else SLIP."""
         normals, _, velocities = self._obstacles(grip)
-        held = np.flatnonzero(contacts.obstacle >= 0)
-        which = contacts.obstacle[held]
-        relative = v[held] - velocities[which]
-        along = relative - np.sum(relative * normals[which], axis=1)[:, None] * normals[which]
-        creeping = np.linalg.norm(along, axis=1) < self._barrier.settings.friction_smoothing
-        contacts.mode[held] = np.where(creeping, cm.STICK, cm.SLIP)
+        mark_sticking(v, contacts.obstacle, normals, velocities,
+                      self._barrier.settings.friction_smoothing, cm.STICK, cm.SLIP,
+                      contacts.mode)
 
     def _finger_wrenches(self, grip: GripperState) -> list[JawWrench]:
         """What each jaw feels at its deformable finger's base nodes (the reaction that
