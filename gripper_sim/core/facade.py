@@ -83,11 +83,7 @@ class SimulationFacade:
     _finger: FingerState | None = None
     #: the obstacles' normals and sides, kept per face set (``_obstacles``)
     _obstacles_kept: tuple | None = None
-    #: (finger state, the jaws' (x, gap, lift) m, their jaw wrenches), the last
-    #: ``_finger_wrenches``
-    _wrenches_kept: tuple | None = None
-    #: per jaw (LEFT, RIGHT), (its finger's base nodes, its finger's nodes) as indices
-    #: into the fingers' state (``_finger_wrenches``)
+    #: ``_finger_bases``, built on first use
     _jaw_bases: tuple | None = None
 
     # ------------------------------------------------------------------ construction
@@ -652,7 +648,7 @@ class SimulationFacade:
         return fields, normal, sides
 
     #: the StepResult fields ``_step_measures`` leaves to first read
-    DEFERRED_MEASURES = ('slipping', 'energies', 'fingers')
+    DEFERRED_MEASURES = ('left_wrench', 'right_wrench', 'slipping', 'energies', 'fingers')
 
     def _step_measures(self, x: np.ndarray, v: np.ndarray, forces: np.ndarray,
                        obstacle: np.ndarray, iterations: int, substeps: int):
@@ -681,13 +677,14 @@ class SimulationFacade:
         side_of_face = np.append(face_sides, -1)  # the last: obstacle -1
         side_of_node = side_of_face[obstacle]
         sides = (side_of_node == LEFT, side_of_node == RIGHT)
-        if self._soft is not None:
-            wrenches = self._finger_wrenches(grip)
-        else:
+        wrenches = None  # a deformable finger's: on first read
+        if self._soft is None:
             wrenches = [_wrench(x[sides[side]] - self._jaw_origin(grip, side),
                                 -forces[sides[side]]) for side in (LEFT, RIGHT)]
         if self._plain_jaws:
             left_n, right_n = (float(np.sum(normal[on])) for on in sides)
+        elif wrenches is None:
+            left_n, right_n = self._finger_jaw_forces()
         else:  # each jaw's force along the closing axis
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
         masses = fruit.masses
@@ -699,9 +696,7 @@ class SimulationFacade:
             time=self._time, step=self._step, positions=x.copy(), velocities=v.copy(),
             contact_forces=forces.copy(), contact_obstacle=obstacle.copy(),
             contact_sticking=self.contacts.mode == cm.STICK,
-            obstacle_names=self.obstacle_names, surface=fruit.surface,
-            left_wrench=wrenches[LEFT], right_wrench=wrenches[RIGHT],
-            left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
+            obstacle_names=self.obstacle_names, surface=fruit.surface, left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
             centroid=centroid, newton_iterations=iterations, substeps=substeps,
@@ -711,7 +706,10 @@ class SimulationFacade:
         origins = (self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT))
 
         def rarely_read() -> dict:
+            jaws = (wrenches if wrenches is not None
+                    else self._finger_wrenches(finger, origins))
             return dict(
+                left_wrench=jaws[LEFT], right_wrench=jaws[RIGHT],
                 slipping=jaw_contacts_sliding(v, obstacle, face_sides, normals,
                                               face_velocities),
                 energies=Energies(
@@ -790,10 +788,8 @@ class SimulationFacade:
         self._mark_sticking(contacts, v, grip_new)
         self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
                                    outcome.reaction[n:], partner[n:] == 0)
-        wrenches = self._finger_wrenches(grip_new)
         self.commit_step(outcome.x[:n], v, contacts, outcome.forces[:n], grip_new,
-                         (-float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])),
-                         dt)
+                         self._finger_jaw_forces(), dt)
         return outcome.iterations
 
     def _mark_sticking(self, contacts: cm.ContactState, v: np.ndarray,
@@ -807,29 +803,39 @@ class SimulationFacade:
                       self._barrier.settings.friction_smoothing, cm.STICK, cm.SLIP,
                       contacts.mode)
 
-    def _finger_wrenches(self, grip: GripperState) -> list[JawWrench]:
+    def _finger_wrenches(self, finger: FingerState, origins: tuple) -> list[JawWrench]:
         """What each jaw feels at its deformable finger's base nodes (the reaction that
-        holds them on it), about the backing's centre; zero for a finger that does not
-        touch the fruit (its inertia and weight are no grip). Kept for the present finger
-        state and ``grip`` (the step's solve and its measures ask for the same)."""
+        holds them on it) in the fingers' state ``finger``, about the backings' centres
+        ``origins`` (left, right) (d,) m; zero for a finger that does not touch the fruit
+        (its inertia and weight are no grip)."""
+        wrenches = []
+        for (nodes, own), origin in zip(self._finger_bases(), origins):
+            if not finger.touching[own].any():
+                nodes = nodes[:0]
+            wrenches.append(_wrench(finger.positions[nodes] - origin, -finger.reaction[nodes]))
+        return wrenches
+
+    def _finger_jaw_forces(self) -> tuple[float, float]:
+        """(left, right) N, each jaw's force on the fruit along its closing axis through
+        its deformable finger: the x part of its ``_finger_wrenches`` force (the same
+        sum), without the rest of the wrench."""
         finger = self._finger
-        where = (grip.x, grip.gap, grip.lift)  # what the jaws' origins depend on
-        kept = self._wrenches_kept
-        if kept is not None and kept[0] is finger and kept[1] == where:
-            return kept[2]
+        forces = []
+        for side, (nodes, own) in enumerate(self._finger_bases()):
+            push = (float(finger.reaction[nodes][:, 0].sum()) if finger.touching[own].any()
+                    else 0.0)
+            forces.append(push if side == LEFT else -push)
+        return forces[LEFT], forces[RIGHT]
+
+    def _finger_bases(self) -> tuple:
+        """Per jaw (LEFT, RIGHT): (its finger's base nodes, the slice of its finger's
+        nodes), as indices into the fingers' state."""
         if self._jaw_bases is None:
             soft = self._soft
             base, m = soft.base - soft.first, soft.body.n_nodes
             self._jaw_bases = tuple((base[mine], slice(side * m, (side + 1) * m))
                                     for side, mine in zip((LEFT, RIGHT), soft.sides_of_base()))
-        wrenches = []
-        for side, (nodes, own) in enumerate(self._jaw_bases):
-            if not finger.touching[own].any():
-                nodes = nodes[:0]
-            wrenches.append(_wrench(finger.positions[nodes] - self._jaw_origin(grip, side),
-                                    -finger.reaction[nodes]))
-        self._wrenches_kept = (finger, where, wrenches)
-        return wrenches
+        return self._jaw_bases
 
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:
         """Step ``dt``, halving it (recursively) while Newton fails; (iterations, substeps)."""
