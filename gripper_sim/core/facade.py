@@ -619,9 +619,12 @@ class SimulationFacade:
             normals, sides = np.array(normals, float), np.array(sides, np.int64)
             normals.flags.writeable = sides.flags.writeable = False
             jaws = sides >= 0
+            # the jaw side of each obstacle, and last -1: an obstacle index's (-1: none)
+            side_of_obstacle = np.append(sides, -1)
             kept = self._obstacles_kept = (template, normals, sides, np.array(velocities, float),
-                                           jaws, np.where(sides[jaws] == LEFT, -1.0, 1.0))
-        _, normals, sides, velocities, jaws, sign = kept
+                                           jaws, np.where(sides[jaws] == LEFT, -1.0, 1.0),
+                                           side_of_obstacle)
+        _, normals, sides, velocities, jaws, sign, _ = kept
         velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
         velocities[jaws] = 0.0
         velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
@@ -664,50 +667,52 @@ class SimulationFacade:
             (dict; of this step's state, whenever called), normal (n,) N each node's
             normal contact force, (on_left, on_right) (n,) bool the nodes each jaw holds).
         """
-        grip, fruit, finger = self._grip, self.fruit, self._finger
+        grip, fruit, finger, soft = self._grip, self.fruit, self._finger, self._soft
         normals, face_sides, face_velocities = self._obstacles(grip)
         held = obstacle >= 0
         normal = np.zeros(len(obstacle))
-        if self._soft is not None:  # the barrier's force is normal to the finger's outline
+        if soft is not None:  # the barrier's force is normal to the finger's outline
             soft_normal = self._barrier.normal_forces(
                 np.vstack([x, finger.positions]).ravel())
             normal[held] = np.linalg.norm(soft_normal[:len(obstacle)][held], axis=1)
         else:
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
-        side_of_face = np.append(face_sides, -1)  # the last: obstacle -1
-        side_of_node = side_of_face[obstacle]
+        side_of_node = self._obstacles_kept[-1][obstacle]
         sides = (side_of_node == LEFT, side_of_node == RIGHT)
-        wrenches = None  # a deformable finger's: on first read
-        if self._soft is None:
-            wrenches = [_wrench(x[sides[side]] - self._jaw_origin(grip, side),
-                                -forces[sides[side]]) for side in (LEFT, RIGHT)]
+        origins = (self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT))
+
+        def jaw_wrenches() -> list:
+            if soft is not None:
+                return self._finger_wrenches(finger, origins)
+            return [_wrench(x[sides[side]] - origins[side], -forces[sides[side]])
+                    for side in (LEFT, RIGHT)]
+        wrenches = None  # built on first read where the grip force needs none
         if self._plain_jaws:
             left_n, right_n = (float(np.sum(normal[on])) for on in sides)
-        elif wrenches is None:
+        elif soft is not None:
             left_n, right_n = self._finger_jaw_forces()
         else:  # each jaw's force along the closing axis
+            wrenches = jaw_wrenches()
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
         masses = fruit.masses
         centroid = masses @ x / masses.sum()
-        touching = bool(np.any(sides[LEFT]) or np.any(sides[RIGHT]))
-        both = bool(np.any(sides[LEFT]) and np.any(sides[RIGHT]))
-        slip = self.measure_slip(float(centroid[-1] - grip.lift), both, touching)
+        on_left, on_right = bool(sides[LEFT].any()), bool(sides[RIGHT].any())
+        slip = self.measure_slip(float(centroid[-1] - grip.lift), on_left and on_right,
+                                 on_left or on_right)
+        x, v, forces, obstacle = x.copy(), v.copy(), forces.copy(), obstacle.copy()
         fields = dict(
-            time=self._time, step=self._step, positions=x.copy(), velocities=v.copy(),
-            contact_forces=forces.copy(), contact_obstacle=obstacle.copy(),
+            time=self._time, step=self._step, positions=x, velocities=v,
+            contact_forces=forces, contact_obstacle=obstacle,
             contact_sticking=self.contacts.mode == cm.STICK,
-            obstacle_names=self.obstacle_names, surface=fruit.surface, left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
+            obstacle_names=self.obstacle_names, surface=fruit.surface,
+            left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
             centroid=centroid, newton_iterations=iterations, substeps=substeps,
             gripper_x=grip.x, gripper_x_velocity=grip.x_rate)
-        x, v, obstacle = fields['positions'], fields['velocities'], fields['contact_obstacle']
-        soft = self._soft
-        origins = (self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT))
 
         def rarely_read() -> dict:
-            jaws = (wrenches if wrenches is not None
-                    else self._finger_wrenches(finger, origins))
+            jaws = wrenches if wrenches is not None else jaw_wrenches()
             return dict(
                 left_wrench=jaws[LEFT], right_wrench=jaws[RIGHT],
                 slipping=jaw_contacts_sliding(v, obstacle, face_sides, normals,
