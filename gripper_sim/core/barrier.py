@@ -55,7 +55,8 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
-                                              largest_relative_move, nearest_partners)
+                                              largest_relative_move, nearest_faces,
+                                              nearest_partners)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear, smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
@@ -173,16 +174,6 @@ def face_corners(faces, dimension: int = 2) -> np.ndarray:
     for k, face in enumerate(faces):
         points[c * k:c * (k + 1)] = face.origin + (corners * _half_extents(face)) @ face.tangents
     return points
-
-
-def face_distances(face, points: np.ndarray) -> np.ndarray:
-    """(n,) m, the distance of points (n, d) from the face's segment or rectangle (as
-    ``face_corners`` cuts it)."""
-    half = _half_extents(face)
-    rel = points - face.origin
-    along = rel @ face.tangents.T
-    outside = along - np.clip(along, -half, half)
-    return np.sqrt((rel @ face.normal) ** 2 + np.sum(outside ** 2, axis=1))
 
 
 class BarrierContact(Energy):
@@ -878,14 +869,14 @@ class BarrierContact(Energy):
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
         """(n,) the face (index) each node with a contact force touches (its nearest face
         within dhat), -1 for the others; positions ``x`` and ``forces`` (n, d)."""
-        holder = -np.ones(x.shape[0], np.int64)
-        best = np.full(x.shape[0], np.inf)
-        loaded = np.flatnonzero(np.any(forces != 0.0, axis=1))
-        for k, face in enumerate(faces):
-            dist = face_distances(face, x[loaded])
-            closer = (dist < self.settings.dhat) & (dist < best[loaded])
-            holder[loaded[closer]] = k
-            best[loaded[closer]] = dist[closer]
+        holder = np.empty(x.shape[0], np.int64)
+        d = self.dimension
+        nearest_faces(np.ascontiguousarray(x), np.ascontiguousarray(forces),
+                      np.array([f.origin for f in faces], float).reshape(-1, d),
+                      np.array([f.normal for f in faces], float).reshape(-1, d),
+                      np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
+                      np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1),
+                      self.settings.dhat, holder)
         return holder
 
     @staticmethod
