@@ -393,7 +393,8 @@ class BarrierContact(Energy):
         start = self.vertices(x_n, old)
         self._start = start
         mu_s, mu_k, rubbing = self._coefficients(new_faces)
-        self._tangential = ipctk.TangentialCollisions()
+        if len(self._tangential):  # ipctk's lagged friction (3D): the last step's
+            self._tangential = ipctk.TangentialCollisions()
         self._friction_pairs = None
         if self.dimension == 2 and rubbing:
             self._friction_pairs = self._lagged_friction(
@@ -907,6 +908,8 @@ class BarrierContact(Energy):
 
 def _largest_shift(a: np.ndarray, b: np.ndarray) -> float:
     """m, the largest distance between matching rows of points ``a`` and ``b`` (k, d)."""
+    if (a == b).all():  # faces standing still (the table, walls)
+        return 0.0
     return float(np.sqrt(np.max(np.sum((b - a) ** 2, axis=1))))
 
 
@@ -953,6 +956,24 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
     return StepOutcome(x, v, forces, contacts, solution.iterations)
 
 
+#: the last ``_prescribed`` constraints: ((n, d, the fixed nodes' array), them), or None
+_kept_constraints: tuple | None = None
+
+
+def _prescribed(n: int, d: int, fixed: np.ndarray) -> StepConstraints:
+    """The constraints of a step of n nodes in d dimensions with nodes ``fixed`` (k,)
+    prescribed (zero filters), the rest free; read only, kept for the same fixed array
+    (a soft body step's are the same every step)."""
+    global _kept_constraints
+    kept = _kept_constraints
+    if kept is None or kept[0][:2] != (n, d) or kept[0][2] is not fixed:
+        constraints = StepConstraints.free(n, dim=d)
+        constraints.filters[fixed] = 0.0
+        constraints.filters.flags.writeable = False
+        kept = _kept_constraints = ((n, d, fixed), constraints)
+    return kept[1]
+
+
 def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
                    new_faces: list, dt: float,
@@ -993,8 +1014,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
             break
     if start is None:
         raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
-    constraints = StepConstraints.free(n, dim=d)
-    constraints.filters[fixed] = 0.0
+    constraints = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
     x = solution.q.reshape(-1, d)
     reaction = np.zeros((n, d))
