@@ -48,7 +48,7 @@ from gripper_sim.core.deferred import build, build_deferred
 from gripper_sim.core.energies import (EnclosedAreaPressure, NeoHookeanTriangles, RingBending,
                                        Stretching)
 from gripper_sim.core.measures import tributary_lengths
-from gripper_sim.core.results import RARELY_READ, Deformation, Energies, JawWrench, StepResult
+from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
 from gripper_sim.core.slip import SLIDING_SPEED
 from gripper_sim.core.stepper import NewtonFailure
 
@@ -63,6 +63,10 @@ if TYPE_CHECKING:
 #: failure messages of the reference solver (stepper.ImplicitEulerSolver.solve)
 _FAILURES = {1: 'start of step is infeasible (inverted element)',
              2: 'no descent direction found', 3: 'line search failed'}
+#: the StepResult fields observers rarely read, which ``FastPath.measure`` builds on first
+#: read (``core.deferred``)
+RARELY_READ = ('velocities', 'contact_forces', 'contact_sticking', 'slipping', 'centroid',
+               'left_wrench', 'right_wrench', 'energies')
 
 
 def available() -> bool:

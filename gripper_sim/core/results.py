@@ -181,8 +181,3 @@ class StepResult:
         held = set(self.contact_obstacle.tolist())
         return any(i in held for i in parts)
 
-
-#: the StepResult fields observers rarely read: the routes that step the simulation build
-#: them on first read (``core.deferred``); with deformable fingers ``fingers`` too
-RARELY_READ = ('velocities', 'contact_forces', 'contact_sticking', 'slipping', 'centroid',
-               'left_wrench', 'right_wrench', 'energies')

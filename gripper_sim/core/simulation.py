@@ -209,11 +209,12 @@ class Simulation(SimulationFacade):
         forces, obstacle = self.contact_forces_and_holders()
         fields, rarely_read, normal, (on_left, on_right) = self._step_measures(
             x, self.v, forces, obstacle, iterations, substeps)
-        fruit, faces = self.fruit, self.faces_at(self._grip)
+        fruit = self.fruit
         if self._soft is not None:  # the fruit's outline in pairs with the fingers
             on_finger = (on_left | on_right)[fruit.surface]
             length = float(np.sum(tributary_lengths(fruit, x)[on_finger]))
         else:
+            faces = self.faces_at(self._grip)
             if self._barrier is not None:  # the outline lies a barrier gap off the faces
                 faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
             length = sum(face_contact_length(fruit, x, faces[index],
