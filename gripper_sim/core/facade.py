@@ -689,8 +689,8 @@ class SimulationFacade:
         wrenches = None  # built on first read where the grip force needs none
         if self._plain_jaws:
             left_n, right_n = (float(np.sum(normal[on])) for on in sides)
-        elif soft is not None:
-            left_n, right_n = self._finger_jaw_forces()
+        elif soft is not None:  # what the step committed: its fingers' base reactions
+            left_n, right_n = self._jaw_force
         else:  # each jaw's force along the closing axis
             wrenches = jaw_wrenches()
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
