@@ -180,4 +180,3 @@ class StepResult:
             return False
         held = set(self.contact_obstacle.tolist())
         return any(i in held for i in parts)
-
