@@ -12,8 +12,9 @@ where it matters:
   ``area_pressure``), which their classes' CSC kernels call too;
 - ``newton_solve``: the one Newton iteration (``newton.newton_iteration``) compiled on
   this module's Newton matrices, its hooks the overloads of the Newton section;
-- ``substep``: ``contact_passes.contact_step`` (the contact passes themselves are
-  ``contact_kernels``, shared with it);
+- ``substep``: ``contact_passes.contact_step``: the one pass driver
+  (``contact_passes.contact_passes``) compiled on this module's Newton solve, its hooks
+  the overloads after the Newton section's;
 - ``step_measures``: the numbers ``Simulation._measure`` reports, the outline's by
   ``measures.outline_measures`` and ``measures.face_contact_length_of`` (as
   ``measures.deformation``); ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
@@ -51,7 +52,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic, overload
 
-from gripper_sim.core import contact_kernels, newton, sparse_ldl
+from gripper_sim.core import contact_passes, newton, sparse_ldl
 from gripper_sim.core.damage import P_SIZE  # noqa: F401 (the patch table's width, for fast.py)
 from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_SIZE,
                                      damage_patches)
@@ -1141,6 +1142,47 @@ def _finish_hook(problem, x, grad):
         return impl
 
 
+# The hooks of ``contact_passes.contact_passes`` for ``substep``'s problem tuple: the
+# constraint arrays are views of substep's work array, the solve is ``_newton_solve``.
+# Not inlined (a call each per pass): inlined, next to the inlined contact kernels, numba
+# 0.68 compiled ``contact_kernels.update`` wrongly (its ``release`` wrote nothing).
+@overload(contact_passes.pass_arrays, jit_options=dict(error_model='numpy'))
+def _pass_arrays_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return problem[3], problem[4], problem[5], problem[6], problem[8], problem[9]
+        return impl
+
+
+@overload(contact_passes.solve, jit_options=dict(error_model='numpy'))
+def _solve_hook(problem, start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed, k):
+    if _is_problem(problem):
+        def impl(problem, start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed, k):
+            (q_n, v_flat, dt, _, _, _, _, fr_t, _, _, fr_speed_flat, masses2, alpha, beta, tol,
+             max_it, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, q,
+             reaction, history, values, counts, pad_nodes, pad_par, order, storage,
+             newton_work, out) = problem
+            status, its, n_hist = _newton_solve(
+                q_n, v_flat, dt, start.reshape(q_n.shape[0]), filters, fr_nodes[:k],
+                fr_t[:k], fr_bound[:k], fr_speed_flat[:k], masses2, alpha, beta, tol, max_it,
+                edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, q,
+                reaction, history, values, counts, pad_nodes, pad_par, order, storage,
+                newton_work)
+            out[1] = n_hist
+            return status, its
+        return impl
+
+
+@overload(contact_passes.solution, jit_options=dict(error_model='numpy'))
+def _solution_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            q, reaction = problem[25], problem[26]
+            n = q.shape[0] // 2
+            return q.reshape((n, 2)), reaction.reshape((n, 2))
+        return impl
+
+
 # ---------------------------------------------------------------------- contact
 @njit(cache=True, error_model='numpy')
 def contact_faces(face_par, face_dyn):
@@ -1386,8 +1428,6 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     v_flat = v_n.reshape(2 * n)
     released = bwork[:n]
     slipped = bwork[n:2 * n]
-    released[:] = False
-    slipped[:] = False
     faces = contact_faces(face_par, face_dyn)
     state = (obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce)
     start = work[2 * n:4 * n].reshape((n, 2))
@@ -1406,31 +1446,18 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     order = iwork[:n]
     fr_nodes = iwork[n:2 * n]
     v_min = max(5.0 * fpar[F_GRAVITY] * dt, 1e-3)
-    iterations = 0
-    n_hist = 0
-    for _ in range(ipar[I_MAX_PASSES]):
-        n_fr = contact_kernels.constraints(state, faces, x_n, x_pred, dt, fpar[F_VCORR],
-                                           start, filters, fr_nodes, fr_tangents, fr_bound,
-                                           fr_speeds)
-        status, its, n_hist = _newton_solve(
-            q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
-            fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
-            fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press, flesh,
-            gravity_grad, pos, q, reaction, history, values, counts, pad_nodes, pad_par,
-            order, storage, newton_work)
-        out[1] = n_hist
-        if status != OK:
-            return status
-        iterations += its
-        x = q.reshape((n, 2))
-        r = reaction.reshape((n, 2))
-        if not contact_kernels.update(state, faces, x, x_n, v_n, r, surface, dt,
-                                      fpar[F_RELEASE], v_min, 0.0, released, slipped):
-            break
-    x = q.reshape((n, 2))
-    r = reaction.reshape((n, 2))
-    x_out[:] = x
-    contact_kernels.finish(state, faces, x, x_n, v_n, r, masses, dt, v_out, forces_out)
+    problem = (q_n, v_flat, dt, start, filters, fr_nodes, fr_tangents, fr_t, fr_bound,
+               fr_speeds, fr_speed, masses2, fpar[F_ALPHA], fpar[F_BETA], fpar[F_TOL],
+               ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press, flesh, gravity_grad,
+               pos, q, reaction, history, values, counts, pad_nodes, pad_par, order, storage,
+               newton_work, out)
+    rules = (ipar[I_MAX_PASSES], fpar[F_VCORR], fpar[F_RELEASE], v_min, 0.0, False)
+    status, iterations = contact_passes.contact_passes(
+        problem, state, faces, x_n, v_n, x_pred, surface, masses, dt, rules, released,
+        slipped, v_out, forces_out)
+    if status != OK:
+        return status
+    x_out[:] = q.reshape((n, 2))
     out[2] = out[3] = 0.0
     for i in range(n):  # each jaw's force along its closing axis, summed over its faces
         f = obstacle[i]
