@@ -7,7 +7,7 @@ incremental potential, gradient and Hessian as the base class (up to round-off i
 summation order); without numba it sums each evaluation's triplets into the pattern
 with one ``np.bincount``.
 
-The fast path (no stiffness damping, every energy with an ``evaluate_into`` kernel;
+The fast path (every energy with an ``evaluate_into`` kernel, stiffness damping included;
 ``GRIPPER_SIM_FAST=0`` turns it off) runs the one Newton iteration
 (``core.newton.newton_iteration``, interpreted, on ``_NewtonProblem``) with less work
 per iteration:
@@ -196,7 +196,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._pattern = None  # (signature, inverse, indices, indptr, nnz)
         if fast is None:
             fast = fast_available()
-        self.fast = bool(fast and kernels is not None and self.beta == 0
+        self.fast = bool(fast and kernels is not None
                          and all(hasattr(e, 'evaluate_into') for e in self.energies))
         #: counts of the fast path: Newton solves (contact passes), Newton systems,
         #: (LDL^T) factorisations, CG iterations
@@ -346,6 +346,10 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._scatter = [np.zeros((0, 0), np.int64) if keys is None else
                          np.searchsorted(unique, keys).astype(np.int64)
                          for keys in element_keys]
+        # (energy, scatter) in evaluation order: with stiffness damping the elastic
+        # energies first (``evaluate_fast``; the sort is stable)
+        self._evaluation_order = sorted(zip(self.energies, self._scatter),
+                                        key=lambda pair: self.beta > 0 and not pair[0].elastic)
         col_node, row_node = unique // n // d, unique % n // d
         block_keys = np.unique(col_node * nodes + row_node)
         bcol, brow = block_keys // nodes, block_keys % nodes
@@ -397,19 +401,36 @@ class PatternCachingSolver(ImplicitEulerSolver):
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
 
     def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
-        """As ``incremental_potential``, with the Hessian as CSC values on the fixed pattern."""
+        """As ``incremental_potential``, with the Hessian as CSC values on the fixed pattern.
+
+        Rayleigh stiffness damping (beta > 0) adds beta dq^T K dq / (2 dt), K the elastic
+        energies' Hessian at q without their rank-one terms (as ``incremental_potential``):
+        the elastic energies are then evaluated first, their Hessian values copied as K."""
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
         grad = self.m * inertia / dt ** 2
-        data = np.zeros(self._nnz if hessian else 1)
+        damped = self.beta > 0
+        full = hessian or damped
+        data = np.zeros(self._nnz if full else 1)
         low_rank = []
-        for energy, scatter in zip(self.energies, self._scatter):
-            value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
+        stiffness = None
+        for energy, scatter in self._evaluation_order:
+            if damped and stiffness is None and not energy.elastic:
+                stiffness = data.copy()
+            value, terms = energy.evaluate_into(q, grad, data, scatter, full)
             if not np.isfinite(value):
                 return np.inf, None, None, None
             phi += value
             low_rank.extend(terms)
-        phi += self._mass_damping(q - q_n, dt, grad)
+        dq = q - q_n
+        phi += self._mass_damping(dq, dt, grad)
+        if damped:
+            stiffness = data.copy() if stiffness is None else stiffness
+            cdq = self._csc(stiffness) @ dq
+            phi += 0.5 * self.beta * float(dq @ cdq) / dt
+            grad += self.beta * cdq / dt
+            if hessian:
+                data += (self.beta / dt) * stiffness
         k = con.friction_nodes
         fric_grad = np.zeros(self.n)
         if k.size:

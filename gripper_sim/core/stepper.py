@@ -19,7 +19,7 @@ The Newton iteration itself is ``core.newton.newton_iteration`` (the one for eve
 set-up); this module gives it the reference problem (``_SparseProblem``: the energies'
 triplets summed into a scipy sparse matrix, SuperLU), on which the faster ones are
 checked (``fast_solver``, the 2D kernels) and which runs where they do not apply
-(``GRIPPER_SIM_FAST=0``, stiffness damping, an energy without a compiled kernel).
+(``GRIPPER_SIM_FAST=0``, an energy without a compiled kernel: none in this package).
 """
 from __future__ import annotations
 
