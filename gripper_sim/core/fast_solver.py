@@ -52,7 +52,8 @@ import scipy.sparse as sp
 from gripper_sim.core import newton
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES,
                                       ImplicitEulerSolver, NewtonFailure, StepConstraints,
-                                      StepSolution, stack_low_rank, woodbury_terms)
+                                      StepProblem, StepSolution, stack_low_rank,
+                                      woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
     from gripper_sim.core import solver_kernels as kernels
@@ -533,7 +534,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         return StepSolution(q, problem.reaction, iterations, done)
 
 
-class _NewtonProblem:
+class _NewtonProblem(StepProblem):
     """One ``PatternCachingSolver.solve``'s problem for ``newton.newton_iteration``: its
     hooks as methods (see ``core.newton``). The Newton matrix is the CSC values of
     S H S + (I - S) + shift S M / dt^2 with the energies' rank-one terms, solved by the
@@ -551,17 +552,13 @@ class _NewtonProblem:
 
     def __init__(self, solver: PatternCachingSolver, q_n: np.ndarray, v_n: np.ndarray,
                  dt: float, con: StepConstraints):
-        self.solver, self.q_n, self.v_n, self.dt, self.con = solver, q_n, v_n, dt, con
+        super().__init__(solver, q_n, v_n, dt, con, solver.evaluate_fast)
         self.filters = np.ascontiguousarray(con.filters, dtype=float)
         self.s_diag = np.einsum('naa->na', self.filters).ravel()
-        self._vectors = tuple(np.empty(solver.n) for _ in range(5))
         self._filtered = np.empty(solver.n)
-        self.parts = None  # (Hessian CSC values, rank-one terms) of the last evaluation
-        self.fric_grad = None
         self.matrix = self.low = None
         self.shift = 0.0
         self.kept = None  # (CSC values, rank-one terms) of the kept Newton matrix
-        self.reaction = None
 
     def filtered(self, vec: np.ndarray) -> np.ndarray:
         """S vec (n_dof,)."""
@@ -569,22 +566,8 @@ class _NewtonProblem:
         kernels.apply_filters(self.filters, np.ascontiguousarray(vec), out)
         return out
 
-    def vectors(self):
-        return self._vectors
-
     def kept_fits(self) -> bool:
         return False  # a new solve: nothing kept (``keep``)
-
-    def evaluate(self, x, hessian, grad) -> float:
-        phi, g, fric_grad, parts = self.solver.evaluate_fast(x, self.q_n, self.v_n, self.dt,
-                                                              self.con, hessian)
-        if not np.isfinite(phi):
-            return np.inf
-        grad[:] = g
-        self.fric_grad = fric_grad
-        if hessian:
-            self.parts = parts
-        return phi
 
     def project(self, grad, g_f) -> None:
         kernels.apply_filters(self.filters, grad, g_f)

@@ -312,7 +312,45 @@ NEWTON_FAILURES = {newton.INFEASIBLE_START: 'start of step is infeasible (invert
                    newton.NO_CONVERGENCE: 'no convergence in {} iterations'}
 
 
-class _SparseProblem:
+class StepProblem:
+    """What the interpreted problems of ``newton.newton_iteration`` share: the step's
+    data, the loop's work vectors, and the ``evaluate`` hook on the solver's potential
+    (``potential``: ``ImplicitEulerSolver.incremental_potential`` or the fast solver's
+    ``evaluate_fast``, both (Phi J, gradient (n_dof,) N, friction gradient, Hessian
+    parts or None)).
+
+    Args:
+        solver: the solver whose step this is.
+        q_n, v_n: (n_dof,) m, m/s at the start of the step.  dt: s.
+        con: the step's constraints.
+        potential: the solver's potential, called (q, q_n, v_n, dt, con, hessian).
+    """
+
+    def __init__(self, solver, q_n: np.ndarray, v_n: np.ndarray, dt: float,
+                 con: StepConstraints, potential):
+        self.solver, self.q_n, self.v_n, self.dt, self.con = solver, q_n, v_n, dt, con
+        self.potential = potential
+        self._vectors = tuple(np.empty(solver.n) for _ in range(5))
+        self.parts = None  # the Hessian parts of the last evaluation with the Hessian
+        self.fric_grad = None
+        self.reaction = None
+
+    def vectors(self):
+        return self._vectors
+
+    def evaluate(self, x, hessian, grad) -> float:
+        phi, g, fric_grad, parts = self.potential(x, self.q_n, self.v_n, self.dt, self.con,
+                                                  bool(hessian))
+        if not np.isfinite(phi):
+            return np.inf
+        grad[:] = g
+        self.fric_grad = fric_grad
+        if hessian:
+            self.parts = parts
+        return phi
+
+
+class _SparseProblem(StepProblem):
     """One ``ImplicitEulerSolver.solve``'s problem for ``newton.newton_iteration``: its
     hooks as methods (see ``core.newton``), on the energies' IJV triplets summed into a
     sparse matrix at each evaluation and SuperLU. The kept factor lives in the solver
@@ -326,18 +364,11 @@ class _SparseProblem:
 
     def __init__(self, solver: ImplicitEulerSolver, q_n: np.ndarray, v_n: np.ndarray,
                  dt: float, con: StepConstraints):
-        self.solver, self.q_n, self.v_n, self.dt, self.con = solver, q_n, v_n, dt, con
+        super().__init__(solver, q_n, v_n, dt, con, solver.incremental_potential)
         self.s = solver.filter_matrix(con.filters)
         self.complement = sp.identity(solver.n, format='csc') - self.s
         self.key = solver.factor_key(con, dt) if solver.keep_factor else None
-        self._vectors = tuple(np.empty(solver.n) for _ in range(5))
-        self.parts = None  # (Hessian, rank-one terms) of the last Hessian evaluation
-        self.fric_grad = None
         self.factor = None  # the KeptFactor just made
-        self.reaction = None
-
-    def vectors(self):
-        return self._vectors
 
     def kept_fits(self) -> bool:
         kept = self.solver.kept_factor
@@ -345,17 +376,6 @@ class _SparseProblem:
             return False
         kept.age += 1
         return True
-
-    def evaluate(self, x, hessian, grad) -> float:
-        phi, g, fric_grad, parts = self.solver.incremental_potential(x, self.q_n, self.v_n, self.dt,
-                                                         self.con, bool(hessian))
-        if not np.isfinite(phi):
-            return np.inf
-        grad[:] = g
-        self.fric_grad = fric_grad
-        if hessian:
-            self.parts = parts
-        return phi
 
     def project(self, grad, g_f) -> None:
         g_f[:] = self.s @ grad
