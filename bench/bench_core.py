@@ -300,8 +300,8 @@ def profile_generic(sim: Simulation, hold: float) -> dict:
                    if key[2] == name and file_part in key[0])
 
     total = cumulative('run_grasp', 'grasp.py')
-    evaluate = cumulative('_evaluate_fast', 'fast_solver.py') + cumulative(
-        '_evaluate', 'fast_solver.py')
+    evaluate = cumulative('evaluate_fast', 'fast_solver.py') + cumulative(
+        'incremental_potential', 'fast_solver.py')
     solve = cumulative('solve', 'fast_solver.py') - evaluate
     contact = (cumulative('contact_step', 'contact_passes.py')
                - cumulative('solve', 'fast_solver.py'))

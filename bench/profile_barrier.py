@@ -42,8 +42,8 @@ PARTS = (
     ('  barrier step', facade, 'soft_body_step'),
     ('  barrier step', facade, 'barrier_step'),
     ('    Newton solve', fast_solver.PatternCachingSolver, 'solve'),
-    ('      evaluation with Hessian', fast_solver.PatternCachingSolver, '_evaluate_fast'),
-    ('      linear solve', fast_solver.PatternCachingSolver, '_linear_solve'),
+    ('      evaluation with Hessian', fast_solver.PatternCachingSolver, 'evaluate_fast'),
+    ('      linear solve', fast_solver.PatternCachingSolver, 'linear_solve'),
     ('      barrier evaluate_into', barrier.BarrierContact, 'evaluate_into'),
     ('      barrier max_step (CCD)', barrier.BarrierContact, 'max_step'),
     ('    barrier begin_step', barrier.BarrierContact, 'begin_step'),
@@ -53,6 +53,7 @@ PARTS = (
     ('    barrier contact_forces', barrier.BarrierContact, 'contact_forces'),
     ('    barrier holders', barrier.BarrierContact, 'holders'),
     ('  fingers: sticking marks', simulation.Simulation, '_mark_sticking'),
+    ('  fingers: jaw forces', simulation.Simulation, '_finger_jaw_forces'),
     ('  fingers: jaw wrenches', simulation.Simulation, '_finger_wrenches'),
     ('  fingers: result', soft_fingers.SoftFingers, 'result'),
 )
@@ -88,7 +89,7 @@ def wrap_parts(times, calls) -> None:
         function = getattr(owner, name, None)
         if function is None:
             continue
-        split = (_hessian_or_not if name == '_evaluate_fast' else
+        split = (_hessian_or_not if name == 'evaluate_fast' else
                  _self_contact_or_not if owner is barrier.BarrierContact else None)
         setattr(owner, name, _timed(function, label, times, calls, split))
 

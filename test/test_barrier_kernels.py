@@ -5,13 +5,15 @@ several candidates sharing an end point), each evaluated by ipctk (its candidate
 collision set, ``BarrierPotential`` with the physical barrier, the Hessian projected by
 clamping) and by the kernel on the same candidates: value, gradient and Hessian agree
 to 1e-10 relative. A self-contact's quiet test measures each vertex's move against its
-body's mean move: a body carried along rigidly has not moved.
+body's mean move: a body carried along rigidly has not moved. The faces holding the
+loaded nodes and the sticking marks equal their numpy references.
 """
 import ipctk
 import numpy as np
 import pytest
 
-from gripper_sim.core.barrier_kernels import edge_vertex_barrier, largest_relative_move
+from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_relative_move,
+                                              mark_sticking, nearest_faces)
 
 DHAT = 1e-3
 KAPPA = 0.1
@@ -86,3 +88,61 @@ def test_a_bodys_move_is_measured_against_its_mean_move():
                                                                                     abs=1e-12)
     q[0, 0] += 4e-3                                  # one vertex of the first body moves
     assert largest_relative_move(q.ravel(), dofs, start, body, 2) == pytest.approx(3e-3)
+
+
+def _nearest_faces_reference(x, forces, origins, normals, tangents, half, dhat):
+    """numpy: each loaded node's nearest face within dhat (the distance to its segment or
+    rectangle), -1 else."""
+    holder = -np.ones(len(x), np.int64)
+    best = np.full(len(x), np.inf)
+    loaded = np.flatnonzero(np.any(forces != 0.0, axis=1))
+    for k in range(len(origins)):
+        rel = x[loaded] - origins[k]
+        along = rel @ tangents[k].T
+        outside = along - np.clip(along, -half[k], half[k])
+        dist = np.sqrt((rel @ normals[k]) ** 2 + np.sum(outside ** 2, axis=1))
+        closer = (dist < dhat) & (dist < best[loaded])
+        holder[loaded[closer]] = k
+        best[loaded[closer]] = dist[closer]
+    return holder
+
+
+@pytest.mark.parametrize('d', [2, 3])
+def test_the_nearest_faces_are_the_references(d):
+    rng = np.random.default_rng(d)
+    n, k = 400, 5
+    x = rng.uniform(-2e-3, 2e-3, (n, d))
+    forces = np.where(rng.random((n, 1)) < 0.7, rng.normal(size=(n, d)), 0.0)
+    normals = rng.normal(size=(k, d))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    tangents = np.empty((k, d - 1, d))
+    for f in range(k):  # an orthonormal basis of the face's plane
+        basis = np.linalg.svd(normals[f][None])[2][1:]
+        tangents[f] = basis
+    origins = rng.uniform(-1e-3, 1e-3, (k, d))
+    half = rng.uniform(2e-4, 2e-3, (k, d - 1))
+    holder = np.empty(n, np.int64)
+    nearest_faces(x, forces, origins, normals, tangents, half, DHAT, holder)
+    expected = _nearest_faces_reference(x, forces, origins, normals, tangents, half, DHAT)
+    assert np.count_nonzero(expected >= 0) > n // 4
+    np.testing.assert_array_equal(holder, expected)
+
+
+def test_the_sticking_marks_are_the_references():
+    rng = np.random.default_rng(3)
+    n, k, eps = 300, 4, 1e-3
+    v = rng.normal(scale=2e-3, size=(n, 2))
+    obstacle = rng.integers(-1, k, n)
+    normals = rng.normal(size=(k, 2))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    velocities = rng.normal(scale=1e-3, size=(k, 2))
+    mode = np.zeros(n, np.int64)
+    mark_sticking(v, obstacle, normals, velocities, eps, 1, 2, mode)
+    held = np.flatnonzero(obstacle >= 0)
+    relative = v[held] - velocities[obstacle[held]]
+    along = relative - np.sum(relative * normals[obstacle[held]], axis=1)[:, None] * normals[
+        obstacle[held]]
+    expected = np.zeros(n, np.int64)
+    expected[held] = np.where(np.linalg.norm(along, axis=1) < eps, 1, 2)
+    assert 0 < np.count_nonzero(expected == 1) < held.size
+    np.testing.assert_array_equal(mode, expected)

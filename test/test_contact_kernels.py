@@ -251,3 +251,51 @@ def test_a_node_in_an_oblique_corner_stays_in_the_whole_step_kernel():
     assert kernel.contacts.obstacle[0] == 4  # held by the table, the right jaw's flank
     assert kernel.contacts.secondary[0] == 2  # its second face
     assert a.positions[0, 1] == pytest.approx(0.0, abs=1e-9)  # on the table
+
+
+class _PullingSolver:
+    """A solve that returns its start with a reaction pulling every node off the
+    table (-1 N along z), counting its calls."""
+
+    def __init__(self, n):
+        self.m = np.ones(2 * n)
+        self.calls = 0
+
+    def solve(self, q_n, v_n, dt, q_start, constraints):
+        from gripper_sim.core.stepper import StepSolution
+        self.calls += 1
+        reaction = np.zeros_like(q_start)
+        reaction[1::2] = -1.0
+        return StepSolution(q_start.copy(), reaction, 1, [1.0])
+
+
+def test_a_node_released_in_a_pass_is_not_caught_again_in_that_step():
+    # a stuck node 1 mm inside the table whose reaction pulls: the first pass releases
+    # it, the second leaves it free although it is still inside, and the passes end
+    from gripper_sim.core.contact_passes import ContactSettings, contact_step
+    table = FlatFace('table', np.zeros(2), np.array([0.0, 1.0]), static_friction=0.5,
+                     kinetic_friction=0.4)
+    contacts = cm.ContactState.empty(1)
+    contacts.obstacle[0] = 0
+    contacts.mode[0] = cm.STICK
+    solver = _PullingSolver(1)
+    settings = ContactSettings(max_passes=10, max_correction_speed=0.1,
+                               release_threshold=1e-6, gravity=9.81)
+    outcome = contact_step(solver, np.array([0]), contacts, np.array([[0.0, -1e-3]]),
+                           np.zeros((1, 2)), [table], [table], 1e-3, settings)
+    assert solver.calls == 2 and outcome.iterations == 2
+    assert outcome.contacts.obstacle[0] == -1 and outcome.contacts.mode[0] == cm.FREE
+    np.testing.assert_array_equal(outcome.forces, 0.0)
+
+
+def test_one_loop_drives_the_contact_passes():
+    # the per-pass kernels are called by the one pass driver only (run by Python in
+    # contact_step, compiled in the 2D whole-step kernel): no second pass loop
+    from pathlib import Path
+    import gripper_sim
+    root = Path(gripper_sim.__file__).parent
+    callers = sorted(str(path.relative_to(root)) for path in root.rglob('*.py')
+                     for call in ('ck.update(', 'contact_kernels.update(', 'ck.finish(',
+                                  'contact_kernels.finish(')
+                     if call in path.read_text())
+    assert callers == ['core/contact_passes.py', 'core/contact_passes.py']

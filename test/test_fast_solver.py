@@ -71,14 +71,14 @@ def test_first_step_stops_a_turning_slip_where_it_is_nearest_zero():
     # a Newton step that turns the slip velocity round to -3 times itself: it passes
     # zero at a quarter of the step
     dq = np.append(-4.0 * slip * dt, 0.0)
-    assert solver._kink_step(q, q_n, dq, dt, con) == pytest.approx(0.25)
+    assert solver.kink_step(q, q_n, dq, dt, con) == pytest.approx(0.25)
     # a step that speeds the slip up, or one that stops short of zero, is taken whole
-    assert solver._kink_step(q, q_n, -dq, dt, con) == 1.0
-    assert solver._kink_step(q, q_n, 0.5 * dq / 4.0, dt, con) == 1.0
+    assert solver.kink_step(q, q_n, -dq, dt, con) == 1.0
+    assert solver.kink_step(q, q_n, 0.5 * dq / 4.0, dt, con) == 1.0
     # a node slipping within the smoothing speed is inside the kink already
     slow = 0.5 * KINK_FACTOR * FRICTION_SMOOTHING * slip / np.linalg.norm(slip)
     solver, q, q_n, con = _one_sliding_node(slow, dt)
-    assert solver._kink_step(q, q_n, np.append(-4.0 * slow * dt, 0.0), dt, con) == 1.0
+    assert solver.kink_step(q, q_n, np.append(-4.0 * slow * dt, 0.0), dt, con) == 1.0
 
 
 @pytest.mark.parametrize('model', [['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
@@ -117,3 +117,44 @@ def test_the_block_ldl_preconditioner_solves_a_newton_matrix(model):
     assert sparse_ldl.factor(pattern.arrays, values, l_values, d_inv) == 0
     assert np.allclose(l_values, ldl.l_values, rtol=1e-10, atol=1e-12 * np.abs(l_values).max())
     assert np.allclose(d_inv, ldl.d_inv, rtol=1e-10, atol=1e-12 * np.abs(d_inv).max())
+
+
+@pytest.mark.parametrize('overrides', [['fruit.model=shell', 'fruit.mesh.subdivisions=3'],
+                                       ['fruit.model=solid', 'fruit.skin.enabled=false',
+                                        'fruit.mesh.subdivisions=3']], ids=['shell', 'solid'])
+def test_stiffness_damping_stays_on_the_fast_path_and_matches_the_reference(overrides):
+    """Rayleigh stiffness damping (fruit.damping.stiffness > 0) keeps the 3D fruit on the
+    fast solver, and its potential, gradient and Hessian there equal the reference
+    evaluation's (triplets, ``ImplicitEulerSolver.incremental_potential``) at a moved,
+    squeezed configuration. (The ends of whole solves are not compared: the damping's
+    gradient beta K(q) dq / dt leaves out dK/dq, so it is not the gradient of the
+    potential both report, and two solvers may stop at different points of it.)"""
+    sim = make_simulation(load_config(overrides=['dimension=3', 'fruit.damping.stiffness=1e-4',
+                                                 'fruit.damping.mass=3'] + overrides))
+    solver = sim.solver
+    assert solver.fast and solver.beta == pytest.approx(1e-4)
+    reference = ImplicitEulerSolver(solver.m[::3], solver.energies, damping_mass=solver.alpha,
+                                    damping_stiffness=solver.beta, dim=3,
+                                    tolerance=solver.tolerance)
+    rng = np.random.default_rng(5)
+    q_n = sim.q.ravel().copy()
+    q_n[2::3] *= 0.97  # squeezed a little along z
+    v_n = 0.02 * rng.normal(size=q_n.size)
+    dt = sim.dt
+    q = q_n + dt * v_n + 1e-5 * rng.normal(size=q_n.size)
+    con = StepConstraints.free(q_n.size // 3, dim=3)
+    for hessian in (False, True):
+        phi, grad, _, parts = solver.evaluate_fast(q, q_n, v_n, dt, con, hessian)
+        phi_ref, grad_ref, _, parts_ref = reference.incremental_potential(q, q_n, v_n, dt,
+                                                                          con, hessian)
+        assert phi == pytest.approx(phi_ref, rel=1e-10)
+        np.testing.assert_allclose(grad, grad_ref, rtol=0,
+                                   atol=1e-9 * np.max(np.abs(grad_ref)))
+    dense = solver._csc(parts[0]).toarray()
+    np.testing.assert_allclose(dense, parts_ref[0].toarray(), rtol=0,
+                               atol=1e-10 * np.max(np.abs(dense)))
+    # the damping term is there at all
+    undamped = make_simulation(load_config(overrides=['dimension=3', 'fruit.damping.mass=3']
+                                           + overrides)).solver
+    _, grad_plain, _, _ = undamped.evaluate_fast(q, q_n, v_n, dt, con, False)
+    assert np.max(np.abs(grad - grad_plain)) > 1e-3 * np.max(np.abs(grad))

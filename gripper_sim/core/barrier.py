@@ -55,7 +55,8 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
-                                              largest_relative_move, nearest_partners)
+                                              largest_relative_move, nearest_faces,
+                                              nearest_partners)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear, smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
@@ -175,16 +176,6 @@ def face_corners(faces, dimension: int = 2) -> np.ndarray:
     return points
 
 
-def face_distances(face, points: np.ndarray) -> np.ndarray:
-    """(n,) m, the distance of points (n, d) from the face's segment or rectangle (as
-    ``face_corners`` cuts it)."""
-    half = _half_extents(face)
-    rel = points - face.origin
-    along = rel @ face.tangents.T
-    outside = along - np.clip(along, -half, half)
-    return np.sqrt((rel @ face.normal) ** 2 + np.sum(outside ** 2, axis=1))
-
-
 class BarrierContact(Energy):
     """The barrier and friction potentials of one step (``begin_step`` sets it up).
 
@@ -253,6 +244,10 @@ class BarrierContact(Energy):
         n_v = self.vertex_nodes.size
         self.vertex_dofs = element_dofs(self.vertex_nodes[:, None], d).ravel()
         self._vertex_dof_pairs = self.vertex_dofs.reshape(-1, d)
+        #: per coordinate, the dofs of the deformable vertices (``vertices`` gathers them
+        #: column by column into its Fortran-ordered array: 3-4x faster than a row gather)
+        self._vertex_dof_columns = tuple(np.ascontiguousarray(self._vertex_dof_pairs[:, k])
+                                         for k in range(d))
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
         #: (solvers that keep one sparsity pattern read it): the fruit's surface triangles
         #: (3D) or skin edges (2D; or its lone surface nodes), and with soft bodies their
@@ -374,7 +369,9 @@ class BarrierContact(Energy):
         ends = self._obstacles_end if obstacles is None else obstacles
         n_v = self.vertex_nodes.size
         v = np.empty((n_v + ends.shape[0], self.dimension), order='F')
-        v[:n_v] = positions[self.vertex_nodes]
+        flat = positions.ravel()
+        for k, dofs in enumerate(self._vertex_dof_columns):
+            v[:n_v, k] = flat[dofs]
         v[n_v:] = ends
         return v
 
@@ -396,7 +393,8 @@ class BarrierContact(Energy):
         start = self.vertices(x_n, old)
         self._start = start
         mu_s, mu_k, rubbing = self._coefficients(new_faces)
-        self._tangential = ipctk.TangentialCollisions()
+        if len(self._tangential):  # ipctk's lagged friction (3D): the last step's
+            self._tangential = ipctk.TangentialCollisions()
         self._friction_pairs = None
         if self.dimension == 2 and rubbing:
             self._friction_pairs = self._lagged_friction(
@@ -872,14 +870,14 @@ class BarrierContact(Energy):
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
         """(n,) the face (index) each node with a contact force touches (its nearest face
         within dhat), -1 for the others; positions ``x`` and ``forces`` (n, d)."""
-        holder = -np.ones(x.shape[0], np.int64)
-        best = np.full(x.shape[0], np.inf)
-        loaded = np.flatnonzero(np.any(forces != 0.0, axis=1))
-        for k, face in enumerate(faces):
-            dist = face_distances(face, x[loaded])
-            closer = (dist < self.settings.dhat) & (dist < best[loaded])
-            holder[loaded[closer]] = k
-            best[loaded[closer]] = dist[closer]
+        holder = np.empty(x.shape[0], np.int64)
+        d = self.dimension
+        nearest_faces(np.ascontiguousarray(x), np.ascontiguousarray(forces),
+                      np.array([f.origin for f in faces], float).reshape(-1, d),
+                      np.array([f.normal for f in faces], float).reshape(-1, d),
+                      np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
+                      np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1),
+                      self.settings.dhat, holder)
         return holder
 
     @staticmethod
@@ -910,6 +908,8 @@ class BarrierContact(Energy):
 
 def _largest_shift(a: np.ndarray, b: np.ndarray) -> float:
     """m, the largest distance between matching rows of points ``a`` and ``b`` (k, d)."""
+    if (a == b).all():  # faces standing still (the table, walls)
+        return 0.0
     return float(np.sqrt(np.max(np.sum((b - a) ** 2, axis=1))))
 
 
@@ -956,6 +956,24 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
     return StepOutcome(x, v, forces, contacts, solution.iterations)
 
 
+#: the last ``_prescribed`` constraints: ((n, d, the fixed nodes' array), them), or None
+_kept_constraints: tuple | None = None
+
+
+def _prescribed(n: int, d: int, fixed: np.ndarray) -> StepConstraints:
+    """The constraints of a step of n nodes in d dimensions with nodes ``fixed`` (k,)
+    prescribed (zero filters), the rest free; read only, kept for the same fixed array
+    (a soft body step's are the same every step)."""
+    global _kept_constraints
+    kept = _kept_constraints
+    if kept is None or kept[0][:2] != (n, d) or kept[0][2] is not fixed:
+        constraints = StepConstraints.free(n, dim=d)
+        constraints.filters[fixed] = 0.0
+        constraints.filters.flags.writeable = False
+        kept = _kept_constraints = ((n, d, fixed), constraints)
+    return kept[1]
+
+
 def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
                    new_faces: list, dt: float,
@@ -996,8 +1014,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
             break
     if start is None:
         raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
-    constraints = StepConstraints.free(n, dim=d)
-    constraints.filters[fixed] = 0.0
+    constraints = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
     x = solution.q.reshape(-1, d)
     reaction = np.zeros((n, d))

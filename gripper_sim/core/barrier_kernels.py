@@ -408,3 +408,60 @@ def nearest_partners(v, edges, candidates, dhat, n_deformable):
         _offer(e0, vertex, gap, n_deformable, best, partner)
         _offer(e1, vertex, gap, n_deformable, best, partner)
     return partner
+
+
+@njit(cache=True)
+def mark_sticking(velocities, obstacle, normals, obstacle_velocities, smoothing, stick,
+                  slip, mode):
+    """Set ``mode`` (n,) of each node held by an obstacle (``obstacle`` (n,) >= 0) to
+    ``stick`` where it moves along that obstacle (velocities (n, d) m/s, the obstacles'
+    unit normals and velocities (k, d)) slower than ``smoothing`` m/s, else ``slip``:
+    the barrier's friction creeps below that speed (its static friction)."""
+    d = velocities.shape[1]
+    for i in range(obstacle.shape[0]):
+        k = obstacle[i]
+        if k < 0:
+            continue
+        normal_speed = 0.0
+        for c in range(d):
+            normal_speed += (velocities[i, c] - obstacle_velocities[k, c]) * normals[k, c]
+        along = 0.0
+        for c in range(d):
+            a = (velocities[i, c] - obstacle_velocities[k, c]) - normal_speed * normals[k, c]
+            along += a * a
+        mode[i] = stick if np.sqrt(along) < smoothing else slip
+
+
+@njit(cache=True)
+def nearest_faces(x, forces, origins, normals, tangents, half_extents, dhat, holder):
+    """Set ``holder`` (n,) to the face (index) nearest to each node of positions ``x``
+    (n, d) m with a nonzero force ``forces`` (n, d) N, of the faces within ``dhat`` m
+    of it, else -1. The k faces: their ``origins`` and unit ``normals`` (k, d), their
+    ``tangents`` (k, d - 1, d) and ``half_extents`` (k, d - 1) m (``barrier.face_distances``:
+    the distance to the segment or rectangle; the first face of the nearest ones)."""
+    n, d = x.shape
+    for i in range(n):
+        holder[i] = -1
+        loaded = False
+        for c in range(d):
+            if forces[i, c] != 0.0:
+                loaded = True
+        if not loaded:
+            continue
+        best = np.inf
+        for k in range(origins.shape[0]):
+            normal = 0.0
+            for c in range(d):
+                normal += (x[i, c] - origins[k, c]) * normals[k, c]
+            squared = normal * normal
+            for t in range(d - 1):
+                along = 0.0
+                for c in range(d):
+                    along += (x[i, c] - origins[k, c]) * tangents[k, t, c]
+                half = half_extents[k, t]
+                outside = along - min(max(along, -half), half)
+                squared += outside * outside
+            distance = np.sqrt(squared)
+            if distance < dhat and distance < best:
+                holder[i] = k
+                best = distance

@@ -2,10 +2,10 @@
 
 The per-node logic of the predictor-corrector passes (the method and its rules are
 described in ``core.contact_passes`` and ``core.contact``), as numba kernels on arrays
-with the dimension d a parameter (positions (n, d)). Two drivers call them around a
-Newton solve: ``contact_passes.contact_step`` (every set-up, around the solver object)
-and the 2D whole-step kernel ``kernels.substep`` (around its compiled Newton solve).
-Per pass: ``constraints`` (z targets, S filters, the sliding nodes' kinetic friction),
+with the dimension d a parameter (positions (n, d)). One driver calls them around a
+Newton solve, ``contact_passes.contact_passes``: run by Python in ``contact_step``
+(every set-up, around the solver object) and compiled in the 2D whole-step kernel
+``kernels.substep`` (around its compiled Newton solve). Per pass: ``constraints`` (z targets, S filters, the sliding nodes' kinetic friction),
 the solve, ``update`` (release, stick/slip, corners, newly caught nodes); after the last
 pass ``finish`` (end velocities with restitution capped so it adds no energy, the
 contact forces, the one-step holds let go). Every function here is inlined into its

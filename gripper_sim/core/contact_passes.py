@@ -23,17 +23,23 @@ the other forces on it, so with the cap no rebound raises the total energy.
 Dimension is a parameter, not a copy: positions are (n, d), faces (``FlatFace`` in 2D,
 ``Plate`` in 3D) have a unit ``normal`` (d,) and ``tangents`` (d - 1, d), and kinetic
 friction is the smoothed Coulomb cone of the stepper in the tangent space (one tangent
-in 2D). The per-node logic of a pass is compiled (``core.contact_kernels``, which the 2D
-whole-step kernel calls too); this module drives it around the solver.
+in 2D). The per-node logic of a pass is compiled (``core.contact_kernels``); the loop
+over the passes is one function, ``contact_passes``, written as ``newton.newton_iteration``
+is: over hooks (``pass_arrays``, ``solve``, ``solution``) on a *problem*. ``contact_step``
+runs it by Python on ``_SolverPasses`` (every set-up, around a solver object); the 2D
+whole-step kernel (``core.kernels.substep``) compiles it with the hooks overloaded for
+its tuple (the solve its compiled Newton solve).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core import contact_kernels as ck
+from gripper_sim.core.newton import OK
 from gripper_sim.core.stepper import StepConstraints, StepSolution
 
 
@@ -87,13 +93,131 @@ class StepOutcome:
     reaction: np.ndarray | None = None
 
 
+# ---------------------------------------------------------------------- hooks
+# What the pass driver asks of its problem. The interpreted versions: methods of the
+# problem object (``_SolverPasses``, around a solver object). The compiled ones are
+# overloads registered for the 2D whole-step kernel's tuple (``core.kernels``).
+def pass_arrays(problem):
+    """-> (start (n, d), filters (n, d, d), fr_nodes (n,) int64, fr_tangents
+    (n, d - 1, d), fr_bound (n,), fr_speed (n, d - 1)): the outputs of a pass's
+    ``contact_kernels.constraints``."""
+    return problem.pass_arrays()
+
+
+def solve(problem, start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed, k):
+    """The Newton solve of a pass from ``start`` under the filters and the first ``k``
+    friction rows -> (status, Newton iterations); its end is then ``solution``."""
+    return problem.solve(start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed, k)
+
+
+def solution(problem):
+    """-> (x (n, d) m, reaction (n, d) N): the last solve's end and the faces' forces."""
+    return problem.solution()
+
+
+# ---------------------------------------------------------------------- the passes
+@njit(cache=True, error_model='numpy', inline='always')
+def _copy_state(state):
+    obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce = state
+    return (obstacle.copy(), mode.copy(), normal_force.copy(), bounce_speed.copy(),
+            secondary.copy(), secondary_bounce.copy())
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def contact_passes(problem, state, faces, x_n, v_n, x_pred, surface, masses, dt, rules,
+                   released, slipped, v_out, forces_out):
+    """The predictor-corrector passes of one step (see the module's docstring): per pass
+    the constraints (``contact_kernels.constraints``), the solve (hook ``solve``), the
+    contact set's correction (``contact_kernels.update``) and, with ``extrapolate``, the
+    sliding nodes' lag extrapolation, until the set stops changing or ``max_passes``;
+    then the end velocities and contact forces (``contact_kernels.finish``).
+
+    Args:
+        problem: what is solved (a tuple for the compiled hooks, an object for the
+            interpreted ones: see the hooks above).
+        state, faces: the contact state (updated in place) and the faces (see
+            ``contact_kernels``).
+        x_n, v_n: (n, d) m and m/s, the step's start.  x_pred: (n, d) m, x_n + dt v_n.
+        surface: (m,) int64, the nodes that can touch a face.
+        masses: (n,) kg.  dt: s.
+        rules: (max_passes, v_corr m/s, release threshold N, v_min m/s, deepest_first,
+            extrapolate) (see ``ContactSettings``; v_min the slowest approach that
+            rebounds).
+        released, slipped: (n,) bool scratch.
+        Outputs: v_out (n, d) m/s, forces_out (n, d) N.
+
+    Returns:
+        (status, Newton iterations); a failed solve's status ends the step (no outputs).
+    """
+    max_passes, v_corr, threshold, v_min, deepest_first, extrapolate = rules
+    n = x_n.shape[0]
+    released[:] = False
+    slipped[:] = False
+    lagged = n if extrapolate else 0
+    lag_history = (np.zeros(lagged), np.zeros(lagged), np.zeros(lagged, np.bool_))
+    iterations = 0
+    for pass_ in range(max_passes):
+        start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed = pass_arrays(problem)
+        k = ck.constraints(state, faces, x_n, x_pred, dt, v_corr, start, filters, fr_nodes,
+                           fr_tangents, fr_bound, fr_speed)
+        status, its = solve(problem, start, filters, fr_nodes, fr_tangents, fr_bound,
+                            fr_speed, k)
+        if status != OK:
+            return status, iterations
+        iterations += its
+        x, reaction = solution(problem)
+        # the state during the solve: a copy only where extrapolate_lag needs it
+        before = _copy_state(state) if extrapolate else state
+        if not ck.update(state, faces, x, x_n, v_n, reaction, surface, dt, threshold, v_min,
+                         deepest_first, released, slipped):
+            break
+        if extrapolate and pass_ < max_passes - 1:
+            ck.extrapolate_lag(state, before, lag_history)
+    x, reaction = solution(problem)
+    ck.finish(state, faces, x, x_n, v_n, reaction, masses, dt, v_out, forces_out)
+    return OK, iterations
+
+
+class _SolverPasses:
+    """The pass hooks around a solver object (``solve(q_n, v_n, dt, q_start,
+    constraints)``, ``core.stepper``): fresh arrays each pass (the solver may keep the
+    constraints it was given), failures raised as ``NewtonFailure``."""
+
+    def __init__(self, solver, q_n: np.ndarray, v_n: np.ndarray, dt: float):
+        self.solver = solver
+        self.q_n = q_n
+        self.v_n = v_n
+        self.dt = dt
+        self.n, self.d = v_n.shape
+        self.x = np.empty((self.n, self.d))
+        self.reaction = np.empty((self.n, self.d))
+
+    def pass_arrays(self):
+        n, d = self.n, self.d
+        return (np.empty((n, d)), np.empty((n, d, d)), np.empty(n, np.int64),
+                np.empty((n, d - 1, d)), np.empty(n), np.empty((n, d - 1)))
+
+    def solve(self, start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed, k):
+        constraints = StepConstraints(filters, fr_nodes[:k], fr_tangents[:k], fr_bound[:k],
+                                      fr_speed[:k])
+        result = self.solver.solve(self.q_n, self.v_n.ravel(), self.dt, start.ravel(),
+                                   constraints)
+        self.x = np.ascontiguousarray(result.q.reshape(-1, self.d))
+        self.reaction = np.ascontiguousarray(result.reaction.reshape(-1, self.d))
+        return OK, result.iterations
+
+    def solution(self):
+        return self.x, self.reaction
+
+
 def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np.ndarray,
                  v_n: np.ndarray, old_faces: list, new_faces: list, dt: float,
                  settings: ContactSettings) -> StepOutcome:
     """One implicit step of ``dt`` from (x_n, v_n) (n, d) with the faces translating from
     ``old_faces`` to ``new_faces``; ``contacts`` is not modified. ``surface``: (m,) the
     nodes that can touch a face; ``solver``: ``solve(q_n, v_n, dt, q_start, constraints)``
-    (``core.stepper``) with the per-dof masses ``m``.
+    (``core.stepper``) with the per-dof masses ``m``. The passes are ``contact_passes``
+    run by Python.
 
     Raises:
         NewtonFailure: from the solver (the caller halves the step).
@@ -101,39 +225,20 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
     n, d = x_n.shape
     x_n = np.ascontiguousarray(x_n, dtype=float)
     v_n = np.ascontiguousarray(v_n, dtype=float)
-    q_n = x_n.ravel()
     x_pred = x_n + dt * v_n
     contacts = contacts.copy()
-    state = contacts.arrays()
     faces = ck.face_arrays(old_faces, new_faces, d)
     surface = np.ascontiguousarray(surface, dtype=np.int64)
-    released = np.zeros(n, bool)
-    slipped = np.zeros(n, bool)
-    v_min = max(5.0 * settings.gravity * dt, 1e-3)  # m/s, the slowest approach that bounces
-    iterations = 0
-    lag_history = (np.zeros(n), np.zeros(n), np.zeros(n, bool))
-    for pass_ in range(settings.max_passes):
-        start, filters = np.empty((n, d)), np.empty((n, d, d))
-        fr_nodes, fr_bound = np.empty(n, np.int64), np.empty(n)
-        fr_tangents, fr_speed = np.empty((n, d - 1, d)), np.empty((n, d - 1))
-        k = ck.constraints(state, faces, x_n, x_pred, dt, settings.max_correction_speed,
-                           start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed)
-        constraints = StepConstraints(filters, fr_nodes[:k], fr_tangents[:k], fr_bound[:k],
-                                      fr_speed[:k])
-        solution = solver.solve(q_n, v_n.ravel(), dt, start.ravel(), constraints)
-        iterations += solution.iterations
-        x = np.ascontiguousarray(solution.q.reshape(-1, d))
-        reaction = np.ascontiguousarray(solution.reaction.reshape(-1, d))
-        before = tuple(field.copy() for field in state) if settings.extrapolate_lag else None
-        if not ck.update(state, faces, x, x_n, v_n, reaction, surface, dt,
-                         settings.release_threshold, v_min, settings.deepest_first, released,
-                         slipped):
-            break
-        if settings.extrapolate_lag and pass_ < settings.max_passes - 1:
-            ck.extrapolate_lag(state, before, lag_history)
-    v, forces = np.empty((n, d)), np.empty((n, d))
     masses = np.ascontiguousarray(solver.m[::d], dtype=float)
-    ck.finish(state, faces, x, x_n, v_n, reaction, masses, dt, v, forces)
+    v_min = max(5.0 * settings.gravity * dt, 1e-3)  # m/s, the slowest approach that bounces
+    rules = (settings.max_passes, settings.max_correction_speed, settings.release_threshold,
+             v_min, settings.deepest_first, settings.extrapolate_lag)
+    problem = _SolverPasses(solver, x_n.ravel(), v_n, dt)
+    v, forces = np.empty((n, d)), np.empty((n, d))
+    _, iterations = contact_passes.py_func(problem, contacts.arrays(), faces, x_n, v_n,
+                                           x_pred, surface, masses, dt, rules,
+                                           np.zeros(n, bool), np.zeros(n, bool), v, forces)
+    x, _ = problem.solution()
     return StepOutcome(x, v, forces, contacts, iterations)
 
 

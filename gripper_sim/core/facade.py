@@ -41,6 +41,7 @@ from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
 from gripper_sim.core import jaw_drive
 from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
+from gripper_sim.core.barrier_kernels import mark_sticking
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
@@ -80,6 +81,10 @@ class SimulationFacade:
     _soft: SoftFingers | None = None
     #: the deformable fingers' state, None for rigid fingers
     _finger: FingerState | None = None
+    #: the obstacles' normals and sides, kept per face set (``_obstacles``)
+    _obstacles_kept: tuple | None = None
+    #: ``_finger_bases``, built on first use
+    _jaw_bases: tuple | None = None
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -599,17 +604,32 @@ class SimulationFacade:
     def _obstacles(self, grip: GripperState):
         """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
         (``obstacle_names``) where ``grip`` puts them; a deformable finger counts as a face
-        along its backing."""
-        faces = self.faces_at(grip)
-        normals = [f.normal for f in faces]
-        velocities = [f.velocity for f in faces]
-        sides = list(self._face_side) + [-1] * (len(faces) - len(self._face_side))
-        if self._soft is not None:
-            normals = [self._in_plane(1.0, 0.0), self._in_plane(-1.0, 0.0)] + normals
-            velocities = [self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
-                                         grip.lift_rate) for sign in (-1.0, 1.0)] + velocities
-            sides = [LEFT, RIGHT] + sides
-        return np.array(normals), np.array(sides, np.int64), np.array(velocities)
+        along its backing. The normals and sides are kept per face set (read only)."""
+        template = self._faces_template
+        kept = self._obstacles_kept
+        if kept is None or kept[0] is not template:
+            faces = list(template)
+            normals = [f.normal for f in faces]
+            velocities = [f.velocity for f in faces]
+            sides = list(self._face_side) + [-1] * (len(faces) - len(self._face_side))
+            if self._soft is not None:
+                normals = [self._in_plane(1.0, 0.0), self._in_plane(-1.0, 0.0)] + normals
+                velocities = [self._in_plane(0.0, 0.0)] * 2 + velocities
+                sides = [LEFT, RIGHT] + sides
+            normals, sides = np.array(normals, float), np.array(sides, np.int64)
+            normals.flags.writeable = sides.flags.writeable = False
+            jaws = sides >= 0
+            # the jaw side of each obstacle, and last -1: an obstacle index's (-1: none)
+            side_of_obstacle = np.append(sides, -1)
+            kept = self._obstacles_kept = (template, normals, sides, np.array(velocities, float),
+                                           jaws, np.where(sides[jaws] == LEFT, -1.0, 1.0),
+                                           side_of_obstacle)
+        _, normals, sides, velocities, jaws, sign, _ = kept
+        velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
+        velocities[jaws] = 0.0
+        velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
+        velocities[jaws, -1] = grip.lift_rate
+        return normals, sides, velocities
 
     def _closing_forces(self, forces, obstacle, faces) -> tuple:
         """(left, right) N, each jaw's hard-contact force on the fruit along its closing
@@ -623,6 +643,18 @@ class SimulationFacade:
     # ------------------------------------------------------------------ measures
     def _common_measures(self, x: np.ndarray, v: np.ndarray, forces: np.ndarray,
                          obstacle: np.ndarray, iterations: int, substeps: int):
+        """``_step_measures`` with every field built at once: (StepResult fields (dict),
+        normal (n,) N, (on_left, on_right) (n,) bool)."""
+        fields, rarely_read, normal, sides = self._step_measures(x, v, forces, obstacle,
+                                                                 iterations, substeps)
+        fields.update(rarely_read())
+        return fields, normal, sides
+
+    #: the StepResult fields ``_step_measures`` leaves to first read
+    DEFERRED_MEASURES = ('left_wrench', 'right_wrench', 'slipping', 'energies', 'fingers')
+
+    def _step_measures(self, x: np.ndarray, v: np.ndarray, forces: np.ndarray,
+                       obstacle: np.ndarray, iterations: int, substeps: int):
         """What the 2D and 3D step results share, at the present gripper state.
 
         Args:
@@ -631,56 +663,66 @@ class SimulationFacade:
             holding each node (pads included), -1 if none.
 
         Returns:
-            (StepResult fields (dict), normal (n,) N each node's normal contact force,
-            (on_left, on_right) (n,) bool the nodes each jaw holds).
+            (StepResult fields (dict) but ``DEFERRED_MEASURES``, a callable giving those
+            (dict; of this step's state, whenever called), normal (n,) N each node's
+            normal contact force, (on_left, on_right) (n,) bool the nodes each jaw holds).
         """
-        grip, fruit = self._grip, self.fruit
+        grip, fruit, finger, soft = self._grip, self.fruit, self._finger, self._soft
         normals, face_sides, face_velocities = self._obstacles(grip)
         held = obstacle >= 0
         normal = np.zeros(len(obstacle))
-        if self._soft is not None:  # the barrier's force is normal to the finger's outline
+        if soft is not None:  # the barrier's force is normal to the finger's outline
             soft_normal = self._barrier.normal_forces(
-                np.vstack([x, self._finger.positions]).ravel())
+                np.vstack([x, finger.positions]).ravel())
             normal[held] = np.linalg.norm(soft_normal[:len(obstacle)][held], axis=1)
         else:
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
-        side_of_face = np.append(face_sides, -1)  # the last: obstacle -1
-        side_of_node = side_of_face[obstacle]
+        side_of_node = self._obstacles_kept[-1][obstacle]
         sides = (side_of_node == LEFT, side_of_node == RIGHT)
-        if self._soft is not None:
-            wrenches = self._finger_wrenches(grip)
-        else:
-            wrenches = [_wrench(x[sides[side]] - self._jaw_origin(grip, side),
-                                -forces[sides[side]]) for side in (LEFT, RIGHT)]
+        origins = (self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT))
+
+        def jaw_wrenches() -> list:
+            if soft is not None:
+                return self._finger_wrenches(finger, origins)
+            return [_wrench(x[sides[side]] - origins[side], -forces[sides[side]])
+                    for side in (LEFT, RIGHT)]
+        wrenches = None  # built on first read where the grip force needs none
         if self._plain_jaws:
             left_n, right_n = (float(np.sum(normal[on])) for on in sides)
+        elif soft is not None:  # what the step committed: its fingers' base reactions
+            left_n, right_n = self._jaw_force
         else:  # each jaw's force along the closing axis
+            wrenches = jaw_wrenches()
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
         masses = fruit.masses
         centroid = masses @ x / masses.sum()
-        touching = bool(np.any(sides[LEFT]) or np.any(sides[RIGHT]))
-        both = bool(np.any(sides[LEFT]) and np.any(sides[RIGHT]))
-        slip = self.measure_slip(float(centroid[-1] - grip.lift), both, touching)
-        slipping = jaw_contacts_sliding(v, obstacle, face_sides, normals, face_velocities)
-        energies = Energies(kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
-                            elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
-                            gravitational=float(self.gravity.value(x.ravel())))
+        on_left, on_right = bool(sides[LEFT].any()), bool(sides[RIGHT].any())
+        slip = self.measure_slip(float(centroid[-1] - grip.lift), on_left and on_right,
+                                 on_left or on_right)
+        x, v, forces, obstacle = x.copy(), v.copy(), forces.copy(), obstacle.copy()
         fields = dict(
-            time=self._time, step=self._step, positions=x.copy(), velocities=v.copy(),
-            contact_forces=forces.copy(), contact_obstacle=obstacle.copy(),
+            time=self._time, step=self._step, positions=x, velocities=v,
+            contact_forces=forces, contact_obstacle=obstacle,
             contact_sticking=self.contacts.mode == cm.STICK,
             obstacle_names=self.obstacle_names, surface=fruit.surface,
-            left_wrench=wrenches[LEFT], right_wrench=wrenches[RIGHT],
             left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
-            slipping=slipping, centroid=centroid, energies=energies,
-            newton_iterations=iterations, substeps=substeps, gripper_x=grip.x,
-            gripper_x_velocity=grip.x_rate)
-        if self._soft is not None:
-            fields['fingers'] = self._soft.result(self._finger, self._jaw_origin(grip, LEFT),
-                                                  self._jaw_origin(grip, RIGHT))
-        return fields, normal, sides
+            centroid=centroid, newton_iterations=iterations, substeps=substeps,
+            gripper_x=grip.x, gripper_x_velocity=grip.x_rate)
+
+        def rarely_read() -> dict:
+            jaws = wrenches if wrenches is not None else jaw_wrenches()
+            return dict(
+                left_wrench=jaws[LEFT], right_wrench=jaws[RIGHT],
+                slipping=jaw_contacts_sliding(v, obstacle, face_sides, normals,
+                                              face_velocities),
+                energies=Energies(
+                    kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
+                    elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
+                    gravitational=float(self.gravity.value(x.ravel()))),
+                fingers=soft.result(finger, *origins) if soft is not None else None)
+        return fields, rarely_read, normal, sides
 
     def contact_forces_and_holders(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, d) N every contact force on the fruit and (n,) the obstacle holding each
@@ -751,10 +793,8 @@ class SimulationFacade:
         self._mark_sticking(contacts, v, grip_new)
         self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
                                    outcome.reaction[n:], partner[n:] == 0)
-        wrenches = self._finger_wrenches(grip_new)
         self.commit_step(outcome.x[:n], v, contacts, outcome.forces[:n], grip_new,
-                         (-float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])),
-                         dt)
+                         self._finger_jaw_forces(), dt)
         return outcome.iterations
 
     def _mark_sticking(self, contacts: cm.ContactState, v: np.ndarray,
@@ -764,28 +804,43 @@ class SimulationFacade:
         moves along its obstacle (a finger: along its backing) slower than the barrier's
         friction smoothing speed, else SLIP."""
         normals, _, velocities = self._obstacles(grip)
-        held = np.flatnonzero(contacts.obstacle >= 0)
-        which = contacts.obstacle[held]
-        relative = v[held] - velocities[which]
-        along = relative - np.sum(relative * normals[which], axis=1)[:, None] * normals[which]
-        creeping = np.linalg.norm(along, axis=1) < self._barrier.settings.friction_smoothing
-        contacts.mode[held] = np.where(creeping, cm.STICK, cm.SLIP)
+        mark_sticking(v, contacts.obstacle, normals, velocities,
+                      self._barrier.settings.friction_smoothing, cm.STICK, cm.SLIP,
+                      contacts.mode)
 
-    def _finger_wrenches(self, grip: GripperState) -> list[JawWrench]:
+    def _finger_wrenches(self, finger: FingerState, origins: tuple) -> list[JawWrench]:
         """What each jaw feels at its deformable finger's base nodes (the reaction that
-        holds them on it), about the backing's centre; zero for a finger that does not
-        touch the fruit (its inertia and weight are no grip)."""
-        soft, finger = self._soft, self._finger
-        base = soft.base - soft.first
-        m = soft.body.n_nodes
+        holds them on it) in the fingers' state ``finger``, about the backings' centres
+        ``origins`` (left, right) (d,) m; zero for a finger that does not touch the fruit
+        (its inertia and weight are no grip)."""
         wrenches = []
-        for side, mine in zip((LEFT, RIGHT), soft.sides_of_base()):
-            nodes = base[mine]
-            if not np.any(finger.touching[side * m:(side + 1) * m]):
+        for (nodes, own), origin in zip(self._finger_bases(), origins):
+            if not finger.touching[own].any():
                 nodes = nodes[:0]
-            wrenches.append(_wrench(finger.positions[nodes] - self._jaw_origin(grip, side),
-                                    -finger.reaction[nodes]))
+            wrenches.append(_wrench(finger.positions[nodes] - origin, -finger.reaction[nodes]))
         return wrenches
+
+    def _finger_jaw_forces(self) -> tuple[float, float]:
+        """(left, right) N, each jaw's force on the fruit along its closing axis through
+        its deformable finger: the x part of its ``_finger_wrenches`` force (the same
+        sum), without the rest of the wrench."""
+        finger = self._finger
+        forces = []
+        for side, (nodes, own) in enumerate(self._finger_bases()):
+            push = (float(finger.reaction[nodes][:, 0].sum()) if finger.touching[own].any()
+                    else 0.0)
+            forces.append(push if side == LEFT else -push)
+        return forces[LEFT], forces[RIGHT]
+
+    def _finger_bases(self) -> tuple:
+        """Per jaw (LEFT, RIGHT): (its finger's base nodes, the slice of its finger's
+        nodes), as indices into the fingers' state."""
+        if self._jaw_bases is None:
+            soft = self._soft
+            base, m = soft.base - soft.first, soft.body.n_nodes
+            self._jaw_bases = tuple((base[mine], slice(side * m, (side + 1) * m))
+                                    for side, mine in zip((LEFT, RIGHT), soft.sides_of_base()))
+        return self._jaw_bases
 
     def _advance(self, dt: float, depth: int) -> tuple[int, int]:
         """Step ``dt``, halving it (recursively) while Newton fails; (iterations, substeps)."""

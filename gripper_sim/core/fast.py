@@ -44,6 +44,7 @@ import numpy as np
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core.damage import Contact, Damage, DamageTracker
+from gripper_sim.core.deferred import build, build_deferred
 from gripper_sim.core.energies import (EnclosedAreaPressure, NeoHookeanTriangles, RingBending,
                                        Stretching)
 from gripper_sim.core.measures import tributary_lengths
@@ -62,6 +63,10 @@ if TYPE_CHECKING:
 #: failure messages of the reference solver (stepper.ImplicitEulerSolver.solve)
 _FAILURES = {1: 'start of step is infeasible (inverted element)',
              2: 'no descent direction found', 3: 'line search failed'}
+#: the StepResult fields observers rarely read, which ``FastPath.measure`` builds on first
+#: read (``core.deferred``)
+RARELY_READ = ('velocities', 'contact_forces', 'contact_sticking', 'slipping', 'centroid',
+               'left_wrench', 'right_wrench', 'energies')
 
 
 def available() -> bool:
@@ -437,7 +442,7 @@ class FastPath:
             message = _FAILURES.get(
                 status, f'no convergence in {sim.solver.max_iterations} iterations')
             raise NewtonFailure(message, history)
-        contacts = _build(cm.ContactState, dict(
+        contacts = build(cm.ContactState, dict(
             obstacle=obstacle, mode=mode, normal_force=normal_force, bounce_speed=bounce,
             secondary=secondary, secondary_bounce=secondary_bounce))
         # the jaw forces with the pads' push included
@@ -499,25 +504,25 @@ class FastPath:
                 contact_sticking=mode == cm.STICK,
                 slipping=touching and self._sliding(v, holder, grip, face_par),
                 centroid=np.array([cx, cz]),
-                left_wrench=_build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
+                left_wrench=build(JawWrench, dict(force=np.array([lfx, 0.0, lfz]),
                                                    torque=np.array([0.0, lty, 0.0]))),
-                right_wrench=_build(JawWrench, dict(force=np.array([rfx, 0.0, rfz]),
+                right_wrench=build(JawWrench, dict(force=np.array([rfx, 0.0, rfz]),
                                                     torque=np.array([0.0, rty, 0.0]))),
-                energies=_build(Energies, dict(kinetic=kinetic, elastic=elastic,
+                energies=build(Energies, dict(kinetic=kinetic, elastic=elastic,
                                                gravitational=gravitational)))
 
-        result = _build_deferred(StepResult, dict(
+        result = build_deferred(StepResult, dict(
             time=sim.time, step=sim.step_count, positions=positions, contact_obstacle=holder,
             obstacle_names=self.obstacle_names(), surface=fruit.surface,
             left_jaw_x=grip.x - half, right_jaw_x=grip.x + half,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
             gap=grip.gap, grip_force=0.5 * (left_n + right_n), slip_distance=slip,
-            deformation=_build(Deformation, dict(
+            deformation=build(Deformation, dict(
                 compression=compression, compression_ratio=ratio, max_skin_strain=max_strain,
                 contact_length=contact_length, peak_contact_pressure=peak,
                 node_pressure=pressure)),
             newton_iterations=iterations, substeps=substeps, damage=damage,
-            gripper_x=grip.x, gripper_x_velocity=grip.x_rate), rarely_read)
+            gripper_x=grip.x, gripper_x_velocity=grip.x_rate), RARELY_READ, rarely_read)
         if self.timing:
             self.timers['measures'] += time.perf_counter() - t0
         return result
@@ -599,7 +604,7 @@ class FastPath:
 
         def patches():
             return dict(contacts=tuple(
-                _build(Contact, dict(body=int(b), load=load, centre=np.array([cx, cz]),
+                build(Contact, dict(body=int(b), load=load, centre=np.array([cx, cz]),
                                      radius=a, peak_pressure=p0, equivalent_radius=re,
                                      modulus=modulus))
                 for b, load, cx, cz, a, p0, re, modulus in table[:count].tolist()))
@@ -612,12 +617,12 @@ class FastPath:
             flesh_stress = float(np.max(flesh.von_mises(positions.ravel()), initial=0.0))
         stress = tracker.record(covered, pressure, flesh_stress, ratio)
         perimeter = tracker.perimeter
-        return _build_deferred(Damage, dict(
+        return build_deferred(Damage, dict(
             bruised=tracker.peak_pressure > tracker.bruise_pressure, bruised_length=length,
             bruised_fraction=length / perimeter if perimeter > 0 else 0.0, pressure=pressure,
             peak_pressure=tracker.peak_pressure, flesh_stress=stress,
             peak_flesh_stress=tracker.peak_flesh_stress, crushed=tracker.crushed,
-            node_pressure=node_pressure), patches)
+            node_pressure=node_pressure), ('contacts',), patches)
 
     def _measure_kernel(self, forces: np.ndarray, holder: np.ndarray):
         """``step_measures`` of the present state with contact forces (n, 2) N and the
@@ -646,103 +651,3 @@ def record_pad(pad, outputs: tuple) -> None:
     (``FastPath.pad_arguments``): what ``PadLayer.finish_step`` records."""
     if pad is not None:
         pad.forces, pad.normal_forces, pad.holder, pad.side_force = outputs
-
-
-def _frozen_builder(cls):
-    """A fast constructor for a (frozen) dataclass: a frozen ``__init__`` sets each field
-    through ``object.__setattr__``, ~10 us for a StepResult; filling ``__dict__`` gives
-    the same object in well under 1 us. Fields left out take their defaults. Falls back
-    to ``cls(**fields)`` (which raises) for missing or unknown fields, and for a class
-    with a ``__post_init__``, slots or default factories.
-    """
-    fields = dataclasses.fields(cls)
-    size = len(fields)
-    defaults = {f.name: f.default for f in fields if f.default is not dataclasses.MISSING}
-    plain = (not hasattr(cls, '__post_init__') and not hasattr(cls, '__slots__')
-             and all(f.default_factory is dataclasses.MISSING for f in fields))
-    new = object.__new__
-    set_attribute = object.__setattr__
-
-    def build(values: dict):
-        """``values`` (a fresh dict the caller gives away) becomes the instance dict."""
-        if plain:
-            obj = new(cls)
-            if len(values) == size:  # every field given (the fast paths do)
-                set_attribute(obj, '__dict__', values)
-                return obj
-            state = obj.__dict__
-            state.update(defaults)
-            state.update(values)
-            if len(state) == size:  # no field missing, none unknown
-                return obj
-        return cls(**values)
-    return build
-
-
-_BUILDERS = {cls: _frozen_builder(cls) for cls in (StepResult, JawWrench, Energies,
-                                                   Deformation, cm.ContactState, Contact,
-                                                   Damage)}
-
-
-def _build(cls, fields: dict):
-    return _BUILDERS[cls](fields)
-
-
-class _Deferred:
-    """A field of a ``_deferred_class`` instance, filled on first read: the instance's
-    ``_fill()`` gives every deferred field at once; they then live in its ``__dict__``
-    (which this non-data descriptor yields to)."""
-
-    def __init__(self, name: str):
-        self.name = name
-
-    def __get__(self, obj, owner=None):
-        if obj is None:
-            return self
-        state = obj.__dict__
-        state.update(state.pop('_fill')())
-        return state[self.name]
-
-
-def _plain(cls, fields: dict):
-    """The ``cls`` instance of ``fields`` (what a deferred instance pickles and copies to)."""
-    return _build(cls, fields)
-
-
-def _deferred_class(cls, names: tuple[str, ...]):
-    """A subclass of the frozen dataclass ``cls`` whose fields ``names`` are built only when
-    read (nobody may read a step's wrenches or contact patches). It compares, prints,
-    pickles and copies as ``cls`` (pickles and copies become plain ``cls`` instances)."""
-    fields = [f.name for f in dataclasses.fields(cls)]
-
-    def as_plain(self):
-        return _plain, (cls, {name: getattr(self, name) for name in fields})
-
-    def __eq__(self, other):
-        if not isinstance(other, cls):
-            return NotImplemented
-        return (tuple(getattr(self, name) for name in fields)
-                == tuple(getattr(other, name) for name in fields))
-
-    namespace = {name: _Deferred(name) for name in names}
-    namespace.update(__reduce__=as_plain, __eq__=__eq__, __hash__=cls.__hash__,
-                     __qualname__=cls.__qualname__, __module__=cls.__module__,
-                     __doc__=cls.__doc__)
-    return type(cls.__name__, (cls,), namespace)
-
-
-#: StepResult and Damage with the parts observers rarely read built on first read
-_DEFERRED = {StepResult: _deferred_class(StepResult, ('velocities', 'contact_forces',
-                                                      'contact_sticking', 'slipping',
-                                                      'centroid', 'left_wrench',
-                                                      'right_wrench', 'energies')),
-             Damage: _deferred_class(Damage, ('contacts',))}
-
-
-def _build_deferred(cls, fields: dict, fill):
-    """A ``cls`` instance of ``fields`` (a fresh dict given away) whose deferred fields
-    (``_DEFERRED``) ``fill()`` gives, as a dict, when first read."""
-    obj = object.__new__(_DEFERRED[cls])
-    fields['_fill'] = fill
-    object.__setattr__(obj, '__dict__', fields)
-    return obj

@@ -7,9 +7,10 @@ incremental potential, gradient and Hessian as the base class (up to round-off i
 summation order); without numba it sums each evaluation's triplets into the pattern
 with one ``np.bincount``.
 
-The fast path (numba installed, no stiffness damping, every energy with an
-``evaluate_into`` kernel; ``GRIPPER_SIM_FAST=0`` turns it off) solves the same Newton
-iteration (same line search, shifts and stopping rule) with less work:
+The fast path (every energy with an ``evaluate_into`` kernel, stiffness damping included;
+``GRIPPER_SIM_FAST=0`` turns it off) runs the one Newton iteration
+(``core.newton.newton_iteration``, interpreted, on ``_NewtonProblem``) with less work
+per iteration:
 - the energies add their gradients and Hessians straight into the CSC values through
   precomputed scatter indices (``core.energies.kernels``, ``core3d.kernels``), and
   S H S + (I - S) is one kernel over the d x d node blocks (``core.solver_kernels``), on
@@ -31,13 +32,12 @@ iteration (same line search, shifts and stopping rule) with less work:
   ``ldl_solve_3``): on the 3D fruits a factorisation takes 0.4 and a solve 0.5-0.7 of
   the time of the single-precision SuperLU used before, in double precision;
 - a later contact pass of the same step starts from the previous pass's solution (in
-  the directions the new filter leaves free), and after a Newton step below
-  ``HESSIAN_REUSE`` times the tolerance the next iteration reuses the Newton matrix;
-- the line search's first trial evaluates the Hessian with the gradient when a new
-  Hessian follows (the full step is usually taken), and it stops where a sliding
-  node's slip velocity, turning round, comes nearest to zero (``_kink_step``: past it
-  the step overshoots the kink of the smoothed friction law and the search halves it
-  again and again).
+  the directions the new filter leaves free); the iteration keeps the Newton matrix
+  (its chord rule) after steps below ``KEEP_BELOW`` times the tolerance, within a solve,
+  and a larger step's first line-search trial evaluates the Hessian with the gradient;
+- the line search starts where a sliding node's slip velocity, turning round, comes
+  nearest to zero (``kink_step``: past it the step overshoots the kink of the smoothed
+  friction law and the search halves it again and again).
 The fast path follows the reference path to the Newton tolerance over a grasp
 (test/test_3d_energies.py::test_fast_solver_follows_the_numpy_reference_path).
 """
@@ -49,9 +49,11 @@ import os
 import numpy as np
 import scipy.sparse as sp
 
-from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, NewtonFailure,
-                                      StepConstraints, StepSolution, descent_direction,
-                                      line_search, stack_low_rank, woodbury_terms)
+from gripper_sim.core import newton
+from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES,
+                                      ImplicitEulerSolver, NewtonFailure, StepConstraints,
+                                      StepProblem, StepSolution, stack_low_rank,
+                                      woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
     from gripper_sim.core import solver_kernels as kernels
@@ -84,10 +86,9 @@ CG_MAX_ITERATIONS = 20
 CG_STALE_ITERATIONS = 3
 #: iterative-refinement sweeps of the direct solve when CG cannot be used (indefinite)
 REFINEMENT_SWEEPS = 3
-#: after a Newton step below this multiple of the tolerance the next iteration reuses
-#: the Newton matrix (a chord step: near convergence the Hessian barely changes, and
-#: the step's size, which decides convergence, is as well estimated)
-HESSIAN_REUSE = 100.0
+#: the Newton matrix is kept only after a step below this multiple of the tolerance
+#: (near convergence the Hessian barely changes; farther, a new one pays)
+KEEP_BELOW = 100.0
 #: a sliding node's Newton step is cut at the kink of the friction law only if it
 #: slips faster than this multiple of the smoothing speed (slower: inside the kink)
 KINK_FACTOR = 10.0
@@ -193,14 +194,15 @@ class PatternCachingSolver(ImplicitEulerSolver):
 
     def __init__(self, *args, fast: bool | None = None, **kwargs):
         super().__init__(*args, **kwargs)
-        self._pattern = None  # (signature, inverse, indices, indptr, nnz)
         if fast is None:
             fast = fast_available()
-        self.fast = bool(fast and kernels is not None and self.beta == 0
+        self.fast = bool(fast and kernels is not None
                          and all(hasattr(e, 'evaluate_into') for e in self.energies))
         #: counts of the fast path: Newton solves (contact passes), Newton systems,
         #: (LDL^T) factorisations, CG iterations
         self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
+        #: the Newton iteration's work counters (``newton.C_*``)
+        self.counts = np.zeros(newton.C_SIZE, np.int64)
         self._lu = None
         self._woodbury = None  # (u, A^-1 u, (C^-1 + u^T A^-1 u)^-1) at the factorisation
         self._stale = False
@@ -226,6 +228,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         kernels.cg_direction(np.zeros(1), np.zeros(1), 0.0)  # CG ended in one iteration
         self.reset()
         self.stats = dict.fromkeys(self.stats, 0)
+        self.counts[:] = 0
 
     def reset(self) -> None:
         """Forget the kept factorisation (a restarted simulation repeats its results)."""
@@ -233,90 +236,12 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._woodbury = None
         self._warm = None
 
-    def _assemble(self, rows: list, cols: list, vals: list) -> sp.csc_matrix:
-        signature = tuple(r.size for r in rows)
-        if self._pattern is None or self._pattern[0] != signature:
-            r = np.concatenate(rows)
-            c = np.concatenate(cols)
-            keys = c.astype(np.int64) * self.n + r
-            unique, inverse = np.unique(keys, return_inverse=True)
-            indices = (unique % self.n).astype(np.int32)
-            indptr = np.searchsorted(unique // self.n, np.arange(self.n + 1)).astype(np.int32)
-            self._pattern = (signature, inverse.ravel(), indices, indptr, unique.size)
-        _, inverse, indices, indptr, nnz = self._pattern
-        data = np.bincount(inverse, weights=np.concatenate(vals), minlength=nnz)
-        return sp.csc_matrix((data, indices, indptr), shape=(self.n, self.n))
-
-    def _evaluate(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
-        inertia = q - q_n - dt * v_n
-        phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
-        grad = self.m * inertia / dt ** 2
-        need = hessian or self.beta > 0
-        rows, cols, vals, low_rank = [], [], [], []
-        elastic_rows, elastic_cols, elastic_vals = [], [], []
-        for energy in self.energies:
-            ev = energy.evaluate(q, hessian=need)
-            if not np.isfinite(ev.value):
-                return np.inf, None, None, None
-            phi += ev.value
-            grad += ev.gradient
-            if need and ev.rows.size:
-                rows.append(ev.rows)
-                cols.append(ev.cols)
-                vals.append(ev.vals)
-                if energy.elastic:
-                    elastic_rows.append(ev.rows)
-                    elastic_cols.append(ev.cols)
-                    elastic_vals.append(ev.vals)
-            if need:
-                low_rank.extend(ev.low_rank)
-        dq = q - q_n
-        phi += self._mass_damping(dq, dt, grad)
-        stiffness = self._assemble(rows, cols, vals) if need and rows else None
-        if self.beta > 0 and elastic_rows:
-            damping = (stiffness if len(elastic_rows) == len(rows) else
-                       sp.coo_matrix((np.concatenate(elastic_vals),
-                                      (np.concatenate(elastic_rows),
-                                       np.concatenate(elastic_cols))),
-                                     shape=(self.n, self.n)).tocsc())
-            cdq = damping @ dq
-            phi += 0.5 * self.beta * float(dq @ cdq) / dt
-            grad += self.beta * cdq / dt
-        phi_f, fric_grad, blocks = self._friction(q, q_n, dt, con, grad)
-        phi += phi_f
-        if not hessian:
-            return phi, grad, fric_grad, None
-        diag = self.m / dt ** 2 + (self.alpha * self.m / dt if self.alpha > 0 else 0.0)
-        hess = sp.diags(np.broadcast_to(diag, (self.n,)).astype(float), format='csc')
-        if stiffness is not None:
-            hess = hess + stiffness
-            if self.beta > 0 and elastic_rows:
-                hess = hess + (self.beta / dt) * damping
-        k = con.friction_nodes
-        if k.size:
-            d = self.dim
-            dofs = d * k[:, None] + np.arange(d)[None, :]
-            hess = hess + sp.csc_matrix(
-                (blocks.ravel(), (np.repeat(dofs, d, axis=1).ravel(),
-                                  np.tile(dofs, (1, d)).ravel())), shape=(self.n, self.n))
-        return phi, grad, fric_grad, (hess.tocsc(), low_rank)
-
     def _mass_damping(self, dq: np.ndarray, dt: float, grad: np.ndarray) -> float:
         """Rayleigh mass damping alpha M dq^2 / (2 dt) (J); its gradient added to grad."""
         if self.alpha <= 0:
             return 0.0
         grad += self.alpha * self.m * dq / dt
         return 0.5 * self.alpha * float(np.sum(self.m * dq ** 2)) / dt
-
-    def _friction(self, q, q_n, dt: float, con: StepConstraints, grad: np.ndarray):
-        """Kinetic friction of the sliding nodes: (potential J, its gradient (n_dof,) N,
-        also added to grad, its (k, d, d) Hessian blocks N/m or None)."""
-        fric_grad = np.zeros(self.n)
-        if not con.friction_nodes.size:
-            return 0.0, fric_grad, None
-        phi_f, blocks = self._cone_friction(q, q_n, dt, con, fric_grad)
-        grad += fric_grad
-        return phi_f, fric_grad, blocks
 
     # ------------------------------------------------------------------ fast path
     def _build_fast_pattern(self) -> None:
@@ -343,6 +268,10 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._scatter = [np.zeros((0, 0), np.int64) if keys is None else
                          np.searchsorted(unique, keys).astype(np.int64)
                          for keys in element_keys]
+        # (energy, scatter) in evaluation order: with stiffness damping the elastic
+        # energies first (``evaluate_fast``; the sort is stable)
+        self._evaluation_order = sorted(zip(self.energies, self._scatter),
+                                        key=lambda pair: self.beta > 0 and not pair[0].elastic)
         col_node, row_node = unique // n // d, unique % n // d
         block_keys = np.unique(col_node * nodes + row_node)
         bcol, brow = block_keys // nodes, block_keys % nodes
@@ -368,7 +297,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._matvec_indptr = self._indptr.astype(np.int64)
         self._matvec_indices = self._indices.astype(np.int64)
 
-    def _kink_step(self, q, q_n, dq, dt, con: StepConstraints) -> float:
+    def kink_step(self, q, q_n, dq, dt, con: StepConstraints) -> float:
         """The line search's first step for sliding nodes: a Newton step that turns a
         node's slip velocity s around (s . ds < 0) past the point nearest to zero
         overshoots the kink of the smoothed friction law (its curvature along s is
@@ -393,20 +322,37 @@ class PatternCachingSolver(ImplicitEulerSolver):
     def _csc(self, data: np.ndarray) -> sp.csc_matrix:
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
 
-    def _evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
-        """As ``_evaluate``, with the Hessian as CSC values on the fixed pattern."""
+    def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+        """As ``incremental_potential``, with the Hessian as CSC values on the fixed pattern.
+
+        Rayleigh stiffness damping (beta > 0) adds beta dq^T K dq / (2 dt), K the elastic
+        energies' Hessian at q without their rank-one terms (as ``incremental_potential``):
+        the elastic energies are then evaluated first, their Hessian values copied as K."""
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
         grad = self.m * inertia / dt ** 2
-        data = np.zeros(self._nnz if hessian else 1)
+        damped = self.beta > 0
+        full = hessian or damped
+        data = np.zeros(self._nnz if full else 1)
         low_rank = []
-        for energy, scatter in zip(self.energies, self._scatter):
-            value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
+        stiffness = None
+        for energy, scatter in self._evaluation_order:
+            if damped and stiffness is None and not energy.elastic:
+                stiffness = data.copy()
+            value, terms = energy.evaluate_into(q, grad, data, scatter, full)
             if not np.isfinite(value):
                 return np.inf, None, None, None
             phi += value
             low_rank.extend(terms)
-        phi += self._mass_damping(q - q_n, dt, grad)
+        dq = q - q_n
+        phi += self._mass_damping(dq, dt, grad)
+        if damped:
+            stiffness = data.copy() if stiffness is None else stiffness
+            cdq = self._csc(stiffness) @ dq
+            phi += 0.5 * self.beta * float(dq @ cdq) / dt
+            grad += self.beta * cdq / dt
+            if hessian:
+                data += (self.beta / dt) * stiffness
         k = con.friction_nodes
         fric_grad = np.zeros(self.n)
         if k.size:
@@ -427,6 +373,15 @@ class PatternCachingSolver(ImplicitEulerSolver):
                                     np.ascontiguousarray(blocks))
         return phi, grad, fric_grad, (data, low_rank)
 
+    def newton_matrix(self, hdata: np.ndarray, filters: np.ndarray,
+                      diagonal: np.ndarray) -> np.ndarray:
+        """CSC values of S H S + (I - S) + diag(``diagonal`` (n_dof,)), H the CSC values
+        ``hdata`` on the pattern, S the node filters (n_nodes, d, d)."""
+        out = np.empty(self._nnz)
+        kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, filters,
+                              diagonal, out)
+        return out
+
     def _factorise(self, values: np.ndarray) -> _BlockLDL:
         """The block LDL^T of A (CSC ``values`` on the pattern). Raises RuntimeError
         (singular)."""
@@ -435,7 +390,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         ldl.factorise(values)
         return ldl
 
-    def _linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
+    def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
                       dt: float, filters: np.ndarray):
         """dq with (A + sum c u u^T) dq = rhs (A: CSC ``values`` on the pattern) by
         conjugate gradients preconditioned with the kept LDL^T, factorised afresh when CG
@@ -548,86 +503,112 @@ class PatternCachingSolver(ImplicitEulerSolver):
 
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:
-        """``ImplicitEulerSolver.solve`` (same Newton iteration, line search and
-        shifts), on the fast path when it applies."""
+        """One implicit Euler step: ``newton.newton_iteration`` (interpreted) on this
+        solver's pattern (``_NewtonProblem``); without the fast path the reference
+        ``ImplicitEulerSolver.solve``. A later contact pass of the same step starts from
+        the last pass's solution in the directions the new filter leaves free.
+
+        Raises:
+            NewtonFailure: no convergence, no descent, or an infeasible start.
+        """
         con = as_cone(con)
         if not self.fast:
             return super().solve(q_n, v_n, dt, q_start, con)
         self.stats['passes'] += 1
-        filters = np.ascontiguousarray(con.filters, dtype=float)
-        s_diag = np.einsum('naa->na', filters).ravel()
-
-        def filtered(vec):
-            out = np.empty(self.n)
-            kernels.apply_filters(filters, np.ascontiguousarray(vec), out)
-            return out
-
-        q = q_start.copy()
-        history: list[float] = []
-        phi = np.inf
+        problem = _NewtonProblem(self, q_n, v_n, dt, con)
+        history = np.zeros(self.max_iterations)
         warm = self._warm
+        status = newton.INFEASIBLE_START
         if warm is not None and warm[1] == dt and np.array_equal(warm[0], q_n):
-            # another contact pass of the same step: start from the last pass's solution
-            # in the free directions, the prescribed values in the held ones
-            q = q_start + filtered(warm[2] - q_start)
-            phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
-        if not np.isfinite(phi):
+            q = q_start + problem.filtered(warm[2] - q_start)
+            status, iterations, n_hist = newton.newton_iteration_interpreted(
+                problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
+        if status == newton.INFEASIBLE_START:
             q = q_start.copy()
-            phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, hessian=True)
-        if not np.isfinite(phi):
-            raise NewtonFailure('start of step is infeasible (inverted element)', history)
-        out = np.empty(self._nnz)
-        reuse = False
-        matrix = low = None
-        for iteration in range(1, self.max_iterations + 1):
-            g_f = filtered(grad)
-            if not reuse:
-                hdata, low_rank = parts
-                low = [(coef, filtered(vec)) for coef, vec in low_rank]
+            status, iterations, n_hist = newton.newton_iteration_interpreted(
+                problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
+        done = history[:n_hist].tolist()
+        if status != newton.OK:
+            raise NewtonFailure(NEWTON_FAILURES[status].format(self.max_iterations), done)
+        self._warm = (q_n.copy(), dt, q)
+        return StepSolution(q, problem.reaction, iterations, done)
 
-            def solve_shifted(shift):
-                nonlocal matrix
-                if not (reuse and shift == 0.0):
-                    kernels.filter_blocks(hdata, self._block_pos, self._block_nodes,
-                                          filters, shift * s_diag * self.m / dt ** 2, out)
-                    matrix = out.copy()
-                return self._linear_solve(matrix, -g_f, low, shift > 0, dt, filters)
 
-            dq, slope = descent_direction(solve_shifted, g_f, history)
-            if kernels.max_abs(dq) / dt < self.tolerance:
-                q = q + dq
-                _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
-                history.append(kernels.max_abs(dq) / dt)
-                self._warm = (q_n.copy(), dt, q)
-                return StepSolution(q, grad - fric_grad, iteration, history)
-            # a full step this large is followed by a new Hessian: the line search's
-            # first trial (usually taken) evaluates it with the gradient
-            full_step_hessian = (reuse or
-                                 kernels.max_abs(dq) / dt >= HESSIAN_REUSE * self.tolerance)
-            first_trial = []
+class _NewtonProblem(StepProblem):
+    """One ``PatternCachingSolver.solve``'s problem for ``newton.newton_iteration``: its
+    hooks as methods (see ``core.newton``). The Newton matrix is the CSC values of
+    S H S + (I - S) + shift S M / dt^2 with the energies' rank-one terms, solved by the
+    solver's preconditioned CG (``linear_solve``, whose LDL^T preconditioner is kept
+    from solve to solve). The kept Newton matrix serves this solve only, after steps
+    below ``KEEP_BELOW`` times the tolerance: a solve's first step is far larger, and
+    a matrix kept from the last solve took 15 % more Newton systems on the solid apple's
+    grasp (bench_3d).
 
-            def evaluate(x):
-                if full_step_hessian and not first_trial:
-                    phi_x, grad_x, _, parts_x = self._evaluate_fast(x, q_n, v_n, dt, con, True)
-                    first_trial.append(parts_x)
-                    return phi_x, grad_x
-                return self._evaluate_fast(x, q_n, v_n, dt, con, False)[:2]
+    Args:
+        solver: the ``PatternCachingSolver`` (fast path).
+        q_n, v_n: (n_dof,) m, m/s at the start of the step.  dt: s.
+        con: the step's constraints, 2D friction as a cone (``as_cone``).
+    """
 
-            q, phi, grad, step = line_search(evaluate, q, dq, phi, slope,
-                                             kernels.max_abs(g_f), filtered, history,
-                                             first_step=min(self.max_step(q, dq),
-                                                            self._kink_step(q, q_n, dq, dt,
-                                                                            con)))
-            norm = step * kernels.max_abs(dq) / dt
-            history.append(norm)
-            if norm < self.tolerance:
-                _, grad, fric_grad, _ = self._evaluate_fast(q, q_n, v_n, dt, con, False)
-                self._warm = (q_n.copy(), dt, q)
-                return StepSolution(q, grad - fric_grad, iteration, history)
-            reuse = not reuse and norm < HESSIAN_REUSE * self.tolerance
-            if not reuse:
-                if step == 1.0 and first_trial:
-                    parts = first_trial[0]
-                else:
-                    phi, grad, _, parts = self._evaluate_fast(q, q_n, v_n, dt, con, True)
-        raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
+    def __init__(self, solver: PatternCachingSolver, q_n: np.ndarray, v_n: np.ndarray,
+                 dt: float, con: StepConstraints):
+        super().__init__(solver, q_n, v_n, dt, con, solver.evaluate_fast)
+        self.filters = np.ascontiguousarray(con.filters, dtype=float)
+        self.s_diag = np.einsum('naa->na', self.filters).ravel()
+        self._filtered = np.empty(solver.n)
+        self.matrix = self.low = None
+        self.shift = 0.0
+        self.kept = None  # (CSC values, rank-one terms) of the kept Newton matrix
+
+    def filtered(self, vec: np.ndarray) -> np.ndarray:
+        """S vec (n_dof,)."""
+        out = np.empty(self.solver.n)
+        kernels.apply_filters(self.filters, np.ascontiguousarray(vec), out)
+        return out
+
+    def kept_fits(self) -> bool:
+        return False  # a new solve: nothing kept (``keep``)
+
+    def project(self, grad, g_f) -> None:
+        kernels.apply_filters(self.filters, grad, g_f)
+
+    def forget(self) -> None:
+        self.kept = None
+
+    def keep(self) -> None:
+        self.kept = (self.matrix, self.low)
+
+    def factorise(self, x, shift) -> bool:
+        solver = self.solver
+        hdata, low_rank = self.parts
+        self.matrix = solver.newton_matrix(hdata, self.filters,
+                                           shift * self.s_diag * solver.m / self.dt ** 2)
+        self.low = [(coef, self.filtered(vec)) for coef, vec in low_rank]
+        self.shift = shift
+        return True
+
+    def direction(self, g_f, dq, fresh) -> tuple[bool, float]:
+        if fresh:
+            matrix, low, refactor = self.matrix, self.low, self.shift > 0
+        else:
+            (matrix, low), refactor = self.kept, False
+        try:
+            x = self.solver.linear_solve(matrix, -g_f, low, refactor, self.dt, self.filters)
+        except RuntimeError:  # a singular factor
+            return False, 0.0
+        dq[:] = x
+        return bool(np.all(np.isfinite(x))), float(g_f @ x)
+
+    def step_bound(self, x, dq) -> float:
+        return min(self.solver.max_step(x, dq),
+                   self.solver.kink_step(x, self.q_n, dq, self.dt, self.con))
+
+    def keep_limit(self) -> float:
+        return KEEP_BELOW * self.solver.tolerance
+
+    def filtered_max(self, g) -> float:
+        kernels.apply_filters(self.filters, g, self._filtered)
+        return kernels.max_abs(self._filtered)
+
+    def finish(self, x, grad) -> None:
+        self.reaction = grad - self.fric_grad

@@ -10,9 +10,11 @@ where it matters:
 - ``ring_stretching``, ``ring_bending``, ``ring_pressure``: the band assembly of the
   energies' element functions (``energies.kernels``: ``edge_spring``, ``hinge``,
   ``area_pressure``), which their classes' CSC kernels call too;
-- ``newton_solve``: ``ImplicitEulerSolver.solve`` (stepper.py);
-- ``substep``: ``contact_passes.contact_step`` (the contact passes themselves are
-  ``contact_kernels``, shared with it);
+- ``newton_solve``: the one Newton iteration (``newton.newton_iteration``) compiled on
+  this module's Newton matrices, its hooks the overloads of the Newton section;
+- ``substep``: ``contact_passes.contact_step``: the one pass driver
+  (``contact_passes.contact_passes``) compiled on this module's Newton solve, its hooks
+  the overloads after the Newton section's;
 - ``step_measures``: the numbers ``Simulation._measure`` reports, the outline's by
   ``measures.outline_measures`` and ``measures.face_contact_length_of`` (as
   ``measures.deformation``); ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
@@ -48,9 +50,9 @@ import math
 import numpy as np
 from numba import njit, types
 from numba.core import cgutils
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
-from gripper_sim.core import contact_kernels, sparse_ldl
+from gripper_sim.core import contact_passes, newton, sparse_ldl
 from gripper_sim.core.damage import P_SIZE  # noqa: F401 (the patch table's width, for fast.py)
 from gripper_sim.core.damage import (FACE_BODY, FACE_CURVATURE, FACE_PADDED, FACE_SIZE,
                                      damage_patches)
@@ -62,25 +64,12 @@ from gripper_sim.core.measures import face_contact_length_of, outline_measures
 from gripper_sim.core.pad import (PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X, PF_NEW_Z, PF_NX,
                                   PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE, PF_SPEED,
                                   pad_blocks, pad_forces, pad_rows, pad_terms)
-from gripper_sim.core.stepper import CONTRACTION, MAX_FACTOR_AGE
-
-#: substep / newton_solve status codes
-OK = 0
-INFEASIBLE_START = 1
-NO_DESCENT = 2
-LINE_SEARCH_FAILED = 3
-NO_CONVERGENCE = 4
-UNSUPPORTED = 5  # a non-symmetric contact filter (oblique faces): use the reference path
-
+from gripper_sim.core.newton import (C_DIRECTIONS, C_EVALS, C_FACTORS,  # noqa: F401
+                                     C_HESSIAN_EVALS, C_SIZE, C_SOLVES, C_SUBSTEPS,
+                                     INFEASIBLE_START, LINE_SEARCH_FAILED, MAX_FACTOR_AGE,
+                                     NO_CONVERGENCE, NO_DESCENT, OK, UNSUPPORTED)
 #: regularisation speed (m/s) of the kinetic friction law, as stepper.FRICTION_SMOOTHING
 FRICTION_SMOOTHING = 1e-4
-
-#: relative rise of the potential the line search's gradient test lets pass, as
-#: stepper.PHI_ROUNDOFF
-PHI_ROUNDOFF = 1e-9
-
-#: shifts of the inertia-like diagonal tried when the Newton matrix gives no descent
-SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
 
 #: columns of ``face_par`` after the seven face parameters: the jaw of the face (-1: none)
 #: and the face origin's offset (x, z) m from the jaw origin
@@ -90,10 +79,6 @@ FP_JAW, FP_OFFSET_X, FP_OFFSET_Z, FP_SIZE = 7, 8, 9, 10
 F_DT, F_ALPHA, F_BETA, F_TOL, F_GRAVITY, F_RELEASE, F_VCORR, F_DEPTH = range(8)
 # ipar layout
 I_MAX_IT, I_MAX_PASSES = range(2)
-#: work counters: Newton solves (contact passes), energy evaluations with and without
-#: the Hessian, Newton matrix factorisations, substeps, solves with a factor (Newton
-#: directions)
-C_SOLVES, C_HESSIAN_EVALS, C_EVALS, C_FACTORS, C_SUBSTEPS, C_DIRECTIONS, C_SIZE = range(7)
 
 
 def band_order(n_nodes: int) -> np.ndarray:
@@ -317,9 +302,9 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
               fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
               hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values,
               pad_nodes, pad_par):
-    """Phi of stepper.ImplicitEulerSolver._evaluate, its gradient (into ``grad``) and the
-    friction gradient (into ``fric_grad``); the elastic band Hessian into ``band``, the
-    energies (4,) into ``values``.
+    """Phi of stepper.ImplicitEulerSolver.incremental_potential, its gradient (into
+    ``grad``) and the friction gradient (into ``fric_grad``); the elastic band Hessian
+    into ``band``, the energies (4,) into ``values``.
 
     Returns (phi, rank-one c).
     """
@@ -401,7 +386,7 @@ def _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab):
                 ab[p, 0, r, c] += acc
 
 
-@njit(cache=True, error_model='numpy', inline='always')
+@njit(cache=True, error_model='numpy')
 def _filtered_max(filters, g):
     """max |S g| over dofs."""
     out = 0.0
@@ -832,8 +817,8 @@ NEWTON_WORK = 16
 KEPT_PER_NODE = 8
 #: the kept factor's metadata: valid (1.0 or 0.0), the step dt (s) it was made for, the
 #: solves it has served, its kinetic friction nodes and soft pad rows (counts), its
-#: rank-one coefficient c
-K_VALID, K_DT, K_AGE, K_FRICTION, K_PADS, K_C, KEPT_META = range(7)
+#: rank-one coefficient c; then the rank-one c of the last evaluation
+K_VALID, K_DT, K_AGE, K_FRICTION, K_PADS, K_C, K_LAST_C, KEPT_META = range(8)
 
 
 @njit(cache=True, error_model='numpy')
@@ -846,7 +831,8 @@ def _kept_key(kept, n):
             kept[6 * n:8 * n], kept[8 * n:8 * n + KEPT_META])
 
 
-def forget_kept(work: np.ndarray) -> None:
+@njit(cache=True, error_model='numpy')
+def forget_kept(work):
     """Drops the factor ``_newton_solve`` keeps in ``work`` (its work array, or
     ``substep``'s, whose tail it is): the next solve makes it afresh."""
     work[work.shape[0] - KEPT_META + K_VALID] = 0.0
@@ -943,16 +929,11 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
                   masses2, alpha, beta, tol, max_it, edges, spar, triples, bpar, ring, press,
                   flesh, gravity_grad, pos, q_out, reaction_out, history, values, counts,
                   pad_nodes, pad_par, order, storage, work):
-    """One implicit Euler step by Newton, as ``ImplicitEulerSolver.solve`` (stepper.py).
+    """One implicit Euler step by Newton: ``newton.newton_iteration`` on the ring's block
+    band or the solid's sparse block LDL^T (its hooks: the overloads below).
 
-    The Newton matrix (with its rank-one pressure term) is kept, factorised, from
-    iteration to iteration and from solve to solve - a chord (modified Newton) method,
-    as ``ImplicitEulerSolver.solve`` -: while it fits (``_kept_fits``: the same
-    constraints and dt, at most MAX_FACTOR_AGE solves old) and each whole step with it cuts the
-    filtered residual max |S g| below CONTRACTION of the last. It is made afresh from the
-    Hessian at the iterate when it does not fit, and when a step with it fails (no
-    descent, or no decrease at the whole step: that iteration is done again) or
-    contracts too slowly. Convergence is the same test: max |dq| / dt < tol.
+    The kept matrix is the factorised Newton matrix with its rank-one pressure term; it
+    fits (``_kept_fits``) under the same constraints and dt.
 
     Args:
         q_n, v_n: (2n,) m and m/s at the start of the step.  dt: s.
@@ -979,140 +960,227 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
     """
     n2 = q_n.shape[0]
     n = n2 // 2
-    n_fr = fr_nodes.shape[0]
-    # flags as variables, not literals: one compiled _evaluate for all call sites
-    yes = np.bool_(True)
-    no = np.bool_(False)
     for i in range(n):
         if filters[i, 0, 1] != filters[i, 1, 0]:
             return UNSUPPORTED, 0, 0
-    band, ab, l_values, d_inv = storage
-    grads = work[:4 * n2].reshape((4, n2))
-    grad = work[4 * n2:5 * n2]
-    grad_t = work[5 * n2:6 * n2]
-    fric_grad = work[6 * n2:7 * n2]
-    area_grad = work[7 * n2:8 * n2]
-    area_grad[:] = 0.0  # only a ring's pressure writes it
-    tmp = work[8 * n2:9 * n2]
-    cdq = work[9 * n2:10 * n2]
-    g_f = work[10 * n2:11 * n2]
-    dq = work[11 * n2:12 * n2]
-    x = work[12 * n2:13 * n2]
-    y = work[13 * n2:14 * n2]
-    u = work[14 * n2:15 * n2]
-    trial = work[15 * n2:16 * n2]
-    kept = work[16 * n2:]
-    _, _, _, kept_u, meta = _kept_key(kept, n)
-    q = q_out
-    q[:] = q_start
-    n_hist = 0
-    counts[C_SOLVES] += 1
-    # fresh: the Hessian at q is in band and the next step needs a new factor
-    fresh = not _kept_fits(kept, filters, fr_nodes, dt, pad_nodes)
-    if not fresh:
-        meta[K_AGE] += 1.0
-    counts[C_HESSIAN_EVALS if fresh else C_EVALS] += 1
-    hessian = yes if fresh else no
-    phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                       fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh,
-                       gravity_grad, pos, hessian, grad, fric_grad, grads, band,
-                       area_grad, tmp, cdq, values, pad_nodes, pad_par)
-    if not math.isfinite(phi):
-        return INFEASIBLE_START, 0, n_hist
-    iteration = 0
-    while iteration < max_it:
-        iteration += 1
-        for i in range(n):
-            for a in range(2):
-                g_f[2 * i + a] = (filters[i, a, 0] * grad[2 * i]
-                                  + filters[i, a, 1] * grad[2 * i + 1])
-                u[2 * i + a] = (filters[i, a, 0] * area_grad[2 * i]
-                                + filters[i, a, 1] * area_grad[2 * i + 1])
-        found = False
-        slope = 0.0
-        if fresh:
-            meta[K_VALID] = 0.0
-            for shift in SHIFTS:
-                counts[C_FACTORS] += 1
-                if not _newton_factor(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
-                                      fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab,
-                                      pad_nodes, pad_par, flesh, l_values, d_inv):
-                    continue
-                counts[C_DIRECTIONS] += 1
-                finite, slope = _direction(ab, l_values, d_inv, flesh, pos, g_f, u, c, x, y,
-                                           dq)
-                if finite and slope <= 0:
-                    found = True
-                    break
-            if not found:
-                return NO_DESCENT, iteration, n_hist
-            _keep(kept, filters, fr_nodes, dt, pad_nodes, u, c)
-        else:
-            counts[C_DIRECTIONS] += 1
-            finite, slope = _direction(ab, l_values, d_inv, flesh, pos, g_f, kept_u,
-                                       meta[K_C], x, y, dq)
-            found = finite and slope <= 0
-        residual = 0.0
-        dq_max = 0.0
-        for m in range(n2):
-            residual = max(residual, abs(g_f[m]))
-            dq_max = max(dq_max, abs(dq[m]))
-        # a step below the tolerance is taken whole, without a line search (the first
-        # trial below, accepted as it is): q + dq, then the reaction there
-        small = dq_max / dt < tol
-        accepted = False
-        phi_trial = 0.0
-        c_trial = 0.0
-        norm = 0.0
-        step = 1.0
-        # a step with the kept factor is tried whole only
-        tries = 30 if fresh else (1 if found else 0)
-        for _ in range(tries):
-            for m in range(n2):
-                trial[m] = q[m] + step * dq[m]
-            norm = 0.0
-            for m in range(n2):
-                norm = max(norm, abs(step * dq[m]))
-            norm /= dt
-            counts[C_EVALS] += 1
-            phi_trial, c_trial = _evaluate(
-                trial, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh,
-                gravity_grad, pos, no, grad_t, fric_grad, grads, band, area_grad,
-                tmp, cdq, values, pad_nodes, pad_par)
-            if small or math.isfinite(phi_trial) and (
-                    phi_trial <= phi + 1e-4 * step * slope
-                    or (phi_trial <= phi + PHI_ROUNDOFF * abs(phi)
-                        and _filtered_max(filters, grad_t) < 0.5 * residual)):
-                accepted = True
-                break
-            step *= 0.5
-        if not accepted:
+    work[7 * n2:8 * n2] = 0.0  # area_grad: only a ring's pressure writes it
+    q_out[:] = q_start
+    problem = (q_n, v_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, masses2, alpha, beta,
+               edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, reaction_out,
+               values, pad_nodes, pad_par, order, storage, work)
+    return newton.newton_iteration(problem, q_out, dt, tol, max_it, history, counts)
+
+
+# The hooks of ``newton.newton_iteration`` for ``_newton_solve``'s problem tuple. Its
+# work array holds (``NEWTON_WORK`` vectors of 2n) grads (4 of them), grad, grad_t,
+# fric_grad, area_grad, tmp, cdq, g_f, dq, x, y, u, trial; then the kept factor.
+@njit(cache=True, error_model='numpy', inline='always')
+def _work_vectors(work, n2):
+    """(grads (4, 2n), grad, grad_t, fric_grad, area_grad, tmp, cdq, g_f, dq, x, y, u,
+    trial, kept) of the work array."""
+    return (work[:4 * n2].reshape((4, n2)), work[4 * n2:5 * n2], work[5 * n2:6 * n2],
+            work[6 * n2:7 * n2], work[7 * n2:8 * n2], work[8 * n2:9 * n2],
+            work[9 * n2:10 * n2], work[10 * n2:11 * n2], work[11 * n2:12 * n2],
+            work[12 * n2:13 * n2], work[13 * n2:14 * n2], work[14 * n2:15 * n2],
+            work[15 * n2:16 * n2], work[16 * n2:])
+
+
+def _is_problem(problem):
+    return isinstance(problem, types.BaseTuple)
+
+
+@overload(newton.vectors, jit_options=dict(error_model='numpy'), inline='always')
+def _vectors(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            work = problem[26]
+            n2 = problem[0].shape[0]
+            (_, grad, grad_t, _, _, _, _, g_f, dq, _, _, _, trial,
+             _) = _work_vectors(work, n2)
+            return grad, grad_t, g_f, dq, trial
+        return impl
+
+
+@overload(newton.kept_fits, jit_options=dict(error_model='numpy'), inline='always')
+def _kept_fits_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            dt, filters, fr_nodes, pad_nodes, work = (problem[2], problem[3], problem[4],
+                                                      problem[22], problem[26])
+            n = filters.shape[0]
+            kept = work[16 * 2 * n:]
+            fits = _kept_fits(kept, filters, fr_nodes, dt, pad_nodes)
+            if fits:
+                meta = _kept_key(kept, n)[4]
+                meta[K_AGE] += 1.0
+            return fits
+        return impl
+
+
+@overload(newton.evaluate, jit_options=dict(error_model='numpy'), inline='always')
+def _evaluate_hook(problem, x, hessian, grad):
+    if _is_problem(problem):
+        def impl(problem, x, hessian, grad):
+            (q_n, v_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, masses2, alpha, beta,
+             edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, _, values,
+             pad_nodes, pad_par, _, storage, work) = problem
+            n2 = q_n.shape[0]
+            (grads, _, _, fric_grad, area_grad, tmp, cdq, _, _, _, _, _, _,
+             kept) = _work_vectors(work, n2)
+            phi, c = _evaluate(x, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
+                               fr_bound, fr_speed, fr_nodes.shape[0], edges, spar, triples,
+                               bpar, ring, press, flesh, gravity_grad, pos, hessian, grad,
+                               fric_grad, grads, storage[0], area_grad, tmp, cdq, values,
+                               pad_nodes, pad_par)
+            _kept_key(kept, n2 // 2)[4][K_LAST_C] = c
+            return phi
+        return impl
+
+
+@overload(newton.project, jit_options=dict(error_model='numpy'), inline='always')
+def _project_hook(problem, grad, g_f):
+    if _is_problem(problem):
+        def impl(problem, grad, g_f):
+            filters, work = problem[3], problem[26]
+            n = filters.shape[0]
+            (_, _, _, _, area_grad, _, _, _, _, _, _, u, _,
+             _) = _work_vectors(work, 2 * n)
+            for i in range(n):
+                for a in range(2):
+                    g_f[2 * i + a] = (filters[i, a, 0] * grad[2 * i]
+                                      + filters[i, a, 1] * grad[2 * i + 1])
+                    u[2 * i + a] = (filters[i, a, 0] * area_grad[2 * i]
+                                    + filters[i, a, 1] * area_grad[2 * i + 1])
+        return impl
+
+
+@overload(newton.forget, jit_options=dict(error_model='numpy'), inline='always')
+def _forget_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            forget_kept(problem[26])
+        return impl
+
+
+@overload(newton.keep, jit_options=dict(error_model='numpy'), inline='always')
+def _keep_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            dt, filters, fr_nodes, pad_nodes, work = (problem[2], problem[3], problem[4],
+                                                      problem[22], problem[26])
+            n = filters.shape[0]
+            (_, _, _, _, _, _, _, _, _, _, _, u, _, kept) = _work_vectors(work, 2 * n)
+            meta = _kept_key(kept, n)[4]
+            _keep(kept, filters, fr_nodes, dt, pad_nodes, u, meta[K_LAST_C])
+        return impl
+
+
+@overload(newton.factorise, jit_options=dict(error_model='numpy'), inline='always')
+def _factorise_hook(problem, x, shift):
+    if _is_problem(problem):
+        def impl(problem, x, shift):
+            (q_n, _, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, masses2, alpha, beta,
+             _, _, _, _, _, _, flesh, _, pos, _, _, pad_nodes, pad_par, order, storage,
+             _) = problem
+            band, ab, l_values, d_inv = storage
+            return _newton_factor(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                                  fr_bound, fr_speed, fr_nodes.shape[0], x, q_n, pos, order,
+                                  shift, ab, pad_nodes, pad_par, flesh, l_values, d_inv)
+        return impl
+
+
+@overload(newton.direction, jit_options=dict(error_model='numpy'), inline='always')
+def _direction_hook(problem, g_f, dq, fresh):
+    if _is_problem(problem):
+        def impl(problem, g_f, dq, fresh):
+            flesh, pos, storage, work = problem[17], problem[19], problem[25], problem[26]
+            n = pos.shape[0]
+            (_, _, _, _, _, _, _, _, _, x, y, u, _, kept) = _work_vectors(work, 2 * n)
+            _, ab, l_values, d_inv = storage
+            _, _, _, kept_u, meta = _kept_key(kept, n)
             if fresh:
-                return LINE_SEARCH_FAILED, iteration, n_hist
-            # the kept factor failed here: this iteration again with the Hessian at q
-            iteration -= 1
-        else:
-            q[:] = trial
-            phi = phi_trial
-            c = c_trial
-            grad[:] = grad_t
-            history[n_hist] = norm
-            n_hist += 1
-            if norm < tol:
-                for m in range(n2):
-                    reaction_out[m] = grad[m] - fric_grad[m]
-                return OK, iteration, n_hist
-            if fresh or _filtered_max(filters, grad) < CONTRACTION * residual:
-                fresh = False
-                continue
-        fresh = True
-        counts[C_HESSIAN_EVALS] += 1
-        phi, c = _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
-                           fr_bound, fr_speed, n_fr, edges, spar, triples, bpar, ring, press,
-                           flesh, gravity_grad, pos, yes, grad, fric_grad, grads, band,
-                           area_grad, tmp, cdq, values, pad_nodes, pad_par)
-    return NO_CONVERGENCE, max_it, n_hist
+                return _direction(ab, l_values, d_inv, flesh, pos, g_f, u, meta[K_LAST_C], x,
+                                  y, dq)
+            return _direction(ab, l_values, d_inv, flesh, pos, g_f, kept_u, meta[K_C], x, y,
+                              dq)
+        return impl
+
+
+@overload(newton.step_bound, jit_options=dict(error_model='numpy'), inline='always')
+def _step_bound_hook(problem, x, dq):
+    if _is_problem(problem):
+        def impl(problem, x, dq):
+            return 1.0
+        return impl
+
+
+@overload(newton.keep_limit, jit_options=dict(error_model='numpy'), inline='always')
+def _keep_limit_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return np.inf
+        return impl
+
+
+@overload(newton.filtered_max, jit_options=dict(error_model='numpy'), inline='always')
+def _filtered_max_hook(problem, g):
+    if _is_problem(problem):
+        def impl(problem, g):
+            return _filtered_max(problem[3], g)
+        return impl
+
+
+@overload(newton.finish, jit_options=dict(error_model='numpy'), inline='always')
+def _finish_hook(problem, x, grad):
+    if _is_problem(problem):
+        def impl(problem, x, grad):
+            reaction_out, work = problem[20], problem[26]
+            n2 = x.shape[0]
+            fric_grad = _work_vectors(work, n2)[3]
+            for m in range(n2):
+                reaction_out[m] = grad[m] - fric_grad[m]
+        return impl
+
+
+# The hooks of ``contact_passes.contact_passes`` for ``substep``'s problem tuple: the
+# constraint arrays are views of substep's work array, the solve is ``_newton_solve``.
+# Not inlined (a call each per pass): inlined, next to the inlined contact kernels, numba
+# 0.68 compiled ``contact_kernels.update`` wrongly (its ``release`` wrote nothing).
+@overload(contact_passes.pass_arrays, jit_options=dict(error_model='numpy'))
+def _pass_arrays_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return problem[3], problem[4], problem[5], problem[6], problem[8], problem[9]
+        return impl
+
+
+@overload(contact_passes.solve, jit_options=dict(error_model='numpy'))
+def _solve_hook(problem, start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed, k):
+    if _is_problem(problem):
+        def impl(problem, start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed, k):
+            (q_n, v_flat, dt, _, _, _, _, fr_t, _, _, fr_speed_flat, masses2, alpha, beta, tol,
+             max_it, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, q,
+             reaction, history, values, counts, pad_nodes, pad_par, order, storage,
+             newton_work, out) = problem
+            status, its, n_hist = _newton_solve(
+                q_n, v_flat, dt, start.reshape(q_n.shape[0]), filters, fr_nodes[:k],
+                fr_t[:k], fr_bound[:k], fr_speed_flat[:k], masses2, alpha, beta, tol, max_it,
+                edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, q,
+                reaction, history, values, counts, pad_nodes, pad_par, order, storage,
+                newton_work)
+            out[1] = n_hist
+            return status, its
+        return impl
+
+
+@overload(contact_passes.solution, jit_options=dict(error_model='numpy'))
+def _solution_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            q, reaction = problem[25], problem[26]
+            n = q.shape[0] // 2
+            return q.reshape((n, 2)), reaction.reshape((n, 2))
+        return impl
 
 
 # ---------------------------------------------------------------------- contact
@@ -1360,8 +1428,6 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     v_flat = v_n.reshape(2 * n)
     released = bwork[:n]
     slipped = bwork[n:2 * n]
-    released[:] = False
-    slipped[:] = False
     faces = contact_faces(face_par, face_dyn)
     state = (obstacle, mode, normal_force, bounce_speed, secondary, secondary_bounce)
     start = work[2 * n:4 * n].reshape((n, 2))
@@ -1380,31 +1446,18 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     order = iwork[:n]
     fr_nodes = iwork[n:2 * n]
     v_min = max(5.0 * fpar[F_GRAVITY] * dt, 1e-3)
-    iterations = 0
-    n_hist = 0
-    for _ in range(ipar[I_MAX_PASSES]):
-        n_fr = contact_kernels.constraints(state, faces, x_n, x_pred, dt, fpar[F_VCORR],
-                                           start, filters, fr_nodes, fr_tangents, fr_bound,
-                                           fr_speeds)
-        status, its, n_hist = _newton_solve(
-            q_n, v_flat, dt, start.reshape(2 * n), filters, fr_nodes[:n_fr], fr_t[:n_fr],
-            fr_bound[:n_fr], fr_speed[:n_fr], masses2, fpar[F_ALPHA], fpar[F_BETA],
-            fpar[F_TOL], ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press, flesh,
-            gravity_grad, pos, q, reaction, history, values, counts, pad_nodes, pad_par,
-            order, storage, newton_work)
-        out[1] = n_hist
-        if status != OK:
-            return status
-        iterations += its
-        x = q.reshape((n, 2))
-        r = reaction.reshape((n, 2))
-        if not contact_kernels.update(state, faces, x, x_n, v_n, r, surface, dt,
-                                      fpar[F_RELEASE], v_min, 0.0, released, slipped):
-            break
-    x = q.reshape((n, 2))
-    r = reaction.reshape((n, 2))
-    x_out[:] = x
-    contact_kernels.finish(state, faces, x, x_n, v_n, r, masses, dt, v_out, forces_out)
+    problem = (q_n, v_flat, dt, start, filters, fr_nodes, fr_tangents, fr_t, fr_bound,
+               fr_speeds, fr_speed, masses2, fpar[F_ALPHA], fpar[F_BETA], fpar[F_TOL],
+               ipar[I_MAX_IT], edges, spar, triples, bpar, ring, press, flesh, gravity_grad,
+               pos, q, reaction, history, values, counts, pad_nodes, pad_par, order, storage,
+               newton_work, out)
+    rules = (ipar[I_MAX_PASSES], fpar[F_VCORR], fpar[F_RELEASE], v_min, 0.0, False)
+    status, iterations = contact_passes.contact_passes(
+        problem, state, faces, x_n, v_n, x_pred, surface, masses, dt, rules, released,
+        slipped, v_out, forces_out)
+    if status != OK:
+        return status
+    x_out[:] = q.reshape((n, 2))
     out[2] = out[3] = 0.0
     for i in range(n):  # each jaw's force along its closing axis, summed over its faces
         f = obstacle[i]

@@ -154,6 +154,25 @@ def _skin(fruit: FruitModel) -> np.ndarray:
     return np.ascontiguousarray(fruit.skin_edges, dtype=np.int64).reshape(-1, 2)
 
 
+#: the last fruit's (fruit, surface (n_s,), skin edges (n_e, 2), their rest lengths (n_e,)
+#: m), ``_outline_at_rest``'s
+_kept_outline: tuple | None = None
+
+
+def _outline_at_rest(fruit: FruitModel) -> tuple:
+    """(surface (n_s,) int64, skin edges (n_e, 2) int64, their rest lengths (n_e,) m) of
+    ``fruit`` as the compiled measures take them; kept for the last fruit asked."""
+    global _kept_outline
+    kept = _kept_outline
+    if kept is None or kept[0] is not fruit:
+        skin = _skin(fruit)
+        rest = fruit.rest_positions
+        segments = np.hypot(*(rest[skin[:, 1]] - rest[skin[:, 0]]).T)
+        kept = _kept_outline = (fruit, np.ascontiguousarray(fruit.surface, np.int64), skin,
+                                np.ascontiguousarray(segments))
+    return kept[1:]
+
+
 def tributary_lengths(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
     """(n_surface,) m, half the length of the two skin segments at each surface node."""
     out = np.empty(len(fruit.surface))
@@ -193,13 +212,10 @@ def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,
             outline nodes the jaws hold.
     """
     x = np.ascontiguousarray(x, dtype=float)
-    surface = np.ascontiguousarray(fruit.surface, np.int64)
-    skin = _skin(fruit)
-    rest = fruit.rest_positions
-    rest_segments = np.hypot(*(rest[skin[:, 1]] - rest[skin[:, 0]]).T)
+    surface, skin, rest_segments = _outline_at_rest(fruit)
     pressure = np.empty(len(surface))
     width, max_strain, peak = outline_measures(
-        x, surface, skin, np.ascontiguousarray(rest_segments),
+        x, surface, skin, rest_segments,
         np.ascontiguousarray(normal_force, dtype=float), float(fruit.depth), pressure)
     compression = fruit.rest_width - width
     ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0

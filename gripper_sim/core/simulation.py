@@ -15,6 +15,7 @@ from gripper_sim.configuration import validate
 from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core import barrier
 from gripper_sim.core.damage import DamageTracker
+from gripper_sim.core.deferred import build_deferred
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.fast import FastPath
@@ -206,13 +207,14 @@ class Simulation(SimulationFacade):
             return self._fast.measure(iterations, substeps)
         x = self.q
         forces, obstacle = self.contact_forces_and_holders()
-        fields, normal, (on_left, on_right) = self._common_measures(
+        fields, rarely_read, normal, (on_left, on_right) = self._step_measures(
             x, self.v, forces, obstacle, iterations, substeps)
-        fruit, faces = self.fruit, self.faces_at(self._grip)
+        fruit = self.fruit
         if self._soft is not None:  # the fruit's outline in pairs with the fingers
             on_finger = (on_left | on_right)[fruit.surface]
             length = float(np.sum(tributary_lengths(fruit, x)[on_finger]))
         else:
+            faces = self.faces_at(self._grip)
             if self._barrier is not None:  # the outline lies a barrier gap off the faces
                 faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
             length = sum(face_contact_length(fruit, x, faces[index],
@@ -222,8 +224,9 @@ class Simulation(SimulationFacade):
             on_pad = (self.contacts.obstacle < 0) & (self._pad.holder >= 0)
             length += float(np.sum(tributary_lengths(fruit, x)[on_pad[fruit.surface]]))
         shape = deformation(fruit, x, normal, on_left | on_right, length)
-        return StepResult(**fields, deformation=shape, damage=self.assess_damage(
+        fields.update(deformation=shape, damage=self.assess_damage(
             x, normal, obstacle, shape.compression_ratio))
+        return build_deferred(StepResult, fields, self.DEFERRED_MEASURES, rarely_read)
 
     def assess_damage(self, positions, normal, obstacle, compression_ratio: float):
         """Bruising and crushing after this step (``gripper_sim.core.damage``) from

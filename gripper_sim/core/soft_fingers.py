@@ -123,6 +123,8 @@ class SoftFingers:
         self.masses = np.concatenate([body.masses, body.masses])
         #: (2 k,) global base nodes: the left finger's, then the right one's
         self.base = np.concatenate([side[body.base_nodes] for side in self.nodes])
+        #: (k, d) m, each finger's base nodes at rest in its jaw frame (``base_targets``)
+        self._base_frames = tuple(frame[body.base_nodes] for frame in self.frames)
         #: the fingers' self-contact barrier (each finger against itself), or None; its
         #: steps begin with the fruit's barrier's (``barrier.soft_body_step``)
         self.self_contact: BarrierContact | None = (
@@ -247,7 +249,8 @@ class SoftFingers:
 
     def base_targets(self, left_origin: np.ndarray, right_origin: np.ndarray) -> np.ndarray:
         """(2 k, 2) m, where the base nodes are held (``base`` order)."""
-        return self.placed(left_origin, right_origin)[self.base - self.first]
+        left_rest, right_rest = self._base_frames
+        return np.vstack([left_origin + left_rest, right_origin + right_rest])
 
     def sides_of_base(self) -> tuple[np.ndarray, np.ndarray]:
         """(2 k,) bool each: the base nodes of the left and of the right finger."""

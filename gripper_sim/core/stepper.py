@@ -14,6 +14,12 @@ The stepper is dimension-generic (``dim`` = 2: q = [x0, z0, ...]; 3: q = [x0, y0
 Kinetic friction of a sliding node is the dissipation potential mu_k R_n dt |s_t|_eps,
 |s|_eps = sqrt(|s|^2 + eps^2), with s_t its slip velocity relative to the obstacle along
 one tangent (2D) or in the tangent plane (3D: a Coulomb cone, the smoothed norm).
+
+The Newton iteration itself is ``core.newton.newton_iteration`` (the one for every
+set-up); this module gives it the reference problem (``_SparseProblem``: the energies'
+triplets summed into a scipy sparse matrix, SuperLU), on which the faster ones are
+checked (``fast_solver``, the 2D kernels) and which runs where they do not apply
+(``GRIPPER_SIM_FAST=0``, an energy without a compiled kernel: none in this package).
 """
 from __future__ import annotations
 
@@ -23,17 +29,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from gripper_sim.core import newton
 from gripper_sim.core.energies.base import Energy
 
 #: regularisation speed (m/s) of the kinetic friction law |s| ~ sqrt(s^2 + eps^2)
 FRICTION_SMOOTHING = 1e-4
-
-#: a Newton step with a kept factorisation must cut the filtered residual max |S g| below
-#: this fraction of the last one, else the matrix is assembled and factorised afresh
-CONTRACTION = 0.25
-
-#: Newton solves a kept factorisation serves at most before it is made afresh
-MAX_FACTOR_AGE = 20
 
 
 class NewtonFailure(Exception):
@@ -91,9 +91,10 @@ class KeptFactor:
     age: int = 0
 
     def fits(self, key: tuple) -> bool:
-        """Made for these constraints and dt, and younger than MAX_FACTOR_AGE solves."""
+        """Made for these constraints and dt, and younger than ``newton.MAX_FACTOR_AGE``
+        solves."""
         filters, friction, energies, dt = key
-        return (self.age < MAX_FACTOR_AGE and self.key[3] == dt and self.key[1] == friction
+        return (self.age < newton.MAX_FACTOR_AGE and self.key[3] == dt and self.key[1] == friction
                 and self.key[2] == energies and np.array_equal(self.key[0], filters))
 
 
@@ -143,13 +144,13 @@ class ImplicitEulerSolver:
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.n = self.m.size
-        self._kept: KeptFactor | None = None
+        self.kept_factor: KeptFactor | None = None
 
     def forget_factor(self) -> None:
         """Drop the kept factorisation (a restarted simulation repeats its results)."""
-        self._kept = None
+        self.kept_factor = None
 
-    def _evaluate(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+    def incremental_potential(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
         """Phi, its gradient, the gradient of the friction part, and the Hessian parts."""
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
@@ -257,7 +258,7 @@ class ImplicitEulerSolver:
         barrier: the continuous-collision step, ``Energy.max_step``)."""
         return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
 
-    def _filter_matrix(self, filters: np.ndarray) -> sp.csc_matrix:
+    def filter_matrix(self, filters: np.ndarray) -> sp.csc_matrix:
         n_nodes = filters.shape[0]
         if self.dim != 2:
             d = self.dim
@@ -272,181 +273,149 @@ class ImplicitEulerSolver:
 
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:
-        """Newton iterations from ``q_start`` (constrained dofs already at their targets).
+        """Newton iterations from ``q_start`` (constrained dofs already at their targets):
+        ``newton.newton_iteration`` (interpreted) on the triplet-assembled Newton matrix
+        and its sparse LU (``_SparseProblem``).
 
-        With ``keep_factor`` the Newton matrix (S H S + (I - S), its rank-one terms
-        filtered) is kept, factorised, from iteration to iteration and from solve to
-        solve - a chord (modified Newton) method - while it fits (``KeptFactor.fits``:
-        the same filters, kinetic friction nodes, energies' keys and dt, at most
-        MAX_FACTOR_AGE solves old) and each whole step with it cuts the filtered
-        residual max |S g| below CONTRACTION of the last. It is made afresh from the
-        Hessian at the iterate when it does not fit, when a step with it fails (no
-        descent, or no decrease at the whole step: that iteration is done again) or
-        contracts too slowly. The stopping test is the same: max |dq| / dt < tolerance.
+        With ``keep_factor`` the factorised Newton matrix (S H S + (I - S), its rank-one
+        terms filtered) is kept from iteration to iteration and from solve to solve by the
+        iteration's chord rule, while it fits (``KeptFactor.fits``: the same filters,
+        kinetic friction nodes, energies' keys and dt, at most ``newton.MAX_FACTOR_AGE``
+        solves old); without it every iteration is a full Newton step.
 
         Raises:
             NewtonFailure: no convergence within ``max_iterations``, or no descent.
         """
-        s = self._filter_matrix(con.filters)
-        eye = sp.identity(self.n, format='csc')
-        complement = eye - s
+        problem = _SparseProblem(self, q_n, v_n, dt, con)
         q = q_start.copy()
-        history: list[float] = []
-        key = self._factor_key(con, dt) if self.keep_factor else None
-        kept = self._kept if key is not None and self._kept is not None else None
-        fresh = kept is None or not kept.fits(key)  # the next step needs a new factor
-        if not fresh:
-            kept.age += 1
-        phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=fresh)
-        if not np.isfinite(phi):
-            raise NewtonFailure('start of step is infeasible (inverted element)', history)
-        iteration = 0
-        while iteration < self.max_iterations:
-            iteration += 1
-            g_f = s @ grad
-            if fresh:
-                self._kept = None
-                kept = self._factorised(parts, s, complement, dt, key)
-                dq, slope = descent_direction(
-                    lambda shift: kept.solve(shift, -g_f), g_f, history)
-                found = True
-                if key is not None:
-                    self._kept = kept
-            else:
-                dq = _solve_low_rank(kept.lu, -g_f, kept.low)
-                slope = float(g_f @ dq)
-                found = bool(np.all(np.isfinite(dq))) and slope <= 0
-            residual = float(np.max(np.abs(g_f)))
-            if found and float(np.max(np.abs(dq))) / dt < self.tolerance:
-                q = q + dq
-                _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con, hessian=False)
-                history.append(float(np.max(np.abs(dq))) / dt)
-                return StepSolution(q, grad - fric_grad, iteration, history)
-            try:
-                if not found:
-                    raise NewtonFailure('no descent with the kept factor', history)
-                q, phi, grad, step = line_search(
-                    lambda x: self._evaluate(x, q_n, v_n, dt, con, hessian=False)[:2],
-                    q, dq, phi, slope, residual, lambda g: s @ g, history,
-                    first_step=self.max_step(q, dq), halvings=30 if fresh else 1)
-            except NewtonFailure:
-                if fresh:
-                    raise
-                iteration -= 1  # this iteration again, with the Hessian at q
-            else:
-                norm = float(np.max(np.abs(step * dq))) / dt
-                history.append(norm)
-                if norm < self.tolerance:
-                    _, grad, fric_grad, _ = self._evaluate(q, q_n, v_n, dt, con,
-                                                           hessian=False)
-                    return StepSolution(q, grad - fric_grad, iteration, history)
-                if key is not None and (fresh or float(np.max(np.abs(s @ grad)))
-                                        < CONTRACTION * residual):
-                    fresh = False
-                    continue
-            fresh = True
-            phi, grad, _, parts = self._evaluate(q, q_n, v_n, dt, con, hessian=True)
-        raise NewtonFailure(f'no convergence in {self.max_iterations} iterations', history)
+        history = np.zeros(self.max_iterations)
+        status, iterations, n_hist = newton.newton_iteration_interpreted(
+            problem, q, dt, self.tolerance, self.max_iterations, history,
+            np.zeros(newton.C_SIZE, np.int64))
+        done = history[:n_hist].tolist()
+        if status != newton.OK:
+            raise NewtonFailure(NEWTON_FAILURES[status].format(self.max_iterations), done)
+        return StepSolution(q, problem.reaction, iterations, done)
 
-    def _factor_key(self, con: StepConstraints, dt: float) -> tuple:
+    def factor_key(self, con: StepConstraints, dt: float) -> tuple:
         """What a kept factorisation must have been made for (``KeptFactor.key``)."""
         friction = con.friction_nodes.tolist()
         return (con.filters.copy(), (len(friction), frozenset(friction)),
                 tuple(energy.factor_key() for energy in self.energies), dt)
 
-    def _factorised(self, parts, s, complement, dt: float, key) -> '_ShiftedFactor':
-        """The Newton matrix of the Hessian ``parts`` (hess, low_rank), to be factorised
-        with a shift (``_ShiftedFactor.solve``)."""
-        hess, low_rank = parts
-        return _ShiftedFactor(key, s @ hess @ s + complement,
-                              sp.diags(s.diagonal() * self.m / dt ** 2),
-                              [(c, s @ u) for c, u in low_rank], self.lu_options)
 
 
-class _ShiftedFactor(KeptFactor):
-    """A ``KeptFactor`` made by its first successful ``solve``: the matrix plus ``shift``
-    times the filtered inertia, factorised."""
-
-    def __init__(self, key, matrix, inertia, low, lu_options):
-        super().__init__(key, None, low)
-        self.matrix, self.inertia, self.lu_options = matrix, inertia, lu_options
-
-    def solve(self, shift: float, rhs: np.ndarray) -> np.ndarray:
-        """(A + shift M_S + sum c u u^T)^-1 rhs; the factorisation is kept. RuntimeError
-        if singular."""
-        a = (self.matrix + shift * self.inertia).tocsc()
-        self.lu = spla.splu(a) if self.lu_options is None else spla.splu(a, **self.lu_options)
-        return _solve_low_rank(self.lu, rhs, self.low)
+#: NewtonFailure's message for each failure status of ``newton.newton_iteration``
+NEWTON_FAILURES = {newton.INFEASIBLE_START: 'start of step is infeasible (inverted element)',
+                   newton.NO_DESCENT: 'no descent direction found',
+                   newton.LINE_SEARCH_FAILED: 'line search failed',
+                   newton.NO_CONVERGENCE: 'no convergence in {} iterations'}
 
 
-#: relative rise of the incremental potential that the line search's gradient test lets
-#: pass (above its rounding noise, ~1e-11 at the end of a step's Newton iterations): a
-#: step that lowers the projected gradient but raises the potential by more is no progress
-#: (a Newton step across the kink of the smoothed friction law, back and forth: 7e-8)
-PHI_ROUNDOFF = 1e-9
-
-#: multiples of the (filtered) inertia M / dt^2 added to an indefinite Newton matrix
-DESCENT_SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
-
-
-def descent_direction(solve_shifted, gradient: np.ndarray, history: list[float]):
-    """The Newton step of the first shift in ``DESCENT_SHIFTS`` that descends.
-
-    An indefinite Hessian (buckling skin, compressed flesh) may give an ascent direction:
-    inertia-like diagonal terms are added until the step descends.
+class StepProblem:
+    """What the interpreted problems of ``newton.newton_iteration`` share: the step's
+    data, the loop's work vectors, and the ``evaluate`` hook on the solver's potential
+    (``potential``: ``ImplicitEulerSolver.incremental_potential`` or the fast solver's
+    ``evaluate_fast``, both (Phi J, gradient (n_dof,) N, friction gradient, Hessian
+    parts or None)).
 
     Args:
-        solve_shifted: shift -> the step dq (n,) of the matrix with ``shift`` times the
-            inertia added; may raise RuntimeError (a singular factor).
-        gradient: (n,) the filtered gradient.
-
-    Returns:
-        (dq, slope gradient . dq).
-
-    Raises:
-        NewtonFailure: no shift gave a finite descent direction.
+        solver: the solver whose step this is.
+        q_n, v_n: (n_dof,) m, m/s at the start of the step.  dt: s.
+        con: the step's constraints.
+        potential: the solver's potential, called (q, q_n, v_n, dt, con, hessian).
     """
-    for shift in DESCENT_SHIFTS:
+
+    def __init__(self, solver, q_n: np.ndarray, v_n: np.ndarray, dt: float,
+                 con: StepConstraints, potential):
+        self.solver, self.q_n, self.v_n, self.dt, self.con = solver, q_n, v_n, dt, con
+        self.potential = potential
+        self._vectors = tuple(np.empty(solver.n) for _ in range(5))
+        self.parts = None  # the Hessian parts of the last evaluation with the Hessian
+        self.fric_grad = None
+        self.reaction = None
+
+    def vectors(self):
+        return self._vectors
+
+    def evaluate(self, x, hessian, grad) -> float:
+        phi, g, fric_grad, parts = self.potential(x, self.q_n, self.v_n, self.dt, self.con,
+                                                  bool(hessian))
+        if not np.isfinite(phi):
+            return np.inf
+        grad[:] = g
+        self.fric_grad = fric_grad
+        if hessian:
+            self.parts = parts
+        return phi
+
+
+class _SparseProblem(StepProblem):
+    """One ``ImplicitEulerSolver.solve``'s problem for ``newton.newton_iteration``: its
+    hooks as methods (see ``core.newton``), on the energies' IJV triplets summed into a
+    sparse matrix at each evaluation and SuperLU. The kept factor lives in the solver
+    (``_kept``) with ``keep_factor``; without it nothing is kept (``keep_limit`` 0).
+
+    Args:
+        solver: the ``ImplicitEulerSolver``.
+        q_n, v_n: (n_dof,) m, m/s at the start of the step.  dt: s.
+        con: the step's constraints.
+    """
+
+    def __init__(self, solver: ImplicitEulerSolver, q_n: np.ndarray, v_n: np.ndarray,
+                 dt: float, con: StepConstraints):
+        super().__init__(solver, q_n, v_n, dt, con, solver.incremental_potential)
+        self.s = solver.filter_matrix(con.filters)
+        self.complement = sp.identity(solver.n, format='csc') - self.s
+        self.key = solver.factor_key(con, dt) if solver.keep_factor else None
+        self.factor = None  # the KeptFactor just made
+
+    def kept_fits(self) -> bool:
+        kept = self.solver.kept_factor
+        if self.key is None or kept is None or not kept.fits(self.key):
+            return False
+        kept.age += 1
+        return True
+
+    def project(self, grad, g_f) -> None:
+        g_f[:] = self.s @ grad
+
+    def forget(self) -> None:
+        self.solver.kept_factor = None
+
+    def keep(self) -> None:
+        if self.key is not None:
+            self.solver.kept_factor = self.factor
+
+    def factorise(self, x, shift) -> bool:
+        solver, s = self.solver, self.s
+        hess, low_rank = self.parts
+        matrix = (s @ hess @ s + self.complement
+                  + sp.diags(shift * s.diagonal() * solver.m / self.dt ** 2)).tocsc()
         try:
-            dq = solve_shifted(shift)
-        except RuntimeError:  # singular factor
-            continue
-        slope = float(gradient @ dq)
-        if np.all(np.isfinite(dq)) and slope <= 0:
-            return dq, slope
-    raise NewtonFailure('no descent direction found', history)
+            lu = (spla.splu(matrix) if solver.lu_options is None
+                  else spla.splu(matrix, **solver.lu_options))
+        except RuntimeError:  # singular
+            return False
+        self.factor = KeptFactor(self.key, lu, [(c, s @ u) for c, u in low_rank])
+        return True
 
+    def direction(self, g_f, dq, fresh) -> tuple[bool, float]:
+        factor = self.factor if fresh else self.solver.kept_factor
+        dq[:] = _solve_low_rank(factor.lu, -g_f, factor.low)
+        return bool(np.all(np.isfinite(dq))), float(g_f @ dq)
 
-def line_search(evaluate, q: np.ndarray, dq: np.ndarray, phi: float, slope: float,
-                residual: float, project, history: list[float], first_step: float = 1.0,
-                halvings: int = 30):
-    """Backtracking from the Newton step ``dq``: the first of the steps s, s/2, s/4, ...
-    (``halvings`` trials; s = ``first_step``, 1 unless a barrier's collision-free bound is
-    smaller) with sufficient decrease (Armijo, 1e-4 of ``slope``) or, with the potential
-    risen by at most ``PHI_ROUNDOFF`` of itself, a projected gradient below half of
-    ``residual``.
+    def step_bound(self, x, dq) -> float:
+        return self.solver.max_step(x, dq)
 
-    Args:
-        evaluate: x -> (phi, gradient) of the incremental potential (inf if infeasible).
-        project: gradient -> its free (filtered) part.
+    def keep_limit(self) -> float:
+        return np.inf if self.key is not None else 0.0
 
-    Returns:
-        (q + step dq, its phi, its gradient, step).
+    def filtered_max(self, g) -> float:
+        return float(np.max(np.abs(self.s @ g), initial=0.0))
 
-    Raises:
-        NewtonFailure: no acceptable step.
-    """
-    step = first_step
-    for _ in range(halvings):
-        trial = q + step * dq
-        phi_trial, grad_trial = evaluate(trial)
-        if np.isfinite(phi_trial) and (
-                phi_trial <= phi + 1e-4 * step * slope
-                or (phi_trial <= phi + PHI_ROUNDOFF * abs(phi)
-                    and float(np.max(np.abs(project(grad_trial)))) < 0.5 * residual)):
-            return trial, phi_trial, grad_trial, step
-        step *= 0.5
-    raise NewtonFailure('line search failed', history)
+    def finish(self, x, grad) -> None:
+        self.reaction = grad - self.fric_grad
 
 
 def stack_low_rank(low_rank, n: int) -> tuple[np.ndarray, np.ndarray]:
