@@ -7,6 +7,7 @@ process and none disturbs another's shutdown.
 from __future__ import annotations
 
 import time
+import uuid
 from collections import deque
 from typing import Any, Callable
 
@@ -14,6 +15,7 @@ import rclpy
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from unique_identifier_msgs.msg import UUID
 
 from control_msgs.action import GripperCommand, ParallelGripperCommand
 from geometry_msgs.msg import WrenchStamped
@@ -97,13 +99,24 @@ class SimClient:
         self.open_client = self.node.create_client(Trigger, f'{self.path}/jaw/open')
         self.param_client = self.node.create_client(SetParameters,
                                                     f'{self.path}/set_parameters')
-        self.grasp = ActionClient(self.node, Grasp, f'{self.path}/grasp',
-                                  feedback_sub_qos_profile=FEEDBACK)
-        self.gripper_cmd = ActionClient(self.node, GripperCommand, f'{self.path}/gripper_cmd',
-                                        feedback_sub_qos_profile=FEEDBACK)
-        self.parallel_gripper_cmd = ActionClient(
-            self.node, ParallelGripperCommand, f'{self.path}/parallel_gripper_cmd',
-            feedback_sub_qos_profile=FEEDBACK)
+        self._feedback: dict[bytes, list] = {}   # goal id -> the list its feedback goes to
+        self.grasp = self.action_client(Grasp, f'{self.path}/grasp')
+        self.gripper_cmd = self.action_client(GripperCommand, f'{self.path}/gripper_cmd')
+        self.parallel_gripper_cmd = self.action_client(ParallelGripperCommand,
+                                                       f'{self.path}/parallel_gripper_cmd')
+
+    def action_client(self, kind, name: str) -> ActionClient:
+        """An action client of ``kind`` for the action ``name``, whose goals' feedback
+        ``send_goal`` collects from the action's feedback topic itself: rclpy's client
+        forgets a goal's feedback callback when it takes the result, so feedback that a
+        busy client has not read by then would be lost."""
+        def on_feedback(msg) -> None:
+            into = self._feedback.get(bytes(msg.goal_id.uuid))
+            if into is not None:
+                into.append(msg.feedback)
+        self.node.create_subscription(kind.Impl.FeedbackMessage, f'{name}/_action/feedback',
+                                      on_feedback, FEEDBACK)
+        return ActionClient(self.node, kind, name, feedback_sub_qos_profile=FEEDBACK)
 
     def _store(self, suffix: str) -> Callable[[Any], None]:
         def store(msg) -> None:
@@ -240,10 +253,14 @@ class SimClient:
     # ----------------------------------------------------------------- actions
     def send_goal(self, client: ActionClient, goal, feedback: list | None = None,
                   timeout: float = 30.0):
-        """Send ``goal``; returns the goal handle (check ``.accepted``)."""
+        """Send ``goal``; returns the goal handle (check ``.accepted``). ``feedback``
+        (with a ``client`` from ``action_client``) receives every feedback of the goal,
+        also what arrives after its result."""
         self.spin_until(client.server_is_ready, timeout, 'the action server')
-        callback = (lambda msg: feedback.append(msg.feedback)) if feedback is not None else None
-        future = client.send_goal_async(goal, feedback_callback=callback)
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        if feedback is not None:
+            self._feedback[bytes(goal_id.uuid)] = feedback
+        future = client.send_goal_async(goal, goal_uuid=goal_id)
         return self.spin_until(lambda: future.done() and future.result(), timeout,
                                'the goal response')
 

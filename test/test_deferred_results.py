@@ -88,3 +88,43 @@ def test_contact_pressures_are_computed_once_per_result(monkeypatch):
     calls = []
     monkeypatch.setattr(peaks, '_sites', lambda r: calls.append(r))
     assert peaks.contact_pressures(result) == first and not calls
+
+
+def test_threads_reading_one_deferred_result_at_once_all_get_its_values():
+    # The node's physics thread (the actions' step listeners) and its publisher read the
+    # same results: the second reader of a result being filled waits for the first's fill.
+    import threading
+    import time
+
+    from gripper_sim.core.deferred import build_deferred
+    from gripper_sim.core.results import Energies
+
+    fills = []
+
+    def slow_fill():
+        fills.append(threading.get_ident())
+        time.sleep(0.05)   # long enough for every thread to arrive during the fill
+        return dict(kinetic=1.0, elastic=2.0)
+
+    result = build_deferred(Energies, dict(gravitational=3.0), ('kinetic', 'elastic'),
+                            slow_fill)
+    start = threading.Barrier(4)
+    read, errors = [], []
+
+    def reader(name):
+        start.wait()
+        try:
+            read.append(getattr(result, name))
+        except Exception as err:  # noqa: BLE001 - the failure this test looks for
+            errors.append(repr(err))
+
+    threads = [threading.Thread(target=reader, args=(name,))
+               for name in ('kinetic', 'elastic', 'kinetic', 'elastic')]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors == []
+    assert sorted(read) == [1.0, 1.0, 2.0, 2.0]
+    assert len(fills) == 1
+    assert result == Energies(kinetic=1.0, elastic=2.0, gravitational=3.0)

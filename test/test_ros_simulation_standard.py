@@ -4,7 +4,6 @@ feedback and cancel, reset, stop, play; the entities, their states, the spawnabl
 replacing the fruit by another and the spawns and deletes refused."""
 import pytest
 from action_msgs.msg import GoalStatus
-from rclpy.action import ActionClient
 from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import (EntityCategory, EntityFilters, Result, SimulationState,
                                        SimulatorFeatures)
@@ -41,7 +40,7 @@ class Standard:
         self.step = node.create_client(StepSimulation, '/step_simulation')
         self.get_state = node.create_client(GetSimulationState, '/get_simulation_state')
         self.set_state = node.create_client(SetSimulationState, '/set_simulation_state')
-        self.simulate = ActionClient(node, SimulateSteps, '/simulate_steps')
+        self.simulate = client.action_client(SimulateSteps, '/simulate_steps')
         self.entities = node.create_client(GetEntities, '/get_entities')
         self.entity_state = node.create_client(GetEntityState, '/get_entity_state')
         self.spawnables = node.create_client(GetSpawnables, '/get_spawnables')

@@ -12,7 +12,11 @@ then. A deferred instance compares, prints, pickles and copies as its dataclass
 from __future__ import annotations
 
 import dataclasses
+import threading
 from typing import Callable
+
+#: one fill at a time: a node's physics thread and its publisher read the same results
+_FILLING = threading.RLock()
 
 
 def _frozen_builder(cls):
@@ -59,7 +63,8 @@ def build(cls, fields: dict):
 class _Deferred:
     """A field of a ``_deferred_class`` instance, filled on first read: the instance's
     ``_fill()`` gives every deferred field at once; they then live in its ``__dict__``
-    (which this non-data descriptor yields to)."""
+    (which this non-data descriptor yields to). Threads may read the same instance: the
+    first fills it, the others wait and read what it filled."""
 
     def __init__(self, name: str):
         self.name = name
@@ -68,7 +73,11 @@ class _Deferred:
         if obj is None:
             return self
         state = obj.__dict__
-        state.update(state.pop('_fill')())
+        with _FILLING:
+            fill = state.get('_fill')
+            if fill is not None:
+                state.update(fill())
+                del state['_fill']
         return state[self.name]
 
 
