@@ -520,6 +520,7 @@ class BarrierContact(Energy):
             if terms is None:
                 return np.inf
             barrier_value, friction_value, barrier_gradient, friction_gradient = terms
+            self._last_terms = (q.copy(), *terms)
         else:
             mesh = self._mesh
             v = self.vertices(q.reshape(-1, self.dimension))
@@ -563,15 +564,17 @@ class BarrierContact(Energy):
         ``barrier_terms``) over the candidates of ``_candidate_pairs``, their Hessians
         added as ``_terms``'s ``into`` says (None: not wanted; the friction's only with
         ``friction``): (barrier value J, friction value J, their gradients (n_d,) N over
-        ``vertex_dofs``, the friction's None without friction pairs), or None if a pair
-        touches."""
-        values, slots = into if into is not None else (_NO_VALUES, _NO_SLOTS)
+        ``vertex_dofs``, None where there are no pairs), or None if a pair touches."""
         pairs = self._friction_pairs
+        candidates = self._candidate_pairs(q)
+        if not len(candidates) and pairs is None:
+            return 0.0, 0.0, None, None
+        values, slots = into if into is not None else (_NO_VALUES, _NO_SLOTS)
         n_d = self.vertex_dofs.size
         barrier_gradient, friction_gradient = np.empty(n_d), np.empty(n_d)
         barrier_value, friction_value, outside, friction_outside = barrier_terms(
             q, self._vertex_dof_pairs, self._obstacles_end, self._mesh_edges,
-            self._candidate_pairs(q), self.settings.dhat, self.settings.stiffness,
+            candidates, self.settings.dhat, self.settings.stiffness,
             self._mesh_dofs, into is not None,
             self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys, slots,
             values, self._start, self._dt, self.settings.friction_smoothing,
