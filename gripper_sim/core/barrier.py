@@ -54,12 +54,11 @@ import ipctk
 import numpy as np
 
 from gripper_sim.core import contact as cm
-from gripper_sim.core.barrier_kernels import (largest_move,
-                                              largest_relative_move, nearest_faces,
-                                              nearest_partners)
-from gripper_sim.core.barrier_terms import barrier_terms
+from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
+                                              nearest_faces, nearest_partners)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear, smallest_distance)
+from gripper_sim.core.barrier_terms import barrier_terms
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.friction_kernels import lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs

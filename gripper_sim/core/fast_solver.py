@@ -16,7 +16,8 @@ per iteration:
   S H S + (I - S) is one kernel over the d x d node blocks (``core.solver_kernels``), on
   the same pattern; kinetic friction is the Coulomb cone of the stepper, a 2D tangent
   being a cone with one tangent;
-- each Newton system is solved by conjugate gradients preconditioned with a block
+- each Newton system is solved by conjugate gradients (one compiled call,
+  ``core.pcg_kernels``) preconditioned with a block
   LDL^T factorisation (``core.sparse_ldl``, d x d node blocks, no pivoting across
   blocks) kept from an earlier Newton iteration or step (the matrix changes little
   between them), its rank-one terms by the Woodbury identity and the whole projected
@@ -43,7 +44,6 @@ The fast path follows the reference path to the Newton tolerance over a grasp
 """
 from __future__ import annotations
 
-import math
 import os
 
 import numpy as np
@@ -432,7 +432,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
 
     def _apply(self, values: np.ndarray, u: np.ndarray, c: np.ndarray,
                x: np.ndarray) -> np.ndarray:
-        """(A + u diag(c) u^T) x, A the CSC values on the pattern."""
+        """(A + u diag(c) u^T) x, A the CSC ``values`` on the pattern."""
         ax = np.empty(self.n)
         kernels.csc_matvec(self._matvec_indptr, self._matvec_indices, values, x, ax)
         if c.size:

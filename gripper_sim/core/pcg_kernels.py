@@ -6,9 +6,12 @@ the solver's fixed pattern, is solved in the range of the node filters S (n_node
 with the preconditioner S (L D L^T + u_w diag(.) u_w^T)^-1 S: the kept block LDL^T
 (``core.sparse_ldl``, in the factor's dof order ``perm``) and its rank-one terms by the
 Woodbury identity (A^-1 u_w and the inverse capacitance matrix, made with the
-factorisation). The stopping rules are ``fast_solver``'s (see its CG_* constants); the
-arithmetic is that of the solver's earlier Python loop over the same kernels (the dot
-products through BLAS as numpy's), its results bit-identical with one rank-one term.
+factorisation). The system lives in the range of S (its held directions are the
+identity and the right-hand side is zero there), so the preconditioner S P^-1 S is
+exact on them even when P was factorised with another contact set. The stopping rules
+are ``fast_solver``'s (see its CG_* constants). The dot products go through BLAS as
+numpy's do, so with one rank-one term the iterates equal a numpy loop over the same
+kernels to the bit.
 Import this module only where numba is installed.
 """
 from __future__ import annotations
