@@ -18,19 +18,28 @@ machine's load average is printed), for each case and model, with Newton iterati
 - ``pick``: the default apple gripped (2 mu N = 1.2 m g), lifted 2 cm and held 1 s,
   with the table, gravity and friction (``--pick`` to include it; about 10 s).
 
+``--baseline DIR`` compares with another checkout of the project (its kernels compiled
+once, e.g. by a run of this script in it): runs of this tree and of DIR alternate, each
+in a fresh process (this script on the other tree, through the GRIPPER_SIM_TREE
+environment variable; every case run once untimed first, numba's caches loaded), and
+the table gives both CPU times (best of ``--repeat`` each) with each run's figures.
+
 Usage::
 
-    nice python bench/bench_barrier.py [--repeat N] [--pick]
+    nice python bench/bench_barrier.py [--repeat N] [--pick] [--baseline DIR]
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+#: the checkout whose gripper_sim is measured: this one, or GRIPPER_SIM_TREE (--baseline)
+ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'test'))
 
@@ -91,34 +100,97 @@ def timed(case, model: str, fast=None):
             result.deformation.contact_length)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--repeat', type=int, default=2)
-    parser.add_argument('--pick', action='store_true', help='also the grasp-and-lift')
-    args = parser.parse_args(argv)
-    print(f'load average {os.getloadavg()[0]:.2f}; CPU seconds, best of {args.repeat}')
+def _runs(pick_too: bool) -> list:
+    """(case name, case, label, fast) of the runs, in order."""
     runs = [('hertz', hertz, 'mmm', None), ('hertz', hertz, 'ipc', None),
             ('membrane', membrane, 'mmm', None), ('membrane', membrane, 'mmm-numpy', False),
             ('membrane', membrane, 'ipc', None),
             ('hertz3d', hertz3d, 'mmm', None), ('hertz3d', hertz3d, 'ipc', None)]
-    if args.pick:
+    if pick_too:
         runs += [('pick', 'pick', 'mmm', None), ('pick', 'pick', 'ipc', None)]
-    print(f"{'case':10s} {'model':10s} {'CPU s':>8s} {'Newton':>7s} {'force N':>9s} "
-          f"{'contact mm':>10s}")
+    return runs
+
+
+def measure(runs: list, repeat: int) -> dict:
+    """(case name, label) -> the figures of ``timed`` with the least CPU time of
+    ``repeat`` runs."""
     best = {}
     for name, case, label, fast in runs:
         model = label.split('-')[0]
-        figures = min((timed(case, model, fast) for _ in range(args.repeat)),
-                      key=lambda f: f[0])
-        best[name, label] = figures[0]
-        cpu, iterations, force, length = figures
-        print(f'{name:10s} {label:10s} {cpu:8.2f} {iterations:7.0f} {force:9.4f} '
-              f'{1e3 * length:10.3f}')
-    for name in ('hertz', 'membrane', 'hertz3d', 'pick'):
-        if (name, 'ipc') in best:
-            print(f'{name}: ipc / mmm CPU time = {best[name, "ipc"] / best[name, "mmm"]:.2f}')
-    print(f'membrane: ipc / mmm-numpy CPU time = '
-          f'{best["membrane", "ipc"] / best["membrane", "mmm-numpy"]:.2f}')
+        best[name, label] = min((timed(case, model, fast) for _ in range(repeat)),
+                                key=lambda f: f[0])
+    return best
+
+
+def plain(runs: list) -> dict:
+    """Each run once untimed (numba's caches loaded), then once timed: figures by
+    'name label' (what --baseline runs in each tree)."""
+    measure(runs, 1)
+    return {f'{name} {label}': figures for (name, label), figures in measure(runs, 1).items()}
+
+
+def compare(baseline: Path, pick_too: bool, repeat: int) -> dict:
+    """The best figures of this tree and of ``baseline``, runs alternated in fresh
+    processes: {'this': best, 'baseline': best} (see the module doc)."""
+    trees = {'this': Path(__file__).resolve().parents[1], 'baseline': baseline.resolve()}
+    best = {label: {} for label in trees}
+    for _ in range(repeat):
+        for label, tree in trees.items():
+            command = [sys.executable, str(Path(__file__).resolve()), '--plain']
+            done = subprocess.run(command + (['--pick'] if pick_too else []),
+                                  env=dict(os.environ, GRIPPER_SIM_TREE=str(tree)),
+                                  capture_output=True, text=True, check=True)
+            for key, figures in json.loads(done.stdout.strip().splitlines()[-1]).items():
+                key = tuple(key.split())
+                if key not in best[label] or figures[0] < best[label][key][0]:
+                    best[label][key] = figures
+    return best
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--repeat', type=int, default=2)
+    parser.add_argument('--pick', action='store_true', help='also the grasp-and-lift')
+    parser.add_argument('--baseline', type=Path, metavar='DIR',
+                        help='another checkout to compare with, side by side')
+    parser.add_argument('--plain', action='store_true',
+                        help='each run once after a warm-up, figures as JSON (what '
+                             '--baseline runs)')
+    args = parser.parse_args(argv)
+    if args.repeat < 1:
+        print(f'error: --repeat must be at least 1, got {args.repeat}', file=sys.stderr)
+        return 2
+    runs = _runs(args.pick)
+    if args.plain:
+        print(json.dumps(plain(runs)))
+        return 0
+    if args.baseline is not None:
+        if not (args.baseline / 'gripper_sim' / 'core').is_dir():
+            print(f'error: --baseline {args.baseline} is not a checkout of this project '
+                  '(no gripper_sim/core in it)', file=sys.stderr)
+            return 2
+        tables = compare(args.baseline, args.pick, args.repeat)
+        print(f'load average {os.getloadavg()[0]:.2f} at the end; CPU seconds, best of '
+              f'{args.repeat} runs each, alternated: this tree and baseline '
+              f'({args.baseline.resolve()})')
+    else:
+        print(f'load average {os.getloadavg()[0]:.2f}; CPU seconds, best of {args.repeat}')
+        tables = {'this': measure(runs, args.repeat)}
+    for tree, best in tables.items():
+        if len(tables) > 1:
+            print(f'-- {tree}')
+        print(f"{'case':10s} {'model':10s} {'CPU s':>8s} {'Newton':>7s} {'force N':>9s} "
+              f"{'contact mm':>10s}")
+        for name, _, label, _ in runs:
+            cpu, iterations, force, length = best[name, label]
+            print(f'{name:10s} {label:10s} {cpu:8.2f} {iterations:7.0f} {force:9.4f} '
+                  f'{1e3 * length:10.3f}')
+        for name in ('hertz', 'membrane', 'hertz3d', 'pick'):
+            if (name, 'ipc') in best:
+                print(f'{name}: ipc / mmm CPU time = '
+                      f'{best[name, "ipc"][0] / best[name, "mmm"][0]:.2f}')
+        print(f'membrane: ipc / mmm-numpy CPU time = '
+              f'{best["membrane", "ipc"][0] / best["membrane", "mmm-numpy"][0]:.2f}')
     return 0
 
 

@@ -12,19 +12,28 @@ The flat finger takes its usual route (the modified mass method, the compiled wh
 step); the solid pad two meshed blocks in the state and the barrier contact on the
 Newton solver (its compiled energies on a fixed pattern).
 
+``--baseline DIR`` compares with another checkout of the project (its kernels compiled
+once): runs of this tree and of DIR alternate, each in a fresh process (this script on
+the other tree, through the GRIPPER_SIM_TREE environment variable; each finger's grasp
+run once untimed first, numba's caches loaded), and the table gives both (best of
+``--repeat`` each).
+
 Usage::
 
-    nice python bench/bench_soft_fingers.py [--repeat N] [--force N]
+    nice python bench/bench_soft_fingers.py [--repeat N] [--force N] [--baseline DIR]
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+#: the checkout whose gripper_sim is measured: this one, or GRIPPER_SIM_TREE (--baseline)
+ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(ROOT))
 
 from gripper_sim.configuration import load_config  # noqa: E402
@@ -47,23 +56,30 @@ def grasp(finger: str, force: float) -> dict:
                         on_step=lambda result, phase: iterations.append(
                             result.newton_iterations))
     return dict(cpu=time.process_time() - start, outcome=summary['outcome'],
-                steps=sim.last.step, solves=sim.gap_solves, newton=sum(iterations),
-                force=sim.last.grip_force, contact=sim.last.deformation.contact_length,
-                pressure=sim.last.damage.peak_pressure)
+                steps=int(sim.last.step), solves=int(sim.gap_solves),
+                newton=int(sum(iterations)), force=float(sim.last.grip_force),
+                contact=float(sim.last.deformation.contact_length),
+                pressure=float(sim.last.damage.peak_pressure))
 
 
-def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
-    """The grasp with each of ``fingers`` (the reference first); prints a table."""
-    parser = argparse.ArgumentParser(description=description)
-    parser.add_argument('--repeat', type=int, default=1, help='runs per finger (best kept)')
-    parser.add_argument('--force', type=float, default=4.0, help='grip force, N')
-    args = parser.parse_args(argv)
-    print(f'load average {os.getloadavg()[0]:.2f}; CPU time (time.process_time), best of '
-          f'{args.repeat}')
-    rows = {}
-    for finger in fingers:
-        runs = [grasp(finger, args.force) for _ in range(args.repeat)]
-        rows[finger] = min(runs, key=lambda r: r['cpu'])
+def _baseline_rows(script: Path, baseline: Path, fingers: tuple, force: float,
+                   repeat: int) -> dict:
+    """{'this': rows, 'baseline': rows}, rows the best grasp per finger of each tree, runs
+    alternated in fresh processes (see the module doc)."""
+    trees = {'this': Path(__file__).resolve().parents[1], 'baseline': baseline.resolve()}
+    best = {label: {} for label in trees}
+    for _ in range(repeat):
+        for label, tree in trees.items():
+            done = subprocess.run([sys.executable, str(script), '--plain', '--force', str(force)],
+                                  env=dict(os.environ, GRIPPER_SIM_TREE=str(tree)),
+                                  capture_output=True, text=True, check=True)
+            for finger, row in json.loads(done.stdout.strip().splitlines()[-1]).items():
+                if finger not in best[label] or row['cpu'] < best[label][finger]['cpu']:
+                    best[label][finger] = row
+    return best
+
+
+def _print_rows(rows: dict, fingers: tuple) -> None:
     print(f"{'finger':10s} {'CPU s':>8s} {'outcome':>8s} {'steps':>6s} {'solves':>7s} "
           f"{'Newton':>7s} {'force N':>8s} {'contact mm':>10s} {'Hertz kPa':>9s}")
     for finger, r in rows.items():
@@ -72,6 +88,48 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
               f"{r['contact'] * 1e3:10.1f} {r['pressure'] * 1e-3:9.0f}")
     reference, other = fingers
     print(f"{other} / {reference}: {rows[other]['cpu'] / rows[reference]['cpu']:.1f}x")
+
+
+def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
+    """The grasp with each of ``fingers`` (the reference first); prints a table (two with
+    ``--baseline``)."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument('--repeat', type=int, default=1, help='runs per finger (best kept)')
+    parser.add_argument('--force', type=float, default=4.0, help='grip force, N')
+    parser.add_argument('--baseline', type=Path, metavar='DIR',
+                        help='another checkout to compare with, side by side')
+    parser.add_argument('--plain', action='store_true',
+                        help='each grasp once after a warm-up, as JSON (what --baseline runs)')
+    args = parser.parse_args(argv)
+    if args.repeat < 1:
+        print(f'error: --repeat must be at least 1, got {args.repeat}', file=sys.stderr)
+        return 2
+    if args.plain:
+        for finger in fingers:
+            grasp(finger, args.force)
+        print(json.dumps({finger: grasp(finger, args.force) for finger in fingers}))
+        return 0
+    if args.baseline is not None:
+        if not (args.baseline / 'gripper_sim' / 'core').is_dir():
+            print(f'error: --baseline {args.baseline} is not a checkout of this project '
+                  '(no gripper_sim/core in it)', file=sys.stderr)
+            return 2
+        script = Path(sys.modules['__main__'].__file__).resolve()
+        tables = _baseline_rows(script, args.baseline, fingers, args.force, args.repeat)
+        print(f'load average {os.getloadavg()[0]:.2f} at the end; CPU time '
+              f'(time.process_time), best of {args.repeat} runs each, alternated: this tree '
+              f'and baseline ({args.baseline.resolve()})')
+        for label, rows in tables.items():
+            print(f'-- {label}')
+            _print_rows(rows, fingers)
+        return 0
+    print(f'load average {os.getloadavg()[0]:.2f}; CPU time (time.process_time), best of '
+          f'{args.repeat}')
+    rows = {}
+    for finger in fingers:
+        runs = [grasp(finger, args.force) for _ in range(args.repeat)]
+        rows[finger] = min(runs, key=lambda r: r['cpu'])
+    _print_rows(rows, fingers)
     return 0
 
 

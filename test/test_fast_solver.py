@@ -8,7 +8,8 @@ import scipy.sparse.linalg as spla
 from gripper_sim.configuration import load_config
 from gripper_sim.core import solver_kernels, sparse_ldl
 from gripper_sim.core.fast_solver import KINK_FACTOR, PatternCachingSolver, as_cone
-from gripper_sim.core.stepper import FRICTION_SMOOTHING, ImplicitEulerSolver, StepConstraints
+from gripper_sim.core.stepper import (FRICTION_SMOOTHING, ImplicitEulerSolver, StepConstraints,
+                                      woodbury_terms)
 from gripper_sim.workflows.factory import make_simulation
 
 
@@ -158,3 +159,41 @@ def test_stiffness_damping_stays_on_the_fast_path_and_matches_the_reference(over
                                            + overrides)).solver
     _, grad_plain, _, _ = undamped.evaluate_fast(q, q_n, v_n, dt, con, False)
     assert np.max(np.abs(grad - grad_plain)) > 1e-3 * np.max(np.abs(grad))
+
+
+@pytest.mark.parametrize('model', [['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
+                                   ['fruit.model=solid', 'fruit.skin.enabled=false',
+                                    'fruit.mesh.subdivisions=3']], ids=['shell', 'solid'])
+def test_the_compiled_cg_solves_a_filtered_newton_system_with_a_rank_one_term(model):
+    """``pcg_kernels.preconditioned_cg`` (the solver's ``_pcg``) on a real Newton matrix
+    S A S + (I - S) plus a rank-one term, its factorisation and Woodbury terms made of the
+    same matrix (an exact preconditioner): the dense solution within round-off, zero in
+    the held directions, in one CG iteration."""
+    sim = make_simulation(load_config(overrides=['dimension=3'] + model))
+    solver = sim.solver
+    dt = sim.dt
+    q = sim.q.ravel()
+    data = np.zeros(solver._nnz)
+    for energy, scatter in zip(solver.energies, solver._scatter):
+        energy.evaluate_into(q, np.zeros(q.size), data, scatter, True)
+    solver_kernels.add_diagonal(data, solver._diag_pos, solver.m / dt ** 2)
+    filters = np.tile(np.eye(3), (q.size // 3, 1, 1))
+    filters[0] = 0.0  # a node held in every direction
+    filters[1] = np.diag([1.0, 1.0, 0.0])  # one held along z
+    values = solver.newton_matrix(data, filters, np.zeros(q.size))
+    rng = np.random.default_rng(7)
+    u = np.zeros((q.size, 1))
+    solver_kernels.apply_filters(filters, rng.normal(size=q.size), u[:, 0])
+    c = np.array([1e-2 * np.max(np.abs(values))])
+    rhs = np.empty(q.size)
+    solver_kernels.apply_filters(filters, np.linspace(-1.0, 1.0, q.size), rhs)
+    solver._lu = solver._factorise(values)
+    a_inv_u, capacitance = woodbury_terms(solver._lu.solve, u, c)
+    solver._woodbury = (u, a_inv_u, np.linalg.inv(capacitance))
+    before = solver.stats['cg_iterations']
+    x = solver._pcg(values, rhs, u, c, dt, filters)
+    dense = solver._csc(values).toarray() + c[0] * u @ u.T
+    exact = np.linalg.solve(dense, rhs)
+    assert x is not None and solver.stats['cg_iterations'] - before == 1
+    assert np.max(np.abs(x - exact)) < 1e-9 * np.max(np.abs(exact))
+    assert np.all(x[:3] == 0.0) and x[5] == 0.0

@@ -54,13 +54,13 @@ import ipctk
 import numpy as np
 
 from gripper_sim.core import contact as cm
-from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_move,
-                                              largest_relative_move, nearest_faces,
-                                              nearest_partners)
+from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
+                                              nearest_faces, nearest_partners)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear, smallest_distance)
+from gripper_sim.core.barrier_terms import barrier_terms
 from gripper_sim.core.contact_passes import StepOutcome
-from gripper_sim.core.friction_kernels import friction_terms, lagged_friction
+from gripper_sim.core.friction_kernels import lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
@@ -94,6 +94,12 @@ QUIET_KEEP = 0.5
 #: m, the compiled barrier's candidates (2D) are sought this much beyond dhat / 2 around
 #: each primitive and serve while every vertex stays within it of where they were sought
 CANDIDATE_MARGIN = 1e-4
+
+
+#: ``barrier_terms``'s arguments when no Hessian is wanted or there is no friction
+_NO_VALUES, _NO_SLOTS = np.zeros(0), np.zeros(0, np.int64)
+_NO_FRICTION = (np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0),
+                np.zeros((0, 2)))
 
 
 @dataclass(frozen=True)
@@ -477,20 +483,6 @@ class BarrierContact(Energy):
         return (ids[:count], weights[:count], tangents[:count], forces[:count],
                 coefficients[:count])
 
-    def _compiled_friction(self, v: np.ndarray, into):
-        """The lagged friction (2D, ``friction_kernels``) at the collision mesh's vertices
-        ``v``: (value J, gradient (n_d,) N over ``vertex_dofs``); its Hessian added as
-        ``_terms``'s ``into`` says (None: not wanted)."""
-        ids, weights, tangents, forces, coefficients = self._friction_pairs
-        gradient = np.zeros(self.n_dof)
-        values, slots = into if into is not None else (np.zeros(0), np.zeros(0, np.int64))
-        value, outside = friction_terms(
-            v, self._start, self._dt, self.settings.friction_smoothing, ids, weights, tangents,
-            forces, coefficients, self._mesh_dofs, gradient, into is not None,
-            self._pattern_keys, self.n_dof, slots, values)
-        self._check_outside(outside)
-        return value, gradient[self.vertex_dofs]
-
     def _check_outside(self, outside: int) -> None:
         """AssertionError if compiled Hessian entries fell outside the pattern, unless
         ``drop_outside_pattern``."""
@@ -522,17 +514,19 @@ class BarrierContact(Energy):
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
         if into is None and last is not None and np.array_equal(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
+        elif self.dimension == 2:
+            terms = self._compiled_terms(q, into, friction)
+            if terms is None:
+                return np.inf
+            barrier_value, friction_value, barrier_gradient, friction_gradient = terms
+            self._last_terms = (q.copy(), *terms)
         else:
             mesh = self._mesh
             v = self.vertices(q.reshape(-1, self.dimension))
             n_d = self.vertex_dofs.size
             barrier_value = friction_value = 0.0
             barrier_gradient = friction_gradient = None
-            if self.dimension == 2:
-                barrier_value, barrier_gradient = self._compiled_barrier(q, v, into)
-                if not np.isfinite(barrier_value):
-                    return np.inf
-            elif len(collisions := self._collisions(v)):
+            if len(collisions := self._collisions(v)):
                 barrier_value = float(self.potential(collisions, mesh, v))
                 if not np.isfinite(barrier_value):
                     return np.inf
@@ -540,10 +534,7 @@ class BarrierContact(Energy):
                 if into is not None:
                     parts.append(self.potential.hessian(collisions, mesh, v, self.projection))
                     scales.append(1.0)
-            if self._friction_pairs is not None:
-                friction_value, friction_gradient = self._compiled_friction(
-                    v, into if friction else None)
-            elif len(self._tangential):
+            if len(self._tangential):
                 velocity = np.asfortranarray((v - self._start) / self._dt)
                 friction_value = self._dt * float(self.friction(self._tangential, mesh,
                                                                 velocity))
@@ -567,25 +558,33 @@ class BarrierContact(Energy):
             np.add.at(into[0], into[1][where], vals)
         return value
 
-    def _compiled_barrier(self, q: np.ndarray, v: np.ndarray, into):
-        """The barrier at positions ``q`` (2 n,) m, the collision mesh's vertices ``v`` (2D,
-        ``barrier_kernels``) over the candidates of ``_candidate_pairs``: (value J,
-        gradient (n_d,) N over ``vertex_dofs`` or None); its Hessian added as ``_terms``'s
-        ``into`` says (None: not wanted)."""
-        candidates = self._candidate_pairs(q, v)
-        if not len(candidates):
-            return 0.0, None
-        gradient = np.zeros(self.n_dof)
-        values, slots = into if into is not None else (np.zeros(0), np.zeros(0, np.int64))
-        value, outside = edge_vertex_barrier(
-            v, self._mesh_edges, candidates, self.settings.dhat, self.settings.stiffness,
-            self._mesh_dofs, gradient, into is not None,
-            self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys,
-            self.n_dof, slots, values)
-        if not np.isfinite(value):
-            return np.inf, None
+    def _compiled_terms(self, q: np.ndarray, into, friction: bool):
+        """The barrier and lagged friction at positions ``q`` (2 n,) m (2D,
+        ``barrier_terms``) over the candidates of ``_candidate_pairs``, their Hessians
+        added as ``_terms``'s ``into`` says (None: not wanted; the friction's only with
+        ``friction``): (barrier value J, friction value J, their gradients (n_d,) N over
+        ``vertex_dofs``, None where there are no pairs), or None if a pair touches."""
+        pairs = self._friction_pairs
+        candidates = self._candidate_pairs(q)
+        if not len(candidates) and pairs is None:
+            return 0.0, 0.0, None, None
+        values, slots = into if into is not None else (_NO_VALUES, _NO_SLOTS)
+        n_d = self.vertex_dofs.size
+        barrier_gradient, friction_gradient = np.empty(n_d), np.empty(n_d)
+        barrier_value, friction_value, outside, friction_outside = barrier_terms(
+            q, self._vertex_dof_pairs, self._obstacles_end, self._mesh_edges,
+            candidates, self.settings.dhat, self.settings.stiffness,
+            self._mesh_dofs, into is not None,
+            self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys, slots,
+            values, self._start, self._dt, self.settings.friction_smoothing,
+            _NO_FRICTION if pairs is None else pairs, pairs is not None,
+            into is not None and friction, barrier_gradient, friction_gradient)
+        if not np.isfinite(barrier_value):
+            return None
         self._check_outside(outside)
-        return value, gradient[self.vertex_dofs]
+        self._check_outside(friction_outside)
+        return (barrier_value, friction_value, barrier_gradient,
+                None if pairs is None else friction_gradient)
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
         """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
@@ -702,16 +701,17 @@ class BarrierContact(Energy):
         candidates.build(self._mesh, v, 0.5 * self.settings.dhat, self._broad_phase)
         return candidates
 
-    def _candidate_pairs(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def _candidate_pairs(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) the (edge, vertex) pairs holding every pair closer than dhat at positions
-        ``q`` (n d,) m, the collision mesh's vertices ``v``: ipctk's candidates of boxes
-        inflated by dhat / 2 + ``CANDIDATE_MARGIN``, sought again once a vertex has moved
+        ``q`` (n d,) m: the candidates (``barrier_search``) of boxes inflated by dhat / 2 +
+        ``CANDIDATE_MARGIN``, sought again once a vertex has moved
         further than the margin from where they were sought (each side of a pair moved
         by at most the margin: the pair came at most twice it closer; the faces' corners
         stand still within a step, at most the margin from where they were sought, see
         ``_start_candidates``)."""
         kept = self._pairs
         if kept is None or largest_move(q, self._vertex_dof_pairs, kept[0]) > CANDIDATE_MARGIN:
+            v = self.vertices(q.reshape(-1, 2))
             pairs = self._static_candidates(v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
             kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs,
                                   self._obstacles_end)
@@ -861,7 +861,7 @@ class BarrierContact(Energy):
             owner = self._owners = np.concatenate(
                 [self.vertex_body, 1 + len(self.bodies)
                  + np.arange(v.shape[0] - n_v) // self.corners_per_face])
-        other = nearest_partners(v, self._mesh_edges, self._candidate_pairs(q, v),
+        other = nearest_partners(v, self._mesh_edges, self._candidate_pairs(q),
                                  self.settings.dhat, n_v)
         partner = np.full(self.n_dof // 2, -1, np.int64)
         partner[self.vertex_nodes] = np.where(other >= 0, owner[other], -1)

@@ -70,6 +70,17 @@ def _line_second_derivatives():
 
 
 @njit(cache=True)
+def _point_line_squared(p, a, b):
+    """Squared distance of p from the line through a and b (2,), as ``_point_line``
+    computes it (the same operations: the same value to the last bit)."""
+    ax, ay, bx, by = a[0] - p[0], a[1] - p[1], b[0] - p[0], b[1] - p[1]
+    c = ax * by - ay * bx
+    ex, ey = b[0] - a[0], b[1] - a[1]
+    length = ex * ex + ey * ey
+    return c * c * (1.0 / length)
+
+
+@njit(cache=True)
 def _point_line(p, a, b, ddc, ddl, dc, dl, grad, hess):
     """Squared distance of p from the line through a and b (2,): c^2 / L with
     c = cross(a - p, b - p), L = |b - a|^2; its gradient (6,) and Hessian (6, 6) over
@@ -298,11 +309,18 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
         ex, ey = b[0] - a[0], b[1] - a[1]
         t = (ex * (p[0] - a[0]) + ey * (p[1] - a[1])) / (ex * ex + ey * ey)
         ids[0] = vertex
+        # a pair beyond dhat (most candidates) is dropped before its derivatives
         if t < 0.0 or t > 1.0:
+            end = a if t < 0.0 else b
+            dx, dy = p[0] - end[0], p[1] - end[1]
+            if dx * dx + dy * dy >= s_hat:
+                continue
             ids[1] = edges[edge, 0] if t < 0.0 else edges[edge, 1]
-            s = _point_point(p, a if t < 0.0 else b, grad4, hess4)
+            s = _point_point(p, end, grad4, hess4)
             m, grad, hess = 2, grad4, hess4
         else:
+            if _point_line_squared(p, a, b) >= s_hat:
+                continue
             ids[1], ids[2] = edges[edge, 0], edges[edge, 1]
             s = _point_line(p, a, b, ddc, ddl, dc, dl, grad6, hess6)
             m, grad, hess = 3, grad6, hess6

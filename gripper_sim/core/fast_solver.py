@@ -16,7 +16,8 @@ per iteration:
   S H S + (I - S) is one kernel over the d x d node blocks (``core.solver_kernels``), on
   the same pattern; kinetic friction is the Coulomb cone of the stepper, a 2D tangent
   being a cone with one tangent;
-- each Newton system is solved by conjugate gradients preconditioned with a block
+- each Newton system is solved by conjugate gradients (one compiled call,
+  ``core.pcg_kernels``) preconditioned with a block
   LDL^T factorisation (``core.sparse_ldl``, d x d node blocks, no pivoting across
   blocks) kept from an earlier Newton iteration or step (the matrix changes little
   between them), its rank-one terms by the Woodbury identity and the whole projected
@@ -43,7 +44,6 @@ The fast path follows the reference path to the Newton tolerance over a grasp
 """
 from __future__ import annotations
 
-import math
 import os
 
 import numpy as np
@@ -56,10 +56,10 @@ from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES,
                                       woodbury_terms)
 
 try:  # numba is optional: without it the numpy reference path runs
+    from gripper_sim.core import pcg_kernels, sparse_ldl
     from gripper_sim.core import solver_kernels as kernels
-    from gripper_sim.core import sparse_ldl
 except ImportError:  # pragma: no cover - depends on the environment
-    kernels = sparse_ldl = None
+    kernels = sparse_ldl = pcg_kernels = None
 
 #: SuperLU settings for the reference path's Newton systems (symmetric pattern:
 #: minimum degree on A^T + A and diagonal pivots, about twice as fast as the defaults
@@ -141,11 +141,7 @@ class _BlockLDL:
             raise RuntimeError('singular Newton matrix')
 
     def _solve_in_place(self, x: np.ndarray) -> None:
-        if self.pattern.block == 3:
-            sparse_ldl.ldl_solve_3(self.pattern.l_ptr, self.pattern.l_row,
-                                self.l_values.reshape(-1, 9), self.d_inv.reshape(-1, 9), x)
-        else:
-            sparse_ldl.solve(self.pattern.arrays, self.l_values, self.d_inv, x)
+        pcg_kernels.block_ldl_solve(self.pattern.arrays, self.l_values, self.d_inv, x)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b for b (n,) or (n, k)."""
@@ -164,15 +160,6 @@ class _BlockLDL:
         x = np.empty(b.shape)
         kernels.unpermute(self._rhs, self.perm, x)
         return x
-
-
-def _converges_in_time(reduction: float, target: float, iterations: int) -> bool:
-    """Whether CG, having reduced a norm by ``reduction`` in ``iterations``, reaches
-    ``target`` (a reduction) within ``CG_MAX_ITERATIONS`` at the same geometric rate."""
-    if not 0.0 < reduction < 1.0:
-        return False
-    rate = math.log(reduction) / iterations
-    return iterations + math.log(target / reduction) / rate <= CG_MAX_ITERATIONS
 
 
 def fast_available() -> bool:
@@ -225,7 +212,6 @@ class PatternCachingSolver(ImplicitEulerSolver):
             self.solve(q, np.zeros(self.n), dt, q.copy(), con)
         except NewtonFailure:
             pass
-        kernels.cg_direction(np.zeros(1), np.zeros(1), 0.0)  # CG ended in one iteration
         self.reset()
         self.stats = dict.fromkeys(self.stats, 0)
         self.counts[:] = 0
@@ -420,33 +406,27 @@ class PatternCachingSolver(ImplicitEulerSolver):
             dq += precondition(rhs - self._apply(values, u, c, dq))
         return dq
 
-    def _preconditioner(self, u: np.ndarray, c: np.ndarray, filters: np.ndarray | None = None):
-        """r -> (kept LDL^T + rank-one terms)^-1 r, projected by the filters S (n_nodes,
-        d, d) if given: S (LDL^T + ...)^-1 S r."""
-        lu = self._lu
+    def _woodbury_terms(self, u: np.ndarray, c: np.ndarray) -> tuple:
+        """The preconditioner's rank-one terms for the system's u (n, k), c (k,): (u_w
+        (n, k_w), (LDL^T)^-1 u_w (n, k_w), the inverse capacitance matrix (k_w, k_w)),
+        those kept with the factorisation if they have as many columns, k_w = 0 if none."""
         kept = self._woodbury
         if kept is not None and kept[0].shape[1] == c.size:
-            u_w, a_inv_u, small_inv = kept
-        elif c.size:
-            a_inv_u, capacitance = woodbury_terms(lu.solve, u, c)
-            u_w, small_inv = u, np.linalg.inv(capacitance)
-        else:
-            u_w = None
-        if filters is None:
-            solve = lu.solve
-        else:
-            # the system lives in the range of S (its held directions are the identity
-            # and the right-hand side is zero there): the preconditioner S P^-1 S is exact
-            # on them even when P was factorised with another contact set
-            def solve(r):
-                return lu.solve_filtered(filters, r)
+            return kept
+        if c.size:
+            a_inv_u, capacitance = woodbury_terms(self._lu.solve, u, c)
+            return u, a_inv_u, np.linalg.inv(capacitance)
+        return np.zeros((self.n, 0)), np.zeros((self.n, 0)), np.zeros((0, 0))
+
+    def _preconditioner(self, u: np.ndarray, c: np.ndarray):
+        """r -> (kept LDL^T + rank-one terms)^-1 r."""
+        u_w, a_inv_u, small_inv = self._woodbury_terms(u, c)
+        solve = self._lu.solve
 
         def precondition(r):
             y = solve(r)
-            if u_w is not None:
+            if u_w.shape[1]:
                 y -= a_inv_u @ (small_inv @ (u_w.T @ y))
-            if filters is not None:
-                kernels.apply_filters(filters, y.copy(), y)
             return y
         return precondition
 
@@ -460,46 +440,22 @@ class PatternCachingSolver(ImplicitEulerSolver):
         return ax
 
     def _pcg(self, values, rhs, u, c, dt, filters):
-        """Preconditioned CG from zero; None if it fails to converge in time."""
-        precondition = self._preconditioner(u, c, filters)
-        max_abs = kernels.max_abs
-        limit = CG_TOLERANCE * max_abs(rhs)
-        error_limit = CG_ERROR_FRACTION * self.tolerance * dt
-        step_floor = CG_RELATIVE_FLOOR * self.tolerance * dt
-        x = np.zeros_like(rhs)
-        r = rhs.copy()
-        z = precondition(r)
-        residual_0, error_0 = max_abs(r), max_abs(z)
-        p = z.copy()
-        rz = float(r @ z)
-        for it in range(1, CG_MAX_ITERATIONS + 1):
-            ap = self._apply(values, u, c, p)
-            curvature = float(p @ ap)
-            if not curvature > 0 or not np.isfinite(curvature):
-                self.stats['cg_iterations'] += it
-                return None
-            residual, largest = kernels.cg_update(x, r, p, ap, rz / curvature)
-            if residual <= limit and largest >= step_floor:
-                self.stats['cg_iterations'] += it
-                self._stale = it > CG_STALE_ITERATIONS
-                return x
-            z = precondition(r)
-            error = max_abs(z)
-            if error <= error_limit:
-                self.stats['cg_iterations'] += it
-                self._stale = it > CG_STALE_ITERATIONS
-                return x
-            if it == CG_STALE_ITERATIONS and not (
-                    _converges_in_time(residual / residual_0, limit / residual_0, it)
-                    or _converges_in_time(error / error_0, error_limit / error_0, it)):
-                # at this rate neither test would pass in time: factorise now
-                self.stats['cg_iterations'] += it
-                return None
-            rz_new = float(r @ z)
-            kernels.cg_direction(z, p, rz_new / rz)
-            rz = rz_new
-        self.stats['cg_iterations'] += CG_MAX_ITERATIONS
-        return None
+        """Preconditioned CG from zero (``pcg_kernels.preconditioned_cg``, in the range of
+        the filters S (n_nodes, d, d)); None if it fails to converge in time."""
+        u_w, a_inv_u, small_inv = self._woodbury_terms(u, c)
+        lu = self._lu
+        x = np.empty(self.n)
+        status, iterations = pcg_kernels.preconditioned_cg(
+            self._matvec_indptr, self._matvec_indices, values, u, np.ascontiguousarray(u.T),
+            np.ascontiguousarray(c, dtype=float), filters, lu.perm, lu.pattern.arrays,
+            lu.l_values, lu.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv, rhs, CG_TOLERANCE,
+            CG_ERROR_FRACTION * self.tolerance * dt, CG_RELATIVE_FLOOR * self.tolerance * dt,
+            CG_MAX_ITERATIONS, CG_STALE_ITERATIONS, x)
+        self.stats['cg_iterations'] += iterations
+        if status != pcg_kernels.CONVERGED:
+            return None
+        self._stale = iterations > CG_STALE_ITERATIONS
+        return x
 
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:

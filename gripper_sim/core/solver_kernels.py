@@ -31,14 +31,12 @@ def filter_blocks(hdata, block_pos, block_nodes, filters, diag_extra, out):
             for c in range(d):
                 if filters[i, a, c] != (1.0 if a == c else 0.0):
                     free[i] = False
+    out[:] = hdata  # the blocks of free nodes as they are
     for blk in range(block_pos.shape[0]):
         i = block_nodes[blk, 0]
         j = block_nodes[blk, 1]
         pos = block_pos[blk]
         if free[i] and free[j]:
-            for a in range(d):
-                for c in range(d):
-                    out[pos[a, c]] = hdata[pos[a, c]]
             if i == j:
                 for a in range(d):
                     out[pos[a, a]] += diag_extra[d * i + a]
