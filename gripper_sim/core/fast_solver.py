@@ -1,14 +1,12 @@
-"""The implicit Euler Newton stepper of the simulations (2D and 3D) on a fixed pattern.
+"""The implicit Euler Newton solver of the simulations (2D and 3D) on a fixed pattern.
 
-``ImplicitEulerSolver`` (``core.stepper``, the reference) turns the energies' IJV
-triplets into a sparse matrix on every evaluation. The fruit's meshes do not change, so
-neither do the triplets' positions: this subclass finds the CSC pattern once. Same
-incremental potential, gradient and Hessian as the base class (up to round-off in the
-summation order); without numba it sums each evaluation's triplets into the pattern
-with one ``np.bincount``.
+The fruit's meshes do not change, so neither do the positions of its energies' Hessian
+entries: ``PatternCachingSolver`` finds the CSC pattern once. It is the one solver of
+every set-up (the 2D whole-step kernel, ``core.kernels``, does the same step in band
+storage); the triplet/SuperLU reference it is tested against is
+``test/reference_solver.py``.
 
-The fast path (every energy with an ``evaluate_into`` kernel, stiffness damping included;
-``GRIPPER_SIM_FAST=0`` turns it off) runs the one Newton iteration
+Every energy has an ``evaluate_into`` kernel. The solver runs the one Newton iteration
 (``core.newton.newton_iteration``, interpreted, on ``_NewtonProblem``) with less work
 per iteration:
 - the energies add their gradients and Hessians straight into the CSC values through
@@ -38,34 +36,22 @@ per iteration:
 - the line search starts where a sliding node's slip velocity, turning round, comes
   nearest to zero (``kink_step``: past it the step overshoots the kink of the smoothed
   friction law and the search halves it again and again).
-The fast path follows the reference path to the Newton tolerance over a grasp
+It follows the reference to the Newton tolerance over a grasp
 (test/test_3d_energies.py::test_fast_solver_follows_the_numpy_reference_path).
 """
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import scipy.sparse as sp
 
-from gripper_sim.core import newton
-from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES,
-                                      ImplicitEulerSolver, NewtonFailure, StepConstraints,
-                                      StepProblem, StepSolution, stack_low_rank,
-                                      woodbury_terms)
-
-try:  # numba is optional: without it the numpy reference path runs
-    from gripper_sim.core import solver_kernels as kernels
-    from gripper_sim.core import sparse_ldl
-except ImportError:  # pragma: no cover - depends on the environment
-    kernels = sparse_ldl = None
-
-#: SuperLU settings for the reference path's Newton systems (symmetric pattern:
-#: minimum degree on A^T + A and diagonal pivots, about twice as fast as the defaults
-#: for the 3D fruit)
-SYMMETRIC_LU_OPTIONS = dict(permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
-                            options=dict(SymmetricMode=True))
+from gripper_sim.core import newton, sparse_ldl
+from gripper_sim.core import solver_kernels as kernels
+from gripper_sim.core.energies.base import Energy
+from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
+                                      StepConstraints, StepProblem, StepSolution,
+                                      stack_low_rank, woodbury_terms)
 
 #: relative residual (infinity norms) at which the preconditioned CG stops (0.1 took
 #: 12 % more Newton systems on the solid apple's grasp: a fruit held at two nodes has a
@@ -175,11 +161,6 @@ def _converges_in_time(reduction: float, target: float, iterations: int) -> bool
     return iterations + math.log(target / reduction) / rate <= CG_MAX_ITERATIONS
 
 
-def fast_available() -> bool:
-    """Whether the numba kernels can be used (numba installed, GRIPPER_SIM_FAST != 0)."""
-    return kernels is not None and os.environ.get('GRIPPER_SIM_FAST', '1') != '0'
-
-
 def as_cone(con: StepConstraints) -> StepConstraints:
     """``con`` with 2D friction (one tangent (k, 2), speeds (k,)) written as a Coulomb
     cone with one tangent ((k, 1, 2), (k, 1)): the same potential, gradient and Hessian."""
@@ -189,15 +170,35 @@ def as_cone(con: StepConstraints) -> StepConstraints:
                            con.friction_bounds, con.friction_obstacle_speed[:, None])
 
 
-class PatternCachingSolver(ImplicitEulerSolver):
-    """``ImplicitEulerSolver`` whose energy Hessians keep one sparsity pattern."""
+class PatternCachingSolver:
+    """The implicit Euler step's Newton solver (see the module docstring).
 
-    def __init__(self, *args, fast: bool | None = None, **kwargs):
-        super().__init__(*args, **kwargs)
-        if fast is None:
-            fast = fast_available()
-        self.fast = bool(fast and kernels is not None
-                         and all(hasattr(e, 'evaluate_into') for e in self.energies))
+    Args:
+        masses: (n_nodes,) kg.
+        energies: internal and external potential energies, each with an
+            ``evaluate_into`` kernel (``energies.base.KernelEnergy``).
+        damping_mass: Rayleigh alpha (1/s).  damping_stiffness: Rayleigh beta (s),
+            applied to the Hessian of the elastic energies.
+        tolerance: m/s, stop when max |dq| / dt falls below it.
+        max_iterations: Newton iterations before NewtonFailure.
+        dim: 2 (planar) or 3, the coordinates per node.
+    """
+
+    def __init__(self, masses: np.ndarray, energies: list[Energy], damping_mass: float = 0.0,
+                 damping_stiffness: float = 0.0, tolerance: float = 1e-6,
+                 max_iterations: int = 25, dim: int = 2):
+        self.dim = int(dim)
+        self.m = np.repeat(np.asarray(masses, dtype=float), self.dim)
+        self.energies = list(energies)
+        for energy in self.energies:
+            if not hasattr(energy, 'evaluate_into'):
+                raise TypeError(f'{type(energy).__name__} has no evaluate_into kernel: '
+                                'every energy of the solver needs one')
+        self.alpha = damping_mass
+        self.beta = damping_stiffness
+        self.tolerance = tolerance
+        self.max_iterations = max_iterations
+        self.n = self.m.size
         #: counts of the fast path: Newton solves (contact passes), Newton systems,
         #: (LDL^T) factorisations, CG iterations
         self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
@@ -207,8 +208,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._woodbury = None  # (u, A^-1 u, (C^-1 + u^T A^-1 u)^-1) at the factorisation
         self._stale = False
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
-        if self.fast:
-            self._build_fast_pattern()
+        self._build_fast_pattern()
 
     def load_kernels(self, q: np.ndarray, dt: float) -> None:
         """Run every kernel of the fast path once, on one Newton solve from positions
@@ -216,8 +216,6 @@ class PatternCachingSolver(ImplicitEulerSolver):
         loads each kernel's compiled code from its cache on first use (about 10-20 ms
         each), which then happens here, when the simulation is built, and not in its
         first steps (a real-time loop would fall behind there)."""
-        if not self.fast:
-            return
         d = self.dim
         con = StepConstraints(np.tile(np.eye(d), (self.n // d, 1, 1)), np.zeros(1, np.int64),
                               np.eye(d)[None, 1:], np.zeros(1), np.zeros((1, d - 1)))
@@ -235,6 +233,11 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._lu = None
         self._woodbury = None
         self._warm = None
+
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """The line search's first step: 1, or less where an energy bounds it (a contact
+        barrier: the continuous-collision step, ``Energy.max_step``)."""
+        return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
 
     def _mass_damping(self, dq: np.ndarray, dt: float, grad: np.ndarray) -> float:
         """Rayleigh mass damping alpha M dq^2 / (2 dt) (J); its gradient added to grad."""
@@ -323,10 +326,12 @@ class PatternCachingSolver(ImplicitEulerSolver):
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
 
     def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
-        """As ``incremental_potential``, with the Hessian as CSC values on the fixed pattern.
+        """The incremental potential Phi (J), its gradient (n_dof,) N, the friction part
+        of the gradient (n_dof,) N, and, with ``hessian``, the Hessian parts: (CSC values
+        on the fixed pattern, the energies' rank-one terms [(c, u)]).
 
         Rayleigh stiffness damping (beta > 0) adds beta dq^T K dq / (2 dt), K the elastic
-        energies' Hessian at q without their rank-one terms (as ``incremental_potential``):
+        energies' Hessian at q without their rank-one terms:
         the elastic energies are then evaluated first, their Hessian values copied as K."""
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
@@ -504,16 +509,13 @@ class PatternCachingSolver(ImplicitEulerSolver):
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:
         """One implicit Euler step: ``newton.newton_iteration`` (interpreted) on this
-        solver's pattern (``_NewtonProblem``); without the fast path the reference
-        ``ImplicitEulerSolver.solve``. A later contact pass of the same step starts from
+        solver's pattern (``_NewtonProblem``). A later contact pass of the same step starts from
         the last pass's solution in the directions the new filter leaves free.
 
         Raises:
             NewtonFailure: no convergence, no descent, or an infeasible start.
         """
         con = as_cone(con)
-        if not self.fast:
-            return super().solve(q_n, v_n, dt, q_start, con)
         self.stats['passes'] += 1
         problem = _NewtonProblem(self, q_n, v_n, dt, con)
         history = np.zeros(self.max_iterations)

@@ -302,7 +302,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
               fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
               hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values,
               pad_nodes, pad_par):
-    """Phi of stepper.ImplicitEulerSolver.incremental_potential, its gradient (into
+    """Phi of ``fast_solver.PatternCachingSolver.evaluate_fast`` in band storage, its gradient (into
     ``grad``) and the friction gradient (into ``fric_grad``); the elastic band Hessian
     into ``band``, the energies (4,) into ``values``.
 

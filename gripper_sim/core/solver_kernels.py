@@ -159,7 +159,7 @@ def max_abs(vec):
 @njit(cache=True)
 def cone_friction(x, x_n, nodes, tangents, bounds, obstacle_speed, dt, eps, fric_grad,
                   blocks):
-    """Kinetic friction of sliding nodes (``ImplicitEulerSolver._cone_friction``).
+    """Kinetic friction of sliding nodes (the Coulomb cone of ``core.stepper``).
 
     With T (m, d) a node's tangents and s = T (x - x_n) / dt - v_obstacle (m/s), the
     potential b dt sqrt(|s|^2 + eps^2) has the gradient b T^T s / root and the Hessian
