@@ -92,24 +92,30 @@ class ImplicitEulerSolver:
         self.kept_factor = None
 
     def incremental_potential(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
-        """Phi, its gradient, the gradient of the friction part, and the Hessian parts."""
+        """Phi, its gradient, the gradient of the friction part, and the Hessian parts
+        (sparse matrix, rank-one terms). Stiffness damping: beta dq^T K_n dq / (2 dt), K_n
+        the elastic energies' Hessian (triplets) at q_n."""
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
         grad = self.m * inertia / dt ** 2
         rows, cols, vals, low_rank = [], [], [], []
-        elastic_rows, elastic_cols, elastic_vals = [], [], []
         for energy in self.energies:
-            ev = energy.evaluate(q, hessian=hessian or self.beta > 0)
+            ev = energy.evaluate(q, hessian=hessian)
             if not np.isfinite(ev.value):
                 return np.inf, None, None, None
             phi += ev.value
             grad += ev.gradient
-            if hessian or self.beta > 0:
+            if hessian:
                 rows.append(ev.rows)
                 cols.append(ev.cols)
                 vals.append(ev.vals)
                 low_rank.extend(ev.low_rank)
+        # stiffness damping's K_n: the elastic energies' Hessian triplets at q_n
+        elastic_rows, elastic_cols, elastic_vals = [], [], []
+        if self.beta > 0:
+            for energy in self.energies:
                 if energy.elastic:
+                    ev = energy.evaluate(q_n, hessian=True)
                     elastic_rows.append(ev.rows)
                     elastic_cols.append(ev.cols)
                     elastic_vals.append(ev.vals)

@@ -87,13 +87,17 @@ def test_energy_kernels_match_the_numpy_energies(name):
     (['fruit.nodes=24', 'fruit.pressure.turgor=3e4'], 5e-4),  # the band, rank-one term
     (['fruit.model=solid'], 1e-4)],  # the sparse LDL^T
     ids=['shell', 'solid'])
+@pytest.mark.parametrize('beta', [1e-4, 2e-3])
 def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction(fruit_model,
-                                                                              noise):
-    fruit, model = _shell(*fruit_model, 'fruit.damping.mass=5', 'fruit.damping.stiffness=1e-4')
+                                                                              noise, beta):
+    """The kernel's Newton and the reference's (with its chord rule): the same iterations
+    and end, with mass and stiffness damping (K_n at the step's start in both)."""
+    fruit, model = _shell(*fruit_model, 'fruit.damping.mass=5',
+                          f'fruit.damping.stiffness={beta}')
     from gripper_sim.core.energies import Gravity
     gravity = Gravity(fruit.masses, 9.81)
     solver = ImplicitEulerSolver(fruit.masses, list(fruit.energies) + [gravity],
-                                 damping_mass=5.0, damping_stiffness=1e-4, tolerance=1e-9)
+                                 damping_mass=5.0, damping_stiffness=beta, tolerance=1e-9)
     solver.keep_factor = True  # the kernel's rule: a factor kept while it contracts
     n = fruit.n_nodes
     q_n = _perturbed(fruit, noise)
@@ -114,7 +118,7 @@ def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction(fr
     history = np.zeros(solver.max_iterations)
     status, iterations, n_hist = kernels.newton_solve(
         q_n, v_n, dt, start, con.filters, con.friction_nodes, con.friction_tangents,
-        con.friction_bounds, con.friction_obstacle_speed, solver.m, 5.0, 1e-4, 1e-9,
+        con.friction_bounds, con.friction_obstacle_speed, solver.m, 5.0, beta, 1e-9,
         solver.max_iterations, model['edges'], model['spar'], model['triples'],
         model['bpar'], model['ring'], model['press'], model['flesh'], gravity.grad,
         model['pos'], model['nbw'], q, reaction, history, np.zeros(4),

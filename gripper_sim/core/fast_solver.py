@@ -208,6 +208,7 @@ class PatternCachingSolver:
         self._woodbury = None  # (u, A^-1 u, (C^-1 + u^T A^-1 u)^-1) at the factorisation
         self._stale = False
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
+        self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
         self._build_fast_pattern()
 
     def load_kernels(self, q: np.ndarray, dt: float) -> None:
@@ -233,6 +234,7 @@ class PatternCachingSolver:
         self._lu = None
         self._woodbury = None
         self._warm = None
+        self._stiffness = None
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The line search's first step: 1, or less where an energy bounds it (a contact
@@ -271,10 +273,6 @@ class PatternCachingSolver:
         self._scatter = [np.zeros((0, 0), np.int64) if keys is None else
                          np.searchsorted(unique, keys).astype(np.int64)
                          for keys in element_keys]
-        # (energy, scatter) in evaluation order: with stiffness damping the elastic
-        # energies first (``evaluate_fast``; the sort is stable)
-        self._evaluation_order = sorted(zip(self.energies, self._scatter),
-                                        key=lambda pair: self.beta > 0 and not pair[0].elastic)
         col_node, row_node = unique // n // d, unique % n // d
         block_keys = np.unique(col_node * nodes + row_node)
         bcol, brow = block_keys // nodes, block_keys % nodes
@@ -325,35 +323,46 @@ class PatternCachingSolver:
     def _csc(self, data: np.ndarray) -> sp.csc_matrix:
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
 
+    def step_stiffness(self, q_n: np.ndarray) -> np.ndarray:
+        """K_n, the elastic energies' Hessian at the step's start ``q_n`` (n_dof,) m
+        without their rank-one terms, as CSC values on the pattern (N/m): the matrix of
+        the stiffness damping. Kept for the step (its contact passes share q_n)."""
+        kept = self._stiffness
+        if kept is not None and np.array_equal(kept[0], q_n):
+            return kept[1]
+        data = np.zeros(self._nnz)
+        scratch = np.zeros(self.n)
+        for energy, scatter in zip(self.energies, self._scatter):
+            if energy.elastic:
+                energy.evaluate_into(q_n, scratch, data, scatter, True)
+        self._stiffness = (q_n.copy(), data)
+        return data
+
     def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
         """The incremental potential Phi (J), its gradient (n_dof,) N, the friction part
         of the gradient (n_dof,) N, and, with ``hessian``, the Hessian parts: (CSC values
         on the fixed pattern, the energies' rank-one terms [(c, u)]).
 
-        Rayleigh stiffness damping (beta > 0) adds beta dq^T K dq / (2 dt), K the elastic
-        energies' Hessian at q without their rank-one terms:
-        the elastic energies are then evaluated first, their Hessian values copied as K."""
+        Rayleigh stiffness damping (beta > 0) adds beta dq^T K_n dq / (2 dt), dq = q - q_n,
+        K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
+        so its gradient beta K_n dq / dt and Hessian beta K_n / dt are exact."""
         inertia = q - q_n - dt * v_n
         phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
         grad = self.m * inertia / dt ** 2
-        damped = self.beta > 0
-        full = hessian or damped
-        data = np.zeros(self._nnz if full else 1)
+        data = np.zeros(self._nnz if hessian else 1)
         low_rank = []
-        stiffness = None
-        for energy, scatter in self._evaluation_order:
-            if damped and stiffness is None and not energy.elastic:
-                stiffness = data.copy()
-            value, terms = energy.evaluate_into(q, grad, data, scatter, full)
+        for energy, scatter in zip(self.energies, self._scatter):
+            value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
             if not np.isfinite(value):
                 return np.inf, None, None, None
             phi += value
             low_rank.extend(terms)
         dq = q - q_n
         phi += self._mass_damping(dq, dt, grad)
-        if damped:
-            stiffness = data.copy() if stiffness is None else stiffness
-            cdq = self._csc(stiffness) @ dq
+        if self.beta > 0:
+            stiffness = self.step_stiffness(q_n)
+            cdq = np.empty(self.n)
+            kernels.csc_matvec(self._matvec_indptr, self._matvec_indices, stiffness, dq, cdq)
             phi += 0.5 * self.beta * float(dq @ cdq) / dt
             grad += self.beta * cdq / dt
             if hessian:
