@@ -305,8 +305,8 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
     """Phi of ``fast_solver.PatternCachingSolver.evaluate_fast`` in band storage, its gradient (into
     ``grad``) and the friction gradient (into ``fric_grad``); the elastic band Hessian
     into ``band``, the energies (4,) into ``values``. Stiffness damping (beta > 0) is
-    beta dq^T K_n dq / (2 dt) with K_n = ``stiffness`` (``_step_stiffness``: the elastic
-    Hessian at q_n, in ``band``'s layout).
+    beta dq^T K_n dq / (2 dt) with K_n = ``stiffness`` (the elastic Hessian at q_n,
+    evaluated once per solve by ``_newton_solve``, in ``band``'s layout).
 
     Returns (phi, rank-one c).
     """
@@ -759,7 +759,7 @@ def _newton_storage(n, nbw, flesh):
     """The Hessian and Newton matrix arrays of ``newton_solve``: (C, A, L's blocks, D^-1,
     K_n): the node-block band (n, nbw+1, 2, 2) twice, or a meshed solid's sparse values
     (n_blocks + 1, 1, 2, 2) twice and its factor (n_factor, 2, 2), (n, 2, 2); then the
-    step's stiffness K_n in C's layout (``_step_stiffness``)."""
+    step's stiffness K_n in C's layout (the stiffness damping's, ``_newton_solve``)."""
     if flesh[0].shape[0] == 0:
         return (np.zeros((n, nbw + 1, 2, 2)), np.empty((n, nbw + 1, 2, 2)),
                 np.empty((0, 2, 2)), np.empty((0, 2, 2)), np.zeros((n, nbw + 1, 2, 2)))
@@ -1400,7 +1400,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     pad_forces, pad_normal, pad_holder, pad_side = (b(pad_forces), b(pad_normal), b(pad_holder),
                                                     b(pad_side))
     work, iwork, bwork, stress = b(work), b(iwork), b(bwork), b(stress)
-    storage = (b(storage[0]), b(storage[1]), b(storage[2]), b(storage[3]))
+    storage = (b(storage[0]), b(storage[1]), b(storage[2]), b(storage[3]), b(storage[4]))
     masses2 = _packed1(fconst, layout, KF_MASSES2)
     masses = _packed1(fconst, layout, KF_MASSES)
     rest_segments = _packed1(fconst, layout, KF_REST_SEGMENTS)
