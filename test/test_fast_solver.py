@@ -45,7 +45,7 @@ def test_compiled_friction_is_the_steppers_cone(dim):
     grad = np.zeros(q.size)
     out = np.empty((con.friction_nodes.size, dim, dim))
     value = solver_kernels.cone_friction(
-        q.reshape(-1, dim), q_n.reshape(-1, dim), con.friction_nodes,
+        q, q_n, con.friction_nodes,
         np.ascontiguousarray(con.friction_tangents), con.friction_bounds,
         np.ascontiguousarray(con.friction_obstacle_speed, dtype=float), dt,
         FRICTION_SMOOTHING, grad, out)
@@ -97,7 +97,7 @@ def test_the_block_ldl_preconditioner_solves_a_newton_matrix(model):
     data = np.zeros(solver._nnz)
     for energy, scatter in zip(solver.energies, solver._scatter):
         energy.evaluate_into(q, np.zeros(q.size), data, scatter, True)
-    solver_kernels.add_diagonal(data, solver._diag_pos, solver.m / dt ** 2)
+    solver_kernels.add_inertia_diagonal(data, solver._diag_pos, solver.m, dt, 0.0)
     ldl = solver._factorise(data)
     matrix = solver._csc(data).tocsc()
     rhs = np.linspace(-1.0, 1.0, q.size)

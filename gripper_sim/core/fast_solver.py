@@ -241,13 +241,6 @@ class PatternCachingSolver:
         barrier: the continuous-collision step, ``Energy.max_step``)."""
         return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
 
-    def _mass_damping(self, dq: np.ndarray, dt: float, grad: np.ndarray) -> float:
-        """Rayleigh mass damping alpha M dq^2 / (2 dt) (J); its gradient added to grad."""
-        if self.alpha <= 0:
-            return 0.0
-        grad += self.alpha * self.m * dq / dt
-        return 0.5 * self.alpha * float(np.sum(self.m * dq ** 2)) / dt
-
     # ------------------------------------------------------------------ fast path
     def _build_fast_pattern(self) -> None:
         """CSC pattern of every energy's elements plus the diagonal node blocks, the
@@ -345,10 +338,12 @@ class PatternCachingSolver:
 
         Rayleigh stiffness damping (beta > 0) adds beta dq^T K_n dq / (2 dt), dq = q - q_n,
         K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
-        so its gradient beta K_n dq / dt and Hessian beta K_n / dt are exact."""
-        inertia = q - q_n - dt * v_n
-        phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
-        grad = self.m * inertia / dt ** 2
+        so its gradient beta K_n dq / dt and Hessian beta K_n / dt are exact.
+        Inertia, damping and friction are ``core.potential_terms``', as in the 2D
+        whole-step kernel."""
+        grad = np.empty(self.n)
+        dq = np.empty(self.n)
+        phi = kernels.inertia_and_mass_damping(q, q_n, v_n, dt, self.m, self.alpha, dq, grad)
         data = np.zeros(self._nnz if hessian else 1)
         low_rank = []
         for energy, scatter in zip(self.energies, self._scatter):
@@ -357,14 +352,11 @@ class PatternCachingSolver:
                 return np.inf, None, None, None
             phi += value
             low_rank.extend(terms)
-        dq = q - q_n
-        phi += self._mass_damping(dq, dt, grad)
         if self.beta > 0:
             stiffness = self.step_stiffness(q_n)
-            cdq = np.empty(self.n)
-            kernels.csc_matvec(self._matvec_indptr, self._matvec_indices, stiffness, dq, cdq)
-            phi += 0.5 * self.beta * float(dq @ cdq) / dt
-            grad += self.beta * cdq / dt
+            phi += kernels.stiffness_damping(self._matvec_indptr, self._matvec_indices,
+                                             stiffness, dq, self.beta, dt, np.empty(self.n),
+                                             grad)
             if hessian:
                 data += (self.beta / dt) * stiffness
         k = con.friction_nodes
@@ -372,7 +364,7 @@ class PatternCachingSolver:
         if k.size:
             blocks = np.empty((k.size, self.dim, self.dim))
             phi += kernels.cone_friction(
-                q.reshape(-1, self.dim), q_n.reshape(-1, self.dim), k.astype(np.int64),
+                q, q_n, k.astype(np.int64),
                 np.ascontiguousarray(con.friction_tangents, dtype=float),
                 np.ascontiguousarray(con.friction_bounds, dtype=float),
                 np.ascontiguousarray(con.friction_obstacle_speed, dtype=float), dt,
@@ -380,8 +372,7 @@ class PatternCachingSolver:
             grad += fric_grad
         if not hessian:
             return phi, grad, fric_grad, None
-        diag = self.m / dt ** 2 + (self.alpha * self.m / dt if self.alpha > 0 else 0.0)
-        kernels.add_diagonal(data, self._diag_pos, np.ascontiguousarray(diag, dtype=float))
+        kernels.add_inertia_diagonal(data, self._diag_pos, self.m, dt, self.alpha)
         if k.size:
             kernels.add_node_blocks(data, self._diag_block_pos, k.astype(np.int64),
                                     np.ascontiguousarray(blocks))

@@ -61,6 +61,7 @@ from gripper_sim.core.energies.kernels import (area_and_gradient, area_pressure,
                                                neohookean_triangles, neohookean_von_mises,
                                                stretching)
 from gripper_sim.core.measures import face_contact_length_of, outline_measures
+from gripper_sim.core import potential_terms as terms
 from gripper_sim.core.pad import (PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X, PF_NEW_Z, PF_NX,
                                   PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE, PF_SPEED,
                                   pad_blocks, pad_forces, pad_rows, pad_terms)
@@ -302,7 +303,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
               fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
               hessian, grad, fric_grad, grads, band, stiffness, area_grad, dq_tmp, cdq, values,
               pad_nodes, pad_par):
-    """Phi of ``fast_solver.PatternCachingSolver.evaluate_fast`` in band storage, its gradient (into
+    """Phi (``core.potential_terms`` and the energies) in band storage, its gradient (into
     ``grad``) and the friction gradient (into ``fric_grad``); the elastic band Hessian
     into ``band``, the energies (4,) into ``values``. Stiffness damping (beta > 0) is
     beta dq^T K_n dq / (2 dt) with K_n = ``stiffness`` (the elastic Hessian at q_n,
@@ -311,12 +312,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
     Returns (phi, rank-one c).
     """
     n2 = q.shape[0]
-    phi_in = 0.0
-    for m in range(n2):
-        inert = q[m] - q_n[m] - dt * v_n[m]
-        phi_in += masses2[m] * inert ** 2
-        grad[m] = masses2[m] * inert / dt ** 2
-    phi = 0.5 * phi_in / dt ** 2
+    phi = terms.inertia(q, q_n, v_n, dt, masses2, grad)
     c = _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
                   hessian, grads, band, area_grad, values)
     for e in range(4):
@@ -327,13 +323,7 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         return np.inf, c
     for m in range(n2):
         dq_tmp[m] = q[m] - q_n[m]
-    if alpha > 0:
-        acc = 0.0
-        for m in range(n2):
-            acc += masses2[m] * dq_tmp[m] ** 2
-        phi += 0.5 * alpha * acc / dt
-        for m in range(n2):
-            grad[m] += alpha * masses2[m] * dq_tmp[m] / dt
+    phi += terms.mass_damping(dq_tmp, masses2, alpha, dt, grad)
     solid = flesh[0].shape[0] > 0
     if beta > 0 and (solid or edges.shape[0] + triples.shape[0] + ring.shape[0] > 0):
         if solid:
@@ -344,24 +334,13 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
             for i in range(pos.shape[0]):
                 order[pos[i]] = i
             band_matvec(stiffness, order, dq_tmp, cdq)
-        acc = 0.0
-        for m in range(n2):
-            acc += dq_tmp[m] * cdq[m]
-        phi += 0.5 * beta * acc / dt
-        for m in range(n2):
-            grad[m] += beta * cdq[m] / dt
+        phi += terms.stiffness_damping(dq_tmp, cdq, beta, dt, grad)
     fric_grad[:] = 0.0
     if n_fr > 0:
         acc = 0.0
         for f in range(n_fr):
-            k = fr_nodes[f]
-            s = ((q[2 * k] - q_n[2 * k]) * fr_t[f, 0]
-                 + (q[2 * k + 1] - q_n[2 * k + 1]) * fr_t[f, 1]) / dt - fr_speed[f]
-            root = math.sqrt(s ** 2 + FRICTION_SMOOTHING ** 2)
-            acc += fr_bound[f] * dt * root
-            w = fr_bound[f] * s / root
-            fric_grad[2 * k] += w * fr_t[f, 0]
-            fric_grad[2 * k + 1] += w * fr_t[f, 1]
+            acc += terms.friction(q, q_n, fr_nodes[f], fr_t[f:f + 1], fr_speed[f:f + 1],
+                                  fr_bound[f], dt, FRICTION_SMOOTHING, fric_grad)[0]
         phi += acc
         for m in range(n2):
             grad[m] += fric_grad[m]
@@ -593,8 +572,8 @@ def _newton_matrix(band, stiffness, masses2, dt, alpha, beta, filters, fr_nodes,
                 h10 += damping * stiffness[p, d, 1, 0]
                 h11 += damping * stiffness[p, d, 1, 1]
             if d == 0:
-                h00 += _inertia(masses2, dt, alpha, 2 * i)
-                h11 += _inertia(masses2, dt, alpha, 2 * i + 1)
+                h00 += terms.inertia_diagonal(masses2, dt, alpha, 2 * i)
+                h11 += terms.inertia_diagonal(masses2, dt, alpha, 2 * i + 1)
             j = order[p - d]
             (ab[p, d, 0, 0], ab[p, d, 0, 1], ab[p, d, 1, 0],
              ab[p, d, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j, h00, h01, h10,
@@ -622,12 +601,6 @@ def _filter_kinds(filters):
 
 
 @njit(cache=True, error_model='numpy')
-def _inertia(masses2, dt, alpha, m):
-    """The inertia (and mass damping) on the diagonal of dof m: m/dt^2 + alpha m/dt."""
-    return masses2[m] / dt ** 2 + (alpha * masses2[m] / dt if alpha > 0 else 0.0)
-
-
-@njit(cache=True, error_model='numpy')
 def _filtered_block(filters, kind_i, kind_j, i, j, h00, h01, h10, h11):
     """S_i H S_j (4 values, row-major) of the node block H = [[h00, h01], [h10, h11]] of
     rows i and columns j (kind_i, kind_j: their ``_filter_kinds``)."""
@@ -648,13 +621,12 @@ def _filtered_block(filters, kind_i, kind_j, i, j, h00, h01, h10, h11):
 @njit(cache=True, error_model='numpy')
 def _friction_blocks(q, q_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, n_fr, pos, ab):
     """Adds the kinetic friction's node blocks S_k (g t t^T) S_k to the diagonal blocks
-    ab[pos[k], 0]."""
+    ab[pos[k], 0] (``potential_terms``: one tangent t per node)."""
     for f in range(n_fr):
         k = fr_nodes[f]
-        s = ((q[2 * k] - q_n[2 * k]) * fr_t[f, 0]
-             + (q[2 * k + 1] - q_n[2 * k + 1]) * fr_t[f, 1]) / dt - fr_speed[f]
+        s, _ = terms.slip(q, q_n, k, fr_t[f:f + 1], fr_speed[f:f + 1], dt)
         root = math.sqrt(s ** 2 + FRICTION_SMOOTHING ** 2)
-        g = fr_bound[f] * FRICTION_SMOOTHING ** 2 / root ** 3 / dt
+        g = terms.one_tangent_curvature(root, fr_bound[f], dt, FRICTION_SMOOTHING)
         tx, tz = fr_t[f, 0], fr_t[f, 1]
         ux = filters[k, 0, 0] * tx + filters[k, 0, 1] * tz  # S t
         uz = filters[k, 1, 0] * tx + filters[k, 1, 1] * tz
@@ -726,8 +698,10 @@ def _solid_newton_matrix(hvals, stiffness, masses2, dt, alpha, beta, filters, fr
         h00, h01, h10, h11 = _damped_block(hvals, stiffness, damping, k)
         (ab[k, 0, 0, 0], ab[k, 0, 0, 1], ab[k, 0, 1, 0],
          ab[k, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[i], i, i,
-                                           h00 + _inertia(masses2, dt, alpha, 2 * i), h01,
-                                           h10, h11 + _inertia(masses2, dt, alpha, 2 * i + 1))
+                                           h00 + terms.inertia_diagonal(masses2, dt, alpha, 2 * i),
+                                           h01, h10,
+                                           h11 + terms.inertia_diagonal(masses2, dt, alpha,
+                                                                        2 * i + 1))
         for m in range(a_ptr[k], a_ptr[k + 1]):
             b = n + m
             j = order[a_col[m]]
