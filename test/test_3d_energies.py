@@ -306,10 +306,10 @@ def test_strawberry_outline_revolved_has_the_pappus_volume():
 def test_fast_solver_follows_the_numpy_reference_path(model):
     """The same grasp on the solver (kernels into a fixed sparse pattern, CG on a kept
     LU, warm-started contact passes) and on the test reference (``reference_route``: the
-    same kernels as triplets, one LU per Newton iteration): the same contact sets and, to the Newton tolerance, the same motion. The
-    jaws close in position mode (one solve per step): in force mode the drive re-solves a
-    step until the force meets its command, and which solves it takes may differ between
-    the paths by the Newton tolerance."""
+    same kernels as triplets, one LU per Newton iteration): the same contact sets and, to
+    the Newton tolerance, the same motion. The jaws close in position mode (one solve per
+    step): in force mode the drive re-solves a step until the force meets its command,
+    and which solves it takes may differ between the paths by the Newton tolerance."""
     from gripper_sim.configuration import load_config
     from gripper_sim.workflows.factory import make_simulation
     config = load_config(overrides=['dimension=3', 'sim.dt=0.01'] + model)

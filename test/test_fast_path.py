@@ -2,8 +2,8 @@
 
 Kernels against the numpy energies (value, gradient, Hessian), the Newton kernel
 against ImplicitEulerSolver.solve, and whole trajectories of Simulation(fast=True)
-against Simulation(fast=False) on the reference solver (``reference_route``): positions within 1e-9 relative every step, the same
-contact sets, modes and Newton iteration counts.
+against Simulation(fast=False) on the reference solver (``reference_route``): positions
+within 1e-9 relative every step, the same contact sets, modes and Newton iteration counts.
 """
 import numpy as np
 import pytest

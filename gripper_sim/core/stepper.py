@@ -17,10 +17,11 @@ one tangent (2D) or in the tangent plane (3D: a Coulomb cone, the smoothed norm)
 
 This module holds what every route of the step shares: the step's constraints and
 solution, the failure, and ``StepProblem``, the interpreted Newton problems' common part.
-The Newton iteration itself is ``core.newton.newton_iteration`` (the one for every
-set-up); the solver is ``core.fast_solver.PatternCachingSolver`` (the 2D whole-step
-kernel, ``core.kernels``, runs the same potential in band storage). The triplet/SuperLU
-reference they are both checked against lives in ``test/reference_solver.py``.
+The potential's terms besides the energies are ``core.potential_terms`` (compiled once
+for both assemblies). The Newton iteration itself is ``core.newton.newton_iteration``
+(the one for every set-up); the solver is ``core.fast_solver.PatternCachingSolver`` (the
+2D whole-step kernel, ``core.kernels``, runs the same potential in band storage). The
+triplet/SuperLU reference they are both checked against is ``test/reference_solver.py``.
 """
 from __future__ import annotations
 
