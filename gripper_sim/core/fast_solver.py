@@ -199,7 +199,7 @@ class PatternCachingSolver:
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.n = self.m.size
-        #: counts of the fast path: Newton solves (contact passes), Newton systems,
+        #: counts: Newton solves (contact passes), Newton systems,
         #: (LDL^T) factorisations, CG iterations
         self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
         #: the Newton iteration's work counters (``newton.C_*``)
@@ -212,7 +212,7 @@ class PatternCachingSolver:
         self._build_fast_pattern()
 
     def load_kernels(self, q: np.ndarray, dt: float) -> None:
-        """Run every kernel of the fast path once, on one Newton solve from positions
+        """Run every kernel of the solver once, on one Newton solve from positions
         ``q`` (n_dof,) m at rest over ``dt`` (s) with a sliding node, and forget it: numba
         loads each kernel's compiled code from its cache on first use (about 10-20 ms
         each), which then happens here, when the simulation is built, and not in its
@@ -241,7 +241,7 @@ class PatternCachingSolver:
         barrier: the continuous-collision step, ``Energy.max_step``)."""
         return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
 
-    # ------------------------------------------------------------------ fast path
+    # ------------------------------------------------------------------ the pattern
     def _build_fast_pattern(self) -> None:
         """CSC pattern of every energy's elements plus the diagonal node blocks, the
         scatter index of each energy, and the positions of the d x d node blocks."""
@@ -547,7 +547,7 @@ class _NewtonProblem(StepProblem):
     grasp (bench_3d).
 
     Args:
-        solver: the ``PatternCachingSolver`` (fast path).
+        solver: the ``PatternCachingSolver``.
         q_n, v_n: (n_dof,) m, m/s at the start of the step.  dt: s.
         con: the step's constraints, 2D friction as a cone (``as_cone``).
     """

@@ -100,7 +100,8 @@ class Simulation(SimulationFacade):
                       else None)
         self._multistep: MultiStep | None = None
         if fast and self._fast is None:
-            raise ConfigError('the fast path needs numba and the default contact model')
+            raise ConfigError('fast=True: the whole-step kernel needs the default contact model '
+                              'and rigid fingers')
         self.reset()
 
     def _make_damage(self) -> DamageTracker:
