@@ -12,8 +12,7 @@ over the wall time (the real-time factor; >= 1 is real time), the CPU time per s
 LDL^T factorisations, conjugate-gradient iterations) and a breakdown of the CPU time by
 part (energy kernels, LDL^T factorisation, triangular solves, the rest of Newton, contact
 bookkeeping, measures). Single thread; wall figures vary with the machine's load, which
-is printed. ``GRIPPER_SIM_FAST=0`` runs the generic Newton path (the same energy
-kernels as triplets, one LU per Newton iteration) instead.
+is printed.
 
 ``--against DIR`` compares source trees side by side in one run (e.g. a checkout of an
 older commit, ``git archive COMMIT | tar -x -C DIR``): the grasp at the 20 ms step runs

@@ -20,7 +20,7 @@ Routes: 'kernel' = the whole step in one numba call (``core.fast``: shell, point
 solid fruits, flat, arc and V-groove fingers, with or without soft pads: every set-up
 here); 'compiled' = the compiled energy kernels and the fixed-pattern Newton solver
 (``core.fast_solver``) driven by the contact passes (``core.contact_passes``), which
-``--set`` of a barrier contact model or ``GRIPPER_SIM_FAST=0`` selects. On the kernel
+``--set`` of a barrier contact model selects. On the kernel
 route a step the kernel could not factorise (a non-symmetric contact filter, a guard: the
 shared contact passes give symmetric ones) would be done by the compiled route; the table
 counts those steps.
@@ -68,7 +68,6 @@ ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().paren
 sys.path.insert(0, str(ROOT))
 
 from gripper_sim.configuration import load_config  # noqa: E402
-from gripper_sim.core import fast  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp  # noqa: E402
 
@@ -300,8 +299,7 @@ def profile_generic(sim: Simulation, hold: float) -> dict:
                    if key[2] == name and file_part in key[0])
 
     total = cumulative('run_grasp', 'grasp.py')
-    evaluate = cumulative('evaluate_fast', 'fast_solver.py') + cumulative(
-        'incremental_potential', 'fast_solver.py')
+    evaluate = cumulative('evaluate_fast', 'fast_solver.py')
     solve = cumulative('solve', 'fast_solver.py') - evaluate
     contact = (cumulative('contact_step', 'contact_passes.py')
                - cumulative('solve', 'fast_solver.py'))
@@ -322,8 +320,7 @@ def bench_model(name: str, overrides: list[str], repeat: int, hold: float) -> di
     watched = min((grasp(sim, hold, watch=True) for _ in range(repeat)), key=lambda r: r[1])
     sim_time = steps * sim.dt
     on_kernel = sim._fast is not None and sim._fast.applies()
-    row = dict(model=name, nodes=sim.fruit.n_nodes, path='kernel' if on_kernel else (
-                   'compiled' if sim.solver.fast else 'numpy'),
+    row = dict(model=name, nodes=sim.fruit.n_nodes, path='kernel' if on_kernel else 'compiled',
                fallbacks=sim._fast.fallbacks // repeat if on_kernel else 0,
                steps=steps, sim_time=sim_time, wall_per_sim=wall / sim_time,
                cpu_per_sim=cpu / sim_time, rtf=sim_time / wall, us_per_step=wall / steps * 1e6,
@@ -486,8 +483,7 @@ def main(argv=None) -> int:
             return 2
         compare(args.baseline, names, args.set, args.repeat, args.hold)
         return 0
-    print(f'numba: {"available" if fast.available() else "NOT available"}; '
-          f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')
+    print(f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')
     print(f'grasp-and-lift: close to {FORCE} N, lift {LIFT * 100:.0f} cm, hold {args.hold} s; '
           f'best of {args.repeat}')
     rows = [bench_model(name, args.set, args.repeat, args.hold)

@@ -152,7 +152,7 @@ SCHEMA: dict[str, Key] = {
     'fruit.damping.mass': Key(0.0, '1/s', 'Rayleigh mass-proportional damping alpha',
                               low=0.0, high=1e4),
     'fruit.damping.stiffness': Key(0.0, 's', 'Rayleigh stiffness-proportional damping '
-                                   'beta (skin stretching and bending)',
+                                   'beta (on the elastic Hessian at the step start)',
                                    low=0.0, high=1.0),
     'fruit.bruise_pressure': Key(0.26e6, 'Pa', 'contact pressure above which the '
                                  'fruit bruises', low=0.0, high=1e9),

@@ -12,6 +12,7 @@ from gripper_sim.core3d.meshes import (TET10_EDGES, body_surface, enclosed_volum
 from helpers import kernel_evaluation
 from reference_energies2d import dense_hessian
 from reference_energies3d import neohookean_von_mises, reference_evaluation
+from reference_solver import reference_route
 
 RNG = np.random.default_rng(7)
 RADIUS = 0.03
@@ -302,22 +303,22 @@ def test_strawberry_outline_revolved_has_the_pappus_volume():
     ['fruit.model=solid', 'fruit.skin.enabled=false', 'fruit.mesh.subdivisions=3',
      'fruit.mesh.max_tet_volume=1e-6', 'fruit.mesh.order=2']],
     ids=['shell', 'solid', 'solid-quadratic'])
-def test_fast_solver_follows_the_numpy_reference_path(model, monkeypatch):
-    """The same grasp on the fast path (kernels into a fixed sparse pattern, CG on a kept
-    LU, warm-started contact passes) and on the generic path (the same kernels as
-    triplets, one LU per Newton iteration): the same contact sets and, to the Newton tolerance, the same motion. The
-    jaws close in position mode (one solve per step): in force mode the drive re-solves a
-    step until the force meets its command, and which solves it takes may differ between
-    the paths by the Newton tolerance."""
+def test_fast_solver_follows_the_numpy_reference_path(model):
+    """The same grasp on the solver (kernels into a fixed sparse pattern, CG on a kept
+    LU, warm-started contact passes) and on the test reference (``reference_route``: the
+    same kernels as triplets, one LU per Newton iteration): the same contact sets and, to
+    the Newton tolerance, the same motion. The jaws close in position mode (one solve per
+    step): in force mode the drive re-solves a step until the force meets its command,
+    and which solves it takes may differ between the paths by the Newton tolerance."""
     from gripper_sim.configuration import load_config
     from gripper_sim.workflows.factory import make_simulation
     config = load_config(overrides=['dimension=3', 'sim.dt=0.01'] + model)
     runs = []
     steps = None
-    for fast in ('1', '0'):
-        monkeypatch.setenv('GRIPPER_SIM_FAST', fast)
+    for fast in (True, False):
         sim = make_simulation(config)
-        assert sim.solver.fast == (fast == '1')
+        if not fast:
+            reference_route(sim)
         sim.command_gap(0.0615)   # 1 mm into the 63.5 mm apple on each side
         results = [sim.step()]
         while steps is None and results[-1].grip_force < 0.5 and len(results) < 400:

@@ -3,11 +3,13 @@ import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+from gripper_sim.core.stepper import StepConstraints
 from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+
+from reference_solver import ImplicitEulerSolver
 
 from helpers import hertz_sphere_errors, pressed_constant_pressure_shell
 

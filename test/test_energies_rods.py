@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from gripper_sim.core.energies import ConstantForce, RingBending, RodBending, Stretching
-from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+from gripper_sim.core.stepper import StepConstraints
+
+from reference_solver import ImplicitEulerSolver
 
 from helpers import kernel_evaluation
 from reference_energies2d import dense_hessian, reference, turning_angles

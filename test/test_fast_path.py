@@ -1,9 +1,9 @@
-"""The numba fast path against the generic numpy/scipy reference path.
+"""The 2D whole-step kernel against the triplet/SuperLU reference (test/reference_solver.py).
 
 Kernels against the numpy energies (value, gradient, Hessian), the Newton kernel
 against ImplicitEulerSolver.solve, and whole trajectories of Simulation(fast=True)
-against Simulation(fast=False): positions within 1e-9 relative every step, the same
-contact sets, modes and Newton iteration counts.
+against Simulation(fast=False) on the reference solver (``reference_route``): positions
+within 1e-9 relative every step, the same contact sets, modes and Newton iteration counts.
 """
 import numpy as np
 import pytest
@@ -12,11 +12,13 @@ from gripper_sim.configuration import load_config
 from gripper_sim.core import fast
 from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+from gripper_sim.core.stepper import StepConstraints
 from gripper_sim.errors import ConvergenceError
 from gripper_sim.workflows.grasp import GraspSequence
 
 from gripper_sim.core import kernels  # noqa: E402 - needs numba, pinned in requirements.txt
+
+from reference_solver import ImplicitEulerSolver, reference_route
 
 SHELL = ['fruit.nodes=24']
 
@@ -85,13 +87,17 @@ def test_energy_kernels_match_the_numpy_energies(name):
     (['fruit.nodes=24', 'fruit.pressure.turgor=3e4'], 5e-4),  # the band, rank-one term
     (['fruit.model=solid'], 1e-4)],  # the sparse LDL^T
     ids=['shell', 'solid'])
+@pytest.mark.parametrize('beta', [1e-4, 2e-3])
 def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction(fruit_model,
-                                                                              noise):
-    fruit, model = _shell(*fruit_model, 'fruit.damping.mass=5', 'fruit.damping.stiffness=1e-4')
+                                                                              noise, beta):
+    """The kernel's Newton and the reference's (with its chord rule): the same iterations
+    and end, with mass and stiffness damping (K_n at the step's start in both)."""
+    fruit, model = _shell(*fruit_model, 'fruit.damping.mass=5',
+                          f'fruit.damping.stiffness={beta}')
     from gripper_sim.core.energies import Gravity
     gravity = Gravity(fruit.masses, 9.81)
     solver = ImplicitEulerSolver(fruit.masses, list(fruit.energies) + [gravity],
-                                 damping_mass=5.0, damping_stiffness=1e-4, tolerance=1e-9)
+                                 damping_mass=5.0, damping_stiffness=beta, tolerance=1e-9)
     solver.keep_factor = True  # the kernel's rule: a factor kept while it contracts
     n = fruit.n_nodes
     q_n = _perturbed(fruit, noise)
@@ -112,7 +118,7 @@ def test_newton_kernel_matches_the_reference_solver_with_contact_and_friction(fr
     history = np.zeros(solver.max_iterations)
     status, iterations, n_hist = kernels.newton_solve(
         q_n, v_n, dt, start, con.filters, con.friction_nodes, con.friction_tangents,
-        con.friction_bounds, con.friction_obstacle_speed, solver.m, 5.0, 1e-4, 1e-9,
+        con.friction_bounds, con.friction_obstacle_speed, solver.m, 5.0, beta, 1e-9,
         solver.max_iterations, model['edges'], model['spar'], model['triples'],
         model['bpar'], model['ring'], model['press'], model['flesh'], gravity.grad,
         model['pos'], model['nbw'], q, reaction, history, np.zeros(4),
@@ -193,7 +199,8 @@ def test_grasp_and_lift_trajectory_matches_the_reference_path():
     overrides = ['gripper.initial_gap=0.0645', 'gripper.close_speed=0.05',
                  'gripper.lift_acceleration=5', 'gripper.lift_speed=0.05']
     config = load_config(overrides=overrides)
-    fast_sim, ref_sim = Simulation(config, fast=True), Simulation(config, fast=False)
+    fast_sim, ref_sim = (Simulation(config, fast=True),
+                         reference_route(Simulation(config, fast=False)))
     phases = []
 
     def drive(sim):
@@ -219,7 +226,8 @@ def test_shaped_fingers_and_pads_match_the_reference_path(finger):
                  'gripper.close_speed=0.05', 'gripper.lift_acceleration=5',
                  'gripper.lift_speed=0.05']
     config = load_config(overrides=overrides)
-    fast_sim, ref_sim = Simulation(config, fast=True), Simulation(config, fast=False)
+    fast_sim, ref_sim = (Simulation(config, fast=True),
+                         reference_route(Simulation(config, fast=False)))
     assert fast_sim._fast.applies()
     faces_held = set()
 
@@ -267,7 +275,7 @@ def test_sliding_grasp_matches_the_reference_path():
                  'gripper.close_speed=0.05', 'gripper.lift_acceleration=5',
                  'gripper.lift_speed=0.05']
     config = load_config(overrides=overrides)
-    sims = Simulation(config, fast=True), Simulation(config, fast=False)
+    sims = Simulation(config, fast=True), reference_route(Simulation(config, fast=False))
     sliding = []
 
     def drive(sim):
@@ -284,7 +292,8 @@ def test_damped_shell_dropped_on_the_table_matches_the_reference_path():
     config = load_config(overrides=['fruit.nodes=32', 'fruit.initial_height=0.045',
                                     'fruit.damping.mass=2', 'fruit.damping.stiffness=1e-4',
                                     'contact.restitution=0.3', 'fruit.initial_velocity.x=0.1'])
-    assert _compare(Simulation(config, fast=True), Simulation(config, fast=False), 250) > 50
+    assert _compare(Simulation(config, fast=True),
+                    reference_route(Simulation(config, fast=False)), 250) > 50
 
 
 def test_bouncing_point_in_a_corner_matches_the_reference_path():
@@ -296,7 +305,7 @@ def test_bouncing_point_in_a_corner_matches_the_reference_path():
     fast_sim = Simulation(config, fast=True)
     # it slides from wall to wall on the table, each rebound at half the speed, until it
     # arrives too slowly to bounce (1.1 s)
-    assert _compare(fast_sim, Simulation(config, fast=False), 1500) > 100
+    assert _compare(fast_sim, reference_route(Simulation(config, fast=False)), 1500) > 100
     assert fast_sim.contacts.secondary[0] >= 0  # held by the table and pushed into a wall
 
 
@@ -305,7 +314,7 @@ def test_step_halving_and_convergence_failure_match_the_reference_path():
     # NewtonFailure path) and at last the solver gives up, at the same step on both paths
     config = load_config(overrides=['fruit.nodes=32', 'sim.max_newton_iterations=3',
                                     'gripper.initial_gap=0.0645', 'gripper.close_speed=0.1'])
-    sims = Simulation(config, fast=True), Simulation(config, fast=False)
+    sims = Simulation(config, fast=True), reference_route(Simulation(config, fast=False))
     for sim in sims:
         sim.command_gap(0.03)  # position mode: the jaws hit the fruit at full speed
     halved = 0
@@ -333,7 +342,7 @@ def test_step_halving_and_convergence_failure_match_the_reference_path():
 def test_parameter_changes_while_running_match_the_reference_path():
     config = load_config(overrides=['fruit.nodes=32', 'gripper.initial_gap=0.0645',
                                     'gripper.close_speed=0.05', 'fruit.bruise_pressure=5e4'])
-    sims = Simulation(config, fast=True), Simulation(config, fast=False)
+    sims = Simulation(config, fast=True), reference_route(Simulation(config, fast=False))
     for sim in sims:
         sim.command_force(3.0)
     assert _compare(*sims, 150) > 50

@@ -282,7 +282,8 @@ def advance(x, v, c_int, c_float, forces, grip, run, kin, rules, peaks, site, fi
     pad = (b(pad[0]), b(pad[1]), b(pad[2]), b(pad[3]), b(pad[4]), b(pad[5]))
     storage = scratch[3]
     scratch = (b(scratch[0]), b(scratch[1]), b(scratch[2]),
-               (b(storage[0]), b(storage[1]), b(storage[2]), b(storage[3])), b(scratch[4]))
+               (b(storage[0]), b(storage[1]), b(storage[2]), b(storage[3]), b(storage[4])),
+               b(scratch[4]))
     x, v, c_int, c_float, forces = b(x), b(v), b(c_int), b(c_float), b(forces)
     grip, run, kin, rules, peaks, site = b(grip), b(run), b(kin), b(rules), b(peaks), b(site)
     work_int, work_float, ends_int, ends_float = (b(work_int), b(work_float), b(ends_int),

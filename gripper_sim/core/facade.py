@@ -44,7 +44,7 @@ from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_ste
 from gripper_sim.core.barrier_kernels import mark_sticking
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.energies import Gravity
-from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS, PatternCachingSolver
+from gripper_sim.core.fast_solver import PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
 from gripper_sim.core.results import Energies, JawWrench, StepResult
@@ -111,7 +111,7 @@ class SimulationFacade:
         if self.initial_gap > c['gripper.max_gap']:
             raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
 
-    def _make_solver(self, fast: bool | None = None) -> PatternCachingSolver:
+    def _make_solver(self) -> PatternCachingSolver:
         """The Newton solver of the fruit's energies, gravity, the pads and the
         deformable fingers (if any)."""
         c = self.config
@@ -126,9 +126,7 @@ class SimulationFacade:
             + ([self._barrier] if self._barrier is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
-            dim=self.dimension, lu_options=SYMMETRIC_LU_OPTIONS, fast=fast)
-        # the rule of the 2D whole-step kernel (kernels._newton_solve), which it checks
-        solver.keep_factor = self.dimension == 2 and self._barrier is None
+            dim=self.dimension)
         return solver
 
     def _forget_factor(self) -> None:
@@ -138,7 +136,6 @@ class SimulationFacade:
         """Back to the initial state and commands, time 0."""
         n = self.fruit.n_nodes
         self.solver.reset()
-        self.solver.forget_factor()
         self._forget_factor()
         self.q = self.initial_positions.copy()
         self.v = np.tile(self._in_plane(self.config['fruit.initial_velocity.x'],

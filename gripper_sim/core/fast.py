@@ -6,10 +6,10 @@ set updates, then the step's measures and damage of the end state - in one numba
 kernel call (``gripper_sim.core.kernels.substep``), and builds the StepResult from its
 numbers (the parts observers rarely read - velocities, contact forces and sticking,
 slipping, centroid, jaw wrenches, energies, damage contact patches - on first read),
-instead of the generic numpy/scipy path
-(per-energy triplets, sparse LU, numpy measures). It gives the same results as that reference path
-(test/test_fast_path.py: trajectories within 1e-9, same contact sets and Newton
-iterations) and is chosen automatically by ``Simulation`` when numba is installed, the
+instead of the generic route (the contact passes in Python around
+``fast_solver.PatternCachingSolver``). It gives the same results as the triplet/SuperLU
+reference solver of the tests on that route (test/test_fast_path.py: trajectories within
+1e-9, same contact sets and Newton iterations) and is chosen by ``Simulation`` when the
 contact model is the default one, the fruit's energies are the ring energies
 (stretching, bending, enclosed-area pressure), the solid's neo-Hookean triangles and
 gravity, and the obstacles move as the kernels model them (``FastPath.applies``: the
@@ -22,8 +22,9 @@ kernel; a step whose filter were not symmetric would be done by the generic path
 (``kernels.UNSUPPORTED``, a guard; ``FastPath.fallbacks`` counts such steps). The node-block band of a ring is its interleaved outline (half-bandwidth 4); a
 meshed solid's Newton matrix is a sparse one (``sparse_ldl``: minimum-degree order, sparse
 LDL^T), its energies assembled into it through precomputed scatter maps.
-``Simulation(config, fast=False)`` or ``GRIPPER_SIM_FAST=0`` in the environment turns
-the fast path off.
+``Simulation(config, fast=False)`` turns it off: the generic route (``core.contact_passes``
+around ``fast_solver.PatternCachingSolver``) then steps the 2D fruit, as it does for a
+barrier contact model or deformable fingers.
 
 A run that nobody watches step by step runs many of these steps in one call, the jaw
 drive and the run's bookkeeping included (``core.multistep``, ``Simulation.advance``),
@@ -36,7 +37,6 @@ numba's compiled kernels are cached on disk (``cache=True``, next to the sources
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 from typing import TYPE_CHECKING
 
@@ -52,26 +52,18 @@ from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResul
 from gripper_sim.core.slip import SLIDING_SPEED
 from gripper_sim.core.stepper import NewtonFailure
 
-try:  # numba is optional: without it every model takes the generic path
-    from gripper_sim.core import kernels, sparse_ldl
-except ImportError:  # pragma: no cover - depends on the environment
-    kernels = sparse_ldl = None
+from gripper_sim.core import kernels, sparse_ldl
 
 if TYPE_CHECKING:
     from gripper_sim.core.simulation import Simulation
 
-#: failure messages of the reference solver (stepper.ImplicitEulerSolver.solve)
+#: failure messages of the reference solver (``stepper.NEWTON_FAILURES``)
 _FAILURES = {1: 'start of step is infeasible (inverted element)',
              2: 'no descent direction found', 3: 'line search failed'}
 #: the StepResult fields observers rarely read, which ``FastPath.measure`` builds on first
 #: read (``core.deferred``)
 RARELY_READ = ('velocities', 'contact_forces', 'contact_sticking', 'slipping', 'centroid',
                'left_wrench', 'right_wrench', 'energies')
-
-
-def available() -> bool:
-    """Whether numba (and so the fast path) can be used here."""
-    return kernels is not None and os.environ.get('GRIPPER_SIM_FAST', '1') != '0'
 
 
 def _empty_model():
@@ -158,7 +150,7 @@ def ring_model(fruit, energies) -> dict | None:
     if n == 1:
         pos[:] = 0
     elif len(surface) == n and set(surface.tolist()) == set(range(n)):
-        pos[surface] = kernels.band_order(n) if kernels is not None else np.arange(n)
+        pos[surface] = kernels.band_order(n)
     else:
         return None  # energies on nodes off the outline without a mesh
     nbw = 0
@@ -269,8 +261,6 @@ class FastPath:
     @classmethod
     def create(cls, sim: 'Simulation') -> 'FastPath | None':
         """The fast path for ``sim``, or None when it does not apply."""
-        if not available():
-            return None
         solver_energies = list(sim.solver.energies)
         expected = list(sim.fruit.energies) + [sim.gravity]
         if sim.pad is not None:

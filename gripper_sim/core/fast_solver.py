@@ -1,14 +1,12 @@
-"""The implicit Euler Newton stepper of the simulations (2D and 3D) on a fixed pattern.
+"""The implicit Euler Newton solver of the simulations (2D and 3D) on a fixed pattern.
 
-``ImplicitEulerSolver`` (``core.stepper``, the reference) turns the energies' IJV
-triplets into a sparse matrix on every evaluation. The fruit's meshes do not change, so
-neither do the triplets' positions: this subclass finds the CSC pattern once. Same
-incremental potential, gradient and Hessian as the base class (up to round-off in the
-summation order); without numba it sums each evaluation's triplets into the pattern
-with one ``np.bincount``.
+The fruit's meshes do not change, so neither do the positions of its energies' Hessian
+entries: ``PatternCachingSolver`` finds the CSC pattern once. It is the one solver of
+every set-up (the 2D whole-step kernel, ``core.kernels``, does the same step in band
+storage); the triplet/SuperLU reference it is tested against is
+``test/reference_solver.py``.
 
-The fast path (every energy with an ``evaluate_into`` kernel, stiffness damping included;
-``GRIPPER_SIM_FAST=0`` turns it off) runs the one Newton iteration
+Every energy has an ``evaluate_into`` kernel. The solver runs the one Newton iteration
 (``core.newton.newton_iteration``, interpreted, on ``_NewtonProblem``) with less work
 per iteration:
 - the energies add their gradients and Hessians straight into the CSC values through
@@ -39,33 +37,20 @@ per iteration:
 - the line search starts where a sliding node's slip velocity, turning round, comes
   nearest to zero (``kink_step``: past it the step overshoots the kink of the smoothed
   friction law and the search halves it again and again).
-The fast path follows the reference path to the Newton tolerance over a grasp
+It follows the reference to the Newton tolerance over a grasp
 (test/test_3d_energies.py::test_fast_solver_follows_the_numpy_reference_path).
 """
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import scipy.sparse as sp
 
-from gripper_sim.core import newton
-from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES,
-                                      ImplicitEulerSolver, NewtonFailure, StepConstraints,
-                                      StepProblem, StepSolution, stack_low_rank,
-                                      woodbury_terms)
-
-try:  # numba is optional: without it the numpy reference path runs
-    from gripper_sim.core import pcg_kernels, sparse_ldl
-    from gripper_sim.core import solver_kernels as kernels
-except ImportError:  # pragma: no cover - depends on the environment
-    kernels = sparse_ldl = pcg_kernels = None
-
-#: SuperLU settings for the reference path's Newton systems (symmetric pattern:
-#: minimum degree on A^T + A and diagonal pivots, about twice as fast as the defaults
-#: for the 3D fruit)
-SYMMETRIC_LU_OPTIONS = dict(permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
-                            options=dict(SymmetricMode=True))
+from gripper_sim.core import newton, pcg_kernels, sparse_ldl
+from gripper_sim.core import solver_kernels as kernels
+from gripper_sim.core.energies.base import Energy
+from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
+                                      StepConstraints, StepProblem, StepSolution,
+                                      stack_low_rank, woodbury_terms)
 
 #: relative residual (infinity norms) at which the preconditioned CG stops (0.1 took
 #: 12 % more Newton systems on the solid apple's grasp: a fruit held at two nodes has a
@@ -162,9 +147,6 @@ class _BlockLDL:
         return x
 
 
-def fast_available() -> bool:
-    """Whether the numba kernels can be used (numba installed, GRIPPER_SIM_FAST != 0)."""
-    return kernels is not None and os.environ.get('GRIPPER_SIM_FAST', '1') != '0'
 
 
 def as_cone(con: StepConstraints) -> StepConstraints:
@@ -176,16 +158,36 @@ def as_cone(con: StepConstraints) -> StepConstraints:
                            con.friction_bounds, con.friction_obstacle_speed[:, None])
 
 
-class PatternCachingSolver(ImplicitEulerSolver):
-    """``ImplicitEulerSolver`` whose energy Hessians keep one sparsity pattern."""
+class PatternCachingSolver:
+    """The implicit Euler step's Newton solver (see the module docstring).
 
-    def __init__(self, *args, fast: bool | None = None, **kwargs):
-        super().__init__(*args, **kwargs)
-        if fast is None:
-            fast = fast_available()
-        self.fast = bool(fast and kernels is not None
-                         and all(hasattr(e, 'evaluate_into') for e in self.energies))
-        #: counts of the fast path: Newton solves (contact passes), Newton systems,
+    Args:
+        masses: (n_nodes,) kg.
+        energies: internal and external potential energies, each with an
+            ``evaluate_into`` kernel (``energies.base.KernelEnergy``).
+        damping_mass: Rayleigh alpha (1/s).  damping_stiffness: Rayleigh beta (s),
+            applied to the Hessian of the elastic energies.
+        tolerance: m/s, stop when max |dq| / dt falls below it.
+        max_iterations: Newton iterations before NewtonFailure.
+        dim: 2 (planar) or 3, the coordinates per node.
+    """
+
+    def __init__(self, masses: np.ndarray, energies: list[Energy], damping_mass: float = 0.0,
+                 damping_stiffness: float = 0.0, tolerance: float = 1e-6,
+                 max_iterations: int = 25, dim: int = 2):
+        self.dim = int(dim)
+        self.m = np.repeat(np.asarray(masses, dtype=float), self.dim)
+        self.energies = list(energies)
+        for energy in self.energies:
+            if not hasattr(energy, 'evaluate_into'):
+                raise TypeError(f'{type(energy).__name__} has no evaluate_into kernel: '
+                                'every energy of the solver needs one')
+        self.alpha = damping_mass
+        self.beta = damping_stiffness
+        self.tolerance = tolerance
+        self.max_iterations = max_iterations
+        self.n = self.m.size
+        #: counts: Newton solves (contact passes), Newton systems,
         #: (LDL^T) factorisations, CG iterations
         self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
         #: the Newton iteration's work counters (``newton.C_*``)
@@ -194,17 +196,15 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._woodbury = None  # (u, A^-1 u, (C^-1 + u^T A^-1 u)^-1) at the factorisation
         self._stale = False
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
-        if self.fast:
-            self._build_fast_pattern()
+        self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
+        self._build_fast_pattern()
 
     def load_kernels(self, q: np.ndarray, dt: float) -> None:
-        """Run every kernel of the fast path once, on one Newton solve from positions
+        """Run every kernel of the solver once, on one Newton solve from positions
         ``q`` (n_dof,) m at rest over ``dt`` (s) with a sliding node, and forget it: numba
         loads each kernel's compiled code from its cache on first use (about 10-20 ms
         each), which then happens here, when the simulation is built, and not in its
         first steps (a real-time loop would fall behind there)."""
-        if not self.fast:
-            return
         d = self.dim
         con = StepConstraints(np.tile(np.eye(d), (self.n // d, 1, 1)), np.zeros(1, np.int64),
                               np.eye(d)[None, 1:], np.zeros(1), np.zeros((1, d - 1)))
@@ -221,15 +221,14 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._lu = None
         self._woodbury = None
         self._warm = None
+        self._stiffness = None
 
-    def _mass_damping(self, dq: np.ndarray, dt: float, grad: np.ndarray) -> float:
-        """Rayleigh mass damping alpha M dq^2 / (2 dt) (J); its gradient added to grad."""
-        if self.alpha <= 0:
-            return 0.0
-        grad += self.alpha * self.m * dq / dt
-        return 0.5 * self.alpha * float(np.sum(self.m * dq ** 2)) / dt
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """The line search's first step: 1, or less where an energy bounds it (a contact
+        barrier: the continuous-collision step, ``Energy.max_step``)."""
+        return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
 
-    # ------------------------------------------------------------------ fast path
+    # ------------------------------------------------------------------ the pattern
     def _build_fast_pattern(self) -> None:
         """CSC pattern of every energy's elements plus the diagonal node blocks, the
         scatter index of each energy, and the positions of the d x d node blocks."""
@@ -254,10 +253,6 @@ class PatternCachingSolver(ImplicitEulerSolver):
         self._scatter = [np.zeros((0, 0), np.int64) if keys is None else
                          np.searchsorted(unique, keys).astype(np.int64)
                          for keys in element_keys]
-        # (energy, scatter) in evaluation order: with stiffness damping the elastic
-        # energies first (``evaluate_fast``; the sort is stable)
-        self._evaluation_order = sorted(zip(self.energies, self._scatter),
-                                        key=lambda pair: self.beta > 0 and not pair[0].elastic)
         col_node, row_node = unique // n // d, unique % n // d
         block_keys = np.unique(col_node * nodes + row_node)
         bcol, brow = block_keys // nodes, block_keys % nodes
@@ -308,35 +303,47 @@ class PatternCachingSolver(ImplicitEulerSolver):
     def _csc(self, data: np.ndarray) -> sp.csc_matrix:
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
 
-    def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
-        """As ``incremental_potential``, with the Hessian as CSC values on the fixed pattern.
+    def step_stiffness(self, q_n: np.ndarray) -> np.ndarray:
+        """K_n, the elastic energies' Hessian at the step's start ``q_n`` (n_dof,) m
+        without their rank-one terms, as CSC values on the pattern (N/m): the matrix of
+        the stiffness damping. Kept for the step (its contact passes share q_n)."""
+        kept = self._stiffness
+        if kept is not None and np.array_equal(kept[0], q_n):
+            return kept[1]
+        data = np.zeros(self._nnz)
+        scratch = np.zeros(self.n)
+        for energy, scatter in zip(self.energies, self._scatter):
+            if energy.elastic:
+                energy.evaluate_into(q_n, scratch, data, scatter, True)
+        self._stiffness = (q_n.copy(), data)
+        return data
 
-        Rayleigh stiffness damping (beta > 0) adds beta dq^T K dq / (2 dt), K the elastic
-        energies' Hessian at q without their rank-one terms (as ``incremental_potential``):
-        the elastic energies are then evaluated first, their Hessian values copied as K."""
-        inertia = q - q_n - dt * v_n
-        phi = 0.5 * float(np.sum(self.m * inertia ** 2)) / dt ** 2
-        grad = self.m * inertia / dt ** 2
-        damped = self.beta > 0
-        full = hessian or damped
-        data = np.zeros(self._nnz if full else 1)
+    def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+        """The incremental potential Phi (J), its gradient (n_dof,) N, the friction part
+        of the gradient (n_dof,) N, and, with ``hessian``, the Hessian parts: (CSC values
+        on the fixed pattern, the energies' rank-one terms [(c, u)]).
+
+        Rayleigh stiffness damping (beta > 0) adds beta dq^T K_n dq / (2 dt), dq = q - q_n,
+        K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
+        so its gradient beta K_n dq / dt and Hessian beta K_n / dt are exact.
+        Inertia, damping and friction are ``core.potential_terms``', as in the 2D
+        whole-step kernel."""
+        grad = np.empty(self.n)
+        dq = np.empty(self.n)
+        phi = kernels.inertia_and_mass_damping(q, q_n, v_n, dt, self.m, self.alpha, dq, grad)
+        data = np.zeros(self._nnz if hessian else 1)
         low_rank = []
-        stiffness = None
-        for energy, scatter in self._evaluation_order:
-            if damped and stiffness is None and not energy.elastic:
-                stiffness = data.copy()
-            value, terms = energy.evaluate_into(q, grad, data, scatter, full)
+        for energy, scatter in zip(self.energies, self._scatter):
+            value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
             if not np.isfinite(value):
                 return np.inf, None, None, None
             phi += value
             low_rank.extend(terms)
-        dq = q - q_n
-        phi += self._mass_damping(dq, dt, grad)
-        if damped:
-            stiffness = data.copy() if stiffness is None else stiffness
-            cdq = self._csc(stiffness) @ dq
-            phi += 0.5 * self.beta * float(dq @ cdq) / dt
-            grad += self.beta * cdq / dt
+        if self.beta > 0:
+            stiffness = self.step_stiffness(q_n)
+            phi += kernels.stiffness_damping(self._matvec_indptr, self._matvec_indices,
+                                             stiffness, dq, self.beta, dt, np.empty(self.n),
+                                             grad)
             if hessian:
                 data += (self.beta / dt) * stiffness
         k = con.friction_nodes
@@ -344,7 +351,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
         if k.size:
             blocks = np.empty((k.size, self.dim, self.dim))
             phi += kernels.cone_friction(
-                q.reshape(-1, self.dim), q_n.reshape(-1, self.dim), k.astype(np.int64),
+                q, q_n, k.astype(np.int64),
                 np.ascontiguousarray(con.friction_tangents, dtype=float),
                 np.ascontiguousarray(con.friction_bounds, dtype=float),
                 np.ascontiguousarray(con.friction_obstacle_speed, dtype=float), dt,
@@ -352,8 +359,7 @@ class PatternCachingSolver(ImplicitEulerSolver):
             grad += fric_grad
         if not hessian:
             return phi, grad, fric_grad, None
-        diag = self.m / dt ** 2 + (self.alpha * self.m / dt if self.alpha > 0 else 0.0)
-        kernels.add_diagonal(data, self._diag_pos, np.ascontiguousarray(diag, dtype=float))
+        kernels.add_inertia_diagonal(data, self._diag_pos, self.m, dt, self.alpha)
         if k.size:
             kernels.add_node_blocks(data, self._diag_block_pos, k.astype(np.int64),
                                     np.ascontiguousarray(blocks))
@@ -460,16 +466,13 @@ class PatternCachingSolver(ImplicitEulerSolver):
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:
         """One implicit Euler step: ``newton.newton_iteration`` (interpreted) on this
-        solver's pattern (``_NewtonProblem``); without the fast path the reference
-        ``ImplicitEulerSolver.solve``. A later contact pass of the same step starts from
+        solver's pattern (``_NewtonProblem``). A later contact pass of the same step starts from
         the last pass's solution in the directions the new filter leaves free.
 
         Raises:
             NewtonFailure: no convergence, no descent, or an infeasible start.
         """
         con = as_cone(con)
-        if not self.fast:
-            return super().solve(q_n, v_n, dt, q_start, con)
         self.stats['passes'] += 1
         problem = _NewtonProblem(self, q_n, v_n, dt, con)
         history = np.zeros(self.max_iterations)
@@ -501,7 +504,7 @@ class _NewtonProblem(StepProblem):
     grasp (bench_3d).
 
     Args:
-        solver: the ``PatternCachingSolver`` (fast path).
+        solver: the ``PatternCachingSolver``.
         q_n, v_n: (n_dof,) m, m/s at the start of the step.  dt: s.
         con: the step's constraints, 2D friction as a cone (``as_cone``).
     """

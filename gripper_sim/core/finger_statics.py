@@ -12,7 +12,8 @@ import numpy as np
 from gripper_sim.core.barrier import BarrierSettings
 from gripper_sim.core.energies import ConstantForce, Energy
 from gripper_sim.core.finger_body import FingerBody
-from gripper_sim.core.stepper import ImplicitEulerSolver, StepConstraints
+from gripper_sim.core.fast_solver import PatternCachingSolver
+from gripper_sim.core.stepper import StepConstraints
 
 #: s, the step of the quasi-static solve: m / dt^2 (a few 1e-4 N/m for a finger's grams)
 #: is far below the stiffness of any finger (> 1 N/m)
@@ -64,10 +65,12 @@ def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8
     q = body.rest_positions.ravel().copy()
     still = np.zeros_like(q)
     solution = None
+    full_load = np.asarray(forces, dtype=float).ravel()
+    load = ConstantForce(np.zeros_like(full_load))
+    solver = PatternCachingSolver(body.masses, elastic + [load], dim=dim,
+                                  tolerance=tolerance / step, max_iterations=100)
     for fraction in list(np.linspace(1.0 / increments, 1.0, increments)) + [1.0] * hold:
-        load = ConstantForce(fraction * np.asarray(forces, dtype=float).ravel())
-        solver = ImplicitEulerSolver(body.masses, elastic + [load], dim=dim,
-                                     tolerance=tolerance / step, max_iterations=100)
+        load.grad[:] = -fraction * full_load  # the potential -f . q of the increment's load
         if barrier is not None:
             barrier.begin_step(q.reshape(-1, dim), [], [], step)
         solution = solver.solve(q, still, step, q.copy(), constraints)

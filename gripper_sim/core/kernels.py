@@ -61,6 +61,7 @@ from gripper_sim.core.energies.kernels import (area_and_gradient, area_pressure,
                                                neohookean_triangles, neohookean_von_mises,
                                                stretching)
 from gripper_sim.core.measures import face_contact_length_of, outline_measures
+from gripper_sim.core import potential_terms as terms
 from gripper_sim.core.pad import (PAD_SIZE, PF_HALF, PF_INDEX, PF_NEW_X, PF_NEW_Z, PF_NX,
                                   PF_NZ, PF_OLD_X, PF_OLD_Z, PF_SIDE, PF_SIZE, PF_SPEED,
                                   pad_blocks, pad_forces, pad_rows, pad_terms)
@@ -300,24 +301,20 @@ def _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, p
 @njit(cache=True, error_model='numpy')
 def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
               fr_speed, n_fr, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
-              hessian, grad, fric_grad, grads, band, area_grad, dq_tmp, cdq, values,
+              hessian, grad, fric_grad, grads, band, stiffness, area_grad, dq_tmp, cdq, values,
               pad_nodes, pad_par):
-    """Phi of stepper.ImplicitEulerSolver.incremental_potential, its gradient (into
+    """Phi (``core.potential_terms`` and the energies) in band storage, its gradient (into
     ``grad``) and the friction gradient (into ``fric_grad``); the elastic band Hessian
-    into ``band``, the energies (4,) into ``values``.
+    into ``band``, the energies (4,) into ``values``. Stiffness damping (beta > 0) is
+    beta dq^T K_n dq / (2 dt) with K_n = ``stiffness`` (the elastic Hessian at q_n,
+    evaluated once per solve by ``_newton_solve``, in ``band``'s layout).
 
     Returns (phi, rank-one c).
     """
     n2 = q.shape[0]
-    need_band = hessian or beta > 0
-    phi_in = 0.0
-    for m in range(n2):
-        inert = q[m] - q_n[m] - dt * v_n[m]
-        phi_in += masses2[m] * inert ** 2
-        grad[m] = masses2[m] * inert / dt ** 2
-    phi = 0.5 * phi_in / dt ** 2
+    phi = terms.inertia(q, q_n, v_n, dt, masses2, grad)
     c = _energies(q, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos,
-                  need_band, grads, band, area_grad, values)
+                  hessian, grads, band, area_grad, values)
     for e in range(4):
         phi += values[e]
         for m in range(n2):
@@ -326,40 +323,24 @@ def _evaluate(q, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t, fr
         return np.inf, c
     for m in range(n2):
         dq_tmp[m] = q[m] - q_n[m]
-    if alpha > 0:
-        acc = 0.0
-        for m in range(n2):
-            acc += masses2[m] * dq_tmp[m] ** 2
-        phi += 0.5 * alpha * acc / dt
-        for m in range(n2):
-            grad[m] += alpha * masses2[m] * dq_tmp[m] / dt
+    phi += terms.mass_damping(dq_tmp, masses2, alpha, dt, grad)
     solid = flesh[0].shape[0] > 0
     if beta > 0 and (solid or edges.shape[0] + triples.shape[0] + ring.shape[0] > 0):
         if solid:
-            sparse_ldl.multiply(flesh[6], band.reshape((band.shape[0], 2, 2)), dq_tmp, cdq)
+            sparse_ldl.multiply(flesh[6], stiffness.reshape((stiffness.shape[0], 2, 2)),
+                                dq_tmp, cdq)
         else:
             order = np.empty(pos.shape[0], np.int64)
             for i in range(pos.shape[0]):
                 order[pos[i]] = i
-            band_matvec(band, order, dq_tmp, cdq)
-        acc = 0.0
-        for m in range(n2):
-            acc += dq_tmp[m] * cdq[m]
-        phi += 0.5 * beta * acc / dt
-        for m in range(n2):
-            grad[m] += beta * cdq[m] / dt
+            band_matvec(stiffness, order, dq_tmp, cdq)
+        phi += terms.stiffness_damping(dq_tmp, cdq, beta, dt, grad)
     fric_grad[:] = 0.0
     if n_fr > 0:
         acc = 0.0
         for f in range(n_fr):
-            k = fr_nodes[f]
-            s = ((q[2 * k] - q_n[2 * k]) * fr_t[f, 0]
-                 + (q[2 * k + 1] - q_n[2 * k + 1]) * fr_t[f, 1]) / dt - fr_speed[f]
-            root = math.sqrt(s ** 2 + FRICTION_SMOOTHING ** 2)
-            acc += fr_bound[f] * dt * root
-            w = fr_bound[f] * s / root
-            fric_grad[2 * k] += w * fr_t[f, 0]
-            fric_grad[2 * k + 1] += w * fr_t[f, 1]
+            acc += terms.friction(q, q_n, fr_nodes[f], fr_t[f:f + 1], fr_speed[f:f + 1],
+                                  fr_bound[f], dt, FRICTION_SMOOTHING, fric_grad)[0]
         phi += acc
         for m in range(n2):
             grad[m] += fric_grad[m]
@@ -561,15 +542,16 @@ def _pad_forces(x, x_n, dt, pad_nodes, pad_par, pad_face, face_par, forces, norm
 
 
 @njit(cache=True, error_model='numpy')
-def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-                   fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par):
+def _newton_matrix(band, stiffness, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                   fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par):
     """Node-block band ab (n, nbw+1, 2, 2) of S H S + I - S + shift diag(S) m / dt^2.
 
-    H = (m/dt^2 + alpha m/dt) I + (1 + beta/dt) C + friction, C = ``band``.
+    H = (m/dt^2 + alpha m/dt) I + C + (beta/dt) K_n + friction, C = ``band``, K_n =
+    ``stiffness`` (read only with beta > 0).
     """
     n = band.shape[0]
     nbw = band.shape[1] - 1
-    scale = 1.0 + (beta / dt if beta > 0 else 0.0)
+    damping = beta / dt if beta > 0 else 0.0
     kind = _filter_kinds(filters)
     for p in range(n):
         i = order[p]
@@ -580,13 +562,18 @@ def _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_b
                 ab[p, d, 1, 0] = 0.0
                 ab[p, d, 1, 1] = 0.0
                 continue
-            h00 = scale * band[p, d, 0, 0]
-            h01 = scale * band[p, d, 0, 1]
-            h10 = scale * band[p, d, 1, 0]
-            h11 = scale * band[p, d, 1, 1]
+            h00 = band[p, d, 0, 0]
+            h01 = band[p, d, 0, 1]
+            h10 = band[p, d, 1, 0]
+            h11 = band[p, d, 1, 1]
+            if damping > 0:
+                h00 += damping * stiffness[p, d, 0, 0]
+                h01 += damping * stiffness[p, d, 0, 1]
+                h10 += damping * stiffness[p, d, 1, 0]
+                h11 += damping * stiffness[p, d, 1, 1]
             if d == 0:
-                h00 += _inertia(masses2, dt, alpha, 2 * i)
-                h11 += _inertia(masses2, dt, alpha, 2 * i + 1)
+                h00 += terms.inertia_diagonal(masses2, dt, alpha, 2 * i)
+                h11 += terms.inertia_diagonal(masses2, dt, alpha, 2 * i + 1)
             j = order[p - d]
             (ab[p, d, 0, 0], ab[p, d, 0, 1], ab[p, d, 1, 0],
              ab[p, d, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j, h00, h01, h10,
@@ -614,12 +601,6 @@ def _filter_kinds(filters):
 
 
 @njit(cache=True, error_model='numpy')
-def _inertia(masses2, dt, alpha, m):
-    """The inertia (and mass damping) on the diagonal of dof m: m/dt^2 + alpha m/dt."""
-    return masses2[m] / dt ** 2 + (alpha * masses2[m] / dt if alpha > 0 else 0.0)
-
-
-@njit(cache=True, error_model='numpy')
 def _filtered_block(filters, kind_i, kind_j, i, j, h00, h01, h10, h11):
     """S_i H S_j (4 values, row-major) of the node block H = [[h00, h01], [h10, h11]] of
     rows i and columns j (kind_i, kind_j: their ``_filter_kinds``)."""
@@ -640,13 +621,12 @@ def _filtered_block(filters, kind_i, kind_j, i, j, h00, h01, h10, h11):
 @njit(cache=True, error_model='numpy')
 def _friction_blocks(q, q_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, n_fr, pos, ab):
     """Adds the kinetic friction's node blocks S_k (g t t^T) S_k to the diagonal blocks
-    ab[pos[k], 0]."""
+    ab[pos[k], 0] (``potential_terms``: one tangent t per node)."""
     for f in range(n_fr):
         k = fr_nodes[f]
-        s = ((q[2 * k] - q_n[2 * k]) * fr_t[f, 0]
-             + (q[2 * k + 1] - q_n[2 * k + 1]) * fr_t[f, 1]) / dt - fr_speed[f]
+        s, _ = terms.slip(q, q_n, k, fr_t[f:f + 1], fr_speed[f:f + 1], dt)
         root = math.sqrt(s ** 2 + FRICTION_SMOOTHING ** 2)
-        g = fr_bound[f] * FRICTION_SMOOTHING ** 2 / root ** 3 / dt
+        g = terms.one_tangent_curvature(root, fr_bound[f], dt, FRICTION_SMOOTHING)
         tx, tz = fr_t[f, 0], fr_t[f, 1]
         ux = filters[k, 0, 0] * tx + filters[k, 0, 1] * tz  # S t
         uz = filters[k, 1, 0] * tx + filters[k, 1, 1] * tz
@@ -704,62 +684,80 @@ def _solid_energies(q, edges, triples, flesh, gravity_grad, hessian, grads, hval
 
 
 @njit(cache=True, error_model='numpy')
-def _solid_newton_matrix(hvals, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-                         fr_speed, n_fr, q, q_n, pos, arrays, shift, ab, pad_nodes, pad_par):
+def _solid_newton_matrix(hvals, stiffness, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                         fr_bound, fr_speed, n_fr, q, q_n, pos, arrays, shift, ab, pad_nodes,
+                         pad_par):
     """``_newton_matrix`` on the solid's sparse values: ab (n_blocks + 1, 1, 2, 2) from
-    the elastic Hessian hvals (same layout)."""
+    the elastic Hessian hvals and K_n ``stiffness`` (same layout)."""
     order, a_ptr, a_col = arrays[0], arrays[2], arrays[3]
     n = order.shape[0]
-    scale = 1.0 + (beta / dt if beta > 0 else 0.0)
+    damping = beta / dt if beta > 0 else 0.0
     kind = _filter_kinds(filters)
     for k in range(n):
         i = order[k]
-        h00 = scale * hvals[k, 0, 0, 0] + _inertia(masses2, dt, alpha, 2 * i)
-        h11 = scale * hvals[k, 0, 1, 1] + _inertia(masses2, dt, alpha, 2 * i + 1)
+        h00, h01, h10, h11 = _damped_block(hvals, stiffness, damping, k)
         (ab[k, 0, 0, 0], ab[k, 0, 0, 1], ab[k, 0, 1, 0],
-         ab[k, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[i], i, i, h00,
-                                           scale * hvals[k, 0, 0, 1],
-                                           scale * hvals[k, 0, 1, 0], h11)
+         ab[k, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[i], i, i,
+                                           h00 + terms.inertia_diagonal(masses2, dt, alpha, 2 * i),
+                                           h01, h10,
+                                           h11 + terms.inertia_diagonal(masses2, dt, alpha,
+                                                                        2 * i + 1))
         for m in range(a_ptr[k], a_ptr[k + 1]):
             b = n + m
             j = order[a_col[m]]
+            h00, h01, h10, h11 = _damped_block(hvals, stiffness, damping, b)
             (ab[b, 0, 0, 0], ab[b, 0, 0, 1], ab[b, 0, 1, 0],
-             ab[b, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j,
-                                               scale * hvals[b, 0, 0, 0],
-                                               scale * hvals[b, 0, 0, 1],
-                                               scale * hvals[b, 0, 1, 0],
-                                               scale * hvals[b, 0, 1, 1])
+             ab[b, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j, h00, h01, h10,
+                                               h11)
     _friction_blocks(q, q_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, n_fr, pos, ab)
     _pad_blocks(q, q_n, dt, pad_nodes, pad_par, filters, pos, ab)
     _held_diagonal(filters, masses2, dt, shift, pos, ab)
 
 
+@njit(cache=True, error_model='numpy', inline='always')
+def _damped_block(hvals, stiffness, damping, b):
+    """The block b of C + damping K_n (4 values, row-major) in the solid's sparse values;
+    K_n read only with damping > 0."""
+    h00, h01 = hvals[b, 0, 0, 0], hvals[b, 0, 0, 1]
+    h10, h11 = hvals[b, 0, 1, 0], hvals[b, 0, 1, 1]
+    if damping > 0:
+        h00 += damping * stiffness[b, 0, 0, 0]
+        h01 += damping * stiffness[b, 0, 0, 1]
+        h10 += damping * stiffness[b, 0, 1, 0]
+        h11 += damping * stiffness[b, 0, 1, 1]
+    return h00, h01, h10, h11
+
+
 @njit(cache=True, error_model='numpy')
 def _newton_storage(n, nbw, flesh):
-    """The Hessian and Newton matrix arrays of ``newton_solve``: (C, A, L's blocks, D^-1):
-    the node-block band (n, nbw+1, 2, 2) twice, or a meshed solid's sparse values
-    (n_blocks + 1, 1, 2, 2) twice and its factor (n_factor, 2, 2), (n, 2, 2)."""
+    """The Hessian and Newton matrix arrays of ``newton_solve``: (C, A, L's blocks, D^-1,
+    K_n): the node-block band (n, nbw+1, 2, 2) twice, or a meshed solid's sparse values
+    (n_blocks + 1, 1, 2, 2) twice and its factor (n_factor, 2, 2), (n, 2, 2); then the
+    step's stiffness K_n in C's layout (the stiffness damping's, ``_newton_solve``)."""
     if flesh[0].shape[0] == 0:
         return (np.zeros((n, nbw + 1, 2, 2)), np.empty((n, nbw + 1, 2, 2)),
-                np.empty((0, 2, 2)), np.empty((0, 2, 2)))
+                np.empty((0, 2, 2)), np.empty((0, 2, 2)), np.zeros((n, nbw + 1, 2, 2)))
     arrays = flesh[6]
     rows = n + arrays[3].shape[0] + 1
     return (np.zeros((rows, 1, 2, 2)), np.empty((rows, 1, 2, 2)),
-            np.empty((arrays[5].shape[0], 2, 2)), np.empty((n, 2, 2)))
+            np.empty((arrays[5].shape[0], 2, 2)), np.empty((n, 2, 2)),
+            np.zeros((rows, 1, 2, 2)))
 
 
 @njit(cache=True, error_model='numpy')
-def _newton_factor(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-                   fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par, flesh,
-                   l_values, d_inv):
+def _newton_factor(band, stiffness, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                   fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par,
+                   flesh, l_values, d_inv):
     """The Newton matrix (``_newton_matrix``) factorised: the band's block LDL^T in ab,
     or a meshed solid's sparse LDL^T in (l_values, d_inv). False if singular."""
     if flesh[0].shape[0] == 0:
-        _newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-                       fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes, pad_par)
+        _newton_matrix(band, stiffness, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                       fr_bound, fr_speed, n_fr, q, q_n, pos, order, shift, ab, pad_nodes,
+                       pad_par)
         return _ldl_blocks(ab)
-    _solid_newton_matrix(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t, fr_bound,
-                         fr_speed, n_fr, q, q_n, pos, flesh[6], shift, ab, pad_nodes, pad_par)
+    _solid_newton_matrix(band, stiffness, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
+                         fr_bound, fr_speed, n_fr, q, q_n, pos, flesh[6], shift, ab, pad_nodes,
+                         pad_par)
     return sparse_ldl.factor(flesh[6], ab.reshape((ab.shape[0], 2, 2)), l_values, d_inv) >= 0
 
 
@@ -951,6 +949,8 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
         counts: (C_SIZE,) int64, work counters added to (see C_*).
         pad_nodes: (m,) int64 nodes, pad_par: (m, PAD_SIZE) the soft pads' rows (m = 0:
             no pads).
+        With beta > 0 the elastic Hessian at q_n (K_n of the stiffness damping) is
+        evaluated once, into ``storage[4]``.
         order, storage, work: scratch space (``newton_scratch``; order filled from pos);
             reused from solve to solve, no allocation here; storage and the tail of
             work hold the kept factor and its key.
@@ -964,6 +964,11 @@ def _newton_solve(q_n, v_n, dt, q_start, filters, fr_nodes, fr_t, fr_bound, fr_s
         if filters[i, 0, 1] != filters[i, 1, 0]:
             return UNSUPPORTED, 0, 0
     work[7 * n2:8 * n2] = 0.0  # area_grad: only a ring's pressure writes it
+    if beta > 0:
+        vectors = _work_vectors(work, n2)
+        grads, area_grad = vectors[0], vectors[4]
+        _energies(q_n, edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, True,
+                  grads, storage[4], area_grad, values)
     q_out[:] = q_start
     problem = (q_n, v_n, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, masses2, alpha, beta,
                edges, spar, triples, bpar, ring, press, flesh, gravity_grad, pos, reaction_out,
@@ -1030,8 +1035,8 @@ def _evaluate_hook(problem, x, hessian, grad):
             phi, c = _evaluate(x, q_n, v_n, dt, masses2, alpha, beta, filters, fr_nodes, fr_t,
                                fr_bound, fr_speed, fr_nodes.shape[0], edges, spar, triples,
                                bpar, ring, press, flesh, gravity_grad, pos, hessian, grad,
-                               fric_grad, grads, storage[0], area_grad, tmp, cdq, values,
-                               pad_nodes, pad_par)
+                               fric_grad, grads, storage[0], storage[4], area_grad, tmp, cdq,
+                               values, pad_nodes, pad_par)
             _kept_key(kept, n2 // 2)[4][K_LAST_C] = c
             return phi
         return impl
@@ -1082,10 +1087,10 @@ def _factorise_hook(problem, x, shift):
             (q_n, _, dt, filters, fr_nodes, fr_t, fr_bound, fr_speed, masses2, alpha, beta,
              _, _, _, _, _, _, flesh, _, pos, _, _, pad_nodes, pad_par, order, storage,
              _) = problem
-            band, ab, l_values, d_inv = storage
-            return _newton_factor(band, masses2, dt, alpha, beta, filters, fr_nodes, fr_t,
-                                  fr_bound, fr_speed, fr_nodes.shape[0], x, q_n, pos, order,
-                                  shift, ab, pad_nodes, pad_par, flesh, l_values, d_inv)
+            band, ab, l_values, d_inv, stiffness = storage
+            return _newton_factor(band, stiffness, masses2, dt, alpha, beta, filters, fr_nodes,
+                                  fr_t, fr_bound, fr_speed, fr_nodes.shape[0], x, q_n, pos,
+                                  order, shift, ab, pad_nodes, pad_par, flesh, l_values, d_inv)
         return impl
 
 
@@ -1096,7 +1101,7 @@ def _direction_hook(problem, g_f, dq, fresh):
             flesh, pos, storage, work = problem[17], problem[19], problem[25], problem[26]
             n = pos.shape[0]
             (_, _, _, _, _, _, _, _, _, x, y, u, _, kept) = _work_vectors(work, 2 * n)
-            _, ab, l_values, d_inv = storage
+            _, ab, l_values, d_inv, _ = storage
             _, _, _, kept_u, meta = _kept_key(kept, n)
             if fresh:
                 return _direction(ab, l_values, d_inv, flesh, pos, g_f, u, meta[K_LAST_C], x,
@@ -1369,7 +1374,7 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
     pad_forces, pad_normal, pad_holder, pad_side = (b(pad_forces), b(pad_normal), b(pad_holder),
                                                     b(pad_side))
     work, iwork, bwork, stress = b(work), b(iwork), b(bwork), b(stress)
-    storage = (b(storage[0]), b(storage[1]), b(storage[2]), b(storage[3]))
+    storage = (b(storage[0]), b(storage[1]), b(storage[2]), b(storage[3]), b(storage[4]))
     masses2 = _packed1(fconst, layout, KF_MASSES2)
     masses = _packed1(fconst, layout, KF_MASSES)
     rest_segments = _packed1(fconst, layout, KF_REST_SEGMENTS)

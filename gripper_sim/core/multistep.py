@@ -20,19 +20,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gripper_sim.core import advance_kernels as ak
 from gripper_sim.core import contact as cm
+from gripper_sim.core import jaw_drive
 from gripper_sim.core.fast import record_pad
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.peaks import site_codes
 
 if TYPE_CHECKING:
     from gripper_sim.core.results import StepResult
-
-try:  # numba is optional for the generic route
-    from gripper_sim.core import advance_kernels as ak
-    from gripper_sim.core import jaw_drive
-except ImportError:  # pragma: no cover - depends on the environment
-    ak = jaw_drive = None
 
 
 @dataclass

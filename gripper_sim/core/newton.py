@@ -12,10 +12,9 @@ iterates on is a *problem* reached only through the hook functions below:
   source run by Python): the problem is an object whose methods of the hooks' names do
   the work - ``fast_solver._NewtonProblem`` (the 3D fruits, the barrier model, soft
   fingers: energies in Python calling compiled kernels into a fixed CSC pattern, Newton
-  systems by conjugate gradients with a kept block LDL^T) and
-  ``stepper._SparseProblem`` (the reference, ``GRIPPER_SIM_FAST=0`` and the set-ups
-  the fast path does not take: triplets summed into a sparse matrix, SuperLU). The
-  loop's vector work is in small compiled helpers, so interpreting it costs
+  systems by conjugate gradients with a kept block LDL^T), and in the tests the
+  reference's (``test/reference_solver.py``: triplets summed into a sparse matrix,
+  SuperLU). The loop's vector work is in small compiled helpers, so interpreting it costs
   microseconds an iteration.
 
 The iteration (a chord or modified Newton method, Ortega & Rheinboldt 1970, sec. 7.1):

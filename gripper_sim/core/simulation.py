@@ -39,9 +39,11 @@ class Simulation(SimulationFacade):
 
     Args:
         config: validated flat configuration from ``gripper_sim.configuration.load_config``.
-        fast: step with the numba kernels (``gripper_sim.core.fast``) when they cover the
-            fruit model; None (default) = whenever numba is installed, False = always the
-            generic numpy/scipy path (the reference), True = require the fast path.
+        fast: step with the whole-step kernel (``gripper_sim.core.fast``) where it covers
+            the set-up (the default contact model, rigid fingers); None (default) = where
+            it does, True = require it, False = never: the generic route (the contact
+            passes of ``core.contact_passes`` around the one Newton solver,
+            ``fast_solver.PatternCachingSolver``, as for a barrier or deformable fingers).
         finger: a deformable finger's body to put on the jaws instead of the configured
             finger (a new geometry, a test body); None: ``gripper.finger.type``'s.
 
@@ -87,7 +89,7 @@ class Simulation(SimulationFacade):
             if c['fruit.initial_height'] is None and c['world.table']:
                 # a barrier needs a positive gap: the fruit starts just above the table
                 self.initial_positions[:, 1] += barrier.START_GAP_FRACTION * c['contact.ipc.dhat']
-        self.solver = self._make_solver(fast=None if fast is not False else False)
+        self.solver = self._make_solver()
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
             initial_stiffness=c['fruit.flesh.youngs_modulus'] * self.fruit.depth,
@@ -98,7 +100,8 @@ class Simulation(SimulationFacade):
                       else None)
         self._multistep: MultiStep | None = None
         if fast and self._fast is None:
-            raise ConfigError('the fast path needs numba and the default contact model')
+            raise ConfigError('fast=True: the whole-step kernel needs the default contact model '
+                              'and rigid fingers')
         self.reset()
 
     def _make_damage(self) -> DamageTracker:

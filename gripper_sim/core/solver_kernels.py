@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from gripper_sim.core import potential_terms as terms
+
 
 @njit(cache=True)
 def filter_blocks(hdata, block_pos, block_nodes, filters, diag_extra, out):
@@ -86,13 +88,6 @@ def add_node_blocks(data, diag_block_pos, nodes, blocks):
 
 
 @njit(cache=True)
-def add_diagonal(data, diag_pos, values):
-    """data[diag_pos[d]] += values[d] for every dof d."""
-    for d in range(values.shape[0]):
-        data[diag_pos[d]] += values[d]
-
-
-@njit(cache=True)
 def csc_matvec(indptr, indices, data, x, out):
     """out (n,) = A x for A given by its CSC values on (indptr, indices) (n + 1,), (nnz,)
     int64."""
@@ -157,50 +152,53 @@ def max_abs(vec):
 @njit(cache=True)
 def cone_friction(x, x_n, nodes, tangents, bounds, obstacle_speed, dt, eps, fric_grad,
                   blocks):
-    """Kinetic friction of sliding nodes (``ImplicitEulerSolver._cone_friction``).
-
-    With T (m, d) a node's tangents and s = T (x - x_n) / dt - v_obstacle (m/s), the
-    potential b dt sqrt(|s|^2 + eps^2) has the gradient b T^T s / root and the Hessian
-    (b / dt) T^T (I / root - s s^T / root^3) T.
+    """Kinetic friction of sliding nodes (``potential_terms.friction``, the Coulomb cone
+    of ``core.stepper``): its gradient added into ``fric_grad``, its Hessian blocks
+    written.
 
     Args:
-        x, x_n: (n, d) m.  nodes: (k,).  tangents: (k, m, d).  bounds: (k,) N.
+        x, x_n: (n_dof,) m.  nodes: (k,).  tangents: (k, m, d).  bounds: (k,) N.
         obstacle_speed: (k, m) m/s.  dt: s.  eps: m/s, the smoothing speed.
-        fric_grad: (d n,) N, the gradient added into it.  blocks: (k, d, d) N/m, written.
+        fric_grad: (n_dof,) N, the gradient added into it.  blocks: (k, d, d) N/m, written.
 
     Returns:
         The potential (J).
     """
-    d = x.shape[1]
-    m = tangents.shape[1]
-    s = np.empty(m)
+    d = tangents.shape[2]
     phi = 0.0
     for r in range(nodes.shape[0]):
-        i = nodes[r]
-        t = tangents[r]
-        sq = 0.0
-        for a in range(m):
-            acc = 0.0
-            for c in range(d):
-                acc += t[a, c] * (x[i, c] - x_n[i, c])
-            s[a] = acc / dt - obstacle_speed[r, a]
-            sq += s[a] * s[a]
-        root = np.sqrt(sq + eps * eps)
-        b = bounds[r]
-        phi += b * dt * root
-        for c in range(d):
-            acc = 0.0
-            for a in range(m):
-                acc += s[a] * t[a, c]
-            fric_grad[d * i + c] += b / root * acc
+        value, s0, s1, root = terms.friction(x, x_n, nodes[r], tangents[r], obstacle_speed[r],
+                                             bounds[r], dt, eps, fric_grad)
+        phi += value
         for c in range(d):
             for e in range(d):
-                acc = 0.0
-                proj_c = 0.0
-                proj_e = 0.0
-                for a in range(m):
-                    acc += t[a, c] * t[a, e]
-                    proj_c += s[a] * t[a, c]
-                    proj_e += s[a] * t[a, e]
-                blocks[r, c, e] = b / dt * (acc / root - proj_c * proj_e / root ** 3)
+                blocks[r, c, e] = terms.friction_block(tangents[r], s0, s1, root, bounds[r],
+                                                       dt, eps, c, e)
     return phi
+
+
+@njit(cache=True)
+def inertia_and_mass_damping(q, q_n, v_n, dt, masses, alpha, dq, grad):
+    """``potential_terms.inertia`` and ``mass_damping``: the gradient written into
+    ``grad`` (n_dof,) N, dq = q - q_n into ``dq``. Returns their value (J)."""
+    phi = terms.inertia(q, q_n, v_n, dt, masses, grad)
+    for m in range(q.shape[0]):
+        dq[m] = q[m] - q_n[m]
+    return phi + terms.mass_damping(dq, masses, alpha, dt, grad)
+
+
+@njit(cache=True)
+def add_inertia_diagonal(data, diag_pos, masses, dt, alpha):
+    """The Hessian of inertia and mass damping (``potential_terms.inertia_diagonal``)
+    added at the diagonal positions ``diag_pos`` (n_dof,) of the CSC values ``data``."""
+    for m in range(masses.shape[0]):
+        data[diag_pos[m]] += terms.inertia_diagonal(masses, dt, alpha, m)
+
+
+@njit(cache=True)
+def stiffness_damping(indptr, indices, stiffness, dq, beta, dt, k_dq, grad):
+    """``potential_terms.stiffness_damping`` with K_n the CSC values ``stiffness`` on
+    (indptr, indices): K_n dq written into ``k_dq``, the gradient added into ``grad``.
+    Returns its value (J)."""
+    csc_matvec(indptr, indices, stiffness, dq, k_dq)
+    return terms.stiffness_damping(dq, k_dq, beta, dt, grad)

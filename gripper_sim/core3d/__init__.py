@@ -2,5 +2,5 @@
 
 Coordinates are (x, y, z): x the jaw closing axis, z up, y along the jaw faces.
 Flat position vectors are q = [x0, y0, z0, x1, ...] (m). It reuses the 2D core's
-stepper (``ImplicitEulerSolver(dim=3)``), contact bookkeeping and gripper kinematics.
+stepper (``PatternCachingSolver(dim=3)``), contact bookkeeping and gripper kinematics.
 """

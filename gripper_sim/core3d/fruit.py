@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gripper_sim.core.energies.base import Energy
-from gripper_sim.core.fast_solver import SYMMETRIC_LU_OPTIONS
-from gripper_sim.core.stepper import ImplicitEulerSolver, NewtonFailure, StepConstraints
+from gripper_sim.core.fast_solver import PatternCachingSolver
+from gripper_sim.core.stepper import NewtonFailure, StepConstraints
 from gripper_sim.core3d import meshes
 from gripper_sim.core3d.energies import (EnclosedVolumePressure, HingeBending, Membrane,
                                          NeoHookeanTets, quadratic_tets)
@@ -162,8 +162,8 @@ def _relax(positions: np.ndarray, masses: np.ndarray, energies, steps: int = 40)
     Raises:
         ConfigError: no equilibrium found (e.g. a skin too soft for its turgor).
     """
-    solver = ImplicitEulerSolver(masses, list(energies), damping_mass=100.0, tolerance=1e-9,
-                                 max_iterations=30, dim=3, lu_options=SYMMETRIC_LU_OPTIONS)
+    solver = PatternCachingSolver(masses, list(energies), damping_mass=100.0, tolerance=1e-9,
+                                  max_iterations=30, dim=3)
     q = positions.ravel().copy()
     size = float(np.ptp(positions))
     free = StepConstraints.free(len(masses), dim=3)

@@ -3,8 +3,7 @@
 Same commands, observers and step order as the 2D ``gripper_sim.core.simulation``
 (gripper kinematics advance, predictor-corrector contact passes around the implicit
 Euler Newton solve, commit, measure, observers), with the 2D core's stepper
-(``ImplicitEulerSolver(dim=3)``, through ``PatternCachingSolver`` which only assembles
-its Hessian faster), contact state and gripper kinematics.
+(``PatternCachingSolver(dim=3)``), contact state and gripper kinematics.
 
 Contact in 3D (modified mass method, Baraff & Witkin 1998): a surface node held by a
 plate is STICK (all three directions prescribed: it moves with the plate), SLIP (the

@@ -47,7 +47,7 @@ class Energy:
     def factor_key(self):
         """What of this energy's Hessian changes with the step's set-up (a soft pad's
         rows): a Newton matrix factorised under another key is not kept
-        (``ImplicitEulerSolver.keep_factor``). None: nothing."""
+        (the test reference solver's ``keep_factor``). None: nothing."""
         return None
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
