@@ -118,3 +118,36 @@ def test_a_second_node_of_the_same_name_refuses_to_start(running, tmp_path):
     assert second.process.returncode == 2, text
     assert 'cannot start: another node named /gripper_sim' in text and 'Traceback' not in text
     assert process.running   # the first one goes on
+
+
+def test_a_node_that_hears_of_an_earlier_namesake_after_its_start_up_stops(tmp_path,
+                                                                            new_domain_id):
+    # On a loaded machine discovery may find a namesake only after the start-up look
+    # (NAMESAKE_WAIT); the hidden ~/_instance topic still settles which node came later.
+    # A test publisher plays an earlier namesake's announcement to a running node.
+    import time
+
+    import rclpy
+    from gripper_sim.ros.namesakes import INSTANCE_QOS
+
+    domain = new_domain_id()
+    node = node_process({'real_time_factor': 0.0}, env=ros_environment(domain),
+                        log_path=tmp_path / 'node.log').start()
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    try:
+        assert node.wait_for_log('ready', 120), node.log()
+        fake = rclpy.create_node('earlier_namesake', context=context)
+        malformed = fake.create_publisher(String, '/gripper_sim/_instance', INSTANCE_QOS)
+        malformed.publish(String(data='not a start'))
+        assert node.wait_for_log('ignored a malformed message', 120), node.log()
+        assert node.running
+        earlier = fake.create_publisher(String, '/gripper_sim/_instance', INSTANCE_QOS)
+        earlier.publish(String(data=f'{time.time() - 3600.0!r} feedfacefeedface'))
+        node.process.wait(120)
+    finally:
+        node.stop()
+        rclpy.try_shutdown(context=context)
+    text = node.log()
+    assert node.process.returncode == 2, text
+    assert 'cannot start: another node named /gripper_sim' in text and 'Traceback' not in text

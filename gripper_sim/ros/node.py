@@ -94,7 +94,7 @@ class SimNode(Node):
                  physics_stall_timeout: float = STALL_TIMEOUT,
                  watchdog_period: float = CHECK_PERIOD,
                  namesake_wait: float | None = None, **kwargs):
-        created = time.monotonic()
+        created, started = time.monotonic(), time.time()
         super().__init__(NODE_NAME, **kwargs)
         self.params = SimParameters(self, fruit=fruit, config_file=config_file)
         self.lock = SimLock()
@@ -108,7 +108,7 @@ class SimNode(Node):
         # after building the simulation: discovery has had that time to find a namesake
         if namesake_wait is not None:
             refuse_namesake(self, created, namesake_wait)
-        self.namesake_watch = NamesakeWatch(self)
+        self.namesake_watch = NamesakeWatch(self, started)
         self._step_listeners: list[Callable[[StepResult], None]] = []
         self._observers: list[Callable[[StepResult], None]] = []
         self._reset_listeners: list[Callable[[StepResult], None]] = []
@@ -357,7 +357,8 @@ def main(args: list[str] | None = None) -> int:
             the ``fruit`` and ``config_file`` parameters.
 
     Returns:
-        0 after a clean shutdown, 2 if the configuration or a parameter is invalid.
+        0 after a clean shutdown, 2 if the configuration or a parameter is invalid or
+        a node of the same name started earlier (``namesakes``).
 
     The Jazzy main idiom, with one change: SIGINT/SIGTERM set a flag instead of
     shutting the context down at once, so an active goal is aborted and its result
@@ -381,6 +382,7 @@ def main(args: list[str] | None = None) -> int:
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stopping.set())
     node = None
+    code = 0
     # Threads: a running goal (Grasp, GripperCommand, ParallelGripperCommand; one
     # drives, a preempted one finishes) and a step request (~/step, step_simulation,
     # simulate_steps) each wait in one; the services, topics, parameters and the
@@ -396,6 +398,11 @@ def main(args: list[str] | None = None) -> int:
         executor.add_node(node)
         while not stopping.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
+            if node.namesake_watch.later.is_set():   # found late: as at start-up
+                rclpy.logging.get_logger(NODE_NAME).error(
+                    f'cannot start: {node.namesake_watch.reason}')
+                code = 2
+                break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
@@ -408,7 +415,7 @@ def main(args: list[str] | None = None) -> int:
                 executor.spin_once(timeout_sec=0.05)
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return code
 
 
 if __name__ == '__main__':
