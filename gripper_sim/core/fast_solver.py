@@ -77,6 +77,8 @@ KEEP_BELOW = 100.0
 #: a sliding node's Newton step is cut at the kink of the friction law only if it
 #: slips faster than this multiple of the smoothing speed (slower: inside the kink)
 KINK_FACTOR = 10.0
+#: the stiffness damping's K_n without stiffness damping (beta = 0)
+_NO_STIFFNESS = np.zeros(0)
 
 
 def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
@@ -327,7 +329,8 @@ class PatternCachingSolver:
         K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
         so its gradient beta K_n dq / dt and Hessian beta K_n / dt are exact.
         Inertia, damping and friction are ``core.potential_terms``', as in the 2D
-        whole-step kernel."""
+        whole-step kernel; the terms after the energies are one kernel call
+        (``solver_kernels.add_step_terms``)."""
         grad = np.empty(self.n)
         dq = np.empty(self.n)
         phi = kernels.inertia_and_mass_damping(q, q_n, v_n, dt, self.m, self.alpha, dq, grad)
@@ -339,31 +342,18 @@ class PatternCachingSolver:
                 return np.inf, None, None, None
             phi += value
             low_rank.extend(terms)
-        if self.beta > 0:
-            stiffness = self.step_stiffness(q_n)
-            phi += kernels.stiffness_damping(self._matvec_indptr, self._matvec_indices,
-                                             stiffness, dq, self.beta, dt, np.empty(self.n),
-                                             grad)
-            if hessian:
-                data += (self.beta / dt) * stiffness
+        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
         k = con.friction_nodes
-        fric_grad = np.zeros(self.n)
-        if k.size:
-            blocks = np.empty((k.size, self.dim, self.dim))
-            phi += kernels.cone_friction(
-                q, q_n, k.astype(np.int64),
-                np.ascontiguousarray(con.friction_tangents, dtype=float),
-                np.ascontiguousarray(con.friction_bounds, dtype=float),
-                np.ascontiguousarray(con.friction_obstacle_speed, dtype=float), dt,
-                FRICTION_SMOOTHING, fric_grad, blocks)
-            grad += fric_grad
-        if not hessian:
-            return phi, grad, fric_grad, None
-        kernels.add_inertia_diagonal(data, self._diag_pos, self.m, dt, self.alpha)
-        if k.size:
-            kernels.add_node_blocks(data, self._diag_block_pos, k.astype(np.int64),
-                                    np.ascontiguousarray(blocks))
-        return phi, grad, fric_grad, (data, low_rank)
+        fric_grad = np.empty(self.n)
+        phi = kernels.add_step_terms(
+            phi, hessian, q, q_n, dq, dt, self.m, self.alpha, self.beta,
+            self._matvec_indptr, self._matvec_indices, stiffness, np.empty(self.n),
+            k.astype(np.int64), np.ascontiguousarray(con.friction_tangents, dtype=float),
+            np.ascontiguousarray(con.friction_bounds, dtype=float),
+            np.ascontiguousarray(con.friction_obstacle_speed, dtype=float),
+            FRICTION_SMOOTHING, self._diag_pos, self._diag_block_pos, grad, fric_grad,
+            np.empty((k.size, self.dim, self.dim)), data)
+        return phi, grad, fric_grad, (data, low_rank) if hessian else None
 
     def newton_matrix(self, hdata: np.ndarray, filters: np.ndarray,
                       diagonal: np.ndarray) -> np.ndarray:
