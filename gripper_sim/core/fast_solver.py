@@ -554,7 +554,8 @@ class _NewtonProblem(StepProblem):
         except RuntimeError:  # a singular factor
             return False, 0.0
         dq[:] = x
-        return bool(np.all(np.isfinite(x))), float(g_f @ x)
+        slope = float(g_f @ x)
+        return math.isfinite(slope), slope  # a non-finite entry of x makes the slope one
 
     def step_bound(self, x, dq) -> float:
         return min(self.solver.max_step(x, dq),
