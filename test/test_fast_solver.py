@@ -286,3 +286,34 @@ def test_the_compiled_cg_solves_a_filtered_newton_system_with_a_rank_one_term(mo
     assert x is not None and solver.stats['cg_iterations'] - before == 1
     assert np.max(np.abs(x - exact)) < 1e-9 * np.max(np.abs(exact))
     assert np.all(x[:3] == 0.0) and x[5] == 0.0
+
+
+@pytest.mark.parametrize('name', ['2d-shell', '3d-solid'])
+def test_potential_with_sliding_nodes_and_damping_is_the_references(name):
+    """The solver's potential with stiffness and mass damping and sliding nodes (the
+    terms after the energies: one kernel, ``solver_kernels.add_step_terms``) equals the
+    reference's triplet evaluation: value, gradient, friction gradient and Hessian."""
+    sim, q, q_n, v_n, dt = _damped_step(name)
+    solver = sim.solver
+    d = solver.dim
+    reference = ImplicitEulerSolver(solver.m[::d], solver.energies, damping_mass=solver.alpha,
+                                    damping_stiffness=solver.beta, dim=d,
+                                    tolerance=solver.tolerance)
+    _, _, sliding = _sliding(d, 5, seed=d)
+    n_nodes = q.size // d
+    con = StepConstraints(np.tile(np.eye(d), (n_nodes, 1, 1)), sliding.friction_nodes,
+                          sliding.friction_tangents, sliding.friction_bounds,
+                          sliding.friction_obstacle_speed)
+    for hessian in (False, True):
+        phi, grad, fric_grad, parts = solver.evaluate_fast(q, q_n, v_n, dt, con, hessian)
+        phi_ref, grad_ref, fric_ref, parts_ref = reference.incremental_potential(
+            q, q_n, v_n, dt, as_cone(con), hessian)
+        assert np.max(np.abs(fric_ref)) > 0
+        assert phi == pytest.approx(phi_ref, rel=1e-10)
+        np.testing.assert_allclose(grad, grad_ref, rtol=0,
+                                   atol=1e-9 * np.max(np.abs(grad_ref)))
+        np.testing.assert_allclose(fric_grad, fric_ref, rtol=0,
+                                   atol=1e-12 * np.max(np.abs(fric_ref)))
+    dense = solver._csc(parts[0]).toarray()
+    np.testing.assert_allclose(dense, parts_ref[0].toarray(), rtol=0,
+                               atol=1e-10 * np.max(np.abs(dense)))

@@ -515,11 +515,13 @@ class BarrierContact(Energy):
         if into is None and last is not None and np.array_equal(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
         elif self.dimension == 2:
-            terms = self._compiled_terms(q, into, friction)
+            # the kernel adds the gradients into ``gradient`` itself
+            terms = self._compiled_terms(q, gradient, into, friction)
             if terms is None:
                 return np.inf
-            barrier_value, friction_value, barrier_gradient, friction_gradient = terms
             self._last_terms = (q.copy(), *terms)
+            barrier_value, friction_value = terms[:2]
+            return barrier_value + friction_value if friction else barrier_value
         else:
             mesh = self._mesh
             v = self.vertices(q.reshape(-1, self.dimension))
@@ -558,12 +560,13 @@ class BarrierContact(Energy):
             np.add.at(into[0], into[1][where], vals)
         return value
 
-    def _compiled_terms(self, q: np.ndarray, into, friction: bool):
+    def _compiled_terms(self, q: np.ndarray, gradient: np.ndarray, into, friction: bool):
         """The barrier and lagged friction at positions ``q`` (2 n,) m (2D,
-        ``barrier_terms``) over the candidates of ``_candidate_pairs``, their Hessians
-        added as ``_terms``'s ``into`` says (None: not wanted; the friction's only with
-        ``friction``): (barrier value J, friction value J, their gradients (n_d,) N over
-        ``vertex_dofs``, None where there are no pairs), or None if a pair touches."""
+        ``barrier_terms``) over the candidates of ``_candidate_pairs``, their gradients
+        added into ``gradient`` (2 n,) N and their Hessians as ``_terms``'s ``into`` says
+        (None: not wanted), the friction's only with ``friction``: (barrier value J,
+        friction value J, their gradients (n_d,) N over ``vertex_dofs``, None where there
+        are no pairs), or None if a pair touches (nothing added)."""
         pairs = self._friction_pairs
         candidates = self._candidate_pairs(q)
         if not len(candidates) and pairs is None:
@@ -578,7 +581,8 @@ class BarrierContact(Energy):
             self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys, slots,
             values, self._start, self._dt, self.settings.friction_smoothing,
             _NO_FRICTION if pairs is None else pairs, pairs is not None,
-            into is not None and friction, barrier_gradient, friction_gradient)
+            into is not None and friction, barrier_gradient, friction_gradient, gradient,
+            friction)
         if not np.isfinite(barrier_value):
             return None
         self._check_outside(outside)

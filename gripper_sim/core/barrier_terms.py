@@ -23,11 +23,19 @@ def _gather(full, vertex_dofs, out):
 
 
 @njit(cache=True)
+def _add_at(full, vertex_dofs, part):
+    """full[vertex_dofs] += part (the dofs distinct)."""
+    for i in range(vertex_dofs.shape[0]):
+        full[vertex_dofs[i]] += part[i]
+
+
+@njit(cache=True)
 def barrier_terms(q, dof_pairs, corners, edges, candidates, dhat, stiffness, mesh_dofs,
                   want_hessian, project, pattern_keys, slots, values, start, dt, eps_v,
                   friction_pairs, with_friction, friction_hessian, barrier_gradient,
-                  friction_gradient):
-    """The barrier and lagged friction at positions ``q`` (2 n,) m.
+                  friction_gradient, gradient, friction_into_gradient):
+    """The barrier and lagged friction at positions ``q`` (2 n,) m, their gradients
+    added into the state's.
 
     Args:
         q: (2 n,) m, the state's positions.
@@ -45,6 +53,8 @@ def barrier_terms(q, dof_pairs, corners, edges, candidates, dhat, stiffness, mes
         friction_hessian: whether the friction's Hessian entries are added too.
         barrier_gradient, friction_gradient: (n_d,) N over the deformable vertices' dofs
             (``dof_pairs`` raveled), written.
+        gradient: (2 n,) N, the barrier's gradient added into it, and the friction's
+            with ``friction_into_gradient`` (nothing added where a pair touches).
 
     Returns:
         (barrier value J (inf: a pair touches), friction value J, Hessian entries outside
@@ -64,6 +74,7 @@ def barrier_terms(q, dof_pairs, corners, edges, candidates, dhat, stiffness, mes
     if not np.isfinite(barrier_value):
         return np.inf, 0.0, 0, 0
     _gather(full, flat_dofs, barrier_gradient)
+    _add_at(gradient, flat_dofs, barrier_gradient)
     friction_value = 0.0
     friction_outside = 0
     if with_friction:
@@ -73,4 +84,6 @@ def barrier_terms(q, dof_pairs, corners, edges, candidates, dhat, stiffness, mes
             v, start, dt, eps_v, ids, weights, tangents, forces, coefficients, mesh_dofs,
             full, friction_hessian, pattern_keys, q.shape[0], slots, values)
         _gather(full, flat_dofs, friction_gradient)
+        if friction_into_gradient:
+            _add_at(gradient, flat_dofs, friction_gradient)
     return barrier_value, friction_value, barrier_outside, friction_outside

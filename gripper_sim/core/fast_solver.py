@@ -42,6 +42,8 @@ It follows the reference to the Newton tolerance over a grasp
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -77,6 +79,8 @@ KEEP_BELOW = 100.0
 #: a sliding node's Newton step is cut at the kink of the friction law only if it
 #: slips faster than this multiple of the smoothing speed (slower: inside the kink)
 KINK_FACTOR = 10.0
+#: the stiffness damping's K_n without stiffness damping (beta = 0)
+_NO_STIFFNESS = np.zeros(0)
 
 
 def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
@@ -151,11 +155,16 @@ class _BlockLDL:
 
 def as_cone(con: StepConstraints) -> StepConstraints:
     """``con`` with 2D friction (one tangent (k, 2), speeds (k,)) written as a Coulomb
-    cone with one tangent ((k, 1, 2), (k, 1)): the same potential, gradient and Hessian."""
-    if con.friction_tangents.ndim == 3:
-        return con
-    return StepConstraints(con.filters, con.friction_nodes, con.friction_tangents[:, None, :],
-                           con.friction_bounds, con.friction_obstacle_speed[:, None])
+    cone with one tangent ((k, 1, 2), (k, 1)): the same potential, gradient and Hessian;
+    its arrays contiguous, the nodes int64, the rest float (as the kernels take them)."""
+    tangents, speed = con.friction_tangents, con.friction_obstacle_speed
+    if tangents.ndim == 2:
+        tangents, speed = tangents[:, None, :], speed[:, None]
+    return StepConstraints(np.ascontiguousarray(con.filters, dtype=float),
+                           np.ascontiguousarray(con.friction_nodes, dtype=np.int64),
+                           np.ascontiguousarray(tangents, dtype=float),
+                           np.ascontiguousarray(con.friction_bounds, dtype=float),
+                           np.ascontiguousarray(speed, dtype=float))
 
 
 class PatternCachingSolver:
@@ -327,7 +336,8 @@ class PatternCachingSolver:
         K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
         so its gradient beta K_n dq / dt and Hessian beta K_n / dt are exact.
         Inertia, damping and friction are ``core.potential_terms``', as in the 2D
-        whole-step kernel."""
+        whole-step kernel; the terms after the energies are one kernel call
+        (``solver_kernels.add_step_terms``)."""
         grad = np.empty(self.n)
         dq = np.empty(self.n)
         phi = kernels.inertia_and_mass_damping(q, q_n, v_n, dt, self.m, self.alpha, dq, grad)
@@ -335,35 +345,22 @@ class PatternCachingSolver:
         low_rank = []
         for energy, scatter in zip(self.energies, self._scatter):
             value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
-            if not np.isfinite(value):
+            if not math.isfinite(value):
                 return np.inf, None, None, None
             phi += value
             low_rank.extend(terms)
-        if self.beta > 0:
-            stiffness = self.step_stiffness(q_n)
-            phi += kernels.stiffness_damping(self._matvec_indptr, self._matvec_indices,
-                                             stiffness, dq, self.beta, dt, np.empty(self.n),
-                                             grad)
-            if hessian:
-                data += (self.beta / dt) * stiffness
+        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
+        if con.friction_tangents.ndim == 2:
+            con = as_cone(con)  # (``solve`` converts it once for its evaluations)
         k = con.friction_nodes
-        fric_grad = np.zeros(self.n)
-        if k.size:
-            blocks = np.empty((k.size, self.dim, self.dim))
-            phi += kernels.cone_friction(
-                q, q_n, k.astype(np.int64),
-                np.ascontiguousarray(con.friction_tangents, dtype=float),
-                np.ascontiguousarray(con.friction_bounds, dtype=float),
-                np.ascontiguousarray(con.friction_obstacle_speed, dtype=float), dt,
-                FRICTION_SMOOTHING, fric_grad, blocks)
-            grad += fric_grad
-        if not hessian:
-            return phi, grad, fric_grad, None
-        kernels.add_inertia_diagonal(data, self._diag_pos, self.m, dt, self.alpha)
-        if k.size:
-            kernels.add_node_blocks(data, self._diag_block_pos, k.astype(np.int64),
-                                    np.ascontiguousarray(blocks))
-        return phi, grad, fric_grad, (data, low_rank)
+        fric_grad = np.empty(self.n)
+        phi = kernels.add_step_terms(
+            phi, hessian, q, q_n, dq, dt, self.m, self.alpha, self.beta,
+            self._matvec_indptr, self._matvec_indices, stiffness, np.empty(self.n), k,
+            con.friction_tangents, con.friction_bounds, con.friction_obstacle_speed,
+            FRICTION_SMOOTHING, self._diag_pos, self._diag_block_pos, grad, fric_grad,
+            np.empty((k.size, self.dim, self.dim)), data)
+        return phi, grad, fric_grad, (data, low_rank) if hessian else None
 
     def newton_matrix(self, hdata: np.ndarray, filters: np.ndarray,
                       diagonal: np.ndarray) -> np.ndarray:
@@ -506,13 +503,14 @@ class _NewtonProblem(StepProblem):
     Args:
         solver: the ``PatternCachingSolver``.
         q_n, v_n: (n_dof,) m, m/s at the start of the step.  dt: s.
-        con: the step's constraints, 2D friction as a cone (``as_cone``).
+        con: the step's constraints, 2D friction as a cone, arrays as the kernels take
+            them (``as_cone``).
     """
 
     def __init__(self, solver: PatternCachingSolver, q_n: np.ndarray, v_n: np.ndarray,
                  dt: float, con: StepConstraints):
         super().__init__(solver, q_n, v_n, dt, con, solver.evaluate_fast)
-        self.filters = np.ascontiguousarray(con.filters, dtype=float)
+        self.filters = con.filters
         self.s_diag = np.einsum('naa->na', self.filters).ravel()
         self._filtered = np.empty(solver.n)
         self.matrix = self.low = None
@@ -556,7 +554,8 @@ class _NewtonProblem(StepProblem):
         except RuntimeError:  # a singular factor
             return False, 0.0
         dq[:] = x
-        return bool(np.all(np.isfinite(x))), float(g_f @ x)
+        slope = float(g_f @ x)
+        return math.isfinite(slope), slope  # a non-finite entry of x makes the slope one
 
     def step_bound(self, x, dq) -> float:
         return min(self.solver.max_step(x, dq),

@@ -202,3 +202,47 @@ def stiffness_damping(indptr, indices, stiffness, dq, beta, dt, k_dq, grad):
     Returns its value (J)."""
     csc_matvec(indptr, indices, stiffness, dq, k_dq)
     return terms.stiffness_damping(dq, k_dq, beta, dt, grad)
+
+
+@njit(cache=True)
+def add_step_terms(phi, hessian, x, x_n, dq, dt, masses, alpha, beta, indptr, indices,
+                   stiffness, k_dq, nodes, tangents, bounds, obstacle_speed, eps,
+                   diag_pos, diag_block_pos, grad, fric_grad, blocks, data):
+    """The incremental potential's terms that follow the energies, in one call:
+    stiffness damping (``stiffness_damping``, if beta > 0), kinetic friction
+    (``cone_friction``) and, with ``hessian``, their Hessians and that of inertia and
+    mass damping (``add_inertia_diagonal``) added into the CSC values ``data``, in the
+    order ``PatternCachingSolver.evaluate_fast`` sums them.
+
+    Args:
+        phi: J, the potential so far.  x, x_n, dq = x - x_n: (n_dof,) m.  dt: s.
+        masses: (n_dof,) kg.  alpha: 1/s.  beta: s.
+        indptr, indices: the CSC pattern (int64).  stiffness: its values of K_n (N/m).
+        k_dq: (n_dof,) N, scratch for K_n dq.
+        nodes, tangents, bounds, obstacle_speed, eps: the sliding nodes, as
+            ``cone_friction``'s.
+        diag_pos: (n_dof,) the diagonal's positions in ``data``.
+        diag_block_pos: (n_nodes, d, d) the diagonal node blocks' positions.
+        grad: (n_dof,) N, added into.  fric_grad: (n_dof,) N, zeroed and written.
+        blocks: (k, d, d) N/m, the friction blocks, written.
+
+    Returns:
+        phi plus these terms' value (J).
+    """
+    if beta > 0:
+        phi += stiffness_damping(indptr, indices, stiffness, dq, beta, dt, k_dq, grad)
+        if hessian:
+            scale = beta / dt
+            for p in range(stiffness.shape[0]):
+                data[p] += scale * stiffness[p]
+    fric_grad[:] = 0.0
+    if nodes.shape[0]:
+        phi += cone_friction(x, x_n, nodes, tangents, bounds, obstacle_speed, dt, eps,
+                             fric_grad, blocks)
+        for m in range(grad.shape[0]):
+            grad[m] += fric_grad[m]
+    if hessian:
+        add_inertia_diagonal(data, diag_pos, masses, dt, alpha)
+        if nodes.shape[0]:
+            add_node_blocks(data, diag_block_pos, nodes, blocks)
+    return phi

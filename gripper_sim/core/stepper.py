@@ -25,6 +25,7 @@ triplet/SuperLU reference they are both checked against is ``test/reference_solv
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,7 +125,7 @@ class StepProblem:
     def evaluate(self, x, hessian, grad) -> float:
         phi, g, fric_grad, parts = self.potential(x, self.q_n, self.v_n, self.dt, self.con,
                                                   bool(hessian))
-        if not np.isfinite(phi):
+        if not math.isfinite(phi):
             return np.inf
         grad[:] = g
         self.fric_grad = fric_grad

@@ -231,6 +231,21 @@ def area_pressure_hessian(de_da, data, scatter):
 
 
 @njit(cache=True)
+def enclosed_area_pressure(x, ring, a0, b, p0, kb, grad, ga, data, scatter, hessian):
+    """The enclosed-area pressure (``EnclosedAreaPressure``) in one call:
+    ``area_and_gradient`` into ``ga`` (2 n,) m, ``area_pressure``, the gradient
+    dE/dA ga (N) added into ``grad`` and, with ``hessian``, ``area_pressure_hessian``
+    into ``data``. Returns (energy J, the rank-one coefficient c N/m^3)."""
+    area = area_and_gradient(x, ring, ga)
+    value, de_da, c = area_pressure(area, a0, b, p0, kb)
+    for m in range(grad.shape[0]):
+        grad[m] += de_da * ga[m]
+    if hessian:
+        area_pressure_hessian(de_da, data, scatter)
+    return value, c
+
+
+@njit(cache=True)
 def _deformation_gradient(x, tri, dm_inv, t):
     """F (f00, f01, f10, f11) of triangle t: its edge matrix times dm_inv[t]."""
     i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]

@@ -45,10 +45,7 @@ class EnclosedAreaPressure(KernelEnergy):
         """The energy's kernel (see ``Stretching.evaluate_into``; scatter (n_ring, 16));
         returns (value J, the rank-one term b K / A0 dA/dq dA/dq^T if K > 0)."""
         ga = np.empty(q.size)
-        area = kernels.area_and_gradient(q.reshape(-1, 2), self.ring, ga)
-        value, de_da, c = kernels.area_pressure(area, self.a0, self.b, self.p0, self.k)
-        grad += de_da * ga
-        if not hessian:
-            return value, []
-        kernels.area_pressure_hessian(de_da, data, scatter)
-        return value, ([(c, ga)] if self.k > 0 else [])
+        value, c = kernels.enclosed_area_pressure(q.reshape(-1, 2), self.ring, self.a0,
+                                                  self.b, self.p0, self.k, grad, ga, data,
+                                                  scatter, hessian)
+        return value, ([(c, ga)] if hessian and self.k > 0 else [])
