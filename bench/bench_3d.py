@@ -28,12 +28,11 @@ import json
 import os
 import pstats
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-THIS_TREE = Path(__file__).resolve().parents[1]
+from baseline import THIS_TREE, run_in_tree
 #: the source tree whose gripper_sim the benchmark imports (the child processes of
 #: ``--against`` set it)
 sys.path.insert(0, os.environ.get('GRIPPER_SIM_TREE', str(THIS_TREE)))
@@ -175,14 +174,9 @@ def side_by_side(models: list[str], trees: list[Path], rounds: int) -> None:
     for round_ in range(rounds + 1):   # round 0 warms numba's cache of each tree
         for model in models:
             for tree in trees:
-                env = dict(os.environ, GRIPPER_SIM_TREE=str(tree), PYTHONPATH=str(tree))
-                child = subprocess.run([sys.executable, __file__, '--child', model],
-                                       env=env, capture_output=True, text=True)
-                if child.returncode != 0:
-                    last = (child.stderr.strip().splitlines() or ['no output'])[-1]
-                    raise SystemExit(f'error: the {model} grasp failed in {tree}: {last}')
+                run = run_in_tree(Path(__file__), tree, ['--child', model])
                 if round_ > 0:
-                    runs[(model, tree)].append(json.loads(child.stdout.splitlines()[-1]))
+                    runs[(model, tree)].append(run)
                     loads.append(os.getloadavg()[0])
     print(f'side by side at dt {COMPARE_DT * 1e3:g} ms, {rounds} rounds taking turns, load '
           f'{min(loads):.1f}-{max(loads):.1f} on {os.cpu_count()} cores; CPU time '

@@ -10,8 +10,8 @@ machine's load average is printed), for each case and model, with Newton iterati
   fixed-pattern Newton solver (``core.fast_solver``).
 - ``membrane``: the pressurised ring (256 nodes) squeezed by 10 % of its radius.
   ``mmm`` runs the whole step in one numba kernel (``core.fast``), which the barrier
-  model does not have; ``mmm-numpy`` is the numpy reference path of the same method
-  (``Simulation(config, fast=False)``).
+  model does not have; ``mmm-shared`` is the same method on the route the barrier model
+  takes (``Simulation(config, fast=False)``: the contact passes over the shared solver).
 - ``hertz3d``: the 3D solid sphere (linear tetrahedra, 922 nodes, 307 on the surface)
   pressed by D = 0.05 R between flat plates, 0.6 s at dt = 50 ms: the 3D model has one
   solver (the fixed-pattern Newton solver) for both contact models.
@@ -33,7 +33,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -43,6 +42,7 @@ ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().paren
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'test'))
 
+from baseline import add_arguments, alternated, argument_problem, best_by_key  # noqa: E402
 from helpers import pick, quasi_static_sim  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
@@ -103,7 +103,7 @@ def timed(case, model: str, fast=None):
 def _runs(pick_too: bool) -> list:
     """(case name, case, label, fast) of the runs, in order."""
     runs = [('hertz', hertz, 'mmm', None), ('hertz', hertz, 'ipc', None),
-            ('membrane', membrane, 'mmm', None), ('membrane', membrane, 'mmm-numpy', False),
+            ('membrane', membrane, 'mmm', None), ('membrane', membrane, 'mmm-shared', False),
             ('membrane', membrane, 'ipc', None),
             ('hertz3d', hertz3d, 'mmm', None), ('hertz3d', hertz3d, 'ipc', None)]
     if pick_too:
@@ -132,43 +132,29 @@ def plain(runs: list) -> dict:
 def compare(baseline: Path, pick_too: bool, repeat: int) -> dict:
     """The best figures of this tree and of ``baseline``, runs alternated in fresh
     processes: {'this': best, 'baseline': best} (see the module doc)."""
-    trees = {'this': Path(__file__).resolve().parents[1], 'baseline': baseline.resolve()}
-    best = {label: {} for label in trees}
-    for _ in range(repeat):
-        for label, tree in trees.items():
-            command = [sys.executable, str(Path(__file__).resolve()), '--plain']
-            done = subprocess.run(command + (['--pick'] if pick_too else []),
-                                  env=dict(os.environ, GRIPPER_SIM_TREE=str(tree)),
-                                  capture_output=True, text=True, check=True)
-            for key, figures in json.loads(done.stdout.strip().splitlines()[-1]).items():
-                key = tuple(key.split())
-                if key not in best[label] or figures[0] < best[label][key][0]:
-                    best[label][key] = figures
-    return best
+    outputs = alternated(Path(__file__).resolve(), baseline,
+                         ['--plain'] + (['--pick'] if pick_too else []), repeat)
+    return {label: {tuple(key.split()): figures
+                    for key, figures in best_by_key(runs, lambda f: f[0]).items()}
+            for label, runs in outputs.items()}
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--repeat', type=int, default=2)
     parser.add_argument('--pick', action='store_true', help='also the grasp-and-lift')
-    parser.add_argument('--baseline', type=Path, metavar='DIR',
-                        help='another checkout to compare with, side by side')
-    parser.add_argument('--plain', action='store_true',
-                        help='each run once after a warm-up, figures as JSON (what '
-                             '--baseline runs)')
+    add_arguments(parser, 'each run once after a warm-up, figures as JSON (what --baseline '
+                          'runs)')
     args = parser.parse_args(argv)
-    if args.repeat < 1:
-        print(f'error: --repeat must be at least 1, got {args.repeat}', file=sys.stderr)
+    problem = argument_problem(args)
+    if problem:
+        print(f'error: {problem}', file=sys.stderr)
         return 2
     runs = _runs(args.pick)
     if args.plain:
         print(json.dumps(plain(runs)))
         return 0
     if args.baseline is not None:
-        if not (args.baseline / 'gripper_sim' / 'core').is_dir():
-            print(f'error: --baseline {args.baseline} is not a checkout of this project '
-                  '(no gripper_sim/core in it)', file=sys.stderr)
-            return 2
         tables = compare(args.baseline, args.pick, args.repeat)
         print(f'load average {os.getloadavg()[0]:.2f} at the end; CPU seconds, best of '
               f'{args.repeat} runs each, alternated: this tree and baseline '
@@ -189,8 +175,8 @@ def main(argv=None) -> int:
             if (name, 'ipc') in best:
                 print(f'{name}: ipc / mmm CPU time = '
                       f'{best[name, "ipc"][0] / best[name, "mmm"][0]:.2f}')
-        print(f'membrane: ipc / mmm-numpy CPU time = '
-              f'{best["membrane", "ipc"][0] / best["membrane", "mmm-numpy"][0]:.2f}')
+        print(f'membrane: ipc / mmm-shared CPU time = '
+              f'{best["membrane", "ipc"][0] / best["membrane", "mmm-shared"][0]:.2f}')
     return 0
 
 

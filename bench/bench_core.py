@@ -56,7 +56,6 @@ import cProfile
 import json
 import os
 import pstats
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -66,6 +65,8 @@ import numpy as np
 #: the checkout whose gripper_sim is measured: this one, or GRIPPER_SIM_TREE (--baseline)
 ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(ROOT))
+
+from baseline import THIS_TREE, add_arguments, alternated, argument_problem  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
@@ -406,25 +407,19 @@ def compare(baseline: Path, names: list[str], overrides: list[str], repeat: int,
             hold: float) -> None:
     """Print this tree's CPU time per step beside ``baseline``'s, runs alternated in fresh
     processes (see the module doc)."""
-    script = Path(__file__).resolve()
-    trees = {'this': Path(__file__).resolve().parents[1], 'baseline': baseline.resolve()}
+    trees = {'this': THIS_TREE, 'baseline': baseline.resolve()}
     best: dict = {}
     for name in names:
-        for _ in range(repeat):
-            for label, tree in trees.items():
-                env = dict(os.environ, GRIPPER_SIM_TREE=str(tree))
-                command = [sys.executable, str(script), '--plain', '--repeat', '1',
-                           '--hold', str(hold), '--setups', name]
-                for item in overrides:
-                    command += ['--set', item]
-                done = subprocess.run(command, env=env, capture_output=True, text=True,
-                                      check=True)
-                row = json.loads(done.stdout.strip().splitlines()[-1])[name]
-                if not Path(row['package']).is_relative_to(tree):
-                    raise RuntimeError(f'the run for {tree} imported {row["package"]}')
-                key = (name, label)
-                if key not in best or row['us_per_step'] < best[key]['us_per_step']:
-                    best[key] = row
+        arguments = ['--plain', '--repeat', '1', '--hold', str(hold), '--setups', name]
+        for item in overrides:
+            arguments += ['--set', item]
+        outputs = alternated(Path(__file__).resolve(), baseline, arguments, repeat)
+        for label, runs in outputs.items():
+            rows = [run[name] for run in runs]
+            for row in rows:
+                if not Path(row['package']).is_relative_to(trees[label]):
+                    raise RuntimeError(f'the run for {trees[label]} imported {row["package"]}')
+            best[(name, label)] = min(rows, key=lambda row: row['us_per_step'])
     print(f'CPU us per step, best of {repeat} runs each, alternated: this tree '
           f'({trees["this"]}) and baseline ({trees["baseline"]}); load average '
           f'{os.getloadavg()[0]:.2f} at the end')
@@ -457,11 +452,8 @@ def main(argv=None) -> int:
                         help=f'comma-separated, of: {", ".join(SETUPS)}')
     parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
                         help='configuration override for every set-up')
-    parser.add_argument('--baseline', type=Path, metavar='DIR',
-                        help='another checkout to compare with, side by side')
-    parser.add_argument('--plain', action='store_true',
-                        help='only the CPU time per step and the end of each grasp, as JSON '
-                             '(what --baseline runs)')
+    add_arguments(parser, 'only the CPU time per step and the end of each grasp, as JSON '
+                          '(what --baseline runs)')
     args = parser.parse_args(argv)
     names = args.setups.split(',')
     unknown = [name for name in names if name not in SETUPS]
@@ -469,18 +461,15 @@ def main(argv=None) -> int:
         print(f'error: unknown set-up {unknown[0]!r} (choose from {", ".join(SETUPS)})',
               file=sys.stderr)
         return 2
-    if args.repeat < 1:
-        print(f'error: --repeat must be at least 1, got {args.repeat}', file=sys.stderr)
+    problem = argument_problem(args)
+    if problem:
+        print(f'error: {problem}', file=sys.stderr)
         return 2
     if args.plain:
         print(json.dumps({name: plain_run(name, args.set, args.repeat, args.hold)
                           for name in names}))
         return 0
     if args.baseline is not None:
-        if not (args.baseline / 'gripper_sim' / 'core').is_dir():
-            print(f'error: --baseline {args.baseline} is not a checkout of this project '
-                  '(no gripper_sim/core in it)', file=sys.stderr)
-            return 2
         compare(args.baseline, names, args.set, args.repeat, args.hold)
         return 0
     print(f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')

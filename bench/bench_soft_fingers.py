@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -35,6 +34,8 @@ from pathlib import Path
 #: the checkout whose gripper_sim is measured: this one, or GRIPPER_SIM_TREE (--baseline)
 ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(ROOT))
+
+from baseline import add_arguments, alternated, argument_problem, best_by_key  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
@@ -66,17 +67,8 @@ def _baseline_rows(script: Path, baseline: Path, fingers: tuple, force: float,
                    repeat: int) -> dict:
     """{'this': rows, 'baseline': rows}, rows the best grasp per finger of each tree, runs
     alternated in fresh processes (see the module doc)."""
-    trees = {'this': Path(__file__).resolve().parents[1], 'baseline': baseline.resolve()}
-    best = {label: {} for label in trees}
-    for _ in range(repeat):
-        for label, tree in trees.items():
-            done = subprocess.run([sys.executable, str(script), '--plain', '--force', str(force)],
-                                  env=dict(os.environ, GRIPPER_SIM_TREE=str(tree)),
-                                  capture_output=True, text=True, check=True)
-            for finger, row in json.loads(done.stdout.strip().splitlines()[-1]).items():
-                if finger not in best[label] or row['cpu'] < best[label][finger]['cpu']:
-                    best[label][finger] = row
-    return best
+    outputs = alternated(script, baseline, ['--plain', '--force', str(force)], repeat)
+    return {label: best_by_key(runs, lambda row: row['cpu']) for label, runs in outputs.items()}
 
 
 def _print_rows(rows: dict, fingers: tuple) -> None:
@@ -96,13 +88,11 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument('--repeat', type=int, default=1, help='runs per finger (best kept)')
     parser.add_argument('--force', type=float, default=4.0, help='grip force, N')
-    parser.add_argument('--baseline', type=Path, metavar='DIR',
-                        help='another checkout to compare with, side by side')
-    parser.add_argument('--plain', action='store_true',
-                        help='each grasp once after a warm-up, as JSON (what --baseline runs)')
+    add_arguments(parser, 'each grasp once after a warm-up, as JSON (what --baseline runs)')
     args = parser.parse_args(argv)
-    if args.repeat < 1:
-        print(f'error: --repeat must be at least 1, got {args.repeat}', file=sys.stderr)
+    problem = argument_problem(args)
+    if problem:
+        print(f'error: {problem}', file=sys.stderr)
         return 2
     if args.plain:
         for finger in fingers:
@@ -110,10 +100,6 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
         print(json.dumps({finger: grasp(finger, args.force) for finger in fingers}))
         return 0
     if args.baseline is not None:
-        if not (args.baseline / 'gripper_sim' / 'core').is_dir():
-            print(f'error: --baseline {args.baseline} is not a checkout of this project '
-                  '(no gripper_sim/core in it)', file=sys.stderr)
-            return 2
         script = Path(sys.modules['__main__'].__file__).resolve()
         tables = _baseline_rows(script, args.baseline, fingers, args.force, args.repeat)
         print(f'load average {os.getloadavg()[0]:.2f} at the end; CPU time '

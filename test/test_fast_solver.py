@@ -83,21 +83,30 @@ def test_first_step_stops_a_turning_slip_where_it_is_nearest_zero():
     assert solver.kink_step(q, q_n, np.append(-4.0 * slow * dt, 0.0), dt, con) == 1.0
 
 
-@pytest.mark.parametrize('model', [['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
-                                   ['fruit.model=solid', 'fruit.skin.enabled=false',
-                                    'fruit.mesh.subdivisions=3']], ids=['shell', 'solid'])
-def test_the_block_ldl_preconditioner_solves_a_newton_matrix(model):
-    """The kept factorisation (block LDL^T, its 3 x 3 kernels) of a real Newton matrix
-    (the fruit's Hessian at rest plus the inertia) solves it to round-off, filtered too,
-    and its factors are those of the generic ``sparse_ldl.factor``."""
+#: 3D fruits whose Newton matrix the solver's linear algebra is checked on
+FRUITS_3D = [['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
+             ['fruit.model=solid', 'fruit.skin.enabled=false', 'fruit.mesh.subdivisions=3']]
+
+
+def _rest_newton_matrix(model: list[str]):
+    """(solver, q (n d,), dt, CSC values of the fruit's Hessian at rest plus the inertia)
+    of the 3D fruit ``model`` (configuration overrides)."""
     sim = make_simulation(load_config(overrides=['dimension=3'] + model))
     solver = sim.solver
-    dt = sim.dt
     q = sim.q.ravel()
     data = np.zeros(solver._nnz)
     for energy, scatter in zip(solver.energies, solver._scatter):
         energy.evaluate_into(q, np.zeros(q.size), data, scatter, True)
-    solver_kernels.add_inertia_diagonal(data, solver._diag_pos, solver.m, dt, 0.0)
+    solver_kernels.add_inertia_diagonal(data, solver._diag_pos, solver.m, sim.dt, 0.0)
+    return solver, q, sim.dt, data
+
+
+@pytest.mark.parametrize('model', FRUITS_3D, ids=['shell', 'solid'])
+def test_the_block_ldl_preconditioner_solves_a_newton_matrix(model):
+    """The kept factorisation (block LDL^T, its 3 x 3 kernels) of a real Newton matrix
+    (the fruit's Hessian at rest plus the inertia) solves it to round-off, filtered too,
+    and its factors are those of the generic ``sparse_ldl.factor``."""
+    solver, q, dt, data = _rest_newton_matrix(model)
     ldl = solver._factorise(data)
     matrix = solver._csc(data).tocsc()
     rhs = np.linspace(-1.0, 1.0, q.size)
@@ -250,22 +259,13 @@ def test_the_solver_and_the_reference_stop_at_one_point_with_stiffness_damping(n
     assert np.max(np.abs(got.q - q_n)) > 1e-6 * size  # the step moved the fruit
 
 
-@pytest.mark.parametrize('model', [['fruit.model=shell', 'fruit.mesh.subdivisions=4'],
-                                   ['fruit.model=solid', 'fruit.skin.enabled=false',
-                                    'fruit.mesh.subdivisions=3']], ids=['shell', 'solid'])
+@pytest.mark.parametrize('model', FRUITS_3D, ids=['shell', 'solid'])
 def test_the_compiled_cg_solves_a_filtered_newton_system_with_a_rank_one_term(model):
     """``pcg_kernels.preconditioned_cg`` (the solver's ``_pcg``) on a real Newton matrix
     S A S + (I - S) plus a rank-one term, its factorisation and Woodbury terms made of the
     same matrix (an exact preconditioner): the dense solution within round-off, zero in
     the held directions, in one CG iteration."""
-    sim = make_simulation(load_config(overrides=['dimension=3'] + model))
-    solver = sim.solver
-    dt = sim.dt
-    q = sim.q.ravel()
-    data = np.zeros(solver._nnz)
-    for energy, scatter in zip(solver.energies, solver._scatter):
-        energy.evaluate_into(q, np.zeros(q.size), data, scatter, True)
-    solver_kernels.add_inertia_diagonal(data, solver._diag_pos, solver.m, dt, 0.0)
+    solver, q, dt, data = _rest_newton_matrix(model)
     filters = np.tile(np.eye(3), (q.size // 3, 1, 1))
     filters[0] = 0.0  # a node held in every direction
     filters[1] = np.diag([1.0, 1.0, 0.0])  # one held along z
