@@ -50,16 +50,13 @@ from gripper_sim.core.energies import (EnclosedAreaPressure, NeoHookeanTriangles
 from gripper_sim.core.measures import tributary_lengths
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
 from gripper_sim.core.slip import SLIDING_SPEED
-from gripper_sim.core.stepper import NewtonFailure
+from gripper_sim.core.stepper import NEWTON_FAILURES, NewtonFailure
 
 from gripper_sim.core import kernels, sparse_ldl
 
 if TYPE_CHECKING:
     from gripper_sim.core.simulation import Simulation
 
-#: failure messages of the reference solver (``stepper.NEWTON_FAILURES``)
-_FAILURES = {1: 'start of step is infeasible (inverted element)',
-             2: 'no descent direction found', 3: 'line search failed'}
 #: the StepResult fields observers rarely read, which ``FastPath.measure`` builds on first
 #: read (``core.deferred``)
 RARELY_READ = ('velocities', 'contact_forces', 'contact_sticking', 'slipping', 'centroid',
@@ -429,9 +426,8 @@ class FastPath:
                 self.fallbacks += 1
                 return None
             history = [float(h) for h in self.history[:int(out[1])]]
-            message = _FAILURES.get(
-                status, f'no convergence in {sim.solver.max_iterations} iterations')
-            raise NewtonFailure(message, history)
+            raise NewtonFailure(NEWTON_FAILURES[status].format(sim.solver.max_iterations),
+                                history)
         contacts = build(cm.ContactState, dict(
             obstacle=obstacle, mode=mode, normal_force=normal_force, bounce_speed=bounce,
             secondary=secondary, secondary_bounce=secondary_bounce))

@@ -151,8 +151,6 @@ class _BlockLDL:
         return x
 
 
-
-
 def as_cone(con: StepConstraints) -> StepConstraints:
     """``con`` with 2D friction (one tangent (k, 2), speeds (k,)) written as a Coulomb
     cone with one tangent ((k, 1, 2), (k, 1)): the same potential, gradient and Hessian;
@@ -451,8 +449,8 @@ class PatternCachingSolver:
         status, iterations = pcg_kernels.preconditioned_cg(
             self._matvec_indptr, self._matvec_indices, values, u, np.ascontiguousarray(u.T),
             np.ascontiguousarray(c, dtype=float), filters, lu.perm, lu.pattern.arrays,
-            lu.l_values, lu.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv, rhs, CG_TOLERANCE,
-            CG_ERROR_FRACTION * self.tolerance * dt, CG_RELATIVE_FLOOR * self.tolerance * dt,
+            lu.l_values, lu.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv, rhs,
+            CG_TOLERANCE, CG_ERROR_FRACTION * self.tolerance * dt, CG_RELATIVE_FLOOR * self.tolerance * dt,
             CG_MAX_ITERATIONS, CG_STALE_ITERATIONS, x)
         self.stats['cg_iterations'] += iterations
         if status != pcg_kernels.CONVERGED:
@@ -463,8 +461,8 @@ class PatternCachingSolver:
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:
         """One implicit Euler step: ``newton.newton_iteration`` (interpreted) on this
-        solver's pattern (``_NewtonProblem``). A later contact pass of the same step starts from
-        the last pass's solution in the directions the new filter leaves free.
+        solver's pattern (``_NewtonProblem``). A later contact pass of the same step starts
+        from the last pass's solution in the directions the new filter leaves free.
 
         Raises:
             NewtonFailure: no convergence, no descent, or an infeasible start.

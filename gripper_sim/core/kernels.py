@@ -562,15 +562,7 @@ def _newton_matrix(band, stiffness, masses2, dt, alpha, beta, filters, fr_nodes,
                 ab[p, d, 1, 0] = 0.0
                 ab[p, d, 1, 1] = 0.0
                 continue
-            h00 = band[p, d, 0, 0]
-            h01 = band[p, d, 0, 1]
-            h10 = band[p, d, 1, 0]
-            h11 = band[p, d, 1, 1]
-            if damping > 0:
-                h00 += damping * stiffness[p, d, 0, 0]
-                h01 += damping * stiffness[p, d, 0, 1]
-                h10 += damping * stiffness[p, d, 1, 0]
-                h11 += damping * stiffness[p, d, 1, 1]
+            h00, h01, h10, h11 = _damped_block(band, stiffness, damping, p, d)
             if d == 0:
                 h00 += terms.inertia_diagonal(masses2, dt, alpha, 2 * i)
                 h11 += terms.inertia_diagonal(masses2, dt, alpha, 2 * i + 1)
@@ -695,7 +687,7 @@ def _solid_newton_matrix(hvals, stiffness, masses2, dt, alpha, beta, filters, fr
     kind = _filter_kinds(filters)
     for k in range(n):
         i = order[k]
-        h00, h01, h10, h11 = _damped_block(hvals, stiffness, damping, k)
+        h00, h01, h10, h11 = _damped_block(hvals, stiffness, damping, k, 0)
         (ab[k, 0, 0, 0], ab[k, 0, 0, 1], ab[k, 0, 1, 0],
          ab[k, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[i], i, i,
                                            h00 + terms.inertia_diagonal(masses2, dt, alpha, 2 * i),
@@ -705,7 +697,7 @@ def _solid_newton_matrix(hvals, stiffness, masses2, dt, alpha, beta, filters, fr
         for m in range(a_ptr[k], a_ptr[k + 1]):
             b = n + m
             j = order[a_col[m]]
-            h00, h01, h10, h11 = _damped_block(hvals, stiffness, damping, b)
+            h00, h01, h10, h11 = _damped_block(hvals, stiffness, damping, b, 0)
             (ab[b, 0, 0, 0], ab[b, 0, 0, 1], ab[b, 0, 1, 0],
              ab[b, 0, 1, 1]) = _filtered_block(filters, kind[i], kind[j], i, j, h00, h01, h10,
                                                h11)
@@ -715,16 +707,17 @@ def _solid_newton_matrix(hvals, stiffness, masses2, dt, alpha, beta, filters, fr
 
 
 @njit(cache=True, error_model='numpy', inline='always')
-def _damped_block(hvals, stiffness, damping, b):
-    """The block b of C + damping K_n (4 values, row-major) in the solid's sparse values;
-    K_n read only with damping > 0."""
-    h00, h01 = hvals[b, 0, 0, 0], hvals[b, 0, 0, 1]
-    h10, h11 = hvals[b, 0, 1, 0], hvals[b, 0, 1, 1]
+def _damped_block(hessian, stiffness, damping, p, d):
+    """The node block [p, d] of C + damping K_n (4 values, row-major), C = ``hessian`` and
+    K_n = ``stiffness`` in one layout (the band (n, nbw+1, 2, 2), or the solid's sparse
+    values (n_blocks + 1, 1, 2, 2) with d = 0); K_n read only with damping > 0."""
+    h00, h01 = hessian[p, d, 0, 0], hessian[p, d, 0, 1]
+    h10, h11 = hessian[p, d, 1, 0], hessian[p, d, 1, 1]
     if damping > 0:
-        h00 += damping * stiffness[b, 0, 0, 0]
-        h01 += damping * stiffness[b, 0, 0, 1]
-        h10 += damping * stiffness[b, 0, 1, 0]
-        h11 += damping * stiffness[b, 0, 1, 1]
+        h00 += damping * stiffness[p, d, 0, 0]
+        h01 += damping * stiffness[p, d, 0, 1]
+        h10 += damping * stiffness[p, d, 1, 0]
+        h11 += damping * stiffness[p, d, 1, 1]
     return h00, h01, h10, h11
 
 

@@ -12,7 +12,6 @@ exact on them even when P was factorised with another contact set. The stopping 
 are ``fast_solver``'s (see its CG_* constants). The dot products go through BLAS as
 numpy's do, so with one rank-one term the iterates equal a numpy loop over the same
 kernels to the bit.
-Import this module only where numba is installed.
 """
 from __future__ import annotations
 
@@ -78,7 +77,8 @@ def _precondition(filters, perm, arrays, l_values, d_inv, u_w_t, a_inv_u, small_
         v = np.zeros(k)
         _add_product(v, 1.0, small_inv, t)
         _add_product(y, -1.0, a_inv_u, v)
-    apply_filters(filters, y.copy(), y)
+    apply_filters(filters, y, work)
+    y[:] = work
 
 
 @njit(cache=True)
