@@ -7,7 +7,6 @@ process and none disturbs another's shutdown.
 from __future__ import annotations
 
 import time
-import uuid
 from collections import deque
 from typing import Any, Callable
 
@@ -15,13 +14,13 @@ import rclpy
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from unique_identifier_msgs.msg import UUID
 
 from control_msgs.action import GripperCommand, ParallelGripperCommand
 from geometry_msgs.msg import WrenchStamped
 from gripper_sim_interfaces.action import Grasp
 from gripper_sim_interfaces.msg import FruitState
 from gripper_sim_interfaces.srv import Step
+from gripper_sim.ros.goal_feedback import GoalFeedback
 from rcl_interfaces.msg import Log, Parameter as ParameterMsg
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
@@ -99,7 +98,7 @@ class SimClient:
         self.open_client = self.node.create_client(Trigger, f'{self.path}/jaw/open')
         self.param_client = self.node.create_client(SetParameters,
                                                     f'{self.path}/set_parameters')
-        self._feedback: dict[bytes, list] = {}   # goal id -> the list its feedback goes to
+        self._feedback: dict[ActionClient, GoalFeedback] = {}   # client -> its feedback topic
         self.grasp = self.action_client(Grasp, f'{self.path}/grasp')
         self.gripper_cmd = self.action_client(GripperCommand, f'{self.path}/gripper_cmd')
         self.parallel_gripper_cmd = self.action_client(ParallelGripperCommand,
@@ -107,16 +106,11 @@ class SimClient:
 
     def action_client(self, kind, name: str) -> ActionClient:
         """An action client of ``kind`` for the action ``name``, whose goals' feedback
-        ``send_goal`` collects from the action's feedback topic itself: rclpy's client
-        forgets a goal's feedback callback when it takes the result, so feedback that a
-        busy client has not read by then would be lost."""
-        def on_feedback(msg) -> None:
-            into = self._feedback.get(bytes(msg.goal_id.uuid))
-            if into is not None:
-                into.append(msg.feedback)
-        self.node.create_subscription(kind.Impl.FeedbackMessage, f'{name}/_action/feedback',
-                                      on_feedback, FEEDBACK)
-        return ActionClient(self.node, kind, name, feedback_sub_qos_profile=FEEDBACK)
+        ``send_goal`` collects from the action's feedback topic itself (``GoalFeedback``:
+        rclpy's client drops what is unread when the result comes)."""
+        client = ActionClient(self.node, kind, name, feedback_sub_qos_profile=FEEDBACK)
+        self._feedback[client] = GoalFeedback(self.node, kind, name, FEEDBACK)
+        return client
 
     def _store(self, suffix: str) -> Callable[[Any], None]:
         def store(msg) -> None:
@@ -257,9 +251,9 @@ class SimClient:
         (with a ``client`` from ``action_client``) receives every feedback of the goal,
         also what arrives after its result."""
         self.spin_until(client.server_is_ready, timeout, 'the action server')
-        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
-        if feedback is not None:
-            self._feedback[bytes(goal_id.uuid)] = feedback
+        topic = self._feedback.get(client)
+        goal_id = (topic.new_goal(feedback.append) if topic is not None and feedback is not None
+                   else None)
         future = client.send_goal_async(goal, goal_uuid=goal_id)
         return self.spin_until(lambda: future.done() and future.result(), timeout,
                                'the goal response')

@@ -1,4 +1,5 @@
 """The ROS verbs of ``gripper-sim`` against a node in a subprocess."""
+import re
 import signal
 import subprocess
 import sys
@@ -187,3 +188,50 @@ def test_status_follow_prints_lines_until_ctrl_c(client):
         if process.poll() is None:
             process.kill()
     assert process.returncode == 0 and 'Traceback' not in err, err
+
+
+def test_grasp_prints_feedback_that_comes_in_a_burst_with_the_result():
+    """A server that publishes its last phases' feedback in one burst right before the
+    result (a loaded machine): every phase is printed (rclpy's own client dropped what
+    was unread when the result came)."""
+    import threading
+
+    import rclpy
+    from rclpy.action import ActionServer
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from rclpy.executors import MultiThreadedExecutor
+    from gripper_sim_interfaces.action import Grasp
+
+    phases = ('closing', 'lifting', 'holding', 'releasing', 'opening')
+    domain = pick_domain_id(41)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('burst_grasp_server', context=context)
+
+    def execute(goal_handle):
+        time.sleep(0.5)   # the client has asked for the result by now
+        for phase in phases:
+            goal_handle.publish_feedback(Grasp.Feedback(phase=phase, gap=0.05))
+        goal_handle.succeed()
+        return Grasp.Result(success=True, outcome='held', message='burst', dropped_at=-1.0)
+
+    server = ActionServer(node, Grasp, '/burst/grasp', execute,
+                          callback_group=ReentrantCallbackGroup())
+    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    executor.add_node(node)
+    spinning = threading.Thread(target=executor.spin, daemon=True)
+    spinning.start()
+    try:
+        for _ in range(3):
+            run = cli('grasp', '--force', '3', '--node', '/burst', '--timeout', '60',
+                      env=ros_environment(domain), timeout=120)
+            assert run.returncode == 0, run.stdout + run.stderr
+            printed = re.findall(r'^  (\S+) +gap ', run.stdout, re.MULTILINE)
+            assert printed == list(phases), run.stdout
+            assert run.stdout.index('opening') < run.stdout.index('result: SUCCESS')
+    finally:
+        server.destroy()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        spinning.join(timeout=10)

@@ -312,12 +312,14 @@ def _grasp(args) -> int:
     from rclpy.action import ActionClient
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from gripper_sim_interfaces.action import Grasp
+    from gripper_sim.ros.goal_feedback import GoalFeedback
     node_path = args.node.rstrip('/')
     with _Session('gripper_sim_grasp_cli') as session:
         session.watch_rejections(node_path)
+        qos = QoSProfile(depth=FEEDBACK_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         client = ActionClient(session.node, Grasp, f'{node_path}/grasp',
-                              feedback_sub_qos_profile=QoSProfile(
-                                  depth=FEEDBACK_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
+                              feedback_sub_qos_profile=qos)
+        feedback = GoalFeedback(session.node, Grasp, f'{node_path}/grasp', qos)
         if not session.spin_until(client.server_is_ready, args.timeout):
             return _no_node(f'Grasp action server {node_path}/grasp', node_path, args.timeout)
         if not args.place and (args.transport is not None or args.retreat is not None):
@@ -332,10 +334,9 @@ def _grasp(args) -> int:
                           retreat_height=args.retreat or 0.0)
         printed = {'phase': None, 'wall': 0.0}
 
-        def on_feedback(message):
+        def on_feedback(fb):
             if args.quiet:
                 return
-            fb = message.feedback
             now = time.monotonic()
             if fb.phase != printed['phase'] or now - printed['wall'] >= 0.25:
                 printed.update(phase=fb.phase, wall=now)
@@ -348,7 +349,7 @@ def _grasp(args) -> int:
         else:
             print(f'grasp: {args.force:g} N, lift {lift:g} m, hold {args.hold:g} s'
                   + (', release' if args.release else ''), flush=True)
-        sent = client.send_goal_async(goal, feedback_callback=on_feedback)
+        sent = client.send_goal_async(goal, goal_uuid=feedback.new_goal(on_feedback))
         try:
             answered = session.spin_until(sent.done, args.timeout)
         except KeyboardInterrupt:   # the goal may be accepted all the same: cancel it
@@ -375,6 +376,7 @@ def _grasp(args) -> int:
                     gone_since = time.monotonic()
                 elif time.monotonic() - gone_since > 5.0:
                     return _error('the node went away before the goal finished')
+            feedback.drain(session.spin_once)
         except KeyboardInterrupt:
             return _cancel(session, handle, result_future)
         result = result_future.result().result
