@@ -65,6 +65,10 @@ def _press(body: FingerBody, force: float, spread: float) -> tuple[np.ndarray, i
     ('gripper.finger.fin_ray.rib_count=30 gripper.finger.fin_ray.rib_thickness=0.0025',
      'rib_count', 'the ribs intersect'),
     ('gripper.finger.fin_ray.rib_angle=-50', 'rib_angle', 'leaves the finger'),
+    # the default angle (null: perpendicular to the back beam) on a wider base: the
+    # message says the angle was derived and which keys to change
+    ('gripper.finger.fin_ray.base_width=0.04', 'rib_angle',
+     'rib_angle is null, so perpendicular to the back beam: set it (a larger angle)'),
     ('gripper.finger.fin_ray.beam_thickness=0.013', 'beam_thickness', 'fill the base'),
     ('gripper.finger.fin_ray.tip_offset=0.03', 'tip_offset', 'between the backing'),
     ('gripper.finger.fin_ray.material=custom', 'youngs_modulus', 'must be set'),

@@ -44,6 +44,8 @@ class FinRayGeometry:
         element_length: rod element length of the discretisation.
         tip_offset: x of the tip (0: the back beam runs along the backing; near
             base_width: the front beam nearly parallel to the jaw).
+        rib_angle_given: False when rib_angle was null in the configuration (then
+            perpendicular to the back beam).
     """
 
     length: float
@@ -55,15 +57,18 @@ class FinRayGeometry:
     rib_angle: float
     element_length: float
     tip_offset: float
+    rib_angle_given: bool = True
 
     @classmethod
     def from_config(cls, config, fruit_depth: float | None = None) -> 'FinRayGeometry':
         """From the ``gripper.finger.fin_ray.*`` keys of a flat configuration; a null
         depth is ``fruit_depth`` (m)."""
-        values = {name: config[PREFIX + name] for name in cls.__dataclass_fields__}
+        values = {name: config[PREFIX + name] for name in cls.__dataclass_fields__
+                  if name != 'rib_angle_given'}
         if values['depth'] is None:
             values['depth'] = fruit_depth
-        if values['rib_angle'] is None:   # perpendicular to the back beam
+        values['rib_angle_given'] = values['rib_angle'] is not None
+        if not values['rib_angle_given']:   # perpendicular to the back beam
             values['rib_angle'] = -math.degrees(math.atan2(values['tip_offset'],
                                                            values['length']))
         return cls(**values)
@@ -135,9 +140,14 @@ def rib_points(geometry: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
         r, s = np.linalg.solve(np.stack([direction, -along], axis=1), corner - back[k])
         if r <= 0 or not margin <= s * beam_length <= beam_length - margin:
             where = 'beyond the tip' if s > 0.5 else 'above the base'
+            derived = '' if g.rib_angle_given else (
+                f'; rib_angle is null, so perpendicular to the back beam: set it (a '
+                f"{'larger' if s <= 0.5 else 'smaller'} angle), or change base_width "
+                f'({g.base_width:g} m), tip_offset ({g.tip_offset:g} m) or rib_count')
             raise _error('rib_angle', g.rib_angle,
                          f'rib {k + 1} of {n} leaves the finger: its front end falls {where} '
-                         f'(ribs start on the back beam {spacing * 1e3:.3g} mm apart)')
+                         f'(ribs start on the back beam {spacing * 1e3:.3g} mm apart)'
+                         + derived)
         fronts[k] = corner + s * along
     return back, fronts
 
