@@ -10,7 +10,9 @@ Every energy has an ``evaluate_into`` kernel. The solver runs the one Newton ite
 (``core.newton.newton_iteration``, interpreted, on ``_NewtonProblem``) with less work
 per iteration:
 - the energies add their gradients and Hessians straight into the CSC values through
-  precomputed scatter indices (``core.energies.kernels``, ``core3d.kernels``), and
+  precomputed scatter indices (``core.energies.kernels``, ``core3d.kernels``); the
+  inertia and the leading 2D rod energies, pressure and gravity are one call
+  (``core.energy_table``), and
   S H S + (I - S) is one kernel over the d x d node blocks (``core.solver_kernels``), on
   the same pattern; kinetic friction is the Coulomb cone of the stepper, a 2D tangent
   being a cone with one tangent;
@@ -50,6 +52,7 @@ import scipy.sparse as sp
 from gripper_sim.core import newton, pcg_kernels, sparse_ldl
 from gripper_sim.core import solver_kernels as kernels
 from gripper_sim.core.energies.base import Energy
+from gripper_sim.core.energy_table import EnergyTable
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
                                       StepConstraints, StepProblem, StepSolution,
                                       stack_low_rank, woodbury_terms)
@@ -205,6 +208,7 @@ class PatternCachingSolver:
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
         self._build_fast_pattern()
+        self._table = EnergyTable(self.energies, self._scatter, self.dim)
 
     def load_kernels(self, q: np.ndarray, dt: float) -> None:
         """Run every kernel of the solver once, on one Newton solve from positions
@@ -334,14 +338,16 @@ class PatternCachingSolver:
         K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
         so its gradient beta K_n dq / dt and Hessian beta K_n / dt are exact.
         Inertia, damping and friction are ``core.potential_terms``', as in the 2D
-        whole-step kernel; the terms after the energies are one kernel call
+        whole-step kernel; the inertia and the leading 2D energies (rods, pressure,
+        gravity) are one kernel call (``energy_table``), the other energies (the
+        barrier, 3D ones) one call each, and the terms after the energies one call
         (``solver_kernels.add_step_terms``)."""
-        grad = np.empty(self.n)
-        dq = np.empty(self.n)
-        phi = kernels.inertia_and_mass_damping(q, q_n, v_n, dt, self.m, self.alpha, dq, grad)
-        data = np.zeros(self._nnz if hessian else 1)
-        low_rank = []
-        for energy, scatter in zip(self.energies, self._scatter):
+        table = self._table
+        phi, grad, dq, data, low_rank = table.potential(q, q_n, v_n, dt, self.m, self.alpha,
+                                                        hessian, self._nnz)
+        if not math.isfinite(phi):
+            return np.inf, None, None, None
+        for energy, scatter in zip(self.energies[table.count:], self._scatter[table.count:]):
             value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
             if not math.isfinite(value):
                 return np.inf, None, None, None
