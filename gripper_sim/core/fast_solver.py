@@ -209,6 +209,11 @@ class PatternCachingSolver:
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
         self._build_fast_pattern()
         self._table = EnergyTable(self.energies, self._scatter, self.dim)
+        #: the energies that may bound a step (``max_step`` not the base's 1)
+        self._step_bounding = [e for e in self.energies
+                               if type(e).max_step is not Energy.max_step]
+        #: the Newton matrix's diagonal term without a shift (read only)
+        self.no_shift = np.zeros(self.n)
 
     def load_kernels(self, q: np.ndarray, dt: float) -> None:
         """Run every kernel of the solver once, on one Newton solve from positions
@@ -237,7 +242,7 @@ class PatternCachingSolver:
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The line search's first step: 1, or less where an energy bounds it (a contact
         barrier: the continuous-collision step, ``Energy.max_step``)."""
-        return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
+        return min([1.0] + [energy.max_step(q, dq) for energy in self._step_bounding])
 
     # ------------------------------------------------------------------ the pattern
     def _build_fast_pattern(self) -> None:
@@ -383,14 +388,15 @@ class PatternCachingSolver:
         ldl.factorise(values)
         return ldl
 
-    def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
-                      dt: float, filters: np.ndarray):
-        """dq with (A + sum c u u^T) dq = rhs (A: CSC ``values`` on the pattern) by
+    def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank: tuple,
+                     fresh: bool, dt: float, filters: np.ndarray):
+        """dq with (A + u diag(c) u^T) dq = rhs (A: CSC ``values`` on the pattern, the
+        rank-one terms ``low_rank`` = (u (n, k), c (k,)), ``stack_low_rank``'s) by
         conjugate gradients preconditioned with the kept LDL^T, factorised afresh when CG
         does not converge fast (or ``fresh``), in the range of the filters S (n_nodes, d,
         d). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
-        u, c = stack_low_rank(low_rank, self.n)
+        u, c = low_rank
         if self._lu is not None and not fresh and not self._stale:
             dq = self._pcg(values, rhs, u, c, dt, filters)
             if dq is not None:
@@ -515,7 +521,6 @@ class _NewtonProblem(StepProblem):
                  dt: float, con: StepConstraints):
         super().__init__(solver, q_n, v_n, dt, con, solver.evaluate_fast)
         self.filters = con.filters
-        self.s_diag = np.einsum('naa->na', self.filters).ravel()
         self._filtered = np.empty(solver.n)
         self.matrix = self.low = None
         self.shift = 0.0
@@ -542,9 +547,14 @@ class _NewtonProblem(StepProblem):
     def factorise(self, x, shift) -> bool:
         solver = self.solver
         hdata, low_rank = self.parts
-        self.matrix = solver.newton_matrix(hdata, self.filters,
-                                           shift * self.s_diag * solver.m / self.dt ** 2)
-        self.low = [(coef, self.filtered(vec)) for coef, vec in low_rank]
+        diagonal = solver.no_shift
+        if shift:
+            s_diag = np.einsum('naa->na', self.filters).ravel()
+            diagonal = shift * s_diag * solver.m / self.dt ** 2
+        self.matrix = solver.newton_matrix(hdata, self.filters, diagonal)
+        # the rank-one terms filtered and stacked once for every system with the matrix
+        self.low = stack_low_rank([(coef, self.filtered(vec)) for coef, vec in low_rank],
+                                  solver.n)
         self.shift = shift
         return True
 
