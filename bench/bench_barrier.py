@@ -169,7 +169,7 @@ def main(argv=None) -> int:
               f"{'contact mm':>10s}")
         for name, _, label, _ in runs:
             cpu, iterations, force, length = best[name, label]
-            print(f'{name:10s} {label:10s} {cpu:8.2f} {iterations:7.0f} {force:9.4f} '
+            print(f'{name:10s} {label:10s} {cpu:8.3f} {iterations:7.0f} {force:9.4f} '
                   f'{1e3 * length:10.3f}')
         for name in ('hertz', 'membrane', 'hertz3d', 'pick'):
             if (name, 'ipc') in best:

@@ -10,7 +10,9 @@ Every energy has an ``evaluate_into`` kernel. The solver runs the one Newton ite
 (``core.newton.newton_iteration``, interpreted, on ``_NewtonProblem``) with less work
 per iteration:
 - the energies add their gradients and Hessians straight into the CSC values through
-  precomputed scatter indices (``core.energies.kernels``, ``core3d.kernels``), and
+  precomputed scatter indices (``core.energies.kernels``, ``core3d.kernels``); the
+  inertia and the leading 2D rod energies, pressure and gravity are one call
+  (``core.energy_table``), and
   S H S + (I - S) is one kernel over the d x d node blocks (``core.solver_kernels``), on
   the same pattern; kinetic friction is the Coulomb cone of the stepper, a 2D tangent
   being a cone with one tangent;
@@ -50,6 +52,7 @@ import scipy.sparse as sp
 from gripper_sim.core import newton, pcg_kernels, sparse_ldl
 from gripper_sim.core import solver_kernels as kernels
 from gripper_sim.core.energies.base import Energy
+from gripper_sim.core.energy_table import EnergyTable
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
                                       StepConstraints, StepProblem, StepSolution,
                                       stack_low_rank, woodbury_terms)
@@ -205,6 +208,12 @@ class PatternCachingSolver:
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
         self._build_fast_pattern()
+        self._table = EnergyTable(self.energies, self._scatter, self.dim)
+        #: the energies that may bound a step (``max_step`` not the base's 1)
+        self._step_bounding = [e for e in self.energies
+                               if type(e).max_step is not Energy.max_step]
+        #: the Newton matrix's diagonal term without a shift (read only)
+        self.no_shift = np.zeros(self.n)
 
     def load_kernels(self, q: np.ndarray, dt: float) -> None:
         """Run every kernel of the solver once, on one Newton solve from positions
@@ -233,7 +242,7 @@ class PatternCachingSolver:
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The line search's first step: 1, or less where an energy bounds it (a contact
         barrier: the continuous-collision step, ``Energy.max_step``)."""
-        return min([1.0] + [energy.max_step(q, dq) for energy in self.energies])
+        return min([1.0] + [energy.max_step(q, dq) for energy in self._step_bounding])
 
     # ------------------------------------------------------------------ the pattern
     def _build_fast_pattern(self) -> None:
@@ -334,14 +343,16 @@ class PatternCachingSolver:
         K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
         so its gradient beta K_n dq / dt and Hessian beta K_n / dt are exact.
         Inertia, damping and friction are ``core.potential_terms``', as in the 2D
-        whole-step kernel; the terms after the energies are one kernel call
+        whole-step kernel; the inertia and the leading 2D energies (rods, pressure,
+        gravity) are one kernel call (``energy_table``), the other energies (the
+        barrier, 3D ones) one call each, and the terms after the energies one call
         (``solver_kernels.add_step_terms``)."""
-        grad = np.empty(self.n)
-        dq = np.empty(self.n)
-        phi = kernels.inertia_and_mass_damping(q, q_n, v_n, dt, self.m, self.alpha, dq, grad)
-        data = np.zeros(self._nnz if hessian else 1)
-        low_rank = []
-        for energy, scatter in zip(self.energies, self._scatter):
+        table = self._table
+        phi, grad, dq, data, low_rank = table.potential(q, q_n, v_n, dt, self.m, self.alpha,
+                                                        hessian, self._nnz)
+        if not math.isfinite(phi):
+            return np.inf, None, None, None
+        for energy, scatter in zip(self.energies[table.count:], self._scatter[table.count:]):
             value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
             if not math.isfinite(value):
                 return np.inf, None, None, None
@@ -377,14 +388,15 @@ class PatternCachingSolver:
         ldl.factorise(values)
         return ldl
 
-    def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank, fresh: bool,
-                      dt: float, filters: np.ndarray):
-        """dq with (A + sum c u u^T) dq = rhs (A: CSC ``values`` on the pattern) by
+    def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank: tuple,
+                     fresh: bool, dt: float, filters: np.ndarray):
+        """dq with (A + u diag(c) u^T) dq = rhs (A: CSC ``values`` on the pattern, the
+        rank-one terms ``low_rank`` = (u (n, k), c (k,)), ``stack_low_rank``'s) by
         conjugate gradients preconditioned with the kept LDL^T, factorised afresh when CG
         does not converge fast (or ``fresh``), in the range of the filters S (n_nodes, d,
         d). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
-        u, c = stack_low_rank(low_rank, self.n)
+        u, c = low_rank
         if self._lu is not None and not fresh and not self._stale:
             dq = self._pcg(values, rhs, u, c, dt, filters)
             if dq is not None:
@@ -509,7 +521,6 @@ class _NewtonProblem(StepProblem):
                  dt: float, con: StepConstraints):
         super().__init__(solver, q_n, v_n, dt, con, solver.evaluate_fast)
         self.filters = con.filters
-        self.s_diag = np.einsum('naa->na', self.filters).ravel()
         self._filtered = np.empty(solver.n)
         self.matrix = self.low = None
         self.shift = 0.0
@@ -536,9 +547,14 @@ class _NewtonProblem(StepProblem):
     def factorise(self, x, shift) -> bool:
         solver = self.solver
         hdata, low_rank = self.parts
-        self.matrix = solver.newton_matrix(hdata, self.filters,
-                                           shift * self.s_diag * solver.m / self.dt ** 2)
-        self.low = [(coef, self.filtered(vec)) for coef, vec in low_rank]
+        diagonal = solver.no_shift
+        if shift:
+            s_diag = np.einsum('naa->na', self.filters).ravel()
+            diagonal = shift * s_diag * solver.m / self.dt ** 2
+        self.matrix = solver.newton_matrix(hdata, self.filters, diagonal)
+        # the rank-one terms filtered and stacked once for every system with the matrix
+        self.low = stack_low_rank([(coef, self.filtered(vec)) for coef, vec in low_rank],
+                                  solver.n)
         self.shift = shift
         return True
 

@@ -50,6 +50,12 @@ class Energy:
         (the test reference solver's ``keep_factor``). None: nothing."""
         return None
 
+    def kernel_data(self):
+        """(kind, arrays) of an energy the solver's compiled potential sums itself
+        (``core.energy_table``: 'stretching', 'bending', 'pressure', 'constant'), or None:
+        the energy is evaluated by its own call."""
+        return None
+
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction of the step ``dq`` from ``q`` (both (n_dof,) m) this energy
         allows (a contact barrier: no crossing along it); 1 = no bound."""

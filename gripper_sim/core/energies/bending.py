@@ -49,6 +49,10 @@ class RodBending(KernelEnergy):
         self.k = np.ascontiguousarray(ei / lengths)
         self.dofs = element_dofs(self.triples)
 
+    def kernel_data(self):
+        """('bending', (triples, phi0 rad, EI / l N m)) (``core.energy_table``)."""
+        return 'bending', (self.triples, self.phi0, self.k)
+
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
         """The energy's kernel (see ``Stretching.evaluate_into``; scatter (n_triple, 36))."""

@@ -20,6 +20,11 @@ class ConstantForce(KernelEnergy):
     def __init__(self, forces: np.ndarray):
         self.grad = -np.asarray(forces, dtype=float).copy()
 
+    def kernel_data(self):
+        """('constant', (the gradient -f N,)) (``core.energy_table``; the same array, so
+        a load changed in place is seen)."""
+        return 'constant', (self.grad,)
+
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter, hessian: bool = True):
         """Adds the gradient -f (N) into ``grad``; returns (value J, no rank-one

@@ -40,6 +40,10 @@ class EnclosedAreaPressure(KernelEnergy):
         area = kernels.area_and_gradient(q.reshape(-1, 2), self.ring, np.empty(q.size))
         return self.p0 - self.k * (area - self.a0) / self.a0
 
+    def kernel_data(self):
+        """('pressure', (ring, [A0 m^2, b m, p0 Pa, K Pa])) (``core.energy_table``)."""
+        return 'pressure', (self.ring, np.array([self.a0, self.b, self.p0, self.k]))
+
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
         """The energy's kernel (see ``Stretching.evaluate_into``; scatter (n_ring, 16));

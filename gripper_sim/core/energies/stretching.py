@@ -24,6 +24,10 @@ class Stretching(KernelEnergy):
         self.k = np.ascontiguousarray(self.ea / self.rest)
         self.dofs = element_dofs(self.edges)
 
+    def kernel_data(self):
+        """('stretching', (edges, rest lengths m, EA / L N/m)) (``core.energy_table``)."""
+        return 'stretching', (self.edges, self.rest, self.k)
+
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
         """The energy's kernel: adds the gradient (N) into ``grad`` (2 n,) and the
