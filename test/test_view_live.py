@@ -178,6 +178,30 @@ def test_replay_serves_the_recording_and_its_scene(recording, new_domain_id, tmp
 
 
 @pytest.mark.slow
+def test_a_client_busy_for_seconds_stays_connected_to_a_fast_replay(recording, new_domain_id,
+                                                                    tmp_path):
+    """A fast replay (rate 5, looping: thousands of messages a second) and a client that
+    reads nothing for 4 s after subscribing (a busy viewer): the server drops old data
+    for it but keeps it connected. With the data's time broadcast once per message its
+    never-dropped control queue filled and the server closed the connection."""
+    port = free_port()
+    replay = RosProcess('gripper_sim.cli.main',
+                        ['replay', str(recording), '--loop', '--rate', '5',
+                         '--foxglove', str(port)],
+                        env=ros_environment(new_domain_id()), log_path=tmp_path / 'replay.log')
+    replay.start()
+    try:
+        assert replay.wait_for_log('Foxglove view of the replay on', timeout=120), replay.log()
+        # past what the socket's buffers held during the stall (~8000 frames)
+        seen = capture(f'ws://127.0.0.1:{port}', {'/gripper_sim/fruit/state'},
+                       per_topic=5000, stall=4.0)
+    finally:
+        code = replay.stop()
+    assert code == 0 and 'Traceback' not in replay.log(), replay.log()
+    assert len(seen.messages['/gripper_sim/fruit/state']) >= 5000
+
+
+@pytest.mark.slow
 def test_replay_on_a_taken_port_is_an_error(recording, new_domain_id):
     with socket.socket() as taken:
         taken.bind(('127.0.0.1', 0))

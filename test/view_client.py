@@ -14,6 +14,7 @@ import asyncio
 import base64
 import json
 import struct
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,7 +36,8 @@ class Capture:
         return next(c for c in self.channels.values() if c['topic'] == topic)
 
 
-async def _capture(url: str, topics: set[str], per_topic: int, timeout: float) -> Capture:
+async def _capture(url: str, topics: set[str], per_topic: int, timeout: float,
+                   stall: float) -> Capture:
     async with asyncio.timeout(timeout):
         async with websockets.connect(url, subprotocols=SUBPROTOCOLS, proxy=None,
                                       compression=None, max_size=None) as socket:
@@ -54,6 +56,7 @@ async def _capture(url: str, topics: set[str], per_topic: int, timeout: float) -
             await socket.send(json.dumps({'op': 'subscribe', 'subscriptions': [
                 {'id': k, 'channelId': int(channel['id'])}
                 for k, channel in enumerate(channels.values())]}))
+            time.sleep(stall)   # a busy client: its event loop blocked, nothing read
             while any(len(capture.messages.get(t, ())) < per_topic for t in topics):
                 frame = await socket.recv()
                 if isinstance(frame, bytes) and frame[0] == MESSAGE_DATA:
@@ -63,11 +66,12 @@ async def _capture(url: str, topics: set[str], per_topic: int, timeout: float) -
             return capture
 
 
-def capture(url: str, topics: set[str], *, per_topic: int = 2, timeout: float = 120.0
-            ) -> Capture:
-    """Connect, wait until ``topics`` are advertised, subscribe to every channel and
-    collect until each of ``topics`` brought ``per_topic`` messages (or ``timeout`` s)."""
-    return asyncio.run(_capture(url, set(topics), per_topic, timeout))
+def capture(url: str, topics: set[str], *, per_topic: int = 2, timeout: float = 120.0,
+            stall: float = 0.0) -> Capture:
+    """Connect, wait until ``topics`` are advertised, subscribe to every channel, read
+    nothing for ``stall`` s (a busy client), and collect until each of ``topics`` brought
+    ``per_topic`` messages (or ``timeout`` s)."""
+    return asyncio.run(_capture(url, set(topics), per_topic, timeout, stall))
 
 
 # ---------------------------------------------------------------- protobuf

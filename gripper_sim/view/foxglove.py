@@ -20,6 +20,7 @@ The node starts its view with ``start_node_view(node)`` (parameters ``foxglove_p
 from __future__ import annotations
 
 import threading
+import time
 from typing import Any, Callable, Mapping
 
 import foxglove
@@ -39,6 +40,11 @@ DEFAULT_ADDRESS = '127.0.0.1'
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
 STATE_TYPE = 'gripper_sim_interfaces/msg/FruitState'
 SCENE_NAME = 'scene'
+#: s of wall time, the shortest interval between two broadcasts of the data's time: each
+#: is a control message that the server queues for every client and never drops, so one
+#: per message of a fast replay filled a briefly busy client's queue (1024) within a
+#: second or two and the server disconnected it
+TIME_PERIOD = 0.02
 
 
 def scene_topic(markers_topic: str) -> str:
@@ -85,6 +91,7 @@ class FoxgloveView:
         self._classes: dict[str, Any] = {}
         self._last_state: Any = None
         self._last_time: int | None = None
+        self._time_sent: float | None = None   # monotonic s of the last time broadcast
         # Kept: the server and the channels are bound to it only while it lives.
         self._context = context = foxglove.Context()
         try:
@@ -123,11 +130,17 @@ class FoxgloveView:
         return f'ws://{host}:{self.port}'
 
     def _advance_time(self, stamp_ns: int) -> None:
+        """Tell the clients the data's time ``stamp_ns``: a reset (time going back) at
+        once, a later time at most every ``TIME_PERIOD`` s of wall time."""
+        now = time.monotonic()
         if self._last_time is not None and stamp_ns < self._last_time:
             self.server.clear_session()   # a reset: clients drop the old run
             self._last_state = None
+            self._time_sent = None
         self._last_time = stamp_ns
-        self.server.broadcast_time(stamp_ns)
+        if self._time_sent is None or now - self._time_sent >= TIME_PERIOD:
+            self.server.broadcast_time(stamp_ns)
+            self._time_sent = now
 
     def _scene_wanted(self) -> bool:
         return self.scene_channel is not None and self.scene_channel.has_sinks()
