@@ -3,6 +3,7 @@ client (``view_client``) that decodes every channel with the schema it advertise
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import socket
 import struct
@@ -151,22 +152,30 @@ def recording(tmp_path_factory):
     return path
 
 
-@pytest.mark.slow
-def test_replay_serves_the_recording_and_its_scene(recording, new_domain_id, tmp_path):
-    with BagReader(recording) as bag:
-        recorded = {name: [m.data for m in bag.messages([name])] for name in bag.topics}
+@contextlib.contextmanager
+def looped_replay(recording, domain_id: int, tmp_path):
+    """A ``gripper-sim replay`` of ``recording`` at rate 5, looping, served to Foxglove;
+    yields its view's URL, then stops it and checks it ended cleanly."""
     port = free_port()
     replay = RosProcess('gripper_sim.cli.main',
                         ['replay', str(recording), '--loop', '--rate', '5',
                          '--foxglove', str(port)],
-                        env=ros_environment(new_domain_id()), log_path=tmp_path / 'replay.log')
+                        env=ros_environment(domain_id), log_path=tmp_path / 'replay.log')
     replay.start()
     try:
         assert replay.wait_for_log('Foxglove view of the replay on', timeout=120), replay.log()
-        seen = capture(f'ws://127.0.0.1:{port}', set(recorded) | {SCENE}, per_topic=3)
+        yield f'ws://127.0.0.1:{port}'
     finally:
         code = replay.stop()   # SIGINT: the replay ends its loop and exits cleanly
     assert code == 0 and 'Traceback' not in replay.log(), replay.log()
+
+
+@pytest.mark.slow
+def test_replay_serves_the_recording_and_its_scene(recording, new_domain_id, tmp_path):
+    with BagReader(recording) as bag:
+        recorded = {name: [m.data for m in bag.messages([name])] for name in bag.topics}
+    with looped_replay(recording, new_domain_id(), tmp_path) as url:
+        seen = capture(url, set(recorded) | {SCENE}, per_topic=3)
     assert {c['topic'] for c in seen.channels.values()} == set(recorded) | {SCENE}
     for topic, payloads in seen.messages.items():
         if topic != SCENE:   # the recorded bytes, as they are
@@ -184,20 +193,9 @@ def test_a_client_busy_for_seconds_stays_connected_to_a_fast_replay(recording, n
     reads nothing for 4 s after subscribing (a busy viewer): the server drops old data
     for it but keeps it connected. With the data's time broadcast once per message its
     never-dropped control queue filled and the server closed the connection."""
-    port = free_port()
-    replay = RosProcess('gripper_sim.cli.main',
-                        ['replay', str(recording), '--loop', '--rate', '5',
-                         '--foxglove', str(port)],
-                        env=ros_environment(new_domain_id()), log_path=tmp_path / 'replay.log')
-    replay.start()
-    try:
-        assert replay.wait_for_log('Foxglove view of the replay on', timeout=120), replay.log()
+    with looped_replay(recording, new_domain_id(), tmp_path) as url:
         # past what the socket's buffers held during the stall (~8000 frames)
-        seen = capture(f'ws://127.0.0.1:{port}', {'/gripper_sim/fruit/state'},
-                       per_topic=5000, stall=4.0)
-    finally:
-        code = replay.stop()
-    assert code == 0 and 'Traceback' not in replay.log(), replay.log()
+        seen = capture(url, {'/gripper_sim/fruit/state'}, per_topic=5000, stall=4.0)
     assert len(seen.messages['/gripper_sim/fruit/state']) >= 5000
 
 

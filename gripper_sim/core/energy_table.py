@@ -49,13 +49,13 @@ class EnergyTable:
         count: how many of the list's first energies are tabled (0: none).
         order: (count,) int64, each tabled energy's kind.
         items: the typed list of their arrays.
-        stiff: (n_pressure,) bool, whether each pressure has a bulk modulus K > 0 (only
-            then is its rank-one Hessian term kept).
+        pressures: how many of them are pressures (each with a rank-one Hessian term,
+            kept when its coefficient b K / A0 is not 0, i.e. K > 0).
     """
 
     def __init__(self, energies: list, scatters: list, dim: int):
         self.items = List.empty_list(typeof((_NO_INDEX, _NO_REALS, _NO_REALS, _NO_INDEX)))
-        order, stiff = [], []
+        order = []
         for energy, scatter in zip(energies, scatters):
             entry = energy.kernel_data() if dim == 2 else None
             if entry is None:
@@ -63,11 +63,9 @@ class EnergyTable:
             kind = KINDS[entry[0]]
             order.append(kind)
             self.items.append(_item(kind, entry[1], scatter))
-            if kind == PRESSURE:
-                stiff.append(bool(entry[1][1][3] > 0))
         self.count = len(order)
         self.order = np.array(order, np.int64)
-        self.stiff = stiff
+        self.pressures = order.count(PRESSURE)
 
     def potential(self, q, q_n, v_n, dt, masses, alpha, hessian: bool, nnz: int):
         """Inertia, mass damping and the tabled energies at ``q`` (n_dof,) m
@@ -78,11 +76,11 @@ class EnergyTable:
         n = q.size
         grad, dq = np.empty(n), np.empty(n)
         data = np.zeros(nnz if hessian else 1)
-        coefs, vectors = np.empty(len(self.stiff)), np.empty((len(self.stiff), n))
+        coefs, vectors = np.empty(self.pressures), np.empty((self.pressures, n))
         phi = inertia_and_energies(q, q_n, v_n, dt, masses, alpha, dq, grad, hessian, data,
                                    self.order, self.items, coefs, vectors)
-        low_rank = ([(float(coefs[p]), vectors[p]) for p in range(len(self.stiff))
-                     if self.stiff[p]] if hessian else [])
+        low_rank = ([(float(coefs[p]), vectors[p]) for p in range(self.pressures)
+                     if coefs[p] != 0.0] if hessian else [])
         return phi, grad, dq, data, low_rank
 
 
@@ -122,7 +120,7 @@ def inertia_and_energies(q, q_n, v_n, dt, masses, alpha, dq, grad, hessian, data
     for slot in range(order.shape[0]):
         kind = order[slot]
         index, a, b, scatter = items[slot]
-        x = q.reshape(-1, 2)  # (a 3D solver has no tabled energies)
+        x = q.reshape(-1, 2)  # here, not before the loop: a 3D solver has no tabled energies
         if kind == STRETCHING:
             value = energy_kernels.stretching(x, index, a, b, grad, data, scatter, hessian)
         elif kind == BENDING:
