@@ -5,9 +5,11 @@
 One warm-up run (numba's caches loaded), then two timed runs (CPU time of this process,
 ``time.process_time``; the load average is printed):
 
-- by part: each listed method is wrapped by a timer (inclusive times: a part contains
-  the parts it calls; a few microseconds per call of overhead), with its calls and CPU
-  time per call. Methods that a build no longer has are left out;
+- by part: each listed method or function is wrapped by a timer (inclusive times: a
+  part contains the parts it calls; a few microseconds per call of overhead), with its
+  calls and CPU time per call. Methods that a build no longer has are left out. Then,
+  for each part with parts listed inside it, its time outside them (a step), the work
+  no listed part holds;
 - compiled and not: every numba kernel bound in a ``gripper_sim`` module is wrapped,
   the time inside them (their call overhead included) against the rest (the Python
   around them, numpy, ipctk).
@@ -35,25 +37,39 @@ from numba.core.registry import CPUDispatcher  # noqa: E402
 
 from gripper_sim.core import barrier, facade, fast_solver, simulation, soft_fingers  # noqa: E402
 
-#: (label, owner, attribute) of the parts timed
+#: (label, owner, attribute) of the parts timed (a class's method or a module's function);
+#: a label's indent nests it in the part above it with less indent
 PARTS = (
     ('step', simulation.Simulation, 'step'),
     ('  measures (StepResult)', simulation.Simulation, '_measure'),
-    ('  barrier step', facade, 'soft_body_step'),
-    ('  barrier step', facade, 'barrier_step'),
-    ('    Newton solve', fast_solver.PatternCachingSolver, 'solve'),
-    ('      evaluation with Hessian', fast_solver.PatternCachingSolver, 'evaluate_fast'),
-    ('      linear solve', fast_solver.PatternCachingSolver, 'linear_solve'),
-    ('      barrier evaluate_into', barrier.BarrierContact, 'evaluate_into'),
-    ('      barrier max_step (CCD)', barrier.BarrierContact, 'max_step'),
-    ('    barrier begin_step', barrier.BarrierContact, 'begin_step'),
-    ('    barrier pushed_start', barrier.BarrierContact, 'pushed_start'),
-    ('    barrier reachable', barrier.BarrierContact, 'reachable'),
-    ('    barrier partners', barrier.BarrierContact, 'partners'),
-    ('    barrier contact_forces', barrier.BarrierContact, 'contact_forces'),
-    ('    barrier holders', barrier.BarrierContact, 'holders'),
-    ('  fingers: sticking marks', simulation.Simulation, '_mark_sticking'),
-    ('  fingers: jaw forces', simulation.Simulation, '_finger_jaw_forces'),
+    ('    shared fields', facade.SimulationFacade, '_step_measures'),
+    ('      barrier normal_forces', barrier.BarrierContact, 'normal_forces'),
+    ('    deformation', simulation, 'deformation'),
+    ('    tributary lengths', simulation, 'tributary_lengths'),
+    ('    damage', simulation.Simulation, 'assess_damage'),
+    ('  gripper after the step', facade.SimulationFacade, 'gripper_after'),
+    ('  soft step (fruit and fingers)', facade.SimulationFacade, '_substep_soft'),
+    ('    faces at the gripper', facade.SimulationFacade, 'faces_at'),
+    ('    base targets', soft_fingers.SoftFingers, 'base_targets'),
+    ('    barrier step', facade, 'soft_body_step'),
+    ('    barrier step', facade, 'barrier_step'),
+    ('      Newton solve', fast_solver.PatternCachingSolver, 'solve'),
+    ('        evaluation with Hessian', fast_solver.PatternCachingSolver, 'evaluate_fast'),
+    ('        linear solve', fast_solver.PatternCachingSolver, 'linear_solve'),
+    ('        barrier evaluate_into', barrier.BarrierContact, 'evaluate_into'),
+    ('        barrier max_step (CCD)', barrier.BarrierContact, 'max_step'),
+    ('      barrier begin_step', barrier.BarrierContact, 'begin_step'),
+    ('        face corners', barrier, 'face_corners'),
+    ('        start candidates', barrier.BarrierContact, '_start_candidates'),
+    ('        lagged friction', barrier.BarrierContact, '_lagged_friction'),
+    ('        quiet region', barrier.BarrierContact, '_quiet_region'),
+    ('      barrier pushed_start', barrier.BarrierContact, 'pushed_start'),
+    ('      barrier reachable', barrier.BarrierContact, 'reachable'),
+    ('      barrier partners', barrier.BarrierContact, 'partners'),
+    ('      barrier contact_forces', barrier.BarrierContact, 'contact_forces'),
+    ('      barrier holders', barrier.BarrierContact, 'holders'),
+    ('    fingers: sticking marks', simulation.Simulation, '_mark_sticking'),
+    ('    fingers: jaw forces', simulation.Simulation, '_finger_jaw_forces'),
     ('  fingers: jaw wrenches', simulation.Simulation, '_finger_wrenches'),
     ('  fingers: result', soft_fingers.SoftFingers, 'result'),
 )
@@ -113,10 +129,34 @@ def _in_order(times) -> list:
     order = list(dict.fromkeys(label for label, _, _ in PARTS))
     rank = {label: k for k, label in enumerate(order)}
 
-    def key(label):
-        base = label.replace(' [self-contact]', '').replace('gradient only', 'with Hessian')
-        return rank.get(base, len(order)), label
-    return sorted(times, key=key)
+    return sorted(times, key=lambda label: (rank.get(_base(label), len(order)), label))
+
+
+def _base(label: str) -> str:
+    """A timed label without its variant (``_hessian_or_not``, ``_self_contact_or_not``)."""
+    return label.replace(' [self-contact]', '').replace('gradient only', 'with Hessian')
+
+
+def _unlisted(times) -> list:
+    """(label, s) of every part that has parts nested in it (``PARTS``): its time
+    outside them."""
+    order = list(dict.fromkeys(label for label, _, _ in PARTS))
+    total = collections.defaultdict(float)
+    for label, seconds in times.items():
+        total[_base(label)] += seconds
+    rows = []
+    for k, label in enumerate(order):
+        indent = len(label) - len(label.lstrip())
+        nested = []
+        for other in order[k + 1:]:
+            depth = len(other) - len(other.lstrip())
+            if depth <= indent:
+                break
+            if depth == indent + 2:
+                nested.append(other)
+        if nested and label in total:
+            rows.append((label, total[label] - sum(total[other] for other in nested)))
+    return rows
 
 
 def run(case: str):
@@ -147,6 +187,11 @@ def main(argv=None) -> int:
             seconds = times[label]
             print(f'{label:44s} {seconds:7.3f} s {100 * seconds / total:5.1f} % '
                   f'{calls[label]:7d} calls {1e6 * seconds / calls[label]:8.1f} us')
+        if wrap is wrap_parts:
+            print('outside the parts listed in it:')
+            for label, seconds in _unlisted(times):
+                print(f'{label:44s} {seconds:7.3f} s {100 * seconds / total:5.1f} % '
+                      f'{1e6 * seconds / steps:8.1f} us a step')
         if wrap is wrap_kernels:
             rest = total - times['compiled kernels']
             print(f'{"the rest (Python, numpy, ipctk)":44s} {rest:7.3f} s '
