@@ -266,6 +266,8 @@ class BarrierContact(Energy):
         self._dt = 1.0
         self._obstacles_end = np.zeros((0, d))
         self._start = np.zeros((n_v, d))
+        #: (d n,) m, the positions of the step's start (``begin_step``)
+        self._start_q = np.zeros(d * n_nodes)
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()  # the lagged friction's pairs (3D)
         #: the compiled lagged friction's pairs (2D, ``_lagged_friction``), or None
@@ -398,6 +400,7 @@ class BarrierContact(Energy):
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
+        self._start_q = x_n.ravel().copy()
         mu_s, mu_k, rubbing = self._coefficients(new_faces)
         if len(self._tangential):  # ipctk's lagged friction (3D): the last step's
             self._tangential = ipctk.TangentialCollisions()
@@ -760,7 +763,7 @@ class BarrierContact(Energy):
         None if even that start is not reached without a crossing (the caller halves the
         step)."""
         start = self.pushed_start(x_n, old_faces, new_faces)
-        return start if self.reachable(x_n, start) else None
+        return start if self.reachable(start) else None
 
     def pushed_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray:
         """(n, d) m, ``x_n`` with the outline nodes that a moving face would come closer
@@ -783,17 +786,18 @@ class BarrierContact(Energy):
             start[nodes[touching]] += shift - advance * old.normal
         return start
 
-    def reachable(self, x_n: np.ndarray, start: np.ndarray) -> bool:
-        """Whether the straight paths from ``x_n`` (the faces at the start of the step) to
-        ``start`` (the faces at its end), both (n, d) m, cross nothing and end apart."""
+    def reachable(self, start: np.ndarray) -> bool:
+        """Whether the straight paths from the step's start (``begin_step``'s positions,
+        the faces at the start of the step) to ``start`` (n, d) m (the faces at its end)
+        cross nothing and end apart."""
         if self.quiet(start.ravel()):
             return True
-        v0 = self.vertices(x_n, self._obstacles_start)
+        v0 = self._start
         v1 = self.vertices(start)
         # in 2D the compiled (conservative) check clears most paths, and with them their
         # ends (it clears no pair that ends touching; the others' boxes stay apart); the
         # exact CCD decides the others; nothing that stands still crosses anything
-        if self._clear_path(x_n.ravel(), start.ravel(), v0, v1):
+        if self._clear_path(self._start_q, start.ravel(), v0, v1):
             return True
         if not np.array_equal(v0, v1):
             exact = float(ipctk.compute_collision_free_stepsize(
@@ -1009,15 +1013,13 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         self_contact.begin_step(x_n, [], [], dt)
         barriers.append(self_contact)
     pushed = barrier.pushed_start(x_n, old_faces, new_faces)
-    start = None
-    for candidate in (pushed + dt * v_n, pushed):
-        candidate = candidate.copy()
-        candidate[fixed] = fixed_targets
-        if all(b.reachable(x_n, candidate) for b in barriers):
-            start = candidate
-            break
-    if start is None:
-        raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
+    start = pushed + dt * v_n
+    start[fixed] = fixed_targets
+    if not all(b.reachable(start) for b in barriers):
+        start = pushed  # its own array: pushed_start's copy
+        start[fixed] = fixed_targets
+        if not all(b.reachable(start) for b in barriers):
+            raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
     constraints = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
     x = solution.q.reshape(-1, d)

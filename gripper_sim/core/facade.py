@@ -85,6 +85,9 @@ class SimulationFacade:
     _obstacles_kept: tuple | None = None
     #: ``_finger_bases``, built on first use
     _jaw_bases: tuple | None = None
+    #: the obstacles' velocities (``_obstacles``): (the ``_obstacles_kept`` they are of,
+    #: the gripper's (x, gap, lift) rates m/s, (k, d) m/s read only), or None
+    _moving_kept: tuple | None = None
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -601,7 +604,8 @@ class SimulationFacade:
     def _obstacles(self, grip: GripperState):
         """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
         (``obstacle_names``) where ``grip`` puts them; a deformable finger counts as a face
-        along its backing. The normals and sides are kept per face set (read only)."""
+        along its backing. The normals and sides are kept per face set, the velocities
+        while the gripper's rates stay (all read only)."""
         template = self._faces_template
         kept = self._obstacles_kept
         if kept is None or kept[0] is not template:
@@ -622,11 +626,16 @@ class SimulationFacade:
                                            jaws, np.where(sides[jaws] == LEFT, -1.0, 1.0),
                                            side_of_obstacle)
         _, normals, sides, velocities, jaws, sign, _ = kept
-        velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
-        velocities[jaws] = 0.0
-        velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
-        velocities[jaws, -1] = grip.lift_rate
-        return normals, sides, velocities
+        rates = (grip.x_rate, grip.gap_rate, grip.lift_rate)
+        moving = self._moving_kept
+        if moving is None or moving[0] is not kept or moving[1] != rates:
+            velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
+            velocities[jaws] = 0.0
+            velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
+            velocities[jaws, -1] = grip.lift_rate
+            velocities.flags.writeable = False
+            moving = self._moving_kept = (kept, rates, velocities)
+        return normals, sides, moving[2]
 
     def _closing_forces(self, forces, obstacle, faces) -> tuple:
         """(left, right) N, each jaw's hard-contact force on the fruit along its closing
