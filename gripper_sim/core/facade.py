@@ -679,7 +679,7 @@ class SimulationFacade:
         normal = np.zeros(len(obstacle))
         if soft is not None:  # the barrier's force is normal to the finger's outline
             soft_normal = self._barrier.normal_forces(
-                np.vstack([x, finger.positions]).ravel())
+                np.concatenate([x, finger.positions]).ravel())
             normal[held] = np.linalg.norm(soft_normal[:len(obstacle)][held], axis=1)
         else:
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
@@ -786,8 +786,8 @@ class SimulationFacade:
         targets = soft.base_targets(self._jaw_origin(grip_new, LEFT),
                                     self._jaw_origin(grip_new, RIGHT))
         outcome = soft_body_step(self.solver, self._barrier,
-                                 np.vstack([self.q, finger.positions]),
-                                 np.vstack([self.v, finger.velocities]), soft.base, targets,
+                                 np.concatenate([self.q, finger.positions]),
+                                 np.concatenate([self.v, finger.velocities]), soft.base, targets,
                                  self.faces_at(self._grip), new_faces, dt,
                                  self_contact=soft.self_contact)
         partner = outcome.contacts.obstacle
@@ -833,7 +833,7 @@ class SimulationFacade:
         finger = self._finger
         forces = []
         for side, (nodes, own) in enumerate(self._finger_bases()):
-            push = (float(finger.reaction[nodes][:, 0].sum()) if finger.touching[own].any()
+            push = (float(finger.reaction[nodes, 0].sum()) if finger.touching[own].any()
                     else 0.0)
             forces.append(push if side == LEFT else -push)
         return forces[LEFT], forces[RIGHT]
