@@ -265,6 +265,8 @@ class BarrierContact(Energy):
         self._n_faces = -1
         self._dt = 1.0
         self._obstacles_end = np.zeros((0, d))
+        #: ``_corners``'s last two answers: (faces, their origins, corners), newest first
+        self._corners_kept = []
         self._start = np.zeros((n_v, d))
         #: (d n,) m, the positions of the step's start (``begin_step``)
         self._start_q = np.zeros(d * n_nodes)
@@ -370,6 +372,21 @@ class BarrierContact(Energy):
         self._mesh_dofs = -np.ones((rest.shape[0], self.dimension), np.int64)
         self._mesh_dofs[:self.vertex_nodes.size] = self.vertex_dofs.reshape(-1, self.dimension)
 
+    def _corners(self, faces) -> np.ndarray:
+        """``face_corners`` of ``faces`` (c k, d) m, kept for the last two face lists asked
+        while each face and its origin array are the same objects (a facade hands the
+        same faces for the same gripper state, ``faces_at``; faces are not changed in
+        place: a moved face is a copy with a new origin). Read only."""
+        for kept_faces, kept_origins, corners in self._corners_kept:
+            if (len(kept_faces) == len(faces)
+                    and all(f is k for f, k in zip(faces, kept_faces))
+                    and all(f.origin is o for f, o in zip(faces, kept_origins))):
+                return corners
+        corners = face_corners(faces, self.dimension)
+        self._corners_kept = ([(tuple(faces), tuple(f.origin for f in faces), corners)]
+                              + self._corners_kept[:1])
+        return corners
+
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
         """(n_v + c k, d) m, the collision mesh's vertices: the surfaces (the fruit's, the
         soft bodies') of ``positions`` (n, d) and the faces' corners (default: where
@@ -386,8 +403,8 @@ class BarrierContact(Energy):
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set up a step of ``dt`` (s) from positions ``x_n`` (n, d) m with the faces moving
         from ``old_faces`` to ``new_faces``: the lagged friction of the start state."""
-        old = face_corners(old_faces, self.dimension)
-        new = face_corners(new_faces, self.dimension)
+        old = self._corners(old_faces)
+        new = self._corners(new_faces)
         if self._rest is None:
             # the mollifier of nearly parallel edges (3D) scales with their rest lengths
             self._rest = x_n[self.vertex_nodes].copy()
