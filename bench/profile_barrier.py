@@ -7,9 +7,9 @@ One warm-up run (numba's caches loaded), then two timed runs (CPU time of this p
 
 - by part: each listed method or function is wrapped by a timer (inclusive times: a
   part contains the parts it calls; a few microseconds per call of overhead), with its
-  calls and CPU time per call. Methods that a build no longer has are left out. Then,
-  for each part with parts listed inside it, its time outside them (a step), the work
-  no listed part holds;
+  calls, CPU time per call and its own time a step (outside the listed parts it
+  calls: the work no listed part holds). Methods that a build no longer has are left
+  out;
 - compiled and not: every numba kernel bound in a ``gripper_sim`` module is wrapped,
   the time inside them (their call overhead included) against the rest (the Python
   around them, numpy, ipctk).
@@ -38,7 +38,7 @@ from numba.core.registry import CPUDispatcher  # noqa: E402
 from gripper_sim.core import barrier, facade, fast_solver, simulation, soft_fingers  # noqa: E402
 
 #: (label, owner, attribute) of the parts timed (a class's method or a module's function);
-#: a label's indent nests it in the part above it with less indent
+#: a label's indent shows where it is usually called (the own times follow the calls)
 PARTS = (
     ('step', simulation.Simulation, 'step'),
     ('  measures (StepResult)', simulation.Simulation, '_measure'),
@@ -48,8 +48,8 @@ PARTS = (
     ('    tributary lengths', simulation, 'tributary_lengths'),
     ('    damage', simulation.Simulation, 'assess_damage'),
     ('  gripper after the step', facade.SimulationFacade, 'gripper_after'),
+    ('  faces at the gripper', facade.SimulationFacade, 'faces_at'),
     ('  soft step (fruit and fingers)', facade.SimulationFacade, '_substep_soft'),
-    ('    faces at the gripper', facade.SimulationFacade, 'faces_at'),
     ('    base targets', soft_fingers.SoftFingers, 'base_targets'),
     ('    barrier step', facade, 'soft_body_step'),
     ('    barrier step', facade, 'barrier_step'),
@@ -75,18 +75,29 @@ PARTS = (
 )
 
 
-def _timed(function, label, times, calls, split=None):
+#: the keys of the timed calls under way, innermost last (``_timed``)
+_open: list = []
+
+
+def _timed(function, label, times, calls, split=None, nested=None):
+    """``function`` wrapped: its CPU time added to ``times[label]``, its calls counted, and
+    (with ``nested``) its time added to ``nested[key]`` of the timed call it runs in."""
     @functools.wraps(function)
     def wrapper(*args, **kwargs):
         key = label
         if split is not None:
             key = split(label, args, kwargs)
+        _open.append(key)
         start = time.process_time()
         try:
             return function(*args, **kwargs)
         finally:
-            times[key] += time.process_time() - start
+            elapsed = time.process_time() - start
+            times[key] += elapsed
             calls[key] += 1
+            _open.pop()
+            if nested is not None and _open:
+                nested[_open[-1]] += elapsed
     return wrapper
 
 
@@ -99,18 +110,19 @@ def _self_contact_or_not(label, args, kwargs):
     return label + (' [self-contact]' if args[0].self_contact else '')
 
 
-def wrap_parts(times, calls) -> None:
-    """Wrap the methods of ``PARTS`` that this build has."""
+def wrap_parts(times, calls, nested) -> None:
+    """Wrap the methods of ``PARTS`` that this build has; ``nested[key]``: the time of the
+    timed parts called inside each part."""
     for label, owner, name in PARTS:
         function = getattr(owner, name, None)
         if function is None:
             continue
         split = (_hessian_or_not if name == 'evaluate_fast' else
                  _self_contact_or_not if owner is barrier.BarrierContact else None)
-        setattr(owner, name, _timed(function, label, times, calls, split))
+        setattr(owner, name, _timed(function, label, times, calls, split, nested))
 
 
-def wrap_kernels(times, calls) -> None:
+def wrap_kernels(times, calls, nested=None) -> None:
     """Wrap every numba kernel bound in a loaded ``gripper_sim`` module (one timer each,
     under the label 'compiled kernels')."""
     wrappers = {}
@@ -137,28 +149,6 @@ def _base(label: str) -> str:
     return label.replace(' [self-contact]', '').replace('gradient only', 'with Hessian')
 
 
-def _unlisted(times) -> list:
-    """(label, s) of every part that has parts nested in it (``PARTS``): its time
-    outside them."""
-    order = list(dict.fromkeys(label for label, _, _ in PARTS))
-    total = collections.defaultdict(float)
-    for label, seconds in times.items():
-        total[_base(label)] += seconds
-    rows = []
-    for k, label in enumerate(order):
-        indent = len(label) - len(label.lstrip())
-        nested = []
-        for other in order[k + 1:]:
-            depth = len(other) - len(other.lstrip())
-            if depth <= indent:
-                break
-            if depth == indent + 2:
-                nested.append(other)
-        if nested and label in total:
-            rows.append((label, total[label] - sum(total[other] for other in nested)))
-    return rows
-
-
 def run(case: str):
     """One run of ``case``; (steps, Newton iterations)."""
     if case == 'ring':
@@ -177,25 +167,26 @@ def main(argv=None) -> int:
     run(args.case)
     for wrap in (wrap_parts, wrap_kernels):
         times, calls = collections.defaultdict(float), collections.Counter()
-        wrap(times, calls)
+        nested = collections.defaultdict(float)
+        wrap(times, calls, nested)
         start = time.process_time()
         steps, iterations = run(args.case)
         total = time.process_time() - start
         print(f'{args.case}: load average {os.getloadavg()[0]:.2f}; {total:.3f} CPU s, '
               f'{steps} steps, {iterations} Newton iterations')
+        if wrap is wrap_parts:
+            print(f'{"part":44s} {"CPU s":>7s} {"%":>7s} {"calls":>7s} {"us a call":>10s} '
+                  f'{"own us a step":>14s}')
         for label in _in_order(times):
             seconds = times[label]
-            print(f'{label:44s} {seconds:7.3f} s {100 * seconds / total:5.1f} % '
-                  f'{calls[label]:7d} calls {1e6 * seconds / calls[label]:8.1f} us')
-        if wrap is wrap_parts:
-            print('outside the parts listed in it:')
-            for label, seconds in _unlisted(times):
-                print(f'{label:44s} {seconds:7.3f} s {100 * seconds / total:5.1f} % '
-                      f'{1e6 * seconds / steps:8.1f} us a step')
+            own = ('' if wrap is wrap_kernels else
+                   f'{1e6 * (seconds - nested[label]) / steps:14.1f}')
+            print(f'{label:44s} {seconds:7.3f} {100 * seconds / total:7.1f} '
+                  f'{calls[label]:7d} {1e6 * seconds / calls[label]:10.1f} {own}')
         if wrap is wrap_kernels:
             rest = total - times['compiled kernels']
-            print(f'{"the rest (Python, numpy, ipctk)":44s} {rest:7.3f} s '
-                  f'{100 * rest / total:5.1f} %')
+            print(f'{"the rest (Python, numpy, ipctk)":44s} {rest:7.3f} '
+                  f'{100 * rest / total:7.1f}')
     return 0
 
 

@@ -265,7 +265,8 @@ class BarrierContact(Energy):
         self._n_faces = -1
         self._dt = 1.0
         self._obstacles_end = np.zeros((0, d))
-        #: ``_corners``'s last two answers: (faces, their origins, corners), newest first
+        #: ``_corners``'s last three corners made: (faces, their origins, corners), the
+        #: newest first
         self._corners_kept = []
         self._start = np.zeros((n_v, d))
         #: (d n,) m, the positions of the step's start (``begin_step``)
@@ -373,18 +374,18 @@ class BarrierContact(Energy):
         self._mesh_dofs[:self.vertex_nodes.size] = self.vertex_dofs.reshape(-1, self.dimension)
 
     def _corners(self, faces) -> np.ndarray:
-        """``face_corners`` of ``faces`` (c k, d) m, kept for the last two face lists asked
+        """``face_corners`` of ``faces`` (c k, d) m, kept for the last three face lists
         while each face and its origin array are the same objects (a facade hands the
         same faces for the same gripper state, ``faces_at``; faces are not changed in
         place: a moved face is a copy with a new origin). Read only."""
         for kept_faces, kept_origins, corners in self._corners_kept:
             if (len(kept_faces) == len(faces)
-                    and all(f is k for f, k in zip(faces, kept_faces))
+                    and all(f is g for f, g in zip(faces, kept_faces))
                     and all(f.origin is o for f, o in zip(faces, kept_origins))):
                 return corners
         corners = face_corners(faces, self.dimension)
         self._corners_kept = ([(tuple(faces), tuple(f.origin for f in faces), corners)]
-                              + self._corners_kept[:1])
+                              + self._corners_kept[:2])
         return corners
 
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:

@@ -85,7 +85,8 @@ class SimulationFacade:
     _obstacles_kept: tuple | None = None
     #: ``_finger_bases``, built on first use
     _jaw_bases: tuple | None = None
-    #: ``faces_at``'s last two answers: (gripper state, faces template, faces), newest first
+    #: ``faces_at``'s last three faces made: (the jaws' placement: the gripper's x, gap,
+    #: lift and their rates, the faces template, the faces), the newest first
     _faces_kept: list = []
     #: the obstacles' velocities (``_obstacles``): (the ``_obstacles_kept`` they are of,
     #: the gripper's (x, gap, lift) rates m/s, (k, d) m/s read only), or None
@@ -581,10 +582,13 @@ class SimulationFacade:
         """The obstacles (``faces_template``) with the jaw faces where the gripper state
         ``grip`` puts them, moving with it: copies of the template's, read only (a step
         asks for its start's and its end's faces, the measures for the end's again: the
-        faces of the last two gripper states asked are kept)."""
+        faces of the last three jaw placements made are kept: a step's end is the next
+        step's start, and the jaw drive's second solve at another gap starts from the same
+        faces)."""
         template = self._faces_template
-        for kept_grip, kept_template, faces in self._faces_kept:
-            if kept_grip is grip and kept_template is template:
+        placement = (grip.x, grip.gap, grip.lift, grip.x_rate, grip.gap_rate, grip.lift_rate)
+        for kept_placement, kept_template, faces in self._faces_kept:
+            if kept_placement == placement and kept_template is template:
                 return faces
         # shallow copies: the moving faces get new origin and velocity arrays
         faces = [copy.copy(f) for f in template]
@@ -593,7 +597,7 @@ class SimulationFacade:
             faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
             faces[index].velocity = self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
                                                    grip.lift_rate)
-        self._faces_kept = [(grip, template, faces)] + self._faces_kept[:1]
+        self._faces_kept = [(placement, template, faces)] + self._faces_kept[:2]
         return faces
 
     def _jaw_faces(self, side: int) -> list[int]:
