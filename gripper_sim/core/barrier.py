@@ -265,6 +265,8 @@ class BarrierContact(Energy):
         self._n_faces = -1
         self._dt = 1.0
         self._obstacles_end = np.zeros((0, d))
+        #: ``_face_geometry``'s last answer: (faces, their origins, the arrays), or None
+        self._geometry_kept = None
         #: ``_corners``'s last three corners made: (faces, their origins, corners), the
         #: newest first
         self._corners_kept = []
@@ -887,24 +889,36 @@ class BarrierContact(Energy):
             owner = self._owners = np.concatenate(
                 [self.vertex_body, 1 + len(self.bodies)
                  + np.arange(v.shape[0] - n_v) // self.corners_per_face])
-        other = nearest_partners(v, self._mesh_edges, self._candidate_pairs(q),
-                                 self.settings.dhat, n_v)
-        partner = np.full(self.n_dof // 2, -1, np.int64)
-        partner[self.vertex_nodes] = np.where(other >= 0, owner[other], -1)
+        partner = np.empty(self.n_dof // 2, np.int64)
+        nearest_partners(v, self._mesh_edges, self._candidate_pairs(q), self.settings.dhat,
+                         self.vertex_nodes, owner, partner)
         return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
         """(n,) the face (index) each node with a contact force touches (its nearest face
         within dhat), -1 for the others; positions ``x`` and ``forces`` (n, d)."""
         holder = np.empty(x.shape[0], np.int64)
-        d = self.dimension
         nearest_faces(np.ascontiguousarray(x), np.ascontiguousarray(forces),
-                      np.array([f.origin for f in faces], float).reshape(-1, d),
-                      np.array([f.normal for f in faces], float).reshape(-1, d),
-                      np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
-                      np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1),
-                      self.settings.dhat, holder)
+                      *self._face_geometry(faces), self.settings.dhat, holder)
         return holder
+
+    def _face_geometry(self, faces) -> tuple:
+        """The faces' origins and unit normals (k, d), tangents (k, d - 1, d) and
+        half-extents (k, d - 1) m as ``nearest_faces`` takes them; kept for the last face
+        list while each face and its origin array are the same objects (see
+        ``_corners``)."""
+        kept = self._geometry_kept
+        if (kept is not None and len(kept[0]) == len(faces)
+                and all(f is g for f, g in zip(faces, kept[0]))
+                and all(f.origin is o for f, o in zip(faces, kept[1]))):
+            return kept[2]
+        d = self.dimension
+        geometry = (np.array([f.origin for f in faces], float).reshape(-1, d),
+                    np.array([f.normal for f in faces], float).reshape(-1, d),
+                    np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
+                    np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1))
+        self._geometry_kept = (tuple(faces), tuple(f.origin for f in faces), geometry)
+        return geometry
 
     @staticmethod
     def touching_faces(faces, x: np.ndarray, holder: np.ndarray) -> list:
