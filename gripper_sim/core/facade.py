@@ -693,7 +693,8 @@ class SimulationFacade:
         if soft is not None:  # the barrier's force is normal to the finger's outline
             soft_normal = self._barrier.normal_forces(
                 np.concatenate([x, finger.positions]).ravel())
-            normal[held] = np.linalg.norm(soft_normal[:len(obstacle)][held], axis=1)
+            pressed = soft_normal[:len(obstacle)][held]
+            normal[held] = np.sqrt((pressed * pressed).sum(axis=1))  # np.linalg.norm's sums
         else:
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
         side_of_node = self._obstacles_kept[-1][obstacle]
