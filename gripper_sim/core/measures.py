@@ -175,8 +175,9 @@ def _outline_at_rest(fruit: FruitModel) -> tuple:
 
 def tributary_lengths(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
     """(n_surface,) m, half the length of the two skin segments at each surface node."""
-    out = np.empty(len(fruit.surface))
-    tributary_lengths_of(np.ascontiguousarray(x, dtype=float), _skin(fruit), len(out), out)
+    surface, skin, _ = _outline_at_rest(fruit)
+    out = np.empty(len(surface))
+    tributary_lengths_of(np.ascontiguousarray(x, dtype=float), skin, len(out), out)
     return out
 
 
