@@ -580,11 +580,10 @@ class SimulationFacade:
 
     def faces_at(self, grip: GripperState) -> list:
         """The obstacles (``faces_template``) with the jaw faces where the gripper state
-        ``grip`` puts them, moving with it: copies of the template's, read only (a step
-        asks for its start's and its end's faces, the measures for the end's again: the
-        faces of the last three jaw placements made are kept: a step's end is the next
-        step's start, and the jaw drive's second solve at another gap starts from the same
-        faces)."""
+        ``grip`` puts them, moving with it: copies of the template's, read only. The faces
+        of the last three jaw placements made are kept: a step's end faces are its
+        measures' and the next step's start faces, and the jaw drive's second solve at
+        another gap starts from the same faces as its first."""
         template = self._faces_template
         placement = (grip.x, grip.gap, grip.lift, grip.x_rate, grip.gap_rate, grip.lift_rate)
         for kept_placement, kept_template, faces in self._faces_kept:
