@@ -5,9 +5,11 @@
 One warm-up run (numba's caches loaded), then two timed runs (CPU time of this process,
 ``time.process_time``; the load average is printed):
 
-- by part: each listed method is wrapped by a timer (inclusive times: a part contains
-  the parts it calls; a few microseconds per call of overhead), with its calls and CPU
-  time per call. Methods that a build no longer has are left out;
+- by part: each listed method or function is wrapped by a timer (inclusive times: a
+  part contains the parts it calls; a few microseconds per call of overhead), with its
+  calls, CPU time per call and its own time a step (outside the listed parts it
+  calls: the work no listed part holds). Methods that a build no longer has are left
+  out;
 - compiled and not: every numba kernel bound in a ``gripper_sim`` module is wrapped,
   the time inside them (their call overhead included) against the rest (the Python
   around them, numpy, ipctk).
@@ -35,42 +37,67 @@ from numba.core.registry import CPUDispatcher  # noqa: E402
 
 from gripper_sim.core import barrier, facade, fast_solver, simulation, soft_fingers  # noqa: E402
 
-#: (label, owner, attribute) of the parts timed
+#: (label, owner, attribute) of the parts timed (a class's method or a module's function);
+#: a label's indent shows where it is usually called (the own times follow the calls)
 PARTS = (
     ('step', simulation.Simulation, 'step'),
     ('  measures (StepResult)', simulation.Simulation, '_measure'),
-    ('  barrier step', facade, 'soft_body_step'),
-    ('  barrier step', facade, 'barrier_step'),
-    ('    Newton solve', fast_solver.PatternCachingSolver, 'solve'),
-    ('      evaluation with Hessian', fast_solver.PatternCachingSolver, 'evaluate_fast'),
-    ('      linear solve', fast_solver.PatternCachingSolver, 'linear_solve'),
-    ('      barrier evaluate_into', barrier.BarrierContact, 'evaluate_into'),
-    ('      barrier max_step (CCD)', barrier.BarrierContact, 'max_step'),
-    ('    barrier begin_step', barrier.BarrierContact, 'begin_step'),
-    ('    barrier pushed_start', barrier.BarrierContact, 'pushed_start'),
-    ('    barrier reachable', barrier.BarrierContact, 'reachable'),
-    ('    barrier partners', barrier.BarrierContact, 'partners'),
-    ('    barrier contact_forces', barrier.BarrierContact, 'contact_forces'),
-    ('    barrier holders', barrier.BarrierContact, 'holders'),
-    ('  fingers: sticking marks', simulation.Simulation, '_mark_sticking'),
-    ('  fingers: jaw forces', simulation.Simulation, '_finger_jaw_forces'),
+    ('    shared fields', facade.SimulationFacade, '_step_measures'),
+    ('      barrier normal_forces', barrier.BarrierContact, 'normal_forces'),
+    ('    deformation', simulation, 'deformation'),
+    ('    tributary lengths', simulation, 'tributary_lengths'),
+    ('    damage', simulation.Simulation, 'assess_damage'),
+    ('  gripper after the step', facade.SimulationFacade, 'gripper_after'),
+    ('  faces at the gripper', facade.SimulationFacade, 'faces_at'),
+    ('  soft step (fruit and fingers)', facade.SimulationFacade, '_substep_soft'),
+    ('    base targets', soft_fingers.SoftFingers, 'base_targets'),
+    ('    barrier step', facade, 'soft_body_step'),
+    ('    barrier step', facade, 'barrier_step'),
+    ('      Newton solve', fast_solver.PatternCachingSolver, 'solve'),
+    ('        evaluation with Hessian', fast_solver.PatternCachingSolver, 'evaluate_fast'),
+    ('        linear solve', fast_solver.PatternCachingSolver, 'linear_solve'),
+    ('        barrier evaluate_into', barrier.BarrierContact, 'evaluate_into'),
+    ('        barrier max_step (CCD)', barrier.BarrierContact, 'max_step'),
+    ('      barrier begin_step', barrier.BarrierContact, 'begin_step'),
+    ('        face corners', barrier, 'face_corners'),
+    ('        start candidates', barrier.BarrierContact, '_start_candidates'),
+    ('        lagged friction', barrier.BarrierContact, '_lagged_friction'),
+    ('        quiet region', barrier.BarrierContact, '_quiet_region'),
+    ('      barrier pushed_start', barrier.BarrierContact, 'pushed_start'),
+    ('      barrier reachable', barrier.BarrierContact, 'reachable'),
+    ('      barrier partners', barrier.BarrierContact, 'partners'),
+    ('      barrier contact_forces', barrier.BarrierContact, 'contact_forces'),
+    ('      barrier holders', barrier.BarrierContact, 'holders'),
+    ('    fingers: sticking marks', simulation.Simulation, '_mark_sticking'),
+    ('    fingers: jaw forces', simulation.Simulation, '_finger_jaw_forces'),
     ('  fingers: jaw wrenches', simulation.Simulation, '_finger_wrenches'),
     ('  fingers: result', soft_fingers.SoftFingers, 'result'),
 )
 
 
-def _timed(function, label, times, calls, split=None):
+#: the keys of the timed calls under way, innermost last (``_timed``)
+_open: list = []
+
+
+def _timed(function, label, times, calls, split=None, nested=None):
+    """``function`` wrapped: its CPU time added to ``times[label]``, its calls counted, and
+    (with ``nested``) its time added to ``nested[key]`` of the timed call it runs in."""
     @functools.wraps(function)
     def wrapper(*args, **kwargs):
         key = label
         if split is not None:
             key = split(label, args, kwargs)
+        _open.append(key)
         start = time.process_time()
         try:
             return function(*args, **kwargs)
         finally:
-            times[key] += time.process_time() - start
+            elapsed = time.process_time() - start
+            times[key] += elapsed
             calls[key] += 1
+            _open.pop()
+            if nested is not None and _open:
+                nested[_open[-1]] += elapsed
     return wrapper
 
 
@@ -83,18 +110,19 @@ def _self_contact_or_not(label, args, kwargs):
     return label + (' [self-contact]' if args[0].self_contact else '')
 
 
-def wrap_parts(times, calls) -> None:
-    """Wrap the methods of ``PARTS`` that this build has."""
+def wrap_parts(times, calls, nested) -> None:
+    """Wrap the methods of ``PARTS`` that this build has; ``nested[key]``: the time of the
+    timed parts called inside each part."""
     for label, owner, name in PARTS:
         function = getattr(owner, name, None)
         if function is None:
             continue
         split = (_hessian_or_not if name == 'evaluate_fast' else
                  _self_contact_or_not if owner is barrier.BarrierContact else None)
-        setattr(owner, name, _timed(function, label, times, calls, split))
+        setattr(owner, name, _timed(function, label, times, calls, split, nested))
 
 
-def wrap_kernels(times, calls) -> None:
+def wrap_kernels(times, calls, nested=None) -> None:
     """Wrap every numba kernel bound in a loaded ``gripper_sim`` module (one timer each,
     under the label 'compiled kernels')."""
     wrappers = {}
@@ -113,10 +141,12 @@ def _in_order(times) -> list:
     order = list(dict.fromkeys(label for label, _, _ in PARTS))
     rank = {label: k for k, label in enumerate(order)}
 
-    def key(label):
-        base = label.replace(' [self-contact]', '').replace('gradient only', 'with Hessian')
-        return rank.get(base, len(order)), label
-    return sorted(times, key=key)
+    return sorted(times, key=lambda label: (rank.get(_base(label), len(order)), label))
+
+
+def _base(label: str) -> str:
+    """A timed label without its variant (``_hessian_or_not``, ``_self_contact_or_not``)."""
+    return label.replace(' [self-contact]', '').replace('gradient only', 'with Hessian')
 
 
 def run(case: str):
@@ -137,20 +167,26 @@ def main(argv=None) -> int:
     run(args.case)
     for wrap in (wrap_parts, wrap_kernels):
         times, calls = collections.defaultdict(float), collections.Counter()
-        wrap(times, calls)
+        nested = collections.defaultdict(float)
+        wrap(times, calls, nested)
         start = time.process_time()
         steps, iterations = run(args.case)
         total = time.process_time() - start
         print(f'{args.case}: load average {os.getloadavg()[0]:.2f}; {total:.3f} CPU s, '
               f'{steps} steps, {iterations} Newton iterations')
+        if wrap is wrap_parts:
+            print(f'{"part":44s} {"CPU s":>7s} {"%":>7s} {"calls":>7s} {"us a call":>10s} '
+                  f'{"own us a step":>14s}')
         for label in _in_order(times):
             seconds = times[label]
-            print(f'{label:44s} {seconds:7.3f} s {100 * seconds / total:5.1f} % '
-                  f'{calls[label]:7d} calls {1e6 * seconds / calls[label]:8.1f} us')
+            own = ('' if wrap is wrap_kernels else
+                   f'{1e6 * (seconds - nested[label]) / steps:14.1f}')
+            print(f'{label:44s} {seconds:7.3f} {100 * seconds / total:7.1f} '
+                  f'{calls[label]:7d} {1e6 * seconds / calls[label]:10.1f} {own}')
         if wrap is wrap_kernels:
             rest = total - times['compiled kernels']
-            print(f'{"the rest (Python, numpy, ipctk)":44s} {rest:7.3f} s '
-                  f'{100 * rest / total:5.1f} %')
+            print(f'{"the rest (Python, numpy, ipctk)":44s} {rest:7.3f} '
+                  f'{100 * rest / total:7.1f}')
     return 0
 
 

@@ -7,6 +7,9 @@ cross-check with the modified mass method on the rigid-finger validation cases (
 squeeze, pressurised membrane, 2D Hertz, friction hold): force and contact length within
 5 % of each other, and no node inside a jaw at any step.
 """
+import copy
+import dataclasses
+
 import ipctk
 import numpy as np
 import pytest
@@ -280,3 +283,44 @@ def test_ipc_refuses_the_fast_path():
 def test_ipc_takes_the_generic_step():
     sim = Simulation(load_config(overrides=['contact.model=ipc']))
     assert sim._fast is None and sim._barrier in sim.solver.energies
+
+
+def test_the_faces_of_a_jaw_placement_are_made_once():
+    """``faces_at`` hands the same faces for the same jaw placement (a step's end faces
+    are the next step's start faces), new ones where the jaws are elsewhere or the faces
+    were made again."""
+    sim = Simulation(load_config(overrides=['contact.model=ipc']))
+    grip = sim.gripper_state
+    faces = sim.faces_at(grip)
+    assert sim.faces_at(dataclasses.replace(grip, stiffness=2.0 * grip.stiffness)) is faces
+    wider = sim.faces_at(dataclasses.replace(grip, gap=grip.gap + 0.002))
+    assert wider is not faces
+    assert wider[0].origin[0] - faces[0].origin[0] == pytest.approx(-0.001, rel=1e-9)
+    assert wider[1].origin[0] - faces[1].origin[0] == pytest.approx(0.001, rel=1e-9)
+    assert sim.faces_at(grip) is faces
+    sim.reset()
+    assert sim.faces_at(sim.gripper_state) is not faces
+
+
+def test_a_barrier_set_up_again_follows_moved_faces_as_a_new_one():
+    """A barrier that kept the corners of earlier faces takes a moved copy of a face
+    where it now is: its forces and holders equal those of a barrier set up afresh."""
+    x = np.array([[0.0, 0.3], [1.0, 0.5], [2.0, 0.2], [3.0, 0.7]]) * DHAT
+    edges = np.array([[0, 1], [1, 2], [2, 3]])
+    start, end = [_table(-0.1 * DHAT)], [_table(0.0, velocity=(0.05, 0.0))]
+    kept = BarrierContact(4, np.arange(4), edges, SETTINGS)
+    kept.begin_step(x, start, end, 1e-3)
+    before = kept.contact_forces(x.ravel())
+    moved = [copy.copy(end[0])]
+    moved[0].origin = end[0].origin + np.array([0.0, 0.05 * DHAT])
+    kept.begin_step(x, end, moved, 1e-3)
+    fresh = BarrierContact(4, np.arange(4), edges, SETTINGS)
+    fresh.begin_step(x, end, moved, 1e-3)
+    forces = kept.contact_forces(x.ravel())
+    assert np.array_equal(forces, fresh.contact_forces(x.ravel()))
+    assert not np.allclose(forces, before)
+    assert np.array_equal(kept.holders(x, moved, forces), fresh.holders(x, moved, forces))
+    end[0].origin = end[0].origin + np.array([0.0, 0.02 * DHAT])  # the same face moved
+    kept.begin_step(x, end, end, 1e-3)
+    fresh.begin_step(x, end, end, 1e-3)
+    assert np.array_equal(kept.contact_forces(x.ravel()), fresh.contact_forces(x.ravel()))

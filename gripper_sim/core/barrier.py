@@ -265,7 +265,14 @@ class BarrierContact(Energy):
         self._n_faces = -1
         self._dt = 1.0
         self._obstacles_end = np.zeros((0, d))
+        #: ``_face_geometry``'s last answer: (faces, their origins, the arrays), or None
+        self._geometry_kept = None
+        #: ``_corners``'s last three corners made: (faces, their origins, corners), the
+        #: newest first
+        self._corners_kept = []
         self._start = np.zeros((n_v, d))
+        #: (d n,) m, the positions of the step's start (``begin_step``)
+        self._start_q = np.zeros(d * n_nodes)
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()  # the lagged friction's pairs (3D)
         #: the compiled lagged friction's pairs (2D, ``_lagged_friction``), or None
@@ -368,6 +375,21 @@ class BarrierContact(Energy):
         self._mesh_dofs = -np.ones((rest.shape[0], self.dimension), np.int64)
         self._mesh_dofs[:self.vertex_nodes.size] = self.vertex_dofs.reshape(-1, self.dimension)
 
+    def _corners(self, faces) -> np.ndarray:
+        """``face_corners`` of ``faces`` (c k, d) m, kept for the last three face lists
+        while each face and its origin array are the same objects (a facade hands the
+        same faces for the same gripper state, ``faces_at``; faces are not changed in
+        place: a moved face is a copy with a new origin). Read only."""
+        for kept_faces, kept_origins, corners in self._corners_kept:
+            if (len(kept_faces) == len(faces)
+                    and all(f is g for f, g in zip(faces, kept_faces))
+                    and all(f.origin is o for f, o in zip(faces, kept_origins))):
+                return corners
+        corners = face_corners(faces, self.dimension)
+        self._corners_kept = ([(tuple(faces), tuple(f.origin for f in faces), corners)]
+                              + self._corners_kept[:2])
+        return corners
+
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
         """(n_v + c k, d) m, the collision mesh's vertices: the surfaces (the fruit's, the
         soft bodies') of ``positions`` (n, d) and the faces' corners (default: where
@@ -384,8 +406,8 @@ class BarrierContact(Energy):
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set up a step of ``dt`` (s) from positions ``x_n`` (n, d) m with the faces moving
         from ``old_faces`` to ``new_faces``: the lagged friction of the start state."""
-        old = face_corners(old_faces, self.dimension)
-        new = face_corners(new_faces, self.dimension)
+        old = self._corners(old_faces)
+        new = self._corners(new_faces)
         if self._rest is None:
             # the mollifier of nearly parallel edges (3D) scales with their rest lengths
             self._rest = x_n[self.vertex_nodes].copy()
@@ -398,6 +420,7 @@ class BarrierContact(Energy):
         self._dt = dt
         start = self.vertices(x_n, old)
         self._start = start
+        self._start_q = x_n.ravel().copy()
         mu_s, mu_k, rubbing = self._coefficients(new_faces)
         if len(self._tangential):  # ipctk's lagged friction (3D): the last step's
             self._tangential = ipctk.TangentialCollisions()
@@ -760,7 +783,7 @@ class BarrierContact(Energy):
         None if even that start is not reached without a crossing (the caller halves the
         step)."""
         start = self.pushed_start(x_n, old_faces, new_faces)
-        return start if self.reachable(x_n, start) else None
+        return start if self.reachable(start) else None
 
     def pushed_start(self, x_n: np.ndarray, old_faces, new_faces) -> np.ndarray:
         """(n, d) m, ``x_n`` with the outline nodes that a moving face would come closer
@@ -783,17 +806,18 @@ class BarrierContact(Energy):
             start[nodes[touching]] += shift - advance * old.normal
         return start
 
-    def reachable(self, x_n: np.ndarray, start: np.ndarray) -> bool:
-        """Whether the straight paths from ``x_n`` (the faces at the start of the step) to
-        ``start`` (the faces at its end), both (n, d) m, cross nothing and end apart."""
+    def reachable(self, start: np.ndarray) -> bool:
+        """Whether the straight paths from the step's start (``begin_step``'s positions,
+        the faces at the start of the step) to ``start`` (n, d) m (the faces at its end)
+        cross nothing and end apart."""
         if self.quiet(start.ravel()):
             return True
-        v0 = self.vertices(x_n, self._obstacles_start)
+        v0 = self._start
         v1 = self.vertices(start)
         # in 2D the compiled (conservative) check clears most paths, and with them their
         # ends (it clears no pair that ends touching; the others' boxes stay apart); the
         # exact CCD decides the others; nothing that stands still crosses anything
-        if self._clear_path(x_n.ravel(), start.ravel(), v0, v1):
+        if self._clear_path(self._start_q, start.ravel(), v0, v1):
             return True
         if not np.array_equal(v0, v1):
             exact = float(ipctk.compute_collision_free_stepsize(
@@ -865,24 +889,36 @@ class BarrierContact(Energy):
             owner = self._owners = np.concatenate(
                 [self.vertex_body, 1 + len(self.bodies)
                  + np.arange(v.shape[0] - n_v) // self.corners_per_face])
-        other = nearest_partners(v, self._mesh_edges, self._candidate_pairs(q),
-                                 self.settings.dhat, n_v)
-        partner = np.full(self.n_dof // 2, -1, np.int64)
-        partner[self.vertex_nodes] = np.where(other >= 0, owner[other], -1)
+        partner = np.empty(self.n_dof // 2, np.int64)
+        nearest_partners(v, self._mesh_edges, self._candidate_pairs(q), self.settings.dhat,
+                         self.vertex_nodes, owner, partner)
         return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
         """(n,) the face (index) each node with a contact force touches (its nearest face
         within dhat), -1 for the others; positions ``x`` and ``forces`` (n, d)."""
         holder = np.empty(x.shape[0], np.int64)
-        d = self.dimension
         nearest_faces(np.ascontiguousarray(x), np.ascontiguousarray(forces),
-                      np.array([f.origin for f in faces], float).reshape(-1, d),
-                      np.array([f.normal for f in faces], float).reshape(-1, d),
-                      np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
-                      np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1),
-                      self.settings.dhat, holder)
+                      *self._face_geometry(faces), self.settings.dhat, holder)
         return holder
+
+    def _face_geometry(self, faces) -> tuple:
+        """The faces' origins and unit normals (k, d), tangents (k, d - 1, d) and
+        half-extents (k, d - 1) m as ``nearest_faces`` takes them; kept for the last face
+        list while each face and its origin array are the same objects (see
+        ``_corners``)."""
+        kept = self._geometry_kept
+        if (kept is not None and len(kept[0]) == len(faces)
+                and all(f is g for f, g in zip(faces, kept[0]))
+                and all(f.origin is o for f, o in zip(faces, kept[1]))):
+            return kept[2]
+        d = self.dimension
+        geometry = (np.array([f.origin for f in faces], float).reshape(-1, d),
+                    np.array([f.normal for f in faces], float).reshape(-1, d),
+                    np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
+                    np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1))
+        self._geometry_kept = (tuple(faces), tuple(f.origin for f in faces), geometry)
+        return geometry
 
     @staticmethod
     def touching_faces(faces, x: np.ndarray, holder: np.ndarray) -> list:
@@ -1009,15 +1045,13 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         self_contact.begin_step(x_n, [], [], dt)
         barriers.append(self_contact)
     pushed = barrier.pushed_start(x_n, old_faces, new_faces)
-    start = None
-    for candidate in (pushed + dt * v_n, pushed):
-        candidate = candidate.copy()
-        candidate[fixed] = fixed_targets
-        if all(b.reachable(x_n, candidate) for b in barriers):
-            start = candidate
-            break
-    if start is None:
-        raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
+    start = pushed + dt * v_n
+    start[fixed] = fixed_targets
+    if not all(b.reachable(start) for b in barriers):
+        start = pushed  # its own array: pushed_start's copy
+        start[fixed] = fixed_targets
+        if not all(b.reachable(start) for b in barriers):
+            raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
     constraints = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
     x = solution.q.reshape(-1, d)

@@ -389,16 +389,20 @@ def _offer(node, other, gap, n_deformable, best, partner):
 
 
 @njit(cache=True)
-def nearest_partners(v, edges, candidates, dhat, n_deformable):
-    """(n_deformable,) for each deformable vertex of the collision mesh the vertex on the
-    other side of its nearest pair within dhat (-1: in none), over the edge-vertex
-    ``candidates`` (k, 2) at the vertices ``v`` (n_m, 2) m, ``edges`` (n_e, 2).
+def nearest_partners(v, edges, candidates, dhat, vertex_nodes, owner, partner):
+    """Set ``partner`` (n,) to, at the node of each deformable vertex of the collision
+    mesh, the body (``owner`` (n_m,) of each vertex) of the vertex on the other side of
+    its nearest pair within dhat, and to -1 at the others (and every node that is no
+    deformable vertex), over the edge-vertex ``candidates`` (k, 2) at the vertices ``v``
+    (n_m, 2) m, ``edges`` (n_e, 2); the deformable vertices come first, at the nodes
+    ``vertex_nodes`` (n_v,).
 
     A point-line pair couples its vertex with both ends of its edge at the distance of
     the nearer end, a point-point pair its two vertices at their distance; of equally
     near pairs the first counts."""
+    n_deformable = vertex_nodes.shape[0]
     best = np.full(n_deformable, np.inf)
-    partner = -np.ones(n_deformable, np.int64)
+    other = -np.ones(n_deformable, np.int64)
     s_hat = dhat * dhat
     for k in range(candidates.shape[0]):
         edge, vertex = candidates[k, 0], candidates[k, 1]
@@ -414,18 +418,21 @@ def nearest_partners(v, edges, candidates, dhat, n_deformable):
             if squared >= s_hat:
                 continue
             gap = np.sqrt(squared)
-            _offer(vertex, end, gap, n_deformable, best, partner)
-            _offer(end, vertex, gap, n_deformable, best, partner)
+            _offer(vertex, end, gap, n_deformable, best, other)
+            _offer(end, vertex, gap, n_deformable, best, other)
             continue
         cross = (a[0] - p[0]) * (b[1] - p[1]) - (a[1] - p[1]) * (b[0] - p[0])
         if cross * cross / (ex * ex + ey * ey) >= s_hat:
             continue
         gap = np.sqrt(min(to_a, to_b))
-        _offer(vertex, e0, gap, n_deformable, best, partner)
-        _offer(vertex, e1, gap, n_deformable, best, partner)
-        _offer(e0, vertex, gap, n_deformable, best, partner)
-        _offer(e1, vertex, gap, n_deformable, best, partner)
-    return partner
+        _offer(vertex, e0, gap, n_deformable, best, other)
+        _offer(vertex, e1, gap, n_deformable, best, other)
+        _offer(e0, vertex, gap, n_deformable, best, other)
+        _offer(e1, vertex, gap, n_deformable, best, other)
+    partner[:] = -1
+    for i in range(n_deformable):
+        if other[i] >= 0:
+            partner[vertex_nodes[i]] = owner[other[i]]
 
 
 @njit(cache=True)

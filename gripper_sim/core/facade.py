@@ -85,6 +85,12 @@ class SimulationFacade:
     _obstacles_kept: tuple | None = None
     #: ``_finger_bases``, built on first use
     _jaw_bases: tuple | None = None
+    #: ``faces_at``'s last three faces made: (the jaws' placement: the gripper's x, gap,
+    #: lift and their rates, the faces template, the faces), the newest first
+    _faces_kept: list = []
+    #: the obstacles' velocities (``_obstacles``): (the ``_obstacles_kept`` they are of,
+    #: the gripper's (x, gap, lift) rates m/s, (k, d) m/s read only), or None
+    _moving_kept: tuple | None = None
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -574,14 +580,23 @@ class SimulationFacade:
 
     def faces_at(self, grip: GripperState) -> list:
         """The obstacles (``faces_template``) with the jaw faces where the gripper state
-        ``grip`` puts them, moving with it; fresh copies."""
+        ``grip`` puts them, moving with it: copies of the template's, read only. The faces
+        of the last three jaw placements made are kept: a step's end faces are its
+        measures' and the next step's start faces, and the jaw drive's second solve at
+        another gap starts from the same faces as its first."""
+        template = self._faces_template
+        placement = (grip.x, grip.gap, grip.lift, grip.x_rate, grip.gap_rate, grip.lift_rate)
+        for kept_placement, kept_template, faces in self._faces_kept:
+            if kept_placement == placement and kept_template is template:
+                return faces
         # shallow copies: the moving faces get new origin and velocity arrays
-        faces = [copy.copy(f) for f in self._faces_template]
+        faces = [copy.copy(f) for f in template]
         for index, side in enumerate(self._face_side):
             sign = -1.0 if side == LEFT else 1.0
             faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
             faces[index].velocity = self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
                                                    grip.lift_rate)
+        self._faces_kept = [(placement, template, faces)] + self._faces_kept[:2]
         return faces
 
     def _jaw_faces(self, side: int) -> list[int]:
@@ -601,7 +616,8 @@ class SimulationFacade:
     def _obstacles(self, grip: GripperState):
         """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
         (``obstacle_names``) where ``grip`` puts them; a deformable finger counts as a face
-        along its backing. The normals and sides are kept per face set (read only)."""
+        along its backing. The normals and sides are kept per face set, the velocities
+        while the gripper's rates stay (all read only)."""
         template = self._faces_template
         kept = self._obstacles_kept
         if kept is None or kept[0] is not template:
@@ -622,11 +638,16 @@ class SimulationFacade:
                                            jaws, np.where(sides[jaws] == LEFT, -1.0, 1.0),
                                            side_of_obstacle)
         _, normals, sides, velocities, jaws, sign, _ = kept
-        velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
-        velocities[jaws] = 0.0
-        velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
-        velocities[jaws, -1] = grip.lift_rate
-        return normals, sides, velocities
+        rates = (grip.x_rate, grip.gap_rate, grip.lift_rate)
+        moving = self._moving_kept
+        if moving is None or moving[0] is not kept or moving[1] != rates:
+            velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
+            velocities[jaws] = 0.0
+            velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
+            velocities[jaws, -1] = grip.lift_rate
+            velocities.flags.writeable = False
+            moving = self._moving_kept = (kept, rates, velocities)
+        return normals, sides, moving[2]
 
     def _closing_forces(self, forces, obstacle, faces) -> tuple:
         """(left, right) N, each jaw's hard-contact force on the fruit along its closing
@@ -670,8 +691,9 @@ class SimulationFacade:
         normal = np.zeros(len(obstacle))
         if soft is not None:  # the barrier's force is normal to the finger's outline
             soft_normal = self._barrier.normal_forces(
-                np.vstack([x, finger.positions]).ravel())
-            normal[held] = np.linalg.norm(soft_normal[:len(obstacle)][held], axis=1)
+                np.concatenate([x, finger.positions]).ravel())
+            pressed = soft_normal[:len(obstacle)][held]
+            normal[held] = np.sqrt((pressed * pressed).sum(axis=1))  # np.linalg.norm's sums
         else:
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
         side_of_node = self._obstacles_kept[-1][obstacle]
@@ -777,8 +799,8 @@ class SimulationFacade:
         targets = soft.base_targets(self._jaw_origin(grip_new, LEFT),
                                     self._jaw_origin(grip_new, RIGHT))
         outcome = soft_body_step(self.solver, self._barrier,
-                                 np.vstack([self.q, finger.positions]),
-                                 np.vstack([self.v, finger.velocities]), soft.base, targets,
+                                 np.concatenate([self.q, finger.positions]),
+                                 np.concatenate([self.v, finger.velocities]), soft.base, targets,
                                  self.faces_at(self._grip), new_faces, dt,
                                  self_contact=soft.self_contact)
         partner = outcome.contacts.obstacle
@@ -824,7 +846,7 @@ class SimulationFacade:
         finger = self._finger
         forces = []
         for side, (nodes, own) in enumerate(self._finger_bases()):
-            push = (float(finger.reaction[nodes][:, 0].sum()) if finger.touching[own].any()
+            push = (float(finger.reaction[nodes, 0].sum()) if finger.touching[own].any()
                     else 0.0)
             forces.append(push if side == LEFT else -push)
         return forces[LEFT], forces[RIGHT]

@@ -175,8 +175,9 @@ def _outline_at_rest(fruit: FruitModel) -> tuple:
 
 def tributary_lengths(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
     """(n_surface,) m, half the length of the two skin segments at each surface node."""
-    out = np.empty(len(fruit.surface))
-    tributary_lengths_of(np.ascontiguousarray(x, dtype=float), _skin(fruit), len(out), out)
+    surface, skin, _ = _outline_at_rest(fruit)
+    out = np.empty(len(surface))
+    tributary_lengths_of(np.ascontiguousarray(x, dtype=float), skin, len(out), out)
     return out
 
 
@@ -187,18 +188,18 @@ def touching_length(x: np.ndarray, edges: np.ndarray, touching: np.ndarray) -> f
     return float(np.sum(seg * 0.5 * touching[edges].sum(axis=1)))
 
 
-def face_contact_length(fruit: FruitModel, x: np.ndarray, face, held: np.ndarray) -> float:
+def face_contact_length(fruit: FruitModel, x: np.ndarray, face, holder: np.ndarray,
+                        index: int) -> float:
     """Length (m) of the fruit outline lying on a flat face (``face_contact_length_of``).
 
     Args:
-        x: (n_nodes, 2) m.  face: a FlatFace.  held: (n_nodes,) bool, node held by that
-        face.
+        x: (n_nodes, 2) m.  face: a FlatFace.  holder: (n_nodes,) int, the obstacle
+        holding each node (-1 none).  index: the face's obstacle index in ``holder``.
     """
-    holder = np.where(held, 0, -1).astype(np.int64)
     return face_contact_length_of(
-        np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(fruit.surface, np.int64),
-        holder, 0, float(face.normal[0]), float(face.normal[1]), float(face.origin[0]),
-        float(face.origin[1]))
+        np.ascontiguousarray(x, dtype=float), _outline_at_rest(fruit)[0],
+        np.ascontiguousarray(holder, np.int64), index, float(face.normal[0]),
+        float(face.normal[1]), float(face.origin[0]), float(face.origin[1]))
 
 
 def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,

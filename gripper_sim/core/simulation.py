@@ -217,12 +217,11 @@ class Simulation(SimulationFacade):
             on_finger = (on_left | on_right)[fruit.surface]
             length = float(np.sum(tributary_lengths(fruit, x)[on_finger]))
         else:
-            faces = self.faces_at(self._grip)
+            jaws = self.faces_at(self._grip)[:len(self._face_side)]
             if self._barrier is not None:  # the outline lies a barrier gap off the faces
-                faces = self._barrier.touching_faces(faces, x, self.contacts.obstacle)
-            length = sum(face_contact_length(fruit, x, faces[index],
-                                             self.contacts.obstacle == index)
-                         for index in range(len(self._face_side)))
+                jaws = self._barrier.touching_faces(jaws, x, self.contacts.obstacle)
+            length = sum(face_contact_length(fruit, x, face, self.contacts.obstacle, index)
+                         for index, face in enumerate(jaws))
         if self._pad is not None:
             on_pad = (self.contacts.obstacle < 0) & (self._pad.holder >= 0)
             length += float(np.sum(tributary_lengths(fruit, x)[on_pad[fruit.surface]]))

@@ -250,7 +250,7 @@ class SoftFingers:
     def base_targets(self, left_origin: np.ndarray, right_origin: np.ndarray) -> np.ndarray:
         """(2 k, 2) m, where the base nodes are held (``base`` order)."""
         left_rest, right_rest = self._base_frames
-        return np.vstack([left_origin + left_rest, right_origin + right_rest])
+        return np.concatenate([left_origin + left_rest, right_origin + right_rest])
 
     def sides_of_base(self) -> tuple[np.ndarray, np.ndarray]:
         """(2 k,) bool each: the base nodes of the left and of the right finger."""
