@@ -108,13 +108,17 @@ JACOBI_SWEEPS = 12
 
 
 @njit(cache=True)
-def _clamp_to_psd(matrix):
+def _clamp_to_psd(matrix, a, vectors, out):
     """``matrix`` (k, k) symmetric with its negative eigenvalues set to 0: its
     eigensystem by cyclic Jacobi rotations (Golub & Van Loan, Matrix Computations,
-    section 8.5), much cheaper than a LAPACK call for k <= 6."""
+    section 8.5), much cheaper than a LAPACK call for k <= 6. ``a``, ``vectors``,
+    ``out`` (k, k): work space (``out`` is returned where the clamp changes ``matrix``,
+    else ``matrix`` itself)."""
     k = matrix.shape[0]
-    a = matrix.copy()
-    vectors = np.eye(k)
+    a[:] = matrix
+    vectors[:] = 0.0
+    for i in range(k):
+        vectors[i, i] = 1.0
     scale = 0.0
     for i in range(k):
         for j in range(k):
@@ -154,7 +158,7 @@ def _clamp_to_psd(matrix):
             negative = True
     if not negative:
         return matrix
-    out = np.zeros((k, k))
+    out[:] = 0.0
     for m in range(k):
         value = a[m, m]
         if value <= 0.0:
@@ -166,16 +170,17 @@ def _clamp_to_psd(matrix):
 
 
 @njit(cache=True)
-def _clamp_2x2_to_psd(matrix):
+def _clamp_2x2_to_psd(matrix, out):
     """``matrix`` (2, 2) symmetric with its negative eigenvalues set to 0, in closed form
-    (a negative and a positive eigenvalue l1 < 0 <= l2: l2 (A - l1 I) / (l2 - l1))."""
+    (a negative and a positive eigenvalue l1 < 0 <= l2: l2 (A - l1 I) / (l2 - l1)); into
+    ``out`` (2, 2), returned, where the clamp changes ``matrix``, else ``matrix``."""
     a, b, d = matrix[0, 0], matrix[0, 1], matrix[1, 1]
     mean = 0.5 * (a + d)
     radius = np.sqrt((0.5 * (a - d)) ** 2 + b * b)
     low, high = mean - radius, mean + radius
     if low >= 0.0:
         return matrix
-    out = np.zeros((2, 2))
+    out[:] = 0.0
     if high <= 0.0:
         return out
     factor = high / (high - low)
@@ -185,9 +190,33 @@ def _clamp_2x2_to_psd(matrix):
 
 
 @njit(cache=True)
-def _clamp_pair_to_psd(local, m):
+def _pair_bases():
+    """The orthonormal bases B (m, m - 1) of ``_clamp_pair_to_psd``: (m = 2, m = 3)."""
+    pair = np.zeros((2, 1))
+    pair[0, 0], pair[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
+    triple = np.zeros((3, 2))
+    triple[0, 0], triple[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
+    triple[0, 1] = triple[1, 1] = 1.0 / np.sqrt(6.0)
+    triple[2, 1] = -2.0 / np.sqrt(6.0)
+    return pair, triple
+
+
+@njit(cache=True)
+def psd_scratch():
+    """The work arrays of ``_clamp_pair_to_psd``, made once per kernel call: (the bases
+    B of m = 2 and 3 (2, 1), (3, 2); reduced (2, 2), (4, 4); the Jacobi copy and
+    eigenvectors (4, 4); clamped (2, 2), (4, 4); out (4, 4), (6, 6))."""
+    pair, triple = _pair_bases()
+    return (pair, triple, np.empty((2, 2)), np.empty((4, 4)), np.empty((4, 4)),
+            np.empty((4, 4)), np.empty((2, 2)), np.empty((4, 4)), np.empty((4, 4)),
+            np.empty((6, 6)))
+
+
+@njit(cache=True)
+def _clamp_pair_to_psd(local, m, scratch):
     """A pair's Hessian ``local`` (2 m, 2 m) over its m = 2 or 3 vertices' (x, y) with its
-    negative eigenvalues set to 0 (``_clamp_to_psd`` of it, to round-off).
+    negative eigenvalues set to 0 (``_clamp_to_psd`` of it, to round-off); ``scratch``
+    the work arrays (``psd_scratch``), one of which is returned.
 
     The barrier depends on the differences of the pair's positions only, so its Hessian
     maps both translations to 0 and acts on their orthogonal complement: with an
@@ -195,15 +224,11 @@ def _clamp_pair_to_psd(local, m):
     zero), L = Q (Q^T L Q) Q^T and the clamped L is Q clamp(Q^T L Q) Q^T, a 2 x 2 in
     closed form (point-point) or a 4 x 4 by Jacobi (point-line) instead of a 4 x 4 or
     6 x 6 by Jacobi."""
+    pair, triple, reduced2, reduced4, jacobi, vectors, clamped2, clamped4, out4, out6 = scratch
     r = m - 1
-    basis = np.zeros((m, r))
-    if m == 2:
-        basis[0, 0], basis[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
-    else:
-        basis[0, 0], basis[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
-        basis[0, 1] = basis[1, 1] = 1.0 / np.sqrt(6.0)
-        basis[2, 1] = -2.0 / np.sqrt(6.0)
-    reduced = np.zeros((2 * r, 2 * r))
+    basis = pair if m == 2 else triple
+    reduced = reduced2 if m == 2 else reduced4
+    reduced[:] = 0.0
     for i in range(r):
         for j in range(r):
             for k in range(m):
@@ -214,8 +239,12 @@ def _clamp_pair_to_psd(local, m):
                     for c in range(2):
                         for e in range(2):
                             reduced[2 * i + c, 2 * j + e] += w * local[2 * k + c, 2 * n + e]
-    clamped = _clamp_2x2_to_psd(reduced) if r == 1 else _clamp_to_psd(reduced)
-    out = np.zeros((2 * m, 2 * m))
+    if r == 1:
+        clamped = _clamp_2x2_to_psd(reduced, clamped2)
+    else:
+        clamped = _clamp_to_psd(reduced, jacobi, vectors, clamped4)
+    out = out4 if m == 2 else out6
+    out[:] = 0.0
     for k in range(m):
         for n in range(m):
             for i in range(r):
@@ -303,6 +332,7 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
     dc, dl = np.empty(6), np.empty(6)
     local6 = np.empty((6, 6))
     local4 = np.empty((4, 4))
+    scratch = psd_scratch()
     for k in range(candidates.shape[0]):
         edge, vertex = candidates[k, 0], candidates[k, 1]
         p, a, b = v[vertex], v[edges[edge, 0]], v[edges[edge, 1]]
@@ -342,7 +372,7 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
             for j in range(2 * m):
                 local[i, j] = second * grad[i] * grad[j] + first * hess[i, j]
         if project:
-            local = _clamp_pair_to_psd(local, m)
+            local = _clamp_pair_to_psd(local, m, scratch)
         outside += add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
                                      hessian_values)
     return total, outside
