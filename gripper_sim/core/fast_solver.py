@@ -208,7 +208,17 @@ class PatternCachingSolver:
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
         self._build_fast_pattern()
-        self._table = EnergyTable(self.energies, self._scatter, self.dim)
+        self._table = EnergyTable(self.energies, self._scatter, self.dim, self.n)
+        #: the energies after the table's, with their scatter indices
+        self._untabled = list(zip(self.energies[self._table.count:],
+                                  self._scatter[self._table.count:]))
+        #: ``evaluate_fast``'s arrays: the CSC values of its last Hessian, the values
+        #: an evaluation without the Hessian is given, K_n dq (n_dof,) N, the sliding
+        #: nodes' friction blocks (k, d, d) N/m
+        self._hessian_values = np.empty(self._nnz)
+        self._no_values = np.zeros(1)
+        self._k_dq = np.empty(self.n)
+        self._friction_blocks = np.empty((0, self.dim, self.dim))
         #: the energies that may bound a step (``max_step`` not the base's 1)
         self._step_bounding = [e for e in self.energies
                                if type(e).max_step is not Energy.max_step]
@@ -334,10 +344,14 @@ class PatternCachingSolver:
         self._stiffness = (q_n.copy(), data)
         return data
 
-    def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+    def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool,
+                      grad=None, fric_grad=None):
         """The incremental potential Phi (J), its gradient (n_dof,) N, the friction part
         of the gradient (n_dof,) N, and, with ``hessian``, the Hessian parts: (CSC values
-        on the fixed pattern, the energies' rank-one terms [(c, u)]).
+        on the fixed pattern, the energies' rank-one terms [(c, u)]; the solver's own
+        arrays, valid until its next evaluation with the Hessian).
+        ``grad`` and ``fric_grad`` (n_dof,), if given, are written instead of new arrays
+        (the Newton iteration's own vectors); where Phi is inf they hold no result.
 
         Rayleigh stiffness damping (beta > 0) adds beta dq^T K_n dq / (2 dt), dq = q - q_n,
         K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
@@ -347,12 +361,17 @@ class PatternCachingSolver:
         gravity) are one kernel call (``energy_table``), the other energies (the
         barrier, 3D ones) one call each, and the terms after the energies one call
         (``solver_kernels.add_step_terms``)."""
+        if grad is None:
+            grad = np.empty(self.n)
+        if fric_grad is None:
+            fric_grad = np.empty(self.n)
+        data = self._hessian_values if hessian else self._no_values
         table = self._table
-        phi, grad, dq, data, low_rank = table.potential(q, q_n, v_n, dt, self.m, self.alpha,
-                                                        hessian, self._nnz)
+        phi, dq, low_rank = table.potential(q, q_n, v_n, dt, self.m, self.alpha, hessian,
+                                            grad, data)
         if not math.isfinite(phi):
             return np.inf, None, None, None
-        for energy, scatter in zip(self.energies[table.count:], self._scatter[table.count:]):
+        for energy, scatter in self._untabled:
             value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
             if not math.isfinite(value):
                 return np.inf, None, None, None
@@ -362,13 +381,15 @@ class PatternCachingSolver:
         if con.friction_tangents.ndim == 2:
             con = as_cone(con)  # (``solve`` converts it once for its evaluations)
         k = con.friction_nodes
-        fric_grad = np.empty(self.n)
+        blocks = self._friction_blocks
+        if blocks.shape[0] != k.size:
+            blocks = self._friction_blocks = np.empty((k.size, self.dim, self.dim))
         phi = kernels.add_step_terms(
             phi, hessian, q, q_n, dq, dt, self.m, self.alpha, self.beta,
-            self._matvec_indptr, self._matvec_indices, stiffness, np.empty(self.n), k,
+            self._matvec_indptr, self._matvec_indices, stiffness, self._k_dq, k,
             con.friction_tangents, con.friction_bounds, con.friction_obstacle_speed,
             FRICTION_SMOOTHING, self._diag_pos, self._diag_block_pos, grad, fric_grad,
-            np.empty((k.size, self.dim, self.dim)), data)
+            blocks, data)
         return phi, grad, fric_grad, (data, low_rank) if hessian else None
 
     def newton_matrix(self, hdata: np.ndarray, filters: np.ndarray,
@@ -521,6 +542,7 @@ class _NewtonProblem(StepProblem):
                  dt: float, con: StepConstraints):
         super().__init__(solver, q_n, v_n, dt, con, solver.evaluate_fast)
         self.filters = con.filters
+        self.fric_grad = np.empty(solver.n)  # the friction gradient of the last evaluation
         self._filtered = np.empty(solver.n)
         self.matrix = self.low = None
         self.shift = 0.0
@@ -531,6 +553,18 @@ class _NewtonProblem(StepProblem):
         out = np.empty(self.solver.n)
         kernels.apply_filters(self.filters, np.ascontiguousarray(vec), out)
         return out
+
+    def evaluate(self, x, hessian, grad) -> float:
+        """Phi at x (inf: infeasible), its gradient written into ``grad`` and the
+        friction's into ``fric_grad`` by the solver itself (no copies)."""
+        phi, _, _, parts = self.solver.evaluate_fast(x, self.q_n, self.v_n, self.dt,
+                                                     self.con, bool(hessian), grad=grad,
+                                                     fric_grad=self.fric_grad)
+        if not math.isfinite(phi):
+            return np.inf
+        if hessian:
+            self.parts = parts
+        return phi
 
     def kept_fits(self) -> bool:
         return False  # a new solve: nothing kept (``keep``)
