@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from gripper_sim.core.barrier_search import collision_free_step
+
 
 @njit(cache=True)
 def _barrier_derivatives(s, s_hat, scale):
@@ -259,6 +261,18 @@ def _clamp_pair_to_psd(local, m, scratch):
 
 
 @njit(cache=True)
+def same_values(a, b):
+    """Whether the arrays ``a`` and ``b`` (n,) hold the same values (``np.array_equal``:
+    NaN equals nothing), stopping at the first difference."""
+    if a.shape[0] != b.shape[0]:
+        return False
+    for i in range(a.shape[0]):
+        if a[i] != b[i]:
+            return False
+    return True
+
+
+@njit(cache=True)
 def largest_move(q, dofs, start):
     """m, the largest distance of a vertex at positions ``q`` (n_dof,) from ``start``
     (k, 2), its coordinates at ``dofs`` (k, 2)."""
@@ -268,6 +282,29 @@ def largest_move(q, dofs, start):
         dy = q[dofs[i, 1]] - start[i, 1]
         largest = max(largest, dx * dx + dy * dy)
     return np.sqrt(largest)
+
+
+@njit(cache=True)
+def kept_step_bound(q, dq, dofs, corners, edges, anchor, pairs, margin):
+    """The CCD's largest fraction (0, 1] of the step ``dq`` from positions ``q`` (n_dof,)
+    m free of crossings (``barrier_search.collision_free_step``) over kept candidate
+    ``pairs`` (k, 2), or -1 if they may miss a pair: a deformable vertex (coordinates at
+    ``dofs`` (n_v, 2)) further than ``margin`` m from ``anchor`` (n_v, 2), where they
+    were sought, at either end. The collision mesh's vertices are the deformable ones
+    then the faces' ``corners`` (c k, 2) m, standing still; ``edges`` (n_e, 2)."""
+    end = q + dq
+    if largest_move(q, dofs, anchor) > margin or largest_move(end, dofs, anchor) > margin:
+        return -1.0
+    n_v = dofs.shape[0]
+    v0 = np.empty((n_v + corners.shape[0], 2))
+    v1 = np.empty((n_v + corners.shape[0], 2))
+    for i in range(n_v):
+        for c in range(2):
+            v0[i, c] = q[dofs[i, c]]
+            v1[i, c] = end[dofs[i, c]]
+    v0[n_v:] = corners
+    v1[n_v:] = corners
+    return collision_free_step(v0, v1, edges, pairs)
 
 
 @njit(cache=True)

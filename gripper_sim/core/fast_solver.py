@@ -55,7 +55,7 @@ from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.energy_table import EnergyTable
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
                                       StepConstraints, StepProblem, StepSolution,
-                                      stack_low_rank, woodbury_terms)
+                                      woodbury_terms)
 
 #: relative residual (infinity norms) at which the preconditioned CG stops (0.1 took
 #: 12 % more Newton systems on the solid apple's grasp: a fruit held at two nodes has a
@@ -112,6 +112,7 @@ class _BlockLDL:
 
     def __init__(self, pattern, gather: tuple, perm: np.ndarray):
         self.pattern, self.gather, self.perm = pattern, gather, perm
+        self.arrays = pattern.arrays  # the kernels' view of the pattern (a new tuple a read)
         b = pattern.block
         self.l_values = np.empty((pattern.n_factor, b, b))
         self.d_inv = np.empty((pattern.n_nodes, b, b))
@@ -124,16 +125,16 @@ class _BlockLDL:
         target, source = self.gather
         values.reshape(-1)[target] = data[source]
         if self.pattern.block == 3:
-            status = sparse_ldl.ldl_factor_3(self.pattern.arrays, values.reshape(-1, 9),
+            status = sparse_ldl.ldl_factor_3(self.arrays, values.reshape(-1, 9),
                                           self.l_values.reshape(-1, 9),
                                           self.d_inv.reshape(-1, 9))
         else:
-            status = sparse_ldl.factor(self.pattern.arrays, values, self.l_values, self.d_inv)
+            status = sparse_ldl.factor(self.arrays, values, self.l_values, self.d_inv)
         if status < 0:
             raise RuntimeError('singular Newton matrix')
 
     def _solve_in_place(self, x: np.ndarray) -> None:
-        pcg_kernels.block_ldl_solve(self.pattern.arrays, self.l_values, self.d_inv, x)
+        pcg_kernels.block_ldl_solve(self.arrays, self.l_values, self.d_inv, x)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b for b (n,) or (n, k)."""
@@ -219,6 +220,8 @@ class PatternCachingSolver:
         self._no_values = np.zeros(1)
         self._k_dq = np.empty(self.n)
         self._friction_blocks = np.empty((0, self.dim, self.dim))
+        #: the preconditioner's rank-one terms where there are none (``_woodbury_terms``)
+        self._no_woodbury = (np.zeros((self.n, 0)), np.zeros((self.n, 0)), np.zeros((0, 0)))
         #: the energies that may bound a step (``max_step`` not the base's 1)
         self._step_bounding = [e for e in self.energies
                                if type(e).max_step is not Energy.max_step]
@@ -412,14 +415,14 @@ class PatternCachingSolver:
     def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank: tuple,
                      fresh: bool, dt: float, filters: np.ndarray):
         """dq with (A + u diag(c) u^T) dq = rhs (A: CSC ``values`` on the pattern, the
-        rank-one terms ``low_rank`` = (u (n, k), c (k,)), ``stack_low_rank``'s) by
+        rank-one terms ``low_rank`` = (u (n, k), c (k,), u^T (k, n)), C order) by
         conjugate gradients preconditioned with the kept LDL^T, factorised afresh when CG
         does not converge fast (or ``fresh``), in the range of the filters S (n_nodes, d,
         d). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
-        u, c = low_rank
+        u, c, u_t = low_rank
         if self._lu is not None and not fresh and not self._stale:
-            dq = self._pcg(values, rhs, u, c, dt, filters)
+            dq = self._pcg(values, rhs, u, c, u_t, dt, filters)
             if dq is not None:
                 return dq
         self._stale = False
@@ -429,7 +432,7 @@ class PatternCachingSolver:
             # the preconditioner keeps these rank-one terms with the factorisation
             a_inv_u, capacitance = woodbury_terms(self._lu.solve, u, c)
             self._woodbury = (u, a_inv_u, np.linalg.inv(capacitance))
-        dq = self._pcg(values, rhs, u, c, dt, filters)
+        dq = self._pcg(values, rhs, u, c, u_t, dt, filters)
         if dq is not None:
             return dq
         # CG failed even on a fresh factorisation (negative curvature: an indefinite
@@ -450,7 +453,7 @@ class PatternCachingSolver:
         if c.size:
             a_inv_u, capacitance = woodbury_terms(self._lu.solve, u, c)
             return u, a_inv_u, np.linalg.inv(capacitance)
-        return np.zeros((self.n, 0)), np.zeros((self.n, 0)), np.zeros((0, 0))
+        return self._no_woodbury
 
     def _preconditioner(self, u: np.ndarray, c: np.ndarray):
         """r -> (kept LDL^T + rank-one terms)^-1 r."""
@@ -473,16 +476,17 @@ class PatternCachingSolver:
             ax += u @ (c * (u.T @ x))
         return ax
 
-    def _pcg(self, values, rhs, u, c, dt, filters):
+    def _pcg(self, values, rhs, u, c, u_t, dt, filters):
         """Preconditioned CG from zero (``pcg_kernels.preconditioned_cg``, in the range of
-        the filters S (n_nodes, d, d)); None if it fails to converge in time."""
+        the filters S (n_nodes, d, d); the rank-one terms u (n, k), c (k,), u_t = u^T);
+        None if it fails to converge in time."""
         u_w, a_inv_u, small_inv = self._woodbury_terms(u, c)
         lu = self._lu
         x = np.empty(self.n)
         status, iterations = pcg_kernels.preconditioned_cg(
-            self._matvec_indptr, self._matvec_indices, values, u, np.ascontiguousarray(u.T),
-            np.ascontiguousarray(c, dtype=float), filters, lu.perm, lu.pattern.arrays,
-            lu.l_values, lu.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv, rhs,
+            self._matvec_indptr, self._matvec_indices, values, u, u_t, c, filters, lu.perm,
+            lu.arrays, lu.l_values, lu.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv,
+            rhs,
             CG_TOLERANCE, CG_ERROR_FRACTION * self.tolerance * dt, CG_RELATIVE_FLOOR * self.tolerance * dt,
             CG_MAX_ITERATIONS, CG_STALE_ITERATIONS, x)
         self.stats['cg_iterations'] += iterations
@@ -566,6 +570,16 @@ class _NewtonProblem(StepProblem):
             self.parts = parts
         return phi
 
+    def _filtered_low_rank(self, low_rank: list) -> tuple:
+        """The rank-one terms [(c_j, u_j)] filtered and stacked once for every system with
+        the matrix: (S u (n, k), c (k,), (S u)^T (k, n)), C order; k may be 0."""
+        k, n = len(low_rank), self.solver.n
+        u_t, c = np.empty((k, n)), np.empty(k)
+        for j, (coef, vec) in enumerate(low_rank):
+            c[j] = coef
+            kernels.apply_filters(self.filters, vec, u_t[j])
+        return np.ascontiguousarray(u_t.T), c, u_t
+
     def kept_fits(self) -> bool:
         return False  # a new solve: nothing kept (``keep``)
 
@@ -586,9 +600,7 @@ class _NewtonProblem(StepProblem):
             s_diag = np.einsum('naa->na', self.filters).ravel()
             diagonal = shift * s_diag * solver.m / self.dt ** 2
         self.matrix = solver.newton_matrix(hdata, self.filters, diagonal)
-        # the rank-one terms filtered and stacked once for every system with the matrix
-        self.low = stack_low_rank([(coef, self.filtered(vec)) for coef, vec in low_rank],
-                                  solver.n)
+        self.low = self._filtered_low_rank(low_rank)
         self.shift = shift
         return True
 
