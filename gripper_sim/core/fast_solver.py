@@ -291,10 +291,17 @@ class PatternCachingSolver:
         self._block_pos = np.searchsorted(unique, keys).astype(np.int64)
         self._block_nodes = np.stack([brow, bcol], axis=1).astype(np.int64)
         self._diag_block_pos = self._block_pos[brow == bcol][np.argsort(brow[brow == bcol])]
+        # each node's blocks (as row or column, the diagonal once) in CSR, its diagonal one
+        off = brow != bcol
+        blocks = np.arange(brow.size)
+        owner = np.concatenate([brow, bcol[off]])
+        order = np.argsort(owner, kind='stable')
+        self._node_blocks = np.concatenate([blocks, blocks[off]])[order]
+        self._node_block_ptr = np.searchsorted(owner[order], np.arange(nodes + 1))
+        self._diag_blocks = blocks[brow == bcol][np.argsort(brow[brow == bcol])]
         self._diag_pos = np.searchsorted(unique, np.arange(n) * n + np.arange(n))
         # the block LDL^T preconditioner in the nested-dissection order of the node graph
         # (dof by dof), and where its blocks come from in the CSC values
-        off = brow != bcol
         graph = sp.csr_matrix((np.ones(len(bcol)), (brow, bcol)), shape=(nodes, nodes))
         node_order = nested_dissection(graph)
         self._ldl_pattern = sparse_ldl.analyse(
@@ -400,8 +407,8 @@ class PatternCachingSolver:
         """CSC values of S H S + (I - S) + diag(``diagonal`` (n_dof,)), H the CSC values
         ``hdata`` on the pattern, S the node filters (n_nodes, d, d)."""
         out = np.empty(self._nnz)
-        kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, filters,
-                              diagonal, out)
+        kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, self._node_block_ptr,
+                              self._node_blocks, self._diag_blocks, filters, diagonal, out)
         return out
 
     def _factorise(self, values: np.ndarray) -> _BlockLDL:
