@@ -57,7 +57,8 @@ import numpy as np
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move,
                                               largest_relative_move, nearest_faces,
-                                              nearest_partners, same_values)
+                                              nearest_partners, relative_moves_within,
+                                              same_values)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear, smallest_distance)
 from gripper_sim.core.barrier_terms import barrier_terms
@@ -100,6 +101,7 @@ CANDIDATE_MARGIN = 1e-4
 
 #: ``barrier_terms``'s arguments when no Hessian is wanted or there is no friction
 _NO_VALUES, _NO_SLOTS = np.zeros(0), np.zeros(0, np.int64)
+_NO_STEP = np.zeros(0)  # ``quiet`` at q only
 _NO_FRICTION = (np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0),
                 np.zeros((0, 2)))
 
@@ -494,8 +496,9 @@ class BarrierContact(Energy):
         if outside and not self.drop_outside_pattern:
             raise AssertionError('barrier Hessian entry outside its pattern')
 
-    def quiet(self, q: np.ndarray) -> bool:
-        """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
+    def quiet(self, q: np.ndarray, dq: np.ndarray = _NO_STEP) -> bool:
+        """Whether no pair is within dhat at positions ``q`` (n d,) m for certain (and, with
+        ``dq`` (n d,) m, at q + dq too; one kernel call, ``relative_moves_within``): a
         self-contact whose vertices all lie within the quiet region's reach of where it
         was sought, each body's mean move taken off (each vertex and edge moved by at most
         that reach against its body: their gap shrank by at most twice it). Always False
@@ -503,7 +506,8 @@ class BarrierContact(Energy):
         if self._quiet is None:
             return False
         anchor, reach = self._quiet
-        return self._relative_move(q, anchor) <= reach
+        return relative_moves_within(q, dq, self._vertex_dof_pairs, anchor, self.vertex_body,
+                                     len(self.bodies) + 1, reach)
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
@@ -663,7 +667,7 @@ class BarrierContact(Energy):
         primitive of the surface crosses a face's and no face's crosses the surface's
         (CCD: in 2D compiled, ``_step_bound``; in 3D ipctk's, keeping the step's collision
         candidates for the line search along it)."""
-        if self._quiet is not None and self.quiet(q) and self.quiet(q + dq):
+        if self.quiet(q, dq):
             return 1.0
         if self.dimension == 2:
             return self._step_bound(q, dq)

@@ -334,6 +334,16 @@ def largest_relative_move(q, dofs, start, body, n_bodies):
 
 
 @njit(cache=True)
+def relative_moves_within(q, dq, dofs, start, body, n_bodies, reach):
+    """Whether ``largest_relative_move`` at positions ``q`` (n_dof,) m, and at q + dq if
+    ``dq`` (n_dof,) m is not empty, is at most ``reach`` m."""
+    if largest_relative_move(q, dofs, start, body, n_bodies) > reach:
+        return False
+    return dq.shape[0] == 0 or largest_relative_move(q + dq, dofs, start, body,
+                                                     n_bodies) <= reach
+
+
+@njit(cache=True)
 def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, gradient,
                         want_hessian, project, pattern_keys, n_dof, slots, hessian_values):
     """The barrier of the edge-vertex ``candidates`` at the collision mesh's vertices.

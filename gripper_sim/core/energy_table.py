@@ -82,14 +82,14 @@ class EnergyTable:
         rank-one terms [(c, dA/dq)] with ``hessian``, else []). dq and the rank-one
         vectors are this table's arrays, valid until its next call (the vectors: its
         next call with the Hessian)."""
-        if hessian:
-            data[:] = 0.0
         vectors = self._vectors if hessian else self._scratch_vectors
         phi = inertia_and_energies(q, q_n, v_n, dt, masses, alpha, self._dq, grad, hessian,
                                    data, self.order, self.items, self._coefs, vectors)
-        low_rank = ([(float(self._coefs[p]), vectors[p]) for p in range(self.pressures)
-                     if self._coefs[p] != 0.0] if hessian else [])
-        return phi, self._dq, low_rank
+        if not (hessian and self.pressures):
+            return phi, self._dq, []
+        coefs = self._coefs
+        return phi, self._dq, [(float(coefs[p]), vectors[p]) for p in range(self.pressures)
+                               if coefs[p] != 0.0]
 
 
 def _item(kind: int, arrays: tuple, scatter: np.ndarray) -> tuple:
@@ -115,7 +115,8 @@ def inertia_and_energies(q, q_n, v_n, dt, masses, alpha, dq, grad, hessian, data
     Args:
         q, q_n, v_n: (2 n,) m, m, m/s.  dt: s.  masses: (2 n,) kg.  alpha: 1/s.
         dq: (2 n,) m, q - q_n written.  grad: (2 n,) N, written.
-        hessian: whether the Hessians are added into the CSC values ``data`` (N/m).
+        hessian: whether the Hessians are added into the CSC values ``data`` (N/m),
+            zeroed first.
         order: (count,) the energies' kinds.  items: their arrays (the typed list).
         rank_one_coefs: (n_pressure,) N/m^3, each pressure's rank-one coefficient c,
             written.  rank_one_vectors: (n_pressure, 2 n) m, its dA/dq, written.
@@ -123,6 +124,8 @@ def inertia_and_energies(q, q_n, v_n, dt, masses, alpha, dq, grad, hessian, data
     Returns:
         Phi so far (J), or inf as soon as an energy is not finite (the rest not summed).
     """
+    if hessian:
+        data[:] = 0.0
     phi = inertia_and_mass_damping(q, q_n, v_n, dt, masses, alpha, dq, grad)
     pressure = 0
     for slot in range(order.shape[0]):
