@@ -434,27 +434,45 @@ def add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
     Args:
         local: (2 m, 2 m) N/m, over the (x, y) dofs of the pair's vertices ``ids[:m]``.
         vertex_dofs: (n_v, 2) each vertex's dof per coordinate, -1 where fixed.
-        n_dof: the matrix's size.  pattern_keys: sorted (nnz,) keys col * n_dof + row of
-        the pattern.  slots: (nnz,) the value index of each key.
+        n_dof: the matrix's size.  pattern_keys: sorted (nnz,) distinct keys
+        col * n_dof + row of the pattern.  slots: (nnz,) the value index of each key.
         hessian_values: the CSC values, added into.
+
+    A vertex's y dof follows its x dof (row + 1): its key then follows the x key's in
+    the sorted keys, so one binary search serves both (each entry adds to its own slot,
+    so the order of the adds is free).
     """
     outside = 0
+    size = pattern_keys.size
     for i in range(m):
+        row_x, row_y = vertex_dofs[ids[i], 0], vertex_dofs[ids[i], 1]
+        adjacent = row_x >= 0 and row_y == row_x + 1
         for j in range(m):
-            for ci in range(2):
-                row = vertex_dofs[ids[i], ci]
-                if row < 0:
+            for cj in range(2):
+                col = vertex_dofs[ids[j], cj]
+                if col < 0:
                     continue
-                for cj in range(2):
-                    col = vertex_dofs[ids[j], cj]
-                    if col < 0:
-                        continue
-                    key = col * n_dof + row
-                    where = np.searchsorted(pattern_keys, key)
-                    if where >= pattern_keys.size or pattern_keys[where] != key:
+                at_x = 0
+                found_x = False
+                if row_x >= 0:
+                    key = col * n_dof + row_x
+                    at_x = np.searchsorted(pattern_keys, key)
+                    found_x = at_x < size and pattern_keys[at_x] == key
+                    if found_x:
+                        hessian_values[slots[at_x]] += local[2 * i, 2 * j + cj]
+                    else:
                         outside += 1
-                        continue
-                    hessian_values[slots[where]] += local[2 * i + ci, 2 * j + cj]
+                if row_y < 0:
+                    continue
+                key = col * n_dof + row_y
+                if adjacent:  # the first key >= row_x's key + 1
+                    at = at_x + 1 if found_x else at_x
+                else:
+                    at = np.searchsorted(pattern_keys, key)
+                if at < size and pattern_keys[at] == key:
+                    hessian_values[slots[at]] += local[2 * i + 1, 2 * j + cj]
+                else:
+                    outside += 1
     return outside
 
 
