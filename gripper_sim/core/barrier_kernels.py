@@ -110,13 +110,13 @@ JACOBI_SWEEPS = 12
 
 
 @njit(cache=True)
-def _clamp_to_psd(matrix, a, vectors, out):
-    """``matrix`` (k, k) symmetric with its negative eigenvalues set to 0: its
+def _clamp_4x4_to_psd(matrix, a, vectors, out):
+    """``matrix`` (4, 4) symmetric with its negative eigenvalues set to 0: its
     eigensystem by cyclic Jacobi rotations (Golub & Van Loan, Matrix Computations,
-    section 8.5), much cheaper than a LAPACK call for k <= 6. ``a``, ``vectors``,
-    ``out`` (k, k): work space (``out`` is returned where the clamp changes ``matrix``,
-    else ``matrix`` itself)."""
-    k = matrix.shape[0]
+    section 8.5), much cheaper than a LAPACK call. ``a``, ``vectors``, ``out`` (4, 4):
+    work space (``out`` is returned where the clamp changes ``matrix``, else ``matrix``
+    itself). The size is a constant, so the compiler unrolls the loops over it."""
+    k = 4
     a[:] = matrix
     vectors[:] = 0.0
     for i in range(k):
@@ -217,15 +217,15 @@ def psd_scratch():
 @njit(cache=True)
 def _clamp_pair_to_psd(local, m, scratch):
     """A pair's Hessian ``local`` (2 m, 2 m) over its m = 2 or 3 vertices' (x, y) with its
-    negative eigenvalues set to 0 (``_clamp_to_psd`` of it, to round-off); ``scratch``
+    negative eigenvalues set to 0 (a Jacobi clamp of it, to round-off); ``scratch``
     the work arrays (``psd_scratch``), one of which is returned.
 
     The barrier depends on the differences of the pair's positions only, so its Hessian
     maps both translations to 0 and acts on their orthogonal complement: with an
     orthonormal basis Q = B (x) I_2 of it (B (m, m - 1), orthonormal columns summing to
     zero), L = Q (Q^T L Q) Q^T and the clamped L is Q clamp(Q^T L Q) Q^T, a 2 x 2 in
-    closed form (point-point) or a 4 x 4 by Jacobi (point-line) instead of a 4 x 4 or
-    6 x 6 by Jacobi."""
+    closed form (point-point) or a 4 x 4 by Jacobi (point-line, ``_clamp_4x4_to_psd``)
+    instead of a 4 x 4 or 6 x 6 by Jacobi."""
     pair, triple, reduced2, reduced4, jacobi, vectors, clamped2, clamped4, out4, out6 = scratch
     r = m - 1
     basis = pair if m == 2 else triple
@@ -244,7 +244,7 @@ def _clamp_pair_to_psd(local, m, scratch):
     if r == 1:
         clamped = _clamp_2x2_to_psd(reduced, clamped2)
     else:
-        clamped = _clamp_to_psd(reduced, jacobi, vectors, clamped4)
+        clamped = _clamp_4x4_to_psd(reduced, jacobi, vectors, clamped4)
     out = out4 if m == 2 else out6
     out[:] = 0.0
     for k in range(m):
