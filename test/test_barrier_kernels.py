@@ -12,8 +12,11 @@ import ipctk
 import numpy as np
 import pytest
 
-from gripper_sim.core.barrier_kernels import (edge_vertex_barrier, largest_relative_move,
-                                              mark_sticking, nearest_faces)
+from gripper_sim.core.barrier_kernels import (add_local_hessian, edge_vertex_barrier,
+                                              kept_step_bound, largest_relative_move,
+                                              mark_sticking, nearest_faces,
+                                              relative_moves_within, same_values)
+from gripper_sim.core.barrier_search import collision_free_step
 
 DHAT = 1e-3
 KAPPA = 0.1
@@ -88,6 +91,72 @@ def test_a_bodys_move_is_measured_against_its_mean_move():
                                                                                     abs=1e-12)
     q[0, 0] += 4e-3                                  # one vertex of the first body moves
     assert largest_relative_move(q.ravel(), dofs, start, body, 2) == pytest.approx(3e-3)
+
+
+@pytest.mark.parametrize('adjacent', [True, False])
+def test_a_local_hessian_adds_where_the_pattern_has_its_keys(adjacent):
+    """Each entry of a pair's local Hessian adds at its key's slot, fixed coordinates (-1)
+    are skipped and keys missing from the pattern are counted (a vertex's y dof next to
+    its x dof, one search for both, or not)."""
+    n_dof = 12
+    dofs = (np.array([[0, 1], [4, 5], [8, 9]]) if adjacent
+            else np.array([[0, 7], [4, 2], [8, 11]]))
+    dofs[1, 1] = -1                                  # a fixed coordinate
+    rng = np.random.default_rng(4)
+    local = rng.normal(size=(6, 6))
+    dense = np.zeros((n_dof, n_dof))                 # [row, col]
+    for a in range(6):
+        for b in range(6):
+            row, col = dofs[a // 2, a % 2], dofs[b // 2, b % 2]
+            if row >= 0 and col >= 0:
+                dense[row, col] += local[a, b]
+    keys = np.flatnonzero(dense.T.ravel() != 0.0)   # col n_dof + row, sorted
+    missing = keys[[3, 10, 11]]
+    kept = np.setdiff1d(keys, missing)
+    slots = rng.permutation(kept.size)
+    values = np.zeros(kept.size)
+    outside = add_local_hessian(local, np.array([0, 1, 2]), 3, dofs, n_dof, kept, slots,
+                                values)
+    assert outside == missing.size
+    expected = dense.T.ravel()[kept]
+    assert np.array_equal(values[slots], expected)
+
+
+def test_the_kept_step_bound_is_the_ccd_over_the_kept_pairs_or_none():
+    """Within the margin of where the pairs were sought the bound is
+    ``collision_free_step``'s over them, vertices gathered from the state and the faces'
+    corners after them; a vertex beyond the margin at either end gives -1."""
+    vertices, edges = _mesh(2)
+    n = len(vertices)
+    dofs = np.arange(2 * n).reshape(n, 2)[:n - 2]  # the last two vertices: a face's corners
+    corners = vertices[n - 2:].copy()
+    q = vertices[:n - 2].ravel().copy()
+    pairs = np.array([(e, i) for e in range(len(edges)) for i in range(n)
+                      if i not in edges[e]], np.int64)
+    dq = np.zeros_like(q)
+    dq[1::2] = 2e-3                                  # the lower outline up through the upper
+    margin = 1.0
+    bound = kept_step_bound(q, dq, dofs, corners, edges, vertices[:n - 2], pairs, margin)
+    end = vertices.copy()
+    end[:n - 2] += dq.reshape(-1, 2)
+    assert 0.0 < bound < 1.0
+    assert bound == collision_free_step(vertices, end, edges, pairs)
+    assert kept_step_bound(q, dq, dofs, corners, edges, vertices[:n - 2], pairs,
+                           1e-3) == -1.0
+
+
+def test_quiet_along_a_step_and_equal_values():
+    start = np.zeros((4, 2))
+    dofs = np.arange(8).reshape(4, 2)
+    body = np.zeros(4, np.int64)
+    q = np.zeros(8)
+    step = np.zeros(8)
+    step[0] = 2e-3                                   # vertex 0 moves 2 mm, the mean 0.5 mm
+    assert relative_moves_within(q, np.zeros(0), dofs, start, body, 1, 1e-3)
+    assert not relative_moves_within(q, step, dofs, start, body, 1, 1e-3)
+    assert relative_moves_within(q, step, dofs, start, body, 1, 2e-3)
+    assert same_values(q, np.zeros(8)) and not same_values(q, step)
+    assert not same_values(np.full(2, np.nan), np.full(2, np.nan))
 
 
 def _nearest_faces_reference(x, forces, origins, normals, tangents, half, dhat):

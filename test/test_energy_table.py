@@ -47,8 +47,12 @@ def test_the_table_sums_the_energies_as_their_own_calls_to_the_bit(hessian):
                      'Stretching', 'RodBending']
     assert type(solver.energies[table.count]).__name__ == 'BarrierContact'
     dt = 1e-3
-    phi, grad, dq, data, low_rank = table.potential(q, q_n, v_n, dt, solver.m, solver.alpha,
-                                                    hessian, solver._nnz)
+    grad = np.full(q.size, np.nan)  # written whole
+    data = np.full(solver._nnz if hessian else 1, np.nan)  # zeroed with the Hessian
+    phi, dq, low_rank = table.potential(q, q_n, v_n, dt, solver.m, solver.alpha, hessian,
+                                        grad, data)
+    if not hessian:
+        data = np.zeros(1)
     expected = _one_by_one(solver, solver.energies[:table.count], q, q_n, v_n, dt, hessian)
     assert phi == expected[0]
     for got, want in zip((grad, dq, data), expected[1:4]):
@@ -63,9 +67,9 @@ def test_the_table_sums_the_energies_as_their_own_calls_to_the_bit(hessian):
 def test_the_table_stops_at_an_energy_without_kernel_data():
     solver, q, q_n, v_n = _fin_ray_solver()
     energies = solver.energies[:2] + [Energy()] + solver.energies[2:4]
-    table = EnergyTable(energies, solver._scatter[:len(energies)], 2)
+    table = EnergyTable(energies, solver._scatter[:len(energies)], 2, solver.n)
     assert table.count == 2
-    assert EnergyTable(solver.energies, solver._scatter, 3).count == 0
+    assert EnergyTable(solver.energies, solver._scatter, 3, solver.n).count == 0
 
 
 def test_an_infeasible_energy_makes_the_potential_infinite():
@@ -73,5 +77,5 @@ def test_an_infeasible_energy_makes_the_potential_infinite():
     q = q.copy()
     q[0] = np.nan
     phi = solver._table.potential(q, q_n, v_n, 1e-3, solver.m, solver.alpha, False,
-                                  solver._nnz)[0]
+                                  np.empty(q.size), np.zeros(1))[0]
     assert not np.isfinite(phi)

@@ -280,7 +280,7 @@ def test_the_compiled_cg_solves_a_filtered_newton_system_with_a_rank_one_term(mo
     a_inv_u, capacitance = woodbury_terms(solver._lu.solve, u, c)
     solver._woodbury = (u, a_inv_u, np.linalg.inv(capacitance))
     before = solver.stats['cg_iterations']
-    x = solver._pcg(values, rhs, u, c, dt, filters)
+    x = solver._pcg(values, rhs, u, c, np.ascontiguousarray(u.T), dt, filters)
     dense = solver._csc(values).toarray() + c[0] * u @ u.T
     exact = np.linalg.solve(dense, rhs)
     assert x is not None and solver.stats['cg_iterations'] - before == 1

@@ -48,14 +48,17 @@ its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass
 
 import ipctk
 import numpy as np
 
 from gripper_sim.core import contact as cm
-from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
-                                              nearest_faces, nearest_partners)
+from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move,
+                                              largest_relative_move, nearest_faces,
+                                              nearest_partners, relative_moves_within,
+                                              same_values)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear, smallest_distance)
 from gripper_sim.core.barrier_terms import barrier_terms
@@ -98,6 +101,7 @@ CANDIDATE_MARGIN = 1e-4
 
 #: ``barrier_terms``'s arguments when no Hessian is wanted or there is no friction
 _NO_VALUES, _NO_SLOTS = np.zeros(0), np.zeros(0, np.int64)
+_NO_STEP = np.zeros(0)  # ``quiet`` at q only
 _NO_FRICTION = (np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0),
                 np.zeros((0, 2)))
 
@@ -287,6 +291,9 @@ class BarrierContact(Energy):
         #: ``vertex_dofs``), for the outputs read at the solution (``contact_forces``,
         #: ``normal_forces``)
         self._last_terms = None
+        #: (n_d,) N, the compiled evaluation's barrier and friction gradients (2D)
+        self._gradient_buffers = (np.empty(self.vertex_dofs.size),
+                                  np.empty(self.vertex_dofs.size))
         self._positions = None  # (scatter, CSC position of each pattern key)
         #: the last Newton step's candidates: (lowest, highest (n_v, d) m corners of the
         #: box each deformable vertex swept, ipctk.Candidates), see ``max_step``
@@ -512,8 +519,9 @@ class BarrierContact(Energy):
         if outside and not self.drop_outside_pattern:
             raise AssertionError('barrier Hessian entry outside its pattern')
 
-    def quiet(self, q: np.ndarray) -> bool:
-        """Whether no pair is within dhat at positions ``q`` (n d,) m for certain: a
+    def quiet(self, q: np.ndarray, dq: np.ndarray = _NO_STEP) -> bool:
+        """Whether no pair is within dhat at positions ``q`` (n d,) m for certain (and, with
+        ``dq`` (n d,) m, at q + dq too; one kernel call, ``relative_moves_within``): a
         self-contact whose vertices all lie within the quiet region's reach of where it
         was sought, each body's mean move taken off (each vertex and edge moved by at most
         that reach against its body: their gap shrank by at most twice it). Always False
@@ -521,7 +529,8 @@ class BarrierContact(Energy):
         if self._quiet is None:
             return False
         anchor, reach = self._quiet
-        return self._relative_move(q, anchor) <= reach
+        return relative_moves_within(q, dq, self._vertex_dof_pairs, anchor, self.vertex_body,
+                                     len(self.bodies) + 1, reach)
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
@@ -535,7 +544,7 @@ class BarrierContact(Energy):
             return 0.0
         last = self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
-        if into is None and last is not None and np.array_equal(last[0], q):
+        if into is None and last is not None and same_values(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
         elif self.dimension == 2:
             # the kernel adds the gradients into ``gradient`` itself
@@ -595,8 +604,8 @@ class BarrierContact(Energy):
         if not len(candidates) and pairs is None:
             return 0.0, 0.0, None, None
         values, slots = into if into is not None else (_NO_VALUES, _NO_SLOTS)
-        n_d = self.vertex_dofs.size
-        barrier_gradient, friction_gradient = np.empty(n_d), np.empty(n_d)
+        # written only by an evaluation that succeeds, which ``_last_terms`` then keeps
+        barrier_gradient, friction_gradient = self._gradient_buffers
         barrier_value, friction_value, outside, friction_outside = barrier_terms(
             q, self._vertex_dof_pairs, self._obstacles_end, self._mesh_edges,
             candidates, self.settings.dhat, self.settings.stiffness,
@@ -606,10 +615,10 @@ class BarrierContact(Energy):
             _NO_FRICTION if pairs is None else pairs, pairs is not None,
             into is not None and friction, barrier_gradient, friction_gradient, gradient,
             friction)
-        if not np.isfinite(barrier_value):
+        if not math.isfinite(barrier_value):
             return None
-        self._check_outside(outside)
-        self._check_outside(friction_outside)
+        if outside or friction_outside:
+            self._check_outside(outside + friction_outside)
         return (barrier_value, friction_value, barrier_gradient,
                 None if pairs is None else friction_gradient)
 
@@ -681,13 +690,13 @@ class BarrierContact(Energy):
         primitive of the surface crosses a face's and no face's crosses the surface's
         (CCD: in 2D compiled, ``_step_bound``; in 3D ipctk's, keeping the step's collision
         candidates for the line search along it)."""
-        end = q + dq
-        if self.quiet(q) and self.quiet(end):
+        if self.quiet(q, dq):
             return 1.0
+        if self.dimension == 2:
+            return self._step_bound(q, dq)
+        end = q + dq
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices(end.reshape(-1, self.dimension))
-        if self.dimension == 2:
-            return self._step_bound(q, end, v0, v1)
         candidates = ipctk.Candidates()
         candidates.build(self._mesh, v0, v1, (0.5 + SWEPT_MARGIN) * self.settings.dhat,
                          self._broad_phase)
@@ -826,16 +835,23 @@ class BarrierContact(Energy):
                 return False
         return self.min_distance(start) > 0.0
 
-    def _step_bound(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray,
-                    v1: np.ndarray) -> float:
+    def _step_bound(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The compiled CCD's (2D, ``barrier_search``) largest fraction (0, 1] of the
-        straight motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's
-        vertices ``v0`` to ``v1`` (n_m, 2) m, free of crossings (conservative: each pair
-        keeps ``SEPARATION`` of its gap). Its pairs: the barrier's kept candidates
-        (``_candidate_pairs``) when both ends lie within ``CANDIDATE_MARGIN`` of where
-        they were sought (so does every point between: a pair not among them stays
-        further than dhat apart all along), else those of the boxes the vertices sweep."""
-        pairs = self._pairs_along(q0, q1, v0, v1, False)
+        step ``dq`` from positions ``q`` (2 n,) m free of crossings
+        (conservative: each pair keeps ``SEPARATION`` of its gap). Its pairs: the
+        barrier's kept candidates (``_candidate_pairs``) when both ends lie within
+        ``CANDIDATE_MARGIN`` of where they were sought (so does every point between: a
+        pair not among them stays further than dhat apart all along; one kernel call,
+        ``kept_step_bound``), else those of the boxes the vertices sweep."""
+        kept = self._pairs
+        if kept is not None:
+            bound = kept_step_bound(q, dq, self._vertex_dof_pairs, self._obstacles_end,
+                                    self._mesh_edges, kept[0], kept[1], CANDIDATE_MARGIN)
+            if bound >= 0.0:
+                return float(bound)
+        end = q + dq
+        v0, v1 = self.vertices(q.reshape(-1, 2)), self.vertices(end.reshape(-1, 2))
+        pairs = self._pairs_along(q, end, v0, v1, False)
         return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
 
     def _pairs_along(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray, v1: np.ndarray,

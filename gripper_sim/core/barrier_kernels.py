@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from gripper_sim.core.barrier_search import collision_free_step
+
 
 @njit(cache=True)
 def _barrier_derivatives(s, s_hat, scale):
@@ -108,13 +110,17 @@ JACOBI_SWEEPS = 12
 
 
 @njit(cache=True)
-def _clamp_to_psd(matrix):
-    """``matrix`` (k, k) symmetric with its negative eigenvalues set to 0: its
+def _clamp_4x4_to_psd(matrix, a, vectors, out):
+    """``matrix`` (4, 4) symmetric with its negative eigenvalues set to 0: its
     eigensystem by cyclic Jacobi rotations (Golub & Van Loan, Matrix Computations,
-    section 8.5), much cheaper than a LAPACK call for k <= 6."""
-    k = matrix.shape[0]
-    a = matrix.copy()
-    vectors = np.eye(k)
+    section 8.5), much cheaper than a LAPACK call. ``a``, ``vectors``, ``out`` (4, 4):
+    work space (``out`` is returned where the clamp changes ``matrix``, else ``matrix``
+    itself). The size is a constant, so the compiler unrolls the loops over it."""
+    k = 4
+    a[:] = matrix
+    vectors[:] = 0.0
+    for i in range(k):
+        vectors[i, i] = 1.0
     scale = 0.0
     for i in range(k):
         for j in range(k):
@@ -154,7 +160,7 @@ def _clamp_to_psd(matrix):
             negative = True
     if not negative:
         return matrix
-    out = np.zeros((k, k))
+    out[:] = 0.0
     for m in range(k):
         value = a[m, m]
         if value <= 0.0:
@@ -166,16 +172,17 @@ def _clamp_to_psd(matrix):
 
 
 @njit(cache=True)
-def _clamp_2x2_to_psd(matrix):
+def _clamp_2x2_to_psd(matrix, out):
     """``matrix`` (2, 2) symmetric with its negative eigenvalues set to 0, in closed form
-    (a negative and a positive eigenvalue l1 < 0 <= l2: l2 (A - l1 I) / (l2 - l1))."""
+    (a negative and a positive eigenvalue l1 < 0 <= l2: l2 (A - l1 I) / (l2 - l1)); into
+    ``out`` (2, 2), returned, where the clamp changes ``matrix``, else ``matrix``."""
     a, b, d = matrix[0, 0], matrix[0, 1], matrix[1, 1]
     mean = 0.5 * (a + d)
     radius = np.sqrt((0.5 * (a - d)) ** 2 + b * b)
     low, high = mean - radius, mean + radius
     if low >= 0.0:
         return matrix
-    out = np.zeros((2, 2))
+    out[:] = 0.0
     if high <= 0.0:
         return out
     factor = high / (high - low)
@@ -185,25 +192,45 @@ def _clamp_2x2_to_psd(matrix):
 
 
 @njit(cache=True)
-def _clamp_pair_to_psd(local, m):
+def _pair_bases():
+    """The orthonormal bases B (m, m - 1) of ``_clamp_pair_to_psd``: (m = 2, m = 3)."""
+    pair = np.zeros((2, 1))
+    pair[0, 0], pair[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
+    triple = np.zeros((3, 2))
+    triple[0, 0], triple[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
+    triple[0, 1] = triple[1, 1] = 1.0 / np.sqrt(6.0)
+    triple[2, 1] = -2.0 / np.sqrt(6.0)
+    return pair, triple
+
+
+@njit(cache=True)
+def psd_scratch():
+    """The work arrays of ``_clamp_pair_to_psd``, made once per kernel call: (the bases
+    B of m = 2 and 3 (2, 1), (3, 2); reduced (2, 2), (4, 4); the Jacobi copy and
+    eigenvectors (4, 4); clamped (2, 2), (4, 4); out (4, 4), (6, 6))."""
+    pair, triple = _pair_bases()
+    return (pair, triple, np.empty((2, 2)), np.empty((4, 4)), np.empty((4, 4)),
+            np.empty((4, 4)), np.empty((2, 2)), np.empty((4, 4)), np.empty((4, 4)),
+            np.empty((6, 6)))
+
+
+@njit(cache=True)
+def _clamp_pair_to_psd(local, m, scratch):
     """A pair's Hessian ``local`` (2 m, 2 m) over its m = 2 or 3 vertices' (x, y) with its
-    negative eigenvalues set to 0 (``_clamp_to_psd`` of it, to round-off).
+    negative eigenvalues set to 0 (a Jacobi clamp of it, to round-off); ``scratch``
+    the work arrays (``psd_scratch``), one of which is returned.
 
     The barrier depends on the differences of the pair's positions only, so its Hessian
     maps both translations to 0 and acts on their orthogonal complement: with an
     orthonormal basis Q = B (x) I_2 of it (B (m, m - 1), orthonormal columns summing to
     zero), L = Q (Q^T L Q) Q^T and the clamped L is Q clamp(Q^T L Q) Q^T, a 2 x 2 in
-    closed form (point-point) or a 4 x 4 by Jacobi (point-line) instead of a 4 x 4 or
-    6 x 6 by Jacobi."""
+    closed form (point-point) or a 4 x 4 by Jacobi (point-line, ``_clamp_4x4_to_psd``)
+    instead of a 4 x 4 or 6 x 6 by Jacobi."""
+    pair, triple, reduced2, reduced4, jacobi, vectors, clamped2, clamped4, out4, out6 = scratch
     r = m - 1
-    basis = np.zeros((m, r))
-    if m == 2:
-        basis[0, 0], basis[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
-    else:
-        basis[0, 0], basis[1, 0] = np.sqrt(0.5), -np.sqrt(0.5)
-        basis[0, 1] = basis[1, 1] = 1.0 / np.sqrt(6.0)
-        basis[2, 1] = -2.0 / np.sqrt(6.0)
-    reduced = np.zeros((2 * r, 2 * r))
+    basis = pair if m == 2 else triple
+    reduced = reduced2 if m == 2 else reduced4
+    reduced[:] = 0.0
     for i in range(r):
         for j in range(r):
             for k in range(m):
@@ -214,8 +241,12 @@ def _clamp_pair_to_psd(local, m):
                     for c in range(2):
                         for e in range(2):
                             reduced[2 * i + c, 2 * j + e] += w * local[2 * k + c, 2 * n + e]
-    clamped = _clamp_2x2_to_psd(reduced) if r == 1 else _clamp_to_psd(reduced)
-    out = np.zeros((2 * m, 2 * m))
+    if r == 1:
+        clamped = _clamp_2x2_to_psd(reduced, clamped2)
+    else:
+        clamped = _clamp_4x4_to_psd(reduced, jacobi, vectors, clamped4)
+    out = out4 if m == 2 else out6
+    out[:] = 0.0
     for k in range(m):
         for n in range(m):
             for i in range(r):
@@ -230,6 +261,18 @@ def _clamp_pair_to_psd(local, m):
 
 
 @njit(cache=True)
+def same_values(a, b):
+    """Whether the arrays ``a`` and ``b`` (n,) hold the same values (``np.array_equal``:
+    NaN equals nothing), stopping at the first difference."""
+    if a.shape[0] != b.shape[0]:
+        return False
+    for i in range(a.shape[0]):
+        if a[i] != b[i]:
+            return False
+    return True
+
+
+@njit(cache=True)
 def largest_move(q, dofs, start):
     """m, the largest distance of a vertex at positions ``q`` (n_dof,) from ``start``
     (k, 2), its coordinates at ``dofs`` (k, 2)."""
@@ -239,6 +282,29 @@ def largest_move(q, dofs, start):
         dy = q[dofs[i, 1]] - start[i, 1]
         largest = max(largest, dx * dx + dy * dy)
     return np.sqrt(largest)
+
+
+@njit(cache=True)
+def kept_step_bound(q, dq, dofs, corners, edges, anchor, pairs, margin):
+    """The CCD's largest fraction (0, 1] of the step ``dq`` from positions ``q`` (n_dof,)
+    m free of crossings (``barrier_search.collision_free_step``) over kept candidate
+    ``pairs`` (k, 2), or -1 if they may miss a pair: a deformable vertex (coordinates at
+    ``dofs`` (n_v, 2)) further than ``margin`` m from ``anchor`` (n_v, 2), where they
+    were sought, at either end. The collision mesh's vertices are the deformable ones
+    then the faces' ``corners`` (c k, 2) m, standing still; ``edges`` (n_e, 2)."""
+    end = q + dq
+    if largest_move(q, dofs, anchor) > margin or largest_move(end, dofs, anchor) > margin:
+        return -1.0
+    n_v = dofs.shape[0]
+    v0 = np.empty((n_v + corners.shape[0], 2))
+    v1 = np.empty((n_v + corners.shape[0], 2))
+    for i in range(n_v):
+        for c in range(2):
+            v0[i, c] = q[dofs[i, c]]
+            v1[i, c] = end[dofs[i, c]]
+    v0[n_v:] = corners
+    v1[n_v:] = corners
+    return collision_free_step(v0, v1, edges, pairs)
 
 
 @njit(cache=True)
@@ -265,6 +331,16 @@ def largest_relative_move(q, dofs, start, body, n_bodies):
         dy = q[dofs[i, 1]] - start[i, 1] - mean[b, 1]
         largest = max(largest, dx * dx + dy * dy)
     return np.sqrt(largest)
+
+
+@njit(cache=True)
+def relative_moves_within(q, dq, dofs, start, body, n_bodies, reach):
+    """Whether ``largest_relative_move`` at positions ``q`` (n_dof,) m, and at q + dq if
+    ``dq`` (n_dof,) m is not empty, is at most ``reach`` m."""
+    if largest_relative_move(q, dofs, start, body, n_bodies) > reach:
+        return False
+    return dq.shape[0] == 0 or largest_relative_move(q + dq, dofs, start, body,
+                                                     n_bodies) <= reach
 
 
 @njit(cache=True)
@@ -303,6 +379,7 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
     dc, dl = np.empty(6), np.empty(6)
     local6 = np.empty((6, 6))
     local4 = np.empty((4, 4))
+    scratch = psd_scratch()
     for k in range(candidates.shape[0]):
         edge, vertex = candidates[k, 0], candidates[k, 1]
         p, a, b = v[vertex], v[edges[edge, 0]], v[edges[edge, 1]]
@@ -342,7 +419,7 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
             for j in range(2 * m):
                 local[i, j] = second * grad[i] * grad[j] + first * hess[i, j]
         if project:
-            local = _clamp_pair_to_psd(local, m)
+            local = _clamp_pair_to_psd(local, m, scratch)
         outside += add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
                                      hessian_values)
     return total, outside
@@ -357,27 +434,45 @@ def add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
     Args:
         local: (2 m, 2 m) N/m, over the (x, y) dofs of the pair's vertices ``ids[:m]``.
         vertex_dofs: (n_v, 2) each vertex's dof per coordinate, -1 where fixed.
-        n_dof: the matrix's size.  pattern_keys: sorted (nnz,) keys col * n_dof + row of
-        the pattern.  slots: (nnz,) the value index of each key.
+        n_dof: the matrix's size.  pattern_keys: sorted (nnz,) distinct keys
+        col * n_dof + row of the pattern.  slots: (nnz,) the value index of each key.
         hessian_values: the CSC values, added into.
+
+    A vertex's y dof follows its x dof (row + 1): its key then follows the x key's in
+    the sorted keys, so one binary search serves both (each entry adds to its own slot,
+    so the order of the adds is free).
     """
     outside = 0
+    size = pattern_keys.size
     for i in range(m):
+        row_x, row_y = vertex_dofs[ids[i], 0], vertex_dofs[ids[i], 1]
+        adjacent = row_x >= 0 and row_y == row_x + 1
         for j in range(m):
-            for ci in range(2):
-                row = vertex_dofs[ids[i], ci]
-                if row < 0:
+            for cj in range(2):
+                col = vertex_dofs[ids[j], cj]
+                if col < 0:
                     continue
-                for cj in range(2):
-                    col = vertex_dofs[ids[j], cj]
-                    if col < 0:
-                        continue
-                    key = col * n_dof + row
-                    where = np.searchsorted(pattern_keys, key)
-                    if where >= pattern_keys.size or pattern_keys[where] != key:
+                at_x = 0
+                found_x = False
+                if row_x >= 0:
+                    key = col * n_dof + row_x
+                    at_x = np.searchsorted(pattern_keys, key)
+                    found_x = at_x < size and pattern_keys[at_x] == key
+                    if found_x:
+                        hessian_values[slots[at_x]] += local[2 * i, 2 * j + cj]
+                    else:
                         outside += 1
-                        continue
-                    hessian_values[slots[where]] += local[2 * i + ci, 2 * j + cj]
+                if row_y < 0:
+                    continue
+                key = col * n_dof + row_y
+                if adjacent:  # the first key >= row_x's key + 1
+                    at = at_x + 1 if found_x else at_x
+                else:
+                    at = np.searchsorted(pattern_keys, key)
+                if at < size and pattern_keys[at] == key:
+                    hessian_values[slots[at]] += local[2 * i + 1, 2 * j + cj]
+                else:
+                    outside += 1
     return outside
 
 

@@ -53,7 +53,7 @@ class EnergyTable:
             kept when its coefficient b K / A0 is not 0, i.e. K > 0).
     """
 
-    def __init__(self, energies: list, scatters: list, dim: int):
+    def __init__(self, energies: list, scatters: list, dim: int, n_dof: int):
         self.items = List.empty_list(typeof((_NO_INDEX, _NO_REALS, _NO_REALS, _NO_INDEX)))
         order = []
         for energy, scatter in zip(energies, scatters):
@@ -66,22 +66,30 @@ class EnergyTable:
         self.count = len(order)
         self.order = np.array(order, np.int64)
         self.pressures = order.count(PRESSURE)
+        #: work arrays of ``potential``: dq (n_dof,) m, the pressures' coefficients and
+        #: their dA/dq (n_pressure, n_dof) of the last evaluation with the Hessian (the
+        #: rank-one terms it returns) and of one without
+        self._dq = np.empty(n_dof)
+        self._coefs = np.empty(self.pressures)
+        self._vectors = np.empty((self.pressures, n_dof))
+        self._scratch_vectors = np.empty((self.pressures, n_dof))
 
-    def potential(self, q, q_n, v_n, dt, masses, alpha, hessian: bool, nnz: int):
+    def potential(self, q, q_n, v_n, dt, masses, alpha, hessian: bool, grad, data):
         """Inertia, mass damping and the tabled energies at ``q`` (n_dof,) m
-        (``inertia_and_energies``): (Phi so far J, inf if infeasible; the gradient
-        (n_dof,) N; dq = q - q_n (n_dof,) m; the CSC values (nnz,) N/m with
-        ``hessian``, else (1,); the pressures' rank-one terms [(c, dA/dq)] with
-        ``hessian``, else [])."""
-        n = q.size
-        grad, dq = np.empty(n), np.empty(n)
-        data = np.zeros(nnz if hessian else 1)
-        coefs, vectors = np.empty(self.pressures), np.empty((self.pressures, n))
-        phi = inertia_and_energies(q, q_n, v_n, dt, masses, alpha, dq, grad, hessian, data,
-                                   self.order, self.items, coefs, vectors)
-        low_rank = ([(float(coefs[p]), vectors[p]) for p in range(self.pressures)
-                     if coefs[p] != 0.0] if hessian else [])
-        return phi, grad, dq, data, low_rank
+        (``inertia_and_energies``), the gradient (n_dof,) N written into ``grad`` and,
+        with ``hessian``, the Hessians into the CSC values ``data`` (N/m; zeroed first):
+        (Phi so far J, inf if infeasible; dq = q - q_n (n_dof,) m; the pressures'
+        rank-one terms [(c, dA/dq)] with ``hessian``, else []). dq and the rank-one
+        vectors are this table's arrays, valid until its next call (the vectors: its
+        next call with the Hessian)."""
+        vectors = self._vectors if hessian else self._scratch_vectors
+        phi = inertia_and_energies(q, q_n, v_n, dt, masses, alpha, self._dq, grad, hessian,
+                                   data, self.order, self.items, self._coefs, vectors)
+        if not (hessian and self.pressures):
+            return phi, self._dq, []
+        coefs = self._coefs
+        return phi, self._dq, [(float(coefs[p]), vectors[p]) for p in range(self.pressures)
+                               if coefs[p] != 0.0]
 
 
 def _item(kind: int, arrays: tuple, scatter: np.ndarray) -> tuple:
@@ -107,7 +115,8 @@ def inertia_and_energies(q, q_n, v_n, dt, masses, alpha, dq, grad, hessian, data
     Args:
         q, q_n, v_n: (2 n,) m, m, m/s.  dt: s.  masses: (2 n,) kg.  alpha: 1/s.
         dq: (2 n,) m, q - q_n written.  grad: (2 n,) N, written.
-        hessian: whether the Hessians are added into the CSC values ``data`` (N/m).
+        hessian: whether the Hessians are added into the CSC values ``data`` (N/m),
+            zeroed first.
         order: (count,) the energies' kinds.  items: their arrays (the typed list).
         rank_one_coefs: (n_pressure,) N/m^3, each pressure's rank-one coefficient c,
             written.  rank_one_vectors: (n_pressure, 2 n) m, its dA/dq, written.
@@ -115,6 +124,8 @@ def inertia_and_energies(q, q_n, v_n, dt, masses, alpha, dq, grad, hessian, data
     Returns:
         Phi so far (J), or inf as soon as an energy is not finite (the rest not summed).
     """
+    if hessian:
+        data[:] = 0.0
     phi = inertia_and_mass_damping(q, q_n, v_n, dt, masses, alpha, dq, grad)
     pressure = 0
     for slot in range(order.shape[0]):

@@ -55,7 +55,7 @@ from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.energy_table import EnergyTable
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
                                       StepConstraints, StepProblem, StepSolution,
-                                      stack_low_rank, woodbury_terms)
+                                      woodbury_terms)
 
 #: relative residual (infinity norms) at which the preconditioned CG stops (0.1 took
 #: 12 % more Newton systems on the solid apple's grasp: a fruit held at two nodes has a
@@ -112,6 +112,7 @@ class _BlockLDL:
 
     def __init__(self, pattern, gather: tuple, perm: np.ndarray):
         self.pattern, self.gather, self.perm = pattern, gather, perm
+        self.arrays = pattern.arrays  # the kernels' view of the pattern (a new tuple a read)
         b = pattern.block
         self.l_values = np.empty((pattern.n_factor, b, b))
         self.d_inv = np.empty((pattern.n_nodes, b, b))
@@ -124,16 +125,16 @@ class _BlockLDL:
         target, source = self.gather
         values.reshape(-1)[target] = data[source]
         if self.pattern.block == 3:
-            status = sparse_ldl.ldl_factor_3(self.pattern.arrays, values.reshape(-1, 9),
+            status = sparse_ldl.ldl_factor_3(self.arrays, values.reshape(-1, 9),
                                           self.l_values.reshape(-1, 9),
                                           self.d_inv.reshape(-1, 9))
         else:
-            status = sparse_ldl.factor(self.pattern.arrays, values, self.l_values, self.d_inv)
+            status = sparse_ldl.factor(self.arrays, values, self.l_values, self.d_inv)
         if status < 0:
             raise RuntimeError('singular Newton matrix')
 
     def _solve_in_place(self, x: np.ndarray) -> None:
-        pcg_kernels.block_ldl_solve(self.pattern.arrays, self.l_values, self.d_inv, x)
+        pcg_kernels.block_ldl_solve(self.arrays, self.l_values, self.d_inv, x)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b for b (n,) or (n, k)."""
@@ -208,7 +209,19 @@ class PatternCachingSolver:
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
         self._build_fast_pattern()
-        self._table = EnergyTable(self.energies, self._scatter, self.dim)
+        self._table = EnergyTable(self.energies, self._scatter, self.dim, self.n)
+        #: the energies after the table's, with their scatter indices
+        self._untabled = list(zip(self.energies[self._table.count:],
+                                  self._scatter[self._table.count:]))
+        #: ``evaluate_fast``'s arrays: the CSC values of its last Hessian, the values
+        #: an evaluation without the Hessian is given, K_n dq (n_dof,) N, the sliding
+        #: nodes' friction blocks (k, d, d) N/m
+        self._hessian_values = np.empty(self._nnz)
+        self._no_values = np.zeros(1)
+        self._k_dq = np.empty(self.n)
+        self._friction_blocks = np.empty((0, self.dim, self.dim))
+        #: the preconditioner's rank-one terms where there are none (``_woodbury_terms``)
+        self._no_woodbury = (np.zeros((self.n, 0)), np.zeros((self.n, 0)), np.zeros((0, 0)))
         #: the energies that may bound a step (``max_step`` not the base's 1)
         self._step_bounding = [e for e in self.energies
                                if type(e).max_step is not Energy.max_step]
@@ -278,10 +291,17 @@ class PatternCachingSolver:
         self._block_pos = np.searchsorted(unique, keys).astype(np.int64)
         self._block_nodes = np.stack([brow, bcol], axis=1).astype(np.int64)
         self._diag_block_pos = self._block_pos[brow == bcol][np.argsort(brow[brow == bcol])]
+        # each node's blocks (as row or column, the diagonal once) in CSR, its diagonal one
+        off = brow != bcol
+        blocks = np.arange(brow.size)
+        owner = np.concatenate([brow, bcol[off]])
+        order = np.argsort(owner, kind='stable')
+        self._node_blocks = np.concatenate([blocks, blocks[off]])[order]
+        self._node_block_ptr = np.searchsorted(owner[order], np.arange(nodes + 1))
+        self._diag_blocks = blocks[brow == bcol][np.argsort(brow[brow == bcol])]
         self._diag_pos = np.searchsorted(unique, np.arange(n) * n + np.arange(n))
         # the block LDL^T preconditioner in the nested-dissection order of the node graph
         # (dof by dof), and where its blocks come from in the CSC values
-        off = brow != bcol
         graph = sp.csr_matrix((np.ones(len(bcol)), (brow, bcol)), shape=(nodes, nodes))
         node_order = nested_dissection(graph)
         self._ldl_pattern = sparse_ldl.analyse(
@@ -334,10 +354,14 @@ class PatternCachingSolver:
         self._stiffness = (q_n.copy(), data)
         return data
 
-    def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool):
+    def evaluate_fast(self, q, q_n, v_n, dt, con: StepConstraints, hessian: bool,
+                      grad=None, fric_grad=None):
         """The incremental potential Phi (J), its gradient (n_dof,) N, the friction part
         of the gradient (n_dof,) N, and, with ``hessian``, the Hessian parts: (CSC values
-        on the fixed pattern, the energies' rank-one terms [(c, u)]).
+        on the fixed pattern, the energies' rank-one terms [(c, u)]; the solver's own
+        arrays, valid until its next evaluation with the Hessian).
+        ``grad`` and ``fric_grad`` (n_dof,), if given, are written instead of new arrays
+        (the Newton iteration's own vectors); where Phi is inf they hold no result.
 
         Rayleigh stiffness damping (beta > 0) adds beta dq^T K_n dq / (2 dt), dq = q - q_n,
         K_n the elastic energies' Hessian at q_n (``step_stiffness``): a quadratic in q,
@@ -347,12 +371,17 @@ class PatternCachingSolver:
         gravity) are one kernel call (``energy_table``), the other energies (the
         barrier, 3D ones) one call each, and the terms after the energies one call
         (``solver_kernels.add_step_terms``)."""
+        if grad is None:
+            grad = np.empty(self.n)
+        if fric_grad is None:
+            fric_grad = np.empty(self.n)
+        data = self._hessian_values if hessian else self._no_values
         table = self._table
-        phi, grad, dq, data, low_rank = table.potential(q, q_n, v_n, dt, self.m, self.alpha,
-                                                        hessian, self._nnz)
+        phi, dq, low_rank = table.potential(q, q_n, v_n, dt, self.m, self.alpha, hessian,
+                                            grad, data)
         if not math.isfinite(phi):
             return np.inf, None, None, None
-        for energy, scatter in zip(self.energies[table.count:], self._scatter[table.count:]):
+        for energy, scatter in self._untabled:
             value, terms = energy.evaluate_into(q, grad, data, scatter, hessian)
             if not math.isfinite(value):
                 return np.inf, None, None, None
@@ -362,13 +391,15 @@ class PatternCachingSolver:
         if con.friction_tangents.ndim == 2:
             con = as_cone(con)  # (``solve`` converts it once for its evaluations)
         k = con.friction_nodes
-        fric_grad = np.empty(self.n)
+        blocks = self._friction_blocks
+        if blocks.shape[0] != k.size:
+            blocks = self._friction_blocks = np.empty((k.size, self.dim, self.dim))
         phi = kernels.add_step_terms(
             phi, hessian, q, q_n, dq, dt, self.m, self.alpha, self.beta,
-            self._matvec_indptr, self._matvec_indices, stiffness, np.empty(self.n), k,
+            self._matvec_indptr, self._matvec_indices, stiffness, self._k_dq, k,
             con.friction_tangents, con.friction_bounds, con.friction_obstacle_speed,
             FRICTION_SMOOTHING, self._diag_pos, self._diag_block_pos, grad, fric_grad,
-            np.empty((k.size, self.dim, self.dim)), data)
+            blocks, data)
         return phi, grad, fric_grad, (data, low_rank) if hessian else None
 
     def newton_matrix(self, hdata: np.ndarray, filters: np.ndarray,
@@ -376,8 +407,8 @@ class PatternCachingSolver:
         """CSC values of S H S + (I - S) + diag(``diagonal`` (n_dof,)), H the CSC values
         ``hdata`` on the pattern, S the node filters (n_nodes, d, d)."""
         out = np.empty(self._nnz)
-        kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, filters,
-                              diagonal, out)
+        kernels.filter_blocks(hdata, self._block_pos, self._block_nodes, self._node_block_ptr,
+                              self._node_blocks, self._diag_blocks, filters, diagonal, out)
         return out
 
     def _factorise(self, values: np.ndarray) -> _BlockLDL:
@@ -391,14 +422,14 @@ class PatternCachingSolver:
     def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank: tuple,
                      fresh: bool, dt: float, filters: np.ndarray):
         """dq with (A + u diag(c) u^T) dq = rhs (A: CSC ``values`` on the pattern, the
-        rank-one terms ``low_rank`` = (u (n, k), c (k,)), ``stack_low_rank``'s) by
+        rank-one terms ``low_rank`` = (u (n, k), c (k,), u^T (k, n)), C order) by
         conjugate gradients preconditioned with the kept LDL^T, factorised afresh when CG
         does not converge fast (or ``fresh``), in the range of the filters S (n_nodes, d,
         d). Raises RuntimeError (singular)."""
         self.stats['systems'] += 1
-        u, c = low_rank
+        u, c, u_t = low_rank
         if self._lu is not None and not fresh and not self._stale:
-            dq = self._pcg(values, rhs, u, c, dt, filters)
+            dq = self._pcg(values, rhs, u, c, u_t, dt, filters)
             if dq is not None:
                 return dq
         self._stale = False
@@ -408,7 +439,7 @@ class PatternCachingSolver:
             # the preconditioner keeps these rank-one terms with the factorisation
             a_inv_u, capacitance = woodbury_terms(self._lu.solve, u, c)
             self._woodbury = (u, a_inv_u, np.linalg.inv(capacitance))
-        dq = self._pcg(values, rhs, u, c, dt, filters)
+        dq = self._pcg(values, rhs, u, c, u_t, dt, filters)
         if dq is not None:
             return dq
         # CG failed even on a fresh factorisation (negative curvature: an indefinite
@@ -429,7 +460,7 @@ class PatternCachingSolver:
         if c.size:
             a_inv_u, capacitance = woodbury_terms(self._lu.solve, u, c)
             return u, a_inv_u, np.linalg.inv(capacitance)
-        return np.zeros((self.n, 0)), np.zeros((self.n, 0)), np.zeros((0, 0))
+        return self._no_woodbury
 
     def _preconditioner(self, u: np.ndarray, c: np.ndarray):
         """r -> (kept LDL^T + rank-one terms)^-1 r."""
@@ -452,16 +483,17 @@ class PatternCachingSolver:
             ax += u @ (c * (u.T @ x))
         return ax
 
-    def _pcg(self, values, rhs, u, c, dt, filters):
+    def _pcg(self, values, rhs, u, c, u_t, dt, filters):
         """Preconditioned CG from zero (``pcg_kernels.preconditioned_cg``, in the range of
-        the filters S (n_nodes, d, d)); None if it fails to converge in time."""
+        the filters S (n_nodes, d, d); the rank-one terms u (n, k), c (k,), u_t = u^T);
+        None if it fails to converge in time."""
         u_w, a_inv_u, small_inv = self._woodbury_terms(u, c)
         lu = self._lu
         x = np.empty(self.n)
         status, iterations = pcg_kernels.preconditioned_cg(
-            self._matvec_indptr, self._matvec_indices, values, u, np.ascontiguousarray(u.T),
-            np.ascontiguousarray(c, dtype=float), filters, lu.perm, lu.pattern.arrays,
-            lu.l_values, lu.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv, rhs,
+            self._matvec_indptr, self._matvec_indices, values, u, u_t, c, filters, lu.perm,
+            lu.arrays, lu.l_values, lu.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv,
+            rhs,
             CG_TOLERANCE, CG_ERROR_FRACTION * self.tolerance * dt, CG_RELATIVE_FLOOR * self.tolerance * dt,
             CG_MAX_ITERATIONS, CG_STALE_ITERATIONS, x)
         self.stats['cg_iterations'] += iterations
@@ -521,6 +553,7 @@ class _NewtonProblem(StepProblem):
                  dt: float, con: StepConstraints):
         super().__init__(solver, q_n, v_n, dt, con, solver.evaluate_fast)
         self.filters = con.filters
+        self.fric_grad = np.empty(solver.n)  # the friction gradient of the last evaluation
         self._filtered = np.empty(solver.n)
         self.matrix = self.low = None
         self.shift = 0.0
@@ -531,6 +564,28 @@ class _NewtonProblem(StepProblem):
         out = np.empty(self.solver.n)
         kernels.apply_filters(self.filters, np.ascontiguousarray(vec), out)
         return out
+
+    def evaluate(self, x, hessian, grad) -> float:
+        """Phi at x (inf: infeasible), its gradient written into ``grad`` and the
+        friction's into ``fric_grad`` by the solver itself (no copies)."""
+        phi, _, _, parts = self.solver.evaluate_fast(x, self.q_n, self.v_n, self.dt,
+                                                     self.con, bool(hessian), grad=grad,
+                                                     fric_grad=self.fric_grad)
+        if not math.isfinite(phi):
+            return np.inf
+        if hessian:
+            self.parts = parts
+        return phi
+
+    def _filtered_low_rank(self, low_rank: list) -> tuple:
+        """The rank-one terms [(c_j, u_j)] filtered and stacked once for every system with
+        the matrix: (S u (n, k), c (k,), (S u)^T (k, n)), C order; k may be 0."""
+        k, n = len(low_rank), self.solver.n
+        u_t, c = np.empty((k, n)), np.empty(k)
+        for j, (coef, vec) in enumerate(low_rank):
+            c[j] = coef
+            kernels.apply_filters(self.filters, vec, u_t[j])
+        return np.ascontiguousarray(u_t.T), c, u_t
 
     def kept_fits(self) -> bool:
         return False  # a new solve: nothing kept (``keep``)
@@ -552,9 +607,7 @@ class _NewtonProblem(StepProblem):
             s_diag = np.einsum('naa->na', self.filters).ravel()
             diagonal = shift * s_diag * solver.m / self.dt ** 2
         self.matrix = solver.newton_matrix(hdata, self.filters, diagonal)
-        # the rank-one terms filtered and stacked once for every system with the matrix
-        self.low = stack_low_rank([(coef, self.filtered(vec)) for coef, vec in low_rank],
-                                  solver.n)
+        self.low = self._filtered_low_rank(low_rank)
         self.shift = shift
         return True
 

@@ -14,13 +14,19 @@ from gripper_sim.core import potential_terms as terms
 
 
 @njit(cache=True)
-def filter_blocks(hdata, block_pos, block_nodes, filters, diag_extra, out):
-    """The Newton matrix S H S + (I - S) + diag(extra) on H's pattern, into ``out``.
+def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks, filters,
+                  diag_extra, out):
+    """The Newton matrix S H S + (I - S) + diag(extra) on H's pattern, into ``out``: H's
+    values, then the blocks of the nodes whose filter is not the identity (few: the
+    held ones) filtered, and the extra diagonal added.
 
     Args:
         hdata: CSC values of H (N/m).
         block_pos: (n_blocks, d, d) positions in data of each d x d node block.
         block_nodes: (n_blocks, 2) node (row, column) of each block.
+        node_ptr: (n_nodes + 1,), node_blocks: (m,) the blocks of each node (as row or
+            column) in CSR: node i's at node_blocks[node_ptr[i]:node_ptr[i + 1]].
+        diag_blocks: (n_nodes,) each node's diagonal block.
         filters: (n_nodes, d, d) the S_i.
         diag_extra: (d n,) added on the diagonal (the shifted inertia, N/m).
         out: values of the filtered matrix, same pattern (written).
@@ -34,34 +40,36 @@ def filter_blocks(hdata, block_pos, block_nodes, filters, diag_extra, out):
                 if filters[i, a, c] != (1.0 if a == c else 0.0):
                     free[i] = False
     out[:] = hdata  # the blocks of free nodes as they are
-    for blk in range(block_pos.shape[0]):
-        i = block_nodes[blk, 0]
-        j = block_nodes[blk, 1]
-        pos = block_pos[blk]
-        if free[i] and free[j]:
-            if i == j:
-                for a in range(d):
-                    out[pos[a, a]] += diag_extra[d * i + a]
+    for node in range(filters.shape[0]):
+        if free[node]:
+            blk = diag_blocks[node]
+            for a in range(d):
+                out[block_pos[blk, a, a]] += diag_extra[d * node + a]
             continue
-        si = filters[i]
-        sj = filters[j]
-        for a in range(d):
-            for c in range(d):
-                acc = 0.0
-                for b in range(d):
-                    acc += si[a, b] * hdata[pos[b, c]]
-                tmp[a, c] = acc
-        for a in range(d):
-            for c in range(d):
-                acc = 0.0
-                for b in range(d):
-                    acc += tmp[a, b] * sj[b, c]
-                out[pos[a, c]] = acc
-        if i == j:
+        for q in range(node_ptr[node], node_ptr[node + 1]):
+            blk = node_blocks[q]
+            i = block_nodes[blk, 0]
+            j = block_nodes[blk, 1]
+            other = j if i == node else i
+            if other < node and not free[other]:
+                continue  # filtered with the other node's blocks
             for a in range(d):
                 for c in range(d):
-                    out[pos[a, c]] += (1.0 if a == c else 0.0) - si[a, c]
-                out[pos[a, a]] += diag_extra[d * i + a]
+                    acc = 0.0
+                    for b in range(d):
+                        acc += filters[i, a, b] * hdata[block_pos[blk, b, c]]
+                    tmp[a, c] = acc
+            for a in range(d):
+                for c in range(d):
+                    acc = 0.0
+                    for b in range(d):
+                        acc += tmp[a, b] * filters[j, b, c]
+                    out[block_pos[blk, a, c]] = acc
+            if i == j:
+                for a in range(d):
+                    for c in range(d):
+                        out[block_pos[blk, a, c]] += (1.0 if a == c else 0.0) - filters[i, a, c]
+                    out[block_pos[blk, a, a]] += diag_extra[d * i + a]
 
 
 @njit(cache=True)
