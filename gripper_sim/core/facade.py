@@ -87,7 +87,7 @@ class SimulationFacade:
     _jaw_bases: tuple | None = None
     #: ``faces_at``'s last three faces made: (the jaws' placement: the gripper's x, gap,
     #: lift and their rates, the faces template, the faces), the newest first
-    _faces_kept: list = []
+    _faces_kept: tuple = ()
     #: the obstacles' velocities (``_obstacles``): (the ``_obstacles_kept`` they are of,
     #: the gripper's (x, gap, lift) rates m/s, (k, d) m/s read only), or None
     _moving_kept: tuple | None = None
@@ -596,7 +596,7 @@ class SimulationFacade:
             faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
             faces[index].velocity = self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
                                                    grip.lift_rate)
-        self._faces_kept = [(placement, template, faces)] + self._faces_kept[:2]
+        self._faces_kept = ((placement, template, faces),) + self._faces_kept[:2]
         return faces
 
     def _jaw_faces(self, side: int) -> list[int]:
