@@ -675,15 +675,19 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
-        into = None
-        if hessian:
-            if self._positions is None or self._positions[0] is not scatter:
-                m = self.dofs.shape[1]
-                keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
-                first = np.unique(keys.ravel(), return_index=True)[1]
-                self._positions = (scatter, scatter.ravel()[first])
-            into = (data, self._positions[1])
+        into = (data, self.pattern_slots(scatter)) if hessian else None
         return self._terms(q, grad, into), []
+
+    def pattern_slots(self, scatter: np.ndarray) -> np.ndarray:
+        """(p,) the solver's CSC position of each of the pattern's sorted keys, from the
+        positions ``scatter`` (n_elem, m * m) of the entries of ``dofs``; kept for the
+        same scatter array."""
+        if self._positions is None or self._positions[0] is not scatter:
+            m = self.dofs.shape[1]
+            keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
+            first = np.unique(keys.ravel(), return_index=True)[1]
+            self._positions = (scatter, scatter.ravel()[first])
+        return self._positions[1]
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no

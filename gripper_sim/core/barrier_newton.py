@@ -1,0 +1,651 @@
+"""The 2D barrier model's Newton solve as one compiled call (a prototype, off by default).
+
+``fast_solver.PatternCachingSolver.solve`` runs ``newton.newton_iteration`` interpreted
+on ``_NewtonProblem`` for the barrier model (``contact.model: ipc``): every hook is a
+Python method calling a kernel. Here the same iteration runs compiled: its hooks are
+overloads (``numba.extending.overload``) for ``BarrierProblemType``, a numba StructRef
+built inside the compiled entry ``_solve`` from one tuple of the step's arrays (a
+StructRef and not a tuple: ``core.kernels`` registers its hooks for every tuple type,
+and numba takes the first overload that types). Each hook calls the kernels the
+interpreted route calls, in the same order on the same arrays, so a solve gives the
+same iterates to the last bit (``test/test_barrier_newton.py``):
+
+- ``evaluate``: ``energy_table.inertia_and_energies``, the barrier's candidates (kept
+  while no vertex moves further than ``barrier.CANDIDATE_MARGIN`` from where they were
+  sought, else sought again by ``barrier_search.edge_vertex_candidates``, as
+  ``BarrierContact._candidate_pairs``), ``barrier_terms.barrier_terms``,
+  ``solver_kernels.add_step_terms``;
+- ``factorise``: ``solver_kernels.filter_blocks`` into one of two matrix slots (the
+  other holds the kept matrix), the pressures' rank-one terms filtered;
+- ``direction``: ``PatternCachingSolver.linear_solve``: ``pcg_kernels.preconditioned_cg``
+  on the kept block LDL^T, refactorised by ``sparse_ldl.factor`` when stale;
+- ``step_bound``: ``barrier_kernels.kept_step_bound``, else the swept boxes' candidates
+  and ``barrier_search.collision_free_step`` (``BarrierContact._step_bound``).
+
+What the solve changes of the solver's and the barrier's state (the kept LDL^T and its
+Woodbury terms, whether it is stale, the candidates, the work counters) is written back
+after the call (``run``). Nothing leaves the compiled loop: the candidates' refresh is
+compiled too. A Hessian entry outside the barrier's pattern ends the solve with
+``OUTSIDE_PATTERN`` (the interpreted route raises AssertionError there; so does ``run``).
+
+Covered (``supports``): a 2D solver whose energies after the table are one fruit
+barrier (rigid faces: no soft bodies, no self-contact) and whose steps have no sliding
+nodes (the barrier model's steps are free). Not yet: soft fingers (the Fin Ray), whose
+pairs may fall outside the pattern (dropped), and self-contact (its quiet region).
+Known difference: with pressure rank-one terms (bulk modulus > 0) the Woodbury terms
+are summed by loops, not numpy's BLAS products, so may differ in the last bits.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, types
+from numba.experimental import structref
+from numba.extending import overload
+
+from gripper_sim.core import newton
+from gripper_sim.core.barrier_kernels import kept_step_bound, largest_move
+from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
+from gripper_sim.core.barrier_terms import barrier_terms
+from gripper_sim.core.energy_table import inertia_and_energies
+from gripper_sim.core.pcg_kernels import CONVERGED, block_ldl_solve, preconditioned_cg
+from gripper_sim.core.solver_kernels import (add_step_terms, apply_filters, csc_matvec,
+                                             filter_blocks, max_abs)
+from gripper_sim.core.sparse_ldl import factor
+
+#: ``_solve``'s status beyond ``newton``'s: a barrier Hessian entry outside its pattern
+OUTSIDE_PATTERN = 100
+
+#: flags (int64 array): whether an LDL^T is kept, whether it is stale, the Woodbury
+#: terms' columns kept with it (-1: none), the candidates sought again, entries outside
+#: the pattern, the slot of the kept matrix (-1: none), of the last factorised one
+F_HAS_LU, F_STALE, F_WOODBURY, F_PAIRS_NEW, F_OUTSIDE, F_KEPT, F_LAST, F_SIZE = range(8)
+#: the candidates where none are kept; K_n where there is no stiffness damping
+_NO_PAIRS, _NO_STIFFNESS = np.zeros((0, 2), np.int64), np.zeros(0)
+#: stats (int64 array): Newton systems, factorisations, CG iterations
+S_SYSTEMS, S_FACTORS, S_CG, S_SIZE = range(4)
+
+
+@structref.register
+class BarrierProblemType(types.StructRef):
+    """The numba type of ``BarrierProblem``."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+#: the problem's fields: the solver's and the barrier's arrays, kept with the solver
+#: (``_problem``), then those of a step or solve, set by ``_solve`` (see ``run``)
+FIELDS = ('masses', 'alpha', 'beta', 'eps', 'keep_limit', 'friction', 'cg_iterations',
+          'table', 'pattern', 'ldl', 'barrier', 'candidates', 'work', 'slots', 'low',
+          'flags', 'stats',
+          'q_n', 'v_n', 'dt', 'dt2', 'stiffness', 'filters', 'cg', 'corners', 'start',
+          'friction_pairs', 'has_friction')
+
+
+class BarrierProblem(structref.StructRefProxy):
+    """Python's handle of the type (never built in Python: ``_solve`` builds it)."""
+
+
+structref.define_proxy(BarrierProblem, BarrierProblemType, list(FIELDS))
+
+
+def _is_problem(problem):
+    return isinstance(problem, BarrierProblemType)
+
+
+# ---------------------------------------------------------------------- kernels
+@njit(cache=True)
+def _candidates(q, barrier, corners, candidates, flags):
+    """The kept candidates (k, 2) for positions q, sought again (boxes inflated by the
+    barrier's candidate radius) once a vertex moved further than the margin."""
+    (dof_pairs, edges, groups, self_contact, dhat, kappa, mesh_dofs, project,
+     pattern_keys, eps_v, radius, swept_radius, margin, barrier_gradient,
+     friction_gradient, drop_outside) = barrier
+    anchor, pairs = candidates
+    if flags[F_PAIRS_NEW] < 0 or largest_move(q, dof_pairs, anchor) > margin:
+        n_v = dof_pairs.shape[0]
+        v = np.empty((n_v + corners.shape[0], 2))
+        for i in range(n_v):
+            v[i, 0] = q[dof_pairs[i, 0]]
+            v[i, 1] = q[dof_pairs[i, 1]]
+        v[n_v:] = corners
+        pairs[0] = edge_vertex_candidates(v, v, edges, groups, self_contact, radius)
+        anchor[:] = v[:n_v]
+        flags[F_PAIRS_NEW] = 1
+    return pairs[0]
+
+
+@njit(cache=True)
+def _evaluate(problem, x, hessian, grad):
+    table_order, items, coefs, vectors, scratch_vectors, dq, hess_coefs = problem.table
+    (indptr, indices, hdata, no_values, k_dq, blocks, diag_pos, diag_block_pos, _, _, _,
+     _, _) = problem.pattern
+    fric_grad = problem.work[1]
+    data = hdata if hessian else no_values
+    phi = inertia_and_energies(x, problem.q_n, problem.v_n, problem.dt, problem.masses,
+                               problem.alpha, dq, grad, hessian, data, table_order, items,
+                               coefs, vectors if hessian else scratch_vectors)
+    if not math.isfinite(phi):
+        return np.inf
+    if hessian:
+        hess_coefs[:] = coefs
+    barrier, flags = problem.barrier, problem.flags
+    (dof_pairs, edges, _, _, dhat, kappa, mesh_dofs, project, pattern_keys, eps_v, _, _,
+     _, barrier_gradient, friction_gradient, drop_outside) = barrier
+    corners, has_friction = problem.corners, problem.has_friction
+    pairs = _candidates(x, barrier, corners, problem.candidates, flags)
+    if pairs.shape[0] or has_friction:
+        slots = problem.slots if hessian else np.zeros(0, np.int64)
+        values = hdata if hessian else np.zeros(0)
+        barrier_value, friction_value, outside, friction_outside = barrier_terms(
+            x, dof_pairs, corners, edges, pairs, dhat, kappa, mesh_dofs, hessian, project,
+            pattern_keys, slots, values, problem.start, problem.dt, eps_v, problem.friction_pairs,
+            has_friction, hessian, barrier_gradient, friction_gradient, grad, True)
+        if not math.isfinite(barrier_value):
+            return np.inf
+        if (outside or friction_outside) and not drop_outside:
+            flags[F_OUTSIDE] = 1
+        phi += barrier_value + friction_value
+    else:
+        phi += 0.0 + 0.0
+    nodes, tangents, bounds, speed = problem.friction
+    return add_step_terms(phi, hessian, x, problem.q_n, dq, problem.dt, problem.masses,
+                          problem.alpha, problem.beta, indptr, indices, problem.stiffness,
+                          k_dq, nodes, tangents, bounds, speed, problem.eps, diag_pos,
+                          diag_block_pos, grad, fric_grad, blocks, hdata)
+
+
+@njit(cache=True)
+def _ldl_solve(ldl, x, out):
+    """out = A^-1 x by the kept LDL^T (``_BlockLDL.solve``)."""
+    perm, arrays, _, _, l_values, d_inv, _, _, _, _, _, _ = ldl
+    y = np.empty(x.shape[0])
+    for m in range(perm.shape[0]):
+        y[m] = x[perm[m]]
+    block_ldl_solve(arrays, l_values, d_inv, y)
+    for m in range(perm.shape[0]):
+        out[perm[m]] = y[m]
+
+
+@njit(cache=True)
+def _factorise_ldl(problem, values):
+    """The block LDL^T of the CSC ``values`` into the kept factor; False if singular
+    (the kept one unchanged)."""
+    (perm, arrays, target, source, l_values, d_inv, l_new, d_new, n_blocks, w_u,
+     w_a_inv_u, w_small_inv) = problem.ldl
+    problem.stats[S_FACTORS] += 1
+    blocks = np.zeros((n_blocks + 1, 2, 2))
+    flat = blocks.reshape(-1)
+    for m in range(target.shape[0]):
+        flat[target[m]] = values[source[m]]
+    if factor(arrays, blocks, l_new, d_new) < 0:
+        return False
+    l_values[:] = l_new
+    d_inv[:] = d_new
+    return True
+
+
+@njit(cache=True)
+def _woodbury(problem, u, c, w_u, w_a_inv_u, w_small_inv):
+    """The preconditioner's rank-one terms for u (n, k), c (k,) into the arrays given:
+    u, A^-1 u and the inverse capacitance matrix (``stepper.woodbury_terms``)."""
+    n, k = u.shape
+    columns = np.empty((k, n))
+    solved = np.empty((k, n))
+    for j in range(k):
+        columns[j] = u[:, j]
+        _ldl_solve(problem.ldl, columns[j], solved[j])
+        w_a_inv_u[:, j] = solved[j]
+        w_u[:, j] = u[:, j]
+    capacitance = np.zeros((k, k))
+    for i in range(k):
+        capacitance[i, i] = 1.0 / c[i]
+        for j in range(k):
+            capacitance[i, j] += np.dot(columns[i], solved[j])
+    w_small_inv[:k, :k] = np.linalg.inv(capacitance)
+
+
+@njit(cache=True)
+def _pcg(problem, values, rhs, u, c, u_t, x):
+    """``PatternCachingSolver._pcg``: True if CG converged (x written)."""
+    (perm, arrays, _, _, l_values, d_inv, _, _, _, w_u, w_a_inv_u,
+     w_small_inv) = problem.ldl
+    flags, stats = problem.flags, problem.stats
+    k = c.shape[0]
+    n = rhs.shape[0]
+    if k and flags[F_WOODBURY] == k:
+        u_w_t, a_inv_u, small_inv = (np.ascontiguousarray(w_u[:, :k].T),
+                                     np.ascontiguousarray(w_a_inv_u[:, :k]),
+                                     np.ascontiguousarray(w_small_inv[:k, :k]))
+    elif k:
+        fresh_u, fresh_a, fresh_s = np.empty((n, k)), np.empty((n, k)), np.empty((k, k))
+        _woodbury(problem, u, c, fresh_u, fresh_a, fresh_s)
+        u_w_t, a_inv_u, small_inv = np.ascontiguousarray(fresh_u.T), fresh_a, fresh_s
+    else:
+        u_w_t, a_inv_u, small_inv = np.zeros((0, n)), np.zeros((n, 0)), np.zeros((0, 0))
+    indptr, indices = problem.pattern[0], problem.pattern[1]
+    relative, error_limit, floor = problem.cg
+    max_iterations, stale_iterations = problem.cg_iterations
+    status, iterations = preconditioned_cg(
+        indptr, indices, values, u, u_t, c, problem.filters, perm, arrays, l_values, d_inv,
+        u_w_t, a_inv_u, small_inv, rhs, relative, error_limit, floor, max_iterations,
+        stale_iterations, x)
+    stats[S_CG] += iterations
+    if status != CONVERGED:
+        return False
+    flags[F_STALE] = 1 if iterations > stale_iterations else 0
+    return True
+
+
+@njit(cache=True)
+def _precondition(problem, u, c, r, out):
+    """out = (kept LDL^T + rank-one terms)^-1 r (``PatternCachingSolver._preconditioner``)."""
+    _ldl_solve(problem.ldl, r, out)
+    k = c.shape[0]
+    if k:
+        w_u, w_a_inv_u, w_small_inv = problem.ldl[9], problem.ldl[10], problem.ldl[11]
+        if problem.flags[F_WOODBURY] != k:
+            w_u, w_a_inv_u, w_small_inv = (np.empty((r.shape[0], k)),
+                                           np.empty((r.shape[0], k)), np.empty((k, k)))
+            _woodbury(problem, u, c, w_u, w_a_inv_u, w_small_inv)
+        t = np.empty(k)
+        column = np.empty(out.shape[0])
+        for j in range(k):
+            column[:] = w_u[:, j]
+            t[j] = np.dot(column, out)
+        for i in range(k):
+            s = 0.0
+            for j in range(k):
+                s += w_small_inv[i, j] * t[j]
+            for m in range(out.shape[0]):
+                out[m] -= w_a_inv_u[m, i] * s
+
+
+@njit(cache=True)
+def _linear_solve(problem, values, rhs, u, c, u_t, fresh, x):
+    """``PatternCachingSolver.linear_solve`` into x; False if the factor is singular."""
+    flags = problem.flags
+    problem.stats[S_SYSTEMS] += 1
+    if flags[F_HAS_LU] and not fresh and not flags[F_STALE]:
+        if _pcg(problem, values, rhs, u, c, u_t, x):
+            return True
+    flags[F_STALE] = 0
+    if not _factorise_ldl(problem, values):
+        return False
+    flags[F_HAS_LU] = 1
+    flags[F_WOODBURY] = -1
+    k = c.shape[0]
+    if k:
+        ldl = problem.ldl
+        _woodbury(problem, u, c, ldl[9], ldl[10], ldl[11])
+        flags[F_WOODBURY] = k
+    if _pcg(problem, values, rhs, u, c, u_t, x):
+        return True
+    # CG failed on a fresh factorisation: the factor's solution, refined (3 sweeps)
+    n = rhs.shape[0]
+    _precondition(problem, u, c, rhs, x)
+    residual, correction = np.empty(n), np.empty(n)
+    for _ in range(3):
+        csc_matvec(problem.pattern[0], problem.pattern[1], values, x, residual)
+        if k:
+            column = np.empty(n)
+            for j in range(k):
+                column[:] = u[:, j]
+                s = c[j] * np.dot(column, x)
+                for m in range(n):
+                    residual[m] += u[m, j] * s
+        for m in range(n):
+            residual[m] = rhs[m] - residual[m]
+        _precondition(problem, u, c, residual, correction)
+        for m in range(n):
+            x[m] += correction[m]
+    return True
+
+
+# ---------------------------------------------------------------------- the hooks
+@overload(newton.vectors)
+def _vectors_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            vectors = problem.work[0]
+            return vectors[0], vectors[1], vectors[2], vectors[3], vectors[4]
+        return impl
+
+
+@overload(newton.kept_fits)
+def _kept_fits_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return False  # a new solve: nothing kept
+        return impl
+
+
+@overload(newton.evaluate)
+def _evaluate_hook(problem, x, hessian, grad):
+    if _is_problem(problem):
+        def impl(problem, x, hessian, grad):
+            return _evaluate(problem, x, hessian, grad)
+        return impl
+
+
+@overload(newton.project)
+def _project_hook(problem, grad, g_f):
+    if _is_problem(problem):
+        def impl(problem, grad, g_f):
+            apply_filters(problem.filters, grad, g_f)
+        return impl
+
+
+@overload(newton.forget)
+def _forget_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            problem.flags[F_KEPT] = -1
+        return impl
+
+
+@overload(newton.keep)
+def _keep_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            problem.flags[F_KEPT] = problem.flags[F_LAST]
+        return impl
+
+
+@overload(newton.factorise)
+def _factorise_hook(problem, x, shift):
+    if _is_problem(problem):
+        def impl(problem, x, shift):
+            (indptr, indices, hdata, _, _, _, _, _, block_pos, block_nodes, node_ptr,
+             node_blocks, diag_blocks) = problem.pattern
+            matrices, u_ts, cs, ks, shifts = problem.low
+            flags = problem.flags
+            slot = 1 if flags[F_KEPT] == 0 else 0
+            filters = problem.filters
+            n = problem.masses.shape[0]
+            diagonal = np.zeros(n)
+            if shift:
+                for i in range(filters.shape[0]):
+                    for a in range(2):
+                        m = 2 * i + a
+                        diagonal[m] = shift * filters[i, a, a] * problem.masses[m] / problem.dt2
+            filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
+                          filters, diagonal, matrices[slot])
+            coefs, vectors, hess_coefs = problem.table[2], problem.table[3], problem.table[6]
+            k = 0
+            for p in range(hess_coefs.shape[0]):
+                if hess_coefs[p] != 0.0:
+                    apply_filters(filters, vectors[p], u_ts[slot, k])
+                    cs[slot, k] = hess_coefs[p]
+                    k += 1
+            ks[slot] = k
+            shifts[slot] = shift
+            flags[F_LAST] = slot
+            return True
+        return impl
+
+
+@overload(newton.direction)
+def _direction_hook(problem, g_f, dq, fresh):
+    if _is_problem(problem):
+        def impl(problem, g_f, dq, fresh):
+            matrices, u_ts, cs, ks, shifts = problem.low
+            flags = problem.flags
+            if fresh:
+                slot = flags[F_LAST]
+                refactor = shifts[slot] > 0
+            else:
+                slot = flags[F_KEPT]
+                refactor = False
+            k = ks[slot]
+            u_t = np.ascontiguousarray(u_ts[slot, :k])
+            u = np.ascontiguousarray(u_t.T)
+            c = np.ascontiguousarray(cs[slot, :k])
+            n = g_f.shape[0]
+            rhs = np.empty(n)
+            for m in range(n):
+                rhs[m] = -g_f[m]
+            x = problem.work[2]
+            if not _linear_solve(problem, matrices[slot], rhs, u, c, u_t, refactor, x):
+                return False, 0.0
+            dq[:] = x
+            slope = np.dot(g_f, x)
+            return math.isfinite(slope), slope
+        return impl
+
+
+@overload(newton.step_bound)
+def _step_bound_hook(problem, x, dq):
+    if _is_problem(problem):
+        def impl(problem, x, dq):
+            (dof_pairs, edges, groups, self_contact, _, _, _, _, _, _, _, swept_radius,
+             margin, _, _, _) = problem.barrier
+            corners = problem.corners
+            anchor, pairs = problem.candidates
+            bound = -1.0
+            if problem.flags[F_PAIRS_NEW] >= 0:
+                bound = kept_step_bound(x, dq, dof_pairs, corners, edges, anchor, pairs[0],
+                                        margin)
+            if bound < 0.0:
+                end = x + dq
+                n_v = dof_pairs.shape[0]
+                v0 = np.empty((n_v + corners.shape[0], 2))
+                v1 = np.empty((n_v + corners.shape[0], 2))
+                for i in range(n_v):
+                    for a in range(2):
+                        v0[i, a] = x[dof_pairs[i, a]]
+                        v1[i, a] = end[dof_pairs[i, a]]
+                v0[n_v:] = corners
+                v1[n_v:] = corners
+                swept = edge_vertex_candidates(v0, v1, edges, groups, self_contact,
+                                               swept_radius)
+                bound = collision_free_step(v0, v1, edges, swept)
+            return min(1.0, bound)
+        return impl
+
+
+@overload(newton.keep_limit)
+def _keep_limit_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return problem.keep_limit
+        return impl
+
+
+@overload(newton.filtered_max)
+def _filtered_max_hook(problem, g):
+    if _is_problem(problem):
+        def impl(problem, g):
+            filtered = problem.work[3]
+            apply_filters(problem.filters, g, filtered)
+            return max_abs(filtered)
+        return impl
+
+
+@overload(newton.finish)
+def _finish_hook(problem, x, grad):
+    if _is_problem(problem):
+        def impl(problem, x, grad):
+            reaction, fric_grad = problem.work[4], problem.work[1]
+            for m in range(x.shape[0]):
+                reaction[m] = grad[m] - fric_grad[m]
+        return impl
+
+
+# ---------------------------------------------------------------------- the entry
+@njit(cache=True)
+def _new_problem(fields):
+    """A ``BarrierProblem`` of the fields' tuple (once per solver: ``_problem``)."""
+    return BarrierProblem(*fields)
+
+
+@njit(cache=True)
+def _solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit, floor,
+           corners, start, pairs, friction_ids, friction_weights, friction_tangents,
+           friction_forces, friction_coefficients, has_friction, q, tol, max_it, history,
+           counts):
+    """``newton.newton_iteration`` compiled on ``problem`` with this solve's arrays (the
+    arguments flat: numba types a tuple argument in Python, ~2 ms for the problem's)."""
+    problem.q_n = q_n
+    problem.v_n = v_n
+    problem.dt = dt
+    problem.dt2 = dt2
+    problem.stiffness = stiffness
+    problem.filters = filters
+    problem.cg = (relative, error_limit, floor)
+    problem.corners = corners
+    problem.start = start
+    problem.candidates[1][0] = pairs
+    problem.friction_pairs = (friction_ids, friction_weights, friction_tangents,
+                              friction_forces, friction_coefficients)
+    problem.has_friction = has_friction
+    return newton.newton_iteration(problem, q, dt, tol, max_it, history, counts)
+
+
+def supports(solver) -> bool:
+    """Whether ``run`` covers the solver's problems (see the module)."""
+    from gripper_sim.core.barrier import BarrierContact
+    untabled = solver._untabled
+    if solver.dim != 2 or len(untabled) != 1:
+        return False
+    barrier = untabled[0][0]
+    return (type(barrier) is BarrierContact and barrier.dimension == 2
+            and not barrier.bodies and not barrier.self_contact
+            and solver._step_bounding == [barrier])
+
+
+class _Kept:
+    """What ``run`` keeps with a solver: the problem (``BarrierProblem``) and the arrays
+    it shares with Python."""
+
+    def __init__(self, solver, settings: 'SolveSettings'):
+        from numba.typed import List
+
+        from gripper_sim.core import barrier as barrier_module
+        from gripper_sim.core.stepper import FRICTION_SMOOTHING
+
+        barrier, scatter = solver._untabled[0]
+        #: what the problem was made for: the barrier, its scatter, its collision mesh
+        self.key = (barrier, scatter, barrier._mesh_edges)
+        n = solver.n
+        table = solver._table
+        p = table.pressures
+        self.lu = solver.empty_factor()
+        self.woodbury = (np.empty((n, p)), np.empty((n, p)), np.empty((p, p)))
+        self.anchor = np.zeros((barrier.vertex_nodes.size, 2))
+        self.pairs = List([np.zeros((0, 2), np.int64)])
+        self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+        self.flags = np.zeros(F_SIZE, np.int64)
+        self.stats = np.zeros(S_SIZE, np.int64)
+        contact = barrier.settings
+        lu = self.lu
+        no_friction = barrier_module._NO_FRICTION
+        self.problem = _new_problem((
+            solver.m, solver.alpha, solver.beta, FRICTION_SMOOTHING,
+            settings.keep_below * solver.tolerance,
+            (np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 1))),
+            (settings.cg_max_iterations, settings.cg_stale_iterations),
+            (table.order, table.items, table._coefs, table._vectors, table._scratch_vectors,
+             table._dq, np.zeros(p)),
+            (solver._matvec_indptr, solver._matvec_indices, solver._hessian_values,
+             solver._no_values, solver._k_dq, np.empty((0, 2, 2)), solver._diag_pos,
+             solver._diag_block_pos, solver._block_pos, solver._block_nodes,
+             solver._node_block_ptr, solver._node_blocks, solver._diag_blocks),
+            (solver._perm, lu.arrays, solver._ldl_gather[0], solver._ldl_gather[1],
+             lu.l_values, lu.d_inv, np.empty_like(lu.l_values), np.empty_like(lu.d_inv),
+             solver._ldl_pattern.n_blocks, *self.woodbury),
+            (barrier._vertex_dof_pairs, barrier._mesh_edges, barrier._mesh_groups,
+             barrier.self_contact, contact.dhat, contact.stiffness, barrier._mesh_dofs,
+             barrier.projection == barrier_module.ipctk.PSDProjectionMethod.CLAMP,
+             barrier._pattern_keys, contact.friction_smoothing,
+             0.5 * contact.dhat + barrier_module.CANDIDATE_MARGIN,
+             (0.5 + barrier_module.SWEPT_MARGIN) * contact.dhat,
+             barrier_module.CANDIDATE_MARGIN, *barrier._gradient_buffers,
+             barrier.drop_outside_pattern),
+            (self.anchor, self.pairs), self.work, barrier.pattern_slots(scatter),
+            (np.empty((2, solver._nnz)), np.empty((2, p, n)), np.empty((2, p)),
+             np.zeros(2, np.int64), np.zeros(2)),
+            self.flags, self.stats,
+            np.zeros(n), np.zeros(n), 1.0, 1.0, np.zeros(0), np.zeros((n // 2, 2, 2)),
+            (0.0, 0.0, 0.0), np.zeros((0, 2)), np.zeros((0, 2)), no_friction, False))
+
+
+@dataclass(frozen=True)
+class SolveSettings:
+    """The solver's constants (``fast_solver``'s of the same names in capitals)."""
+
+    keep_below: float
+    cg_tolerance: float
+    cg_error_fraction: float
+    cg_relative_floor: float
+    cg_max_iterations: int
+    cg_stale_iterations: int
+
+
+def run(solver, settings: SolveSettings, q_n, v_n, dt, con, q, history):
+    """One Newton solve of ``solver`` (``supports``) compiled: (status, iterations,
+    len(history), reaction (n_dof,) N or None); ``q`` (n_dof,) m, the start, overwritten
+    with the solution. The solver's kept LDL^T, its state and the barrier's candidates
+    are read and written back; ``con`` as ``fast_solver.as_cone`` makes it, no sliding
+    nodes. Raises AssertionError where the barrier's Hessian falls outside its pattern
+    (as the interpreted route does)."""
+    kept = getattr(solver, '_compiled_solve', None)
+    barrier, scatter = solver._untabled[0]
+    key = (barrier, scatter, barrier._mesh_edges)
+    if kept is None or any(a is not b for a, b in zip(kept.key, key)):
+        kept = solver._compiled_solve = _Kept(solver, settings)
+    flags, lu = kept.flags, kept.lu
+    flags[:] = 0
+    flags[F_KEPT] = flags[F_LAST] = -1
+    flags[F_WOODBURY] = -1
+    kept.stats[:] = 0
+    if solver._lu is not None:
+        if solver._lu is not lu:
+            lu.l_values[:] = solver._lu.l_values
+            lu.d_inv[:] = solver._lu.d_inv
+        flags[F_HAS_LU] = 1
+        if solver._woodbury is not None:
+            k = solver._woodbury[0].shape[1]
+            for mine, theirs in zip(kept.woodbury, solver._woodbury):
+                mine[:theirs.shape[0], :theirs.shape[1]] = theirs
+            flags[F_WOODBURY] = k
+    flags[F_STALE] = int(solver._stale)
+    flags[F_PAIRS_NEW] = -1
+    pairs = barrier._pairs
+    if pairs is not None:
+        kept.anchor[:] = pairs[0]
+        flags[F_PAIRS_NEW] = 0
+    friction = barrier._friction_pairs
+    has_friction = friction is not None
+    if friction is None:
+        from gripper_sim.core.barrier import _NO_FRICTION as friction
+    tol = solver.tolerance
+    filters = con.filters if con.filters.flags.writeable else con.filters.copy()
+    stiffness = solver.step_stiffness(q_n) if solver.beta > 0 else _NO_STIFFNESS
+    status, iterations, n_hist = _solve(
+        kept.problem, q_n, v_n, dt, dt ** 2, stiffness, filters, settings.cg_tolerance,
+        settings.cg_error_fraction * tol * dt, settings.cg_relative_floor * tol * dt,
+        barrier._obstacles_end, np.ascontiguousarray(barrier._start),
+        _NO_PAIRS if pairs is None else pairs[1], *friction,
+        has_friction, q, tol, solver.max_iterations, history, solver.counts)
+    stats = kept.stats
+    solver.stats['systems'] += int(stats[S_SYSTEMS])
+    solver.stats['factorisations'] += int(stats[S_FACTORS])
+    solver.stats['cg_iterations'] += int(stats[S_CG])
+    if flags[F_HAS_LU]:
+        solver._lu = lu
+    solver._stale = bool(flags[F_STALE])
+    k = int(flags[F_WOODBURY])
+    w_u, w_a_inv_u, w_small_inv = kept.woodbury
+    solver._woodbury = (None if k < 0 else
+                        (w_u[:, :k].copy(), w_a_inv_u[:, :k].copy(), w_small_inv[:k, :k].copy()))
+    if flags[F_PAIRS_NEW] == 1:
+        barrier._pairs = (kept.anchor.copy(), kept.pairs[0], barrier._obstacles_end)
+    barrier._last_terms = None
+    if flags[F_OUTSIDE]:
+        raise AssertionError('barrier Hessian entry outside its pattern')
+    reaction = kept.work[4].copy() if status == newton.OK else None
+    return status, iterations, n_hist, reaction
