@@ -1,7 +1,8 @@
 """The 2D barrier model's compiled Newton solve (``core.barrier_newton``, a prototype off
 by default: ``fast_solver.COMPILED_BARRIER_SOLVE``) against the interpreted route it is
 to replace: the same positions to the last bit at every step, the same Newton
-iterations, and the same solver work (systems, factorisations, CG iterations)."""
+iterations, the same contact forces, and the same solver work (systems,
+factorisations, CG iterations)."""
 import numpy as np
 import pytest
 
@@ -30,15 +31,15 @@ def _apple():
 
 
 def _trace(make, steps, compiled, monkeypatch):
-    """(positions of every step, Newton iterations, solver stats, work counters, the
-    last grip force N) of a run."""
+    """(positions and contact forces of every step, Newton iterations, solver stats, work
+    counters, the last grip force N) of a run."""
     monkeypatch.setattr(fast_solver, 'COMPILED_BARRIER_SOLVE', compiled)
     sim = make()
     assert barrier_newton.supports(sim.solver)
     positions, iterations = [], []
     for _ in range(steps):
         result = sim.step()
-        positions.append(sim.q.copy())
+        positions.append(np.concatenate([sim.q.ravel(), sim.contact_forces.ravel()]))
         iterations.append(result.newton_iterations)
     return (positions, iterations, dict(sim.solver.stats), sim.solver.counts.copy(),
             result.grip_force)

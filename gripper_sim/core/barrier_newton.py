@@ -60,8 +60,10 @@ OUTSIDE_PATTERN = 100
 
 #: flags (int64 array): whether an LDL^T is kept, whether it is stale, the Woodbury
 #: terms' columns kept with it (-1: none), the candidates sought again, entries outside
-#: the pattern, the slot of the kept matrix (-1: none), of the last factorised one
-F_HAS_LU, F_STALE, F_WOODBURY, F_PAIRS_NEW, F_OUTSIDE, F_KEPT, F_LAST, F_SIZE = range(8)
+#: the pattern, the slot of the kept matrix (-1: none), of the last factorised one, the
+#: barrier's last finite evaluation (0: none in this solve, 1: no pairs, 2: terms)
+(F_HAS_LU, F_STALE, F_WOODBURY, F_PAIRS_NEW, F_OUTSIDE, F_KEPT, F_LAST, F_TERMS,
+ F_SIZE) = range(9)
 #: the candidates where none are kept; K_n where there is no stiffness damping
 _NO_PAIRS, _NO_STIFFNESS = np.zeros((0, 2), np.int64), np.zeros(0)
 #: stats (int64 array): Newton systems, factorisations, CG iterations
@@ -149,8 +151,14 @@ def _evaluate(problem, x, hessian, grad):
         if (outside or friction_outside) and not drop_outside:
             flags[F_OUTSIDE] = 1
         phi += barrier_value + friction_value
+        flags[F_TERMS] = 2
     else:
+        barrier_value = friction_value = 0.0
         phi += 0.0 + 0.0
+        flags[F_TERMS] = 1
+    last_q, last_values = problem.work[5], problem.work[6]
+    last_q[:] = x
+    last_values[0], last_values[1] = barrier_value, friction_value
     nodes, tangents, bounds, speed = problem.friction
     return add_step_terms(phi, hessian, x, problem.q_n, dq, problem.dt, problem.masses,
                           problem.alpha, problem.beta, indptr, indices, problem.stiffness,
@@ -537,7 +545,11 @@ class _Kept:
         self.woodbury = (np.empty((n, p)), np.empty((n, p)), np.empty((p, p)))
         self.anchor = np.zeros((barrier.vertex_nodes.size, 2))
         self.pairs = List([np.zeros((0, 2), np.int64)])
-        self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+        #: the loop's vectors (5, n), the friction gradient, CG's solution, S g, the
+        #: reaction, the positions of the barrier's last evaluation and its (barrier,
+        #: friction) values J
+        self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+                     np.empty(n), np.empty(2))
         self.flags = np.zeros(F_SIZE, np.int64)
         self.stats = np.zeros(S_SIZE, np.int64)
         contact = barrier.settings
@@ -644,7 +656,14 @@ def run(solver, settings: SolveSettings, q_n, v_n, dt, con, q, history):
                         (w_u[:, :k].copy(), w_a_inv_u[:, :k].copy(), w_small_inv[:k, :k].copy()))
     if flags[F_PAIRS_NEW] == 1:
         barrier._pairs = (kept.anchor.copy(), kept.pairs[0], barrier._obstacles_end)
-    barrier._last_terms = None
+    if flags[F_TERMS]:
+        # as ``BarrierContact._terms`` keeps them, for the outputs read at the solution
+        last_q, (barrier_value, friction_value) = kept.work[5], kept.work[6]
+        gradients = ((None, None) if flags[F_TERMS] == 1 else
+                     (barrier._gradient_buffers[0],
+                      barrier._gradient_buffers[1] if has_friction else None))
+        barrier._last_terms = (last_q.copy(), float(barrier_value), float(friction_value),
+                               *gradients)
     if flags[F_OUTSIDE]:
         raise AssertionError('barrier Hessian entry outside its pattern')
     reaction = kept.work[4].copy() if status == newton.OK else None
