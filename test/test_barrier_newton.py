@@ -11,6 +11,7 @@ from helpers import quasi_static_sim
 from gripper_sim.configuration import load_config
 from gripper_sim.core import barrier_newton, fast_solver
 from gripper_sim.core.simulation import Simulation
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
 RADIUS = 0.03
 
@@ -62,6 +63,36 @@ def test_compiled_solve_repeats_the_interpreted_one_to_the_bit(make, steps, monk
     for step, (a, b) in enumerate(zip(compiled[0], interpreted[0])):
         assert a.tobytes() == b.tobytes(), f'step {step}'
     assert interpreted[4] > 0.0  # the runs made contact
+
+
+def _fin_ray_grasp(compiled, monkeypatch):
+    """(positions and contact forces of every step, Newton iterations, solver stats,
+    outcome) of the 2D Fin Ray grasp-and-lift (two barriers: the fingers' self-contact
+    and the fruit's with the soft fingers; the fingers' bases held by the filters)."""
+    monkeypatch.setattr(fast_solver, 'COMPILED_BARRIER_SOLVE', compiled)
+    config = load_config(overrides=['gripper.finger.type=fin_ray'])
+    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
+    sim = Simulation(config)
+    assert barrier_newton.supports(sim.solver)
+    states, iterations = [], []
+
+    def on_step(result, phase):
+        states.append(np.concatenate([sim.q.ravel(), sim.contact_forces.ravel()]))
+        iterations.append(result.newton_iterations)
+    summary = run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.01, hold_time=0.2),
+                        on_step=on_step)
+    return states, iterations, dict(sim.solver.stats), summary['outcome']
+
+
+def test_compiled_solve_repeats_the_fin_ray_grasp_to_the_bit(monkeypatch):
+    interpreted = _fin_ray_grasp(False, monkeypatch)
+    compiled = _fin_ray_grasp(True, monkeypatch)
+    assert interpreted[3] == compiled[3] == 'held'
+    assert compiled[1] == interpreted[1]
+    assert compiled[2] == interpreted[2]
+    assert len(compiled[0]) == len(interpreted[0])
+    for step, (a, b) in enumerate(zip(compiled[0], interpreted[0])):
+        assert a.tobytes() == b.tobytes(), f'step {step}'
 
 
 def test_compiled_solve_is_off_by_default():

@@ -4,36 +4,44 @@
 on ``_NewtonProblem`` for the barrier model (``contact.model: ipc``): every hook is a
 Python method calling a kernel. Here the same iteration runs compiled: its hooks are
 overloads (``numba.extending.overload``) for ``BarrierProblemType``, a numba StructRef
-built inside the compiled entry ``_solve`` from one tuple of the step's arrays (a
-StructRef and not a tuple: ``core.kernels`` registers its hooks for every tuple type,
-and numba takes the first overload that types). Each hook calls the kernels the
-interpreted route calls, in the same order on the same arrays, so a solve gives the
-same iterates to the last bit (``test/test_barrier_newton.py``):
+(a StructRef and not a tuple: ``core.kernels`` registers its hooks for every tuple
+type, and numba takes the first overload that types). The problem holds the solver's
+arrays (energy table, CSC pattern and Hessian values, block LDL^T and Woodbury terms,
+the two Newton matrix slots, work vectors) and one ``BarrierPart`` per barrier energy
+(its collision mesh, candidates, lagged friction, quiet region, pattern slots); both
+are made once per solver (``_Kept``) and a solve sets only its own arrays (``_solve``,
+``_set_part``: flat arguments, as numba types a tuple argument in Python at ~2 ms for
+the problem's). Each hook calls the kernels the interpreted route calls, in the same
+order on the same arrays, so a solve gives the same iterates to the last bit
+(``test/test_barrier_newton.py``: the ring, the membrane, the apple with friction and
+the pressure's rank-one term, the Fin Ray grasp):
 
-- ``evaluate``: ``energy_table.inertia_and_energies``, the barrier's candidates (kept
-  while no vertex moves further than ``barrier.CANDIDATE_MARGIN`` from where they were
-  sought, else sought again by ``barrier_search.edge_vertex_candidates``, as
-  ``BarrierContact._candidate_pairs``), ``barrier_terms.barrier_terms``,
+- ``evaluate``: ``energy_table.inertia_and_energies``; per barrier its quiet test
+  (self-contact, ``barrier_kernels.relative_moves_within``), its candidates (kept while
+  no vertex moves further than ``barrier.CANDIDATE_MARGIN`` from where they were sought,
+  else sought again by ``barrier_search.edge_vertex_candidates``, as
+  ``BarrierContact._candidate_pairs``), ``barrier_terms.barrier_terms``; then
   ``solver_kernels.add_step_terms``;
-- ``factorise``: ``solver_kernels.filter_blocks`` into one of two matrix slots (the
-  other holds the kept matrix), the pressures' rank-one terms filtered;
+- ``factorise``: ``solver_kernels.filter_blocks`` into a matrix slot, the pressures'
+  rank-one terms filtered;
 - ``direction``: ``PatternCachingSolver.linear_solve``: ``pcg_kernels.preconditioned_cg``
-  on the kept block LDL^T, refactorised by ``sparse_ldl.factor`` when stale;
-- ``step_bound``: ``barrier_kernels.kept_step_bound``, else the swept boxes' candidates
-  and ``barrier_search.collision_free_step`` (``BarrierContact._step_bound``).
+  on the kept block LDL^T, refactorised by ``sparse_ldl.factor`` when stale, the
+  Woodbury terms made with it, the refinement when CG fails on a fresh factor;
+- ``step_bound``: per barrier ``barrier_kernels.kept_step_bound``, else the swept boxes'
+  candidates and ``barrier_search.collision_free_step`` (``BarrierContact._step_bound``).
 
-What the solve changes of the solver's and the barrier's state (the kept LDL^T and its
-Woodbury terms, whether it is stale, the candidates, the work counters) is written back
-after the call (``run``). Nothing leaves the compiled loop: the candidates' refresh is
-compiled too. A Hessian entry outside the barrier's pattern ends the solve with
-``OUTSIDE_PATTERN`` (the interpreted route raises AssertionError there; so does ``run``).
+Nothing leaves the compiled loop: the candidates' refresh and the refactorisation are
+compiled too. What the solve changes of the solver's and the barriers' state (the kept
+LDL^T, Woodbury terms and staleness, the work counters, the candidates, the last
+evaluation ``contact_forces`` reuses) is written back after the call (``run``). A
+Hessian entry outside a barrier's pattern (where it does not drop them) is flagged and
+``run`` raises AssertionError, as the interpreted route does at once.
 
-Covered (``supports``): a 2D solver whose energies after the table are one fruit
-barrier (rigid faces: no soft bodies, no self-contact) and whose steps have no sliding
-nodes (the barrier model's steps are free). Not yet: soft fingers (the Fin Ray), whose
-pairs may fall outside the pattern (dropped), and self-contact (its quiet region).
-Known difference: with pressure rank-one terms (bulk modulus > 0) the Woodbury terms
-are summed by loops, not numpy's BLAS products, so may differ in the last bits.
+Covered (``supports``): a 2D solver whose energies after the table are one or two
+``BarrierContact`` (the fruit's, with rigid faces or soft bodies; a self-contact), and
+steps with no sliding nodes (the barrier model's steps; a sliding node needs the line
+search's ``kink_step``). The interpreted route stays the default until this one has
+replaced it (``fast_solver.COMPILED_BARRIER_SOLVE``).
 """
 from __future__ import annotations
 
@@ -46,7 +54,8 @@ from numba.experimental import structref
 from numba.extending import overload
 
 from gripper_sim.core import newton
-from gripper_sim.core.barrier_kernels import kept_step_bound, largest_move
+from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move,
+                                              relative_moves_within)
 from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
 from gripper_sim.core.barrier_terms import barrier_terms
 from gripper_sim.core.energy_table import inertia_and_energies
@@ -59,13 +68,17 @@ from gripper_sim.core.sparse_ldl import factor
 OUTSIDE_PATTERN = 100
 
 #: flags (int64 array): whether an LDL^T is kept, whether it is stale, the Woodbury
-#: terms' columns kept with it (-1: none), the candidates sought again, entries outside
-#: the pattern, the slot of the kept matrix (-1: none), of the last factorised one, the
-#: barrier's last finite evaluation (0: none in this solve, 1: no pairs, 2: terms)
-(F_HAS_LU, F_STALE, F_WOODBURY, F_PAIRS_NEW, F_OUTSIDE, F_KEPT, F_LAST, F_TERMS,
- F_SIZE) = range(9)
-#: the candidates where none are kept; K_n where there is no stiffness damping
-_NO_PAIRS, _NO_STIFFNESS = np.zeros((0, 2), np.int64), np.zeros(0)
+#: terms' columns kept with it (-1: none), the slot of the kept matrix (-1: none), of
+#: the last factorised one
+F_HAS_LU, F_STALE, F_WOODBURY, F_KEPT, F_LAST, F_SIZE = range(6)
+#: a barrier's flags (int64 array): its candidates (-1: none kept, 0: kept, 1: sought
+#: again in this solve), its Hessian entries outside the pattern (not dropped), its last
+#: finite evaluation (0: none in this solve (or quiet), 1: no pairs, 2: terms)
+B_PAIRS, B_OUTSIDE, B_TERMS, B_SIZE = range(4)
+#: the candidates where none are kept (and their anchor); K_n where there is no
+#: stiffness damping
+_NO_PAIRS, _NO_ANCHOR = np.zeros((0, 2), np.int64), np.zeros((0, 2))
+_NO_STIFFNESS = np.zeros(0)
 #: stats (int64 array): Newton systems, factorisations, CG iterations
 S_SYSTEMS, S_FACTORS, S_CG, S_SIZE = range(4)
 
@@ -78,20 +91,42 @@ class BarrierProblemType(types.StructRef):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
 
 
-#: the problem's fields: the solver's and the barrier's arrays, kept with the solver
-#: (``_problem``), then those of a step or solve, set by ``_solve`` (see ``run``)
+@structref.register
+class BarrierPartType(types.StructRef):
+    """The numba type of ``BarrierPart``."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+#: the problem's fields: the solver's arrays and its barriers (``BarrierPart``, a
+#: tuple), kept with the solver (``_Kept``), then those of a solve, set by ``_solve``
 FIELDS = ('masses', 'alpha', 'beta', 'eps', 'keep_limit', 'friction', 'cg_iterations',
-          'table', 'pattern', 'ldl', 'barrier', 'candidates', 'work', 'slots', 'low',
-          'flags', 'stats',
-          'q_n', 'v_n', 'dt', 'dt2', 'stiffness', 'filters', 'cg', 'corners', 'start',
-          'friction_pairs', 'has_friction')
+          'table', 'pattern', 'ldl', 'barriers', 'work', 'low', 'flags', 'stats',
+          'q_n', 'v_n', 'dt', 'dt2', 'stiffness', 'filters', 'cg')
+#: a barrier's fields (one ``BarrierContact``): its fixed arrays and settings, then those
+#: of a step, set by ``_set_part``: the faces' corners (c k, 2) m, the collision mesh's
+#: start (n_m, 2) m, the candidates and where they were sought, the lagged friction, the
+#: quiet region (self-contact), its flags (``B_*``), its last evaluation's positions and
+#: (barrier, friction) values J
+PART_FIELDS = ('dof_pairs', 'edges', 'groups', 'self_contact', 'dhat', 'kappa',
+               'mesh_dofs', 'project', 'pattern_keys', 'eps_v', 'radius', 'swept_radius',
+               'margin', 'barrier_gradient', 'friction_gradient', 'drop_outside',
+               'vertex_body', 'n_bodies', 'slots',
+               'corners', 'start', 'anchor', 'pairs', 'friction_pairs', 'has_friction',
+               'quiet_anchor', 'quiet_reach', 'has_quiet', 'flags', 'last_q', 'last_values')
 
 
 class BarrierProblem(structref.StructRefProxy):
     """Python's handle of the type (never built in Python: ``_solve`` builds it)."""
 
 
+class BarrierPart(structref.StructRefProxy):
+    """One barrier's arrays (``PART_FIELDS``), kept by ``_Kept``."""
+
+
 structref.define_proxy(BarrierProblem, BarrierProblemType, list(FIELDS))
+structref.define_proxy(BarrierPart, BarrierPartType, list(PART_FIELDS))
 
 
 def _is_problem(problem):
@@ -100,24 +135,70 @@ def _is_problem(problem):
 
 # ---------------------------------------------------------------------- kernels
 @njit(cache=True)
-def _candidates(q, barrier, corners, candidates, flags):
+def _vertices(q, part, out):
+    """out (n_v + c k, 2) m: the barrier's deformable vertices at q, then the corners."""
+    dof_pairs = part.dof_pairs
+    n_v = dof_pairs.shape[0]
+    for i in range(n_v):
+        out[i, 0] = q[dof_pairs[i, 0]]
+        out[i, 1] = q[dof_pairs[i, 1]]
+    out[n_v:] = part.corners
+
+
+@njit(cache=True)
+def _quiet(part, q, dq):
+    """``BarrierContact.quiet``: a self-contact in its quiet region at q (and q + dq if
+    dq is not empty)."""
+    if not part.has_quiet:
+        return False
+    return relative_moves_within(q, dq, part.dof_pairs, part.quiet_anchor, part.vertex_body,
+                                 part.n_bodies, part.quiet_reach)
+
+
+@njit(cache=True)
+def _candidates(part, q):
     """The kept candidates (k, 2) for positions q, sought again (boxes inflated by the
-    barrier's candidate radius) once a vertex moved further than the margin."""
-    (dof_pairs, edges, groups, self_contact, dhat, kappa, mesh_dofs, project,
-     pattern_keys, eps_v, radius, swept_radius, margin, barrier_gradient,
-     friction_gradient, drop_outside) = barrier
-    anchor, pairs = candidates
-    if flags[F_PAIRS_NEW] < 0 or largest_move(q, dof_pairs, anchor) > margin:
-        n_v = dof_pairs.shape[0]
-        v = np.empty((n_v + corners.shape[0], 2))
-        for i in range(n_v):
-            v[i, 0] = q[dof_pairs[i, 0]]
-            v[i, 1] = q[dof_pairs[i, 1]]
-        v[n_v:] = corners
-        pairs[0] = edge_vertex_candidates(v, v, edges, groups, self_contact, radius)
-        anchor[:] = v[:n_v]
-        flags[F_PAIRS_NEW] = 1
-    return pairs[0]
+    barrier's candidate radius) once a vertex moved further than the margin
+    (``BarrierContact._candidate_pairs``)."""
+    flags = part.flags
+    if flags[B_PAIRS] < 0 or largest_move(q, part.dof_pairs, part.anchor) > part.margin:
+        v = np.empty((part.dof_pairs.shape[0] + part.corners.shape[0], 2))
+        _vertices(q, part, v)
+        part.pairs = edge_vertex_candidates(v, v, part.edges, part.groups, part.self_contact,
+                                            part.radius)
+        part.anchor[:] = v[:part.dof_pairs.shape[0]]
+        flags[B_PAIRS] = 1
+    return part.pairs
+
+
+@njit(cache=True)
+def _barrier_value(part, x, hessian, grad, hdata, dt):
+    """``BarrierContact.evaluate_into`` (2D): the barrier and friction value J (inf: a
+    pair touches), gradients added into grad, Hessians into hdata."""
+    if _quiet(part, x, np.zeros(0)):
+        return 0.0
+    flags = part.flags
+    pairs = _candidates(part, x)
+    if pairs.shape[0] or part.has_friction:
+        slots = part.slots if hessian else np.zeros(0, np.int64)
+        values = hdata if hessian else np.zeros(0)
+        barrier_value, friction_value, outside, friction_outside = barrier_terms(
+            x, part.dof_pairs, part.corners, part.edges, pairs, part.dhat, part.kappa,
+            part.mesh_dofs, hessian, part.project, part.pattern_keys, slots, values,
+            part.start, dt, part.eps_v, part.friction_pairs, part.has_friction, hessian,
+            part.barrier_gradient, part.friction_gradient, grad, True)
+        if not math.isfinite(barrier_value):
+            return np.inf
+        if (outside or friction_outside) and not part.drop_outside:
+            flags[B_OUTSIDE] = 1
+        flags[B_TERMS] = 2
+    else:
+        barrier_value = friction_value = 0.0
+        flags[B_TERMS] = 1
+    part.last_q[:] = x
+    part.last_values[0] = barrier_value
+    part.last_values[1] = friction_value
+    return barrier_value + friction_value
 
 
 @njit(cache=True)
@@ -134,36 +215,36 @@ def _evaluate(problem, x, hessian, grad):
         return np.inf
     if hessian:
         hess_coefs[:] = coefs
-    barrier, flags = problem.barrier, problem.flags
-    (dof_pairs, edges, _, _, dhat, kappa, mesh_dofs, project, pattern_keys, eps_v, _, _,
-     _, barrier_gradient, friction_gradient, drop_outside) = barrier
-    corners, has_friction = problem.corners, problem.has_friction
-    pairs = _candidates(x, barrier, corners, problem.candidates, flags)
-    if pairs.shape[0] or has_friction:
-        slots = problem.slots if hessian else np.zeros(0, np.int64)
-        values = hdata if hessian else np.zeros(0)
-        barrier_value, friction_value, outside, friction_outside = barrier_terms(
-            x, dof_pairs, corners, edges, pairs, dhat, kappa, mesh_dofs, hessian, project,
-            pattern_keys, slots, values, problem.start, problem.dt, eps_v, problem.friction_pairs,
-            has_friction, hessian, barrier_gradient, friction_gradient, grad, True)
-        if not math.isfinite(barrier_value):
+    for part in problem.barriers:
+        value = _barrier_value(part, x, hessian, grad, hdata, problem.dt)
+        if not math.isfinite(value):
             return np.inf
-        if (outside or friction_outside) and not drop_outside:
-            flags[F_OUTSIDE] = 1
-        phi += barrier_value + friction_value
-        flags[F_TERMS] = 2
-    else:
-        barrier_value = friction_value = 0.0
-        phi += 0.0 + 0.0
-        flags[F_TERMS] = 1
-    last_q, last_values = problem.work[5], problem.work[6]
-    last_q[:] = x
-    last_values[0], last_values[1] = barrier_value, friction_value
+        phi += value
     nodes, tangents, bounds, speed = problem.friction
     return add_step_terms(phi, hessian, x, problem.q_n, dq, problem.dt, problem.masses,
                           problem.alpha, problem.beta, indptr, indices, problem.stiffness,
                           k_dq, nodes, tangents, bounds, speed, problem.eps, diag_pos,
                           diag_block_pos, grad, fric_grad, blocks, hdata)
+
+
+@njit(cache=True)
+def _max_step(part, x, dq):
+    """``BarrierContact.max_step`` (2D): the CCD's largest fraction (0, 1] of dq."""
+    if _quiet(part, x, dq):
+        return 1.0
+    bound = -1.0
+    if part.flags[B_PAIRS] >= 0:
+        bound = kept_step_bound(x, dq, part.dof_pairs, part.corners, part.edges, part.anchor,
+                                part.pairs, part.margin)
+    if bound >= 0.0:
+        return bound
+    n_m = part.dof_pairs.shape[0] + part.corners.shape[0]
+    v0, v1 = np.empty((n_m, 2)), np.empty((n_m, 2))
+    _vertices(x, part, v0)
+    _vertices(x + dq, part, v1)
+    swept = edge_vertex_candidates(v0, v1, part.edges, part.groups, part.self_contact,
+                                   part.swept_radius)
+    return collision_free_step(v0, v1, part.edges, swept)
 
 
 @njit(cache=True)
@@ -429,29 +510,10 @@ def _direction_hook(problem, g_f, dq, fresh):
 def _step_bound_hook(problem, x, dq):
     if _is_problem(problem):
         def impl(problem, x, dq):
-            (dof_pairs, edges, groups, self_contact, _, _, _, _, _, _, _, swept_radius,
-             margin, _, _, _) = problem.barrier
-            corners = problem.corners
-            anchor, pairs = problem.candidates
-            bound = -1.0
-            if problem.flags[F_PAIRS_NEW] >= 0:
-                bound = kept_step_bound(x, dq, dof_pairs, corners, edges, anchor, pairs[0],
-                                        margin)
-            if bound < 0.0:
-                end = x + dq
-                n_v = dof_pairs.shape[0]
-                v0 = np.empty((n_v + corners.shape[0], 2))
-                v1 = np.empty((n_v + corners.shape[0], 2))
-                for i in range(n_v):
-                    for a in range(2):
-                        v0[i, a] = x[dof_pairs[i, a]]
-                        v1[i, a] = end[dof_pairs[i, a]]
-                v0[n_v:] = corners
-                v1[n_v:] = corners
-                swept = edge_vertex_candidates(v0, v1, edges, groups, self_contact,
-                                               swept_radius)
-                bound = collision_free_step(v0, v1, edges, swept)
-            return min(1.0, bound)
+            bound = 1.0
+            for part in problem.barriers:
+                bound = min(bound, _max_step(part, x, dq))
+            return min(bound, 1.0)
         return impl
 
 
@@ -486,17 +548,54 @@ def _finish_hook(problem, x, grad):
 # ---------------------------------------------------------------------- the entry
 @njit(cache=True)
 def _new_problem(fields):
-    """A ``BarrierProblem`` of the fields' tuple (once per solver: ``_problem``)."""
+    """A ``BarrierProblem`` of the fields' tuple (once per solver: ``_Kept``)."""
     return BarrierProblem(*fields)
 
 
 @njit(cache=True)
+def _new_part(fields):
+    """A ``BarrierPart`` of the fields' tuple (once per barrier: ``_Kept``)."""
+    return BarrierPart(*fields)
+
+
+@njit(cache=True)
+def _set_part(part, corners, start, anchor, has_pairs, pairs, friction_ids,
+              friction_weights, friction_tangents, friction_forces, friction_coefficients,
+              has_friction, quiet_anchor, quiet_reach, has_quiet):
+    """A barrier's arrays of this step and solve (``PART_FIELDS``; flat arguments: numba
+    types a tuple argument in Python, slowly)."""
+    part.corners = corners
+    part.start = start
+    if has_pairs:
+        part.anchor[:] = anchor
+    part.pairs = pairs
+    part.friction_pairs = (friction_ids, friction_weights, friction_tangents,
+                           friction_forces, friction_coefficients)
+    part.has_friction = has_friction
+    part.quiet_anchor = quiet_anchor
+    part.quiet_reach = quiet_reach
+    part.has_quiet = has_quiet
+    part.flags[:] = 0
+    part.flags[B_PAIRS] = 0 if has_pairs else -1
+
+
+@njit(cache=True)
+def _pairs_of(part):
+    """The part's candidates (k, 2)."""
+    return part.pairs
+
+
+@njit(cache=True)
+def _shared_arrays(part):
+    """The part's arrays Python reads: flags, the last evaluation's positions and
+    values, the candidates' anchor."""
+    return part.flags, part.last_q, part.last_values, part.anchor
+
+
+@njit(cache=True)
 def _solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit, floor,
-           corners, start, pairs, friction_ids, friction_weights, friction_tangents,
-           friction_forces, friction_coefficients, has_friction, q, tol, max_it, history,
-           counts):
-    """``newton.newton_iteration`` compiled on ``problem`` with this solve's arrays (the
-    arguments flat: numba types a tuple argument in Python, ~2 ms for the problem's)."""
+           q, tol, max_it, history, counts):
+    """``newton.newton_iteration`` compiled on ``problem`` with this solve's arrays."""
     problem.q_n = q_n
     problem.v_n = v_n
     problem.dt = dt
@@ -504,57 +603,62 @@ def _solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit
     problem.stiffness = stiffness
     problem.filters = filters
     problem.cg = (relative, error_limit, floor)
-    problem.corners = corners
-    problem.start = start
-    problem.candidates[1][0] = pairs
-    problem.friction_pairs = (friction_ids, friction_weights, friction_tangents,
-                              friction_forces, friction_coefficients)
-    problem.has_friction = has_friction
     return newton.newton_iteration(problem, q, dt, tol, max_it, history, counts)
 
 
 def supports(solver) -> bool:
     """Whether ``run`` covers the solver's problems (see the module)."""
     from gripper_sim.core.barrier import BarrierContact
-    untabled = solver._untabled
-    if solver.dim != 2 or len(untabled) != 1:
-        return False
-    barrier = untabled[0][0]
-    return (type(barrier) is BarrierContact and barrier.dimension == 2
-            and not barrier.bodies and not barrier.self_contact
-            and solver._step_bounding == [barrier])
+    barriers = [energy for energy, _ in solver._untabled]
+    return (solver.dim == 2 and 0 < len(barriers) <= 2
+            and all(type(b) is BarrierContact and b.dimension == 2 for b in barriers)
+            and solver._step_bounding == barriers)
+
+
+def _part(barrier, scatter):
+    """A ``BarrierPart`` of a 2D ``BarrierContact`` and its scatter into the solver's CSC
+    values (its per-step fields empty: ``_set_part`` sets them)."""
+    from gripper_sim.core import barrier as barrier_module
+
+    contact = barrier.settings
+    n_v = barrier.vertex_nodes.size
+    return _new_part((
+        barrier._vertex_dof_pairs, barrier._mesh_edges, barrier._mesh_groups,
+        barrier.self_contact, contact.dhat, contact.stiffness, barrier._mesh_dofs,
+        barrier.projection == barrier_module.ipctk.PSDProjectionMethod.CLAMP,
+        barrier._pattern_keys, contact.friction_smoothing,
+        0.5 * contact.dhat + barrier_module.CANDIDATE_MARGIN,
+        (0.5 + barrier_module.SWEPT_MARGIN) * contact.dhat, barrier_module.CANDIDATE_MARGIN,
+        *barrier._gradient_buffers, barrier.drop_outside_pattern, barrier.vertex_body,
+        len(barrier.bodies) + 1, barrier.pattern_slots(scatter),
+        np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((n_v, 2)), _NO_PAIRS,
+        barrier_module._NO_FRICTION, False, np.zeros((0, 2)), 0.0, False,
+        np.zeros(B_SIZE, np.int64), np.empty(barrier.n_dof), np.empty(2)))
 
 
 class _Kept:
-    """What ``run`` keeps with a solver: the problem (``BarrierProblem``) and the arrays
-    it shares with Python."""
+    """What ``run`` keeps with a solver: the problem (``BarrierProblem``), its barriers'
+    parts (``BarrierPart``) and the arrays they share with Python."""
 
     def __init__(self, solver, settings: 'SolveSettings'):
-        from numba.typed import List
-
-        from gripper_sim.core import barrier as barrier_module
         from gripper_sim.core.stepper import FRICTION_SMOOTHING
 
-        barrier, scatter = solver._untabled[0]
-        #: what the problem was made for: the barrier, its scatter, its collision mesh
-        self.key = (barrier, scatter, barrier._mesh_edges)
+        #: what the problem was made for: each barrier, its scatter, its collision mesh
+        self.key = self.key_of(solver)
         n = solver.n
         table = solver._table
         p = table.pressures
         self.lu = solver.empty_factor()
         self.woodbury = (np.empty((n, p)), np.empty((n, p)), np.empty((p, p)))
-        self.anchor = np.zeros((barrier.vertex_nodes.size, 2))
-        self.pairs = List([np.zeros((0, 2), np.int64)])
+        self.parts = tuple(_part(barrier, scatter) for barrier, scatter in solver._untabled)
+        #: each part's flags, last positions and values (shared with the part)
+        self.part_arrays = tuple(_shared_arrays(part) for part in self.parts)
         #: the loop's vectors (5, n), the friction gradient, CG's solution, S g, the
-        #: reaction, the positions of the barrier's last evaluation and its (barrier,
-        #: friction) values J
-        self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
-                     np.empty(n), np.empty(2))
+        #: reaction
+        self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
         self.flags = np.zeros(F_SIZE, np.int64)
         self.stats = np.zeros(S_SIZE, np.int64)
-        contact = barrier.settings
         lu = self.lu
-        no_friction = barrier_module._NO_FRICTION
         self.problem = _new_problem((
             solver.m, solver.alpha, solver.beta, FRICTION_SMOOTHING,
             settings.keep_below * solver.tolerance,
@@ -569,20 +673,17 @@ class _Kept:
             (solver._perm, lu.arrays, solver._ldl_gather[0], solver._ldl_gather[1],
              lu.l_values, lu.d_inv, np.empty_like(lu.l_values), np.empty_like(lu.d_inv),
              solver._ldl_pattern.n_blocks, *self.woodbury),
-            (barrier._vertex_dof_pairs, barrier._mesh_edges, barrier._mesh_groups,
-             barrier.self_contact, contact.dhat, contact.stiffness, barrier._mesh_dofs,
-             barrier.projection == barrier_module.ipctk.PSDProjectionMethod.CLAMP,
-             barrier._pattern_keys, contact.friction_smoothing,
-             0.5 * contact.dhat + barrier_module.CANDIDATE_MARGIN,
-             (0.5 + barrier_module.SWEPT_MARGIN) * contact.dhat,
-             barrier_module.CANDIDATE_MARGIN, *barrier._gradient_buffers,
-             barrier.drop_outside_pattern),
-            (self.anchor, self.pairs), self.work, barrier.pattern_slots(scatter),
+            self.parts, self.work,
             (np.empty((2, solver._nnz)), np.empty((2, p, n)), np.empty((2, p)),
              np.zeros(2, np.int64), np.zeros(2)),
             self.flags, self.stats,
             np.zeros(n), np.zeros(n), 1.0, 1.0, np.zeros(0), np.zeros((n // 2, 2, 2)),
-            (0.0, 0.0, 0.0), np.zeros((0, 2)), np.zeros((0, 2)), no_friction, False))
+            (0.0, 0.0, 0.0)))
+
+    @staticmethod
+    def key_of(solver) -> tuple:
+        return tuple(x for barrier, scatter in solver._untabled
+                     for x in (barrier, scatter, barrier._mesh_edges))
 
 
 @dataclass(frozen=True)
@@ -597,17 +698,50 @@ class SolveSettings:
     cg_stale_iterations: int
 
 
+def _set_barrier(part, barrier) -> None:
+    """The part's arrays of this step and solve from the barrier's state."""
+    from gripper_sim.core.barrier import _NO_FRICTION
+
+    pairs = barrier._pairs
+    friction = barrier._friction_pairs
+    quiet = barrier._quiet
+    _set_part(part, barrier._obstacles_end, np.ascontiguousarray(barrier._start),
+              pairs[0] if pairs is not None else _NO_ANCHOR, pairs is not None,
+              pairs[1] if pairs is not None else _NO_PAIRS,
+              *(friction if friction is not None else _NO_FRICTION), friction is not None,
+              quiet[0] if quiet is not None else _NO_ANCHOR,
+              quiet[1] if quiet is not None else 0.0, quiet is not None)
+
+
+def _read_back(part, arrays, barrier) -> None:
+    """The barrier's state after a solve: its candidates if sought again, its last
+    evaluation (as ``BarrierContact._terms`` keeps it, for the outputs read at the
+    solution)."""
+    flags, last_q, (barrier_value, friction_value), anchor = arrays
+    if flags[B_PAIRS] == 1:
+        barrier._pairs = (anchor.copy(), _pairs_of(part), barrier._obstacles_end)
+    if flags[B_TERMS]:
+        gradients = ((None, None) if flags[B_TERMS] == 1 else
+                     (barrier._gradient_buffers[0],
+                      barrier._gradient_buffers[1] if barrier._friction_pairs is not None
+                      else None))
+        barrier._last_terms = (last_q.copy(), float(barrier_value), float(friction_value),
+                               *gradients)
+    if flags[B_OUTSIDE]:
+        raise AssertionError('barrier Hessian entry outside its pattern')
+
+
 def run(solver, settings: SolveSettings, q_n, v_n, dt, con, q, history):
     """One Newton solve of ``solver`` (``supports``) compiled: (status, iterations,
     len(history), reaction (n_dof,) N or None); ``q`` (n_dof,) m, the start, overwritten
-    with the solution. The solver's kept LDL^T, its state and the barrier's candidates
+    with the solution. The solver's kept LDL^T, its state and the barriers' candidates
     are read and written back; ``con`` as ``fast_solver.as_cone`` makes it, no sliding
-    nodes. Raises AssertionError where the barrier's Hessian falls outside its pattern
+    nodes. Raises AssertionError where a barrier's Hessian falls outside its pattern
     (as the interpreted route does)."""
     kept = getattr(solver, '_compiled_solve', None)
-    barrier, scatter = solver._untabled[0]
-    key = (barrier, scatter, barrier._mesh_edges)
-    if kept is None or any(a is not b for a, b in zip(kept.key, key)):
+    key = _Kept.key_of(solver)
+    if kept is None or len(kept.key) != len(key) or any(
+            a is not b for a, b in zip(kept.key, key)):
         kept = solver._compiled_solve = _Kept(solver, settings)
     flags, lu = kept.flags, kept.lu
     flags[:] = 0
@@ -625,24 +759,16 @@ def run(solver, settings: SolveSettings, q_n, v_n, dt, con, q, history):
                 mine[:theirs.shape[0], :theirs.shape[1]] = theirs
             flags[F_WOODBURY] = k
     flags[F_STALE] = int(solver._stale)
-    flags[F_PAIRS_NEW] = -1
-    pairs = barrier._pairs
-    if pairs is not None:
-        kept.anchor[:] = pairs[0]
-        flags[F_PAIRS_NEW] = 0
-    friction = barrier._friction_pairs
-    has_friction = friction is not None
-    if friction is None:
-        from gripper_sim.core.barrier import _NO_FRICTION as friction
+    barriers = [barrier for barrier, _ in solver._untabled]
+    for part, barrier in zip(kept.parts, barriers):
+        _set_barrier(part, barrier)
     tol = solver.tolerance
     filters = con.filters if con.filters.flags.writeable else con.filters.copy()
     stiffness = solver.step_stiffness(q_n) if solver.beta > 0 else _NO_STIFFNESS
     status, iterations, n_hist = _solve(
         kept.problem, q_n, v_n, dt, dt ** 2, stiffness, filters, settings.cg_tolerance,
         settings.cg_error_fraction * tol * dt, settings.cg_relative_floor * tol * dt,
-        barrier._obstacles_end, np.ascontiguousarray(barrier._start),
-        _NO_PAIRS if pairs is None else pairs[1], *friction,
-        has_friction, q, tol, solver.max_iterations, history, solver.counts)
+        q, tol, solver.max_iterations, history, solver.counts)
     stats = kept.stats
     solver.stats['systems'] += int(stats[S_SYSTEMS])
     solver.stats['factorisations'] += int(stats[S_FACTORS])
@@ -654,17 +780,7 @@ def run(solver, settings: SolveSettings, q_n, v_n, dt, con, q, history):
     w_u, w_a_inv_u, w_small_inv = kept.woodbury
     solver._woodbury = (None if k < 0 else
                         (w_u[:, :k].copy(), w_a_inv_u[:, :k].copy(), w_small_inv[:k, :k].copy()))
-    if flags[F_PAIRS_NEW] == 1:
-        barrier._pairs = (kept.anchor.copy(), kept.pairs[0], barrier._obstacles_end)
-    if flags[F_TERMS]:
-        # as ``BarrierContact._terms`` keeps them, for the outputs read at the solution
-        last_q, (barrier_value, friction_value) = kept.work[5], kept.work[6]
-        gradients = ((None, None) if flags[F_TERMS] == 1 else
-                     (barrier._gradient_buffers[0],
-                      barrier._gradient_buffers[1] if has_friction else None))
-        barrier._last_terms = (last_q.copy(), float(barrier_value), float(friction_value),
-                               *gradients)
-    if flags[F_OUTSIDE]:
-        raise AssertionError('barrier Hessian entry outside its pattern')
+    for part, arrays, barrier in zip(kept.parts, kept.part_arrays, barriers):
+        _read_back(part, arrays, barrier)
     reaction = kept.work[4].copy() if status == newton.OK else None
     return status, iterations, n_hist, reaction
