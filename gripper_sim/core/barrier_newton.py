@@ -650,6 +650,10 @@ class _Kept:
         p = table.pressures
         self.lu = solver.empty_factor()
         self.woodbury = (np.empty((n, p)), np.empty((n, p)), np.empty((p, p)))
+        #: the solver's Woodbury terms as the last solve left them (their values are those
+        #: of ``woodbury``), and the last read-only filters with their copy
+        self.woodbury_out = None
+        self.filters = (None, None)
         self.parts = tuple(_part(barrier, scatter) for barrier, scatter in solver._untabled)
         #: each part's flags, last positions and values (shared with the part)
         self.part_arrays = tuple(_shared_arrays(part) for part in self.parts)
@@ -754,16 +758,20 @@ def run(solver, settings: SolveSettings, q_n, v_n, dt, con, q, history):
             lu.d_inv[:] = solver._lu.d_inv
         flags[F_HAS_LU] = 1
         if solver._woodbury is not None:
-            k = solver._woodbury[0].shape[1]
-            for mine, theirs in zip(kept.woodbury, solver._woodbury):
-                mine[:theirs.shape[0], :theirs.shape[1]] = theirs
-            flags[F_WOODBURY] = k
+            if solver._woodbury is not kept.woodbury_out:  # else they hold its values
+                for mine, theirs in zip(kept.woodbury, solver._woodbury):
+                    mine[:theirs.shape[0], :theirs.shape[1]] = theirs
+            flags[F_WOODBURY] = solver._woodbury[0].shape[1]
     flags[F_STALE] = int(solver._stale)
     barriers = [barrier for barrier, _ in solver._untabled]
     for part, barrier in zip(kept.parts, barriers):
         _set_barrier(part, barrier)
     tol = solver.tolerance
-    filters = con.filters if con.filters.flags.writeable else con.filters.copy()
+    filters = con.filters
+    if not filters.flags.writeable:  # a read-only array is typed apart: a copy, kept
+        if kept.filters[0] is not filters:
+            kept.filters = (filters, filters.copy())
+        filters = kept.filters[1]
     stiffness = solver.step_stiffness(q_n) if solver.beta > 0 else _NO_STIFFNESS
     status, iterations, n_hist = _solve(
         kept.problem, q_n, v_n, dt, dt ** 2, stiffness, filters, settings.cg_tolerance,
@@ -773,13 +781,14 @@ def run(solver, settings: SolveSettings, q_n, v_n, dt, con, q, history):
     solver.stats['systems'] += int(stats[S_SYSTEMS])
     solver.stats['factorisations'] += int(stats[S_FACTORS])
     solver.stats['cg_iterations'] += int(stats[S_CG])
-    if flags[F_HAS_LU]:
-        solver._lu = lu
     solver._stale = bool(flags[F_STALE])
-    k = int(flags[F_WOODBURY])
-    w_u, w_a_inv_u, w_small_inv = kept.woodbury
-    solver._woodbury = (None if k < 0 else
-                        (w_u[:, :k].copy(), w_a_inv_u[:, :k].copy(), w_small_inv[:k, :k].copy()))
+    if stats[S_FACTORS]:  # the factor and its Woodbury terms are new
+        solver._lu = lu
+        k = int(flags[F_WOODBURY])
+        w_u, w_a_inv_u, w_small_inv = kept.woodbury
+        kept.woodbury_out = solver._woodbury = (
+            None if k < 0 else
+            (w_u[:, :k].copy(), w_a_inv_u[:, :k].copy(), w_small_inv[:k, :k].copy()))
     for part, arrays, barrier in zip(kept.parts, kept.part_arrays, barriers):
         _read_back(part, arrays, barrier)
     reaction = kept.work[4].copy() if status == newton.OK else None
