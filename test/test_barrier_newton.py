@@ -1,15 +1,15 @@
-"""The 2D barrier model's compiled Newton solve (``core.barrier_newton``, a prototype off
-by default: ``fast_solver.COMPILED_BARRIER_SOLVE``) against the interpreted route it is
-to replace: the same positions to the last bit at every step, the same Newton
-iterations, the same contact forces, and the same solver work (systems,
-factorisations, CG iterations)."""
+"""The 2D barrier model's compiled Newton solve (``core.barrier_newton``, run by
+``core.barrier_solve``; a prototype off by default:
+``fast_solver.COMPILED_BARRIER_SOLVE``) against the interpreted route it is to replace:
+the same positions to the last bit at every step, the same Newton iterations, the same
+contact forces, and the same solver work (systems, factorisations, CG iterations)."""
 import numpy as np
 import pytest
 
 from helpers import quasi_static_sim
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import barrier_newton, fast_solver
+from gripper_sim.core import barrier_solve, fast_solver
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
@@ -36,7 +36,7 @@ def _trace(make, steps, compiled, monkeypatch):
     counters, the last grip force N) of a run."""
     monkeypatch.setattr(fast_solver, 'COMPILED_BARRIER_SOLVE', compiled)
     sim = make()
-    assert barrier_newton.supports(sim.solver)
+    assert barrier_solve.supports(sim.solver)
     positions, iterations = [], []
     for _ in range(steps):
         result = sim.step()
@@ -73,7 +73,7 @@ def _fin_ray_grasp(compiled, monkeypatch):
     config = load_config(overrides=['gripper.finger.type=fin_ray'])
     config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
     sim = Simulation(config)
-    assert barrier_newton.supports(sim.solver)
+    assert barrier_solve.supports(sim.solver)
     states, iterations = [], []
 
     def on_step(result, phase):

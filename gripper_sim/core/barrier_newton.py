@@ -9,10 +9,11 @@ type, and numba takes the first overload that types). The problem holds the solv
 arrays (energy table, CSC pattern and Hessian values, block LDL^T and Woodbury terms,
 the two Newton matrix slots, work vectors) and one ``BarrierPart`` per barrier energy
 (its collision mesh, candidates, lagged friction, quiet region, pattern slots); both
-are made once per solver (``_Kept``) and a solve sets only its own arrays (``_solve``,
-``_set_part``: flat arguments, as numba types a tuple argument in Python at ~2 ms for
-the problem's). Each hook calls the kernels the interpreted route calls, in the same
-order on the same arrays, so a solve gives the same iterates to the last bit
+are made once per solver (``barrier_solve``, which runs a solve from Python) and a
+solve sets only its own arrays (``solve``, ``set_part``: flat arguments, as numba
+types a tuple argument in Python at ~2 ms for the problem's). Each hook calls the
+kernels the interpreted route calls, in the same order on the same arrays, so a solve
+gives the same iterates to the last bit
 (``test/test_barrier_newton.py``: the ring, the membrane, the apple with friction and
 the pressure's rank-one term, the Fin Ray grasp):
 
@@ -33,20 +34,20 @@ the pressure's rank-one term, the Fin Ray grasp):
 Nothing leaves the compiled loop: the candidates' refresh and the refactorisation are
 compiled too. What the solve changes of the solver's and the barriers' state (the kept
 LDL^T, Woodbury terms and staleness, the work counters, the candidates, the last
-evaluation ``contact_forces`` reuses) is written back after the call (``run``). A
-Hessian entry outside a barrier's pattern (where it does not drop them) is flagged and
-``run`` raises AssertionError, as the interpreted route does at once.
+evaluation ``contact_forces`` reuses) is written back after the call
+(``barrier_solve.run``). A Hessian entry outside a barrier's pattern (where it does not
+drop them) is flagged and ``run`` raises AssertionError, as the interpreted route does
+at once.
 
-Covered (``supports``): a 2D solver whose energies after the table are one or two
-``BarrierContact`` (the fruit's, with rigid faces or soft bodies; a self-contact), and
-steps with no sliding nodes (the barrier model's steps; a sliding node needs the line
-search's ``kink_step``). The interpreted route stays the default until this one has
-replaced it (``fast_solver.COMPILED_BARRIER_SOLVE``).
+Covered (``barrier_solve.supports``): a 2D solver whose energies after the table are
+one or two ``BarrierContact`` (the fruit's, with rigid faces or soft bodies; a
+self-contact), and steps with no sliding nodes (the barrier model's steps; a sliding
+node needs the line search's ``kink_step``). The interpreted route stays the default
+until this one has replaced it (``fast_solver.COMPILED_BARRIER_SOLVE``).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, types
@@ -64,7 +65,7 @@ from gripper_sim.core.solver_kernels import (add_step_terms, apply_filters, csc_
                                              filter_blocks, max_abs)
 from gripper_sim.core.sparse_ldl import factor
 
-#: ``_solve``'s status beyond ``newton``'s: a barrier Hessian entry outside its pattern
+#: ``solve``'s status beyond ``newton``'s: a barrier Hessian entry outside its pattern
 OUTSIDE_PATTERN = 100
 
 #: flags (int64 array): whether an LDL^T is kept, whether it is stale, the Woodbury
@@ -75,10 +76,8 @@ F_HAS_LU, F_STALE, F_WOODBURY, F_KEPT, F_LAST, F_SIZE = range(6)
 #: again in this solve), its Hessian entries outside the pattern (not dropped), its last
 #: finite evaluation (0: none in this solve (or quiet), 1: no pairs, 2: terms)
 B_PAIRS, B_OUTSIDE, B_TERMS, B_SIZE = range(4)
-#: the candidates where none are kept (and their anchor); K_n where there is no
-#: stiffness damping
-_NO_PAIRS, _NO_ANCHOR = np.zeros((0, 2), np.int64), np.zeros((0, 2))
-_NO_STIFFNESS = np.zeros(0)
+#: the candidates where none are kept
+NO_PAIRS = np.zeros((0, 2), np.int64)
 #: stats (int64 array): Newton systems, factorisations, CG iterations
 S_SYSTEMS, S_FACTORS, S_CG, S_SIZE = range(4)
 
@@ -99,13 +98,25 @@ class BarrierPartType(types.StructRef):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
 
 
-#: the problem's fields: the solver's arrays and its barriers (``BarrierPart``, a
-#: tuple), kept with the solver (``_Kept``), then those of a solve, set by ``_solve``
+#: the problem's fields. Kept with the solver (``barrier_solve``): masses (n,) kg per dof,
+#: Rayleigh alpha 1/s and beta s, the friction smoothing m/s, the keep limit m/s, the
+#: (empty) sliding nodes' arrays, CG's (max, stale) iterations; ``table``: the energy
+#: table's order, items, pressure coefficients and dA/dq (with and without the Hessian),
+#: dq, the coefficients of the last Hessian; ``pattern``: the CSC indptr and indices,
+#: Hessian values, the no-Hessian values, K_n dq, friction blocks, the diagonal's and
+#: the node blocks' positions (``filter_blocks``' arrays); ``ldl``: perm, the factor's
+#: pattern arrays, its gather from the CSC values, L and D^-1 (kept) and their scratch,
+#: the blocks, the Woodbury terms (u, A^-1 u, inverse capacitance); ``barriers``: a
+#: tuple of ``BarrierPart``; ``work``: see ``_Kept``; ``low``: two Newton matrix slots
+#: (2, nnz), their filtered rank-one vectors (2, P, n), coefficients (2, P), counts
+#: and shifts; ``flags`` (``F_*``); ``stats`` (``S_*``). Set by ``solve``: q_n, v_n
+#: (n,), dt s, dt^2, K_n's CSC values, the filters (n_nodes, 2, 2), CG's (relative,
+#: error limit m, floor m)
 FIELDS = ('masses', 'alpha', 'beta', 'eps', 'keep_limit', 'friction', 'cg_iterations',
           'table', 'pattern', 'ldl', 'barriers', 'work', 'low', 'flags', 'stats',
           'q_n', 'v_n', 'dt', 'dt2', 'stiffness', 'filters', 'cg')
 #: a barrier's fields (one ``BarrierContact``): its fixed arrays and settings, then those
-#: of a step, set by ``_set_part``: the faces' corners (c k, 2) m, the collision mesh's
+#: of a step, set by ``set_part``: the faces' corners (c k, 2) m, the collision mesh's
 #: start (n_m, 2) m, the candidates and where they were sought, the lagged friction, the
 #: quiet region (self-contact), its flags (``B_*``), its last evaluation's positions and
 #: (barrier, friction) values J
@@ -118,11 +129,11 @@ PART_FIELDS = ('dof_pairs', 'edges', 'groups', 'self_contact', 'dhat', 'kappa',
 
 
 class BarrierProblem(structref.StructRefProxy):
-    """Python's handle of the type (never built in Python: ``_solve`` builds it)."""
+    """The compiled Newton iteration's problem (``FIELDS``), made by ``new_problem``."""
 
 
 class BarrierPart(structref.StructRefProxy):
-    """One barrier's arrays (``PART_FIELDS``), kept by ``_Kept``."""
+    """One barrier's arrays (``PART_FIELDS``), made by ``new_part``."""
 
 
 structref.define_proxy(BarrierProblem, BarrierProblemType, list(FIELDS))
@@ -463,7 +474,7 @@ def _factorise_hook(problem, x, shift):
                         diagonal[m] = shift * filters[i, a, a] * problem.masses[m] / problem.dt2
             filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
                           filters, diagonal, matrices[slot])
-            coefs, vectors, hess_coefs = problem.table[2], problem.table[3], problem.table[6]
+            vectors, hess_coefs = problem.table[3], problem.table[6]
             k = 0
             for p in range(hess_coefs.shape[0]):
                 if hess_coefs[p] != 0.0:
@@ -547,19 +558,19 @@ def _finish_hook(problem, x, grad):
 
 # ---------------------------------------------------------------------- the entry
 @njit(cache=True)
-def _new_problem(fields):
+def new_problem(fields):
     """A ``BarrierProblem`` of the fields' tuple (once per solver: ``_Kept``)."""
     return BarrierProblem(*fields)
 
 
 @njit(cache=True)
-def _new_part(fields):
+def new_part(fields):
     """A ``BarrierPart`` of the fields' tuple (once per barrier: ``_Kept``)."""
     return BarrierPart(*fields)
 
 
 @njit(cache=True)
-def _set_part(part, corners, start, anchor, has_pairs, pairs, friction_ids,
+def set_part(part, corners, start, anchor, has_pairs, pairs, friction_ids,
               friction_weights, friction_tangents, friction_forces, friction_coefficients,
               has_friction, quiet_anchor, quiet_reach, has_quiet):
     """A barrier's arrays of this step and solve (``PART_FIELDS``; flat arguments: numba
@@ -580,20 +591,20 @@ def _set_part(part, corners, start, anchor, has_pairs, pairs, friction_ids,
 
 
 @njit(cache=True)
-def _pairs_of(part):
+def candidates_of(part):
     """The part's candidates (k, 2)."""
     return part.pairs
 
 
 @njit(cache=True)
-def _shared_arrays(part):
+def shared_arrays(part):
     """The part's arrays Python reads: flags, the last evaluation's positions and
     values, the candidates' anchor."""
     return part.flags, part.last_q, part.last_values, part.anchor
 
 
 @njit(cache=True)
-def _solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit, floor,
+def solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit, floor,
            q, tol, max_it, history, counts):
     """``newton.newton_iteration`` compiled on ``problem`` with this solve's arrays."""
     problem.q_n = q_n
@@ -604,192 +615,3 @@ def _solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit
     problem.filters = filters
     problem.cg = (relative, error_limit, floor)
     return newton.newton_iteration(problem, q, dt, tol, max_it, history, counts)
-
-
-def supports(solver) -> bool:
-    """Whether ``run`` covers the solver's problems (see the module)."""
-    from gripper_sim.core.barrier import BarrierContact
-    barriers = [energy for energy, _ in solver._untabled]
-    return (solver.dim == 2 and 0 < len(barriers) <= 2
-            and all(type(b) is BarrierContact and b.dimension == 2 for b in barriers)
-            and solver._step_bounding == barriers)
-
-
-def _part(barrier, scatter):
-    """A ``BarrierPart`` of a 2D ``BarrierContact`` and its scatter into the solver's CSC
-    values (its per-step fields empty: ``_set_part`` sets them)."""
-    from gripper_sim.core import barrier as barrier_module
-
-    contact = barrier.settings
-    n_v = barrier.vertex_nodes.size
-    return _new_part((
-        barrier._vertex_dof_pairs, barrier._mesh_edges, barrier._mesh_groups,
-        barrier.self_contact, contact.dhat, contact.stiffness, barrier._mesh_dofs,
-        barrier.projection == barrier_module.ipctk.PSDProjectionMethod.CLAMP,
-        barrier._pattern_keys, contact.friction_smoothing,
-        0.5 * contact.dhat + barrier_module.CANDIDATE_MARGIN,
-        (0.5 + barrier_module.SWEPT_MARGIN) * contact.dhat, barrier_module.CANDIDATE_MARGIN,
-        *barrier._gradient_buffers, barrier.drop_outside_pattern, barrier.vertex_body,
-        len(barrier.bodies) + 1, barrier.pattern_slots(scatter),
-        np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((n_v, 2)), _NO_PAIRS,
-        barrier_module._NO_FRICTION, False, np.zeros((0, 2)), 0.0, False,
-        np.zeros(B_SIZE, np.int64), np.empty(barrier.n_dof), np.empty(2)))
-
-
-class _Kept:
-    """What ``run`` keeps with a solver: the problem (``BarrierProblem``), its barriers'
-    parts (``BarrierPart``) and the arrays they share with Python."""
-
-    def __init__(self, solver, settings: 'SolveSettings'):
-        from gripper_sim.core.stepper import FRICTION_SMOOTHING
-
-        #: what the problem was made for: each barrier, its scatter, its collision mesh
-        self.key = self.key_of(solver)
-        n = solver.n
-        table = solver._table
-        p = table.pressures
-        self.lu = solver.empty_factor()
-        self.woodbury = (np.empty((n, p)), np.empty((n, p)), np.empty((p, p)))
-        #: the solver's Woodbury terms as the last solve left them (their values are those
-        #: of ``woodbury``), and the last read-only filters with their copy
-        self.woodbury_out = None
-        self.filters = (None, None)
-        self.parts = tuple(_part(barrier, scatter) for barrier, scatter in solver._untabled)
-        #: each part's flags, last positions and values (shared with the part)
-        self.part_arrays = tuple(_shared_arrays(part) for part in self.parts)
-        #: the loop's vectors (5, n), the friction gradient, CG's solution, S g, the
-        #: reaction
-        self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
-        self.flags = np.zeros(F_SIZE, np.int64)
-        self.stats = np.zeros(S_SIZE, np.int64)
-        lu = self.lu
-        self.problem = _new_problem((
-            solver.m, solver.alpha, solver.beta, FRICTION_SMOOTHING,
-            settings.keep_below * solver.tolerance,
-            (np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 1))),
-            (settings.cg_max_iterations, settings.cg_stale_iterations),
-            (table.order, table.items, table._coefs, table._vectors, table._scratch_vectors,
-             table._dq, np.zeros(p)),
-            (solver._matvec_indptr, solver._matvec_indices, solver._hessian_values,
-             solver._no_values, solver._k_dq, np.empty((0, 2, 2)), solver._diag_pos,
-             solver._diag_block_pos, solver._block_pos, solver._block_nodes,
-             solver._node_block_ptr, solver._node_blocks, solver._diag_blocks),
-            (solver._perm, lu.arrays, solver._ldl_gather[0], solver._ldl_gather[1],
-             lu.l_values, lu.d_inv, np.empty_like(lu.l_values), np.empty_like(lu.d_inv),
-             solver._ldl_pattern.n_blocks, *self.woodbury),
-            self.parts, self.work,
-            (np.empty((2, solver._nnz)), np.empty((2, p, n)), np.empty((2, p)),
-             np.zeros(2, np.int64), np.zeros(2)),
-            self.flags, self.stats,
-            np.zeros(n), np.zeros(n), 1.0, 1.0, np.zeros(0), np.zeros((n // 2, 2, 2)),
-            (0.0, 0.0, 0.0)))
-
-    @staticmethod
-    def key_of(solver) -> tuple:
-        return tuple(x for barrier, scatter in solver._untabled
-                     for x in (barrier, scatter, barrier._mesh_edges))
-
-
-@dataclass(frozen=True)
-class SolveSettings:
-    """The solver's constants (``fast_solver``'s of the same names in capitals)."""
-
-    keep_below: float
-    cg_tolerance: float
-    cg_error_fraction: float
-    cg_relative_floor: float
-    cg_max_iterations: int
-    cg_stale_iterations: int
-
-
-def _set_barrier(part, barrier) -> None:
-    """The part's arrays of this step and solve from the barrier's state."""
-    from gripper_sim.core.barrier import _NO_FRICTION
-
-    pairs = barrier._pairs
-    friction = barrier._friction_pairs
-    quiet = barrier._quiet
-    _set_part(part, barrier._obstacles_end, np.ascontiguousarray(barrier._start),
-              pairs[0] if pairs is not None else _NO_ANCHOR, pairs is not None,
-              pairs[1] if pairs is not None else _NO_PAIRS,
-              *(friction if friction is not None else _NO_FRICTION), friction is not None,
-              quiet[0] if quiet is not None else _NO_ANCHOR,
-              quiet[1] if quiet is not None else 0.0, quiet is not None)
-
-
-def _read_back(part, arrays, barrier) -> None:
-    """The barrier's state after a solve: its candidates if sought again, its last
-    evaluation (as ``BarrierContact._terms`` keeps it, for the outputs read at the
-    solution)."""
-    flags, last_q, (barrier_value, friction_value), anchor = arrays
-    if flags[B_PAIRS] == 1:
-        barrier._pairs = (anchor.copy(), _pairs_of(part), barrier._obstacles_end)
-    if flags[B_TERMS]:
-        gradients = ((None, None) if flags[B_TERMS] == 1 else
-                     (barrier._gradient_buffers[0],
-                      barrier._gradient_buffers[1] if barrier._friction_pairs is not None
-                      else None))
-        barrier._last_terms = (last_q.copy(), float(barrier_value), float(friction_value),
-                               *gradients)
-    if flags[B_OUTSIDE]:
-        raise AssertionError('barrier Hessian entry outside its pattern')
-
-
-def run(solver, settings: SolveSettings, q_n, v_n, dt, con, q, history):
-    """One Newton solve of ``solver`` (``supports``) compiled: (status, iterations,
-    len(history), reaction (n_dof,) N or None); ``q`` (n_dof,) m, the start, overwritten
-    with the solution. The solver's kept LDL^T, its state and the barriers' candidates
-    are read and written back; ``con`` as ``fast_solver.as_cone`` makes it, no sliding
-    nodes. Raises AssertionError where a barrier's Hessian falls outside its pattern
-    (as the interpreted route does)."""
-    kept = getattr(solver, '_compiled_solve', None)
-    key = _Kept.key_of(solver)
-    if kept is None or len(kept.key) != len(key) or any(
-            a is not b for a, b in zip(kept.key, key)):
-        kept = solver._compiled_solve = _Kept(solver, settings)
-    flags, lu = kept.flags, kept.lu
-    flags[:] = 0
-    flags[F_KEPT] = flags[F_LAST] = -1
-    flags[F_WOODBURY] = -1
-    kept.stats[:] = 0
-    if solver._lu is not None:
-        if solver._lu is not lu:
-            lu.l_values[:] = solver._lu.l_values
-            lu.d_inv[:] = solver._lu.d_inv
-        flags[F_HAS_LU] = 1
-        if solver._woodbury is not None:
-            if solver._woodbury is not kept.woodbury_out:  # else they hold its values
-                for mine, theirs in zip(kept.woodbury, solver._woodbury):
-                    mine[:theirs.shape[0], :theirs.shape[1]] = theirs
-            flags[F_WOODBURY] = solver._woodbury[0].shape[1]
-    flags[F_STALE] = int(solver._stale)
-    barriers = [barrier for barrier, _ in solver._untabled]
-    for part, barrier in zip(kept.parts, barriers):
-        _set_barrier(part, barrier)
-    tol = solver.tolerance
-    filters = con.filters
-    if not filters.flags.writeable:  # a read-only array is typed apart: a copy, kept
-        if kept.filters[0] is not filters:
-            kept.filters = (filters, filters.copy())
-        filters = kept.filters[1]
-    stiffness = solver.step_stiffness(q_n) if solver.beta > 0 else _NO_STIFFNESS
-    status, iterations, n_hist = _solve(
-        kept.problem, q_n, v_n, dt, dt ** 2, stiffness, filters, settings.cg_tolerance,
-        settings.cg_error_fraction * tol * dt, settings.cg_relative_floor * tol * dt,
-        q, tol, solver.max_iterations, history, solver.counts)
-    stats = kept.stats
-    solver.stats['systems'] += int(stats[S_SYSTEMS])
-    solver.stats['factorisations'] += int(stats[S_FACTORS])
-    solver.stats['cg_iterations'] += int(stats[S_CG])
-    solver._stale = bool(flags[F_STALE])
-    if stats[S_FACTORS]:  # the factor and its Woodbury terms are new
-        solver._lu = lu
-        k = int(flags[F_WOODBURY])
-        w_u, w_a_inv_u, w_small_inv = kept.woodbury
-        kept.woodbury_out = solver._woodbury = (
-            None if k < 0 else
-            (w_u[:, :k].copy(), w_a_inv_u[:, :k].copy(), w_small_inv[:k, :k].copy()))
-    for part, arrays, barrier in zip(kept.parts, kept.part_arrays, barriers):
-        _read_back(part, arrays, barrier)
-    reaction = kept.work[4].copy() if status == newton.OK else None
-    return status, iterations, n_hist, reaction

@@ -49,7 +49,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from gripper_sim.core import barrier_newton, newton, pcg_kernels, sparse_ldl
+from gripper_sim.core import barrier_solve, newton, pcg_kernels, sparse_ldl
 from gripper_sim.core import solver_kernels as kernels
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.energy_table import EnergyTable
@@ -88,7 +88,7 @@ COMPILED_BARRIER_SOLVE = False
 #: the stiffness damping's K_n without stiffness damping (beta = 0)
 _NO_STIFFNESS = np.zeros(0)
 #: the constants above as the compiled barrier solve takes them
-_COMPILED_SETTINGS = barrier_newton.SolveSettings(
+_COMPILED_SETTINGS = barrier_solve.SolveSettings(
     KEEP_BELOW, CG_TOLERANCE, CG_ERROR_FRACTION, CG_RELATIVE_FLOOR, CG_MAX_ITERATIONS,
     CG_STALE_ITERATIONS)
 
@@ -542,12 +542,12 @@ class PatternCachingSolver:
 
     def _iterate(self, problem: '_NewtonProblem', q: np.ndarray, history: np.ndarray):
         """``newton.newton_iteration`` on ``problem`` from ``q`` (overwritten): interpreted,
-        or with ``COMPILED_BARRIER_SOLVE`` compiled where ``barrier_newton`` covers the
+        or with ``COMPILED_BARRIER_SOLVE`` compiled where ``barrier_solve`` covers the
         solver (the reaction then set on the problem). (status, iterations, n_hist)."""
         con = problem.con
         if (COMPILED_BARRIER_SOLVE and not con.friction_nodes.size
-                and barrier_newton.supports(self)):
-            status, iterations, n_hist, reaction = barrier_newton.run(
+                and barrier_solve.supports(self)):
+            status, iterations, n_hist, reaction = barrier_solve.run(
                 self, _COMPILED_SETTINGS, problem.q_n, problem.v_n, problem.dt, con, q,
                 history)
             problem.reaction = reaction
