@@ -9,7 +9,7 @@ import pytest
 from helpers import quasi_static_sim
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import barrier_solve, fast_solver
+from gripper_sim.core import fast_solver
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
@@ -36,7 +36,7 @@ def _trace(make, steps, compiled, monkeypatch):
     counters, the last grip force N) of a run."""
     monkeypatch.setattr(fast_solver, 'COMPILED_BARRIER_SOLVE', compiled)
     sim = make()
-    assert barrier_solve.supports(sim.solver)
+    assert sim.solver.compiled_solve_covers()
     positions, iterations = [], []
     for _ in range(steps):
         result = sim.step()
@@ -73,7 +73,7 @@ def _fin_ray_grasp(compiled, monkeypatch):
     config = load_config(overrides=['gripper.finger.type=fin_ray'])
     config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
     sim = Simulation(config)
-    assert barrier_solve.supports(sim.solver)
+    assert sim.solver.compiled_solve_covers()
     states, iterations = [], []
 
     def on_step(result, phase):

@@ -215,6 +215,7 @@ class PatternCachingSolver:
         self._stale = False
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
+        self._compiled = None  # the compiled barrier solve (``_iterate_compiled``)
         self._build_fast_pattern()
         self._table = EnergyTable(self.energies, self._scatter, self.dim, self.n)
         #: the energies after the table's, with their scatter indices
@@ -540,18 +541,44 @@ class PatternCachingSolver:
         self._warm = (q_n.copy(), dt, q)
         return StepSolution(q, problem.reaction, iterations, done)
 
+    def compiled_solve_covers(self, con: StepConstraints | None = None) -> bool:
+        """Whether the compiled barrier solve (``barrier_solve``) covers this solver's
+        problems (and the step's constraints ``con``: no sliding nodes)."""
+        return ((con is None or not con.friction_nodes.size)
+                and barrier_solve.supports(self.dim, [e for e, _ in self._untabled],
+                                           self._step_bounding))
+
+    def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
+                          history: np.ndarray):
+        """``_iterate`` by ``barrier_solve.CompiledSolve`` (made once, kept)."""
+        compiled = self._compiled
+        if compiled is None or not compiled.fits(self._untabled):
+            pattern = (self._matvec_indptr, self._matvec_indices, self._hessian_values,
+                       self._no_values, self._k_dq, np.empty((0, 2, 2)), self._diag_pos,
+                       self._diag_block_pos, self._block_pos, self._block_nodes,
+                       self._node_block_ptr, self._node_blocks, self._diag_blocks)
+            compiled = self._compiled = barrier_solve.CompiledSolve(
+                _COMPILED_SETTINGS, self.m, self.alpha, self.beta, self.tolerance,
+                self._table, pattern, self.empty_factor(),
+                (self._perm, *self._ldl_gather, self._ldl_pattern.n_blocks), self._untabled)
+        q_n = problem.q_n
+        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
+        state = barrier_solve.FactorState(self._lu, self._woodbury, self._stale)
+        status, iterations, n_hist, reaction, state, work = compiled.run(
+            state, q_n, problem.v_n, problem.dt, problem.con, stiffness, q, history,
+            self.max_iterations, self.counts)
+        self._lu, self._woodbury, self._stale = state.lu, state.woodbury, state.stale
+        for key, count in work.items():
+            self.stats[key] += count
+        problem.reaction = reaction
+        return status, iterations, n_hist
+
     def _iterate(self, problem: '_NewtonProblem', q: np.ndarray, history: np.ndarray):
         """``newton.newton_iteration`` on ``problem`` from ``q`` (overwritten): interpreted,
         or with ``COMPILED_BARRIER_SOLVE`` compiled where ``barrier_solve`` covers the
         solver (the reaction then set on the problem). (status, iterations, n_hist)."""
-        con = problem.con
-        if (COMPILED_BARRIER_SOLVE and not con.friction_nodes.size
-                and barrier_solve.supports(self)):
-            status, iterations, n_hist, reaction = barrier_solve.run(
-                self, _COMPILED_SETTINGS, problem.q_n, problem.v_n, problem.dt, con, q,
-                history)
-            problem.reaction = reaction
-            return status, iterations, n_hist
+        if COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(problem.con):
+            return self._iterate_compiled(problem, q, history)
         return newton.newton_iteration_interpreted(problem, q, problem.dt, self.tolerance,
                                                    self.max_iterations, history, self.counts)
 
