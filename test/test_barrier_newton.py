@@ -1,6 +1,6 @@
 """The 2D barrier model's compiled Newton solve (``core.barrier_newton``, run by
-``core.barrier_solve``; a prototype off by default:
-``fast_solver.COMPILED_BARRIER_SOLVE``) against the interpreted route it is to replace:
+``core.barrier_solve``; the default where it covers the solve:
+``fast_solver.COMPILED_BARRIER_SOLVE``) against the interpreted route it replaces there:
 the same positions to the last bit at every step, the same Newton iterations, the same
 contact forces, and the same solver work (systems, factorisations, CG iterations)."""
 import numpy as np
@@ -95,5 +95,24 @@ def test_compiled_solve_repeats_the_fin_ray_grasp_to_the_bit(monkeypatch):
         assert a.tobytes() == b.tobytes(), f'step {step}'
 
 
-def test_compiled_solve_is_off_by_default():
-    assert fast_solver.COMPILED_BARRIER_SOLVE is False
+def test_the_ring_solves_compiled_by_default_and_the_solid_disk_interpreted(monkeypatch):
+    """The default route: the ring's barrier solves go through the compiled solve; the
+    2D solid fruit (its flesh outside the energy table) stays on the interpreted one."""
+    routes = []
+    compiled = fast_solver.PatternCachingSolver._iterate_compiled
+
+    def spy(self, *args):
+        routes.append('compiled')
+        return compiled(self, *args)
+    monkeypatch.setattr(fast_solver.PatternCachingSolver, '_iterate_compiled', spy)
+    sim = _ring(0.002)
+    for _ in range(5):
+        sim.step()
+    assert routes
+    routes.clear()
+    solid = quasi_static_sim(RADIUS, 'fruit.model=solid', 'contact.model=ipc')
+    assert not solid.solver.compiled_solve_covers()
+    solid.command_gap(2 * RADIUS - 0.001, speed=0.002)
+    for _ in range(3):
+        solid.step()
+    assert routes == []

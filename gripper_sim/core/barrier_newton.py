@@ -42,8 +42,9 @@ at once.
 Covered (``barrier_solve.supports``): a 2D solver whose energies after the table are
 one or two ``BarrierContact`` (the fruit's, with rigid faces or soft bodies; a
 self-contact), and steps with no sliding nodes (the barrier model's steps; a sliding
-node needs the line search's ``kink_step``). The interpreted route stays the default
-until this one has replaced it (``fast_solver.COMPILED_BARRIER_SOLVE``).
+node needs the line search's ``kink_step``). These run compiled by default
+(``fast_solver.COMPILED_BARRIER_SOLVE``); the interpreted route serves the rest until this
+one covers it too.
 """
 from __future__ import annotations
 

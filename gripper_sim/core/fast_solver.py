@@ -82,9 +82,11 @@ KEEP_BELOW = 100.0
 #: a sliding node's Newton step is cut at the kink of the friction law only if it
 #: slips faster than this multiple of the smoothing speed (slower: inside the kink)
 KINK_FACTOR = 10.0
-#: whether the 2D barrier model's Newton solves run compiled (``core.barrier_newton``, a
-#: prototype: off until it covers every barrier set-up and replaces the interpreted route)
-COMPILED_BARRIER_SOLVE = False
+#: whether the 2D barrier model's Newton solves run compiled (``core.barrier_newton``)
+#: where it covers them (``barrier_solve.supports``); the interpreted route serves the
+#: rest (the 2D solid fruit's flesh, steps with sliding nodes, 3D). False: interpreted
+#: everywhere (the tests compare the two)
+COMPILED_BARRIER_SOLVE = True
 #: the stiffness damping's K_n without stiffness damping (beta = 0)
 _NO_STIFFNESS = np.zeros(0)
 #: the constants above as the compiled barrier solve takes them
