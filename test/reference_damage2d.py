@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from gripper_sim.core.damage import Contact, hertz
+from gripper_sim.core.damage import RESOLVED_NODES, Contact, hertz
 
 
 def runs(tracker, obstacle_of_surface: np.ndarray) -> list[tuple[int, np.ndarray]]:
@@ -45,7 +45,6 @@ def contacts(tracker, positions: np.ndarray, normal_force: np.ndarray,
     nearest its centre)."""
     ring = tracker.ring
     seg = np.linalg.norm(np.roll(positions[ring], -1, axis=0) - positions[ring], axis=1)
-    tributary = 0.5 * (seg + np.roll(seg, 1))
     out = []
     for body, run in runs(tracker, obstacle[ring]):
         nodes = ring[run]
@@ -61,9 +60,12 @@ def contacts(tracker, positions: np.ndarray, normal_force: np.ndarray,
         faces = obstacle[nodes]
         padded = np.mean([tracker.padded[o] for o in faces]) >= 0.5
         modulus = tracker.pad_modulus if padded else tracker.rigid_modulus
-        if np.mean([tracker.deformable[o] for o in faces]) >= 0.5:
-            line_peak = float(np.max(f / tributary[run])) / tracker.depth
-            k1_eff = math.pi * line_peak ** 2 / (load / tracker.depth * modulus)
+        if (np.mean([tracker.deformable[o] for o in faces]) >= 0.5
+                and load ** 2 / float(f @ f) >= RESOLVED_NODES):
+            arc = np.concatenate([[0.0], np.cumsum(seg[run[:-1]])])  # along the run
+            mean = float(f @ arc) / load
+            variance = float(f @ (arc - mean) ** 2) / load
+            k1_eff = load / tracker.depth / (math.pi * modulus * variance)
         else:
             face_k = float(np.mean([tracker.curvature[o] for o in faces]))
             k1_eff = max(k1 + face_k, 1e-3 * k1)

@@ -6,10 +6,12 @@ contact (``plane_strain_peak``) that the planar simulation resolves itself. So a
 grip force, the plane-strain contact with the estimate's in-plane radius R1' and modulus
 E* must have the peak line pressure the simulation shows
 (``Deformation.peak_contact_pressure``: node force over tributary length and depth). On
-a rigid or padded face R1' is the fruit's and E* the materials' (an independent
-prediction); on a deformable finger R1' is read from the simulated patch, so what is
-checked there is that the finger's wrap reaches p0, and that R1' is what the physics
-says it should be (Hertz's for a pad, larger for a finger that wraps).
+a rigid or padded face R1' is the fruit's and E* the materials'; on a deformable finger
+R1' is read from the simulated patch's width (its load-weighted variance along the
+outline), so there the check is that a Hertz-like patch (the solid pad on the solid
+apple) gives its own peak back, that R1' is what the physics says it should be (Hertz's
+for a pad, larger for a finger that wraps), and that the estimate does not move with the
+mesh where the resolved peak does.
 """
 import math
 
@@ -112,11 +114,12 @@ def squeezes():
 #: Rigid flat: Hertz, the node forces sampling the pressure over about a third of the
 #: half-width each. Soft pad layer: an elastic foundation 3 mm thick under a patch
 #: 3.4 mm wide is stiffer than the half-space Hertz assumes, so its estimate (which the
-#: compiled step computes too) stays low. Deformable fingers: the radius is measured from
-#: the simulated patch, so equality here checks that the estimate reads that patch (and not
-#: the rest radius); whether the radius is right is the next test's check.
-AGREEMENT = {'flat': (0.75, 1.1), 'soft_pad': (0.55, 0.8), 'solid_pad': (0.999, 1.001),
-             'fin_ray': (0.999, 1.001)}
+#: compiled step computes too) stays low. Solid pad: two elastic bodies, a Hertz patch,
+#: whose width gives its peak back (-1 %). Fin Ray: the patch is not Hertz's - the front
+#: beam presses harder where a rib holds it - and the estimate, from the patch's width,
+#: is 40 % below the highest node's line pressure at this mesh.
+AGREEMENT = {'flat': (0.75, 1.1), 'soft_pad': (0.55, 0.8), 'solid_pad': (0.95, 1.05),
+             'fin_ray': (0.45, 0.8)}
 
 
 @pytest.mark.parametrize('finger', FINGERS)
@@ -151,3 +154,25 @@ def test_a_pad_measures_hertz_and_a_wrapping_finger_a_flatter_contact(squeezes):
     for soft in (pad, fin):
         assert soft.deformation.peak_contact_pressure < flat.deformation.peak_contact_pressure
         assert soft.damage.pressure < flat.damage.pressure
+
+
+def test_the_wrapping_fingers_estimate_does_not_move_with_the_mesh():
+    """The Fin Ray at 8 N on the default (pressurised skin) apple: the bruise estimate
+    from the patch's width is the same on 64 outline nodes with 2 mm rod elements and on
+    256 with 1 mm (measured: 65.3 and 66.8 kPa; 66.3 on 512 with 0.5 mm), where the
+    highest node's line pressure grows with the refinement (18 -> 26 kPa; 31 on 512)."""
+    def squeeze(*overrides):
+        config = load_config(finger='fin_ray', overrides=SQUEEZE + list(overrides))
+        touching = Simulation(config).touching_gap
+        sim = Simulation(load_config(finger='fin_ray', overrides=SQUEEZE + list(overrides) + [
+            f'gripper.initial_gap={touching + 0.001}']))
+        sim.command_force(8.0, 0.02)
+        result = sim.run(1.2)
+        assert result.grip_force == pytest.approx(8.0, rel=0.01)
+        return result
+
+    coarse = squeeze()
+    fine = squeeze('fruit.nodes=256', 'gripper.finger.fin_ray.element_length=0.001')
+    assert fine.damage.pressure == pytest.approx(coarse.damage.pressure, rel=0.05)
+    assert (fine.deformation.peak_contact_pressure
+            > 1.25 * coarse.deformation.peak_contact_pressure)
