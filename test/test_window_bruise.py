@@ -2,12 +2,15 @@
 soft pad the jaw contact is spared (its Hertz estimate is far above the flat finger's)
 and the fruit, squeezed on the table, bruises at the table once the table carries its
 own Hertz bruise load."""
+import math
+
 import pytest
 
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import evaluate
 from gripper_sim.workflows.scenario import PickAndPlace, load_scenario, scenario_config
-from gripper_sim.workflows.window import estimates, table_bruise_load, trial_of, trial_setup
+from gripper_sim.workflows.window import (GraspWindow, Trial, estimates, table_bruise_load,
+                                          trial_of, trial_setup)
 
 
 def bruise_trial(finger: str, force: float):
@@ -50,3 +53,29 @@ def test_on_rigid_flat_jaws_the_jaws_bruise_first_at_their_estimate():
     assert trial.bruised and trial.bruised_at == 'jaws'
     load, p0 = contacts['left_jaw']
     assert p0 > threshold and load == pytest.approx(jaw_estimate, rel=0.03)
+
+
+def _trial(force, kind, outcome, bruised):
+    return Trial(force=force, kind=kind, held=False, slipped=True, bruised=bruised,
+                 outcome=outcome, slip_distance=0.0, peak_grip_force=force,
+                 peak_jaw_pressure=0.0, peak_table_pressure=0.0, peak_damage_pressure=0.0,
+                 bruised_at=None, wall_time=0.0)
+
+
+@pytest.mark.parametrize('above, limited_by', [('bruised', 'bruise'),
+                                                ('solver failed', 'solver failure')])
+def test_the_window_says_whether_a_bruise_or_a_solver_failure_ended_its_safe_side(
+        above, limited_by):
+    """A bruise trial whose solver failed reads 'solver failed', not 'bruised', and a
+    window whose upper bound sits below such a trial says so (text and JSON)."""
+    trials = [_trial(10.0, 'bruise', 'held', False), _trial(20.0, 'bruise', above, True),
+              _trial(15.0, 'bruise', 'held', False), _trial(30.0, 'bruise', 'bruised', True)]
+    window = GraspWindow(fruit='apple', finger='fin_ray', min_force=2.0, max_force=15.0,
+                         min_estimate=1.0, max_estimate=16.0, mass=0.134, friction=0.5,
+                         tolerance=0.05, trials=trials)
+    assert trials[1].verdict == ('bruised' if above == 'bruised' else 'solver failed')
+    assert window.max_force_limited_by == limited_by
+    assert window.as_dict()['max_force_limited_by'] == limited_by
+    assert GraspWindow(fruit='apple', finger='fin_ray', min_force=2.0, max_force=math.inf,
+                       min_estimate=1.0, max_estimate=16.0, mass=0.134, friction=0.5,
+                       tolerance=0.05, trials=trials).max_force_limited_by is None

@@ -465,6 +465,9 @@ def run_window(args) -> int:
           + (f'; on the table once it carries {window.table_bruise_estimate:.3g} N'
              if window.table_bruise_estimate else '')
           + (f"; bruised at the {' and the '.join(sites)}" if sites else '') + ')')
+    if window.max_force_limited_by == 'solver failure':
+        print('                  (the nearest trial above it did not converge: the fruit '
+              'bruises somewhere above this bound, not at it)')
     if window.exists:
         top = 'gripper.max_force' if window.max_force == math.inf else \
             f'{window.max_force:.3g} N'

@@ -232,6 +232,10 @@ class GraspMachine(Protocol):
 CARRIED = ('held', 'slipped', 'bruised', 'crushed', 'placed')
 
 
+#: ``GraspEvaluation.outcome`` of a run whose solver failed (``ConvergenceError``)
+SOLVER_FAILED = 'solver failed'
+
+
 @dataclass
 class GraspEvaluation:
     """One grasp run to its end, measured (``evaluate``).
@@ -314,7 +318,7 @@ def evaluate(sim, machine: GraspMachine, force: float,
                 on_step(result, machine.phase)
     except ConvergenceError as err:
         return GraspEvaluation(
-            force=float(force), outcome='solver failed', held=False, dropped=True,
+            force=float(force), outcome=SOLVER_FAILED, held=False, dropped=True,
             slipped=False, bruised=True, crushed=True, slip_distance=0.0,
             peak_grip_force=peaks.grip_force, peak_compression=peaks.compression,
             peak_jaw_pressure=peaks.jaw_pressure, peak_table_pressure=peaks.table_pressure,

@@ -37,7 +37,7 @@ from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.factory import make_simulation
-from gripper_sim.workflows.grasp import GraspEvaluation, evaluate
+from gripper_sim.workflows.grasp import SOLVER_FAILED, GraspEvaluation, evaluate
 from gripper_sim.workflows.scenario import PickAndPlace, Scenario
 
 #: relative width of the final bisection brackets
@@ -85,6 +85,8 @@ class Trial:
         """One word for the trial line: held, slipped (or the run's word when it did
         not carry the fruit) for a 'hold' trial; bruised or safe for a 'bruise' one."""
         if self.kind == 'bruise':
+            if self.outcome == SOLVER_FAILED:
+                return SOLVER_FAILED
             return 'bruised' if self.bruised else 'safe'
         if self.held:
             return 'held'
@@ -127,6 +129,20 @@ class GraspWindow:
     max_force_measured: float | None = None
 
     @property
+    def max_force_limited_by(self) -> str | None:
+        """What ended the safe side at ``max_force``: 'bruise', or 'solver failure' when
+        the nearest trial above it failed to converge instead of bruising (then the
+        fruit bruises somewhere above ``max_force``, not at it); None without a finite
+        ``max_force``."""
+        if self.max_force is None or math.isinf(self.max_force):
+            return None
+        above = [t for t in self.trials if t.kind == 'bruise' and t.force > self.max_force]
+        if not above:
+            return None
+        nearest = min(above, key=lambda t: t.force)
+        return 'solver failure' if nearest.outcome == SOLVER_FAILED else 'bruise'
+
+    @property
     def exists(self) -> bool:
         """There is a force that holds without bruising."""
         return (self.min_force is not None and self.max_force is not None
@@ -146,6 +162,7 @@ class GraspWindow:
                     table_bruise_estimate=self.table_bruise_estimate,
                     min_force_measured=self.min_force_measured,
                     max_force_measured=self.max_force_measured,
+                    max_force_limited_by=self.max_force_limited_by,
                     trials=[dict(vars(t), verdict=t.verdict) for t in self.trials])
 
 

@@ -417,7 +417,10 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
                 'color': ['crimson' if t['bruised'] else 'seagreen' for t in trials]},
         hovertemplate='%{x:.3g} N: %{text}, %{y:.1f} kPa<extra></extra>'), row=2, col=1)
     low, high = _force_value(window.get('min_force')), _force_value(window.get('max_force'))
-    for value, label in ((low, 'holds from'), (high, 'bruises above')):
+    failure_bound = window.get('max_force_limited_by') == 'solver failure'
+    for value, label in ((low, 'holds from'),
+                         (high, 'safe up to (solver failure above)' if failure_bound
+                          else 'bruises above')):
         if value is not None and math.isfinite(value):
             fig.add_vline(x=value, line_dash='dash', line_color='grey')
             fig.add_annotation(x=value, y=1.0, yref='paper', text=f'{label} {value:.3g} N',
@@ -434,7 +437,11 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
     else:
         found = f'{low:.3g} N .. ' + (f'{high:.3g} N' if math.isfinite(high)
                                       else 'gripper.max_force (nothing bruised)')
+    window_rows = [('safe window', found)]
+    if failure_bound:
+        window_rows.append(('upper bound', 'the nearest trial above it did not converge: '
+                            'the fruit bruises somewhere above it, not at it'))
     return write_html_report(path, title, [
-        Block('Window', rows=[('safe window', found)]),
+        Block('Window', rows=window_rows),
         Block('Trials', fig, rows=rows,
               text='Green: held (top) or not bruised (bottom); red: not held, or bruised.')])
