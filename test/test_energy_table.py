@@ -1,6 +1,7 @@
 """The 2D energies' table (``core.energy_table``): the one compiled call sums the leading
-rod energies, pressure and gravity to the same bits as their own kernels called one by
-one after the inertia, and stops at the first energy without ``kernel_data``."""
+rod energies, pressure, neo-Hookean flesh and gravity to the same bits as their own
+kernels called one by one after the inertia, and stops at the first energy without
+``kernel_data``."""
 import numpy as np
 import pytest
 
@@ -11,13 +12,27 @@ from gripper_sim.core.energy_table import EnergyTable
 from gripper_sim.core.simulation import Simulation
 
 
-def _fin_ray_solver():
-    """The Fin Ray grasp's Newton solver (apple's skin, gravity, the fingers' rods, the
-    barriers) and a perturbed state of it."""
-    sim = Simulation(load_config(overrides=['gripper.finger.type=fin_ray']))
+#: each grasp's overrides and its solver's tabled energies (the next one: the barrier)
+GRASPS = {
+    'fin_ray': (['gripper.finger.type=fin_ray'],
+                ['Stretching', 'RingBending', 'EnclosedAreaPressure', 'Gravity', 'Stretching',
+                 'RodBending']),
+    'solid_ipc': (['fruit.model=solid', 'contact.model=ipc'],
+                  ['Stretching', 'RingBending', 'NeoHookeanTriangles', 'Gravity']),
+    'solid_pad': (['gripper.finger.type=solid_pad', 'fruit.model=solid'],
+                  ['Stretching', 'RingBending', 'NeoHookeanTriangles', 'Gravity',
+                   'NeoHookeanTriangles']),
+}
+
+
+def _solver(grasp='fin_ray'):
+    """A grasp's Newton solver (``GRASPS``) and a perturbed state of it."""
+    sim = Simulation(load_config(overrides=GRASPS[grasp][0]))
     solver = sim.solver
     rng = np.random.default_rng(3)
-    q_n = np.vstack([sim.q, sim._finger.positions]).ravel()
+    finger = getattr(sim, '_finger', None)
+    q_n = (sim.q if solver.n == sim.q.size
+           else np.vstack([sim.q, finger.positions])).ravel()
     assert q_n.size == solver.n
     q = q_n + 1e-5 * rng.normal(size=q_n.size)
     return solver, q, q_n, 1e-3 * rng.normal(size=q_n.size)
@@ -38,13 +53,13 @@ def _one_by_one(solver, energies, q, q_n, v_n, dt, hessian):
     return phi, grad, dq, data, low_rank
 
 
+@pytest.mark.parametrize('grasp', sorted(GRASPS))
 @pytest.mark.parametrize('hessian', [False, True])
-def test_the_table_sums_the_energies_as_their_own_calls_to_the_bit(hessian):
-    solver, q, q_n, v_n = _fin_ray_solver()
+def test_the_table_sums_the_energies_as_their_own_calls_to_the_bit(grasp, hessian):
+    solver, q, q_n, v_n = _solver(grasp)
     table = solver._table
     kinds = [type(e).__name__ for e in solver.energies[:table.count]]
-    assert kinds == ['Stretching', 'RingBending', 'EnclosedAreaPressure', 'Gravity',
-                     'Stretching', 'RodBending']
+    assert kinds == GRASPS[grasp][1]
     assert type(solver.energies[table.count]).__name__ == 'BarrierContact'
     dt = 1e-3
     grad = np.full(q.size, np.nan)  # written whole
@@ -57,7 +72,8 @@ def test_the_table_sums_the_energies_as_their_own_calls_to_the_bit(hessian):
     assert phi == expected[0]
     for got, want in zip((grad, dq, data), expected[1:4]):
         assert np.array_equal(got, want)
-    assert len(low_rank) == len(expected[4]) == (1 if hessian else 0)
+    pressures = kinds.count('EnclosedAreaPressure')
+    assert len(low_rank) == len(expected[4]) == (pressures if hessian else 0)
     for (c, u), (c_ref, u_ref) in zip(low_rank, expected[4]):
         assert c == c_ref and np.array_equal(u, u_ref)
     if hessian:
@@ -65,7 +81,7 @@ def test_the_table_sums_the_energies_as_their_own_calls_to_the_bit(hessian):
 
 
 def test_the_table_stops_at_an_energy_without_kernel_data():
-    solver, q, q_n, v_n = _fin_ray_solver()
+    solver, q, q_n, v_n = _solver()
     energies = solver.energies[:2] + [Energy()] + solver.energies[2:4]
     table = EnergyTable(energies, solver._scatter[:len(energies)], 2, solver.n)
     assert table.count == 2
@@ -73,9 +89,25 @@ def test_the_table_stops_at_an_energy_without_kernel_data():
 
 
 def test_an_infeasible_energy_makes_the_potential_infinite():
-    solver, q, q_n, v_n = _fin_ray_solver()
+    solver, q, q_n, v_n = _solver()
     q = q.copy()
     q[0] = np.nan
     phi = solver._table.potential(q, q_n, v_n, 1e-3, solver.m, solver.alpha, False,
                                   np.empty(q.size), np.zeros(1))[0]
     assert not np.isfinite(phi)
+
+
+def test_an_inverted_flesh_triangle_makes_the_potential_infinite_as_its_own_call():
+    solver, q, q_n, v_n = _solver('solid_ipc')
+    flesh = solver.energies[2]
+    q = q.copy()
+    a, b, c = flesh.tri[0]
+    q[2 * a:2 * a + 2] = q[2 * b:2 * b + 2] + q[2 * c:2 * c + 2] - q[2 * a:2 * a + 2]
+    grad = np.zeros(q.size)
+    assert flesh.evaluate_into(q, grad, np.zeros(1), solver._scatter[2], False)[0] == np.inf
+    assert not grad.any()  # nothing added
+    for hessian in (False, True):
+        data = np.zeros(solver._nnz if hessian else 1)
+        phi = solver._table.potential(q, q_n, v_n, 1e-3, solver.m, solver.alpha, hessian,
+                                      np.empty(q.size), data)[0]
+        assert phi == np.inf

@@ -1,13 +1,15 @@
-"""The 2D rod energies of a Newton solver's potential summed in one compiled call.
+"""The 2D elastic energies of a Newton solver's potential summed in one compiled call.
 
 ``PatternCachingSolver.evaluate_fast`` (``core.fast_solver``) sums the inertia and the
 energies in their list's order. The leading energies whose kernels take fixed arrays
 (``Energy.kernel_data``: the rods' stretching and bending, the enclosed-area pressure,
-the constant forces such as gravity) are summed here in one call with the inertia, in
-the same order and by the same kernels (``core.energies.kernels``), so the sums are the
-same to the last bit; the energies after them (the contact barrier, the 3D energies)
-follow in Python, one call each. The Fin Ray grasp has its first six energies here
-(the apple's four, the fingers' stretching and bending) instead of seven calls.
+the neo-Hookean triangles of a solid fruit or pad, the constant forces such as gravity)
+are summed here in one call with the inertia, in the same order and by the same kernels
+(``core.energies.kernels``), so the sums are the same to the last bit; the energies
+after them (the contact barrier, the 3D energies) follow in Python, one call each. The
+Fin Ray grasp has its first six energies here (the apple's four, the fingers' stretching
+and bending), the solid apple all four of its own (skin stretching and bending, flesh,
+gravity), leaving only the barrier, if any, to its own call.
 
 The table is one numba typed list of equally typed items (a list is passed to a kernel
 as one object, ~1 us, where a tuple of arrays costs each array's unboxing), each item
@@ -15,6 +17,8 @@ as one object, ~1 us, where a tuple of arrays costs each array's unboxing), each
 - stretching: (edges, rest lengths L m, EA / L N/m, scatter);
 - bending: (triples, phi0 rad, EI / l N m, scatter);
 - pressure: (ring (n, 1), [A0 m^2, depth b m, p0 Pa, K Pa], -, scatter);
+- neo-Hookean triangles: (triangles, [mu Pa, lambda Pa], the rest volumes (n_tri,) m^3
+  then dm^-1 (n_tri, 2, 2) 1/m flattened, scatter);
 - constant force: (-, the gradient -f (n_dof,) N (the energy's own array, so a load
   changed in place is seen), -, -).
 """
@@ -30,9 +34,9 @@ from gripper_sim.core.energies import kernels as energy_kernels
 from gripper_sim.core.solver_kernels import inertia_and_mass_damping
 
 #: the kinds of ``Energy.kernel_data`` and their codes in ``EnergyTable.order``
-STRETCHING, BENDING, PRESSURE, CONSTANT = range(4)
+STRETCHING, BENDING, PRESSURE, CONSTANT, NEOHOOKEAN = range(5)
 KINDS = {'stretching': STRETCHING, 'bending': BENDING, 'pressure': PRESSURE,
-         'constant': CONSTANT}
+         'constant': CONSTANT, 'neohookean': NEOHOOKEAN}
 
 _NO_INDEX, _NO_REALS = np.zeros((0, 0), np.int64), np.zeros(0)
 
@@ -136,6 +140,11 @@ def inertia_and_energies(q, q_n, v_n, dt, masses, alpha, dq, grad, hessian, data
             value = energy_kernels.stretching(x, index, a, b, grad, data, scatter, hessian)
         elif kind == BENDING:
             value = energy_kernels.bending(x, index, a, b, grad, data, scatter, hessian)
+        elif kind == NEOHOOKEAN:
+            n_tri = index.shape[0]
+            value = energy_kernels.neohookean_triangles(
+                x, index, b[n_tri:].reshape(n_tri, 2, 2), b[:n_tri], a[0], a[1], grad, data,
+                scatter, hessian)
         elif kind == PRESSURE:
             value, c = energy_kernels.enclosed_area_pressure(
                 x, index[:, 0], a[0], a[1], a[2], a[3], grad, rank_one_vectors[pressure],

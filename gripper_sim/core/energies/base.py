@@ -52,8 +52,8 @@ class Energy:
 
     def kernel_data(self):
         """(kind, arrays) of an energy the solver's compiled potential sums itself
-        (``core.energy_table``: 'stretching', 'bending', 'pressure', 'constant'), or None:
-        the energy is evaluated by its own call."""
+        (``core.energy_table``: 'stretching', 'bending', 'pressure', 'neohookean',
+        'constant'), or None: the energy is evaluated by its own call."""
         return None
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:

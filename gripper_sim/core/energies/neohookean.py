@@ -50,6 +50,12 @@ class NeoHookeanTriangles(KernelEnergy):
                                      float(self.lam), out)
         return out
 
+    def kernel_data(self):
+        """('neohookean', (triangles, [mu, lambda] Pa, the rest volumes (n_tri,) m^3 then
+        dm^-1 (n_tri, 2, 2) 1/m flattened)) (``core.energy_table``)."""
+        return 'neohookean', (self.tri, np.array([self.mu, self.lam], dtype=float),
+                              np.concatenate([self.volume, self.dm_inv.ravel()]))
+
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
         """The energy's kernel (see ``Stretching.evaluate_into``; scatter (n_tri, 36));
