@@ -454,6 +454,8 @@ def run_window(args) -> int:
     high = (f'none up to gripper.max_force ({limit:g} N)' if window.max_force == math.inf
             else 'bruised at every force tried' if window.max_force is None
             else bound(window.max_force, window.max_force_measured))
+    if window.max_force_limited_by == 'solver failure':
+        high = f'not found: safe up to {high}'
     print(f'  holds from      {low}')
     print(f'                  (slides less than window.max_slip = {window.max_slip * 1e3:g} mm;'
           f' m g / (2 mu) = {window.min_estimate:.3g} N, m = {window.mass * 1e3:.0f} g, '
@@ -466,8 +468,8 @@ def run_window(args) -> int:
              if window.table_bruise_estimate else '')
           + (f"; bruised at the {' and the '.join(sites)}" if sites else '') + ')')
     if window.max_force_limited_by == 'solver failure':
-        print('                  (the nearest trial above it did not converge: the fruit '
-              'bruises somewhere above this bound, not at it)')
+        print('                  (the nearest trial above did not converge: the fruit '
+              'bruises somewhere above this force, not at it)')
     if window.exists:
         top = 'gripper.max_force' if window.max_force == math.inf else \
             f'{window.max_force:.3g} N'

@@ -398,6 +398,14 @@ def _trial_pressure(trial: dict) -> float:
     return float(trial.get('peak_pressure', trial.get('peak_damage_pressure', math.nan)))
 
 
+def _trial_colour(trial: dict, good: bool) -> str:
+    """A window trial's marker colour: grey where its solver failed, else green if
+    ``good``, red if not."""
+    if trial['outcome'] == 'solver failed':
+        return 'grey'
+    return 'seagreen' if good else 'crimson'
+
+
 def write_window_report(window: dict, path: str | Path, title: str = 'Grasp window') -> Path:
     """``window``'s report: every trial's outcome, slip and peak damage pressure over its
     grip force, with the bounds found. ``window``: ``GraspWindow.as_dict()``."""
@@ -407,14 +415,13 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
     fig.add_trace(go.Scatter(
         x=force, y=[1e3 * t['slip_distance'] for t in trials], mode='markers',
         text=[t.get('verdict', t['outcome']) for t in trials], name='slip (mm)',
-        marker={'size': 10, 'color': ['seagreen' if t['held'] else 'crimson'
-                                      for t in trials]},
+        marker={'size': 10, 'color': [_trial_colour(t, t['held']) for t in trials]},
         hovertemplate='%{x:.3g} N: %{text}, slip %{y:.3f} mm<extra></extra>'), row=1, col=1)
     fig.add_trace(go.Scatter(
         x=force, y=[_trial_pressure(t) / 1e3 for t in trials], mode='markers',
         text=[t['outcome'] for t in trials], name='peak damage pressure (kPa)',
         marker={'size': 10, 'symbol': 'diamond',
-                'color': ['crimson' if t['bruised'] else 'seagreen' for t in trials]},
+                'color': [_trial_colour(t, not t['bruised']) for t in trials]},
         hovertemplate='%{x:.3g} N: %{text}, %{y:.1f} kPa<extra></extra>'), row=2, col=1)
     low, high = _force_value(window.get('min_force')), _force_value(window.get('max_force'))
     failure_bound = window.get('max_force_limited_by') == 'solver failure'
@@ -444,4 +451,5 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
     return write_html_report(path, title, [
         Block('Window', rows=window_rows),
         Block('Trials', fig, rows=rows,
-              text='Green: held (top) or not bruised (bottom); red: not held, or bruised.')])
+              text='Green: held (top) or not bruised (bottom); red: not held, or bruised; '
+                   'grey: the solver failed (neither).')])
