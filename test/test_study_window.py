@@ -119,3 +119,17 @@ def test_a_force_grid_evaluates_every_fruit_at_every_force(tmp_path):
     (point,) = run.summary['points']
     assert point['population']['curve']['p'] == [0.0, 1.0, 0.0]
     assert point['population']['window'] == dict(low=3.0, high=3.0, high_is_limit=False)
+
+
+def test_the_population_counts_the_upper_bounds_a_solver_failure_set():
+    """A fruit whose upper bound is where its solver stopped (not a bruise) is counted,
+    and the study's line says so."""
+    from gripper_sim.cli.study import describe_window
+    windows = [SampleWindow(i, 2.0, 20.0 + i, 'solver failure' if i < 3 else 'bruise')
+               for i in range(10)]
+    result = population_window(windows, 200.0, 0.9, 0.95)
+    assert result['solver_failure_bounds'] == 3
+    assert '3 fruits\' upper bounds are solver failures' in describe_window(result, '90 %')
+    plain = population_window(windows_from([2.0] * 10, [20.0] * 10), 200.0, 0.9, 0.95)
+    assert plain['solver_failure_bounds'] == 0
+    assert 'solver' not in describe_window(plain, '90 %')

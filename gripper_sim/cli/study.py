@@ -88,4 +88,8 @@ def describe_window(population: dict | None, percent: str) -> str:
     sure = population['confident_window']
     if sure is None and not math.isnan(population['samples_needed']):
         text += f"; a confident claim needs >= {population['samples_needed']} fruits"
+    failures = population.get('solver_failure_bounds', 0)
+    if failures:
+        text += (f"; {failures} fruits' upper bounds are solver failures, not bruises (they "
+                 'bruise somewhere above)')
     return text

@@ -34,11 +34,14 @@ BOOTSTRAP = 2000
 
 @dataclass(frozen=True)
 class SampleWindow:
-    """One fruit's window (N; see the module docstring for None and inf)."""
+    """One fruit's window (N; see the module docstring for None and inf);
+    ``max_force_limited_by``: 'solver failure' where the trial above ``max_force`` did not
+    converge (the fruit bruises somewhere above it), 'bruise', or None (unknown)."""
 
     sample: int
     min_force: float | None
     max_force: float | None
+    max_force_limited_by: str | None = None
 
     @property
     def exists(self) -> bool:
@@ -104,6 +107,8 @@ def population_window(windows: Sequence[SampleWindow], limit: float, fraction: f
                         holds_nowhere=sum(w.min_force is None for w in windows),
                         damaged_everywhere=sum(w.max_force is None for w in windows),
                         no_own_window=sum(not w.exists for w in windows),
+                        solver_failure_bounds=sum(w.max_force_limited_by == 'solver failure'
+                                                  for w in windows),
                         window=None, ci=None, no_window_share=None,
                         confident_window=None)
     if ends is not None:

@@ -231,7 +231,7 @@ class _Runner:
         chain.done = True
         if value is None:
             chain.error = failure
-            chain.result = [] if self.study.forces else (None, None)
+            chain.result = [] if self.study.forces else (None, None, None)
         elif self.study.forces:
             chain.result = [evaluation_of(self.store.get(case_key(chain.setup, 'hold', f,
                                                                   self.code)))
@@ -301,7 +301,9 @@ def summarise(study: Study, chains: list[_Chain], store: RowStore, complete: boo
             if study.forces:
                 entry['population']['curve'] = _grid_success(study, own)
         entry['samples'] = [dict(sample=w.sample, min_force=w.min_force,
-                                 max_force=_number(w.max_force)) for w in windows]
+                                 max_force=_number(w.max_force),
+                                 max_force_limited_by=w.max_force_limited_by)
+                            for w in windows]
         entry['failed'] = [dict(sample=c.setup.sample, error=c.error) for c in own if c.error]
         points.append(entry)
     rows = store.rows.values()

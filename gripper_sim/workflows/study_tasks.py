@@ -21,7 +21,7 @@ import gripper_sim
 from gripper_sim.workflows.grasp import GraspEvaluation
 from gripper_sim.workflows.scenario import Scenario
 from gripper_sim.workflows.window import (estimates, evaluate_grasp, run_search, trial_of,
-                                     window_search)
+                                     upper_bound_limited_by, window_search)
 
 #: the fields of a GraspEvaluation a row carries
 EVALUATION_FIELDS = tuple(f.name for f in fields(GraspEvaluation)
@@ -81,7 +81,8 @@ def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
     """One fruit at one design point.
 
     Without ``forces``: its window search (``workflows.window.window_search`` from the seeds
-    of ``estimates``), returning ``result`` = (min_force, max_force). With ``forces``:
+    of ``estimates``), returning ``result`` = (min_force, max_force, what limited
+    max_force: ``window.upper_bound_limited_by``). With ``forces``:
     one 'hold' evaluation per force, ``result`` None. An evaluation already in
     ``known`` (outputs by ``answer_key``, from a previous run) is not computed again.
 
@@ -104,6 +105,11 @@ def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
             evaluation(('hold', force))
         return dict(result=None, new=new)
     hold, bruise, _ = estimates(config)
-    result = run_search(window_search(config, hold, bruise, tolerance),
-                        lambda request: trial_of(evaluation(request), request[0]))
-    return dict(result=result, new=new)
+    trials = []
+
+    def trial(request: tuple[str, float]):
+        trials.append(trial_of(evaluation(request), request[0]))
+        return trials[-1]
+
+    low, high = run_search(window_search(config, hold, bruise, tolerance), trial)
+    return dict(result=(low, high, upper_bound_limited_by(high, trials)), new=new)

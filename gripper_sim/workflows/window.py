@@ -130,17 +130,8 @@ class GraspWindow:
 
     @property
     def max_force_limited_by(self) -> str | None:
-        """What ended the safe side at ``max_force``: 'bruise', or 'solver failure' when
-        the nearest trial above it failed to converge instead of bruising (then the
-        fruit bruises somewhere above ``max_force``, not at it); None without a finite
-        ``max_force``."""
-        if self.max_force is None or math.isinf(self.max_force):
-            return None
-        above = [t for t in self.trials if t.kind == 'bruise' and t.force > self.max_force]
-        if not above:
-            return None
-        nearest = min(above, key=lambda t: t.force)
-        return 'solver failure' if nearest.outcome == SOLVER_FAILED else 'bruise'
+        """What ended the safe side at ``max_force`` (``upper_bound_limited_by``)."""
+        return upper_bound_limited_by(self.max_force, self.trials)
 
     @property
     def exists(self) -> bool:
@@ -164,6 +155,20 @@ class GraspWindow:
                     max_force_measured=self.max_force_measured,
                     max_force_limited_by=self.max_force_limited_by,
                     trials=[dict(vars(t), verdict=t.verdict) for t in self.trials])
+
+
+def upper_bound_limited_by(max_force: float | None, trials: Iterable[Trial]) -> str | None:
+    """What ended a window's safe side at ``max_force`` (N): 'bruise', or 'solver
+    failure' when the nearest 'bruise' trial above it failed to converge instead of
+    bruising (then the fruit bruises somewhere above ``max_force``, not at it); None
+    without a finite ``max_force`` or a trial above it."""
+    if max_force is None or math.isinf(max_force):
+        return None
+    above = [t for t in trials if t.kind == 'bruise' and t.force > max_force]
+    if not above:
+        return None
+    nearest = min(above, key=lambda t: t.force)
+    return 'solver failure' if nearest.outcome == SOLVER_FAILED else 'bruise'
 
 
 def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
