@@ -61,3 +61,19 @@ def test_the_tip_bends_towards_the_fruit_as_the_grip_grows(squeezes):
     tips = harder.fingers.tip_displacement
     assert tips[0] == pytest.approx(tips[1], abs=1e-7)
     assert tips[0, 0] > 0 and tips[0, 0] > soft.fingers.tip_displacement[0, 0]
+
+
+def test_a_hard_grip_is_lifted_with_the_fingers_carrying_the_fruit():
+    """At 83 N the apple lies closer to the Fin Ray's front beam (nanometres, deep in the
+    barrier) than the jaws move in a sub-step of the lift: a start with only the fingers'
+    bases moved crosses the fruit at every sub-step, and the run failed ('no
+    collision-free start'). The step then starts with each finger moved by its base's
+    shift and the fruit's nodes touching it with it: the lift goes through."""
+    from gripper_sim.workflows.scenario import load_scenario, scenario_config
+    from gripper_sim.workflows.window import evaluate_grasp, trial_setup
+    scenario = load_scenario('pick_and_place')
+    config, base = trial_setup(scenario_config(scenario, finger='fin_ray'), scenario)
+    evaluation = evaluate_grasp(config, base, 83.0, 'bruise')
+    assert evaluation.outcome != 'solver failed', evaluation.message
+    assert evaluation.peak_grip_force == pytest.approx(83.0, rel=0.02)
+    assert not evaluation.bruised

@@ -1016,6 +1016,20 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
 _kept_constraints: tuple | None = None
 
 
+def _carried_start(barrier: BarrierContact, x_n: np.ndarray, pushed: np.ndarray,
+                   carried: list) -> np.ndarray:
+    """(n, d) m, ``pushed`` with each soft body's nodes and the fruit's outline nodes
+    within dhat of it at ``x_n`` moved by its base's shift (``soft_body_step``)."""
+    start = pushed.copy()
+    partner = barrier.partners(x_n.ravel())
+    fruit = barrier.vertex_nodes[barrier.vertex_body == 0]
+    for body, (nodes, shift) in enumerate(carried):
+        start[nodes] = x_n[nodes] + shift
+        touching = fruit[partner[fruit] == 1 + body]
+        start[touching] = x_n[touching] + shift
+    return start
+
+
 def _prescribed(n: int, d: int, fixed: np.ndarray) -> StepConstraints:
     """The constraints of a step of n nodes in d dimensions with nodes ``fixed`` (k,)
     prescribed (zero filters), the rest free; read only, kept for the same fixed array
@@ -1033,7 +1047,8 @@ def _prescribed(n: int, d: int, fixed: np.ndarray) -> StepConstraints:
 def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
                    new_faces: list, dt: float,
-                   self_contact: BarrierContact | None = None) -> StepOutcome:
+                   self_contact: BarrierContact | None = None,
+                   carried: list | None = None) -> StepOutcome:
     """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) of the fruit and the soft
     bodies in the barrier (``barrier.bodies``), nodes ``fixed`` (k,) prescribed at
     ``fixed_targets`` (k, d) m (a finger's base on its jaw: zero filters, the modified
@@ -1042,7 +1057,12 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
 
     The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
     nothing, else from x_n (each with the fixed nodes at their targets and the outline
-    pushed ahead of moving faces, ``pushed_start``).
+    pushed ahead of moving faces, ``pushed_start``), else, with ``carried`` (per soft
+    body in ``barrier.bodies`` order, (its nodes (k,), the shift (d,) m its base makes
+    in the step)), from x_n with each soft body moved by its base's shift and the
+    fruit's nodes within dhat of it moved along with it: where a fruit pressed hard on
+    a finger lies closer to it than the base's move, moving the base alone would cross
+    the fruit.
 
     Returns:
         The outcome; ``forces`` (n, d) N the barrier's and friction's force on every node
@@ -1066,6 +1086,9 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     if not all(b.reachable(start) for b in barriers):
         start = pushed  # its own array: pushed_start's copy
         start[fixed] = fixed_targets
+        if not all(b.reachable(start) for b in barriers) and carried is not None:
+            start = _carried_start(barrier, x_n, pushed, carried)
+            start[fixed] = fixed_targets
         if not all(b.reachable(start) for b in barriers):
             raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
     constraints = _prescribed(n, d, fixed)

@@ -798,11 +798,15 @@ class SimulationFacade:
         soft, n, finger = self._soft, self.fruit.n_nodes, self._finger
         targets = soft.base_targets(self._jaw_origin(grip_new, LEFT),
                                     self._jaw_origin(grip_new, RIGHT))
+        m = soft.n_nodes // 2
+        carried = [(n + side * m + np.arange(m),
+                    self._jaw_origin(grip_new, side) - self._jaw_origin(self._grip, side))
+                   for side in (LEFT, RIGHT)]
         outcome = soft_body_step(self.solver, self._barrier,
                                  np.concatenate([self.q, finger.positions]),
                                  np.concatenate([self.v, finger.velocities]), soft.base, targets,
                                  self.faces_at(self._grip), new_faces, dt,
-                                 self_contact=soft.self_contact)
+                                 self_contact=soft.self_contact, carried=carried)
         partner = outcome.contacts.obstacle
         v = outcome.v[:n]
         contacts = cm.ContactState.empty(n)
