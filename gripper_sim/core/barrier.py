@@ -102,6 +102,8 @@ CANDIDATE_MARGIN = 1e-4
 #: ``barrier_terms``'s arguments when no Hessian is wanted or there is no friction
 _NO_VALUES, _NO_SLOTS = np.zeros(0), np.zeros(0, np.int64)
 _NO_STEP = np.zeros(0)  # ``quiet`` at q only
+#: the compiled solve's empty (k, 2) corners or anchors and candidates
+_NO_CORNERS, _NO_PAIRS = np.zeros((0, 2)), np.zeros((0, 2), np.int64)
 _NO_FRICTION = (np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0),
                 np.zeros((0, 2)))
 
@@ -675,15 +677,70 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
-        into = None
-        if hessian:
-            if self._positions is None or self._positions[0] is not scatter:
-                m = self.dofs.shape[1]
-                keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
-                first = np.unique(keys.ravel(), return_index=True)[1]
-                self._positions = (scatter, scatter.ravel()[first])
-            into = (data, self._positions[1])
+        into = (data, self.pattern_slots(scatter)) if hessian else None
         return self._terms(q, grad, into), []
+
+    def pattern_slots(self, scatter: np.ndarray) -> np.ndarray:
+        """(p,) the solver's CSC position of each of the pattern's sorted keys, from the
+        positions ``scatter`` (n_elem, m * m) of the entries of ``dofs``; kept for the
+        same scatter array."""
+        if self._positions is None or self._positions[0] is not scatter:
+            m = self.dofs.shape[1]
+            keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
+            first = np.unique(keys.ravel(), return_index=True)[1]
+            self._positions = (scatter, scatter.ravel()[first])
+        return self._positions[1]
+
+    # ------------------------------------------------------------------ compiled solve
+    def compiled_fields(self, scatter: np.ndarray) -> tuple:
+        """The fields of a ``barrier_newton.BarrierPart`` of this 2D barrier up to its
+        flags (the compiled solve's own arrays follow), its Hessian added into the
+        solver's CSC values at ``scatter`` (``evaluate_into``'s); the step's fields empty
+        (``compiled_step``)."""
+        contact = self.settings
+        return (self._vertex_dof_pairs, self._mesh_edges, self._mesh_groups,
+                self.self_contact, contact.dhat, contact.stiffness, self._mesh_dofs,
+                self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys,
+                contact.friction_smoothing, 0.5 * contact.dhat + CANDIDATE_MARGIN,
+                (0.5 + SWEPT_MARGIN) * contact.dhat, CANDIDATE_MARGIN,
+                *self._gradient_buffers, self.drop_outside_pattern, self.vertex_body,
+                len(self.bodies) + 1, self.pattern_slots(scatter),
+                _NO_CORNERS, _NO_CORNERS, np.zeros((self.vertex_nodes.size, 2)),
+                _NO_PAIRS, _NO_FRICTION, False, _NO_CORNERS, 0.0, False)
+
+    def compiled_mesh(self) -> np.ndarray:
+        """The collision mesh's edges: a new array when the mesh is built anew."""
+        return self._mesh_edges
+
+    def compiled_step(self) -> tuple:
+        """``barrier_newton.set_part``'s arguments of this step: the faces' corners, the
+        collision mesh's start, the candidates' anchor, whether they are kept, the
+        candidates, the lagged friction's five arrays, whether there is friction, the
+        quiet region's anchor and reach, whether there is one."""
+        pairs, friction, quiet = self._pairs, self._friction_pairs, self._quiet
+        return (self._obstacles_end, np.ascontiguousarray(self._start),
+                pairs[0] if pairs is not None else _NO_CORNERS, pairs is not None,
+                pairs[1] if pairs is not None else _NO_PAIRS,
+                *(friction if friction is not None else _NO_FRICTION), friction is not None,
+                quiet[0] if quiet is not None else _NO_CORNERS,
+                quiet[1] if quiet is not None else 0.0, quiet is not None)
+
+    def keep_compiled(self, anchor, pairs, terms: int, last_q: np.ndarray,
+                      values: np.ndarray) -> None:
+        """What a compiled solve changed: the candidates ``pairs`` (k, 2) sought again at
+        vertices ``anchor`` (n_v, 2) m (None: kept), and the last evaluation (``terms``: 0
+        none, 1 no pairs, 2 the compiled terms at ``last_q`` (d n,) m with (barrier,
+        friction) ``values`` J, the gradients in this barrier's buffers), as ``_terms``
+        keeps them."""
+        if pairs is not None:
+            self._pairs = (anchor.copy(), pairs, self._obstacles_end)
+        if terms:
+            gradients = ((None, None) if terms == 1 else
+                         (self._gradient_buffers[0],
+                          self._gradient_buffers[1] if self._friction_pairs is not None
+                          else None))
+            self._last_terms = (last_q.copy(), float(values[0]), float(values[1]),
+                                *gradients)
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no

@@ -49,7 +49,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from gripper_sim.core import newton, pcg_kernels, sparse_ldl
+from gripper_sim.core import barrier_solve, newton, pcg_kernels, sparse_ldl
 from gripper_sim.core import solver_kernels as kernels
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.energy_table import EnergyTable
@@ -82,8 +82,17 @@ KEEP_BELOW = 100.0
 #: a sliding node's Newton step is cut at the kink of the friction law only if it
 #: slips faster than this multiple of the smoothing speed (slower: inside the kink)
 KINK_FACTOR = 10.0
+#: whether the 2D barrier model's Newton solves run compiled (``core.barrier_newton``)
+#: where it covers them (``barrier_solve.supports``); the interpreted route serves the
+#: rest (the 2D solid fruit's flesh, steps with sliding nodes, 3D). False: interpreted
+#: everywhere (the tests compare the two)
+COMPILED_BARRIER_SOLVE = True
 #: the stiffness damping's K_n without stiffness damping (beta = 0)
 _NO_STIFFNESS = np.zeros(0)
+#: the constants above as the compiled barrier solve takes them
+_COMPILED_SETTINGS = barrier_solve.SolveSettings(
+    KEEP_BELOW, CG_TOLERANCE, CG_ERROR_FRACTION, CG_RELATIVE_FLOOR, CG_MAX_ITERATIONS,
+    CG_STALE_ITERATIONS)
 
 
 def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
@@ -208,6 +217,7 @@ class PatternCachingSolver:
         self._stale = False
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
+        self._compiled = None  # the compiled barrier solve (``_iterate_compiled``)
         self._build_fast_pattern()
         self._table = EnergyTable(self.energies, self._scatter, self.dim, self.n)
         #: the energies after the table's, with their scatter indices
@@ -411,11 +421,15 @@ class PatternCachingSolver:
                               self._node_blocks, self._diag_blocks, filters, diagonal, out)
         return out
 
+    def empty_factor(self) -> _BlockLDL:
+        """A block LDL^T of the Newton matrix's pattern, not factorised yet."""
+        return _BlockLDL(self._ldl_pattern, self._ldl_gather, self._perm)
+
     def _factorise(self, values: np.ndarray) -> _BlockLDL:
         """The block LDL^T of A (CSC ``values`` on the pattern). Raises RuntimeError
         (singular)."""
         self.stats['factorisations'] += 1
-        ldl = _BlockLDL(self._ldl_pattern, self._ldl_gather, self._perm)
+        ldl = self.empty_factor()
         ldl.factorise(values)
         return ldl
 
@@ -519,17 +533,56 @@ class PatternCachingSolver:
         status = newton.INFEASIBLE_START
         if warm is not None and warm[1] == dt and np.array_equal(warm[0], q_n):
             q = q_start + problem.filtered(warm[2] - q_start)
-            status, iterations, n_hist = newton.newton_iteration_interpreted(
-                problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
+            status, iterations, n_hist = self._iterate(problem, q, history)
         if status == newton.INFEASIBLE_START:
             q = q_start.copy()
-            status, iterations, n_hist = newton.newton_iteration_interpreted(
-                problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
+            status, iterations, n_hist = self._iterate(problem, q, history)
         done = history[:n_hist].tolist()
         if status != newton.OK:
             raise NewtonFailure(NEWTON_FAILURES[status].format(self.max_iterations), done)
         self._warm = (q_n.copy(), dt, q)
         return StepSolution(q, problem.reaction, iterations, done)
+
+    def compiled_solve_covers(self, con: StepConstraints | None = None) -> bool:
+        """Whether the compiled barrier solve (``barrier_solve``) covers this solver's
+        problems (and the step's constraints ``con``: no sliding nodes)."""
+        return ((con is None or not con.friction_nodes.size)
+                and barrier_solve.supports(self.dim, [e for e, _ in self._untabled],
+                                           self._step_bounding))
+
+    def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
+                          history: np.ndarray):
+        """``_iterate`` by ``barrier_solve.CompiledSolve`` (made once, kept)."""
+        compiled = self._compiled
+        if compiled is None or not compiled.fits(self._untabled):
+            pattern = (self._matvec_indptr, self._matvec_indices, self._hessian_values,
+                       self._no_values, self._k_dq, np.empty((0, 2, 2)), self._diag_pos,
+                       self._diag_block_pos, self._block_pos, self._block_nodes,
+                       self._node_block_ptr, self._node_blocks, self._diag_blocks)
+            compiled = self._compiled = barrier_solve.CompiledSolve(
+                _COMPILED_SETTINGS, self.m, self.alpha, self.beta, self.tolerance,
+                self._table, pattern, self.empty_factor(),
+                (self._perm, *self._ldl_gather, self._ldl_pattern.n_blocks), self._untabled)
+        q_n = problem.q_n
+        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
+        state = barrier_solve.FactorState(self._lu, self._woodbury, self._stale)
+        status, iterations, n_hist, reaction, state, work = compiled.run(
+            state, q_n, problem.v_n, problem.dt, problem.con, stiffness, q, history,
+            self.max_iterations, self.counts)
+        self._lu, self._woodbury, self._stale = state.lu, state.woodbury, state.stale
+        for key, count in work.items():
+            self.stats[key] += count
+        problem.reaction = reaction
+        return status, iterations, n_hist
+
+    def _iterate(self, problem: '_NewtonProblem', q: np.ndarray, history: np.ndarray):
+        """``newton.newton_iteration`` on ``problem`` from ``q`` (overwritten): interpreted,
+        or with ``COMPILED_BARRIER_SOLVE`` compiled where ``barrier_solve`` covers the
+        solver (the reaction then set on the problem). (status, iterations, n_hist)."""
+        if COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(problem.con):
+            return self._iterate_compiled(problem, q, history)
+        return newton.newton_iteration_interpreted(problem, q, problem.dt, self.tolerance,
+                                                   self.max_iterations, history, self.counts)
 
 
 class _NewtonProblem(StepProblem):
