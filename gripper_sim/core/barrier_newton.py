@@ -55,32 +55,26 @@ from numba import njit, types
 from numba.experimental import structref
 from numba.extending import overload
 
-from gripper_sim.core import newton
+from gripper_sim.core import linear_solve, newton
 from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move,
                                               relative_moves_within)
 from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
 from gripper_sim.core.barrier_terms import barrier_terms
 from gripper_sim.core.energy_table import inertia_and_energies
-from gripper_sim.core.pcg_kernels import CONVERGED, block_ldl_solve, preconditioned_cg
-from gripper_sim.core.solver_kernels import (add_step_terms, apply_filters, csc_matvec,
-                                             filter_blocks, max_abs)
-from gripper_sim.core.sparse_ldl import factor
+from gripper_sim.core.solver_kernels import add_step_terms, apply_filters, filter_blocks, max_abs
 
 #: ``solve``'s status beyond ``newton``'s: a barrier Hessian entry outside its pattern
 OUTSIDE_PATTERN = 100
 
-#: flags (int64 array): whether an LDL^T is kept, whether it is stale, the Woodbury
-#: terms' columns kept with it (-1: none), the slot of the kept matrix (-1: none), of
-#: the last factorised one
-F_HAS_LU, F_STALE, F_WOODBURY, F_KEPT, F_LAST, F_SIZE = range(6)
+#: flags (int64 array): the slot of the kept Newton matrix (-1: none), of the last
+#: factorised one
+F_KEPT, F_LAST, F_SIZE = range(3)
 #: a barrier's flags (int64 array): its candidates (-1: none kept, 0: kept, 1: sought
 #: again in this solve), its Hessian entries outside the pattern (not dropped), its last
 #: finite evaluation (0: none in this solve (or quiet), 1: no pairs, 2: terms)
 B_PAIRS, B_OUTSIDE, B_TERMS, B_SIZE = range(4)
 #: the candidates where none are kept
 NO_PAIRS = np.zeros((0, 2), np.int64)
-#: stats (int64 array): Newton systems, factorisations, CG iterations
-S_SYSTEMS, S_FACTORS, S_CG, S_SIZE = range(4)
 
 
 @structref.register
@@ -101,20 +95,18 @@ class BarrierPartType(types.StructRef):
 
 #: the problem's fields. Kept with the solver (``barrier_solve``): masses (n,) kg per dof,
 #: Rayleigh alpha 1/s and beta s, the friction smoothing m/s, the keep limit m/s, the
-#: (empty) sliding nodes' arrays, CG's (max, stale) iterations; ``table``: the energy
-#: table's order, items, pressure coefficients and dA/dq (with and without the Hessian),
-#: dq, the coefficients of the last Hessian; ``pattern``: the CSC indptr and indices,
-#: Hessian values, the no-Hessian values, K_n dq, friction blocks, the diagonal's and
-#: the node blocks' positions (``filter_blocks``' arrays); ``ldl``: perm, the factor's
-#: pattern arrays, its gather from the CSC values, L and D^-1 (kept) and their scratch,
-#: the blocks, the Woodbury terms (u, A^-1 u, inverse capacitance); ``barriers``: a
-#: tuple of ``BarrierPart``; ``work``: see ``_Kept``; ``low``: two Newton matrix slots
+#: (empty) sliding nodes' arrays; ``table``: the energy table's order, items, pressure
+#: coefficients and dA/dq (with and without the Hessian), dq, the coefficients of the
+#: last Hessian; ``pattern``: the CSC indptr and indices, Hessian values, the no-Hessian
+#: values, K_n dq, friction blocks, the diagonal's and the node blocks' positions
+#: (``filter_blocks``' arrays); ``linear``: the solver's ``linear_solve.LinearSolveState``
+#: (its kept preconditioner and work counters); ``barriers``: a tuple of ``BarrierPart``;
+#: ``work``: see ``barrier_solve.CompiledSolve``; ``low``: two Newton matrix slots
 #: (2, nnz), their filtered rank-one vectors (2, P, n), coefficients (2, P), counts
-#: and shifts; ``flags`` (``F_*``); ``stats`` (``S_*``). Set by ``solve``: q_n, v_n
-#: (n,), dt s, dt^2, K_n's CSC values, the filters (n_nodes, 2, 2), CG's (relative,
-#: error limit m, floor m)
-FIELDS = ('masses', 'alpha', 'beta', 'eps', 'keep_limit', 'friction', 'cg_iterations',
-          'table', 'pattern', 'ldl', 'barriers', 'work', 'low', 'flags', 'stats',
+#: and shifts; ``flags`` (``F_*``). Set by ``solve``: q_n, v_n (n,), dt s, dt^2, K_n's
+#: CSC values, the filters (n_nodes, 2, 2), CG's (relative, error limit m, floor m)
+FIELDS = ('masses', 'alpha', 'beta', 'eps', 'keep_limit', 'friction',
+          'table', 'pattern', 'linear', 'barriers', 'work', 'low', 'flags',
           'q_n', 'v_n', 'dt', 'dt2', 'stiffness', 'filters', 'cg')
 #: a barrier's fields (one ``BarrierContact``): its fixed arrays and settings, then those
 #: of a step, set by ``set_part``: the faces' corners (c k, 2) m, the collision mesh's
@@ -259,153 +251,6 @@ def _max_step(part, x, dq):
     return collision_free_step(v0, v1, part.edges, swept)
 
 
-@njit(cache=True)
-def _ldl_solve(ldl, x, out):
-    """out = A^-1 x by the kept LDL^T (``_BlockLDL.solve``)."""
-    perm, arrays, _, _, l_values, d_inv, _, _, _, _, _, _ = ldl
-    y = np.empty(x.shape[0])
-    for m in range(perm.shape[0]):
-        y[m] = x[perm[m]]
-    block_ldl_solve(arrays, l_values, d_inv, y)
-    for m in range(perm.shape[0]):
-        out[perm[m]] = y[m]
-
-
-@njit(cache=True)
-def _factorise_ldl(problem, values):
-    """The block LDL^T of the CSC ``values`` into the kept factor; False if singular
-    (the kept one unchanged)."""
-    (perm, arrays, target, source, l_values, d_inv, l_new, d_new, n_blocks, w_u,
-     w_a_inv_u, w_small_inv) = problem.ldl
-    problem.stats[S_FACTORS] += 1
-    blocks = np.zeros((n_blocks + 1, 2, 2))
-    flat = blocks.reshape(-1)
-    for m in range(target.shape[0]):
-        flat[target[m]] = values[source[m]]
-    if factor(arrays, blocks, l_new, d_new) < 0:
-        return False
-    l_values[:] = l_new
-    d_inv[:] = d_new
-    return True
-
-
-@njit(cache=True)
-def _woodbury(problem, u, c, w_u, w_a_inv_u, w_small_inv):
-    """The preconditioner's rank-one terms for u (n, k), c (k,) into the arrays given:
-    u, A^-1 u and the inverse capacitance matrix (``stepper.woodbury_terms``)."""
-    n, k = u.shape
-    columns = np.empty((k, n))
-    solved = np.empty((k, n))
-    for j in range(k):
-        columns[j] = u[:, j]
-        _ldl_solve(problem.ldl, columns[j], solved[j])
-        w_a_inv_u[:, j] = solved[j]
-        w_u[:, j] = u[:, j]
-    capacitance = np.zeros((k, k))
-    for i in range(k):
-        capacitance[i, i] = 1.0 / c[i]
-        for j in range(k):
-            capacitance[i, j] += np.dot(columns[i], solved[j])
-    w_small_inv[:k, :k] = np.linalg.inv(capacitance)
-
-
-@njit(cache=True)
-def _pcg(problem, values, rhs, u, c, u_t, x):
-    """``PatternCachingSolver._pcg``: True if CG converged (x written)."""
-    (perm, arrays, _, _, l_values, d_inv, _, _, _, w_u, w_a_inv_u,
-     w_small_inv) = problem.ldl
-    flags, stats = problem.flags, problem.stats
-    k = c.shape[0]
-    n = rhs.shape[0]
-    if k and flags[F_WOODBURY] == k:
-        u_w_t, a_inv_u, small_inv = (np.ascontiguousarray(w_u[:, :k].T),
-                                     np.ascontiguousarray(w_a_inv_u[:, :k]),
-                                     np.ascontiguousarray(w_small_inv[:k, :k]))
-    elif k:
-        fresh_u, fresh_a, fresh_s = np.empty((n, k)), np.empty((n, k)), np.empty((k, k))
-        _woodbury(problem, u, c, fresh_u, fresh_a, fresh_s)
-        u_w_t, a_inv_u, small_inv = np.ascontiguousarray(fresh_u.T), fresh_a, fresh_s
-    else:
-        u_w_t, a_inv_u, small_inv = np.zeros((0, n)), np.zeros((n, 0)), np.zeros((0, 0))
-    indptr, indices = problem.pattern[0], problem.pattern[1]
-    relative, error_limit, floor = problem.cg
-    max_iterations, stale_iterations = problem.cg_iterations
-    status, iterations = preconditioned_cg(
-        indptr, indices, values, u, u_t, c, problem.filters, perm, arrays, l_values, d_inv,
-        u_w_t, a_inv_u, small_inv, rhs, relative, error_limit, floor, max_iterations,
-        stale_iterations, x)
-    stats[S_CG] += iterations
-    if status != CONVERGED:
-        return False
-    flags[F_STALE] = 1 if iterations > stale_iterations else 0
-    return True
-
-
-@njit(cache=True)
-def _precondition(problem, u, c, r, out):
-    """out = (kept LDL^T + rank-one terms)^-1 r (``PatternCachingSolver._preconditioner``)."""
-    _ldl_solve(problem.ldl, r, out)
-    k = c.shape[0]
-    if k:
-        w_u, w_a_inv_u, w_small_inv = problem.ldl[9], problem.ldl[10], problem.ldl[11]
-        if problem.flags[F_WOODBURY] != k:
-            w_u, w_a_inv_u, w_small_inv = (np.empty((r.shape[0], k)),
-                                           np.empty((r.shape[0], k)), np.empty((k, k)))
-            _woodbury(problem, u, c, w_u, w_a_inv_u, w_small_inv)
-        t = np.empty(k)
-        column = np.empty(out.shape[0])
-        for j in range(k):
-            column[:] = w_u[:, j]
-            t[j] = np.dot(column, out)
-        for i in range(k):
-            s = 0.0
-            for j in range(k):
-                s += w_small_inv[i, j] * t[j]
-            for m in range(out.shape[0]):
-                out[m] -= w_a_inv_u[m, i] * s
-
-
-@njit(cache=True)
-def _linear_solve(problem, values, rhs, u, c, u_t, fresh, x):
-    """``PatternCachingSolver.linear_solve`` into x; False if the factor is singular."""
-    flags = problem.flags
-    problem.stats[S_SYSTEMS] += 1
-    if flags[F_HAS_LU] and not fresh and not flags[F_STALE]:
-        if _pcg(problem, values, rhs, u, c, u_t, x):
-            return True
-    flags[F_STALE] = 0
-    if not _factorise_ldl(problem, values):
-        return False
-    flags[F_HAS_LU] = 1
-    flags[F_WOODBURY] = -1
-    k = c.shape[0]
-    if k:
-        ldl = problem.ldl
-        _woodbury(problem, u, c, ldl[9], ldl[10], ldl[11])
-        flags[F_WOODBURY] = k
-    if _pcg(problem, values, rhs, u, c, u_t, x):
-        return True
-    # CG failed on a fresh factorisation: the factor's solution, refined (3 sweeps)
-    n = rhs.shape[0]
-    _precondition(problem, u, c, rhs, x)
-    residual, correction = np.empty(n), np.empty(n)
-    for _ in range(3):
-        csc_matvec(problem.pattern[0], problem.pattern[1], values, x, residual)
-        if k:
-            column = np.empty(n)
-            for j in range(k):
-                column[:] = u[:, j]
-                s = c[j] * np.dot(column, x)
-                for m in range(n):
-                    residual[m] += u[m, j] * s
-        for m in range(n):
-            residual[m] = rhs[m] - residual[m]
-        _precondition(problem, u, c, residual, correction)
-        for m in range(n):
-            x[m] += correction[m]
-    return True
-
-
 # ---------------------------------------------------------------------- the hooks
 @overload(newton.vectors)
 def _vectors_hook(problem):
@@ -510,7 +355,10 @@ def _direction_hook(problem, g_f, dq, fresh):
             for m in range(n):
                 rhs[m] = -g_f[m]
             x = problem.work[2]
-            if not _linear_solve(problem, matrices[slot], rhs, u, c, u_t, refactor, x):
+            relative, error_limit, floor = problem.cg
+            if not linear_solve.solve(problem.linear, matrices[slot], rhs, u, c, u_t,
+                                      problem.filters, relative, error_limit, floor,
+                                      refactor, x):
                 return False, 0.0
             dq[:] = x
             slope = np.dot(g_f, x)

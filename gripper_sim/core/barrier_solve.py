@@ -1,10 +1,10 @@
 """The compiled barrier solve (``core.barrier_newton``) run from Python: which solvers it
 covers (``supports``), the problem and its barriers' parts made once per solver
-(``CompiledSolve``), and one solve (``CompiledSolve.run``): the solver's factor state
-and the barriers' step state handed in, the compiled ``newton.newton_iteration``
-called, the state it changed handed back (the kept LDL^T and Woodbury terms, staleness,
-work counters; each barrier's candidates and last evaluation, ``BarrierContact``'s
-``keep_compiled``).
+(``CompiledSolve``; it holds the solver's ``linear_solve.LinearSolveState``, so the kept
+preconditioner and the work counters are the solver's own), and one solve
+(``CompiledSolve.run``): the barriers' step state handed in, the compiled
+``newton.newton_iteration`` called, the barriers' state it changed handed back (each
+barrier's candidates and last evaluation, ``BarrierContact``'s ``keep_compiled``).
 """
 from __future__ import annotations
 
@@ -24,19 +24,6 @@ class SolveSettings:
     cg_tolerance: float
     cg_error_fraction: float
     cg_relative_floor: float
-    cg_max_iterations: int
-    cg_stale_iterations: int
-
-
-@dataclass
-class FactorState:
-    """The solver's kept preconditioner: the block LDL^T (``fast_solver._BlockLDL``,
-    None: none yet), its Woodbury terms (u, A^-1 u, inverse capacitance; None: none) and
-    whether it is stale (a new one is due)."""
-
-    lu: object
-    woodbury: tuple | None
-    stale: bool
 
 
 def supports(dim: int, energies_after_table: list, step_bounding: list) -> bool:
@@ -59,13 +46,12 @@ class CompiledSolve:
         masses: (n,) kg per dof.  alpha: 1/s.  beta: s.  tolerance: m/s.
         table: the solver's ``EnergyTable`` (``kernel_arrays``).
         pattern: the solver's CSC arrays as ``barrier_newton``'s ``pattern`` field.
-        factor: an empty block LDL^T of the pattern (``_BlockLDL``), the one this solve
-            factorises into.  gather: (perm, target, source) of the factor.
+        linear: the solver's ``linear_solve.LinearSolveState``.
         barriers: [(BarrierContact, its scatter)] the energies after the table.
     """
 
     def __init__(self, settings: SolveSettings, masses, alpha, beta, tolerance, table,
-                 pattern: tuple, factor, gather: tuple, barriers: list):
+                 pattern: tuple, linear, barriers: list):
         from gripper_sim.core.stepper import FRICTION_SMOOTHING
 
         self.settings, self.tolerance, self.beta = settings, tolerance, beta
@@ -74,11 +60,7 @@ class CompiledSolve:
         self.barriers = [barrier for barrier, _ in barriers]
         n = masses.size
         p = table.pressures
-        self.lu = factor
-        self.woodbury = (np.empty((n, p)), np.empty((n, p)), np.empty((p, p)))
-        #: the Woodbury terms as the last solve handed them back (their values are those
-        #: of ``woodbury``), and the last read-only filters with their copy
-        self.woodbury_out = None
+        #: the last read-only filters with their copy
         self.filters = (None, None)
         self.parts = tuple(bn.new_part((*barrier.compiled_fields(scatter),
                                         np.zeros(bn.B_SIZE, np.int64), np.empty(n),
@@ -90,20 +72,13 @@ class CompiledSolve:
         #: reaction
         self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
         self.flags = np.zeros(bn.F_SIZE, np.int64)
-        self.stats = np.zeros(bn.S_SIZE, np.int64)
-        perm, target, source, n_blocks = gather
         self.problem = bn.new_problem((
             masses, alpha, beta, FRICTION_SMOOTHING, settings.keep_below * tolerance,
             (np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 1))),
-            (settings.cg_max_iterations, settings.cg_stale_iterations),
-            (*table.kernel_arrays(), np.zeros(p)), pattern,
-            (perm, factor.arrays, target, source, factor.l_values, factor.d_inv,
-             np.empty_like(factor.l_values), np.empty_like(factor.d_inv), n_blocks,
-             *self.woodbury),
-            self.parts, self.work,
+            (*table.kernel_arrays(), np.zeros(p)), pattern, linear, self.parts, self.work,
             (np.empty((2, pattern[2].size)), np.empty((2, p, n)), np.empty((2, p)),
              np.zeros(2, np.int64), np.zeros(2)),
-            self.flags, self.stats,
+            self.flags,
             np.zeros(n), np.zeros(n), 1.0, 1.0, np.zeros(0), np.zeros((n // 2, 2, 2)),
             (0.0, 0.0, 0.0)))
 
@@ -118,29 +93,15 @@ class CompiledSolve:
         key = self.key_of(barriers)
         return len(key) == len(self.key) and all(a is b for a, b in zip(key, self.key))
 
-    def run(self, state: FactorState, q_n, v_n, dt, con, stiffness, q, history,
-            max_iterations, counts):
+    def run(self, q_n, v_n, dt, con, stiffness, q, history, max_iterations, counts):
         """One Newton solve: (status, iterations, len(history), reaction (n_dof,) N or
-        None, the factor state after it, {stat: increment}); ``q`` (n_dof,) m, the start,
-        overwritten with the solution; ``con`` as ``fast_solver.as_cone`` makes it, no
-        sliding nodes; ``stiffness`` K_n's CSC values (or empty); ``counts`` the solver's
-        work counters (added to). Raises AssertionError where a barrier's Hessian falls
-        outside its pattern (as the interpreted route does)."""
-        flags, lu, settings, tol = self.flags, self.lu, self.settings, self.tolerance
-        flags[:] = 0
-        flags[bn.F_KEPT] = flags[bn.F_LAST] = flags[bn.F_WOODBURY] = -1
-        self.stats[:] = 0
-        if state.lu is not None:
-            if state.lu is not lu:
-                lu.l_values[:] = state.lu.l_values
-                lu.d_inv[:] = state.lu.d_inv
-            flags[bn.F_HAS_LU] = 1
-            if state.woodbury is not None:
-                if state.woodbury is not self.woodbury_out:  # else they hold its values
-                    for mine, theirs in zip(self.woodbury, state.woodbury):
-                        mine[:theirs.shape[0], :theirs.shape[1]] = theirs
-                flags[bn.F_WOODBURY] = state.woodbury[0].shape[1]
-        flags[bn.F_STALE] = int(state.stale)
+        None); ``q`` (n_dof,) m, the start, overwritten with the solution; ``con`` as
+        ``fast_solver.as_cone`` makes it, no sliding nodes; ``stiffness`` K_n's CSC values
+        (or empty); ``counts`` the solver's work counters (added to). Raises
+        AssertionError where a barrier's Hessian falls outside its pattern (as the
+        interpreted route does)."""
+        flags, settings, tol = self.flags, self.settings, self.tolerance
+        flags[bn.F_KEPT] = flags[bn.F_LAST] = -1
         for part, barrier in zip(self.parts, self.barriers):
             bn.set_part(part, *barrier.compiled_step())
         filters = con.filters
@@ -152,15 +113,6 @@ class CompiledSolve:
             self.problem, q_n, v_n, dt, dt ** 2, stiffness, filters, settings.cg_tolerance,
             settings.cg_error_fraction * tol * dt, settings.cg_relative_floor * tol * dt,
             q, tol, max_iterations, history, counts)
-        stats = self.stats
-        state = FactorState(state.lu, state.woodbury, bool(flags[bn.F_STALE]))
-        if stats[bn.S_FACTORS]:  # the factor and its Woodbury terms are new
-            k = int(flags[bn.F_WOODBURY])
-            w_u, w_a_inv_u, w_small_inv = self.woodbury
-            self.woodbury_out = (
-                None if k < 0 else
-                (w_u[:, :k].copy(), w_a_inv_u[:, :k].copy(), w_small_inv[:k, :k].copy()))
-            state = FactorState(lu, self.woodbury_out, state.stale)
         for part, (b_flags, last_q, values, anchor), barrier in zip(
                 self.parts, self.part_arrays, self.barriers):
             sought = b_flags[bn.B_PAIRS] == 1
@@ -170,6 +122,4 @@ class CompiledSolve:
             if b_flags[bn.B_OUTSIDE]:
                 raise AssertionError('barrier Hessian entry outside its pattern')
         reaction = self.work[4].copy() if status == newton.OK else None
-        work = dict(systems=int(stats[bn.S_SYSTEMS]), factorisations=int(stats[bn.S_FACTORS]),
-                    cg_iterations=int(stats[bn.S_CG]))
-        return status, iterations, n_hist, reaction, state, work
+        return status, iterations, n_hist, reaction
