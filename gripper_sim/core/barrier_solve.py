@@ -2,9 +2,9 @@
 covers (``supports``), the problem and its barriers' parts made once per solver
 (``CompiledSolve``; it holds the solver's ``linear_solve.LinearSolveState``, so the kept
 preconditioner and the work counters are the solver's own), and one solve
-(``CompiledSolve.run``): the barriers' step state handed in, the compiled
-``newton.newton_iteration`` called, the barriers' state it changed handed back (each
-barrier's candidates and last evaluation, ``BarrierContact``'s ``keep_compiled``).
+(``CompiledSolve.run``): the compiled ``newton.newton_iteration`` called on it. Each
+barrier's ``barrier_part.BarrierPart`` is the barrier's own (its step state, kept
+candidates and last evaluation), so nothing is handed in or back.
 """
 from __future__ import annotations
 
@@ -55,19 +55,14 @@ class CompiledSolve:
         from gripper_sim.core.stepper import FRICTION_SMOOTHING
 
         self.settings, self.tolerance, self.beta = settings, tolerance, beta
-        #: what the problem was made for: each barrier, its scatter, its collision mesh
+        #: what the problem was made for: each barrier, its scatter, its part
         self.key = self.key_of(barriers)
         self.barriers = [barrier for barrier, _ in barriers]
         n = masses.size
         p = table.pressures
         #: the last read-only filters with their copy
         self.filters = (None, None)
-        self.parts = tuple(bn.new_part((*barrier.compiled_fields(scatter),
-                                        np.zeros(bn.B_SIZE, np.int64), np.empty(n),
-                                        np.empty(2)))
-                           for barrier, scatter in barriers)
-        #: each part's flags, last positions and values, candidates' anchor (shared)
-        self.part_arrays = tuple(bn.shared_arrays(part) for part in self.parts)
+        self.parts = tuple(barrier.compiled_part(scatter) for barrier, scatter in barriers)
         #: the loop's vectors (5, n), the friction gradient, CG's solution, S g, the
         #: reaction
         self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
@@ -86,7 +81,7 @@ class CompiledSolve:
     def key_of(barriers: list) -> tuple:
         """What a ``CompiledSolve`` of ``barriers`` [(barrier, scatter)] is made for."""
         return tuple(x for barrier, scatter in barriers
-                     for x in (barrier, scatter, barrier.compiled_mesh()))
+                     for x in (barrier, scatter, barrier.compiled_part(scatter)))
 
     def fits(self, barriers: list) -> bool:
         """Whether this was made for ``barriers`` [(barrier, scatter)] as they are."""
@@ -102,8 +97,6 @@ class CompiledSolve:
         interpreted route does)."""
         flags, settings, tol = self.flags, self.settings, self.tolerance
         flags[bn.F_KEPT] = flags[bn.F_LAST] = -1
-        for part, barrier in zip(self.parts, self.barriers):
-            bn.set_part(part, *barrier.compiled_step())
         filters = con.filters
         if not filters.flags.writeable:  # a read-only array is typed apart: a copy, kept
             if self.filters[0] is not filters:
@@ -113,13 +106,7 @@ class CompiledSolve:
             self.problem, q_n, v_n, dt, dt ** 2, stiffness, filters, settings.cg_tolerance,
             settings.cg_error_fraction * tol * dt, settings.cg_relative_floor * tol * dt,
             q, tol, max_iterations, history, counts)
-        for part, (b_flags, last_q, values, anchor), barrier in zip(
-                self.parts, self.part_arrays, self.barriers):
-            sought = b_flags[bn.B_PAIRS] == 1
-            barrier.keep_compiled(anchor if sought else None,
-                                  bn.candidates_of(part) if sought else None,
-                                  int(b_flags[bn.B_TERMS]), last_q, values)
-            if b_flags[bn.B_OUTSIDE]:
-                raise AssertionError('barrier Hessian entry outside its pattern')
+        for barrier in self.barriers:
+            barrier.check_compiled()
         reaction = self.work[4].copy() if status == newton.OK else None
         return status, iterations, n_hist, reaction
