@@ -312,10 +312,12 @@ class BarrierContact(Energy):
         self._owners = None
         #: 2D: the step state, kept candidates, last evaluation and compiled kernels
         #: (``barrier_part``; made with the collision mesh), its arrays Python reads
-        #: (``barrier_part.shared_arrays``) and the slots last set in it; else None
+        #: (``barrier_part.shared_arrays``), the slots and projection last set in it;
+        #: else None
         self._part = None
         self._part_arrays = None
         self._part_slots = None
+        self._part_project = None
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -389,6 +391,7 @@ class BarrierContact(Energy):
             self._part = bp.new_part(self._part_fields())
             self._part_arrays = bp.shared_arrays(self._part)
             self._part_slots = None
+            self._part_project = self.projection == ipctk.PSDProjectionMethod.CLAMP
 
     def _corners(self, faces) -> np.ndarray:
         """``face_corners`` of ``faces`` (c k, d) m, kept for the last three face lists
@@ -565,8 +568,8 @@ class BarrierContact(Energy):
         elif self.dimension == 2:
             # the kernel adds the gradients into ``gradient`` itself
             values, slots = into if into is not None else (_NO_VALUES, _NO_SLOTS)
-            value = bp.barrier_value(self._part, q, into is not None, gradient, values, slots,
-                                     self._dt, friction)
+            value = bp.barrier_value(self._synced_part(), q, into is not None, gradient,
+                                     values, slots, self._dt, friction)
             self.check_compiled()
             return value
         else:
@@ -692,6 +695,15 @@ class BarrierContact(Energy):
         if self._part_slots is not slots:
             bp.set_slots(self._part, slots)
             self._part_slots = slots
+        return self._synced_part()
+
+    def _synced_part(self):
+        """The 2D part with this barrier's ``projection`` (which may be set on the
+        instance)."""
+        project = self.projection == ipctk.PSDProjectionMethod.CLAMP
+        if project != self._part_project:
+            bp.set_project(self._part, project)
+            self._part_project = project
         return self._part
 
     def pattern_slots(self, scatter: np.ndarray) -> np.ndarray:

@@ -183,6 +183,12 @@ def set_slots(part, slots):
 
 
 @njit(cache=True)
+def set_project(part, project):
+    """Whether each pair's Hessian is made positive semi-definite (clamped)."""
+    part.project = project
+
+
+@njit(cache=True)
 def set_step(part, corners, start, has_pairs, anchor, pairs, friction_ids, friction_weights,
              friction_tangents, friction_forces, friction_coefficients, has_friction,
              quiet_anchor, quiet_reach, has_quiet):
