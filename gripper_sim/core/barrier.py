@@ -59,7 +59,8 @@ import numpy as np
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
-                                              nearest_faces, nearest_partners, same_values)
+                                              mesh_vertices, nearest_faces, nearest_partners,
+                                              same_values)
 from gripper_sim.core.barrier_search import (edge_vertex_candidates, paths_clear,
                                              smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
@@ -256,10 +257,6 @@ class BarrierContact(Energy):
         n_v = self.vertex_nodes.size
         self.vertex_dofs = element_dofs(self.vertex_nodes[:, None], d).ravel()
         self._vertex_dof_pairs = self.vertex_dofs.reshape(-1, d)
-        #: per coordinate, the dofs of the deformable vertices (``vertices`` gathers them
-        #: column by column into its Fortran-ordered array: 3-4x faster than a row gather)
-        self._vertex_dof_columns = tuple(np.ascontiguousarray(self._vertex_dof_pairs[:, k])
-                                         for k in range(d))
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
         #: (solvers that keep one sparsity pattern read it): the fruit's surface triangles
         #: (3D) or skin edges (2D; or its lone surface nodes), and with soft bodies their
@@ -413,12 +410,8 @@ class BarrierContact(Energy):
         soft bodies') of ``positions`` (n, d) and the faces' corners (default: where
         they are at the end of this step)."""
         ends = self._obstacles_end if obstacles is None else obstacles
-        n_v = self.vertex_nodes.size
-        v = np.empty((n_v + ends.shape[0], self.dimension), order='F')
-        flat = positions.ravel()
-        for k, dofs in enumerate(self._vertex_dof_columns):
-            v[:n_v, k] = flat[dofs]
-        v[n_v:] = ends
+        v = np.empty((self.vertex_nodes.size + ends.shape[0], self.dimension), order='F')
+        mesh_vertices(positions.ravel(), self._vertex_dof_pairs, ends, v)
         return v
 
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:

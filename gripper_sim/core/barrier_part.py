@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit, types
 from numba.experimental import structref
 
-from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move,
+from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move, mesh_vertices,
                                               relative_moves_within)
 from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
 from gripper_sim.core.barrier_terms import barrier_terms
@@ -75,17 +75,6 @@ structref.define_proxy(BarrierPart, BarrierPartType, list(PART_FIELDS))
 
 
 @njit(cache=True)
-def _vertices(q, part, out):
-    """out (n_v + c k, 2) m: the barrier's deformable vertices at q, then the corners."""
-    dof_pairs = part.dof_pairs
-    n_v = dof_pairs.shape[0]
-    for i in range(n_v):
-        out[i, 0] = q[dof_pairs[i, 0]]
-        out[i, 1] = q[dof_pairs[i, 1]]
-    out[n_v:] = part.corners
-
-
-@njit(cache=True)
 def quiet(part, q, dq):
     """Whether the part is a self-contact within its quiet region at positions q (2 n,)
     m (and q + dq if dq (2 n,) m is not empty): no pair within dhat for certain."""
@@ -105,7 +94,7 @@ def candidates(part, q):
     flags = part.flags
     if flags[B_PAIRS] < 0 or largest_move(q, part.dof_pairs, part.anchor) > part.margin:
         v = np.empty((part.dof_pairs.shape[0] + part.corners.shape[0], 2))
-        _vertices(q, part, v)
+        mesh_vertices(q, part.dof_pairs, part.corners, v)
         part.pairs = edge_vertex_candidates(v, v, part.edges, part.groups, part.self_contact,
                                             part.radius)
         part.anchor[:] = v[:part.dof_pairs.shape[0]]
@@ -163,8 +152,8 @@ def max_step(part, x, dq):
         return bound
     n_m = part.dof_pairs.shape[0] + part.corners.shape[0]
     v0, v1 = np.empty((n_m, 2)), np.empty((n_m, 2))
-    _vertices(x, part, v0)
-    _vertices(x + dq, part, v1)
+    mesh_vertices(x, part.dof_pairs, part.corners, v0)
+    mesh_vertices(x + dq, part.dof_pairs, part.corners, v1)
     swept = edge_vertex_candidates(v0, v1, part.edges, part.groups, part.self_contact,
                                    part.swept_radius)
     return collision_free_step(v0, v1, part.edges, swept)
