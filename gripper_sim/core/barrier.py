@@ -540,7 +540,9 @@ class BarrierContact(Energy):
         was sought, each body's mean move taken off (each vertex and edge moved by at most
         that reach against its body: their gap shrank by at most twice it;
         ``barrier_part.quiet``). Always False for the fruit's barrier and in 3D."""
-        return self._part is not None and bool(bp.quiet(self._part, q, dq))
+        if self._quiet is None:  # (the part's region is this one: ``begin_step``)
+            return False
+        return bool(bp.quiet(self._part, q, dq))
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
