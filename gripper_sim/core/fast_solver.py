@@ -81,8 +81,9 @@ KEEP_BELOW = 100.0
 KINK_FACTOR = 10.0
 #: whether the 2D barrier model's Newton solves run compiled (``core.barrier_newton``)
 #: where it covers them (``barrier_solve.supports``); the interpreted route serves the
-#: rest (the 2D solid fruit's flesh, steps with sliding nodes, 3D). False: interpreted
-#: everywhere (the tests compare the two)
+#: rest (energies outside the energy table besides the barriers, steps with sliding
+#: nodes, the mmm model's shared route, 3D). False: interpreted everywhere (the tests
+#: compare the two)
 COMPILED_BARRIER_SOLVE = True
 #: the stiffness damping's K_n without stiffness damping (beta = 0)
 _NO_STIFFNESS = np.zeros(0)
