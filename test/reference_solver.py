@@ -21,7 +21,7 @@ from gripper_sim.core import newton
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
                                       StepConstraints, StepProblem, StepSolution,
-                                      stack_low_rank, woodbury_terms)
+                                      stack_low_rank)
 
 #: SuperLU settings for the reference's Newton systems (symmetric pattern: minimum
 #: degree on A^T + A and diagonal pivots, about twice as fast as the defaults for the
@@ -318,6 +318,14 @@ class _SparseProblem(StepProblem):
 
     def finish(self, x, grad) -> None:
         self.reaction = grad - self.fric_grad
+
+
+def woodbury_terms(solve, u: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A^-1 u (n, k) and the capacitance matrix diag(1/c) + u^T A^-1 u (k, k) of the
+    Woodbury identity (A + u diag(c) u^T)^-1 = A^-1 - A^-1 u cap^-1 u^T A^-1, with
+    ``solve`` applying A^-1 to a vector."""
+    a_inv_u = solve(u) if u.shape[1] > 1 else solve(u[:, 0])[:, None]
+    return a_inv_u, np.diag(1.0 / c) + u.T @ a_inv_u
 
 
 def _solve_low_rank(lu, rhs: np.ndarray, low_rank) -> np.ndarray:

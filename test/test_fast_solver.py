@@ -6,9 +6,11 @@ import pytest
 import scipy.sparse.linalg as spla
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import solver_kernels, sparse_ldl
+from numba import njit
+
+from gripper_sim.core import linear_solve, solver_kernels, sparse_ldl
 from gripper_sim.core.fast_solver import KINK_FACTOR, PatternCachingSolver, as_cone
-from gripper_sim.core.stepper import FRICTION_SMOOTHING, StepConstraints, woodbury_terms
+from gripper_sim.core.stepper import FRICTION_SMOOTHING, StepConstraints
 from gripper_sim.workflows.factory import make_simulation
 
 from reference_solver import ImplicitEulerSolver
@@ -101,32 +103,37 @@ def _rest_newton_matrix(model: list[str]):
     return solver, q, sim.dt, data
 
 
+@njit
+def _kept_factor(state):
+    return state.l_values.copy(), state.d_inv.copy()
+
+
 @pytest.mark.parametrize('model', FRUITS_3D, ids=['shell', 'solid'])
 def test_the_block_ldl_preconditioner_solves_a_newton_matrix(model):
-    """The kept factorisation (block LDL^T, its 3 x 3 kernels) of a real Newton matrix
-    (the fruit's Hessian at rest plus the inertia) solves it to round-off, filtered too,
-    and its factors are those of the generic ``sparse_ldl.factor``."""
+    """The kept factorisation (block LDL^T, its 3 x 3 kernels; ``linear_solve``) of a
+    real Newton matrix (the fruit's Hessian at rest plus the inertia) solves it to
+    round-off, and its factors are those of the generic ``sparse_ldl.factor``."""
     solver, q, dt, data = _rest_newton_matrix(model)
-    ldl = solver._factorise(data)
+    state = solver.linear
+    before = solver.stats['factorisations']
+    assert linear_solve.factorise(state, data)
+    assert solver.stats['factorisations'] == before + 1
     matrix = solver._csc(data).tocsc()
     rhs = np.linspace(-1.0, 1.0, q.size)
     exact = spla.spsolve(matrix, rhs)
-    assert np.max(np.abs(ldl.solve(rhs) - exact)) < 1e-9 * np.max(np.abs(exact))
-    # a node held in every direction (S_0 = 0): the filtered solve is A^-1 S b
-    filters = np.tile(np.eye(3), (q.size // 3, 1, 1))
-    filters[0] = 0.0
-    filtered = ldl.solve_filtered(filters, rhs)
-    assert np.max(np.abs(filtered - ldl.solve(np.where(np.arange(q.size) < 3, 0.0, rhs)))) \
-        < 1e-12 * np.max(np.abs(exact))
-    pattern = ldl.pattern
+    x = np.empty(q.size)
+    linear_solve.ldl_solve(state, rhs, x)
+    assert np.max(np.abs(x - exact)) < 1e-9 * np.max(np.abs(exact))
+    kept_l, kept_d = _kept_factor(state)
+    pattern = solver._ldl_pattern
     values = pattern.new_values()
     target, source = solver._ldl_gather
     values.reshape(-1)[target] = data[source]
-    l_values = np.empty_like(ldl.l_values)
-    d_inv = np.empty_like(ldl.d_inv)
+    l_values = np.empty_like(kept_l)
+    d_inv = np.empty_like(kept_d)
     assert sparse_ldl.factor(pattern.arrays, values, l_values, d_inv) == 0
-    assert np.allclose(l_values, ldl.l_values, rtol=1e-10, atol=1e-12 * np.abs(l_values).max())
-    assert np.allclose(d_inv, ldl.d_inv, rtol=1e-10, atol=1e-12 * np.abs(d_inv).max())
+    assert np.allclose(l_values, kept_l, rtol=1e-10, atol=1e-12 * np.abs(l_values).max())
+    assert np.allclose(d_inv, kept_d, rtol=1e-10, atol=1e-12 * np.abs(d_inv).max())
 
 
 @pytest.mark.parametrize('overrides', [['fruit.model=shell', 'fruit.mesh.subdivisions=3'],
@@ -261,7 +268,7 @@ def test_the_solver_and_the_reference_stop_at_one_point_with_stiffness_damping(n
 
 @pytest.mark.parametrize('model', FRUITS_3D, ids=['shell', 'solid'])
 def test_the_compiled_cg_solves_a_filtered_newton_system_with_a_rank_one_term(model):
-    """``pcg_kernels.preconditioned_cg`` (the solver's ``_pcg``) on a real Newton matrix
+    """``linear_solve.solve`` (the solver's ``linear_solve``) on a real Newton matrix
     S A S + (I - S) plus a rank-one term, its factorisation and Woodbury terms made of the
     same matrix (an exact preconditioner): the dense solution within round-off, zero in
     the held directions, in one CG iteration."""
@@ -276,14 +283,13 @@ def test_the_compiled_cg_solves_a_filtered_newton_system_with_a_rank_one_term(mo
     c = np.array([1e-2 * np.max(np.abs(values))])
     rhs = np.empty(q.size)
     solver_kernels.apply_filters(filters, np.linspace(-1.0, 1.0, q.size), rhs)
-    solver._lu = solver._factorise(values)
-    a_inv_u, capacitance = woodbury_terms(solver._lu.solve, u, c)
-    solver._woodbury = (u, a_inv_u, np.linalg.inv(capacitance))
     before = solver.stats['cg_iterations']
-    x = solver._pcg(values, rhs, u, c, np.ascontiguousarray(u.T), dt, filters)
+    # a fresh factorisation of this matrix, its Woodbury terms, then CG on them
+    x = solver.linear_solve(values, rhs, (u, c, np.ascontiguousarray(u.T)), True, dt,
+                            filters)
     dense = solver._csc(values).toarray() + c[0] * u @ u.T
     exact = np.linalg.solve(dense, rhs)
-    assert x is not None and solver.stats['cg_iterations'] - before == 1
+    assert solver.stats['cg_iterations'] - before == 1
     assert np.max(np.abs(x - exact)) < 1e-9 * np.max(np.abs(exact))
     assert np.all(x[:3] == 0.0) and x[5] == 0.0
 

@@ -20,7 +20,10 @@ CCD are the IPC Toolkit's (``ipctk``, MIT). In 2D they are compiled: the barrier
 equal to ipctk's to 1e-10, over the candidates of a compiled sort and sweep
 (``core.barrier_search``), the barrier's kept while no vertex moves further than
 ``CANDIDATE_MARGIN``; the line search's bound is that module's additive CCD, and only a
-start of step whose path it cannot clear goes to ipctk's exact CCD. One implementation
+start of step whose path it cannot clear goes to ipctk's exact CCD. The 2D barrier's
+step state, evaluation, kept candidates and step bound live in one compiled part
+(``core.barrier_part``) that the compiled Newton solve (``core.barrier_newton``) calls
+too. One implementation
 for both dimensions (``dimension`` d = 2 or 3). Its collision mesh holds the fruit's
 surface: in 2D the outline (the surface nodes and skin edges), in 3D the surface nodes,
 edges and triangles; and every rigid face: in
@@ -48,20 +51,18 @@ its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import dataclass
 
 import ipctk
 import numpy as np
 
+from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
-from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move,
-                                              largest_relative_move, nearest_faces,
-                                              nearest_partners, relative_moves_within,
+from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
+                                              mesh_vertices, nearest_faces, nearest_partners,
                                               same_values)
-from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
-                                             paths_clear, smallest_distance)
-from gripper_sim.core.barrier_terms import barrier_terms
+from gripper_sim.core.barrier_search import (edge_vertex_candidates, paths_clear,
+                                             smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.friction_kernels import lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -102,6 +103,8 @@ CANDIDATE_MARGIN = 1e-4
 #: ``barrier_terms``'s arguments when no Hessian is wanted or there is no friction
 _NO_VALUES, _NO_SLOTS = np.zeros(0), np.zeros(0, np.int64)
 _NO_STEP = np.zeros(0)  # ``quiet`` at q only
+#: the compiled solve's empty (k, 2) corners or anchors and candidates
+_NO_CORNERS, _NO_PAIRS = np.zeros((0, 2)), np.zeros((0, 2), np.int64)
 _NO_FRICTION = (np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0),
                 np.zeros((0, 2)))
 
@@ -254,10 +257,6 @@ class BarrierContact(Energy):
         n_v = self.vertex_nodes.size
         self.vertex_dofs = element_dofs(self.vertex_nodes[:, None], d).ravel()
         self._vertex_dof_pairs = self.vertex_dofs.reshape(-1, d)
-        #: per coordinate, the dofs of the deformable vertices (``vertices`` gathers them
-        #: column by column into its Fortran-ordered array: 3-4x faster than a row gather)
-        self._vertex_dof_columns = tuple(np.ascontiguousarray(self._vertex_dof_pairs[:, k])
-                                         for k in range(d))
         #: (n_elem, m) the dofs of the elements that span the barrier's Hessian pattern
         #: (solvers that keep one sparsity pattern read it): the fruit's surface triangles
         #: (3D) or skin edges (2D; or its lone surface nodes), and with soft bodies their
@@ -308,10 +307,14 @@ class BarrierContact(Energy):
         self._friction_coefficients = None
         #: (n_m,) the body of each collision-mesh vertex as ``partners`` numbers them
         self._owners = None
-        #: the compiled barrier's candidates: (the deformable vertices (n_v, d) m where
-        #: they were sought, the (edge, vertex) pairs (k, 2), the faces' corners then
-        #: (c k, d) m), or None
-        self._pairs = None
+        #: 2D: the step state, kept candidates, last evaluation and compiled kernels
+        #: (``barrier_part``; made with the collision mesh), its arrays Python reads
+        #: (``barrier_part.shared_arrays``), the slots and projection last set in it;
+        #: else None
+        self._part = None
+        self._part_arrays = None
+        self._part_slots = None
+        self._part_project = None
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -381,6 +384,11 @@ class BarrierContact(Energy):
         self._mesh_edges = edges.astype(np.int64)
         self._mesh_dofs = -np.ones((rest.shape[0], self.dimension), np.int64)
         self._mesh_dofs[:self.vertex_nodes.size] = self.vertex_dofs.reshape(-1, self.dimension)
+        if self.dimension == 2:
+            self._part = bp.new_part(self._part_fields())
+            self._part_arrays = bp.shared_arrays(self._part)
+            self._part_slots = None
+            self._part_project = self.projection == ipctk.PSDProjectionMethod.CLAMP
 
     def _corners(self, faces) -> np.ndarray:
         """``face_corners`` of ``faces`` (c k, d) m, kept for the last three face lists
@@ -402,12 +410,8 @@ class BarrierContact(Energy):
         soft bodies') of ``positions`` (n, d) and the faces' corners (default: where
         they are at the end of this step)."""
         ends = self._obstacles_end if obstacles is None else obstacles
-        n_v = self.vertex_nodes.size
-        v = np.empty((n_v + ends.shape[0], self.dimension), order='F')
-        flat = positions.ravel()
-        for k, dofs in enumerate(self._vertex_dof_columns):
-            v[:n_v, k] = flat[dofs]
-        v[n_v:] = ends
+        v = np.empty((self.vertex_nodes.size + ends.shape[0], self.dimension), order='F')
+        mesh_vertices(positions.ravel(), self._vertex_dof_pairs, ends, v)
         return v
 
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
@@ -422,7 +426,6 @@ class BarrierContact(Energy):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
         self._swept = None
-        self._pairs = None
         self._last_terms = None
         self._dt = dt
         start = self.vertices(x_n, old)
@@ -432,9 +435,10 @@ class BarrierContact(Energy):
         if len(self._tangential):  # ipctk's lagged friction (3D): the last step's
             self._tangential = ipctk.TangentialCollisions()
         self._friction_pairs = None
+        kept = None  # the candidates kept from the step's start (2D)
         if self.dimension == 2 and rubbing:
-            self._friction_pairs = self._lagged_friction(
-                start, mu_s, mu_k, self._start_candidates(start, old, new))
+            pairs, kept = self._start_candidates(start, old, new)
+            self._friction_pairs = self._lagged_friction(start, mu_s, mu_k, pairs)
         elif rubbing:
             collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
@@ -444,6 +448,15 @@ class BarrierContact(Energy):
                                        mu_k, max)
         if self.self_contact:
             self._quiet = self._quiet_region(x_n, start)
+        if self.dimension == 2:
+            friction, quiet = self._friction_pairs, self._quiet
+            bp.set_step(self._part, new, np.ascontiguousarray(start), kept is not None,
+                        kept if kept is not None else _NO_CORNERS,
+                        pairs if kept is not None else _NO_PAIRS,
+                        *(friction if friction is not None else _NO_FRICTION),
+                        friction is not None,
+                        quiet[0] if quiet is not None else _NO_CORNERS,
+                        quiet[1] if quiet is not None else 0.0, quiet is not None)
 
     def _coefficients(self, faces) -> tuple[np.ndarray, np.ndarray, bool]:
         """Each collision-mesh vertex's static and kinetic friction coefficients (n_m,)
@@ -482,16 +495,17 @@ class BarrierContact(Energy):
                                      len(self.bodies) + 1)
 
     def _start_candidates(self, start: np.ndarray, old: np.ndarray,
-                          new: np.ndarray) -> np.ndarray:
+                          new: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """(k, 2) the (edge, vertex) candidates at the collision mesh's start vertices
         ``start`` (2D; the faces' corners ``old`` (c k, 2) m where they start), boxes
-        inflated by dhat / 2 + ``CANDIDATE_MARGIN``: every pair within dhat there. They
-        serve as the barrier's kept candidates (``_candidate_pairs``) when no corner
-        moves further than the margin to where it ends (``new``)."""
+        inflated by dhat / 2 + ``CANDIDATE_MARGIN``: every pair within dhat there; and
+        where they were sought (n_v, 2) m if they serve as the barrier's kept candidates
+        (``barrier_part.candidates``: no corner moves further than the margin to where
+        it ends, ``new``), else None."""
         pairs = self._static_candidates(start, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
         if not old.size or _largest_shift(old, new) <= CANDIDATE_MARGIN:
-            self._pairs = (start[:self.vertex_nodes.size].copy(), pairs, old)
-        return pairs
+            return pairs, start[:self.vertex_nodes.size].copy()
+        return pairs, None
 
     def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray,
                          pairs: np.ndarray):
@@ -524,13 +538,11 @@ class BarrierContact(Energy):
         ``dq`` (n d,) m, at q + dq too; one kernel call, ``relative_moves_within``): a
         self-contact whose vertices all lie within the quiet region's reach of where it
         was sought, each body's mean move taken off (each vertex and edge moved by at most
-        that reach against its body: their gap shrank by at most twice it). Always False
-        for the fruit's barrier."""
-        if self._quiet is None:
+        that reach against its body: their gap shrank by at most twice it;
+        ``barrier_part.quiet``). Always False for the fruit's barrier and in 3D."""
+        if self._quiet is None:  # (the part's region is this one: ``begin_step``)
             return False
-        anchor, reach = self._quiet
-        return relative_moves_within(q, dq, self._vertex_dof_pairs, anchor, self.vertex_body,
-                                     len(self.bodies) + 1, reach)
+        return bool(bp.quiet(self._part, q, dq))
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
@@ -543,17 +555,18 @@ class BarrierContact(Energy):
         if self.quiet(q):
             return 0.0
         last = self._last_terms
+        if self.dimension == 2:
+            last = self._part_terms()
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
         if into is None and last is not None and same_values(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
         elif self.dimension == 2:
             # the kernel adds the gradients into ``gradient`` itself
-            terms = self._compiled_terms(q, gradient, into, friction)
-            if terms is None:
-                return np.inf
-            self._last_terms = (q.copy(), *terms)
-            barrier_value, friction_value = terms[:2]
-            return barrier_value + friction_value if friction else barrier_value
+            values, slots = into if into is not None else (_NO_VALUES, _NO_SLOTS)
+            value = bp.barrier_value(self._synced_part(), q, into is not None, gradient,
+                                     values, slots, self._dt, friction)
+            self.check_compiled()
+            return value
         else:
             mesh = self._mesh
             v = self.vertices(q.reshape(-1, self.dimension))
@@ -592,35 +605,26 @@ class BarrierContact(Energy):
             np.add.at(into[0], into[1][where], vals)
         return value
 
-    def _compiled_terms(self, q: np.ndarray, gradient: np.ndarray, into, friction: bool):
-        """The barrier and lagged friction at positions ``q`` (2 n,) m (2D,
-        ``barrier_terms``) over the candidates of ``_candidate_pairs``, their gradients
-        added into ``gradient`` (2 n,) N and their Hessians as ``_terms``'s ``into`` says
-        (None: not wanted), the friction's only with ``friction``: (barrier value J,
-        friction value J, their gradients (n_d,) N over ``vertex_dofs``, None where there
-        are no pairs), or None if a pair touches (nothing added)."""
-        pairs = self._friction_pairs
-        candidates = self._candidate_pairs(q)
-        if not len(candidates) and pairs is None:
-            return 0.0, 0.0, None, None
-        values, slots = into if into is not None else (_NO_VALUES, _NO_SLOTS)
-        # written only by an evaluation that succeeds, which ``_last_terms`` then keeps
-        barrier_gradient, friction_gradient = self._gradient_buffers
-        barrier_value, friction_value, outside, friction_outside = barrier_terms(
-            q, self._vertex_dof_pairs, self._obstacles_end, self._mesh_edges,
-            candidates, self.settings.dhat, self.settings.stiffness,
-            self._mesh_dofs, into is not None,
-            self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys, slots,
-            values, self._start, self._dt, self.settings.friction_smoothing,
-            _NO_FRICTION if pairs is None else pairs, pairs is not None,
-            into is not None and friction, barrier_gradient, friction_gradient, gradient,
-            friction)
-        if not math.isfinite(barrier_value):
+    def check_compiled(self) -> None:
+        """AssertionError if a compiled evaluation (2D) put Hessian entries outside the
+        pattern (unless ``drop_outside_pattern``; the part flags it, cleared here)."""
+        flags = self._part_arrays[0]
+        if flags[bp.B_OUTSIDE]:
+            flags[bp.B_OUTSIDE] = 0
+            self._check_outside(1)
+
+    def _part_terms(self):
+        """The 2D part's last evaluation as ``_last_terms`` (q, barrier value J, friction
+        value J, barrier and friction gradients (n_d,) N over ``vertex_dofs`` or None),
+        None if there is none this step."""
+        flags, last_q, values, _ = self._part_arrays
+        terms = flags[bp.B_TERMS]
+        if not terms:
             return None
-        if outside or friction_outside:
-            self._check_outside(outside + friction_outside)
-        return (barrier_value, friction_value, barrier_gradient,
-                None if pairs is None else friction_gradient)
+        gradients = ((None, None) if terms == 1 else
+                     (self._gradient_buffers[0],
+                      self._gradient_buffers[1] if self._friction_pairs is not None else None))
+        return last_q, float(values[0]), float(values[1]), *gradients
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
         """The entries of the Hessians ``parts`` (scipy CSC over the collision mesh's
@@ -675,25 +679,63 @@ class BarrierContact(Energy):
         """As ``evaluate``, adding the gradient (N) into ``grad`` and the Hessian (N/m)
         into the solver's CSC values ``data`` at ``scatter`` (n_elem, m * m), the
         positions of the entries of ``dofs``; returns (value J, no low-rank terms)."""
-        into = None
-        if hessian:
-            if self._positions is None or self._positions[0] is not scatter:
-                m = self.dofs.shape[1]
-                keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
-                first = np.unique(keys.ravel(), return_index=True)[1]
-                self._positions = (scatter, scatter.ravel()[first])
-            into = (data, self._positions[1])
+        into = (data, self.pattern_slots(scatter)) if hessian else None
         return self._terms(q, grad, into), []
+
+    def compiled_part(self, scatter: np.ndarray):
+        """The 2D barrier's ``barrier_part.BarrierPart`` (a new one when the collision
+        mesh is built anew), its Hessian going into the solver's CSC values at
+        ``scatter`` (``evaluate_into``'s)."""
+        slots = self.pattern_slots(scatter)
+        if self._part_slots is not slots:
+            bp.set_slots(self._part, slots)
+            self._part_slots = slots
+        return self._synced_part()
+
+    def _synced_part(self):
+        """The 2D part with this barrier's ``projection`` (which may be set on the
+        instance)."""
+        project = self.projection == ipctk.PSDProjectionMethod.CLAMP
+        if project != self._part_project:
+            bp.set_project(self._part, project)
+            self._part_project = project
+        return self._part
+
+    def pattern_slots(self, scatter: np.ndarray) -> np.ndarray:
+        """(p,) the solver's CSC position of each of the pattern's sorted keys, from the
+        positions ``scatter`` (n_elem, m * m) of the entries of ``dofs``; kept for the
+        same scatter array."""
+        if self._positions is None or self._positions[0] is not scatter:
+            m = self.dofs.shape[1]
+            keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
+            first = np.unique(keys.ravel(), return_index=True)[1]
+            self._positions = (scatter, scatter.ravel()[first])
+        return self._positions[1]
+
+    def _part_fields(self) -> tuple:
+        """The fields of this 2D barrier's ``barrier_part.BarrierPart``, the step's
+        empty (``begin_step`` sets them), no pattern slots yet (``compiled_part``)."""
+        contact = self.settings
+        return (self._vertex_dof_pairs, self._mesh_edges, self._mesh_groups,
+                self.self_contact, contact.dhat, contact.stiffness, self._mesh_dofs,
+                self.projection == ipctk.PSDProjectionMethod.CLAMP, self._pattern_keys,
+                contact.friction_smoothing, 0.5 * contact.dhat + CANDIDATE_MARGIN,
+                (0.5 + SWEPT_MARGIN) * contact.dhat, CANDIDATE_MARGIN,
+                *self._gradient_buffers, self.drop_outside_pattern, self.vertex_body,
+                len(self.bodies) + 1, _NO_SLOTS,
+                _NO_CORNERS, _NO_CORNERS, np.zeros((self.vertex_nodes.size, 2)),
+                _NO_PAIRS, _NO_FRICTION, False, _NO_CORNERS, 0.0, False,
+                np.zeros(bp.B_SIZE, np.int64), np.empty(self.n_dof), np.empty(2))
 
     def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
         """The largest fraction (0, 1] of the step ``dq`` (d n,) m from ``q`` along which no
         primitive of the surface crosses a face's and no face's crosses the surface's
-        (CCD: in 2D compiled, ``_step_bound``; in 3D ipctk's, keeping the step's collision
+        (CCD: in 2D compiled, ``barrier_part.max_step``; in 3D ipctk's, keeping the step's collision
         candidates for the line search along it)."""
+        if self.dimension == 2:
+            return float(bp.max_step(self._part, q, dq))
         if self.quiet(q, dq):
             return 1.0
-        if self.dimension == 2:
-            return self._step_bound(q, dq)
         end = q + dq
         v0 = self.vertices(q.reshape(-1, self.dimension))
         v1 = self.vertices(end.reshape(-1, self.dimension))
@@ -737,41 +779,26 @@ class BarrierContact(Energy):
         candidates.build(self._mesh, v, 0.5 * self.settings.dhat, self._broad_phase)
         return candidates
 
-    def _candidate_pairs(self, q: np.ndarray) -> np.ndarray:
-        """(k, 2) the (edge, vertex) pairs holding every pair closer than dhat at positions
-        ``q`` (n d,) m: the candidates (``barrier_search``) of boxes inflated by dhat / 2 +
-        ``CANDIDATE_MARGIN``, sought again once a vertex has moved
-        further than the margin from where they were sought (each side of a pair moved
-        by at most the margin: the pair came at most twice it closer; the faces' corners
-        stand still within a step, at most the margin from where they were sought, see
-        ``_start_candidates``)."""
-        kept = self._pairs
-        if kept is None or largest_move(q, self._vertex_dof_pairs, kept[0]) > CANDIDATE_MARGIN:
-            v = self.vertices(q.reshape(-1, 2))
-            pairs = self._static_candidates(v, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
-            kept = self._pairs = (v[:self.vertex_nodes.size].copy(), pairs,
-                                  self._obstacles_end)
-        return kept[1]
-
     def _kept_along(self, q0: np.ndarray, q1: np.ndarray,
                     faces_move: bool) -> np.ndarray | None:
-        """The kept candidates (``_candidate_pairs``) if they hold every pair that comes
+        """The kept candidates (``barrier_part.candidates``) if they hold every pair that comes
         within dhat along the straight motion from positions ``q0`` to ``q1`` (2 n,) m,
         the faces' corners where they end, or with ``faces_move`` moving from where they
         start: both ends within ``CANDIDATE_MARGIN`` of where they were sought (so is
         every point between: a pair not among them stays further than dhat apart all
         along; kept candidates always have the faces' ends within it); else None."""
-        kept = self._pairs
-        if kept is None:
+        flags, _, _, anchor = self._part_arrays
+        if flags[bp.B_PAIRS] < 0:
             return None
-        anchor, pairs, corners = kept
         for q in (q0, q1):
             if largest_move(q, self._vertex_dof_pairs, anchor) > CANDIDATE_MARGIN:
                 return None
+        # the corners they were sought with: where the faces start, or since, where they end
+        corners = self._obstacles_start if flags[bp.B_PAIRS] == 0 else self._obstacles_end
         if (faces_move and corners.size
                 and _largest_shift(corners, self._obstacles_start) > CANDIDATE_MARGIN):
             return None
-        return pairs
+        return bp.candidates_of(self._part)
 
     def _static_candidates(self, v: np.ndarray, radius: float) -> np.ndarray:
         """(k, 2) the (edge, vertex) pairs of the collision mesh's vertices ``v`` (2D) whose
@@ -835,25 +862,6 @@ class BarrierContact(Energy):
                 return False
         return self.min_distance(start) > 0.0
 
-    def _step_bound(self, q: np.ndarray, dq: np.ndarray) -> float:
-        """The compiled CCD's (2D, ``barrier_search``) largest fraction (0, 1] of the
-        step ``dq`` from positions ``q`` (2 n,) m free of crossings
-        (conservative: each pair keeps ``SEPARATION`` of its gap). Its pairs: the
-        barrier's kept candidates (``_candidate_pairs``) when both ends lie within
-        ``CANDIDATE_MARGIN`` of where they were sought (so does every point between: a
-        pair not among them stays further than dhat apart all along; one kernel call,
-        ``kept_step_bound``), else those of the boxes the vertices sweep."""
-        kept = self._pairs
-        if kept is not None:
-            bound = kept_step_bound(q, dq, self._vertex_dof_pairs, self._obstacles_end,
-                                    self._mesh_edges, kept[0], kept[1], CANDIDATE_MARGIN)
-            if bound >= 0.0:
-                return float(bound)
-        end = q + dq
-        v0, v1 = self.vertices(q.reshape(-1, 2)), self.vertices(end.reshape(-1, 2))
-        pairs = self._pairs_along(q, end, v0, v1, False)
-        return float(collision_free_step(v0, v1, self._mesh_edges, pairs))
-
     def _pairs_along(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray, v1: np.ndarray,
                      faces_move: bool) -> np.ndarray:
         """(k, 2) candidates holding every pair that comes within dhat along the straight
@@ -906,7 +914,7 @@ class BarrierContact(Energy):
                 [self.vertex_body, 1 + len(self.bodies)
                  + np.arange(v.shape[0] - n_v) // self.corners_per_face])
         partner = np.empty(self.n_dof // 2, np.int64)
-        nearest_partners(v, self._mesh_edges, self._candidate_pairs(q), self.settings.dhat,
+        nearest_partners(v, self._mesh_edges, bp.candidates(self._part, q), self.settings.dhat,
                          self.vertex_nodes, owner, partner)
         return partner
 

@@ -285,6 +285,20 @@ def largest_move(q, dofs, start):
 
 
 @njit(cache=True)
+def mesh_vertices(q, dofs, corners, out):
+    """out (n_v + c k, d) m (C or Fortran order): the collision mesh's vertices, the
+    deformable ones at positions q (d n,) m (their dofs (n_v, d)), then the faces'
+    corners (c k, d) m."""
+    n_v, d = dofs.shape
+    for i in range(n_v):
+        for k in range(d):
+            out[i, k] = q[dofs[i, k]]
+    for i in range(corners.shape[0]):
+        for k in range(d):
+            out[n_v + i, k] = corners[i, k]
+
+
+@njit(cache=True)
 def kept_step_bound(q, dq, dofs, corners, edges, anchor, pairs, margin):
     """The CCD's largest fraction (0, 1] of the step ``dq`` from positions ``q`` (n_dof,)
     m free of crossings (``barrier_search.collision_free_step``) over kept candidate

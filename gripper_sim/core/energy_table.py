@@ -96,6 +96,14 @@ class EnergyTable:
                                if coefs[p] != 0.0]
 
 
+    def kernel_arrays(self) -> tuple:
+        """The arrays ``inertia_and_energies`` takes from the table, for a compiled caller:
+        (order, items, the pressures' coefficients (n_pressure,), their dA/dq of an
+        evaluation with the Hessian and of one without (n_pressure, n_dof), dq (n_dof,))."""
+        return (self.order, self.items, self._coefs, self._vectors, self._scratch_vectors,
+                self._dq)
+
+
 def _item(kind: int, arrays: tuple, scatter: np.ndarray) -> tuple:
     """The table's item of an energy's ``kernel_data`` arrays (see the module)."""
     scatter = np.ascontiguousarray(scatter, dtype=np.int64)

@@ -17,7 +17,7 @@ per iteration:
   the same pattern; kinetic friction is the Coulomb cone of the stepper, a 2D tangent
   being a cone with one tangent;
 - each Newton system is solved by conjugate gradients (one compiled call,
-  ``core.pcg_kernels``) preconditioned with a block
+  ``core.linear_solve``, which keeps the preconditioner) preconditioned with a block
   LDL^T factorisation (``core.sparse_ldl``, d x d node blocks, no pivoting across
   blocks) kept from an earlier Newton iteration or step (the matrix changes little
   between them), its rank-one terms by the Woodbury identity and the whole projected
@@ -49,13 +49,12 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from gripper_sim.core import newton, pcg_kernels, sparse_ldl
+from gripper_sim.core import barrier_solve, linear_solve, newton, sparse_ldl
 from gripper_sim.core import solver_kernels as kernels
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.energy_table import EnergyTable
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
-                                      StepConstraints, StepProblem, StepSolution,
-                                      woodbury_terms)
+                                      StepConstraints, StepProblem, StepSolution)
 
 #: relative residual (infinity norms) at which the preconditioned CG stops (0.1 took
 #: 12 % more Newton systems on the solid apple's grasp: a fruit held at two nodes has a
@@ -74,16 +73,23 @@ CG_MAX_ITERATIONS = 20
 #: (a factorisation costs about 25 of the solid apple's CG iterations; 3 to 5 give the
 #: same 3D grasp times, 3 the 2D Fin Ray grasp's best: 2.3 s against 2.4-2.8 s at 5)
 CG_STALE_ITERATIONS = 3
-#: iterative-refinement sweeps of the direct solve when CG cannot be used (indefinite)
-REFINEMENT_SWEEPS = 3
 #: the Newton matrix is kept only after a step below this multiple of the tolerance
 #: (near convergence the Hessian barely changes; farther, a new one pays)
 KEEP_BELOW = 100.0
 #: a sliding node's Newton step is cut at the kink of the friction law only if it
 #: slips faster than this multiple of the smoothing speed (slower: inside the kink)
 KINK_FACTOR = 10.0
+#: whether the 2D barrier model's Newton solves run compiled (``core.barrier_newton``)
+#: where it covers them (``barrier_solve.supports``); the interpreted route serves the
+#: rest (energies outside the energy table besides the barriers, steps with sliding
+#: nodes, the mmm model's shared route, 3D). False: interpreted everywhere (the tests
+#: compare the two)
+COMPILED_BARRIER_SOLVE = True
 #: the stiffness damping's K_n without stiffness damping (beta = 0)
 _NO_STIFFNESS = np.zeros(0)
+#: the constants above as the compiled barrier solve takes them
+_COMPILED_SETTINGS = barrier_solve.SolveSettings(
+    KEEP_BELOW, CG_TOLERANCE, CG_ERROR_FRACTION, CG_RELATIVE_FLOOR)
 
 
 def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
@@ -96,63 +102,6 @@ def nested_dissection(graph: sp.csr_matrix) -> np.ndarray:
     graph.eliminate_zeros()
     order, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(graph.indptr, graph.indices))
     return np.asarray(order, dtype=np.int64)
-
-
-class _BlockLDL:
-    """A = L D L^T in d x d node blocks (``core.sparse_ldl``) standing for A^-1 as the
-    preconditioner, in the nested-dissection order of the node graph: x[perm] =
-    (L D L^T)^-1 b[perm], perm (n,) the dofs in factor order.
-
-    Args:
-        pattern: the ``sparse_ldl.SparsePattern`` of the Newton matrix.
-        gather: (target (m,) into the flat block values, source (m,) into the CSC
-            values): the matrix's stored blocks taken from its CSC values.
-        perm: (n,) dofs in the factor's position order.
-    """
-
-    def __init__(self, pattern, gather: tuple, perm: np.ndarray):
-        self.pattern, self.gather, self.perm = pattern, gather, perm
-        self.arrays = pattern.arrays  # the kernels' view of the pattern (a new tuple a read)
-        b = pattern.block
-        self.l_values = np.empty((pattern.n_factor, b, b))
-        self.d_inv = np.empty((pattern.n_nodes, b, b))
-        self._rhs = np.empty(perm.size)
-
-    def factorise(self, data: np.ndarray) -> None:
-        """Factorise the matrix of CSC values ``data``. Raises RuntimeError (a singular
-        pivot block)."""
-        values = self.pattern.new_values()
-        target, source = self.gather
-        values.reshape(-1)[target] = data[source]
-        if self.pattern.block == 3:
-            status = sparse_ldl.ldl_factor_3(self.arrays, values.reshape(-1, 9),
-                                          self.l_values.reshape(-1, 9),
-                                          self.d_inv.reshape(-1, 9))
-        else:
-            status = sparse_ldl.factor(self.arrays, values, self.l_values, self.d_inv)
-        if status < 0:
-            raise RuntimeError('singular Newton matrix')
-
-    def _solve_in_place(self, x: np.ndarray) -> None:
-        pcg_kernels.block_ldl_solve(self.arrays, self.l_values, self.d_inv, x)
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        """A^-1 b for b (n,) or (n, k)."""
-        columns = b.reshape(b.shape[0], -1)
-        out = np.empty(columns.shape)
-        for c in range(columns.shape[1]):
-            x = np.ascontiguousarray(columns[self.perm, c], dtype=float)
-            self._solve_in_place(x)
-            out[self.perm, c] = x
-        return out.reshape(b.shape)
-
-    def solve_filtered(self, filters: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """A^-1 S b (n,), S the node filters (n_nodes, d, d)."""
-        kernels.filter_and_permute(filters, b, self.perm, self._rhs)
-        self._solve_in_place(self._rhs)
-        x = np.empty(b.shape)
-        kernels.unpermute(self._rhs, self.perm, x)
-        return x
 
 
 def as_cone(con: StepConstraints) -> StepConstraints:
@@ -198,17 +147,18 @@ class PatternCachingSolver:
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.n = self.m.size
-        #: counts: Newton solves (contact passes), Newton systems,
-        #: (LDL^T) factorisations, CG iterations
-        self.stats = dict(passes=0, systems=0, factorisations=0, cg_iterations=0)
+        self._passes = 0  # Newton solves (contact passes)
         #: the Newton iteration's work counters (``newton.C_*``)
         self.counts = np.zeros(newton.C_SIZE, np.int64)
-        self._lu = None
-        self._woodbury = None  # (u, A^-1 u, (C^-1 + u^T A^-1 u)^-1) at the factorisation
-        self._stale = False
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
+        self._compiled = None  # the compiled barrier solve (``_iterate_compiled``)
         self._build_fast_pattern()
+        #: the Newton systems' solve with its kept preconditioner (``core.linear_solve``)
+        self.linear = linear_solve.new_state(
+            self._matvec_indptr, self._matvec_indices, self._perm, self._ldl_pattern,
+            self._ldl_gather, CG_MAX_ITERATIONS, CG_STALE_ITERATIONS)
+        self._linear_stats = self.linear.stats
         self._table = EnergyTable(self.energies, self._scatter, self.dim, self.n)
         #: the energies after the table's, with their scatter indices
         self._untabled = list(zip(self.energies[self._table.count:],
@@ -220,8 +170,6 @@ class PatternCachingSolver:
         self._no_values = np.zeros(1)
         self._k_dq = np.empty(self.n)
         self._friction_blocks = np.empty((0, self.dim, self.dim))
-        #: the preconditioner's rank-one terms where there are none (``_woodbury_terms``)
-        self._no_woodbury = (np.zeros((self.n, 0)), np.zeros((self.n, 0)), np.zeros((0, 0)))
         #: the energies that may bound a step (``max_step`` not the base's 1)
         self._step_bounding = [e for e in self.energies
                                if type(e).max_step is not Energy.max_step]
@@ -242,13 +190,22 @@ class PatternCachingSolver:
         except NewtonFailure:
             pass
         self.reset()
-        self.stats = dict.fromkeys(self.stats, 0)
+        self._passes = 0
+        self._linear_stats[:] = 0
         self.counts[:] = 0
+
+    @property
+    def stats(self) -> dict:
+        """Counts: Newton solves (contact passes), Newton systems, (LDL^T)
+        factorisations, CG iterations."""
+        s = self._linear_stats
+        return dict(passes=self._passes, systems=int(s[linear_solve.S_SYSTEMS]),
+                    factorisations=int(s[linear_solve.S_FACTORS]),
+                    cg_iterations=int(s[linear_solve.S_CG]))
 
     def reset(self) -> None:
         """Forget the kept factorisation (a restarted simulation repeats its results)."""
-        self._lu = None
-        self._woodbury = None
+        linear_solve.forget(self.linear)
         self._warm = None
         self._stiffness = None
 
@@ -411,96 +368,19 @@ class PatternCachingSolver:
                               self._node_blocks, self._diag_blocks, filters, diagonal, out)
         return out
 
-    def _factorise(self, values: np.ndarray) -> _BlockLDL:
-        """The block LDL^T of A (CSC ``values`` on the pattern). Raises RuntimeError
-        (singular)."""
-        self.stats['factorisations'] += 1
-        ldl = _BlockLDL(self._ldl_pattern, self._ldl_gather, self._perm)
-        ldl.factorise(values)
-        return ldl
-
     def linear_solve(self, values: np.ndarray, rhs: np.ndarray, low_rank: tuple,
-                     fresh: bool, dt: float, filters: np.ndarray):
+                     fresh: bool, dt: float, filters: np.ndarray) -> np.ndarray:
         """dq with (A + u diag(c) u^T) dq = rhs (A: CSC ``values`` on the pattern, the
-        rank-one terms ``low_rank`` = (u (n, k), c (k,), u^T (k, n)), C order) by
-        conjugate gradients preconditioned with the kept LDL^T, factorised afresh when CG
-        does not converge fast (or ``fresh``), in the range of the filters S (n_nodes, d,
-        d). Raises RuntimeError (singular)."""
-        self.stats['systems'] += 1
+        rank-one terms ``low_rank`` = (u (n, k), c (k,), u^T (k, n)), C order) in the
+        range of the filters S (n_nodes, d, d), by ``core.linear_solve`` (its kept
+        preconditioner factorised afresh if ``fresh``). Raises RuntimeError (singular)."""
         u, c, u_t = low_rank
-        if self._lu is not None and not fresh and not self._stale:
-            dq = self._pcg(values, rhs, u, c, u_t, dt, filters)
-            if dq is not None:
-                return dq
-        self._stale = False
-        self._lu = self._factorise(values)
-        self._woodbury = None
-        if c.size:
-            # the preconditioner keeps these rank-one terms with the factorisation
-            a_inv_u, capacitance = woodbury_terms(self._lu.solve, u, c)
-            self._woodbury = (u, a_inv_u, np.linalg.inv(capacitance))
-        dq = self._pcg(values, rhs, u, c, u_t, dt, filters)
-        if dq is not None:
-            return dq
-        # CG failed even on a fresh factorisation (negative curvature: an indefinite
-        # matrix): the factorisation's own solution, refined against the matrix
-        precondition = self._preconditioner(u, c)
-        dq = precondition(rhs)
-        for _ in range(REFINEMENT_SWEEPS):
-            dq += precondition(rhs - self._apply(values, u, c, dq))
+        dq = np.empty(self.n)
+        if not linear_solve.solve(self.linear, values, rhs, u, c, u_t, filters, CG_TOLERANCE,
+                                  CG_ERROR_FRACTION * self.tolerance * dt,
+                                  CG_RELATIVE_FLOOR * self.tolerance * dt, fresh, dq):
+            raise RuntimeError('singular Newton matrix')
         return dq
-
-    def _woodbury_terms(self, u: np.ndarray, c: np.ndarray) -> tuple:
-        """The preconditioner's rank-one terms for the system's u (n, k), c (k,): (u_w
-        (n, k_w), (LDL^T)^-1 u_w (n, k_w), the inverse capacitance matrix (k_w, k_w)),
-        those kept with the factorisation if they have as many columns, k_w = 0 if none."""
-        kept = self._woodbury
-        if kept is not None and kept[0].shape[1] == c.size:
-            return kept
-        if c.size:
-            a_inv_u, capacitance = woodbury_terms(self._lu.solve, u, c)
-            return u, a_inv_u, np.linalg.inv(capacitance)
-        return self._no_woodbury
-
-    def _preconditioner(self, u: np.ndarray, c: np.ndarray):
-        """r -> (kept LDL^T + rank-one terms)^-1 r."""
-        u_w, a_inv_u, small_inv = self._woodbury_terms(u, c)
-        solve = self._lu.solve
-
-        def precondition(r):
-            y = solve(r)
-            if u_w.shape[1]:
-                y -= a_inv_u @ (small_inv @ (u_w.T @ y))
-            return y
-        return precondition
-
-    def _apply(self, values: np.ndarray, u: np.ndarray, c: np.ndarray,
-               x: np.ndarray) -> np.ndarray:
-        """(A + u diag(c) u^T) x, A the CSC ``values`` on the pattern."""
-        ax = np.empty(self.n)
-        kernels.csc_matvec(self._matvec_indptr, self._matvec_indices, values, x, ax)
-        if c.size:
-            ax += u @ (c * (u.T @ x))
-        return ax
-
-    def _pcg(self, values, rhs, u, c, u_t, dt, filters):
-        """Preconditioned CG from zero (``pcg_kernels.preconditioned_cg``, in the range of
-        the filters S (n_nodes, d, d); the rank-one terms u (n, k), c (k,), u_t = u^T);
-        None if it fails to converge in time."""
-        u_w, a_inv_u, small_inv = self._woodbury_terms(u, c)
-        lu = self._lu
-        x = np.empty(self.n)
-        status, iterations = pcg_kernels.preconditioned_cg(
-            self._matvec_indptr, self._matvec_indices, values, u, u_t, c, filters, lu.perm,
-            lu.arrays, lu.l_values, lu.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv,
-            rhs,
-            CG_TOLERANCE, CG_ERROR_FRACTION * self.tolerance * dt, CG_RELATIVE_FLOOR * self.tolerance * dt,
-            CG_MAX_ITERATIONS, CG_STALE_ITERATIONS, x)
-        self.stats['cg_iterations'] += iterations
-        if status != pcg_kernels.CONVERGED:
-            return None
-        self._stale = iterations > CG_STALE_ITERATIONS
-        return x
 
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:
@@ -512,24 +392,58 @@ class PatternCachingSolver:
             NewtonFailure: no convergence, no descent, or an infeasible start.
         """
         con = as_cone(con)
-        self.stats['passes'] += 1
+        self._passes += 1
         problem = _NewtonProblem(self, q_n, v_n, dt, con)
         history = np.zeros(self.max_iterations)
         warm = self._warm
         status = newton.INFEASIBLE_START
         if warm is not None and warm[1] == dt and np.array_equal(warm[0], q_n):
             q = q_start + problem.filtered(warm[2] - q_start)
-            status, iterations, n_hist = newton.newton_iteration_interpreted(
-                problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
+            status, iterations, n_hist = self._iterate(problem, q, history)
         if status == newton.INFEASIBLE_START:
             q = q_start.copy()
-            status, iterations, n_hist = newton.newton_iteration_interpreted(
-                problem, q, dt, self.tolerance, self.max_iterations, history, self.counts)
+            status, iterations, n_hist = self._iterate(problem, q, history)
         done = history[:n_hist].tolist()
         if status != newton.OK:
             raise NewtonFailure(NEWTON_FAILURES[status].format(self.max_iterations), done)
         self._warm = (q_n.copy(), dt, q)
         return StepSolution(q, problem.reaction, iterations, done)
+
+    def compiled_solve_covers(self, con: StepConstraints | None = None) -> bool:
+        """Whether the compiled barrier solve (``barrier_solve``) covers this solver's
+        problems (and the step's constraints ``con``: no sliding nodes)."""
+        return ((con is None or not con.friction_nodes.size)
+                and barrier_solve.supports(self.dim, [e for e, _ in self._untabled],
+                                           self._step_bounding))
+
+    def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
+                          history: np.ndarray):
+        """``_iterate`` by ``barrier_solve.CompiledSolve`` (made once, kept)."""
+        compiled = self._compiled
+        if compiled is None or not compiled.fits(self._untabled):
+            pattern = (self._matvec_indptr, self._matvec_indices, self._hessian_values,
+                       self._no_values, self._k_dq, np.empty((0, 2, 2)), self._diag_pos,
+                       self._diag_block_pos, self._block_pos, self._block_nodes,
+                       self._node_block_ptr, self._node_blocks, self._diag_blocks)
+            compiled = self._compiled = barrier_solve.CompiledSolve(
+                _COMPILED_SETTINGS, self.m, self.alpha, self.beta, self.tolerance,
+                self._table, pattern, self.linear, self._untabled)
+        q_n = problem.q_n
+        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
+        status, iterations, n_hist, reaction = compiled.run(
+            q_n, problem.v_n, problem.dt, problem.con, stiffness, q, history,
+            self.max_iterations, self.counts)
+        problem.reaction = reaction
+        return status, iterations, n_hist
+
+    def _iterate(self, problem: '_NewtonProblem', q: np.ndarray, history: np.ndarray):
+        """``newton.newton_iteration`` on ``problem`` from ``q`` (overwritten): interpreted,
+        or with ``COMPILED_BARRIER_SOLVE`` compiled where ``barrier_solve`` covers the
+        solver (the reaction then set on the problem). (status, iterations, n_hist)."""
+        if COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(problem.con):
+            return self._iterate_compiled(problem, q, history)
+        return newton.newton_iteration_interpreted(problem, q, problem.dt, self.tolerance,
+                                                   self.max_iterations, history, self.counts)
 
 
 class _NewtonProblem(StepProblem):

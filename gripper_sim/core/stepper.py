@@ -141,10 +141,3 @@ def stack_low_rank(low_rank, n: int) -> tuple[np.ndarray, np.ndarray]:
     return (np.stack([vec for _, vec in low_rank], axis=1),
             np.array([coef for coef, _ in low_rank]))
 
-
-def woodbury_terms(solve, u: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A^-1 u (n, k) and the capacitance matrix diag(1/c) + u^T A^-1 u (k, k) of the
-    Woodbury identity (A + u diag(c) u^T)^-1 = A^-1 - A^-1 u cap^-1 u^T A^-1, with
-    ``solve`` applying A^-1 to a vector."""
-    a_inv_u = solve(u) if u.shape[1] > 1 else solve(u[:, 0])[:, None]
-    return a_inv_u, np.diag(1.0 / c) + u.T @ a_inv_u

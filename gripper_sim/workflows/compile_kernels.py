@@ -5,7 +5,9 @@ fruits in every route, so that no user pays numba's compile time on a first run 
 compile takes ~15-20 s of CPU in 2D, ~30 s in 3D): in 2D a shell, a point fruit, a
 solid with a V-groove finger, a shell with a soft pad, one between Fin Ray fingers and
 one with the barrier contact on flat fingers (the whole-step kernel and the multi-step
-advance around it, the energy kernels, the solver's and the barrier's); in 3D
+advance around it, the energy kernels, the solver's and the barrier's, the compiled
+barrier Newton solve with one barrier (flat fingers) and with two (the Fin Ray
+fingers' self-contact too): ``core.barrier_newton``, ~15 s cold); in 3D
 shells with a plain and a wrinkling skin and solids of linear and of quadratic
 tetrahedra.
 """

@@ -1,0 +1,296 @@
+"""The 2D barrier model's Newton solve as one compiled call.
+
+``fast_solver.PatternCachingSolver.solve`` runs ``newton.newton_iteration``; where this
+module covers the solve (``barrier_solve.supports``) it runs compiled, its hooks
+overloads (``numba.extending.overload``) for ``BarrierProblemType``, a numba StructRef
+(a StructRef and not a tuple: ``core.kernels`` registers its hooks for every tuple
+type, and numba takes the first overload that types); elsewhere on the interpreted
+``_NewtonProblem``. The two drivers call the same implementations: the Newton systems'
+solve is ``core.linear_solve`` (the problem holds the solver's ``LinearSolveState``),
+each barrier's evaluation, candidates and step bound are ``core.barrier_part`` (the
+problem holds each barrier's own ``BarrierPart``), so a solve gives the same iterates
+as the interpreted route to the last bit (``test/test_barrier_newton.py``: the ring,
+the membrane, the apple with friction and the pressure's rank-one term, the Fin Ray
+grasp). The problem (energy table, CSC pattern and Hessian values, the two Newton
+matrix slots, work vectors) is made once per solver (``barrier_solve``, which runs a
+solve from Python) and a solve sets only its own arrays (``solve``: flat arguments, as
+numba types a tuple argument in Python at ~2 ms for the problem's):
+
+- ``evaluate``: ``energy_table.inertia_and_energies``; per barrier
+  ``barrier_part.barrier_value``; then ``solver_kernels.add_step_terms``
+  (``PatternCachingSolver.evaluate_fast``'s sequence);
+- ``factorise``: ``solver_kernels.filter_blocks`` into a matrix slot, the pressures'
+  rank-one terms filtered;
+- ``direction``: ``linear_solve.solve``;
+- ``step_bound``: per barrier ``barrier_part.max_step``.
+
+A Hessian entry outside a barrier's pattern (where it does not drop them) is flagged
+in its part and ``barrier_solve.run`` raises AssertionError after the call, as the
+interpreted route does at once.
+
+Covered (``barrier_solve.supports``): a 2D solver whose energies after the table are
+one or two ``BarrierContact`` (the fruit's, with rigid faces or soft bodies; a
+self-contact), and steps with no sliding nodes (the barrier model's steps; a sliding
+node needs the line search's ``kink_step``). These run compiled by default
+(``fast_solver.COMPILED_BARRIER_SOLVE``).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, types
+from numba.experimental import structref
+from numba.extending import overload
+
+from gripper_sim.core import linear_solve, newton
+from gripper_sim.core.barrier_part import barrier_value, max_step
+from gripper_sim.core.energy_table import inertia_and_energies
+from gripper_sim.core.solver_kernels import add_step_terms, apply_filters, filter_blocks, max_abs
+
+#: ``solve``'s status beyond ``newton``'s: a barrier Hessian entry outside its pattern
+OUTSIDE_PATTERN = 100
+
+#: flags (int64 array): the slot of the kept Newton matrix (-1: none), of the last
+#: factorised one
+F_KEPT, F_LAST, F_SIZE = range(3)
+
+
+@structref.register
+class BarrierProblemType(types.StructRef):
+    """The numba type of ``BarrierProblem``."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+#: the problem's fields. Kept with the solver (``barrier_solve``): masses (n,) kg per dof,
+#: Rayleigh alpha 1/s and beta s, the friction smoothing m/s, the keep limit m/s, the
+#: (empty) sliding nodes' arrays; ``table``: the energy table's order, items, pressure
+#: coefficients and dA/dq (with and without the Hessian), dq, the coefficients of the
+#: last Hessian; ``pattern``: the CSC indptr and indices, Hessian values, the no-Hessian
+#: values, K_n dq, friction blocks, the diagonal's and the node blocks' positions
+#: (``filter_blocks``' arrays); ``linear``: the solver's ``linear_solve.LinearSolveState``
+#: (its kept preconditioner and work counters); ``barriers``: a tuple of ``BarrierPart``;
+#: ``work``: see ``barrier_solve.CompiledSolve``; ``low``: two Newton matrix slots
+#: (2, nnz), their filtered rank-one vectors (2, P, n), coefficients (2, P), counts
+#: and shifts; ``flags`` (``F_*``). Set by ``solve``: q_n, v_n (n,), dt s, dt^2, K_n's
+#: CSC values, the filters (n_nodes, 2, 2), CG's (relative, error limit m, floor m)
+FIELDS = ('masses', 'alpha', 'beta', 'eps', 'keep_limit', 'friction',
+          'table', 'pattern', 'linear', 'barriers', 'work', 'low', 'flags',
+          'q_n', 'v_n', 'dt', 'dt2', 'stiffness', 'filters', 'cg')
+
+
+class BarrierProblem(structref.StructRefProxy):
+    """The compiled Newton iteration's problem (``FIELDS``), made by ``new_problem``."""
+
+
+structref.define_proxy(BarrierProblem, BarrierProblemType, list(FIELDS))
+
+
+def _is_problem(problem):
+    return isinstance(problem, BarrierProblemType)
+
+
+# ---------------------------------------------------------------------- kernels
+@njit(cache=True)
+def _evaluate(problem, x, hessian, grad):
+    table_order, items, coefs, vectors, scratch_vectors, dq, hess_coefs = problem.table
+    (indptr, indices, hdata, no_values, k_dq, blocks, diag_pos, diag_block_pos, _, _, _,
+     _, _) = problem.pattern
+    fric_grad = problem.work[1]
+    data = hdata if hessian else no_values
+    phi = inertia_and_energies(x, problem.q_n, problem.v_n, problem.dt, problem.masses,
+                               problem.alpha, dq, grad, hessian, data, table_order, items,
+                               coefs, vectors if hessian else scratch_vectors)
+    if not math.isfinite(phi):
+        return np.inf
+    if hessian:
+        hess_coefs[:] = coefs
+    empty_values, no_slots = np.zeros(0), np.zeros(0, np.int64)
+    for part in problem.barriers:
+        value = barrier_value(part, x, hessian, grad, hdata if hessian else empty_values,
+                              part.slots if hessian else no_slots, problem.dt, True)
+        if not math.isfinite(value):
+            return np.inf
+        phi += value
+    nodes, tangents, bounds, speed = problem.friction
+    return add_step_terms(phi, hessian, x, problem.q_n, dq, problem.dt, problem.masses,
+                          problem.alpha, problem.beta, indptr, indices, problem.stiffness,
+                          k_dq, nodes, tangents, bounds, speed, problem.eps, diag_pos,
+                          diag_block_pos, grad, fric_grad, blocks, hdata)
+
+
+# ---------------------------------------------------------------------- the hooks
+@overload(newton.vectors)
+def _vectors_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            vectors = problem.work[0]
+            return vectors[0], vectors[1], vectors[2], vectors[3], vectors[4]
+        return impl
+
+
+@overload(newton.kept_fits)
+def _kept_fits_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return False  # a new solve: nothing kept
+        return impl
+
+
+@overload(newton.evaluate)
+def _evaluate_hook(problem, x, hessian, grad):
+    if _is_problem(problem):
+        def impl(problem, x, hessian, grad):
+            return _evaluate(problem, x, hessian, grad)
+        return impl
+
+
+@overload(newton.project)
+def _project_hook(problem, grad, g_f):
+    if _is_problem(problem):
+        def impl(problem, grad, g_f):
+            apply_filters(problem.filters, grad, g_f)
+        return impl
+
+
+@overload(newton.forget)
+def _forget_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            problem.flags[F_KEPT] = -1
+        return impl
+
+
+@overload(newton.keep)
+def _keep_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            problem.flags[F_KEPT] = problem.flags[F_LAST]
+        return impl
+
+
+@overload(newton.factorise)
+def _factorise_hook(problem, x, shift):
+    if _is_problem(problem):
+        def impl(problem, x, shift):
+            (indptr, indices, hdata, _, _, _, _, _, block_pos, block_nodes, node_ptr,
+             node_blocks, diag_blocks) = problem.pattern
+            matrices, u_ts, cs, ks, shifts = problem.low
+            flags = problem.flags
+            slot = 1 if flags[F_KEPT] == 0 else 0
+            filters = problem.filters
+            n = problem.masses.shape[0]
+            diagonal = np.zeros(n)
+            if shift:
+                for i in range(filters.shape[0]):
+                    for a in range(2):
+                        m = 2 * i + a
+                        diagonal[m] = shift * filters[i, a, a] * problem.masses[m] / problem.dt2
+            filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
+                          filters, diagonal, matrices[slot])
+            vectors, hess_coefs = problem.table[3], problem.table[6]
+            k = 0
+            for p in range(hess_coefs.shape[0]):
+                if hess_coefs[p] != 0.0:
+                    apply_filters(filters, vectors[p], u_ts[slot, k])
+                    cs[slot, k] = hess_coefs[p]
+                    k += 1
+            ks[slot] = k
+            shifts[slot] = shift
+            flags[F_LAST] = slot
+            return True
+        return impl
+
+
+@overload(newton.direction)
+def _direction_hook(problem, g_f, dq, fresh):
+    if _is_problem(problem):
+        def impl(problem, g_f, dq, fresh):
+            matrices, u_ts, cs, ks, shifts = problem.low
+            flags = problem.flags
+            if fresh:
+                slot = flags[F_LAST]
+                refactor = shifts[slot] > 0
+            else:
+                slot = flags[F_KEPT]
+                refactor = False
+            k = ks[slot]
+            u_t = np.ascontiguousarray(u_ts[slot, :k])
+            u = np.ascontiguousarray(u_t.T)
+            c = np.ascontiguousarray(cs[slot, :k])
+            n = g_f.shape[0]
+            rhs = np.empty(n)
+            for m in range(n):
+                rhs[m] = -g_f[m]
+            x = problem.work[2]
+            relative, error_limit, floor = problem.cg
+            if not linear_solve.solve(problem.linear, matrices[slot], rhs, u, c, u_t,
+                                      problem.filters, relative, error_limit, floor,
+                                      refactor, x):
+                return False, 0.0
+            dq[:] = x
+            slope = np.dot(g_f, x)
+            return math.isfinite(slope), slope
+        return impl
+
+
+@overload(newton.step_bound)
+def _step_bound_hook(problem, x, dq):
+    if _is_problem(problem):
+        def impl(problem, x, dq):
+            bound = 1.0
+            for part in problem.barriers:
+                bound = min(bound, max_step(part, x, dq))
+            return min(bound, 1.0)
+        return impl
+
+
+@overload(newton.keep_limit)
+def _keep_limit_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return problem.keep_limit
+        return impl
+
+
+@overload(newton.filtered_max)
+def _filtered_max_hook(problem, g):
+    if _is_problem(problem):
+        def impl(problem, g):
+            filtered = problem.work[3]
+            apply_filters(problem.filters, g, filtered)
+            return max_abs(filtered)
+        return impl
+
+
+@overload(newton.finish)
+def _finish_hook(problem, x, grad):
+    if _is_problem(problem):
+        def impl(problem, x, grad):
+            reaction, fric_grad = problem.work[4], problem.work[1]
+            for m in range(x.shape[0]):
+                reaction[m] = grad[m] - fric_grad[m]
+        return impl
+
+
+# ---------------------------------------------------------------------- the entry
+@njit(cache=True)
+def new_problem(fields):
+    """A ``BarrierProblem`` of the fields' tuple (once per solver: ``_Kept``)."""
+    return BarrierProblem(*fields)
+
+
+@njit(cache=True)
+def solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit, floor,
+           q, tol, max_it, history, counts):
+    """``newton.newton_iteration`` compiled on ``problem`` with this solve's arrays."""
+    problem.q_n = q_n
+    problem.v_n = v_n
+    problem.dt = dt
+    problem.dt2 = dt2
+    problem.stiffness = stiffness
+    problem.filters = filters
+    problem.cg = (relative, error_limit, floor)
+    return newton.newton_iteration(problem, q, dt, tol, max_it, history, counts)

@@ -1,0 +1,211 @@
+"""A 2D barrier's step state and its compiled evaluation, candidates and step bound: the
+one implementation ``BarrierContact`` (2D) calls from Python and the compiled Newton
+problem (``core.barrier_newton``) calls compiled.
+
+``BarrierPart`` (a numba StructRef, one per 2D ``BarrierContact``, made with its
+collision mesh) holds the barrier's fixed arrays and settings and the state of a step
+(``set_step``, from ``BarrierContact.begin_step``): the faces' corners, the collision
+mesh's start, the kept candidates and where they were sought, the lagged friction, the
+quiet region of a self-contact; and what its evaluations keep: the candidates sought
+again, the last evaluation (positions, values; its gradients in the barrier's buffers).
+
+- ``quiet``: a self-contact with every vertex within its quiet region's reach
+  (``barrier_kernels.relative_moves_within``);
+- ``candidates``: the kept (edge, vertex) candidates, sought again
+  (``barrier_search.edge_vertex_candidates``, boxes inflated by dhat / 2 + the margin)
+  once a vertex moved further than the margin from where they were sought;
+- ``barrier_value``: the barrier and lagged friction (``barrier_terms.barrier_terms``)
+  over those candidates, gradients added, the Hessian into the solver's CSC values;
+- ``max_step``: the CCD's step bound: ``barrier_kernels.kept_step_bound`` on the kept
+  candidates, else the swept boxes' candidates and ``barrier_search.collision_free_step``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, types
+from numba.experimental import structref
+
+from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move, mesh_vertices,
+                                              relative_moves_within)
+from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
+from gripper_sim.core.barrier_terms import barrier_terms
+
+#: a part's flags (int64 array): its candidates (-1: none kept, 0: sought at the step's
+#: start (the faces' corners where they start), 1: sought since (where they end)), its
+#: Hessian entries outside the pattern (not dropped; the reader clears it), its last
+#: finite evaluation (0: none this step, 1: no pairs, 2: terms)
+B_PAIRS, B_OUTSIDE, B_TERMS, B_SIZE = range(4)
+#: the candidates where none are kept
+NO_PAIRS = np.zeros((0, 2), np.int64)
+
+
+@structref.register
+class BarrierPartType(types.StructRef):
+    """The numba type of ``BarrierPart``."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+#: a part's fields: the barrier's fixed arrays and settings (``BarrierContact.part_fields``:
+#: vertex dof pairs (n_v, 2), the mesh's edges and groups, self-contact, dhat m, kappa,
+#: the mesh's dofs, whether to project the Hessian, the pattern's keys, eps_v m/s, the
+#: candidate radius m, the swept radius m, the candidate margin m, the gradient buffers
+#: (n_d,), whether entries outside the pattern are dropped, each vertex's body, the
+#: bodies' count, the pattern's CSC slots (p,)), then a step's (``set_step``): the faces'
+#: corners (c k, 2) m, the collision mesh's start (n_m, 2) m, the candidates' anchor
+#: (n_v, 2) m and the candidates (k, 2), the lagged friction, the quiet region's anchor
+#: and reach m (self-contact), the flags (``B_*``), the last evaluation's positions
+#: (d n,) m and (barrier, friction) values J
+PART_FIELDS = ('dof_pairs', 'edges', 'groups', 'self_contact', 'dhat', 'kappa',
+               'mesh_dofs', 'project', 'pattern_keys', 'eps_v', 'radius', 'swept_radius',
+               'margin', 'barrier_gradient', 'friction_gradient', 'drop_outside',
+               'vertex_body', 'n_bodies', 'slots',
+               'corners', 'start', 'anchor', 'pairs', 'friction_pairs', 'has_friction',
+               'quiet_anchor', 'quiet_reach', 'has_quiet', 'flags', 'last_q', 'last_values')
+
+
+class BarrierPart(structref.StructRefProxy):
+    """One 2D barrier's arrays and step state (``PART_FIELDS``), made by ``new_part``."""
+
+
+structref.define_proxy(BarrierPart, BarrierPartType, list(PART_FIELDS))
+
+
+@njit(cache=True)
+def quiet(part, q, dq):
+    """Whether the part is a self-contact within its quiet region at positions q (2 n,)
+    m (and q + dq if dq (2 n,) m is not empty): no pair within dhat for certain."""
+    if not part.has_quiet:
+        return False
+    return relative_moves_within(q, dq, part.dof_pairs, part.quiet_anchor, part.vertex_body,
+                                 part.n_bodies, part.quiet_reach)
+
+
+@njit(cache=True)
+def candidates(part, q):
+    """The (edge, vertex) candidates (k, 2) holding every pair closer than dhat at
+    positions q (2 n,) m: the kept ones, sought again (boxes inflated by the candidate
+    radius) once a vertex moved further than the margin from where they were sought
+    (each side of a pair moved by at most the margin: the pair came at most twice it
+    closer; the faces' corners stand still within a step)."""
+    flags = part.flags
+    if flags[B_PAIRS] < 0 or largest_move(q, part.dof_pairs, part.anchor) > part.margin:
+        v = np.empty((part.dof_pairs.shape[0] + part.corners.shape[0], 2))
+        mesh_vertices(q, part.dof_pairs, part.corners, v)
+        part.pairs = edge_vertex_candidates(v, v, part.edges, part.groups, part.self_contact,
+                                            part.radius)
+        part.anchor[:] = v[:part.dof_pairs.shape[0]]
+        flags[B_PAIRS] = 1
+    return part.pairs
+
+
+@njit(cache=True)
+def barrier_value(part, x, hessian, grad, hdata, slots, dt, friction):
+    """The barrier plus (with ``friction``) the lagged friction at positions x (2 n,) m
+    over ``candidates``: value J (inf: a pair touches; nothing kept), the gradients
+    added into grad (2 n,) N, with ``hessian`` the Hessians (the friction's with
+    ``friction``) into hdata at the pattern keys' ``slots`` (p,). An entry outside the
+    pattern (not dropped) sets the flag ``B_OUTSIDE``. Kept: x, the values, the
+    gradients in the part's buffers (``B_TERMS``)."""
+    if quiet(part, x, np.zeros(0)):
+        return 0.0
+    flags = part.flags
+    pairs = candidates(part, x)
+    if pairs.shape[0] or part.has_friction:
+        barrier, friction_value, outside, friction_outside = barrier_terms(
+            x, part.dof_pairs, part.corners, part.edges, pairs, part.dhat, part.kappa,
+            part.mesh_dofs, hessian, part.project, part.pattern_keys, slots, hdata,
+            part.start, dt, part.eps_v, part.friction_pairs, part.has_friction,
+            hessian and friction, part.barrier_gradient, part.friction_gradient, grad,
+            friction)
+        if not math.isfinite(barrier):
+            return np.inf
+        if (outside or friction_outside) and not part.drop_outside:
+            flags[B_OUTSIDE] = 1
+        flags[B_TERMS] = 2
+    else:
+        barrier = friction_value = 0.0
+        flags[B_TERMS] = 1
+    part.last_q[:] = x
+    part.last_values[0] = barrier
+    part.last_values[1] = friction_value
+    return barrier + friction_value if friction else barrier
+
+
+@njit(cache=True)
+def max_step(part, x, dq):
+    """The CCD's largest fraction (0, 1] of the step dq (2 n,) m from x free of
+    crossings (conservative: each pair keeps ``barrier_search.SEPARATION`` of its gap):
+    on the kept candidates when both ends lie within the margin of where they were
+    sought (``kept_step_bound``), else on the candidates of the boxes the vertices
+    sweep (inflated by the swept radius)."""
+    if quiet(part, x, dq):
+        return 1.0
+    bound = -1.0
+    if part.flags[B_PAIRS] >= 0:
+        bound = kept_step_bound(x, dq, part.dof_pairs, part.corners, part.edges, part.anchor,
+                                part.pairs, part.margin)
+    if bound >= 0.0:
+        return bound
+    n_m = part.dof_pairs.shape[0] + part.corners.shape[0]
+    v0, v1 = np.empty((n_m, 2)), np.empty((n_m, 2))
+    mesh_vertices(x, part.dof_pairs, part.corners, v0)
+    mesh_vertices(x + dq, part.dof_pairs, part.corners, v1)
+    swept = edge_vertex_candidates(v0, v1, part.edges, part.groups, part.self_contact,
+                                   part.swept_radius)
+    return collision_free_step(v0, v1, part.edges, swept)
+
+
+@njit(cache=True)
+def new_part(fields):
+    """A ``BarrierPart`` of the fields' tuple (``PART_FIELDS``)."""
+    return BarrierPart(*fields)
+
+
+@njit(cache=True)
+def set_slots(part, slots):
+    """The pattern keys' CSC slots (p,) of the solver the part's Hessian goes to."""
+    part.slots = slots
+
+
+@njit(cache=True)
+def set_project(part, project):
+    """Whether each pair's Hessian is made positive semi-definite (clamped)."""
+    part.project = project
+
+
+@njit(cache=True)
+def set_step(part, corners, start, has_pairs, anchor, pairs, friction_ids, friction_weights,
+             friction_tangents, friction_forces, friction_coefficients, has_friction,
+             quiet_anchor, quiet_reach, has_quiet):
+    """A step's state (``PART_FIELDS``; flat arguments: numba types a tuple argument in
+    Python, slowly); no evaluation kept."""
+    part.corners = corners
+    part.start = start
+    if has_pairs:
+        part.anchor[:] = anchor
+    part.pairs = pairs
+    part.friction_pairs = (friction_ids, friction_weights, friction_tangents,
+                           friction_forces, friction_coefficients)
+    part.has_friction = has_friction
+    part.quiet_anchor = quiet_anchor
+    part.quiet_reach = quiet_reach
+    part.has_quiet = has_quiet
+    part.flags[:] = 0
+    part.flags[B_PAIRS] = 0 if has_pairs else -1
+
+
+@njit(cache=True)
+def candidates_of(part):
+    """The part's kept candidates (k, 2) (as they are: see ``candidates``)."""
+    return part.pairs
+
+
+@njit(cache=True)
+def shared_arrays(part):
+    """The part's arrays Python reads: flags, the last evaluation's positions and
+    values, the candidates' anchor."""
+    return part.flags, part.last_q, part.last_values, part.anchor

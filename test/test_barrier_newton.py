@@ -1,0 +1,129 @@
+"""The 2D barrier model's compiled Newton solve (``core.barrier_newton``, run by
+``core.barrier_solve``; the default where it covers the solve:
+``fast_solver.COMPILED_BARRIER_SOLVE``) against the interpreted route it replaces there:
+the same positions to the last bit at every step, the same Newton iterations, the same
+contact forces, and the same solver work (systems, factorisations, CG iterations)."""
+import numpy as np
+import pytest
+
+from helpers import quasi_static_sim
+
+from gripper_sim.configuration import load_config
+from gripper_sim.core import fast_solver
+from gripper_sim.core.simulation import Simulation
+from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+
+RADIUS = 0.03
+
+
+def _ring(approach, *overrides):
+    sim = quasi_static_sim(RADIUS, 'fruit.nodes=64', 'contact.model=ipc', *overrides)
+    sim.command_gap(2 * RADIUS - approach, speed=approach / 0.5)
+    return sim
+
+
+def _apple():
+    """The default apple on the table (friction, gravity, bulk modulus: the pressure's
+    rank-one term) squeezed to 2 N by the ipc model."""
+    sim = Simulation(load_config(overrides=['contact.model=ipc', 'fruit.nodes=64',
+                                            'gripper.initial_gap=0.0645']))
+    sim.command_force(2.0, speed=0.01)
+    return sim
+
+
+def _solid_disk():
+    """The 2D solid disk (neo-Hookean flesh) squeezed by the ipc model."""
+    sim = quasi_static_sim(RADIUS, 'fruit.model=solid', 'contact.model=ipc')
+    sim.command_gap(2 * RADIUS - 0.002, speed=0.004)
+    return sim
+
+
+def _trace(make, steps, compiled, monkeypatch):
+    """(positions and contact forces of every step, Newton iterations, solver stats, work
+    counters, the last grip force N) of a run."""
+    monkeypatch.setattr(fast_solver, 'COMPILED_BARRIER_SOLVE', compiled)
+    sim = make()
+    if not sim.solver.compiled_solve_covers():
+        pytest.skip('the compiled solve does not cover this set-up (the 2D solid fruit '
+                    'until its flesh is in the energy table)')
+    positions, iterations = [], []
+    for _ in range(steps):
+        result = sim.step()
+        positions.append(np.concatenate([sim.q.ravel(), sim.contact_forces.ravel()]))
+        iterations.append(result.newton_iterations)
+    return (positions, iterations, dict(sim.solver.stats), sim.solver.counts.copy(),
+            result.grip_force)
+
+
+@pytest.mark.parametrize('make,steps', [
+    (lambda: _ring(0.005 * RADIUS, 'fruit.skin.youngs_modulus=1e7',
+                   'fruit.skin.thickness=1e-3',
+                   'fruit.pressure.turgor=0', 'fruit.pressure.bulk_modulus=0'), 120),
+    (lambda: _ring(0.2 * RADIUS, 'fruit.skin.youngs_modulus=1e9',
+                   'fruit.skin.thickness=1e-5',
+                   'fruit.pressure.turgor=2e4', 'fruit.pressure.bulk_modulus=0'), 100),
+    (_apple, 160), (_solid_disk, 60)], ids=['ring', 'membrane', 'apple', 'solid-disk'])
+def test_compiled_solve_repeats_the_interpreted_one_to_the_bit(make, steps, monkeypatch):
+    interpreted = _trace(make, steps, False, monkeypatch)
+    compiled = _trace(make, steps, True, monkeypatch)
+    assert compiled[1] == interpreted[1]
+    assert compiled[2] == interpreted[2]
+    np.testing.assert_array_equal(compiled[3], interpreted[3])
+    for step, (a, b) in enumerate(zip(compiled[0], interpreted[0])):
+        assert a.tobytes() == b.tobytes(), f'step {step}'
+    assert interpreted[4] > 0.0  # the runs made contact
+
+
+def _fin_ray_grasp(compiled, monkeypatch):
+    """(positions and contact forces of every step, Newton iterations, solver stats,
+    outcome) of the 2D Fin Ray grasp-and-lift (two barriers: the fingers' self-contact
+    and the fruit's with the soft fingers; the fingers' bases held by the filters)."""
+    monkeypatch.setattr(fast_solver, 'COMPILED_BARRIER_SOLVE', compiled)
+    config = load_config(overrides=['gripper.finger.type=fin_ray'])
+    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
+    sim = Simulation(config)
+    assert sim.solver.compiled_solve_covers()
+    states, iterations = [], []
+
+    def on_step(result, phase):
+        states.append(np.concatenate([sim.q.ravel(), sim.contact_forces.ravel()]))
+        iterations.append(result.newton_iterations)
+    summary = run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.01, hold_time=0.2),
+                        on_step=on_step)
+    return states, iterations, dict(sim.solver.stats), summary['outcome']
+
+
+def test_compiled_solve_repeats_the_fin_ray_grasp_to_the_bit(monkeypatch):
+    interpreted = _fin_ray_grasp(False, monkeypatch)
+    compiled = _fin_ray_grasp(True, monkeypatch)
+    assert interpreted[3] == compiled[3] == 'held'
+    assert compiled[1] == interpreted[1]
+    assert compiled[2] == interpreted[2]
+    assert len(compiled[0]) == len(interpreted[0])
+    for step, (a, b) in enumerate(zip(compiled[0], interpreted[0])):
+        assert a.tobytes() == b.tobytes(), f'step {step}'
+
+
+def test_the_ring_solves_compiled_by_default_and_the_shared_mmm_route_interpreted(
+        monkeypatch):
+    """The default route: the ring's barrier solves go through the compiled solve; the
+    modified mass method on the shared solver (no barrier energy) stays on the
+    interpreted one."""
+    routes = []
+    compiled = fast_solver.PatternCachingSolver._iterate_compiled
+
+    def spy(self, *args):
+        routes.append('compiled')
+        return compiled(self, *args)
+    monkeypatch.setattr(fast_solver.PatternCachingSolver, '_iterate_compiled', spy)
+    sim = _ring(0.002)
+    for _ in range(5):
+        sim.step()
+    assert routes
+    routes.clear()
+    shared = quasi_static_sim(RADIUS, 'fruit.nodes=64', fast=False)
+    assert not shared.solver.compiled_solve_covers()
+    shared.command_gap(2 * RADIUS - 0.001, speed=0.002)
+    for _ in range(3):
+        shared.step()
+    assert shared.solver.stats['passes'] and routes == []
