@@ -347,7 +347,10 @@ SCHEMA: dict[str, Key] = {
                                 'the update divided by dt is below this', low=1e-14,
                                 high=1.0, open_low=True),
     'sim.max_newton_iterations': Key(25, '-', 'Newton iterations before the step is '
-                                     'halved', 'int', 1, 1000),
+                                     'halved; on the Newton solver (barrier contact, '
+                                     'deformable fingers, 3D) a solve whose last 5 steps '
+                                     'shrank by half or more goes on, up to 4 times as '
+                                     'many', 'int', 1, 1000),
     'sim.max_halvings': Key(6, '-', 'times a failing step is halved before giving up',
                             'int', 0, 30),
     'sim.max_contact_passes': Key(10, '-', 'predictor-corrector passes per step',

@@ -323,3 +323,13 @@ def test_potential_with_sliding_nodes_and_damping_is_the_references(name):
     dense = solver._csc(parts[0]).toarray()
     np.testing.assert_allclose(dense, parts_ref[0].toarray(), rtol=0,
                                atol=1e-10 * np.max(np.abs(dense)))
+
+
+def test_a_solve_still_converging_at_the_limit_goes_on_and_a_stalled_one_does_not():
+    """``still_converging``: the last PROGRESS_SPAN steps shrank by PROGRESS_FACTOR."""
+    from gripper_sim.core.fast_solver import PROGRESS_SPAN, still_converging
+    linear = [1e-2 * 0.8 ** k for k in range(25)]  # 0.8^5 = 0.33 over the span
+    assert still_converging(linear)
+    stalled = linear[:20] + [linear[19] * f for f in (1.2, 0.9, 1.1, 0.8, 1.0)]
+    assert not still_converging(stalled)
+    assert not still_converging(linear[:PROGRESS_SPAN])

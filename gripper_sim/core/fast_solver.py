@@ -79,6 +79,13 @@ KEEP_BELOW = 100.0
 #: a sliding node's Newton step is cut at the kink of the friction law only if it
 #: slips faster than this multiple of the smoothing speed (slower: inside the kink)
 KINK_FACTOR = 10.0
+#: a solve still converging at its iteration limit goes on from where it is, before its
+#: step is halved: while its last PROGRESS_SPAN steps shrank by PROGRESS_FACTOR or more
+#: (a linear convergence: pressed barrier pairs whose negative curvature the Newton
+#: matrix leaves out), up to EXTENDED_LIMIT times the limit in all
+PROGRESS_SPAN = 5
+PROGRESS_FACTOR = 0.5
+EXTENDED_LIMIT = 4
 #: whether the 2D barrier model's Newton solves run compiled (``core.barrier_newton``)
 #: where it covers them (``barrier_solve.supports``); the interpreted route serves the
 #: rest (energies outside the energy table besides the barriers, steps with sliding
@@ -116,6 +123,13 @@ def as_cone(con: StepConstraints) -> StepConstraints:
                            np.ascontiguousarray(tangents, dtype=float),
                            np.ascontiguousarray(con.friction_bounds, dtype=float),
                            np.ascontiguousarray(speed, dtype=float))
+
+
+def still_converging(steps: list) -> bool:
+    """Whether a solve's Newton steps (max |dq| / dt of each, m/s) shrank by
+    ``PROGRESS_FACTOR`` or more over the last ``PROGRESS_SPAN`` of them."""
+    return (len(steps) > PROGRESS_SPAN
+            and steps[-1] <= PROGRESS_FACTOR * steps[-1 - PROGRESS_SPAN])
 
 
 class PatternCachingSolver:
@@ -384,9 +398,10 @@ class PatternCachingSolver:
 
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints) -> StepSolution:
-        """One implicit Euler step: ``newton.newton_iteration`` (interpreted) on this
-        solver's pattern (``_NewtonProblem``). A later contact pass of the same step starts
-        from the last pass's solution in the directions the new filter leaves free.
+        """One implicit Euler step: ``newton.newton_iteration`` on this solver's pattern
+        (``_NewtonProblem``, or compiled: ``_iterate``). A later contact pass of the same
+        step starts from the last pass's solution in the directions the new filter leaves
+        free. A solve still converging at ``max_iterations`` goes on (``PROGRESS_SPAN``).
 
         Raises:
             NewtonFailure: no convergence, no descent, or an infeasible start.
@@ -404,8 +419,13 @@ class PatternCachingSolver:
             q = q_start.copy()
             status, iterations, n_hist = self._iterate(problem, q, history)
         done = history[:n_hist].tolist()
+        while (status == newton.NO_CONVERGENCE and still_converging(done)
+               and iterations < EXTENDED_LIMIT * self.max_iterations):
+            status, more, n_hist = self._iterate(problem, q, history)
+            iterations += more
+            done += history[:n_hist].tolist()
         if status != newton.OK:
-            raise NewtonFailure(NEWTON_FAILURES[status].format(self.max_iterations), done)
+            raise NewtonFailure(NEWTON_FAILURES[status].format(iterations), done)
         self._warm = (q_n.copy(), dt, q)
         return StepSolution(q, problem.reaction, iterations, done)
 
