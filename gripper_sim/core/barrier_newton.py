@@ -29,8 +29,9 @@ in its part and ``barrier_solve.run`` raises AssertionError after the call, as t
 interpreted route does at once.
 
 Covered (``barrier_solve.supports``): a 2D solver whose energies after the table are
-one or two ``BarrierContact`` (the fruit's, with rigid faces or soft bodies; a
-self-contact), and steps with no sliding nodes (the barrier model's steps; a sliding
+one or two ``BarrierContact`` (the fruit's - skin or solid flesh, whose energies the
+table sums - with rigid faces or soft bodies; a self-contact), and steps with no
+sliding nodes (the barrier model's steps; a sliding
 node needs the line search's ``kink_step``). These run compiled by default
 (``fast_solver.COMPILED_BARRIER_SOLVE``).
 """
