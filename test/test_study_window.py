@@ -133,3 +133,27 @@ def test_the_population_counts_the_upper_bounds_a_solver_failure_set():
     plain = population_window(windows_from([2.0] * 10, [20.0] * 10), 200.0, 0.9, 0.95)
     assert plain['solver_failure_bounds'] == 0
     assert 'solver' not in describe_window(plain, '90 %')
+
+
+def test_a_grid_study_tells_a_solver_failure_above_the_safe_forces_from_a_bruise():
+    """A study over a list of forces: a fruit's window ends at its largest safe force;
+    the force above it failed to converge for one fruit and bruised the other."""
+    from types import SimpleNamespace
+    from gripper_sim.workflows.study import _sample_windows
+
+    def evaluation(force, outcome):
+        bad = outcome in ('bruised', 'solver failed')
+        return SimpleNamespace(force=force, outcome=outcome, held=not bad, bruised=bad,
+                               crushed=outcome == 'solver failed', slip_distance=0.0,
+                               peak_grip_force=force, peak_jaw_pressure=0.0,
+                               peak_table_pressure=0.0, peak_damage_pressure=0.0,
+                               bruised_at='')
+
+    def chain(sample, last):
+        return SimpleNamespace(done=True, setup=SimpleNamespace(sample=sample), result=[
+            evaluation(5.0, 'held'), evaluation(10.0, 'held'), evaluation(20.0, last)])
+
+    windows = _sample_windows(SimpleNamespace(forces=(5.0, 10.0, 20.0)),
+                              [chain(0, 'solver failed'), chain(1, 'bruised')])
+    assert [(w.min_force, w.max_force) for w in windows] == [(5.0, 10.0), (5.0, 10.0)]
+    assert [w.max_force_limited_by for w in windows] == ['solver failure', 'bruise']

@@ -42,6 +42,7 @@ from gripper_sim.workflows.study_spec import Study
 from gripper_sim.workflows.study_spec import FruitSetup
 from gripper_sim.workflows.study_tasks import (answer_key, code_version, evaluation_of,
                                                run_fruit)
+from gripper_sim.workflows.window import trial_of, upper_bound_limited_by
 
 #: seconds to wait for an existing scheduler before giving up
 CONNECT_TIMEOUT = 3.0
@@ -336,8 +337,10 @@ def _sample_windows(study: Study, chains: list[_Chain]) -> list[SampleWindow]:
     for sample, evaluations in sorted(by_sample.items()):
         held = [e.force for e in evaluations if e.held]
         safe = [e.force for e in evaluations if not (e.bruised or e.crushed)]
-        windows.append(SampleWindow(sample, min(held) if held else None,
-                                    max(safe) if safe else None))
+        high = max(safe) if safe else None
+        windows.append(SampleWindow(sample, min(held) if held else None, high,
+                                    upper_bound_limited_by(high, [trial_of(e, 'bruise')
+                                                                  for e in evaluations])))
     return windows
 
 
