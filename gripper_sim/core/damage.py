@@ -31,8 +31,8 @@ section 3):
   sits where the skin bends round a finger's rib or the patch's end, narrower than any
   practical node spacing, and grew by 75 % from 64 to 512 outline nodes (the Fin Ray at
   8 N), where sigma moved by 3 %. A patch whose load rests on fewer than
-  ``RESOLVED_NODES`` nodes (their effective count) has no resolved width: it keeps the fruit's rest radius, as on a rigid face (the
-  higher, conservative p0);
+  ``RESOLVED_NODES`` nodes (their effective count) has no resolved width: it keeps the
+  fruit's rest radius, as on a rigid face (the higher, conservative p0);
 - contact radius a = (3 F Re / (4 E*))^(1/3), peak pressure p0 = 3 F / (2 pi a^2), and
   pressure p(s) = p0 sqrt(1 - s^2 / a^2) at distance s from the centre: that is the
   per-node pressure reported;
@@ -242,7 +242,8 @@ def damage_patches(x, normal, obstacle, ring, faces, rest_curvature, bruise_pres
                     arc += seg[run[m - 1]]
                 variance += max(normal[ring[run[m]]], 0.0) * (arc - arc_mean) ** 2 / load
             k1_eff = load / depth / (math.pi * modulus * variance)
-        else:  # a face more curved than the fruit conforms to it: 1/1000 of its curvature
+        else:  # (a deformable finger's unresolved patch too: its faces are flat) a face
+            # more curved than the fruit conforms to it: 1/1000 of its curvature
             k1_eff = max(k1 + face_k / length, 1e-3 * k1)
         re = 1.0 / math.sqrt(k1_eff * k1)
         a, p0 = hertz(load, re, modulus)
