@@ -112,6 +112,11 @@ KEYS: dict[str, Term] = {
     'min_force_measured': Term('N', 'lower bound, measured: peak_grip_force of its trial'),
     'max_force_measured': Term('N', 'upper bound, measured: peak_grip_force of its trial '
                                     '(null when max_force is "inf")'),
+    'max_force_limited_by': Term('-', "what ended the safe side at max_force: 'bruise', or "
+                                      "'solver failure' when the nearest trial above it did "
+                                      'not converge (the fruit bruises somewhere above '
+                                      'max_force, not at it); null without a finite '
+                                      'max_force'),
     'min_estimate': Term('N', 'closed-form lower seed m g / (2 mu)'),
     'max_estimate': Term('N', 'closed-form upper seed (Hertz bruise force)'),
     'table_bruise_estimate': Term('N', 'closed-form table load at which the fruit bruises '
