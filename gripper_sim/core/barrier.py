@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
+from typing import Callable
 
 import ipctk
 import numpy as np
@@ -554,9 +555,7 @@ class BarrierContact(Energy):
         gradients of the last evaluation are reused when ``q`` is the same."""
         if self.quiet(q):
             return 0.0
-        last = self._last_terms
-        if self.dimension == 2:
-            last = self._part_terms()
+        last = self._part_terms() if self.dimension == 2 else self._last_terms
         parts, scales = [], []  # the Hessians (scipy CSC) and their factors
         if into is None and last is not None and same_values(last[0], q):
             _, barrier_value, friction_value, barrier_gradient, friction_gradient = last
@@ -1056,7 +1055,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
                    new_faces: list, dt: float,
                    self_contact: BarrierContact | None = None,
-                   carried: list | None = None) -> StepOutcome:
+                   carried: Callable[[], list] | None = None) -> StepOutcome:
     """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) of the fruit and the soft
     bodies in the barrier (``barrier.bodies``), nodes ``fixed`` (k,) prescribed at
     ``fixed_targets`` (k, d) m (a finger's base on its jaw: zero filters, the modified
@@ -1065,9 +1064,9 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
 
     The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
     nothing, else from x_n (each with the fixed nodes at their targets and the outline
-    pushed ahead of moving faces, ``pushed_start``), else, with ``carried`` (per soft
-    body in ``barrier.bodies`` order, (its nodes (k,), the shift (d,) m its base makes
-    in the step)), from x_n with each soft body moved by its base's shift and the
+    pushed ahead of moving faces, ``pushed_start``), else, with ``carried`` (a function
+    giving per soft body in ``barrier.bodies`` order (its nodes (k,), the shift (d,) m
+    its base makes in the step); called only then), from x_n with each soft body moved by its base's shift and the
     fruit's nodes within dhat of it moved along with it: where a fruit pressed hard on
     a finger lies closer to it than the base's move, moving the base alone would cross
     the fruit.
@@ -1089,16 +1088,19 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         self_contact.begin_step(x_n, [], [], dt)
         barriers.append(self_contact)
     pushed = barrier.pushed_start(x_n, old_faces, new_faces)
-    start = pushed + dt * v_n
-    start[fixed] = fixed_targets
-    if not all(b.reachable(start) for b in barriers):
-        start = pushed  # its own array: pushed_start's copy
+
+    def reachable(start: np.ndarray) -> bool:
         start[fixed] = fixed_targets
-        if not all(b.reachable(start) for b in barriers) and carried is not None:
-            start = _carried_start(barrier, x_n, pushed, carried)
-            start[fixed] = fixed_targets
-        if not all(b.reachable(start) for b in barriers):
-            raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
+        return all(b.reachable(start) for b in barriers)
+
+    start = pushed + dt * v_n
+    if not reachable(start):
+        start = pushed  # its own array: pushed_start's copy
+        if not reachable(start):
+            start = None if carried is None else _carried_start(barrier, x_n, pushed,
+                                                                carried())
+            if start is None or not reachable(start):
+                raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
     constraints = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
     x = solution.q.reshape(-1, d)

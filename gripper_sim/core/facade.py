@@ -799,9 +799,11 @@ class SimulationFacade:
         targets = soft.base_targets(self._jaw_origin(grip_new, LEFT),
                                     self._jaw_origin(grip_new, RIGHT))
         m = soft.n_nodes // 2
-        carried = [(n + side * m + np.arange(m),
-                    self._jaw_origin(grip_new, side) - self._jaw_origin(self._grip, side))
-                   for side in (LEFT, RIGHT)]
+
+        def carried():  # each finger's nodes and its base's shift (``soft_body_step``)
+            return [(n + side * m + np.arange(m),
+                     self._jaw_origin(grip_new, side) - self._jaw_origin(self._grip, side))
+                    for side in (LEFT, RIGHT)]
         outcome = soft_body_step(self.solver, self._barrier,
                                  np.concatenate([self.q, finger.positions]),
                                  np.concatenate([self.v, finger.velocities]), soft.base, targets,

@@ -187,6 +187,10 @@ class PatternCachingSolver:
         #: the energies that may bound a step (``max_step`` not the base's 1)
         self._step_bounding = [e for e in self.energies
                                if type(e).max_step is not Energy.max_step]
+        #: whether the compiled barrier solve covers this solver's energies
+        #: (``compiled_solve_covers``; they do not change)
+        self._compiled_covers = barrier_solve.supports(
+            self.dim, [e for e, _ in self._untabled], self._step_bounding)
         #: the Newton matrix's diagonal term without a shift (read only)
         self.no_shift = np.zeros(self.n)
 
@@ -432,9 +436,7 @@ class PatternCachingSolver:
     def compiled_solve_covers(self, con: StepConstraints | None = None) -> bool:
         """Whether the compiled barrier solve (``barrier_solve``) covers this solver's
         problems (and the step's constraints ``con``: no sliding nodes)."""
-        return ((con is None or not con.friction_nodes.size)
-                and barrier_solve.supports(self.dim, [e for e, _ in self._untabled],
-                                           self._step_bounding))
+        return self._compiled_covers and (con is None or not con.friction_nodes.size)
 
     def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
                           history: np.ndarray):
