@@ -51,6 +51,7 @@ its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 from __future__ import annotations
 
 import copy
+import operator
 from dataclasses import dataclass
 from typing import Callable
 
@@ -177,6 +178,16 @@ _FACE_ELEMENTS = {2: (np.array([[0, 1]]), np.zeros((0, 3), np.int64)),
 def _half_extents(face) -> np.ndarray:
     """(d - 1,) m, the face's half-extents, infinite ones cut to ``INFINITE_FACE_LENGTH``."""
     return np.minimum(np.asarray(face.half_extents, float), 0.5 * INFINITE_FACE_LENGTH)
+
+
+def _same_faces(faces, kept_faces: tuple, kept_origins: tuple) -> bool:
+    """Whether ``faces`` are the objects ``kept_faces``, each still with its origin array
+    of ``kept_origins``."""
+    return (len(faces) == len(kept_faces) and all(map(operator.is_, faces, kept_faces))
+            and all(map(operator.is_, map(_origin, faces), kept_origins)))
+
+
+_origin = operator.attrgetter('origin')
 
 
 def face_corners(faces, dimension: int = 2) -> np.ndarray:
@@ -397,9 +408,7 @@ class BarrierContact(Energy):
         same faces for the same gripper state, ``faces_at``; faces are not changed in
         place: a moved face is a copy with a new origin). Read only."""
         for kept_faces, kept_origins, corners in self._corners_kept:
-            if (len(kept_faces) == len(faces)
-                    and all(f is g for f, g in zip(faces, kept_faces))
-                    and all(f.origin is o for f, o in zip(faces, kept_origins))):
+            if _same_faces(faces, kept_faces, kept_origins):
                 return corners
         corners = face_corners(faces, self.dimension)
         self._corners_kept = ([(tuple(faces), tuple(f.origin for f in faces), corners)]
@@ -433,31 +442,42 @@ class BarrierContact(Energy):
         self._start = start
         self._start_q = x_n.ravel().copy()
         mu_s, mu_k, rubbing = self._coefficients(new_faces)
+        if self.dimension == 2:
+            self._begin_part(x_n, start, new, mu_s, mu_k, rubbing)
+            return
         if len(self._tangential):  # ipctk's lagged friction (3D): the last step's
             self._tangential = ipctk.TangentialCollisions()
-        self._friction_pairs = None
-        kept = None  # the candidates kept from the step's start (2D)
-        if self.dimension == 2 and rubbing:
-            pairs, kept = self._start_candidates(start, old, new)
-            self._friction_pairs = self._lagged_friction(start, mu_s, mu_k, pairs)
-        elif rubbing:
+        if rubbing:
             collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
                              broad_phase=self._broad_phase)
             if len(collisions):
                 self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
                                        mu_k, max)
+
+    def _begin_part(self, x_n: np.ndarray, start: np.ndarray, new: np.ndarray,
+                    mu_s: np.ndarray, mu_k: np.ndarray, rubbing: bool) -> None:
+        """``begin_step``'s 2D part: the step from positions ``x_n`` (n, 2) m, the collision
+        mesh's vertices ``start`` (n_m, 2) m, to the faces' corners ``new`` (c k, 2) m
+        where they end, with the coefficients ``_coefficients`` gives: the lagged
+        friction's pairs, the kept candidates, a self-contact's quiet region, set in the
+        compiled part (``barrier_part.set_step``)."""
+        start_c = np.ascontiguousarray(start)
+        friction = kept = None  # the lagged friction, the candidates kept from the start
+        if rubbing:
+            pairs, kept = self._start_candidates(start_c, self._obstacles_start, new)
+            friction = self._lagged_friction(start_c, mu_s, mu_k, pairs)
+        self._friction_pairs = friction
         if self.self_contact:
-            self._quiet = self._quiet_region(x_n, start)
-        if self.dimension == 2:
-            friction, quiet = self._friction_pairs, self._quiet
-            bp.set_step(self._part, new, np.ascontiguousarray(start), kept is not None,
-                        kept if kept is not None else _NO_CORNERS,
-                        pairs if kept is not None else _NO_PAIRS,
-                        *(friction if friction is not None else _NO_FRICTION),
-                        friction is not None,
-                        quiet[0] if quiet is not None else _NO_CORNERS,
-                        quiet[1] if quiet is not None else 0.0, quiet is not None)
+            self._quiet = self._quiet_region(x_n, start_c)
+        quiet = self._quiet
+        bp.set_step(self._part, new, start_c, kept is not None,
+                    kept if kept is not None else _NO_CORNERS,
+                    pairs if kept is not None else _NO_PAIRS,
+                    *(friction if friction is not None else _NO_FRICTION),
+                    friction is not None,
+                    quiet[0] if quiet is not None else _NO_CORNERS,
+                    quiet[1] if quiet is not None else 0.0, quiet is not None)
 
     def _coefficients(self, faces) -> tuple[np.ndarray, np.ndarray, bool]:
         """Each collision-mesh vertex's static and kinetic friction coefficients (n_m,)
@@ -500,12 +520,12 @@ class BarrierContact(Energy):
         """(k, 2) the (edge, vertex) candidates at the collision mesh's start vertices
         ``start`` (2D; the faces' corners ``old`` (c k, 2) m where they start), boxes
         inflated by dhat / 2 + ``CANDIDATE_MARGIN``: every pair within dhat there; and
-        where they were sought (n_v, 2) m if they serve as the barrier's kept candidates
-        (``barrier_part.candidates``: no corner moves further than the margin to where
-        it ends, ``new``), else None."""
+        where they were sought (n_v, 2) m (a view of ``start``) if they serve as the
+        barrier's kept candidates (``barrier_part.candidates``: no corner moves further
+        than the margin to where it ends, ``new``), else None."""
         pairs = self._static_candidates(start, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
-        if not old.size or _largest_shift(old, new) <= CANDIDATE_MARGIN:
-            return pairs, start[:self.vertex_nodes.size].copy()
+        if not old.size or old is new or _largest_shift(old, new) <= CANDIDATE_MARGIN:
+            return pairs, start[:self.vertex_nodes.size]
         return pairs, None
 
     def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray,
@@ -827,6 +847,8 @@ class BarrierContact(Energy):
         start = x_n.copy()
         dhat = self.settings.dhat
         for old, new in zip(old_faces, new_faces):
+            if new is old:  # a fixed face (``faces_at``)
+                continue
             shift = new.origin - old.origin
             if not np.any(shift):
                 continue
@@ -931,9 +953,7 @@ class BarrierContact(Energy):
         list while each face and its origin array are the same objects (see
         ``_corners``)."""
         kept = self._geometry_kept
-        if (kept is not None and len(kept[0]) == len(faces)
-                and all(f is g for f, g in zip(faces, kept[0]))
-                and all(f.origin is o for f, o in zip(faces, kept[1]))):
+        if kept is not None and _same_faces(faces, kept[0], kept[1]):
             return kept[2]
         d = self.dimension
         geometry = (np.array([f.origin for f in faces], float).reshape(-1, d),
@@ -1106,7 +1126,6 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     x = solution.q.reshape(-1, d)
     reaction = np.zeros((n, d))
     reaction[fixed] = solution.reaction.reshape(-1, d)[fixed]
-    contacts = cm.ContactState.empty(n)
-    contacts.obstacle = barrier.partners(solution.q)
+    contacts = cm.ContactState.held_by(barrier.partners(solution.q))
     return StepOutcome(x, (x - x_n) / dt, barrier.contact_forces(solution.q), contacts,
                        solution.iterations, reaction)

@@ -48,9 +48,15 @@ class ContactState:
 
     @classmethod
     def empty(cls, n_nodes: int) -> 'ContactState':
-        return cls(-np.ones(n_nodes, np.int64), np.zeros(n_nodes, np.int64),
-                   np.zeros(n_nodes), np.zeros(n_nodes), -np.ones(n_nodes, np.int64),
-                   np.zeros(n_nodes))
+        return cls.held_by(np.full(n_nodes, -1, np.int64))
+
+    @classmethod
+    def held_by(cls, obstacle: np.ndarray) -> 'ContactState':
+        """The contact set whose nodes are held by ``obstacle`` (n,) (-1: free; taken, not
+        copied), all FREE, no forces, no second obstacle."""
+        n_nodes = obstacle.shape[0]
+        return cls(obstacle, np.zeros(n_nodes, np.int64), np.zeros(n_nodes), np.zeros(n_nodes),
+                   np.full(n_nodes, -1, np.int64), np.zeros(n_nodes))
 
     def copy(self) -> 'ContactState':
         return ContactState(self.obstacle.copy(), self.mode.copy(), self.normal_force.copy(),

@@ -580,19 +580,21 @@ class SimulationFacade:
 
     def faces_at(self, grip: GripperState) -> list:
         """The obstacles (``faces_template``) with the jaw faces where the gripper state
-        ``grip`` puts them, moving with it: copies of the template's, read only. The faces
-        of the last three jaw placements made are kept: a step's end faces are its
-        measures' and the next step's start faces, and the jaw drive's second solve at
-        another gap starts from the same faces as its first."""
+        ``grip`` puts them, moving with it: copies of the template's (the fixed faces,
+        table and walls, the template's own), read only. The faces of the last three jaw
+        placements made are kept: a step's end faces are its measures' and the next step's
+        start faces, and the jaw drive's second solve at another gap starts from the same
+        faces as its first."""
         template = self._faces_template
         placement = (grip.x, grip.gap, grip.lift, grip.x_rate, grip.gap_rate, grip.lift_rate)
         for kept_placement, kept_template, faces in self._faces_kept:
             if kept_placement == placement and kept_template is template:
                 return faces
-        # shallow copies: the moving faces get new origin and velocity arrays
-        faces = [copy.copy(f) for f in template]
+        faces = list(template)
         for index, side in enumerate(self._face_side):
             sign = -1.0 if side == LEFT else 1.0
+            # a shallow copy: the moving face gets new origin and velocity arrays
+            faces[index] = copy.copy(template[index])
             faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
             faces[index].velocity = self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
                                                    grip.lift_rate)
@@ -811,10 +813,9 @@ class SimulationFacade:
                                  self_contact=soft.self_contact, carried=carried)
         partner = outcome.contacts.obstacle
         v = outcome.v[:n]
-        contacts = cm.ContactState.empty(n)
         # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
         # right_jaw (the fingers), then the faces
-        contacts.obstacle = np.where(partner[:n] > 0, partner[:n] - 1, -1)
+        contacts = cm.ContactState.held_by(np.where(partner[:n] > 0, partner[:n] - 1, -1))
         self._mark_sticking(contacts, v, grip_new)
         self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
                                    outcome.reaction[n:], partner[n:] == 0)
