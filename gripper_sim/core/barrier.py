@@ -61,8 +61,7 @@ import numpy as np
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
-                                              mesh_vertices, nearest_faces, nearest_partners,
-                                              same_values)
+                                              mesh_vertices, nearest_faces, same_values)
 from gripper_sim.core.barrier_search import (edge_vertex_candidates, paths_clear,
                                              smallest_distance)
 from gripper_sim.core.contact_passes import StepOutcome
@@ -912,31 +911,38 @@ class BarrierContact(Energy):
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, d) N, the faces' force on each node at ``q`` (d n,) m: barrier + friction."""
-        gradient = np.zeros(self.n_dof)
-        self._terms(q, gradient)
-        return -gradient.reshape(-1, self.dimension)
+        return self._forces(q, True)
 
     def normal_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, d) N, the barrier's (normal) part of ``contact_forces``, no friction."""
+        return self._forces(q, False)
+
+    def _forces(self, q: np.ndarray, friction: bool) -> np.ndarray:
+        """(n, d) N, minus the gradient of the barrier plus (with ``friction``) the lagged
+        friction at ``q`` (d n,) m: in 2D the last evaluation's when it was at ``q``
+        (``barrier_part.kept_forces``), else ``_terms``'s."""
+        if self.dimension == 2:
+            forces = np.empty(self.n_dof)
+            if bp.kept_forces(self._part, q, friction, forces):
+                return forces.reshape(-1, 2)
         gradient = np.zeros(self.n_dof)
-        self._terms(q, gradient, friction=False)
+        self._terms(q, gradient, friction=friction)
         return -gradient.reshape(-1, self.dimension)
 
     def partners(self, q: np.ndarray) -> np.ndarray:
         """(n,) int, for every node of an outline the body its nearest pair within dhat
         at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
         soft bodies); -1 for the nodes in no pair. 2D."""
-        v = self.vertices(q.reshape(-1, 2))
         n_v = self.vertex_nodes.size
+        n_m = n_v + self._obstacles_end.shape[0]
         owner = self._owners
-        if owner is None or owner.size != v.shape[0]:
+        if owner is None or owner.size != n_m:
             # the body of every collision-mesh vertex: outlines, then the faces' end points
             owner = self._owners = np.concatenate(
                 [self.vertex_body, 1 + len(self.bodies)
-                 + np.arange(v.shape[0] - n_v) // self.corners_per_face])
+                 + np.arange(n_m - n_v) // self.corners_per_face])
         partner = np.empty(self.n_dof // 2, np.int64)
-        nearest_partners(v, self._mesh_edges, bp.candidates(self._part, q), self.settings.dhat,
-                         self.vertex_nodes, owner, partner)
+        bp.partners(self._part, q, self.vertex_nodes, owner, partner)
         return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:

@@ -16,6 +16,8 @@ again, the last evaluation (positions, values; its gradients in the barrier's bu
   once a vertex moved further than the margin from where they were sought;
 - ``barrier_value``: the barrier and lagged friction (``barrier_terms.barrier_terms``)
   over those candidates, gradients added, the Hessian into the solver's CSC values;
+- ``kept_forces``: the last evaluation's forces, read at the positions it was made at;
+- ``partners``: the body each outline node's nearest pair within dhat touches;
 - ``max_step``: the CCD's step bound: ``barrier_kernels.kept_step_bound`` on the kept
   candidates, else the swept boxes' candidates and ``barrier_search.collision_free_step``.
 """
@@ -28,7 +30,8 @@ from numba import njit, types
 from numba.experimental import structref
 
 from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move, mesh_vertices,
-                                              relative_moves_within)
+                                              nearest_partners, relative_moves_within,
+                                              same_values)
 from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
 from gripper_sim.core.barrier_terms import barrier_terms
 
@@ -133,6 +136,42 @@ def barrier_value(part, x, hessian, grad, hdata, slots, dt, friction):
     part.last_values[0] = barrier
     part.last_values[1] = friction_value
     return barrier + friction_value if friction else barrier
+
+
+@njit(cache=True)
+def kept_forces(part, q, friction, forces):
+    """Whether the barrier's forces at positions q (2 n,) m are known without an
+    evaluation (a quiet self-contact, or the last evaluation made at q); then sets
+    ``forces`` (2 n,) N to minus the gradient of the barrier plus (with ``friction``) the
+    lagged friction, as ``BarrierContact._terms`` adds them into zeros (minus zero where
+    no vertex is)."""
+    terms = part.flags[B_TERMS]
+    if not quiet(part, q, np.zeros(0)) and (terms == 0 or not same_values(part.last_q, q)):
+        return False
+    forces[:] = -0.0
+    if terms != 2 or quiet(part, q, np.zeros(0)):
+        return True
+    with_friction = friction and part.has_friction
+    dof_pairs = part.dof_pairs
+    for i in range(dof_pairs.shape[0]):
+        for c in range(2):
+            k = 2 * i + c
+            gradient = 0.0 + part.barrier_gradient[k]
+            if with_friction:
+                gradient += part.friction_gradient[k]
+            forces[dof_pairs[i, c]] = -gradient
+    return True
+
+
+@njit(cache=True)
+def partners(part, q, vertex_nodes, owner, partner):
+    """``barrier_kernels.nearest_partners`` at positions q (2 n,) m over ``candidates``,
+    the faces' corners where they end: sets ``partner`` (n,) (``owner`` (n_m,) the body
+    of each collision-mesh vertex, the deformable ones at ``vertex_nodes`` (n_v,))."""
+    v = np.empty((part.dof_pairs.shape[0] + part.corners.shape[0], 2))
+    mesh_vertices(q, part.dof_pairs, part.corners, v)
+    nearest_partners(v, part.edges, candidates(part, q), part.dhat, vertex_nodes, owner,
+                     partner)
 
 
 @njit(cache=True)
