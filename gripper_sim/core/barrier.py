@@ -62,8 +62,7 @@ from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
                                               mesh_vertices, nearest_faces, same_values)
-from gripper_sim.core.barrier_search import (edge_vertex_candidates, paths_clear,
-                                             smallest_distance)
+from gripper_sim.core.barrier_search import edge_vertex_candidates, smallest_distance
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.friction_kernels import lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -279,6 +278,8 @@ class BarrierContact(Energy):
         self._n_faces = -1
         self._dt = 1.0
         self._obstacles_end = np.zeros((0, d))
+        #: m, the largest move of a face's corner in the step (2D, ``begin_step``)
+        self._faces_shift = 0.0
         #: ``_face_geometry``'s last answer: (faces, their origins, the arrays), or None
         self._geometry_kept = None
         #: ``_corners``'s last three corners made: (faces, their origins, corners), the
@@ -462,9 +463,11 @@ class BarrierContact(Energy):
         friction's pairs, the kept candidates, a self-contact's quiet region, set in the
         compiled part (``barrier_part.set_step``)."""
         start_c = np.ascontiguousarray(start)
+        old = self._obstacles_start
+        self._faces_shift = 0.0 if not old.size or old is new else _largest_shift(old, new)
         friction = kept = None  # the lagged friction, the candidates kept from the start
         if rubbing:
-            pairs, kept = self._start_candidates(start_c, self._obstacles_start, new)
+            pairs, kept = self._start_candidates(start_c)
             friction = self._lagged_friction(start_c, mu_s, mu_k, pairs)
         self._friction_pairs = friction
         if self.self_contact:
@@ -514,16 +517,15 @@ class BarrierContact(Energy):
         return largest_relative_move(q, self._vertex_dof_pairs, anchor, self.vertex_body,
                                      len(self.bodies) + 1)
 
-    def _start_candidates(self, start: np.ndarray, old: np.ndarray,
-                          new: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    def _start_candidates(self, start: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """(k, 2) the (edge, vertex) candidates at the collision mesh's start vertices
-        ``start`` (2D; the faces' corners ``old`` (c k, 2) m where they start), boxes
-        inflated by dhat / 2 + ``CANDIDATE_MARGIN``: every pair within dhat there; and
-        where they were sought (n_v, 2) m (a view of ``start``) if they serve as the
-        barrier's kept candidates (``barrier_part.candidates``: no corner moves further
-        than the margin to where it ends, ``new``), else None."""
+        ``start`` (2D; the faces' corners where they start), boxes inflated by dhat / 2 +
+        ``CANDIDATE_MARGIN``: every pair within dhat there; and where they were sought
+        (n_v, 2) m (a view of ``start``) if they serve as the barrier's kept candidates
+        (``barrier_part.candidates``: no corner moves further than the margin in the step,
+        ``_faces_shift``), else None."""
         pairs = self._static_candidates(start, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
-        if not old.size or old is new or _largest_shift(old, new) <= CANDIDATE_MARGIN:
+        if self._faces_shift <= CANDIDATE_MARGIN:
             return pairs, start[:self.vertex_nodes.size]
         return pairs, None
 
@@ -797,27 +799,6 @@ class BarrierContact(Energy):
         candidates.build(self._mesh, v, 0.5 * self.settings.dhat, self._broad_phase)
         return candidates
 
-    def _kept_along(self, q0: np.ndarray, q1: np.ndarray,
-                    faces_move: bool) -> np.ndarray | None:
-        """The kept candidates (``barrier_part.candidates``) if they hold every pair that comes
-        within dhat along the straight motion from positions ``q0`` to ``q1`` (2 n,) m,
-        the faces' corners where they end, or with ``faces_move`` moving from where they
-        start: both ends within ``CANDIDATE_MARGIN`` of where they were sought (so is
-        every point between: a pair not among them stays further than dhat apart all
-        along; kept candidates always have the faces' ends within it); else None."""
-        flags, _, _, anchor = self._part_arrays
-        if flags[bp.B_PAIRS] < 0:
-            return None
-        for q in (q0, q1):
-            if largest_move(q, self._vertex_dof_pairs, anchor) > CANDIDATE_MARGIN:
-                return None
-        # the corners they were sought with: where the faces start, or since, where they end
-        corners = self._obstacles_start if flags[bp.B_PAIRS] == 0 else self._obstacles_end
-        if (faces_move and corners.size
-                and _largest_shift(corners, self._obstacles_start) > CANDIDATE_MARGIN):
-            return None
-        return bp.candidates_of(self._part)
-
     def _static_candidates(self, v: np.ndarray, radius: float) -> np.ndarray:
         """(k, 2) the (edge, vertex) pairs of the collision mesh's vertices ``v`` (2D) whose
         boxes inflated by ``radius`` (m) meet (``barrier_search``)."""
@@ -866,47 +847,23 @@ class BarrierContact(Energy):
         """Whether the straight paths from the step's start (``begin_step``'s positions,
         the faces at the start of the step) to ``start`` (n, d) m (the faces at its end)
         cross nothing and end apart."""
-        if self.quiet(start.ravel()):
+        q = start.ravel()
+        if self.quiet(q):
             return True
-        v0 = self._start
-        v1 = self.vertices(start)
         # in 2D the compiled (conservative) check clears most paths, and with them their
         # ends (it clears no pair that ends touching; the others' boxes stay apart); the
         # exact CCD decides the others; nothing that stands still crosses anything
-        if self._clear_path(self._start_q, start.ravel(), v0, v1):
+        if self.dimension == 2 and bp.start_clear(self._part, self._start_q, q,
+                                                  self._faces_shift):
             return True
+        v0 = self._start
+        v1 = self.vertices(start)
         if not np.array_equal(v0, v1):
             exact = float(ipctk.compute_collision_free_stepsize(
                 self._mesh, v0, v1, broad_phase=self._broad_phase, narrow_phase_ccd=EXACT_CCD))
             if exact < 1.0:
                 return False
         return self.min_distance(start) > 0.0
-
-    def _pairs_along(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray, v1: np.ndarray,
-                     faces_move: bool) -> np.ndarray:
-        """(k, 2) candidates holding every pair that comes within dhat along the straight
-        motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's vertices
-        ``v0`` to ``v1`` (n_m, 2) m (``faces_move``: the faces' corners among them from
-        where they start to where they end): the kept ones (``_kept_along``), else those
-        of the boxes the vertices sweep."""
-        pairs = self._kept_along(q0, q1, faces_move)
-        if pairs is None:
-            pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
-                                           self.self_contact,
-                                           (0.5 + SWEPT_MARGIN) * self.settings.dhat)
-        return pairs
-
-    def _clear_path(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray,
-                    v1: np.ndarray) -> bool:
-        """Whether the compiled check (2D, ``barrier_search.paths_clear``) finds the
-        straight motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's
-        vertices ``v0`` to ``v1`` (n_m, 2) m (the faces from where they start to where
-        they end), free of crossings, every pair ending apart, for certain (3D: never,
-        the exact CCD decides)."""
-        if self.dimension != 2:
-            return False
-        pairs = self._pairs_along(q0, q1, v0, v1, True)
-        return bool(paths_clear(v0, v1, self._mesh_edges, pairs))
 
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:

@@ -18,6 +18,8 @@ again, the last evaluation (positions, values; its gradients in the barrier's bu
   over those candidates, gradients added, the Hessian into the solver's CSC values;
 - ``kept_forces``: the last evaluation's forces, read at the positions it was made at;
 - ``partners``: the body each outline node's nearest pair within dhat touches;
+- ``start_clear``: whether the way to a start of the Newton solve is clear
+  (``barrier_search.paths_clear``) over the kept candidates, else the swept boxes';
 - ``max_step``: the CCD's step bound: ``barrier_kernels.kept_step_bound`` on the kept
   candidates, else the swept boxes' candidates and ``barrier_search.collision_free_step``.
 """
@@ -32,7 +34,8 @@ from numba.experimental import structref
 from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move, mesh_vertices,
                                               nearest_partners, relative_moves_within,
                                               same_values)
-from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
+from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
+                                             paths_clear)
 from gripper_sim.core.barrier_terms import barrier_terms
 
 #: a part's flags (int64 array): its candidates (-1: none kept, 0: sought at the step's
@@ -175,6 +178,30 @@ def partners(part, q, vertex_nodes, owner, partner):
 
 
 @njit(cache=True)
+def start_clear(part, q0, q1, faces_shift):
+    """Whether ``barrier_search.paths_clear`` finds the straight motion from the step's
+    start (positions q0 (2 n,) m, the faces' corners where they start: ``start``) to
+    positions q1 (2 n,) m (the faces' corners where they end), whose corners move at most
+    ``faces_shift`` m, free of crossings, every pair ending apart, for certain. Over the
+    kept candidates if they hold every pair that comes within dhat along it: both ends
+    within the margin of where they were sought (so is every point between), and the
+    corners too (those of the start's candidates stand where the faces start, those
+    sought since where they end); else over the candidates of the swept boxes."""
+    v0 = part.start
+    v1 = np.empty_like(v0)
+    mesh_vertices(q1, part.dof_pairs, part.corners, v1)
+    flags = part.flags
+    if (flags[B_PAIRS] >= 0 and (flags[B_PAIRS] == 0 or faces_shift <= part.margin)
+            and largest_move(q0, part.dof_pairs, part.anchor) <= part.margin
+            and largest_move(q1, part.dof_pairs, part.anchor) <= part.margin):
+        pairs = part.pairs
+    else:
+        pairs = edge_vertex_candidates(v0, v1, part.edges, part.groups, part.self_contact,
+                                       part.swept_radius)
+    return paths_clear(v0, v1, part.edges, pairs)
+
+
+@njit(cache=True)
 def max_step(part, x, dq):
     """The CCD's largest fraction (0, 1] of the step dq (2 n,) m from x free of
     crossings (conservative: each pair keeps ``barrier_search.SEPARATION`` of its gap):
@@ -235,12 +262,6 @@ def set_step(part, corners, start, has_pairs, anchor, pairs, friction_ids, frict
     part.has_quiet = has_quiet
     part.flags[:] = 0
     part.flags[B_PAIRS] = 0 if has_pairs else -1
-
-
-@njit(cache=True)
-def candidates_of(part):
-    """The part's kept candidates (k, 2) (as they are: see ``candidates``)."""
-    return part.pairs
 
 
 @njit(cache=True)
