@@ -41,7 +41,7 @@ from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
 from gripper_sim.core import jaw_drive
 from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
-from gripper_sim.core.barrier_kernels import mark_sticking
+from gripper_sim.core.barrier_kernels import held_normal_forces, mark_sticking
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import PatternCachingSolver
@@ -91,6 +91,10 @@ class SimulationFacade:
     #: the obstacles' velocities (``_obstacles``): (the ``_obstacles_kept`` they are of,
     #: the gripper's (x, gap, lift) rates m/s, (k, d) m/s read only), or None
     _moving_kept: tuple | None = None
+    #: ``obstacle_names``: (the faces template they are of, the names), or None
+    _names_kept: tuple | None = None
+    #: ``_total_mass``: (the masses array, their sum kg), or None
+    _mass_kept: tuple | None = None
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -612,8 +616,13 @@ class SimulationFacade:
 
     @property
     def obstacle_names(self) -> tuple:
-        names = tuple(f.name for f in self._faces_template)
-        return ('left_jaw', 'right_jaw') + names if self._soft is not None else names
+        """The obstacles' names (``StepResult.obstacle_names``), kept per face set."""
+        kept = self._names_kept
+        if kept is None or kept[0] is not self._faces_template:
+            names = tuple(f.name for f in self._faces_template)
+            names = ('left_jaw', 'right_jaw') + names if self._soft is not None else names
+            kept = self._names_kept = (self._faces_template, names)
+        return kept[1]
 
     def _obstacles(self, grip: GripperState):
         """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
@@ -689,20 +698,21 @@ class SimulationFacade:
         """
         grip, fruit, finger, soft = self._grip, self.fruit, self._finger, self._soft
         normals, face_sides, face_velocities = self._obstacles(grip)
-        held = obstacle >= 0
-        normal = np.zeros(len(obstacle))
         if soft is not None:  # the barrier's force is normal to the finger's outline
-            soft_normal = self._barrier.normal_forces(
-                np.concatenate([x, finger.positions]).ravel())
-            pressed = soft_normal[:len(obstacle)][held]
-            normal[held] = np.sqrt((pressed * pressed).sum(axis=1))  # np.linalg.norm's sums
+            normal = np.empty(len(obstacle))
+            held_normal_forces(self._barrier.normal_forces(
+                np.concatenate([x, finger.positions]).ravel()), obstacle, normal)
         else:
+            held = obstacle >= 0
+            normal = np.zeros(len(obstacle))
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
         side_of_node = self._obstacles_kept[-1][obstacle]
         sides = (side_of_node == LEFT, side_of_node == RIGHT)
-        origins = (self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT))
 
-        def jaw_wrenches() -> list:
+        def jaw_origins() -> tuple:
+            return self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT)
+
+        def jaw_wrenches(origins: tuple) -> list:
             if soft is not None:
                 return self._finger_wrenches(finger, origins)
             return [_wrench(x[sides[side]] - origins[side], -forces[sides[side]])
@@ -713,10 +723,10 @@ class SimulationFacade:
         elif soft is not None:  # what the step committed: its fingers' base reactions
             left_n, right_n = self._jaw_force
         else:  # each jaw's force along the closing axis
-            wrenches = jaw_wrenches()
+            wrenches = jaw_wrenches(jaw_origins())
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
         masses = fruit.masses
-        centroid = masses @ x / masses.sum()
+        centroid = masses @ x / self._total_mass(masses)
         on_left, on_right = bool(sides[LEFT].any()), bool(sides[RIGHT].any())
         slip = self.measure_slip(float(centroid[-1] - grip.lift), on_left and on_right,
                                  on_left or on_right)
@@ -733,7 +743,8 @@ class SimulationFacade:
             gripper_x=grip.x, gripper_x_velocity=grip.x_rate)
 
         def rarely_read() -> dict:
-            jaws = wrenches if wrenches is not None else jaw_wrenches()
+            origins = jaw_origins()
+            jaws = wrenches if wrenches is not None else jaw_wrenches(origins)
             return dict(
                 left_wrench=jaws[LEFT], right_wrench=jaws[RIGHT],
                 slipping=jaw_contacts_sliding(v, obstacle, face_sides, normals,
@@ -744,6 +755,13 @@ class SimulationFacade:
                     gravitational=float(self.gravity.value(x.ravel()))),
                 fingers=soft.result(finger, *origins) if soft is not None else None)
         return fields, rarely_read, normal, sides
+
+    def _total_mass(self, masses: np.ndarray) -> float:
+        """kg, the sum of ``masses`` (n,) kg (``masses.sum()``), kept for the same array."""
+        kept = self._mass_kept
+        if kept is None or kept[0] is not masses:
+            kept = self._mass_kept = (masses, masses.sum())
+        return kept[1]
 
     def contact_forces_and_holders(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, d) N every contact force on the fruit and (n,) the obstacle holding each
