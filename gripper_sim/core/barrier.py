@@ -64,7 +64,6 @@ from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_mov
                                               mesh_vertices, nearest_faces, same_values)
 from gripper_sim.core.barrier_search import edge_vertex_candidates, smallest_distance
 from gripper_sim.core.contact_passes import StepOutcome
-from gripper_sim.core.friction_kernels import lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
@@ -290,8 +289,8 @@ class BarrierContact(Energy):
         self._start_q = np.zeros(d * n_nodes)
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()  # the lagged friction's pairs (3D)
-        #: the compiled lagged friction's pairs (2D, ``_lagged_friction``), or None
-        self._friction_pairs = None
+        #: whether the step has lagged friction pairs (2D, ``barrier_part.set_step``)
+        self._has_friction = False
         #: the broad phase of every candidate search (the meshes are small: sorting the
         #: boxes along an axis beats the default hash grid 2-3x)
         self._broad_phase = ipctk.SweepAndPrune()
@@ -459,27 +458,20 @@ class BarrierContact(Energy):
                     mu_s: np.ndarray, mu_k: np.ndarray, rubbing: bool) -> None:
         """``begin_step``'s 2D part: the step from positions ``x_n`` (n, 2) m, the collision
         mesh's vertices ``start`` (n_m, 2) m, to the faces' corners ``new`` (c k, 2) m
-        where they end, with the coefficients ``_coefficients`` gives: the lagged
-        friction's pairs, the kept candidates, a self-contact's quiet region, set in the
-        compiled part (``barrier_part.set_step``)."""
+        where they end, with the coefficients ``_coefficients`` gives: the candidates at
+        the start (kept while no corner moves further than ``CANDIDATE_MARGIN``), the
+        lagged friction's pairs (``barrier_part.set_step``), a self-contact's quiet
+        region."""
         start_c = np.ascontiguousarray(start)
         old = self._obstacles_start
         self._faces_shift = 0.0 if not old.size or old is new else _largest_shift(old, new)
-        friction = kept = None  # the lagged friction, the candidates kept from the start
-        if rubbing:
-            pairs, kept = self._start_candidates(start_c)
-            friction = self._lagged_friction(start_c, mu_s, mu_k, pairs)
-        self._friction_pairs = friction
         if self.self_contact:
             self._quiet = self._quiet_region(x_n, start_c)
         quiet = self._quiet
-        bp.set_step(self._part, new, start_c, kept is not None,
-                    kept if kept is not None else _NO_CORNERS,
-                    pairs if kept is not None else _NO_PAIRS,
-                    *(friction if friction is not None else _NO_FRICTION),
-                    friction is not None,
-                    quiet[0] if quiet is not None else _NO_CORNERS,
-                    quiet[1] if quiet is not None else 0.0, quiet is not None)
+        self._has_friction = bool(bp.set_step(
+            self._part, new, start_c, rubbing, self._faces_shift <= CANDIDATE_MARGIN, mu_s,
+            mu_k, quiet[0] if quiet is not None else _NO_CORNERS,
+            quiet[1] if quiet is not None else 0.0, quiet is not None))
 
     def _coefficients(self, faces) -> tuple[np.ndarray, np.ndarray, bool]:
         """Each collision-mesh vertex's static and kinetic friction coefficients (n_m,)
@@ -516,38 +508,6 @@ class BarrierContact(Energy):
         besides its body's mean move (``largest_relative_move``)."""
         return largest_relative_move(q, self._vertex_dof_pairs, anchor, self.vertex_body,
                                      len(self.bodies) + 1)
-
-    def _start_candidates(self, start: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """(k, 2) the (edge, vertex) candidates at the collision mesh's start vertices
-        ``start`` (2D; the faces' corners where they start), boxes inflated by dhat / 2 +
-        ``CANDIDATE_MARGIN``: every pair within dhat there; and where they were sought
-        (n_v, 2) m (a view of ``start``) if they serve as the barrier's kept candidates
-        (``barrier_part.candidates``: no corner moves further than the margin in the step,
-        ``_faces_shift``), else None."""
-        pairs = self._static_candidates(start, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
-        if self._faces_shift <= CANDIDATE_MARGIN:
-            return pairs, start[:self.vertex_nodes.size]
-        return pairs, None
-
-    def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray,
-                         pairs: np.ndarray):
-        """The compiled friction's pairs (2D, ``friction_kernels.lagged_friction``) at the
-        collision mesh's start vertices ``start`` with per-vertex coefficients ``mu_s``,
-        ``mu_k`` (n_m,), of the (edge, vertex) candidates ``pairs`` (k, 2) (holding every
-        pair within dhat): (vertex ids, weights, tangents, forces, coefficients), or None
-        when no pair is within dhat."""
-        k = len(pairs)
-        if not k:
-            return None
-        ids, weights = np.empty((k, 3), np.int64), np.empty((k, 3))
-        tangents, forces, coefficients = np.empty((k, 2)), np.empty(k), np.empty((k, 2))
-        count = lagged_friction(np.ascontiguousarray(start), self._mesh_edges, pairs,
-                                self.settings.dhat, self.settings.stiffness, mu_s, mu_k, ids,
-                                weights, tangents, forces, coefficients)
-        if not count:
-            return None
-        return (ids[:count], weights[:count], tangents[:count], forces[:count],
-                coefficients[:count])
 
     def _check_outside(self, outside: int) -> None:
         """AssertionError if compiled Hessian entries fell outside the pattern, unless
@@ -643,7 +603,7 @@ class BarrierContact(Energy):
             return None
         gradients = ((None, None) if terms == 1 else
                      (self._gradient_buffers[0],
-                      self._gradient_buffers[1] if self._friction_pairs is not None else None))
+                      self._gradient_buffers[1] if self._has_friction else None))
         return last_q, float(values[0]), float(values[1]), *gradients
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:

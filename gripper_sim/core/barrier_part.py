@@ -37,14 +37,13 @@ from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move, mes
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear)
 from gripper_sim.core.barrier_terms import barrier_terms
+from gripper_sim.core.friction_kernels import lagged_friction
 
 #: a part's flags (int64 array): its candidates (-1: none kept, 0: sought at the step's
 #: start (the faces' corners where they start), 1: sought since (where they end)), its
 #: Hessian entries outside the pattern (not dropped; the reader clears it), its last
 #: finite evaluation (0: none this step, 1: no pairs, 2: terms)
 B_PAIRS, B_OUTSIDE, B_TERMS, B_SIZE = range(4)
-#: the candidates where none are kept
-NO_PAIRS = np.zeros((0, 2), np.int64)
 
 
 @structref.register
@@ -244,24 +243,52 @@ def set_project(part, project):
 
 
 @njit(cache=True)
-def set_step(part, corners, start, has_pairs, anchor, pairs, friction_ids, friction_weights,
-             friction_tangents, friction_forces, friction_coefficients, has_friction,
-             quiet_anchor, quiet_reach, has_quiet):
-    """A step's state (``PART_FIELDS``; flat arguments: numba types a tuple argument in
-    Python, slowly); no evaluation kept."""
+def set_step(part, corners, start, rubbing, keep, mu_s, mu_k, quiet_anchor, quiet_reach,
+             has_quiet):
+    """A step's state (``PART_FIELDS``), no evaluation kept: the faces' corners where
+    they end (c k, 2) m, the collision mesh's start (n_m, 2) m (C order; the faces'
+    corners where they start); with ``rubbing`` (a friction coefficient is positive)
+    the candidates at the start (``edge_vertex_candidates``, boxes inflated by the
+    candidate radius: every pair within dhat), kept if ``keep`` (no corner moves further
+    than the margin in the step), and the lagged friction of those within dhat
+    (``friction_kernels.lagged_friction``, each vertex's coefficients ``mu_s``, ``mu_k``
+    (n_m,)); a self-contact's quiet region (anchor (n_v, 2) m, reach m) if
+    ``has_quiet``. Returns whether there is lagged friction."""
     part.corners = corners
     part.start = start
-    if has_pairs:
-        part.anchor[:] = anchor
+    pairs = np.zeros((0, 2), np.int64)
+    has_pairs = has_friction = False
+    ids, weights = np.zeros((0, 3), np.int64), np.zeros((0, 3))
+    tangents, forces, coefficients = np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2))
+    if rubbing:
+        found = edge_vertex_candidates(start, start, part.edges, part.groups,
+                                       part.self_contact, part.radius)
+        k = found.shape[0]
+        if k:
+            all_ids, all_weights = np.empty((k, 3), np.int64), np.empty((k, 3))
+            all_tangents, all_forces, all_coefficients = (np.empty((k, 2)), np.empty(k),
+                                                          np.empty((k, 2)))
+            count = lagged_friction(start, part.edges, found, part.dhat, part.kappa, mu_s,
+                                    mu_k, all_ids, all_weights, all_tangents, all_forces,
+                                    all_coefficients)
+            if count:
+                has_friction = True
+                ids, weights = all_ids[:count].copy(), all_weights[:count].copy()
+                tangents, forces = all_tangents[:count].copy(), all_forces[:count].copy()
+                coefficients = all_coefficients[:count].copy()
+        if keep:
+            has_pairs = True
+            pairs = found
+            part.anchor[:] = start[:part.dof_pairs.shape[0]]
     part.pairs = pairs
-    part.friction_pairs = (friction_ids, friction_weights, friction_tangents,
-                           friction_forces, friction_coefficients)
+    part.friction_pairs = (ids, weights, tangents, forces, coefficients)
     part.has_friction = has_friction
     part.quiet_anchor = quiet_anchor
     part.quiet_reach = quiet_reach
     part.has_quiet = has_quiet
     part.flags[:] = 0
     part.flags[B_PAIRS] = 0 if has_pairs else -1
+    return has_friction
 
 
 @njit(cache=True)
