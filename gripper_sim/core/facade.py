@@ -642,20 +642,23 @@ class SimulationFacade:
                 sides = [LEFT, RIGHT] + sides
             normals, sides = np.array(normals, float), np.array(sides, np.int64)
             normals.flags.writeable = sides.flags.writeable = False
-            jaws = sides >= 0
+            # (obstacle, -1.0 left or 1.0 right) of the jaws' obstacles
+            jaw_signs = tuple((int(k), -1.0 if sides[k] == LEFT else 1.0)
+                              for k in np.flatnonzero(sides >= 0))
             # the jaw side of each obstacle, and last -1: an obstacle index's (-1: none)
             side_of_obstacle = np.append(sides, -1)
             kept = self._obstacles_kept = (template, normals, sides, np.array(velocities, float),
-                                           jaws, np.where(sides[jaws] == LEFT, -1.0, 1.0),
-                                           side_of_obstacle)
-        _, normals, sides, velocities, jaws, sign, _ = kept
+                                           jaw_signs, side_of_obstacle)
+        _, normals, sides, velocities, jaw_signs, _ = kept
         rates = (grip.x_rate, grip.gap_rate, grip.lift_rate)
         moving = self._moving_kept
         if moving is None or moving[0] is not kept or moving[1] != rates:
             velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
-            velocities[jaws] = 0.0
-            velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
-            velocities[jaws, -1] = grip.lift_rate
+            half_gap_rate = 0.5 * grip.gap_rate
+            for k, sign in jaw_signs:
+                velocities[k] = 0.0
+                velocities[k, 0] = grip.x_rate + half_gap_rate * sign
+                velocities[k, -1] = grip.lift_rate
             velocities.flags.writeable = False
             moving = self._moving_kept = (kept, rates, velocities)
         return normals, sides, moving[2]
