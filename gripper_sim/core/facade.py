@@ -48,7 +48,7 @@ from gripper_sim.core.fast_solver import PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
 from gripper_sim.core.results import Energies, JawWrench, StepResult
-from gripper_sim.core.soft_fingers import FingerState, SoftFingers
+from gripper_sim.core.soft_fingers import FingerState, SoftFingers, base_pushes
 from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
@@ -872,12 +872,9 @@ class SimulationFacade:
         its deformable finger: the x part of its ``_finger_wrenches`` force (the same
         sum), without the rest of the wrench."""
         finger = self._finger
-        forces = []
-        for side, (nodes, own) in enumerate(self._finger_bases()):
-            push = (float(finger.reaction[nodes, 0].sum()) if finger.touching[own].any()
-                    else 0.0)
-            forces.append(push if side == LEFT else -push)
-        return forces[LEFT], forces[RIGHT]
+        (left, _), (right, _) = self._finger_bases()
+        return base_pushes(finger.reaction, finger.touching, left, right,
+                           self._soft.body.n_nodes)
 
     def _finger_bases(self) -> tuple:
         """Per jaw (LEFT, RIGHT): (its finger's base nodes, the slice of its finger's
