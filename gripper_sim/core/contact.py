@@ -20,8 +20,25 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def jaw_sides(obstacle, side_of_obstacle, left, right):
+    """Set ``left`` and ``right`` (n,) bool to the nodes the left (side 0) and the right
+    (side 1) jaw hold: the side of each node's obstacle (``obstacle`` (n,), -1 none;
+    ``side_of_obstacle`` (k + 1,) each obstacle's side, -1 none, and last -1 for no
+    obstacle); returns whether each jaw holds any node."""
+    any_left = any_right = False
+    for i in range(obstacle.shape[0]):
+        side = side_of_obstacle[obstacle[i]]
+        left[i] = side == 0
+        right[i] = side == 1
+        any_left = any_left or side == 0
+        any_right = any_right or side == 1
+    return any_left, any_right
 
 
 @dataclass

@@ -709,8 +709,8 @@ class SimulationFacade:
             held = obstacle >= 0
             normal = np.zeros(len(obstacle))
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
-        side_of_node = self._obstacles_kept[-1][obstacle]
-        sides = (side_of_node == LEFT, side_of_node == RIGHT)
+        sides = (np.empty(len(obstacle), bool), np.empty(len(obstacle), bool))  # LEFT, RIGHT
+        on_left, on_right = cm.jaw_sides(obstacle, self._obstacles_kept[-1], *sides)
 
         def jaw_origins() -> tuple:
             return self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT)
@@ -730,7 +730,6 @@ class SimulationFacade:
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
         masses = fruit.masses
         centroid = masses @ x / self._total_mass(masses)
-        on_left, on_right = bool(sides[LEFT].any()), bool(sides[RIGHT].any())
         slip = self.measure_slip(float(centroid[-1] - grip.lift), on_left and on_right,
                                  on_left or on_right)
         x, v, forces, obstacle = x.copy(), v.copy(), forces.copy(), obstacle.copy()
