@@ -41,7 +41,8 @@ from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
 from gripper_sim.core import jaw_drive
 from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
-from gripper_sim.core.barrier_kernels import held_normal_forces, mark_sticking
+from gripper_sim.core.barrier_kernels import (held_normal_forces, mark_sticking,
+                                              split_partners)
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import PatternCachingSolver
@@ -831,14 +832,15 @@ class SimulationFacade:
                                  np.concatenate([self.v, finger.velocities]), soft.base, targets,
                                  self.faces_at(self._grip), new_faces, dt,
                                  self_contact=soft.self_contact, carried=carried)
-        partner = outcome.contacts.obstacle
         v = outcome.v[:n]
         # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
         # right_jaw (the fingers), then the faces
-        contacts = cm.ContactState.held_by(np.where(partner[:n] > 0, partner[:n] - 1, -1))
+        obstacle, touching = np.empty(n, np.int64), np.empty(soft.n_nodes, bool)
+        split_partners(outcome.contacts.obstacle, obstacle, touching)
+        contacts = cm.ContactState.held_by(obstacle)
         self._mark_sticking(contacts, v, grip_new)
         self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
-                                   outcome.reaction[n:], partner[n:] == 0)
+                                   outcome.reaction[n:], touching)
         self.commit_step(outcome.x[:n], v, contacts, outcome.forces[:n], grip_new,
                          self._finger_jaw_forces(), dt)
         return outcome.iterations
