@@ -44,6 +44,7 @@ from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_ste
 from gripper_sim.core.barrier_kernels import (held_normal_forces, mark_sticking,
                                               split_partners)
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
+from gripper_sim.core.deferred import build
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
@@ -839,8 +840,9 @@ class SimulationFacade:
         split_partners(outcome.contacts.obstacle, obstacle, touching)
         contacts = cm.ContactState.held_by(obstacle)
         self._mark_sticking(contacts, v, grip_new)
-        self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
-                                   outcome.reaction[n:], touching)
+        self._finger = build(FingerState, dict(
+            positions=outcome.x[n:], velocities=outcome.v[n:], contact_forces=outcome.forces[n:],
+            reaction=outcome.reaction[n:], touching=touching))
         self.commit_step(outcome.x[:n], v, contacts, outcome.forces[:n], grip_new,
                          self._finger_jaw_forces(), dt)
         return outcome.iterations

@@ -11,6 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
+from gripper_sim.core.deferred import build
 from gripper_sim.core.fruit import FruitModel
 from gripper_sim.core.results import Deformation
 
@@ -321,8 +322,8 @@ def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,
     compression = fruit.rest_width - width
     ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
     if jaw_contact_length is None:
-        trib = tributary_lengths(fruit, x)
-        jaw_contact_length = float(np.sum(trib[jaw_contact[surface]]))
-    return Deformation(compression=compression, compression_ratio=ratio,
-                       max_skin_strain=max_strain, contact_length=jaw_contact_length,
-                       peak_contact_pressure=peak, node_pressure=pressure)
+        jaw_contact_length = held_length(fruit, x, jaw_contact)
+    return build(Deformation, dict(compression=compression, compression_ratio=ratio,
+                                   max_skin_strain=max_strain,
+                                   contact_length=jaw_contact_length,
+                                   peak_contact_pressure=peak, node_pressure=pressure))
