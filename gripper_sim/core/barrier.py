@@ -326,6 +326,7 @@ class BarrierContact(Energy):
         self._part_arrays = None
         self._part_slots = None
         self._part_project = None
+        self._part_projection = None  # the ``projection`` last compared (``_synced_part``)
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -675,10 +676,13 @@ class BarrierContact(Energy):
     def _synced_part(self):
         """The 2D part with this barrier's ``projection`` (which may be set on the
         instance)."""
-        project = self.projection == ipctk.PSDProjectionMethod.CLAMP
-        if project != self._part_project:
-            bp.set_project(self._part, project)
-            self._part_project = project
+        projection = self.projection
+        if projection is not self._part_projection:  # (ipctk's enum values are singletons)
+            project = projection == ipctk.PSDProjectionMethod.CLAMP
+            if project != self._part_project:
+                bp.set_project(self._part, project)
+                self._part_project = project
+            self._part_projection = projection
         return self._part
 
     def pattern_slots(self, scatter: np.ndarray) -> np.ndarray:
