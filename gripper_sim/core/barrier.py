@@ -953,8 +953,7 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
                             StepConstraints.free(n, dim=d))
     x = solution.q.reshape(-1, d)
     forces = barrier.contact_forces(solution.q)
-    contacts = cm.ContactState.empty(n)
-    contacts.obstacle = barrier.holders(x, new_faces, forces)
+    contacts = cm.ContactState.held_by(barrier.holders(x, new_faces, forces))
     v = (x - x_n) / dt
     for k in np.flatnonzero(np.bincount(contacts.obstacle + 1, minlength=len(new_faces) + 1)[1:]):
         face = new_faces[k]
