@@ -9,7 +9,8 @@ from gripper_sim.configuration import load_config
 from gripper_sim.core import kernels
 from gripper_sim.core.fast import ring_model
 from gripper_sim.core.fruit import build_fruit
-from gripper_sim.core.measures import deformation, face_contact_length, tributary_lengths
+from gripper_sim.core.measures import (deformation, face_contact_length, held_length,
+                                       numpy_sum, tributary_lengths)
 from gripper_sim.core.obstacles import FlatFace
 
 MODELS = (['fruit.nodes=40'], ['fruit.model=solid', 'fruit.nodes=48'])
@@ -82,3 +83,26 @@ def test_the_compiled_step_measures_with_the_same_functions():
     assert out[kernels.M_PEAK_PRESSURE] == shape.peak_contact_pressure
     assert np.array_equal(pressure, shape.node_pressure)
     assert out[kernels.M_CONTACT_LENGTH] == face_contact_length(fruit, x, face, obstacle, 1) > 0
+
+
+@pytest.mark.parametrize('size', [0, 1, 7, 8, 14, 127, 128, 129, 300, 1000])
+def test_numpy_sum_adds_as_numpy_does_to_the_bit(size):
+    """The compiled sum follows numpy's pairwise order: equal to ``np.sum`` bit for bit
+    (a plain running sum differs in the last bits for most of these), zeros' sign too."""
+    rng = np.random.default_rng(size)
+    for _ in range(20):
+        values = rng.standard_normal(size) * 10.0 ** rng.uniform(-6, 6, size)
+        assert numpy_sum(values, size) == np.sum(values)
+        assert numpy_sum(np.append(values, 5.0), size) == np.sum(values)  # only count
+    minus_zeros = np.full(size, -0.0)
+    assert np.signbit(numpy_sum(minus_zeros, size)) == np.signbit(np.sum(minus_zeros))
+
+
+@pytest.mark.parametrize('model', MODELS, ids=['shell', 'solid'])
+def test_held_length_is_the_sum_of_the_held_tributary_lengths(model):
+    fruit = build_fruit(load_config(overrides=model))
+    x, _, held, _ = _pressed(fruit, 0)
+    expected = float(np.sum(tributary_lengths(fruit, x)[held[fruit.surface]]))
+    assert expected > 0
+    assert held_length(fruit, x, held) == expected
+    assert held_length(fruit, x, np.zeros(fruit.n_nodes, bool)) == 0.0

@@ -51,6 +51,7 @@ its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 from __future__ import annotations
 
 import copy
+import operator
 from dataclasses import dataclass
 from typing import Callable
 
@@ -60,12 +61,9 @@ import numpy as np
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
-                                              mesh_vertices, nearest_faces, nearest_partners,
-                                              same_values)
-from gripper_sim.core.barrier_search import (edge_vertex_candidates, paths_clear,
-                                             smallest_distance)
+                                              mesh_vertices, nearest_faces, same_values)
+from gripper_sim.core.barrier_search import edge_vertex_candidates, smallest_distance
 from gripper_sim.core.contact_passes import StepOutcome
-from gripper_sim.core.friction_kernels import lagged_friction
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
@@ -179,6 +177,16 @@ def _half_extents(face) -> np.ndarray:
     return np.minimum(np.asarray(face.half_extents, float), 0.5 * INFINITE_FACE_LENGTH)
 
 
+def _same_faces(faces, kept_faces: tuple, kept_origins: tuple) -> bool:
+    """Whether ``faces`` are the objects ``kept_faces``, each still with its origin array
+    of ``kept_origins``."""
+    return (len(faces) == len(kept_faces) and all(map(operator.is_, faces, kept_faces))
+            and all(map(operator.is_, map(_origin, faces), kept_origins)))
+
+
+_origin = operator.attrgetter('origin')
+
+
 def face_corners(faces, dimension: int = 2) -> np.ndarray:
     """(c k, d) m, the corners of the k faces (``FlatFace`` or ``Plate``), c = 2^(d-1)
     rows per face: a segment's two ends, a rectangle's four corners in order round it."""
@@ -269,6 +277,8 @@ class BarrierContact(Energy):
         self._n_faces = -1
         self._dt = 1.0
         self._obstacles_end = np.zeros((0, d))
+        #: m, the largest move of a face's corner in the step (2D, ``begin_step``)
+        self._faces_shift = 0.0
         #: ``_face_geometry``'s last answer: (faces, their origins, the arrays), or None
         self._geometry_kept = None
         #: ``_corners``'s last three corners made: (faces, their origins, corners), the
@@ -279,8 +289,8 @@ class BarrierContact(Energy):
         self._start_q = np.zeros(d * n_nodes)
         self._rest = None  # (n_v, d) m, the surface's first start: the mesh's rest shape
         self._tangential = ipctk.TangentialCollisions()  # the lagged friction's pairs (3D)
-        #: the compiled lagged friction's pairs (2D, ``_lagged_friction``), or None
-        self._friction_pairs = None
+        #: whether the step has lagged friction pairs (2D, ``barrier_part.set_step``)
+        self._has_friction = False
         #: the broad phase of every candidate search (the meshes are small: sorting the
         #: boxes along an axis beats the default hash grid 2-3x)
         self._broad_phase = ipctk.SweepAndPrune()
@@ -316,6 +326,7 @@ class BarrierContact(Energy):
         self._part_arrays = None
         self._part_slots = None
         self._part_project = None
+        self._part_projection = None  # the ``projection`` last compared (``_synced_part``)
 
     # ------------------------------------------------------------------ set-up
     def _pattern_elements(self) -> np.ndarray:
@@ -397,9 +408,7 @@ class BarrierContact(Energy):
         same faces for the same gripper state, ``faces_at``; faces are not changed in
         place: a moved face is a copy with a new origin). Read only."""
         for kept_faces, kept_origins, corners in self._corners_kept:
-            if (len(kept_faces) == len(faces)
-                    and all(f is g for f, g in zip(faces, kept_faces))
-                    and all(f.origin is o for f, o in zip(faces, kept_origins))):
+            if _same_faces(faces, kept_faces, kept_origins):
                 return corners
         corners = face_corners(faces, self.dimension)
         self._corners_kept = ([(tuple(faces), tuple(f.origin for f in faces), corners)]
@@ -433,31 +442,37 @@ class BarrierContact(Energy):
         self._start = start
         self._start_q = x_n.ravel().copy()
         mu_s, mu_k, rubbing = self._coefficients(new_faces)
+        if self.dimension == 2:
+            self._begin_part(x_n, start, new, mu_s, mu_k, rubbing)
+            return
         if len(self._tangential):  # ipctk's lagged friction (3D): the last step's
             self._tangential = ipctk.TangentialCollisions()
-        self._friction_pairs = None
-        kept = None  # the candidates kept from the step's start (2D)
-        if self.dimension == 2 and rubbing:
-            pairs, kept = self._start_candidates(start, old, new)
-            self._friction_pairs = self._lagged_friction(start, mu_s, mu_k, pairs)
-        elif rubbing:
+        if rubbing:
             collisions = ipctk.NormalCollisions()
             collisions.build(self._mesh, start, self.settings.dhat,
                              broad_phase=self._broad_phase)
             if len(collisions):
                 self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
                                        mu_k, max)
+
+    def _begin_part(self, x_n: np.ndarray, start: np.ndarray, new: np.ndarray,
+                    mu_s: np.ndarray, mu_k: np.ndarray, rubbing: bool) -> None:
+        """``begin_step``'s 2D part: the step from positions ``x_n`` (n, 2) m, the collision
+        mesh's vertices ``start`` (n_m, 2) m, to the faces' corners ``new`` (c k, 2) m
+        where they end, with the coefficients ``_coefficients`` gives: the candidates at
+        the start (kept while no corner moves further than ``CANDIDATE_MARGIN``), the
+        lagged friction's pairs (``barrier_part.set_step``), a self-contact's quiet
+        region."""
+        start_c = np.ascontiguousarray(start)
+        old = self._obstacles_start
+        self._faces_shift = 0.0 if not old.size or old is new else _largest_shift(old, new)
         if self.self_contact:
-            self._quiet = self._quiet_region(x_n, start)
-        if self.dimension == 2:
-            friction, quiet = self._friction_pairs, self._quiet
-            bp.set_step(self._part, new, np.ascontiguousarray(start), kept is not None,
-                        kept if kept is not None else _NO_CORNERS,
-                        pairs if kept is not None else _NO_PAIRS,
-                        *(friction if friction is not None else _NO_FRICTION),
-                        friction is not None,
-                        quiet[0] if quiet is not None else _NO_CORNERS,
-                        quiet[1] if quiet is not None else 0.0, quiet is not None)
+            self._quiet = self._quiet_region(x_n, start_c)
+        quiet = self._quiet
+        self._has_friction = bool(bp.set_step(
+            self._part, new, start_c, rubbing, self._faces_shift <= CANDIDATE_MARGIN, mu_s,
+            mu_k, quiet[0] if quiet is not None else _NO_CORNERS,
+            quiet[1] if quiet is not None else 0.0, quiet is not None))
 
     def _coefficients(self, faces) -> tuple[np.ndarray, np.ndarray, bool]:
         """Each collision-mesh vertex's static and kinetic friction coefficients (n_m,)
@@ -494,39 +509,6 @@ class BarrierContact(Energy):
         besides its body's mean move (``largest_relative_move``)."""
         return largest_relative_move(q, self._vertex_dof_pairs, anchor, self.vertex_body,
                                      len(self.bodies) + 1)
-
-    def _start_candidates(self, start: np.ndarray, old: np.ndarray,
-                          new: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """(k, 2) the (edge, vertex) candidates at the collision mesh's start vertices
-        ``start`` (2D; the faces' corners ``old`` (c k, 2) m where they start), boxes
-        inflated by dhat / 2 + ``CANDIDATE_MARGIN``: every pair within dhat there; and
-        where they were sought (n_v, 2) m if they serve as the barrier's kept candidates
-        (``barrier_part.candidates``: no corner moves further than the margin to where
-        it ends, ``new``), else None."""
-        pairs = self._static_candidates(start, 0.5 * self.settings.dhat + CANDIDATE_MARGIN)
-        if not old.size or _largest_shift(old, new) <= CANDIDATE_MARGIN:
-            return pairs, start[:self.vertex_nodes.size].copy()
-        return pairs, None
-
-    def _lagged_friction(self, start: np.ndarray, mu_s: np.ndarray, mu_k: np.ndarray,
-                         pairs: np.ndarray):
-        """The compiled friction's pairs (2D, ``friction_kernels.lagged_friction``) at the
-        collision mesh's start vertices ``start`` with per-vertex coefficients ``mu_s``,
-        ``mu_k`` (n_m,), of the (edge, vertex) candidates ``pairs`` (k, 2) (holding every
-        pair within dhat): (vertex ids, weights, tangents, forces, coefficients), or None
-        when no pair is within dhat."""
-        k = len(pairs)
-        if not k:
-            return None
-        ids, weights = np.empty((k, 3), np.int64), np.empty((k, 3))
-        tangents, forces, coefficients = np.empty((k, 2)), np.empty(k), np.empty((k, 2))
-        count = lagged_friction(np.ascontiguousarray(start), self._mesh_edges, pairs,
-                                self.settings.dhat, self.settings.stiffness, mu_s, mu_k, ids,
-                                weights, tangents, forces, coefficients)
-        if not count:
-            return None
-        return (ids[:count], weights[:count], tangents[:count], forces[:count],
-                coefficients[:count])
 
     def _check_outside(self, outside: int) -> None:
         """AssertionError if compiled Hessian entries fell outside the pattern, unless
@@ -622,7 +604,7 @@ class BarrierContact(Energy):
             return None
         gradients = ((None, None) if terms == 1 else
                      (self._gradient_buffers[0],
-                      self._gradient_buffers[1] if self._friction_pairs is not None else None))
+                      self._gradient_buffers[1] if self._has_friction else None))
         return last_q, float(values[0]), float(values[1]), *gradients
 
     def _pattern_entries(self, parts: list, scales: list) -> tuple[np.ndarray, np.ndarray]:
@@ -694,10 +676,13 @@ class BarrierContact(Energy):
     def _synced_part(self):
         """The 2D part with this barrier's ``projection`` (which may be set on the
         instance)."""
-        project = self.projection == ipctk.PSDProjectionMethod.CLAMP
-        if project != self._part_project:
-            bp.set_project(self._part, project)
-            self._part_project = project
+        projection = self.projection
+        if projection is not self._part_projection:  # (ipctk's enum values are singletons)
+            project = projection == ipctk.PSDProjectionMethod.CLAMP
+            if project != self._part_project:
+                bp.set_project(self._part, project)
+                self._part_project = project
+            self._part_projection = projection
         return self._part
 
     def pattern_slots(self, scatter: np.ndarray) -> np.ndarray:
@@ -778,27 +763,6 @@ class BarrierContact(Energy):
         candidates.build(self._mesh, v, 0.5 * self.settings.dhat, self._broad_phase)
         return candidates
 
-    def _kept_along(self, q0: np.ndarray, q1: np.ndarray,
-                    faces_move: bool) -> np.ndarray | None:
-        """The kept candidates (``barrier_part.candidates``) if they hold every pair that comes
-        within dhat along the straight motion from positions ``q0`` to ``q1`` (2 n,) m,
-        the faces' corners where they end, or with ``faces_move`` moving from where they
-        start: both ends within ``CANDIDATE_MARGIN`` of where they were sought (so is
-        every point between: a pair not among them stays further than dhat apart all
-        along; kept candidates always have the faces' ends within it); else None."""
-        flags, _, _, anchor = self._part_arrays
-        if flags[bp.B_PAIRS] < 0:
-            return None
-        for q in (q0, q1):
-            if largest_move(q, self._vertex_dof_pairs, anchor) > CANDIDATE_MARGIN:
-                return None
-        # the corners they were sought with: where the faces start, or since, where they end
-        corners = self._obstacles_start if flags[bp.B_PAIRS] == 0 else self._obstacles_end
-        if (faces_move and corners.size
-                and _largest_shift(corners, self._obstacles_start) > CANDIDATE_MARGIN):
-            return None
-        return bp.candidates_of(self._part)
-
     def _static_candidates(self, v: np.ndarray, radius: float) -> np.ndarray:
         """(k, 2) the (edge, vertex) pairs of the collision mesh's vertices ``v`` (2D) whose
         boxes inflated by ``radius`` (m) meet (``barrier_search``)."""
@@ -827,6 +791,8 @@ class BarrierContact(Energy):
         start = x_n.copy()
         dhat = self.settings.dhat
         for old, new in zip(old_faces, new_faces):
+            if new is old:  # a fixed face (``faces_at``)
+                continue
             shift = new.origin - old.origin
             if not np.any(shift):
                 continue
@@ -845,15 +811,17 @@ class BarrierContact(Energy):
         """Whether the straight paths from the step's start (``begin_step``'s positions,
         the faces at the start of the step) to ``start`` (n, d) m (the faces at its end)
         cross nothing and end apart."""
-        if self.quiet(start.ravel()):
+        q = start.ravel()
+        if self.quiet(q):
             return True
-        v0 = self._start
-        v1 = self.vertices(start)
         # in 2D the compiled (conservative) check clears most paths, and with them their
         # ends (it clears no pair that ends touching; the others' boxes stay apart); the
         # exact CCD decides the others; nothing that stands still crosses anything
-        if self._clear_path(self._start_q, start.ravel(), v0, v1):
+        if self.dimension == 2 and bp.start_clear(self._part, self._start_q, q,
+                                                  self._faces_shift):
             return True
+        v0 = self._start
+        v1 = self.vertices(start)
         if not np.array_equal(v0, v1):
             exact = float(ipctk.compute_collision_free_stepsize(
                 self._mesh, v0, v1, broad_phase=self._broad_phase, narrow_phase_ccd=EXACT_CCD))
@@ -861,60 +829,41 @@ class BarrierContact(Energy):
                 return False
         return self.min_distance(start) > 0.0
 
-    def _pairs_along(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray, v1: np.ndarray,
-                     faces_move: bool) -> np.ndarray:
-        """(k, 2) candidates holding every pair that comes within dhat along the straight
-        motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's vertices
-        ``v0`` to ``v1`` (n_m, 2) m (``faces_move``: the faces' corners among them from
-        where they start to where they end): the kept ones (``_kept_along``), else those
-        of the boxes the vertices sweep."""
-        pairs = self._kept_along(q0, q1, faces_move)
-        if pairs is None:
-            pairs = edge_vertex_candidates(v0, v1, self._mesh_edges, self._mesh_groups,
-                                           self.self_contact,
-                                           (0.5 + SWEPT_MARGIN) * self.settings.dhat)
-        return pairs
-
-    def _clear_path(self, q0: np.ndarray, q1: np.ndarray, v0: np.ndarray,
-                    v1: np.ndarray) -> bool:
-        """Whether the compiled check (2D, ``barrier_search.paths_clear``) finds the
-        straight motion from positions ``q0`` to ``q1`` (2 n,) m, the collision mesh's
-        vertices ``v0`` to ``v1`` (n_m, 2) m (the faces from where they start to where
-        they end), free of crossings, every pair ending apart, for certain (3D: never,
-        the exact CCD decides)."""
-        if self.dimension != 2:
-            return False
-        pairs = self._pairs_along(q0, q1, v0, v1, True)
-        return bool(paths_clear(v0, v1, self._mesh_edges, pairs))
-
     # ------------------------------------------------------------------ outputs
     def contact_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, d) N, the faces' force on each node at ``q`` (d n,) m: barrier + friction."""
-        gradient = np.zeros(self.n_dof)
-        self._terms(q, gradient)
-        return -gradient.reshape(-1, self.dimension)
+        return self._forces(q, True)
 
     def normal_forces(self, q: np.ndarray) -> np.ndarray:
         """(n, d) N, the barrier's (normal) part of ``contact_forces``, no friction."""
+        return self._forces(q, False)
+
+    def _forces(self, q: np.ndarray, friction: bool) -> np.ndarray:
+        """(n, d) N, minus the gradient of the barrier plus (with ``friction``) the lagged
+        friction at ``q`` (d n,) m: in 2D the last evaluation's when it was at ``q``
+        (``barrier_part.kept_forces``), else ``_terms``'s."""
+        if self.dimension == 2:
+            forces = np.empty(self.n_dof)
+            if bp.kept_forces(self._part, q, friction, forces):
+                return forces.reshape(-1, 2)
         gradient = np.zeros(self.n_dof)
-        self._terms(q, gradient, friction=False)
+        self._terms(q, gradient, friction=friction)
         return -gradient.reshape(-1, self.dimension)
 
     def partners(self, q: np.ndarray) -> np.ndarray:
         """(n,) int, for every node of an outline the body its nearest pair within dhat
         at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
         soft bodies); -1 for the nodes in no pair. 2D."""
-        v = self.vertices(q.reshape(-1, 2))
         n_v = self.vertex_nodes.size
+        n_m = n_v + self._obstacles_end.shape[0]
         owner = self._owners
-        if owner is None or owner.size != v.shape[0]:
+        if owner is None or owner.size != n_m:
             # the body of every collision-mesh vertex: outlines, then the faces' end points
             owner = self._owners = np.concatenate(
                 [self.vertex_body, 1 + len(self.bodies)
-                 + np.arange(v.shape[0] - n_v) // self.corners_per_face])
+                 + np.arange(n_m - n_v) // self.corners_per_face])
         partner = np.empty(self.n_dof // 2, np.int64)
-        nearest_partners(v, self._mesh_edges, bp.candidates(self._part, q), self.settings.dhat,
-                         self.vertex_nodes, owner, partner)
+        bp.partners(self._part, q, self.vertex_nodes, owner, partner)
         return partner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
@@ -931,9 +880,7 @@ class BarrierContact(Energy):
         list while each face and its origin array are the same objects (see
         ``_corners``)."""
         kept = self._geometry_kept
-        if (kept is not None and len(kept[0]) == len(faces)
-                and all(f is g for f, g in zip(faces, kept[0]))
-                and all(f.origin is o for f, o in zip(faces, kept[1]))):
+        if kept is not None and _same_faces(faces, kept[0], kept[1]):
             return kept[2]
         d = self.dimension
         geometry = (np.array([f.origin for f in faces], float).reshape(-1, d),
@@ -1006,8 +953,7 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
                             StepConstraints.free(n, dim=d))
     x = solution.q.reshape(-1, d)
     forces = barrier.contact_forces(solution.q)
-    contacts = cm.ContactState.empty(n)
-    contacts.obstacle = barrier.holders(x, new_faces, forces)
+    contacts = cm.ContactState.held_by(barrier.holders(x, new_faces, forces))
     v = (x - x_n) / dt
     for k in np.flatnonzero(np.bincount(contacts.obstacle + 1, minlength=len(new_faces) + 1)[1:]):
         face = new_faces[k]
@@ -1106,7 +1052,6 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     x = solution.q.reshape(-1, d)
     reaction = np.zeros((n, d))
     reaction[fixed] = solution.reaction.reshape(-1, d)[fixed]
-    contacts = cm.ContactState.empty(n)
-    contacts.obstacle = barrier.partners(solution.q)
+    contacts = cm.ContactState.held_by(barrier.partners(solution.q))
     return StepOutcome(x, (x - x_n) / dt, barrier.contact_forces(solution.q), contacts,
                        solution.iterations, reaction)

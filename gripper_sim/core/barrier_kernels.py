@@ -567,6 +567,36 @@ def mark_sticking(velocities, obstacle, normals, obstacle_velocities, smoothing,
 
 
 @njit(cache=True)
+def split_partners(partner, obstacle, touching):
+    """From ``partner`` (n + m,) (``BarrierContact.partners``: the fruit's n nodes, then
+    the soft bodies' m; 0 the fruit, 1 + b soft body b, then the faces, -1 none): set
+    ``obstacle`` (n,) to each fruit node's partner less one (the obstacles' order:
+    the soft bodies, then the faces), -1 for none, and ``touching`` (m,) bool to the
+    soft bodies' nodes whose partner is the fruit."""
+    n = obstacle.shape[0]
+    for i in range(n):
+        obstacle[i] = partner[i] - 1 if partner[i] > 0 else -1
+    for i in range(touching.shape[0]):
+        touching[i] = partner[n + i] == 0
+
+
+@njit(cache=True)
+def held_normal_forces(forces, obstacle, normal):
+    """Set ``normal`` (n,) N to the magnitude of each held node's force (``forces``
+    (n', d) N, n' >= n: the barrier's normal force, sums as ``np.linalg.norm``'s) where
+    ``obstacle`` (n,) >= 0, else 0."""
+    d = forces.shape[1]
+    for i in range(obstacle.shape[0]):
+        if obstacle[i] < 0:
+            normal[i] = 0.0
+            continue
+        square = 0.0
+        for c in range(d):
+            square += forces[i, c] * forces[i, c]
+        normal[i] = np.sqrt(square)
+
+
+@njit(cache=True)
 def nearest_faces(x, forces, origins, normals, tangents, half_extents, dhat, holder):
     """Set ``holder`` (n,) to the face (index) nearest to each node of positions ``x``
     (n, d) m with a nonzero force ``forces`` (n, d) N, of the faces within ``dhat`` m

@@ -16,6 +16,10 @@ again, the last evaluation (positions, values; its gradients in the barrier's bu
   once a vertex moved further than the margin from where they were sought;
 - ``barrier_value``: the barrier and lagged friction (``barrier_terms.barrier_terms``)
   over those candidates, gradients added, the Hessian into the solver's CSC values;
+- ``kept_forces``: the last evaluation's forces, read at the positions it was made at;
+- ``partners``: the body each outline node's nearest pair within dhat touches;
+- ``start_clear``: whether the way to a start of the Newton solve is clear
+  (``barrier_search.paths_clear``) over the kept candidates, else the swept boxes';
 - ``max_step``: the CCD's step bound: ``barrier_kernels.kept_step_bound`` on the kept
   candidates, else the swept boxes' candidates and ``barrier_search.collision_free_step``.
 """
@@ -28,17 +32,18 @@ from numba import njit, types
 from numba.experimental import structref
 
 from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move, mesh_vertices,
-                                              relative_moves_within)
-from gripper_sim.core.barrier_search import collision_free_step, edge_vertex_candidates
+                                              nearest_partners, relative_moves_within,
+                                              same_values)
+from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
+                                             paths_clear)
 from gripper_sim.core.barrier_terms import barrier_terms
+from gripper_sim.core.friction_kernels import lagged_friction
 
 #: a part's flags (int64 array): its candidates (-1: none kept, 0: sought at the step's
 #: start (the faces' corners where they start), 1: sought since (where they end)), its
 #: Hessian entries outside the pattern (not dropped; the reader clears it), its last
 #: finite evaluation (0: none this step, 1: no pairs, 2: terms)
 B_PAIRS, B_OUTSIDE, B_TERMS, B_SIZE = range(4)
-#: the candidates where none are kept
-NO_PAIRS = np.zeros((0, 2), np.int64)
 
 
 @structref.register
@@ -136,6 +141,66 @@ def barrier_value(part, x, hessian, grad, hdata, slots, dt, friction):
 
 
 @njit(cache=True)
+def kept_forces(part, q, friction, forces):
+    """Whether the barrier's forces at positions q (2 n,) m are known without an
+    evaluation (a quiet self-contact, or the last evaluation made at q); then sets
+    ``forces`` (2 n,) N to minus the gradient of the barrier plus (with ``friction``) the
+    lagged friction, as ``BarrierContact._terms`` adds them into zeros (minus zero where
+    no vertex is)."""
+    terms = part.flags[B_TERMS]
+    if not quiet(part, q, np.zeros(0)) and (terms == 0 or not same_values(part.last_q, q)):
+        return False
+    forces[:] = -0.0
+    if terms != 2 or quiet(part, q, np.zeros(0)):
+        return True
+    with_friction = friction and part.has_friction
+    dof_pairs = part.dof_pairs
+    for i in range(dof_pairs.shape[0]):
+        for c in range(2):
+            k = 2 * i + c
+            gradient = 0.0 + part.barrier_gradient[k]
+            if with_friction:
+                gradient += part.friction_gradient[k]
+            forces[dof_pairs[i, c]] = -gradient
+    return True
+
+
+@njit(cache=True)
+def partners(part, q, vertex_nodes, owner, partner):
+    """``barrier_kernels.nearest_partners`` at positions q (2 n,) m over ``candidates``,
+    the faces' corners where they end: sets ``partner`` (n,) (``owner`` (n_m,) the body
+    of each collision-mesh vertex, the deformable ones at ``vertex_nodes`` (n_v,))."""
+    v = np.empty((part.dof_pairs.shape[0] + part.corners.shape[0], 2))
+    mesh_vertices(q, part.dof_pairs, part.corners, v)
+    nearest_partners(v, part.edges, candidates(part, q), part.dhat, vertex_nodes, owner,
+                     partner)
+
+
+@njit(cache=True)
+def start_clear(part, q0, q1, faces_shift):
+    """Whether ``barrier_search.paths_clear`` finds the straight motion from the step's
+    start (positions q0 (2 n,) m, the faces' corners where they start: ``start``) to
+    positions q1 (2 n,) m (the faces' corners where they end), whose corners move at most
+    ``faces_shift`` m, free of crossings, every pair ending apart, for certain. Over the
+    kept candidates if they hold every pair that comes within dhat along it: both ends
+    within the margin of where they were sought (so is every point between), and the
+    corners too (those of the start's candidates stand where the faces start, those
+    sought since where they end); else over the candidates of the swept boxes."""
+    v0 = part.start
+    v1 = np.empty_like(v0)
+    mesh_vertices(q1, part.dof_pairs, part.corners, v1)
+    flags = part.flags
+    if (flags[B_PAIRS] >= 0 and (flags[B_PAIRS] == 0 or faces_shift <= part.margin)
+            and largest_move(q0, part.dof_pairs, part.anchor) <= part.margin
+            and largest_move(q1, part.dof_pairs, part.anchor) <= part.margin):
+        pairs = part.pairs
+    else:
+        pairs = edge_vertex_candidates(v0, v1, part.edges, part.groups, part.self_contact,
+                                       part.swept_radius)
+    return paths_clear(v0, v1, part.edges, pairs)
+
+
+@njit(cache=True)
 def max_step(part, x, dq):
     """The CCD's largest fraction (0, 1] of the step dq (2 n,) m from x free of
     crossings (conservative: each pair keeps ``barrier_search.SEPARATION`` of its gap):
@@ -178,30 +243,52 @@ def set_project(part, project):
 
 
 @njit(cache=True)
-def set_step(part, corners, start, has_pairs, anchor, pairs, friction_ids, friction_weights,
-             friction_tangents, friction_forces, friction_coefficients, has_friction,
-             quiet_anchor, quiet_reach, has_quiet):
-    """A step's state (``PART_FIELDS``; flat arguments: numba types a tuple argument in
-    Python, slowly); no evaluation kept."""
+def set_step(part, corners, start, rubbing, keep, mu_s, mu_k, quiet_anchor, quiet_reach,
+             has_quiet):
+    """A step's state (``PART_FIELDS``), no evaluation kept: the faces' corners where
+    they end (c k, 2) m, the collision mesh's start (n_m, 2) m (C order; the faces'
+    corners where they start); with ``rubbing`` (a friction coefficient is positive)
+    the candidates at the start (``edge_vertex_candidates``, boxes inflated by the
+    candidate radius: every pair within dhat), kept if ``keep`` (no corner moves further
+    than the margin in the step), and the lagged friction of those within dhat
+    (``friction_kernels.lagged_friction``, each vertex's coefficients ``mu_s``, ``mu_k``
+    (n_m,)); a self-contact's quiet region (anchor (n_v, 2) m, reach m) if
+    ``has_quiet``. Returns whether there is lagged friction."""
     part.corners = corners
     part.start = start
-    if has_pairs:
-        part.anchor[:] = anchor
+    pairs = np.zeros((0, 2), np.int64)
+    has_pairs = has_friction = False
+    ids, weights = np.zeros((0, 3), np.int64), np.zeros((0, 3))
+    tangents, forces, coefficients = np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2))
+    if rubbing:
+        found = edge_vertex_candidates(start, start, part.edges, part.groups,
+                                       part.self_contact, part.radius)
+        k = found.shape[0]
+        if k:
+            all_ids, all_weights = np.empty((k, 3), np.int64), np.empty((k, 3))
+            all_tangents, all_forces, all_coefficients = (np.empty((k, 2)), np.empty(k),
+                                                          np.empty((k, 2)))
+            count = lagged_friction(start, part.edges, found, part.dhat, part.kappa, mu_s,
+                                    mu_k, all_ids, all_weights, all_tangents, all_forces,
+                                    all_coefficients)
+            if count:
+                has_friction = True
+                ids, weights = all_ids[:count].copy(), all_weights[:count].copy()
+                tangents, forces = all_tangents[:count].copy(), all_forces[:count].copy()
+                coefficients = all_coefficients[:count].copy()
+        if keep:
+            has_pairs = True
+            pairs = found
+            part.anchor[:] = start[:part.dof_pairs.shape[0]]
     part.pairs = pairs
-    part.friction_pairs = (friction_ids, friction_weights, friction_tangents,
-                           friction_forces, friction_coefficients)
+    part.friction_pairs = (ids, weights, tangents, forces, coefficients)
     part.has_friction = has_friction
     part.quiet_anchor = quiet_anchor
     part.quiet_reach = quiet_reach
     part.has_quiet = has_quiet
     part.flags[:] = 0
     part.flags[B_PAIRS] = 0 if has_pairs else -1
-
-
-@njit(cache=True)
-def candidates_of(part):
-    """The part's kept candidates (k, 2) (as they are: see ``candidates``)."""
-    return part.pairs
+    return has_friction
 
 
 @njit(cache=True)

@@ -20,8 +20,25 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 FREE, STICK, SLIP, IMPACT = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def jaw_sides(obstacle, side_of_obstacle, left, right):
+    """Set ``left`` and ``right`` (n,) bool to the nodes the left (side 0) and the right
+    (side 1) jaw hold: the side of each node's obstacle (``obstacle`` (n,), -1 none;
+    ``side_of_obstacle`` (k + 1,) each obstacle's side, -1 none, and last -1 for no
+    obstacle); returns whether each jaw holds any node."""
+    any_left = any_right = False
+    for i in range(obstacle.shape[0]):
+        side = side_of_obstacle[obstacle[i]]
+        left[i] = side == 0
+        right[i] = side == 1
+        any_left = any_left or side == 0
+        any_right = any_right or side == 1
+    return any_left, any_right
 
 
 @dataclass
@@ -48,9 +65,15 @@ class ContactState:
 
     @classmethod
     def empty(cls, n_nodes: int) -> 'ContactState':
-        return cls(-np.ones(n_nodes, np.int64), np.zeros(n_nodes, np.int64),
-                   np.zeros(n_nodes), np.zeros(n_nodes), -np.ones(n_nodes, np.int64),
-                   np.zeros(n_nodes))
+        return cls.held_by(np.full(n_nodes, -1, np.int64))
+
+    @classmethod
+    def held_by(cls, obstacle: np.ndarray) -> 'ContactState':
+        """The contact set whose nodes are held by ``obstacle`` (n,) (-1: free; taken, not
+        copied), all FREE, no forces, no second obstacle."""
+        n_nodes = obstacle.shape[0]
+        return cls(obstacle, np.zeros(n_nodes, np.int64), np.zeros(n_nodes), np.zeros(n_nodes),
+                   np.full(n_nodes, -1, np.int64), np.zeros(n_nodes))
 
     def copy(self) -> 'ContactState':
         return ContactState(self.obstacle.copy(), self.mode.copy(), self.normal_force.copy(),

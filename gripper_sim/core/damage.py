@@ -53,6 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from gripper_sim.core.deferred import build_deferred
 from gripper_sim.core.energies.bending import turning_angles
 
 #: Tresca stress below a Hertz contact over its peak pressure (2 x 0.31, fruit-data.md)
@@ -116,6 +117,10 @@ class Damage:
                     bruised_fraction=float(self.bruised_fraction),
                     peak_pressure=float(self.peak_pressure),
                     peak_flesh_stress=float(self.peak_flesh_stress), crushed=bool(self.crushed))
+
+
+#: the ``Damage`` fields ``DamageTracker.update`` leaves to first read (``core.deferred``)
+DEFERRED_DAMAGE = ('contacts',)
 
 
 def contact_modulus(youngs_modulus: float, poisson_ratio: float,
@@ -361,9 +366,9 @@ class DamageTracker:
 
     def _patches(self, positions: np.ndarray, normal_force: np.ndarray, obstacle: np.ndarray,
                  covered: np.ndarray):
-        """``damage_patches`` raising ``covered``: (contacts, the outline position nearest
-        each one's centre (k,), node pressure (n_surface,) Pa, largest peak pressure Pa,
-        bruised length m)."""
+        """``damage_patches`` raising ``covered``: (a callable giving the contacts (tuple,
+        made on call), the outline position nearest each one's centre (k,), node pressure
+        (n_surface,) Pa, largest peak pressure Pa, bruised length m)."""
         n = len(self.ring)
         node_pressure = np.empty(n)
         table = np.empty((n, P_SIZE))
@@ -374,8 +379,11 @@ class DamageTracker:
             np.ascontiguousarray(obstacle, dtype=np.int64), self.ring, self.faces,
             self.rest_curvature, self.bruise_pressure, self.rigid_modulus, self.pad_modulus,
             self.depth, covered, node_pressure, table, near)
-        contacts = tuple(Contact(int(b), load, np.array([cx, cz]), a, p0, re, modulus)
-                         for b, load, cx, cz, a, p0, re, modulus in table[:count].tolist())
+        rows = table[:count]
+
+        def contacts() -> tuple:
+            return tuple(Contact(int(b), load, np.array([cx, cz]), a, p0, re, modulus)
+                         for b, load, cx, cz, a, p0, re, modulus in rows.tolist())
         return contacts, near[:count], node_pressure, pressure, length
 
     def contacts(self, positions: np.ndarray, normal_force: np.ndarray,
@@ -390,7 +398,7 @@ class DamageTracker:
         """
         contacts, near, *_ = self._patches(positions, normal_force, obstacle,
                                            self.covered.copy())
-        return list(zip(contacts, near.tolist()))
+        return list(zip(contacts(), near.tolist()))
 
     def record(self, covered: np.ndarray, pressure: float, flesh_stress: float,
                compression_ratio: float) -> float:
@@ -421,7 +429,7 @@ class DamageTracker:
 
     def update(self, positions: np.ndarray, normal_force: np.ndarray, obstacle: np.ndarray,
                compression_ratio: float, flesh_stress: float = 0.0) -> Damage:
-        """Damage after a step.
+        """Damage after a step (its ``contacts`` made on first read).
 
         Args:
             positions: (n_nodes, 2) m.  normal_force: (n_nodes,) N.  obstacle:
@@ -431,9 +439,11 @@ class DamageTracker:
         contacts, _, node_pressure, pressure, length = self._patches(
             positions, normal_force, obstacle, self.covered)
         stress = self.record(self.covered, pressure, flesh_stress, compression_ratio)
-        return Damage(bruised=self.peak_pressure > self.bruise_pressure, bruised_length=length,
-                      bruised_fraction=length / self.perimeter if self.perimeter > 0 else 0.0,
-                      pressure=pressure, peak_pressure=self.peak_pressure,
-                      flesh_stress=stress, peak_flesh_stress=self.peak_flesh_stress,
-                      crushed=self.crushed, node_pressure=node_pressure,
-                      contacts=contacts)
+        return build_deferred(
+            Damage, dict(bruised=self.peak_pressure > self.bruise_pressure,
+                         bruised_length=length,
+                         bruised_fraction=length / self.perimeter if self.perimeter > 0 else 0.0,
+                         pressure=pressure, peak_pressure=self.peak_pressure,
+                         flesh_stress=stress, peak_flesh_stress=self.peak_flesh_stress,
+                         crushed=self.crushed, node_pressure=node_pressure),
+            DEFERRED_DAMAGE, lambda: dict(contacts=contacts()))

@@ -41,14 +41,16 @@ from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
 from gripper_sim.core import jaw_drive
 from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
-from gripper_sim.core.barrier_kernels import mark_sticking
+from gripper_sim.core.barrier_kernels import (held_normal_forces, mark_sticking,
+                                              split_partners)
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
+from gripper_sim.core.deferred import build
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
 from gripper_sim.core.results import Energies, JawWrench, StepResult
-from gripper_sim.core.soft_fingers import FingerState, SoftFingers
+from gripper_sim.core.soft_fingers import FingerState, SoftFingers, base_pushes
 from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
@@ -91,6 +93,10 @@ class SimulationFacade:
     #: the obstacles' velocities (``_obstacles``): (the ``_obstacles_kept`` they are of,
     #: the gripper's (x, gap, lift) rates m/s, (k, d) m/s read only), or None
     _moving_kept: tuple | None = None
+    #: ``obstacle_names``: (the faces template they are of, the names), or None
+    _names_kept: tuple | None = None
+    #: ``_total_mass``: (the masses array, their sum kg), or None
+    _mass_kept: tuple | None = None
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -580,19 +586,21 @@ class SimulationFacade:
 
     def faces_at(self, grip: GripperState) -> list:
         """The obstacles (``faces_template``) with the jaw faces where the gripper state
-        ``grip`` puts them, moving with it: copies of the template's, read only. The faces
-        of the last three jaw placements made are kept: a step's end faces are its
-        measures' and the next step's start faces, and the jaw drive's second solve at
-        another gap starts from the same faces as its first."""
+        ``grip`` puts them, moving with it: copies of the template's (the fixed faces,
+        table and walls, the template's own), read only. The faces of the last three jaw
+        placements made are kept: a step's end faces are its measures' and the next step's
+        start faces, and the jaw drive's second solve at another gap starts from the same
+        faces as its first."""
         template = self._faces_template
         placement = (grip.x, grip.gap, grip.lift, grip.x_rate, grip.gap_rate, grip.lift_rate)
         for kept_placement, kept_template, faces in self._faces_kept:
             if kept_placement == placement and kept_template is template:
                 return faces
-        # shallow copies: the moving faces get new origin and velocity arrays
-        faces = [copy.copy(f) for f in template]
+        faces = list(template)
         for index, side in enumerate(self._face_side):
             sign = -1.0 if side == LEFT else 1.0
+            # a shallow copy: the moving face gets new origin and velocity arrays
+            faces[index] = copy.copy(template[index])
             faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
             faces[index].velocity = self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
                                                    grip.lift_rate)
@@ -610,8 +618,13 @@ class SimulationFacade:
 
     @property
     def obstacle_names(self) -> tuple:
-        names = tuple(f.name for f in self._faces_template)
-        return ('left_jaw', 'right_jaw') + names if self._soft is not None else names
+        """The obstacles' names (``StepResult.obstacle_names``), kept per face set."""
+        kept = self._names_kept
+        if kept is None or kept[0] is not self._faces_template:
+            names = tuple(f.name for f in self._faces_template)
+            names = ('left_jaw', 'right_jaw') + names if self._soft is not None else names
+            kept = self._names_kept = (self._faces_template, names)
+        return kept[1]
 
     def _obstacles(self, grip: GripperState):
         """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
@@ -631,20 +644,23 @@ class SimulationFacade:
                 sides = [LEFT, RIGHT] + sides
             normals, sides = np.array(normals, float), np.array(sides, np.int64)
             normals.flags.writeable = sides.flags.writeable = False
-            jaws = sides >= 0
+            # (obstacle, -1.0 left or 1.0 right) of the jaws' obstacles
+            jaw_signs = tuple((int(k), -1.0 if sides[k] == LEFT else 1.0)
+                              for k in np.flatnonzero(sides >= 0))
             # the jaw side of each obstacle, and last -1: an obstacle index's (-1: none)
             side_of_obstacle = np.append(sides, -1)
             kept = self._obstacles_kept = (template, normals, sides, np.array(velocities, float),
-                                           jaws, np.where(sides[jaws] == LEFT, -1.0, 1.0),
-                                           side_of_obstacle)
-        _, normals, sides, velocities, jaws, sign, _ = kept
+                                           jaw_signs, side_of_obstacle)
+        _, normals, sides, velocities, jaw_signs, _ = kept
         rates = (grip.x_rate, grip.gap_rate, grip.lift_rate)
         moving = self._moving_kept
         if moving is None or moving[0] is not kept or moving[1] != rates:
             velocities = velocities.copy()  # the jaws' faces (and fingers) move with the gripper
-            velocities[jaws] = 0.0
-            velocities[jaws, 0] = grip.x_rate + 0.5 * grip.gap_rate * sign
-            velocities[jaws, -1] = grip.lift_rate
+            half_gap_rate = 0.5 * grip.gap_rate
+            for k, sign in jaw_signs:
+                velocities[k] = 0.0
+                velocities[k, 0] = grip.x_rate + half_gap_rate * sign
+                velocities[k, -1] = grip.lift_rate
             velocities.flags.writeable = False
             moving = self._moving_kept = (kept, rates, velocities)
         return normals, sides, moving[2]
@@ -687,20 +703,21 @@ class SimulationFacade:
         """
         grip, fruit, finger, soft = self._grip, self.fruit, self._finger, self._soft
         normals, face_sides, face_velocities = self._obstacles(grip)
-        held = obstacle >= 0
-        normal = np.zeros(len(obstacle))
         if soft is not None:  # the barrier's force is normal to the finger's outline
-            soft_normal = self._barrier.normal_forces(
-                np.concatenate([x, finger.positions]).ravel())
-            pressed = soft_normal[:len(obstacle)][held]
-            normal[held] = np.sqrt((pressed * pressed).sum(axis=1))  # np.linalg.norm's sums
+            normal = np.empty(len(obstacle))
+            held_normal_forces(self._barrier.normal_forces(
+                np.concatenate([x, finger.positions]).ravel()), obstacle, normal)
         else:
+            held = obstacle >= 0
+            normal = np.zeros(len(obstacle))
             normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
-        side_of_node = self._obstacles_kept[-1][obstacle]
-        sides = (side_of_node == LEFT, side_of_node == RIGHT)
-        origins = (self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT))
+        sides = (np.empty(len(obstacle), bool), np.empty(len(obstacle), bool))  # LEFT, RIGHT
+        on_left, on_right = cm.jaw_sides(obstacle, self._obstacles_kept[-1], *sides)
 
-        def jaw_wrenches() -> list:
+        def jaw_origins() -> tuple:
+            return self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT)
+
+        def jaw_wrenches(origins: tuple) -> list:
             if soft is not None:
                 return self._finger_wrenches(finger, origins)
             return [_wrench(x[sides[side]] - origins[side], -forces[sides[side]])
@@ -711,11 +728,10 @@ class SimulationFacade:
         elif soft is not None:  # what the step committed: its fingers' base reactions
             left_n, right_n = self._jaw_force
         else:  # each jaw's force along the closing axis
-            wrenches = jaw_wrenches()
+            wrenches = jaw_wrenches(jaw_origins())
             left_n, right_n = -float(wrenches[LEFT].force[0]), float(wrenches[RIGHT].force[0])
         masses = fruit.masses
-        centroid = masses @ x / masses.sum()
-        on_left, on_right = bool(sides[LEFT].any()), bool(sides[RIGHT].any())
+        centroid = masses @ x / self._total_mass(masses)
         slip = self.measure_slip(float(centroid[-1] - grip.lift), on_left and on_right,
                                  on_left or on_right)
         x, v, forces, obstacle = x.copy(), v.copy(), forces.copy(), obstacle.copy()
@@ -731,7 +747,8 @@ class SimulationFacade:
             gripper_x=grip.x, gripper_x_velocity=grip.x_rate)
 
         def rarely_read() -> dict:
-            jaws = wrenches if wrenches is not None else jaw_wrenches()
+            origins = jaw_origins()
+            jaws = wrenches if wrenches is not None else jaw_wrenches(origins)
             return dict(
                 left_wrench=jaws[LEFT], right_wrench=jaws[RIGHT],
                 slipping=jaw_contacts_sliding(v, obstacle, face_sides, normals,
@@ -742,6 +759,13 @@ class SimulationFacade:
                     gravitational=float(self.gravity.value(x.ravel()))),
                 fingers=soft.result(finger, *origins) if soft is not None else None)
         return fields, rarely_read, normal, sides
+
+    def _total_mass(self, masses: np.ndarray) -> float:
+        """kg, the sum of ``masses`` (n,) kg (``masses.sum()``), kept for the same array."""
+        kept = self._mass_kept
+        if kept is None or kept[0] is not masses:
+            kept = self._mass_kept = (masses, masses.sum())
+        return kept[1]
 
     def contact_forces_and_holders(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, d) N every contact force on the fruit and (n,) the obstacle holding each
@@ -809,15 +833,16 @@ class SimulationFacade:
                                  np.concatenate([self.v, finger.velocities]), soft.base, targets,
                                  self.faces_at(self._grip), new_faces, dt,
                                  self_contact=soft.self_contact, carried=carried)
-        partner = outcome.contacts.obstacle
         v = outcome.v[:n]
-        contacts = cm.ContactState.empty(n)
         # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
         # right_jaw (the fingers), then the faces
-        contacts.obstacle = np.where(partner[:n] > 0, partner[:n] - 1, -1)
+        obstacle, touching = np.empty(n, np.int64), np.empty(soft.n_nodes, bool)
+        split_partners(outcome.contacts.obstacle, obstacle, touching)
+        contacts = cm.ContactState.held_by(obstacle)
         self._mark_sticking(contacts, v, grip_new)
-        self._finger = FingerState(outcome.x[n:], outcome.v[n:], outcome.forces[n:],
-                                   outcome.reaction[n:], partner[n:] == 0)
+        self._finger = build(FingerState, dict(
+            positions=outcome.x[n:], velocities=outcome.v[n:], contact_forces=outcome.forces[n:],
+            reaction=outcome.reaction[n:], touching=touching))
         self.commit_step(outcome.x[:n], v, contacts, outcome.forces[:n], grip_new,
                          self._finger_jaw_forces(), dt)
         return outcome.iterations
@@ -850,12 +875,9 @@ class SimulationFacade:
         its deformable finger: the x part of its ``_finger_wrenches`` force (the same
         sum), without the rest of the wrench."""
         finger = self._finger
-        forces = []
-        for side, (nodes, own) in enumerate(self._finger_bases()):
-            push = (float(finger.reaction[nodes, 0].sum()) if finger.touching[own].any()
-                    else 0.0)
-            forces.append(push if side == LEFT else -push)
-        return forces[LEFT], forces[RIGHT]
+        (left, _), (right, _) = self._finger_bases()
+        return base_pushes(finger.reaction, finger.touching, left, right,
+                           self._soft.body.n_nodes)
 
     def _finger_bases(self) -> tuple:
         """Per jaw (LEFT, RIGHT): (its finger's base nodes, the slice of its finger's

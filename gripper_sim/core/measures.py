@@ -11,11 +11,104 @@ import math
 import numpy as np
 from numba import njit
 
+from gripper_sim.core.deferred import build
 from gripper_sim.core.fruit import FruitModel
 from gripper_sim.core.results import Deformation
 
 
 # ---------------------------------------------------------------------- compiled measures
+#: numpy's pairwise summation: a block of up to this many values is added in 8 partial sums
+_PAIRWISE_BLOCK = 128
+
+
+@njit(cache=True)
+def _block_sum(values, start, n):
+    """The sum of values[start:start + n], n <= 128, in numpy's order: a running sum of
+    fewer than 8, else 8 partial sums combined pairwise, then the rest added."""
+    if n < 8:
+        total = 0.0
+        for i in range(start, start + n):
+            total += values[i]
+        return total
+    r0, r1, r2, r3 = values[start], values[start + 1], values[start + 2], values[start + 3]
+    r4, r5, r6, r7 = values[start + 4], values[start + 5], values[start + 6], values[start + 7]
+    i = 8
+    while i < n - n % 8:
+        j = start + i
+        r0 += values[j]
+        r1 += values[j + 1]
+        r2 += values[j + 2]
+        r3 += values[j + 3]
+        r4 += values[j + 4]
+        r5 += values[j + 5]
+        r6 += values[j + 6]
+        r7 += values[j + 7]
+        i += 8
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        total += values[start + i]
+        i += 1
+    return total
+
+
+@njit(cache=True)
+def _pairwise(values, n):
+    """The sum of values[:n] in numpy's pairwise order: a block (``_block_sum``) up to
+    ``_PAIRWISE_BLOCK`` values, else the sum of its two halves (the first a multiple of
+    8 long), each summed so in turn (an explicit stack: numba caches no recursion)."""
+    if n <= _PAIRWISE_BLOCK:
+        return _block_sum(values, 0, n)
+    depth = 64
+    starts, sizes = np.empty(depth, np.int64), np.empty(depth, np.int64)
+    stages, lefts = np.zeros(depth, np.int64), np.empty(depth)
+    top = 0
+    starts[0], sizes[0] = 0, n
+    result = 0.0  # the sum of the range last finished
+    while top >= 0:
+        start, size = starts[top], sizes[top]
+        half = size // 2
+        half -= half % 8
+        if size <= _PAIRWISE_BLOCK:
+            result = _block_sum(values, start, size)
+            top -= 1
+        elif stages[top] == 0:  # its first half next
+            stages[top] = 1
+            top += 1
+            starts[top], sizes[top], stages[top] = start, half, 0
+        elif stages[top] == 1:  # its first half done: its second half next
+            lefts[top] = result
+            stages[top] = 2
+            top += 1
+            starts[top], sizes[top], stages[top] = start + half, size - half, 0
+        else:  # both halves done
+            result = lefts[top] + result
+            top -= 1
+    return result
+
+
+@njit(cache=True)
+def numpy_sum(values, count):
+    """The sum of values[:count] (float64) added as ``np.sum`` adds a contiguous array
+    (pairwise: 8 partial sums over blocks of up to 128 values, halves beyond; onto 0), so
+    that a compiled measure equals numpy's to the bit."""
+    return 0.0 + _pairwise(values, count)
+
+
+@njit(cache=True, error_model='numpy')
+def held_length_of(x, skin_edges, surface, held, lengths):
+    """m, the sum (``numpy_sum``) of the tributary lengths (``tributary_lengths_of``) of
+    the outline nodes ``surface`` (n_s,) held (``held`` (n,) bool) at positions ``x``
+    (n, 2) m; ``lengths`` (n_s,) m scratch."""
+    n_s = surface.shape[0]
+    tributary_lengths_of(x, skin_edges, n_s, lengths)
+    count = 0
+    for s in range(n_s):
+        if held[surface[s]]:
+            lengths[count] = lengths[s]
+            count += 1
+    return numpy_sum(lengths, count)
+
+
 @njit(cache=True, error_model='numpy')
 def tributary_lengths_of(x, skin_edges, n_surface, out):
     """Fill ``out`` (n_surface,) m with half the length of the two skin segments at each
@@ -181,6 +274,14 @@ def tributary_lengths(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
     return out
 
 
+def held_length(fruit: FruitModel, x: np.ndarray, held: np.ndarray) -> float:
+    """m, the summed tributary lengths (``tributary_lengths``) of the surface nodes held
+    (``held`` (n_nodes,) bool) at positions ``x`` (n_nodes, 2) m."""
+    surface, skin, _ = _outline_at_rest(fruit)
+    return float(held_length_of(np.ascontiguousarray(x, dtype=float), skin, surface, held,
+                                np.empty(len(surface))))
+
+
 def touching_length(x: np.ndarray, edges: np.ndarray, touching: np.ndarray) -> float:
     """m, the length of an outline in contact: each edge (e, 2) of positions ``x`` (n, 2)
     counts by the share of its two ends that touch (``touching`` (n,) bool)."""
@@ -221,8 +322,8 @@ def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,
     compression = fruit.rest_width - width
     ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
     if jaw_contact_length is None:
-        trib = tributary_lengths(fruit, x)
-        jaw_contact_length = float(np.sum(trib[jaw_contact[surface]]))
-    return Deformation(compression=compression, compression_ratio=ratio,
-                       max_skin_strain=max_strain, contact_length=jaw_contact_length,
-                       peak_contact_pressure=peak, node_pressure=pressure)
+        jaw_contact_length = held_length(fruit, x, jaw_contact)
+    return build(Deformation, dict(compression=compression, compression_ratio=ratio,
+                                   max_skin_strain=max_strain,
+                                   contact_length=jaw_contact_length,
+                                   peak_contact_pressure=peak, node_pressure=pressure))

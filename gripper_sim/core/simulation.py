@@ -21,7 +21,8 @@ from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.fast import FastPath
 from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics
-from gripper_sim.core.measures import deformation, face_contact_length, tributary_lengths
+from gripper_sim.core.measures import (deformation, face_contact_length, held_length,
+                                       tributary_lengths)
 from gripper_sim.core.multistep import MultiStep
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
@@ -213,9 +214,9 @@ class Simulation(SimulationFacade):
         fields, rarely_read, normal, (on_left, on_right) = self._step_measures(
             x, self.v, forces, obstacle, iterations, substeps)
         fruit = self.fruit
+        on_jaws = on_left | on_right
         if self._soft is not None:  # the fruit's outline in pairs with the fingers
-            on_finger = (on_left | on_right)[fruit.surface]
-            length = float(np.sum(tributary_lengths(fruit, x)[on_finger]))
+            length = held_length(fruit, x, on_jaws)
         else:
             jaws = self.faces_at(self._grip)[:len(self._face_side)]
             if self._barrier is not None:  # the outline lies a barrier gap off the faces
@@ -224,8 +225,8 @@ class Simulation(SimulationFacade):
                          for index, face in enumerate(jaws))
         if self._pad is not None:
             on_pad = (self.contacts.obstacle < 0) & (self._pad.holder >= 0)
-            length += float(np.sum(tributary_lengths(fruit, x)[on_pad[fruit.surface]]))
-        shape = deformation(fruit, x, normal, on_left | on_right, length)
+            length += held_length(fruit, x, on_pad)
+        shape = deformation(fruit, x, normal, on_jaws, length)
         fields.update(deformation=shape, damage=self.assess_damage(
             x, normal, obstacle, shape.compression_ratio))
         return build_deferred(StepResult, fields, self.DEFERRED_MEASURES, rarely_read)

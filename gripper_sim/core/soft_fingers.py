@@ -22,12 +22,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings, SoftBody
 from gripper_sim.core.energies import NeoHookeanTriangles
 from gripper_sim.core.fin_ray import fin_ray_from_config
 from gripper_sim.core.finger_body import FingerBody
-from gripper_sim.core.measures import touching_length
+from gripper_sim.core.measures import numpy_sum, touching_length
 from gripper_sim.core.results import FingerResult
 from gripper_sim.core.solid_pad import solid_pad_body
 from gripper_sim.errors import ConfigError
@@ -54,6 +55,30 @@ PAIR_REACH_FRACTION = 0.25
 #: ... the fruit's nodes within this fraction of its half-width of its side facing the
 #: finger (the fruit compressed by half its width reaches no further)
 PAIR_SIDE_DEPTH = 0.5
+
+
+@njit(cache=True)
+def base_pushes(reaction, touching, left_base, right_base, m):
+    """(left, right) N, each jaw's force on the fruit along x through its finger: the sum
+    (``measures.numpy_sum``) of the x reactions ``reaction`` (2 m, 2) N of its finger's
+    base nodes (``left_base``, ``right_base`` (k,), indices into the fingers' state),
+    the right one's negated; 0 for a finger none of whose m nodes touches the fruit
+    (``touching`` (2 m,) bool)."""
+    pushes = np.zeros(2)
+    values = np.empty(max(left_base.shape[0], right_base.shape[0]))
+    for side in range(2):
+        base = left_base if side == 0 else right_base
+        touches = False
+        for i in range(side * m, (side + 1) * m):
+            if touching[i]:
+                touches = True
+                break
+        if not touches:
+            continue
+        for k in range(base.shape[0]):
+            values[k] = reaction[base[k], 0]
+        pushes[side] = numpy_sum(values, base.shape[0])
+    return pushes[0], -pushes[1]
 
 
 @dataclass(frozen=True)
