@@ -17,13 +17,14 @@ mismatch and step size (max |dq| / dt, m/s) of its fresh directions.
 
 With ``--pick MODE`` (``hold`` or ``bruise``) it checks a 2D Fin Ray instead: the
 window's trial of that mode at ``--force`` N (``workflows.window.evaluate_grasp``, the
-scenario ``pick_and_place``, ``--set`` applied), the solves interpreted. At the first
-solve that fails, its last two fresh directions are broken down by energy: the energy
-table's (the fruit's and fingers' elastic energies, pressure, inertia) and each barrier's
-with and without its friction, the Newton matrix's product with dq against the central
-difference of that energy's gradient, at the dofs of the largest residual. A pair of
-nodes whose coupling is missing from the matrix shows as a barrier whose product is
-much larger than its difference (both nodes moving together).
+scenario ``pick_and_place``, ``--fruit`` and ``--set`` applied), the solves
+interpreted. At the first solve that fails, its last two fresh directions are broken
+down by energy: the energy table's (the fruit's and fingers' elastic energies,
+pressure, inertia) and each barrier's with and without its friction, the Newton
+matrix's product with dq against the central difference of that energy's gradient, at
+the dofs of the largest residual. A pair of nodes whose coupling is missing from the
+matrix shows as a barrier whose product is much larger than its difference (both nodes
+moving together).
 
 Usage::
 
@@ -173,8 +174,8 @@ def check_pick(args) -> int:
 
     fast_solver.PatternCachingSolver.solve = solve_watched
     scenario = load_scenario('pick_and_place')
-    config, base = trial_setup(scenario_config(scenario, finger='fin_ray',
-                                               overrides=args.set), scenario)
+    config, base = trial_setup(scenario_config(
+        scenario, fruit=args.fruit, finger='fin_ray', overrides=args.set), scenario)
     evaluation = evaluate_grasp(config, base, args.force, args.pick)
     print(f'{args.pick} trial at {args.force} N: {evaluation.outcome}, peak grip force '
           f'{evaluation.peak_grip_force:.2f} N')
@@ -202,6 +203,7 @@ def main(argv=None) -> int:
     parser.add_argument('--move', type=float, default=1e-9)
     parser.add_argument('--pick', choices=('hold', 'bruise'), default=None,
                         help='the 2D Fin Ray pick trial of this mode instead')
+    parser.add_argument('--fruit', default=None, help="the pick trial's fruit preset")
     parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE')
     args = parser.parse_args(argv)
     barrier.BarrierContact.projection = getattr(ipctk.PSDProjectionMethod, args.projection)

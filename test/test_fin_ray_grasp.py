@@ -89,9 +89,9 @@ def test_on_a_fine_mesh_the_barriers_pattern_holds_the_pairs_that_touch(force, m
     pattern held pairs within twice their nodes' spacings at rest (3.3 mm here); the
     couplings of the pairs outside it were left out of the Newton matrix, Newton took 5 %
     of the residual an iteration, and the trials failed: a hold at 2.36 N as the apple
-    began to slip, a close from 45 N. The pattern now reaches a quarter of the fruit's
-    half-width at least (``soft_fingers.PAIR_REACH_FRACTION``), and both run through
-    within the iteration limit."""
+    began to slip, a close from 45 N. A step that fails with couplings left out now
+    grows the pattern by the pairs near contact and is taken again
+    (``BarrierContact.grow_pattern``): both run through within the iteration limit."""
     from gripper_sim.core import fast_solver
     from gripper_sim.workflows.scenario import load_scenario, scenario_config
     from gripper_sim.workflows.window import evaluate_grasp, trial_setup
@@ -134,3 +134,29 @@ def test_a_solve_still_converging_at_the_iteration_limit_goes_on(monkeypatch):
     evaluation = evaluate_grasp(config, base, 8.0, 'bruise')
     assert evaluation.outcome != 'solver failed', evaluation.message
     assert failures == []
+
+
+def test_a_reset_simulation_repeats_its_run_after_its_pattern_grew():
+    """The fine mesh's hold at 2.363 N grows the barrier's pattern; the simulation reset
+    goes back to the pattern given (``restore_pattern``) and repeats the run to the bit."""
+    from gripper_sim.workflows.factory import make_simulation
+    from gripper_sim.workflows.grasp import evaluate
+    from gripper_sim.workflows.scenario import PickAndPlace, load_scenario, scenario_config
+    from gripper_sim.workflows.window import trial_setup
+    scenario = load_scenario('pick_and_place')
+    config, base = trial_setup(scenario_config(scenario, finger='fin_ray',
+                                               overrides=FINE_MESH), scenario)
+    sim = make_simulation(config)
+    given = sim._barrier.pattern_pairs
+    runs = []
+    for _ in range(2):
+        machine = PickAndPlace(sim, base.with_values(close__mode='force', close__force=2.363),
+                               until='transport')
+        evaluation = evaluate(sim, machine, 2.363)
+        assert evaluation.outcome != 'solver failed', evaluation.message
+        runs.append((sim.last.positions.copy(), sim._barrier.pattern_pairs.shape[0]))
+        sim.reset()
+        assert sim._barrier.pattern_pairs is given
+    (first, grown), (second, grown_again) = runs
+    assert grown > given.shape[0] and grown_again == grown
+    assert np.array_equal(first, second)

@@ -110,6 +110,36 @@ def test_two_way_barrier_matches_finite_differences_on_both_bodies():
     assert np.linalg.eigvalsh(barrier.hessian(q)).min() > -1e-9 * np.abs(dense).max()
 
 
+def test_a_pattern_grows_by_the_pairs_near_contact_once_couplings_were_left_out():
+    """A barrier whose pattern holds one fruit-body pair: while no entry fell outside it,
+    it does not grow; once one did (``left_out``), the pairs within twice the longest
+    edge join it (their dofs too), once; ``restore_pattern`` goes back to the pairs
+    given."""
+    x = np.array([[0.0, 0.0], [1.0, 0.1], [2.0, 0.0], [0.6, 0.6], [1.6, 0.5],
+                  [3.0, 0.6]]) * DHAT
+    body = SoftBody(np.array([3, 4, 5]), np.array([[3, 4], [4, 5]]), 0.5, 0.4)
+    given = np.array([[0, 3]])
+    barrier = BarrierContact(6, np.arange(3), np.array([[0, 1], [1, 2]]),
+                             BarrierSettings(dhat=DHAT, stiffness=0.5,
+                                             friction_smoothing=1e-3),
+                             bodies=(body,), pairs=given)
+    assert not barrier.grow_pattern(x)
+    keys = barrier._pattern_keys.size
+    barrier.left_out = True
+    assert barrier.grow_pattern(x)
+    reach = 2.0 * np.linalg.norm(x[5] - x[4])  # the longest edge: the body's second
+    near = {(i, j) for i in range(3) for j in range(3, 6)
+            if np.linalg.norm(x[i] - x[j]) <= reach}
+    assert {tuple(p) for p in barrier.pattern_pairs} == near | {(0, 3)}
+    assert (0, 5) not in near and (2, 5) in near
+    assert barrier._pattern_keys.size > keys
+    assert {tuple(row) for row in barrier.dofs[:, [0, 2]] // 2} >= near
+    assert not barrier.left_out and not barrier.grow_pattern(x)
+    assert barrier.restore_pattern()
+    assert np.array_equal(barrier.pattern_pairs, given) and barrier._pattern_keys.size == keys
+    assert not barrier.restore_pattern()
+
+
 def test_two_way_collision_free_step_stops_a_finger_node_before_the_fruit():
     barrier, x = _two_way_barrier()
     q = x.ravel()

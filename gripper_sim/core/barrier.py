@@ -94,6 +94,11 @@ QUIET_SEARCH = 1e-3
 #: a self-contact's quiet region serves the next steps too while their starts have used
 #: at most this fraction of its reach (then it is sought again)
 QUIET_KEEP = 0.5
+#: a step that failed with pairs' couplings left out of the Hessian's pattern (2D soft
+#: bodies, ``grow_pattern``) adds the fruit-body node pairs within this many of the
+#: collision mesh's longest edges of each other (a pair in contact couples a vertex with
+#: both ends of an edge)
+GROWTH_REACH_EDGES = 2.0
 #: m, the compiled barrier's candidates (2D) are sought this much beyond dhat / 2 around
 #: each primitive and serve while every vertex stays within it of where they were sought
 CANDIDATE_MARGIN = 1e-4
@@ -238,6 +243,11 @@ class BarrierContact(Energy):
         #: every pair of a fruit outline node and a soft body's outline node
         self.pattern_pairs = (None if pairs is None
                               else np.asarray(pairs, np.int64).reshape(-1, 2))
+        #: the pairs given (``restore_pattern``)
+        self._given_pairs = self.pattern_pairs
+        #: whether Hessian entries fell outside the pattern (left out of the Newton
+        #: matrix) since the pattern last changed (``grow_pattern``)
+        self.left_out = False
         if pairs is not None:
             self.drop_outside_pattern = True
         self.n_dof = d * n_nodes
@@ -512,9 +522,55 @@ class BarrierContact(Energy):
 
     def _check_outside(self, outside: int) -> None:
         """AssertionError if compiled Hessian entries fell outside the pattern, unless
-        ``drop_outside_pattern``."""
+        ``drop_outside_pattern`` (then ``left_out`` is set)."""
         if outside and not self.drop_outside_pattern:
             raise AssertionError('barrier Hessian entry outside its pattern')
+        self.left_out = self.left_out or bool(outside)
+
+    def grow_pattern(self, x: np.ndarray) -> bool:
+        """Add to the Hessian's pattern (2D, ``pattern_pairs`` given) the pairs of a fruit
+        outline node and a soft body's outline node within ``GROWTH_REACH_EDGES`` times
+        the collision mesh's longest edge of each other at positions ``x`` (n, 2) m, if
+        entries fell outside the pattern since it last changed (``left_out``). True if
+        it grew: a solver must then be made anew over ``dofs``."""
+        if not self.left_out or self.pattern_pairs is None or self.dimension != 2:
+            return False
+        self.left_out = False
+        v = x[self.vertex_nodes]
+        edges = np.vstack([self.fruit_edges, *self.body_edges])
+        reach = GROWTH_REACH_EDGES * np.linalg.norm(v[edges[:, 1]] - v[edges[:, 0]],
+                                                    axis=1).max()
+        fruit = self.vertex_body == 0
+        body = ~fruit
+        apart = np.linalg.norm(v[fruit][:, None] - v[body][None, :], axis=2)
+        i, j = np.nonzero(apart <= reach)
+        near = np.column_stack([self.vertex_nodes[fruit][i], self.vertex_nodes[body][j]])
+        known = self.pattern_pairs[:, 0] * self.n_dof + self.pattern_pairs[:, 1]
+        new = near[~np.isin(near[:, 0] * self.n_dof + near[:, 1], known)]
+        if not new.size:
+            return False
+        self._set_pattern(np.vstack([self.pattern_pairs, new]))
+        return True
+
+    def restore_pattern(self) -> bool:
+        """Back to the pattern of the pairs given (a restarted run repeats its results);
+        True if it had grown (a solver must then be made anew over ``dofs``)."""
+        self.left_out = False
+        if self.pattern_pairs is self._given_pairs:
+            return False
+        self._set_pattern(self._given_pairs)
+        return True
+
+    def _set_pattern(self, pairs: np.ndarray) -> None:
+        """The Hessian's pattern of the pairs (p, 2), and what depends on it."""
+        self.pattern_pairs = pairs
+        self.dofs = element_dofs(self._pattern_elements(), self.dimension)
+        self._pattern_keys = self._hessian_pattern()
+        self._positions = None
+        self._entry_cache = {}
+        if self._part is not None:
+            bp.set_pattern(self._part, self._pattern_keys)
+            self._part_slots = None
 
     def quiet(self, q: np.ndarray, dq: np.ndarray = _NO_STEP) -> bool:
         """Whether no pair is within dhat at positions ``q`` (n d,) m for certain (and, with

@@ -113,8 +113,8 @@ def barrier_value(part, x, hessian, grad, hdata, slots, dt, friction):
     over ``candidates``: value J (inf: a pair touches; nothing kept), the gradients
     added into grad (2 n,) N, with ``hessian`` the Hessians (the friction's with
     ``friction``) into hdata at the pattern keys' ``slots`` (p,). An entry outside the
-    pattern (not dropped) sets the flag ``B_OUTSIDE``. Kept: x, the values, the
-    gradients in the part's buffers (``B_TERMS``)."""
+    pattern (dropped with ``drop_outside``) sets the flag ``B_OUTSIDE``. Kept: x, the
+    values, the gradients in the part's buffers (``B_TERMS``)."""
     if quiet(part, x, np.zeros(0)):
         return 0.0
     flags = part.flags
@@ -128,7 +128,7 @@ def barrier_value(part, x, hessian, grad, hdata, slots, dt, friction):
             friction)
         if not math.isfinite(barrier):
             return np.inf
-        if (outside or friction_outside) and not part.drop_outside:
+        if outside or friction_outside:
             flags[B_OUTSIDE] = 1
         flags[B_TERMS] = 2
     else:
@@ -234,6 +234,13 @@ def new_part(fields):
 def set_slots(part, slots):
     """The pattern keys' CSC slots (p,) of the solver the part's Hessian goes to."""
     part.slots = slots
+
+
+@njit(cache=True)
+def set_pattern(part, pattern_keys):
+    """The sorted keys (p,) of the barrier's Hessian pattern (its slots set anew after:
+    ``set_slots``)."""
+    part.pattern_keys = pattern_keys
 
 
 @njit(cache=True)

@@ -147,6 +147,8 @@ class SimulationFacade:
     def reset(self) -> None:
         """Back to the initial state and commands, time 0."""
         n = self.fruit.n_nodes
+        if self._barrier is not None and self._barrier.restore_pattern():
+            self.solver = self._make_solver()
         self.solver.reset()
         self._forget_factor()
         self.q = self.initial_positions.copy()
@@ -894,6 +896,8 @@ class SimulationFacade:
         try:
             return self._drive_jaws(dt), 1
         except NewtonFailure as failure:
+            if self._pattern_grown():  # the step again, every coupling in the matrix
+                return self._advance(dt, depth)
             if depth >= self.config['sim.max_halvings']:
                 msg = (f'the solver did not converge at t = {self._time:.6g} s even in '
                        f'sub-steps of {dt:.3g} s (the step halved {depth} times: '
@@ -902,6 +906,18 @@ class SimulationFacade:
         it1, s1 = self._advance(0.5 * dt, depth + 1)
         it2, s2 = self._advance(0.5 * dt, depth + 1)
         return it1 + it2, s1 + s2
+
+    def _pattern_grown(self) -> bool:
+        """Whether the barrier's Hessian pattern grew to hold the pairs near contact
+        after a failed step left couplings out of the Newton matrix
+        (``BarrierContact.grow_pattern``); the solver is then made anew over it."""
+        barrier = self._barrier
+        if barrier is None or self._soft is None:
+            return False
+        if not barrier.grow_pattern(np.concatenate([self.q, self._finger.positions])):
+            return False
+        self.solver = self._make_solver()
+        return True
 
     def _convergence_advice(self, failure: NewtonFailure) -> str:
         """What may help a step that failed in its smallest sub-steps (a smaller sim.dt

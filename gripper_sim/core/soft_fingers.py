@@ -44,14 +44,9 @@ THICKNESS_KEYS = {'solid_pad': 'gripper.finger.solid_pad.thickness',
 MIRROR = np.array([-1.0, 1.0])
 #: the fruit-finger pairs the barrier's Hessian pattern holds (``BarrierContact``'s
 #: ``pairs``): a fruit outline node and a finger surface node at most this many times
-#: the sum of their node spacings apart in z at rest (the fingers close along x) ...
+#: the sum of their node spacings apart in z at rest (the fingers close along x; a step
+#: that fails with pairs outside it grows it: ``BarrierContact.grow_pattern``)
 PAIR_REACH_SPACINGS = 2.0
-#: ... or this fraction of the fruit's half-width, whichever is more: under load the
-#: outline shifts along the finger by millimetres whatever the mesh (a 256-node apple
-#: touched finger nodes 4 mm from its nodes' partners at rest; the pairs left out of the
-#: pattern left their coupling out of the Newton matrix, which then took 5 % of the
-#: residual an iteration, and the grasp failed at 2.4 N and from 45 N)
-PAIR_REACH_FRACTION = 0.25
 #: ... the fruit's nodes within this fraction of its half-width of its side facing the
 #: finger (the fruit compressed by half its width reaches no further)
 PAIR_SIDE_DEPTH = 0.5
@@ -220,9 +215,8 @@ class SoftFingers:
         the fruit's ``surface`` nodes (n_s,) at ``outline`` (n_s, 2) m, relative to the
         jaws' centre, on the side facing each finger (``PAIR_SIDE_DEPTH``), and that
         finger's surface nodes at rest within ``PAIR_REACH_SPACINGS`` times the sum of
-        the two nodes' spacings, or ``PAIR_REACH_FRACTION`` of the fruit's half-width if
-        more, of each other in z. A node's spacing: the distance to its nearest
-        neighbour on its outline (m)."""
+        the two nodes' spacings of each other in z. A node's spacing: the distance to
+        its nearest neighbour on its outline (m)."""
         x = self.body.rest_positions
         edges = self.body.surface_edges
         finger = np.unique(edges)
@@ -236,9 +230,8 @@ class SoftFingers:
         pairs = []
         for sign, nodes, frame in zip((-1.0, 1.0), self.nodes, self.frames):
             side = np.flatnonzero(sign * outline[:, 0] > (1.0 - PAIR_SIDE_DEPTH) * half_width)
-            reach = np.maximum(PAIR_REACH_SPACINGS * (fruit_spacing[side, None]
-                                                      + finger_spacing[None, finger]),
-                               PAIR_REACH_FRACTION * half_width)
+            reach = PAIR_REACH_SPACINGS * (fruit_spacing[side, None]
+                                           + finger_spacing[None, finger])
             i, j = np.nonzero(np.abs(outline[side, None, 1] - frame[None, finger, 1]) <= reach)
             pairs.append(np.column_stack([surface[side[i]], nodes[finger[j]]]))
         return np.vstack(pairs)
