@@ -18,7 +18,7 @@ mismatch and step size (max |dq| / dt, m/s) of its fresh directions.
 With ``--pick MODE`` (``hold`` or ``bruise``) it checks a 2D Fin Ray instead: the
 window's trial of that mode at ``--force`` N (``workflows.window.evaluate_grasp``, the
 scenario ``pick_and_place``, ``--fruit`` and ``--set`` applied), the solves
-interpreted. At the first solve that fails, its last two fresh directions are broken
+interpreted. At the last solve that failed, its last two fresh directions are broken
 down by energy: the energy table's (the fruit's and fingers' elastic energies,
 pressure, inertia) and each barrier's with and without its friction, the Newton
 matrix's product with dq against the central difference of that energy's gradient, at
@@ -168,8 +168,7 @@ def check_pick(args) -> int:
         try:
             return solve(self, q_n, v_n, dt, *rest)
         except NewtonFailure as error:
-            if not failed:
-                failed.append((dt, str(error), list(directions)))
+            failed[:] = [(dt, str(error), list(directions))]
             raise
 
     fast_solver.PatternCachingSolver.solve = solve_watched
@@ -183,7 +182,7 @@ def check_pick(args) -> int:
         print('no solve failed')
         return 0
     dt, message, rows = failed[0]
-    print(f'first failed solve (dt {dt:.3g} s): {message}')
+    print(f'last failed solve (dt {dt:.3g} s): {message}')
     for residual, energies in rows[-2:]:
         top = np.argsort(residual)[::-1][:4]
         print('  fresh direction; largest |S g| (N) at dofs',
