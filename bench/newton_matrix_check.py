@@ -20,11 +20,12 @@ window's trial of that mode at ``--force`` N (``workflows.window.evaluate_grasp`
 scenario ``pick_and_place``, ``--fruit`` and ``--set`` applied), the solves
 interpreted. At the last solve that failed, its last two fresh directions are broken
 down by energy: the energy table's (the fruit's and fingers' elastic energies,
-pressure, inertia) and each barrier's with and without its friction, the Newton
+pressure, inertia and mass damping) and each barrier's with and without its friction, the Newton
 matrix's product with dq against the central difference of that energy's gradient, at
 the dofs of the largest residual. A pair of nodes whose coupling is missing from the
 matrix shows as a barrier whose product is much larger than its difference (both nodes
-moving together).
+moving together). The lagged friction is smooth only within eps_v dt of a slip (1.6 nm
+at a 16 us sub-step): for its rows choose ``--move`` well below that.
 
 Usage::
 
@@ -49,7 +50,7 @@ sys.path.insert(0, str(ROOT))
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core import barrier, fast_solver  # noqa: E402
 from gripper_sim.core.barrier_part import barrier_value  # noqa: E402
-from gripper_sim.core.solver_kernels import csc_matvec  # noqa: E402
+from gripper_sim.core.solver_kernels import add_inertia_diagonal, csc_matvec  # noqa: E402
 from gripper_sim.core.stepper import NewtonFailure  # noqa: E402
 from gripper_sim.core3d.simulation import Simulation3D  # noqa: E402
 from gripper_sim.errors import ConvergenceError  # noqa: E402
@@ -103,6 +104,8 @@ def energy_parts(solver, q, q_n, v_n, dt, hessian: bool) -> dict:
     grad, data = np.zeros(solver.n), np.zeros(solver._nnz)
     _, _, low_rank = solver._table.potential(q, q_n, v_n, dt, solver.m, solver.alpha,
                                              hessian, grad, data if hessian else np.zeros(1))
+    if hessian:  # the inertia's and mass damping's diagonal (the solver adds it later)
+        add_inertia_diagonal(data, solver._diag_pos, solver.m, dt, solver.alpha)
     parts['energy table'] = (grad, data, list(low_rank))
     for k, (energy, scatter) in enumerate(solver._untabled):
         part, slots = energy.compiled_part(scatter), energy.pattern_slots(scatter)
