@@ -211,7 +211,7 @@ def test_the_contact_pattern_is_the_grasps_wherever_the_jaws_start():
     above = Simulation3D(load_config(overrides=FIN_RAY_3D + [
         f'gripper.initial_lift={centred.initial_lift + 0.02}']))
     assert above.initial_lift == pytest.approx(centred.initial_lift + 0.02)
-    assert np.array_equal(above._barrier.pairs, centred._barrier.pairs)
+    assert np.array_equal(above._barrier.pattern_pairs, centred._barrier.pattern_pairs)
 
 
 def _squeezes(*overrides: str, force: float = 2.0, max_steps: int = 80,

@@ -45,3 +45,26 @@ def test_the_fruit_slides_in_the_fin_rays_and_every_step_converges_whole():
     assert fruit_rose < jaws_rose - 1e-3          # the apple slid down the fingers
     assert min(distances) > 0.0
     assert np.all(np.isfinite(end.fingers.positions))
+
+
+def test_a_fruit_that_slides_off_the_barriers_pattern_grows_it():
+    """The window's hold trial at 1.04 N (the 1 um gap of the window's default): in the
+    lift the apple slides along the fingers beyond the pairs the barrier's Hessian
+    pattern holds; their couplings were left out of the Newton matrix and the solves
+    converged linearly, step after halved step (128 s of CPU time on a loaded machine).
+    A failed step now grows the pattern by the pairs near contact and is taken again
+    (``BarrierContact.grow_pattern``; 26 s on the same machine): the apple drops."""
+    from gripper_sim.workflows.factory import make_simulation
+    from gripper_sim.workflows.grasp import evaluate
+    from gripper_sim.workflows.scenario import PickAndPlace, load_scenario, scenario_config
+    from gripper_sim.workflows.window import trial_setup
+    scenario = load_scenario('pick_and_place')
+    config, base = trial_setup(scenario_config(scenario, finger='fin_ray',
+                                               overrides=['dimension=3']), scenario)
+    sim = make_simulation(config)
+    given = sim._barrier.pattern_pairs.shape[0]
+    machine = PickAndPlace(sim, base.with_values(close__mode='force', close__force=1.04),
+                           until='transport')
+    evaluation = evaluate(sim, machine, 1.04)
+    assert evaluation.outcome == 'dropped', evaluation.message
+    assert sim._barrier.pattern_pairs.shape[0] > given

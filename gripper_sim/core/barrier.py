@@ -528,12 +528,12 @@ class BarrierContact(Energy):
         self.left_out = self.left_out or bool(outside)
 
     def grow_pattern(self, x: np.ndarray) -> bool:
-        """Add to the Hessian's pattern (2D, ``pattern_pairs`` given) the pairs of a fruit
+        """Add to the Hessian's pattern (``pattern_pairs`` given) the pairs of a fruit
         outline node and a soft body's outline node within ``GROWTH_REACH_EDGES`` times
-        the collision mesh's longest edge of each other at positions ``x`` (n, 2) m, if
+        the collision mesh's longest edge of each other at positions ``x`` (n, d) m, if
         entries fell outside the pattern since it last changed (``left_out``). True if
         it grew: a solver must then be made anew over ``dofs``."""
-        if not self.left_out or self.pattern_pairs is None or self.dimension != 2:
+        if not self.left_out or self.pattern_pairs is None:
             return False
         self.left_out = False
         v = x[self.vertex_nodes]
@@ -677,16 +677,19 @@ class BarrierContact(Energy):
                                     and np.array_equal(kept[1], rows)):
                 kept = (indptr.copy(), rows.copy(), *self._locate(indptr, rows))
                 self._entry_cache[slot] = kept
+            self.left_out = self.left_out or kept[4]
             where.append(kept[2])
             vals.append(scale * matrix.data[:end][kept[3]])
         if not where:
             return np.zeros(0, np.int64), np.zeros(0)
         return np.concatenate(where), np.concatenate(vals)
 
-    def _locate(self, indptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _locate(self, indptr: np.ndarray,
+                rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """For a Hessian's CSC structure over the deformable vertices' dofs (``indptr``
         (n_d + 1,), row ``indices``): (the pattern's key index of each entry among the
-        deformable vertices, bool mask of those entries)."""
+        deformable vertices, bool mask of those entries, whether entries fell outside the
+        pattern and were left out)."""
         n_d = self.vertex_dofs.size
         cols = np.repeat(np.arange(n_d), np.diff(indptr))
         inside = rows < n_d
@@ -694,12 +697,13 @@ class BarrierContact(Energy):
         last = self._pattern_keys.size - 1
         index = np.minimum(np.searchsorted(self._pattern_keys, keys), last)
         found = self._pattern_keys[index] == keys
-        if not np.all(found):
+        left_out = not np.all(found)
+        if left_out:
             if not self.drop_outside_pattern:
                 raise AssertionError('barrier Hessian entry outside its pattern')
             inside[inside] = found
             index = index[found]
-        return index, inside
+        return index, inside, left_out
 
     def evaluate(self, q: np.ndarray, hessian: bool = True) -> Evaluation:
         """Barrier plus lagged friction at fruit positions ``q`` (d n,) m."""

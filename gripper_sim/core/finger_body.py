@@ -20,7 +20,7 @@ from gripper_sim.core.energies import Energy, RodBending, Stretching
 
 #: the node pairs of a finger whose coupling its self-contact's Hessian pattern holds:
 #: those this many rod element lengths (the longest) apart or closer at rest (pairs
-#: further apart still feel their exact barrier force, ``BarrierContact.pairs``)
+#: further apart still feel their exact barrier force, ``BarrierContact.pattern_pairs``)
 SELF_PAIR_REACH_ELEMENTS = 2.0
 
 

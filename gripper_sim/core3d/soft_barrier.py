@@ -12,7 +12,8 @@ the fruit: the fingers close along x, and in contact the two surfaces slide rela
 each other by far less than a mesh edge. Pairs outside the pattern (a fruit slipping far
 along a finger) still add their exact barrier gradient; their coupling is left out of
 the Newton matrix (``drop_outside_pattern``), which slows convergence but changes no
-solution.
+solution; a step that fails with couplings left out grows the pattern by the pairs near
+contact and is taken again (``BarrierContact.grow_pattern``).
 
 ``partners`` (the body each node touches) is dimension-generic here: from each pair's
 stencil (vertex-vertex, edge-vertex, edge-edge, face-vertex) and its distance.
@@ -37,20 +38,17 @@ class SoftBarrier3D(BarrierContact):
             holds (global node indices).
     """
 
-    drop_outside_pattern = True
-
     def __init__(self, n_nodes: int, surface: np.ndarray, skin_edges: np.ndarray,
                  triangles: np.ndarray, settings: BarrierSettings, bodies: tuple[SoftBody, ...],
                  pairs: np.ndarray):
-        self.pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
         super().__init__(n_nodes, surface, skin_edges, settings, bodies, dimension=3,
-                         triangles=triangles)
+                         triangles=triangles, pairs=pairs)
 
     def _pattern_elements(self) -> np.ndarray:
         """(n_elem, 3) the fruit's surface triangles, the soft bodies' and the pairs
-        (their second node repeated: one element width)."""
+        (``pattern_pairs``, their second node repeated: one element width)."""
         bodies = [self.vertex_nodes[t] for t in self.body_triangles]
-        pairs = np.column_stack([self.pairs, self.pairs[:, 1]])
+        pairs = np.column_stack([self.pattern_pairs, self.pattern_pairs[:, 1]])
         return np.vstack([self.surface[self.fruit_triangles], *bodies, pairs])
 
     def partners(self, q: np.ndarray) -> np.ndarray:
