@@ -94,7 +94,7 @@ QUIET_SEARCH = 1e-3
 #: a self-contact's quiet region serves the next steps too while their starts have used
 #: at most this fraction of its reach (then it is sought again)
 QUIET_KEEP = 0.5
-#: a step that failed with pairs' couplings left out of the Hessian's pattern (2D soft
+#: a step that failed with pairs' couplings left out of the Hessian's pattern (soft
 #: bodies, ``grow_pattern``) adds the fruit-body node pairs within this many of the
 #: collision mesh's longest edges of each other (a pair in contact couples a vertex with
 #: both ends of an edge)

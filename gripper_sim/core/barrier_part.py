@@ -41,8 +41,9 @@ from gripper_sim.core.friction_kernels import lagged_friction
 
 #: a part's flags (int64 array): its candidates (-1: none kept, 0: sought at the step's
 #: start (the faces' corners where they start), 1: sought since (where they end)), its
-#: Hessian entries outside the pattern (not dropped; the reader clears it), its last
-#: finite evaluation (0: none this step, 1: no pairs, 2: terms)
+#: Hessian entries outside the pattern (an error, or left out with ``drop_outside``; the
+#: reader clears it), its last finite evaluation (0: none this step, 1: no pairs, 2:
+#: terms)
 B_PAIRS, B_OUTSIDE, B_TERMS, B_SIZE = range(4)
 
 
