@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core.advance_kernels import pairwise_sum
+from gripper_sim.core.measures import numpy_sum
 from gripper_sim.core.multistep import StopRules
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.workflows.grasp import GraspSequence, evaluate
@@ -135,10 +135,10 @@ def test_a_pick_and_place_ends_the_same_unwatched(options):
 
 
 @pytest.mark.parametrize('count', [0, 1, 7, 8, 9, 16, 17, 63, 128, 129, 300])
-def test_pairwise_sum_adds_as_numpy_does(count):
+def test_the_advances_sum_adds_as_numpy_does(count):
     values = np.random.default_rng(count).normal(size=max(count, 1)) * 1e-3
     expected = float(np.add.reduce(values[:count])) if count else 0.0
-    assert pairwise_sum(values, count) == expected
+    assert numpy_sum(values, count) == expected
     if count:
-        assert pairwise_sum(values, count) / count == float(np.mean(values[:count]))
-    assert math.isfinite(pairwise_sum(values, count))
+        assert numpy_sum(values, count) / count == float(np.mean(values[:count]))
+    assert math.isfinite(numpy_sum(values, count))

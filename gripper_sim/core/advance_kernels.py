@@ -32,6 +32,7 @@ from gripper_sim.core.damage import TRESCA_OVER_P0
 from gripper_sim.core.kernels import (KI_SURFACE, M_ANY_LEFT, M_ANY_RIGHT, M_CZ, M_LEFT_FX,
                                       M_LEFT_N, M_RIGHT_FX, M_RIGHT_N, M_WIDTH, OK, UNSUPPORTED,
                                       _packed1, borrowed, substep)
+from gripper_sim.core.measures import numpy_sum
 
 #: the grip's slots (``GripperState``'s fields)
 (G_GAP, G_GAP_RATE, G_LIFT, G_LIFT_RATE, G_MODE, G_TARGET_GAP, G_TARGET_FORCE, G_SPEED,
@@ -142,35 +143,6 @@ def _holder(c_int, pad_holder, padded, i):
     if c_int[0, i] >= 0 or not padded:
         return c_int[0, i]
     return pad_holder[i]
-
-
-@njit(cache=True)
-def pairwise_sum(values, count):
-    """The sum of values[:count] as numpy's ``add.reduce`` adds a contiguous float64
-    array (pairwise, eight partial sums per block of up to 128), so that a mean taken
-    here equals ``np.mean`` of the same numbers to the last bit."""
-    if count < 8:
-        total = 0.0
-        for i in range(count):
-            total += values[i]
-        return total
-    if count <= 128:
-        r = np.empty(8)
-        for j in range(8):
-            r[j] = values[j]
-        i = 8
-        while i < count - count % 8:
-            for j in range(8):
-                r[j] += values[i + j]
-            i += 8
-        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        while i < count:
-            total += values[i]
-            i += 1
-        return total
-    half = count // 2
-    half -= half % 8
-    return pairwise_sum(values, half) + pairwise_sum(values[half:], count - half)
 
 
 @njit(cache=True)
@@ -381,7 +353,7 @@ def advance(x, v, c_int, c_float, forces, grip, run, kin, rules, peaks, site, fi
                     lifts[count] = v[i, 1]
                     count += 1
             if step_dt > 0 and count > 0:
-                relative = pairwise_sum(lifts, count) / count - grip[G_LIFT_RATE]
+                relative = numpy_sum(lifts, count) / count - grip[G_LIFT_RATE]
                 slide = max(0.0, slide - relative * step_dt)
                 max_slip = max(max_slip, slide)
         # the stop rules

@@ -1072,8 +1072,8 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     nothing, else from x_n (each with the fixed nodes at their targets and the outline
     pushed ahead of moving faces, ``pushed_start``), else, with ``carried`` (a function
     giving per soft body in ``barrier.bodies`` order (its nodes (k,), the shift (d,) m
-    its base makes in the step); called only then), from x_n with each soft body moved by its base's shift and the
-    fruit's nodes within dhat of it moved along with it: where a fruit pressed hard on
+    its base makes in the step); called only then), from x_n with each soft body moved
+    by its base's shift and the fruit's nodes within dhat of it moved along with it: where a fruit pressed hard on
     a finger lies closer to it than the base's move, moving the base alone would cross
     the fruit.
 
