@@ -102,3 +102,34 @@ def test_the_simulation_gives_each_fin_ray_its_self_contact():
 def test_a_finger_without_rods_has_no_self_contact(finger):
     sim = Simulation(load_config(overrides=[f'gripper.finger.type={finger}']))
     assert sim._soft.self_contact is None
+
+
+def test_a_folding_finger_grows_its_self_contact_pattern():
+    """The tomato squeezed to 43.8 N (the Fin Ray's window trial): each finger's front
+    beam lands on members whose nodes lay apart at rest, outside its self-contact's
+    Hessian pattern; their couplings were left out of the Newton matrix (5 times too
+    stiff along the nodes' joint motion: ``bench/newton_matrix_check.py --pick``), Newton
+    crept and the trial failed at its smallest sub-step. A step that fails so grows the
+    self-contact's pattern too (``BarrierContact.grow_pattern``): the trial runs through
+    (the tomato slips), and a reset goes back to the pattern given."""
+    from gripper_sim.workflows.factory import make_simulation
+    from gripper_sim.workflows.grasp import evaluate
+    from gripper_sim.workflows.scenario import PickAndPlace, load_scenario, scenario_config
+    from gripper_sim.workflows.window import trial_setup
+    scenario = load_scenario('pick_and_place')
+    config, base = trial_setup(scenario_config(scenario, fruit='tomato', finger='fin_ray'),
+                               scenario)
+    sim = make_simulation(config)
+    barrier = sim._soft.self_contact
+    given = barrier.pattern_pairs
+    machine = PickAndPlace(sim, base.with_values(close__mode='force', close__force=43.804),
+                           until='transport', stop_on_bruise=True)
+    evaluation = evaluate(sim, machine, 43.804)
+    assert evaluation.outcome != 'solver failed', evaluation.message
+    assert evaluation.peak_grip_force == pytest.approx(43.804, rel=0.02)
+    grown = barrier.pattern_pairs
+    assert len(grown) > len(given)
+    m, first = sim._soft.body.n_nodes, sim.fruit.n_nodes
+    assert np.all((grown[:, 0] - first < m) == (grown[:, 1] - first < m))  # one finger's
+    sim.reset()
+    assert barrier.pattern_pairs is given

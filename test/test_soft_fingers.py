@@ -140,6 +140,34 @@ def test_a_pattern_grows_by_the_pairs_near_contact_once_couplings_were_left_out(
     assert not barrier.restore_pattern()
 
 
+def test_a_self_contact_pattern_grows_by_each_bodys_own_pairs_near_contact():
+    """A self-contact barrier over two copies of a bent chain whose pattern holds one
+    pair: once couplings were left out, the node pairs of one copy within twice the
+    longest edge join it (lower node first), never a pair across copies; restored,
+    back to the pair given."""
+    chain = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [2.0, 0.8], [1.0, 0.8],
+                      [0.0, 0.8]]) * DHAT
+    edges = np.column_stack([np.arange(5), np.arange(1, 6)])
+    x = np.vstack([chain, chain + [0.5 * DHAT, 0.3 * DHAT]])  # the copies overlap
+    copies = (np.arange(6), np.arange(6, 12))
+    bodies = tuple(SoftBody(copy, copy[edges], 0.0, 0.0) for copy in copies)
+    given = np.array([[0, 5]])
+    barrier = BarrierContact(12, np.zeros(0, np.int64), np.zeros((0, 2), np.int64),
+                             BarrierSettings(dhat=DHAT, stiffness=0.5), bodies=bodies,
+                             pairs=given, self_contact=True)
+    keys = barrier._pattern_keys.size
+    barrier.left_out = True
+    assert barrier.grow_pattern(x)
+    reach = 2.0 * DHAT  # twice the longest edge (1 dhat)
+    near = {(copy[i], copy[j]) for copy in copies for i in range(6) for j in range(i + 1, 6)
+            if np.linalg.norm(chain[i] - chain[j]) <= reach}
+    assert {tuple(p) for p in barrier.pattern_pairs} == near | {(0, 5)}
+    assert (0, 3) not in near and (1, 4) in near and (7, 10) in near
+    assert barrier._pattern_keys.size > keys
+    assert barrier.restore_pattern()
+    assert np.array_equal(barrier.pattern_pairs, given) and barrier._pattern_keys.size == keys
+
+
 def test_two_way_collision_free_step_stops_a_finger_node_before_the_fruit():
     barrier, x = _two_way_barrier()
     q = x.ravel()

@@ -57,6 +57,7 @@ from typing import Callable
 
 import ipctk
 import numpy as np
+from scipy.spatial import cKDTree
 
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
@@ -95,9 +96,9 @@ QUIET_SEARCH = 1e-3
 #: at most this fraction of its reach (then it is sought again)
 QUIET_KEEP = 0.5
 #: a step that failed with pairs' couplings left out of the Hessian's pattern (soft
-#: bodies, ``grow_pattern``) adds the fruit-body node pairs within this many of the
-#: collision mesh's longest edges of each other (a pair in contact couples a vertex with
-#: both ends of an edge)
+#: bodies and their self-contact, ``grow_pattern``) adds the node pairs within this many
+#: of the collision mesh's longest edges of each other (a pair in contact couples a
+#: vertex with both ends of an edge)
 GROWTH_REACH_EDGES = 2.0
 #: m, the compiled barrier's candidates (2D) are sought this much beyond dhat / 2 around
 #: each primitive and serve while every vertex stays within it of where they were sought
@@ -528,11 +529,11 @@ class BarrierContact(Energy):
         self.left_out = self.left_out or bool(outside)
 
     def grow_pattern(self, x: np.ndarray) -> bool:
-        """Add to the Hessian's pattern (``pattern_pairs`` given) the pairs of a fruit
-        outline node and a soft body's outline node within ``GROWTH_REACH_EDGES`` times
-        the collision mesh's longest edge of each other at positions ``x`` (n, d) m, if
-        entries fell outside the pattern since it last changed (``left_out``). True if
-        it grew: a solver must then be made anew over ``dofs``."""
+        """Add to the Hessian's pattern (``pattern_pairs`` given) the node pairs that may
+        touch (``_near_pairs``) within ``GROWTH_REACH_EDGES`` times the collision mesh's
+        longest edge of each other at positions ``x`` (n, d) m, if entries fell outside
+        the pattern since it last changed (``left_out``). True if it grew: a solver must
+        then be made anew over ``dofs``."""
         if not self.left_out or self.pattern_pairs is None:
             return False
         self.left_out = False
@@ -540,17 +541,33 @@ class BarrierContact(Energy):
         edges = np.vstack([self.fruit_edges, *self.body_edges])
         reach = GROWTH_REACH_EDGES * np.linalg.norm(v[edges[:, 1]] - v[edges[:, 0]],
                                                     axis=1).max()
-        fruit = self.vertex_body == 0
-        body = ~fruit
-        apart = np.linalg.norm(v[fruit][:, None] - v[body][None, :], axis=2)
-        i, j = np.nonzero(apart <= reach)
-        near = np.column_stack([self.vertex_nodes[fruit][i], self.vertex_nodes[body][j]])
+        near = self._near_pairs(v, reach)
         known = self.pattern_pairs[:, 0] * self.n_dof + self.pattern_pairs[:, 1]
         new = near[~np.isin(near[:, 0] * self.n_dof + near[:, 1], known)]
         if not new.size:
             return False
         self._set_pattern(np.vstack([self.pattern_pairs, new]))
         return True
+
+    def _near_pairs(self, v: np.ndarray, reach: float) -> np.ndarray:
+        """(p, 2) the node pairs whose vertices at ``v`` (n_v, d) m lie within ``reach``
+        (m) of each other and may touch: a fruit outline node and a soft body's (in that
+        order), or with ``self_contact`` two nodes of one body (the lower first), sorted."""
+        if self.self_contact:
+            found = []
+            for body in range(1, len(self.bodies) + 1):
+                mine = np.flatnonzero(self.vertex_body == body)
+                pairs = cKDTree(v[mine]).query_pairs(reach, output_type='ndarray')
+                found.append(np.sort(self.vertex_nodes[mine][pairs], axis=1))
+            near = np.vstack(found) if found else np.zeros((0, 2), np.int64)
+        else:
+            fruit = np.flatnonzero(self.vertex_body == 0)
+            body = np.flatnonzero(self.vertex_body != 0)
+            close = cKDTree(v[fruit]).sparse_distance_matrix(
+                cKDTree(v[body]), reach, output_type='ndarray')
+            near = np.column_stack([self.vertex_nodes[fruit][close['i']],
+                                    self.vertex_nodes[body][close['j']]])
+        return near[np.lexsort((near[:, 1], near[:, 0]))].astype(np.int64)
 
     def restore_pattern(self) -> bool:
         """Back to the pattern of the pairs given (a restarted run repeats its results);

@@ -147,7 +147,7 @@ class SimulationFacade:
     def reset(self) -> None:
         """Back to the initial state and commands, time 0."""
         n = self.fruit.n_nodes
-        if self._barrier is not None and self._barrier.restore_pattern():
+        if any([barrier.restore_pattern() for barrier in self._patterned_barriers()]):
             self.solver = self._make_solver()
         self.solver.reset()
         self._forget_factor()
@@ -908,16 +908,25 @@ class SimulationFacade:
         return it1 + it2, s1 + s2
 
     def _pattern_grown(self) -> bool:
-        """Whether the barrier's Hessian pattern grew to hold the pairs near contact
-        after a failed step left couplings out of the Newton matrix
-        (``BarrierContact.grow_pattern``); the solver is then made anew over it."""
-        barrier = self._barrier
-        if barrier is None or self._soft is None:
+        """Whether a barrier's Hessian pattern (the fruit's, the fingers' self-contact)
+        grew to hold the pairs near contact after a failed step left couplings out of the
+        Newton matrix (``BarrierContact.grow_pattern``); the solver is then made anew
+        over it."""
+        if self._soft is None:
             return False
-        if not barrier.grow_pattern(np.concatenate([self.q, self._finger.positions])):
+        x = np.concatenate([self.q, self._finger.positions])
+        grown = [barrier.grow_pattern(x) for barrier in self._patterned_barriers()]
+        if not any(grown):
             return False
         self.solver = self._make_solver()
         return True
+
+    def _patterned_barriers(self) -> list:
+        """The barriers whose Hessian pattern may grow: the fruit's, the fingers'
+        self-contact (those present)."""
+        soft = self._soft
+        return [b for b in (self._barrier, soft.self_contact if soft else None)
+                if b is not None]
 
     def _convergence_advice(self, failure: NewtonFailure) -> str:
         """What may help a step that failed in its smallest sub-steps (a smaller sim.dt
