@@ -27,6 +27,20 @@ class ConvergenceError(GripperSimError):
         self.time = time
 
 
+class FingersClosed(ConvergenceError):
+    """The deformable fingers closed on each other over the fruit: its outline is pinched
+    between them (crushed there) and no step can go on.
+
+    Attributes (besides ``ConvergenceError``'s):
+        gap: m, how far apart the two fingers' outlines were.
+    """
+
+    def __init__(self, message: str, residual_history=(), time: float = float('nan'),
+                 gap: float = 0.0):
+        super().__init__(message, residual_history, time)
+        self.gap = gap
+
+
 class ConfigWarning(UserWarning):
     """A configuration key that is valid but has no effect in the set-up (or a choice
     that overrides another), issued with ``warnings.warn``; the CLI prints it as

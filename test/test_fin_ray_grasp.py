@@ -108,6 +108,23 @@ def test_on_a_fine_mesh_the_barriers_pattern_holds_the_pairs_that_touch(force, m
     assert evaluation.peak_grip_force == pytest.approx(force, rel=0.02)
 
 
+def test_on_a_fine_mesh_a_firm_close_starts_its_steps_with_the_fruit_near_the_fingers_carried():
+    """The fine mesh's window trial at 83 N: late in the close a step's fingers move
+    1.6 um while fruit edges lie nanometres under their beams with both ends further
+    than dhat from them; carrying only the fruit nodes within dhat along with the
+    fingers crossed those edges, and the trial failed with no collision-free start
+    (at 83.4 N of grip). A step now tries next the fruit nodes within a longest edge of
+    each finger carried along (``barrier.CARRY_REACH_EDGES``): the trial runs through."""
+    from gripper_sim.workflows.scenario import load_scenario, scenario_config
+    from gripper_sim.workflows.window import evaluate_grasp, trial_setup
+    scenario = load_scenario('pick_and_place')
+    config, base = trial_setup(scenario_config(scenario, finger='fin_ray',
+                                               overrides=FINE_MESH), scenario)
+    evaluation = evaluate_grasp(config, base, 83.0, 'bruise')
+    assert evaluation.outcome not in ('solver failed', 'pinched'), evaluation.message
+    assert evaluation.peak_grip_force == pytest.approx(83.0, rel=0.02)
+
+
 def test_a_solve_still_converging_at_the_iteration_limit_goes_on(monkeypatch):
     """``sim.max_newton_iterations`` 6 on the default Fin Ray grasp to 8 N: some solves
     need 7 to 10 iterations, converging fast. Such a solve goes on

@@ -51,6 +51,7 @@ its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 from __future__ import annotations
 
 import copy
+import math
 import operator
 from dataclasses import dataclass
 from typing import Callable
@@ -100,6 +101,10 @@ QUIET_KEEP = 0.5
 #: of the collision mesh's longest edges of each other (a pair in contact couples a
 #: vertex with both ends of an edge)
 GROWTH_REACH_EDGES = 2.0
+#: a soft-body step with no other collision-free start carries along with each finger
+#: the fruit's outline nodes within this many of the collision mesh's longest edges of it
+#: (``soft_body_step``), after those within dhat of it
+CARRY_REACH_EDGES = 1.0
 #: m, the compiled barrier's candidates (2D) are sought this much beyond dhat / 2 around
 #: each primitive and serve while every vertex stays within it of where they were sought
 CANDIDATE_MARGIN = 1e-4
@@ -538,16 +543,29 @@ class BarrierContact(Energy):
             return False
         self.left_out = False
         v = x[self.vertex_nodes]
-        edges = np.vstack([self.fruit_edges, *self.body_edges])
-        reach = GROWTH_REACH_EDGES * np.linalg.norm(v[edges[:, 1]] - v[edges[:, 0]],
-                                                    axis=1).max()
-        near = self._near_pairs(v, reach)
+        near = self._near_pairs(v, GROWTH_REACH_EDGES * self.longest_edge(x))
         known = self.pattern_pairs[:, 0] * self.n_dof + self.pattern_pairs[:, 1]
         new = near[~np.isin(near[:, 0] * self.n_dof + near[:, 1], known)]
         if not new.size:
             return False
         self._set_pattern(np.vstack([self.pattern_pairs, new]))
         return True
+
+    def longest_edge(self, x: np.ndarray) -> float:
+        """m, the collision mesh's longest outline edge (the fruit's and the soft
+        bodies') at positions ``x`` (n, d) m."""
+        v = x[self.vertex_nodes]
+        edges = np.vstack([self.fruit_edges, *self.body_edges])
+        return float(np.linalg.norm(v[edges[:, 1]] - v[edges[:, 0]], axis=1).max())
+
+    def bodies_gap(self, x: np.ndarray) -> float:
+        """m, the smallest distance between outline vertices of two different soft bodies
+        at positions ``x`` (n, d) m (inf with fewer than two bodies)."""
+        v = x[self.vertex_nodes]
+        outlines = [v[self.vertex_body == 1 + b] for b in range(len(self.bodies))]
+        return min((float(cKDTree(first).query(second)[0].min())
+                    for k, first in enumerate(outlines) for second in outlines[k + 1:]),
+                   default=math.inf)
 
     def _near_pairs(self, v: np.ndarray, reach: float) -> np.ndarray:
         """(p, 2) the node pairs whose vertices at ``v`` (n_v, d) m lie within ``reach``
@@ -1046,18 +1064,54 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
 _kept_constraints: tuple | None = None
 
 
+class NoCollisionFreeStart(NewtonFailure):
+    """A soft-body step found no start whose way from the step's start crosses nothing
+    (``soft_body_step``; the caller halves the step)."""
+
+    def __init__(self):
+        super().__init__("no collision-free start for the soft bodies' step", [])
+
+
 def _carried_start(barrier: BarrierContact, x_n: np.ndarray, pushed: np.ndarray,
-                   carried: list) -> np.ndarray:
+                   carried: list, reach: float | None = None) -> np.ndarray:
     """(n, d) m, ``pushed`` with each soft body's nodes and the fruit's outline nodes
-    within dhat of it at ``x_n`` moved by its base's shift (``soft_body_step``)."""
+    near it at ``x_n`` moved by its base's shift (``soft_body_step``): those within dhat
+    of it (``partners``), or with ``reach`` (m) those within ``reach`` of its outline's
+    vertices and nearer it than any other body's."""
     start = pushed.copy()
-    partner = barrier.partners(x_n.ravel())
     fruit = barrier.vertex_nodes[barrier.vertex_body == 0]
+    if reach is None:
+        partner = barrier.partners(x_n.ravel())
+        owner = partner[fruit]
+    else:
+        apart = np.array([cKDTree(x_n[barrier.vertex_nodes[barrier.vertex_body == 1 + b]])
+                          .query(x_n[fruit])[0] for b in range(len(carried))])
+        owner = np.where(apart.min(axis=0) <= reach, 1 + apart.argmin(axis=0), -1)
     for body, (nodes, shift) in enumerate(carried):
         start[nodes] = x_n[nodes] + shift
-        touching = fruit[partner[fruit] == 1 + body]
+        touching = fruit[owner == 1 + body]
         start[touching] = x_n[touching] + shift
     return start
+
+
+def _carried_starts(barrier: BarrierContact, x_n: np.ndarray, pushed: np.ndarray,
+                    carried: Callable[[], list] | None,
+                    reachable: Callable[[np.ndarray], bool]) -> np.ndarray:
+    """The first ``reachable`` of the carried starts (``_carried_start``): the fruit's
+    nodes within dhat of a soft body carried with it, else those within
+    ``CARRY_REACH_EDGES`` of the collision mesh's longest edges of it (a fruit edge whose
+    ends lie closer to a finger than its move may cross it unless both are carried).
+
+    Raises:
+        NoCollisionFreeStart: neither is (or no ``carried``).
+    """
+    if carried is not None:
+        moves = carried()
+        for reach in (None, CARRY_REACH_EDGES * barrier.longest_edge(x_n)):
+            start = _carried_start(barrier, x_n, pushed, moves, reach)
+            if reachable(start):
+                return start
+    raise NoCollisionFreeStart()
 
 
 def _prescribed(n: int, d: int, fixed: np.ndarray) -> StepConstraints:
@@ -1090,9 +1144,10 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     pushed ahead of moving faces, ``pushed_start``), else, with ``carried`` (a function
     giving per soft body in ``barrier.bodies`` order (its nodes (k,), the shift (d,) m
     its base makes in the step); called only then), from x_n with each soft body moved
-    by its base's shift and the fruit's nodes within dhat of it moved along with it: where a fruit pressed hard on
-    a finger lies closer to it than the base's move, moving the base alone would cross
-    the fruit.
+    by its base's shift and the fruit's nodes near it moved along with it (within dhat,
+    else within ``CARRY_REACH_EDGES`` longest edges: ``_carried_starts``): where a fruit
+    pressed hard on a finger lies closer to it than the base's move, moving the base
+    alone would cross the fruit.
 
     Returns:
         The outcome; ``forces`` (n, d) N the barrier's and friction's force on every node
@@ -1102,7 +1157,8 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         faces; -1 none).
 
     Raises:
-        NewtonFailure: no feasible start or no convergence (the caller halves the step).
+        NewtonFailure: no convergence, or ``NoCollisionFreeStart`` (the caller halves
+            the step).
     """
     n, d = x_n.shape
     barrier.begin_step(x_n, old_faces, new_faces, dt)
@@ -1120,10 +1176,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     if not reachable(start):
         start = pushed  # its own array: pushed_start's copy
         if not reachable(start):
-            start = None if carried is None else _carried_start(barrier, x_n, pushed,
-                                                                carried())
-            if start is None or not reachable(start):
-                raise NewtonFailure('no collision-free start for the soft bodies\' step', [])
+            start = _carried_starts(barrier, x_n, pushed, carried, reachable)
     constraints = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
     x = solution.q.reshape(-1, d)

@@ -40,7 +40,8 @@ import numpy as np
 from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
 from gripper_sim.core import jaw_drive
-from gripper_sim.core.barrier import BarrierContact, barrier_step, soft_body_step
+from gripper_sim.core.barrier import (BarrierContact, NoCollisionFreeStart, barrier_step,
+                                      soft_body_step)
 from gripper_sim.core.barrier_kernels import (held_normal_forces, mark_sticking,
                                               split_partners)
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
@@ -53,13 +54,19 @@ from gripper_sim.core.results import Energies, JawWrench, StepResult
 from gripper_sim.core.soft_fingers import FingerState, SoftFingers, base_pushes
 from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NewtonFailure
-from gripper_sim.errors import CommandError, ConfigError, ConvergenceError
+from gripper_sim.errors import (CommandError, ConfigError, ConvergenceError,
+                                FingersClosed)
 
 LEFT, RIGHT = 0, 1
 
 
 #: configuration keys that may change while the simulation runs (the schema's runtime keys)
 DYNAMIC_KEYS = RUNTIME_KEYS
+
+#: m, deformable fingers whose outlines come this close while their step finds no
+#: collision-free start have closed on each other over the fruit (``FingersClosed``): far
+#: less than any fruit's skin is thick (tens of um and more)
+FINGERS_MEET = 1e-5
 
 
 def finite(name: str, value: Any) -> float:
@@ -899,6 +906,7 @@ class SimulationFacade:
             if self._pattern_grown():  # the step again, every coupling in the matrix
                 return self._advance(dt, depth)
             if depth >= self.config['sim.max_halvings']:
+                self._check_fingers_open(failure)
                 msg = (f'the solver did not converge at t = {self._time:.6g} s even in '
                        f'sub-steps of {dt:.3g} s (the step halved {depth} times: '
                        f'{failure}); {self._convergence_advice(failure)}')
@@ -906,6 +914,24 @@ class SimulationFacade:
         it1, s1 = self._advance(0.5 * dt, depth + 1)
         it2, s2 = self._advance(0.5 * dt, depth + 1)
         return it1 + it2, s1 + s2
+
+    def _check_fingers_open(self, failure: NewtonFailure) -> None:
+        """FingersClosed if the deformable fingers' step ``failure`` (in its smallest
+        sub-step) found no collision-free start because the fingers' outlines have come
+        within ``FINGERS_MEET`` of each other over the fruit: the jaws close them on each
+        other (the model has no finger-to-finger contact) with the fruit's outline pinched
+        between them."""
+        if not isinstance(failure, NoCollisionFreeStart):
+            return
+        gap = self._barrier.bodies_gap(np.concatenate([self.q, self._finger.positions]))
+        if gap < FINGERS_MEET:
+            raise FingersClosed(
+                f'the fingers closed on each other over the fruit at t = {self._time:.6g} s '
+                f'(their outlines {gap * 1e6:.2g} um apart): its outline is pinched between '
+                f'them (crushed there; the model has no contact between the fingers) and the '
+                f'jaws close no further; a smaller grip force avoids it, or fingers whose '
+                f'rigid parts meet at a smaller jaw gap',
+                failure.history, self._time, gap) from failure
 
     def _pattern_grown(self) -> bool:
         """Whether a barrier's Hessian pattern (the fruit's, the fingers' self-contact)

@@ -40,6 +40,8 @@ OUTCOMES: dict[str, str] = {
     'placed': 'set down on the table at the target, clear of the jaws and at rest',
     'failed': 'the grip never reached its target, or the fruit was not placed',
     'solver failed': 'the solver did not converge (the run counts as neither held nor safe)',
+    'pinched': 'the deformable fingers closed on each other over the fruit, its outline '
+               'pinched between them: crushed there (bruised_at pinch), and the run ends',
     'canceled': 'the Grasp goal was canceled',
     'running': 'the run ended (time limit) before it had an outcome',
     'safe': 'a window trial that did not bruise or crush the fruit',
@@ -91,8 +93,9 @@ KEYS: dict[str, Term] = {
                                        'with fruit.bruise_pressure (2D: Hertz estimate of '
                                        'each contact, jaws and table; 3D: resolved)'),
     'peak_flesh_stress': Term('Pa', 'largest flesh stress of the damage model'),
-    'bruised_at': Term('-', 'where the fruit first bruised: jaws or table (null, or empty '
-                            'in a study\'s rows: not bruised)'),
+    'bruised_at': Term('-', 'where the fruit first bruised: jaws, table, or pinch (between '
+                            'deformable fingers closed on each other; null, or empty in a '
+                            'study\'s rows: not bruised)'),
     'bruised_length': Term('m', '2D: length of the outline bruised'),
     'bruised_fraction': Term('', 'fraction of the outline (2D) or surface (3D) bruised'),
     'final_gap': Term('m', 'jaw gap at the end'),

@@ -22,7 +22,7 @@ from gripper_sim.core.results import StepResult
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.core.slip import grasp_slipped
 from gripper_sim.core.vocabulary import DROP_SLIP, damage_fields
-from gripper_sim.errors import CommandError, ConvergenceError
+from gripper_sim.errors import CommandError, ConvergenceError, FingersClosed
 
 CLOSING, SQUEEZING, LIFTING, HOLDING, RELEASING, DONE = (
     'closing', 'squeezing', 'lifting', 'holding', 'releasing', 'done')
@@ -234,6 +234,11 @@ CARRIED = ('held', 'slipped', 'bruised', 'crushed', 'placed')
 
 #: ``GraspEvaluation.outcome`` of a run whose solver failed (``ConvergenceError``)
 SOLVER_FAILED = 'solver failed'
+#: ``GraspEvaluation.outcome`` of a run whose deformable fingers closed on each other over
+#: the fruit (``FingersClosed``): crushed where they pinch it (``bruised_at`` PINCH)
+PINCHED = 'pinched'
+#: ``GraspEvaluation.bruised_at`` of a pinched run
+PINCH = 'pinch'
 
 
 @dataclass
@@ -242,7 +247,8 @@ class GraspEvaluation:
 
     Attributes:
         force: N, the commanded grip force.
-        outcome: the machine's one-word outcome, or 'solver failed'.
+        outcome: the machine's one-word outcome, 'solver failed', or 'pinched' (the
+            fingers closed on each other over the fruit).
         held: the fruit was carried to the end, not dropped, and slid less than
             ``window.max_slip`` in the jaws.
         dropped, slipped, bruised, crushed: the run's flags.
@@ -252,15 +258,16 @@ class GraspEvaluation:
         peak_jaw_pressure, peak_table_pressure: Pa, largest contact pressure at the jaws,
             on the table (``core.peaks.contact_pressures``).
         peak_damage_pressure: Pa, the damage model's peak pressure (Hertz in 2D).
-        bruised_at: where it first bruised, 'jaws' or 'table' ('': not bruised; a study's
-            rows are a table of one type per column).
+        bruised_at: where it first bruised, 'jaws', 'table' or 'pinch' (between the
+            fingers closed on each other) ('': not bruised; a study's rows are a table of
+            one type per column).
         bruised_fraction: fraction of the outline (2D) or surface (3D) bruised.
         error: '' or the solver's message when it failed.
         sim_time: s simulated; steps: time steps taken.
         message: the machine's text.
         summary: the machine's own summary (JSON-ready; empty when the solver failed).
-        failure: the ConvergenceError when the solver failed (not compared, not pickled
-            into rows).
+        failure: the ConvergenceError when the solver failed or the fingers closed
+            (``FingersClosed``) (not compared, not pickled into rows).
     """
 
     force: float
@@ -301,7 +308,9 @@ def evaluate(sim, machine: GraspMachine, force: float,
     A ``ConvergenceError`` of the solver ends the run: the evaluation then has outcome
     'solver failed', ``error`` set and counts as neither held nor undamaged (dropped
     and crushed flags set), so that a force the solver cannot follow stays out of any
-    window. A run holds when it carried the fruit to the end (``CARRIED``, not dropped)
+    window. Where the solver stopped because the fingers closed on each other over the
+    fruit (``FingersClosed``) the outcome is 'pinched': crushed at the pinch, not dropped.
+    A run holds when it carried the fruit to the end (``CARRIED``, not dropped)
     with less than ``window.max_slip`` of slip.
     """
     peaks = RunPeaks()
@@ -316,6 +325,17 @@ def evaluate(sim, machine: GraspMachine, force: float,
             machine.update(result)
             if on_step is not None:
                 on_step(result, machine.phase)
+    except FingersClosed as err:
+        damage = sim.last.damage
+        return GraspEvaluation(
+            force=float(force), outcome=PINCHED, held=False, dropped=False,
+            slipped=False, bruised=True, crushed=True, slip_distance=0.0,
+            peak_grip_force=peaks.grip_force, peak_compression=peaks.compression,
+            peak_jaw_pressure=peaks.jaw_pressure, peak_table_pressure=peaks.table_pressure,
+            peak_damage_pressure=float(damage.peak_pressure) if damage is not None else 0.0,
+            bruised_at=peaks.bruised_at or PINCH, bruised_fraction=0.0, error='',
+            sim_time=float(sim.time), steps=int(sim.last.step - start_step),
+            message=str(err), failure=err)
     except ConvergenceError as err:
         return GraspEvaluation(
             force=float(force), outcome=SOLVER_FAILED, held=False, dropped=True,

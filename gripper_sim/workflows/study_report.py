@@ -21,6 +21,7 @@ from plotly.subplots import make_subplots  # noqa: E402
 
 OUTCOME_COLOURS = {'held': '#2ca02c', 'placed': '#2ca02c', 'slipped': '#bcbd22',
                    'dropped': '#1f77b4', 'bruised': '#ff7f0e', 'crushed': '#d62728',
+                   'pinched': '#9467bd',
                    'failed': '#7f7f7f', 'solver failed': '#000000', 'error': '#000000'}
 #: a design point's colour cycle
 PALETTE = ('#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2',

@@ -37,7 +37,7 @@ from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.factory import make_simulation
-from gripper_sim.workflows.grasp import SOLVER_FAILED, GraspEvaluation, evaluate
+from gripper_sim.workflows.grasp import PINCHED, SOLVER_FAILED, GraspEvaluation, evaluate
 from gripper_sim.workflows.scenario import PickAndPlace, Scenario
 
 #: relative width of the final bisection brackets
@@ -83,10 +83,11 @@ class Trial:
     @property
     def verdict(self) -> str:
         """One word for the trial line: held, slipped (or the run's word when it did
-        not carry the fruit) for a 'hold' trial; bruised or safe for a 'bruise' one."""
+        not carry the fruit) for a 'hold' trial; bruised or safe (or 'solver failed',
+        'pinched') for a 'bruise' one."""
         if self.kind == 'bruise':
-            if self.outcome == SOLVER_FAILED:
-                return SOLVER_FAILED
+            if self.outcome in (SOLVER_FAILED, PINCHED):
+                return self.outcome
             return 'bruised' if self.bruised else 'safe'
         if self.held:
             return 'held'

@@ -451,5 +451,6 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
     return write_html_report(path, title, [
         Block('Window', rows=window_rows),
         Block('Trials', fig, rows=rows,
-              text='Green: held (top) or not bruised (bottom); red: not held, or bruised; '
-                   'grey: the solver failed (neither).')])
+              text='Green: held (top) or not bruised (bottom); red: not held, or bruised '
+                   '(pinched: the fingers closed on each other over the fruit, crushing it '
+                   'between them); grey: the solver failed (neither).')])
