@@ -37,7 +37,8 @@ from gripper_sim import configuration
 from gripper_sim.convert import messages
 from gripper_sim.convert.messages import MessageContext
 from gripper_sim.core.results import StepResult
-from gripper_sim.errors import CommandError, ConvergenceError, GripperSimError
+from gripper_sim.errors import (CommandError, ConvergenceError, FingersClosed,
+                                GripperSimError)
 from gripper_sim.ros.commands import CommandQueue, DoneCallback, JawCommandTopics
 from gripper_sim.ros.description import RobotDescription
 from gripper_sim.ros.entities import EntityServices
@@ -244,6 +245,9 @@ class SimNode(Node):
             self.commands.run_all()
             try:
                 result = self.sim.step()
+            except FingersClosed as err:
+                self._recover(f'the step at t = {self.sim.time:.4f} s could not go on: {err}')
+                return None
             except ConvergenceError as err:
                 self._recover(f'solver did not converge at t = {self.sim.time:.4f} s: {err}')
                 return None
