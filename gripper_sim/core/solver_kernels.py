@@ -8,7 +8,7 @@ Import this module only where numba is installed.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 from gripper_sim.core import potential_terms as terms
 
@@ -22,7 +22,8 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
 
     Args:
         hdata: CSC values of H (N/m).
-        block_pos: (n_blocks, d, d) positions in data of each d x d node block.
+        block_pos: (n_blocks, d, d) positions in data of each d x d node block (read as
+            unsigned: no negative-index wraparound).
         block_nodes: (n_blocks, 2) node (row, column) of each block.
         node_ptr: (n_nodes + 1,), node_blocks: (m,) the blocks of each node (as row or
             column) in CSR: node i's at node_blocks[node_ptr[i]:node_ptr[i + 1]].
@@ -44,7 +45,7 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
         if free[node]:
             blk = diag_blocks[node]
             for a in range(d):
-                out[block_pos[blk, a, a]] += diag_extra[d * node + a]
+                out[uint64(block_pos[blk, a, a])] += diag_extra[d * node + a]
             continue
         for q in range(node_ptr[node], node_ptr[node + 1]):
             blk = node_blocks[q]
@@ -57,19 +58,20 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
                 for c in range(d):
                     acc = 0.0
                     for b in range(d):
-                        acc += filters[i, a, b] * hdata[block_pos[blk, b, c]]
+                        acc += filters[i, a, b] * hdata[uint64(block_pos[blk, b, c])]
                     tmp[a, c] = acc
             for a in range(d):
                 for c in range(d):
                     acc = 0.0
                     for b in range(d):
                         acc += tmp[a, b] * filters[j, b, c]
-                    out[block_pos[blk, a, c]] = acc
+                    out[uint64(block_pos[blk, a, c])] = acc
             if i == j:
                 for a in range(d):
                     for c in range(d):
-                        out[block_pos[blk, a, c]] += (1.0 if a == c else 0.0) - filters[i, a, c]
-                    out[block_pos[blk, a, a]] += diag_extra[d * i + a]
+                        identity = 1.0 if a == c else 0.0
+                        out[uint64(block_pos[blk, a, c])] += identity - filters[i, a, c]
+                    out[uint64(block_pos[blk, a, a])] += diag_extra[d * i + a]
 
 
 @njit(cache=True)
@@ -98,12 +100,12 @@ def add_node_blocks(data, diag_block_pos, nodes, blocks):
 @njit(cache=True)
 def csc_matvec(indptr, indices, data, x, out):
     """out (n,) = A x for A given by its CSC values on (indptr, indices) (n + 1,), (nnz,)
-    int64."""
+    int64 (read as unsigned: no negative-index wraparound in the inner loop)."""
     out[:] = 0.0
     for j in range(indptr.shape[0] - 1):
         xj = x[j]
-        for p in range(indptr[j], indptr[j + 1]):
-            out[indices[p]] += data[p] * xj
+        for p in range(uint64(indptr[j]), uint64(indptr[j + 1])):
+            out[uint64(indices[p])] += data[p] * xj
 
 
 @njit(cache=True)
@@ -145,7 +147,7 @@ def filter_and_permute(filters, vec, perm, out):
 def unpermute(vec, perm, out):
     """out[perm[k]] = vec[k] (n,), in double precision."""
     for k in range(perm.shape[0]):
-        out[perm[k]] = vec[k]
+        out[uint64(perm[k])] = vec[k]
 
 
 @njit(cache=True)
