@@ -2,8 +2,10 @@
 
 Free functions ``@njit(cache=True)`` on the CSC values of a Newton matrix whose pattern
 is fixed (the energies' elements plus every node's diagonal block) and on the per-node
-contact filters S_i (n_nodes, d, d), d = 2 or 3 the coordinates per node.
-Import this module only where numba is installed.
+contact filters S_i (n_nodes, d, d), d = 2 or 3 the coordinates per node. The filters'
+node-block loops (``filter_blocks``, ``apply_filters``, ``filter_and_permute``) run
+their inlined body with d = 2 as a constant for 2D filters, so the compiler unrolls
+them and divides by a shift. Import this module only where numba is installed.
 """
 from __future__ import annotations
 
@@ -32,7 +34,17 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
         diag_extra: (d n,) added on the diagonal (the shifted inertia, N/m).
         out: values of the filtered matrix, same pattern (written).
     """
-    d = filters.shape[1]
+    if filters.shape[1] == 2:
+        _filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
+                       filters, diag_extra, out, 2)
+    else:
+        _filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
+                       filters, diag_extra, out, filters.shape[1])
+
+
+@njit(cache=True, inline='always')
+def _filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
+                   filters, diag_extra, out, d):
     tmp = np.empty((d, d))
     free = np.ones(filters.shape[0], np.bool_)  # S_i = I (most nodes: no contact)
     for i in range(filters.shape[0]):
@@ -77,7 +89,14 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
 @njit(cache=True)
 def apply_filters(filters, vec, out):
     """out (d n,) = S vec: each node's d-vector times its filter (n, d, d)."""
-    d = filters.shape[1]
+    if filters.shape[1] == 2:
+        _apply_filters(filters, vec, out, 2)
+    else:
+        _apply_filters(filters, vec, out, filters.shape[1])
+
+
+@njit(cache=True, inline='always')
+def _apply_filters(filters, vec, out, d):
     for i in range(filters.shape[0]):
         for a in range(d):
             acc = 0.0
@@ -132,7 +151,14 @@ def cg_direction(z, p, beta):
 def filter_and_permute(filters, vec, perm, out):
     """out[k] (d n,) = (S vec)[perm[k]], S the node filters (n, d, d); out may be single
     precision (the right-hand side of a single-precision factorisation)."""
-    d = filters.shape[1]
+    if filters.shape[1] == 2:
+        _filter_and_permute(filters, vec, perm, out, 2)
+    else:
+        _filter_and_permute(filters, vec, perm, out, filters.shape[1])
+
+
+@njit(cache=True, inline='always')
+def _filter_and_permute(filters, vec, perm, out, d):
     for k in range(perm.shape[0]):
         dof = perm[k]
         i = dof // d
