@@ -20,7 +20,7 @@ candidates instead of through ipctk's collision objects and sparse matrices:
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 from gripper_sim.core.barrier_search import collision_free_step
 
@@ -454,7 +454,8 @@ def add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
 
     A vertex's y dof follows its x dof (row + 1): its key then follows the x key's in
     the sorted keys, so one binary search serves both (each entry adds to its own slot,
-    so the order of the adds is free).
+    so the order of the adds is free). The slots are read as unsigned (no negative-index
+    wraparound).
     """
     outside = 0
     size = pattern_keys.size
@@ -473,7 +474,7 @@ def add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
                     at_x = np.searchsorted(pattern_keys, key)
                     found_x = at_x < size and pattern_keys[at_x] == key
                     if found_x:
-                        hessian_values[slots[at_x]] += local[2 * i, 2 * j + cj]
+                        hessian_values[uint64(slots[at_x])] += local[2 * i, 2 * j + cj]
                     else:
                         outside += 1
                 if row_y < 0:
@@ -484,7 +485,7 @@ def add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
                 else:
                     at = np.searchsorted(pattern_keys, key)
                 if at < size and pattern_keys[at] == key:
-                    hessian_values[slots[at]] += local[2 * i + 1, 2 * j + cj]
+                    hessian_values[uint64(slots[at])] += local[2 * i + 1, 2 * j + cj]
                 else:
                     outside += 1
     return outside

@@ -2,13 +2,15 @@
 
 Free functions ``@njit(cache=True)`` on the CSC values of a Newton matrix whose pattern
 is fixed (the energies' elements plus every node's diagonal block) and on the per-node
-contact filters S_i (n_nodes, d, d), d = 2 or 3 the coordinates per node.
-Import this module only where numba is installed.
+contact filters S_i (n_nodes, d, d), d = 2 or 3 the coordinates per node. The filters'
+node-block loops (``filter_blocks``, ``apply_filters``, ``filter_and_permute``) run
+their inlined body with d = 2 as a constant for 2D filters, so the compiler unrolls
+them and divides by a shift. Import this module only where numba is installed.
 """
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 from gripper_sim.core import potential_terms as terms
 
@@ -22,7 +24,8 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
 
     Args:
         hdata: CSC values of H (N/m).
-        block_pos: (n_blocks, d, d) positions in data of each d x d node block.
+        block_pos: (n_blocks, d, d) positions in data of each d x d node block (read as
+            unsigned: no negative-index wraparound).
         block_nodes: (n_blocks, 2) node (row, column) of each block.
         node_ptr: (n_nodes + 1,), node_blocks: (m,) the blocks of each node (as row or
             column) in CSR: node i's at node_blocks[node_ptr[i]:node_ptr[i + 1]].
@@ -31,7 +34,17 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
         diag_extra: (d n,) added on the diagonal (the shifted inertia, N/m).
         out: values of the filtered matrix, same pattern (written).
     """
-    d = filters.shape[1]
+    if filters.shape[1] == 2:
+        _filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
+                       filters, diag_extra, out, 2)
+    else:
+        _filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
+                       filters, diag_extra, out, filters.shape[1])
+
+
+@njit(cache=True, inline='always')
+def _filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blocks,
+                   filters, diag_extra, out, d):
     tmp = np.empty((d, d))
     free = np.ones(filters.shape[0], np.bool_)  # S_i = I (most nodes: no contact)
     for i in range(filters.shape[0]):
@@ -44,7 +57,7 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
         if free[node]:
             blk = diag_blocks[node]
             for a in range(d):
-                out[block_pos[blk, a, a]] += diag_extra[d * node + a]
+                out[uint64(block_pos[blk, a, a])] += diag_extra[d * node + a]
             continue
         for q in range(node_ptr[node], node_ptr[node + 1]):
             blk = node_blocks[q]
@@ -57,25 +70,33 @@ def filter_blocks(hdata, block_pos, block_nodes, node_ptr, node_blocks, diag_blo
                 for c in range(d):
                     acc = 0.0
                     for b in range(d):
-                        acc += filters[i, a, b] * hdata[block_pos[blk, b, c]]
+                        acc += filters[i, a, b] * hdata[uint64(block_pos[blk, b, c])]
                     tmp[a, c] = acc
             for a in range(d):
                 for c in range(d):
                     acc = 0.0
                     for b in range(d):
                         acc += tmp[a, b] * filters[j, b, c]
-                    out[block_pos[blk, a, c]] = acc
+                    out[uint64(block_pos[blk, a, c])] = acc
             if i == j:
                 for a in range(d):
                     for c in range(d):
-                        out[block_pos[blk, a, c]] += (1.0 if a == c else 0.0) - filters[i, a, c]
-                    out[block_pos[blk, a, a]] += diag_extra[d * i + a]
+                        identity = 1.0 if a == c else 0.0
+                        out[uint64(block_pos[blk, a, c])] += identity - filters[i, a, c]
+                    out[uint64(block_pos[blk, a, a])] += diag_extra[d * i + a]
 
 
 @njit(cache=True)
 def apply_filters(filters, vec, out):
     """out (d n,) = S vec: each node's d-vector times its filter (n, d, d)."""
-    d = filters.shape[1]
+    if filters.shape[1] == 2:
+        _apply_filters(filters, vec, out, 2)
+    else:
+        _apply_filters(filters, vec, out, filters.shape[1])
+
+
+@njit(cache=True, inline='always')
+def _apply_filters(filters, vec, out, d):
     for i in range(filters.shape[0]):
         for a in range(d):
             acc = 0.0
@@ -98,12 +119,12 @@ def add_node_blocks(data, diag_block_pos, nodes, blocks):
 @njit(cache=True)
 def csc_matvec(indptr, indices, data, x, out):
     """out (n,) = A x for A given by its CSC values on (indptr, indices) (n + 1,), (nnz,)
-    int64."""
+    int64 (read as unsigned: no negative-index wraparound in the inner loop)."""
     out[:] = 0.0
     for j in range(indptr.shape[0] - 1):
         xj = x[j]
-        for p in range(indptr[j], indptr[j + 1]):
-            out[indices[p]] += data[p] * xj
+        for p in range(uint64(indptr[j]), uint64(indptr[j + 1])):
+            out[uint64(indices[p])] += data[p] * xj
 
 
 @njit(cache=True)
@@ -130,7 +151,14 @@ def cg_direction(z, p, beta):
 def filter_and_permute(filters, vec, perm, out):
     """out[k] (d n,) = (S vec)[perm[k]], S the node filters (n, d, d); out may be single
     precision (the right-hand side of a single-precision factorisation)."""
-    d = filters.shape[1]
+    if filters.shape[1] == 2:
+        _filter_and_permute(filters, vec, perm, out, 2)
+    else:
+        _filter_and_permute(filters, vec, perm, out, filters.shape[1])
+
+
+@njit(cache=True, inline='always')
+def _filter_and_permute(filters, vec, perm, out, d):
     for k in range(perm.shape[0]):
         dof = perm[k]
         i = dof // d
@@ -145,7 +173,7 @@ def filter_and_permute(filters, vec, perm, out):
 def unpermute(vec, perm, out):
     """out[perm[k]] = vec[k] (n,), in double precision."""
     for k in range(perm.shape[0]):
-        out[perm[k]] = vec[k]
+        out[uint64(perm[k])] = vec[k]
 
 
 @njit(cache=True)

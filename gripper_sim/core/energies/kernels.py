@@ -7,8 +7,9 @@ with central differences), adding the gradient into a preallocated (n_dof,)
 vector and each element Hessian entry straight into the ``data`` array of a fixed CSC
 matrix: ``scatter[e, r * m + c]`` is the position in ``data`` of the entry (row
 ``dofs[e, r]``, column ``dofs[e, c]``) of element e with m dofs (``base.element_dofs``
-order: [x, z] of each element node). With ``hessian`` False only the value and the
-gradient are computed (line searches).
+order: [x, z] of each element node), read as unsigned (no negative-index wraparound in
+the adds). With ``hessian`` False only the value and the gradient are computed (line
+searches).
 
 Positions x are (n_nodes, 2) (m). Import this module only where numba is installed.
 """
@@ -17,7 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 
 @njit(cache=True, inline='always')
@@ -70,7 +71,7 @@ def stretching(x, edges, rest, k, grad, data, scatter, hessian):
                 h = b00 if a + b == 0 else (b11 if a + b == 2 else b01)
                 if (r < 2) != (c < 2):
                     h = -h
-                data[sc[4 * r + c]] += h
+                data[uint64(sc[4 * r + c])] += h
     return value
 
 
@@ -132,15 +133,15 @@ def hinge_block(k, kd, jr0, jr1, jc0, jc1, h00, h01):
 def _add_block(data, sc, m, r, c, b00, b01, b10, b11):
     """Adds the node block (r, c) (b00, b01, b10, b11) of an element matrix with m dofs at
     its scatter positions sc (m^2,), and for r != c its transpose at (c, r)."""
-    data[sc[m * (2 * r) + 2 * c]] += b00
-    data[sc[m * (2 * r) + 2 * c + 1]] += b01
-    data[sc[m * (2 * r + 1) + 2 * c]] += b10
-    data[sc[m * (2 * r + 1) + 2 * c + 1]] += b11
+    data[uint64(sc[m * (2 * r) + 2 * c])] += b00
+    data[uint64(sc[m * (2 * r) + 2 * c + 1])] += b01
+    data[uint64(sc[m * (2 * r + 1) + 2 * c])] += b10
+    data[uint64(sc[m * (2 * r + 1) + 2 * c + 1])] += b11
     if r != c:
-        data[sc[m * (2 * c) + 2 * r]] += b00
-        data[sc[m * (2 * c) + 2 * r + 1]] += b10
-        data[sc[m * (2 * c + 1) + 2 * r]] += b01
-        data[sc[m * (2 * c + 1) + 2 * r + 1]] += b11
+        data[uint64(sc[m * (2 * c) + 2 * r])] += b00
+        data[uint64(sc[m * (2 * c) + 2 * r + 1])] += b10
+        data[uint64(sc[m * (2 * c + 1) + 2 * r])] += b01
+        data[uint64(sc[m * (2 * c + 1) + 2 * r + 1])] += b11
 
 
 @njit(cache=True)
@@ -224,10 +225,10 @@ def area_pressure_hessian(de_da, data, scatter):
     h = 0.5 * de_da
     for e in range(scatter.shape[0]):
         sc = scatter[e]
-        data[sc[0 * 4 + 3]] += h
-        data[sc[3 * 4 + 0]] += h
-        data[sc[1 * 4 + 2]] -= h
-        data[sc[2 * 4 + 1]] -= h
+        data[uint64(sc[0 * 4 + 3])] += h
+        data[uint64(sc[3 * 4 + 0])] += h
+        data[uint64(sc[1 * 4 + 2])] -= h
+        data[uint64(sc[2 * 4 + 1])] -= h
 
 
 @njit(cache=True)
