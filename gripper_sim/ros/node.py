@@ -245,11 +245,10 @@ class SimNode(Node):
             self.commands.run_all()
             try:
                 result = self.sim.step()
-            except FingersClosed as err:
-                self._recover(f'the step at t = {self.sim.time:.4f} s could not go on: {err}')
-                return None
             except ConvergenceError as err:
-                self._recover(f'solver did not converge at t = {self.sim.time:.4f} s: {err}')
+                what = ('the step could not go on' if isinstance(err, FingersClosed)
+                        else 'solver did not converge')
+                self._recover(f'{what} at t = {self.sim.time:.4f} s: {err}')
                 return None
             if not messages.result_is_finite(result):
                 self._recover(f'step produced non-finite values at t = {result.time:.4f} s')

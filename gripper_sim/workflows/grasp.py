@@ -325,25 +325,18 @@ def evaluate(sim, machine: GraspMachine, force: float,
             machine.update(result)
             if on_step is not None:
                 on_step(result, machine.phase)
-    except FingersClosed as err:
-        damage = sim.last.damage
-        return GraspEvaluation(
-            force=float(force), outcome=PINCHED, held=False, dropped=False,
-            slipped=False, bruised=True, crushed=True, slip_distance=0.0,
-            peak_grip_force=peaks.grip_force, peak_compression=peaks.compression,
-            peak_jaw_pressure=peaks.jaw_pressure, peak_table_pressure=peaks.table_pressure,
-            peak_damage_pressure=float(damage.peak_pressure) if damage is not None else 0.0,
-            bruised_at=peaks.bruised_at or PINCH, bruised_fraction=0.0, error='',
-            sim_time=float(sim.time), steps=int(sim.last.step - start_step),
-            message=str(err), failure=err)
     except ConvergenceError as err:
+        pinched = isinstance(err, FingersClosed)  # stopped by the fruit, not the solver
+        damage = sim.last.damage if pinched else None
         return GraspEvaluation(
-            force=float(force), outcome=SOLVER_FAILED, held=False, dropped=True,
-            slipped=False, bruised=True, crushed=True, slip_distance=0.0,
-            peak_grip_force=peaks.grip_force, peak_compression=peaks.compression,
-            peak_jaw_pressure=peaks.jaw_pressure, peak_table_pressure=peaks.table_pressure,
-            peak_damage_pressure=0.0, bruised_at=peaks.bruised_at or '',
-            bruised_fraction=0.0, error=str(err) or type(err).__name__,
+            force=float(force), outcome=PINCHED if pinched else SOLVER_FAILED, held=False,
+            dropped=not pinched, slipped=False, bruised=True, crushed=True,
+            slip_distance=0.0, peak_grip_force=peaks.grip_force,
+            peak_compression=peaks.compression, peak_jaw_pressure=peaks.jaw_pressure,
+            peak_table_pressure=peaks.table_pressure,
+            peak_damage_pressure=float(damage.peak_pressure) if damage is not None else 0.0,
+            bruised_at=peaks.bruised_at or (PINCH if pinched else ''), bruised_fraction=0.0,
+            error='' if pinched else str(err) or type(err).__name__,
             sim_time=float(sim.time), steps=int(sim.last.step - start_step),
             message=str(err), failure=err)
     summary = machine.summary()
