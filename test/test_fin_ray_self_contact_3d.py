@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from gripper_sim.configuration import load_config
+from gripper_sim.core.barrier import BarrierContact
 from gripper_sim.core.fin_ray import fin_ray_body
 from gripper_sim.core.finger_statics import static_equilibrium
 from gripper_sim.core3d.mesh_geometry import surface_edges
@@ -81,11 +82,36 @@ def test_without_self_contact_the_pressed_shells_cross():
     assert max(counts) > 0 and any(intersecting)
 
 
-def test_with_self_contact_the_shells_touch_and_never_cross():
+def test_with_self_contact_the_shells_touch_and_never_cross(monkeypatch):
+    answers = []
+    quiet = BarrierContact.quiet
+
+    def recorded(barrier, *args):
+        answers.append(quiet(barrier, *args))
+        return answers[-1]
+
+    monkeypatch.setattr(BarrierContact, 'quiet', recorded)
     counts, intersecting, gap = _fold(SETTINGS)
     assert len(counts) == 200
     assert max(counts) == 0 and not any(intersecting)
     assert 0 < gap < 1e-5, 'folded onto the members behind it, not through them'
+    # while the members stay apart the barrier's work is skipped (its quiet region);
+    # once they come near it is done
+    assert any(answers) and not all(answers)
+
+
+def test_a_quiet_self_contact_is_quiet_whatever_the_finger_s_translation():
+    _, body = _body()
+    barrier = body.self_contact(SETTINGS)
+    x = body.rest_positions
+    barrier.begin_step(x, [], [], 1e-3)
+    assert barrier.quiet(x.ravel())
+    assert barrier.quiet((x + [0.01, -0.02, 0.03]).ravel())
+    # one node moved by a millimetre against the others: beyond the region's reach (half
+    # the smallest gap between two members, 0.38 mm here, less dhat: 0.19 mm)
+    moved = x.copy()
+    moved[body.tip_node, 0] += 1e-3
+    assert not barrier.quiet(moved.ravel())
 
 
 def test_the_finger_at_rest_feels_no_self_contact():

@@ -63,7 +63,8 @@ from scipy.spatial import cKDTree
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
-                                              mesh_vertices, nearest_faces, same_values)
+                                              mesh_vertices, nearest_faces,
+                                              relative_moves_within, same_values)
 from gripper_sim.core.barrier_search import edge_vertex_candidates, smallest_distance
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -461,6 +462,8 @@ class BarrierContact(Energy):
         if self.dimension == 2:
             self._begin_part(x_n, start, new, mu_s, mu_k, rubbing)
             return
+        if self.self_contact:
+            self._quiet = self._quiet_region(x_n, start)
         if len(self._tangential):  # ipctk's lagged friction (3D): the last step's
             self._tangential = ipctk.TangentialCollisions()
         if rubbing:
@@ -509,7 +512,7 @@ class BarrierContact(Energy):
 
     def _quiet_region(self, x_n: np.ndarray, start: np.ndarray):
         """The self-contact's quiet region (``_quiet``) for a step from positions ``x_n``
-        (n, 2) m, the collision mesh's vertices ``start``: the last one while the step
+        (n, d) m, the collision mesh's vertices ``start``: the last one while the step
         starts well inside it (``QUIET_KEEP``), else sought again; None if a pair is
         within 2 dhat."""
         kept = self._quiet
@@ -521,7 +524,7 @@ class BarrierContact(Energy):
         return None
 
     def _relative_move(self, q: np.ndarray, anchor: np.ndarray) -> float:
-        """m, how far a vertex at positions ``q`` (n d,) moved from ``anchor`` (n_v, 2) m
+        """m, how far a vertex at positions ``q`` (n d,) moved from ``anchor`` (n_v, d) m
         besides its body's mean move (``largest_relative_move``)."""
         return largest_relative_move(q, self._vertex_dof_pairs, anchor, self.vertex_body,
                                      len(self.bodies) + 1)
@@ -613,10 +616,14 @@ class BarrierContact(Energy):
         self-contact whose vertices all lie within the quiet region's reach of where it
         was sought, each body's mean move taken off (each vertex and edge moved by at most
         that reach against its body: their gap shrank by at most twice it;
-        ``barrier_part.quiet``). Always False for the fruit's barrier and in 3D."""
-        if self._quiet is None:  # (the part's region is this one: ``begin_step``)
+        ``barrier_part.quiet`` in 2D). Always False for the fruit's barrier."""
+        if self._quiet is None:  # (the 2D part's region is this one: ``begin_step``)
             return False
-        return bool(bp.quiet(self._part, q, dq))
+        if self.dimension == 2:
+            return bool(bp.quiet(self._part, q, dq))
+        anchor, reach = self._quiet
+        return bool(relative_moves_within(q, dq, self._vertex_dof_pairs, anchor,
+                                          self.vertex_body, len(self.bodies) + 1, reach))
 
     # ------------------------------------------------------------------ the energy
     def _terms(self, q: np.ndarray, gradient: np.ndarray, into=None,
@@ -865,10 +872,16 @@ class BarrierContact(Energy):
                                       self.self_contact, radius)
 
     def _nearest(self, v: np.ndarray, reach: float, beyond: float | None = None) -> float:
-        """m, the smallest distance of a pair of the collision mesh's vertices ``v`` (2D),
-        or ``beyond`` (default ``reach``) if none is nearer than ``reach`` (m)."""
-        pairs = self._static_candidates(v, 0.5 * reach)
-        distance = smallest_distance(v, self._mesh_edges, pairs, reach)
+        """m, the smallest distance of a pair of the collision mesh's vertices ``v``, or
+        ``beyond`` (default ``reach``) if none is nearer than ``reach`` (m)."""
+        if self.dimension == 3:
+            pairs = ipctk.NormalCollisions()
+            pairs.build(self._mesh, v, reach, broad_phase=self._broad_phase)
+            distance = (min(np.sqrt(pairs.compute_minimum_distance(self._mesh, v)), reach)
+                        if len(pairs) else reach)
+        else:
+            pairs = self._static_candidates(v, 0.5 * reach)
+            distance = smallest_distance(v, self._mesh_edges, pairs, reach)
         return float(distance) if distance < reach or beyond is None else beyond
 
     # ------------------------------------------------------------------ the start

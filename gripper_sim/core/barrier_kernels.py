@@ -324,26 +324,29 @@ def kept_step_bound(q, dq, dofs, corners, edges, anchor, pairs, margin):
 @njit(cache=True)
 def largest_relative_move(q, dofs, start, body, n_bodies):
     """m, the largest distance of a vertex at positions ``q`` (n_dof,) from ``start``
-    (k, 2), its coordinates at ``dofs`` (k, 2), once its body's mean move is taken off
+    (k, d), its coordinates at ``dofs`` (k, d), once its body's mean move is taken off
     (``body`` (k,) each vertex's body in 0 .. ``n_bodies`` - 1): a bound on how far a
     body's own primitives came closer to each other, whatever the bodies' translations."""
-    mean = np.zeros((n_bodies, 2))
+    d = dofs.shape[1]
+    mean = np.zeros((n_bodies, d))
     count = np.zeros(n_bodies)
     for i in range(dofs.shape[0]):
         b = body[i]
-        mean[b, 0] += q[dofs[i, 0]] - start[i, 0]
-        mean[b, 1] += q[dofs[i, 1]] - start[i, 1]
+        for a in range(d):
+            mean[b, a] += q[dofs[i, a]] - start[i, a]
         count[b] += 1.0
     for b in range(n_bodies):
         if count[b] > 0.0:
-            mean[b, 0] /= count[b]
-            mean[b, 1] /= count[b]
+            for a in range(d):
+                mean[b, a] /= count[b]
     largest = 0.0
     for i in range(dofs.shape[0]):
         b = body[i]
-        dx = q[dofs[i, 0]] - start[i, 0] - mean[b, 0]
-        dy = q[dofs[i, 1]] - start[i, 1] - mean[b, 1]
-        largest = max(largest, dx * dx + dy * dy)
+        squared = 0.0
+        for a in range(d):
+            r = q[dofs[i, a]] - start[i, a] - mean[b, a]
+            squared += r * r
+        largest = max(largest, squared)
     return np.sqrt(largest)
 
 
