@@ -27,6 +27,7 @@ from gripper_sim.geometry.fin_ray import check_fin_ray
 from gripper_sim.geometry.finger_materials import MATERIAL_NAMES
 from gripper_sim.geometry.fingers import check_finger
 from gripper_sim.geometry.shapes import outline_from_config
+from gripper_sim.geometry.solid_pad import check_solid_pad
 
 DEFAULT_FRUIT = 'apple'
 #: file name endings that make a ``--fruit`` value a preset file rather than a name
@@ -244,7 +245,9 @@ SCHEMA: dict[str, Key] = {
                                              'front beam nearly parallel to the jaw)',
                                              low=0.0, high=0.2),
     'gripper.finger.fin_ray.element_length': Key(0.002, 'm', 'fin_ray: rod element length '
-                                                 'of the discretisation', low=0.0, high=0.05,
+                                                 'of the discretisation (at most 1000 nodes '
+                                                 'in a finger: finer is refused)', low=0.0,
+                                                 high=0.05,
                                                  open_low=True),
     'gripper.finger.fin_ray.material': Key('tpu', '-', 'fin_ray: tpu (printed TPU, E = 100 '
                                            'MPa); silicone (Dragon Skin 30, E = 0.59 MPa); '
@@ -279,7 +282,10 @@ SCHEMA: dict[str, Key] = {
     # al. 2014, J. Micromech. Microeng. 24 035017)
     'gripper.finger.solid_pad.thickness': Key(0.006, 'm', 'solid_pad: thickness t of the '
                                               'block from the jaw backing to its front face '
-                                              '(its height is gripper.jaw_height)', low=0.0,
+                                              '(its height is gripper.jaw_height; 2D: at '
+                                              'most 400 rows of cells along it, each '
+                                              'thickness / layers high: thinner is '
+                                              'refused)', low=0.0,
                                               high=0.05, open_low=True),
     'gripper.finger.solid_pad.youngs_modulus': Key(
         0.593e6, 'Pa', 'solid_pad: Young modulus E (Dragon Skin 30: 0.59 MPa; Ecoflex 00-30: '
@@ -591,6 +597,7 @@ def validate(flat: Mapping[str, Any]) -> Parameters:
     if result.get('gripper.finger.type') == 'arc':
         check_finger(result)
     check_fin_ray(result)
+    check_solid_pad(result)
     return Parameters._restore(result)
 
 

@@ -20,7 +20,7 @@ from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.finger_statics import static_equilibrium
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConfigError
-from gripper_sim.geometry.fin_ray import FinRayGeometry, layout
+from gripper_sim.geometry.fin_ray import MAX_SECTION_NODES, FinRayGeometry, layout
 from gripper_sim.geometry.finger_materials import MATERIALS
 
 FIN_RAY = 'gripper.finger.type=fin_ray'
@@ -73,11 +73,21 @@ def _press(body: FingerBody, force: float, spread: float) -> tuple[np.ndarray, i
     ('gripper.finger.fin_ray.tip_offset=0.03', 'tip_offset', 'between the backing'),
     ('gripper.finger.fin_ray.material=custom', 'youngs_modulus', 'must be set'),
     ('gripper.finger.fin_ray.material=wood', 'material', 'must be one of'),
+    # inside the key's range (> 0), but 200,000 nodes: their contact pairs' matrices
+    # took 612 GiB
+    ('gripper.finger.fin_ray.element_length=1e-6', 'element_length',
+     'too fine: the members (203 mm in all) would have about 2.03e+05 nodes, at most 1000: '
+     'use 0.00021 m or more'),
 ])
 def test_a_bad_fin_ray_is_a_one_line_error_naming_the_key(override, key, words):
     with pytest.raises(ConfigError, match=f"'gripper.finger.fin_ray.{key}'") as info:
         _config(*override.split())
     assert words in str(info.value) and '\n' not in str(info.value)
+
+
+def test_the_finest_fin_ray_the_error_suggests_is_built():
+    config = _config('gripper.finger.fin_ray.element_length=0.00021')
+    assert Simulation(config)._soft.body.n_nodes <= MAX_SECTION_NODES
 
 
 def test_fin_ray_keys_without_a_fin_ray_have_no_effect():

@@ -383,6 +383,24 @@ def test_zero_or_negative_thickness_is_refused(value):
                                f'gripper.finger.solid_pad.thickness={value}'])
 
 
+def test_a_pad_too_thin_for_its_layers_is_refused_not_meshed():
+    # inside the key's range (> 0): 1.6 million rows of cells took 24 GB before the
+    # check, and the process was killed
+    overrides = ['gripper.finger.type=solid_pad', 'gripper.finger.solid_pad.thickness=1e-7']
+    with pytest.raises(ConfigError) as info:
+        load_config(overrides=overrides)
+    assert str(info.value) == (
+        "config key 'gripper.finger.solid_pad.thickness' = 1e-07 m: too thin for its 4 "
+        'layers: its square cells (2.5e-08 m) would take 1.6e+06 rows along the jaw height '
+        '(0.04 m), at most 400: use a thickness of 0.0004 m or more, or fewer layers '
+        '(gripper.finger.solid_pad.layers)')
+    # the thickness it suggests is meshed (in 400 rows); the 3D pad caps its rows itself
+    pad = Simulation(load_config(overrides=['gripper.finger.type=solid_pad',
+                                            'gripper.finger.solid_pad.thickness=0.0004']))
+    assert pad._soft.body.n_nodes == 5 * 401
+    load_config(overrides=['dimension=3', *overrides])
+
+
 def test_fingers_that_fill_the_stroke_are_refused():
     config = load_config(overrides=['gripper.finger.type=solid_pad', 'gripper.max_gap=0.05',
                                     'gripper.finger.solid_pad.thickness=0.03'])

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from gripper_sim.core.finger_body import FingerBody
+from gripper_sim.geometry.solid_pad import row_count
 
 
 def solid_pad_body(config, depth: float) -> FingerBody:
@@ -24,8 +25,8 @@ def solid_pad_body(config, depth: float) -> FingerBody:
     thickness = float(config['gripper.finger.solid_pad.thickness'])
     height = float(config['gripper.jaw_height'])
     layers = int(config['gripper.finger.solid_pad.layers'])
-    rows = max(2, int(round(height / (thickness / layers))))
-    return block_body('solid_pad', thickness, height, layers, rows, depth,
+    return block_body('solid_pad', thickness, height, layers,
+                      row_count(thickness, height, layers), depth,
                       float(config['gripper.finger.solid_pad.youngs_modulus']),
                       float(config['gripper.finger.solid_pad.poisson_ratio']),
                       float(config['gripper.finger.solid_pad.density']))

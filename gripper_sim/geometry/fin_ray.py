@@ -27,6 +27,10 @@ import numpy as np
 from gripper_sim.errors import ConfigError
 
 PREFIX = 'gripper.finger.fin_ray.'
+#: nodes a finger's section may have at most (its member lengths over element_length,
+#: about; the default finger has 104, the 3D finger each node in every slice): finer,
+#: and the matrices of its contact pairs outgrow any memory
+MAX_SECTION_NODES = 1000
 
 
 @dataclass(frozen=True)
@@ -191,7 +195,15 @@ def check_geometry(geometry: FinRayGeometry) -> None:
     if g.element_length > 0.25 * g.length:
         raise _error('element_length', g.element_length,
                      f'too coarse: at most a quarter of the length ({g.length:g} m)')
-    rib_points(g)
+    backs, fronts = rib_points(g)
+    members = (g.base_width + math.hypot(g.tip_offset, g.length)
+               + math.hypot(g.base_width - g.tip_offset, g.length)
+               + float(np.hypot(*(fronts - backs).T).sum()))
+    if members / g.element_length > MAX_SECTION_NODES:
+        raise _error('element_length', g.element_length,
+                     f'too fine: the members ({1e3 * members:.0f} mm in all) would have about '
+                     f'{members / g.element_length:.3g} nodes, at most {MAX_SECTION_NODES}: '
+                     f'use {math.ceil(1e5 * members / MAX_SECTION_NODES) / 1e5:g} m or more')
 
 
 def layout(geometry: FinRayGeometry) -> FinRayLayout:
