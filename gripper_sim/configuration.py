@@ -282,10 +282,10 @@ SCHEMA: dict[str, Key] = {
     # al. 2014, J. Micromech. Microeng. 24 035017)
     'gripper.finger.solid_pad.thickness': Key(0.006, 'm', 'solid_pad: thickness t of the '
                                               'block from the jaw backing to its front face '
-                                              '(its height is gripper.jaw_height; 2D: at '
-                                              'most 400 rows of cells along it, each '
-                                              'thickness / layers high: thinner is '
-                                              'refused)', low=0.0,
+                                              '(its height is gripper.jaw_height; its '
+                                              'cells across it, thickness / layers, at '
+                                              'least 1/400 of that: thinner is refused)',
+                                              low=0.0,
                                               high=0.05, open_low=True),
     'gripper.finger.solid_pad.youngs_modulus': Key(
         0.593e6, 'Pa', 'solid_pad: Young modulus E (Dragon Skin 30: 0.59 MPa; Ecoflex 00-30: '
