@@ -19,7 +19,9 @@ from gripper_sim.configuration import load_config
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings, SoftBody
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.mesh import boundary_edges, mesh_outline, points_inside
+from gripper_sim.core.newton import INFEASIBLE_START
 from gripper_sim.core.simulation import Simulation
+from gripper_sim.core.stepper import NEWTON_FAILURES, NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConfigWarning
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp
 
@@ -461,3 +463,13 @@ def test_the_solid_pad_preset_is_the_built_in_solid_pad():
     assert len(keys) == 5
     assert {k: preset[k] for k in keys} == {k: built_in[k] for k in keys}
     assert preset['gripper.finger.type'] == 'solid_pad'
+
+
+def test_a_step_failed_on_an_inverted_element_names_the_fingers_too():
+    failure = NewtonFailure(NEWTON_FAILURES[INFEASIBLE_START], [])
+    pad = Simulation(load_config(overrides=['gripper.finger.type=solid_pad']))
+    assert pad._convergence_advice(failure).startswith(
+        'an element of the fruit or of a solid_pad finger inverted (it is crushed)')
+    rigid = Simulation(load_config())
+    assert rigid._convergence_advice(failure).startswith(
+        'an element of the fruit inverted (it is crushed)')

@@ -958,8 +958,10 @@ class SimulationFacade:
         """What may help a step that failed in its smallest sub-steps (a smaller sim.dt
         would only repeat them)."""
         c = self.config
-        if 'infeasible' in str(failure):  # an element inverted: the fruit is crushed
-            return ('an element of the fruit inverted (it is crushed): a smaller grip force, '
+        if 'infeasible' in str(failure):  # an element inverted: crushed
+            body = ('the fruit' if self._soft is None
+                    else f"the fruit or of a {c['gripper.finger.type']} finger")
+            return (f'an element of {body} inverted (it is crushed): a smaller grip force, '
                     'gap command or closing speed helps; a smaller sim.dt would only repeat '
                     'these sub-steps')
         return (f"raise sim.max_newton_iterations (now {c['sim.max_newton_iterations']}) "
