@@ -69,6 +69,10 @@ def _press(body: FingerBody, force: float, spread: float) -> tuple[np.ndarray, i
     # message says the angle was derived and which keys to change
     ('gripper.finger.fin_ray.base_width=0.04', 'rib_angle',
      'rib_angle is null, so perpendicular to the back beam: set it (a larger angle)'),
+    # the derived angle (perpendicular to the back beam) parallel to the front beam: a
+    # singular system and a traceback before 2026-12-03
+    ('gripper.finger.fin_ray.length=0.01', 'rib_angle',
+     'the ribs run parallel to the front beam: they never meet it; rib_angle is null'),
     ('gripper.finger.fin_ray.beam_thickness=0.013', 'beam_thickness', 'fill the base'),
     ('gripper.finger.fin_ray.tip_offset=0.03', 'tip_offset', 'between the backing'),
     ('gripper.finger.fin_ray.material=custom', 'youngs_modulus', 'must be set'),

@@ -139,19 +139,23 @@ def rib_points(geometry: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
                      f'{g.rib_thickness * 1e3:.3g} mm')
     fronts = np.empty((n, 2))
     margin = max(g.beam_thickness, g.rib_thickness)
+    crossing = np.stack([direction, -along], axis=1)
+    derived = '' if g.rib_angle_given else (
+        '; rib_angle is null, so perpendicular to the back beam: set it{}, or change '
+        f'base_width ({g.base_width:g} m), tip_offset ({g.tip_offset:g} m) or rib_count')
+    if n and abs(np.linalg.det(crossing)) <= 1e-12 * beam_length:
+        raise _error('rib_angle', g.rib_angle, 'the ribs run parallel to the front beam: '
+                     'they never meet it' + derived.format(''))
     for k in range(n):
         # back[k] + r direction = corner + s along
-        r, s = np.linalg.solve(np.stack([direction, -along], axis=1), corner - back[k])
+        r, s = np.linalg.solve(crossing, corner - back[k])
         if r <= 0 or not margin <= s * beam_length <= beam_length - margin:
             where = 'beyond the tip' if s > 0.5 else 'above the base'
-            derived = '' if g.rib_angle_given else (
-                f'; rib_angle is null, so perpendicular to the back beam: set it (a '
-                f"{'larger' if s <= 0.5 else 'smaller'} angle), or change base_width "
-                f'({g.base_width:g} m), tip_offset ({g.tip_offset:g} m) or rib_count')
             raise _error('rib_angle', g.rib_angle,
                          f'rib {k + 1} of {n} leaves the finger: its front end falls {where} '
                          f'(ribs start on the back beam {spacing * 1e3:.3g} mm apart)'
-                         + derived)
+                         + derived.format(f" (a {'larger' if s <= 0.5 else 'smaller'} "
+                                          'angle)'))
         fronts[k] = corner + s * along
     return back, fronts
 
