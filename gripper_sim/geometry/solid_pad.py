@@ -30,7 +30,7 @@ def check_solid_pad(config) -> None:
     thickness = float(config[PREFIX + 'thickness'])
     layers = int(config[PREFIX + 'layers'])
     height = float(config['gripper.jaw_height'])
-    ratio = height * layers / thickness
+    ratio = row_count(thickness, height, layers)
     if ratio > MAX_ROWS:
         thinnest = math.ceil(1e6 * height * layers / MAX_ROWS) / 1e6
         raise ConfigError(
