@@ -1,12 +1,22 @@
 """Time to compute a grasp window (``gripper-sim window``) for the default fruit.
 
 Prints the window, the number of simulations and the wall time; no assertion (a
-benchmark, not a test). Run: ``python bench/bench_window.py [--fruit NAME] [--finger NAME]``.
+benchmark, not a test). Run: ``python bench/bench_window.py [--fruit NAME] [--finger NAME]
+[--workers N [N ...]]``.
+
+With several ``--workers`` counts the window is computed once per count, one after the
+other in this process, and the table gives each one's wall time, the CPU time of this
+process and of its worker processes (``resource.getrusage``), the trials run ahead that
+the searches did not take, and whether its trials and bounds are the first count's to
+the bit. Wall time is what more workers buy: run it on an otherwise idle machine (the
+load average is printed).
 """
 from __future__ import annotations
 
 import argparse
 import math
+import os
+import resource
 import sys
 import time
 from pathlib import Path
@@ -24,9 +34,13 @@ def main() -> int:
     parser.add_argument('--finger', default=None)
     parser.add_argument('--scenario', default='pick_and_place')
     parser.add_argument('--tolerance', type=float, default=TOLERANCE)
+    parser.add_argument('--workers', type=int, nargs='+', default=None,
+                        help='worker-process counts to compare (default: one process)')
     args = parser.parse_args()
     scenario = load_scenario(args.scenario)
     config = scenario_config(scenario, fruit=args.fruit, finger=args.finger)
+    if args.workers:
+        return compare_workers(config, scenario, args)
     start, cpu = time.perf_counter(), time.process_time()
     window = grasp_window(config, scenario, args.tolerance)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
@@ -44,6 +58,43 @@ def main() -> int:
     for trial in window.trials:
         print(f'    {trial.kind:6s} {trial.force:8.3f} N  {trial.verdict:8s} slip '
               f'{trial.slip_distance * 1e3:6.3f} mm {trial.wall_time:6.1f} s')
+    return 0
+
+
+def _comparable(window) -> dict:
+    """The window's JSON without its timings and worker counts."""
+    data = window.as_dict()
+    for key in ('wall_time', 'workers', 'look_ahead_trials'):
+        data.pop(key)
+    for trial in data['trials']:
+        trial.pop('wall_time')
+    return data
+
+
+def compare_workers(config, scenario, args) -> int:
+    """The window once per worker count in ``args.workers``; prints a table."""
+    print(f'grasp window, {config["fruit.name"]} / {config["gripper.finger.name"]} finger '
+          f'/ {args.scenario}, tolerance {args.tolerance:g}; load average '
+          f'{os.getloadavg()[0]:.2f} at the start')
+    print(f"{'workers':>7s} {'wall s':>8s} {'CPU s':>8s} {'trials':>6s} {'ahead':>5s} "
+          f"{'min N':>8s} {'max N':>8s}  same as the first")
+    first = None
+    for workers in args.workers:
+        own = resource.getrusage(resource.RUSAGE_SELF)
+        children = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        window = grasp_window(config, scenario, args.tolerance, workers=workers)
+        wall = time.perf_counter() - start
+        cpu = sum(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+                  for before, after in ((own, resource.getrusage(resource.RUSAGE_SELF)),
+                                        (children,
+                                         resource.getrusage(resource.RUSAGE_CHILDREN))))
+        data = _comparable(window)
+        first = data if first is None else first
+        print(f'{workers:7d} {wall:8.1f} {cpu:8.1f} {len(window.trials):6d} '
+              f'{window.look_ahead_trials:5d} {window.min_force or math.nan:8.3f} '
+              f'{window.max_force or math.nan:8.3f}  {data == first}')
+    print(f'load average {os.getloadavg()[0]:.2f} at the end')
     return 0
 
 

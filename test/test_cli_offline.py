@@ -71,6 +71,8 @@ def test_pick_json_reports_outcome():
     (['pick', '--force', 'inf'], 'must be a finite number > 0'),
     (['squeeze', '--set', 'sim.dt=abc', '--to-force', '5'], "'sim.dt'"),
     (['squeeze', '--config', '/nonexistent.yaml', '--to-force', '5'], 'cannot read'),
+    (['window', '--workers', '0'], 'must be at least 1'),
+    (['window', '--workers', '2.5'], 'is not an integer'),
 ])
 def test_bad_input_gives_a_clear_error(args, message):
     run = gripper_sim(*args, timeout=120)

@@ -23,6 +23,17 @@ def positive_float(text: str) -> float:
     return value
 
 
+def positive_int(text: str) -> int:
+    """A whole number >= 1."""
+    try:
+        value = int(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from err
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'{value} must be at least 1')
+    return value
+
+
 def non_negative_float(text: str) -> float:
     """A finite number >= 0."""
     value = _finite(text, '>= 0')

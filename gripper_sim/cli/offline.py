@@ -14,7 +14,7 @@ from contextlib import ExitStack
 
 import numpy as np
 
-from gripper_sim.cli.arguments import non_negative_float, positive_float
+from gripper_sim.cli.arguments import non_negative_float, positive_float, positive_int
 from gripper_sim.cli.progress import StepProgress
 from gripper_sim.configuration import available_fruits, load_config, parse_override
 from gripper_sim.core.peaks import RunPeaks
@@ -108,6 +108,11 @@ def register(subparsers) -> None:
     window.add_argument('--html', metavar='FILE.html',
                         help='also write an HTML report of the trials (opens offline)')
     window.add_argument('--quiet', action='store_true', help='no line per trial')
+    window.add_argument('--workers', type=positive_int, default=1, metavar='N',
+                        help='processes running trials (default 1); from 2 the hold and '
+                             'bruise searches run side by side and spare processes try '
+                             'the forces a search may need next: the same trials and '
+                             'window, sooner')
     window.set_defaults(handler=run_window)
 
     fingers = subparsers.add_parser('fingers', help='list the finger presets')
@@ -428,7 +433,7 @@ def run_window(args) -> int:
               f"{config['gripper.finger.name']} finger ({scenario['name']}: lift "
               f"{scenario['lift.height']:g} m, transport {scenario['transport.distance']:g} m)",
               flush=True)
-    window = grasp_window(config, scenario, tolerance, progress)
+    window = grasp_window(config, scenario, tolerance, progress, args.workers)
     if args.html:
         from gripper_sim.recording.analysis.report_html import write_window_report
         from gripper_sim.recording.errors import RecordingError
@@ -476,7 +481,9 @@ def run_window(args) -> int:
         print(f'  safe window     {window.min_force:.3g} N .. {top} commanded')
     else:
         print('  safe window     none')
-    print(f'  {len(window.trials)} simulations in {window.wall_time:.1f} s')
+    extra = (f' on {window.workers} processes (and {window.look_ahead_trials} tried ahead '
+             'that the searches did not need)' if window.workers > 1 else '')
+    print(f'  {len(window.trials)} simulations in {window.wall_time:.1f} s{extra}')
     return 0
 
 

@@ -1,10 +1,11 @@
 """``gripper-sim study STUDY.yaml``: run a grasp study on Dask (``gripper_sim.workflows``)."""
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
+
+from gripper_sim.cli.arguments import positive_int
 
 
 def register(subparsers) -> None:
@@ -20,23 +21,13 @@ def register(subparsers) -> None:
                        help='results directory (default: study-results/NAME)')
     study.add_argument('--scheduler', metavar='tcp://HOST:PORT', default=None,
                        help='an existing Dask scheduler (default: a local cluster)')
-    study.add_argument('--workers', type=_positive_int, default=None, metavar='N',
+    study.add_argument('--workers', type=positive_int, default=None, metavar='N',
                        help='local cluster: worker processes (default: the CPU count)')
     study.add_argument('--csv', action='store_true', help='also write rows.csv')
     study.add_argument('--no-report', action='store_true',
                        help='skip the HTML/PNG report')
     study.add_argument('--no-progress', action='store_true', help='no progress bar')
     study.set_defaults(handler=run_study_verb)
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from err
-    if value < 1:
-        raise argparse.ArgumentTypeError(f'{value} must be at least 1')
-    return value
 
 
 def run_study_verb(args) -> int:

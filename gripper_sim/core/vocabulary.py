@@ -130,7 +130,11 @@ KEYS: dict[str, Term] = {
     'tolerance': Term('', 'relative width at which the bisections stop'),
     'max_slip': Term('m', 'window.max_slip: the slip limit of a held trial'),
     'wall_time': Term('s', 'wall-clock time of the computation'),
-    'trials': Term('-', 'every simulated grasp of the window'),
+    'trials': Term('-', 'every simulated grasp of the window (those its searches took, '
+                        'in their serial order)'),
+    'workers': Term('-', 'processes the window\'s trials ran on (window --workers)'),
+    'look_ahead_trials': Term('-', 'trials run ahead on spare worker processes that the '
+                                   'searches did not need (not in trials)'),
     'verdict': Term('-', 'a window trial\'s verdict: held or slipped (or the run\'s '
                          'outcome when it did not carry the fruit) for a hold trial, '
                          'bruised or safe for a bruise trial'),

@@ -20,15 +20,17 @@ scenario's approach skipped), run by ``evaluate_grasp`` (``workflows.grasp.evalu
 evaluation the ``pick`` command and studies share). A trial stops early once its
 answer is known (dropped or bruised). A trial whose solver fails (``ConvergenceError``)
 counts as neither holding nor safe, so that force stays out of the window. The two
-bisections are one generator, ``window_search``, driven here trial after trial and by
-``gripper_sim.workflows.study`` over a Dask cluster.
+bisections (``window_bisections``) are one generator, ``window_search``, driven here
+trial after trial and by ``gripper_sim.workflows.study`` over a Dask cluster; on
+several worker processes (``grasp_window``'s ``workers``) they run side by side and look
+ahead (``workflows.speculative``), with the same trials and window.
 """
 from __future__ import annotations
 
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Generator, Iterable, Mapping, Tuple
+from typing import Any, Callable, Generator, Iterable, Mapping
 
 import numpy as np
 
@@ -39,6 +41,8 @@ from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import PINCHED, SOLVER_FAILED, GraspEvaluation, evaluate
 from gripper_sim.workflows.scenario import PickAndPlace, Scenario
+from gripper_sim.workflows.speculative import (ProcessPool, Request, Search, force_key,
+                                               run_searches)
 
 #: relative width of the final bisection brackets
 TOLERANCE = 0.03
@@ -111,6 +115,9 @@ class GraspWindow:
         max_slip: m, ``window.max_slip``.
         table_bruise_estimate: N, the table load at which the fruit bruises on the table
             (``table_bruise_load``); the trials say where each bruised (``bruised_at``).
+        workers: processes the trials ran on.
+        look_ahead_trials: trials run ahead on spare workers that the searches did not
+            take (not in ``trials``).
     """
 
     fruit: str
@@ -128,6 +135,8 @@ class GraspWindow:
     table_bruise_estimate: float = 0.0
     min_force_measured: float | None = None
     max_force_measured: float | None = None
+    workers: int = 1
+    look_ahead_trials: int = 0
 
     @property
     def max_force_limited_by(self) -> str | None:
@@ -155,6 +164,7 @@ class GraspWindow:
                     min_force_measured=self.min_force_measured,
                     max_force_measured=self.max_force_measured,
                     max_force_limited_by=self.max_force_limited_by,
+                    workers=self.workers, look_ahead_trials=self.look_ahead_trials,
                     trials=[dict(vars(t), verdict=t.verdict) for t in self.trials])
 
 
@@ -239,10 +249,6 @@ def table_bruise_load(config: Mapping[str, Any]) -> float:
     return config['fruit.bruise_pressure'] ** 3 * math.pi ** 3 * radius ** 2 / (6 * e_star ** 2)
 
 
-#: one request of a window search: (kind, force in N), kind 'hold' or 'bruise'
-Request = Tuple[str, float]
-
-
 def trial_setup(config: Mapping[str, Any], scenario: Scenario) -> tuple[dict, Scenario]:
     """The configuration and scenario of a window trial: the jaws start open at the
     grasp height (the scenario's approach skipped)."""
@@ -299,13 +305,11 @@ def measured_bounds(min_force: float | None, max_force: float | None,
     return measured('hold', min_force), measured('bruise', max_force)
 
 
-def window_search(config: Mapping[str, Any], hold_estimate: float, bruise_estimate: float,
-                  tolerance: float = TOLERANCE
-                  ) -> Generator[Request, Trial, tuple[float | None, float | None]]:
-    """The grasp window's two bisections as a generator: it yields ``(kind, force)``
-    requests, is sent back each request's ``Trial`` (``trial_of``), and returns
-    ``(min_force, max_force)`` (see ``GraspWindow``). The same search runs in one
-    process (``grasp_window``) and over a cluster (``gripper_sim.workflows.study``).
+def window_bisections(config: Mapping[str, Any], hold_estimate: float,
+                      bruise_estimate: float, tolerance: float = TOLERANCE) -> list[Search]:
+    """The grasp window's two bisections, independent of each other: the smallest force
+    that holds ('hold', verdict ``Trial.held``) and the largest that does not bruise
+    ('bruise', verdict not ``Trial.bruised``).
 
     Args:
         config: the trials' configuration (friction, pad, gripper.max_force, dimension).
@@ -319,26 +323,41 @@ def window_search(config: Mapping[str, Any], hold_estimate: float, bruise_estima
     # minimum lies between m g / (2 mu_s) and m g / (2 mu_k)
     mu_k = mu if pad else config['contact.jaw.kinetic_friction']
     kinetic = hold_estimate * mu / mu_k if mu_k > 0 else 2 * hold_estimate
-    min_force = yield from _ask('hold', bisection(0.8 * hold_estimate, 1.15 * kinetic, limit,
-                                                  tolerance, want_smallest=True))
     # the pressurised 3D shell spreads its contact (its pressure stays near the turgor,
     # far from Hertz): start the search no lower than the holding force there
     seed = (max(bruise_estimate, hold_estimate) if int(config.get('dimension', 2)) == 3
             else bruise_estimate)
-    max_force = yield from _ask('bruise', bisection(0.8 * seed, 1.25 * seed, limit,
-                                                    tolerance, want_smallest=False))
+    return [Search('hold', lambda: bisection(0.8 * hold_estimate, 1.15 * kinetic, limit,
+                                             tolerance, want_smallest=True),
+                   lambda trial: trial.held),
+            Search('bruise', lambda: bisection(0.8 * seed, 1.25 * seed, limit, tolerance,
+                                               want_smallest=False),
+                   lambda trial: not trial.bruised)]
+
+
+def window_search(config: Mapping[str, Any], hold_estimate: float, bruise_estimate: float,
+                  tolerance: float = TOLERANCE
+                  ) -> Generator[Request, Trial, tuple[float | None, float | None]]:
+    """The grasp window's two bisections (``window_bisections``) one after the other as a
+    generator: it yields ``(kind, force)`` requests, is sent back each request's
+    ``Trial`` (``trial_of``), and returns ``(min_force, max_force)`` (see
+    ``GraspWindow``). The same search runs in one process (``grasp_window``) and over a
+    cluster (``gripper_sim.workflows.study``)."""
+    hold, bruise = window_bisections(config, hold_estimate, bruise_estimate, tolerance)
+    min_force = yield from _ask(hold)
+    max_force = yield from _ask(bruise)
     return min_force, max_force
 
 
-def _ask(kind: str, search: Generator[float, bool, float | None]
-         ) -> Generator[Request, Trial, float | None]:
+def _ask(search: Search) -> Generator[Request, Trial, float | None]:
     """Turn a bisection's forces into ``(kind, force)`` requests and trials into its
-    verdicts (held for 'hold', not damaged for 'bruise')."""
+    verdicts."""
+    bisect = search.bisection()
     try:
-        force = next(search)
+        force = next(bisect)
         while True:
-            trial = yield kind, force
-            force = search.send(trial.held if kind == 'hold' else not trial.bruised)
+            trial = yield search.kind, force
+            force = bisect.send(search.verdict(trial))
     except StopIteration as stop:
         return stop.value
 
@@ -354,38 +373,58 @@ def run_search(search: Generator, answer: Callable[[Any], Any]) -> Any:
         return stop.value
 
 
+def run_trial(config: Mapping[str, Any], scenario: Scenario, request: Request) -> Trial:
+    """The window's trial of ``request`` (kind, force N): ``evaluate_grasp`` and its
+    verdict (``trial_of``), with its wall time."""
+    kind, force = request
+    start = time.perf_counter()
+    return trial_of(evaluate_grasp(config, scenario, force, kind), kind,
+                    time.perf_counter() - start)
+
+
 def grasp_window(config: Mapping[str, Any], scenario: Scenario,
                  tolerance: float = TOLERANCE,
-                 progress: Callable[[Trial], None] | None = None) -> GraspWindow:
+                 progress: Callable[[Trial], None] | None = None,
+                 workers: int = 1) -> GraspWindow:
     """Find the grasp window of the fruit and finger of ``config`` in ``scenario``.
 
     Args:
         config: the configuration of the runs (``scenario.scenario_config``).
         scenario: gives the close speed, squeeze time, lift and transport.
         tolerance: relative width at which a bisection stops.
-        progress: called with each trial as it finishes.
+        progress: called with each trial as it finishes (with ``workers`` > 1, as it is
+            known to be one the serial search runs, in its order).
+        workers: processes running trials; above 1 the two bisections run side by side
+            and look ahead (``workflows.speculative``): the same trials and window as
+            one, sooner.
     """
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise GripperSimError(f'workers must be a whole number >= 1, got {workers!r}')
     start = time.perf_counter()
     hold_estimate, bruise_estimate, mass = estimates(config)
     config, base = trial_setup(config, scenario)
-    trials: list[Trial] = []
-    cache: dict[Request, Trial] = {}
+    look_ahead = 0
+    if workers == 1:
+        trials: list[Trial] = []
+        cache: dict[Request, Trial] = {}
 
-    def trial(request: Request) -> Trial:
-        kind, force = request
-        key = (kind, round(force, 12))
-        if key not in cache:
-            t0 = time.perf_counter()
-            result = trial_of(evaluate_grasp(config, base, force, kind), kind,
-                              time.perf_counter() - t0)
-            cache[key] = result
-            trials.append(result)
-            if progress is not None:
-                progress(result)
-        return cache[key]
+        def trial(request: Request) -> Trial:
+            key = (request[0], force_key(request[1]))
+            if key not in cache:
+                cache[key] = run_trial(config, base, request)
+                trials.append(cache[key])
+                if progress is not None:
+                    progress(cache[key])
+            return cache[key]
 
-    min_force, max_force = run_search(
-        window_search(config, hold_estimate, bruise_estimate, tolerance), trial)
+        min_force, max_force = run_search(window_search(
+            config, hold_estimate, bruise_estimate, tolerance), trial)
+    else:
+        searches = window_bisections(config, hold_estimate, bruise_estimate, tolerance)
+        with ProcessPool(workers, run_trial, (config, base)) as pool:
+            run = run_searches(searches, pool, workers, progress)
+        (min_force, max_force), trials = run.answers, run.paths[0] + run.paths[1]
+        look_ahead = run.wasted
     mu = (config['contact.pad.friction'] if config['gripper.finger.pad.enabled']
           else config['contact.jaw.static_friction'])
     low, high = measured_bounds(min_force, max_force, trials)
@@ -397,7 +436,8 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
                        max_slip=float(config['window.max_slip']),
                        table_bruise_estimate=(table_bruise_load(config)
                                               if config['world.table'] else 0.0),
-                       min_force_measured=low, max_force_measured=high)
+                       min_force_measured=low, max_force_measured=high, workers=workers,
+                       look_ahead_trials=look_ahead)
 
 
 def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
