@@ -235,3 +235,58 @@ def test_grasp_prints_feedback_that_comes_in_a_burst_with_the_result():
         node.destroy_node()
         rclpy.try_shutdown(context=context)
         spinning.join(timeout=10)
+
+
+def test_reset_pause_step_resume_without_a_ros2_command_line(client):
+    """The node's services from ``gripper-sim`` (a venv has no ``ros2`` command)."""
+    run = cli('pause')
+    assert run.returncode == 0, run.stderr
+    run = cli('step', '25')
+    assert run.returncode == 0, run.stderr
+    assert 'sim time' in run.stdout
+    stepped = float(re.search(r'sim time ([0-9.e+-]+) s', run.stdout).group(1))
+    run = cli('step', '25')
+    assert run.returncode == 0, run.stderr
+    assert float(re.search(r'sim time ([0-9.e+-]+) s', run.stdout).group(1)) == \
+        pytest.approx(stepped + 25 * 0.001, abs=1e-9)
+    run = cli('resume')
+    assert run.returncode == 0, run.stderr
+    run = cli('step', '5')   # refused unless paused: the node's reason, exit 1
+    assert run.returncode == 1 and 'pause it first' in run.stderr, run.stderr
+    run = cli('jaw', 'gap', '0.05')
+    assert run.returncode == 0, run.stderr
+    client.spin_until(lambda: client.latest['fruit/state'].gap < 0.0735 - 1e-3, 60,
+                      'the jaws to close')
+    run = cli('reset')
+    assert run.returncode == 0, run.stderr
+    client.spin_until(lambda: client.latest['fruit/state'].gap > 0.0735 - 1e-6, 60,
+                      'the reset gap')
+
+
+@pytest.mark.parametrize('args, message', [
+    (('step', '0'), 'steps must be 1 to 1000000'),
+    (('step', '2.5'), 'steps must be a whole number'),
+    (('record-node', 'begin'), "invalid choice: 'begin'"),
+])
+def test_bad_service_arguments_are_refused_before_sending(args, message):
+    run = cli(*args)
+    assert run.returncode == 2
+    assert message in run.stderr and 'Traceback' not in run.stderr
+
+
+def test_record_node_starts_and_stops_the_in_node_recording(client, tmp_path):
+    run = cli('record-node', 'start')
+    assert run.returncode == 0, run.stderr
+    assert 'recording every step to' in run.stdout
+    path = run.stdout.split('recording every step to ', 1)[1].split()[0].rstrip('.,;')
+    run = cli('record-node', 'start')   # refused while recording
+    assert run.returncode == 1 and 'already recording' in run.stderr
+    run = cli('record-node', 'stop')
+    assert run.returncode == 0, run.stderr
+    run = cli('info', path)
+    assert run.returncode == 0, run.stderr
+    assert '/gripper_sim/fruit/state' in run.stdout
+    run = cli('record-node', 'stop')
+    assert run.returncode == 1 and 'not recording' in run.stderr
+    import shutil
+    shutil.rmtree(path, ignore_errors=True)

@@ -1,4 +1,5 @@
-"""ROS verbs of ``gripper-sim``: node, jaw, lift, grasp, status, controller.
+"""ROS verbs of ``gripper-sim``: node, jaw, lift, grasp, status, controller, and the node's
+services (reset, pause, resume, step, record), so that no ``ros2`` command line is needed.
 
 Every handler imports rclpy lazily (offline verbs run without ROS). Discovery defaults
 to LOCALHOST when ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is unset.
@@ -103,6 +104,28 @@ def register(subparsers) -> None:
                         help='lines per second with --follow (default 2)')
     _common(status)
     status.set_defaults(handler=_status)
+
+    reset = subparsers.add_parser(
+        'reset', help="back to t = 0 and the initial commands (the node's ~/reset)")
+    _common(reset)
+    reset.set_defaults(handler=_service, service='reset', kind='trigger')
+    for verb, value, text in (('pause', True, 'pause the physics (~/pause true)'),
+                              ('resume', False, 'resume the physics (~/pause false)')):
+        paused = subparsers.add_parser(verb, help=text)
+        _common(paused)
+        paused.set_defaults(handler=_service, service='pause', kind='bool', value=value)
+    step = subparsers.add_parser('step', help='take N physics steps while paused (~/step)')
+    step.add_argument('steps', type=_steps, help='steps to take, 1 to 1,000,000')
+    _common(step)
+    step.set_defaults(handler=_step)
+    record = subparsers.add_parser(
+        'record-node', help="start or stop the node's own recording (~/record)",
+        description="Start (to the node's record_path, or a new bag folder "
+                    'gripper_sim_<date>_<time> in its working directory) or stop the '
+                    "node's in-node recording of every physics step.")
+    record.add_argument('action', choices=('start', 'stop'))
+    _common(record)
+    record.set_defaults(handler=_service, service='record', kind='bool')
 
     controller = subparsers.add_parser(
         'controller', help='run the example PI grip force controller node')
@@ -293,19 +316,68 @@ def _measure(msg, what: str) -> float:
         msg.position[names.index('right_jaw_joint')]
 
 
+def _steps(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'steps must be a whole number, got {text!r}') from err
+    if not 1 <= value <= 1_000_000:
+        raise argparse.ArgumentTypeError(f'steps must be 1 to 1000000, got {value}')
+    return value
+
+
+def _call(args, srv_type, service: str, request):
+    """Call the node's ``service`` (relative to ``--node``) with ``request``; (exit code,
+    response): exit 1 with a hint if no node serves it or answers in ``--timeout`` s."""
+    node_path = args.node.rstrip('/')
+    name = f'{node_path}/{service}'
+    with _Session('gripper_sim_cli') as session:
+        client = session.node.create_client(srv_type, name)
+        if not session.spin_until(client.service_is_ready, args.timeout):
+            return _no_node(f'service {name}', node_path, args.timeout), None
+        future = client.call_async(request)
+        if not session.spin_until(future.done, args.timeout):
+            return _error(f'the node did not answer {name} within {args.timeout:g} s'), None
+        return 0, future.result()
+
+
+def _answer(response) -> int:
+    """Print a Trigger/SetBool/Step response's message; 0 on success, else 1."""
+    print(response.message, file=sys.stdout if response.success else sys.stderr)
+    return 0 if response.success else 1
+
+
+def _service(args) -> int:
+    """A Trigger or SetBool service of the node: ``args.service``, ``args.kind``, the
+    SetBool value in ``args.value`` (pause/resume) or ``args.action`` (record)."""
+    from std_srvs.srv import SetBool, Trigger
+    if args.kind == 'trigger':
+        code, response = _call(args, Trigger, args.service, Trigger.Request())
+    else:
+        value = args.value if args.service == 'pause' else args.action == 'start'
+        code, response = _call(args, SetBool, args.service, SetBool.Request(data=value))
+    return code if response is None else _answer(response)
+
+
+def _step(args) -> int:
+    from gripper_sim_interfaces.srv import Step
+    code, response = _call(args, Step, 'step', Step.Request(steps=args.steps))
+    if response is None:
+        return code
+    if response.success:
+        print(f'{response.message} (sim time {response.sim_time:.6g} s)'
+              if response.message else f'sim time {response.sim_time:.6g} s')
+        return 0
+    return _answer(response)
+
+
 def _open(args) -> int:
     from std_srvs.srv import Trigger
-    node_path = args.node.rstrip('/')
-    with _Session('gripper_sim_cli') as session:
-        client = session.node.create_client(Trigger, f'{node_path}/jaw/open')
-        if not session.spin_until(client.service_is_ready, args.timeout):
-            return _no_node(f'service {node_path}/jaw/open', node_path, args.timeout)
-        future = client.call_async(Trigger.Request())
-        if not session.spin_until(future.done, args.timeout):
-            return _error('the node did not answer the open request')
-        response = future.result()
-        print(response.message)
-        return 0 if response.success else 1
+    code, response = _call(args, Trigger, 'jaw/open', Trigger.Request())
+    if response is None:
+        return code
+    print(response.message)
+    return 0 if response.success else 1
 
 
 def _grasp(args) -> int:
