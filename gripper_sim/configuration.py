@@ -666,7 +666,8 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
     fruit_name = _chosen('fruit', choices['fruit']) or DEFAULT_FRUIT
     finger_name = _chosen('finger', choices['finger'])
     base_dir = Path(config_file).parent if config_file is not None else None
-    chosen: dict[str, Any] = dict(_preset(fruit_name, base_dir))
+    preset_keys, provenance = _preset(fruit_name, base_dir)
+    chosen: dict[str, Any] = dict(preset_keys)
     if finger_name is not None:
         chosen.update(_finger_preset(finger_name))
     user: dict[str, Any] = {}
@@ -693,6 +694,9 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
                if key not in baseline or config[key] != _coerce(key, baseline[key])}
     for message in no_effect_warnings(config, changed, fruit_name):
         warnings.warn(message, ConfigWarning, stacklevel=2)
+    mismatch = calibration_warning(fruit_name, provenance, config['dimension'])
+    if mismatch:
+        warnings.warn(mismatch, ConfigWarning, stacklevel=2)
     return config
 
 
@@ -770,18 +774,34 @@ def no_effect_warnings(config: Mapping[str, Any], user: Mapping[str, Any],
     return lines
 
 
-def _preset(name: str, base_dir: Path | None = None) -> dict[str, Any]:
+def _preset(name: str, base_dir: Path | None = None) -> tuple[dict[str, Any], Mapping]:
+    """The fruit preset's flat keys and its ``calibration:`` record ({} if none)."""
     data = read_yaml(fruit_preset_path(name, base_dir))
+    provenance: Mapping = {}
     if is_preset_file(name):
-        _drop_provenance(data, f"fruit preset file '{name}'")
-    return _checked_flatten(data, f'fruit preset {name}')
+        provenance = _drop_provenance(data, f"fruit preset file '{name}'")
+    return _checked_flatten(data, f'fruit preset {name}'), provenance
 
 
-def _drop_provenance(data: dict, source: str) -> None:
-    """Remove the ``calibration:`` record (where a preset came from) from ``data``."""
+def _drop_provenance(data: dict, source: str) -> Mapping:
+    """Remove the ``calibration:`` record (where a preset came from) from ``data``;
+    returns it ({} if none)."""
     provenance = data.pop(PROVENANCE_KEY, None)
     if provenance is not None and not isinstance(provenance, Mapping):
         raise ConfigError(f"{source}: '{PROVENANCE_KEY}' must be a mapping")
+    return provenance or {}
+
+
+def calibration_warning(fruit: str, provenance: Mapping, dimension: int) -> str | None:
+    """A warning when a calibrated preset runs in another dimension than it was fitted
+    in (its flesh or turgor were fitted for that model), else None."""
+    fitted = provenance.get('dimension')
+    if fitted is None or int(fitted) == int(dimension):
+        return None
+    return (f"fruit preset file '{fruit}' was calibrated in {int(fitted)}D "
+            f"({provenance.get('model', 'its')} model); this run is {int(dimension)}D, "
+            f"where its fitted values need not fit the data: add --set "
+            f"dimension={int(fitted)} to run it as calibrated")
 
 
 def _finger_preset(name: str) -> dict[str, Any]:

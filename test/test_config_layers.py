@@ -148,3 +148,23 @@ def test_a_saved_configuration_loads_again_without_warnings(tmp_path):
     changed = write(tmp_path, 'changed.yaml', to_yaml({**config, 'contact.pad.friction': 0.6}))
     with pytest.warns(ConfigWarning, match="'contact.pad.friction' has no effect"):
         load_config(config_file=changed)
+
+
+def test_a_preset_calibrated_in_3d_warns_when_run_in_2d(tmp_path):
+    """``gripper-sim calibrate`` records the dimension it fitted in (``calibration:``); a
+    run in the other dimension is told, one it was fitted for is not."""
+    preset = tmp_path / 'my_peach.yaml'
+    preset.write_text('fruit:\n  name: my_peach\n  flesh:\n    youngs_modulus: 9.9e5\n'
+                      'calibration:\n  base_fruit: peach\n  model: solid\n  dimension: 3\n')
+    with pytest.warns(ConfigWarning, match=r"calibrated in 3D \(solid model\); this run is "
+                                           r"2D.*--set dimension=3"):
+        config = load_config(fruit=str(preset))
+    assert config['fruit.flesh.youngs_modulus'] == pytest.approx(9.9e5)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error', ConfigWarning)
+        assert load_config(fruit=str(preset), overrides=['dimension=3'])['dimension'] == 3
+    plain = tmp_path / 'plain.yaml'
+    plain.write_text('fruit:\n  name: plain\n')   # no record: nothing to say
+    with warnings.catch_warnings():
+        warnings.simplefilter('error', ConfigWarning)
+        load_config(fruit=str(plain))

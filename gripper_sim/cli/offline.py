@@ -45,15 +45,17 @@ def config_from_args(args, forced: dict | None = None) -> dict:
     user = dict(parse_override(text) for text in args.overrides)
     merged = dict(forced or {})
     merged.update(user)
-    return load_config(fruit=args.fruit, config_file=args.config, overrides=merged)
+    return load_config(fruit=args.fruit, config_file=args.config, overrides=merged,
+                       finger=getattr(args, 'finger', None))
 
 
 def register(subparsers) -> None:
     squeeze = subparsers.add_parser(
         'squeeze', help='plate compression test (ASAE S368 style) of a fruit',
-        description='Close rigid flat jaws slowly on the fruit until a force or a gap is '
-                    'reached. Gravity and the table are off unless set with --set.')
-    add_config_arguments(squeeze)
+        description='Close the jaws (rigid flat plates unless --finger) slowly on the fruit '
+                    'until a force or a gap is reached. Gravity and the table are off unless '
+                    'set with --set.')
+    _add_fruit_finger_arguments(squeeze)
     target = squeeze.add_mutually_exclusive_group(required=True)
     target.add_argument('--to-force', type=positive_float, metavar='N',
                         help='stop when the mean jaw normal force reaches N newtons')
@@ -68,7 +70,7 @@ def register(subparsers) -> None:
         'pick', help='close to a grip force, lift and hold the fruit',
         description='Close the jaws on the fruit resting on the table to a grip force, '
                     'lift it and hold it; reports held, slipped or dropped.')
-    add_config_arguments(pick)
+    _add_fruit_finger_arguments(pick)
     pick.add_argument('--force', type=positive_float, required=True, metavar='N',
                       help='grip force (mean jaw normal force), N')
     pick.add_argument('--lift', type=non_negative_float, default=0.05, metavar='M',
@@ -125,7 +127,7 @@ def register(subparsers) -> None:
 
 
 def _add_fruit_finger_arguments(parser) -> None:
-    """--fruit / --config / --finger / --set of the scenario verbs."""
+    """--fruit / --config / --finger / --set of the simulating verbs."""
     add_config_arguments(parser)
     parser.add_argument('--finger', metavar='NAME',
                         help='finger preset (config/fingers: see gripper-sim fingers)')
