@@ -185,6 +185,9 @@ def test_topic_selection_follows_ros2_bag_record():
     assert pick.wants('/a') and pick.wants('/sim/fruit/state')
     assert not pick.wants('/sim/fruit/nodes') and not pick.wants('/b')
     assert not pick.wants('/x/sim/y')   # a pattern matches the whole name
+    # hidden topics (an action's internals, a node's _instance) only when named
+    assert not pick.wants('/sim/_instance') and not pick.wants('/sim/grasp/_action/feedback')
+    assert TopicSelection.build(['/sim/_instance']).wants('/sim/_instance')
     every = TopicSelection.build(all_topics=True, exclude=r'/rosout')
     assert every.wants('/tf') and not every.wants('/rosout') and not every.wants('/_hidden')
     with pytest.raises(RecordingError, match='not a valid regular expression'):

@@ -45,3 +45,17 @@ def test_controller_settles_the_grip_force_within_5_percent(tmp_path):
         assert controller.stop() in (0, None), controller.log()
         assert node.stop() == 0, node.log()
     assert 'Traceback' not in controller.log() + node.log()
+
+
+def test_controller_without_a_simulator_says_what_it_waits_for(tmp_path):
+    env = ros_environment(pick_domain_id(21))
+    controller = controller_process(['--force', str(SETPOINT)], env=env,
+                                    log_path=tmp_path / 'controller.log').start()
+    try:
+        assert controller.wait_for_log('no wrench on /gripper_sim/left_jaw/wrench', 60), \
+            controller.log()
+        assert f"ROS_DOMAIN_ID ({env['ROS_DOMAIN_ID']})" in controller.log()
+        assert controller.running   # it waits on
+    finally:
+        assert controller.stop() in (0, None), controller.log()
+    assert 'Traceback' not in controller.log()

@@ -55,9 +55,10 @@ def compile_pattern(pattern: str | None, option: str) -> re.Pattern | None:
 class TopicSelection:
     """Which topics to record, as ``ros2 bag record`` chooses them.
 
-    A topic is recorded when it is named, or matches ``regex``, or ``all_topics`` is set
-    (hidden topics excepted), and it does not match ``exclude``. Patterns match the whole
-    topic name.
+    A topic is recorded when it is named, or matches ``regex`` or ``all_topics`` is set
+    (for these two hidden topics excepted, as rosbag2 does without
+    --include-hidden-topics: an action's ``_action/*`` topics, a node's ``_instance``),
+    and it does not match ``exclude``. Patterns match the whole topic name.
     """
 
     names: frozenset = frozenset()
@@ -85,13 +86,15 @@ class TopicSelection:
             return False
         if topic in self.names:
             return True
-        if self.regex is not None and self.regex.fullmatch(topic):
-            return True
-        return self.all_topics and not is_hidden(topic)
+        if is_hidden(topic):
+            return False
+        return self.all_topics or (self.regex is not None
+                                   and self.regex.fullmatch(topic) is not None)
 
 
 def is_hidden(topic: str) -> bool:
-    """Hidden topics (a name component starting with '_'), skipped by --all like rosbag2."""
+    """Hidden topics (a name component starting with '_'), skipped by --all and --regex
+    like rosbag2."""
     return any(part.startswith('_') for part in topic.split('/') if part)
 
 
@@ -263,7 +266,9 @@ def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = Fa
     def request_stop(_signum: int, _frame: Any) -> None:
         stop.set()
 
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    # no command line: rcl would read this verb's own arguments (e.g. --remap
+    # A:=B) as ROS remapping rules and warn that their syntax is deprecated
+    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT,
                                                                   signal.SIGTERM)}
     node = None

@@ -26,6 +26,7 @@ import os
 import signal
 import sys
 import threading
+import time
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
@@ -42,6 +43,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 JAW_JOINTS = ('left_jaw_joint', 'right_jaw_joint')
+#: s of wall time without a wrench before the controller says what it waits for
+WAIT_WARNING = 5.0
 
 
 def _range(low: float, high: float) -> list[FloatingPointRange]:
@@ -82,8 +85,22 @@ class ForceController(Node):
         self.command: float | None = None
         self._last_t: int | None = None
         self._last_error = 0.0
+        self._sim = sim
+        self._warned_waiting = False
         self.get_logger().info(
             f"controlling {sim}: grip force setpoint {self.get_parameter('force').value:g} N")
+
+    def warn_if_waiting(self, waited: float) -> None:
+        """Once, after ``waited`` s (wall time) with no wrench from the simulator: say
+        where it listens, so that a controller without a simulator does not wait in
+        silence."""
+        if self._warned_waiting or any(self._forces):
+            return
+        self._warned_waiting = True
+        self.get_logger().warning(
+            f'no wrench on {self._sim}/left_jaw/wrench after {waited:.0f} s: is '
+            f'`gripper-sim node` running as {self._sim} with the same ROS_DOMAIN_ID '
+            f"({os.environ.get('ROS_DOMAIN_ID', '0')})? Waiting on.")
 
     def _check(self, parameters: list[Parameter]) -> SetParametersResult:
         for parameter in parameters:
@@ -165,8 +182,11 @@ def main(args: list[str] | None = None) -> int:
         except Exception as err:   # invalid parameter overrides: say so, no traceback
             rclpy.logging.get_logger('gripper_force_controller').error(f'cannot start: {err}')
             return 2
+        started = time.monotonic()
         while not stopping.is_set() and rclpy.ok():
             rclpy.spin_once(node, timeout_sec=0.1)
+            if time.monotonic() - started > WAIT_WARNING:
+                node.warn_if_waiting(WAIT_WARNING)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

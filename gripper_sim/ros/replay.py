@@ -201,7 +201,9 @@ def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
     Foxglove (``gripper_sim.view.foxglove.recording_view``; ViewError if it cannot).
     """
     with BagReader(path) as bag:
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        # no command line: rcl would read this verb's own arguments (e.g. --remap
+        # A:=B) as ROS remapping rules and warn that their syntax is deprecated
+        rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
         node = None
         player = None
         view = None
