@@ -61,16 +61,6 @@ def main() -> int:
     return 0
 
 
-def _comparable(window) -> dict:
-    """The window's JSON without its timings and worker counts."""
-    data = window.as_dict()
-    for key in ('wall_time', 'workers', 'look_ahead_trials'):
-        data.pop(key)
-    for trial in data['trials']:
-        trial.pop('wall_time')
-    return data
-
-
 def compare_workers(config, scenario, args) -> int:
     """The window once per worker count in ``args.workers``; prints a table."""
     print(f'grasp window, {config["fruit.name"]} / {config["gripper.finger.name"]} finger '
@@ -89,7 +79,7 @@ def compare_workers(config, scenario, args) -> int:
                   for before, after in ((own, resource.getrusage(resource.RUSAGE_SELF)),
                                         (children,
                                          resource.getrusage(resource.RUSAGE_CHILDREN))))
-        data = _comparable(window)
+        data = window.answer_dict()
         first = data if first is None else first
         print(f'{workers:7d} {wall:8.1f} {cpu:8.1f} {len(window.trials):6d} '
               f'{window.look_ahead_trials:5d} {window.min_force or math.nan:8.3f} '

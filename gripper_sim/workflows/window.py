@@ -167,6 +167,16 @@ class GraspWindow:
                     workers=self.workers, look_ahead_trials=self.look_ahead_trials,
                     trials=[dict(vars(t), verdict=t.verdict) for t in self.trials])
 
+    def answer_dict(self) -> dict:
+        """``as_dict`` without what depends on the run rather than the answer (the wall
+        times, the worker count, the look-ahead trials): equal for equal windows."""
+        data = self.as_dict()
+        for key in ('wall_time', 'workers', 'look_ahead_trials'):
+            data.pop(key)
+        for trial in data['trials']:
+            trial.pop('wall_time')
+        return data
+
 
 def upper_bound_limited_by(max_force: float | None, trials: Iterable[Trial]) -> str | None:
     """What ended a window's safe side at ``max_force`` (N): 'bruise', or 'solver
