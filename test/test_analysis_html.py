@@ -219,7 +219,7 @@ def test_window_verb_writes_its_report(monkeypatch, tmp_path, capsys):
     """The verb hands its window to the report (the search itself is stubbed: it is
     tested with the window verb)."""
     monkeypatch.setattr('gripper_sim.workflows.window.grasp_window',
-                        lambda config, scenario, tolerance, progress: made_window())
+                        lambda config, scenario, tolerance, progress, workers=1: made_window())
     path = tmp_path / 'window.html'
     assert main(['window', '--html', str(path), '--quiet']) == 0
     out = capsys.readouterr().out

@@ -435,7 +435,7 @@ def run_window(args) -> int:
               f"{config['gripper.finger.name']} finger ({scenario['name']}: lift "
               f"{scenario['lift.height']:g} m, transport {scenario['transport.distance']:g} m)",
               flush=True)
-    window = grasp_window(config, scenario, tolerance, progress, args.workers)
+    window = grasp_window(config, scenario, tolerance, progress, workers=args.workers)
     if args.html:
         from gripper_sim.recording.analysis.report_html import write_window_report
         from gripper_sim.recording.errors import RecordingError
