@@ -22,7 +22,7 @@ class FakeTrial:
         self.bruised = force > bruise_above
 
 
-class InlinePool:
+class LastFirstPool:
     """Runs each started trial at once but hands the results back last-started first,
     so that trials finish out of the order they were asked in; records what ran."""
 
@@ -79,7 +79,7 @@ def serial(hold_from, bruise_above, limit=200.0):
 def test_parallel_searches_ask_and_answer_as_the_serial_ones(hold_from, bruise_above,
                                                              workers):
     answers, trials = serial(hold_from, bruise_above)
-    pool = InlinePool(hold_from, bruise_above)
+    pool = LastFirstPool(hold_from, bruise_above)
     reported = []
     run = run_searches(searches(), pool, workers, reported.append)
     assert run.answers == answers
@@ -100,13 +100,13 @@ def test_a_failed_trial_on_the_path_stops_the_run_and_one_off_it_does_not():
     answers, trials = serial(2.7, 31.0)
     hold_path = [t.force for t in trials if t.kind == 'hold']
     with pytest.raises(GripperSimError, match='failed at'):
-        run_searches(searches(), InlinePool(2.7, 31.0, fail_at=hold_path[2:3]), 1)
+        run_searches(searches(), LastFirstPool(2.7, 31.0, fail_at=hold_path[2:3]), 1)
     # a look-ahead the search did not take failed: the run goes on as the serial one
-    pool = InlinePool(2.7, 31.0)
+    pool = LastFirstPool(2.7, 31.0)
     run_searches(searches(), pool, 5)
     off_path = [f for kind, f in pool.started if kind == 'hold' and f not in hold_path]
     assert off_path
-    run = run_searches(searches(), InlinePool(2.7, 31.0, fail_at=off_path), 5)
+    run = run_searches(searches(), LastFirstPool(2.7, 31.0, fail_at=off_path), 5)
     assert run.answers == answers
 
 

@@ -1,8 +1,8 @@
-"""Bisections run on several processes with the trials and answers of one process.
+"""Bisections run in this process, or on several with the trials and answers of one.
 
 A bisection (``window.bisection``) is a generator that yields the force to try next and
 is sent back a verdict there; what it asks after a list of verdicts depends on those
-verdicts alone, so it is found by replaying them into a fresh generator (``_replay``).
+verdicts alone, so it is found by replaying them into a fresh generator (``_follow``).
 ``run_searches`` keeps up to ``workers`` trials running: first the force each search
 needs next on its own path (the serial search's), then, on free workers, the forces it
 would need after either verdict of a trial it is still waiting for (breadth first: one
@@ -60,19 +60,6 @@ def force_key(force: float) -> float:
     return round(force, 12)
 
 
-def _replay(bisection: Callable[[], Generator], verdicts: list[bool]) -> tuple[bool, Any]:
-    """(finished, value): after ``verdicts`` the search asks for force ``value`` (N), or
-    has finished with answer ``value``."""
-    search = bisection()
-    try:
-        force = next(search)
-        for verdict in verdicts:
-            force = search.send(verdict)
-    except StopIteration as stop:
-        return True, stop.value
-    return False, force
-
-
 @dataclass
 class _Plan:
     """A search's state given the trials known: finished with ``answer``, or waiting
@@ -86,22 +73,28 @@ class _Plan:
 
 
 def _follow(search: Search, verdicts: list[bool], known: dict) -> tuple[list, bool, Any, list]:
-    """Walk ``search`` from ``verdicts`` through the trials ``known`` ({(kind, key):
-    trial or an exception}); (verdicts, finished, answer or the unknown force asked,
-    the known trials met on the way). An exception met re-raises (the serial search
-    would have stopped there)."""
+    """Replay ``verdicts`` into a fresh generator of ``search`` (what it asks depends on
+    them alone), then walk on through the trials ``known`` ({(kind, key): trial or an
+    exception}); (verdicts, finished, its answer or the unknown force it asks, the known
+    trials met after ``verdicts``). An exception met re-raises (the serial search would
+    have stopped there)."""
     verdicts, met = list(verdicts), []
-    while True:
-        finished, value = _replay(search.bisection, verdicts)
-        if finished:
-            return verdicts, True, value, met
-        outcome = known.get((search.kind, force_key(value)))
-        if outcome is None:
-            return verdicts, False, value, met
-        if isinstance(outcome, BaseException):
-            raise outcome
-        met.append(outcome)
-        verdicts.append(bool(search.verdict(outcome)))
+    bisect = search.bisection()
+    try:
+        value = next(bisect)
+        for verdict in verdicts:
+            value = bisect.send(verdict)
+        while True:
+            outcome = known.get((search.kind, force_key(value)))
+            if outcome is None:
+                return verdicts, False, value, met
+            if isinstance(outcome, BaseException):
+                raise outcome
+            met.append(outcome)
+            verdicts.append(bool(search.verdict(outcome)))
+            value = bisect.send(verdicts[-1])
+    except StopIteration as stop:
+        return verdicts, True, stop.value, met
 
 
 def _plan(search: Search, known: dict, look_ahead: int) -> _Plan:
@@ -198,6 +191,32 @@ def _call(job: Callable, args: tuple, request: Request):
         return GripperSimError(str(err))
     except Exception:  # noqa: BLE001 - reported in the parent with its traceback
         return WorkerFailure(f'a trial failed in a worker process:\n{traceback.format_exc()}')
+
+
+class InlinePool:
+    """Runs each started trial at once in this process: with one worker ``run_searches``
+    is the serial search (the searches one after the other, nothing run ahead). The
+    project's errors are handed back as outcomes; any other propagates at once."""
+
+    def __init__(self, job: Callable, args: tuple):
+        self._job, self._args = job, args
+        self._done: list = []
+
+    def start(self, request: Request) -> None:
+        try:
+            outcome = self._job(*self._args, request)
+        except GripperSimError as err:
+            outcome = err
+        self._done.append((request, outcome))
+
+    def finished(self) -> tuple[Request, Any]:
+        return self._done.pop(0)
+
+    def __enter__(self) -> 'InlinePool':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
 
 
 class ProcessPool:

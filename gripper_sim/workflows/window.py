@@ -20,10 +20,10 @@ scenario's approach skipped), run by ``evaluate_grasp`` (``workflows.grasp.evalu
 evaluation the ``pick`` command and studies share). A trial stops early once its
 answer is known (dropped or bruised). A trial whose solver fails (``ConvergenceError``)
 counts as neither holding nor safe, so that force stays out of the window. The two
-bisections (``window_bisections``) are one generator, ``window_search``, driven here
-trial after trial and by ``gripper_sim.workflows.study`` over a Dask cluster; on
-several worker processes (``grasp_window``'s ``workers``) they run side by side and look
-ahead (``workflows.speculative``), with the same trials and window.
+bisections (``window_bisections``) are driven here by ``workflows.speculative``: one after
+the other in this process, or on several worker processes (``grasp_window``'s
+``workers``) side by side and looking ahead, with the same trials and window; and as one
+generator, ``window_search``, by ``gripper_sim.workflows.study`` over a Dask cluster.
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import PINCHED, SOLVER_FAILED, GraspEvaluation, evaluate
 from gripper_sim.workflows.scenario import PickAndPlace, Scenario
-from gripper_sim.workflows.speculative import (ProcessPool, Request, Search, force_key,
+from gripper_sim.workflows.speculative import (InlinePool, ProcessPool, Request, Search,
                                                run_searches)
 
 #: relative width of the final bisection brackets
@@ -402,8 +402,9 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
         config: the configuration of the runs (``scenario.scenario_config``).
         scenario: gives the close speed, squeeze time, lift and transport.
         tolerance: relative width at which a bisection stops.
-        progress: called with each trial as it finishes (with ``workers`` > 1, as it is
-            known to be one the serial search runs, in its order).
+        progress: called with each trial of the searches' paths, in their order, as it
+            is known (with ``workers`` > 1 a trial run ahead waits for the verdicts before
+            it, one the searches did not need is not reported).
         workers: processes running trials; above 1 the two bisections run side by side
             and look ahead (``workflows.speculative``): the same trials and window as
             one, sooner.
@@ -413,28 +414,12 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
     start = time.perf_counter()
     hold_estimate, bruise_estimate, mass = estimates(config)
     config, base = trial_setup(config, scenario)
-    look_ahead = 0
-    if workers == 1:
-        trials: list[Trial] = []
-        cache: dict[Request, Trial] = {}
-
-        def trial(request: Request) -> Trial:
-            key = (request[0], force_key(request[1]))
-            if key not in cache:
-                cache[key] = run_trial(config, base, request)
-                trials.append(cache[key])
-                if progress is not None:
-                    progress(cache[key])
-            return cache[key]
-
-        min_force, max_force = run_search(window_search(
-            config, hold_estimate, bruise_estimate, tolerance), trial)
-    else:
-        searches = window_bisections(config, hold_estimate, bruise_estimate, tolerance)
-        with ProcessPool(workers, run_trial, (config, base)) as pool:
-            run = run_searches(searches, pool, workers, progress)
-        (min_force, max_force), trials = run.answers, run.paths[0] + run.paths[1]
-        look_ahead = run.wasted
+    searches = window_bisections(config, hold_estimate, bruise_estimate, tolerance)
+    pool = (InlinePool(run_trial, (config, base)) if workers == 1
+            else ProcessPool(workers, run_trial, (config, base)))
+    with pool:
+        run = run_searches(searches, pool, workers, progress)
+    (min_force, max_force), trials = run.answers, run.paths[0] + run.paths[1]
     mu = (config['contact.pad.friction'] if config['gripper.finger.pad.enabled']
           else config['contact.jaw.static_friction'])
     low, high = measured_bounds(min_force, max_force, trials)
@@ -447,7 +432,7 @@ def grasp_window(config: Mapping[str, Any], scenario: Scenario,
                        table_bruise_estimate=(table_bruise_load(config)
                                               if config['world.table'] else 0.0),
                        min_force_measured=low, max_force_measured=high, workers=workers,
-                       look_ahead_trials=look_ahead)
+                       look_ahead_trials=run.wasted)
 
 
 def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
