@@ -41,9 +41,10 @@ from gripper_sim.core.measures import numpy_sum
 #: ``kin`` (K_SIZE,): the kinematics' constants [max gap m, max speed m/s, lift and
 #: transport accelerations m/s^2, dt s, fruit rest width m, plain jaws (1/0), the flat
 #: jaws' clearance applies (1/0), the fruit has flesh in the kernel (1/0), bruise
-#: pressure Pa, failure stress Pa, failure strain (NaN: none)]
+#: pressure Pa, failure stress Pa, failure strain (NaN: none), the force-mode drive's
+#: damping N s/m]
 (K_MAX_GAP, K_MAX_SPEED, K_LIFT_ACC, K_X_ACC, K_DT, K_REST_WIDTH, K_PLAIN, K_CLEARANCE,
- K_FLESH, K_BRUISE, K_FAILURE_STRESS, K_FAILURE_STRAIN, K_SIZE) = range(13)
+ K_FLESH, K_BRUISE, K_FAILURE_STRESS, K_FAILURE_STRAIN, K_DAMPING, K_SIZE) = range(14)
 #: ``run`` slots (module doc)
 (R_TIME, R_JAW_LEFT, R_JAW_RIGHT, R_SLIP_REF, R_HELD_SLIP, R_PEAK_PRESSURE, R_PEAK_STRESS,
  R_CRUSHED, R_STEPS, R_ITERATIONS, R_SOLVES, R_NEWTON, R_SLIDE, R_MAX_SLIP, R_MAX_DROP,
@@ -94,6 +95,13 @@ def _bounds(grip, kin, dt):
 
 
 @njit(cache=True)
+def _damping_rate(grip, kin, dt):
+    """``GripperKinematics.damping_rate``."""
+    return jaw_drive.damping_rate(grip[G_MODE] > 0, grip[G_MEASURED_FORCE], kin[K_DAMPING],
+                                  dt)
+
+
+@njit(cache=True)
 def _clearance(x, grip, left_n, right_n, kin):
     """``SimulationFacade._jaw_clearance`` of positions x (n, 2) m, the grip and the jaw
     forces N."""
@@ -119,7 +127,7 @@ def _solve(x, v, c_int, c_float, grip, new, gap, jaw_left, jaw_right, kin, x_out
             grip[G_MODE] > 0, grip[G_GAP], grip[G_TARGET_GAP], grip[G_TARGET_FORCE],
             grip[G_SPEED], grip[G_STIFFNESS], grip[G_MAX_EFFORT], force,
             jaw_left > 0 and jaw_right > 0, _clearance(x, grip, jaw_left, jaw_right, kin),
-            lo, hi, kin[K_MAX_GAP], dt)
+            lo, hi, kin[K_MAX_GAP], dt, _damping_rate(grip, kin, dt))
     _moved(grip, dt, gap, force, kin, new)
     face_par, face_dyn, fconst, iconst, layout, fpar, ipar = fixed
     history, out, normal_out, pressure_out, meas_out, counts = outs
@@ -163,7 +171,9 @@ def _drive_jaws(x, v, start_int, start_float, c_int, c_float, ends_int, ends_flo
         servo = jaw_drive.servo_gap(grip[G_GAP], grip[G_TARGET_GAP], grip[G_SPEED],
                                     kin[K_MAX_GAP], dt)
         goal, lo, hi = grip[G_MAX_EFFORT], servo, max(servo, hi)
-    stiffness = grip[G_STIFFNESS]
+    start_gap = grip[G_GAP]
+    damped = _damping_rate(grip, kin, dt)
+    stiffness = grip[G_STIFFNESS] + damped
     iterations = 0
     solves = 0
     count = 0
@@ -188,13 +198,14 @@ def _drive_jaws(x, v, start_int, start_float, c_int, c_float, ends_int, ends_flo
         left_n, right_n = out[2], out[3]
         both = left_n > 0 and right_n > 0
         gap = new[G_GAP]
-        miss = (0.5 * (left_n + right_n) if both else 0.0) - goal
+        miss = jaw_drive.grip_miss(left_n, right_n, goal, gap, start_gap, damped)
         ends_int[count] = c_int
         ends_float[count] = c_float
         count, stiffness, action = jaw_drive.record_solve(tried, count, gap, miss, both,
                                                           stiffness, goal, lo, hi)
         if action == jaw_drive.DONE:
-            new[G_STIFFNESS] = stiffness
+            new[G_STIFFNESS] = jaw_drive.contact_stiffness(stiffness, damped,
+                                                           grip[G_STIFFNESS])
             return OK, iterations, solves
         if action == jaw_drive.SETTLE:
             break
@@ -212,7 +223,7 @@ def _drive_jaws(x, v, start_int, start_float, c_int, c_float, ends_int, ends_flo
         if status != OK:
             return status, iterations, solves
         iterations += np.int64(out[0])
-    new[G_STIFFNESS] = stiffness
+    new[G_STIFFNESS] = jaw_drive.contact_stiffness(stiffness, damped, grip[G_STIFFNESS])
     return OK, iterations, solves
 
 

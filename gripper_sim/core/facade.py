@@ -495,7 +495,9 @@ class SimulationFacade:
             return self._substep(dt)
         saved = self._saved_state()
         goal, lo, hi = self._grip_force_goal(self._grip, dt)
-        stiffness = self._grip.stiffness
+        start_gap = self._grip.gap
+        damped = self.kinematics.damping_rate(self._grip, dt)
+        stiffness = self._grip.stiffness + damped   # the slope of the miss in the gap
         iterations = 0
         tried = np.empty((MAX_GAP_SOLVES, 3))   # the solves' rows, see ``jaw_drive``
         count = 0
@@ -516,12 +518,14 @@ class SimulationFacade:
                 left_n, right_n = self._jaw_force
                 both = left_n > 0 and right_n > 0
                 gap = self._grip.gap
-                miss = (0.5 * (left_n + right_n) if both else 0.0) - goal
+                miss = jaw_drive.grip_miss(left_n, right_n, goal, gap, start_gap, damped)
                 ends.append(self.contacts)
                 count, stiffness, action = jaw_drive.record_solve(
                     tried, count, gap, miss, both, stiffness, goal, lo, hi)
                 if action == jaw_drive.DONE:
-                    return self._kept_stiffness(stiffness, iterations)
+                    return self._kept_stiffness(
+                        jaw_drive.contact_stiffness(stiffness, damped, self._grip.stiffness),
+                        iterations)
                 if action == jaw_drive.SETTLE:
                     break
                 gap = jaw_drive.next_gap(tried, count, stiffness, goal, lo, hi,
@@ -535,11 +539,12 @@ class SimulationFacade:
                 iterations += self._solve_at(tried[best, 0], dt, ends[best])
         finally:
             self._gap_override = None
-        return self._kept_stiffness(stiffness, iterations)
+        return self._kept_stiffness(
+            jaw_drive.contact_stiffness(stiffness, damped, self._grip.stiffness), iterations)
 
     def _kept_stiffness(self, stiffness: float, iterations: int) -> int:
-        """Keep ``stiffness`` (N/m) in the gripper state for the next step's prediction;
-        returns ``iterations``."""
+        """Keep ``stiffness`` (N/m, the contact's) in the gripper state for the next
+        step's prediction; returns ``iterations``."""
         if stiffness != self._grip.stiffness:
             self._grip = replace(self._grip, stiffness=stiffness)
         return iterations

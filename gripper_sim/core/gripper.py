@@ -3,7 +3,8 @@
 The jaws close symmetrically about the gripper centre x. In position mode the gap moves
 towards a target at a rate limit, but never closes further than where the grip force
 (mean normal force of the two jaws on the fruit) reaches the maximum effort; in force
-mode the gap moves so that the grip force meets its target. ``GripperKinematics.advance``
+mode the gap moves so that the grip force meets its target, through the drive's damping
+(grip force - target = damping x gap rate, ``jaw_drive.damping_rate``). ``GripperKinematics.advance``
 predicts the step's gap from the last measured force and the contact stiffness; the
 facade (``core.facade.SimulationFacade``) then solves the step and, if the force it
 measures misses the target, re-solves the step at a corrected gap (``_drive_jaws``), so
@@ -68,12 +69,15 @@ class GripperKinematics:
         initial_stiffness: N/m, first guess of -d grip force / d gap.
         transport_acceleration: m/s^2, of the sideways transport.
         max_speed: m/s, the drive's top gap rate (see ``gap_bounds``).
+        damping: N s/m, the force-mode drive's damping (``jaw_drive.damping_rate``).
     """
 
     def __init__(self, max_gap: float, lift_acceleration: float, initial_stiffness: float,
-                 transport_acceleration: float = 1.0, max_speed: float = math.inf):
+                 transport_acceleration: float = 1.0, max_speed: float = math.inf,
+                 damping: float = 0.0):
         self.max_gap = max_gap
         self.max_speed = max_speed
+        self.damping = damping
         self.lift_acceleration = lift_acceleration
         self.initial_stiffness = initial_stiffness
         self.transport_acceleration = transport_acceleration
@@ -95,8 +99,14 @@ class GripperKinematics:
         gap = jaw_drive.predicted_gap(
             state.mode == 'force', state.gap, state.target_gap, state.target_force,
             state.speed, state.stiffness, state.max_effort, grip_force, both_in_contact,
-            clearance, lo, hi, self.max_gap, dt)
+            clearance, lo, hi, self.max_gap, dt, self.damping_rate(state, dt))
         return self.moved(state, dt, gap, grip_force)
+
+    def damping_rate(self, state: GripperState, dt: float) -> float:
+        """N/m, the drive's damping per metre of gap change in a step of ``dt`` (s) from
+        ``state`` (``jaw_drive.damping_rate``)."""
+        return jaw_drive.damping_rate(state.mode == 'force', state.measured_force,
+                                      self.damping, dt)
 
     def moved(self, state: GripperState, dt: float, gap: float,
               grip_force: float) -> GripperState:

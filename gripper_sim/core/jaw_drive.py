@@ -7,6 +7,8 @@ grasp driven either way moves its jaws by the same arithmetic:
 - ``trapezoid``, ``moved``: one step of the lift and the transport at their speed and
   acceleration limits;
 - ``servo_gap``, ``gap_bounds``, ``predicted_gap``: the gap a step starts its solve at;
+- ``damping_rate``, ``grip_miss``, ``contact_stiffness``: the force-mode drive's damping
+  (grip force - command = damping x gap rate) in the equation a step's gap meets;
 - the gap search when a solved step misses its force goal: ``record_solve`` (keep a
   solve, update the stiffness, decide: done, settle, or search on), ``next_gap`` (with
   ``contact_measure``, ``secant_stiffness``), ``nearest_solve`` (whose end contact set a
@@ -91,17 +93,52 @@ def gap_bounds(gap, speed, max_speed, gripping, max_gap, dt):
 
 
 @njit(cache=True)
+def damping_rate(force_mode, measured_force, damping, dt):
+    """N/m, the drive's damping per metre of gap change within a step of ``dt`` (s):
+    ``damping`` / dt (``damping`` N s/m) while it holds a grip in force mode (a force
+    measured, as in ``gap_bounds``), else 0 (it closes at the commanded speed, or it is a
+    position servo).
+
+    A force-controlled jaw is a motor with a force limit and damping (MuJoCo's slide
+    joint with a motor and damping): grip force - command = damping x gap rate, solved
+    at the step's end (implicit Euler). An ideal force source (damping 0) follows every
+    vibration of the fruit without taking energy out of it, so the fruit rang for as long
+    as the integrator let it: the slip after a lift then moved with dt.
+    """
+    return damping / dt if force_mode and measured_force > 0.0 else 0.0
+
+
+@njit(cache=True)
+def grip_miss(left_n, right_n, goal, gap, start_gap, rate):
+    """N, how far a solve at ``gap`` (m) misses the drive's equation: the grip force (the
+    mean of the jaws' normal forces ``left_n``, ``right_n`` N if both touch, else 0) - the
+    ``goal`` (N) - ``rate`` (``damping_rate``, N/m) x (gap - ``start_gap``, m)."""
+    force = 0.5 * (left_n + right_n) if left_n > 0 and right_n > 0 else 0.0
+    return force - goal - rate * (gap - start_gap)
+
+
+@njit(cache=True)
+def contact_stiffness(step_stiffness, rate, previous):
+    """N/m, the contact's -d force / d gap from a gap search's ``step_stiffness`` (the
+    slope of ``grip_miss`` in the gap, N/m) less the drive's ``rate`` (N/m); ``previous``
+    when the difference is not positive (the damping dominates the secant)."""
+    stiffness = step_stiffness - rate
+    return stiffness if stiffness > 0.0 else previous
+
+
+@njit(cache=True)
 def predicted_gap(force_mode, gap, target_gap, target_force, speed, stiffness, max_effort,
-                  grip_force, both_in_contact, clearance, lo, hi, max_gap, dt):
+                  grip_force, both_in_contact, clearance, lo, hi, max_gap, dt, damped=0.0):
     """m, the gap a step is first solved at (``GripperKinematics.advance``): where the
-    grip force (N, measured at the step's start) would meet its target (force mode) or
-    the effort limit (position mode) at ``stiffness`` (N/m), within [lo, hi]."""
+    grip force (N, measured at the step's start) would meet its target (force mode, with
+    the drive's damping ``damped`` N/m, ``damping_rate``) or the effort limit (position
+    mode) at ``stiffness`` (N/m), within [lo, hi]."""
     if force_mode:
         if grip_force <= 0.0 or not both_in_contact:
             landing = (max(clearance, 0.0) + target_force / stiffness) / dt
             rate = -min(speed, landing)
         else:
-            rate = -(target_force - grip_force) / (stiffness * dt)
+            rate = -(target_force - grip_force) / ((stiffness + damped) * dt)
     else:
         rate = (servo_gap(gap, target_gap, speed, max_gap, dt) - gap) / dt
         if rate < 0 and both_in_contact and grip_force > 0:

@@ -193,7 +193,8 @@ class MultiStep:
                         sim.fruit.rest_width, float(sim.plain_jaws),
                         float(sim.clearance_is_planar), float(path.flesh_in_kernel),
                         tracker.bruise_pressure, tracker.failure_stress,
-                        math.nan if failure_strain is None else failure_strain], dtype=float)
+                        math.nan if failure_strain is None else failure_strain,
+                        kinematics.damping], dtype=float)
         peaks = np.zeros(ak.PEAK_SIZE)
         normal, pressure = np.empty(n), np.empty(len(path.surface))
         damage = list(path.damage_inputs())
