@@ -9,7 +9,10 @@ max(0.2 mm, 20 %) of the finest dt's and the peak grip force within 2 %.
 With ``--forces``, instead: the pick_and_place scenario in force mode on the apple
 from 0.5 N to 100 N, the peak grip force over the command in every phase (close,
 squeeze, lift, transport, lower, open) and the lowest grip force during the lift.
-Run: ``nice python bench/convergence.py [--only 2d|3d] [--ratios 1.1 1.5 3] [--forces]``.
+``--set KEY=VALUE`` (repeatable) overrides the configuration of every run, e.g.
+``--set fruit.damping.stiffness=2e-3`` (a damped flesh: the 2D slip converges).
+Run: ``nice python bench/convergence.py [--only 2d|3d] [--ratios 1.1 1.5 3] [--forces]
+[--set KEY=VALUE ...]``.
 """
 from __future__ import annotations
 
@@ -30,7 +33,7 @@ LADDERS = {'2d': (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4), '3d': (2e-2, 1e-2, 5e-3, 2
 OVERRIDES = {'2d': [], '3d': ['dimension=3']}
 
 
-def force_table(fruit: str) -> int:
+def force_table(fruit: str, overrides: list[str]) -> int:
     """Print the --forces table; 0 if every peak is within 2 % of its command and the
     lift never below 95 % of it."""
     print(f'pick_and_place, {fruit} (2D), force mode: peak grip force / command per phase')
@@ -38,7 +41,7 @@ def force_table(fruit: str) -> int:
           + '  lift min/cmd  cpu s')
     good = True
     for force in FORCES:
-        summary, peaks, lift_min, cpu = pick_and_place_forces(fruit, force)
+        summary, peaks, lift_min, cpu = pick_and_place_forces(fruit, force, *overrides)
         ratios = [peaks[p] / force if p in peaks else float('nan') for p in PHASES]
         print(f"{force:9.1f}  {summary['outcome']:10}  "
               + ''.join(f'{r:10.4f}' for r in ratios)
@@ -53,20 +56,22 @@ def main(argv=None) -> int:
     parser.add_argument('--fruit', default='apple', help='with --forces')
     parser.add_argument('--ratios', type=float, nargs='+', default=[1.1, 1.5, 3.0])
     parser.add_argument('--forces', action='store_true')
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                        help='a configuration override of every run (repeatable)')
     args = parser.parse_args(argv)
     if args.forces:
-        return force_table(args.fruit)
+        return force_table(args.fruit, args.set)
     print('model  ratio  force N   dt ms  outcome   slip mm  peak N  peak/cmd  '
           'lift min/cmd  solves/step  cpu s')
     verdicts = []
     for model in [args.only] if args.only else sorted(LADDERS):
-        base = load_config(overrides=OVERRIDES[model])
+        base = load_config(overrides=OVERRIDES[model] + args.set)
         minimum = hold_minimum(base)
         for ratio in args.ratios:
             force = ratio * minimum
             rows = []
             for dt in LADDERS[model]:
-                config = load_config(overrides=OVERRIDES[model] + [f'sim.dt={dt}'])
+                config = load_config(overrides=OVERRIDES[model] + args.set + [f'sim.dt={dt}'])
                 row = traced_pick(config, force)
                 rows.append(row)
                 print(f"{model:5}  {ratio:5.2f}  {force:7.3f}  {dt * 1e3:6.3f}  "

@@ -152,7 +152,7 @@ SCHEMA: dict[str, Key] = {
                                        '(1 - 2 nu))', low=0.0, high=1e10, nullable=True),
     'fruit.damping.mass': Key(0.0, '1/s', 'Rayleigh mass-proportional damping alpha',
                               low=0.0, high=1e4),
-    'fruit.damping.stiffness': Key(2e-3, 's', 'Rayleigh stiffness-proportional damping '
+    'fruit.damping.stiffness': Key(0.0, 's', 'Rayleigh stiffness-proportional damping '
                                    'beta (on the elastic Hessian at the step start): the '
                                    'flesh\'s viscosity, which damps a gripped fruit\'s '
                                    'ringing (~70 Hz for the apple) so that a pick converges '
