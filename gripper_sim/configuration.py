@@ -248,6 +248,18 @@ SCHEMA: dict[str, Key] = {
                                             'towards the tip); null = perpendicular to the '
                                             'back beam', low=-60.0, high=60.0,
                                             nullable=True),
+    'gripper.finger.fin_ray.rib_ends': Key(None, 'm', 'fin_ray: the ribs as a list of '
+                                           '[back, front] pairs, one per rib: where it meets '
+                                           'the back and the front beam, as distances from '
+                                           'the base along each beam (YAML list, stored as '
+                                           'its JSON text); it sets the rib count (rib_count '
+                                           'and rib_angle are then not used); null = '
+                                           'rib_count ribs by rib_angle', 'str',
+                                           nullable=True),
+    'gripper.finger.fin_ray.rib_joint': Key('rigid', '-', 'fin_ray: how the ribs join the '
+                                            'beams: rigid (welded, the rest angle kept); '
+                                            'pinned (hinged, no moment)', 'str',
+                                            choices=('rigid', 'pinned')),
     'gripper.finger.fin_ray.tip_offset': Key(0.02, 'm', 'fin_ray: x of the tip (0: the back '
                                              'beam runs along the jaw; near base_width: the '
                                              'front beam nearly parallel to the jaw)',
@@ -262,7 +274,7 @@ SCHEMA: dict[str, Key] = {
                                            'custom (gripper.finger.fin_ray.youngs_modulus '
                                            'and density)', 'str', choices=MATERIAL_NAMES),
     'gripper.finger.fin_ray.youngs_modulus': Key(None, 'Pa', 'fin_ray, custom material: '
-                                                 'Young modulus E', low=1e3, high=1e11,
+                                                 'Young modulus E', low=1e3, high=1e12,
                                                  nullable=True),
     'gripper.finger.fin_ray.density': Key(1200.0, 'kg/m^3', 'fin_ray, custom material: '
                                           'density', low=50.0, high=20000.0),

@@ -6,7 +6,8 @@ stiffness EI = E t^3 b / 12 (Euler-Bernoulli, rectangular section), bending trip
 the chain's interior nodes. Where members meet (rib on beam, beam on base, the beams at
 the tip) the joint is rigid: triples across the joint keep the rest angle between the
 members, with the weaker member's EI shared among the triples it takes part in at that
-node. A triple against the base (rigid, on the jaw) clamps its beam: it stands for half
+node; with ``rib_joint`` 'pinned' a rib's ends are hinges instead (no triple across
+them: the rib carries no moment into the beams). A triple against the base (rigid, on the jaw) clamps its beam: it stands for half
 the free edge. The base's nodes are the body's base nodes; the front beam's edges, tip
 to base, are its surface (the fruit on their right-hand side, +x).
 """
@@ -77,8 +78,11 @@ def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial) -> FingerBo
                 [(int(nodes[i - 1]), k, ei, False), (int(nodes[i + 1]), k, ei, False)])
         for end, neighbour in ((nodes[0], nodes[1]), (nodes[-1], nodes[-2])):
             arms.setdefault(int(end), []).append((int(neighbour), k, ei, not member.rigid))
+    hinged = ({k for k, member in enumerate(plan.members) if member.name.startswith('rib')}
+              if geometry.rib_joint == 'pinned' else set())
     for joint, joint_arms in arms.items():
-        cross = [(a, c) for a, c in combinations(joint_arms, 2) if a[1] != c[1]]
+        cross = [(a, c) for a, c in combinations(joint_arms, 2)
+                 if a[1] != c[1] and a[1] not in hinged and c[1] not in hinged]
         taken: dict[tuple, int] = {}
         for pair in cross:
             for arm in pair:

@@ -34,7 +34,8 @@ class StaticState:
 def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8,
                        tolerance: float = 1e-10, self_contact: BarrierSettings | None = None,
                        on_increment=None, step: float = STATIC_STEP,
-                       hold: int = 1, elastic: list[Energy] | None = None) -> StaticState:
+                       hold: int = 1, elastic: list[Energy] | None = None,
+                       before_increment=None) -> StaticState:
     """The finger under ``forces`` with its base nodes fixed at rest.
 
     Args:
@@ -50,7 +51,12 @@ def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8
             one makes the increments an overdamped motion that follows a snap-through,
             where the long default jumps to the loaded equilibrium if one is near.
         hold: further increments at the full load.
-        elastic: the body's elastic energies on its own q; None: its rods'.
+        elastic: the body's elastic energies on its own q; None: its rods'. Other
+            potentials may join them (an obstacle's contact barrier).
+        before_increment: called before each increment's solve with its load fraction
+            (0..1] and the positions it starts from (n_nodes, d) m; it may change
+            something of the energies (move an obstacle) and returns the positions to
+            start from (feasible for them).
 
     Raises:
         NewtonFailure: no equilibrium found.
@@ -71,6 +77,9 @@ def static_equilibrium(body: FingerBody, forces: np.ndarray, increments: int = 8
                                   tolerance=tolerance / step, max_iterations=100)
     for fraction in list(np.linspace(1.0 / increments, 1.0, increments)) + [1.0] * hold:
         load.grad[:] = -fraction * full_load  # the potential -f . q of the increment's load
+        if before_increment is not None:
+            q = np.asarray(before_increment(fraction, q.reshape(-1, dim)),
+                           dtype=float).ravel().copy()
         if barrier is not None:
             barrier.begin_step(q.reshape(-1, dim), [], [], step)
         solution = solver.solve(q, still, step, q.copy(), constraints)

@@ -13,7 +13,10 @@ are nearly parallel to the jaws.
 
 ``rib_count`` ribs start on the back beam at equal spacing in height between base and
 tip and run to the front beam at ``rib_angle`` to the base (0: parallel to the base;
-positive: their front ends lower, towards the tip). Every member (base, back beam, front
+positive: their front ends lower, towards the tip); or, with ``rib_ends`` given, each rib
+joins the two beams at the given distances from the base along each beam (a published
+finger's crossbeams). Where a rib meets a beam the joint is rigid, or with ``rib_joint``
+'pinned' a hinge (the rib a two-force link). Every member (base, back beam, front
 beam, each rib) is a chain of rod elements about ``element_length`` long along its
 centre line, with nodes where members meet.
 """
@@ -31,6 +34,8 @@ PREFIX = 'gripper.finger.fin_ray.'
 #: about; the default finger has 104, the 3D finger each node in every slice): finer,
 #: and the matrices of its contact pairs outgrow any memory
 MAX_SECTION_NODES = 1000
+#: how a rib joins the beams: welded (rest angle kept) or hinged
+RIB_JOINTS = ('rigid', 'pinned')
 
 
 @dataclass(frozen=True)
@@ -50,6 +55,11 @@ class FinRayGeometry:
             base_width: the front beam nearly parallel to the jaw).
         rib_angle_given: False when rib_angle was null in the configuration (then
             perpendicular to the back beam).
+        rib_ends: None (the rule of rib_count and rib_angle), or per rib (distance along
+            the back beam, distance along the front beam), m from the base (each beam's
+            end on the base), top to bottom; it then sets the rib count.
+        rib_joint: 'rigid' (a rib welded to the beams: the joint keeps its rest angle) or
+            'pinned' (hinged: no moment between rib and beam).
     """
 
     length: float
@@ -62,13 +72,20 @@ class FinRayGeometry:
     element_length: float
     tip_offset: float
     rib_angle_given: bool = True
+    rib_ends: tuple[tuple[float, float], ...] | None = None
+    rib_joint: str = 'rigid'
 
     @classmethod
     def from_config(cls, config, fruit_depth: float | None = None) -> 'FinRayGeometry':
         """From the ``gripper.finger.fin_ray.*`` keys of a flat configuration; a null
         depth is ``fruit_depth`` (m)."""
-        values = {name: config[PREFIX + name] for name in cls.__dataclass_fields__
-                  if name != 'rib_angle_given'}
+        values = {name: config.get(PREFIX + name, cls.__dataclass_fields__[name].default)
+                  if name in ('rib_ends', 'rib_joint') else config[PREFIX + name]
+                  for name in cls.__dataclass_fields__ if name != 'rib_angle_given'}
+        values['rib_ends'] = parse_rib_ends(values['rib_ends'])
+        if values['rib_ends'] is not None:
+            values['rib_count'] = len(values['rib_ends'])
+            values['rib_angle'] = values['rib_angle'] or 0.0
         if values['depth'] is None:
             values['depth'] = fruit_depth
         values['rib_angle_given'] = values['rib_angle'] is not None
@@ -112,15 +129,76 @@ def _error(name: str, value, reason: str) -> ConfigError:
     return ConfigError(f"config key '{PREFIX}{name}' = {value:g}: {reason}")
 
 
+def parse_rib_ends(value) -> tuple[tuple[float, float], ...] | None:
+    """The ``rib_ends`` key (a list of [back, front] pairs, m, or its JSON/YAML text;
+    None or '' for none) as a tuple of pairs; ConfigError if it is not such a list."""
+    if value is None or (isinstance(value, str) and not value.strip()):
+        return None
+    if isinstance(value, tuple) and all(isinstance(p, tuple) for p in value):
+        return value
+    from gripper_sim.geometry.shapes import parse_points
+    pairs = parse_points(value, PREFIX + 'rib_ends')
+    return tuple((float(b), float(f)) for b, f in pairs)
+
+
+def _beams(g: FinRayGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(back corner, back beam unit vector, front corner, front beam unit vector), each
+    (2,), the beams' directions from the base towards the tip."""
+    half = 0.5 * g.length
+    back_corner = np.array([0.0, half])
+    front_corner = np.array([g.base_width, half])
+    tip = np.array([g.tip_offset, -half])
+    return (back_corner, (tip - back_corner) / np.linalg.norm(tip - back_corner),
+            front_corner, (tip - front_corner) / np.linalg.norm(tip - front_corner))
+
+
+def _given_rib_points(g: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """``rib_points`` of explicit ``rib_ends``, checked: each end on its beam (at least
+    a thickness from the base and the tip), the ribs in the same order along both
+    beams (else they cross) and their ends more than a rib thickness apart."""
+    ends = np.array(g.rib_ends, dtype=float).reshape(-1, 2)
+    back_corner, back_dir, front_corner, front_dir = _beams(g)
+    lengths = (math.hypot(g.tip_offset, g.length),
+               math.hypot(g.base_width - g.tip_offset, g.length))
+    margin = max(g.beam_thickness, g.rib_thickness)
+    key = f"config key '{PREFIX}rib_ends'"
+    for k, pair in enumerate(ends):
+        for value, beam, length in zip(pair, ('back', 'front'), lengths):
+            if not (math.isfinite(value) and margin <= value <= length - margin):
+                raise ConfigError(
+                    f'{key}: rib {k + 1} of {len(ends)} is off the {beam} beam: its end '
+                    f'at {value * 1e3:.4g} mm from the base must lie from {margin * 1e3:.3g} '
+                    f'to {(length - margin) * 1e3:.4g} mm (the {beam} beam is '
+                    f'{length * 1e3:.4g} mm long)')
+    order = np.argsort(ends[:, 0], kind='stable')
+    ends = ends[order]
+    for k in range(len(ends) - 1):
+        step = ends[k + 1] - ends[k]
+        if step[0] <= g.rib_thickness or step[1] <= g.rib_thickness:
+            which = ('cross' if step[1] < 0 else
+                     f'are not more than a rib thickness ({g.rib_thickness * 1e3:.3g} mm) '
+                     'apart')
+            raise ConfigError(
+                f'{key}: ribs {order[k] + 1} and {order[k + 1] + 1} {which}: the ribs '
+                'must come in the same order along both beams, back ends '
+                f'{ends[k, 0] * 1e3:.4g} and {ends[k + 1, 0] * 1e3:.4g} mm, front ends '
+                f'{ends[k, 1] * 1e3:.4g} and {ends[k + 1, 1] * 1e3:.4g} mm from the base')
+    return (back_corner + ends[:, :1] * back_dir, front_corner + ends[:, 1:] * front_dir)
+
+
 def rib_points(geometry: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
     """((n, 2), (n, 2)) m: each rib's back end on the back beam and front end on the
-    front beam, top to bottom.
+    front beam, top to bottom: from ``rib_ends`` if given, else ``rib_count`` ribs at
+    equal height spacing on the back beam and ``rib_angle``.
 
     Raises:
         ConfigError: a rib that leaves the finger (its front end beyond the tip or above
-            the base) or ribs that intersect (closer than a rib thickness).
+            the base; a given end off its beam) or ribs that intersect (closer than a rib
+            thickness; given ends in another order along the two beams).
     """
     g = geometry
+    if g.rib_ends is not None:
+        return _given_rib_points(g)
     n = int(g.rib_count)
     half = 0.5 * g.length
     spacing = g.length / (n + 1)
@@ -187,6 +265,9 @@ def check_geometry(geometry: FinRayGeometry) -> None:
             raise _error(name, value, 'must be positive')
     if g.rib_count < 0:
         raise _error('rib_count', g.rib_count, 'must not be negative')
+    if g.rib_joint not in RIB_JOINTS:
+        raise ConfigError(f"config key '{PREFIX}rib_joint' must be one of "
+                          f"{', '.join(RIB_JOINTS)}, got '{g.rib_joint}'")
     if g.beam_thickness >= 0.5 * g.base_width:
         raise _error('beam_thickness', g.beam_thickness,
                      f'the beams fill the base ({g.base_width:g} m wide): it must be below '
@@ -214,7 +295,8 @@ def layout(geometry: FinRayGeometry) -> FinRayLayout:
     """The nodes and member chains of a checked geometry (``check_geometry``)."""
     g = geometry
     half = 0.5 * g.length
-    backs, fronts = rib_points(g) if g.rib_count else (np.zeros((0, 2)), np.zeros((0, 2)))
+    backs, fronts = (rib_points(g) if g.rib_count or g.rib_ends
+                     else (np.zeros((0, 2)), np.zeros((0, 2))))
     positions: list[np.ndarray] = []
 
     def node(point) -> int:

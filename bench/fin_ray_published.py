@@ -1,0 +1,167 @@
+"""Our Fin Ray finger against measured forces of a Fin Ray pressed onto a rigid cylinder.
+
+Source (the only complete numeric case we have; a 2021 undergraduate thesis repository,
+not a peer-reviewed paper): github.com/zeyang23/Fin-ray, ``Experiments/``:
+
+- the finger (``test_05_20_1.m``, ``test_05_20_2.m``): two spring-steel strips 0.2 mm
+  thick, 28 mm deep, E = 213 GPa; roots 73.24 mm apart on a clamped base, the front beam
+  at 90 deg to it, the back beam at 116 deg, so that they meet at the tip: front beam
+  73.24 / tan 26 deg = 150.16 mm, back beam 73.24 / sin 26 deg = 167.07 mm; 4 crossbeams
+  joining the front beam at 27/54/81/108 mm and the back beam at 45.67/78.69/107.5/132.27
+  mm from the base, modelled there as rigid links pinned to the strips (a fixed distance
+  between the two points, a force along the link, no moment: ``finray_force.m``);
+- the load (``test_05_20_1.m``): a rigid cylinder, its centre 66.5 mm from the base along
+  the front beam, touching it at delta 0; the base moved towards it by delta; frictionless
+  point contacts;
+- the figures (``test_05_20_plot.m``): the sensor's force components [tangential; normal]
+  at delta 5..30 mm and their model's |F|, for a cylinder of radius 20 mm and one of
+  30 mm (their model ran it as 31.5 mm; the 20 mm case's result file is named r22.5).
+
+Our finger: ``gripper.finger.fin_ray.*`` with the crossbeams as ``rib_ends`` and
+``rib_joint: pinned``, ribs of 3 mm steel (EA 1.8e7 N, 75x the strips': rigid links),
+a custom material of 213 GPa; the tip 0.4 mm inside the front corner (our geometry keeps
+the beams two thicknesses apart at the tip: the front beam leans 0.15 deg). The cylinder
+(``core.finger_indent``) moves into the front beam perpendicular to it in 0.5 mm steps,
+touching its surface (0.1 mm off the centre line) at delta 0.
+
+    python bench/fin_ray_published.py [--radius 0.02] [--model-radius R] [--element 0.001]
+        [--e-scaling]
+
+``--e-scaling`` applies the source model's stiffening of the strips (E x L_front / 135 mm
+and E x L_back / 156 mm, undocumented there); ``--model-radius`` runs another radius than
+the cylinder's (their 22.5 / 31.5 mm) against the same measurements.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import sys
+import time
+
+import numpy as np
+
+from gripper_sim.configuration import load_config
+from gripper_sim.core.barrier import BarrierSettings
+from gripper_sim.core.fin_ray import fin_ray_from_config
+from gripper_sim.core.finger_indent import indent_disc
+from gripper_sim.geometry.fin_ray import FinRayGeometry, layout
+
+STRIP = 0.2e-3             # m, strip thickness
+DEPTH = 28e-3              # m
+STEEL = 213e9              # Pa
+ROOTS = 73.24e-3           # m, between the beams' roots on the base
+PSI = math.radians(26.0)   # between the beams
+FRONT = ROOTS / math.tan(PSI)   # 150.16 mm
+BACK = ROOTS / math.sin(PSI)    # 167.07 mm
+#: per crossbeam (along the back beam, along the front beam), m from the base
+RIB_ENDS = ((45.67e-3, 27e-3), (78.69e-3, 54e-3), (107.5e-3, 81e-3), (132.27e-3, 108e-3))
+CONTACT_HEIGHT = 66.5e-3   # m, the cylinder's centre from the base along the front beam
+RIB_THICKNESS = 3e-3       # m of steel: rigid links
+DELTAS = (5e-3, 10e-3, 15e-3, 20e-3, 25e-3, 30e-3)
+#: test_05_20_plot.m: cylinder radius (m) -> (sensor [tangential, normal] N at DELTAS,
+#: their model's |F| N, the radius their model ran)
+MEASURED = {
+    0.020: (((0.36, 1.45), (0.39, 2.92), (0.43, 4.65), (0.85, 6.50), (1.03, 9.36),
+             (1.10, 13.58)), (1.51, 2.95, 4.54, 6.44, 9.10, 13.58), 0.0225),
+    0.030: (((0.30, 1.15), (0.37, 2.46), (0.30, 4.19), (0.25, 6.34), (0.35, 9.00),
+             (0.80, 12.60)), (1.24, 2.67, 4.24, 6.06, 8.33, 12.81), 0.0315),
+}
+#: the cylinder contact: a node pressed with 1 N stays about 20 um from the cylinder
+#: (2 kappa dhat / F), at most dhat = 10 um (0.2 % of delta 5 mm)
+CONTACT = BarrierSettings(dhat=1e-5, stiffness=1.0)
+
+
+def thesis_config(element_length: float = 1e-3):
+    """The flat configuration of the source's finger (module docstring)."""
+    prefix = 'gripper.finger.fin_ray.'
+    values = {'length': FRONT, 'base_width': ROOTS, 'tip_offset': ROOTS - 2 * STRIP,
+              'depth': DEPTH, 'beam_thickness': STRIP, 'rib_thickness': RIB_THICKNESS,
+              'rib_ends': json.dumps([list(pair) for pair in RIB_ENDS]),
+              'rib_joint': 'pinned', 'element_length': element_length,
+              'material': 'custom', 'youngs_modulus': STEEL, 'density': 7850.0}
+    return load_config(overrides=['gripper.finger.type=fin_ray']
+                       + [f'{prefix}{k}={v}' for k, v in values.items()])
+
+
+def scale_strips(body, geometry: FinRayGeometry, front: float, back: float):
+    """The body with the bending stiffness of the front and back beams' own triples
+    scaled by ``front`` and ``back`` (the source model's E scaling)."""
+    members = {m.name: set(m.nodes.tolist()) for m in layout(geometry).members}
+    stiffness = body.bend_stiffness.copy()
+    for k, triple in enumerate(body.bend_triples.tolist()):
+        for name, factor in (('front', front), ('back', back)):
+            if set(triple) <= members[name]:
+                stiffness[k] *= factor
+    return dataclasses.replace(body, bend_stiffness=stiffness)
+
+
+def run(radius: float, element_length: float = 1e-3, e_scaling: bool = False,
+        step: float = 0.5e-3, travel: float = 30e-3):
+    """(Indentation, body) of the source's finger pressed by a cylinder of ``radius`` m
+    to ``travel`` m in ``step`` m increments."""
+    config = thesis_config(element_length)
+    body = fin_ray_from_config(config, DEPTH)
+    geometry = FinRayGeometry.from_config(config, DEPTH)
+    if e_scaling:
+        body = scale_strips(body, geometry, FRONT / 135e-3, BACK / 156e-3)
+    plan = layout(geometry)
+    front = plan.front_nodes                      # tip -> base corner
+    x0 = body.rest_positions
+    corner, tip = x0[front[-1]], x0[front[0]]
+    along = (tip - corner) / np.linalg.norm(tip - corner)
+    normal = np.array([-along[1], along[0]])      # outwards, towards +x
+    if normal[0] < 0:
+        normal = -normal
+    touching = np.setdiff1d(front, body.base_nodes)
+    centre = corner + CONTACT_HEIGHT * along + (radius + 0.5 * STRIP) * normal
+    result = indent_disc(body, touching, centre, radius + 0.5 * STRIP,
+                         np.array([-1.0, 0.0]), travel, round(travel / step), CONTACT)
+    return result, body
+
+
+def table(radius: float, model_radius: float, element_length: float, e_scaling: bool):
+    """Prints the comparison; returns the rows (delta m, our (Fx, Fz) N, measured |F| N,
+    error of our |F| against it)."""
+    sensor, theirs, their_radius = MEASURED[radius]
+    start = time.process_time()
+    result, body = run(model_radius, element_length, e_scaling)
+    cpu = time.process_time() - start
+    print(f'cylinder r = {radius * 1e3:g} mm (model r = {model_radius * 1e3:g} mm; the source '
+          f'model ran {their_radius * 1e3:g} mm), elements {element_length * 1e3:g} mm, '
+          f'{body.n_nodes} nodes, E scaling {"on" if e_scaling else "off"}, '
+          f'CPU {cpu:.1f} s')
+    print(f'base reaction at the end {result.reaction.round(3)} N (minus the force on the '
+          'cylinder)')
+    print(' delta mm | ours Fx   Fz    |F| N | measured Ft   Fn   |F| N | their model |F| | '
+          'ours vs measured')
+    rows = []
+    for k, delta in enumerate(DELTAS):
+        i = int(np.argmin(np.abs(result.delta - delta)))
+        fx, fz = result.force[i]                  # on the cylinder, +x: pushed away
+        ours = math.hypot(fx, fz)
+        measured = math.hypot(*sensor[k])
+        error = ours / measured - 1.0
+        rows.append((delta, (fx, fz), measured, error))
+        print(f'{delta * 1e3:8.0f} | {fx:6.2f} {fz:6.2f} {ours:6.2f} | {sensor[k][0]:10.2f} '
+              f'{sensor[k][1]:5.2f} {measured:6.2f} | {theirs[k]:15.2f} | {error * 100:+6.1f} %')
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--radius', type=float, default=0.02, choices=sorted(MEASURED),
+                        help='m, the measured cylinder')
+    parser.add_argument('--model-radius', type=float, default=None,
+                        help='m, the radius to model (default: the cylinder\'s)')
+    parser.add_argument('--element', type=float, default=1e-3, help='m, element length')
+    parser.add_argument('--e-scaling', action='store_true',
+                        help='the source model\'s E x L/135 mm, L/156 mm')
+    args = parser.parse_args(argv)
+    table(args.radius, args.model_radius or args.radius, args.element, args.e_scaling)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

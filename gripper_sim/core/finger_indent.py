@@ -1,0 +1,200 @@
+"""A finger pressed against a fixed rigid cylinder (2D: a disc), frictionless: the load
+case of published Fin Ray measurements (contact force against the displacement of the
+finger's base towards a cylinder).
+
+The finger's base is held (``finger_statics.static_equilibrium``); the disc, equivalently,
+moves towards it by delta in increments (moving the base by delta towards a fixed disc is
+the same relative motion: only the frame differs). The contact is the IPC barrier of the
+project's finger contact (``barrier_kernels``: kappa b(s, dhat^2) / dhat^3 on the squared
+gap s) between each node of the touching rods and the disc's exact circle, so the disc is
+smooth: no facets (a polygon's corners would press dents into a thin strip and make the
+force jump from facet to facet), and the gap of a node is the distance to the circle in
+closed form. A straight element between two nodes outside the circle may dip into it by
+at most l^2 / (8 R) (l the element length, R the radius: 1 mm elements on a 20 mm
+cylinder, 6 um), below any figure reported here. The force on the disc is the sum of
+its barrier forces.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gripper_sim.core.barrier import BarrierSettings
+from gripper_sim.core.energies.base import Energy, element_dofs
+from gripper_sim.core.finger_body import FingerBody
+from gripper_sim.core.finger_statics import static_equilibrium
+
+#: a step may close at most this fraction of a node's gap to the disc (the line search's
+#: first step, as a barrier's continuous-collision step)
+GAP_CLOSING = 0.9
+
+
+class DiscBarrier(Energy):
+    """Frictionless contact of some nodes with a fixed rigid disc (2D).
+
+    Args:
+        nodes: (k,) the nodes that may touch it.
+        n_nodes: nodes of the state (q holds 2 n_nodes coordinates: x, z).
+        radius: m, the disc's radius plus the distance of the touching surface from the
+            nodes (a rod's half thickness: its nodes are on its centre line).
+        settings: the barrier's dhat (m) and stiffness kappa (N).
+
+    Attributes:
+        centre: (2,) m, the disc's centre (set it between solves).
+    """
+
+    elastic = False
+
+    def __init__(self, nodes: np.ndarray, n_nodes: int, radius: float,
+                 settings: BarrierSettings):
+        self.nodes = np.asarray(nodes, dtype=np.int64)
+        self.n_nodes = int(n_nodes)
+        self.radius = float(radius)
+        self.dhat = float(settings.dhat)
+        self.kappa = float(settings.stiffness)
+        self.centre = np.zeros(2)
+        self.dofs = element_dofs(self.nodes[:, None])
+
+    def _relative(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((k, 2) m the nodes relative to the centre, (k,) m their distances from it)."""
+        rel = q.reshape(-1, 2)[self.nodes] - self.centre
+        return rel, np.hypot(rel[:, 0], rel[:, 1])
+
+    def gaps(self, q: np.ndarray) -> np.ndarray:
+        """(k,) m, each node's distance from the disc's surface (negative: inside)."""
+        return self._relative(q)[1] - self.radius
+
+    def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
+                      scatter: np.ndarray, hessian: bool = True):
+        """Adds the gradient (N) into ``grad`` and, with ``hessian``, each node's 2 x 2
+        Hessian (N/m, its positive part: the normal stiffness; the tangential term,
+        negative on a convex obstacle, is dropped) into ``data`` at ``scatter`` (k, 4);
+        returns (value J, no rank-one terms); value inf for a node on or in the disc."""
+        rel, dist = self._relative(q)
+        gap = dist - self.radius
+        if np.any(gap <= 0.0):
+            return math.inf, []
+        active = np.flatnonzero(gap < self.dhat)
+        d = gap[active]
+        s, s_hat = d * d, self.dhat ** 2
+        scale = self.kappa / self.dhat ** 3
+        # b(s, S) = -(s - S)^2 ln(s / S) and its s-derivatives (as ``barrier_kernels``)
+        ratio, log = s_hat / s, np.log(s / s_hat)
+        value = float(np.sum(-(s - s_hat) ** 2 * log)) * scale
+        first = (s_hat - s) * (2.0 * log - ratio + 1.0) * scale
+        second = ((ratio + 2.0) * ratio - 2.0 * log - 3.0) * scale
+        normal = rel[active] / dist[active, None]
+        slope = 2.0 * d * first                          # J/m, d(energy)/d(gap)
+        np.add.at(grad, self.dofs[active], slope[:, None] * normal)
+        if hessian:
+            curvature = np.maximum(4.0 * s * second + 2.0 * first, 0.0)
+            blocks = curvature[:, None, None] * normal[:, :, None] * normal[:, None, :]
+            np.add.at(data, scatter[active], blocks.reshape(-1, 4))
+        return value, []
+
+    def max_step(self, q: np.ndarray, dq: np.ndarray) -> float:
+        """The largest fraction of ``dq`` over which no node closes more than
+        ``GAP_CLOSING`` of its gap to the disc (1: none approaches that far)."""
+        rel, dist = self._relative(q)
+        move = dq.reshape(-1, 2)[self.nodes]
+        limit = self.radius + (1.0 - GAP_CLOSING) * (dist - self.radius)
+        a = np.sum(move * move, axis=1)
+        b = 2.0 * np.sum(rel * move, axis=1)
+        c = dist * dist - limit * limit
+        disc = b * b - 4.0 * a * c
+        hits = (a > 0) & (b < 0) & (disc >= 0)
+        if not np.any(hits):
+            return 1.0
+        t = (-b[hits] - np.sqrt(disc[hits])) / (2.0 * a[hits])
+        return float(min(1.0, t.min()))
+
+    def force(self, q: np.ndarray) -> np.ndarray:
+        """(2,) N, the force the nodes exert on the disc (x, z): the sum of the barrier
+        gradients (each node is pushed by minus its own)."""
+        grad = np.zeros(q.size)
+        self.evaluate_into(q, grad, np.zeros(1), np.zeros((0, 0), np.int64), False)
+        return grad.reshape(-1, 2).sum(axis=0)
+
+    def push_out(self, x: np.ndarray) -> np.ndarray:
+        """(n, 2) m: positions ``x`` with every touching node closer to the disc than
+        dhat / 2 moved out along its normal to dhat / 2 from it (a feasible start for a
+        solve after the disc moved)."""
+        x = x.copy()
+        rel, dist = self._relative(x.ravel())
+        inside = dist - self.radius < 0.5 * self.dhat
+        normal = rel[inside] / np.maximum(dist[inside], 1e-300)[:, None]
+        x[self.nodes[inside]] = self.centre + normal * (self.radius + 0.5 * self.dhat)
+        return x
+
+
+@dataclass(frozen=True)
+class Indentation:
+    """Attributes:
+        delta: (s,) m, the disc's travel towards the finger (the base's towards the
+            disc) after each increment.
+        force: (s, 2) N, the force of the finger on the disc (x, z), in equilibrium.
+        reaction: (2,) N, the base's reaction on the finger at the last delta (minus the
+            last ``force``, up to the solver's tolerance: a check).
+        positions: (s, n_nodes, 2) m, the finger's shapes.
+        centres: (s, 2) m, the disc's centres.
+    """
+
+    delta: np.ndarray
+    force: np.ndarray
+    reaction: np.ndarray
+    positions: np.ndarray
+    centres: np.ndarray
+
+
+def indent_disc(body: FingerBody, nodes: np.ndarray, centre: np.ndarray, radius: float,
+                direction: np.ndarray, travel: float, increments: int,
+                settings: BarrierSettings, self_contact: BarrierSettings | None = None,
+                tolerance: float = 1e-8) -> Indentation:
+    """The finger with its base held and a fixed disc moved by ``travel`` along
+    ``direction`` into it in ``increments`` equal steps, a static equilibrium at each.
+
+    Args:
+        body: a 2D finger (``FingerBody``); its base nodes stay at rest.
+        nodes: (k,) the nodes that may touch the disc (e.g. the front beam's).
+        centre: (2,) m, the disc's centre at delta 0 (touching, not pressing).
+        radius: m, the disc's radius plus the touching surface's offset from the nodes.
+        direction: (2,) the unit direction the disc moves in.
+        travel: m, the last delta.
+        increments: steps from 0 to ``travel`` (each a Newton solve from the last shape).
+        settings: the disc contact's barrier (dhat m, stiffness N).
+        self_contact: the finger's self-contact barrier; None: none.
+        tolerance: m, Newton's tolerance on the largest update (a stiff barrier's
+            force follows a node's gap at kappa / dhat scale: 1e-9 m is at the roundoff
+            floor of a steel finger, where Newton finds no descent).
+
+    Raises:
+        NewtonFailure: no equilibrium found.
+    """
+    disc = DiscBarrier(nodes, body.n_nodes, radius, settings)
+    centre = np.asarray(centre, dtype=float)
+    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    rows: list[tuple] = []
+
+    def move(fraction: float, x: np.ndarray) -> np.ndarray:
+        """The disc to this increment's place; the start: the last shape moved on as
+        the last increment moved it (a linear predictor), nodes still in the disc
+        pushed out of it."""
+        disc.centre = centre + fraction * travel * direction
+        if len(rows) >= 2:
+            x = 2.0 * rows[-1][2] - rows[-2][2]
+            x[body.base_nodes] = body.rest_positions[body.base_nodes]
+        return disc.push_out(x)
+
+    def record(x: np.ndarray) -> None:
+        rows.append((len(rows) + 1, disc.force(x.ravel()), x.copy(), disc.centre.copy()))
+
+    disc.centre = centre.copy()
+    final = static_equilibrium(body, np.zeros_like(body.rest_positions),
+                               increments=increments, hold=0, tolerance=tolerance,
+                               self_contact=self_contact, elastic=body.rod_energies() + [disc],
+                               before_increment=move, on_increment=record)
+    steps, force, positions, centres = zip(*rows)
+    return Indentation(travel * np.array(steps) / increments, np.array(force),
+                       final.base_reaction, np.array(positions), np.array(centres))

@@ -1,0 +1,113 @@
+"""Our Fin Ray against a published case (``bench/fin_ray_published.py``: the thesis
+repository github.com/zeyang23/Fin-ray, Experiments/test_05_20_plot.m, a steel-strip Fin
+Ray pressed onto a rigid cylinder), and the ``rib_ends`` configuration it uses."""
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
+
+import fin_ray_published as published  # noqa: E402
+from gripper_sim.configuration import load_config  # noqa: E402
+from gripper_sim.errors import ConfigError  # noqa: E402
+from gripper_sim.geometry.fin_ray import FinRayGeometry, rib_points  # noqa: E402
+
+PREFIX = 'gripper.finger.fin_ray.'
+
+
+def _errors(radius):
+    """Our |F| / measured |F| - 1 at delta 5..30 mm, and the run."""
+    result, _ = published.run(radius, element_length=2e-3)
+    sensor = published.MEASURED[radius][0]
+    rows = []
+    for delta, measured in zip(published.DELTAS, sensor):
+        i = int(np.argmin(np.abs(result.delta - delta)))
+        rows.append(math.hypot(*result.force[i]) / math.hypot(*measured) - 1.0)
+    return np.array(rows), result
+
+
+@pytest.fixture(scope='module')
+def r30():
+    return _errors(0.030)
+
+
+@pytest.fixture(scope='module')
+def r20():
+    return _errors(0.020)
+
+
+def test_the_base_holds_what_presses_the_cylinder(r20):
+    _, result = r20
+    assert np.allclose(result.reaction, result.force[-1], rtol=1e-3, atol=1e-3)
+    push = result.force[:, 0]
+    assert np.all(np.diff(push) > 0), 'the force rises with the travel'
+
+
+def test_30_mm_cylinder_within_15_percent_up_to_15_mm(r30):
+    errors, _ = r30
+    assert np.all(np.abs(errors[:3]) < 0.15), errors
+
+
+def test_30_mm_cylinder_within_25_percent_to_30_mm(r30):
+    errors, _ = r30
+    assert np.all(np.abs(errors) < 0.25), errors
+
+
+@pytest.mark.xfail(strict=True, reason='ours is 20-29 % below the measured force for the '
+                   '20 mm cylinder (with the source model\'s undocumented E scaling, or its '
+                   '22.5 mm radius, 12-22 %): the 15 % target is not met')
+def test_20_mm_cylinder_within_15_percent(r20):
+    errors, _ = r20
+    assert np.all(np.abs(errors) < 0.15), errors
+
+
+def test_20_mm_cylinder_as_reported(r20):
+    """The figures the README gives: 20-29 % below the measurement."""
+    errors, _ = r20
+    assert np.all((-0.32 < errors) & (errors < -0.17)), errors
+
+
+def _config(ends, **more):
+    overrides = ['gripper.finger.type=fin_ray', f'{PREFIX}rib_ends={json.dumps(ends)}']
+    overrides += [f'{PREFIX}{k}={v}' for k, v in more.items()]
+    return load_config(overrides=overrides)
+
+
+def test_rib_ends_place_the_ribs_and_set_their_count():
+    config = _config([[0.02, 0.03], [0.045, 0.05]])
+    geometry = FinRayGeometry.from_config(config, 0.02)
+    assert geometry.rib_count == 2
+    backs, fronts = rib_points(geometry)
+    corner = np.array([0.0, 0.03])
+    assert np.allclose(np.linalg.norm(backs - corner, axis=1), [0.02, 0.045])
+    front_corner = np.array([geometry.base_width, 0.03])
+    assert np.allclose(np.linalg.norm(fronts - front_corner, axis=1), [0.03, 0.05])
+
+
+def test_null_rib_ends_keep_the_spacing_rule():
+    config = load_config(overrides=['gripper.finger.type=fin_ray'])
+    geometry = FinRayGeometry.from_config(config, 0.02)
+    assert geometry.rib_ends is None and len(rib_points(geometry)[0]) == config[
+        PREFIX + 'rib_count']
+
+
+@pytest.mark.parametrize('ends, words', [
+    ([[0.02, 0.03], [0.5, 0.05]], 'rib 2 of 2 is off the back beam'),
+    ([[0.02, -0.01]], 'rib 1 of 1 is off the front beam'),
+    ([[0.02, 0.05], [0.045, 0.03]], 'ribs 1 and 2 cross'),
+    ([[0.02, 0.03], [0.0204, 0.05]], 'not more than a rib thickness'),
+    ('not a list', 'must be a list of [x, z] number pairs'),
+])
+def test_bad_rib_ends_are_refused_clearly(ends, words):
+    with pytest.raises(ConfigError, match='rib_ends') as error:
+        _config(ends)
+    assert words in str(error.value)
+
+
+def test_an_unknown_rib_joint_is_refused():
+    with pytest.raises(ConfigError, match='rib_joint'):
+        load_config(overrides=['gripper.finger.type=fin_ray', f'{PREFIX}rib_joint=glued'])
