@@ -57,16 +57,10 @@ def test_30_mm_cylinder_within_25_percent_to_30_mm(r30):
     assert np.all(np.abs(errors) < 0.25), errors
 
 
-@pytest.mark.xfail(strict=True, reason='ours is 20-29 % below the measured force for the '
-                   '20 mm cylinder (with the source model\'s undocumented E scaling, or its '
-                   '22.5 mm radius, 12-22 %): the 15 % target is not met')
-def test_20_mm_cylinder_within_15_percent(r20):
-    errors, _ = r20
-    assert np.all(np.abs(errors) < 0.15), errors
-
-
 def test_20_mm_cylinder_as_reported(r20):
-    """The figures the README gives: 20-29 % below the measurement."""
+    """The figures the README gives: 20-29 % below the measurement, outside the issue's
+    15 % (with the source model's undocumented E scaling, or its 22.5 mm radius, 12-22 %
+    below)."""
     errors, _ = r20
     assert np.all((-0.32 < errors) & (errors < -0.17)), errors
 
@@ -100,7 +94,8 @@ def test_null_rib_ends_keep_the_spacing_rule():
     ([[0.02, -0.01]], 'rib 1 of 1 is off the front beam'),
     ([[0.02, 0.05], [0.045, 0.03]], 'ribs 1 and 2 cross'),
     ([[0.02, 0.03], [0.0204, 0.05]], 'not more than a rib thickness'),
-    ('not a list', 'must be a list of [x, z] number pairs'),
+    ('not a list', 'must be a list of [back, front] number pairs'),
+    ([[0.02, 0.03], [0.02, 0.03]], 'not more than a rib thickness'),
 ])
 def test_bad_rib_ends_are_refused_clearly(ends, words):
     with pytest.raises(ConfigError, match='rib_ends') as error:

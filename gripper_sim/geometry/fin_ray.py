@@ -137,7 +137,7 @@ def parse_rib_ends(value) -> tuple[tuple[float, float], ...] | None:
     if isinstance(value, tuple) and all(isinstance(p, tuple) for p in value):
         return value
     from gripper_sim.geometry.shapes import parse_points
-    pairs = parse_points(value, PREFIX + 'rib_ends')
+    pairs = parse_points(value, PREFIX + 'rib_ends', pair='[back, front]', outline=False)
     return tuple((float(b), float(f)) for b, f in pairs)
 
 

@@ -148,13 +148,15 @@ def _within_many(q0, q1, r) -> np.ndarray:
     return np.all((r[None] >= lo) & (r[None] <= hi), axis=-1)
 
 
-def parse_points(value, key: str = 'fruit.shape.points') -> np.ndarray:
-    """(m, 2) m from a list of [x, z] pairs or its JSON/YAML text; ConfigError if not."""
+def parse_points(value, key: str = 'fruit.shape.points', pair: str = '[x, z]',
+                 outline: bool = True) -> np.ndarray:
+    """(m, 2) m from a list of ``pair`` pairs or its JSON/YAML text; ConfigError if not.
+    An ``outline`` drops a closing repeat of its first point."""
     if isinstance(value, str):
         text = value.strip()
         if not text:
-            raise ConfigError(f"config key '{key}' is empty: give the outline as a list "
-                              f'of [x, z] pairs in metres')
+            raise ConfigError(f"config key '{key}' is empty: give a list of {pair} pairs "
+                              'in metres')
         try:
             value = json.loads(text)
         except ValueError:
@@ -162,18 +164,19 @@ def parse_points(value, key: str = 'fruit.shape.points') -> np.ndarray:
             try:
                 value = yaml.safe_load(text)
             except yaml.YAMLError as err:
-                raise ConfigError(f"config key '{key}' is not a list of [x, z] pairs") \
+                raise ConfigError(f"config key '{key}' is not a list of {pair} pairs") \
                     from err
     try:
         points = np.array(value, dtype=float)
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"config key '{key}' must be a list of [x, z] number pairs") \
+        raise ConfigError(f"config key '{key}' must be a list of {pair} number pairs") \
             from err
     if points.ndim != 2 or points.shape[1] != 2:
-        raise ConfigError(f"config key '{key}' must be a list of [x, z] number pairs")
+        raise ConfigError(f"config key '{key}' must be a list of {pair} number pairs")
     if not np.all(np.isfinite(points)):
         raise ConfigError(f"config key '{key}' holds a non-finite number")
-    if len(points) > 1 and np.allclose(points[0], points[-1], rtol=0, atol=1e-12):
+    if outline and len(points) > 1 and np.allclose(points[0], points[-1], rtol=0,
+                                                   atol=1e-12):
         points = points[:-1]  # a closing repeat of the first point
     return points
 
