@@ -46,6 +46,7 @@ from gripper_sim.configuration import load_config
 from gripper_sim.core.barrier import BarrierSettings
 from gripper_sim.core.fin_ray import fin_ray_from_config
 from gripper_sim.core.finger_indent import indent_disc
+from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.geometry.fin_ray import FinRayGeometry, layout
 
 STRIP = 0.2e-3             # m, strip thickness
@@ -98,9 +99,23 @@ def scale_strips(body, geometry: FinRayGeometry, front: float, back: float):
 
 
 def run(radius: float, element_length: float = 1e-3, e_scaling: bool = False,
-        step: float = 0.5e-3, travel: float = 30e-3):
+        step: float = 0.5e-3, travel: float = 30e-3, retries: int = 2):
     """(Indentation, body) of the source's finger pressed by a cylinder of ``radius`` m
-    to ``travel`` m in ``step`` m increments."""
+    to ``travel`` m in ``step`` m increments; an increment Newton cannot solve makes the
+    run start again with half the step (``retries`` times: the E-scaled finger on the
+    22.5 mm cylinder needs 0.25 mm steps with 1 mm elements)."""
+    try:
+        return _run(radius, element_length, e_scaling, step, travel)
+    except NewtonFailure as failure:
+        if retries <= 0:
+            raise
+        print(f'({failure} at {step * 1e3:g} mm steps: again at {step * 0.5e3:g} mm)')
+        return run(radius, element_length, e_scaling, 0.5 * step, travel, retries - 1)
+
+
+def _run(radius: float, element_length: float, e_scaling: bool, step: float,
+         travel: float):
+    """``run`` at one step size."""
     config = thesis_config(element_length)
     body = fin_ray_from_config(config, DEPTH)
     geometry = FinRayGeometry.from_config(config, DEPTH)
