@@ -26,8 +26,9 @@ from gripper_sim.core.barrier_search import collision_free_step
 
 
 @njit(cache=True)
-def _barrier_derivatives(s, s_hat, scale):
-    """(value, first, second derivative) of scale * b(s, s_hat) in s."""
+def barrier_derivatives(s, s_hat, scale):
+    """(value, first, second derivative) of scale * b(s, s_hat) in s, the IPC barrier
+    b = -(s - s_hat)^2 ln(s / s_hat) of a squared gap s (m^2; scalars, or arrays of s)."""
     ratio = s_hat / s
     log = np.log(s / s_hat)
     value = -(s - s_hat) ** 2 * log * scale
@@ -422,7 +423,7 @@ def edge_vertex_barrier(v, edges, candidates, dhat, stiffness, vertex_dofs, grad
             continue
         if s <= 0.0:
             return np.inf, 0
-        value, first, second = _barrier_derivatives(s, s_hat, scale)
+        value, first, second = barrier_derivatives(s, s_hat, scale)
         total += value
         for i in range(m):
             for c in range(2):

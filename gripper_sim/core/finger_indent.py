@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gripper_sim.core.barrier import BarrierSettings
+from gripper_sim.core.barrier_kernels import barrier_derivatives
 from gripper_sim.core.energies.base import Energy, element_dofs
 from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.finger_statics import static_equilibrium
@@ -78,13 +79,10 @@ class DiscBarrier(Energy):
             return math.inf, []
         active = np.flatnonzero(gap < self.dhat)
         d = gap[active]
-        s, s_hat = d * d, self.dhat ** 2
-        scale = self.kappa / self.dhat ** 3
-        # b(s, S) = -(s - S)^2 ln(s / S) and its s-derivatives (as ``barrier_kernels``)
-        ratio, log = s_hat / s, np.log(s / s_hat)
-        value = float(np.sum(-(s - s_hat) ** 2 * log)) * scale
-        first = (s_hat - s) * (2.0 * log - ratio + 1.0) * scale
-        second = ((ratio + 2.0) * ratio - 2.0 * log - 3.0) * scale
+        s = d * d
+        values, first, second = barrier_derivatives(s, self.dhat ** 2,
+                                                    self.kappa / self.dhat ** 3)
+        value = float(np.sum(values))
         normal = rel[active] / dist[active, None]
         slope = 2.0 * d * first                          # J/m, d(energy)/d(gap)
         np.add.at(grad, self.dofs[active], slope[:, None] * normal)
