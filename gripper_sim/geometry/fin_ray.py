@@ -175,12 +175,12 @@ def _given_rib_points(g: FinRayGeometry) -> tuple[np.ndarray, np.ndarray]:
     for k in range(len(ends) - 1):
         step = ends[k + 1] - ends[k]
         if step[0] <= g.rib_thickness or step[1] <= g.rib_thickness:
-            which = ('cross' if step[1] < 0 else
+            which = ('cross: the ribs must come in the same order along both beams'
+                     if step[1] < 0 else
                      f'are not more than a rib thickness ({g.rib_thickness * 1e3:.3g} mm) '
                      'apart')
             raise ConfigError(
-                f'{key}: ribs {order[k] + 1} and {order[k + 1] + 1} {which}: the ribs '
-                'must come in the same order along both beams, back ends '
+                f'{key}: ribs {order[k] + 1} and {order[k + 1] + 1} {which}: back ends '
                 f'{ends[k, 0] * 1e3:.4g} and {ends[k + 1, 0] * 1e3:.4g} mm, front ends '
                 f'{ends[k, 1] * 1e3:.4g} and {ends[k + 1, 1] * 1e3:.4g} mm from the base')
     return (back_corner + ends[:, :1] * back_dir, front_corner + ends[:, 1:] * front_dir)
