@@ -4,11 +4,11 @@ The jaws close symmetrically about the gripper centre x. In position mode the ga
 towards a target at a rate limit, but never closes further than where the grip force
 (mean normal force of the two jaws on the fruit) reaches the maximum effort; in force
 mode the gap moves so that the grip force meets its target, through the drive's damping
-(grip force - target = damping x gap rate, ``jaw_drive.damping_rate``). ``GripperKinematics.advance``
-predicts the step's gap from the last measured force and the contact stiffness; the
-facade (``core.facade.SimulationFacade``) then solves the step and, if the force it
-measures misses the target, re-solves the step at a corrected gap (``_drive_jaws``), so
-the force holds whatever dt. The lift moves the jaw centre height towards a target with
+(grip force - target = damping x gap rate, ``jaw_drive.damping_rate``).
+``GripperKinematics.advance`` predicts the step's gap from the last measured force and
+the contact stiffness; the facade (``core.facade.SimulationFacade``) then solves the
+step and, if the force it measures misses the target, re-solves the step at a
+corrected gap (``_drive_jaws``), so the force holds whatever dt. The lift moves the jaw centre height towards a target with
 a trapezoidal speed profile, and the transport moves the gripper centre sideways (x)
 the same way. The arithmetic of each rule is a compiled function of ``core.jaw_drive``,
 which the 2D multi-step advance (``core.advance_kernels``) calls too.

@@ -102,8 +102,9 @@ def damping_rate(force_mode, measured_force, damping, dt):
     A force-controlled jaw is a motor with a force limit and damping (MuJoCo's slide
     joint with a motor and damping): grip force - command = damping x gap rate, solved
     at the step's end (implicit Euler). An ideal force source (damping 0) follows every
-    vibration of the fruit without taking energy out of it, so the fruit rang for as long
-    as the integrator let it: the slip after a lift then moved with dt.
+    vibration of the fruit without taking energy out of it: an undamped fruit rings for as
+    long as the integrator lets it, and the slip after a lift moves with dt (README, Jaw
+    drive).
     """
     return damping / dt if force_mode and measured_force > 0.0 else 0.0
 
