@@ -157,7 +157,7 @@ SCHEMA: dict[str, Key] = {
                                    'flesh\'s viscosity, which damps a gripped fruit\'s '
                                    'ringing (~70 Hz for the apple) so that a pick converges '
                                    'in dt; 0: elastic, it rings as long as the integrator '
-                                   'lets it (README, Jaw drive)',
+                                   'lets it (README, Jaws)',
                                    low=0.0, high=1.0),
     'fruit.bruise_pressure': Key(0.26e6, 'Pa', 'contact pressure above which the '
                                  'fruit bruises', low=0.0, high=1e9),

@@ -30,7 +30,7 @@ def test_with_the_flesh_damped_the_slip_of_a_held_fruit_converges_in_dt():
     """At 1.5x the hold minimum, with fruit.damping.stiffness 2e-3 s, the slip at dt
     0.125 ms is within 2 % of the slip at 1 ms. Undamped (the default) it falls from 0.093
     to 0.062 mm: the fruit rings at ~70 Hz in the ideal force drive's jaws, and only the
-    integrator damps it (README, Jaw drive)."""
+    integrator damps it (README, Jaws)."""
     damped = ['fruit.damping.stiffness=2e-3']
     force = 1.5 * hold_minimum(load_config(overrides=damped))
     coarse, fine = (traced_pick(load_config(overrides=damped + [f'sim.dt={dt}']), force)
