@@ -8,8 +8,9 @@ the tip) the joint is rigid: triples across the joint keep the rest angle betwee
 members, with the weaker member's EI shared among the triples it takes part in at that
 node; with ``rib_joint`` 'pinned' a rib's ends are hinges instead (no triple across
 them: the rib carries no moment into the beams). A triple against the base (rigid, on
-the jaw) clamps its beam: it stands for half the free edge. The base's nodes are the body's base nodes; the front beam's edges, tip
-to base, are its surface (the fruit on their right-hand side, +x).
+the jaw) clamps its beam: it stands for half the free edge. The base's nodes are the
+body's base nodes; the front beam's edges, tip to base, are its surface (the fruit on
+their right-hand side, +x).
 """
 from __future__ import annotations
 

@@ -63,10 +63,6 @@ class DiscBarrier(Energy):
         rel = q.reshape(-1, 2)[self.nodes] - self.centre
         return rel, np.hypot(rel[:, 0], rel[:, 1])
 
-    def gaps(self, q: np.ndarray) -> np.ndarray:
-        """(k,) m, each node's distance from the disc's surface (negative: inside)."""
-        return self._relative(q)[1] - self.radius
-
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter: np.ndarray, hessian: bool = True):
         """Adds the gradient (N) into ``grad`` and, with ``hessian``, each node's 2 x 2

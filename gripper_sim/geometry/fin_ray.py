@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry.shapes import parse_points
 
 PREFIX = 'gripper.finger.fin_ray.'
 #: nodes a finger's section may have at most (its member lengths over element_length,
@@ -79,9 +80,8 @@ class FinRayGeometry:
     def from_config(cls, config, fruit_depth: float | None = None) -> 'FinRayGeometry':
         """From the ``gripper.finger.fin_ray.*`` keys of a flat configuration; a null
         depth is ``fruit_depth`` (m)."""
-        values = {name: config.get(PREFIX + name, cls.__dataclass_fields__[name].default)
-                  if name in ('rib_ends', 'rib_joint') else config[PREFIX + name]
-                  for name in cls.__dataclass_fields__ if name != 'rib_angle_given'}
+        values = {name: config[PREFIX + name] for name in cls.__dataclass_fields__
+                  if name != 'rib_angle_given'}
         values['rib_ends'] = parse_rib_ends(values['rib_ends'])
         if values['rib_ends'] is not None:
             values['rib_count'] = len(values['rib_ends'])
@@ -134,9 +134,6 @@ def parse_rib_ends(value) -> tuple[tuple[float, float], ...] | None:
     None or '' for none) as a tuple of pairs; ConfigError if it is not such a list."""
     if value is None or (isinstance(value, str) and not value.strip()):
         return None
-    if isinstance(value, tuple) and all(isinstance(p, tuple) for p in value):
-        return value
-    from gripper_sim.geometry.shapes import parse_points
     pairs = parse_points(value, PREFIX + 'rib_ends', pair='[back, front]', outline=False)
     return tuple((float(b), float(f)) for b, f in pairs)
 
