@@ -25,11 +25,24 @@ the beams two thicknesses apart at the tip: the front beam leans 0.15 deg). The 
 touching its surface (0.1 mm off the centre line) at delta 0.
 
     python bench/fin_ray_published.py [--radius 0.02] [--model-radius R] [--element 0.001]
-        [--e-scaling]
+        [--e-scaling] [--source-model]
 
 ``--e-scaling`` applies the source model's stiffening of the strips (E x L_front / 135 mm
 and E x L_back / 156 mm, undocumented there); ``--model-radius`` runs another radius than
 the cylinder's (their 22.5 / 31.5 mm) against the same measurements.
+
+``--source-model`` runs the source model's own inputs as its code computes them: the E
+scaling, its radius (22.5 / 31.5 mm), and its crossbeams where its discretisation puts
+them. That model cuts each strip into 50 segments and joins a crossbeam at the end of
+segment fix(50 x distance / strip length), up to one segment (3.0 mm on the front strip,
+3.3 mm on the back) nearer the base than the nominal distances, while the crossbeam's
+length stays the nominal one: 1.2-1.5 mm (2-7 %) shorter than the distance between the
+points it joins, so the finger is prestressed before the cylinder touches it. Ours then
+takes the same attachment points and the same rib rest lengths (``rod_rest_lengths``).
+Its saved runs (``Experiments/X_series_r22.5_delta30.mat``, which ``test_05_20_2.m``
+loads for the 20 mm cylinder, and ``X_series_r31.5_delta35.mat``: three contact points
+per delta, each its position and normal force) give the sum of its contact forces'
+magnitudes, which the table sets beside the sum of ours.
 """
 from __future__ import annotations
 
@@ -69,17 +82,26 @@ MEASURED = {
     0.030: (((0.30, 1.15), (0.37, 2.46), (0.30, 4.19), (0.25, 6.34), (0.35, 9.00),
              (0.80, 12.60)), (1.24, 2.67, 4.24, 6.06, 8.33, 12.81), 0.0315),
 }
+#: the source's saved model runs (module docstring): the sum of its three contact forces'
+#: magnitudes, N at DELTAS, by the radius it ran
+SAVED_RUNS = {
+    0.0225: (1.238, 2.649, 4.202, 6.024, 8.415, 12.479),
+    0.0315: (1.243, 2.672, 4.247, 6.054, 8.373, 13.104),
+}
+#: segments per strip of the source model (``nA``, ``nB``)
+SOURCE_SEGMENTS = 50
 #: the cylinder contact: a node pressed with 1 N stays about 20 um from the cylinder
 #: (2 kappa dhat / F), at most dhat = 10 um (0.2 % of delta 5 mm)
 CONTACT = BarrierSettings(dhat=1e-5, stiffness=1.0)
 
 
-def thesis_config(element_length: float = 1e-3):
-    """The flat configuration of the source's finger (module docstring)."""
+def thesis_config(element_length: float = 1e-3, rib_ends=RIB_ENDS):
+    """The flat configuration of the source's finger (module docstring), with its
+    crossbeams at ``rib_ends`` ((back, front) m from the base, per crossbeam)."""
     prefix = 'gripper.finger.fin_ray.'
     values = {'length': FRONT, 'base_width': ROOTS, 'tip_offset': ROOTS - 2 * STRIP,
               'depth': DEPTH, 'beam_thickness': STRIP, 'rib_thickness': RIB_THICKNESS,
-              'rib_ends': json.dumps([list(pair) for pair in RIB_ENDS]),
+              'rib_ends': json.dumps([list(pair) for pair in rib_ends]),
               'rib_joint': 'pinned', 'element_length': element_length,
               'material': 'custom', 'youngs_modulus': STEEL, 'density': 7850.0}
     return load_config(overrides=['gripper.finger.type=fin_ray']
@@ -98,27 +120,66 @@ def scale_strips(body, geometry: FinRayGeometry, front: float, back: float):
     return dataclasses.replace(body, bend_stiffness=stiffness)
 
 
+def crossbeam_length(back: float, front: float) -> float:
+    """m, the distance between the points ``back`` and ``front`` m from the base along the
+    unloaded back and front strips (the triangle they make with the tip)."""
+    a, b = FRONT - front, BACK - back
+    return math.sqrt(a * a + b * b - 2.0 * a * b * math.cos(PSI))
+
+
+def source_rib_ends() -> tuple[tuple[float, float], ...]:
+    """(back, front) m from the base per crossbeam, where the source model joins them: at
+    the end of segment fix(segments x distance / strip length) of each strip."""
+    def snapped(distance, strip):
+        return int(SOURCE_SEGMENTS * distance / strip) * strip / SOURCE_SEGMENTS
+    return tuple((snapped(back, BACK), snapped(front, FRONT)) for back, front in RIB_ENDS)
+
+
+def prestress_ribs(body, geometry: FinRayGeometry, rest_lengths):
+    """The body with each rib's rod edges at their drawn length scaled by the rib's
+    ``rest_lengths`` (m, per rib) over its drawn length: ribs that pull (shorter) or push."""
+    members = layout(geometry).members
+    drawn = np.linalg.norm(body.rest_positions[body.rod_edges[:, 1]]
+                           - body.rest_positions[body.rod_edges[:, 0]], axis=1)
+    rest = drawn.copy()
+    ribs = iter(rest_lengths)
+    start = 0
+    for member in members:                 # fin_ray_body's edges: member after member
+        count = len(member.nodes) - 1
+        if member.name.startswith('rib'):
+            ends = body.rest_positions[member.nodes[[0, -1]]]
+            rest[start:start + count] *= next(ribs) / np.linalg.norm(ends[1] - ends[0])
+        start += count
+    return dataclasses.replace(body, rod_rest_lengths=rest)
+
+
 def run(radius: float, element_length: float = 1e-3, e_scaling: bool = False,
-        step: float = 0.5e-3, travel: float = 30e-3, retries: int = 2):
+        step: float = 0.5e-3, travel: float = 30e-3, retries: int = 2,
+        source_ribs: bool = False):
     """(Indentation, body) of the source's finger pressed by a cylinder of ``radius`` m
     to ``travel`` m in ``step`` m increments; an increment Newton cannot solve makes the
     run start again with half the step (``retries`` times: the E-scaled finger on the
-    22.5 mm cylinder needs 0.25 mm steps with 1 mm elements)."""
+    22.5 mm cylinder needs 0.25 mm steps with 1 mm elements). ``source_ribs``: the
+    crossbeams where the source model joins them, prestressed as there."""
     try:
-        return _run(radius, element_length, e_scaling, step, travel)
+        return _run(radius, element_length, e_scaling, step, travel, source_ribs)
     except NewtonFailure as failure:
         if retries <= 0:
             raise
         print(f'({failure} at {step * 1e3:g} mm steps: again at {step * 0.5e3:g} mm)')
-        return run(radius, element_length, e_scaling, 0.5 * step, travel, retries - 1)
+        return run(radius, element_length, e_scaling, 0.5 * step, travel, retries - 1,
+                   source_ribs)
 
 
 def _run(radius: float, element_length: float, e_scaling: bool, step: float,
-         travel: float):
+         travel: float, source_ribs: bool):
     """``run`` at one step size."""
-    config = thesis_config(element_length)
+    ends = source_rib_ends() if source_ribs else RIB_ENDS
+    config = thesis_config(element_length, ends)
     body = fin_ray_from_config(config, DEPTH)
     geometry = FinRayGeometry.from_config(config, DEPTH)
+    if source_ribs:
+        body = prestress_ribs(body, geometry, [crossbeam_length(*pair) for pair in RIB_ENDS])
     if e_scaling:
         body = scale_strips(body, geometry, FRONT / 135e-3, BACK / 156e-3)
     plan = layout(geometry)
@@ -136,21 +197,25 @@ def _run(radius: float, element_length: float, e_scaling: bool, step: float,
     return result, body
 
 
-def table(radius: float, model_radius: float, element_length: float, e_scaling: bool):
+def table(radius: float, model_radius: float, element_length: float, e_scaling: bool,
+          source_ribs: bool = False):
     """Prints the comparison; returns the rows (delta m, our (Fx, Fz) N, measured |F| N,
-    error of our |F| against it)."""
+    error of our |F| against it, our sum of contact force magnitudes N)."""
     sensor, theirs, their_radius = MEASURED[radius]
+    saved = SAVED_RUNS.get(model_radius) if source_ribs else None
     start = time.process_time()
-    result, body = run(model_radius, element_length, e_scaling)
+    result, body = run(model_radius, element_length, e_scaling, source_ribs=source_ribs)
     cpu = time.process_time() - start
     print(f'cylinder r = {radius * 1e3:g} mm (model r = {model_radius * 1e3:g} mm; the source '
           f'model ran {their_radius * 1e3:g} mm), elements {element_length * 1e3:g} mm, '
-          f'{body.n_nodes} nodes, E scaling {"on" if e_scaling else "off"}, '
+          f'{body.n_nodes} nodes, E scaling {"on" if e_scaling else "off"}, crossbeams '
+          f'{"as the source model joins them" if source_ribs else "nominal"}, '
           f'CPU {cpu:.1f} s')
     print(f'base reaction at the end {result.reaction.round(3)} N (minus the force on the '
           'cylinder)')
+    saved_head = ' | ours sum|f| saved run' if saved else ''
     print(' delta mm | ours Fx   Fz    |F| N | measured Ft   Fn   |F| N | their model |F| | '
-          'ours vs measured')
+          'ours vs measured' + saved_head)
     rows = []
     for k, delta in enumerate(DELTAS):
         i = int(np.argmin(np.abs(result.delta - delta)))
@@ -158,9 +223,11 @@ def table(radius: float, model_radius: float, element_length: float, e_scaling: 
         ours = math.hypot(fx, fz)
         measured = math.hypot(*sensor[k])
         error = ours / measured - 1.0
-        rows.append((delta, (fx, fz), measured, error))
+        rows.append((delta, (fx, fz), measured, error, result.pressing[i]))
+        saved_cells = (f' | {result.pressing[i]:11.2f} {saved[k]:9.2f}' if saved else '')
         print(f'{delta * 1e3:8.0f} | {fx:6.2f} {fz:6.2f} {ours:6.2f} | {sensor[k][0]:10.2f} '
-              f'{sensor[k][1]:5.2f} {measured:6.2f} | {theirs[k]:15.2f} | {error * 100:+6.1f} %')
+              f'{sensor[k][1]:5.2f} {measured:6.2f} | {theirs[k]:15.2f} | '
+              f'{error * 100:+6.1f} %' + saved_cells)
     return rows
 
 
@@ -173,8 +240,15 @@ def main(argv=None) -> int:
     parser.add_argument('--element', type=float, default=1e-3, help='m, element length')
     parser.add_argument('--e-scaling', action='store_true',
                         help='the source model\'s E x L/135 mm, L/156 mm')
+    parser.add_argument('--source-model', action='store_true',
+                        help='the source model\'s inputs: E scaling, its radius, its '
+                             'crossbeams (module docstring)')
     args = parser.parse_args(argv)
-    table(args.radius, args.model_radius or args.radius, args.element, args.e_scaling)
+    if args.source_model:
+        table(args.radius, args.model_radius or MEASURED[args.radius][2], args.element,
+              True, source_ribs=True)
+    else:
+        table(args.radius, args.model_radius or args.radius, args.element, args.e_scaling)
     return 0
 
 

@@ -65,6 +65,45 @@ def test_20_mm_cylinder_as_reported(r20):
     assert np.all((-0.32 < errors) & (errors < -0.17)), errors
 
 
+@pytest.fixture(scope='module')
+def source_model_20():
+    return published.run(0.0225, element_length=2e-3, e_scaling=True, source_ribs=True)
+
+
+def test_with_the_source_models_inputs_ours_reproduces_its_saved_run(source_model_20):
+    """Two independent models of the same finger (its 50 pseudo-rigid segments per strip
+    and three fitted point contacts; our rods and continuous barrier contact) given the
+    same inputs: the sum of the contact forces within 3 % at every delta."""
+    result, _ = source_model_20
+    saved = np.array(published.SAVED_RUNS[0.0225])
+    ours = np.array([result.pressing[int(np.argmin(np.abs(result.delta - d)))]
+                     for d in published.DELTAS])
+    assert np.all(np.abs(ours / saved - 1.0) < 0.03), ours / saved - 1.0
+
+
+def test_the_sum_of_contact_magnitudes_bounds_the_net_force(source_model_20):
+    result, _ = source_model_20
+    net = np.hypot(*result.force.T)
+    assert np.all(net <= result.pressing * (1 + 1e-12))
+    assert np.all(net >= 0.98 * result.pressing), 'a contact arc of a few degrees'
+
+
+def test_the_source_models_crossbeams_are_nearer_the_base_and_prestressed(source_model_20):
+    snapped = np.array(published.source_rib_ends())
+    nominal = np.array(published.RIB_ENDS)
+    segments = np.array([published.BACK, published.FRONT]) / published.SOURCE_SEGMENTS
+    assert np.all((snapped <= nominal) & (snapped > nominal - segments))
+    _, body = source_model_20
+    assert len(body.rod_rest_lengths) == len(body.rod_edges)
+    drawn = np.linalg.norm(body.rest_positions[body.rod_edges[:, 1]]
+                           - body.rest_positions[body.rod_edges[:, 0]], axis=1)
+    shorter = body.rod_rest_lengths < drawn * (1 - 1e-9)
+    # the ribs' own edges pull: their rest lengths sum to the nominal crossbeam lengths
+    lengths = [published.crossbeam_length(*pair) for pair in published.RIB_ENDS]
+    assert body.rod_rest_lengths[shorter].sum() == pytest.approx(sum(lengths), rel=1e-9)
+    assert np.all(body.rod_rest_lengths[~shorter] == pytest.approx(drawn[~shorter]))
+
+
 def _config(ends, **more):
     overrides = ['gripper.finger.type=fin_ray', f'{PREFIX}rib_ends={json.dumps(ends)}']
     overrides += [f'{PREFIX}{k}={v}' for k, v in more.items()]

@@ -38,7 +38,9 @@ class FingerBody:
         surface_edges: (e, 2) the edges of the outline that may touch the fruit.
         tip_node: the node whose displacement is the finger's tip displacement.
         depth: m, out-of-plane depth (the finger's width along the jaw).
-        rod_edges: (r, 2) rod segments; rod_axial_stiffness: (r,) EA, N.
+        rod_edges: (r, 2) rod segments; rod_axial_stiffness: (r,) EA, N;
+            rod_rest_lengths: (r,) m, their rest lengths (empty: their lengths in
+            ``rest_positions``; shorter or longer: the body is prestressed as drawn).
         bend_triples: (t, 3) node triples (i, j, k) bent at j; bend_stiffness: (t,) EI,
             N m^2 (rest angle: that of ``rest_positions``); bend_lengths: (t,) m, the rod
             length each triple's curvature stands for (empty: the mean of its two rest
@@ -57,6 +59,7 @@ class FingerBody:
     depth: float
     rod_edges: np.ndarray = field(default_factory=lambda: _ints((0, 2)))
     rod_axial_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rod_rest_lengths: np.ndarray = field(default_factory=lambda: np.zeros(0))
     bend_triples: np.ndarray = field(default_factory=lambda: _ints((0, 3)))
     bend_stiffness: np.ndarray = field(default_factory=lambda: np.zeros(0))
     bend_lengths: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -85,8 +88,11 @@ class FingerBody:
             copies, rest_positions = (np.arange(self.n_nodes),), self.rest_positions
         n = len(copies)
         edges = np.vstack([nodes[self.rod_edges] for nodes in copies])
-        rest = np.linalg.norm(rest_positions[edges[:, 1]] - rest_positions[edges[:, 0]],
-                              axis=1)
+        if len(self.rod_rest_lengths):
+            rest = np.tile(self.rod_rest_lengths, n)
+        else:
+            rest = np.linalg.norm(rest_positions[edges[:, 1]] - rest_positions[edges[:, 0]],
+                                  axis=1)
         energies: list[Energy] = [Stretching(edges, rest,
                                              np.tile(self.rod_axial_stiffness, n))]
         if len(self.bend_triples):

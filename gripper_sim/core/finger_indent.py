@@ -104,12 +104,16 @@ class DiscBarrier(Energy):
         t = (-b[hits] - np.sqrt(disc[hits])) / (2.0 * a[hits])
         return float(min(1.0, t.min()))
 
-    def force(self, q: np.ndarray) -> np.ndarray:
-        """(2,) N, the force the nodes exert on the disc (x, z): the sum of the barrier
-        gradients (each node is pushed by minus its own)."""
+    def node_forces(self, q: np.ndarray) -> np.ndarray:
+        """(k, 2) N, the force each of ``nodes`` exerts on the disc (x, z): its barrier
+        gradient (the node is pushed by minus it)."""
         grad = np.zeros(q.size)
         self.evaluate_into(q, grad, np.zeros(1), np.zeros((0, 0), np.int64), False)
-        return grad.reshape(-1, 2).sum(axis=0)
+        return grad.reshape(-1, 2)[self.nodes]
+
+    def force(self, q: np.ndarray) -> np.ndarray:
+        """(2,) N, the force the nodes exert on the disc (x, z)."""
+        return self.node_forces(q).sum(axis=0)
 
     def push_out(self, x: np.ndarray) -> np.ndarray:
         """(n, 2) m: positions ``x`` with every touching node closer to the disc than
@@ -129,6 +133,8 @@ class Indentation:
         delta: (s,) m, the disc's travel towards the finger (the base's towards the
             disc) after each increment.
         force: (s, 2) N, the force of the finger on the disc (x, z), in equilibrium.
+        pressing: (s,) N, the sum of the magnitudes of the nodes' forces on the disc
+            (the contact pressure integrated over the contact, |force| at most).
         reaction: (2,) N, the base's reaction on the finger at the last delta (minus the
             last ``force``, up to the solver's tolerance: a check).
         positions: (s, n_nodes, 2) m, the finger's shapes.
@@ -137,6 +143,7 @@ class Indentation:
 
     delta: np.ndarray
     force: np.ndarray
+    pressing: np.ndarray
     reaction: np.ndarray
     positions: np.ndarray
     centres: np.ndarray
@@ -177,18 +184,21 @@ def indent_disc(body: FingerBody, nodes: np.ndarray, centre: np.ndarray, radius:
         pushed out of it."""
         disc.centre = centre + fraction * travel * direction
         if len(rows) >= 2:
-            x = 2.0 * rows[-1][2] - rows[-2][2]
+            x = 2.0 * rows[-1][3] - rows[-2][3]
             x[body.base_nodes] = body.rest_positions[body.base_nodes]
         return disc.push_out(x)
 
     def record(x: np.ndarray) -> None:
-        rows.append((len(rows) + 1, disc.force(x.ravel()), x.copy(), disc.centre.copy()))
+        forces = disc.node_forces(x.ravel())
+        rows.append((len(rows) + 1, forces.sum(axis=0), np.hypot(*forces.T).sum(), x.copy(),
+                     disc.centre.copy()))
 
     disc.centre = centre.copy()
     final = static_equilibrium(body, np.zeros_like(body.rest_positions),
                                increments=increments, hold=0, tolerance=tolerance,
                                self_contact=self_contact, elastic=body.rod_energies() + [disc],
                                before_increment=move, on_increment=record)
-    steps, force, positions, centres = zip(*rows)
+    steps, force, pressing, positions, centres = zip(*rows)
     return Indentation(travel * np.array(steps) / increments, np.array(force),
-                       final.base_reaction, np.array(positions), np.array(centres))
+                       np.array(pressing), final.base_reaction, np.array(positions),
+                       np.array(centres))
