@@ -17,11 +17,7 @@ import numpy as np
 from gripper_sim.cli.arguments import non_negative_float, positive_float, positive_int
 from gripper_sim.cli.progress import StepProgress
 from gripper_sim.configuration import available_fruits, load_config, parse_override
-from gripper_sim.core.peaks import RunPeaks
-from gripper_sim.core.vocabulary import damage_fields
 from gripper_sim.errors import GripperSimError
-from gripper_sim.workflows.squeeze import (SQUEEZE_DEFAULTS, check_squeeze, squeeze,
-                                          stopped_at_max_effort)
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
@@ -155,6 +151,7 @@ class _Series:
     """
 
     def __init__(self, dimension: int = 2):
+        from gripper_sim.core.peaks import RunPeaks
         self.dimension = int(dimension)
         self.time, self.gap, self.force = [], [], []
         self.peaks = RunPeaks()
@@ -271,7 +268,10 @@ def _write_html(args, recorder) -> None:
 
 
 def run_squeeze(args) -> int:
+    from gripper_sim.core.vocabulary import damage_fields
     from gripper_sim.workflows.factory import make_simulation as Simulation
+    from gripper_sim.workflows.squeeze import (SQUEEZE_DEFAULTS, check_squeeze, squeeze,
+                                              stopped_at_max_effort)
     config = config_from_args(args, SQUEEZE_DEFAULTS)
     check_squeeze(config, args.speed, args.to_force)
     sim = Simulation(config)

@@ -93,59 +93,71 @@ def polygon_centroid(points: np.ndarray) -> np.ndarray:
 
 
 def crossing_segments(points: np.ndarray) -> tuple[int, int] | None:
-    """The first pair (i, j) of non-adjacent edges of the closed polygon that intersect.
+    """The first pair (i, j), i < j, of non-adjacent edges of the closed polygon that
+    intersect.
 
     Edge i joins ``points[i]`` and ``points[i + 1]``. Touching counts as crossing.
-    Returns None when the polygon is simple.
+    Returns None when the polygon is simple. Only pairs whose bounding boxes meet are
+    tested (every crossing or touching pair's do), found by a sweep along x: with the
+    edges sorted by their lowest x, an edge's x-overlapping successors are the run up to
+    its highest x.
     """
     p = np.asarray(points, dtype=float)
     n = len(p)
+    if n < 4:
+        return None
     a, b = p, np.roll(p, -1, axis=0)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
     scale = max(float(np.ptp(p)), 1e-300)
     eps = 1e-12 * scale * scale
+    order = np.argsort(lo[:, 0], kind='stable')
+    sorted_lo = lo[order, 0]
+    ends = np.searchsorted(sorted_lo, hi[order, 0], side='right')
+    counts = np.maximum(ends - np.arange(n) - 1, 0)
+    found: list[tuple[int, int]] = []
+    first = 0
+    while first < n:                       # blocks of edges with at most ~2^20 pairs
+        last = int(np.searchsorted(np.cumsum(counts[first:]), 1 << 20, side='right'))
+        last = min(n, first + max(last, 1))
+        rank = np.repeat(np.arange(first, last), counts[first:last])
+        offset = np.arange(rank.size) - np.repeat(np.cumsum(counts[first:last])
+                                                  - counts[first:last], counts[first:last])
+        ei, ej = order[rank], order[rank + 1 + offset]
+        ei, ej = np.minimum(ei, ej), np.maximum(ei, ej)
+        keep = ((ej - ei >= 2) & ~((ei == 0) & (ej == n - 1))      # not neighbours
+                & (lo[ei, 1] <= hi[ej, 1]) & (lo[ej, 1] <= hi[ei, 1]))
+        ei, ej = ei[keep], ej[keep]
+        hit = _intersect(a[ei], b[ei], a[ej], b[ej], eps)
+        if np.any(hit):
+            k = np.lexsort((ej[hit], ei[hit]))[0]
+            found.append((int(ei[hit][k]), int(ej[hit][k])))
+        first = last
+    return min(found) if found else None
 
+
+def _intersect(ai, bi, aj, bj, eps: float) -> np.ndarray:
+    """(k,) whether segments ai-bi and aj-bj (each (k, 2)) cross or touch (an endpoint on
+    the other segment within the orientation tolerance ``eps``, m^2)."""
     def orient(p0, p1, q):
-        return ((p1[..., 0] - p0[..., 0]) * (q[..., 1] - p0[..., 1])
-                - (p1[..., 1] - p0[..., 1]) * (q[..., 0] - p0[..., 0]))
+        return ((p1[:, 0] - p0[:, 0]) * (q[:, 1] - p0[:, 1])
+                - (p1[:, 1] - p0[:, 1]) * (q[:, 0] - p0[:, 0]))
 
-    for i in range(n - 2):
-        js = np.arange(i + 2, n)
-        if i == 0:
-            js = js[js != n - 1]  # edge n-1 shares node 0 with edge 0
-        if not js.size:
-            continue
-        ai, bi = a[i], b[i]
-        aj, bj = a[js], b[js]
-        d1, d2 = orient(ai, bi, aj), orient(ai, bi, bj)
-        d3, d4 = orient(aj, bj, ai[None]), orient(aj, bj, bi[None])
-        proper = (((d1 > eps) & (d2 < -eps)) | ((d1 < -eps) & (d2 > eps))) & \
-                 (((d3 > eps) & (d4 < -eps)) | ((d3 < -eps) & (d4 > eps)))
-        # collinear overlaps and touching: an endpoint on the other segment
-        touch = np.zeros(js.size, bool)
-        for d, q0, q1, r in ((d1, ai, bi, aj), (d2, ai, bi, bj)):
-            on = np.abs(d) <= eps
-            if np.any(on):
-                touch |= on & _within(q0, q1, r)
-        for d, r in ((d3, ai), (d4, bi)):
-            on = np.abs(d) <= eps
-            if np.any(on):
-                touch |= on & _within_many(aj, bj, r)
-        hit = np.flatnonzero(proper | touch)
-        if hit.size:
-            return i, int(js[hit[0]])
-    return None
+    d1, d2 = orient(ai, bi, aj), orient(ai, bi, bj)
+    d3, d4 = orient(aj, bj, ai), orient(aj, bj, bi)
+    proper = (((d1 > eps) & (d2 < -eps)) | ((d1 < -eps) & (d2 > eps))) & \
+             (((d3 > eps) & (d4 < -eps)) | ((d3 < -eps) & (d4 > eps)))
+    touch = ((np.abs(d1) <= eps) & _within(ai, bi, aj)) | \
+            ((np.abs(d2) <= eps) & _within(ai, bi, bj)) | \
+            ((np.abs(d3) <= eps) & _within(aj, bj, ai)) | \
+            ((np.abs(d4) <= eps) & _within(aj, bj, bi))
+    return proper | touch
 
 
 def _within(q0, q1, r) -> np.ndarray:
-    """Points r (k, 2) inside the bounding box of the segment q0-q1."""
+    """(k,) whether each point r (k, 2) lies inside the bounding box of its segment
+    q0-q1 (k, 2)."""
     lo, hi = np.minimum(q0, q1), np.maximum(q0, q1)
     return np.all((r >= lo) & (r <= hi), axis=-1)
-
-
-def _within_many(q0, q1, r) -> np.ndarray:
-    """Point r (2,) inside the bounding boxes of segments q0-q1 (k, 2)."""
-    lo, hi = np.minimum(q0, q1), np.maximum(q0, q1)
-    return np.all((r[None] >= lo) & (r[None] <= hi), axis=-1)
 
 
 def parse_points(value, key: str = 'fruit.shape.points', pair: str = '[x, z]',
