@@ -136,3 +136,46 @@ def test_self_intersecting_outline_from_the_cli_is_a_clear_error(tmp_path):
     assert run.returncode == 2
     assert "error: config key 'fruit.shape.points'" in run.stderr
     assert 'crosses itself' in run.stderr and 'Traceback' not in run.stderr
+
+
+def _first_crossing_by_every_pair(points):
+    """The reference: every pair of non-adjacent edges, in order, by orientations (a
+    touching endpoint counts)."""
+    p = np.asarray(points, float)
+    n = len(p)
+    eps = 1e-12 * float(np.ptp(p)) ** 2
+
+    def orient(o, u, v):
+        return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
+
+    def on(o, u, v):
+        return (min(o[0], u[0]) <= v[0] <= max(o[0], u[0])
+                and min(o[1], u[1]) <= v[1] <= max(o[1], u[1]))
+
+    for i in range(n):
+        for j in range(i + 2, n):
+            if i == 0 and j == n - 1:
+                continue
+            a, b, c, d = p[i], p[(i + 1) % n], p[j], p[(j + 1) % n]
+            d1, d2, d3, d4 = orient(a, b, c), orient(a, b, d), orient(c, d, a), orient(c, d, b)
+            if (d1 * d2 < 0 and abs(d1) > eps and abs(d2) > eps
+                    and d3 * d4 < 0 and abs(d3) > eps and abs(d4) > eps):
+                return i, j
+            if ((abs(d1) <= eps and on(a, b, c)) or (abs(d2) <= eps and on(a, b, d))
+                    or (abs(d3) <= eps and on(c, d, a)) or (abs(d4) <= eps and on(c, d, b))):
+                return i, j
+    return None
+
+
+def test_the_self_crossing_sweep_finds_the_first_pair_every_pair_would():
+    rng = np.random.default_rng(7)
+    for trial in range(600):
+        n = int(rng.integers(3, 30))
+        if trial % 3 == 0:
+            points = rng.random((n, 2))                         # mostly crossing
+        elif trial % 3 == 1:
+            points = rng.integers(0, 4, (n, 2)).astype(float)   # collinear, touching
+        else:
+            angle = np.sort(rng.random(n)) * 2 * np.pi          # mostly simple
+            points = np.c_[np.cos(angle), np.sin(angle)] * (1 + 0.3 * rng.random(n))[:, None]
+        assert crossing_segments(points) == _first_crossing_by_every_pair(points), points
