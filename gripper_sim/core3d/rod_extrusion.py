@@ -76,7 +76,12 @@ def extruded_rod_body(section: FingerBody, width: float, slices: int) -> FingerB
 
     Raises:
         ConfigError: the section has no rods, or no positive width.
+        ValueError: a prestressed section (``rod_rest_lengths``), which the shells do not
+            take.
     """
+    if len(section.rod_rest_lengths):
+        raise ValueError('a prestressed section (rod_rest_lengths) cannot be extruded: the '
+                         "shells' rest shape is the section's drawn shape")
     if not len(section.rod_edges):
         raise ConfigError(f"config key 'gripper.finger.type' = {section.name}: only a "
                           'section of rods is extruded to shells')
