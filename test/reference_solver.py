@@ -300,7 +300,16 @@ class _SparseProblem(StepProblem):
         except RuntimeError:  # singular
             return False
         self.factor = KeptFactor(self.key, lu, [(c, s @ u) for c, u in low_rank])
+        self.matrix = matrix
         return True
+
+    def definite(self) -> bool:
+        """Whether the matrix just factorised with its rank-one terms is positive
+        definite (dense eigenvalues: the reference's problems are small)."""
+        dense = self.matrix.toarray()
+        for c, u in self.factor.low:
+            dense += c * np.outer(u, u)
+        return bool(np.linalg.eigvalsh(0.5 * (dense + dense.T))[0] > 0.0)
 
     def direction(self, g_f, dq, fresh) -> tuple[bool, float]:
         factor = self.factor if fresh else self.solver.kept_factor

@@ -116,7 +116,7 @@ def test_the_block_ldl_preconditioner_solves_a_newton_matrix(model):
     solver, q, dt, data = _rest_newton_matrix(model)
     state = solver.linear
     before = solver.stats['factorisations']
-    assert linear_solve.factorise(state, data)
+    assert linear_solve.factorise(state, data) == 0  # positive definite
     assert solver.stats['factorisations'] == before + 1
     matrix = solver._csc(data).tocsc()
     rhs = np.linspace(-1.0, 1.0, q.size)
@@ -292,6 +292,39 @@ def test_the_compiled_cg_solves_a_filtered_newton_system_with_a_rank_one_term(mo
     assert solver.stats['cg_iterations'] - before == 1
     assert np.max(np.abs(x - exact)) < 1e-9 * np.max(np.abs(exact))
     assert np.all(x[:3] == 0.0) and x[5] == 0.0
+
+
+def test_a_fresh_factorisation_counts_the_newton_matrix_negative_eigenvalues():
+    """``linear_solve.solve`` with a new factorisation counts the negative eigenvalues of
+    A + u diag(c) u^T (``F_NEGATIVE``: D's blocks and the capacitance matrix), as the dense
+    eigenvalues do: A a 3D shell's Newton matrix with the inertia taken away four times
+    over (indefinite), with and without rank-one terms that make it less or more so."""
+    solver, q, dt, data = _rest_newton_matrix(['fruit.model=shell',
+                                               'fruit.mesh.subdivisions=2'])
+    n = q.size
+    filters = np.tile(np.eye(3), (n // 3, 1, 1))
+    filters[0] = 0.0  # a node held in every direction
+    values = solver.newton_matrix(data, filters, -4.0 * solver.m / dt ** 2)
+    dense = solver._csc(values).toarray()
+    eigenvalues, vectors = np.linalg.eigh(dense)
+    negative = int(np.sum(eigenvalues < 0))
+    assert 0 < negative < n
+    lowest = vectors[:, 0]
+    scale = np.abs(eigenvalues).max()
+    flags = solver.linear.flags
+    cases = [(np.zeros((n, 0)), np.zeros(0), negative),
+             (lowest[:, None], np.array([10.0 * scale]), negative - 1),
+             (vectors[:, -1:], np.array([-10.0 * scale]), negative + 1)]
+    for u, c, expected in cases:
+        u = np.ascontiguousarray(u)
+        total = dense + (u * c) @ u.T
+        assert int(np.sum(np.linalg.eigvalsh(total) < 0)) == expected
+        solver.linear_solve(values, np.linspace(-1.0, 1.0, n), (u, c, np.ascontiguousarray(u.T)),
+                            True, dt, filters)
+        assert flags[linear_solve.F_NEGATIVE] == expected
+    solver.linear_solve(solver.newton_matrix(data, filters, np.zeros(n)), np.ones(n),
+                        cases[0][:2] + (np.zeros((0, n)),), True, dt, filters)
+    assert flags[linear_solve.F_NEGATIVE] == 0  # the Newton matrix at rest: definite
 
 
 @pytest.mark.parametrize('name', ['2d-shell', '3d-solid'])

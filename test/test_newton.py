@@ -49,8 +49,12 @@ class QuarticProblem:
         if abs(np.linalg.det(matrix)) < 1e-300:
             return False
         self.inverse = np.linalg.inv(matrix)
+        self.matrix = matrix
         self.shifts.append(shift)
         return True
+
+    def definite(self):
+        return bool(np.linalg.eigvalsh(self.matrix)[0] > 0.0)
 
     def direction(self, g_f, dq, fresh):
         dq[:] = -(self.inverse if fresh else self.kept) @ g_f
@@ -95,6 +99,25 @@ def test_an_indefinite_hessian_is_shifted_until_the_step_descends():
     assert status == newton.OK
     assert problem.shifts[:2] == [0.0, 1.0]
     assert abs(q[0]) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_a_shifted_matrix_must_be_positive_definite_not_only_descend():
+    # at q = (0.1, 0) the Hessian diag(-4.97, -0.5): the plain Newton step climbs;
+    # shifted by 1 it is still indefinite, yet its step descends (the second
+    # component's gradient dominates); by 10 it is positive definite, and that is taken
+    a, b, q0 = np.array([-5.0, -0.5]), np.array([0.0, 1.0]), np.array([0.1, 0.0])
+    problem = QuarticProblem(a, b)
+    grad = np.empty(2)
+    problem.evaluate(q0, True, grad)
+    problem.factorise(q0, 1.0)
+    assert not problem.definite() and grad @ (-problem.inverse @ grad) < 0
+    problem = QuarticProblem(a, b)
+    status, q, _, _, _ = _solve(problem, q0)
+    assert status == newton.OK
+    assert problem.shifts[:3] == [0.0, 1.0, 10.0]
+    np.testing.assert_allclose(q ** 3 + a * q - b, 0.0, atol=1e-12)
+    assert np.all(3 * q ** 2 + a > 0)  # a minimum
+    assert q[0] == pytest.approx(np.sqrt(5.0))
 
 
 def test_the_kept_matrix_serves_iterations_while_it_contracts():

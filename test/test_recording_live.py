@@ -404,7 +404,7 @@ def test_record_a_split_bag_folder_by_pattern_and_replay_it(tmp_path):
             for i in range(60):
                 for topic, pub in pubs.items():
                     pub.publish(String(data=f'{topic} {i}'))
-                time.sleep(0.01)
+                time.sleep(0.02)
             for pub in pubs.values():
                 pub.wait_for_all_acked(Duration(seconds=TIMEOUT))
             wait_for(lambda: "recording '/sim/a'" in recorder.log(), what='recorder log')
@@ -412,12 +412,21 @@ def test_record_a_split_bag_folder_by_pattern_and_replay_it(tmp_path):
     log = recorder.log()
     assert "recording '/sim/b'" not in log and "recording '/other'" not in log, log
     files = sorted(p.name for p in out.glob('*.mcap'))
-    assert len(files) >= 3 and (out / 'metadata.yaml').is_file()
+    assert (out / 'metadata.yaml').is_file()
     with BagReader(out) as bag:
         assert set(bag.topics) == {'/sim/a'} and bag.message_count == 60
         sent = [m.data for m in bag.messages()]
     with RosbagsReader(out) as reader:
-        assert [bytes(raw) for _, _, raw in reader.messages()] == sent
+        stamped = [(log_time, bytes(raw)) for _, log_time, raw in reader.messages()]
+    assert [raw for _, raw in stamped] == sent
+    # a new file once a message is logged more than 0.2 s after its file's first (the
+    # recorder's receive times: a loaded machine may deliver the 1.2 s of sending in
+    # bursts, so the count is the one these times call for)
+    expected, start = 1, stamped[0][0]
+    for log_time, _ in stamped:
+        if log_time - start > 200_000_000:
+            expected, start = expected + 1, log_time
+    assert len(files) == expected >= 2, files
 
     # the folder replays like a file: every message, in order
     copy = tmp_path / 'copy'

@@ -237,6 +237,14 @@ def _direction_hook(problem, g_f, dq, fresh):
         return impl
 
 
+@overload(newton.definite)
+def _definite_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return problem.linear.flags[linear_solve.F_NEGATIVE] <= 0
+        return impl
+
+
 @overload(newton.step_bound)
 def _step_bound_hook(problem, x, dq):
     if _is_problem(problem):

@@ -560,6 +560,9 @@ class _NewtonProblem(StepProblem):
         slope = float(g_f @ x)
         return math.isfinite(slope), slope  # a non-finite entry of x makes the slope one
 
+    def definite(self) -> bool:
+        return self.solver.linear.flags[linear_solve.F_NEGATIVE] <= 0
+
     def step_bound(self, x, dq) -> float:
         return min(self.solver.max_step(x, dq),
                    self.solver.kink_step(x, self.q_n, dq, self.dt, self.con))

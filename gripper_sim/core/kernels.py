@@ -1104,6 +1104,14 @@ def _direction_hook(problem, g_f, dq, fresh):
         return impl
 
 
+@overload(newton.definite, jit_options=dict(error_model='numpy'), inline='always')
+def _definite_hook(problem):
+    if _is_problem(problem):
+        def impl(problem):
+            return True  # the inertia is not counted: a descending direction is taken
+        return impl
+
+
 @overload(newton.step_bound, jit_options=dict(error_model='numpy'), inline='always')
 def _step_bound_hook(problem, x, dq):
     if _is_problem(problem):

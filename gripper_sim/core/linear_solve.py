@@ -11,7 +11,13 @@ u^T A^-1 u)^-1 u^T A^-1 (Golub & Van Loan, Matrix Computations, 4th ed., 2.1.4).
 factorisation is made when the kept one is stale (CG took more than its stale
 iterations last time), when asked (``fresh``), or when CG fails on the kept one; if CG
 fails even on a fresh one (an indefinite matrix), the factor's own solution refined
-against the matrix (``REFINEMENT_SWEEPS``) is the answer.
+against the matrix (``REFINEMENT_SWEEPS``) is the answer. A system solved with a new
+factorisation also counts its matrix's negative eigenvalues (``F_NEGATIVE``), for the
+Newton iteration's rule that a shifted matrix be positive definite (``core.newton``):
+D's blocks carry A's inertia (Sylvester's law of inertia; the factorisation has no
+pivoting across blocks), and the rank-one terms change it by the capacitance matrix's
+(Haynsworth's inertia additivity: In(A + u C u^T) = In(A) + In(C^-1 + u^T A^-1 u) -
+In(C^-1), the bordered matrix [[A, u], [u^T, -C^-1]] reduced both ways).
 
 ``LinearSolveState`` (a numba StructRef, made once per solver by ``new_state``) holds
 the pattern, the kept factor and its Woodbury terms, the flags and the work counters.
@@ -30,10 +36,12 @@ from gripper_sim.core.solver_kernels import csc_matvec
 from gripper_sim.core.sparse_ldl import factor, ldl_factor_3
 
 #: flags (int64 array): whether a factor is kept, whether it is stale (a new one is due),
-#: the columns of the Woodbury terms kept with it (-1: none)
-F_HAS_FACTOR, F_STALE, F_WOODBURY, F_SIZE = range(4)
-#: stats (int64 array): Newton systems, factorisations, CG iterations
-S_SYSTEMS, S_FACTORS, S_CG, S_SIZE = range(4)
+#: the columns of the Woodbury terms kept with it (-1: none), the negative eigenvalues of
+#: the last system's matrix A + u diag(c) u^T if it was factorised afresh (-1: it was not)
+F_HAS_FACTOR, F_STALE, F_WOODBURY, F_NEGATIVE, F_SIZE = range(5)
+#: stats (int64 array): Newton systems, factorisations, CG iterations, factorisations of
+#: an indefinite matrix
+S_SYSTEMS, S_FACTORS, S_CG, S_INDEFINITE, S_SIZE = range(5)
 #: iterative-refinement sweeps of the factor's solution when CG cannot be used
 REFINEMENT_SWEEPS = 3
 
@@ -99,6 +107,7 @@ def new_state(indptr: np.ndarray, indices: np.ndarray, perm: np.ndarray, pattern
     l_shape, d_shape = (pattern.n_factor, b, b), (pattern.n_nodes, b, b)
     flags = np.zeros(F_SIZE, np.int64)
     flags[F_WOODBURY] = -1
+    flags[F_NEGATIVE] = -1
     target, source = gather
     return _new_state((
         indptr, indices, perm, pattern.arrays, np.ascontiguousarray(target, dtype=np.int64),
@@ -113,6 +122,7 @@ def forget(state: LinearSolveState) -> None:
     flags = state.flags
     flags[:] = 0
     flags[F_WOODBURY] = -1
+    flags[F_NEGATIVE] = -1
 
 
 @njit(cache=True)
@@ -129,8 +139,9 @@ def ldl_solve(state, x, out):
 
 @njit(cache=True)
 def factorise(state, values):
-    """The block LDL^T of the CSC ``values`` (nnz,) kept; False if a pivot block is
-    singular (the kept factor unchanged)."""
+    """The block LDL^T of the CSC ``values`` (nnz,) kept: the number of its pivot blocks
+    that are not positive definite (0: the matrix is positive definite), or -1 if a pivot
+    block is singular (the kept factor unchanged)."""
     state.stats[S_FACTORS] += 1
     b = state.d_inv.shape[1]
     blocks = np.zeros((state.n_blocks + 1, b, b))
@@ -146,10 +157,32 @@ def factorise(state, values):
     else:
         status = factor(state.arrays, blocks, l_new, d_new)
     if status < 0:
-        return False
+        return -1
     state.l_values[:] = l_new
     state.d_inv[:] = d_new
-    return True
+    return status
+
+
+@njit(cache=True)
+def _negative_eigenvalues(state, indefinite_blocks, c, small_inv):
+    """The negative eigenvalues of A + u diag(c) u^T, A the kept factor's matrix with
+    ``indefinite_blocks`` pivot blocks not positive definite, c (k,), ``small_inv`` the
+    inverse capacitance matrix (k, k) (see the module's docstring)."""
+    negative = 0
+    if indefinite_blocks:
+        for block in state.d_inv:
+            for value in np.linalg.eigvalsh(0.5 * (block + block.T)):
+                if value < 0.0:
+                    negative += 1
+    k = c.shape[0]
+    if k:
+        for value in np.linalg.eigvalsh(0.5 * (small_inv + small_inv.T)):
+            if value > 0.0:
+                negative += 1
+        for j in range(k):
+            if c[j] > 0.0:
+                negative -= 1
+    return negative
 
 
 @njit(cache=True)
@@ -232,11 +265,13 @@ def solve(state, values, rhs, u, c, u_t, filters, relative, error_limit, floor, 
     factorisation is singular (x not written)."""
     flags = state.flags
     state.stats[S_SYSTEMS] += 1
+    flags[F_NEGATIVE] = -1
     if flags[F_HAS_FACTOR] and not fresh and not flags[F_STALE]:
         if _pcg(state, values, rhs, u, c, u_t, filters, relative, error_limit, floor, x):
             return True
     flags[F_STALE] = 0
-    if not factorise(state, values):
+    indefinite_blocks = factorise(state, values)
+    if indefinite_blocks < 0:
         return False
     flags[F_HAS_FACTOR] = 1
     flags[F_WOODBURY] = -1
@@ -244,6 +279,9 @@ def solve(state, values, rhs, u, c, u_t, filters, relative, error_limit, floor, 
     if k:
         state.w_u, state.w_a_inv_u, state.w_small_inv = _woodbury(state, u, c)
         flags[F_WOODBURY] = k
+    flags[F_NEGATIVE] = _negative_eigenvalues(state, indefinite_blocks, c, state.w_small_inv)
+    if flags[F_NEGATIVE]:
+        state.stats[S_INDEFINITE] += 1
     if _pcg(state, values, rhs, u, c, u_t, filters, relative, error_limit, floor, x):
         return True
     # CG failed on a fresh factorisation (negative curvature: an indefinite matrix)

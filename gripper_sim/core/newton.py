@@ -21,7 +21,13 @@ The iteration (a chord or modified Newton method, Ortega & Rheinboldt 1970, sec.
 - convergence: max |dq| / dt < tol (m/s); a step that small is taken whole;
 - a *fresh* iteration assembles the Newton matrix S H S + (I - S) at the iterate and
   adds ``shift`` times the filtered inertia S M / dt^2 for the first shift of ``SHIFTS``
-  whose direction descends (an indefinite Hessian: buckling skin, compressed flesh);
+  whose direction descends (an indefinite Hessian: buckling skin, compressed flesh) and,
+  for a shift above 0, whose matrix is not known to be indefinite (the problem's
+  ``definite``; Nocedal & Wright, Numerical Optimization, 2nd ed., sec. 3.4: a Hessian
+  modified until positive definite). An indefinite shifted matrix can still give a
+  descending direction, and near the shift where one of its eigenvalues crosses zero an
+  enormous one (metres for a millimetre's step) whose step bound and line search then
+  crawl; the largest shift is taken if it descends, definite or not;
 - the matrix is then *kept* (``keep``), from iteration to iteration and from solve to
   solve, while it fits the step (the problem's ``kept_fits``: the same constraints and
   dt, at most ``MAX_FACTOR_AGE`` solves old) and each whole step with it cuts the
@@ -45,6 +51,8 @@ Hooks (problem first; arrays (n_dof,) float64):
     ``project(grad, g_f)``: g_f = S grad.
     ``forget``: drop the kept matrix.  ``keep``: keep the matrix just factorised.
     ``factorise(x, shift)`` -> bool (False: singular).
+    ``definite`` -> bool: False if the matrix of the last fresh ``direction`` is known
+        to be indefinite (True if it is positive definite or its inertia is unknown).
     ``direction(g_f, dq, fresh)`` -> (finite, slope g_f . dq): dq = -A^-1 g_f with the
         matrix just factorised (``fresh``) or the kept one.
     ``step_bound(x, dq)`` -> the line search's first step (<= 1).
@@ -74,7 +82,7 @@ UNSUPPORTED = 5  # a non-symmetric contact filter (oblique faces): use the refer
 C_SOLVES, C_HESSIAN_EVALS, C_EVALS, C_FACTORS, C_SUBSTEPS, C_DIRECTIONS, C_SIZE = range(7)
 
 #: multiples of the (filtered) inertia M / dt^2 added to an indefinite Newton matrix
-SHIFTS = (0.0, 1.0, 10.0, 100.0, 1000.0)
+SHIFTS = (0.0, 1.0, 10.0, 100.0, 1e3, 1e4, 1e5, 1e6)
 
 #: a Newton step with the kept matrix must cut the filtered residual max |S g| below
 #: this fraction of the last one, else the matrix is assembled and factorised afresh
@@ -129,6 +137,10 @@ def factorise(problem, x, shift):
 
 def direction(problem, g_f, dq, fresh):
     return problem.direction(g_f, dq, fresh)
+
+
+def definite(problem):
+    return problem.definite()
 
 
 def step_bound(problem, x, dq):
@@ -200,7 +212,8 @@ def newton_iteration(problem, q, dt, tol, max_it, history, counts):
                     continue
                 counts[C_DIRECTIONS] += 1
                 finite, slope = direction(problem, g_f, dq, True)
-                if finite and slope <= 0:
+                if finite and slope <= 0 and (
+                        shift == 0.0 or shift == SHIFTS[-1] or definite(problem)):
                     found = True
                     break
             if not found:
