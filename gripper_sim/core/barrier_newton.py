@@ -241,7 +241,7 @@ def _direction_hook(problem, g_f, dq, fresh):
 def _definite_hook(problem):
     if _is_problem(problem):
         def impl(problem):
-            return problem.linear.flags[linear_solve.F_NEGATIVE] <= 0
+            return linear_solve.not_known_indefinite(problem.linear)
         return impl
 
 

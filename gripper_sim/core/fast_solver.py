@@ -561,7 +561,7 @@ class _NewtonProblem(StepProblem):
         return math.isfinite(slope), slope  # a non-finite entry of x makes the slope one
 
     def definite(self) -> bool:
-        return self.solver.linear.flags[linear_solve.F_NEGATIVE] <= 0
+        return linear_solve.not_known_indefinite(self.solver.linear)
 
     def step_bound(self, x, dq) -> float:
         return min(self.solver.max_step(x, dq),

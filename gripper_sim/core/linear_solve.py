@@ -164,6 +164,13 @@ def factorise(state, values):
 
 
 @njit(cache=True)
+def not_known_indefinite(state):
+    """False if the last system's matrix was factorised afresh and found indefinite
+    (``F_NEGATIVE`` > 0); True if positive definite or not counted."""
+    return state.flags[F_NEGATIVE] <= 0
+
+
+@njit(cache=True)
 def _negative_eigenvalues(state, indefinite_blocks, c, small_inv):
     """The negative eigenvalues of A + u diag(c) u^T, A the kept factor's matrix with
     ``indefinite_blocks`` pivot blocks not positive definite, c (k,), ``small_inv`` the
