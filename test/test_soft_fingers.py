@@ -23,7 +23,8 @@ from gripper_sim.core.newton import INFEASIBLE_START
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.core.stepper import NEWTON_FAILURES, NewtonFailure
 from gripper_sim.errors import CommandError, ConfigError, ConfigWarning
-from gripper_sim.workflows.grasp import GraspSequence, run_grasp
+from gripper_sim.workflows.factory import make_simulation
+from gripper_sim.workflows.grasp import GraspSequence, evaluate, run_grasp
 
 RADIUS = 0.03
 MODULUS = 1e6
@@ -421,6 +422,15 @@ def test_a_fruit_that_does_not_fit_between_the_fingers_is_refused(override, key)
         Simulation(config)
 
 
+def test_an_open_gap_at_which_the_fingers_overlap_is_refused():
+    """Fingers far above the fruit touch it at no gap; an open gap below their stop (two
+    6 mm pads: 12 mm) is refused, and the default opens them 1 cm past it."""
+    above = ['gripper.finger.type=solid_pad', 'gripper.initial_lift=0.3']
+    with pytest.raises(ConfigError, match="'gripper.initial_gap'.*overlap at the open gap"):
+        Simulation(load_config(overrides=above + ['gripper.initial_gap=0.011']))
+    assert Simulation(load_config(overrides=above)).initial_gap == pytest.approx(0.022)
+
+
 @pytest.mark.parametrize('override,match', [('gripper.finger.pad.enabled=true', 'pad.enabled'),
                                             ('contact.restitution=0.5', 'restitution')])
 def test_unsupported_combinations_are_refused(override, match):
@@ -446,6 +456,27 @@ def test_a_gap_that_presses_the_fingers_together_is_a_command_error():
         sim.command_gap(0.011)  # two 6 mm pads
     sim.command_gap(0.012)
     assert sim.gripper_state.target_gap == 0.012
+
+
+@pytest.mark.parametrize('dimension', [2, 3])
+def test_force_mode_jaws_stop_where_the_fingers_meet_and_the_grasp_says_so(dimension):
+    """Closing in force mode on nothing (the fingers far above the fruit), the jaws stop
+    at their stop, where the two pads' fronts meet, instead of pressing the fingers
+    through each other (the model has no contact between them); the grasp ends 'failed'
+    and its message names the stop. Before, the 3D Fin Ray's jaws closed 8 mm past it."""
+    coarse = ['fruit.mesh.subdivisions=3'] if dimension == 3 else []
+    config = load_config(overrides=['gripper.finger.type=solid_pad', f'dimension={dimension}',
+                                    'gripper.initial_lift=0.3', *coarse])
+    sim = make_simulation(config)
+    assert sim.smallest_gap == pytest.approx(0.012)   # two 6 mm pads
+    gaps = []
+    sim.add_observer(lambda result: gaps.append(result.gap))
+    evaluation = evaluate(sim, GraspSequence(sim, 5.0, close_speed=0.2), 5.0, time_limit=2.0)
+    assert evaluation.outcome == 'failed'
+    assert 'at their stop, a 12 mm gap' in evaluation.message
+    assert evaluation.peak_grip_force == 0.0
+    assert min(gaps) == pytest.approx(sim.smallest_gap, abs=1e-12)
+    assert gaps[-1] == pytest.approx(sim.smallest_gap, abs=1e-12)
 
 
 @pytest.mark.parametrize('overrides,key', [

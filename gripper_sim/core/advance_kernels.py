@@ -42,16 +42,17 @@ from gripper_sim.core.measures import numpy_sum
 #: transport accelerations m/s^2, dt s, fruit rest width m, plain jaws (1/0), the flat
 #: jaws' clearance applies (1/0), the fruit has flesh in the kernel (1/0), bruise
 #: pressure Pa, failure stress Pa, failure strain (NaN: none), the force-mode drive's
-#: damping N s/m]
+#: damping N s/m, the jaws' stop (their smallest gap) m]
 (K_MAX_GAP, K_MAX_SPEED, K_LIFT_ACC, K_X_ACC, K_DT, K_REST_WIDTH, K_PLAIN, K_CLEARANCE,
- K_FLESH, K_BRUISE, K_FAILURE_STRESS, K_FAILURE_STRAIN, K_DAMPING, K_SIZE) = range(14)
+ K_FLESH, K_BRUISE, K_FAILURE_STRESS, K_FAILURE_STRAIN, K_DAMPING, K_MIN_GAP,
+ K_SIZE) = range(15)
 #: ``run`` slots (module doc)
 (R_TIME, R_JAW_LEFT, R_JAW_RIGHT, R_SLIP_REF, R_HELD_SLIP, R_PEAK_PRESSURE, R_PEAK_STRESS,
  R_CRUSHED, R_STEPS, R_ITERATIONS, R_SOLVES, R_NEWTON, R_SLIDE, R_MAX_SLIP, R_MAX_DROP,
  R_PREVIOUS_TIME, R_SIZE) = range(17)
 #: ``rules`` slots (``multistep.StopRules``): stop after a step where both jaws touch and
 #: the grip force is at least S_FORCE N; the time is past S_DEADLINE s; S_GAP_CLOSED
-#: (1/0) and the gap is 0; the time since S_PHASE_START is at least S_ELAPSED s;
+#: (1/0) and the jaws are at their stop (K_MIN_GAP); the time since S_PHASE_START is at least S_ELAPSED s;
 #: S_LIFTED and S_MOVED (1/0) and the lift, the transport (each asked for) reached
 #: its target at rest; the gap is within 1e-9 m of S_GAP_AT (NaN: off); S_DROP (1/0) and
 #: no jaw touches or the slip exceeds S_DROP_SLIP m; S_BRUISE (1/0) and the fruit is
@@ -91,7 +92,7 @@ def _bounds(grip, kin, dt):
     """``GripperKinematics.gap_bounds``."""
     return jaw_drive.gap_bounds(grip[G_GAP], grip[G_SPEED], kin[K_MAX_SPEED],
                                 grip[G_MODE] > 0 and grip[G_MEASURED_FORCE] > 0.0,
-                                kin[K_MAX_GAP], dt)
+                                kin[K_MIN_GAP], kin[K_MAX_GAP], dt)
 
 
 @njit(cache=True)
@@ -127,7 +128,7 @@ def _solve(x, v, c_int, c_float, grip, new, gap, jaw_left, jaw_right, kin, x_out
             grip[G_MODE] > 0, grip[G_GAP], grip[G_TARGET_GAP], grip[G_TARGET_FORCE],
             grip[G_SPEED], grip[G_STIFFNESS], grip[G_MAX_EFFORT], force,
             jaw_left > 0 and jaw_right > 0, _clearance(x, grip, jaw_left, jaw_right, kin),
-            lo, hi, kin[K_MAX_GAP], dt, _damping_rate(grip, kin, dt))
+            lo, hi, kin[K_MIN_GAP], kin[K_MAX_GAP], dt, _damping_rate(grip, kin, dt))
     _moved(grip, dt, gap, force, kin, new)
     face_par, face_dyn, fconst, iconst, layout, fpar, ipar = fixed
     history, out, normal_out, pressure_out, meas_out, counts = outs
@@ -169,7 +170,7 @@ def _drive_jaws(x, v, start_int, start_float, c_int, c_float, ends_int, ends_flo
     else:
         lo, hi = _bounds(grip, kin, dt)
         servo = jaw_drive.servo_gap(grip[G_GAP], grip[G_TARGET_GAP], grip[G_SPEED],
-                                    kin[K_MAX_GAP], dt)
+                                    kin[K_MIN_GAP], kin[K_MAX_GAP], dt)
         goal, lo, hi = grip[G_MAX_EFFORT], servo, max(servo, hi)
     start_gap = grip[G_GAP]
     damped = _damping_rate(grip, kin, dt)
@@ -369,7 +370,7 @@ def advance(x, v, c_int, c_float, forces, grip, run, kin, rules, peaks, site, fi
                 max_slip = max(max_slip, slide)
         # the stop rules
         if _stops(rules, grip, time, n_steps, both, touching, grip_force, slip, max_slip,
-                  damage_site, bruised or run[R_CRUSHED] > 0):
+                  damage_site, bruised or run[R_CRUSHED] > 0, kin[K_MIN_GAP]):
             return STOPPED
         run[R_SLIDE], run[R_MAX_SLIP], run[R_MAX_DROP] = slide, max_slip, max_drop
     return STOPPED  # not reached: the loop returns
@@ -377,13 +378,14 @@ def advance(x, v, c_int, c_float, forces, grip, run, kin, rules, peaks, site, fi
 
 @njit(cache=True)
 def _stops(rules, grip, time, n_steps, both, touching, grip_force, slip, max_slip,
-           damage_site, damaged):
-    """Whether a stop rule (S_*) fires after a step with these measures."""
+           damage_site, damaged, min_gap):
+    """Whether a stop rule (S_*) fires after a step with these measures (``min_gap`` m:
+    the jaws' stop)."""
     if both and grip_force >= rules[S_FORCE]:
         return True
     if time > rules[S_DEADLINE]:
         return True
-    if rules[S_GAP_CLOSED] > 0 and grip[G_GAP] <= 0.0:
+    if rules[S_GAP_CLOSED] > 0 and grip[G_GAP] <= min_gap:
         return True
     if time - rules[S_PHASE_START] >= rules[S_ELAPSED]:
         return True

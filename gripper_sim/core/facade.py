@@ -125,8 +125,10 @@ class SimulationFacade:
         self.touching_gap = (self.fruit.rest_width if self._soft is None else
                              self._soft.touching_gap(self.initial_positions
                                                      - self._in_plane(0.0, self.initial_lift)))
+        # (a fruit below or above the fingers: they close on nothing down to their stop)
         self.initial_gap = (c['gripper.initial_gap'] if c['gripper.initial_gap'] is not None
-                            else min(self.touching_gap + 0.01, c['gripper.max_gap']))
+                            else min(max(self.touching_gap, self.smallest_gap) + 0.01,
+                                     c['gripper.max_gap']))
         if self.initial_gap > c['gripper.max_gap']:
             raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
 
@@ -221,8 +223,10 @@ class SimulationFacade:
 
     @property
     def smallest_gap(self) -> float:
-        """m, the smallest gap a command may ask for: 0, or with deformable fingers the gap
-        at which their fronts at rest would meet."""
+        """m, the jaws' stop (``GripperKinematics.min_gap``): the smallest gap a command
+        may ask for and a force-mode drive closes to, 0 or, with deformable fingers, the
+        gap at which their fronts at rest would meet (a Fin Ray's rigid base reaches that
+        far: there the two bases collide)."""
         return 2.0 * self._soft.thickness if self._soft is not None else 0.0
 
     def command_force(self, force: float, speed: float | None = None) -> None:

@@ -70,12 +70,15 @@ class GripperKinematics:
         transport_acceleration: m/s^2, of the sideways transport.
         max_speed: m/s, the drive's top gap rate (see ``gap_bounds``).
         damping: N s/m, the force-mode drive's damping (``jaw_drive.damping_rate``).
+        min_gap: m, the jaws' stop: the gap at which the fingers' rigid parts meet (0 for
+            rigid fingers; ``SimulationFacade.smallest_gap``). No drive closes past it.
     """
 
     def __init__(self, max_gap: float, lift_acceleration: float, initial_stiffness: float,
                  transport_acceleration: float = 1.0, max_speed: float = math.inf,
-                 damping: float = 0.0):
+                 damping: float = 0.0, min_gap: float = 0.0):
         self.max_gap = max_gap
+        self.min_gap = min_gap
         self.max_speed = max_speed
         self.damping = damping
         self.lift_acceleration = lift_acceleration
@@ -99,7 +102,7 @@ class GripperKinematics:
         gap = jaw_drive.predicted_gap(
             state.mode == 'force', state.gap, state.target_gap, state.target_force,
             state.speed, state.stiffness, state.max_effort, grip_force, both_in_contact,
-            clearance, lo, hi, self.max_gap, dt, self.damping_rate(state, dt))
+            clearance, lo, hi, self.min_gap, self.max_gap, dt, self.damping_rate(state, dt))
         return self.moved(state, dt, gap, grip_force)
 
     def damping_rate(self, state: GripperState, dt: float) -> float:
@@ -124,7 +127,8 @@ class GripperKinematics:
     def servo_gap(self, state: GripperState, dt: float) -> float:
         """m, the gap after ``dt`` (s) of the position servo's move towards its target at
         the commanded speed, before any force limit."""
-        return jaw_drive.servo_gap(state.gap, state.target_gap, state.speed, self.max_gap, dt)
+        return jaw_drive.servo_gap(state.gap, state.target_gap, state.speed, self.min_gap,
+                                   self.max_gap, dt)
 
     def gap_bounds(self, state: GripperState, dt: float) -> tuple[float, float]:
         """(smallest, largest) gap (m) the drive can reach from ``state`` in ``dt`` (s):
@@ -134,5 +138,5 @@ class GripperKinematics:
         lost 10-12 % of its grip force while the drive re-closed at the approach speed)."""
         return jaw_drive.gap_bounds(state.gap, state.speed, self.max_speed,
                                     state.mode == 'force' and state.measured_force > 0.0,
-                                    self.max_gap, dt)
+                                    self.min_gap, self.max_gap, dt)
 

@@ -74,22 +74,24 @@ def moved(gap0, gap, lift, lift_rate, target_lift, lift_speed, lift_acceleration
 
 
 @njit(cache=True)
-def servo_gap(gap, target_gap, speed, max_gap, dt):
+def servo_gap(gap, target_gap, speed, min_gap, max_gap, dt):
     """m, the gap after ``dt`` (s) of the position servo's move from ``gap`` towards
-    ``target_gap`` at ``speed`` (m/s), before any force limit."""
+    ``target_gap`` at ``speed`` (m/s), before any force limit, within the jaws' stroke
+    [``min_gap``, ``max_gap``] (m)."""
     travel = speed * dt
-    return min(max(target_gap, gap - travel, 0.0), gap + travel, max_gap)
+    return min(max(target_gap, gap - travel, min_gap), gap + travel, max_gap)
 
 
 @njit(cache=True)
-def gap_bounds(gap, speed, max_speed, gripping, max_gap, dt):
+def gap_bounds(gap, speed, max_speed, gripping, min_gap, max_gap, dt):
     """(smallest, largest) gap (m) the drive can reach from ``gap`` in ``dt`` (s): it
     closes at the commanded ``speed`` until it grips (``gripping``: force mode with a
     force measured); then it closes and opens at up to its own top speed ``max_speed``
-    (m/s), as a force-controlled drive does."""
+    (m/s), as a force-controlled drive does. Never past the jaws' stroke [``min_gap``,
+    ``max_gap``] (m): ``min_gap`` is the stop where the fingers' rigid parts meet."""
     fastest = max(speed, max_speed)
     closing = fastest if gripping else speed
-    return max(gap - closing * dt, 0.0), min(gap + fastest * dt, max_gap)
+    return max(gap - closing * dt, min_gap), min(gap + fastest * dt, max_gap)
 
 
 @njit(cache=True)
@@ -129,7 +131,8 @@ def contact_stiffness(step_stiffness, rate, previous):
 
 @njit(cache=True)
 def predicted_gap(force_mode, gap, target_gap, target_force, speed, stiffness, max_effort,
-                  grip_force, both_in_contact, clearance, lo, hi, max_gap, dt, damped=0.0):
+                  grip_force, both_in_contact, clearance, lo, hi, min_gap, max_gap, dt,
+                  damped=0.0):
     """m, the gap a step is first solved at (``GripperKinematics.advance``): where the
     grip force (N, measured at the step's start) would meet its target (force mode, with
     the drive's damping ``damped`` N/m, ``damping_rate``) or the effort limit (position
@@ -141,7 +144,7 @@ def predicted_gap(force_mode, gap, target_gap, target_force, speed, stiffness, m
         else:
             rate = -(target_force - grip_force) / ((stiffness + damped) * dt)
     else:
-        rate = (servo_gap(gap, target_gap, speed, max_gap, dt) - gap) / dt
+        rate = (servo_gap(gap, target_gap, speed, min_gap, max_gap, dt) - gap) / dt
         if rate < 0 and both_in_contact and grip_force > 0:
             rate = max(rate, -(max_effort - grip_force) / (stiffness * dt))
     return min(max(gap + rate * dt, lo), hi)

@@ -39,7 +39,7 @@ class StopRules:
     Attributes:
         grip_force: N; both jaws touch the fruit and the grip force is at least this.
         deadline: s; the time is past it.
-        gap_closed: the gap is 0.
+        gap_closed: the jaws are at their stop (``GripperKinematics.min_gap``).
         phase_start, elapsed: s; the time since ``phase_start`` is at least ``elapsed``.
         lifted, moved: the lift, the transport (each one asked for) reached its target
             and stopped.
@@ -194,7 +194,7 @@ class MultiStep:
                         float(sim.clearance_is_planar), float(path.flesh_in_kernel),
                         tracker.bruise_pressure, tracker.failure_stress,
                         math.nan if failure_strain is None else failure_strain,
-                        kinematics.damping], dtype=float)
+                        kinematics.damping, kinematics.min_gap], dtype=float)
         peaks = np.zeros(ak.PEAK_SIZE)
         normal, pressure = np.empty(n), np.empty(len(path.surface))
         damage = list(path.damage_inputs())

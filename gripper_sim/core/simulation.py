@@ -95,7 +95,8 @@ class Simulation(SimulationFacade):
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
             initial_stiffness=c['fruit.flesh.youngs_modulus'] * self.fruit.depth,
             transport_acceleration=c['gripper.transport_acceleration'],
-            max_speed=c['gripper.max_speed'], damping=c['gripper.force_damping'])
+            max_speed=c['gripper.max_speed'], damping=c['gripper.force_damping'],
+            min_gap=self.smallest_gap)
         self._observers: list[Callable[[StepResult], None]] = []
         self._fast = (FastPath.create(self) if fast is not False and self._barrier is None
                       else None)

@@ -250,6 +250,11 @@ class SoftFingers:
                               f'{self.thickness * 1e3:.3g} mm thick fill the jaw stroke '
                               f"(gripper.max_gap = {stroke * 1e3:.3g} mm); make them thinner "
                               'or the stroke larger')
+        if open_gap < both:
+            raise ConfigError(f"config key 'gripper.initial_gap': the {kind} fingers, "
+                              f'{self.thickness * 1e3:.3g} mm thick ({key}), overlap at the '
+                              f'open gap ({open_gap * 1e3:.3g} mm); open the jaws to at least '
+                              f'{both * 1e3:.3g} mm')
         if open_gap <= touching_gap:
             gap_key = ('gripper.initial_gap' if config['gripper.initial_gap'] is not None
                        else 'gripper.max_gap')

@@ -150,7 +150,8 @@ class Simulation3D(SimulationFacade):
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
             initial_stiffness=0.1 * c['fruit.flesh.youngs_modulus'] * radius,
             transport_acceleration=c['gripper.transport_acceleration'],
-            max_speed=c['gripper.max_speed'], damping=c['gripper.force_damping'])
+            max_speed=c['gripper.max_speed'], damping=c['gripper.force_damping'],
+            min_gap=self.smallest_gap)
         self._observers: list[Callable[[StepResult3D], None]] = []
         self.reset()
         if self._soft is None and self._barrier is None:

@@ -118,9 +118,10 @@ class GraspSequence:
             both = result.in_contact_with('left_jaw') and result.in_contact_with('right_jaw')
             if both and result.grip_force >= FORCE_REACHED * self.target_force:
                 self._enter(SQUEEZING)
-            elif sim.time > self.closing_deadline or result.gap <= 0.0:
+            elif sim.time > self.closing_deadline or result.gap <= sim.smallest_gap:
                 self._finish('failed', f'the grip force did not reach {self.target_force} N '
-                             f'(reached {self.peaks.grip_force:.3g} N)')
+                             f'(reached {self.peaks.grip_force:.3g} N)'
+                             f'{stop_reached(sim, result.gap)}')
         elif self.phase == SQUEEZING:
             if elapsed >= SETTLE_TIME:
                 if self.lift_height > 0:
@@ -239,6 +240,17 @@ SOLVER_FAILED = 'solver failed'
 PINCHED = 'pinched'
 #: ``GraspEvaluation.bruised_at`` of a pinched run
 PINCH = 'pinch'
+
+
+def stop_reached(sim, gap: float) -> str:
+    """The end of a message on a close that ended at ``gap`` (m): why, if the jaws are at
+    their stop (``Simulation.smallest_gap``), else ''."""
+    if gap > sim.smallest_gap:
+        return ''
+    if sim.smallest_gap <= 0.0:
+        return '; the jaws closed fully'
+    return (f': the jaws are at their stop, a {sim.smallest_gap * 1e3:.4g} mm gap, where '
+            f'the fingers\' rigid bases meet')
 
 
 @dataclass

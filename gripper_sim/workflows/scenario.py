@@ -51,10 +51,10 @@ from gripper_sim.core.slip import SLIP_TOLERANCE
 from gripper_sim.core.vocabulary import DROP_SLIP, damage_fields
 from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import ConfigError
+from gripper_sim.workflows.grasp import FORCE_REACHED, stop_reached
+
 #: height (m) above the table at which the lowered fruit is let go
 PLACE_CLEARANCE = 5e-4
-#: fraction of the target force at which closing ends (as grasp.py)
-FORCE_REACHED = 0.97
 
 PHASES = ('approach', 'close', 'squeeze', 'lift', 'transport', 'lower', 'open', 'retreat',
           'settle', 'done')
@@ -400,11 +400,11 @@ class PickAndPlace:
             if reached:
                 self.reached_grip = True
                 self._enter('squeeze')
-            elif sim.time > self.closing_deadline or result.gap <= 0.0:
+            elif sim.time > self.closing_deadline or result.gap <= sim.smallest_gap:
                 what = (f"{sc['close.force']} N" if sc['close.mode'] == 'force'
                         else f"the gap {sc['close.gap']} m")
                 self._end('failed', f'the grip did not reach {what} (peak force '
-                          f'{self.peaks.grip_force:.3g} N)')
+                          f'{self.peaks.grip_force:.3g} N){stop_reached(sim, result.gap)}')
         elif self.phase == 'squeeze':
             if elapsed >= sc['squeeze.time'] - 0.5 * sim.dt:
                 if self._past_until('lift'):
