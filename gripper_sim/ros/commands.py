@@ -18,6 +18,7 @@ from rclpy.qos import QoSProfile
 from std_msgs.msg import Float64, String
 
 from gripper_sim.errors import CommandError, ConfigError
+from gripper_sim.workflows.grasp import FORCE_REACHED, stop_reached
 
 #: ``on_done(None)`` once a command ran, ``on_done(reason)`` if the core refused it or
 #: a newer command of its slot replaced it (the reason then starts with ``SUPERSEDED``)
@@ -112,7 +113,10 @@ class JawCommandTopics:
     <command>`` once applied, ``rejected: <command>: <reason>``, or ``superseded:
     <command>: by <newer command>`` when a newer command for the jaws (gap, force, open)
     or for the lift arrived before the next step applied it: only the latest set-point
-    counts (what ``gripper-sim jaw`` waits for).
+    counts (what ``gripper-sim jaw`` waits for). A force command whose jaws then reach
+    their stop (``Simulation.smallest_gap``: the deformable fingers' fronts meet, or a
+    gap of 0) short of its force gets one more: ``stopped: <command>: the grip is <f>
+    N: the jaws are at their stop ...``, logged as a warning too.
 
     Args:
         node: the ``SimNode`` (its ``sim``, ``jaws`` and ``commands``).
@@ -129,9 +133,14 @@ class JawCommandTopics:
                                  callback_group=group)
         node.create_subscription(Float64, '~/lift/command', self._on_lift, qos,
                                  callback_group=group)
+        #: (description, N) of the force command applied last whose stop is watched for
+        #: (physics thread only), or None
+        self._watched: tuple[str, float] | None = None
+        node.add_step_listener(self._watch_stop)
 
     def _command(self, description: str, value: Any, unit: str, slot: str,
-                 command: Callable[[float], None], allow_negative: bool = False) -> None:
+                 command: Callable[[float], None], allow_negative: bool = False,
+                 watch_stop: bool = False) -> None:
         node = self._node
         problem = command_problem(value, description, unit, allow_negative)
         owner = node.jaws.owner
@@ -146,6 +155,8 @@ class JawCommandTopics:
 
         def report(reason: str | None) -> None:
             if reason is None:
+                if slot == JAWS:
+                    self._watched = (what, float(value)) if watch_stop else None
                 text = f'accepted: {what}'
             elif reason.startswith(SUPERSEDED):
                 text = f'superseded: {what}: {reason}'
@@ -158,7 +169,29 @@ class JawCommandTopics:
         self._command('gap command', msg.data, 'm', JAWS, self._node.sim.command_gap)
 
     def _on_force(self, msg: Float64) -> None:
-        self._command('force command', msg.data, 'N', JAWS, self._node.sim.command_force)
+        self._command('force command', msg.data, 'N', JAWS, self._node.sim.command_force,
+                      watch_stop=True)
+
+    def _watch_stop(self, result) -> None:
+        """After a step (physics thread): report the watched force command once its jaws
+        are at their stop short of its force; forget it once they are at the stop, or once
+        the jaws are no longer its (a hold, a goal, a reset)."""
+        if self._watched is None:
+            return
+        node, (what, force) = self._node, self._watched
+        sim = node.sim
+        if sim.gripper_state.mode != 'force' or node.jaws.owner is not None:
+            self._watched = None
+            return
+        if result.gap > sim.smallest_gap:
+            return
+        self._watched = None
+        if result.grip_force >= FORCE_REACHED * force:
+            return
+        text = (f'stopped: {what}: the grip is {result.grip_force:.3g} N'
+                f'{stop_reached(sim, result.gap)}')
+        node.get_logger().warning(text)
+        self._status.publish(String(data=text))
 
     def _on_lift(self, msg: Float64) -> None:
         self._command('lift command', msg.data, 'm', LIFT, self._node.sim.command_lift,
