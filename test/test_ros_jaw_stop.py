@@ -27,7 +27,7 @@ def test_a_force_command_that_ends_at_the_jaws_stop_is_reported(tmp_path, node_a
             'the stop reported')
         assert answers[0] == 'accepted: force command 5 N'
         assert stopped == ("stopped: force command 5 N: the grip is 0 N: the jaws are at "
-                           "their stop, a 12 mm gap, where the fingers' rigid bases meet")
+                           "their stop, a 12 mm gap, where the two fingers meet")
         client.spin_until(lambda: abs(client.latest['fruit/state'].gap - 0.012) < 1e-9, 60,
                           'the published gap at the stop')
         assert process.wait_for_log('stopped: force command 5 N', 30)

@@ -250,7 +250,7 @@ def stop_reached(sim, gap: float) -> str:
     if sim.smallest_gap <= 0.0:
         return '; the jaws closed fully'
     return (f': the jaws are at their stop, a {sim.smallest_gap * 1e3:.4g} mm gap, where '
-            f'the fingers\' rigid bases meet')
+            'the two fingers meet')
 
 
 @dataclass
