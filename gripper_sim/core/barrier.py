@@ -86,6 +86,11 @@ START_GAP_FRACTION = 0.5
 #: the line search's CCD keeps ipctk's default, which stops short of 0.8 of the time of
 #: impact so that a Newton step never lands on a face)
 EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
+#: the line search's CCD (3D): ipctk's default rescaling (0.8 of the time of impact), with
+#: the exact check's tolerance (m): ipctk's default 1e-6 m is dhat itself at dhat = 1 um,
+#: and two of a 3D Fin Ray's members pressed 26 nm apart crossed within it (the self-
+#: contact test failed on an AMD EPYC machine, passed on another)
+LINE_SEARCH_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 0.8)
 #: the candidates of a Newton step serve positions this fraction of dhat outside the box
 #: each vertex sweeps along it (round-off of q + s dq), their boxes inflated by as much
 SWEPT_MARGIN = 1e-2
@@ -831,7 +836,8 @@ class BarrierContact(Energy):
         n_v = self.vertex_nodes.size
         self._swept = (np.minimum(v0[:n_v], v1[:n_v]), np.maximum(v0[:n_v], v1[:n_v]),
                        candidates)
-        return float(candidates.compute_collision_free_stepsize(self._mesh, v0, v1))
+        return float(candidates.compute_collision_free_stepsize(
+            self._mesh, v0, v1, narrow_phase_ccd=LINE_SEARCH_CCD))
 
     def _collisions(self, v: np.ndarray) -> ipctk.NormalCollisions:
         """The pairs closer than dhat at the collision mesh's vertices ``v`` (``vertices``):
