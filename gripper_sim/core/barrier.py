@@ -83,8 +83,8 @@ INFINITE_FACE_LENGTH = 4.0
 #: a start of step whose pushed nodes would stop this fraction of dhat from a face
 START_GAP_FRACTION = 0.5
 #: the start's check: whether the straight paths cross at all (no conservative rescaling;
-#: the line search's CCD keeps ipctk's default, which stops short of 0.8 of the time of
-#: impact so that a Newton step never lands on a face)
+#: the line search's CCD stops short, at 0.8 of the time of impact, so that a Newton step
+#: never lands on a face)
 EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
 #: the line search's CCD (3D): ipctk's default rescaling (0.8 of the time of impact), with
 #: the exact check's tolerance (m): ipctk's default 1e-6 m is dhat itself at dhat = 1 um,
