@@ -50,16 +50,16 @@ from gripper_sim.core.measures import numpy_sum
 (R_TIME, R_JAW_LEFT, R_JAW_RIGHT, R_SLIP_REF, R_HELD_SLIP, R_PEAK_PRESSURE, R_PEAK_STRESS,
  R_CRUSHED, R_STEPS, R_ITERATIONS, R_SOLVES, R_NEWTON, R_SLIDE, R_MAX_SLIP, R_MAX_DROP,
  R_PREVIOUS_TIME, R_SIZE) = range(17)
-#: ``rules`` slots (``multistep.StopRules``): stop after a step where both jaws touch and
-#: the grip force is at least S_FORCE N; the time is past S_DEADLINE s; S_GAP_CLOSED
-#: (1/0) and the jaws are at their stop (K_MIN_GAP); the time since S_PHASE_START is at least S_ELAPSED s;
-#: S_LIFTED and S_MOVED (1/0) and the lift, the transport (each asked for) reached
-#: its target at rest; the gap is within 1e-9 m of S_GAP_AT (NaN: off); S_DROP (1/0) and
-#: no jaw touches or the slip exceeds S_DROP_SLIP m; S_BRUISE (1/0) and the fruit is
-#: bruised where a jaw or the table presses; S_DAMAGED (1/0) and it is bruised or
-#: crushed; the time reached S_END s; S_MAX_STEPS steps run; the slide exceeds
-#: S_SLIDE_LIMIT m. S_SLIDE (1/0): the slide of the fruit along the jaws is integrated
-#: (``scenario.PickAndPlace._slide``) and the largest slip distance kept
+#: ``rules`` slots (``multistep.StopRules``): stop after a step where both jaws touch
+#: and the grip force is at least S_FORCE N; the time is past S_DEADLINE s; S_GAP_CLOSED
+#: (1/0) and the jaws are at their stop (K_MIN_GAP); the time since S_PHASE_START is at
+#: least S_ELAPSED s; S_LIFTED and S_MOVED (1/0) and the lift, the transport (each asked
+#: for) reached its target at rest; the gap is within 1e-9 m of S_GAP_AT (NaN: off);
+#: S_DROP (1/0) and no jaw touches or the slip exceeds S_DROP_SLIP m; S_BRUISE (1/0) and
+#: the fruit is bruised where a jaw or the table presses; S_DAMAGED (1/0) and it is
+#: bruised or crushed; the time reached S_END s; S_MAX_STEPS steps run; the slide
+#: exceeds S_SLIDE_LIMIT m. S_SLIDE (1/0): the slide of the fruit along the jaws is
+#: integrated (``scenario.PickAndPlace._slide``) and the largest slip distance kept
 (S_FORCE, S_DEADLINE, S_GAP_CLOSED, S_PHASE_START, S_ELAPSED, S_LIFTED, S_MOVED, S_GAP_AT,
  S_DROP, S_DROP_SLIP, S_BRUISE, S_DAMAGED, S_END, S_MAX_STEPS, S_SLIDE, S_SLIDE_LIMIT,
  S_SIZE) = range(17)
