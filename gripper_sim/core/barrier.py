@@ -87,13 +87,11 @@ START_GAP_FRACTION = 0.5
 #: never lands on a face)
 EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
 #: the line search's CCD (3D, ``BarrierContact.line_search_ccd``): ipctk's default
-#: rescaling (0.8 of the time of impact), a tolerance of this fraction of dhat and at
-#: most ``LINE_SEARCH_CCD_ITERATIONS`` (at the cap Tight Inclusion returns a time of
-#: impact no later than the true one). ipctk's default tolerance, 1e-6 m, is dhat itself
-#: at dhat = 1 um: two of a 3D Fin Ray's members pressed 26 nm apart crossed within it
-#: (1e-7 m holds them, 3e-7 m does not). The 3D solid pad's squeeze to 2 N took 12 s of
-#: CPU with 1e-6 m, 124 s with 1e-9 m, 50 s with 1e-8 m and 20 s with 1e-8 m and 1e6
-#: iterations (ipctk's default cap is 1e7)
+#: rescaling, a tolerance of this fraction of dhat (ipctk's default 1e-6 m is dhat itself
+#: at dhat = 1 um, and two of a 3D Fin Ray's members pressed 26 nm apart crossed within
+#: it) and at most ``LINE_SEARCH_CCD_ITERATIONS`` (at the cap Tight Inclusion returns a
+#: time of impact no later than the true one; ipctk's default cap, 1e7, made the 3D
+#: solid pad's squeeze 2.5 times slower; see the README, *Contact models*)
 LINE_SEARCH_CCD_TOLERANCE = 1e-2
 LINE_SEARCH_CCD_ITERATIONS = 10 ** 6
 #: the candidates of a Newton step serve positions this fraction of dhat outside the box
@@ -290,7 +288,8 @@ class BarrierContact(Energy):
         self.settings = settings
         self.potential = ipctk.BarrierPotential(settings.dhat, settings.stiffness, True)
         self.line_search_ccd = ipctk.TightInclusionCCD(
-            LINE_SEARCH_CCD_TOLERANCE * settings.dhat, LINE_SEARCH_CCD_ITERATIONS, 0.8)
+            LINE_SEARCH_CCD_TOLERANCE * settings.dhat, LINE_SEARCH_CCD_ITERATIONS,
+            ipctk.TightInclusionCCD.DEFAULT_CONSERVATIVE_RESCALING)
         self.friction = ipctk.FrictionPotential(settings.friction_smoothing)
         n_v = self.vertex_nodes.size
         self.vertex_dofs = element_dofs(self.vertex_nodes[:, None], d).ravel()
