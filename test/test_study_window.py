@@ -157,3 +157,29 @@ def test_a_grid_study_tells_a_solver_failure_above_the_safe_forces_from_a_bruise
                               [chain(0, 'solver failed'), chain(1, 'bruised')])
     assert [(w.min_force, w.max_force) for w in windows] == [(5.0, 10.0), (5.0, 10.0)]
     assert [w.max_force_limited_by for w in windows] == ['solver failure', 'bruise']
+
+
+def test_a_force_grid_whose_largest_force_is_not_reached_ends_below_it():
+    """On a force grid an undamaged run whose grip stayed below its command (outcome
+    'failed') is not safe: the fruit's upper bound is the force below it, limited by
+    'grip not reached', and the population counts such fruits."""
+    from types import SimpleNamespace
+    from gripper_sim.cli.study import describe_window
+    from gripper_sim.workflows.study import _sample_windows
+
+    def evaluation(force, outcome, peak):
+        return SimpleNamespace(force=force, outcome=outcome, held=outcome == 'held',
+                               bruised=False, crushed=False, slip_distance=0.0,
+                               peak_grip_force=peak, peak_jaw_pressure=0.0,
+                               peak_table_pressure=0.0, peak_damage_pressure=0.0,
+                               bruised_at='')
+
+    chain = SimpleNamespace(done=True, setup=SimpleNamespace(sample=0), result=[
+        evaluation(5.0, 'held', 5.0), evaluation(10.0, 'held', 10.0),
+        evaluation(20.0, 'failed', 14.0)])
+    windows = _sample_windows(SimpleNamespace(forces=(5.0, 10.0, 20.0)), [chain])
+    assert [(w.min_force, w.max_force, w.max_force_limited_by) for w in windows] == [
+        (5.0, 10.0, 'grip not reached')]
+    result = population_window(windows, limit=20.0, fraction=0.9, confidence=0.9)
+    assert result['grip_limit_bounds'] == 1 and result['solver_failure_bounds'] == 0
+    assert "1 fruits' upper bounds are the most grip" in describe_window(result, '90 %')

@@ -9,8 +9,9 @@ import pytest
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import evaluate
 from gripper_sim.workflows.scenario import PickAndPlace, load_scenario, scenario_config
-from gripper_sim.workflows.window import (GraspWindow, Trial, estimates, table_bruise_load,
-                                          trial_of, trial_setup)
+from gripper_sim.workflows.window import (GraspWindow, Trial, _ask, estimates, run_search,
+                                          table_bruise_load, trial_of, trial_setup,
+                                          upper_bound_limited_by, window_bisections)
 
 
 def bruise_trial(finger: str, force: float):
@@ -55,9 +56,10 @@ def test_on_rigid_flat_jaws_the_jaws_bruise_first_at_their_estimate():
     assert p0 > threshold and load == pytest.approx(jaw_estimate, rel=0.03)
 
 
-def _trial(force, kind, outcome, bruised):
+def _trial(force, kind, outcome, bruised, peak=None):
     return Trial(force=force, kind=kind, held=False, slipped=True, bruised=bruised,
-                 outcome=outcome, slip_distance=0.0, peak_grip_force=force,
+                 outcome=outcome, slip_distance=0.0,
+                 peak_grip_force=force if peak is None else peak,
                  peak_jaw_pressure=0.0, peak_table_pressure=0.0, peak_damage_pressure=0.0,
                  bruised_at=None, wall_time=0.0)
 
@@ -79,3 +81,60 @@ def test_the_window_says_whether_a_bruise_or_a_solver_failure_ended_its_safe_sid
     assert GraspWindow(fruit='apple', finger='fin_ray', min_force=2.0, max_force=math.inf,
                        min_estimate=1.0, max_estimate=16.0, mass=0.134, friction=0.5,
                        tolerance=0.05, trials=trials).max_force_limited_by is None
+
+
+def test_a_grip_the_fingers_do_not_reach_ends_the_safe_side():
+    """A 'bruise' trial whose grip stays below its command, undamaged (a 3D Fin Ray
+    buckles at about 76 N of grip, README), reads 'not reached' and is not safe: the
+    window's upper bound is the largest force reached, limited by 'grip not reached',
+    not inf. A run that ended 'failed' with its grip reached (the fruit not placed) and
+    an undamaged one that held are safe."""
+    buckles_at, bruise_above = 76.0, 150.0
+
+    def trial(request):
+        kind, force = request
+        reached = force <= buckles_at
+        return _trial(force, kind, 'held' if reached else 'failed', force > bruise_above
+                      and reached, peak=force if reached else buckles_at)
+
+    config = {'gripper.max_force': 200.0, 'gripper.finger.pad.enabled': False,
+              'contact.jaw.static_friction': 0.5, 'contact.jaw.kinetic_friction': 0.4,
+              'dimension': 3}
+    bruise = window_bisections(config, 2.0, 20.0, tolerance=0.03)[1]
+    asked = []
+    max_force = run_search(_ask(bruise), lambda r: asked.append(trial(r)) or asked[-1])
+    # a grip within 3 % of its command counts as reached (the scenario's FORCE_REACHED)
+    assert 0.97 * buckles_at < max_force <= buckles_at / 0.97
+    assert upper_bound_limited_by(max_force, asked) == 'grip not reached'
+    above = min((t for t in asked if t.force > max_force), key=lambda t: t.force)
+    assert above.verdict == 'not reached' and not above.safe and not above.bruised
+    assert _trial(90.0, 'bruise', 'failed', False, peak=89.0).safe  # reached: 0.97
+    assert _trial(90.0, 'bruise', 'held', False, peak=60.0).safe  # held: no 'failed'
+    window = GraspWindow(fruit='apple', finger='fin_ray', min_force=2.0,
+                         max_force=max_force, min_estimate=1.0, max_estimate=16.0,
+                         mass=0.134, friction=0.5, tolerance=0.03, trials=asked)
+    assert window.as_dict()['max_force_limited_by'] == 'grip not reached'
+
+
+def test_the_window_command_says_when_the_grip_was_not_reached(monkeypatch, capsys):
+    """`gripper-sim window`'s text for a window that ends below a trial whose grip was
+    not reached: the bound as 'not found: safe up to', and the trial's peak grip."""
+    from gripper_sim.cli.main import main
+    from gripper_sim.workflows import window as window_module
+    trials = [_trial(2.0, 'hold', 'held', False), _trial(70.0, 'bruise', 'held', False),
+              _trial(80.0, 'bruise', 'failed', False, peak=76.4)]
+
+    def grasp_window(config, scenario, tolerance, progress, workers=1):
+        for trial in trials:
+            progress(trial)
+        return GraspWindow(fruit='apple', finger='fin_ray', min_force=2.0, max_force=70.0,
+                           min_estimate=1.3, max_estimate=16.6, mass=0.134, friction=0.5,
+                           tolerance=tolerance, trials=trials, min_force_measured=2.0,
+                           max_force_measured=70.0)
+
+    monkeypatch.setattr(window_module, 'grasp_window', grasp_window)
+    assert main(['window', '--fruit', 'apple', '--finger', 'fin_ray']) == 0
+    out = capsys.readouterr().out
+    assert 'bruise trial   80.000 N: not reached' in out
+    assert 'bruises above   not found: safe up to 70 N commanded' in out
+    assert 'the nearest trial above, 80 N, did not reach its grip: peak 76.4 N' in out

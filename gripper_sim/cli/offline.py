@@ -461,7 +461,7 @@ def run_window(args) -> int:
     high = (f'none up to gripper.max_force ({limit:g} N)' if window.max_force == math.inf
             else 'bruised at every force tried' if window.max_force is None
             else bound(window.max_force, window.max_force_measured))
-    if window.max_force_limited_by == 'solver failure':
+    if window.max_force_limited_by in ('solver failure', 'grip not reached'):
         high = f'not found: safe up to {high}'
     print(f'  holds from      {low}')
     print(f'                  (slides less than window.max_slip = {window.max_slip * 1e3:g} mm;'
@@ -477,6 +477,12 @@ def run_window(args) -> int:
     if window.max_force_limited_by == 'solver failure':
         print('                  (the nearest trial above did not converge: the fruit '
               'bruises somewhere above this force, not at it)')
+    elif window.max_force_limited_by == 'grip not reached':
+        above = min((t for t in window.trials if t.kind == 'bruise'
+                     and t.force > window.max_force), key=lambda t: t.force)
+        print(f'                  (the nearest trial above, {above.force:.3g} N, did not '
+              f'reach its grip: peak {above.peak_grip_force:.3g} N, not bruised; the '
+              'fingers deliver no more)')
     if window.exists:
         top = 'gripper.max_force' if window.max_force == math.inf else \
             f'{window.max_force:.3g} N'

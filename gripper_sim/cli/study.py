@@ -83,4 +83,8 @@ def describe_window(population: dict | None, percent: str) -> str:
     if failures:
         text += (f"; {failures} fruits' upper bounds are solver failures, not bruises (they "
                  'bruise somewhere above)')
+    limited = population.get('grip_limit_bounds', 0)
+    if limited:
+        text += (f"; {limited} fruits' upper bounds are the most grip their fingers "
+                 'delivered, not bruises (a larger command was not reached)')
     return text

@@ -44,7 +44,9 @@ OUTCOMES: dict[str, str] = {
                'pinched between them: crushed there (bruised_at pinch), and the run ends',
     'canceled': 'the Grasp goal was canceled',
     'running': 'the run ended (time limit) before it had an outcome',
-    'safe': 'a window trial that did not bruise or crush the fruit',
+    'safe': 'a window trial that did not bruise or crush the fruit, at its commanded grip',
+    'not reached': 'a window bruise trial whose grip stayed below its command, the fruit '
+                   'undamaged (the fingers deliver no more): counts as neither held nor safe',
     'error': 'a study case raised an error (its message is the row\'s error)',
 }
 
@@ -111,14 +113,17 @@ KEYS: dict[str, Term] = {
     'min_force': Term('N', 'lower bound, commanded: the smallest force whose trial slid '
                            'less than window.max_slip'),
     'max_force': Term('N', 'upper bound, commanded: the largest force that did not bruise '
+                           'and was reached '
                            '("inf": none up to gripper.max_force)'),
     'min_force_measured': Term('N', 'lower bound, measured: peak_grip_force of its trial'),
     'max_force_measured': Term('N', 'upper bound, measured: peak_grip_force of its trial '
                                     '(null when max_force is "inf")'),
-    'max_force_limited_by': Term('-', "what ended the safe side at max_force: 'bruise', or "
+    'max_force_limited_by': Term('-', "what ended the safe side at max_force: 'bruise'; "
                                       "'solver failure' when the nearest trial above it did "
                                       'not converge (the fruit bruises somewhere above '
-                                      'max_force, not at it); null without a finite '
+                                      "max_force, not at it); 'grip not reached' when that "
+                                      'trial\'s grip stayed below its command, undamaged '
+                                      '(the fingers deliver no more); null without a finite '
                                       'max_force'),
     'min_estimate': Term('N', 'closed-form lower seed m g / (2 mu)'),
     'max_estimate': Term('N', 'closed-form upper seed (Hertz bruise force)'),
@@ -137,7 +142,7 @@ KEYS: dict[str, Term] = {
                                    'searches did not need (not in trials)'),
     'verdict': Term('-', 'a window trial\'s verdict: held or slipped (or the run\'s '
                          'outcome when it did not carry the fruit) for a hold trial, '
-                         'bruised or safe for a bruise trial'),
+                         'bruised, safe or not reached for a bruise trial'),
     'kind': Term('-', 'a window trial\'s question: hold (does it hold?) or bruise (does '
                       'it bruise?)'),
     # analyze (a recording's summary.json; the unit is a suffix there)

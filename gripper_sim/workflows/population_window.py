@@ -36,7 +36,9 @@ BOOTSTRAP = 2000
 class SampleWindow:
     """One fruit's window (N; see the module docstring for None and inf);
     ``max_force_limited_by``: 'solver failure' where the trial above ``max_force`` did not
-    converge (the fruit bruises somewhere above it), 'bruise', or None (unknown)."""
+    converge (the fruit bruises somewhere above it), 'grip not reached' where its grip
+    stayed below its command (the fingers deliver no more), 'bruise', or None
+    (unknown)."""
 
     sample: int
     min_force: float | None
@@ -109,6 +111,8 @@ def population_window(windows: Sequence[SampleWindow], limit: float, fraction: f
                         no_own_window=sum(not w.exists for w in windows),
                         solver_failure_bounds=sum(w.max_force_limited_by == 'solver failure'
                                                   for w in windows),
+                        grip_limit_bounds=sum(w.max_force_limited_by == 'grip not reached'
+                                              for w in windows),
                         window=None, ci=None, no_window_share=None,
                         confident_window=None)
     if ends is not None:

@@ -336,11 +336,11 @@ def _sample_windows(study: Study, chains: list[_Chain]) -> list[SampleWindow]:
     windows = []
     for sample, evaluations in sorted(by_sample.items()):
         held = [e.force for e in evaluations if e.held]
-        safe = [e.force for e in evaluations if not (e.bruised or e.crushed)]
+        trials = [trial_of(e, 'bruise') for e in evaluations]
+        safe = [t.force for t in trials if t.safe]
         high = max(safe) if safe else None
         windows.append(SampleWindow(sample, min(held) if held else None, high,
-                                    upper_bound_limited_by(high, [trial_of(e, 'bruise')
-                                                                  for e in evaluations])))
+                                    upper_bound_limited_by(high, trials)))
     return windows
 
 

@@ -19,7 +19,10 @@ Each trial is a fresh simulation starting with the jaws open at the grasp height
 scenario's approach skipped), run by ``evaluate_grasp`` (``workflows.grasp.evaluate``, the
 evaluation the ``pick`` command and studies share). A trial stops early once its
 answer is known (dropped or bruised). A trial whose solver fails (``ConvergenceError``)
-counts as neither holding nor safe, so that force stays out of the window. The two
+counts as neither holding nor safe, so that force stays out of the window; so does a
+'bruise' trial whose grip never reached its command (the fingers deliver no more: a
+Fin Ray that buckles, jaws at their stop), which is undamaged but not a grasp at that
+force. The two
 bisections (``window_bisections``) are driven here by ``workflows.speculative``: one after
 the other in this process, or on several worker processes (``grasp_window``'s
 ``workers``) side by side and looking ahead, with the same trials and window; and as one
@@ -39,7 +42,8 @@ from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.factory import make_simulation
-from gripper_sim.workflows.grasp import PINCHED, SOLVER_FAILED, GraspEvaluation, evaluate
+from gripper_sim.workflows.grasp import (FORCE_REACHED, PINCHED, SOLVER_FAILED,
+                                         GraspEvaluation, evaluate)
 from gripper_sim.workflows.scenario import PickAndPlace, Scenario
 from gripper_sim.workflows.speculative import (InlinePool, ProcessPool, Request, Search,
                                                run_searches)
@@ -48,6 +52,8 @@ from gripper_sim.workflows.speculative import (InlinePool, ProcessPool, Request,
 TOLERANCE = 0.03
 #: how many times a bracket end may be halved or doubled looking for a bracket
 MAX_WIDENINGS = 8
+#: a 'bruise' trial's verdict when its grip stayed below its command (``Trial.reached``)
+NOT_REACHED = 'not reached'
 
 
 @dataclass
@@ -88,14 +94,29 @@ class Trial:
     def verdict(self) -> str:
         """One word for the trial line: held, slipped (or the run's word when it did
         not carry the fruit) for a 'hold' trial; bruised or safe (or 'solver failed',
-        'pinched') for a 'bruise' one."""
+        'pinched', 'not reached') for a 'bruise' one."""
         if self.kind == 'bruise':
             if self.outcome in (SOLVER_FAILED, PINCHED):
                 return self.outcome
+            if not self.bruised and not self.reached:
+                return NOT_REACHED
             return 'bruised' if self.bruised else 'safe'
         if self.held:
             return 'held'
         return 'slipped' if self.outcome in ('held', 'slipped', 'placed') else self.outcome
+
+    @property
+    def reached(self) -> bool:
+        """The grip reached its command: not a run that ended 'failed' with its peak grip
+        below ``FORCE_REACHED`` of it (the jaws at their stop, a finger buckled)."""
+        return not (self.outcome == 'failed'
+                    and self.peak_grip_force < FORCE_REACHED * self.force)
+
+    @property
+    def safe(self) -> bool:
+        """A 'bruise' trial's verdict for the window: undamaged, and at its commanded
+        grip (a grip the fingers cannot deliver is not a safe grasp at that force)."""
+        return not self.bruised and self.reached
 
 
 @dataclass
@@ -105,8 +126,9 @@ class GraspWindow:
     Attributes:
         min_force: N commanded, smallest force that held: slid less than ``max_slip``
             (None: none up to gripper.max_force).
-        max_force: N commanded, largest force that did not bruise (None: even the
-            smallest force tried bruised; inf: nothing bruised up to gripper.max_force).
+        max_force: N commanded, largest force that did not bruise and whose trial
+            reached its grip (``Trial.safe``; None: no force tried was; inf: every one up
+            to gripper.max_force was).
         min_force_measured, max_force_measured: N, the peak grip force measured in the
             trial of each bound (None where the bound is None or inf).
         min_estimate, max_estimate: N, the closed-form seeds (m g / 2 mu; Hertz).
@@ -179,17 +201,20 @@ class GraspWindow:
 
 
 def upper_bound_limited_by(max_force: float | None, trials: Iterable[Trial]) -> str | None:
-    """What ended a window's safe side at ``max_force`` (N): 'bruise', or 'solver
+    """What ended a window's safe side at ``max_force`` (N): 'bruise'; 'solver
     failure' when the nearest 'bruise' trial above it failed to converge instead of
-    bruising (then the fruit bruises somewhere above ``max_force``, not at it); None
-    without a finite ``max_force`` or a trial above it."""
+    bruising (then the fruit bruises somewhere above ``max_force``, not at it); 'grip
+    not reached' when that trial's grip stayed below its command, undamaged (the
+    fingers deliver no more); None without a finite ``max_force`` or a trial above it."""
     if max_force is None or math.isinf(max_force):
         return None
     above = [t for t in trials if t.kind == 'bruise' and t.force > max_force]
     if not above:
         return None
     nearest = min(above, key=lambda t: t.force)
-    return 'solver failure' if nearest.outcome == SOLVER_FAILED else 'bruise'
+    if nearest.outcome == SOLVER_FAILED:
+        return 'solver failure'
+    return 'bruise' if nearest.bruised or nearest.reached else 'grip not reached'
 
 
 def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
@@ -319,7 +344,7 @@ def window_bisections(config: Mapping[str, Any], hold_estimate: float,
                       bruise_estimate: float, tolerance: float = TOLERANCE) -> list[Search]:
     """The grasp window's two bisections, independent of each other: the smallest force
     that holds ('hold', verdict ``Trial.held``) and the largest that does not bruise
-    ('bruise', verdict not ``Trial.bruised``).
+    ('bruise', verdict ``Trial.safe``).
 
     Args:
         config: the trials' configuration (friction, pad, gripper.max_force, dimension).
@@ -342,7 +367,7 @@ def window_bisections(config: Mapping[str, Any], hold_estimate: float,
                    lambda trial: trial.held),
             Search('bruise', lambda: bisection(0.8 * seed, 1.25 * seed, limit, tolerance,
                                                want_smallest=False),
-                   lambda trial: not trial.bruised)]
+                   lambda trial: trial.safe)]
 
 
 def window_search(config: Mapping[str, Any], hold_estimate: float, bruise_estimate: float,

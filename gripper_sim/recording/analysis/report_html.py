@@ -399,10 +399,13 @@ def _trial_pressure(trial: dict) -> float:
 
 
 def _trial_colour(trial: dict, good: bool) -> str:
-    """A window trial's marker colour: grey where its solver failed, else green if
-    ``good``, red if not."""
+    """A window trial's marker colour: grey where its solver failed, orange where its
+    grip did not reach its command (verdict 'not reached'), else green if ``good``, red
+    if not."""
     if trial['outcome'] == 'solver failed':
         return 'grey'
+    if trial.get('verdict') == 'not reached':
+        return 'darkorange'
     return 'seagreen' if good else 'crimson'
 
 
@@ -424,10 +427,11 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
                 'color': [_trial_colour(t, not t['bruised']) for t in trials]},
         hovertemplate='%{x:.3g} N: %{text}, %{y:.1f} kPa<extra></extra>'), row=2, col=1)
     low, high = _force_value(window.get('min_force')), _force_value(window.get('max_force'))
-    failure_bound = window.get('max_force_limited_by') == 'solver failure'
+    limited_by = window.get('max_force_limited_by')
+    high_label = {'solver failure': 'safe up to (solver failure above)',
+                  'grip not reached': 'safe up to (grip not reached above)'}
     for value, label in ((low, 'holds from'),
-                         (high, 'safe up to (solver failure above)' if failure_bound
-                          else 'bruises above')):
+                         (high, high_label.get(limited_by, 'bruises above'))):
         if value is not None and math.isfinite(value):
             fig.add_vline(x=value, line_dash='dash', line_color='grey')
             fig.add_annotation(x=value, y=1.0, yref='paper', text=f'{label} {value:.3g} N',
@@ -445,12 +449,16 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
         found = f'{low:.3g} N .. ' + (f'{high:.3g} N' if math.isfinite(high)
                                       else 'gripper.max_force (nothing bruised)')
     window_rows = [('safe window', found)]
-    if failure_bound:
+    if limited_by == 'solver failure':
         window_rows.append(('upper bound', 'the nearest trial above it did not converge: '
                             'the fruit bruises somewhere above it, not at it'))
+    elif limited_by == 'grip not reached':
+        window_rows.append(('upper bound', 'the nearest trial above it did not reach its '
+                            'grip, the fruit undamaged: the fingers deliver no more'))
     return write_html_report(path, title, [
         Block('Window', rows=window_rows),
         Block('Trials', fig, rows=rows,
               text='Green: held (top) or not bruised (bottom); red: not held, or bruised '
                    '(pinched: the fingers closed on each other over the fruit, crushing it '
-                   'between them); grey: the solver failed (neither).')])
+                   'between them); grey: the solver failed (neither); orange: the grip '
+                   'did not reach its command (not bruised, but not in the window).')])
