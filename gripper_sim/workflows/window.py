@@ -22,11 +22,11 @@ answer is known (dropped or bruised). A trial whose solver fails (``ConvergenceE
 counts as neither holding nor safe, so that force stays out of the window; so does a
 'bruise' trial whose grip never reached its command (the fingers deliver no more: a
 Fin Ray that buckles, jaws at their stop), which is undamaged but not a grasp at that
-force. The two
-bisections (``window_bisections``) are driven here by ``workflows.speculative``: one after
-the other in this process, or on several worker processes (``grasp_window``'s
-``workers``) side by side and looking ahead, with the same trials and window; and as one
-generator, ``window_search``, by ``gripper_sim.workflows.study`` over a Dask cluster.
+force. The two bisections (``window_bisections``) are driven here by
+``workflows.speculative``: one after the other in this process, or on several worker
+processes (``grasp_window``'s ``workers``) side by side and looking ahead, with the
+same trials and window; and as one generator, ``window_search``, by
+``gripper_sim.workflows.study`` over a Dask cluster.
 """
 from __future__ import annotations
 
