@@ -10,8 +10,9 @@ from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import evaluate
 from gripper_sim.workflows.scenario import PickAndPlace, load_scenario, scenario_config
 from gripper_sim.workflows.window import (GraspWindow, Trial, _ask, estimates, run_search,
-                                          table_bruise_load, trial_of, trial_setup,
-                                          upper_bound_limited_by, window_bisections)
+                                          run_trial, table_bruise_load, trial_of,
+                                          trial_setup, upper_bound_limited_by,
+                                          window_bisections)
 
 
 def bruise_trial(finger: str, force: float):
@@ -138,3 +139,18 @@ def test_the_window_command_says_when_the_grip_was_not_reached(monkeypatch, caps
     assert 'bruise trial   80.000 N: not reached' in out
     assert 'bruises above   not found: safe up to 70 N commanded' in out
     assert 'the nearest trial above, 80 N, did not reach its grip: peak 76.4 N' in out
+
+
+def test_a_silicone_fin_ray_does_not_reach_a_firm_grip():
+    """A real case: the Fin Ray in silicone (Dragon Skin 30, E = 0.59 MPa) gives way;
+    a 'bruise' trial at 10 N closes the jaws to their stop with about 2.6 N of grip
+    (`gripper-sim window ... --set gripper.finger.fin_ray.material=silicone`: safe up to
+    2.59 N, grip not reached above, README), the apple undamaged: 'not reached', not
+    'safe'."""
+    scenario = load_scenario('pick_and_place')
+    config = scenario_config(scenario, finger='fin_ray',
+                             overrides=['gripper.finger.fin_ray.material=silicone'])
+    trial = run_trial(config, scenario, ('bruise', 10.0))
+    assert trial.outcome == 'failed' and not trial.bruised
+    assert 1.0 < trial.peak_grip_force < 0.5 * 10.0
+    assert trial.verdict == 'not reached' and not trial.safe
