@@ -58,7 +58,7 @@ import numpy as np
 from gripper_sim.configuration import load_config
 from gripper_sim.core.barrier import BarrierSettings
 from gripper_sim.core.fin_ray import fin_ray_from_config
-from gripper_sim.core.finger_indent import indent_disc
+from gripper_sim.core.finger_indent import front_beam_disc, indent_disc
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.geometry.fin_ray import FinRayGeometry, layout
 
@@ -182,16 +182,8 @@ def _run(radius: float, element_length: float, e_scaling: bool, step: float,
         body = prestress_ribs(body, geometry, [crossbeam_length(*pair) for pair in RIB_ENDS])
     if e_scaling:
         body = scale_strips(body, geometry, FRONT / 135e-3, BACK / 156e-3)
-    plan = layout(geometry)
-    front = plan.front_nodes                      # tip -> base corner
-    x0 = body.rest_positions
-    corner, tip = x0[front[-1]], x0[front[0]]
-    along = (tip - corner) / np.linalg.norm(tip - corner)
-    normal = np.array([-along[1], along[0]])      # outwards, towards +x
-    if normal[0] < 0:
-        normal = -normal
-    touching = np.setdiff1d(front, body.base_nodes)
-    centre = corner + CONTACT_HEIGHT * along + (radius + 0.5 * STRIP) * normal
+    touching, centre, _normal = front_beam_disc(body, layout(geometry).front_nodes,
+                                                CONTACT_HEIGHT, radius + 0.5 * STRIP)
     result = indent_disc(body, touching, centre, radius + 0.5 * STRIP,
                          np.array([-1.0, 0.0]), travel, round(travel / step), CONTACT)
     return result, body

@@ -149,6 +149,32 @@ class Indentation:
     centres: np.ndarray
 
 
+def front_beam_disc(body: FingerBody, front_nodes: np.ndarray, height: float,
+                    radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A disc touching a finger's front beam at delta 0, for ``indent_disc``.
+
+    Args:
+        body: the finger (its front beam facing +x, as ``geometry.fin_ray.layout`` lays
+            a Fin Ray out).
+        front_nodes: (f,) the front beam's nodes from the tip to the base corner
+            (``layout(...).front_nodes``).
+        height: m, the disc's centre from the base corner along the beam.
+        radius: m, the disc's radius plus the touching surface's offset from the nodes.
+
+    Returns:
+        (the nodes that may touch it (k,): the front beam's off the base; the disc's
+        centre (2,) m; the beam's outward unit normal (2,)).
+    """
+    x0 = body.rest_positions
+    corner, tip = x0[front_nodes[-1]], x0[front_nodes[0]]
+    along = (tip - corner) / np.linalg.norm(tip - corner)
+    normal = np.array([-along[1], along[0]])
+    if normal[0] < 0:
+        normal = -normal
+    return (np.setdiff1d(front_nodes, body.base_nodes), corner + height * along
+            + radius * normal, normal)
+
+
 def indent_disc(body: FingerBody, nodes: np.ndarray, centre: np.ndarray, radius: float,
                 direction: np.ndarray, travel: float, increments: int,
                 settings: BarrierSettings, self_contact: BarrierSettings | None = None,
