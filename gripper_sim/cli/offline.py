@@ -418,7 +418,7 @@ def run_scenario_verb(args) -> int:
 
 def run_window(args) -> int:
     from gripper_sim.workflows.scenario import load_scenario, scenario_config
-    from gripper_sim.workflows.window import TOLERANCE, grasp_window
+    from gripper_sim.workflows.window import TOLERANCE, bruise_trial_above, grasp_window
     scenario = load_scenario(args.scenario)
     config = scenario_config(scenario, fruit=args.fruit, finger=args.finger,
                              config_file=args.config, overrides=args.overrides)
@@ -478,8 +478,7 @@ def run_window(args) -> int:
         print('                  (the nearest trial above did not converge: the fruit '
               'bruises somewhere above this force, not at it)')
     elif window.max_force_limited_by == 'grip not reached':
-        above = min((t for t in window.trials if t.kind == 'bruise'
-                     and t.force > window.max_force), key=lambda t: t.force)
+        above = bruise_trial_above(window.max_force, window.trials)
         print(f'                  (the nearest trial above, {above.force:.3g} N, did not '
               f'reach its grip: peak {above.peak_grip_force:.3g} N, not bruised; the '
               'fingers deliver no more)')

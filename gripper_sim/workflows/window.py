@@ -200,18 +200,24 @@ class GraspWindow:
         return data
 
 
+def bruise_trial_above(max_force: float | None, trials: Iterable[Trial]) -> Trial | None:
+    """The 'bruise' trial nearest above ``max_force`` (N), the one that ended the safe
+    side; None without a finite ``max_force`` or a trial above it."""
+    if max_force is None or math.isinf(max_force):
+        return None
+    above = [t for t in trials if t.kind == 'bruise' and t.force > max_force]
+    return min(above, key=lambda t: t.force) if above else None
+
+
 def upper_bound_limited_by(max_force: float | None, trials: Iterable[Trial]) -> str | None:
     """What ended a window's safe side at ``max_force`` (N): 'bruise'; 'solver
     failure' when the nearest 'bruise' trial above it failed to converge instead of
     bruising (then the fruit bruises somewhere above ``max_force``, not at it); 'grip
     not reached' when that trial's grip stayed below its command, undamaged (the
     fingers deliver no more); None without a finite ``max_force`` or a trial above it."""
-    if max_force is None or math.isinf(max_force):
+    nearest = bruise_trial_above(max_force, trials)
+    if nearest is None:
         return None
-    above = [t for t in trials if t.kind == 'bruise' and t.force > max_force]
-    if not above:
-        return None
-    nearest = min(above, key=lambda t: t.force)
     if nearest.outcome == SOLVER_FAILED:
         return 'solver failure'
     return 'bruise' if nearest.bruised or nearest.reached else 'grip not reached'
