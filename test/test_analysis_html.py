@@ -151,7 +151,24 @@ def test_window_report_opens_offline(window_html, tmp_path):
     with Browser() as browser:
         assert open_report(browser, window_html, tmp_path / 'window.png') == 1
         text = browser.evaluate('document.body.innerText')
-    assert '1 N .. 4 N' in text and 'dropped' in text
+    assert '1 N .. 4 N' in text and 'hold: dropped' in text and 'bruise: bruised' in text
+
+
+def test_window_report_says_when_the_fingers_did_not_reach_a_grip(tmp_path):
+    """A window whose bounds end at grips the fingers did not reach (the silicone Fin
+    Ray's): its rows say so for each bound, and the trials read 'not reached'."""
+    window = made_window()
+    window.min_force = None  # 1 N slid, 2 N not reached; 4 N safe, 8 N not reached
+    hold_2, bruise_8 = window.trials[2], window.trials[4]
+    for trial in window.trials[:3]:
+        trial.held = False
+    hold_2.outcome, hold_2.peak_grip_force = 'failed', 1.5
+    bruise_8.outcome, bruise_8.bruised, bruise_8.peak_grip_force = 'failed', False, 5.0
+    page = write_window_report(window.as_dict(), tmp_path / 'window.html').read_text()
+    assert window.min_force_limited_by == window.max_force_limited_by == 'grip not reached'
+    assert 'lower bound' in page and 'so no force holds' in page
+    assert 'upper bound' in page and 'the fingers deliver no more' in page
+    assert 'hold: not reached' in page and 'bruise: not reached' in page
 
 
 def test_the_index_of_several_runs_links_to_their_reports(pick_3d, tmp_path):

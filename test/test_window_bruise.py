@@ -9,10 +9,11 @@ import pytest
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import evaluate
 from gripper_sim.workflows.scenario import PickAndPlace, load_scenario, scenario_config
-from gripper_sim.workflows.window import (GraspWindow, Trial, _ask, estimates, run_search,
-                                          run_trial, table_bruise_load, trial_of,
-                                          trial_setup, upper_bound_limited_by,
-                                          window_bisections)
+from gripper_sim.workflows.window import (OUT_OF_REACH, GraspWindow, Trial, _ask,
+                                          estimates, hold_verdict, lower_bound_limited_by,
+                                          reach_bracket, run_search, run_trial,
+                                          table_bruise_load, trial_of, trial_setup,
+                                          upper_bound_limited_by, window_bisections)
 
 
 def bruise_trial(finger: str, force: float):
@@ -117,26 +118,85 @@ def test_a_grip_the_fingers_do_not_reach_ends_the_safe_side():
     assert window.as_dict()['max_force_limited_by'] == 'grip not reached'
 
 
+def hold_search(hold_from: float, reach: float, limit: float = 200.0):
+    """The window's hold search (its bisection and verdict) against trials that hold
+    from ``hold_from`` N, where the fingers deliver at most ``reach`` N; (answer, trials
+    in the order asked)."""
+    def trial(request):
+        kind, force = request
+        reached = force <= reach
+        held = reached and force >= hold_from
+        result = _trial(force, kind, 'held' if held else 'failed' if not reached
+                        else 'dropped', False, peak=force if reached else reach)
+        result.held = held
+        return result
+
+    config = {'gripper.max_force': limit, 'gripper.finger.pad.enabled': False,
+              'contact.jaw.static_friction': 0.5, 'contact.jaw.kinetic_friction': 0.4,
+              'dimension': 2}
+    hold = window_bisections(config, 2.0, 20.0, tolerance=0.03)[0]
+    asked = []
+    answer = run_search(_ask(hold), lambda r: asked.append(trial(r)) or asked[-1])
+    return answer, asked
+
+
+def test_a_grip_the_fingers_do_not_reach_stops_the_hold_search_climbing():
+    """A 'hold' trial whose grip is not reached reads 'not reached' (``OUT_OF_REACH`` to
+    the search): no larger force is tried, the search looks below it for a force that
+    holds, and where none does it stops within the tolerance, 'grip not reached',
+    instead of doubling up to gripper.max_force."""
+    # the hold lies below the reach: found as without one (the bracket's upper end, 2.9 N,
+    # or the doubling's 11.5 N out of reach)
+    for hold_from, reach in ((2.5, 2.7), (5.9, 6.5)):
+        answer, asked = hold_search(hold_from, reach)
+        assert hold_from <= answer <= hold_from / 0.97
+        assert max(t.force for t in asked) < 2 * reach
+        assert lower_bound_limited_by(answer, asked) is None
+        unreached = [t for t in asked if not t.reached]
+        assert unreached and all(t.verdict == 'not reached'
+                                 and hold_verdict(t) == OUT_OF_REACH for t in unreached)
+    # nothing holds below the reach: none, bracketed to the tolerance, nothing above tried
+    answer, asked = hold_search(hold_from=5.0, reach=4.0)
+    assert answer is None and lower_bound_limited_by(answer, asked) == 'grip not reached'
+    slid, first_unreached = reach_bracket(asked)
+    # (a grip within 3 % of its command counts as reached)
+    assert slid.force <= 4.0 / 0.97 < first_unreached.force / 0.97
+    assert first_unreached.force - slid.force <= 0.03 * first_unreached.force
+    assert max(t.force for t in asked) < 2 * 4.0 and len(asked) < 12
+    # not even the first force is reached: the search halves down below it
+    answer, asked = hold_search(hold_from=1.2, reach=0.9)
+    assert answer is None and lower_bound_limited_by(answer, asked) == 'grip not reached'
+    assert reach_bracket(asked)[0].force <= 0.9 / 0.97 < reach_bracket(asked)[1].force / 0.97
+    # the fingers deliver every force: none up to the limit, as before
+    answer, asked = hold_search(hold_from=300.0, reach=math.inf)
+    assert answer is None and lower_bound_limited_by(answer, asked) == 'gripper.max_force'
+    assert max(t.force for t in asked) == 200.0
+
+
 def test_the_window_command_says_when_the_grip_was_not_reached(monkeypatch, capsys):
     """`gripper-sim window`'s text for a window that ends below a trial whose grip was
     not reached: the bound as 'not found: safe up to', and the trial's peak grip."""
     from gripper_sim.cli.main import main
     from gripper_sim.workflows import window as window_module
-    trials = [_trial(2.0, 'hold', 'held', False), _trial(70.0, 'bruise', 'held', False),
+    trials = [_trial(2.0, 'hold', 'dropped', False), _trial(2.05, 'hold', 'failed', False,
+                                                             peak=1.96),
+              _trial(70.0, 'bruise', 'held', False),
               _trial(80.0, 'bruise', 'failed', False, peak=76.4)]
 
     def grasp_window(config, scenario, tolerance, progress, workers=1):
         for trial in trials:
             progress(trial)
-        return GraspWindow(fruit='apple', finger='fin_ray', min_force=2.0, max_force=70.0,
+        return GraspWindow(fruit='apple', finger='fin_ray', min_force=None, max_force=70.0,
                            min_estimate=1.3, max_estimate=16.6, mass=0.134, friction=0.5,
-                           tolerance=tolerance, trials=trials, min_force_measured=2.0,
-                           max_force_measured=70.0)
+                           tolerance=tolerance, trials=trials, max_force_measured=70.0)
 
     monkeypatch.setattr(window_module, 'grasp_window', grasp_window)
     assert main(['window', '--fruit', 'apple', '--finger', 'fin_ray']) == 0
     out = capsys.readouterr().out
+    assert 'hold   trial    2.050 N: not reached' in out
     assert 'bruise trial   80.000 N: not reached' in out
+    assert ('holds from      not found: slides at 2 N, does not reach a grip of 2.05 N '
+            '(peak 1.96 N): the fingers deliver no more') in out
     assert 'bruises above   not found: safe up to 70 N commanded' in out
     assert 'the nearest trial above, 80 N, did not reach its grip: peak 76.4 N' in out
 
@@ -154,3 +214,7 @@ def test_a_silicone_fin_ray_does_not_reach_a_firm_grip():
     assert trial.outcome == 'failed' and not trial.bruised
     assert 1.0 < trial.peak_grip_force < 0.5 * 10.0
     assert trial.verdict == 'not reached' and not trial.safe
+    # its hold trial at 10 N likewise: the hold search climbs no higher
+    trial = run_trial(config, scenario, ('hold', 10.0))
+    assert trial.outcome == 'failed' and not trial.held
+    assert trial.verdict == 'not reached' and hold_verdict(trial) == OUT_OF_REACH

@@ -7,18 +7,21 @@ import pytest
 
 from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.speculative import Search, run_searches
-from gripper_sim.workflows.window import _ask, bisection, grasp_window, run_search
+from gripper_sim.workflows.window import (OUT_OF_REACH, _ask, bisection, grasp_window,
+                                          hold_verdict, run_search)
 from gripper_sim.workflows.scenario import load_scenario, scenario_config
 
 from test_cli_offline import gripper_sim
 
 
 class FakeTrial:
-    """A trial of the synthetic searches: its force and the two verdicts."""
+    """A trial of the synthetic searches: its force and the verdicts (the fingers deliver
+    at most ``reach`` N: above it a grip is not reached and nothing holds)."""
 
-    def __init__(self, kind, force, hold_from, bruise_above):
+    def __init__(self, kind, force, hold_from, bruise_above, reach=math.inf):
         self.kind, self.force = kind, force
-        self.held = force >= hold_from
+        self.reached = force <= reach
+        self.held = hold_from <= force <= reach
         self.bruised = force > bruise_above
 
 
@@ -26,8 +29,9 @@ class LastFirstPool:
     """Runs each started trial at once but hands the results back last-started first,
     so that trials finish out of the order they were asked in; records what ran."""
 
-    def __init__(self, hold_from, bruise_above, fail_at=()):
+    def __init__(self, hold_from, bruise_above, fail_at=(), reach=math.inf):
         self.hold_from, self.bruise_above, self.fail_at = hold_from, bruise_above, fail_at
+        self.reach = reach
         self.waiting, self.started, self.most_running = [], [], 0
 
     def start(self, request):
@@ -35,7 +39,8 @@ class LastFirstPool:
         self.started.append(request)
         outcome = (GripperSimError(f'failed at {force}') if
                    any(math.isclose(force, f) for f in self.fail_at)
-                   else FakeTrial(kind, force, self.hold_from, self.bruise_above))
+                   else FakeTrial(kind, force, self.hold_from, self.bruise_above,
+                                  self.reach))
         self.waiting.append((request, outcome))
         self.most_running = max(self.most_running, len(self.waiting))
 
@@ -45,13 +50,13 @@ class LastFirstPool:
 
 def searches(limit=200.0, tolerance=0.03):
     return [Search('hold', lambda: bisection(1.0, 1.5, limit, tolerance, want_smallest=True),
-                   lambda trial: trial.held),
+                   hold_verdict, (True, False, OUT_OF_REACH)),
             Search('bruise', lambda: bisection(8.0, 12.0, limit, tolerance,
                                                want_smallest=False),
                    lambda trial: not trial.bruised)]
 
 
-def serial(hold_from, bruise_above, limit=200.0):
+def serial(hold_from, bruise_above, limit=200.0, reach=math.inf):
     """The searches one after the other in this process: (answers, trials in order)."""
     trials, cache = [], {}
 
@@ -59,7 +64,7 @@ def serial(hold_from, bruise_above, limit=200.0):
         kind, force = request
         key = (kind, round(force, 12))
         if key not in cache:
-            cache[key] = FakeTrial(kind, force, hold_from, bruise_above)
+            cache[key] = FakeTrial(kind, force, hold_from, bruise_above, reach)
             trials.append(cache[key])
         return cache[key]
 
@@ -69,17 +74,20 @@ def serial(hold_from, bruise_above, limit=200.0):
     return list(run_search(both(), trial)), trials
 
 
-@pytest.mark.parametrize('hold_from,bruise_above', [
-    (2.7, 31.0),     # both brackets widen upwards
-    (0.2, 3.0),      # the hold bracket widens down; the bruise one down too
-    (5.0, 250.0),    # nothing bruises up to the limit: inf
-    (300.0, 0.01),   # nothing holds up to the limit, everything bruises
+@pytest.mark.parametrize('hold_from,bruise_above,reach', [
+    (2.7, 31.0, math.inf),   # both brackets widen upwards
+    (0.2, 3.0, math.inf),    # the hold bracket widens down; the bruise one down too
+    (5.0, 250.0, math.inf),  # nothing bruises up to the limit: inf
+    (300.0, 0.01, math.inf),  # nothing holds up to the limit, everything bruises
+    (2.7, 31.0, 4.0),        # the climb overshoots the reach, then finds the hold below
+    (5.0, 31.0, 4.0),        # nothing holds below the reach
+    (2.7, 31.0, 0.6),        # not even the first force is reached
 ])
 @pytest.mark.parametrize('workers', [1, 2, 3, 5])
 def test_parallel_searches_ask_and_answer_as_the_serial_ones(hold_from, bruise_above,
-                                                             workers):
-    answers, trials = serial(hold_from, bruise_above)
-    pool = LastFirstPool(hold_from, bruise_above)
+                                                             reach, workers):
+    answers, trials = serial(hold_from, bruise_above, reach=reach)
+    pool = LastFirstPool(hold_from, bruise_above, reach=reach)
     reported = []
     run = run_searches(searches(), pool, workers, reported.append)
     assert run.answers == answers

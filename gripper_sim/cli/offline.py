@@ -418,7 +418,8 @@ def run_scenario_verb(args) -> int:
 
 def run_window(args) -> int:
     from gripper_sim.workflows.scenario import load_scenario, scenario_config
-    from gripper_sim.workflows.window import TOLERANCE, bruise_trial_above, grasp_window
+    from gripper_sim.workflows.window import (TOLERANCE, bruise_trial_above, grasp_window,
+                                              reach_bracket)
     scenario = load_scenario(args.scenario)
     config = scenario_config(scenario, fruit=args.fruit, finger=args.finger,
                              config_file=args.config, overrides=args.overrides)
@@ -458,6 +459,11 @@ def run_window(args) -> int:
 
     low = ('none up to gripper.max_force' if window.min_force is None
            else bound(window.min_force, window.min_force_measured))
+    if window.min_force_limited_by == 'grip not reached':
+        slid, unreached = reach_bracket(window.trials)
+        low = ('not found: ' + (f'slides at {slid.force:.3g} N, ' if slid else '')
+               + f'does not reach a grip of {unreached.force:.3g} N (peak '
+               f'{unreached.peak_grip_force:.3g} N): the fingers deliver no more')
     high = (f'none up to gripper.max_force ({limit:g} N)' if window.max_force == math.inf
             else 'bruised at every force tried' if window.max_force is None
             else bound(window.max_force, window.max_force_measured))

@@ -118,6 +118,11 @@ KEYS: dict[str, Term] = {
     'min_force_measured': Term('N', 'lower bound, measured: peak_grip_force of its trial'),
     'max_force_measured': Term('N', 'upper bound, measured: peak_grip_force of its trial '
                                     '(null when max_force is "inf")'),
+    'min_force_limited_by': Term('-', "why min_force is null: 'gripper.max_force' (no "
+                                      "force up to it held) or 'grip not reached' (no "
+                                      'force held below the smallest whose grip was not '
+                                      'reached, to the tolerance: the fingers deliver no '
+                                      'more); null when min_force was found'),
     'max_force_limited_by': Term('-', "what ended the safe side at max_force: 'bruise'; "
                                       "'solver failure' when the nearest trial above it did "
                                       'not converge (the fruit bruises somewhere above '
@@ -140,9 +145,9 @@ KEYS: dict[str, Term] = {
     'workers': Term('-', 'processes the window\'s trials ran on (window --workers)'),
     'look_ahead_trials': Term('-', 'trials run ahead on spare worker processes that the '
                                    'searches did not need (not in trials)'),
-    'verdict': Term('-', 'a window trial\'s verdict: held or slipped (or the run\'s '
-                         'outcome when it did not carry the fruit) for a hold trial, '
-                         'bruised, safe or not reached for a bruise trial'),
+    'verdict': Term('-', 'a window trial\'s verdict: held, slipped or not reached (or '
+                         'the run\'s outcome when it did not carry the fruit) for a hold '
+                         'trial, bruised, safe or not reached for a bruise trial'),
     'kind': Term('-', 'a window trial\'s question: hold (does it hold?) or bruise (does '
                       'it bruise?)'),
     # analyze (a recording's summary.json; the unit is a suffix there)

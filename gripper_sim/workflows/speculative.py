@@ -5,8 +5,8 @@ is sent back a verdict there; what it asks after a list of verdicts depends on t
 verdicts alone, so it is found by replaying them into a fresh generator (``_follow``).
 ``run_searches`` keeps up to ``workers`` trials running: first the force each search
 needs next on its own path (the serial search's), then, on free workers, the forces it
-would need after either verdict of a trial it is still waiting for (breadth first: one
-verdict ahead, then two, ...), the searches taking turns. A search reads only the
+would need after each verdict a trial it is still waiting for can give (breadth first:
+one verdict ahead, then two, ...), the searches taking turns. A search reads only the
 verdicts on its path, in its order, so its answer, its trials and their order are the
 serial search's; a trial off the path (a look-ahead the verdict went against) runs to
 its end and is counted in ``SearchRun.wasted``.
@@ -38,11 +38,13 @@ class Search:
         bisection: makes a fresh generator of it (yields forces N, is sent verdicts,
             returns its answer).
         verdict: the verdict a trial (``window.Trial``) gives it.
+        verdicts: the verdicts it can give (the look-ahead follows each).
     """
 
     kind: str
-    bisection: Callable[[], Generator[float, bool, Any]]
-    verdict: Callable[[Any], bool]
+    bisection: Callable[[], Generator[float, Any, Any]]
+    verdict: Callable[[Any], Any]
+    verdicts: tuple = (True, False)
 
 
 @dataclass
@@ -72,7 +74,7 @@ class _Plan:
     wanted: list = field(default_factory=list)
 
 
-def _follow(search: Search, verdicts: list[bool], known: dict) -> tuple[list, bool, Any, list]:
+def _follow(search: Search, verdicts: list, known: dict) -> tuple[list, bool, Any, list]:
     """Replay ``verdicts`` into a fresh generator of ``search`` (what it asks depends on
     them alone), then walk on through the trials ``known`` ({(kind, key): trial or an
     exception}); (verdicts, finished, its answer or the unknown force it asks, the known
@@ -91,7 +93,7 @@ def _follow(search: Search, verdicts: list[bool], known: dict) -> tuple[list, bo
             if isinstance(outcome, BaseException):
                 raise outcome
             met.append(outcome)
-            verdicts.append(bool(search.verdict(outcome)))
+            verdicts.append(search.verdict(outcome))
             value = bisect.send(verdicts[-1])
     except StopIteration as stop:
         return verdicts, True, stop.value, met
@@ -112,7 +114,7 @@ def _plan(search: Search, known: dict, look_ahead: int) -> _Plan:
     while level and len(wanted) <= look_ahead:
         next_level = []
         for branch in level:
-            for verdict in (True, False):
+            for verdict in search.verdicts:
                 try:
                     ahead, done, force, _ = _follow(search, branch + [verdict], known)
                 except GripperSimError:  # a failed trial ends this branch

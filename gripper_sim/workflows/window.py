@@ -52,8 +52,11 @@ from gripper_sim.workflows.speculative import (InlinePool, ProcessPool, Request,
 TOLERANCE = 0.03
 #: how many times a bracket end may be halved or doubled looking for a bracket
 MAX_WIDENINGS = 8
-#: a 'bruise' trial's verdict when its grip stayed below its command (``Trial.reached``)
+#: a trial's verdict when its grip stayed below its command (``Trial.reached``)
 NOT_REACHED = 'not reached'
+#: the hold search's third verdict (beside True and False): not held, and the fingers did
+#: not reach this grip, so they reach none above it either (``hold_verdict``)
+OUT_OF_REACH = 'out of reach'
 
 
 @dataclass
@@ -103,6 +106,8 @@ class Trial:
             return 'bruised' if self.bruised else 'safe'
         if self.held:
             return 'held'
+        if not self.reached:
+            return NOT_REACHED
         return 'slipped' if self.outcome in ('held', 'slipped', 'placed') else self.outcome
 
     @property
@@ -119,13 +124,22 @@ class Trial:
         return not self.bruised and self.reached
 
 
+def hold_verdict(trial: Trial) -> bool | str:
+    """A 'hold' trial's verdict for the hold search: True (held), False (not held), or
+    ``OUT_OF_REACH`` (not held, its grip not reached: no larger command holds either)."""
+    if trial.held:
+        return True
+    return False if trial.reached else OUT_OF_REACH
+
+
 @dataclass
 class GraspWindow:
     """Result of ``grasp_window``.
 
     Attributes:
         min_force: N commanded, smallest force that held: slid less than ``max_slip``
-            (None: none up to gripper.max_force).
+            (None: none up to gripper.max_force, or none below the grip the fingers
+            reach: ``min_force_limited_by``).
         max_force: N commanded, largest force that did not bruise and whose trial
             reached its grip (``Trial.safe``; None: no force tried was; inf: every one up
             to gripper.max_force was).
@@ -161,6 +175,11 @@ class GraspWindow:
     look_ahead_trials: int = 0
 
     @property
+    def min_force_limited_by(self) -> str | None:
+        """Why nothing held (``lower_bound_limited_by``)."""
+        return lower_bound_limited_by(self.min_force, self.trials)
+
+    @property
     def max_force_limited_by(self) -> str | None:
         """What ended the safe side at ``max_force`` (``upper_bound_limited_by``)."""
         return upper_bound_limited_by(self.max_force, self.trials)
@@ -185,6 +204,7 @@ class GraspWindow:
                     table_bruise_estimate=self.table_bruise_estimate,
                     min_force_measured=self.min_force_measured,
                     max_force_measured=self.max_force_measured,
+                    min_force_limited_by=self.min_force_limited_by,
                     max_force_limited_by=self.max_force_limited_by,
                     workers=self.workers, look_ahead_trials=self.look_ahead_trials,
                     trials=[dict(vars(t), verdict=t.verdict) for t in self.trials])
@@ -221,6 +241,28 @@ def upper_bound_limited_by(max_force: float | None, trials: Iterable[Trial]) -> 
     if nearest.outcome == SOLVER_FAILED:
         return 'solver failure'
     return 'bruise' if nearest.bruised or nearest.reached else 'grip not reached'
+
+
+def lower_bound_limited_by(min_force: float | None, trials: Iterable[Trial]) -> str | None:
+    """Why a window has no lower bound: 'grip not reached' when a 'hold' trial's grip
+    stayed below its command (the hold search stopped below it: the fingers deliver no
+    more), 'gripper.max_force' when every force up to it was tried; None when
+    ``min_force`` was found."""
+    if min_force is not None:
+        return None
+    reached = all(t.reached for t in trials if t.kind == 'hold')
+    return 'gripper.max_force' if reached else 'grip not reached'
+
+
+def reach_bracket(trials: Iterable[Trial]) -> tuple[Trial | None, Trial | None]:
+    """The 'hold' trials that end a hold search stopped by the fingers' reach: the
+    largest reached force that did not hold (None if none) and the smallest force whose
+    grip was not reached (None if none)."""
+    hold = [t for t in trials if t.kind == 'hold']
+    slid = [t for t in hold if t.reached and not t.held]
+    unreached = [t for t in hold if not t.reached]
+    return (max(slid, key=lambda t: t.force) if slid else None,
+            min(unreached, key=lambda t: t.force) if unreached else None)
 
 
 def estimates(config: Mapping[str, Any]) -> tuple[float, float, float]:
@@ -349,8 +391,9 @@ def measured_bounds(min_force: float | None, max_force: float | None,
 def window_bisections(config: Mapping[str, Any], hold_estimate: float,
                       bruise_estimate: float, tolerance: float = TOLERANCE) -> list[Search]:
     """The grasp window's two bisections, independent of each other: the smallest force
-    that holds ('hold', verdict ``Trial.held``) and the largest that does not bruise
-    ('bruise', verdict ``Trial.safe``).
+    that holds ('hold', verdict ``hold_verdict``: a grip the fingers do not reach ends
+    the search upward) and the largest that does not bruise ('bruise', verdict
+    ``Trial.safe``).
 
     Args:
         config: the trials' configuration (friction, pad, gripper.max_force, dimension).
@@ -370,7 +413,7 @@ def window_bisections(config: Mapping[str, Any], hold_estimate: float,
             else bruise_estimate)
     return [Search('hold', lambda: bisection(0.8 * hold_estimate, 1.15 * kinetic, limit,
                                              tolerance, want_smallest=True),
-                   lambda trial: trial.held),
+                   hold_verdict, (True, False, OUT_OF_REACH)),
             Search('bruise', lambda: bisection(0.8 * seed, 1.25 * seed, limit, tolerance,
                                                want_smallest=False),
                    lambda trial: trial.safe)]
@@ -473,16 +516,19 @@ def _bisect(ok: Callable[[float], bool], low: float, high: float, limit: float,
 
 
 def bisection(low: float, high: float, limit: float, tolerance: float,
-              want_smallest: bool) -> Generator[float, bool, float | None]:
+              want_smallest: bool) -> Generator[float, bool | str, float | None]:
     """The boundary of the forces where a verdict holds, to ``tolerance``, from the
     bracket guess [low, high] (widened as needed: halved down at most ``MAX_WIDENINGS``
     times, doubled up until ``limit``, so "none up to ``limit``" means ``limit`` was tried).
-    A generator: yields the force (N) to try next, is sent back the verdict there.
+    A generator: yields the force (N) to try next, is sent back the verdict there: True
+    (ok), False, or (``want_smallest`` only) ``OUT_OF_REACH``: not ok, and no force above
+    it can be, so the search looks for an ok force below it, between the largest force
+    found not ok and the smallest out of reach, until they are within ``tolerance``.
 
     want_smallest: the verdict holds above the boundary (the minimum force); returns the
-    smallest force found ok, None if none up to ``limit``. Otherwise it holds below it
-    (the maximum force); returns the largest force found ok, ``inf`` if ok at ``limit``,
-    None if not even at the smallest force tried.
+    smallest force found ok, None if none up to ``limit`` (or below the reach). Otherwise
+    it holds below it (the maximum force); returns the largest force found ok, ``inf`` if
+    ok at ``limit``, None if not even at the smallest force tried.
     """
     if not low > 0 or not math.isfinite(high):
         raise GripperSimError('the grasp window needs a positive, finite force estimate')
@@ -490,23 +536,42 @@ def bisection(low: float, high: float, limit: float, tolerance: float,
     if lo >= hi:
         lo = 0.8 * hi
     good_high = want_smallest
+    reach = math.inf  # the smallest force found out of reach
     # widen until ok(lo) != ok(hi) with the good side where it should be
     for _ in range(MAX_WIDENINGS):
         ok_lo = yield lo
+        if ok_lo == OUT_OF_REACH:  # not even lo is reached: look below it
+            reach, lo = lo, lo / 2
+            continue
         if ok_lo == good_high:  # lo is already on the high side: move it down
             hi, lo = lo, lo / 2
+            reach = math.inf  # an ok force below the reach brackets the search itself
             continue
         break
     else:
-        return lo if want_smallest else None
-    while True:  # doubling, so at most log2(limit / hi) + 1 trials
+        return lo if want_smallest and reach == math.inf else None
+    while reach == math.inf:  # doubling, so at most log2(limit / hi) + 1 trials
         ok_hi = yield hi
-        if ok_hi != good_high:  # hi is still on the low side: move it up
+        if ok_hi == OUT_OF_REACH:
+            reach = hi
+        elif ok_hi != good_high:  # hi is still on the low side: move it up
             if hi >= limit:
                 return None if want_smallest else math.inf
             lo, hi = hi, min(2 * hi, limit)
-            continue
-        break
+        else:
+            break
+    while reach < math.inf:  # below the reach: an ok force, or none within tolerance
+        if (reach - lo) <= tolerance * reach:
+            return None
+        mid = 0.5 * (lo + reach)
+        verdict = yield mid
+        if verdict == OUT_OF_REACH:
+            reach = mid
+        elif verdict == good_high:
+            hi = mid
+            break
+        else:
+            lo = mid
     while (hi - lo) > tolerance * hi:
         mid = 0.5 * (lo + hi)
         if (yield mid) == good_high:

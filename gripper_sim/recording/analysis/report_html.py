@@ -440,7 +440,7 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
     fig.update_yaxes(title_text='peak damage pressure (kPa)', row=2, col=1)
     fig.update_xaxes(title_text='grip force (N)', row=2, col=1)
     fig.update_layout(height=640, showlegend=False)
-    rows = [(f"{t['force']:.4g} N", f"{t.get('verdict', t['outcome'])}, slip "
+    rows = [(f"{t['force']:.4g} N", f"{t['kind']}: {t.get('verdict', t['outcome'])}, slip "
              f"{1e3 * t['slip_distance']:.3f} "
              f'mm, peak damage pressure {_trial_pressure(t) / 1e3:.1f} kPa') for t in trials]
     if not window.get('window') or low is None or high is None:
@@ -449,6 +449,9 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
         found = f'{low:.3g} N .. ' + (f'{high:.3g} N' if math.isfinite(high)
                                       else 'gripper.max_force (nothing bruised)')
     window_rows = [('safe window', found)]
+    if window.get('min_force_limited_by') == 'grip not reached':
+        window_rows.append(('lower bound', 'none: the fingers did not reach the grip of the '
+                            'forces above the largest that slid, so no force holds'))
     if limited_by == 'solver failure':
         window_rows.append(('upper bound', 'the nearest trial above it did not converge: '
                             'the fruit bruises somewhere above it, not at it'))
