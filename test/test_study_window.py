@@ -183,3 +183,34 @@ def test_a_force_grid_whose_largest_force_is_not_reached_ends_below_it():
     result = population_window(windows, limit=20.0, fraction=0.9, confidence=0.9)
     assert result['grip_limit_bounds'] == 1 and result['solver_failure_bounds'] == 0
     assert "1 fruits' upper bounds are the most grip" in describe_window(result, '90 %')
+
+
+def test_a_fruit_held_by_no_grip_its_fingers_reach_is_counted():
+    """On a force grid, a fruit that slid at every force its fingers reached and whose
+    larger forces were not reached holds nowhere 'grip not reached'; the population
+    and the study line count it apart from fruits that held at no force up to the
+    limit."""
+    from types import SimpleNamespace
+    from gripper_sim.cli.study import describe_window
+    from gripper_sim.workflows.study import _sample_windows
+
+    def evaluation(force, outcome, peak):
+        return SimpleNamespace(force=force, outcome=outcome, held=outcome == 'held',
+                               bruised=False, crushed=False, slip_distance=0.01,
+                               peak_grip_force=peak, peak_jaw_pressure=0.0,
+                               peak_table_pressure=0.0, peak_damage_pressure=0.0,
+                               bruised_at='')
+
+    unreached = SimpleNamespace(done=True, setup=SimpleNamespace(sample=0), result=[
+        evaluation(2.0, 'dropped', 2.0), evaluation(4.0, 'failed', 2.6),
+        evaluation(8.0, 'failed', 2.6)])
+    slides = SimpleNamespace(done=True, setup=SimpleNamespace(sample=1), result=[
+        evaluation(2.0, 'dropped', 2.0), evaluation(4.0, 'dropped', 4.0),
+        evaluation(8.0, 'dropped', 8.0)])
+    windows = _sample_windows(SimpleNamespace(forces=(2.0, 4.0, 8.0)), [unreached, slides])
+    assert [(w.min_force, w.min_force_limited_by) for w in windows] == [
+        (None, 'grip not reached'), (None, 'gripper.max_force')]
+    result = population_window(windows, limit=8.0, fraction=0.9, confidence=0.9)
+    assert result['holds_nowhere'] == 2 and result['grip_limit_holds_nowhere'] == 1
+    assert '1 fruits hold at no force their fingers deliver' in describe_window(
+        result, '90 %')

@@ -62,13 +62,15 @@ def run_study_verb(args) -> int:
 
 
 def describe_window(population: dict | None, percent: str) -> str:
-    """One line: the population window with its interval, or 'no safe force'."""
+    """One line: the population window with its interval, or 'no safe force', and what
+    limited the fruits' own bounds where it was not a bruise or a slide."""
     if population is None:
         return 'not complete'
     window = population['window']
     if window is None:
         return (f"no safe force for {percent} of the fruits ({population['no_own_window']} "
-                f"of {population['samples']} have no window of their own)")
+                f"of {population['samples']} have no window of their own)"
+                + _bound_notes(population))
     high = ('gripper.max_force' if window['high_is_limit'] else f"{window['high']:.3g} N")
     text = f"{window['low']:.3g} N .. {high} holds {percent} undamaged"
     ci = population['ci']
@@ -79,6 +81,13 @@ def describe_window(population: dict | None, percent: str) -> str:
     sure = population['confident_window']
     if sure is None and not math.isnan(population['samples_needed']):
         text += f"; a confident claim needs >= {population['samples_needed']} fruits"
+    return text + _bound_notes(population)
+
+
+def _bound_notes(population: dict) -> str:
+    """'; ...' for each count of fruits whose bounds a solver failure or the fingers'
+    reach limited (empty if none)."""
+    text = ''
     failures = population.get('solver_failure_bounds', 0)
     if failures:
         text += (f"; {failures} fruits' upper bounds are solver failures, not bruises (they "
@@ -87,4 +96,8 @@ def describe_window(population: dict | None, percent: str) -> str:
     if limited:
         text += (f"; {limited} fruits' upper bounds are the most grip their fingers "
                  'delivered, not bruises (a larger command was not reached)')
+    unheld = population.get('grip_limit_holds_nowhere', 0)
+    if unheld:
+        text += (f'; {unheld} fruits hold at no force their fingers deliver (the grips '
+                 'that might hold them were not reached)')
     return text

@@ -42,7 +42,8 @@ from gripper_sim.workflows.study_spec import Study
 from gripper_sim.workflows.study_spec import FruitSetup
 from gripper_sim.workflows.study_tasks import (answer_key, code_version, evaluation_of,
                                                run_fruit)
-from gripper_sim.workflows.window import trial_of, upper_bound_limited_by
+from gripper_sim.workflows.window import (lower_bound_limited_by, trial_of,
+                                          upper_bound_limited_by)
 
 #: seconds to wait for an existing scheduler before giving up
 CONNECT_TIMEOUT = 3.0
@@ -232,7 +233,7 @@ class _Runner:
         chain.done = True
         if value is None:
             chain.error = failure
-            chain.result = [] if self.study.forces else (None, None, None)
+            chain.result = [] if self.study.forces else (None, None, None, None)
         elif self.study.forces:
             chain.result = [evaluation_of(self.store.get(case_key(chain.setup, 'hold', f,
                                                                   self.code)))
@@ -303,7 +304,8 @@ def summarise(study: Study, chains: list[_Chain], store: RowStore, complete: boo
                 entry['population']['curve'] = _grid_success(study, own)
         entry['samples'] = [dict(sample=w.sample, min_force=w.min_force,
                                  max_force=_number(w.max_force),
-                                 max_force_limited_by=w.max_force_limited_by)
+                                 max_force_limited_by=w.max_force_limited_by,
+                                 min_force_limited_by=w.min_force_limited_by)
                             for w in windows]
         entry['failed'] = [dict(sample=c.setup.sample, error=c.error) for c in own if c.error]
         points.append(entry)
@@ -336,11 +338,13 @@ def _sample_windows(study: Study, chains: list[_Chain]) -> list[SampleWindow]:
     windows = []
     for sample, evaluations in sorted(by_sample.items()):
         held = [e.force for e in evaluations if e.held]
+        low = min(held) if held else None
         trials = [trial_of(e, 'bruise') for e in evaluations]
         safe = [t.force for t in trials if t.safe]
         high = max(safe) if safe else None
-        windows.append(SampleWindow(sample, min(held) if held else None, high,
-                                    upper_bound_limited_by(high, trials)))
+        windows.append(SampleWindow(
+            sample, low, high, upper_bound_limited_by(high, trials),
+            lower_bound_limited_by(low, [trial_of(e, 'hold') for e in evaluations])))
     return windows
 
 

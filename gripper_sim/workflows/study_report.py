@@ -148,6 +148,7 @@ def _png(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> No
         step = max(1, len(categories) // 20)
         ax[i].set_xticks(range(0, len(categories), step), categories[::step],
                          fontsize=7 if len(categories) > 8 else None)
+        ax[i].set_xlim(-0.5, len(categories) - 0.5)  # one category: not the spread's width
         ax[i].set_yscale('log')
         ax[i].yaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f'{v:g}'))
         ax[i].set_xlabel(axis)

@@ -21,7 +21,8 @@ import gripper_sim
 from gripper_sim.workflows.grasp import GraspEvaluation
 from gripper_sim.workflows.scenario import Scenario
 from gripper_sim.workflows.window import (estimates, evaluate_grasp, run_search, trial_of,
-                                     upper_bound_limited_by, window_search)
+                                     lower_bound_limited_by, upper_bound_limited_by,
+                                     window_search)
 
 #: the fields of a GraspEvaluation a row carries
 EVALUATION_FIELDS = tuple(f.name for f in fields(GraspEvaluation)
@@ -82,7 +83,8 @@ def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
 
     Without ``forces``: its window search (``workflows.window.window_search`` from the seeds
     of ``estimates``), returning ``result`` = (min_force, max_force, what limited
-    max_force: ``window.upper_bound_limited_by``). With ``forces``:
+    max_force: ``window.upper_bound_limited_by``, why min_force is None:
+    ``window.lower_bound_limited_by``). With ``forces``:
     one 'hold' evaluation per force, ``result`` None. An evaluation already in
     ``known`` (outputs by ``answer_key``, from a previous run) is not computed again.
 
@@ -112,4 +114,5 @@ def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
         return trials[-1]
 
     low, high = run_search(window_search(config, hold, bruise, tolerance), trial)
-    return dict(result=(low, high, upper_bound_limited_by(high, trials)), new=new)
+    return dict(result=(low, high, upper_bound_limited_by(high, trials),
+                        lower_bound_limited_by(low, trials)), new=new)
