@@ -159,6 +159,16 @@ def test_a_grid_study_tells_a_solver_failure_above_the_safe_forces_from_a_bruise
     assert [w.max_force_limited_by for w in windows] == ['solver failure', 'bruise']
 
 
+def evaluation(force: float, outcome: str, peak: float):
+    """An undamaged grasp evaluation of a force grid (the fields ``_sample_windows``
+    reads): its force and outcome, held when 'held', its peak grip force ``peak`` N."""
+    from types import SimpleNamespace
+    return SimpleNamespace(force=force, outcome=outcome, held=outcome == 'held',
+                           bruised=False, crushed=False, slip_distance=0.0,
+                           peak_grip_force=peak, peak_jaw_pressure=0.0,
+                           peak_table_pressure=0.0, peak_damage_pressure=0.0, bruised_at='')
+
+
 def test_a_force_grid_whose_largest_force_is_not_reached_ends_below_it():
     """On a force grid an undamaged run whose grip stayed below its command (outcome
     'failed') is not safe: the fruit's upper bound is the force below it, limited by
@@ -166,13 +176,6 @@ def test_a_force_grid_whose_largest_force_is_not_reached_ends_below_it():
     from types import SimpleNamespace
     from gripper_sim.cli.study import describe_window
     from gripper_sim.workflows.study import _sample_windows
-
-    def evaluation(force, outcome, peak):
-        return SimpleNamespace(force=force, outcome=outcome, held=outcome == 'held',
-                               bruised=False, crushed=False, slip_distance=0.0,
-                               peak_grip_force=peak, peak_jaw_pressure=0.0,
-                               peak_table_pressure=0.0, peak_damage_pressure=0.0,
-                               bruised_at='')
 
     chain = SimpleNamespace(done=True, setup=SimpleNamespace(sample=0), result=[
         evaluation(5.0, 'held', 5.0), evaluation(10.0, 'held', 10.0),
@@ -193,13 +196,6 @@ def test_a_fruit_held_by_no_grip_its_fingers_reach_is_counted():
     from types import SimpleNamespace
     from gripper_sim.cli.study import describe_window
     from gripper_sim.workflows.study import _sample_windows
-
-    def evaluation(force, outcome, peak):
-        return SimpleNamespace(force=force, outcome=outcome, held=outcome == 'held',
-                               bruised=False, crushed=False, slip_distance=0.01,
-                               peak_grip_force=peak, peak_jaw_pressure=0.0,
-                               peak_table_pressure=0.0, peak_damage_pressure=0.0,
-                               bruised_at='')
 
     unreached = SimpleNamespace(done=True, setup=SimpleNamespace(sample=0), result=[
         evaluation(2.0, 'dropped', 2.0), evaluation(4.0, 'failed', 2.6),
