@@ -6,7 +6,8 @@
   table lets go, to the end of the hold): such a trial is 'held'. Found by bisection
   over full simulations, from a bracket seeded with the rigid-flat-jaw estimate
   m g / (2 mu_s) (validation.md section 6) and m g / (2 mu_k), widened until it
-  brackets.
+  brackets. A trial whose grip stays below its command ('not reached') ends the climb:
+  no larger command holds, so the search looks below it (``hold_verdict``, ``bisection``).
 - Maximum force: the largest grip force at which the same run leaves the fruit
   undamaged (neither bruised nor crushed), by bisection seeded with the Hertz force at
   which the peak pressure reaches the bruise threshold,
