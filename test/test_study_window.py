@@ -208,5 +208,10 @@ def test_a_fruit_held_by_no_grip_its_fingers_reach_is_counted():
         (None, 'grip not reached'), (None, 'gripper.max_force')]
     result = population_window(windows, limit=8.0, fraction=0.9, confidence=0.9)
     assert result['holds_nowhere'] == 2 and result['grip_limit_holds_nowhere'] == 1
+    # no fruit has a window: the success curve (0 everywhere) still spans the forces of
+    # the fruits' own bounds (fruit 0 safe up to 2 N), not only the gripper's limit
+    curve = result['curve']
+    assert curve['force'][0] == pytest.approx(1.0) and curve['force'][-1] == pytest.approx(4.0)
+    assert max(curve['p']) == 0.0
     assert '1 fruits hold at no force their fingers deliver' in describe_window(
         result, '90 %')

@@ -149,11 +149,15 @@ def population_window(windows: Sequence[SampleWindow], limit: float, fraction: f
 
 def success_curve(windows: Sequence[SampleWindow], limit: float, confidence: float,
                   points: int = 120) -> dict:
-    """p(F) on log-spaced forces from half the smallest end to twice the largest finite
-    end (capped at ``limit``), with every end included: {force, p, lower, upper}."""
+    """p(F) on log-spaced forces from half the smallest finite bound of a fruit to twice
+    the largest (capped at ``limit``; the bounds of fruits without a window of their own
+    count, so that a population with none still gets the forces that were tried), with
+    every end included: {force, p, lower, upper}."""
     n = len(windows)
     ends = candidate_forces(windows, limit)
-    finite = ends[ends < limit] if np.any(ends < limit) else ends
+    bounds = np.array([b for w in windows for b in (w.min_force, w.max_force)
+                       if b is not None and b < limit], dtype=float)
+    finite = bounds if bounds.size else ends
     start, stop = 0.5 * float(finite.min()), min(2.0 * float(finite.max()), limit)
     grid = np.geomspace(start, max(stop, 1.01 * start), points)
     forces = np.unique(np.concatenate([grid, ends[(ends >= start) & (ends <= stop)]]))
