@@ -171,6 +171,10 @@ def test_a_grip_the_fingers_do_not_reach_stops_the_hold_search_climbing():
     answer, asked = hold_search(hold_from=300.0, reach=math.inf)
     assert answer is None and lower_bound_limited_by(answer, asked) == 'gripper.max_force'
     assert max(t.force for t in asked) == 200.0
+    # ... unless the trial at the limit did not converge: whether it holds is not known
+    failed = [t if t.force < 200.0 else _trial(200.0, 'hold', 'solver failed', False)
+              for t in asked]
+    assert lower_bound_limited_by(None, failed) == 'solver failure'
 
 
 def test_the_window_command_says_when_the_grip_was_not_reached(monkeypatch, capsys):
@@ -218,3 +222,25 @@ def test_a_silicone_fin_ray_does_not_reach_a_firm_grip():
     trial = run_trial(config, scenario, ('hold', 10.0))
     assert trial.outcome == 'failed' and not trial.held
     assert trial.verdict == 'not reached' and hold_verdict(trial) == OUT_OF_REACH
+
+
+def test_the_window_command_says_when_no_hold_is_known_for_a_solver_failure(monkeypatch,
+                                                                           capsys):
+    """A hold search whose trial at gripper.max_force did not converge: not 'none up to
+    gripper.max_force' but that whether it holds there is not known."""
+    from gripper_sim.cli.main import main
+    from gripper_sim.workflows import window as window_module
+    trials = [_trial(100.0, 'hold', 'dropped', False),
+              _trial(200.0, 'hold', 'solver failed', False),
+              _trial(10.0, 'bruise', 'held', False), _trial(20.0, 'bruise', 'bruised', True)]
+
+    def grasp_window(config, scenario, tolerance, progress, workers=1):
+        return GraspWindow(fruit='apple', finger='flat', min_force=None, max_force=10.0,
+                           min_estimate=1.3, max_estimate=16.6, mass=0.134, friction=0.5,
+                           tolerance=tolerance, trials=trials, max_force_measured=10.0)
+
+    monkeypatch.setattr(window_module, 'grasp_window', grasp_window)
+    assert main(['window', '--fruit', 'apple', '--quiet']) == 0
+    out = capsys.readouterr().out
+    assert ('holds from      not found up to gripper.max_force (200 N): the trial there did '
+            'not converge') in out

@@ -464,6 +464,9 @@ def run_window(args) -> int:
         low = ('not found: ' + (f'slides at {slid.force:.3g} N, ' if slid else '')
                + f'does not reach a grip of {unreached.force:.3g} N (peak '
                f'{unreached.peak_grip_force:.3g} N): the fingers deliver no more')
+    elif window.min_force_limited_by == 'solver failure':
+        low = (f'not found up to gripper.max_force ({limit:g} N): the trial there did not '
+               'converge, so whether it holds is not known')
     high = (f'none up to gripper.max_force ({limit:g} N)' if window.max_force == math.inf
             else 'bruised at every force tried' if window.max_force is None
             else bound(window.max_force, window.max_force_measured))

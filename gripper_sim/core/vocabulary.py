@@ -119,10 +119,12 @@ KEYS: dict[str, Term] = {
     'max_force_measured': Term('N', 'upper bound, measured: peak_grip_force of its trial '
                                     '(null when max_force is "inf")'),
     'min_force_limited_by': Term('-', "why min_force is null: 'gripper.max_force' (no "
-                                      "force up to it held) or 'grip not reached' (no "
+                                      "force up to it held), 'grip not reached' (no "
                                       'force held below the smallest whose grip was not '
                                       'reached, to the tolerance: the fingers deliver no '
-                                      'more); null when min_force was found'),
+                                      "more) or 'solver failure' (the trial at the largest "
+                                      'force did not converge); null when min_force was '
+                                      'found'),
     'max_force_limited_by': Term('-', "what ended the safe side at max_force: 'bruise'; "
                                       "'solver failure' when the nearest trial above it did "
                                       'not converge (the fruit bruises somewhere above '

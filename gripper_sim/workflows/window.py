@@ -247,12 +247,17 @@ def upper_bound_limited_by(max_force: float | None, trials: Iterable[Trial]) -> 
 def lower_bound_limited_by(min_force: float | None, trials: Iterable[Trial]) -> str | None:
     """Why a window has no lower bound: 'grip not reached' when a 'hold' trial's grip
     stayed below its command (the hold search stopped below it: the fingers deliver no
-    more), 'gripper.max_force' when every force up to it was tried; None when
-    ``min_force`` was found."""
+    more); 'solver failure' when the largest force tried failed to converge (whether it
+    holds is not known); 'gripper.max_force' when every force up to it was tried; None
+    when ``min_force`` was found."""
     if min_force is not None:
         return None
-    reached = all(t.reached for t in trials if t.kind == 'hold')
-    return 'gripper.max_force' if reached else 'grip not reached'
+    hold = [t for t in trials if t.kind == 'hold']
+    if not all(t.reached for t in hold):
+        return 'grip not reached'
+    if hold and max(hold, key=lambda t: t.force).outcome == SOLVER_FAILED:
+        return 'solver failure'
+    return 'gripper.max_force'
 
 
 def reach_bracket(trials: Iterable[Trial]) -> tuple[Trial | None, Trial | None]:
