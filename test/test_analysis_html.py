@@ -169,6 +169,11 @@ def test_window_report_says_when_the_fingers_did_not_reach_a_grip(tmp_path):
     assert 'lower bound' in page and 'so no force holds' in page
     assert 'upper bound' in page and 'the fingers deliver no more' in page
     assert 'hold: not reached' in page and 'bruise: not reached' in page
+    # a hold search whose last trial did not converge says that instead
+    hold_2.outcome, hold_2.peak_grip_force = 'solver failed', 2.0
+    page = write_window_report(window.as_dict(), tmp_path / 'failed.html').read_text()
+    assert window.min_force_limited_by == 'solver failure'
+    assert 'whether it holds is not known' in page
 
 
 def test_the_index_of_several_runs_links_to_their_reports(pick_3d, tmp_path):

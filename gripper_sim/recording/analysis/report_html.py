@@ -449,9 +449,13 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
         found = f'{low:.3g} N .. ' + (f'{high:.3g} N' if math.isfinite(high)
                                       else 'gripper.max_force (nothing bruised)')
     window_rows = [('safe window', found)]
-    if window.get('min_force_limited_by') == 'grip not reached':
+    lower_limited_by = window.get('min_force_limited_by')
+    if lower_limited_by == 'grip not reached':
         window_rows.append(('lower bound', 'none: the fingers did not reach the grip of the '
                             'forces above the largest that slid, so no force holds'))
+    elif lower_limited_by == 'solver failure':
+        window_rows.append(('lower bound', 'not found: the trial at gripper.max_force did not '
+                            'converge, so whether it holds is not known'))
     if limited_by == 'solver failure':
         window_rows.append(('upper bound', 'the nearest trial above it did not converge: '
                             'the fruit bruises somewhere above it, not at it'))
