@@ -177,6 +177,14 @@ def test_a_grip_the_fingers_do_not_reach_stops_the_hold_search_climbing():
     assert lower_bound_limited_by(None, failed) == 'solver failure'
 
 
+def test_a_hold_at_every_force_tried_down_to_the_last_widening_answers_a_force_tried():
+    """Held at every force down to the bracket's last halving: the answer is the smallest
+    force tried (its trial measured), not the half below it, never tried."""
+    answer, asked = hold_search(hold_from=1e-6, reach=math.inf)
+    held = [t.force for t in asked if t.held]
+    assert len(asked) == 8 and len(held) == 8 and answer == min(held)
+
+
 def test_the_window_command_says_when_the_grip_was_not_reached(monkeypatch, capsys):
     """`gripper-sim window`'s text for a window that ends below a trial whose grip was
     not reached: the bound as 'not found: safe up to', and the trial's peak grip."""

@@ -554,8 +554,8 @@ def bisection(low: float, high: float, limit: float, tolerance: float,
             reach = math.inf  # an ok force below the reach brackets the search itself
             continue
         break
-    else:
-        return lo if want_smallest and reach == math.inf else None
+    else:  # ok at every force tried down there: the smallest of them (hi), or none
+        return hi if want_smallest and reach == math.inf else None
     while reach == math.inf:  # doubling, so at most log2(limit / hi) + 1 trials
         ok_hi = yield hi
         if ok_hi == OUT_OF_REACH:
