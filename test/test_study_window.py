@@ -213,5 +213,11 @@ def test_a_fruit_held_by_no_grip_its_fingers_reach_is_counted():
     curve = result['curve']
     assert curve['force'][0] == pytest.approx(1.0) and curve['force'][-1] == pytest.approx(4.0)
     assert max(curve['p']) == 0.0
+    # a fruit whose hold trial at the limit did not converge: counted apart
+    failed = SampleWindow(2, None, 8.0, 'bruise', 'solver failure')
+    result = population_window(windows + [failed], limit=8.0, fraction=0.9, confidence=0.9)
+    assert result['holds_nowhere'] == 3 and result['solver_failure_holds_nowhere'] == 1
+    assert "1 fruits held at no force below one whose trial did not converge" in (
+        describe_window(result, '90 %'))
     assert '1 fruits hold at no force their fingers deliver' in describe_window(
         result, '90 %')

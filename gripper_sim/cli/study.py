@@ -96,6 +96,10 @@ def _bound_notes(population: dict) -> str:
     if limited:
         text += (f"; {limited} fruits' upper bounds are the most grip their fingers "
                  'delivered, not bruises (a larger command was not reached)')
+    unknown = population.get('solver_failure_holds_nowhere', 0)
+    if unknown:
+        text += (f'; {unknown} fruits held at no force below one whose trial did not '
+                 'converge (whether they hold there is not known)')
     unheld = population.get('grip_limit_holds_nowhere', 0)
     if unheld:
         text += (f'; {unheld} fruits hold at no force their fingers deliver (the grips '

@@ -39,8 +39,9 @@ class SampleWindow:
     converge (the fruit bruises somewhere above it), 'grip not reached' where its grip
     stayed below its command (the fingers deliver no more), 'bruise', or None
     (unknown); ``min_force_limited_by``: where ``min_force`` is None, 'grip not reached'
-    when nothing held below a force whose grip was not reached, else 'gripper.max_force'
-    (None: a min_force, or unknown)."""
+    when nothing held below a force whose grip was not reached, 'solver failure' when
+    the trial at the largest force did not converge, else 'gripper.max_force' (None: a
+    min_force, or unknown)."""
 
     sample: int
     min_force: float | None
@@ -112,6 +113,8 @@ def population_window(windows: Sequence[SampleWindow], limit: float, fraction: f
                         holds_nowhere=sum(w.min_force is None for w in windows),
                         grip_limit_holds_nowhere=sum(
                             w.min_force_limited_by == 'grip not reached' for w in windows),
+                        solver_failure_holds_nowhere=sum(
+                            w.min_force_limited_by == 'solver failure' for w in windows),
                         damaged_everywhere=sum(w.max_force is None for w in windows),
                         no_own_window=sum(not w.exists for w in windows),
                         solver_failure_bounds=sum(w.max_force_limited_by == 'solver failure'
