@@ -84,24 +84,22 @@ def describe_window(population: dict | None, percent: str) -> str:
     return text + _bound_notes(population)
 
 
+#: the population's counts of fruits whose bounds a solver failure or the fingers' reach
+#: limited, and the study line's note on each ({n}: the count)
+BOUND_NOTES = (
+    ('solver_failure_bounds', "{n} fruits' upper bounds are solver failures, not bruises "
+                              '(they bruise somewhere above)'),
+    ('grip_limit_bounds', "{n} fruits' upper bounds are the most grip their fingers "
+                          'delivered, not bruises (a larger command was not reached)'),
+    ('solver_failure_holds_nowhere', '{n} fruits held at no force below one whose trial '
+                                     'did not converge (whether they hold there is not '
+                                     'known)'),
+    ('grip_limit_holds_nowhere', '{n} fruits hold at no force their fingers deliver (the '
+                                 'grips that might hold them were not reached)'),
+)
+
+
 def _bound_notes(population: dict) -> str:
-    """'; ...' for each count of fruits whose bounds a solver failure or the fingers'
-    reach limited (empty if none)."""
-    text = ''
-    failures = population.get('solver_failure_bounds', 0)
-    if failures:
-        text += (f"; {failures} fruits' upper bounds are solver failures, not bruises (they "
-                 'bruise somewhere above)')
-    limited = population.get('grip_limit_bounds', 0)
-    if limited:
-        text += (f"; {limited} fruits' upper bounds are the most grip their fingers "
-                 'delivered, not bruises (a larger command was not reached)')
-    unknown = population.get('solver_failure_holds_nowhere', 0)
-    if unknown:
-        text += (f'; {unknown} fruits held at no force below one whose trial did not '
-                 'converge (whether they hold there is not known)')
-    unheld = population.get('grip_limit_holds_nowhere', 0)
-    if unheld:
-        text += (f'; {unheld} fruits hold at no force their fingers deliver (the grips '
-                 'that might hold them were not reached)')
-    return text
+    """'; ...' for each count of ``BOUND_NOTES`` above 0 (empty if none)."""
+    return ''.join(f'; {note.format(n=population[key])}' for key, note in BOUND_NOTES
+                   if population.get(key, 0))

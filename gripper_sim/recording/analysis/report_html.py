@@ -409,6 +409,21 @@ def _trial_colour(trial: dict, good: bool) -> str:
     return 'seagreen' if good else 'crimson'
 
 
+#: the window page's row on a bound that a solver failure or the fingers' reach limited:
+#: (bound, its ``*_limited_by``) -> the row's text
+_BOUND_ROWS = {
+    ('lower bound', 'grip not reached'): 'none: the fingers did not reach the grip of the '
+                                         'forces above the largest that slid, so no force '
+                                         'holds',
+    ('lower bound', 'solver failure'): 'not found: the trial at gripper.max_force did not '
+                                       'converge, so whether it holds is not known',
+    ('upper bound', 'solver failure'): 'the nearest trial above it did not converge: the '
+                                       'fruit bruises somewhere above it, not at it',
+    ('upper bound', 'grip not reached'): 'the nearest trial above it did not reach its grip, '
+                                         'the fruit undamaged: the fingers deliver no more',
+}
+
+
 def write_window_report(window: dict, path: str | Path, title: str = 'Grasp window') -> Path:
     """``window``'s report: every trial's outcome, slip and peak damage pressure over its
     grip force, with the bounds found. ``window``: ``GraspWindow.as_dict()``."""
@@ -449,19 +464,11 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
         found = f'{low:.3g} N .. ' + (f'{high:.3g} N' if math.isfinite(high)
                                       else 'gripper.max_force (nothing bruised)')
     window_rows = [('safe window', found)]
-    lower_limited_by = window.get('min_force_limited_by')
-    if lower_limited_by == 'grip not reached':
-        window_rows.append(('lower bound', 'none: the fingers did not reach the grip of the '
-                            'forces above the largest that slid, so no force holds'))
-    elif lower_limited_by == 'solver failure':
-        window_rows.append(('lower bound', 'not found: the trial at gripper.max_force did not '
-                            'converge, so whether it holds is not known'))
-    if limited_by == 'solver failure':
-        window_rows.append(('upper bound', 'the nearest trial above it did not converge: '
-                            'the fruit bruises somewhere above it, not at it'))
-    elif limited_by == 'grip not reached':
-        window_rows.append(('upper bound', 'the nearest trial above it did not reach its '
-                            'grip, the fruit undamaged: the fingers deliver no more'))
+    for bound, key in (('lower bound', 'min_force_limited_by'),
+                       ('upper bound', 'max_force_limited_by')):
+        why = _BOUND_ROWS.get((bound, window.get(key)))
+        if why is not None:
+            window_rows.append((bound, why))
     return write_html_report(path, title, [
         Block('Window', rows=window_rows),
         Block('Trials', fig, rows=rows,
