@@ -14,9 +14,19 @@ one symbol, ``barrier_newton.solve``; ``--interpreted`` runs the Newton loop in 
 linear solve and the filters are separate symbols (their Python glue slower than on the
 compiled route).
 
+``--inside`` compiles every kernel afresh in the sampled run (numba's cache in a
+temporary folder, ~3 min of CPU before the warm-up ends) and names every function of
+each kernel's machine code as well (``inner_functions``: a kernel loaded from the cache
+keeps no module to list them from): the kernels the compiled solve calls that LLVM did
+not inline (the block LDL^T solve, CG's matrix product, the energies, the barrier's
+terms) become their own symbols, on the compiled route. The fresh compile leaves numba's
+compiler objects on the heap, so the Python collector's share of the samples is larger
+than in a normal run (compare the JIT symbols among themselves).
+
 Usage::
 
-    python bench/perf_kernels.py [fin_ray|ring] [--interpreted] [--runs N] [--top K]
+    python bench/perf_kernels.py [fin_ray|ring] [--interpreted] [--inside] [--runs N]
+        [--top K]
 
 It runs itself under ``perf record`` (4 kHz; started with sampling off, switched on
 through perf's control FIFO once the warm-up run is done, so that imports and numba's
@@ -29,6 +39,7 @@ from __future__ import annotations
 import argparse
 import os
 import pkgutil
+import re
 import shutil
 import subprocess
 import sys
@@ -64,7 +75,41 @@ def kernel_entries() -> list[tuple[int, str]]:
                 if address:
                     entries.append((address, f"{value.py_func.__module__.split('.')[-1]}."
                                              f'{value.py_func.__name__}'))
-    return sorted(entries)
+                entries.extend(inner_functions(result.library))
+    return sorted(dict(entries).items())
+
+
+def _short_name(mangled: str) -> str:
+    """'module.function' of a numba function's mangled symbol (an Itanium-style nested
+    name: length-prefixed parts, the last two kept; the symbol itself if it is not one)."""
+    if not mangled.startswith('_ZN'):
+        return mangled
+    parts, text = [], mangled[3:]
+    while True:
+        match = re.match(r'(\d+)', text)
+        if not match:
+            break
+        size, skip = int(match.group(1)), len(match.group(1))
+        parts.append(text[skip:skip + size])
+        text = text[skip + size:]
+    return '.'.join(parts[-2:]) if parts else mangled
+
+
+def inner_functions(library) -> list[tuple[int, str]]:
+    """(address, name) of every function defined in a compiled kernel's code (the kernels
+    it calls and LLVM did not inline): known only for code compiled in this process
+    (``--inside``: a library loaded from numba's cache keeps no module to list)."""
+    module = getattr(library, '_final_module', None)
+    if module is None:
+        return []
+    found = []
+    for function in module.functions:
+        if function.is_declaration:
+            continue
+        address = library.get_pointer_to_function(function.name)
+        if address:
+            found.append((address, _short_name(function.name)))
+    return found
 
 
 def write_perf_map(entries: list[tuple[int, str]]) -> Path:
@@ -111,6 +156,10 @@ def main(argv=None) -> int:
                         help='the Newton loop in Python: each kernel its own symbol')
     parser.add_argument('--runs', type=int, default=6, help='runs sampled (default 6)')
     parser.add_argument('--top', type=int, default=30, help='symbols listed (default 30)')
+    parser.add_argument('--inside', action='store_true',
+                        help="compile every kernel afresh in this run (numba's cache in a "
+                             'temporary folder, several minutes) so that the functions '
+                             'inside a kernel are named too')
     args = parser.parse_args(argv)
     if args.interpreted:
         from gripper_sim.core import fast_solver
@@ -129,7 +178,10 @@ def main(argv=None) -> int:
         command = ['perf', 'record', '-q', '-F', '4000', '-g', '-D', '-1',
                    f'--control=fifo:{folder / "ctl"},{folder / "ack"}', '-o', str(data),
                    sys.executable, __file__, *(argv if argv is not None else sys.argv[1:])]
-        subprocess.run(command, env=dict(os.environ, **{CHILD: tmp}), check=True)
+        env = dict(os.environ, **{CHILD: tmp})
+        if args.inside:
+            env['NUMBA_CACHE_DIR'] = str(folder / 'numba-cache')
+        subprocess.run(command, env=env, check=True)
         print(f'{args.case}{" (interpreted Newton loop)" if args.interpreted else ""}: '
               f'{args.runs} runs after a warm-up, load average {os.getloadavg()[0]:.2f}; '
               'share of the samples')
