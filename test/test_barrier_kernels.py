@@ -6,7 +6,8 @@ collision set, ``BarrierPotential`` with the physical barrier, the Hessian proje
 clamping) and by the kernel on the same candidates: value, gradient and Hessian agree
 to 1e-10 relative. A self-contact's quiet test measures each vertex's move against its
 body's mean move: a body carried along rigidly has not moved. The faces holding the
-loaded nodes and the sticking marks equal their numpy references.
+loaded nodes and the sticking marks equal their numpy references, as do the held nodes'
+normal forces, the mean gap of a face's nodes and the start pushed ahead of a moving face.
 """
 import ipctk
 import numpy as np
@@ -14,7 +15,8 @@ import pytest
 
 from gripper_sim.core.barrier_kernels import (add_local_hessian, edge_vertex_barrier,
                                               kept_step_bound, largest_relative_move,
-                                              mark_sticking, nearest_faces,
+                                              mark_sticking, mean_gap, nearest_faces,
+                                              normal_components, push_ahead,
                                               relative_moves_within, same_values)
 from gripper_sim.core.barrier_search import collision_free_step
 
@@ -215,3 +217,75 @@ def test_the_sticking_marks_are_the_references():
     expected[held] = np.where(np.linalg.norm(along, axis=1) < eps, 1, 2)
     assert 0 < np.count_nonzero(expected == 1) < held.size
     np.testing.assert_array_equal(mode, expected)
+
+
+def _random_face(rng, d):
+    """A face's origin, unit normal (d,), orthonormal tangents (d - 1, d) and half
+    extents (d - 1,) m, near the origin."""
+    normal = rng.normal(size=d)
+    normal /= np.linalg.norm(normal)
+    tangents = np.linalg.svd(normal[None])[2][1:]
+    return rng.uniform(-1e-3, 1e-3, d), normal, tangents, rng.uniform(5e-4, 2e-3, d - 1)
+
+
+def test_the_held_normal_forces_and_mean_gaps_are_the_references():
+    rng = np.random.default_rng(5)
+    n, k = 200, 3
+    x = rng.uniform(-2e-3, 2e-3, (n, 2))
+    forces = rng.normal(size=(n, 2))
+    holder = rng.integers(-1, k, n)
+    faces = [_random_face(rng, 2) for _ in range(k)]
+    normals = np.array([face[1] for face in faces])
+    normal_force = np.full(n, 7.0)
+    normal_components(holder, forces, normals, normal_force)
+    held = holder >= 0
+    np.testing.assert_allclose(normal_force[held],
+                               np.sum(forces[held] * normals[holder[held]], axis=1),
+                               rtol=1e-12, atol=1e-15)
+    assert np.all(normal_force[~held] == 7.0)  # the others left as they were
+    for face, (origin, normal, _, _) in enumerate(faces):
+        count, gap = mean_gap(x, holder, face, origin, normal)
+        mine = holder == face
+        assert count == np.count_nonzero(mine) > 0
+        assert gap == pytest.approx(np.mean((x[mine] - origin) @ normal), rel=1e-12)
+    assert mean_gap(x, holder, k, faces[0][0], faces[0][1]) == (0, 0.0)
+
+
+def _pushed_reference(x_n, surface, origin, normal, tangents, half, thickness, shift, dhat,
+                      fraction):
+    """The start pushed ahead of a face moving by ``shift`` in numpy (as
+    ``BarrierContact.pushed_start`` computed it before the kernel)."""
+    start = x_n.copy()
+    rel = x_n[surface] - origin
+    covered = (np.all(np.abs(rel @ tangents.T) <= half, axis=1) & (rel @ normal > -thickness))
+    nodes = surface[covered]
+    gap = (x_n[nodes] - origin) @ normal
+    advance = float(shift @ normal)
+    target = np.where(gap < dhat, gap, fraction * dhat)
+    push = np.maximum(advance - gap + target, 0.0)
+    front = gap >= 0
+    touching = front & (gap < dhat)
+    start[nodes[front]] += push[front, None] * normal
+    start[nodes[touching]] += shift - advance * normal
+    return start
+
+
+@pytest.mark.parametrize('d', [2, 3])
+def test_the_start_pushed_ahead_of_a_moving_face_is_the_reference(d):
+    rng = np.random.default_rng(10 + d)
+    n = 300
+    origin, normal, tangents, half = _random_face(rng, d)
+    # nodes in front of the face, behind it and beside it, some within dhat of it
+    x_n = origin + rng.uniform(-3e-3, 3e-3, (n, d))
+    near = rng.random(n) < 0.3
+    x_n[near] += (rng.uniform(0.0, DHAT, near.sum())
+                  - (x_n[near] - origin) @ normal)[:, None] * normal
+    surface = np.sort(rng.choice(n, 250, replace=False)).astype(np.int64)
+    shift = 4e-4 * normal + rng.normal(scale=2e-4, size=d)
+    start = x_n.copy()
+    push_ahead(x_n, surface, origin, normal, tangents, half, 1e-3, shift, DHAT, 0.5, start)
+    expected = _pushed_reference(x_n, surface, origin, normal, tangents, half, 1e-3, shift,
+                                 DHAT, 0.5)
+    moved = np.any(expected != x_n, axis=1)
+    assert 10 < np.count_nonzero(moved) < len(surface)
+    np.testing.assert_allclose(start, expected, rtol=0, atol=1e-15)

@@ -63,8 +63,10 @@ from scipy.spatial import cKDTree
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
 from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
-                                              mesh_vertices, nearest_faces,
-                                              relative_moves_within, same_values)
+                                              mark_sticking, mean_gap, mesh_vertices,
+                                              nearest_faces, normal_components,
+                                              push_ahead, relative_moves_within,
+                                              same_values)
 from gripper_sim.core.barrier_search import edge_vertex_candidates, smallest_distance
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -916,15 +918,9 @@ class BarrierContact(Energy):
             shift = new.origin - old.origin
             if not np.any(shift):
                 continue
-            nodes = self.surface[old.covers(x_n[self.surface])]
-            gap = old.gap(x_n[nodes])
-            advance = float(shift @ old.normal)
-            target = np.where(gap < dhat, gap, START_GAP_FRACTION * dhat)
-            push = np.maximum(advance - gap + target, 0.0)
-            front = gap >= 0
-            touching = front & (gap < dhat)
-            start[nodes[front]] += push[front, None] * old.normal
-            start[nodes[touching]] += shift - advance * old.normal
+            push_ahead(x_n, self.surface, old.origin, old.normal, old.tangents,
+                       np.asarray(old.half_extents, float), float(old.thickness), shift, dhat,
+                       START_GAP_FRACTION, start)
         return start
 
     def reachable(self, start: np.ndarray) -> bool:
@@ -991,14 +987,28 @@ class BarrierContact(Energy):
         within dhat), -1 for the others; positions ``x`` and ``forces`` (n, d)."""
         holder = np.empty(x.shape[0], np.int64)
         nearest_faces(np.ascontiguousarray(x), np.ascontiguousarray(forces),
-                      *self._face_geometry(faces), self.settings.dhat, holder)
+                      *self._face_geometry(faces)[:4], self.settings.dhat, holder)
         return holder
 
+    def held_contacts(self, x: np.ndarray, v: np.ndarray, faces,
+                      forces: np.ndarray) -> cm.ContactState:
+        """The contact set of positions ``x``, velocities ``v`` and contact ``forces`` (n, d)
+        against ``faces``: each node held by its ``holders`` face, with its normal force
+        (N, along the face's normal) and its mode, STICK below the friction smoothing
+        speed along the face (relative to it), else SLIP."""
+        contacts = cm.ContactState.held_by(self.holders(x, faces, forces))
+        _, normals, _, _, velocities = self._face_geometry(faces)
+        normal_components(contacts.obstacle, np.ascontiguousarray(forces), normals,
+                          contacts.normal_force)
+        mark_sticking(np.ascontiguousarray(v), contacts.obstacle, normals, velocities,
+                      self.settings.friction_smoothing, cm.STICK, cm.SLIP, contacts.mode)
+        return contacts
+
     def _face_geometry(self, faces) -> tuple:
-        """The faces' origins and unit normals (k, d), tangents (k, d - 1, d) and
-        half-extents (k, d - 1) m as ``nearest_faces`` takes them; kept for the last face
-        list while each face and its origin array are the same objects (see
-        ``_corners``)."""
+        """The faces' origins and unit normals (k, d), tangents (k, d - 1, d), half-extents
+        (k, d - 1) m (as ``nearest_faces`` takes them) and velocities (k, d) m/s; kept for
+        the last face list while each face and its origin array are the same objects
+        (see ``_corners``)."""
         kept = self._geometry_kept
         if kept is not None and _same_faces(faces, kept[0], kept[1]):
             return kept[2]
@@ -1006,7 +1016,8 @@ class BarrierContact(Energy):
         geometry = (np.array([f.origin for f in faces], float).reshape(-1, d),
                     np.array([f.normal for f in faces], float).reshape(-1, d),
                     np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
-                    np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1))
+                    np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1),
+                    np.array([f.velocity for f in faces], float).reshape(-1, d))
         self._geometry_kept = (tuple(faces), tuple(f.origin for f in faces), geometry)
         return geometry
 
@@ -1016,11 +1027,12 @@ class BarrierContact(Energy):
         (``holder`` (n,), positions ``x`` (n, d) m): the surfaces the outline lies on, for
         the measures that read gaps from a face (the contact length's edges)."""
         moved = []
+        x = np.ascontiguousarray(x, dtype=float)
         for k, face in enumerate(faces):
-            nodes = holder == k
-            if np.any(nodes):
+            count, gap = mean_gap(x, holder, k, face.origin, face.normal)
+            if count:
                 face = copy.copy(face)
-                face.origin = face.origin + float(np.mean(face.gap(x[nodes]))) * face.normal
+                face.origin = face.origin + gap * face.normal
             moved.append(face)
         return moved
 
@@ -1070,20 +1082,16 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
     n, d = x_n.shape
     start = _begin(barrier, x_n, old_faces, new_faces, dt)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(),
-                            StepConstraints.free(n, dim=d))
+                            _prescribed(n, d, _NO_NODES))
     x = solution.q.reshape(-1, d)
     forces = barrier.contact_forces(solution.q)
-    contacts = cm.ContactState.held_by(barrier.holders(x, new_faces, forces))
     v = (x - x_n) / dt
-    for k in np.flatnonzero(np.bincount(contacts.obstacle + 1, minlength=len(new_faces) + 1)[1:]):
-        face = new_faces[k]
-        nodes = np.flatnonzero(contacts.obstacle == k)
-        contacts.normal_force[nodes] = forces[nodes] @ face.normal
-        slip = np.linalg.norm((v[nodes] - face.velocity) @ face.tangents.T, axis=1)
-        contacts.mode[nodes] = np.where(slip < barrier.settings.friction_smoothing, cm.STICK,
-                                        cm.SLIP)
-    return StepOutcome(x, v, forces, contacts, solution.iterations)
+    return StepOutcome(x, v, forces, barrier.held_contacts(x, v, new_faces, forces),
+                       solution.iterations)
 
+
+#: no nodes (a step with none prescribed: ``_prescribed``'s key)
+_NO_NODES = np.zeros(0, np.int64)
 
 #: the last ``_prescribed`` constraints: ((n, d, the fixed nodes' array), them), or None
 _kept_constraints: tuple | None = None

@@ -602,6 +602,80 @@ def held_normal_forces(forces, obstacle, normal):
 
 
 @njit(cache=True)
+def push_ahead(x_n, surface, origin, normal, tangents, half_extents, thickness, shift, dhat,
+               fraction, start):
+    """``BarrierContact.pushed_start`` for one face moving by ``shift`` (d,) m: each node of
+    ``surface`` (k,) at positions ``x_n`` (n, d) m that the face covers at its start
+    (``FaceGeometry.covers``: within ``half_extents`` (d - 1,) m along its ``tangents``
+    (d - 1, d), less than ``thickness`` m behind it; ``origin``, unit ``normal`` (d,))
+    and lies in front of it is moved in ``start`` (n, d) along the normal by as much as
+    the face's advance brings it closer than its gap (below ``dhat`` m) or ``fraction``
+    dhat, and one that touches it (gap below dhat) along the face's shift besides."""
+    d = x_n.shape[1]
+    advance = 0.0
+    for c in range(d):
+        advance += shift[c] * normal[c]
+    for s in range(surface.shape[0]):
+        i = surface[s]
+        gap = 0.0
+        for c in range(d):
+            gap += (x_n[i, c] - origin[c]) * normal[c]
+        if not gap >= 0.0 or not gap > -thickness:
+            continue
+        covered = True
+        for t in range(d - 1):
+            along = 0.0
+            for c in range(d):
+                along += (x_n[i, c] - origin[c]) * tangents[t, c]
+            if not abs(along) <= half_extents[t]:
+                covered = False
+        if not covered:
+            continue
+        target = gap if gap < dhat else fraction * dhat
+        push = max(advance - gap + target, 0.0)
+        for c in range(d):
+            start[i, c] += push * normal[c]
+        if gap < dhat:
+            for c in range(d):
+                start[i, c] += shift[c] - advance * normal[c]
+
+
+@njit(cache=True)
+def mean_gap(x, holder, face, origin, normal):
+    """(count, m) of the nodes of positions ``x`` (n, d) m that ``holder`` (n,) gives to
+    face ``face``: how many, and the mean of their signed distances from the face's plane
+    (its ``origin`` and unit ``normal`` (d,)); 0.0 for none."""
+    d = x.shape[1]
+    count = 0
+    total = 0.0
+    for i in range(holder.shape[0]):
+        if holder[i] != face:
+            continue
+        gap = 0.0
+        for c in range(d):
+            gap += (x[i, c] - origin[c]) * normal[c]
+        total += gap
+        count += 1
+    return count, total / count if count else 0.0
+
+
+@njit(cache=True)
+def normal_components(holder, forces, normals, normal_force):
+    """Set ``normal_force`` (n,) N of each node held by a face (``holder`` (n,) >= 0, the
+    face's index) to its force (``forces`` (n, d) N) along the face's unit normal
+    (``normals`` (k, d)); the other nodes are left as they are."""
+    d = forces.shape[1]
+    for i in range(holder.shape[0]):
+        k = holder[i]
+        if k < 0:
+            continue
+        along = 0.0
+        for c in range(d):
+            along += forces[i, c] * normals[k, c]
+        normal_force[i] = along
+
+
+@njit(cache=True)
 def nearest_faces(x, forces, origins, normals, tangents, half_extents, dhat, holder):
     """Set ``holder`` (n,) to the face (index) nearest to each node of positions ``x``
     (n, d) m with a nonzero force ``forces`` (n, d) N, of the faces within ``dhat`` m
