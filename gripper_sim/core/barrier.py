@@ -51,6 +51,7 @@ its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import operator
 from dataclasses import dataclass
@@ -1049,10 +1050,14 @@ class BarrierContact(Energy):
 
 
 def _largest_shift(a: np.ndarray, b: np.ndarray) -> float:
-    """m, the largest distance between matching rows of points ``a`` and ``b`` (k, d)."""
-    if (a == b).all():  # faces standing still (the table, walls)
-        return 0.0
-    return float(np.sqrt(np.max(np.sum((b - a) ** 2, axis=1))))
+    """m, the largest distance between matching rows of points ``a`` and ``b`` (k, 2)."""
+    return float(largest_move(np.ravel(b), _row_dofs(b.shape[0]), a))
+
+
+@functools.lru_cache(maxsize=8)
+def _row_dofs(rows: int) -> np.ndarray:
+    """(rows, 2) the flat index of each coordinate of a (rows, 2) C-order array."""
+    return np.arange(2 * rows, dtype=np.int64).reshape(rows, 2)
 
 
 def _no_triplets():

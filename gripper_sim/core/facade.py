@@ -43,7 +43,7 @@ from gripper_sim.core import jaw_drive
 from gripper_sim.core.barrier import (BarrierContact, NoCollisionFreeStart, barrier_step,
                                       soft_body_step)
 from gripper_sim.core.barrier_kernels import (held_normal_forces, mark_sticking,
-                                              split_partners)
+                                              normal_components, split_partners)
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.deferred import build
 from gripper_sim.core.energies import Gravity
@@ -726,9 +726,8 @@ class SimulationFacade:
             held_normal_forces(self._barrier.normal_forces(
                 np.concatenate([x, finger.positions]).ravel()), obstacle, normal)
         else:
-            held = obstacle >= 0
             normal = np.zeros(len(obstacle))
-            normal[held] = np.einsum('ij,ij->i', forces[held], normals[obstacle[held]])
+            normal_components(obstacle, np.ascontiguousarray(forces), normals, normal)
         sides = (np.empty(len(obstacle), bool), np.empty(len(obstacle), bool))  # LEFT, RIGHT
         on_left, on_right = cm.jaw_sides(obstacle, self._obstacles_kept[-1], *sides)
 
