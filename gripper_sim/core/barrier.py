@@ -1022,20 +1022,25 @@ class BarrierContact(Energy):
         self._geometry_kept = (tuple(faces), tuple(f.origin for f in faces), geometry)
         return geometry
 
-    @staticmethod
-    def touching_faces(faces, x: np.ndarray, holder: np.ndarray) -> list:
-        """The faces moved out along their normals to the mean gap of the nodes they hold
-        (``holder`` (n,), positions ``x`` (n, d) m): the surfaces the outline lies on, for
-        the measures that read gaps from a face (the contact length's edges)."""
+    def touching_faces(self, faces, x: np.ndarray, holder: np.ndarray) -> list:
+        """The faces moved out along their normals by their ``touching_gaps``: the surfaces
+        the outline lies on, for the measures that read gaps from a face."""
         moved = []
-        x = np.ascontiguousarray(x, dtype=float)
-        for k, face in enumerate(faces):
-            count, gap = mean_gap(x, holder, k, face.origin, face.normal)
-            if count:
+        for face, gap in zip(faces, self.touching_gaps(faces, x, holder)):
+            if gap:
                 face = copy.copy(face)
                 face.origin = face.origin + gap * face.normal
             moved.append(face)
         return moved
+
+    @staticmethod
+    def touching_gaps(faces, x: np.ndarray, holder: np.ndarray) -> list[float]:
+        """m, each face's mean gap to the nodes it holds (``holder`` (n,), positions ``x``
+        (n, d) m; 0.0 for a face that holds none): how far out the outline lies on it (the
+        contact length's edges are read from a face there)."""
+        x = np.ascontiguousarray(x, dtype=float)
+        return [mean_gap(x, holder, k, face.origin, face.normal)[1]
+                for k, face in enumerate(faces)]
 
     def min_distance(self, x: np.ndarray) -> float:
         """m, the smallest distance between the surface and a face at positions (n, d)

@@ -290,17 +290,19 @@ def touching_length(x: np.ndarray, edges: np.ndarray, touching: np.ndarray) -> f
 
 
 def face_contact_length(fruit: FruitModel, x: np.ndarray, face, holder: np.ndarray,
-                        index: int) -> float:
+                        index: int, offset: float = 0.0) -> float:
     """Length (m) of the fruit outline lying on a flat face (``face_contact_length_of``).
 
     Args:
         x: (n_nodes, 2) m.  face: a FlatFace.  holder: (n_nodes,) int, the obstacle
         holding each node (-1 none).  index: the face's obstacle index in ``holder``.
+        offset: m, the face taken this far out along its normal (the barrier's gap).
     """
+    nx, nz = float(face.normal[0]), float(face.normal[1])
     return face_contact_length_of(
         np.ascontiguousarray(x, dtype=float), _outline_at_rest(fruit)[0],
-        np.ascontiguousarray(holder, np.int64), index, float(face.normal[0]),
-        float(face.normal[1]), float(face.origin[0]), float(face.origin[1]))
+        np.ascontiguousarray(holder, np.int64), index, nx, nz,
+        float(face.origin[0]) + offset * nx, float(face.origin[1]) + offset * nz)
 
 
 def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,

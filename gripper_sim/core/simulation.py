@@ -220,10 +220,12 @@ class Simulation(SimulationFacade):
             length = held_length(fruit, x, on_jaws)
         else:
             jaws = self.faces_at(self._grip)[:len(self._face_side)]
-            if self._barrier is not None:  # the outline lies a barrier gap off the faces
-                jaws = self._barrier.touching_faces(jaws, x, self.contacts.obstacle)
-            length = sum(face_contact_length(fruit, x, face, self.contacts.obstacle, index)
-                         for index, face in enumerate(jaws))
+            # with the barrier the outline lies a gap off the faces
+            offsets = ((0.0,) * len(jaws) if self._barrier is None
+                       else self._barrier.touching_gaps(jaws, x, self.contacts.obstacle))
+            length = sum(face_contact_length(fruit, x, face, self.contacts.obstacle, index,
+                                             offset)
+                         for index, (face, offset) in enumerate(zip(jaws, offsets)))
         if self._pad is not None:
             on_pad = (self.contacts.obstacle < 0) & (self._pad.holder >= 0)
             length += held_length(fruit, x, on_pad)
