@@ -1091,8 +1091,7 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
     """
     n, d = x_n.shape
     start = _begin(barrier, x_n, old_faces, new_faces, dt)
-    solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(),
-                            _prescribed(n, d, _NO_NODES))
+    solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), _free(n, d))
     x = solution.q.reshape(-1, d)
     forces = barrier.contact_forces(solution.q)
     v = (x - x_n) / dt
@@ -1100,8 +1099,20 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
                        solution.iterations)
 
 
-#: no nodes (a step with none prescribed: ``_prescribed``'s key)
-_NO_NODES = np.zeros(0, np.int64)
+#: the last ``_free`` constraints: ((n, d), them), or None
+_kept_free: tuple | None = None
+
+
+def _free(n: int, d: int) -> StepConstraints:
+    """The constraints of a step of n free nodes in d dimensions (identity filters), kept
+    for the same (n, d): a barrier step's are the same every step and nothing writes
+    them (writable, unlike ``_prescribed``'s: the interpreted solves' kernels are
+    compiled for writable filters)."""
+    global _kept_free
+    if _kept_free is None or _kept_free[0] != (n, d):
+        _kept_free = ((n, d), StepConstraints.free(n, dim=d))
+    return _kept_free[1]
+
 
 #: the last ``_prescribed`` constraints: ((n, d, the fixed nodes' array), them), or None
 _kept_constraints: tuple | None = None
