@@ -8,8 +8,10 @@ one with the barrier contact on flat fingers (the whole-step kernel and the mult
 advance around it, the energy kernels, the solver's and the barrier's, the compiled
 barrier Newton solve with one barrier (flat fingers) and with two (the Fin Ray
 fingers' self-contact too): ``core.barrier_newton``, ~15 s cold); in 3D
-shells with a plain and a wrinkling skin and solids of linear and of quadratic
-tetrahedra.
+shells with a plain and a wrinkling skin, solids of linear and of quadratic
+tetrahedra, and the default shell with the barrier contact on flat fingers, between
+solid pads and between Fin Ray fingers (a first 3D solid-pad step compiled ~14 s of
+kernels before they were here).
 """
 from __future__ import annotations
 
@@ -35,7 +37,10 @@ SETUPS_3D = (_SMALL_3D + ('fruit.model=shell', 'fruit.pressure.turgor=2e4'),
                           'fruit.skin.wrinkling=true'),
              _SMALL_3D + ('fruit.model=solid', 'fruit.mesh.max_tet_volume=1e-6'),
              _SMALL_3D + ('fruit.model=solid', 'fruit.mesh.max_tet_volume=1e-6',
-                          'fruit.mesh.order=2'))
+                          'fruit.mesh.order=2'),
+             _SMALL_3D + ('contact.model=ipc',),
+             _SMALL_3D + ('gripper.finger.type=solid_pad',),
+             _SMALL_3D + ('gripper.finger.type=fin_ray',))
 
 
 def warm_cache(setups: Iterable[Sequence[str]]) -> float:
