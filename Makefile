@@ -90,7 +90,7 @@ KERNEL_SOURCES := $(wildcard gripper_sim/core/*.py gripper_sim/core/energies/*.p
 	gripper_sim/core3d/*.py gripper_sim/core3d/energies/*.py) \
 	gripper_sim/workflows/compile_kernels.py
 $(KERNEL_STAMP): $(VENV_STAMP) $(KERNEL_SOURCES)
-	@echo "== kernels: compiling the numba fast paths (2D, 3D) into their cache (~1-2 min, once)"
+	@echo "== kernels: compiling the numba fast paths (2D, 3D) into their cache (~6 min on 2 cores, once)"
 	find gripper_sim -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(PY) -m gripper_sim.workflows.compile_kernels
 	touch $@
