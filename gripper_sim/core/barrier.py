@@ -1039,7 +1039,7 @@ class BarrierContact(Energy):
         (n, d) m; 0.0 for a face that holds none): how far out the outline lies on it (the
         contact length's edges are read from a face there)."""
         x = np.ascontiguousarray(x, dtype=float)
-        return [mean_gap(x, holder, k, face.origin, face.normal)[1]
+        return [mean_gap(x, holder, k, face.origin, face.normal)
                 for k, face in enumerate(faces)]
 
     def min_distance(self, x: np.ndarray) -> float:

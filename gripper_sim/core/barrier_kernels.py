@@ -642,9 +642,9 @@ def push_ahead(x_n, surface, origin, normal, tangents, half_extents, thickness, 
 
 @njit(cache=True)
 def mean_gap(x, holder, face, origin, normal):
-    """(count, m) of the nodes of positions ``x`` (n, d) m that ``holder`` (n,) gives to
-    face ``face``: how many, and the mean of their signed distances from the face's plane
-    (its ``origin`` and unit ``normal`` (d,)); 0.0 for none."""
+    """m, the mean signed distance from the plane of face ``face`` (its ``origin`` and
+    unit ``normal`` (d,)) of the nodes of positions ``x`` (n, d) m that ``holder`` (n,)
+    gives to it; 0.0 for none."""
     d = x.shape[1]
     count = 0
     total = 0.0
@@ -656,7 +656,7 @@ def mean_gap(x, holder, face, origin, normal):
             gap += (x[i, c] - origin[c]) * normal[c]
         total += gap
         count += 1
-    return count, total / count if count else 0.0
+    return total / count if count else 0.0
 
 
 @njit(cache=True)
