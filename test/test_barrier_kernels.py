@@ -252,40 +252,75 @@ def test_the_held_normal_forces_and_mean_gaps_are_the_references():
 
 
 def _pushed_reference(x_n, surface, origin, normal, tangents, half, thickness, shift, dhat,
-                      fraction):
+                      fraction, predicted=None):
     """The start pushed ahead of a face moving by ``shift`` in numpy (as
-    ``BarrierContact.pushed_start`` computed it before the kernel)."""
-    start = x_n.copy()
+    ``BarrierContact.pushed_start`` computed it before the kernel), from ``predicted``
+    (none: x_n, the touching nodes carried along with the face)."""
+    start = (x_n if predicted is None else predicted).copy()
     rel = x_n[surface] - origin
     covered = (np.all(np.abs(rel @ tangents.T) <= half, axis=1) & (rel @ normal > -thickness))
     nodes = surface[covered]
     gap = (x_n[nodes] - origin) @ normal
+    move = (start[nodes] - x_n[nodes]) @ normal
     advance = float(shift @ normal)
     target = np.where(gap < dhat, gap, fraction * dhat)
-    push = np.maximum(advance - gap + target, 0.0)
+    push = np.maximum(advance - gap - move + target, 0.0)
     front = gap >= 0
     touching = front & (gap < dhat)
     start[nodes[front]] += push[front, None] * normal
-    start[nodes[touching]] += shift - advance * normal
+    if predicted is None:
+        start[nodes[touching]] += shift - advance * normal
     return start
 
 
-@pytest.mark.parametrize('d', [2, 3])
-def test_the_start_pushed_ahead_of_a_moving_face_is_the_reference(d):
-    rng = np.random.default_rng(10 + d)
+def _random_start(rng, d):
+    """A face, nodes in front of it, behind it and beside it (some within dhat of it), the
+    outline's nodes among them and the face's shift."""
     n = 300
     origin, normal, tangents, half = _random_face(rng, d)
-    # nodes in front of the face, behind it and beside it, some within dhat of it
     x_n = origin + rng.uniform(-3e-3, 3e-3, (n, d))
     near = rng.random(n) < 0.3
     x_n[near] += (rng.uniform(0.0, DHAT, near.sum())
                   - (x_n[near] - origin) @ normal)[:, None] * normal
     surface = np.sort(rng.choice(n, 250, replace=False)).astype(np.int64)
     shift = 4e-4 * normal + rng.normal(scale=2e-4, size=d)
+    return x_n, surface, origin, normal, tangents, half, shift
+
+
+@pytest.mark.parametrize('d', [2, 3])
+def test_the_start_pushed_ahead_of_a_moving_face_is_the_reference(d):
+    rng = np.random.default_rng(10 + d)
+    x_n, surface, origin, normal, tangents, half, shift = _random_start(rng, d)
     start = x_n.copy()
-    push_ahead(x_n, surface, origin, normal, tangents, half, 1e-3, shift, DHAT, 0.5, start)
+    push_ahead(x_n, surface, origin, normal, tangents, half, 1e-3, shift, DHAT, 0.5, True,
+               start)
     expected = _pushed_reference(x_n, surface, origin, normal, tangents, half, 1e-3, shift,
                                  DHAT, 0.5)
     moved = np.any(expected != x_n, axis=1)
     assert 10 < np.count_nonzero(moved) < len(surface)
     np.testing.assert_allclose(start, expected, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize('d', [2, 3])
+def test_a_predicted_start_is_pushed_only_as_far_as_the_face_needs(d):
+    """From the predictor (each node's own move besides the face's), a covered node in
+    front of the face ends at least its gap (below dhat) or dhat / 2 ahead of the face
+    where it ends; the others keep their predicted places."""
+    rng = np.random.default_rng(20 + d)
+    x_n, surface, origin, normal, tangents, half, shift = _random_start(rng, d)
+    predicted = x_n + rng.normal(scale=4e-4, size=x_n.shape)
+    start = predicted.copy()
+    push_ahead(x_n, surface, origin, normal, tangents, half, 1e-3, shift, DHAT, 0.5, False,
+               start)
+    expected = _pushed_reference(x_n, surface, origin, normal, tangents, half, 1e-3, shift,
+                                 DHAT, 0.5, predicted)
+    np.testing.assert_allclose(start, expected, rtol=0, atol=1e-15)
+    rel = x_n[surface] - origin
+    gap = rel @ normal
+    front = surface[(gap >= 0) & np.all(np.abs(rel @ tangents.T) <= half, axis=1)]
+    moved = np.any(start != predicted, axis=1)
+    assert np.count_nonzero(moved) >= 3 and not np.any(moved[np.setdiff1d(
+        np.arange(len(x_n)), front)])
+    gap_n = (x_n[front] - origin) @ normal
+    ends = (start[front] - origin - shift) @ normal
+    assert np.all(ends >= np.minimum(gap_n, 0.5 * DHAT) - 1e-15)

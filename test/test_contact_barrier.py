@@ -197,6 +197,43 @@ def test_barrier_gap_stays_within_dhat():
     assert 0 < smallest and np.all(gaps < load_config()['contact.ipc.dhat'])
 
 
+def _squeeze_iterations(model_start: str, monkeypatch) -> tuple:
+    """(Newton iterations, grip force N, contact length m) of the membrane squeezed by 10 %
+    with the barrier, its steps started as ``model_start`` says: 'chosen' (the build's),
+    'x_n' (the predictor left out: the outline only pushed ahead of the jaws)."""
+    if model_start == 'x_n':
+        pushed = BarrierContact.pushed_start
+        monkeypatch.setattr(BarrierContact, 'pushed_start',
+                            lambda self, x_n, old, new, predicted=None:
+                            pushed(self, x_n, old, new))
+    radius = 0.03
+    sim = quasi_static_sim(radius, 'fruit.skin.youngs_modulus=1e9', 'fruit.skin.thickness=1e-5',
+                           'fruit.nodes=256', 'fruit.pressure.turgor=2e4',
+                           'fruit.pressure.bulk_modulus=0', 'contact.model=ipc')
+    sim.command_gap(1.8 * radius, speed=0.4 * radius)
+    iterations = 0
+    for _ in range(60):
+        result = sim.step()
+        iterations += result.newton_iterations
+    monkeypatch.undo()
+    return iterations, result.grip_force, result.deformation.contact_length
+
+
+def test_a_squeeze_starts_its_barrier_steps_from_the_predictor(monkeypatch):
+    """From x_n a moving jaw pushes outline nodes half a barrier gap ahead of it that the
+    solution lifts tens of micrometres off it, and Newton takes a few iterations to free
+    each; a step now also tries the predictor x_n + dt v_n (pushed ahead of the jaws) and
+    starts from the start of lower incremental potential: the membrane's squeeze takes
+    well under two thirds of the iterations, to the same answer (grip force and contact
+    length within 1e-5, the creep after the jaws stop not yet settled)."""
+    chosen = _squeeze_iterations('chosen', monkeypatch)
+    plain = _squeeze_iterations('x_n', monkeypatch)
+    print(f'  membrane squeeze, Newton iterations: {chosen[0]} (x_n alone {plain[0]})')
+    assert chosen[0] < 0.65 * plain[0]
+    assert chosen[1] == pytest.approx(plain[1], rel=1e-5)
+    assert chosen[2] == pytest.approx(plain[2], rel=1e-5)
+
+
 def test_dropped_node_rests_on_the_table_with_its_weight_and_no_chatter():
     """A point mass dropped 5 cm onto the table (dt = 1 ms, 3 s): at rest the barrier
     carries exactly its weight, it never touches or passes the table, and it does not

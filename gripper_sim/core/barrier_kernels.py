@@ -603,14 +603,16 @@ def held_normal_forces(forces, obstacle, normal):
 
 @njit(cache=True)
 def push_ahead(x_n, surface, origin, normal, tangents, half_extents, thickness, shift, dhat,
-               fraction, start):
+               fraction, carry, start):
     """``BarrierContact.pushed_start`` for one face moving by ``shift`` (d,) m: each node of
     ``surface`` (k,) at positions ``x_n`` (n, d) m that the face covers at its start
     (``FaceGeometry.covers``: within ``half_extents`` (d - 1,) m along its ``tangents``
     (d - 1, d), less than ``thickness`` m behind it; ``origin``, unit ``normal`` (d,))
-    and lies in front of it is moved in ``start`` (n, d) along the normal by as much as
-    the face's advance brings it closer than its gap (below ``dhat`` m) or ``fraction``
-    dhat, and one that touches it (gap below dhat) along the face's shift besides."""
+    and lies in front of it is moved in ``start`` (n, d) m (on entry the start before
+    the push: x_n or the predictor) along the normal by as much as the face's advance
+    and the node's own move from x_n to ``start`` bring it closer than its gap at x_n
+    (below ``dhat`` m) or ``fraction`` dhat; with ``carry`` one that touches it (gap
+    below dhat) is moved along the face's shift besides."""
     d = x_n.shape[1]
     advance = 0.0
     for c in range(d):
@@ -632,10 +634,13 @@ def push_ahead(x_n, surface, origin, normal, tangents, half_extents, thickness, 
         if not covered:
             continue
         target = gap if gap < dhat else fraction * dhat
-        push = max(advance - gap + target, 0.0)
+        move = 0.0
+        for c in range(d):
+            move += (start[i, c] - x_n[i, c]) * normal[c]
+        push = max(advance - gap - move + target, 0.0)
         for c in range(d):
             start[i, c] += push * normal[c]
-        if gap < dhat:
+        if carry and gap < dhat:
             for c in range(d):
                 start[i, c] += shift[c] - advance * normal[c]
 

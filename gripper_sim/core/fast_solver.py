@@ -438,9 +438,23 @@ class PatternCachingSolver:
         problems (and the step's constraints ``con``: no sliding nodes)."""
         return self._compiled_covers and (con is None or not con.friction_nodes.size)
 
-    def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
-                          history: np.ndarray):
-        """``_iterate`` by ``barrier_solve.CompiledSolve`` (made once, kept)."""
+    def potential(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q: np.ndarray,
+                  con: StepConstraints) -> float:
+        """J, the incremental potential at q (n_dof,) m of the step ``solve`` would take
+        with these arguments (inf: infeasible), as its Newton solve evaluates it: of two
+        starts of a step, the lower is nearer its solution (``barrier.barrier_step``)."""
+        con = as_cone(con)
+        if COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(con):
+            return self._compiled_solve().potential(q_n, v_n, dt, con,
+                                                    self._damping_stiffness(q_n), q)
+        return _NewtonProblem(self, q_n, v_n, dt, con).evaluate(q, False, np.empty(self.n))
+
+    def _damping_stiffness(self, q_n: np.ndarray) -> np.ndarray:
+        """``step_stiffness`` where stiffness damping is on, else an empty array."""
+        return self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
+
+    def _compiled_solve(self) -> barrier_solve.CompiledSolve:
+        """The ``barrier_solve.CompiledSolve`` of this solver (made once, kept)."""
         compiled = self._compiled
         if compiled is None or not compiled.fits(self._untabled):
             pattern = (self._matvec_indptr, self._matvec_indices, self._hessian_values,
@@ -450,11 +464,15 @@ class PatternCachingSolver:
             compiled = self._compiled = barrier_solve.CompiledSolve(
                 _COMPILED_SETTINGS, self.m, self.alpha, self.beta, self.tolerance,
                 self._table, pattern, self.linear, self._untabled)
+        return compiled
+
+    def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
+                          history: np.ndarray):
+        """``_iterate`` by ``barrier_solve.CompiledSolve``."""
         q_n = problem.q_n
-        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
-        status, iterations, n_hist, reaction = compiled.run(
-            q_n, problem.v_n, problem.dt, problem.con, stiffness, q, history,
-            self.max_iterations, self.counts)
+        status, iterations, n_hist, reaction = self._compiled_solve().run(
+            q_n, problem.v_n, problem.dt, problem.con, self._damping_stiffness(q_n), q,
+            history, self.max_iterations, self.counts)
         problem.reaction = reaction
         return status, iterations, n_hist
 
