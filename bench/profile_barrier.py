@@ -63,7 +63,7 @@ PARTS = (
     ('        start candidates', barrier.BarrierContact, '_start_candidates'),
     ('        lagged friction', barrier.BarrierContact, '_lagged_friction'),
     ('        quiet region', barrier.BarrierContact, '_quiet_region'),
-    ('      barrier pushed_start', barrier.BarrierContact, 'pushed_start'),
+    ('      barrier pushed_starts', barrier.BarrierContact, 'pushed_starts'),
     ('      barrier reachable', barrier.BarrierContact, 'reachable'),
     ('      barrier partners', barrier.BarrierContact, 'partners'),
     ('      barrier contact_forces', barrier.BarrierContact, 'contact_forces'),

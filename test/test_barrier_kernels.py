@@ -287,13 +287,24 @@ def _random_start(rng, d):
     return x_n, surface, origin, normal, tangents, half, shift
 
 
+def _pushed(x_n, surface, origin, normal, tangents, half, shift, predicted=None):
+    """``push_ahead`` for one face of thickness 1 mm and a face beside it standing still:
+    (the start from x_n, the one from ``predicted`` or None)."""
+    d = x_n.shape[1]
+    faces = (np.stack([origin, origin + 1e-3]), np.stack([normal, normal]),
+             np.stack([tangents, tangents]), np.stack([half, half]), np.full(2, 1e-3),
+             np.stack([shift, np.zeros(d)]))
+    plain = x_n.copy()
+    ahead = np.zeros((0, 0)) if predicted is None else predicted.copy()
+    push_ahead(x_n, surface, *faces, DHAT, 0.5, plain, ahead)
+    return plain, (None if predicted is None else ahead)
+
+
 @pytest.mark.parametrize('d', [2, 3])
 def test_the_start_pushed_ahead_of_a_moving_face_is_the_reference(d):
     rng = np.random.default_rng(10 + d)
     x_n, surface, origin, normal, tangents, half, shift = _random_start(rng, d)
-    start = x_n.copy()
-    push_ahead(x_n, surface, origin, normal, tangents, half, 1e-3, shift, DHAT, 0.5, True,
-               start)
+    start, _ = _pushed(x_n, surface, origin, normal, tangents, half, shift)
     expected = _pushed_reference(x_n, surface, origin, normal, tangents, half, 1e-3, shift,
                                  DHAT, 0.5)
     moved = np.any(expected != x_n, axis=1)
@@ -305,16 +316,17 @@ def test_the_start_pushed_ahead_of_a_moving_face_is_the_reference(d):
 def test_a_predicted_start_is_pushed_only_as_far_as_the_face_needs(d):
     """From the predictor (each node's own move besides the face's), a covered node in
     front of the face ends at least its gap (below dhat) or dhat / 2 ahead of the face
-    where it ends; the others keep their predicted places."""
+    where it ends; the others keep their predicted places (a face standing still pushes
+    none), and the start from x_n is the one without a prediction."""
     rng = np.random.default_rng(20 + d)
     x_n, surface, origin, normal, tangents, half, shift = _random_start(rng, d)
     predicted = x_n + rng.normal(scale=4e-4, size=x_n.shape)
-    start = predicted.copy()
-    push_ahead(x_n, surface, origin, normal, tangents, half, 1e-3, shift, DHAT, 0.5, False,
-               start)
+    plain, start = _pushed(x_n, surface, origin, normal, tangents, half, shift, predicted)
     expected = _pushed_reference(x_n, surface, origin, normal, tangents, half, 1e-3, shift,
                                  DHAT, 0.5, predicted)
     np.testing.assert_allclose(start, expected, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(plain, _pushed(x_n, surface, origin, normal, tangents,
+                                                 half, shift)[0])
     rel = x_n[surface] - origin
     gap = rel @ normal
     front = surface[(gap >= 0) & np.all(np.abs(rel @ tangents.T) <= half, axis=1)]

@@ -202,8 +202,8 @@ def _squeeze_iterations(model_start: str, monkeypatch) -> tuple:
     with the barrier, its steps started as ``model_start`` says: 'chosen' (the build's),
     'x_n' (the predictor left out: the outline only pushed ahead of the jaws)."""
     if model_start == 'x_n':
-        pushed = BarrierContact.pushed_start
-        monkeypatch.setattr(BarrierContact, 'pushed_start',
+        pushed = BarrierContact.pushed_starts
+        monkeypatch.setattr(BarrierContact, 'pushed_starts',
                             lambda self, x_n, old, new, predicted=None:
                             pushed(self, x_n, old, new))
     radius = 0.03

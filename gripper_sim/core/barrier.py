@@ -85,6 +85,8 @@ ipctk.set_num_threads(1)
 INFINITE_FACE_LENGTH = 4.0
 #: a start of step whose pushed nodes would stop this fraction of dhat from a face
 START_GAP_FRACTION = 0.5
+#: no predicted start (``push_ahead``)
+_NO_START = np.zeros((0, 0))
 #: the start's check: whether the straight paths cross at all (no conservative rescaling;
 #: the line search's CCD stops short, at 0.8 of the time of impact, so that a Newton step
 #: never lands on a face)
@@ -900,25 +902,23 @@ class BarrierContact(Energy):
         return float(distance) if distance < reach or beyond is None else beyond
 
     # ------------------------------------------------------------------ the start
-    def pushed_start(self, x_n: np.ndarray, old_faces, new_faces,
-                     predicted: np.ndarray | None = None) -> np.ndarray:
-        """(n, d) m, the step's start: ``predicted`` (n, d) m (the predictor x_n + dt v_n)
-        or else ``x_n``, with the outline nodes that a moving face covers at x_n and would
-        come closer than dhat / 2 to pushed ahead of it (one already within dhat of it no
-        closer than it was; without a prediction moved along with it besides); not
-        checked for crossings (``reachable``)."""
-        start = (x_n if predicted is None else predicted).copy()
-        dhat = self.settings.dhat
-        for old, new in zip(old_faces, new_faces):
-            if new is old:  # a fixed face (``faces_at``)
-                continue
-            shift = new.origin - old.origin
-            if not np.any(shift):
-                continue
-            push_ahead(x_n, self.surface, old.origin, old.normal, old.tangents,
-                       np.asarray(old.half_extents, float), float(old.thickness), shift, dhat,
-                       START_GAP_FRACTION, predicted is None, start)
-        return start
+    def pushed_starts(self, x_n: np.ndarray, old_faces, new_faces,
+                      predicted: np.ndarray | None = None) -> tuple:
+        """The step's starts, not checked for crossings (``reachable``): (n, d) m x_n with
+        the outline nodes that a moving face covers at x_n and would come closer than
+        dhat / 2 to pushed ahead of it (one already within dhat of it no closer than it
+        was, and moved along with it), and ``predicted`` (n, d) m (the predictor
+        x_n + dt v_n; None: none) with them pushed ahead of it as far as their own moves
+        leave that to do (None if none)."""
+        plain = x_n.copy()
+        ahead = _NO_START if predicted is None else predicted.copy()
+        origins, normals, tangents, half_extents, _, thickness = self._face_geometry(
+            old_faces)
+        shifts = np.array([new.origin for new in new_faces], float).reshape(
+            origins.shape) - origins
+        push_ahead(x_n, self.surface, origins, normals, tangents, half_extents, thickness,
+                   shifts, self.settings.dhat, START_GAP_FRACTION, plain, ahead)
+        return plain, (None if predicted is None else ahead)
 
     def reachable(self, start: np.ndarray) -> bool:
         """Whether the straight paths from the step's start (``begin_step``'s positions,
@@ -994,7 +994,7 @@ class BarrierContact(Energy):
         (N, along the face's normal) and its mode, STICK below the friction smoothing
         speed along the face (relative to it), else SLIP."""
         contacts = cm.ContactState.held_by(self.holders(x, faces, forces))
-        _, normals, _, _, velocities = self._face_geometry(faces)
+        _, normals, _, _, velocities, _ = self._face_geometry(faces)
         normal_components(contacts.obstacle, np.ascontiguousarray(forces), normals,
                           contacts.normal_force)
         mark_sticking(np.ascontiguousarray(v), contacts.obstacle, normals, velocities,
@@ -1003,9 +1003,9 @@ class BarrierContact(Energy):
 
     def _face_geometry(self, faces) -> tuple:
         """The faces' origins and unit normals (k, d), tangents (k, d - 1, d), half-extents
-        (k, d - 1) m (as ``nearest_faces`` takes them) and velocities (k, d) m/s; kept for
-        the last face list while each face and its origin array are the same objects
-        (see ``_corners``)."""
+        (k, d - 1) m (as ``nearest_faces`` takes them), velocities (k, d) m/s and
+        thicknesses (k,) m; kept for the last face list while each face and its origin
+        array are the same objects (see ``_corners``)."""
         kept = self._geometry_kept
         if kept is not None and _same_faces(faces, kept[0], kept[1]):
             return kept[2]
@@ -1014,7 +1014,8 @@ class BarrierContact(Energy):
                     np.array([f.normal for f in faces], float).reshape(-1, d),
                     np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
                     np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1),
-                    np.array([f.velocity for f in faces], float).reshape(-1, d))
+                    np.array([f.velocity for f in faces], float).reshape(-1, d),
+                    np.array([f.thickness for f in faces], float))
         self._geometry_kept = (tuple(faces), tuple(f.origin for f in faces), geometry)
         return geometry
 
@@ -1066,13 +1067,15 @@ def _no_triplets():
     return empty, empty, np.zeros(0)
 
 
-def _begin(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
-           old_faces: list, new_faces: list, dt: float,
-           constraints: StepConstraints) -> np.ndarray:
-    """Set up the barrier's step; its start (n, d) m: x_n pushed ahead of moving faces
-    (``pushed_start``), and in 2D the predictor x_n + dt v_n pushed ahead of them too:
-    the one the way to which crosses nothing, or if both, the one of lower incremental
-    potential (the solver's ``potential``). NewtonFailure if none.
+def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces: list,
+           new_faces: list, dt: float,
+           resolution: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """Set up the barrier's step; its starts (n, d) m: x_n pushed ahead of moving faces
+    (``pushed_starts``), and in 2D the predictor x_n + dt v_n pushed ahead of them too,
+    those the way to which crosses nothing: (the start, the other start or None; the
+    solve takes the one of lower incremental potential, ``newton.lower_start``). Two
+    starts no coordinate of which differs by ``resolution`` m (the Newton tolerance's
+    step) or more are one. NewtonFailure if none.
 
     The predictor halves the ring squeeze's Newton iterations (``bench_barrier.py``: 256
     against 556; from x_n a moving jaw pushes outline nodes into its barrier that the
@@ -1082,18 +1085,15 @@ def _begin(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
     second start (ipctk's CCD) and the two potentials cost more than the iterations they
     save (the Hertz sphere: 35 against 38 iterations, 0.75 against 0.67 s)."""
     barrier.begin_step(x_n, old_faces, new_faces, dt)
-    candidates = [barrier.pushed_start(x_n, old_faces, new_faces)]
-    if barrier.dimension == 2:
-        candidates.insert(0, barrier.pushed_start(x_n, old_faces, new_faces,
-                                                  x_n + dt * v_n))
-    starts = [start for start in candidates if barrier.reachable(start)]
+    plain, predicted = barrier.pushed_starts(
+        x_n, old_faces, new_faces, x_n + dt * v_n if barrier.dimension == 2 else None)
+    starts = [start for start in (predicted, plain)
+              if start is not None and barrier.reachable(start)]
     if not starts:
         raise NewtonFailure('no collision-free start for the barrier step', [])
-    if len(starts) == 1 or np.array_equal(*starts):
-        return starts[0]
-    q_n, v = x_n.ravel(), v_n.ravel()
-    return min(starts, key=lambda start: solver.potential(q_n, v, dt, start.ravel(),
-                                                          constraints))
+    if len(starts) == 1 or np.max(np.abs(starts[0] - starts[1])) < resolution:
+        return starts[0], None
+    return starts[0], starts[1].ravel()
 
 
 def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
@@ -1106,9 +1106,10 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
     n, d = x_n.shape
-    constraints = _free(n, d)
-    start = _begin(solver, barrier, x_n, v_n, old_faces, new_faces, dt, constraints)
-    solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
+    start, alternative = _begin(barrier, x_n, v_n, old_faces, new_faces, dt,
+                                solver.tolerance * dt)
+    solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), _free(n, d),
+                            alternative)
     x = solution.q.reshape(-1, d)
     forces = barrier.contact_forces(solution.q)
     v = (x - x_n) / dt
@@ -1212,7 +1213,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
 
     The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
     nothing, else from x_n (each with the fixed nodes at their targets and the outline
-    pushed ahead of moving faces, ``pushed_start``), else, with ``carried`` (a function
+    pushed ahead of moving faces, ``pushed_starts``), else, with ``carried`` (a function
     giving per soft body in ``barrier.bodies`` order (its nodes (k,), the shift (d,) m
     its base makes in the step); called only then), from x_n with each soft body moved
     by its base's shift and the fruit's nodes near it moved along with it (within dhat,
@@ -1242,9 +1243,9 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         start[fixed] = fixed_targets
         return all(b.reachable(start) for b in barriers)
 
-    start = barrier.pushed_start(x_n, old_faces, new_faces, x_n + dt * v_n)
+    pushed, start = barrier.pushed_starts(x_n, old_faces, new_faces, x_n + dt * v_n)
     if not reachable(start):
-        pushed = start = barrier.pushed_start(x_n, old_faces, new_faces)
+        start = pushed  # its own array: pushed_starts' copy
         if not reachable(start):
             start = _carried_starts(barrier, x_n, pushed, carried, reachable)
     constraints = _prescribed(n, d, fixed)

@@ -602,21 +602,35 @@ def held_normal_forces(forces, obstacle, normal):
 
 
 @njit(cache=True)
-def push_ahead(x_n, surface, origin, normal, tangents, half_extents, thickness, shift, dhat,
-               fraction, carry, start):
-    """``BarrierContact.pushed_start`` for one face moving by ``shift`` (d,) m: each node of
-    ``surface`` (k,) at positions ``x_n`` (n, d) m that the face covers at its start
-    (``FaceGeometry.covers``: within ``half_extents`` (d - 1,) m along its ``tangents``
-    (d - 1, d), less than ``thickness`` m behind it; ``origin``, unit ``normal`` (d,))
-    and lies in front of it is moved in ``start`` (n, d) m (on entry the start before
-    the push: x_n or the predictor) along the normal by as much as the face's advance
-    and the node's own move from x_n to ``start`` bring it closer than its gap at x_n
-    (below ``dhat`` m) or ``fraction`` dhat; with ``carry`` one that touches it (gap
-    below dhat) is moved along the face's shift besides."""
+def push_ahead(x_n, surface, origins, normals, tangents, half_extents, thickness, shifts,
+               dhat, fraction, plain, predicted):
+    """``BarrierContact.pushed_starts``: for each face k that moves by ``shifts[k]`` (k, d)
+    m (origin ``origins[k]``, unit normal ``normals[k]`` (k, d) at the step's start), each
+    node of ``surface`` (s,) at positions ``x_n`` (n, d) m that the face covers there
+    (``FaceGeometry.covers``: within ``half_extents[k]`` (k, d - 1) m along its
+    ``tangents[k]`` (k, d - 1, d), less than ``thickness[k]`` (k,) m behind it) and that
+    lies in front of it is moved along the normal by as much as the face's advance and
+    the node's own move bring it closer than its gap at x_n (below ``dhat`` m) or
+    ``fraction`` dhat: in ``plain`` (n, d) m (x_n on entry; a node that touches the face,
+    gap below dhat, is moved along with the face besides) and, if not empty,
+    ``predicted`` (n, d) m (the predictor on entry)."""
     d = x_n.shape[1]
-    advance = 0.0
-    for c in range(d):
-        advance += shift[c] * normal[c]
+    for k in range(shifts.shape[0]):
+        moving = False
+        advance = 0.0
+        for c in range(d):
+            moving = moving or shifts[k, c] != 0.0
+            advance += shifts[k, c] * normals[k, c]
+        if moving:
+            _push_face(x_n, surface, origins[k], normals[k], tangents[k], half_extents[k],
+                       thickness[k], shifts[k], advance, dhat, fraction, plain, predicted)
+
+
+@njit(cache=True)
+def _push_face(x_n, surface, origin, normal, tangents, half_extents, thickness, shift,
+               advance, dhat, fraction, plain, predicted):
+    """``push_ahead`` for one face."""
+    d = x_n.shape[1]
     for s in range(surface.shape[0]):
         i = surface[s]
         gap = 0.0
@@ -634,15 +648,19 @@ def push_ahead(x_n, surface, origin, normal, tangents, half_extents, thickness, 
         if not covered:
             continue
         target = gap if gap < dhat else fraction * dhat
-        move = 0.0
+        push = max(advance - gap + target, 0.0)
         for c in range(d):
-            move += (start[i, c] - x_n[i, c]) * normal[c]
-        push = max(advance - gap - move + target, 0.0)
-        for c in range(d):
-            start[i, c] += push * normal[c]
-        if carry and gap < dhat:
+            plain[i, c] += push * normal[c]
+        if gap < dhat:
             for c in range(d):
-                start[i, c] += shift[c] - advance * normal[c]
+                plain[i, c] += shift[c] - advance * normal[c]
+        if predicted.shape[0]:
+            move = 0.0
+            for c in range(d):
+                move += (predicted[i, c] - x_n[i, c]) * normal[c]
+            push = max(advance - gap - move + target, 0.0)
+            for c in range(d):
+                predicted[i, c] += push * normal[c]
 
 
 @njit(cache=True)

@@ -292,28 +292,17 @@ def new_problem(fields):
 
 
 @njit(cache=True)
-def _set_step(problem, q_n, v_n, dt, dt2, stiffness, filters):
-    """The step's arrays into the problem (see ``FIELDS``)."""
+def solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit, floor,
+           q, alternative, tol, max_it, history, counts):
+    """``newton.newton_iteration`` compiled on ``problem`` with this solve's arrays, from q
+    or, if not empty and lower, ``alternative`` (``newton.lower_start``)."""
     problem.q_n = q_n
     problem.v_n = v_n
     problem.dt = dt
     problem.dt2 = dt2
     problem.stiffness = stiffness
     problem.filters = filters
-
-
-@njit(cache=True)
-def solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit, floor,
-           q, tol, max_it, history, counts):
-    """``newton.newton_iteration`` compiled on ``problem`` with this solve's arrays."""
-    _set_step(problem, q_n, v_n, dt, dt2, stiffness, filters)
     problem.cg = (relative, error_limit, floor)
+    if alternative.shape[0]:
+        newton.lower_start(problem, q, alternative, counts)
     return newton.newton_iteration(problem, q, dt, tol, max_it, history, counts)
-
-
-@njit(cache=True)
-def potential(problem, q_n, v_n, dt, dt2, stiffness, filters, q):
-    """J, the step's incremental potential at q (n,) m (inf: infeasible), as ``solve``
-    evaluates it (no Hessian; the gradient into a work vector of the loop)."""
-    _set_step(problem, q_n, v_n, dt, dt2, stiffness, filters)
-    return _evaluate(problem, q, False, problem.work[0][1])

@@ -97,15 +97,11 @@ class CompiledSolve:
             self.filters = (filters, filters.copy())
         return self.filters[1]
 
-    def potential(self, q_n, v_n, dt, con, stiffness, q) -> float:
-        """J, the incremental potential at q (n_dof,) m of the step ``run`` would solve
-        with these arguments (inf: infeasible)."""
-        return bn.potential(self.problem, q_n, v_n, dt, dt ** 2, stiffness,
-                            self._writable(con.filters), q)
-
-    def run(self, q_n, v_n, dt, con, stiffness, q, history, max_iterations, counts):
+    def run(self, q_n, v_n, dt, con, stiffness, q, alternative, history, max_iterations,
+            counts):
         """One Newton solve: (status, iterations, len(history), reaction (n_dof,) N or
-        None); ``q`` (n_dof,) m, the start, overwritten with the solution; ``con`` as
+        None); ``q`` (n_dof,) m, the start, overwritten with the solution (``alternative``
+        (n_dof,) m, if not empty, the start where the potential is lower); ``con`` as
         ``fast_solver.as_cone`` makes it, no sliding nodes; ``stiffness`` K_n's CSC values
         (or empty); ``counts`` the solver's work counters (added to). Raises
         AssertionError where a barrier's Hessian falls outside its pattern (as the
@@ -116,7 +112,7 @@ class CompiledSolve:
             self.problem, q_n, v_n, dt, dt ** 2, stiffness, self._writable(con.filters),
             settings.cg_tolerance,
             settings.cg_error_fraction * tol * dt, settings.cg_relative_floor * tol * dt,
-            q, tol, max_iterations, history, counts)
+            q, alternative, tol, max_iterations, history, counts)
         for barrier in self.barriers:
             barrier.check_compiled()
         reaction = self.work[4].copy() if status == newton.OK else None

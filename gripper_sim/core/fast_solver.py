@@ -94,6 +94,8 @@ EXTENDED_LIMIT = 4
 COMPILED_BARRIER_SOLVE = True
 #: the stiffness damping's K_n without stiffness damping (beta = 0)
 _NO_STIFFNESS = np.zeros(0)
+#: no alternative start (``barrier_solve.CompiledSolve.run``)
+_NO_START = np.zeros(0)
 #: the constants above as the compiled barrier solve takes them
 _COMPILED_SETTINGS = barrier_solve.SolveSettings(
     KEEP_BELOW, CG_TOLERANCE, CG_ERROR_FRACTION, CG_RELATIVE_FLOOR)
@@ -401,11 +403,13 @@ class PatternCachingSolver:
         return dq
 
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
-              con: StepConstraints) -> StepSolution:
+              con: StepConstraints, alternative: np.ndarray | None = None) -> StepSolution:
         """One implicit Euler step: ``newton.newton_iteration`` on this solver's pattern
-        (``_NewtonProblem``, or compiled: ``_iterate``). A later contact pass of the same
-        step starts from the last pass's solution in the directions the new filter leaves
-        free. A solve still converging at ``max_iterations`` goes on (``PROGRESS_SPAN``).
+        (``_NewtonProblem``, or compiled: ``_iterate``), from ``q_start`` (n_dof,) m or,
+        where the incremental potential is lower there, ``alternative`` (n_dof,) m
+        (``newton.lower_start``). A later contact pass of the same step starts from the
+        last pass's solution in the directions the new filter leaves free. A solve still
+        converging at ``max_iterations`` goes on (``PROGRESS_SPAN``).
 
         Raises:
             NewtonFailure: no convergence, no descent, or an infeasible start.
@@ -421,7 +425,7 @@ class PatternCachingSolver:
             status, iterations, n_hist = self._iterate(problem, q, history)
         if status == newton.INFEASIBLE_START:
             q = q_start.copy()
-            status, iterations, n_hist = self._iterate(problem, q, history)
+            status, iterations, n_hist = self._iterate(problem, q, history, alternative)
         done = history[:n_hist].tolist()
         while (status == newton.NO_CONVERGENCE and still_converging(done)
                and iterations < EXTENDED_LIMIT * self.max_iterations):
@@ -437,17 +441,6 @@ class PatternCachingSolver:
         """Whether the compiled barrier solve (``barrier_solve``) covers this solver's
         problems (and the step's constraints ``con``: no sliding nodes)."""
         return self._compiled_covers and (con is None or not con.friction_nodes.size)
-
-    def potential(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q: np.ndarray,
-                  con: StepConstraints) -> float:
-        """J, the incremental potential at q (n_dof,) m of the step ``solve`` would take
-        with these arguments (inf: infeasible), as its Newton solve evaluates it: of two
-        starts of a step, the lower is nearer its solution (``barrier.barrier_step``)."""
-        con = as_cone(con)
-        if COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(con):
-            return self._compiled_solve().potential(q_n, v_n, dt, con,
-                                                    self._damping_stiffness(q_n), q)
-        return _NewtonProblem(self, q_n, v_n, dt, con).evaluate(q, False, np.empty(self.n))
 
     def _damping_stiffness(self, q_n: np.ndarray) -> np.ndarray:
         """``step_stiffness`` where stiffness damping is on, else an empty array."""
@@ -467,21 +460,27 @@ class PatternCachingSolver:
         return compiled
 
     def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
-                          history: np.ndarray):
+                          history: np.ndarray, alternative: np.ndarray | None):
         """``_iterate`` by ``barrier_solve.CompiledSolve``."""
         q_n = problem.q_n
         status, iterations, n_hist, reaction = self._compiled_solve().run(
             q_n, problem.v_n, problem.dt, problem.con, self._damping_stiffness(q_n), q,
-            history, self.max_iterations, self.counts)
+            _NO_START if alternative is None else alternative, history,
+            self.max_iterations, self.counts)
         problem.reaction = reaction
         return status, iterations, n_hist
 
-    def _iterate(self, problem: '_NewtonProblem', q: np.ndarray, history: np.ndarray):
-        """``newton.newton_iteration`` on ``problem`` from ``q`` (overwritten): interpreted,
-        or with ``COMPILED_BARRIER_SOLVE`` compiled where ``barrier_solve`` covers the
-        solver (the reaction then set on the problem). (status, iterations, n_hist)."""
+    def _iterate(self, problem: '_NewtonProblem', q: np.ndarray, history: np.ndarray,
+                 alternative: np.ndarray | None = None):
+        """``newton.newton_iteration`` on ``problem`` from ``q`` (overwritten; first set to
+        ``alternative`` where the potential is lower, ``newton.lower_start``):
+        interpreted, or with ``COMPILED_BARRIER_SOLVE`` compiled where ``barrier_solve``
+        covers the solver (the reaction then set on the problem). (status, iterations,
+        n_hist)."""
         if COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(problem.con):
-            return self._iterate_compiled(problem, q, history)
+            return self._iterate_compiled(problem, q, history, alternative)
+        if alternative is not None:
+            newton.lower_start.py_func(problem, q, alternative, self.counts)
         return newton.newton_iteration_interpreted(problem, q, problem.dt, self.tolerance,
                                                    self.max_iterations, history, self.counts)
 

@@ -18,6 +18,8 @@ iterates on is a *problem* reached only through the hook functions below:
   microseconds an iteration.
 
 The iteration (a chord or modified Newton method, Ortega & Rheinboldt 1970, sec. 7.1):
+- start: the caller's, or of two (``lower_start``, the barrier model's 2D steps) the one
+  of lower Phi;
 - convergence: max |dq| / dt < tol (m/s); a step that small is taken whole;
 - a *fresh* iteration assembles the Newton matrix S H S + (I - S) at the iterate and
   adds ``shift`` times the filtered inertia S M / dt^2 for the first shift of ``SHIFTS``
@@ -276,6 +278,18 @@ def newton_iteration(problem, q, dt, tol, max_it, history, counts):
             counts[C_HESSIAN_EVALS] += 1
             phi = evaluate(problem, q, True, grad)
     return NO_CONVERGENCE, max_it, n_hist
+
+
+@njit(cache=True, error_model='numpy')
+def lower_start(problem, q, alternative, counts):
+    """Sets the start q (n_dof,) m to ``alternative`` (n_dof,) m where the incremental
+    potential is lower there (``evaluate`` without the Hessian; ``counts`` as
+    ``newton_iteration``'s): of two starts of a step the lower is, as a rule, the nearer
+    its solution."""
+    scratch = vectors(problem)[1]
+    counts[C_EVALS] += 2
+    if evaluate(problem, alternative, False, scratch) < evaluate(problem, q, False, scratch):
+        _copy(q, alternative)
 
 
 def newton_iteration_interpreted(problem, q, dt, tol, max_it, history, counts):
