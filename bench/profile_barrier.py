@@ -1,6 +1,8 @@
 """Where the CPU time of a barrier-contact run goes: the 2D Fin Ray grasp-and-lift of
-``bench_fin_ray.py`` (``fin_ray``) or the pressurised ring squeeze of
-``bench_barrier.py`` (``ring``). Prints figures; asserts nothing.
+``bench_fin_ray.py`` (``fin_ray``), the pressurised ring squeeze of ``bench_barrier.py``
+(``ring``) or its pick of the default apple with rigid fingers (``pick``; its steps
+counted as Newton solves, its iterations as Newton directions). Prints figures; asserts
+nothing.
 
 One warm-up run (numba's caches loaded), then two timed runs (CPU time of this process,
 ``time.process_time``; the load average is printed):
@@ -16,7 +18,7 @@ One warm-up run (numba's caches loaded), then two timed runs (CPU time of this p
 
 Usage::
 
-    nice python bench/profile_barrier.py [fin_ray|ring]
+    nice python bench/profile_barrier.py [fin_ray|ring|pick]
 """
 from __future__ import annotations
 
@@ -155,6 +157,10 @@ def run(case: str):
         from bench_barrier import membrane, timed
         _, iterations, _, _ = timed(membrane, 'ipc')
         return 150, iterations
+    if case == 'pick':
+        from helpers import pick
+        sim, _ = pick(1.2, overrides=['contact.model=ipc'])
+        return sim.solver.counts[0], sim.solver.counts[5]
     from bench_soft_fingers import grasp
     figures = grasp('fin_ray', 4.0)
     return figures['steps'], figures['newton']
@@ -162,7 +168,7 @@ def run(case: str):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('case', nargs='?', default='fin_ray', choices=('fin_ray', 'ring'))
+    parser.add_argument('case', nargs='?', default='fin_ray', choices=('fin_ray', 'ring', 'pick'))
     args = parser.parse_args(argv)
     run(args.case)
     for wrap in (wrap_parts, wrap_kernels):
