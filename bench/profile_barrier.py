@@ -61,7 +61,7 @@ PARTS = (
     ('        barrier evaluate_into', barrier.BarrierContact, 'evaluate_into'),
     ('        barrier max_step (CCD)', barrier.BarrierContact, 'max_step'),
     ('      barrier begin_step', barrier.BarrierContact, 'begin_step'),
-    ('        face corners', barrier, 'face_corners'),
+    ('        face geometry and corners', barrier.BarrierContact, '_face_geometry'),
     ('        start candidates', barrier.BarrierContact, '_start_candidates'),
     ('        lagged friction', barrier.BarrierContact, '_lagged_friction'),
     ('        quiet region', barrier.BarrierContact, '_quiet_region'),

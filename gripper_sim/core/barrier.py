@@ -212,17 +212,6 @@ def _same_faces(faces, kept_faces: tuple, kept_origins: tuple) -> bool:
 _origin = operator.attrgetter('origin')
 
 
-def face_corners(faces, dimension: int = 2) -> np.ndarray:
-    """(c k, d) m, the corners of the k faces (``FlatFace`` or ``Plate``), c = 2^(d-1)
-    rows per face: a segment's two ends, a rectangle's four corners in order round it."""
-    corners = _CORNERS[dimension]
-    c = corners.shape[0]
-    points = np.empty((c * len(faces), dimension))
-    for k, face in enumerate(faces):
-        points[c * k:c * (k + 1)] = face.origin + (corners * _half_extents(face)) @ face.tangents
-    return points
-
-
 class BarrierContact(Energy):
     """The barrier and friction potentials of one step (``begin_step`` sets it up).
 
@@ -312,11 +301,9 @@ class BarrierContact(Energy):
         self._obstacles_end = np.zeros((0, d))
         #: m, the largest move of a face's corner in the step (2D, ``begin_step``)
         self._faces_shift = 0.0
-        #: ``_face_geometry``'s last answer: (faces, their origins, the arrays), or None
-        self._geometry_kept = None
-        #: ``_corners``'s last three corners made: (faces, their origins, corners), the
-        #: newest first
-        self._corners_kept = []
+        #: ``_face_geometry``'s last three answers: (faces, their origins, the arrays),
+        #: the newest first
+        self._geometry_kept = []
         self._start = np.zeros((n_v, d))
         #: (d n,) m, the positions of the step's start (``begin_step``)
         self._start_q = np.zeros(d * n_nodes)
@@ -436,17 +423,10 @@ class BarrierContact(Energy):
             self._part_project = self.projection == ipctk.PSDProjectionMethod.CLAMP
 
     def _corners(self, faces) -> np.ndarray:
-        """``face_corners`` of ``faces`` (c k, d) m, kept for the last three face lists
-        while each face and its origin array are the same objects (a facade hands the
-        same faces for the same gripper state, ``faces_at``; faces are not changed in
-        place: a moved face is a copy with a new origin). Read only."""
-        for kept_faces, kept_origins, corners in self._corners_kept:
-            if _same_faces(faces, kept_faces, kept_origins):
-                return corners
-        corners = face_corners(faces, self.dimension)
-        self._corners_kept = ([(tuple(faces), tuple(f.origin for f in faces), corners)]
-                              + self._corners_kept[:2])
-        return corners
+        """(c k, d) m, the corners of the k ``faces`` (``FlatFace`` or ``Plate``), c =
+        2^(d-1) rows per face: a segment's two ends, a rectangle's four corners in order
+        round it (``_face_geometry``'s, kept: not to be written)."""
+        return self._face_geometry(faces)[6]
 
     def vertices(self, positions: np.ndarray, obstacles: np.ndarray | None = None) -> np.ndarray:
         """(n_v + c k, d) m, the collision mesh's vertices: the surfaces (the fruit's, the
@@ -912,7 +892,7 @@ class BarrierContact(Energy):
         leave that to do (None if none)."""
         plain = x_n.copy()
         ahead = _NO_START if predicted is None else predicted.copy()
-        origins, normals, tangents, half_extents, _, thickness = self._face_geometry(
+        origins, normals, tangents, half_extents, _, thickness, _ = self._face_geometry(
             old_faces)
         shifts = np.array([new.origin for new in new_faces], float).reshape(
             origins.shape) - origins
@@ -994,7 +974,7 @@ class BarrierContact(Energy):
         (N, along the face's normal) and its mode, STICK below the friction smoothing
         speed along the face (relative to it), else SLIP."""
         contacts = cm.ContactState.held_by(self.holders(x, faces, forces))
-        _, normals, _, _, velocities, _ = self._face_geometry(faces)
+        _, normals, _, _, velocities, _, _ = self._face_geometry(faces)
         normal_components(contacts.obstacle, np.ascontiguousarray(forces), normals,
                           contacts.normal_force)
         mark_sticking(np.ascontiguousarray(v), contacts.obstacle, normals, velocities,
@@ -1003,20 +983,26 @@ class BarrierContact(Energy):
 
     def _face_geometry(self, faces) -> tuple:
         """The faces' origins and unit normals (k, d), tangents (k, d - 1, d), half-extents
-        (k, d - 1) m (as ``nearest_faces`` takes them), velocities (k, d) m/s and
-        thicknesses (k,) m; kept for the last face list while each face and its origin
-        array are the same objects (see ``_corners``)."""
-        kept = self._geometry_kept
-        if kept is not None and _same_faces(faces, kept[0], kept[1]):
-            return kept[2]
+        (k, d - 1) m (as ``nearest_faces`` takes them), velocities (k, d) m/s,
+        thicknesses (k,) m and corners (``_corners``); kept for the last three face lists
+        while each face and its origin array are the same objects (a facade hands the
+        same faces for the same gripper state, ``faces_at``; faces are not changed in
+        place: a moved face is a copy with a new origin)."""
+        for kept_faces, kept_origins, geometry in self._geometry_kept:
+            if _same_faces(faces, kept_faces, kept_origins):
+                return geometry
         d = self.dimension
-        geometry = (np.array([f.origin for f in faces], float).reshape(-1, d),
-                    np.array([f.normal for f in faces], float).reshape(-1, d),
-                    np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d),
-                    np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1),
+        origins = np.array([f.origin for f in faces], float).reshape(-1, d)
+        tangents = np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d)
+        half_extents = np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1)
+        corners = (origins[:, None, :] + (_CORNERS[d] * half_extents[:, None, :]) @ tangents
+                   ).reshape(-1, d)
+        geometry = (origins, np.array([f.normal for f in faces], float).reshape(-1, d),
+                    tangents, half_extents,
                     np.array([f.velocity for f in faces], float).reshape(-1, d),
-                    np.array([f.thickness for f in faces], float))
-        self._geometry_kept = (tuple(faces), tuple(f.origin for f in faces), geometry)
+                    np.array([f.thickness for f in faces], float), corners)
+        self._geometry_kept = ([(tuple(faces), tuple(f.origin for f in faces), geometry)]
+                               + self._geometry_kept[:2])
         return geometry
 
     def touching_faces(self, faces, x: np.ndarray, holder: np.ndarray) -> list:
