@@ -88,15 +88,6 @@ class CompiledSolve:
         key = self.key_of(barriers)
         return len(key) == len(self.key) and all(a is b for a, b in zip(key, self.key))
 
-    def _writable(self, filters: np.ndarray) -> np.ndarray:
-        """The constraints' filters (n_nodes, 2, 2) as a writable array (a read-only one
-        is typed apart: a copy, kept)."""
-        if filters.flags.writeable:
-            return filters
-        if self.filters[0] is not filters:
-            self.filters = (filters, filters.copy())
-        return self.filters[1]
-
     def run(self, q_n, v_n, dt, con, stiffness, q, alternative, history, max_iterations,
             counts):
         """One Newton solve: (status, iterations, len(history), reaction (n_dof,) N or
@@ -108,9 +99,13 @@ class CompiledSolve:
         interpreted route does)."""
         flags, settings, tol = self.flags, self.settings, self.tolerance
         flags[bn.F_KEPT] = flags[bn.F_LAST] = -1
+        filters = con.filters
+        if not filters.flags.writeable:  # a read-only array is typed apart: a copy, kept
+            if self.filters[0] is not filters:
+                self.filters = (filters, filters.copy())
+            filters = self.filters[1]
         status, iterations, n_hist = bn.solve(
-            self.problem, q_n, v_n, dt, dt ** 2, stiffness, self._writable(con.filters),
-            settings.cg_tolerance,
+            self.problem, q_n, v_n, dt, dt ** 2, stiffness, filters, settings.cg_tolerance,
             settings.cg_error_fraction * tol * dt, settings.cg_relative_floor * tol * dt,
             q, alternative, tol, max_iterations, history, counts)
         for barrier in self.barriers:

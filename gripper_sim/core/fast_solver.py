@@ -442,12 +442,9 @@ class PatternCachingSolver:
         problems (and the step's constraints ``con``: no sliding nodes)."""
         return self._compiled_covers and (con is None or not con.friction_nodes.size)
 
-    def _damping_stiffness(self, q_n: np.ndarray) -> np.ndarray:
-        """``step_stiffness`` where stiffness damping is on, else an empty array."""
-        return self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
-
-    def _compiled_solve(self) -> barrier_solve.CompiledSolve:
-        """The ``barrier_solve.CompiledSolve`` of this solver (made once, kept)."""
+    def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
+                          history: np.ndarray, alternative: np.ndarray | None):
+        """``_iterate`` by ``barrier_solve.CompiledSolve`` (made once, kept)."""
         compiled = self._compiled
         if compiled is None or not compiled.fits(self._untabled):
             pattern = (self._matvec_indptr, self._matvec_indices, self._hessian_values,
@@ -457,14 +454,10 @@ class PatternCachingSolver:
             compiled = self._compiled = barrier_solve.CompiledSolve(
                 _COMPILED_SETTINGS, self.m, self.alpha, self.beta, self.tolerance,
                 self._table, pattern, self.linear, self._untabled)
-        return compiled
-
-    def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
-                          history: np.ndarray, alternative: np.ndarray | None):
-        """``_iterate`` by ``barrier_solve.CompiledSolve``."""
         q_n = problem.q_n
-        status, iterations, n_hist, reaction = self._compiled_solve().run(
-            q_n, problem.v_n, problem.dt, problem.con, self._damping_stiffness(q_n), q,
+        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
+        status, iterations, n_hist, reaction = compiled.run(
+            q_n, problem.v_n, problem.dt, problem.con, stiffness, q,
             _NO_START if alternative is None else alternative, history,
             self.max_iterations, self.counts)
         problem.reaction = reaction
