@@ -37,7 +37,8 @@ sys.path.insert(0, str(ROOT / 'test'))
 
 from numba.core.registry import CPUDispatcher  # noqa: E402
 
-from gripper_sim.core import barrier, facade, fast_solver, simulation, soft_fingers  # noqa: E402
+from gripper_sim.core import (barrier, facade, fast_solver, newton, simulation,  # noqa: E402
+                              soft_fingers)
 
 #: (label, owner, attribute) of the parts timed (a class's method or a module's function);
 #: a label's indent shows where it is usually called (the own times follow the calls)
@@ -160,7 +161,7 @@ def run(case: str):
     if case == 'pick':
         from helpers import pick
         sim, _ = pick(1.2, overrides=['contact.model=ipc'])
-        return sim.solver.counts[0], sim.solver.counts[5]
+        return sim.solver.counts[newton.C_SOLVES], sim.solver.counts[newton.C_DIRECTIONS]
     from bench_soft_fingers import grasp
     figures = grasp('fin_ray', 4.0)
     return figures['steps'], figures['newton']

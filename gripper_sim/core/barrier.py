@@ -86,7 +86,7 @@ INFINITE_FACE_LENGTH = 4.0
 #: a start of step whose pushed nodes would stop this fraction of dhat from a face
 START_GAP_FRACTION = 0.5
 #: no predicted start (``push_ahead``)
-_NO_START = np.zeros((0, 0))
+_NO_PREDICTION = np.zeros((0, 0))
 #: the start's check: whether the straight paths cross at all (no conservative rescaling;
 #: the line search's CCD stops short, at 0.8 of the time of impact, so that a Newton step
 #: never lands on a face)
@@ -891,11 +891,10 @@ class BarrierContact(Energy):
         x_n + dt v_n; None: none) with them pushed ahead of it as far as their own moves
         leave that to do (None if none)."""
         plain = x_n.copy()
-        ahead = _NO_START if predicted is None else predicted.copy()
+        ahead = _NO_PREDICTION if predicted is None else predicted.copy()
         origins, normals, tangents, half_extents, _, thickness, _ = self._face_geometry(
             old_faces)
-        shifts = np.array([new.origin for new in new_faces], float).reshape(
-            origins.shape) - origins
+        shifts = self._face_geometry(new_faces)[0] - origins
         push_ahead(x_n, self.surface, origins, normals, tangents, half_extents, thickness,
                    shifts, self.settings.dhat, START_GAP_FRACTION, plain, ahead)
         return plain, (None if predicted is None else ahead)
