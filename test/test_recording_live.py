@@ -155,6 +155,26 @@ def test_recorded_messages_equal_what_was_published(tmp_path):
         assert bag.bag_metadata()['message_count'] == sum(len(v) for v in sent.values())
 
 
+def test_ctrl_c_right_after_a_burst_still_writes_every_message_of_it(tmp_path):
+    """A stop writes what was published before it: queued and in-flight messages too."""
+    domain = _domain()
+    out = tmp_path / 'burst.mcap'
+    count = 300  # below the recorder's keep-last depth (1000)
+    with ros_node(domain, 'burst_talker') as node:
+        pub = node.create_publisher(
+            String, '/burst', QoSProfile(depth=count, reliability=ReliabilityPolicy.RELIABLE))
+        recorder = cli(domain, tmp_path, 'record', '-o', str(out), '/burst', name='record')
+        with recorder:
+            wait_for(lambda: pub.get_subscription_count() > 0, what='the recorder to subscribe')
+            wait_for(lambda: "recording '/burst'" in recorder.log(), what='recorder log')
+            for i in range(count):
+                pub.publish(String(data=f'burst {i:04d} ' + 'x' * 100_000))
+            stop_cleanly(recorder)  # at once: no wait for the recorder to take them
+    with BagReader(out) as bag:
+        got = [deserialize_message(m.data, String).data[:10] for m in bag.messages(['/burst'])]
+    assert got == [f'burst {i:04d}' for i in range(count)]
+
+
 def test_all_picks_up_topics_that_appear_later_and_duration_ends_it(tmp_path):
     domain = _domain()
     out = tmp_path / 'all.mcap'

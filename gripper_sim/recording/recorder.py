@@ -14,6 +14,7 @@ import importlib
 import os
 import re
 import signal
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -26,6 +27,11 @@ from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
 
 SUBSCRIPTION_DEPTH = 1000  # deep enough that bursts at full physics rate are not dropped
+#: s: on a stop, a topic is finished once it has been silent this long (or delivered a
+#: message published after the stop)
+STOP_QUIET = 0.25
+#: s: the longest a stop waits for messages published before it to arrive
+STOP_CEILING = 5.0
 
 
 def import_message_class(type_name: str) -> Any:
@@ -135,6 +141,9 @@ class Recorder:
                                               all_topics=all_topics)
         self.on_message = on_message
         self.stats = RecorderStats()
+        #: per topic: the latest publish time written (ns) and when it arrived (monotonic s)
+        self.latest_publish: dict[str, int] = {}
+        self.latest_arrival: dict[str, float] = {}
         self._subscriptions: dict[str, Any] = {}
         self._skipped: set[str] = set()
         self._lock = threading.Lock()
@@ -228,8 +237,25 @@ class Recorder:
         self.stats.messages += 1
         self.stats.bytes += len(data)
         self.stats.per_topic[topic] = self.stats.per_topic.get(topic, 0) + 1
+        self.latest_publish[topic] = publish_time
+        self.latest_arrival[topic] = time.monotonic()
         if self.on_message is not None:
             self.on_message(topic, log_time)
+
+    def caught_up(self, stopped_at_ns: int, stopped_at: float, quiet: float) -> bool:
+        """Whether every subscribed topic has delivered what was published before a stop.
+
+        A topic has once it delivered a message published at or after ``stopped_at_ns``
+        (system clock, ns) or has been silent for ``quiet`` s since the later of its last
+        message and ``stopped_at`` (monotonic s).
+        """
+        now = time.monotonic()
+        for topic in self._subscriptions:
+            if self.latest_publish.get(topic, 0) >= stopped_at_ns:
+                continue
+            if now - max(self.latest_arrival.get(topic, stopped_at), stopped_at) < quiet:
+                return False
+        return True
 
     def destroy(self) -> None:
         for sub in self._subscriptions.values():
@@ -237,6 +263,24 @@ class Recorder:
         self._subscriptions.clear()
         self.node.destroy_timer(self._discovery_timer)
         self.node.destroy_timer(self._flush_timer)
+
+
+def finish_after_stop(executor: Any, recorder: Recorder, *, quiet: float = STOP_QUIET,
+                      ceiling: float = STOP_CEILING) -> None:
+    """Keep recording until every topic has delivered what was published before now.
+
+    Messages already acknowledged to the recorder but not yet taken, and those still on
+    their way from a busy publisher, would otherwise be lost on Ctrl-C. Waits at most
+    ``ceiling`` s (a warning on stderr if messages may still have been in flight).
+    """
+    stopped_at_ns = time.time_ns()
+    stopped_at = time.monotonic()
+    while not recorder.caught_up(stopped_at_ns, stopped_at, quiet):
+        if time.monotonic() - stopped_at >= ceiling:
+            print(f'record: stopped after waiting {ceiling:g} s for messages published before '
+                  'the stop; some may not have arrived', file=sys.stderr)
+            return
+        executor.spin_once(timeout_sec=min(0.05, quiet))
 
 
 def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = False,
@@ -248,7 +292,9 @@ def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = Fa
     """Record until Ctrl-C/SIGTERM, ``duration`` s or ``max_messages``; return a summary.
 
     ``output`` is a bag folder to create (split by ``max_bag_size`` bytes and/or
-    ``max_bag_duration`` s) or, ending in ``.mcap``, one file. The files are always
+    ``max_bag_duration`` s) or, ending in ``.mcap``, one file. On a signal or at the end
+    of ``duration``, messages published before the stop that are still queued or in
+    flight are written too (``finish_after_stop``). The files are always
     closed properly (summary, statistics, rosbag2 metadata, ``metadata.yaml``), except
     after SIGKILL, where ``recover`` rebuilds them.
     """
@@ -281,12 +327,16 @@ def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = Fa
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         deadline = None if duration is None else time.monotonic() + duration
+        full = False
         while not stop.is_set():
             executor.spin_once(timeout_sec=0.05)
             if deadline is not None and time.monotonic() >= deadline:
                 break
             if max_messages is not None and recorder.stats.messages >= max_messages:
+                full = True
                 break
+        if not full:
+            finish_after_stop(executor, recorder)
         executor.remove_node(node)
     finally:
         if recorder is not None:
