@@ -7,7 +7,6 @@ cross-check with the modified mass method on the rigid-finger validation cases (
 squeeze, pressurised membrane, 2D Hertz, friction hold): force and contact length within
 5 % of each other, and no node inside a jaw at any step.
 """
-import copy
 import dataclasses
 
 import ipctk
@@ -322,6 +321,29 @@ def test_ipc_takes_the_generic_step():
     assert sim._fast is None and sim._barrier in sim.solver.energies
 
 
+def test_a_barrier_follows_a_face_tilted_or_shortened_as_a_new_one():
+    """The parts of the faces' geometry that do not move with them are kept while the
+    faces' shapes are the same objects (a moved copy shares them): a face made again
+    with another normal or length counts as such, its moved copy does not change it."""
+    x = np.array([[0.0, 0.3], [1.0, 0.5], [2.0, 0.2], [3.0, 0.7]]) * DHAT
+    edges = np.array([[0, 1], [1, 2], [2, 3]])
+    tilt = np.array([-0.2, 1.0]) / np.hypot(0.2, 1.0)
+    variants = [[_table()], [dataclasses.replace(_table(), normal=tilt)],
+                [dataclasses.replace(_table(), half_length=1.5 * DHAT)]]
+    variants.append([variants[1][0].moved(np.array([0.0, 0.1 * DHAT]))])
+    kept = BarrierContact(4, np.arange(4), edges, SETTINGS)
+    for faces in variants:
+        kept.begin_step(x, faces, faces, 1e-3)
+        fresh = BarrierContact(4, np.arange(4), edges, SETTINGS)
+        fresh.begin_step(x, faces, faces, 1e-3)
+        assert np.array_equal(kept.contact_forces(x.ravel()), fresh.contact_forces(x.ravel()))
+        for got, want in zip(kept._face_geometry(faces), fresh._face_geometry(faces)):
+            assert np.array_equal(got, want)
+    tilted, moved = variants[1][0], variants[3][0]
+    assert moved.normal is tilted.normal and moved.velocity is tilted.velocity
+    assert np.array_equal(moved.origin, [0.0, 0.1 * DHAT]) and tilted.origin[1] == 0.0
+
+
 def test_the_faces_of_a_jaw_placement_are_made_once():
     """``faces_at`` hands the same faces for the same jaw placement (a step's end faces
     are the next step's start faces), new ones where the jaws are elsewhere or the faces
@@ -348,8 +370,7 @@ def test_a_barrier_set_up_again_follows_moved_faces_as_a_new_one():
     kept = BarrierContact(4, np.arange(4), edges, SETTINGS)
     kept.begin_step(x, start, end, 1e-3)
     before = kept.contact_forces(x.ravel())
-    moved = [copy.copy(end[0])]
-    moved[0].origin = end[0].origin + np.array([0.0, 0.05 * DHAT])
+    moved = [end[0].moved(end[0].origin + np.array([0.0, 0.05 * DHAT]))]
     kept.begin_step(x, end, moved, 1e-3)
     fresh = BarrierContact(4, np.arange(4), edges, SETTINGS)
     fresh.begin_step(x, end, moved, 1e-3)

@@ -50,7 +50,6 @@ its pairs with the fruit are those ``core3d.soft_barrier`` keeps in the pattern.
 """
 from __future__ import annotations
 
-import copy
 import functools
 import math
 import operator
@@ -211,6 +210,22 @@ def _same_faces(faces, kept_faces: tuple, kept_origins: tuple) -> bool:
 
 _origin = operator.attrgetter('origin')
 
+def _shape_key(face) -> tuple:
+    """What a face's normal, tangents, half-extents and thickness are made of: its type
+    and those attributes' objects (a 2D face's tangent and half-extent come from its
+    normal and half length), which a shallow copy of the face moved elsewhere
+    (``faces_at``) shares."""
+    attributes = face.__dict__
+    return (type(face), attributes['normal'], attributes['thickness'],
+            attributes.get('half_length'), attributes.get('tangents'),
+            attributes.get('half_extents'))
+
+
+def _same_shapes(shapes: tuple, kept: tuple) -> bool:
+    """Whether two face lists' ``_shape_key``s hold the same objects."""
+    return len(shapes) == len(kept) and all(
+        all(map(operator.is_, a, b)) for a, b in zip(shapes, kept))
+
 
 class BarrierContact(Energy):
     """The barrier and friction potentials of one step (``begin_step`` sets it up).
@@ -304,6 +319,9 @@ class BarrierContact(Energy):
         #: ``_face_geometry``'s last three answers: (faces, their origins, the arrays),
         #: the newest first
         self._geometry_kept = []
+        #: (the faces' ``_shape_key``s, their normals, tangents, half-extents, thicknesses,
+        #: corners' offsets from their origins), or None
+        self._shapes_kept = None
         self._start = np.zeros((n_v, d))
         #: (d n,) m, the positions of the step's start (``begin_step``)
         self._start_q = np.zeros(d * n_nodes)
@@ -986,20 +1004,31 @@ class BarrierContact(Energy):
         thicknesses (k,) m and corners (``_corners``); kept for the last three face lists
         while each face and its origin array are the same objects (a facade hands the
         same faces for the same gripper state, ``faces_at``; faces are not changed in
-        place: a moved face is a copy with a new origin)."""
+        place: a moved face is a copy with a new origin). The parts that do not move
+        with a face are kept apart, while the faces' shapes are made of the same objects
+        (``_shape_key``): a face list of a new gripper state makes only its
+        origins, velocities and corners."""
         for kept_faces, kept_origins, geometry in self._geometry_kept:
             if _same_faces(faces, kept_faces, kept_origins):
                 return geometry
         d = self.dimension
+        shapes = tuple(map(_shape_key, faces))
+        kept_shapes = self._shapes_kept
+        if kept_shapes is not None and _same_shapes(shapes, kept_shapes[0]):
+            normals, tangents, half_extents, thickness, corner_offsets = kept_shapes[1]
+        else:
+            tangents = np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d)
+            half_extents = np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1)
+            corner_offsets = (_CORNERS[d] * half_extents[:, None, :]) @ tangents
+            normals = np.array([f.normal for f in faces], float).reshape(-1, d)
+            thickness = np.array([f.thickness for f in faces], float)
+            self._shapes_kept = (shapes, (normals, tangents, half_extents, thickness,
+                                          corner_offsets))
         origins = np.array([f.origin for f in faces], float).reshape(-1, d)
-        tangents = np.array([f.tangents for f in faces], float).reshape(-1, d - 1, d)
-        half_extents = np.array([_half_extents(f) for f in faces]).reshape(-1, d - 1)
-        corners = (origins[:, None, :] + (_CORNERS[d] * half_extents[:, None, :]) @ tangents
-                   ).reshape(-1, d)
-        geometry = (origins, np.array([f.normal for f in faces], float).reshape(-1, d),
-                    tangents, half_extents,
+        corners = (origins[:, None, :] + corner_offsets).reshape(-1, d)
+        geometry = (origins, normals, tangents, half_extents,
                     np.array([f.velocity for f in faces], float).reshape(-1, d),
-                    np.array([f.thickness for f in faces], float), corners)
+                    thickness, corners)
         self._geometry_kept = ([(tuple(faces), tuple(f.origin for f in faces), geometry)]
                                + self._geometry_kept[:2])
         return geometry
@@ -1010,8 +1039,7 @@ class BarrierContact(Energy):
         moved = []
         for face, gap in zip(faces, self.touching_gaps(faces, x, holder)):
             if gap:
-                face = copy.copy(face)
-                face.origin = face.origin + gap * face.normal
+                face = face.moved(face.origin + gap * face.normal)
             moved.append(face)
         return moved
 

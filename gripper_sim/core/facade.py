@@ -30,7 +30,6 @@ multi-step advance (``core.advance_kernels``) runs this same loop on them in num
 """
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import replace
 from typing import Any, Callable
@@ -617,11 +616,9 @@ class SimulationFacade:
         faces = list(template)
         for index, side in enumerate(self._face_side):
             sign = -1.0 if side == LEFT else 1.0
-            # a shallow copy: the moving face gets new origin and velocity arrays
-            faces[index] = copy.copy(template[index])
-            faces[index].origin = self._jaw_origin(grip, side) + self._face_offsets[index]
-            faces[index].velocity = self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate,
-                                                   grip.lift_rate)
+            faces[index] = template[index].moved(
+                self._jaw_origin(grip, side) + self._face_offsets[index],
+                self._in_plane(grip.x_rate + sign * 0.5 * grip.gap_rate, grip.lift_rate))
         self._faces_kept = ((placement, template, faces),) + self._faces_kept[:2]
         return faces
 

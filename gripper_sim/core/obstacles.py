@@ -39,6 +39,17 @@ class FaceGeometry:
         along = np.abs(rel @ self.tangents.T)
         return np.all(along <= self.half_extents, axis=1) & (rel @ self.normal > -self.thickness)
 
+    def moved(self, origin: np.ndarray, velocity: np.ndarray | None = None):
+        """A shallow copy of this face with ``origin`` (d,) m and, if given, ``velocity``
+        (d,) m/s; its other attributes are this face's objects (faces are not changed in
+        place: a moved face is a copy)."""
+        face = object.__new__(type(self))
+        face.__dict__.update(self.__dict__)
+        face.origin = origin
+        if velocity is not None:
+            face.velocity = velocity
+        return face
+
     def may_touch(self, low: np.ndarray, high: np.ndarray) -> bool:
         """Broad phase: can any point of the box [low, high] (d,) be inside the face?"""
         corners = np.array(list(itertools.product(*zip(low, high))), dtype=float)
