@@ -45,6 +45,7 @@ It follows the reference to the Newton tolerance over a grasp
 from __future__ import annotations
 
 import math
+import operator
 
 import numpy as np
 import scipy.sparse as sp
@@ -169,6 +170,8 @@ class PatternCachingSolver:
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
         self._compiled = None  # the compiled barrier solve (``_iterate_compiled``)
+        #: (constraints, their arrays, their ``as_cone``) of the last solve
+        self._cone_kept = None
         self._build_fast_pattern()
         #: the Newton systems' solve with its kept preconditioner (``core.linear_solve``)
         self.linear = linear_solve.new_state(
@@ -414,9 +417,10 @@ class PatternCachingSolver:
         Raises:
             NewtonFailure: no convergence, no descent, or an infeasible start.
         """
-        con = as_cone(con)
+        con = self._cone(con)
         self._passes += 1
-        problem = _NewtonProblem(self, q_n, v_n, dt, con)
+        compiled = COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(con)
+        problem = (_CompiledStep if compiled else _NewtonProblem)(self, q_n, v_n, dt, con)
         history = np.zeros(self.max_iterations)
         warm = self._warm
         status = newton.INFEASIBLE_START
@@ -437,12 +441,23 @@ class PatternCachingSolver:
         self._warm = (q_n.copy(), dt, q)
         return StepSolution(q, problem.reaction, iterations, done)
 
+    def _cone(self, con: StepConstraints) -> StepConstraints:
+        """``as_cone(con)``, kept while the same constraints come with the same arrays (a
+        barrier step's are the same every step: ``barrier._free``, ``_prescribed``)."""
+        arrays = (con.filters, con.friction_nodes, con.friction_tangents, con.friction_bounds,
+                  con.friction_obstacle_speed)
+        kept = self._cone_kept
+        if (kept is None or kept[0] is not con
+                or not all(map(operator.is_, arrays, kept[1]))):
+            kept = self._cone_kept = (con, arrays, as_cone(con))
+        return kept[2]
+
     def compiled_solve_covers(self, con: StepConstraints | None = None) -> bool:
         """Whether the compiled barrier solve (``barrier_solve``) covers this solver's
         problems (and the step's constraints ``con``: no sliding nodes)."""
         return self._compiled_covers and (con is None or not con.friction_nodes.size)
 
-    def _iterate_compiled(self, problem: '_NewtonProblem', q: np.ndarray,
+    def _iterate_compiled(self, problem: '_CompiledStep', q: np.ndarray,
                           history: np.ndarray, alternative: np.ndarray | None):
         """``_iterate`` by ``barrier_solve.CompiledSolve`` (made once, kept)."""
         compiled = self._compiled
@@ -463,19 +478,44 @@ class PatternCachingSolver:
         problem.reaction = reaction
         return status, iterations, n_hist
 
-    def _iterate(self, problem: '_NewtonProblem', q: np.ndarray, history: np.ndarray,
+    def _iterate(self, problem, q: np.ndarray, history: np.ndarray,
                  alternative: np.ndarray | None = None):
         """``newton.newton_iteration`` on ``problem`` from ``q`` (overwritten; first set to
         ``alternative`` where the potential is lower, ``newton.lower_start``):
-        interpreted, or with ``COMPILED_BARRIER_SOLVE`` compiled where ``barrier_solve``
-        covers the solver (the reaction then set on the problem). (status, iterations,
-        n_hist)."""
-        if COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(problem.con):
+        interpreted on a ``_NewtonProblem``, compiled on a ``_CompiledStep`` (``solve``
+        makes one where ``COMPILED_BARRIER_SOLVE`` is set and ``barrier_solve`` covers
+        the solver; the reaction then set on it). (status, iterations, n_hist)."""
+        if isinstance(problem, _CompiledStep):
             return self._iterate_compiled(problem, q, history, alternative)
         if alternative is not None:
             newton.lower_start.py_func(problem, q, alternative, self.counts)
         return newton.newton_iteration_interpreted(problem, q, problem.dt, self.tolerance,
                                                    self.max_iterations, history, self.counts)
+
+
+def _filtered(filters: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """S vec (n_dof,) with the filters S (n_nodes, d, d)."""
+    out = np.empty(vec.size)
+    kernels.apply_filters(filters, np.ascontiguousarray(vec), out)
+    return out
+
+
+class _CompiledStep:
+    """One ``PatternCachingSolver.solve``'s data on the compiled route
+    (``_iterate_compiled``, which keeps its own work vectors): the step's start q_n,
+    v_n (n_dof,) m, m/s, dt s, its constraints (``as_cone``) and, once solved, the
+    reaction (n_dof,) N."""
+
+    __slots__ = ('q_n', 'v_n', 'dt', 'con', 'reaction')
+
+    def __init__(self, solver: PatternCachingSolver, q_n: np.ndarray, v_n: np.ndarray,
+                 dt: float, con: StepConstraints):
+        self.q_n, self.v_n, self.dt, self.con = q_n, v_n, dt, con
+        self.reaction = None
+
+    def filtered(self, vec: np.ndarray) -> np.ndarray:
+        """S vec (n_dof,)."""
+        return _filtered(self.con.filters, vec)
 
 
 class _NewtonProblem(StepProblem):
@@ -507,9 +547,7 @@ class _NewtonProblem(StepProblem):
 
     def filtered(self, vec: np.ndarray) -> np.ndarray:
         """S vec (n_dof,)."""
-        out = np.empty(self.solver.n)
-        kernels.apply_filters(self.filters, np.ascontiguousarray(vec), out)
-        return out
+        return _filtered(self.filters, vec)
 
     def evaluate(self, x, hessian, grad) -> float:
         """Phi at x (inf: infeasible), its gradient written into ``grad`` and the
