@@ -1104,7 +1104,7 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces:
               if start is not None and barrier.reachable(start)]
     if not starts:
         raise NewtonFailure('no collision-free start for the barrier step', [])
-    if len(starts) == 1 or np.max(np.abs(starts[0] - starts[1])) < resolution:
+    if len(starts) == 1 or np.abs(starts[0] - starts[1]).max() < resolution:
         return starts[0], None
     return starts[0], starts[1].ravel()
 

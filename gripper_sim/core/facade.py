@@ -684,9 +684,9 @@ class SimulationFacade:
         """(left, right) N, each jaw's hard-contact force on the fruit along its closing
         axis (the face normal for flat jaws), summed over its faces."""
         if self._plain_jaws:
-            return tuple(float(np.sum(forces[obstacle == side] @ faces[side].normal))
+            return tuple(float((forces[obstacle == side] @ faces[side].normal).sum())
                          for side in (LEFT, RIGHT))
-        return tuple(sign * float(np.sum(forces[np.isin(obstacle, self._jaw_faces(side)), 0]))
+        return tuple(sign * float(forces[np.isin(obstacle, self._jaw_faces(side)), 0].sum())
                      for side, sign in ((LEFT, 1.0), (RIGHT, -1.0)))
 
     # ------------------------------------------------------------------ measures
@@ -738,7 +738,7 @@ class SimulationFacade:
                     for side in (LEFT, RIGHT)]
         wrenches = None  # built on first read where the grip force needs none
         if self._plain_jaws:
-            left_n, right_n = (float(np.sum(normal[on])) for on in sides)
+            left_n, right_n = (float(normal[on].sum()) for on in sides)
         elif soft is not None:  # what the step committed: its fingers' base reactions
             left_n, right_n = self._jaw_force
         else:  # each jaw's force along the closing axis
