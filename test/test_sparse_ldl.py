@@ -128,6 +128,36 @@ def test_minimum_degree_of_a_path_makes_no_fill():
     assert sparse_ldl.analyse(n, pairs, 1, order=order).n_factor == n - 1
 
 
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_the_symbolic_factorisation_is_the_fill_of_dense_elimination(seed):
+    """L's pattern, by columns and by rows, and the elimination tree equal those of an
+    elimination on a dense boolean matrix (each eliminated node's later neighbours made
+    a clique), on a random graph in a random order."""
+    rng = np.random.default_rng(seed)
+    n = 60
+    pairs = rng.integers(0, n, size=(90, 2))
+    order = rng.permutation(n)
+    pattern = sparse_ldl.analyse(n, pairs, 2, order=order)
+    position = pattern.position
+    filled = np.zeros((n, n), bool)
+    filled[position[pairs[:, 0]], position[pairs[:, 1]]] = True
+    filled |= filled.T
+    for k in range(n):
+        later = np.flatnonzero(filled[k + 1:, k]) + k + 1
+        filled[np.ix_(later, later)] = True
+    lower = np.tril(filled, -1)
+    for column in range(n):
+        rows = pattern.l_row[pattern.l_ptr[column]:pattern.l_ptr[column + 1]]
+        assert rows.tolist() == np.flatnonzero(lower[:, column]).tolist()
+        below = np.flatnonzero(lower[:, column])
+        assert pattern.parent[column] == (below[0] if below.size else -1)
+    for row in range(n):
+        columns = pattern.r_col[pattern.r_ptr[row]:pattern.r_ptr[row + 1]]
+        assert columns.tolist() == np.flatnonzero(lower[row]).tolist()
+        at = pattern.r_index[pattern.r_ptr[row]:pattern.r_ptr[row + 1]]
+        assert pattern.l_row[at].tolist() == [row] * len(columns)
+
+
 def test_bad_patterns_are_refused():
     with pytest.raises(ValueError, match='pairs'):
         sparse_ldl.analyse(3, [[0, 3]], 2)

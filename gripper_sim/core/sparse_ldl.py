@@ -3,8 +3,8 @@
 The matrix A (n_nodes b x n_nodes b) is made of b x b node blocks: block (i, j) is
 non-zero only for i = j or a pair (i, j) of the node graph given once (a mesh's
 edges). ``analyse`` orders the nodes to reduce fill (minimum degree on the node graph,
-``minimum_degree``) and computes, in numpy, the elimination tree and the pattern of
-L (the symbolic factorisation); the numba kernels then factorise A = L D L^T with unit
+``minimum_degree``) and computes the elimination tree and the pattern of L (the
+symbolic factorisation, a numba kernel too: ``_symbolic``); the numba kernels then factorise A = L D L^T with unit
 lower block-triangular L and block-diagonal D (b x b blocks) for new values on that
 pattern, and solve with the factors. Algorithms as described in T. A. Davis, "Direct
 Methods for Sparse Linear Systems", SIAM 2006: the elimination tree (section 4.1, Liu's
@@ -84,40 +84,6 @@ def minimum_degree(n_nodes: int, pairs: np.ndarray) -> np.ndarray:
             heapq.heappush(heap, (len(adj), other))
         neighbours[node] = set()
     return np.asarray(order, dtype=np.int64)
-
-
-def _elimination_tree(lower: list) -> np.ndarray:
-    """parent (n,) of each position in the elimination tree (-1: a root), from the
-    columns below the diagonal of each row (``lower[k]``: columns < k)."""
-    n = len(lower)
-    parent = np.full(n, -1, np.int64)
-    ancestor = np.full(n, -1, np.int64)  # path-compressed ancestors
-    for k in range(n):
-        for i in lower[k]:
-            while i != -1 and i < k:
-                following = ancestor[i]
-                ancestor[i] = k
-                if following == -1:
-                    parent[i] = k
-                i = following
-    return parent
-
-
-def _row_patterns(lower: list, parent: np.ndarray) -> list:
-    """The columns of each row of L (sorted): the reach of the row of A in the tree."""
-    n = len(lower)
-    mark = np.full(n, -1, np.int64)
-    rows = []
-    for k in range(n):
-        mark[k] = k
-        reach = []
-        for i in lower[k]:
-            while mark[i] != k:
-                reach.append(i)
-                mark[i] = k
-                i = parent[i]
-        rows.append(sorted(reach))
-    return rows
 
 
 @dataclasses.dataclass(frozen=True)
@@ -262,30 +228,74 @@ def analyse(n_nodes: int, pairs: np.ndarray, block: int,
     keys = np.unique(hi * n_nodes + lo)
     a_rows, a_col = keys // n_nodes, keys % n_nodes
     a_ptr = np.searchsorted(a_rows, np.arange(n_nodes + 1)).astype(np.int64)
-    lower = [a_col[a_ptr[k]:a_ptr[k + 1]].tolist() for k in range(n_nodes)]
-    parent = _elimination_tree(lower)
-    rows = _row_patterns(lower, parent)
-    counts = np.zeros(n_nodes, np.int64)
-    for cols in rows:
-        counts[cols] += 1
-    l_ptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    l_row = np.empty(l_ptr[-1], np.int64)
-    r_ptr = np.concatenate([[0], np.cumsum([len(c) for c in rows])]).astype(np.int64)
-    r_col = np.empty(r_ptr[-1], np.int64)
-    r_index = np.empty(r_ptr[-1], np.int64)
-    filled = l_ptr[:-1].copy()
-    for k, cols in enumerate(rows):  # rows ascending: each column's rows come ascending
-        start = r_ptr[k]
-        for t, j in enumerate(cols):
-            l_row[filled[j]] = k
-            r_col[start + t] = j
-            r_index[start + t] = filled[j]
-            filled[j] += 1
-    return SparsePattern(n_nodes, int(block), order, position, a_ptr, a_col.astype(np.int64),
+    a_col = a_col.astype(np.int64)
+    parent, l_ptr, l_row, r_ptr, r_col, r_index = _symbolic(n_nodes, a_ptr, a_col)
+    return SparsePattern(n_nodes, int(block), order, position, a_ptr, a_col,
                          parent, l_ptr, l_row, r_ptr, r_col, r_index)
 
 
 # ---------------------------------------------------------------------- numba kernels
+@njit(cache=True)
+def _symbolic(n, a_ptr, a_col):
+    """The symbolic factorisation of the strictly lower blocks of A by rows, in
+    positions (``a_ptr`` (n + 1,), ``a_col``, columns ascending in each row): the
+    elimination tree (Liu's algorithm with path compression, Davis 2006 section 4.1),
+    the rows of L as the reaches of A's rows in it (section 4.2, each sorted), and L's
+    blocks by columns, rows ascending. Returns (parent, l_ptr, l_row, r_ptr, r_col,
+    r_index) int64, as ``SparsePattern`` holds them."""
+    parent = np.full(n, -1, np.int64)
+    ancestor = np.full(n, -1, np.int64)  # path-compressed ancestors
+    for k in range(n):
+        for p in range(a_ptr[k], a_ptr[k + 1]):
+            i = a_col[p]
+            while i != -1 and i < k:
+                following = ancestor[i]
+                ancestor[i] = k
+                if following == -1:
+                    parent[i] = k
+                i = following
+    mark = np.full(n, -1, np.int64)
+    r_ptr = np.zeros(n + 1, np.int64)
+    for k in range(n):  # each row's size: its reach in the tree
+        mark[k] = k
+        size = 0
+        for p in range(a_ptr[k], a_ptr[k + 1]):
+            i = a_col[p]
+            while mark[i] != k:
+                size += 1
+                mark[i] = k
+                i = parent[i]
+        r_ptr[k + 1] = r_ptr[k] + size
+    r_col = np.empty(r_ptr[n], np.int64)
+    mark[:] = -1
+    for k in range(n):
+        mark[k] = k
+        top = r_ptr[k]
+        for p in range(a_ptr[k], a_ptr[k + 1]):
+            i = a_col[p]
+            while mark[i] != k:
+                r_col[top] = i
+                top += 1
+                mark[i] = k
+                i = parent[i]
+        r_col[r_ptr[k]:r_ptr[k + 1]].sort()
+    l_ptr = np.zeros(n + 1, np.int64)
+    for e in range(r_ptr[n]):
+        l_ptr[r_col[e] + 1] += 1
+    for j in range(n):
+        l_ptr[j + 1] += l_ptr[j]
+    filled = l_ptr[:n].copy()
+    l_row = np.empty(r_ptr[n], np.int64)
+    r_index = np.empty(r_ptr[n], np.int64)
+    for k in range(n):  # rows ascending: each column's rows come ascending
+        for e in range(r_ptr[k], r_ptr[k + 1]):
+            j = r_col[e]
+            l_row[filled[j]] = k
+            r_index[e] = filled[j]
+            filled[j] += 1
+    return parent, l_ptr, l_row, r_ptr, r_col, r_index
+
+
 @njit(cache=True)
 def _invert_block(d, out):
     """out = d^-1 for a small symmetric block d (b, b). Returns 0 if d is positive
