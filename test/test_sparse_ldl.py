@@ -8,6 +8,7 @@ from scipy.spatial import Delaunay
 from gripper_sim.configuration import load_config
 from gripper_sim.core import sparse_ldl
 from gripper_sim.core.fruit import build_fruit
+from gripper_sim.core.pattern_keys import sorted_unique
 
 
 def _mesh(n_points: int, seed: int):
@@ -156,6 +157,14 @@ def test_the_symbolic_factorisation_is_the_fill_of_dense_elimination(seed):
         assert columns.tolist() == np.flatnonzero(lower[row]).tolist()
         at = pattern.r_index[pattern.r_ptr[row]:pattern.r_ptr[row + 1]]
         assert pattern.l_row[at].tolist() == [row] * len(columns)
+
+
+@pytest.mark.parametrize('keys', [np.zeros(0, np.int64), np.array([7]), np.array([[3, 1], [3, 2]]),
+                                  np.random.default_rng(0).integers(0, 40, (50, 6)),
+                                  np.random.default_rng(1).integers(0, 10**12, 10**5)])
+def test_sorted_unique_is_numpys_unique(keys):
+    got, expected = sorted_unique(keys), np.unique(keys)
+    assert got.dtype == expected.dtype and np.array_equal(got, expected)
 
 
 def test_bad_patterns_are_refused():

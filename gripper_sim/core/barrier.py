@@ -70,6 +70,7 @@ from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_mov
 from gripper_sim.core.barrier_search import edge_vertex_candidates, smallest_distance
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
+from gripper_sim.core.pattern_keys import sorted_unique
 from gripper_sim.core.stepper import FRICTION_SMOOTHING, NewtonFailure, StepConstraints
 from gripper_sim.errors import ConfigError
 
@@ -391,7 +392,7 @@ class BarrierContact(Energy):
         elements ``dofs``."""
         m = self.dofs.shape[1]
         keys = np.tile(self.dofs, (1, m)) * self.n_dof + np.repeat(self.dofs, m, axis=1)
-        return np.unique(keys)
+        return sorted_unique(keys)
 
     @property
     def corners_per_face(self) -> int:

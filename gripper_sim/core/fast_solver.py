@@ -54,6 +54,7 @@ from gripper_sim.core import barrier_solve, linear_solve, newton, sparse_ldl
 from gripper_sim.core import solver_kernels as kernels
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.energy_table import EnergyTable
+from gripper_sim.core.pattern_keys import sorted_unique
 from gripper_sim.core.stepper import (FRICTION_SMOOTHING, NEWTON_FAILURES, NewtonFailure,
                                       StepConstraints, StepProblem, StepSolution)
 
@@ -255,7 +256,7 @@ class PatternCachingSolver:
             keys = np.tile(energy.dofs, (1, m)) * n + np.repeat(energy.dofs, m, axis=1)
             element_keys.append(keys)
             key_sets.append(keys.ravel())
-        unique = np.unique(np.concatenate(key_sets))
+        unique = sorted_unique(np.concatenate(key_sets))
         self._indices = (unique % n).astype(np.int32)
         self._indptr = np.searchsorted(unique // n, np.arange(n + 1)).astype(np.int32)
         self._nnz = unique.size
@@ -263,7 +264,7 @@ class PatternCachingSolver:
                          np.searchsorted(unique, keys).astype(np.int64)
                          for keys in element_keys]
         col_node, row_node = unique // n // d, unique % n // d
-        block_keys = np.unique(col_node * nodes + row_node)
+        block_keys = sorted_unique(col_node * nodes + row_node)
         bcol, brow = block_keys // nodes, block_keys % nodes
         a = np.arange(d)
         keys = ((d * bcol[:, None, None] + a[None, None, :]) * n

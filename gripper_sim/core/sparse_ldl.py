@@ -47,6 +47,8 @@ import heapq
 import numpy as np
 from numba import njit, uint64
 
+from gripper_sim.core.pattern_keys import sorted_unique
+
 
 def minimum_degree(n_nodes: int, pairs: np.ndarray) -> np.ndarray:
     """A fill-reducing elimination order of a graph: minimum degree on the explicit
@@ -225,7 +227,7 @@ def analyse(n_nodes: int, pairs: np.ndarray, block: int,
     p = position[pairs]
     p = p[p[:, 0] != p[:, 1]]
     hi, lo = p.max(axis=1), p.min(axis=1)
-    keys = np.unique(hi * n_nodes + lo)
+    keys = sorted_unique(hi * n_nodes + lo)
     a_rows, a_col = keys // n_nodes, keys % n_nodes
     a_ptr = np.searchsorted(a_rows, np.arange(n_nodes + 1)).astype(np.int64)
     a_col = a_col.astype(np.int64)
