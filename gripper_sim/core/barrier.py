@@ -211,6 +211,7 @@ def _same_faces(faces, kept_faces: tuple, kept_origins: tuple) -> bool:
 
 _origin = operator.attrgetter('origin')
 
+
 def _shape_key(face) -> tuple:
     """What a face's normal, tangents, half-extents and thickness are made of: its type
     and those attributes' objects (a 2D face's tangent and half-extent come from its

@@ -505,7 +505,7 @@ class _CompiledStep:
     """One ``PatternCachingSolver.solve``'s data on the compiled route
     (``_iterate_compiled``, which keeps its own work vectors): the step's start q_n,
     v_n (n_dof,) m, m/s, dt s, its constraints (``as_cone``) and, once solved, the
-    reaction (n_dof,) N."""
+    reaction (n_dof,) N. Made as ``_NewtonProblem`` is (its ``solver`` argument unused)."""
 
     __slots__ = ('q_n', 'v_n', 'dt', 'con', 'reaction')
 

@@ -4,14 +4,14 @@ The matrix A (n_nodes b x n_nodes b) is made of b x b node blocks: block (i, j) 
 non-zero only for i = j or a pair (i, j) of the node graph given once (a mesh's
 edges). ``analyse`` orders the nodes to reduce fill (minimum degree on the node graph,
 ``minimum_degree``) and computes the elimination tree and the pattern of L (the
-symbolic factorisation, a numba kernel too: ``_symbolic``); the numba kernels then factorise A = L D L^T with unit
-lower block-triangular L and block-diagonal D (b x b blocks) for new values on that
-pattern, and solve with the factors. Algorithms as described in T. A. Davis, "Direct
-Methods for Sparse Linear Systems", SIAM 2006: the elimination tree (section 4.1, Liu's
-algorithm with path compression), the row patterns of L as reaches in the tree
-(section 4.2), the up-looking factorisation row by row (section 4.7, here on blocks),
-and the triangular solves (section 3.1); minimum degree as in section 7.1 (George &
-Liu 1989), on the explicit elimination graph.
+symbolic factorisation, a numba kernel too: ``_symbolic``); the numba kernels then
+factorise A = L D L^T with unit lower block-triangular L and block-diagonal D (b x b
+blocks) for new values on that pattern, and solve with the factors. Algorithms as
+described in T. A. Davis, "Direct Methods for Sparse Linear Systems", SIAM 2006: the
+elimination tree (section 4.1, Liu's algorithm with path compression), the row patterns
+of L as reaches in the tree (section 4.2), the up-looking factorisation row by row
+(section 4.7, here on blocks), and the triangular solves (section 3.1); minimum degree
+as in section 7.1 (George & Liu 1989), on the explicit elimination graph.
 
 Storage, in the fill-reducing order (``SparsePattern.position[i]``: the position of
 node i; ``order`` its inverse):
