@@ -74,3 +74,14 @@ def argument_problem(args) -> str | None:
     if args.repeat < 1:
         return f'--repeat must be at least 1, got {args.repeat}'
     return None if args.baseline is None else checkout_problem(args.baseline)
+
+
+def parse_checked(parser, argv=None):
+    """``parser.parse_args(argv)``, its ``--repeat`` and ``--baseline`` checked
+    (``argument_problem``): SystemExit(2) with the problem on stderr if one is wrong."""
+    args = parser.parse_args(argv)
+    problem = argument_problem(args)
+    if problem:
+        print(f'error: {problem}', file=sys.stderr)
+        raise SystemExit(2)
+    return args

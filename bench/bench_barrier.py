@@ -42,7 +42,7 @@ ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().paren
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'test'))
 
-from baseline import add_arguments, alternated, argument_problem, best_by_key  # noqa: E402
+from baseline import add_arguments, alternated, best_by_key, parse_checked  # noqa: E402
 from helpers import pick, quasi_static_sim  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
@@ -145,11 +145,7 @@ def main(argv=None) -> int:
     parser.add_argument('--pick', action='store_true', help='also the grasp-and-lift')
     add_arguments(parser, 'each run once after a warm-up, figures as JSON (what --baseline '
                           'runs)')
-    args = parser.parse_args(argv)
-    problem = argument_problem(args)
-    if problem:
-        print(f'error: {problem}', file=sys.stderr)
-        return 2
+    args = parse_checked(parser, argv)
     runs = _runs(args.pick)
     if args.plain:
         print(json.dumps(plain(runs)))

@@ -26,7 +26,7 @@ TREE = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().paren
 sys.path.insert(0, str(TREE))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baseline import add_arguments, alternated, argument_problem, best_by_key  # noqa: E402
+from baseline import add_arguments, alternated, best_by_key, parse_checked  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.workflows.factory import make_simulation  # noqa: E402
@@ -59,11 +59,7 @@ def main(argv=None) -> int:
     parser.add_argument('--repeat', type=int, default=3)
     add_arguments(parser, 'each set-up once timed after one untimed build, as JSON (what '
                           '--baseline runs)')
-    args = parser.parse_args(argv)
-    problem = argument_problem(args)
-    if problem:
-        print(f'error: {problem}', file=sys.stderr)
-        return 2
+    args = parse_checked(parser, argv)
     if args.plain:
         print(json.dumps({name: build_time(overrides, 1)
                           for name, overrides in SETUPS.items()}))

@@ -35,7 +35,7 @@ from pathlib import Path
 ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(ROOT))
 
-from baseline import add_arguments, alternated, argument_problem, best_by_key  # noqa: E402
+from baseline import add_arguments, alternated, best_by_key, parse_checked  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
@@ -89,11 +89,7 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
     parser.add_argument('--repeat', type=int, default=1, help='runs per finger (best kept)')
     parser.add_argument('--force', type=float, default=4.0, help='grip force, N')
     add_arguments(parser, 'each grasp once after a warm-up, as JSON (what --baseline runs)')
-    args = parser.parse_args(argv)
-    problem = argument_problem(args)
-    if problem:
-        print(f'error: {problem}', file=sys.stderr)
-        return 2
+    args = parse_checked(parser, argv)
     if args.plain:
         for finger in fingers:
             grasp(finger, args.force)
