@@ -2,7 +2,9 @@
 mass method (``mmm``) on rigid-finger cases. Prints figures; asserts nothing.
 
 CPU time of this process (``time.process_time``, the best of ``--repeat`` runs; the
-machine's load average is printed), for each case and model, with Newton iterations:
+machine's load average is printed), for each case and model, with Newton iterations and
+(``solves s``) the CPU time inside the 2D barrier model's compiled Newton solves, the
+part of the barrier model's time that compiling the Python around them would leave:
 
 - ``hertz``: the solid disk (256 surface nodes) pressed to 1.5 N by flat jaws, 1.5 s of
   simulated time at dt = 10 ms. ``mmm`` runs the compiled whole step (``core.fast``,
@@ -31,6 +33,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -46,6 +49,7 @@ from baseline import add_arguments, alternated, best_by_key, parse_checked  # no
 from helpers import pick, quasi_static_sim  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
+from gripper_sim.core import barrier_solve  # noqa: E402
 from gripper_sim.workflows.factory import make_simulation  # noqa: E402
 
 RADIUS = 0.03
@@ -83,21 +87,45 @@ def hertz3d(model: str, fast=None):
     return sim, 0.6
 
 
+@contextlib.contextmanager
+def _solves_timed():
+    """While open, the CPU time inside the compiled 2D barrier Newton solves
+    (``barrier_solve.CompiledSolve.run``, the solve alone, none of the step around it):
+    yields a one-item list that holds it (s)."""
+    run = barrier_solve.CompiledSolve.run
+    inside = [0.0]
+
+    def timed_run(*args, **kwargs):
+        start = time.process_time()
+        try:
+            return run(*args, **kwargs)
+        finally:
+            inside[0] += time.process_time() - start
+    barrier_solve.CompiledSolve.run = timed_run
+    try:
+        yield inside
+    finally:
+        barrier_solve.CompiledSolve.run = run
+
+
 def timed(case, model: str, fast=None):
-    """(CPU s, Newton iterations, grip force N, contact length m) of one run."""
-    start = time.process_time()
-    if case == 'pick':
-        sim, _ = pick(1.2, overrides=[f'contact.model={model}'])
-        iterations = float('nan')
-        result = sim.last
-    else:
-        sim, duration = case(model, fast)
-        iterations = 0
-        for _ in range(int(round(duration / sim.dt))):
-            result = sim.step()
-            iterations += result.newton_iterations
-    return (time.process_time() - start, iterations, result.grip_force,
-            result.deformation.contact_length)
+    """(CPU s, Newton iterations, grip force N, contact length m, CPU s inside the
+    compiled 2D barrier solves, 0 where none ran: ``_solves_timed``) of one run."""
+    with _solves_timed() as solves:
+        start = time.process_time()
+        if case == 'pick':
+            sim, _ = pick(1.2, overrides=[f'contact.model={model}'])
+            iterations = float('nan')
+            result = sim.last
+        else:
+            sim, duration = case(model, fast)
+            iterations = 0
+            for _ in range(int(round(duration / sim.dt))):
+                result = sim.step()
+                iterations += result.newton_iterations
+        cpu = time.process_time() - start
+    return (cpu, iterations, result.grip_force, result.deformation.contact_length,
+            solves[0])
 
 
 def _runs(pick_too: bool) -> list:
@@ -162,15 +190,17 @@ def main(argv=None) -> int:
         if len(tables) > 1:
             print(f'-- {tree}')
         print(f"{'case':10s} {'model':10s} {'CPU s':>8s} {'Newton':>7s} {'force N':>9s} "
-              f"{'contact mm':>10s}")
+              f"{'contact mm':>10s} {'solves s':>9s}")
         for name, _, label, _ in runs:
-            cpu, iterations, force, length = best[name, label]
+            cpu, iterations, force, length, solves = best[name, label]
             print(f'{name:10s} {label:10s} {cpu:8.3f} {iterations:7.0f} {force:9.4f} '
-                  f'{1e3 * length:10.3f}')
+                  f'{1e3 * length:10.3f} ' + (f'{solves:9.3f}' if solves else f"{'-':>9s}"))
         for name in ('hertz', 'membrane', 'hertz3d', 'pick'):
             if (name, 'ipc') in best:
-                print(f'{name}: ipc / mmm CPU time = '
-                      f'{best[name, "ipc"][0] / best[name, "mmm"][0]:.2f}')
+                ipc, mmm = best[name, 'ipc'], best[name, 'mmm']
+                print(f'{name}: ipc / mmm CPU time = {ipc[0] / mmm[0]:.2f}' + (
+                    f'; its compiled solves alone / mmm = {ipc[4] / mmm[0]:.2f}'
+                    if ipc[4] else ''))
         print(f'membrane: ipc / mmm-shared CPU time = '
               f'{best["membrane", "ipc"][0] / best["membrane", "mmm-shared"][0]:.2f}')
     return 0
