@@ -33,7 +33,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import sys
@@ -47,9 +46,9 @@ sys.path.insert(0, str(ROOT / 'test'))
 
 from baseline import add_arguments, alternated, best_by_key, parse_checked  # noqa: E402
 from helpers import pick, quasi_static_sim  # noqa: E402
+from solve_timer import solves_timed  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
-from gripper_sim.core import barrier_solve  # noqa: E402
 from gripper_sim.workflows.factory import make_simulation  # noqa: E402
 
 RADIUS = 0.03
@@ -87,31 +86,10 @@ def hertz3d(model: str, fast=None):
     return sim, 0.6
 
 
-@contextlib.contextmanager
-def _solves_timed():
-    """While open, the CPU time inside the compiled 2D barrier Newton solves
-    (``barrier_solve.CompiledSolve.run``, the solve alone, none of the step around it):
-    yields a one-item list that holds it (s)."""
-    run = barrier_solve.CompiledSolve.run
-    inside = [0.0]
-
-    def timed_run(*args, **kwargs):
-        start = time.process_time()
-        try:
-            return run(*args, **kwargs)
-        finally:
-            inside[0] += time.process_time() - start
-    barrier_solve.CompiledSolve.run = timed_run
-    try:
-        yield inside
-    finally:
-        barrier_solve.CompiledSolve.run = run
-
-
 def timed(case, model: str, fast=None):
     """(CPU s, Newton iterations, grip force N, contact length m, CPU s inside the
-    compiled 2D barrier solves, 0 where none ran: ``_solves_timed``) of one run."""
-    with _solves_timed() as solves:
+    compiled 2D barrier solves, 0 where none ran: ``solve_timer``) of one run."""
+    with solves_timed() as solves:
         start = time.process_time()
         if case == 'pick':
             sim, _ = pick(1.2, overrides=[f'contact.model={model}'])

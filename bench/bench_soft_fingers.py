@@ -5,9 +5,11 @@ CPU time of this process (``time.process_time``, the best of ``--repeat`` runs; 
 machine's load average is printed), side by side for ``gripper.finger.type`` flat and
 solid_pad: the apple (shell model, 64 nodes) on the table, the jaws starting 1 mm from
 it (from the fingers' fronts for the pad), closed in force mode to ``--force`` N, lifted
-1 cm and held 0.2 s at dt = 1 ms; with the outcome, steps, solves, Newton iterations,
-and at the end the grip force, the contact length (both jaws) and the peak damage
-pressure (Hertz estimate).
+1 cm and held 0.2 s at dt = 1 ms (each finger's grasp run once untimed first, numba's
+caches loaded); with the CPU time inside the barrier model's compiled Newton solves
+(``in solves``, ``solve_timer``: what compiling the Python around them would leave), the
+outcome, steps, solves, Newton iterations, and at the end the grip force, the contact
+length (both jaws) and the peak damage pressure (Hertz estimate).
 The flat finger takes its usual route (the modified mass method, the compiled whole
 step); the solid pad two meshed blocks in the state and the barrier contact on the
 Newton solver (its compiled energies on a fixed pattern).
@@ -36,6 +38,7 @@ ROOT = Path(os.environ.get('GRIPPER_SIM_TREE') or Path(__file__).resolve().paren
 sys.path.insert(0, str(ROOT))
 
 from baseline import add_arguments, alternated, best_by_key, parse_checked  # noqa: E402
+from solve_timer import solves_timed  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
@@ -47,16 +50,20 @@ FINGERS = ('flat', 'solid_pad')
 
 def grasp(finger: str, force: float) -> dict:
     """One grasp-and-lift, the jaws starting 1 mm wider than where the fingers touch the
-    apple; its CPU time (s) and counts."""
-    start = time.process_time()
-    config = load_config(overrides=[f'gripper.finger.type={finger}'])
-    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
-    sim = Simulation(config)
-    iterations = []
-    summary = run_grasp(sim, GraspSequence(sim, force, lift_height=0.01, hold_time=0.2),
-                        on_step=lambda result, phase: iterations.append(
-                            result.newton_iterations))
-    return dict(cpu=time.process_time() - start, outcome=summary['outcome'],
+    apple; its CPU time (s), of it inside the compiled barrier Newton solves (s,
+    ``solve_timer``), and counts."""
+    with solves_timed() as inside:
+        start = time.process_time()
+        config = load_config(overrides=[f'gripper.finger.type={finger}'])
+        config = config.replaced(
+            {'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
+        sim = Simulation(config)
+        iterations = []
+        summary = run_grasp(sim, GraspSequence(sim, force, lift_height=0.01, hold_time=0.2),
+                            on_step=lambda result, phase: iterations.append(
+                                result.newton_iterations))
+        cpu = time.process_time() - start
+    return dict(cpu=cpu, solve_cpu=inside[0], outcome=summary['outcome'],
                 steps=int(sim.last.step), solves=int(sim.gap_solves),
                 newton=int(sum(iterations)), force=float(sim.last.grip_force),
                 contact=float(sim.last.deformation.contact_length),
@@ -72,14 +79,19 @@ def _baseline_rows(script: Path, baseline: Path, fingers: tuple, force: float,
 
 
 def _print_rows(rows: dict, fingers: tuple) -> None:
-    print(f"{'finger':10s} {'CPU s':>8s} {'outcome':>8s} {'steps':>6s} {'solves':>7s} "
-          f"{'Newton':>7s} {'force N':>8s} {'contact mm':>10s} {'Hertz kPa':>9s}")
+    print(f"{'finger':10s} {'CPU s':>8s} {'in solves':>9s} {'outcome':>8s} {'steps':>6s} "
+          f"{'solves':>7s} {'Newton':>7s} {'force N':>8s} {'contact mm':>10s} "
+          f"{'Hertz kPa':>9s}")
     for finger, r in rows.items():
-        print(f"{finger:10s} {r['cpu']:8.2f} {r['outcome']:>8s} {r['steps']:6d} "
+        inside = f"{r['solve_cpu']:9.2f}" if r['solve_cpu'] else f"{'-':>9s}"
+        print(f"{finger:10s} {r['cpu']:8.2f} {inside} {r['outcome']:>8s} {r['steps']:6d} "
               f"{r['solves']:7d} {r['newton']:7d} {r['force']:8.3f} "
               f"{r['contact'] * 1e3:10.1f} {r['pressure'] * 1e-3:9.0f}")
     reference, other = fingers
-    print(f"{other} / {reference}: {rows[other]['cpu'] / rows[reference]['cpu']:.1f}x")
+    ratio = rows[other]['cpu'] / rows[reference]['cpu']
+    inside = rows[other]['solve_cpu'] / rows[reference]['cpu']
+    print(f"{other} / {reference}: {ratio:.1f}x" + (
+        f"; {other}'s compiled solves alone / {reference}: {inside:.1f}x" if inside else ''))
 
 
 def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
@@ -109,6 +121,7 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
           f'{args.repeat}')
     rows = {}
     for finger in fingers:
+        grasp(finger, args.force)  # untimed: numba's caches loaded
         runs = [grasp(finger, args.force) for _ in range(args.repeat)]
         rows[finger] = min(runs, key=lambda r: r['cpu'])
     _print_rows(rows, fingers)
