@@ -10,6 +10,7 @@ squeeze, pressurised membrane, 2D Hertz, friction hold): force and contact lengt
 import dataclasses
 
 import ipctk
+import numba
 import numpy as np
 import pytest
 
@@ -201,10 +202,11 @@ def _squeeze_iterations(model_start: str, monkeypatch) -> tuple:
     with the barrier, its steps started as ``model_start`` says: 'chosen' (the build's),
     'x_n' (the predictor left out: the outline only pushed ahead of the jaws)."""
     if model_start == 'x_n':
-        pushed = BarrierContact.pushed_starts
-        monkeypatch.setattr(BarrierContact, 'pushed_starts',
-                            lambda self, x_n, old, new, predicted=None:
-                            pushed(self, x_n, old, new))
+        def plain_start_only(self, x_n, v_n, old, new, dt):
+            self.begin_step(x_n, old, new, dt)
+            plain, _ = self.pushed_starts(x_n, old, new)
+            return [plain] if self.reachable(plain) else [], 0.0
+        monkeypatch.setattr(BarrierContact, 'begin_with_starts', plain_start_only)
     radius = 0.03
     sim = quasi_static_sim(radius, 'fruit.skin.youngs_modulus=1e9', 'fruit.skin.thickness=1e-5',
                            'fruit.nodes=256', 'fruit.pressure.turgor=2e4',
@@ -231,6 +233,54 @@ def test_a_squeeze_starts_its_barrier_steps_from_the_predictor(monkeypatch):
     assert chosen[0] < 0.65 * plain[0]
     assert chosen[1] == pytest.approx(plain[1], rel=1e-5)
     assert chosen[2] == pytest.approx(plain[2], rel=1e-5)
+
+
+@numba.njit
+def _step_fields(part):
+    return part.corners, part.start, part.pairs, part.anchor, part.friction_pairs, part.flags
+
+
+def _part_state(barrier: BarrierContact) -> list:
+    """Copies of a 2D barrier's step state: its part's (corners, start, candidates and
+    their anchor, lagged friction, flags), the collision mesh's start, the faces' shift,
+    whether there is friction."""
+    corners, start, pairs, anchor, friction, flags = _step_fields(barrier._part)
+    arrays = [corners, start, pairs, anchor, *friction, flags, barrier._start,
+              barrier._start_q]
+    return [np.array(a) for a in arrays] + [barrier._faces_shift, barrier._has_friction]
+
+
+def test_a_barrier_steps_compiled_set_up_is_the_step_by_step_one(monkeypatch):
+    """``begin_with_starts`` (one compiled call) sets a step up and makes its two starts
+    as ``begin_step``, ``pushed_starts`` and ``reachable`` do one by one (the 3D and
+    soft bodies' route): the same starts, the same part state, bit for bit, while the
+    jaws squeeze the membrane (both starts reachable and apart)."""
+    calls = []
+    original = BarrierContact.begin_with_starts
+
+    def recorded(self, x_n, v_n, old, new, dt):
+        calls.append((self, x_n.copy(), v_n.copy(), old, new, dt))
+        return original(self, x_n, v_n, old, new, dt)
+    monkeypatch.setattr(BarrierContact, 'begin_with_starts', recorded)
+    sim = quasi_static_sim(0.03, 'fruit.nodes=256', 'fruit.skin.youngs_modulus=1e9',
+                           'fruit.skin.thickness=1e-5', 'fruit.pressure.turgor=2e4',
+                           'contact.model=ipc')
+    sim.command_gap(1.8 * 0.03, speed=0.4 * 0.03)
+    for _ in range(20):
+        sim.step()
+    barrier, x_n, v_n, old, new, dt = calls[-1]
+    starts, difference = original(barrier, x_n, v_n, old, new, dt)
+    fused = _part_state(barrier)
+    barrier.begin_step(x_n, old, new, dt)
+    plain, predicted = barrier.pushed_starts(x_n, old, new, x_n + dt * v_n)
+    stepwise = [start for start in (predicted, plain) if barrier.reachable(start)]
+    assert len(starts) == len(stepwise) == 2
+    assert all(np.array_equal(a, b) for a, b in zip(starts, stepwise))
+    assert difference == np.abs(predicted - plain).max() > 0.0
+    by_steps = _part_state(barrier)
+    assert len(fused[2]) > 0 and fused[-1]  # candidates and friction at the start
+    for a, b in zip(fused, by_steps):
+        assert np.array_equal(a, b)
 
 
 def test_dropped_node_rests_on_the_table_with_its_weight_and_no_chatter():

@@ -460,21 +460,9 @@ class BarrierContact(Energy):
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set up a step of ``dt`` (s) from positions ``x_n`` (n, d) m with the faces moving
         from ``old_faces`` to ``new_faces``: the lagged friction of the start state."""
-        old = self._corners(old_faces)
-        new = self._corners(new_faces)
-        if self._rest is None:
-            # the mollifier of nearly parallel edges (3D) scales with their rest lengths
-            self._rest = x_n[self.vertex_nodes].copy()
-        if self._mesh is None or self._n_faces != len(new_faces):
-            self._build_mesh(new)
-        self._obstacles_start, self._obstacles_end = old, new
-        self._swept = None
-        self._last_terms = None
-        self._dt = dt
+        old, new, mu_s, mu_k, rubbing = self._begin_faces(x_n, old_faces, new_faces, dt)
         start = self.vertices(x_n, old)
         self._start = start
-        self._start_q = x_n.ravel().copy()
-        mu_s, mu_k, rubbing = self._coefficients(new_faces)
         if self.dimension == 2:
             self._begin_part(x_n, start, new, mu_s, mu_k, rubbing)
             return
@@ -489,6 +477,49 @@ class BarrierContact(Energy):
             if len(collisions):
                 self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
                                        mu_k, max)
+
+    def _begin_faces(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> tuple:
+        """``begin_step``'s set-up of the faces and the step (all but the collision mesh's
+        start and the 2D part's or 3D friction's state): (the faces' corners where they
+        start and end (c k, d) m, and ``_coefficients(new_faces)``)."""
+        old = self._corners(old_faces)
+        new = self._corners(new_faces)
+        if self._rest is None:
+            # the mollifier of nearly parallel edges (3D) scales with their rest lengths
+            self._rest = x_n[self.vertex_nodes].copy()
+        if self._mesh is None or self._n_faces != len(new_faces):
+            self._build_mesh(new)
+        self._obstacles_start, self._obstacles_end = old, new
+        self._swept = None
+        self._last_terms = None
+        self._dt = dt
+        self._start_q = x_n.ravel().copy()
+        return (old, new, *self._coefficients(new_faces))
+
+    def begin_with_starts(self, x_n: np.ndarray, v_n: np.ndarray, old_faces, new_faces,
+                          dt: float) -> tuple[list, float]:
+        """``begin_step``, then ``pushed_starts`` of x_n and of the predictor
+        x_n + dt v_n, each checked as ``reachable`` does, the compiled parts in one call
+        (``barrier_part.begin_with_starts``): for a 2D barrier of rigid faces only, not a
+        self-contact. Positions ``x_n`` (n, 2) m, velocities ``v_n`` (n, 2) m/s.
+
+        Returns:
+            (the reachable starts (n, 2) m, the predictor's first; the largest coordinate
+            difference m between the two starts).
+        """
+        old, new, mu_s, mu_k, rubbing = self._begin_faces(x_n, old_faces, new_faces, dt)
+        origins, normals, tangents, half_extents, _, thickness, _ = self._face_geometry(
+            old_faces)
+        shifts = self._face_geometry(new_faces)[0] - origins
+        (has_friction, self._start, self._faces_shift, plain, predicted, predicted_clear,
+         plain_clear, difference) = bp.begin_with_starts(
+            self._part, x_n, v_n, dt, old, new, rubbing, mu_s, mu_k, self.surface, origins,
+            normals, tangents, half_extents, thickness, shifts, START_GAP_FRACTION)
+        self._has_friction = bool(has_friction)
+        starts = [start for start, clear in ((predicted, predicted_clear),
+                                             (plain, plain_clear))
+                  if clear or self._exactly_reachable(start)]
+        return starts, float(difference)
 
     def _begin_part(self, x_n: np.ndarray, start: np.ndarray, new: np.ndarray,
                     mu_s: np.ndarray, mu_k: np.ndarray, rubbing: bool) -> None:
@@ -932,6 +963,11 @@ class BarrierContact(Energy):
         if self.dimension == 2 and bp.start_clear(self._part, self._start_q, q,
                                                   self._faces_shift):
             return True
+        return self._exactly_reachable(start)
+
+    def _exactly_reachable(self, start: np.ndarray) -> bool:
+        """``reachable``'s exact check (ipctk's CCD, then the ends' distance) of the paths
+        to ``start`` (n, d) m."""
         v0 = self._start
         v1 = self.vertices(start)
         if not np.array_equal(v0, v1):
@@ -1099,14 +1135,18 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces:
     load: 250 iterations, 362 from x_n, 300 from the predictor). In 3D the check of a
     second start (ipctk's CCD) and the two potentials cost more than the iterations they
     save (the Hertz sphere: 35 against 38 iterations, 0.75 against 0.67 s)."""
-    barrier.begin_step(x_n, old_faces, new_faces, dt)
-    plain, predicted = barrier.pushed_starts(
-        x_n, old_faces, new_faces, x_n + dt * v_n if barrier.dimension == 2 else None)
-    starts = [start for start in (predicted, plain)
-              if start is not None and barrier.reachable(start)]
+    if barrier.dimension == 2 and not barrier.self_contact:
+        starts, difference = barrier.begin_with_starts(x_n, v_n, old_faces, new_faces, dt)
+    else:
+        barrier.begin_step(x_n, old_faces, new_faces, dt)
+        plain, predicted = barrier.pushed_starts(
+            x_n, old_faces, new_faces, x_n + dt * v_n if barrier.dimension == 2 else None)
+        starts = [start for start in (predicted, plain)
+                  if start is not None and barrier.reachable(start)]
+        difference = np.abs(starts[0] - starts[1]).max() if len(starts) == 2 else 0.0
     if not starts:
         raise NewtonFailure('no collision-free start for the barrier step', [])
-    if len(starts) == 1 or np.abs(starts[0] - starts[1]).max() < resolution:
+    if len(starts) == 1 or difference < resolution:
         return starts[0], None
     return starts[0], starts[1].ravel()
 

@@ -32,8 +32,8 @@ from numba import njit, types
 from numba.experimental import structref
 
 from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move, mesh_vertices,
-                                              nearest_partners, relative_moves_within,
-                                              same_values)
+                                              nearest_partners, push_ahead,
+                                              relative_moves_within, same_values)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear)
 from gripper_sim.core.barrier_terms import barrier_terms
@@ -199,6 +199,53 @@ def start_clear(part, q0, q1, faces_shift):
         pairs = edge_vertex_candidates(v0, v1, part.edges, part.groups, part.self_contact,
                                        part.swept_radius)
     return paths_clear(v0, v1, part.edges, pairs)
+
+
+@njit(cache=True)
+def begin_with_starts(part, x_n, v_n, dt, old_corners, new_corners, rubbing, mu_s, mu_k,
+                      surface, origins, normals, tangents, half_extents, thickness, shifts,
+                      fraction):
+    """A step of a barrier with rigid faces only (not a self-contact) set up and its two
+    starts made and checked in one call: what ``BarrierContact.begin_step``,
+    ``pushed_starts`` with the predictor and ``reachable``'s compiled check of each start
+    do one by one, in their order and arithmetic.
+
+    Args:
+        x_n, v_n: (n, 2) m, m/s at the step's start.  dt: s.
+        old_corners, new_corners: (c k, 2) m, the faces' corners where they start and end.
+        rubbing, mu_s, mu_k: as ``set_step``'s.
+        surface, origins ... shifts, fraction: as ``barrier_kernels.push_ahead``'s (the
+            faces where they start, and their shifts in the step).
+
+    Returns:
+        (whether there is lagged friction, the collision mesh's start (n_m, 2) m, the
+        largest corner shift m, the start x_n pushed (n, 2) m, the predictor x_n + dt v_n
+        pushed (n, 2) m, whether ``start_clear`` clears the way to the predictor's, to
+        x_n's, the largest coordinate difference between them m).
+    """
+    start_q = x_n.ravel()
+    start = np.empty((part.dof_pairs.shape[0] + old_corners.shape[0], 2))
+    mesh_vertices(start_q, part.dof_pairs, old_corners, start)
+    k = new_corners.shape[0]
+    faces_shift = largest_move(new_corners.ravel(), np.arange(2 * k).reshape((k, 2)),
+                               old_corners)
+    has_friction = set_step(part, new_corners, start, rubbing, faces_shift <= part.margin,
+                            mu_s, mu_k, np.zeros((0, 2)), 0.0, False)
+    plain = x_n.copy()
+    predicted = np.empty_like(x_n)
+    for i in range(x_n.shape[0]):
+        for c in range(2):
+            predicted[i, c] = x_n[i, c] + dt * v_n[i, c]
+    push_ahead(x_n, surface, origins, normals, tangents, half_extents, thickness, shifts,
+               part.dhat, fraction, plain, predicted)
+    predicted_clear = start_clear(part, start_q, predicted.ravel(), faces_shift)
+    plain_clear = start_clear(part, start_q, plain.ravel(), faces_shift)
+    difference = 0.0
+    for i in range(x_n.shape[0]):
+        for c in range(2):
+            difference = max(difference, abs(predicted[i, c] - plain[i, c]))
+    return (has_friction, start, faces_shift, plain, predicted, predicted_clear,
+            plain_clear, difference)
 
 
 @njit(cache=True)
