@@ -17,7 +17,9 @@ import pytest
 from helpers import kernel_evaluation, pick, quasi_static_sim
 
 from gripper_sim.configuration import load_config
+from gripper_sim.core import barrier_part as bp
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
+from gripper_sim.core.contact import STICK
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.obstacles import Plate
 from gripper_sim.core.simulation import Simulation
@@ -281,6 +283,38 @@ def test_a_barrier_steps_compiled_set_up_is_the_step_by_step_one(monkeypatch):
     assert len(fused[2]) > 0 and fused[-1]  # candidates and friction at the start
     for a, b in zip(fused, by_steps):
         assert np.array_equal(a, b)
+
+
+def test_a_barrier_steps_compiled_outputs_are_the_step_by_step_ones(monkeypatch):
+    """``step_outputs`` (one compiled call where the last evaluation was at the solution)
+    gives the velocities, contact forces and contact set that ``contact_forces`` and
+    ``held_contacts`` give one by one (the 3D route), bit for bit, in a squeeze whose
+    nodes stick and are held by both jaws."""
+    calls = []
+    original = BarrierContact.step_outputs
+
+    def recorded(self, q, x_n, dt, faces):
+        outputs = original(self, q, x_n, dt, faces)
+        calls.append((self, q.copy(), x_n.copy(), dt, faces, outputs))
+        return outputs
+    monkeypatch.setattr(BarrierContact, 'step_outputs', recorded)
+    sim = quasi_static_sim(0.03, 'fruit.nodes=256', 'fruit.skin.youngs_modulus=1e9',
+                           'fruit.skin.thickness=1e-5', 'fruit.pressure.turgor=2e4',
+                           'contact.model=ipc')
+    sim.command_gap(1.8 * 0.03, speed=0.4 * 0.03)
+    for _ in range(20):
+        sim.step()
+    barrier, q, x_n, dt, faces, (v, forces, contacts) = calls[-1]
+    assert bp.kept_forces(barrier._part, q, True, np.empty(q.size))  # the compiled route
+    by_steps = barrier.contact_forces(q)
+    x = q.reshape(-1, 2)
+    assert np.array_equal(v, (x - x_n) / dt)
+    assert np.array_equal(forces, by_steps)
+    held = barrier.held_contacts(x, v, faces, by_steps)
+    assert {0, 1} <= set(contacts.obstacle) and (contacts.mode == STICK).any()
+    for name in ('obstacle', 'mode', 'normal_force', 'bounce_speed', 'secondary',
+                 'secondary_bounce'):
+        assert np.array_equal(getattr(contacts, name), getattr(held, name)), name
 
 
 def test_dropped_node_rests_on_the_table_with_its_weight_and_no_chatter():

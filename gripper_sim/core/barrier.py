@@ -1022,6 +1022,28 @@ class BarrierContact(Energy):
                       *self._face_geometry(faces)[:4], self.settings.dhat, holder)
         return holder
 
+    def step_outputs(self, q: np.ndarray, x_n: np.ndarray, dt: float,
+                     faces) -> tuple[np.ndarray, np.ndarray, cm.ContactState]:
+        """A step's outputs at its solution ``q`` (d n,) m from positions ``x_n`` (n, d) m over
+        ``dt`` (s), ``faces`` (rigid) at its end: (the velocities (x - x_n) / dt (n, d)
+        m/s, ``contact_forces`` (n, d) N, ``held_contacts``); in 2D in one compiled call
+        (``barrier_part.step_outputs``) where the last evaluation was made at q."""
+        n, d = x_n.shape
+        if d == 2:
+            forces, v, holder = np.empty(2 * n), np.empty((n, 2)), np.empty(n, np.int64)
+            contacts = cm.ContactState.held_by(holder)
+            origins, normals, tangents, half_extents, velocities, _, _ = (
+                self._face_geometry(faces))
+            if bp.step_outputs(self._part, q, x_n, dt, origins, normals, tangents,
+                               half_extents, velocities, self.settings.friction_smoothing,
+                               cm.STICK, cm.SLIP, forces, v, holder, contacts.normal_force,
+                               contacts.mode):
+                return v, forces.reshape(n, 2), contacts
+        forces = self.contact_forces(q)
+        x = q.reshape(-1, d)
+        v = (x - x_n) / dt
+        return v, forces, self.held_contacts(x, v, faces, forces)
+
     def held_contacts(self, x: np.ndarray, v: np.ndarray, faces,
                       forces: np.ndarray) -> cm.ContactState:
         """The contact set of positions ``x``, velocities ``v`` and contact ``forces`` (n, d)
@@ -1165,11 +1187,8 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
                                 solver.tolerance * dt)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), _free(n, d),
                             alternative)
-    x = solution.q.reshape(-1, d)
-    forces = barrier.contact_forces(solution.q)
-    v = (x - x_n) / dt
-    return StepOutcome(x, v, forces, barrier.held_contacts(x, v, new_faces, forces),
-                       solution.iterations)
+    v, forces, contacts = barrier.step_outputs(solution.q, x_n, dt, new_faces)
+    return StepOutcome(solution.q.reshape(-1, d), v, forces, contacts, solution.iterations)
 
 
 #: the last ``_free`` constraints: ((n, d), them), or None
