@@ -20,6 +20,7 @@ from gripper_sim.configuration import load_config
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
 from gripper_sim.core.contact import STICK
+from gripper_sim.core.measures import face_contact_length, faces_contact_length
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.obstacles import Plate
 from gripper_sim.core.simulation import Simulation
@@ -315,6 +316,28 @@ def test_a_barrier_steps_compiled_outputs_are_the_step_by_step_ones(monkeypatch)
     for name in ('obstacle', 'mode', 'normal_force', 'bounce_speed', 'secondary',
                  'secondary_bounce'):
         assert np.array_equal(getattr(contacts, name), getattr(held, name)), name
+
+
+def test_the_jaws_contact_length_is_each_faces_lifted_by_its_gap():
+    """``faces_contact_length`` (one compiled call) sums each jaw face's
+    ``face_contact_length`` with the face taken out by its ``touching_gaps`` (the
+    barrier's outline lies a gap off it), or not lifted, as the faces one by one."""
+    sim = quasi_static_sim(0.03, 'fruit.nodes=256', 'fruit.skin.youngs_modulus=1e9',
+                           'fruit.skin.thickness=1e-5', 'fruit.pressure.turgor=2e4',
+                           'contact.model=ipc')
+    sim.command_gap(1.8 * 0.03, speed=0.4 * 0.03)
+    for _ in range(10):  # the jaws moving: the outline leaves each face at an angle
+        sim.step()
+    x, holder, fruit = sim.q, sim.contacts.obstacle, sim.fruit
+    jaws = sim.faces_at(sim._grip)[:2]
+    gaps = sim._barrier.touching_gaps(jaws, x, holder)
+    assert min(gaps) > 0.0
+    lifted = [face_contact_length(fruit, x, face, holder, k, gap)
+              for k, (face, gap) in enumerate(zip(jaws, gaps))]
+    flat = [face_contact_length(fruit, x, face, holder, k) for k, face in enumerate(jaws)]
+    assert min(lifted) > 0.0 and lifted != flat
+    assert faces_contact_length(fruit, x, jaws, holder, True) == sum(lifted)
+    assert faces_contact_length(fruit, x, jaws, holder, False) == sum(flat)
 
 
 def test_dropped_node_rests_on_the_table_with_its_weight_and_no_chatter():

@@ -11,6 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
+from gripper_sim.core.barrier_kernels import mean_gap
 from gripper_sim.core.deferred import build
 from gripper_sim.core.fruit import FruitModel
 from gripper_sim.core.results import Deformation
@@ -241,6 +242,22 @@ def face_contact_length_of(x, ring, holder, face, nx, nz, ox, oz):
     return length
 
 
+@njit(cache=True, error_model='numpy')
+def faces_contact_length_of(x, ring, holder, origins, normals, lifted):
+    """m, the summed ``face_contact_length_of`` of k flat faces (face k the holder's k: its
+    point ``origins[k]`` and unit normal ``normals[k]`` (k, 2)), each taken out along its
+    normal by the mean gap of the nodes it holds (``barrier_kernels.mean_gap``) if
+    ``lifted`` (the barrier model's outline lies a gap off its faces)."""
+    length = 0.0
+    for k in range(origins.shape[0]):
+        offset = mean_gap(x, holder, k, origins[k], normals[k]) if lifted else 0.0
+        nx, nz = normals[k, 0], normals[k, 1]
+        length += face_contact_length_of(x, ring, holder, k, nx, nz,
+                                         origins[k, 0] + offset * nx,
+                                         origins[k, 1] + offset * nz)
+    return length
+
+
 # ---------------------------------------------------------------------- on a fruit model
 def _skin(fruit: FruitModel) -> np.ndarray:
     """(n_e, 2) int64, the fruit's skin edges as the compiled measures take them."""
@@ -303,6 +320,18 @@ def face_contact_length(fruit: FruitModel, x: np.ndarray, face, holder: np.ndarr
         np.ascontiguousarray(x, dtype=float), _outline_at_rest(fruit)[0],
         np.ascontiguousarray(holder, np.int64), index, nx, nz,
         float(face.origin[0]) + offset * nx, float(face.origin[1]) + offset * nz)
+
+
+def faces_contact_length(fruit: FruitModel, x: np.ndarray, faces: list, holder: np.ndarray,
+                         lifted: bool) -> float:
+    """m, the summed ``face_contact_length`` of the flat ``faces`` (face k the obstacle k of
+    ``holder`` (n_nodes,)), at positions ``x`` (n_nodes, 2) m, each taken out by the mean
+    gap of the nodes it holds if ``lifted`` (``faces_contact_length_of``)."""
+    origins = np.array([face.origin for face in faces], dtype=float).reshape(-1, 2)
+    normals = np.array([face.normal for face in faces], dtype=float).reshape(-1, 2)
+    return float(faces_contact_length_of(
+        np.ascontiguousarray(x, dtype=float), _outline_at_rest(fruit)[0],
+        np.ascontiguousarray(holder, np.int64), origins, normals, lifted))
 
 
 def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,

@@ -21,7 +21,7 @@ from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.fast import FastPath
 from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics
-from gripper_sim.core.measures import (deformation, face_contact_length, held_length,
+from gripper_sim.core.measures import (deformation, faces_contact_length, held_length,
                                        tributary_lengths)
 from gripper_sim.core.multistep import MultiStep
 from gripper_sim.core.obstacles import FlatFace
@@ -219,13 +219,10 @@ class Simulation(SimulationFacade):
         if self._soft is not None:  # the fruit's outline in pairs with the fingers
             length = held_length(fruit, x, on_jaws)
         else:
-            jaws = self.faces_at(self._grip)[:len(self._face_side)]
             # with the barrier the outline lies a gap off the faces
-            offsets = ((0.0,) * len(jaws) if self._barrier is None
-                       else self._barrier.touching_gaps(jaws, x, self.contacts.obstacle))
-            length = sum(face_contact_length(fruit, x, face, self.contacts.obstacle, index,
-                                             offset)
-                         for index, (face, offset) in enumerate(zip(jaws, offsets)))
+            jaws = self.faces_at(self._grip)[:len(self._face_side)]
+            length = faces_contact_length(fruit, x, jaws, self.contacts.obstacle,
+                                          self._barrier is not None)
         if self._pad is not None:
             on_pad = (self.contacts.obstacle < 0) & (self._pad.holder >= 0)
             length += held_length(fruit, x, on_pad)
