@@ -504,3 +504,39 @@ def test_a_step_failed_on_an_inverted_element_names_the_fingers_too():
     rigid = Simulation(load_config())
     assert rigid._convergence_advice(failure).startswith(
         'an element of the fruit inverted (it is crushed)')
+
+
+def test_a_soft_steps_compiled_set_up_is_the_step_by_step_one(monkeypatch):
+    """A soft-body step's set-up (``set_up_starts``: one compiled call) makes the
+    starts that ``begin_step`` and ``pushed_starts`` make one by one with the fingers'
+    bases at their targets, and ``start_clear`` answers as ``reachable``'s compiled
+    check, bit for bit, in a Fin Ray grasp while the jaws close on the apple."""
+    from gripper_sim.core import barrier_part as bp
+
+    calls = []
+    original = BarrierContact.set_up_starts
+
+    def recorded(self, x_n, v_n, old, new, dt, fixed, targets, both):
+        calls.append((self, x_n.copy(), v_n.copy(), old, new, dt, fixed, targets.copy()))
+        return original(self, x_n, v_n, old, new, dt, fixed, targets, both)
+    monkeypatch.setattr(BarrierContact, 'set_up_starts', recorded)
+    config = load_config(overrides=['gripper.finger.type=fin_ray'])
+    sim = Simulation(config.replaced(
+        {'gripper.initial_gap': Simulation(config).touching_gap + 0.001}))
+    sim.command_force(4.0, speed=0.01)
+    for _ in range(150):
+        result = sim.step()
+    assert result.grip_force > 0.5  # the fingers press on the apple
+    barrier, x_n, v_n, old, new, dt, fixed, targets = calls[-1]
+    assert np.abs(targets - x_n[fixed]).max() > 0  # the bases move in the step
+    plain, predicted, predicted_clear, plain_clear, difference = original(
+        barrier, x_n, v_n, old, new, dt, fixed, targets, True)
+    barrier.begin_step(x_n, old, new, dt)
+    by_steps = barrier.pushed_starts(x_n, old, new, x_n + dt * v_n)
+    for fused, start, clear in zip((plain, predicted), by_steps,
+                                   (plain_clear, predicted_clear)):
+        start[fixed] = targets
+        assert np.array_equal(fused, start)
+        assert clear == bp.start_clear(barrier._part, barrier._start_q, start.ravel(),
+                                       barrier._faces_shift)
+    assert predicted_clear and difference == np.abs(predicted - plain).max() > 0

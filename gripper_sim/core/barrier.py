@@ -129,6 +129,8 @@ _NO_VALUES, _NO_SLOTS = np.zeros(0), np.zeros(0, np.int64)
 _NO_STEP = np.zeros(0)  # ``quiet`` at q only
 #: the compiled solve's empty (k, 2) corners or anchors and candidates
 _NO_CORNERS, _NO_PAIRS = np.zeros((0, 2)), np.zeros((0, 2), np.int64)
+#: no prescribed nodes (``set_up_starts``)
+_NO_NODES = np.zeros(0, np.int64)
 _NO_FRICTION = (np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0),
                 np.zeros((0, 2)))
 
@@ -500,12 +502,34 @@ class BarrierContact(Energy):
                           dt: float) -> tuple[list, float]:
         """``begin_step``, then ``pushed_starts`` of x_n and of the predictor
         x_n + dt v_n, each checked as ``reachable`` does, the compiled parts in one call
-        (``barrier_part.begin_with_starts``): for a 2D barrier of rigid faces only, not a
-        self-contact. Positions ``x_n`` (n, 2) m, velocities ``v_n`` (n, 2) m/s.
+        (``set_up_starts``): for a 2D barrier of rigid faces only, not a self-contact.
+        Positions ``x_n`` (n, 2) m, velocities ``v_n`` (n, 2) m/s.
 
         Returns:
             (the reachable starts (n, 2) m, the predictor's first; the largest coordinate
             difference m between the two starts).
+        """
+        plain, predicted, predicted_clear, plain_clear, difference = self.set_up_starts(
+            x_n, v_n, old_faces, new_faces, dt, _NO_NODES, _NO_CORNERS, True)
+        starts = [start for start, clear in ((predicted, predicted_clear),
+                                             (plain, plain_clear))
+                  if clear or self._exactly_reachable(start)]
+        return starts, difference
+
+    def set_up_starts(self, x_n: np.ndarray, v_n: np.ndarray, old_faces, new_faces,
+                      dt: float, fixed: np.ndarray, targets: np.ndarray,
+                      both: bool) -> tuple:
+        """``begin_step`` and ``pushed_starts`` of x_n and of the predictor x_n + dt v_n
+        (positions (n, 2) m, velocities (n, 2) m/s) in one compiled call
+        (``barrier_part.begin_with_starts``), nodes ``fixed`` (k,) at ``targets`` (k, 2) m
+        in both, with ``reachable``'s compiled check (``barrier_part.start_clear``) of the
+        predictor's and, with ``both`` or if that is not clear, of x_n's: 2D, not a
+        self-contact.
+
+        Returns:
+            (x_n's start, the predictor's (n, 2) m, whether the compiled check clears the
+            way to the predictor's, to x_n's (False where not checked), the largest
+            coordinate difference m between them).
         """
         old, new, mu_s, mu_k, rubbing = self._begin_faces(x_n, old_faces, new_faces, dt)
         origins, normals, tangents, half_extents, _, thickness, _ = self._face_geometry(
@@ -514,12 +538,10 @@ class BarrierContact(Energy):
         (has_friction, self._start, self._faces_shift, plain, predicted, predicted_clear,
          plain_clear, difference) = bp.begin_with_starts(
             self._part, x_n, v_n, dt, old, new, rubbing, mu_s, mu_k, self.surface, origins,
-            normals, tangents, half_extents, thickness, shifts, START_GAP_FRACTION)
+            normals, tangents, half_extents, thickness, shifts, START_GAP_FRACTION, fixed,
+            targets, both)
         self._has_friction = bool(has_friction)
-        starts = [start for start, clear in ((predicted, predicted_clear),
-                                             (plain, plain_clear))
-                  if clear or self._exactly_reachable(start)]
-        return starts, float(difference)
+        return plain, predicted, bool(predicted_clear), bool(plain_clear), float(difference)
 
     def _begin_part(self, x_n: np.ndarray, start: np.ndarray, new: np.ndarray,
                     mu_s: np.ndarray, mu_k: np.ndarray, rubbing: bool) -> None:
@@ -1307,20 +1329,29 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
             the step).
     """
     n, d = x_n.shape
-    barrier.begin_step(x_n, old_faces, new_faces, dt)
-    barriers = [barrier]
+    if d == 2:
+        pushed, start, clear, pushed_clear, _ = barrier.set_up_starts(
+            x_n, v_n, old_faces, new_faces, dt, fixed, fixed_targets, False)
+    else:
+        barrier.begin_step(x_n, old_faces, new_faces, dt)
+        pushed, start = barrier.pushed_starts(x_n, old_faces, new_faces, x_n + dt * v_n)
+        clear = pushed_clear = None
     if self_contact is not None:
         self_contact.begin_step(x_n, [], [], dt)
-        barriers.append(self_contact)
 
-    def reachable(start: np.ndarray) -> bool:
+    def reachable(start: np.ndarray, compiled_clear: bool | None = None) -> bool:
+        """Whether the way to ``start`` (its fixed nodes set) crosses nothing, the
+        barrier's compiled check (2D) already made if ``compiled_clear`` is given."""
         start[fixed] = fixed_targets
-        return all(b.reachable(start) for b in barriers)
+        if compiled_clear is None:
+            crosses_nothing = barrier.reachable(start)
+        else:
+            crosses_nothing = compiled_clear or barrier._exactly_reachable(start)
+        return crosses_nothing and (self_contact is None or self_contact.reachable(start))
 
-    pushed, start = barrier.pushed_starts(x_n, old_faces, new_faces, x_n + dt * v_n)
-    if not reachable(start):
-        start = pushed  # its own array: pushed_starts' copy
-        if not reachable(start):
+    if not reachable(start, clear):
+        start = pushed  # its own array
+        if not reachable(start, pushed_clear if not clear else None):
             start = _carried_starts(barrier, x_n, pushed, carried, reachable)
     constraints = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)

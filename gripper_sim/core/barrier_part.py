@@ -205,11 +205,11 @@ def start_clear(part, q0, q1, faces_shift):
 @njit(cache=True)
 def begin_with_starts(part, x_n, v_n, dt, old_corners, new_corners, rubbing, mu_s, mu_k,
                       surface, origins, normals, tangents, half_extents, thickness, shifts,
-                      fraction):
-    """A step of a barrier with rigid faces only (not a self-contact) set up and its two
-    starts made and checked in one call: what ``BarrierContact.begin_step``,
-    ``pushed_starts`` with the predictor and ``reachable``'s compiled check of each start
-    do one by one, in their order and arithmetic.
+                      fraction, fixed, targets, both):
+    """A step of a barrier that is not a self-contact set up and its two starts made and
+    checked in one call: what ``BarrierContact.begin_step``, ``pushed_starts`` with the
+    predictor and ``reachable``'s compiled check of each start do one by one, in their
+    order and arithmetic.
 
     Args:
         x_n, v_n: (n, 2) m, m/s at the step's start.  dt: s.
@@ -217,12 +217,15 @@ def begin_with_starts(part, x_n, v_n, dt, old_corners, new_corners, rubbing, mu_
         rubbing, mu_s, mu_k: as ``set_step``'s.
         surface, origins ... shifts, fraction: as ``barrier_kernels.push_ahead``'s (the
             faces where they start, and their shifts in the step).
+        fixed: (k,) nodes prescribed at ``targets`` (k, 2) m in both starts (a soft
+            body's base; may be empty).  both: check the way to x_n's start too (else
+            only if the predictor's is not clear).
 
     Returns:
         (whether there is lagged friction, the collision mesh's start (n_m, 2) m, the
         largest corner shift m, the start x_n pushed (n, 2) m, the predictor x_n + dt v_n
         pushed (n, 2) m, whether ``start_clear`` clears the way to the predictor's, to
-        x_n's, the largest coordinate difference between them m).
+        x_n's (False where not checked), the largest coordinate difference between them m).
     """
     start_q = x_n.ravel()
     start = np.empty((part.dof_pairs.shape[0] + old_corners.shape[0], 2))
@@ -239,8 +242,13 @@ def begin_with_starts(part, x_n, v_n, dt, old_corners, new_corners, rubbing, mu_
             predicted[i, c] = x_n[i, c] + dt * v_n[i, c]
     push_ahead(x_n, surface, origins, normals, tangents, half_extents, thickness, shifts,
                part.dhat, fraction, plain, predicted)
+    for k in range(fixed.shape[0]):
+        for c in range(2):
+            predicted[fixed[k], c] = plain[fixed[k], c] = targets[k, c]
     predicted_clear = start_clear(part, start_q, predicted.ravel(), faces_shift)
-    plain_clear = start_clear(part, start_q, plain.ravel(), faces_shift)
+    plain_clear = False
+    if both or not predicted_clear:
+        plain_clear = start_clear(part, start_q, plain.ravel(), faces_shift)
     difference = 0.0
     for i in range(x_n.shape[0]):
         for c in range(2):
