@@ -238,6 +238,18 @@ def test_a_squeeze_starts_its_barrier_steps_from_the_predictor(monkeypatch):
     assert chosen[2] == pytest.approx(plain[2], rel=1e-5)
 
 
+def _membrane_squeezed(steps: int) -> Simulation:
+    """The stiff-skinned pressurised ring (256 nodes, 30 mm) with the barrier, after
+    ``steps`` steps of its jaws closing to 1.8 radii."""
+    sim = quasi_static_sim(0.03, 'fruit.nodes=256', 'fruit.skin.youngs_modulus=1e9',
+                           'fruit.skin.thickness=1e-5', 'fruit.pressure.turgor=2e4',
+                           'contact.model=ipc')
+    sim.command_gap(1.8 * 0.03, speed=0.4 * 0.03)
+    for _ in range(steps):
+        sim.step()
+    return sim
+
+
 @numba.njit
 def _step_fields(part):
     return part.corners, part.start, part.pairs, part.anchor, part.friction_pairs, part.flags
@@ -265,12 +277,7 @@ def test_a_barrier_steps_compiled_set_up_is_the_step_by_step_one(monkeypatch):
         calls.append((self, x_n.copy(), v_n.copy(), old, new, dt))
         return original(self, x_n, v_n, old, new, dt)
     monkeypatch.setattr(BarrierContact, 'begin_with_starts', recorded)
-    sim = quasi_static_sim(0.03, 'fruit.nodes=256', 'fruit.skin.youngs_modulus=1e9',
-                           'fruit.skin.thickness=1e-5', 'fruit.pressure.turgor=2e4',
-                           'contact.model=ipc')
-    sim.command_gap(1.8 * 0.03, speed=0.4 * 0.03)
-    for _ in range(20):
-        sim.step()
+    sim = _membrane_squeezed(20)
     barrier, x_n, v_n, old, new, dt = calls[-1]
     starts, difference = original(barrier, x_n, v_n, old, new, dt)
     fused = _part_state(barrier)
@@ -299,12 +306,7 @@ def test_a_barrier_steps_compiled_outputs_are_the_step_by_step_ones(monkeypatch)
         calls.append((self, q.copy(), x_n.copy(), dt, faces, outputs))
         return outputs
     monkeypatch.setattr(BarrierContact, 'step_outputs', recorded)
-    sim = quasi_static_sim(0.03, 'fruit.nodes=256', 'fruit.skin.youngs_modulus=1e9',
-                           'fruit.skin.thickness=1e-5', 'fruit.pressure.turgor=2e4',
-                           'contact.model=ipc')
-    sim.command_gap(1.8 * 0.03, speed=0.4 * 0.03)
-    for _ in range(20):
-        sim.step()
+    sim = _membrane_squeezed(20)
     barrier, q, x_n, dt, faces, (v, forces, contacts) = calls[-1]
     assert bp.kept_forces(barrier._part, q, True, np.empty(q.size))  # the compiled route
     by_steps = barrier.contact_forces(q)
@@ -322,12 +324,7 @@ def test_the_jaws_contact_length_is_each_faces_lifted_by_its_gap():
     """``faces_contact_length`` (one compiled call) sums each jaw face's
     ``face_contact_length`` with the face taken out by its ``touching_gaps`` (the
     barrier's outline lies a gap off it), or not lifted, as the faces one by one."""
-    sim = quasi_static_sim(0.03, 'fruit.nodes=256', 'fruit.skin.youngs_modulus=1e9',
-                           'fruit.skin.thickness=1e-5', 'fruit.pressure.turgor=2e4',
-                           'contact.model=ipc')
-    sim.command_gap(1.8 * 0.03, speed=0.4 * 0.03)
-    for _ in range(10):  # the jaws moving: the outline leaves each face at an angle
-        sim.step()
+    sim = _membrane_squeezed(10)  # the jaws moving: the outline leaves each face at an angle
     x, holder, fruit = sim.q, sim.contacts.obstacle, sim.fruit
     jaws = sim.faces_at(sim._grip)[:2]
     gaps = sim._barrier.touching_gaps(jaws, x, holder)
