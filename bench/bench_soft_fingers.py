@@ -83,8 +83,8 @@ def _print_rows(rows: dict, fingers: tuple) -> None:
           f"{'solves':>7s} {'Newton':>7s} {'force N':>8s} {'contact mm':>10s} "
           f"{'Hertz kPa':>9s}")
     for finger, r in rows.items():
-        inside = f"{r['solve_cpu']:9.2f}" if r['solve_cpu'] else f"{'-':>9s}"
-        print(f"{finger:10s} {r['cpu']:8.2f} {inside} {r['outcome']:>8s} {r['steps']:6d} "
+        inside = f"{r['solve_cpu']:9.3f}" if r['solve_cpu'] else f"{'-':>9s}"
+        print(f"{finger:10s} {r['cpu']:8.3f} {inside} {r['outcome']:>8s} {r['steps']:6d} "
               f"{r['solves']:7d} {r['newton']:7d} {r['force']:8.3f} "
               f"{r['contact'] * 1e3:10.1f} {r['pressure'] * 1e-3:9.0f}")
     reference, other = fingers
