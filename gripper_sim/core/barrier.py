@@ -513,7 +513,7 @@ class BarrierContact(Energy):
             x_n, v_n, old_faces, new_faces, dt, _NO_NODES, _NO_CORNERS, True)
         starts = [start for start, clear in ((predicted, predicted_clear),
                                              (plain, plain_clear))
-                  if clear or self._exactly_reachable(start)]
+                  if clear or self.exactly_reachable(start)]
         return starts, difference
 
     def set_up_starts(self, x_n: np.ndarray, v_n: np.ndarray, old_faces, new_faces,
@@ -985,9 +985,9 @@ class BarrierContact(Energy):
         if self.dimension == 2 and bp.start_clear(self._part, self._start_q, q,
                                                   self._faces_shift):
             return True
-        return self._exactly_reachable(start)
+        return self.exactly_reachable(start)
 
-    def _exactly_reachable(self, start: np.ndarray) -> bool:
+    def exactly_reachable(self, start: np.ndarray) -> bool:
         """``reachable``'s exact check (ipctk's CCD, then the ends' distance) of the paths
         to ``start`` (n, d) m."""
         v0 = self._start
@@ -1346,7 +1346,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         if compiled_clear is None:
             crosses_nothing = barrier.reachable(start)
         else:
-            crosses_nothing = compiled_clear or barrier._exactly_reachable(start)
+            crosses_nothing = compiled_clear or barrier.exactly_reachable(start)
         return crosses_nothing and (self_contact is None or self_contact.reachable(start))
 
     if not reachable(start, clear):
