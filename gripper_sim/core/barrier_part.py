@@ -230,9 +230,11 @@ def begin_with_starts(part, x_n, v_n, dt, old_corners, new_corners, rubbing, mu_
     start_q = x_n.ravel()
     start = np.empty((part.dof_pairs.shape[0] + old_corners.shape[0], 2))
     mesh_vertices(start_q, part.dof_pairs, old_corners, start)
-    k = new_corners.shape[0]
-    faces_shift = largest_move(new_corners.ravel(), np.arange(2 * k).reshape((k, 2)),
-                               old_corners)
+    faces_shift = 0.0  # no faces where the step starts (as ``BarrierContact._begin_part``)
+    if old_corners.shape[0]:
+        k = new_corners.shape[0]
+        faces_shift = largest_move(new_corners.ravel(), np.arange(2 * k).reshape((k, 2)),
+                                   old_corners)
     has_friction = set_step(part, new_corners, start, rubbing, faces_shift <= part.margin,
                             mu_s, mu_k, np.zeros((0, 2)), 0.0, False)
     plain = x_n.copy()
@@ -242,9 +244,9 @@ def begin_with_starts(part, x_n, v_n, dt, old_corners, new_corners, rubbing, mu_
             predicted[i, c] = x_n[i, c] + dt * v_n[i, c]
     push_ahead(x_n, surface, origins, normals, tangents, half_extents, thickness, shifts,
                part.dhat, fraction, plain, predicted)
-    for k in range(fixed.shape[0]):
+    for j in range(fixed.shape[0]):
         for c in range(2):
-            predicted[fixed[k], c] = plain[fixed[k], c] = targets[k, c]
+            predicted[fixed[j], c] = plain[fixed[j], c] = targets[j, c]
     predicted_clear = start_clear(part, start_q, predicted.ravel(), faces_shift)
     plain_clear = False
     if both or not predicted_clear:
