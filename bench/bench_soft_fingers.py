@@ -89,9 +89,10 @@ def _print_rows(rows: dict, fingers: tuple) -> None:
               f"{r['contact'] * 1e3:10.1f} {r['pressure'] * 1e-3:9.0f}")
     reference, other = fingers
     ratio = rows[other]['cpu'] / rows[reference]['cpu']
-    inside = rows[other]['solve_cpu'] / rows[reference]['cpu']
+    solves_alone = rows[other]['solve_cpu'] / rows[reference]['cpu']
     print(f"{other} / {reference}: {ratio:.1f}x" + (
-        f"; {other}'s compiled solves alone / {reference}: {inside:.1f}x" if inside else ''))
+        f"; {other}'s compiled solves alone / {reference}: {solves_alone:.1f}x"
+        if solves_alone else ''))
 
 
 def compare(fingers: tuple[str, str], description: str, argv=None) -> int:

@@ -462,7 +462,8 @@ class BarrierContact(Energy):
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set up a step of ``dt`` (s) from positions ``x_n`` (n, d) m with the faces moving
         from ``old_faces`` to ``new_faces``: the lagged friction of the start state."""
-        old, new, mu_s, mu_k, rubbing = self._begin_faces(x_n, old_faces, new_faces, dt)
+        old, new = self._corners(old_faces), self._corners(new_faces)
+        mu_s, mu_k, rubbing = self._begin_faces(x_n, old, new, new_faces, dt)
         start = self.vertices(x_n, old)
         self._start = start
         if self.dimension == 2:
@@ -480,12 +481,11 @@ class BarrierContact(Energy):
                 self._tangential.build(self._mesh, start, collisions, self.potential, mu_s,
                                        mu_k, max)
 
-    def _begin_faces(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> tuple:
+    def _begin_faces(self, x_n: np.ndarray, old: np.ndarray, new: np.ndarray, new_faces,
+                     dt: float) -> tuple:
         """``begin_step``'s set-up of the faces and the step (all but the collision mesh's
-        start and the 2D part's or 3D friction's state): (the faces' corners where they
-        start and end (c k, d) m, and ``_coefficients(new_faces)``)."""
-        old = self._corners(old_faces)
-        new = self._corners(new_faces)
+        start and the 2D part's or 3D friction's state), the faces' corners where they
+        start and end ``old``, ``new`` (c k, d) m: ``_coefficients(new_faces)``."""
         if self._rest is None:
             # the mollifier of nearly parallel edges (3D) scales with their rest lengths
             self._rest = x_n[self.vertex_nodes].copy()
@@ -496,7 +496,7 @@ class BarrierContact(Energy):
         self._last_terms = None
         self._dt = dt
         self._start_q = x_n.ravel().copy()
-        return (old, new, *self._coefficients(new_faces))
+        return self._coefficients(new_faces)
 
     def begin_with_starts(self, x_n: np.ndarray, v_n: np.ndarray, old_faces, new_faces,
                           dt: float) -> tuple[list, float]:
@@ -531,10 +531,12 @@ class BarrierContact(Energy):
             way to the predictor's, to x_n's (False where not checked), the largest
             coordinate difference m between them).
         """
-        old, new, mu_s, mu_k, rubbing = self._begin_faces(x_n, old_faces, new_faces, dt)
-        origins, normals, tangents, half_extents, _, thickness, _ = self._face_geometry(
+        origins, normals, tangents, half_extents, _, thickness, old = self._face_geometry(
             old_faces)
-        shifts = self._face_geometry(new_faces)[0] - origins
+        new_geometry = self._face_geometry(new_faces)
+        new_origins, new = new_geometry[0], new_geometry[6]
+        mu_s, mu_k, rubbing = self._begin_faces(x_n, old, new, new_faces, dt)
+        shifts = new_origins - origins
         (has_friction, self._start, self._faces_shift, plain, predicted, predicted_clear,
          plain_clear, difference) = bp.begin_with_starts(
             self._part, x_n, v_n, dt, old, new, rubbing, mu_s, mu_k, self.surface, origins,
