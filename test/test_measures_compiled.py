@@ -10,7 +10,7 @@ from gripper_sim.core import kernels
 from gripper_sim.core.fast import ring_model
 from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core.measures import (deformation, face_contact_length, held_length,
-                                       numpy_sum, tributary_lengths)
+                                       jaw_normal_forces, numpy_sum, tributary_lengths)
 from gripper_sim.core.obstacles import FlatFace
 
 MODELS = (['fruit.nodes=40'], ['fruit.model=solid', 'fruit.nodes=48'])
@@ -106,3 +106,32 @@ def test_held_length_is_the_sum_of_the_held_tributary_lengths(model):
     assert expected > 0
     assert held_length(fruit, x, held) == expected
     assert held_length(fruit, x, np.zeros(fruit.n_nodes, bool)) == 0.0
+
+
+@pytest.mark.parametrize('n, d', [(40, 2), (300, 2), (60, 3)])
+def test_jaw_normal_forces_are_the_normal_components_and_their_numpy_sums(n, d):
+    """Each node's force along its obstacle's normal (0 where free), the nodes each jaw
+    holds and each jaw's sum as ``normal[held].sum()`` gives it, bit for bit: obstacles
+    0 (left jaw), 1 (right jaw) and 2 (a table, no jaw) with tilted normals."""
+    rng = np.random.default_rng(n + d)
+    normals = rng.standard_normal((3, d))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    side_of_obstacle = np.array([0, 1, -1, -1])
+    for _ in range(5):
+        obstacle = rng.integers(-1, 3, n)
+        forces = rng.standard_normal((n, d)) * 10.0 ** rng.uniform(-3, 3, (n, 1))
+        left, right, normal = np.empty(n, bool), np.empty(n, bool), np.empty(n)
+        any_left, any_right, left_n, right_n = jaw_normal_forces(
+            obstacle, forces, normals, side_of_obstacle, left, right, normal, np.empty(n))
+        expected = np.zeros(n)
+        for i in np.flatnonzero(obstacle >= 0):
+            for c in range(d):
+                expected[i] += forces[i, c] * normals[obstacle[i], c]
+        assert np.array_equal(normal, expected)
+        assert np.array_equal(left, obstacle == 0) and np.array_equal(right, obstacle == 1)
+        assert (any_left, any_right) == (left.any(), right.any()) == (True, True)
+        assert left_n == np.sum(expected[left]) and right_n == np.sum(expected[right])
+    free = np.full(n, -1)
+    assert jaw_normal_forces(free, forces, normals, side_of_obstacle, left, right, normal,
+                             np.empty(n)) == (False, False, 0.0, 0.0)
+    assert not normal.any() and not left.any() and not right.any()

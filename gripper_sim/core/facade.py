@@ -42,13 +42,14 @@ from gripper_sim.core import jaw_drive
 from gripper_sim.core.barrier import (BarrierContact, NoCollisionFreeStart, barrier_step,
                                       soft_body_step)
 from gripper_sim.core.barrier_kernels import (held_normal_forces, mark_sticking,
-                                              normal_components, split_partners)
+                                              split_partners)
 from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.deferred import build
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import PatternCachingSolver
 from gripper_sim.core.gripper import GripperState
 from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
+from gripper_sim.core.measures import jaw_normal_forces
 from gripper_sim.core.results import Energies, JawWrench, StepResult
 from gripper_sim.core.soft_fingers import FingerState, SoftFingers, base_pushes
 from gripper_sim.core.slip import jaw_contacts_sliding
@@ -680,12 +681,13 @@ class SimulationFacade:
             moving = self._moving_kept = (kept, rates, velocities)
         return normals, sides, moving[2]
 
-    def _closing_forces(self, forces, obstacle, faces) -> tuple:
+    def _closing_forces(self, forces, obstacle) -> tuple:
         """(left, right) N, each jaw's hard-contact force on the fruit along its closing
-        axis (the face normal for flat jaws), summed over its faces."""
+        axis (the face normal for flat jaws: ``jaw_normal_forces``), summed over its faces.
+        ``forces`` (n, d) N the contact force on each node, ``obstacle`` (n,) the
+        obstacle holding it."""
         if self._plain_jaws:
-            return tuple(float((forces[obstacle == side] @ faces[side].normal).sum())
-                         for side in (LEFT, RIGHT))
+            return self._jaw_normal_forces(forces, obstacle)[2]
         return tuple(sign * float(forces[np.isin(obstacle, self._jaw_faces(side)), 0].sum())
                      for side, sign in ((LEFT, 1.0), (RIGHT, -1.0)))
 
@@ -722,11 +724,11 @@ class SimulationFacade:
             normal = np.empty(len(obstacle))
             held_normal_forces(self._barrier.normal_forces(
                 np.concatenate([x, finger.positions]).ravel()), obstacle, normal)
+            sides = (np.empty(len(obstacle), bool), np.empty(len(obstacle), bool))
+            on_left, on_right = cm.jaw_sides(obstacle, self._obstacles_kept[-1], *sides)
         else:
-            normal = np.zeros(len(obstacle))
-            normal_components(obstacle, np.ascontiguousarray(forces), normals, normal)
-        sides = (np.empty(len(obstacle), bool), np.empty(len(obstacle), bool))  # LEFT, RIGHT
-        on_left, on_right = cm.jaw_sides(obstacle, self._obstacles_kept[-1], *sides)
+            on_left, on_right, jaw_forces, normal, sides = self._jaw_normal_forces(
+                forces, obstacle)
 
         def jaw_origins() -> tuple:
             return self._jaw_origin(grip, LEFT), self._jaw_origin(grip, RIGHT)
@@ -738,7 +740,7 @@ class SimulationFacade:
                     for side in (LEFT, RIGHT)]
         wrenches = None  # built on first read where the grip force needs none
         if self._plain_jaws:
-            left_n, right_n = (float(normal[on].sum()) for on in sides)
+            left_n, right_n = jaw_forces
         elif soft is not None:  # what the step committed: its fingers' base reactions
             left_n, right_n = self._jaw_force
         else:  # each jaw's force along the closing axis
@@ -773,6 +775,19 @@ class SimulationFacade:
                     gravitational=float(self.gravity.value(x.ravel()))),
                 fingers=soft.result(finger, *origins) if soft is not None else None)
         return fields, rarely_read, normal, sides
+
+    def _jaw_normal_forces(self, forces: np.ndarray, obstacle: np.ndarray) -> tuple:
+        """(whether the left jaw holds any node, the right, the left jaw's summed normal
+        force N, the right's, each node's normal force (n,) N, (the nodes the left jaw
+        holds, the right) (n,) bool) of the contact forces ``forces`` (n, d) N on nodes
+        held by ``obstacle`` (n,) (``measures.jaw_normal_forces``)."""
+        n = len(obstacle)
+        normal, sides = np.empty(n), (np.empty(n, bool), np.empty(n, bool))  # LEFT, RIGHT
+        normals = self._obstacles(self._grip)[0]
+        any_left, any_right, left, right = jaw_normal_forces(
+            obstacle, np.ascontiguousarray(forces), normals, self._obstacles_kept[-1],
+            *sides, normal, np.empty(n))
+        return any_left, any_right, (float(left), float(right)), normal, sides
 
     def _total_mass(self, masses: np.ndarray) -> float:
         """kg, the sum of ``masses`` (n,) kg (``masses.sum()``), kept for the same array."""
@@ -826,8 +841,7 @@ class SimulationFacade:
                                    ContactSettings.from_config(self.config,
                                                                self.deepest_first))
         self.commit_step(outcome.x, outcome.v, outcome.contacts, outcome.forces, grip_new,
-                         self._closing_forces(outcome.forces, outcome.contacts.obstacle,
-                                              new_faces), dt)
+                         self._closing_forces(outcome.forces, outcome.contacts.obstacle), dt)
         return outcome.iterations
 
     def _substep_soft(self, dt: float, grip_new: GripperState, new_faces: list) -> int:

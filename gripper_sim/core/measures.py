@@ -95,6 +95,49 @@ def numpy_sum(values, count):
     return 0.0 + _pairwise(values, count)
 
 
+@njit(cache=True)
+def jaw_normal_forces(obstacle, forces, normals, side_of_obstacle, left, right, normal,
+                      scratch):
+    """Each node's normal contact force, the nodes each jaw holds and each jaw's summed
+    normal force, in one call.
+
+    Args:
+        obstacle: (n,) the obstacle holding each node, -1 none.  forces: (n, d) N, the
+        contact force on each node.  normals: (k, d) the obstacles' unit normals.
+        side_of_obstacle: (k + 1,) each obstacle's jaw side (0 left, 1 right, -1 none),
+        and last -1 (no obstacle).  left, right: (n,) bool, the nodes the left and the
+        right jaw hold (written).  normal: (n,) N, each held node's force along its
+        obstacle's normal, 0 where free (written).  scratch: (n,) float.
+
+    Returns:
+        (whether the left jaw holds any node, the right, the left jaw's normal force N,
+        the right's): each sum the one numpy gives ``normal[left].sum()`` to the bit
+        (``numpy_sum``).
+    """
+    n, d = forces.shape
+    for i in range(n):
+        k = obstacle[i]
+        along = 0.0
+        if k >= 0:
+            for c in range(d):
+                along += forces[i, c] * normals[k, c]
+        normal[i] = along
+        side = side_of_obstacle[k]
+        left[i] = side == 0
+        right[i] = side == 1
+    sums = np.zeros(2)
+    held = np.zeros(2, np.bool_)
+    for side, on in enumerate((left, right)):
+        count = 0
+        for i in range(n):
+            if on[i]:
+                scratch[count] = normal[i]
+                count += 1
+        held[side] = count > 0
+        sums[side] = numpy_sum(scratch, count)
+    return held[0], held[1], sums[0], sums[1]
+
+
 @njit(cache=True, error_model='numpy')
 def held_length_of(x, skin_edges, surface, held, lengths):
     """m, the sum (``numpy_sum``) of the tributary lengths (``tributary_lengths_of``) of
