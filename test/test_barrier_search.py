@@ -11,9 +11,10 @@ stops).
 import ipctk
 import numpy as np
 import pytest
+from numba import njit
 
-from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
-                                             paths_clear)
+from gripper_sim.core.barrier_search import (_may_collide, collision_free_step,
+                                             edge_vertex_candidates, paths_clear)
 
 DHAT = 1e-3
 EXACT = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
@@ -53,6 +54,50 @@ def test_the_candidates_hold_ipctks(seed):
     assert len(pairs) == len(set(pairs))
     assert theirs and theirs <= set(pairs)
     assert all(groups[v] != groups[edges[e, 0]] for e, v in pairs)
+
+
+@njit(cache=True)
+def _one_sweep(v0, v1, edges, groups, same_group, radius):
+    """The candidates by one sweep over all vertices in the order of their boxes' low x
+    (``np.argsort``'s), each edge scanning every vertex whose low x lies in its x range
+    widened by the widest box: the plain search, the reference of the order."""
+    low = np.minimum(v0, v1) - radius
+    high = np.maximum(v0, v1) + radius
+    widest = np.max(high[:, 0] - low[:, 0])
+    order = np.argsort(low[:, 0])
+    sorted_low = low[order, 0]
+    pairs = []
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        e_low, e_high = np.minimum(low[a], low[b]), np.maximum(high[a], high[b])
+        for k in range(np.searchsorted(sorted_low, e_low[0] - widest),
+                       np.searchsorted(sorted_low, e_high[0], side='right')):
+            i = order[k]
+            if (high[i, 0] >= e_low[0] and low[i, 0] <= e_high[0] and high[i, 1] >= e_low[1]
+                    and low[i, 1] <= e_high[1] and _may_collide(i, a, b, groups, same_group)):
+                pairs.append((e, i))
+    return pairs
+
+
+@pytest.mark.parametrize('same_group', [False, True], ids=['across', 'within'])
+@pytest.mark.parametrize('seed', range(6))
+def test_the_candidates_are_the_plain_sweeps_in_its_order(seed, same_group):
+    """Searching each group's vertices apart finds the pairs of one sweep over all of
+    them, each edge's in the same order: four groups (one edge joining two), vertices on
+    a coarse grid (many equal low x, ordered as ``np.argsort`` orders them)."""
+    rng = np.random.default_rng(seed)
+    n = 60
+    start = rng.integers(0, 12, (n, 2)) * 1e-3
+    end = start + rng.integers(-2, 3, (n, 2)) * 1e-3 * (seed % 2)
+    groups = rng.integers(0, 4, n)
+    other = int(np.flatnonzero(groups != groups[0])[0])  # an edge across two groups
+    edges = np.array([(i, i + 1) for i in range(n - 1) if groups[i] == groups[i + 1]]
+                     + [(0, other)])
+    mine = [tuple(p) for p in edge_vertex_candidates(start, end, edges, groups, same_group,
+                                                     1.5e-3)]
+    plain = [tuple(p) for p in _one_sweep(start, end, edges, groups, same_group, 1.5e-3)]
+    assert len(plain) > 50
+    assert mine == plain
 
 
 @pytest.mark.parametrize('seed', range(8))

@@ -42,52 +42,119 @@ def _may_collide(vertex, a, b, groups, same_group):
 
 
 @njit(cache=True)
+def _group_may_collide(group, group_a, group_b, same_group):
+    """Whether a vertex of ``group`` may pair with an edge whose ends lie in ``group_a``
+    and ``group_b`` (``_may_collide``'s rule on the groups alone)."""
+    if same_group:
+        return group == group_a or group == group_b
+    return group != group_a or group != group_b
+
+
+@njit(cache=True)
+def _first_above(values, first, last, bound, equal_too):
+    """The first index in [first, last) of the sorted ``values`` above ``bound`` (or at
+    it, unless ``equal_too``), else ``last``: ``np.searchsorted`` of values[first:last],
+    side 'left' (or 'right' with ``equal_too``), plus ``first``."""
+    while first < last:
+        middle = (first + last) // 2
+        if values[middle] < bound or (equal_too and values[middle] == bound):
+            first = middle + 1
+        else:
+            last = middle
+    return first
+
+
+@njit(cache=True)
 def edge_vertex_candidates(v0, v1, edges, groups, same_group, radius):
-    """(k, 2) the (edge, vertex) pairs whose boxes inflated by ``radius`` (m) meet.
+    """(k, 2) the (edge, vertex) pairs whose boxes inflated by ``radius`` (m) meet, each
+    edge's in the order of its vertices' boxes' low x (ties as ``np.argsort`` orders them).
 
     Args:
         v0, v1: (n_m, 2) m, the collision mesh's vertices at the start and end of the
             motion (the same array for a static search).
         edges: (n_e, 2) the mesh's edges.
-        groups: (n_m,) each vertex's group.  same_group: pairs within a group (a
-            self-contact) instead of across groups.
+        groups: (n_m,) each vertex's group (0, 1, ...).  same_group: pairs within a group
+            (a self-contact) instead of across groups.
+
+    Each edge scans, in each group its vertices may pair with, the vertices whose low x
+    lies in its box's x range widened by the widest vertex box (each group's vertices
+    kept in the order of all of them): a fruit's edge scans the other bodies' vertices
+    only, not its own.
     """
     n_v = v0.shape[0]
     low = np.empty((n_v, 2))
     high = np.empty((n_v, 2))
     widest = 0.0
+    n_groups = 0
     for i in range(n_v):
         for c in range(2):
             low[i, c] = min(v0[i, c], v1[i, c]) - radius
             high[i, c] = max(v0[i, c], v1[i, c]) + radius
         widest = max(widest, high[i, 0] - low[i, 0])
+        n_groups = max(n_groups, groups[i] + 1)
     order = np.argsort(low[:, 0])
-    sorted_low = low[order, 0]
+    # each group's vertices in that order: members[group_start[g]:group_start[g + 1]]
+    group_start = np.zeros(n_groups + 1, np.int64)
+    for i in range(n_v):
+        group_start[groups[i] + 1] += 1
+    for g in range(n_groups):
+        group_start[g + 1] += group_start[g]
+    filled = group_start[:n_groups].copy()
+    members = np.empty(n_v, np.int64)
+    member_low = np.empty(n_v)
+    rank = np.empty(n_v, np.int64)
+    for k in range(n_v):
+        i = order[k]
+        g = groups[i]
+        members[filled[g]] = i
+        member_low[filled[g]] = low[i, 0]
+        filled[g] += 1
+        rank[i] = k
     capacity = 4 * (n_v + edges.shape[0]) + 16
     pairs = np.empty((capacity, 2), np.int64)
     count = 0
+    found = np.empty(n_v, np.int64)  # one edge's vertices
     for e in range(edges.shape[0]):
         a, b = edges[e, 0], edges[e, 1]
         e_low_x = min(low[a, 0], low[b, 0])
         e_high_x = max(high[a, 0], high[b, 0])
         e_low_y = min(low[a, 1], low[b, 1])
         e_high_y = max(high[a, 1], high[b, 1])
-        first = np.searchsorted(sorted_low, e_low_x - widest)
-        last = np.searchsorted(sorted_low, e_high_x, side='right')
-        for k in range(first, last):
-            i = order[k]
-            if (high[i, 0] < e_low_x or low[i, 0] > e_high_x or high[i, 1] < e_low_y
-                    or low[i, 1] > e_high_y):
+        m = 0
+        sources = 0
+        for g in range(n_groups):
+            if not _group_may_collide(g, groups[a], groups[b], same_group):
                 continue
-            if not _may_collide(i, a, b, groups, same_group):
-                continue
-            if count == capacity:
-                grown = np.empty((2 * capacity, 2), np.int64)
-                grown[:count] = pairs[:count]
-                pairs = grown
-                capacity *= 2
+            first, last = group_start[g], group_start[g + 1]
+            before = m
+            for k in range(_first_above(member_low, first, last, e_low_x - widest, False),
+                           _first_above(member_low, first, last, e_high_x, True)):
+                i = members[k]
+                if (high[i, 0] < e_low_x or low[i, 0] > e_high_x or high[i, 1] < e_low_y
+                        or low[i, 1] > e_high_y):
+                    continue
+                if not _may_collide(i, a, b, groups, same_group):
+                    continue
+                found[m] = i
+                m += 1
+            if m > before:
+                sources += 1
+        if sources > 1:  # several groups' vertices: in the order of all of them
+            for j in range(1, m):
+                i = found[j]
+                k = j
+                while k > 0 and rank[found[k - 1]] > rank[i]:
+                    found[k] = found[k - 1]
+                    k -= 1
+                found[k] = i
+        if count + m > capacity:
+            capacity = max(2 * capacity, count + m)
+            grown = np.empty((capacity, 2), np.int64)
+            grown[:count] = pairs[:count]
+            pairs = grown
+        for j in range(m):
             pairs[count, 0] = e
-            pairs[count, 1] = i
+            pairs[count, 1] = found[j]
             count += 1
     return pairs[:count].copy()
 
