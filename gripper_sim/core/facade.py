@@ -777,10 +777,10 @@ class SimulationFacade:
         return fields, rarely_read, normal, sides
 
     def _jaw_normal_forces(self, forces: np.ndarray, obstacle: np.ndarray) -> tuple:
-        """(whether the left jaw holds any node, the right, the left jaw's summed normal
-        force N, the right's, each node's normal force (n,) N, (the nodes the left jaw
-        holds, the right) (n,) bool) of the contact forces ``forces`` (n, d) N on nodes
-        held by ``obstacle`` (n,) (``measures.jaw_normal_forces``)."""
+        """(whether the left jaw holds any node, whether the right does, (the left jaw's
+        summed normal force, the right's) N, each node's normal force (n,) N, (the nodes
+        the left jaw holds, the right's) (n,) bool) of the contact forces ``forces``
+        (n, d) N on nodes held by ``obstacle`` (n,) (``measures.jaw_normal_forces``)."""
         n = len(obstacle)
         normal, sides = np.empty(n), (np.empty(n, bool), np.empty(n, bool))  # LEFT, RIGHT
         normals = self._obstacles(self._grip)[0]
