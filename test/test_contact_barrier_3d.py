@@ -7,6 +7,7 @@ behind a plate (checked at every step). The energy
 itself (a surface of triangles against finite differences, its fixed pattern, its
 collision-free step bound) is checked with the 2D one in ``test_contact_barrier.py``.
 """
+import ipctk
 import numpy as np
 import pytest
 
@@ -142,3 +143,53 @@ def test_ipc_in_3d_takes_the_barrier_step():
                                               'contact.model=ipc']))
     assert sim._barrier in sim.solver.energies
     assert sim._barrier.dofs.shape == (sim.fruit.triangles.shape[0], 9)
+
+
+def _on_the_table():
+    """(the barrier, the fruit's positions q (3 n,) m) of the default apple resting on the
+    table (3D, ``ipc``, a coarse mesh) after its first step."""
+    sim = Simulation3D(load_config(overrides=['dimension=3', 'fruit.mesh.subdivisions=4',
+                                              'contact.model=ipc']))
+    sim.step()
+    return sim._barrier, sim.q.ravel().copy()
+
+
+def test_the_line_search_takes_the_tables_plane_in_closed_form():
+    """A fall of 1 mm towards the table: the step bound is 0.8 of the time the nearest
+    vertex takes to reach the table's plane, as Tight Inclusion's CCD over every
+    candidate finds it (to its tolerance), and the CCD is left none of the table's."""
+    barrier, q = _on_the_table()
+    n_v = barrier.vertex_nodes.size
+    dq = np.zeros((q.size // 3, 3))
+    dq[:, 2] = -1e-3
+    heights = q.reshape(-1, 3)[barrier.vertex_nodes, 2]
+    assert 0 < heights.min() < barrier.settings.dhat
+    bound = barrier.max_step(q, dq.ravel())
+    assert bound == pytest.approx(0.8 * heights.min() / 1e-3, rel=1e-12)
+    v0 = barrier.vertices(q.reshape(-1, 3))
+    v1 = barrier.vertices((q + dq.ravel()).reshape(-1, 3))
+    candidates = ipctk.Candidates()
+    candidates.build(barrier._mesh, v0, v1, 0.51 * barrier.settings.dhat)
+    exact = candidates.compute_collision_free_stepsize(
+        barrier._mesh, v0, v1, narrow_phase_ccd=barrier.line_search_ccd)
+    assert bound == pytest.approx(exact, rel=1e-2)
+    _, others = barrier._plane_step(candidates, v0, v1)
+    table = len(barrier._mesh.faces) - 2, len(barrier._mesh.faces) - 1  # the last face's
+    assert len(candidates.fv_candidates) > len(others.fv_candidates)
+    assert not {c.face_id for c in others.fv_candidates} & set(table)
+    assert n_v == v0.shape[0] - 4 * 3  # the jaws' and the table's corners after them
+
+
+def test_a_vertex_behind_the_table_leaves_the_table_to_the_ccd():
+    barrier, q = _on_the_table()
+    x = q.reshape(-1, 3)
+    x[barrier.vertex_nodes[0], 2] = -1e-7
+    dq = np.zeros_like(x)
+    dq[:, 2] = -1e-4
+    v0, v1 = barrier.vertices(x), barrier.vertices(x + dq)
+    candidates = ipctk.Candidates()
+    candidates.build(barrier._mesh, v0, v1, 0.51 * barrier.settings.dhat)
+    bound, others = barrier._plane_step(candidates, v0, v1)
+    assert bound == 1.0
+    assert len(others.fv_candidates) == len(candidates.fv_candidates)
+    assert len(others.ee_candidates) == len(candidates.ee_candidates)

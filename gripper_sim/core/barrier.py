@@ -99,6 +99,10 @@ EXACT_CCD = ipctk.TightInclusionCCD(1e-9, 10 ** 7, 1.0)
 #: solid pad's squeeze 2.5 times slower; see the README, *Contact models*)
 LINE_SEARCH_CCD_TOLERANCE = 1e-2
 LINE_SEARCH_CCD_ITERATIONS = 10 ** 6
+#: the line search's step against a still infinite face (3D, ``_plane_step``) takes a
+#: vertex this fraction of its way to the face's plane (Tight Inclusion's conservative
+#: rescaling of the time of impact, which ipctk takes as its default)
+PLANE_RESCALING = ipctk.TightInclusionCCD.DEFAULT_CONSERVATIVE_RESCALING
 #: the candidates of a Newton step serve positions this fraction of dhat outside the box
 #: each vertex sweeps along it (round-off of q + s dq), their boxes inflated by as much
 SWEPT_MARGIN = 1e-2
@@ -197,6 +201,16 @@ _CORNERS = {2: np.array([[-1.0], [1.0]]),
 _FACE_ELEMENTS = {2: (np.array([[0, 1]]), np.zeros((0, 3), np.int64)),
                   3: (np.array([[0, 1], [1, 2], [2, 3], [3, 0], [0, 2]]),
                       np.array([[0, 1, 2], [0, 2, 3]]))}
+
+
+def _still_planes(faces) -> tuple:
+    """(indices (p,), origins (p, 3) m, unit normals (p, 3)) of the ``faces`` (``Plate``)
+    that are infinite (table, walls) and stand still."""
+    planes = [k for k, face in enumerate(faces)
+              if np.all(np.isinf(face.half_extents)) and not np.any(face.velocity)]
+    return (np.array(planes, np.int64),
+            np.array([faces[k].origin for k in planes], float).reshape(-1, 3),
+            np.array([faces[k].normal for k in planes], float).reshape(-1, 3))
 
 
 def _half_extents(face) -> np.ndarray:
@@ -350,6 +364,9 @@ class BarrierContact(Energy):
         #: the last Newton step's candidates: (lowest, highest (n_v, d) m corners of the
         #: box each deformable vertex swept, ipctk.Candidates), see ``max_step``
         self._swept = None
+        #: 3D: the step's infinite faces standing still (table, walls): (their indices
+        #: among the faces, origins (p, 3) m, unit normals (p, 3)), see ``_plane_step``
+        self._planes = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
         #: per Hessian part, its last CSC structure and ``_locate``'s answer for it
         self._entry_cache = {}
         #: self-contact only: (the deformable vertices where the gaps were sought (n_v, d)
@@ -432,6 +449,8 @@ class BarrierContact(Energy):
             self._mesh.can_collide = ipctk.make_vertex_patches_filter(
                 self._mesh_groups.astype(np.int32))
         self._n_faces = k
+        #: the collision mesh's triangles and edges (the faces' last, per face in order)
+        self._mesh_sizes = (len(triangles) if self.dimension == 3 else 0, len(edges))
         self._last_collisions = None
         #: the mesh's edges (n_e, 2) and each vertex's state dofs (n_v + c k, d), -1 for
         #: the faces' corners (for the compiled barrier)
@@ -493,6 +512,8 @@ class BarrierContact(Energy):
             self._build_mesh(new)
         self._obstacles_start, self._obstacles_end = old, new
         self._swept = None
+        if self.dimension == 3:
+            self._planes = _still_planes(new_faces)
         self._last_terms = None
         self._dt = dt
         self._start_q = x_n.ravel().copy()
@@ -902,8 +923,55 @@ class BarrierContact(Energy):
         n_v = self.vertex_nodes.size
         self._swept = (np.minimum(v0[:n_v], v1[:n_v]), np.maximum(v0[:n_v], v1[:n_v]),
                        candidates)
-        return float(candidates.compute_collision_free_stepsize(
-            self._mesh, v0, v1, narrow_phase_ccd=self.line_search_ccd))
+        bound, others = self._plane_step(candidates, v0, v1)
+        if others.empty():
+            return bound
+        return min(bound, float(others.compute_collision_free_stepsize(
+            self._mesh, v0, v1, narrow_phase_ccd=self.line_search_ccd)))
+
+    def _plane_step(self, candidates: ipctk.Candidates, v0: np.ndarray,
+                    v1: np.ndarray) -> tuple[float, ipctk.Candidates]:
+        """3D: the line search's largest step fraction (0, 1] against the infinite faces
+        standing still (``_planes``) in closed form, and the ``candidates`` left to the
+        CCD (those of no such face). The collision mesh's vertices move from ``v0`` to
+        ``v1`` (n_m, 3) m in straight lines. A face all of whose deformable vertices
+        start in front of it bounds the step where the first of them would have come
+        ``PLANE_RESCALING`` of its way to its plane (as Tight Inclusion's conservative
+        rescaling of the time of impact): its plane holds its rectangle and, each edge
+        lying in front of it, an edge meets it first at an end. (Tight Inclusion takes
+        its iteration cap on a vertex falling onto the table at 1 um's tolerance: the
+        first 3D step onto the table took 6 s.) A face with a vertex at or behind it is
+        left to the CCD."""
+        faces, origins, normals = self._planes
+        if not faces.size:
+            return 1.0, candidates
+        n_v = self.vertex_nodes.size
+        start = (v0[:n_v] - origins[:, None, :]) @ normals[:, :, None]  # (p, n_v, 1) m
+        end = (v1[:n_v] - origins[:, None, :]) @ normals[:, :, None]
+        in_front = start.min(axis=(1, 2)) > 0.0
+        faces = faces[in_front]
+        if not faces.size:
+            return 1.0, candidates
+        start, end = start[in_front], end[in_front]
+        closing = end < start
+        times = PLANE_RESCALING * start[closing] / (start[closing] - end[closing])
+        bound = float(min(times.min(initial=1.0), 1.0))
+        triangles, edges = self._mesh_sizes
+        face_triangles, face_edges = (len(e) for e in _FACE_ELEMENTS[3][::-1])
+        k = self._n_faces
+        drop_triangles = set((triangles - face_triangles * (k - faces[:, None])
+                              + np.arange(face_triangles)).ravel().tolist())
+        drop_edges = set((edges - face_edges * (k - faces[:, None])
+                          + np.arange(face_edges)).ravel().tolist())
+        others = ipctk.Candidates()
+        others.fv_candidates = [c for c in candidates.fv_candidates
+                                if c.face_id not in drop_triangles]
+        others.ee_candidates = [c for c in candidates.ee_candidates
+                                if c.edge0_id not in drop_edges
+                                and c.edge1_id not in drop_edges]
+        others.ev_candidates = candidates.ev_candidates
+        others.vv_candidates = candidates.vv_candidates
+        return bound, others
 
     def _collisions(self, v: np.ndarray) -> ipctk.NormalCollisions:
         """The pairs closer than dhat at the collision mesh's vertices ``v`` (``vertices``):
