@@ -938,10 +938,10 @@ class BarrierContact(Energy):
         start in front of it bounds the step where the first of them would have come
         ``PLANE_RESCALING`` of its way to its plane (as Tight Inclusion's conservative
         rescaling of the time of impact): its plane holds its rectangle and, each edge
-        lying in front of it, an edge meets it first at an end. (Tight Inclusion takes
-        its iteration cap on a vertex falling onto the table at 1 um's tolerance: the
-        first 3D step onto the table took 6 s.) A face with a vertex at or behind it is
-        left to the CCD."""
+        lying in front of it, an edge meets it first at an end. (Tight Inclusion runs to
+        its iteration cap on a vertex falling onto the table at the 1 um gap's tolerance,
+        1e-8 m: the first 3D step onto the table took 6 s.) A face with a vertex at or
+        behind it is left to the CCD."""
         faces, origins, normals = self._planes
         if not faces.size:
             return 1.0, candidates
