@@ -961,9 +961,9 @@ class BarrierContact(Energy):
         start, end = start[in_front], end[in_front]
         closing = end < start
         times = PLANE_RESCALING * start[closing] / (start[closing] - end[closing])
-        bound = float(min(times.min(initial=1.0), 1.0))
+        bound = float(times.min(initial=1.0))
         triangles, edges = self._mesh_sizes
-        face_triangles, face_edges = (len(e) for e in _FACE_ELEMENTS[3][::-1])
+        face_edges, face_triangles = (len(e) for e in _FACE_ELEMENTS[3])
         k = self._n_faces
         drop_triangles = set((triangles - face_triangles * (k - faces[:, None])
                               + np.arange(face_triangles)).ravel().tolist())
@@ -1427,6 +1427,9 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
 
     if not reachable(start, clear):
         start = pushed  # its own array
+        # the predictor's way may be clear of the fruit and not of the self-contact: then
+        # x_n's was not checked (the compiled call checks it only where the predictor's
+        # is not clear)
         if not reachable(start, pushed_clear if not clear else None):
             start = _carried_starts(barrier, x_n, pushed, carried, reachable)
     constraints = _prescribed(n, d, fixed)

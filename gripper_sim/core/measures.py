@@ -11,7 +11,8 @@ import math
 import numpy as np
 from numba import njit
 
-from gripper_sim.core.barrier_kernels import mean_gap
+from gripper_sim.core.barrier_kernels import mean_gap, normal_components
+from gripper_sim.core.contact import jaw_sides
 from gripper_sim.core.deferred import build
 from gripper_sim.core.fruit import FruitModel
 from gripper_sim.core.results import Deformation
@@ -98,8 +99,8 @@ def numpy_sum(values, count):
 @njit(cache=True)
 def jaw_normal_forces(obstacle, forces, normals, side_of_obstacle, left, right, normal,
                       scratch):
-    """Each node's normal contact force, the nodes each jaw holds and each jaw's summed
-    normal force, in one call.
+    """Each node's normal contact force (``normal_components``), the nodes each jaw holds
+    (``contact.jaw_sides``) and each jaw's summed normal force, in one call.
 
     Args:
         obstacle: (n,) the obstacle holding each node, -1 none.  forces: (n, d) N, the
@@ -114,28 +115,18 @@ def jaw_normal_forces(obstacle, forces, normals, side_of_obstacle, left, right, 
         the right's): each sum the one numpy gives ``normal[left].sum()`` to the bit
         (``numpy_sum``).
     """
-    n, d = forces.shape
-    for i in range(n):
-        k = obstacle[i]
-        along = 0.0
-        if k >= 0:
-            for c in range(d):
-                along += forces[i, c] * normals[k, c]
-        normal[i] = along
-        side = side_of_obstacle[k]
-        left[i] = side == 0
-        right[i] = side == 1
+    normal[:] = 0.0
+    normal_components(obstacle, forces, normals, normal)
+    any_left, any_right = jaw_sides(obstacle, side_of_obstacle, left, right)
     sums = np.zeros(2)
-    held = np.zeros(2, np.bool_)
     for side, on in enumerate((left, right)):
         count = 0
-        for i in range(n):
+        for i in range(normal.shape[0]):
             if on[i]:
                 scratch[count] = normal[i]
                 count += 1
-        held[side] = count > 0
         sums[side] = numpy_sum(scratch, count)
-    return held[0], held[1], sums[0], sums[1]
+    return any_left, any_right, sums[0], sums[1]
 
 
 @njit(cache=True, error_model='numpy')
