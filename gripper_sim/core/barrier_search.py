@@ -51,20 +51,6 @@ def _group_may_collide(group, group_a, group_b, same_group):
 
 
 @njit(cache=True)
-def _first_above(values, first, last, bound, equal_too):
-    """The first index in [first, last) of the sorted ``values`` above ``bound`` (or at
-    it, unless ``equal_too``), else ``last``: ``np.searchsorted`` of values[first:last],
-    side 'left' (or 'right' with ``equal_too``), plus ``first``."""
-    while first < last:
-        middle = (first + last) // 2
-        if values[middle] < bound or (equal_too and values[middle] == bound):
-            first = middle + 1
-        else:
-            last = middle
-    return first
-
-
-@njit(cache=True)
 def edge_vertex_candidates(v0, v1, edges, groups, same_group, radius):
     """(k, 2) the (edge, vertex) pairs whose boxes inflated by ``radius`` (m) meet, each
     edge's in the order of its vertices' boxes' low x (ties as ``np.argsort`` orders them).
@@ -127,8 +113,9 @@ def edge_vertex_candidates(v0, v1, edges, groups, same_group, radius):
                 continue
             first, last = group_start[g], group_start[g + 1]
             before = m
-            for k in range(_first_above(member_low, first, last, e_low_x - widest, False),
-                           _first_above(member_low, first, last, e_high_x, True)):
+            group_low = member_low[first:last]
+            for k in range(first + np.searchsorted(group_low, e_low_x - widest),
+                           first + np.searchsorted(group_low, e_high_x, side='right')):
                 i = members[k]
                 if (high[i, 0] < e_low_x or low[i, 0] > e_high_x or high[i, 1] < e_low_y
                         or low[i, 1] > e_high_y):
