@@ -25,7 +25,15 @@ the beams two thicknesses apart at the tip: the front beam leans 0.15 deg). The 
 touching its surface (0.1 mm off the centre line) at delta 0.
 
     python bench/fin_ray_published.py [--radius 0.02] [--model-radius R] [--element 0.001]
-        [--e-scaling] [--source-model]
+        [--e-scaling] [--source-model] [--plate] [--friction MU]
+
+``--plate`` bends the strips as plates, E t^3 b / (12 (1 - nu^2)) with steel's nu 0.3,
+instead of beams (E t^3 b / 12): a strip 28 mm wide and 0.2 mm thick curved to a radius
+R has Searle's parameter b^2 / (R t) = 39 at R = 100 mm, far above the ~1 below which it
+would bend as a beam (its cross-section free to curl anticlastically); our 3D Fin Ray
+bends its members as plates so. ``--friction MU`` gives the cylinder contact Coulomb
+friction (``finger_indent.DiscFriction``): the source's model is frictionless, its
+experiment was not; the sensor's tangential force is the figure that tells mu.
 
 ``--e-scaling`` applies the source model's stiffening of the strips (E x L_front / 135 mm
 and E x L_back / 156 mm, undocumented there); ``--model-radius`` runs another radius than
@@ -65,6 +73,8 @@ from gripper_sim.geometry.fin_ray import FinRayGeometry, layout
 STRIP = 0.2e-3             # m, strip thickness
 DEPTH = 28e-3              # m
 STEEL = 213e9              # Pa
+#: spring steel's Poisson ratio (the usual 0.3 of steels), for ``--plate``
+STEEL_POISSON = 0.3
 ROOTS = 73.24e-3           # m, between the beams' roots on the base
 PSI = math.radians(26.0)   # between the beams
 FRONT = ROOTS / math.tan(PSI)   # 150.16 mm
@@ -155,24 +165,26 @@ def prestress_ribs(body, geometry: FinRayGeometry, rest_lengths):
 
 def run(radius: float, element_length: float = 1e-3, e_scaling: bool = False,
         step: float = 0.5e-3, travel: float = 30e-3, retries: int = 2,
-        source_ribs: bool = False):
+        source_ribs: bool = False, friction: float = 0.0, plate: bool = False):
     """(Indentation, body) of the source's finger pressed by a cylinder of ``radius`` m
     to ``travel`` m in ``step`` m increments; an increment Newton cannot solve makes the
     run start again with half the step (``retries`` times: the E-scaled finger on the
     22.5 mm cylinder needs 0.25 mm steps with 1 mm elements). ``source_ribs``: the
-    crossbeams where the source model joins them, prestressed as there."""
+    crossbeams where the source model joins them, prestressed as there. ``friction``:
+    mu of the cylinder contact. ``plate``: the strips bend as plates (module doc)."""
     try:
-        return _run(radius, element_length, e_scaling, step, travel, source_ribs)
+        return _run(radius, element_length, e_scaling, step, travel, source_ribs, friction,
+                    plate)
     except NewtonFailure as failure:
         if retries <= 0:
             raise
         print(f'({failure} at {step * 1e3:g} mm steps: again at {step * 0.5e3:g} mm)')
         return run(radius, element_length, e_scaling, 0.5 * step, travel, retries - 1,
-                   source_ribs)
+                   source_ribs, friction, plate)
 
 
 def _run(radius: float, element_length: float, e_scaling: bool, step: float,
-         travel: float, source_ribs: bool):
+         travel: float, source_ribs: bool, friction: float = 0.0, plate: bool = False):
     """``run`` at one step size."""
     ends = source_rib_ends() if source_ribs else RIB_ENDS
     config = thesis_config(element_length, ends)
@@ -182,27 +194,32 @@ def _run(radius: float, element_length: float, e_scaling: bool, step: float,
         body = prestress_ribs(body, geometry, [crossbeam_length(*pair) for pair in RIB_ENDS])
     if e_scaling:
         body = scale_strips(body, geometry, FRONT / 135e-3, BACK / 156e-3)
+    if plate:
+        factor = 1.0 / (1.0 - STEEL_POISSON ** 2)
+        body = scale_strips(body, geometry, factor, factor)
     touching, centre, _normal = front_beam_disc(body, layout(geometry).front_nodes,
                                                 CONTACT_HEIGHT, radius + 0.5 * STRIP)
     result = indent_disc(body, touching, centre, radius + 0.5 * STRIP,
-                         np.array([-1.0, 0.0]), travel, round(travel / step), CONTACT)
+                         np.array([-1.0, 0.0]), travel, round(travel / step), CONTACT,
+                         friction=friction)
     return result, body
 
 
 def table(radius: float, model_radius: float, element_length: float, e_scaling: bool,
-          source_ribs: bool = False):
+          source_ribs: bool = False, friction: float = 0.0, plate: bool = False):
     """Prints the comparison; returns the rows (delta m, our (Fx, Fz) N, measured |F| N,
     error of our |F| against it, our sum of contact force magnitudes N)."""
     sensor, theirs, their_radius = MEASURED[radius]
     saved = SAVED_RUNS.get(model_radius) if source_ribs else None
     start = time.process_time()
-    result, body = run(model_radius, element_length, e_scaling, source_ribs=source_ribs)
+    result, body = run(model_radius, element_length, e_scaling, source_ribs=source_ribs,
+                       friction=friction, plate=plate)
     cpu = time.process_time() - start
     print(f'cylinder r = {radius * 1e3:g} mm (model r = {model_radius * 1e3:g} mm; the source '
           f'model ran {their_radius * 1e3:g} mm), elements {element_length * 1e3:g} mm, '
           f'{body.n_nodes} nodes, E scaling {"on" if e_scaling else "off"}, crossbeams '
-          f'{"as the source model joins them" if source_ribs else "nominal"}, '
-          f'CPU {cpu:.1f} s')
+          f'{"as the source model joins them" if source_ribs else "nominal"}, strips bent as '
+          f'{"plates" if plate else "beams"}, friction mu = {friction:g}, CPU {cpu:.1f} s')
     print(f'base reaction at the end {result.reaction.round(3)} N (minus the force on the '
           'cylinder)')
     saved_head = ' | ours sum|f| saved run' if saved else ''
@@ -235,12 +252,19 @@ def main(argv=None) -> int:
     parser.add_argument('--source-model', action='store_true',
                         help='the source model\'s inputs: E scaling, its radius, its '
                              'crossbeams (module docstring)')
+    parser.add_argument('--friction', type=float, default=0.0,
+                        help='mu of the cylinder contact (default 0: frictionless)')
+    parser.add_argument('--plate', action='store_true',
+                        help='the strips bend as plates: E / (1 - nu^2), nu = 0.3')
     args = parser.parse_args(argv)
+    if not (math.isfinite(args.friction) and args.friction >= 0.0):
+        parser.error(f'--friction {args.friction}: must be a number >= 0')
     if args.source_model:
         table(args.radius, args.model_radius or MEASURED[args.radius][2], args.element,
               True, source_ribs=True)
     else:
-        table(args.radius, args.model_radius or args.radius, args.element, args.e_scaling)
+        table(args.radius, args.model_radius or args.radius, args.element, args.e_scaling,
+              friction=args.friction, plate=args.plate)
     return 0
 
 

@@ -19,15 +19,25 @@ from gripper_sim.geometry.fin_ray import FinRayGeometry, rib_points  # noqa: E40
 PREFIX = 'gripper.finger.fin_ray.'
 
 
-def _errors(radius):
-    """Our |F| / measured |F| - 1 at delta 5..30 mm, and the run."""
-    result, _ = published.run(radius, element_length=2e-3)
+def _errors(radius, **options):
+    """Our |F| / measured |F| - 1 at delta 5..30 mm, and the run (``published.run``'s
+    options)."""
+    result, _ = published.run(radius, element_length=2e-3, **options)
     sensor = published.MEASURED[radius][0]
     rows = []
     for delta, measured in zip(published.DELTAS, sensor):
         i = int(np.argmin(np.abs(result.delta - delta)))
         rows.append(math.hypot(*result.force[i]) / math.hypot(*measured) - 1.0)
     return np.array(rows), result
+
+
+def _tangential_misfit(result, radius):
+    """N, the root mean square of our tangential force's magnitude (along the front beam)
+    less the sensor's, over delta 5..30 mm."""
+    sensor = published.MEASURED[radius][0]
+    misfit = [abs(result.force[int(np.argmin(np.abs(result.delta - delta))), 1]) - ft
+              for delta, (ft, _fn) in zip(published.DELTAS, sensor)]
+    return float(np.sqrt(np.mean(np.square(misfit))))
 
 
 @pytest.fixture(scope='module')
@@ -63,6 +73,42 @@ def test_20_mm_cylinder_as_reported(r20):
     below)."""
     errors, _ = r20
     assert np.all((-0.32 < errors) & (errors < -0.17)), errors
+
+
+@pytest.fixture(scope='module')
+def plates_with_friction():
+    """Both cylinders, the strips bent as plates, the contact with mu = 0.2."""
+    return {radius: _errors(radius, plate=True, friction=0.2) for radius in (0.02, 0.03)}
+
+
+def test_plates_with_friction_are_within_15_percent_at_every_point(plates_with_friction):
+    """The README's figures: -14 to +9 % at delta 5..30 mm on both cylinders."""
+    for radius, (errors, _) in plates_with_friction.items():
+        assert np.all(np.abs(errors) < 0.15), (radius, errors)
+
+
+def test_friction_fits_the_sensors_tangential_force_better(plates_with_friction, r20, r30):
+    """mu = 0.2 is read off the tangential components (module README): frictionless,
+    ours misses them by 0.3 N rms; with mu = 0.2, by about 0.25 N."""
+    with_friction = np.mean([_tangential_misfit(result, radius)
+                             for radius, (_, result) in plates_with_friction.items()])
+    frictionless = np.mean([_tangential_misfit(r20[1], 0.02), _tangential_misfit(r30[1], 0.03)])
+    assert with_friction < 0.8 * frictionless, (with_friction, frictionless)
+
+
+def test_with_friction_the_base_still_holds_what_presses_the_cylinder(plates_with_friction):
+    _, result = plates_with_friction[0.02]
+    assert np.allclose(result.reaction, result.force[-1], rtol=1e-3, atol=1e-3)
+    pressed = result.delta >= published.DELTAS[0] - 1e-9
+    assert np.all(result.force[pressed, 1] > 0), 'friction turns the tangential force round'
+
+
+@pytest.mark.parametrize('value', ['-0.1', 'nan', 'inf'])
+def test_a_bad_friction_coefficient_is_refused(value, capsys):
+    with pytest.raises(SystemExit) as stop:
+        published.main(['--friction', value])
+    assert stop.value.code == 2
+    assert 'must be a number >= 0' in capsys.readouterr().err
 
 
 @pytest.fixture(scope='module')

@@ -187,3 +187,31 @@ def friction_terms(v, start, dt, eps_v, vertex_ids, weights, tangents, forces, c
         outside += add_local_hessian(local, vertex_ids[k], m, vertex_dofs, n_dof, pattern_keys,
                                      slots, hessian_values)
     return total, outside
+
+
+@njit(cache=True)
+def point_friction(slips, forces, mu, eps, along, stiffness):
+    """The lagged friction potential of points sliding on a rigid surface, in statics:
+    each point's lambda mu f0(|s|) of its tangential slip s over a load increment (the
+    dissipative potential above with the step's slip in place of dt times the speed).
+
+    Args:
+        slips: (k,) m, each point's slip along its lagged tangent since the increment's
+            start (relative to the surface).
+        forces: (k,) N, each point's lagged normal force lambda.
+        mu: the friction coefficient (static and kinetic alike).
+        eps: m, the slip below which friction is smoothed (sticking).
+        along: (k,) out: N, d(potential)/d(slip) of each point.
+        stiffness: (k,) out: N/m, its second derivative, clamped at 0 (0 once sliding).
+
+    Returns:
+        The potential, J.
+    """
+    total = 0.0
+    for k in range(slips.shape[0]):
+        y = abs(slips[k])
+        total += forces[k] * _mu_f0(y, mu, mu, eps)
+        f1_over_y, slope = _mu_f1_terms(y, mu, mu, eps)
+        along[k] = forces[k] * f1_over_y * slips[k]
+        stiffness[k] = forces[k] * max(slope, 0.0)
+    return total
