@@ -27,11 +27,11 @@ touching its surface (0.1 mm off the centre line) at delta 0.
     python bench/fin_ray_published.py [--radius 0.02] [--model-radius R] [--element 0.001]
         [--e-scaling] [--source-model] [--plate] [--friction MU]
 
-``--plate`` bends the strips as plates, E t^3 b / (12 (1 - nu^2)) with steel's nu 0.3,
-instead of beams (E t^3 b / 12): a strip 28 mm wide and 0.2 mm thick curved to a radius
-R has Searle's parameter b^2 / (R t) = 39 at R = 100 mm, far above the ~1 below which it
-would bend as a beam (its cross-section free to curl anticlastically); our 3D Fin Ray
-bends its members as plates so. ``--friction MU`` gives the cylinder contact Coulomb
+``--plate`` bends the strips as plates (``gripper.finger.fin_ray.section: plate``), E t^3
+b / (12 (1 - nu^2)) with steel's nu 0.3, instead of beams (E t^3 b / 12): a strip 28 mm
+wide and 0.2 mm thick curved to a radius R has Searle's parameter b^2 / (R t) = 39 at R
+= 100 mm, far above the ~1 below which it would bend as a beam (its cross-section free
+to curl anticlastically); our 3D Fin Ray bends its members as plates so. ``--friction MU`` gives the cylinder contact Coulomb
 friction (``finger_indent.DiscFriction``): the source's model is frictionless, its
 experiment was not; the sensor's tangential force is the figure that tells mu.
 
@@ -73,7 +73,7 @@ from gripper_sim.geometry.fin_ray import FinRayGeometry, layout
 STRIP = 0.2e-3             # m, strip thickness
 DEPTH = 28e-3              # m
 STEEL = 213e9              # Pa
-#: spring steel's Poisson ratio (the usual 0.3 of steels), for ``--plate``
+#: spring steel's Poisson ratio (the usual 0.3 of steels): its plate bending (``--plate``)
 STEEL_POISSON = 0.3
 ROOTS = 73.24e-3           # m, between the beams' roots on the base
 PSI = math.radians(26.0)   # between the beams
@@ -105,15 +105,17 @@ SOURCE_SEGMENTS = 50
 CONTACT = BarrierSettings(dhat=1e-5, stiffness=1.0)
 
 
-def thesis_config(element_length: float = 1e-3, rib_ends=RIB_ENDS):
+def thesis_config(element_length: float = 1e-3, rib_ends=RIB_ENDS, section: str = 'beam'):
     """The flat configuration of the source's finger (module docstring), with its
-    crossbeams at ``rib_ends`` ((back, front) m from the base, per crossbeam)."""
+    crossbeams at ``rib_ends`` ((back, front) m from the base, per crossbeam), its members
+    bending as ``section`` (``gripper.finger.fin_ray.section``)."""
     prefix = 'gripper.finger.fin_ray.'
     values = {'length': FRONT, 'base_width': ROOTS, 'tip_offset': ROOTS - 2 * STRIP,
               'depth': DEPTH, 'beam_thickness': STRIP, 'rib_thickness': RIB_THICKNESS,
               'rib_ends': json.dumps([list(pair) for pair in rib_ends]),
               'rib_joint': 'pinned', 'element_length': element_length,
-              'material': 'custom', 'youngs_modulus': STEEL, 'density': 7850.0}
+              'material': 'custom', 'youngs_modulus': STEEL, 'density': 7850.0,
+              'poisson_ratio': STEEL_POISSON, 'section': section}
     return load_config(overrides=['gripper.finger.type=fin_ray']
                        + [f'{prefix}{k}={v}' for k, v in values.items()])
 
@@ -187,16 +189,13 @@ def _run(radius: float, element_length: float, e_scaling: bool, step: float,
          travel: float, source_ribs: bool, friction: float = 0.0, plate: bool = False):
     """``run`` at one step size."""
     ends = source_rib_ends() if source_ribs else RIB_ENDS
-    config = thesis_config(element_length, ends)
+    config = thesis_config(element_length, ends, 'plate' if plate else 'beam')
     body = fin_ray_from_config(config, DEPTH)
     geometry = FinRayGeometry.from_config(config, DEPTH)
     if source_ribs:
         body = prestress_ribs(body, geometry, [crossbeam_length(*pair) for pair in RIB_ENDS])
     if e_scaling:
         body = scale_strips(body, geometry, FRONT / 135e-3, BACK / 156e-3)
-    if plate:
-        factor = 1.0 / (1.0 - STEEL_POISSON ** 2)
-        body = scale_strips(body, geometry, factor, factor)
     touching, centre, _normal = front_beam_disc(body, layout(geometry).front_nodes,
                                                 CONTACT_HEIGHT, radius + 0.5 * STRIP)
     result = indent_disc(body, touching, centre, radius + 0.5 * STRIP,

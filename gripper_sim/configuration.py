@@ -278,6 +278,18 @@ SCHEMA: dict[str, Key] = {
                                                  nullable=True),
     'gripper.finger.fin_ray.density': Key(1200.0, 'kg/m^3', 'fin_ray, custom material: '
                                           'density', low=50.0, high=20000.0),
+    'gripper.finger.fin_ray.poisson_ratio': Key(0.45, '-', 'fin_ray, custom material: '
+                                                'Poisson ratio nu (plate bending: section '
+                                                'plate in 2D, the shells in 3D)', low=0.0,
+                                                high=0.49),
+    'gripper.finger.fin_ray.section': Key('beam', '-', 'fin_ray, 2D: how the beams and ribs '
+                                          'bend over the finger\'s depth b: beam (plane '
+                                          'stress, E t^3 b / 12: a member free to curl '
+                                          'across its width); plate (plane strain, E t^3 b / '
+                                          '(12 (1 - nu^2)), stretching E t b / (1 - nu^2): a '
+                                          'member much wider than thick, bent to radii R '
+                                          'with b^2 / (R t) >> 1, as the 3D shells bend)',
+                                          'str', choices=('beam', 'plate')),
     'gripper.finger.fin_ray.contact_dhat': Key(None, 'm', 'fin_ray, 3D: barrier activation '
                                                'distance of the fruit contact (and the '
                                                "table's, in the same barrier); null = 1e-4 "
@@ -759,7 +771,10 @@ def no_effect_reason(key: str, config: Mapping[str, Any]) -> str | None:
         return f"the finger is {finger}, not a Fin Ray: set 'gripper.finger.type' = fin_ray"
     if key == 'gripper.finger.fin_ray.contact_dhat' and config['dimension'] != 3:
         return "in 2D the Fin Ray's fruit contact is 'contact.ipc.dhat'"
-    if (key in ('gripper.finger.fin_ray.youngs_modulus', 'gripper.finger.fin_ray.density')
+    if key == 'gripper.finger.fin_ray.section' and config['dimension'] == 3:
+        return "in 3D the Fin Ray's members are shells: they bend as plates"
+    if (key in ('gripper.finger.fin_ray.youngs_modulus', 'gripper.finger.fin_ray.density',
+                'gripper.finger.fin_ray.poisson_ratio')
             and config['gripper.finger.fin_ray.material'] != 'custom'):
         return ("the Fin Ray's material is "
                 f"{config['gripper.finger.fin_ray.material']}: set "

@@ -100,6 +100,29 @@ def test_fin_ray_keys_without_a_fin_ray_have_no_effect():
         load_config(overrides=['gripper.finger.fin_ray.rib_count=6'])
 
 
+@pytest.mark.parametrize('overrides,words', [
+    (['gripper.finger.fin_ray.poisson_ratio=0.3'], "the Fin Ray's material is tpu"),
+    (['dimension=3', 'gripper.finger.fin_ray.section=plate'],
+     "in 3D the Fin Ray's members are shells"),
+])
+def test_section_and_poisson_keys_say_where_they_have_no_effect(overrides, words):
+    with pytest.warns(UserWarning, match=words):
+        load_config(overrides=['gripper.finger.type=fin_ray'] + overrides)
+
+
+@pytest.mark.parametrize('override,words', [
+    ('section=shell', 'must be one of beam, plate'),
+    ('poisson_ratio=0.5', 'out of range'),
+    ('poisson_ratio=-0.1', 'out of range'),
+])
+def test_bad_section_or_poisson_ratio_is_refused(override, words):
+    with pytest.raises(ConfigError, match=words):
+        load_config(overrides=['gripper.finger.type=fin_ray',
+                               'gripper.finger.fin_ray.material=custom',
+                               'gripper.finger.fin_ray.youngs_modulus=1e8',
+                               f'gripper.finger.fin_ray.{override}'])
+
+
 @pytest.mark.parametrize('override,key,words', [
     ('gripper.max_gap=0.05', 'gripper.finger.fin_ray.base_width', 'fill the jaw stroke'),
     ('gripper.max_gap=0.09', 'gripper.max_gap', 'does not fit between the fin_ray fingers'),
@@ -146,6 +169,23 @@ def test_members_carry_ea_and_ei_of_their_sections():
     interior = body.bend_stiffness[np.isclose(body.bend_stiffness, beam_ei)]
     assert len(interior) > 40 and np.any(np.isclose(body.bend_stiffness, rib_ei))
     assert len(body.rod_edges) == sum(len(m.nodes) - 1 for m in plan.members)
+
+
+def test_plate_members_carry_ea_and_ei_over_one_minus_nu_squared():
+    """``section: plate``: plane strain across the depth, every member's EA and EI (the
+    joints' too) divided by 1 - nu^2 of the custom material's nu; nothing else changes."""
+    keys = ('gripper.finger.fin_ray.material=custom',
+            'gripper.finger.fin_ray.youngs_modulus=5e7', 'gripper.finger.fin_ray.density=1000',
+            'gripper.finger.fin_ray.poisson_ratio=0.3')
+    beam = fin_ray_from_config(_config(*keys), 0.042)
+    plate = fin_ray_from_config(_config(*keys, 'gripper.finger.fin_ray.section=plate'), 0.042)
+    factor = 1.0 / (1.0 - 0.3 ** 2)
+    assert np.allclose(plate.rod_axial_stiffness, factor * beam.rod_axial_stiffness,
+                       rtol=1e-14)
+    assert np.allclose(plate.bend_stiffness, factor * beam.bend_stiffness, rtol=1e-14)
+    assert np.array_equal(plate.masses, beam.masses)
+    assert np.array_equal(plate.bend_triples, beam.bend_triples)
+    assert plate.poisson_ratio == beam.poisson_ratio == 0.3
 
 
 def test_the_finger_stands_on_its_base_and_faces_the_fruit():

@@ -33,18 +33,22 @@ def material_from_config(config) -> FingerMaterial:
     if name != 'custom':
         raise ConfigError(f"config key '{PREFIX}material': unknown material '{name}'")
     return FingerMaterial(config[PREFIX + 'youngs_modulus'], config[PREFIX + 'density'],
-                          'custom')
+                          'custom', config[PREFIX + 'poisson_ratio'])
 
 
-def fin_ray_from_config(config, fruit_depth: float) -> FingerBody:
+def fin_ray_from_config(config, fruit_depth: float, section: str | None = None) -> FingerBody:
     """The Fin Ray finger of a flat configuration (``gripper.finger.fin_ray.*``), as deep
-    as the fruit (``fruit_depth``, m) unless ``gripper.finger.fin_ray.depth`` is set."""
+    as the fruit (``fruit_depth``, m) unless ``gripper.finger.fin_ray.depth`` is set; its
+    members bend as ``section`` (``fin_ray_body``; None: ``gripper.finger.fin_ray.section``)."""
     return fin_ray_body(FinRayGeometry.from_config(config, fruit_depth),
-                        material_from_config(config))
+                        material_from_config(config), section or config[PREFIX + 'section'])
 
 
-def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial) -> FingerBody:
-    """The finger of ``geometry`` made of ``material``.
+def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial,
+                 section: str = 'beam') -> FingerBody:
+    """The finger of ``geometry`` made of ``material``, its members bending as ``section``:
+    'beam' (plane stress: E t^3 b / 12 in bending, E t b in stretching) or 'plate' (plane
+    strain across the depth b: both divided by 1 - nu^2, nu the material's).
 
     Raises:
         ConfigError: a geometry that cannot be built (``check_geometry``), or no depth.
@@ -56,18 +60,20 @@ def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial) -> FingerBo
     x0 = plan.positions
     b = geometry.depth
     e_mod = material.youngs_modulus
+    # the modulus of the members' bending and stretching: plane strain across b for plates
+    e_section = e_mod / (1.0 - material.poisson_ratio ** 2) if section == 'plate' else e_mod
     edges, axial, masses = [], [], np.zeros(len(x0))
     triples, stiffness, lengths = [], [], []
     # node -> its arms: (neighbour, member, EI, whether the member ends at the node)
     arms: dict[int, list[tuple[int, int, float, bool]]] = {}
     for k, member in enumerate(plan.members):
         t = member.thickness
-        ei = e_mod * t ** 3 * b / 12.0
+        ei = e_section * t ** 3 * b / 12.0
         nodes = member.nodes
         pairs = np.stack([nodes[:-1], nodes[1:]], axis=1)
         edge_lengths = np.linalg.norm(x0[pairs[:, 1]] - x0[pairs[:, 0]], axis=1)
         edges.append(pairs)
-        axial.append(np.full(len(pairs), e_mod * t * b))
+        axial.append(np.full(len(pairs), e_section * t * b))
         np.add.at(masses, pairs.ravel(),
                   np.repeat(0.5 * material.density * t * b * edge_lengths, 2))
         for i in range(1, len(nodes) - 1):

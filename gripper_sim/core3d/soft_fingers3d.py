@@ -82,8 +82,9 @@ def fin_ray_body3d(config) -> FingerBody3D:
     width = float(config['gripper.jaw_width'] if depth is None else depth)
     cell = WIDTH_CELL_RATIO * float(config['gripper.finger.fin_ray.element_length'])
     slices = min(MAX_IN_PLANE_CELLS, max(2, int(round(width / cell))))
-    return dataclasses.replace(extruded_rod_body(fin_ray_from_config(config, width), width,
-                                                 slices),
+    # the section as beams: the shells add the plates' 1 / (1 - nu^2) themselves
+    section = fin_ray_from_config(config, width, 'beam')
+    return dataclasses.replace(extruded_rod_body(section, width, slices),
                                self_contact_settings=BarrierSettings.from_config(config))
 
 
