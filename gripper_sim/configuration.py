@@ -24,7 +24,7 @@ import yaml
 
 from gripper_sim.errors import ConfigError, ConfigWarning
 from gripper_sim.geometry.fin_ray import check_fin_ray
-from gripper_sim.geometry.finger_materials import MATERIAL_NAMES
+from gripper_sim.geometry.finger_materials import MATERIAL_NAMES, SECTIONS as FIN_RAY_SECTIONS
 from gripper_sim.geometry.fingers import check_finger
 from gripper_sim.geometry.shapes import outline_from_config
 from gripper_sim.geometry.solid_pad import check_solid_pad
@@ -289,7 +289,7 @@ SCHEMA: dict[str, Key] = {
                                           '(12 (1 - nu^2)), stretching E t b / (1 - nu^2): a '
                                           'member much wider than thick, bent to radii R '
                                           'with b^2 / (R t) >> 1, as the 3D shells bend)',
-                                          'str', choices=('beam', 'plate')),
+                                          'str', choices=FIN_RAY_SECTIONS),
     'gripper.finger.fin_ray.contact_dhat': Key(None, 'm', 'fin_ray, 3D: barrier activation '
                                                'distance of the fruit contact (and the '
                                                "table's, in the same barrier); null = 1e-4 "

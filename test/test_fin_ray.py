@@ -123,6 +123,11 @@ def test_bad_section_or_poisson_ratio_is_refused(override, words):
                                f'gripper.finger.fin_ray.{override}'])
 
 
+def test_fin_ray_body_refuses_an_unknown_section():
+    with pytest.raises(ValueError, match="section 'shell': must be one of beam, plate"):
+        fin_ray_body(_geometry(), MATERIALS['tpu'], 'shell')
+
+
 @pytest.mark.parametrize('override,key,words', [
     ('gripper.max_gap=0.05', 'gripper.finger.fin_ray.base_width', 'fill the jaw stroke'),
     ('gripper.max_gap=0.09', 'gripper.max_gap', 'does not fit between the fin_ray fingers'),

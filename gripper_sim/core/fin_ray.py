@@ -22,7 +22,7 @@ from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.errors import ConfigError
 from gripper_sim.geometry.fin_ray import (PREFIX, FinRayGeometry, check_geometry,
                                           layout)
-from gripper_sim.geometry.finger_materials import MATERIALS, FingerMaterial
+from gripper_sim.geometry.finger_materials import MATERIALS, SECTIONS, FingerMaterial
 
 
 def material_from_config(config) -> FingerMaterial:
@@ -39,7 +39,7 @@ def material_from_config(config) -> FingerMaterial:
 def fin_ray_from_config(config, fruit_depth: float, section: str | None = None) -> FingerBody:
     """The Fin Ray finger of a flat configuration (``gripper.finger.fin_ray.*``), as deep
     as the fruit (``fruit_depth``, m) unless ``gripper.finger.fin_ray.depth`` is set; its
-    members bend as ``section`` (``fin_ray_body``; None: ``gripper.finger.fin_ray.section``)."""
+    members bend as ``section`` (``fin_ray_body``; None: the configuration's)."""
     return fin_ray_body(FinRayGeometry.from_config(config, fruit_depth),
                         material_from_config(config), section or config[PREFIX + 'section'])
 
@@ -52,7 +52,10 @@ def fin_ray_body(geometry: FinRayGeometry, material: FingerMaterial,
 
     Raises:
         ConfigError: a geometry that cannot be built (``check_geometry``), or no depth.
+        ValueError: a section neither 'beam' nor 'plate'.
     """
+    if section not in SECTIONS:
+        raise ValueError(f"section {section!r}: must be one of {', '.join(SECTIONS)}")
     if geometry.depth is None:
         raise ConfigError(f"config key '{PREFIX}depth': the finger needs a depth")
     check_geometry(geometry)

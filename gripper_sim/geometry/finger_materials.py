@@ -46,3 +46,7 @@ MATERIALS: dict[str, FingerMaterial] = {
 
 #: the material names ``gripper.finger.fin_ray.material`` accepts
 MATERIAL_NAMES = tuple(MATERIALS) + ('custom',)
+
+#: how a planar finger's members bend over its depth (``gripper.finger.fin_ray.section``):
+#: as beams (plane stress) or as plates (plane strain across the depth)
+SECTIONS = ('beam', 'plate')
