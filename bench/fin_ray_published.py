@@ -31,9 +31,10 @@ touching its surface (0.1 mm off the centre line) at delta 0.
 b / (12 (1 - nu^2)) with steel's nu 0.3, instead of beams (E t^3 b / 12): a strip 28 mm
 wide and 0.2 mm thick curved to a radius R has Searle's parameter b^2 / (R t) = 39 at R
 = 100 mm, far above the ~1 below which it would bend as a beam (its cross-section free
-to curl anticlastically); our 3D Fin Ray bends its members as plates so. ``--friction MU`` gives the cylinder contact Coulomb
-friction (``finger_indent.DiscFriction``): the source's model is frictionless, its
-experiment was not; the sensor's tangential force is the figure that tells mu.
+to curl anticlastically); our 3D Fin Ray bends its members as plates so. ``--friction
+MU`` gives the cylinder contact Coulomb friction (``finger_indent.DiscFriction``): the
+source's model is frictionless, its experiment was not; the sensor's tangential force is
+the figure that tells mu.
 
 ``--e-scaling`` applies the source model's stiffening of the strips (E x L_front / 135 mm
 and E x L_back / 156 mm, undocumented there); ``--model-radius`` runs another radius than

@@ -45,6 +45,14 @@ SLIP_EPS = 1e-6
 GAP_CLOSING = 0.9
 
 
+def _node_gradients(energy: Energy, q: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """(k, 2) N, the gradient of ``energy`` (its ``evaluate_into``) at ``q`` (n_dof,) m
+    on each of ``nodes``: the force each node exerts on the disc."""
+    grad = np.zeros(q.size)
+    energy.evaluate_into(q, grad, np.zeros(1), np.zeros((0, 0), np.int64), False)
+    return grad.reshape(-1, 2)[nodes]
+
+
 class DiscBarrier(Energy):
     """Frictionless contact of some nodes with a fixed rigid disc (2D).
 
@@ -120,9 +128,7 @@ class DiscBarrier(Energy):
     def node_forces(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) N, the force each of ``nodes`` exerts on the disc (x, z): its barrier
         gradient (the node is pushed by minus it)."""
-        grad = np.zeros(q.size)
-        self.evaluate_into(q, grad, np.zeros(1), np.zeros((0, 0), np.int64), False)
-        return grad.reshape(-1, 2)[self.nodes]
+        return _node_gradients(self, q, self.nodes)
 
     def force(self, q: np.ndarray) -> np.ndarray:
         """(2,) N, the force the nodes exert on the disc (x, z)."""
@@ -192,9 +198,7 @@ class DiscFriction(Energy):
 
     def node_forces(self, q: np.ndarray) -> np.ndarray:
         """(k, 2) N, the friction force each node exerts on the disc (x, z)."""
-        grad = np.zeros(q.size)
-        self.evaluate_into(q, grad, np.zeros(1), np.zeros((0, 0), np.int64), False)
-        return grad.reshape(-1, 2)[self.disc.nodes]
+        return _node_gradients(self, q, self.disc.nodes)
 
 
 @dataclass(frozen=True)
@@ -278,9 +282,8 @@ def indent_disc(body: FingerBody, nodes: np.ndarray, centre: np.ndarray, radius:
     if not (math.isfinite(friction) and friction >= 0.0):
         raise ValueError(f'friction coefficient {friction}: must be a number >= 0')
     disc = DiscBarrier(nodes, body.n_nodes, radius, settings)
-    contact = [disc]
-    if friction > 0.0:
-        contact.append(DiscFriction(disc, friction, slip_eps))
+    drag = DiscFriction(disc, friction, slip_eps) if friction > 0.0 else None
+    contact = [disc] if drag is None else [disc, drag]
     centre = np.asarray(centre, dtype=float)
     direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
     rows: list[tuple] = []
@@ -289,9 +292,8 @@ def indent_disc(body: FingerBody, nodes: np.ndarray, centre: np.ndarray, radius:
         """The disc to this increment's place; the start: the last shape moved on as
         the last increment moved it (a linear predictor), nodes still in the disc
         pushed out of it; the friction lagged at the last equilibrium."""
-        if rows:
-            for friction_energy in contact[1:]:
-                friction_energy.lag(rows[-1][3].ravel())
+        if rows and drag is not None:
+            drag.lag(rows[-1][3].ravel())
         disc.centre = centre + fraction * travel * direction
         if len(rows) >= 2:
             x = 2.0 * rows[-1][3] - rows[-2][3]
@@ -300,7 +302,9 @@ def indent_disc(body: FingerBody, nodes: np.ndarray, centre: np.ndarray, radius:
 
     def record(x: np.ndarray) -> None:
         normal = disc.node_forces(x.ravel())
-        total = sum(energy.node_forces(x.ravel()).sum(axis=0) for energy in contact)
+        total = normal.sum(axis=0)
+        if drag is not None:
+            total = total + drag.node_forces(x.ravel()).sum(axis=0)
         rows.append((len(rows) + 1, total, np.hypot(*normal.T).sum(), x.copy(),
                      disc.centre.copy()))
 
