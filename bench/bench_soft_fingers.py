@@ -18,11 +18,14 @@ Newton solver (its compiled energies on a fixed pattern).
 once): runs of this tree and of DIR alternate, each in a fresh process (this script on
 the other tree, through the GRIPPER_SIM_TREE environment variable; each finger's grasp
 run once untimed first, numba's caches loaded), and the table gives both (best of
-``--repeat`` each).
+``--repeat`` each). ``--set KEY=VALUE`` (repeatable) overrides a configuration key in
+the deformable finger's grasp, the reference's left as it is (e.g.
+``gripper.finger.fin_ray.element_length=0.004``); a bad key or value is a usage error.
 
 Usage::
 
-    nice python bench/bench_soft_fingers.py [--repeat N] [--force N] [--baseline DIR]
+    nice python bench/bench_soft_fingers.py [--repeat N] [--force N] [--set KEY=VALUE]
+        [--baseline DIR]
 """
 from __future__ import annotations
 
@@ -41,6 +44,7 @@ from baseline import add_arguments, alternated, best_by_key, parse_checked  # no
 from solve_timer import solves_timed  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
+from gripper_sim.errors import ConfigError  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp  # noqa: E402
 
@@ -48,13 +52,13 @@ from gripper_sim.workflows.grasp import GraspSequence, run_grasp  # noqa: E402
 FINGERS = ('flat', 'solid_pad')
 
 
-def grasp(finger: str, force: float) -> dict:
+def grasp(finger: str, force: float, overrides: tuple = ()) -> dict:
     """One grasp-and-lift, the jaws starting 1 mm wider than where the fingers touch the
-    apple; its CPU time (s), of it inside the compiled barrier Newton solves (s,
-    ``solve_timer``), and counts."""
+    apple, the configuration keys ``overrides`` ('KEY=VALUE') set; its CPU time (s), of it
+    inside the compiled barrier Newton solves (s, ``solve_timer``), and counts."""
     with solves_timed() as inside:
         start = time.process_time()
-        config = load_config(overrides=[f'gripper.finger.type={finger}'])
+        config = load_config(overrides=[f'gripper.finger.type={finger}', *overrides])
         config = config.replaced(
             {'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
         sim = Simulation(config)
@@ -71,10 +75,12 @@ def grasp(finger: str, force: float) -> dict:
 
 
 def _baseline_rows(script: Path, baseline: Path, fingers: tuple, force: float,
-                   repeat: int) -> dict:
+                   overrides: list, repeat: int) -> dict:
     """{'this': rows, 'baseline': rows}, rows the best grasp per finger of each tree, runs
     alternated in fresh processes (see the module doc)."""
-    outputs = alternated(script, baseline, ['--plain', '--force', str(force)], repeat)
+    settings = [word for item in overrides for word in ('--set', item)]
+    outputs = alternated(script, baseline, ['--plain', '--force', str(force), *settings],
+                         repeat)
     return {label: best_by_key(runs, lambda row: row['cpu']) for label, runs in outputs.items()}
 
 
@@ -101,16 +107,27 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument('--repeat', type=int, default=1, help='runs per finger (best kept)')
     parser.add_argument('--force', type=float, default=4.0, help='grip force, N')
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                        help="override a configuration key in the deformable finger's "
+                        'grasp (repeatable)')
     add_arguments(parser, 'each grasp once after a warm-up, as JSON (what --baseline runs)')
     args = parse_checked(parser, argv)
+    reference, deformable = fingers
+    try:
+        load_config(overrides=[f'gripper.finger.type={deformable}', *args.set])
+    except ConfigError as error:
+        parser.error(f'--set: {error}')
+    overrides = {reference: (), deformable: tuple(args.set)}
     if args.plain:
         for finger in fingers:
-            grasp(finger, args.force)
-        print(json.dumps({finger: grasp(finger, args.force) for finger in fingers}))
+            grasp(finger, args.force, overrides[finger])
+        print(json.dumps({finger: grasp(finger, args.force, overrides[finger])
+                          for finger in fingers}))
         return 0
     if args.baseline is not None:
         script = Path(sys.modules['__main__'].__file__).resolve()
-        tables = _baseline_rows(script, args.baseline, fingers, args.force, args.repeat)
+        tables = _baseline_rows(script, args.baseline, fingers, args.force, args.set,
+                                args.repeat)
         print(f'load average {os.getloadavg()[0]:.2f} at the end; CPU time '
               f'(time.process_time), best of {args.repeat} runs each, alternated: this tree '
               f'and baseline ({args.baseline.resolve()})')
@@ -119,11 +136,11 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
             _print_rows(rows, fingers)
         return 0
     print(f'load average {os.getloadavg()[0]:.2f}; CPU time (time.process_time), best of '
-          f'{args.repeat}')
+          f'{args.repeat}' + ''.join(f'; {deformable}: {item}' for item in args.set))
     rows = {}
     for finger in fingers:
-        grasp(finger, args.force)  # untimed: numba's caches loaded
-        runs = [grasp(finger, args.force) for _ in range(args.repeat)]
+        grasp(finger, args.force, overrides[finger])  # untimed: numba's caches loaded
+        runs = [grasp(finger, args.force, overrides[finger]) for _ in range(args.repeat)]
         rows[finger] = min(runs, key=lambda r: r['cpu'])
     _print_rows(rows, fingers)
     return 0
