@@ -1,6 +1,7 @@
-"""The soft-finger benchmarks' configuration overrides (``bench/bench_soft_fingers.py``,
-``bench/bench_fin_ray.py`` ``--set KEY=VALUE``): they reach the deformable finger's grasp
-only, and a bad key or value is a usage error before anything runs."""
+"""The Fin Ray benchmarks' configuration overrides (``--set KEY=VALUE`` of
+``bench/bench_fin_ray.py``, ``bench/bench_soft_fingers.py`` and ``bench/newton_rates.py``):
+they reach the deformable finger's grasp only, and a bad key or value is a usage error
+before anything runs."""
 import json
 import sys
 from pathlib import Path
@@ -11,6 +12,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
 
 import bench_fin_ray  # noqa: E402
 import bench_soft_fingers  # noqa: E402
+import newton_rates  # noqa: E402
 
 ELEMENT = 'gripper.finger.fin_ray.element_length'
 
@@ -20,9 +22,10 @@ ELEMENT = 'gripper.finger.fin_ray.element_length'
     ('gripper.finger.fin_ray.no_such_key=1', 'unknown config key'),
     (f'{ELEMENT}', 'KEY=VALUE'),
 ])
-def test_a_bad_setting_is_a_usage_error(setting, words, capsys):
+@pytest.mark.parametrize('bench', [bench_fin_ray, newton_rates])
+def test_a_bad_setting_is_a_usage_error(bench, setting, words, capsys):
     with pytest.raises(SystemExit) as stop:
-        bench_fin_ray.main(['--set', setting])
+        bench.main(['--set', setting])
     assert stop.value.code == 2
     assert words in capsys.readouterr().err
 
