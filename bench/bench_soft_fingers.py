@@ -44,8 +44,8 @@ from baseline import add_arguments, alternated, best_by_key, parse_checked  # no
 from solve_timer import solves_timed  # noqa: E402
 
 from gripper_sim.configuration import load_config  # noqa: E402
-from gripper_sim.errors import ConfigError  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
+from gripper_sim.errors import ConfigError  # noqa: E402
 from gripper_sim.workflows.grasp import GraspSequence, run_grasp  # noqa: E402
 
 #: the fingers compared
