@@ -10,6 +10,7 @@ import time
 
 import pytest
 import rclpy
+from rclpy.action import ActionServer
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
@@ -196,6 +197,39 @@ def test_a_stalled_physics_loop_is_reported_and_recovers(context):
         assert node.watchdog.stalled_since is None and node.physics.alive
     finally:
         node.sim.release.set()
+        node.destroy_node()
+
+
+class InterfacesAtWarmUp(SimNode):
+    """A node that notes which of its interfaces exist when it warms its kernels."""
+
+    def _warm_up(self):
+        self.at_warm_up = {'services': [s.srv_name for s in self.services],
+                           'topics': [p.topic_name for p in self.publishers],
+                           'actions': [w for w in self.waitables if isinstance(w, ActionServer)]}
+        return super()._warm_up()
+
+
+def test_the_node_warms_its_kernels_before_it_offers_any_interface(context, monkeypatch):
+    """Kernels compile at their first call (minutes from a cold numba cache): the node
+    makes that call on a throw-away simulation of its configuration before it creates
+    a topic, service or action, so no client finds it and then waits for a first step
+    that compiles under the simulation lock (a ~/pause timed out after 60 s)."""
+    warmed = []
+    monkeypatch.setattr('gripper_sim.ros.node.warm_kernels',
+                        lambda config: warmed.append(dict(config)) or 0.0)
+    node = InterfacesAtWarmUp(context=context, start=False, watchdog_period=0.0,
+                              parameter_overrides=[Parameter('foxglove_port', value=0)])
+    try:
+        assert warmed == [node.params.config]
+        # only what rclpy's Node creates itself: the parameter services and events, the
+        # type descriptions
+        assert all('parameter' in name or name.endswith('/get_type_description')
+                   for name in node.at_warm_up['services']), node.at_warm_up
+        assert node.at_warm_up['topics'] == ['/parameter_events']
+        assert node.at_warm_up['actions'] == []
+        assert any(name.endswith('/pause') for name in (s.srv_name for s in node.services))
+    finally:
         node.destroy_node()
 
 

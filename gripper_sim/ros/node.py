@@ -7,7 +7,8 @@ and the jaw topics), ``publishing`` (state topics in step order), ``runtime_para
 (what a parameter change does), ``description`` (``/tf_static``, the URDF on
 ``robot_description``), ``recording_control`` (``record_path``, ``~/record``),
 ``services`` (``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``),
-``simulation_standard`` (the simulation_interfaces services over them) and the three
+``simulation_standard`` (the simulation_interfaces services over them), ``warm_up``
+(the physics kernels compiled or loaded before any of these exist) and the three
 action servers (Grasp, control_msgs GripperCommand and ParallelGripperCommand). What
 stays here is the step itself (commands, physics, listeners, publishing) and the reset,
 which touch all of them.
@@ -54,6 +55,7 @@ from gripper_sim.ros.runtime_parameters import RuntimeParameters, log_rejections
 from gripper_sim.ros.services import SimServices
 from gripper_sim.ros.simulation_standard import SimulationStandard
 from gripper_sim.ros.sync import JawOwner, JawOwnership, SimLock
+from gripper_sim.ros.warm_up import warm_kernels
 from gripper_sim.ros.watchdog import CHECK_PERIOD, STALL_TIMEOUT, PhysicsWatchdog
 from gripper_sim.view.foxglove import start_node_view
 from gripper_sim.workflows.factory import make_simulation
@@ -109,6 +111,9 @@ class SimNode(Node):
         # after building the simulation: discovery has had that time to find a namesake
         if namesake_wait is not None:
             refuse_namesake(self, created, namesake_wait)
+        # Before any topic, service or action exists: a client that finds them is served
+        # at once, not after a first step that compiles (``warm_up``).
+        warmed = self._warm_up()
         self.namesake_watch = NamesakeWatch(self, started)
         self._step_listeners: list[Callable[[StepResult], None]] = []
         self._observers: list[Callable[[StepResult], None]] = []
@@ -150,7 +155,8 @@ class SimNode(Node):
             f"{getattr(self.sim, 'dimension', 2)}D, {len(self.sim.last.positions)} nodes), "
             f'dt {self.sim.dt:g} s, publishing every '
             f'{publish_every} steps ({1.0 / (publish_every * self.sim.dt):g} Hz '
-            f'sim time), real-time factor {self.physics.real_time_factor:g}')
+            f'sim time), real-time factor {self.physics.real_time_factor:g}, physics '
+            f'kernels warmed up in {warmed:.1f} s')
         self.state_publisher.publish(self.sim.last, self.message_context.snapshot(),
                                      self._sequence)
         self.recording_control.start_at_startup()
@@ -159,6 +165,14 @@ class SimNode(Node):
         self.live_view = start_node_view(self)
         if start:
             self.physics.start()
+
+    def _warm_up(self) -> float:
+        """Compile, or load from numba's cache, the kernels the configuration's steps
+        use (``warm_up.warm_kernels``); wall seconds taken."""
+        self.get_logger().info('warming up the physics kernels: about a second from '
+                               "numba's cache, minutes to compile them if `make install` "
+                               'has not')
+        return warm_kernels(self.params.config)
 
     # ------------------------------------------------------------------ hooks
     def add_observer(self, callback: Callable[[StepResult], None]) -> None:
@@ -316,6 +330,7 @@ class SimNode(Node):
             config.update({key: preset[key] for key in keys if key in preset})
             config = configuration.validate(config)
             sim = self._simulation_factory(dict(config))
+            warm_kernels(config)   # a new fruit model's kernels: compiled before it steps
             context = MessageContext.from_config(
                 config, initial=sim.last, frame_prefix=str(self.params.get('frame_prefix')))
         except (GripperSimError, ValueError) as error:
@@ -365,7 +380,8 @@ def main(args: list[str] | None = None) -> int:
 
     The Jazzy main idiom, with one change: SIGINT/SIGTERM set a flag instead of
     shutting the context down at once, so an active goal is aborted and its result
-    delivered before the node goes.
+    delivered before the node goes. While the node is still being built (its kernels
+    warming up) they stop it at once.
     """
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     argv = list(sys.argv if args is None else args)
@@ -382,9 +398,15 @@ def main(args: list[str] | None = None) -> int:
     sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     stopping = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stopping.set())
     node = None
+
+    def on_signal(*_) -> None:
+        stopping.set()
+        if node is None:   # still starting, maybe compiling kernels for minutes: no goal yet
+            raise KeyboardInterrupt
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, on_signal)
     code = 0
     # Threads: a running goal (Grasp, GripperCommand, ParallelGripperCommand; one
     # drives, a preempted one finishes) and a step request (~/step, step_simulation,
