@@ -3,10 +3,11 @@
 ``python -m gripper_sim.workflows.compile_kernels`` (``make install`` runs it) steps small
 fruits in every route, so that no user pays numba's compile time on a first run (a cold
 compile takes ~15-20 s of CPU in 2D, ~30 s in 3D): in 2D a shell, a point fruit, a
-solid with a V-groove finger, a shell with a soft pad, one between Fin Ray fingers and
-one with the barrier contact on flat fingers (the whole-step kernel and the multi-step
-advance around it, the energy kernels, the solver's and the barrier's, the compiled
-barrier Newton solve with one barrier (flat fingers) and with two (the Fin Ray
+solid with a V-groove finger, a shell with a soft pad, one between Fin Ray fingers, one
+between solid pads (without it a node's first solid-pad start compiled for 67 s under
+load) and one with the barrier contact on flat fingers (the whole-step kernel and the
+multi-step advance around it, the energy kernels, the solver's and the barrier's, the
+compiled barrier Newton solve with one barrier (flat fingers) and with two (the Fin Ray
 fingers' self-contact too): ``core.barrier_newton``, ~15 s cold); in 3D
 shells with a plain and a wrinkling skin, solids of linear and of quadratic
 tetrahedra, and the default shell with the barrier contact on flat fingers, between
@@ -28,6 +29,7 @@ SETUPS_2D = (('fruit.model=shell', 'fruit.nodes=16'),
              ('fruit.model=solid', 'gripper.finger.type=vgroove', 'fruit.nodes=16'),
              ('fruit.model=shell', 'gripper.finger.pad.enabled=true', 'fruit.nodes=16'),
              ('fruit.model=shell', 'gripper.finger.type=fin_ray', 'fruit.nodes=16'),
+             ('fruit.model=shell', 'gripper.finger.type=solid_pad', 'fruit.nodes=16'),
              ('fruit.model=shell', 'contact.model=ipc', 'fruit.nodes=16'))
 
 _SMALL_3D = ('dimension=3', 'fruit.mesh.subdivisions=3')
