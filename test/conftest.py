@@ -77,14 +77,15 @@ def physics_kernels(request):
     """The kernels of the node's default configuration in numba's on-disk cache before
     the session's first node starts, if the session has a ``ros`` test.
 
-    A node warms its kernels before it offers any interface (``gripper_sim.ros.warm_up``).
-    From the cache that takes ~0.4 s; from a cold cache (a fresh checkout without ``make
-    install``) ~110 s of CPU for the default 2D apple, past the nodes' 120 s start-up
-    timeouts under load. Compiled here once instead, under pytest's per-test timeout.
+    A node warms its kernels before it offers any interface
+    (``compile_kernels.warm_kernels``). From the cache that takes ~0.4 s; from a cold
+    cache (a fresh checkout without ``make install``) ~110 s of CPU for the default 2D
+    apple, past the nodes' 120 s start-up timeouts under load. Compiled here once
+    instead, under pytest's per-test timeout.
     """
     if any(item.get_closest_marker('ros') for item in request.session.items):
         from gripper_sim.configuration import load_config
-        from gripper_sim.ros.warm_up import warm_kernels
+        from gripper_sim.workflows.compile_kernels import warm_kernels
         warm_kernels(load_config())
 
 

@@ -7,8 +7,7 @@ and the jaw topics), ``publishing`` (state topics in step order), ``runtime_para
 (what a parameter change does), ``description`` (``/tf_static``, the URDF on
 ``robot_description``), ``recording_control`` (``record_path``, ``~/record``),
 ``services`` (``~/reset``, ``~/pause``, ``~/step``, ``~/jaw/open``),
-``simulation_standard`` (the simulation_interfaces services over them), ``warm_up``
-(the physics kernels compiled or loaded before any of these exist) and the three
+``simulation_standard`` (the simulation_interfaces services over them) and the three
 action servers (Grasp, control_msgs GripperCommand and ParallelGripperCommand). What
 stays here is the step itself (commands, physics, listeners, publishing) and the reset,
 which touch all of them.
@@ -55,9 +54,9 @@ from gripper_sim.ros.runtime_parameters import RuntimeParameters, log_rejections
 from gripper_sim.ros.services import SimServices
 from gripper_sim.ros.simulation_standard import SimulationStandard
 from gripper_sim.ros.sync import JawOwner, JawOwnership, SimLock
-from gripper_sim.ros.warm_up import warm_kernels
 from gripper_sim.ros.watchdog import CHECK_PERIOD, STALL_TIMEOUT, PhysicsWatchdog
 from gripper_sim.view.foxglove import start_node_view
+from gripper_sim.workflows.compile_kernels import warm_kernels
 from gripper_sim.workflows.factory import make_simulation
 
 NODE_NAME = 'gripper_sim'
@@ -112,7 +111,7 @@ class SimNode(Node):
         if namesake_wait is not None:
             refuse_namesake(self, created, namesake_wait)
         # Before any topic, service or action exists: a client that finds them is served
-        # at once, not after a first step that compiles (``warm_up``).
+        # at once, not after a first step that compiles (``_warm_up``).
         warmed = self._warm_up()
         self.namesake_watch = NamesakeWatch(self, started)
         self._step_listeners: list[Callable[[StepResult], None]] = []
@@ -168,7 +167,8 @@ class SimNode(Node):
 
     def _warm_up(self) -> float:
         """Compile, or load from numba's cache, the kernels the configuration's steps
-        use (``warm_up.warm_kernels``); wall seconds taken."""
+        use (``compile_kernels.warm_kernels``), before any topic, service or action
+        exists; wall seconds taken."""
         self.get_logger().info('warming up the physics kernels: about a second from '
                                "numba's cache, minutes to compile them if `make install` "
                                'has not')
