@@ -68,6 +68,9 @@ NODE_NAME = 'gripper_sim'
 GIL_SWITCH_INTERVAL = 0.001   # s
 # At shutdown the node spins this long to deliver an aborted goal's result.
 RESULT_DELIVERY = 1.0   # s
+# Set while a node of this process warms its kernels up (``SimNode._warm_up``): a
+# SIGINT or SIGTERM then stops it at once (``main``).
+WARMING_UP = threading.Event()
 
 
 class SimNode(Node):
@@ -168,11 +171,15 @@ class SimNode(Node):
     def _warm_up(self) -> float:
         """Compile, or load from numba's cache, the kernels the configuration's steps
         use (``compile_kernels.warm_kernels``), before any topic, service or action
-        exists; wall seconds taken."""
+        exists; wall seconds taken. ``WARMING_UP`` is set meanwhile."""
         self.get_logger().info('warming up the physics kernels: about a second from '
                                "numba's cache, minutes to compile them if `make install` "
                                'has not')
-        return warm_kernels(self.params.config)
+        WARMING_UP.set()
+        try:
+            return warm_kernels(self.params.config)
+        finally:
+            WARMING_UP.clear()
 
     # ------------------------------------------------------------------ hooks
     def add_observer(self, callback: Callable[[StepResult], None]) -> None:
@@ -380,8 +387,8 @@ def main(args: list[str] | None = None) -> int:
 
     The Jazzy main idiom, with one change: SIGINT/SIGTERM set a flag instead of
     shutting the context down at once, so an active goal is aborted and its result
-    delivered before the node goes. While the node is still being built (its kernels
-    warming up) they stop it at once.
+    delivered before the node goes. While the node warms its kernels up (before it has
+    started anything) they stop it at once.
     """
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     argv = list(sys.argv if args is None else args)
@@ -402,7 +409,9 @@ def main(args: list[str] | None = None) -> int:
 
     def on_signal(*_) -> None:
         stopping.set()
-        if node is None:   # still starting, maybe compiling kernels for minutes: no goal yet
+        # the warm-up may compile for minutes and has started nothing yet: stop it now;
+        # anywhere else the node is stopped once built (it may have started threads)
+        if WARMING_UP.is_set():
             raise KeyboardInterrupt
 
     for signum in (signal.SIGINT, signal.SIGTERM):
