@@ -52,6 +52,21 @@ from gripper_sim.workflows.grasp import GraspSequence, run_grasp  # noqa: E402
 FINGERS = ('flat', 'solid_pad')
 
 
+def add_set_argument(parser, help_text: str) -> None:
+    """The repeatable ``--set KEY=VALUE`` option of the soft-finger benchmarks."""
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                        help=help_text)
+
+
+def checked_config(parser, finger: str, settings: list):
+    """The configuration of ``finger`` with the ``--set`` ``settings`` ('KEY=VALUE'); a
+    bad key or value is the parser's usage error (exit 2)."""
+    try:
+        return load_config(overrides=[f'gripper.finger.type={finger}', *settings])
+    except ConfigError as error:
+        parser.error(f'--set: {error}')
+
+
 def grasp(finger: str, force: float, overrides: tuple = ()) -> dict:
     """One grasp-and-lift, the jaws starting 1 mm wider than where the fingers touch the
     apple, the configuration keys ``overrides`` ('KEY=VALUE') set; its CPU time (s), of it
@@ -107,16 +122,12 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument('--repeat', type=int, default=1, help='runs per finger (best kept)')
     parser.add_argument('--force', type=float, default=4.0, help='grip force, N')
-    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
-                        help="override a configuration key in the deformable finger's "
-                        'grasp (repeatable)')
+    add_set_argument(parser, "override a configuration key in the deformable finger's "
+                     'grasp (repeatable)')
     add_arguments(parser, 'each grasp once after a warm-up, as JSON (what --baseline runs)')
     args = parse_checked(parser, argv)
     reference, deformable = fingers
-    try:
-        load_config(overrides=[f'gripper.finger.type={deformable}', *args.set])
-    except ConfigError as error:
-        parser.error(f'--set: {error}')
+    checked_config(parser, deformable, args.set)
     overrides = {reference: (), deformable: tuple(args.set)}
     if args.plain:
         for finger in fingers:

@@ -19,11 +19,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_soft_fingers import add_set_argument, checked_config  # noqa: E402
 from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core.simulation import Simulation  # noqa: E402
 from gripper_sim.core.soft_fingers import finger_body  # noqa: E402
-from gripper_sim.errors import ConfigError  # noqa: E402
 
 #: the squeeze holds its force once the jaws move slower than this (m/s), after
 #: ``SETTLE_STEPS`` steps at least, for at most ``MAX_STEPS`` steps
@@ -65,15 +66,11 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--force', type=float, nargs='+', default=[2.0, 4.0, 8.0],
                         help='grip forces held, N')
-    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
-                        help='override a configuration key (repeatable)')
+    add_set_argument(parser, 'override a configuration key (repeatable)')
     args = parser.parse_args(argv)
     if not all(np.isfinite(f) and f > 0 for f in args.force):
         parser.error('--force: every force must be a finite number > 0')
-    try:
-        load_config(overrides=['gripper.finger.type=fin_ray', *args.set])
-    except ConfigError as error:
-        parser.error(f'--set: {error}')
+    checked_config(parser, 'fin_ray', args.set)
     print(f"{'grip N':>7s} {'R min mm':>9s} {'R median mm':>12s} {'Searle max':>11s} "
           f"{'median':>7s}   (b^2 / (R t) along the front beam)")
     for force in args.force:

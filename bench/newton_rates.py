@@ -22,11 +22,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'bench'))
 
-from bench_soft_fingers import grasp  # noqa: E402
+from bench_soft_fingers import add_set_argument, checked_config, grasp  # noqa: E402
 
-from gripper_sim.configuration import load_config  # noqa: E402
 from gripper_sim.core import fast_solver  # noqa: E402
-from gripper_sim.errors import ConfigError  # noqa: E402
 
 #: percentiles printed
 PERCENTILES = (5, 25, 50, 75, 95)
@@ -51,13 +49,9 @@ def histories(overrides: tuple) -> list[list[float]]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
-                        help='override a configuration key of the grasp (repeatable)')
+    add_set_argument(parser, 'override a configuration key of the grasp (repeatable)')
     args = parser.parse_args(argv)
-    try:
-        config = load_config(overrides=['gripper.finger.type=fin_ray', *args.set])
-    except ConfigError as error:
-        parser.error(f'--set: {error}')
+    config = checked_config(parser, 'fin_ray', args.set)
     runs = histories(tuple(args.set))
     counts = collections.Counter(len(run) for run in runs)
     print(f'{len(runs)} solves, {sum(map(len, runs))} Newton iterations; tolerance '

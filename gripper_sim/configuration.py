@@ -39,6 +39,9 @@ PROVENANCE_KEY = 'calibration'
 SELECTORS = ('fruit', 'finger')
 #: the finger types whose faces are rigid (the others are deformable bodies)
 RIGID_FINGERS = ('flat', 'arc', 'vgroove')
+#: a value kind (``Key.kind``) as an error message names it
+KIND_NAMES = {'float': 'a number', 'int': 'an integer', 'bool': 'true or false',
+              'str': 'a string', 'list': 'a list'}
 
 
 @dataclass(frozen=True)
@@ -513,7 +516,8 @@ def _coerce(key: str, value: Any) -> Any:
                                   f"{', '.join(spec.choices)}, got '{text}'")
             return text
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"config key '{key}' must be a {spec.kind}, got {value!r}") from err
+        raise ConfigError(f"config key '{key}' must be {KIND_NAMES[spec.kind]}, "
+                          f"got {value!r}") from err
     if not math.isfinite(number):
         raise ConfigError(f"config key '{key}' must be finite, got {value!r}")
     unit = f' {spec.unit}' if spec.unit not in ('', '-') else ''

@@ -93,7 +93,7 @@ def test_a_larger_slip_limit_lowers_the_bound(window_json, capsys):
     ('0', "'window.max_slip' = 0.0 m is out of range"),
     ('0.02', "'window.max_slip' = 0.02 m is out of range"),
     ('nan', "'window.max_slip' must be finite"),
-    ('abc', "'window.max_slip' must be a float"),
+    ('abc', "'window.max_slip' must be a number"),
 ])
 def test_a_bad_slip_limit_is_a_one_line_error(value, message, capsys):
     assert main(['window', '--set', f'window.max_slip={value}']) == 2
