@@ -1,4 +1,4 @@
-"""``gripper-sim`` in a pipe whose reader has gone: no traceback, exit 141 (or 0)."""
+"""``gripper-sim`` in a pipe whose reader has gone, or stopped by Ctrl-C: no traceback."""
 import io
 import subprocess
 import sys
@@ -30,3 +30,11 @@ def test_head_in_a_real_pipe():
     assert len(run.stdout.splitlines()) == 1
     assert 'Traceback' not in run.stderr and 'BrokenPipe' not in run.stderr, run.stderr
     assert run.stderr.strip().splitlines()[-1] in ('status 0', 'status 141'), run.stderr
+
+
+def test_ctrl_c_while_the_verbs_load_ends_with_130_and_no_traceback(monkeypatch, capsys):
+    def interrupted_import(name):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cli_main.importlib, 'import_module', interrupted_import)
+    assert cli_main.main(['fruits']) == 130
+    assert 'Traceback' not in capsys.readouterr().err

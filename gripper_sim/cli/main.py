@@ -51,6 +51,8 @@ def main(argv: list[str] | None = None) -> int:
         return code
     except BrokenPipeError:
         return _reader_gone()
+    except KeyboardInterrupt:   # anywhere, the verbs' imports too
+        return 130
 
 
 def _run(argv: list[str] | None) -> int:
@@ -70,8 +72,6 @@ def _run(argv: list[str] | None) -> int:
     except GripperSimError as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return 130
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
