@@ -175,6 +175,34 @@ def test_node_verb_refuses_an_unknown_fruit():
     assert 'Traceback' not in run.stderr
 
 
+#: a node whose construction gets a SIGINT before its kernels' warm-up (while it reads
+#: its parameters), then takes a moment there: the signal must stop it at once
+INTERRUPTED_START = """
+import os, signal, sys, time
+from gripper_sim.ros import node
+real = node.SimParameters
+def interrupted(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(20)
+    return real(*args, **kwargs)
+node.SimParameters = interrupted
+sys.exit(node.main(['sim_node', '--ros-args', '-p', 'foxglove_port:=0',
+                    '-p', 'record_path:=' + sys.argv[1]]))
+"""
+
+
+def test_ctrl_c_while_the_node_starts_stops_it_at_once(tmp_path):
+    bag = tmp_path / 'bag'
+    run = subprocess.run([sys.executable, '-c', INTERRUPTED_START, str(bag)],
+                         env=ros_environment(pick_domain_id(43)), capture_output=True,
+                         text=True, timeout=120)
+    log = run.stdout + run.stderr
+    assert run.returncode == 0, log
+    assert 'ready' not in log and 'warming up' not in log, log
+    assert not bag.exists()
+    assert 'Traceback' not in log, log
+
+
 def test_status_follow_prints_lines_until_ctrl_c(client):
     process = subprocess.Popen(
         [sys.executable, '-m', 'gripper_sim.cli.main', 'status', '--follow', '--rate', '5'],

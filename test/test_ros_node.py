@@ -6,11 +6,13 @@ of bad input rejected with a logged reason while the node keeps running.
 import math
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 
 from gripper_sim.convert import messages
+from gripper_sim_interfaces.srv import Step
 from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
 from ros_client import SimClient
 
@@ -136,6 +138,27 @@ def test_pause_step_and_reset(client):
     assert client.step(3).sim_time == pytest.approx(0.003, abs=1e-9)
     client.pause(False)
     client.wait_sim_time(0.05)
+
+
+def test_a_second_step_request_is_refused_at_once_not_queued(client):
+    """Through the node's executor: a ~/step meanwhile is answered (refused) while the
+    first runs, and none is left to run after the ~/pause that interrupts the first."""
+    client.pause(True)
+    long_step = client.step_client.call_async(Step.Request(steps=1_000_000))
+    start = client.sim_time()
+    client.spin_until(lambda: client.sim_time() > start + 0.02, 60, 'the long step to run')
+    second = client.step(5)
+    assert not long_step.done()
+    assert not second.success and 'in progress' in second.message
+    paused = client.pause(True)
+    client.spin_until(long_step.done, 60, 'the interrupted step to answer')
+    assert 'stopped after' in long_step.result().message
+    at_pause = float(paused.message.split('t = ')[1].split()[0])
+    settle = time.monotonic() + 1.0
+    client.spin_until(lambda: time.monotonic() > settle, 5, 'a second')
+    # one step on from where the pause left it: nothing ran after the pause's answer
+    assert client.step(1).sim_time == pytest.approx(at_pause + 0.001, abs=1e-9)
+    client.pause(False)
 
 
 @pytest.mark.parametrize('what, value', [

@@ -68,9 +68,10 @@ NODE_NAME = 'gripper_sim'
 GIL_SWITCH_INTERVAL = 0.001   # s
 # At shutdown the node spins this long to deliver an aborted goal's result.
 RESULT_DELIVERY = 1.0   # s
-# Set while a node of this process warms its kernels up (``SimNode._warm_up``): a
-# SIGINT or SIGTERM then stops it at once (``main``).
-WARMING_UP = threading.Event()
+# Set by ``main`` while its node is built, until the node starts anything (threads, a
+# recording, the live view's server; ``SimNode.__init__`` clears it): a SIGINT or
+# SIGTERM then stops it at once, the kernels' warm-up (minutes when it compiles) too.
+STARTING = threading.Event()
 
 
 class SimNode(Node):
@@ -161,6 +162,7 @@ class SimNode(Node):
             f'kernels warmed up in {warmed:.1f} s')
         self.state_publisher.publish(self.sim.last, self.message_context.snapshot(),
                                      self._sequence)
+        STARTING.clear()   # from here a signal stops the built node (``main``)
         self.recording_control.start_at_startup()
         # Foxglove live view (foxglove_port, 0 = off): observes published batches while a
         # client watches; None when off or its port is taken (a warning).
@@ -171,15 +173,11 @@ class SimNode(Node):
     def _warm_up(self) -> float:
         """Compile, or load from numba's cache, the kernels the configuration's steps
         use (``compile_kernels.warm_kernels``), before any topic, service or action
-        exists; wall seconds taken. ``WARMING_UP`` is set meanwhile."""
+        exists; wall seconds taken."""
         self.get_logger().info('warming up the physics kernels: about a second from '
                                "numba's cache, minutes to compile them if `make install` "
                                'has not')
-        WARMING_UP.set()
-        try:
-            return warm_kernels(self.params.config)
-        finally:
-            WARMING_UP.clear()
+        return warm_kernels(self.params.config)
 
     # ------------------------------------------------------------------ hooks
     def add_observer(self, callback: Callable[[StepResult], None]) -> None:
@@ -387,8 +385,8 @@ def main(args: list[str] | None = None) -> int:
 
     The Jazzy main idiom, with one change: SIGINT/SIGTERM set a flag instead of
     shutting the context down at once, so an active goal is aborted and its result
-    delivered before the node goes. While the node warms its kernels up (before it has
-    started anything) they stop it at once.
+    delivered before the node goes. While the node is built (its kernels' warm-up too),
+    before it has started anything, they stop it at once.
     """
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     argv = list(sys.argv if args is None else args)
@@ -409,9 +407,9 @@ def main(args: list[str] | None = None) -> int:
 
     def on_signal(*_) -> None:
         stopping.set()
-        # the warm-up may compile for minutes and has started nothing yet: stop it now;
-        # anywhere else the node is stopped once built (it may have started threads)
-        if WARMING_UP.is_set():
+        # a node being built has started nothing yet (its warm-up may compile for
+        # minutes): stop it now; once it has, it is stopped as a built node
+        if STARTING.is_set():
             raise KeyboardInterrupt
 
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -423,12 +421,15 @@ def main(args: list[str] | None = None) -> int:
     # watchdog need the rest.
     executor = MultiThreadedExecutor(num_threads=8)
     try:
+        STARTING.set()
         try:
             node = SimNode(fruit=options.fruit, config_file=options.config,
                            namesake_wait=NAMESAKE_WAIT)
         except GripperSimError as err:   # a configuration, parameter or name problem
             rclpy.logging.get_logger(NODE_NAME).error(f'cannot start: {err}')
             return 2
+        finally:
+            STARTING.clear()
         executor.add_node(node)
         while not stopping.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
+from rclpy.callback_groups import CallbackGroup, ReentrantCallbackGroup
 from std_srvs.srv import SetBool, Trigger
 
 from gripper_sim_interfaces.srv import Step
@@ -21,14 +21,16 @@ STEP_WAIT = 0.5   # s
 
 class SimServices:
     """Serves the simulation services of ``node`` (a ``SimNode``) in ``group``; ``~/step``
-    in a group of its own, as it waits for the physics thread to take the steps."""
+    in a reentrant group of its own, as it waits for the physics thread to take the
+    steps: a second request meanwhile runs at once and is refused (``request_steps``),
+    not queued behind the first."""
 
     def __init__(self, node, group: CallbackGroup):
         self._node = node
         node.create_service(Trigger, '~/reset', self._on_reset, callback_group=group)
         node.create_service(SetBool, '~/pause', self._on_pause, callback_group=group)
         node.create_service(Step, '~/step', self._on_step,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+                            callback_group=ReentrantCallbackGroup())
         node.create_service(Trigger, '~/jaw/open', self._on_open, callback_group=group)
 
     def _on_reset(self, request, response):

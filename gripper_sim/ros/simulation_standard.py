@@ -12,8 +12,7 @@ STOPPED: reset to t = 0 and paused, until it is played, paused or stepped).
 from __future__ import annotations
 
 from rclpy.action import ActionServer, CancelResponse
-from rclpy.callback_groups import (CallbackGroup, MutuallyExclusiveCallbackGroup,
-                                   ReentrantCallbackGroup)
+from rclpy.callback_groups import CallbackGroup, ReentrantCallbackGroup
 from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import Result, SimulationState, SimulatorFeatures
 from simulation_interfaces.srv import (GetSimulationState, GetSimulatorFeatures,
@@ -48,7 +47,8 @@ def outcome(code: int = Result.RESULT_OK, message: str = '') -> Result:
 
 class SimulationStandard:
     """Serves the simulation_interfaces services of ``node`` (a ``SimNode``) in
-    ``group``; ``step_simulation`` in a group of its own (it waits for the steps)."""
+    ``group``; ``step_simulation`` in a reentrant group of its own (it waits for the
+    steps; a second request meanwhile is refused at once, not queued)."""
 
     def __init__(self, node, group: CallbackGroup):
         self._node = node
@@ -58,7 +58,7 @@ class SimulationStandard:
         node.create_service(ResetSimulation, 'reset_simulation', self._on_reset,
                             callback_group=group)
         node.create_service(StepSimulation, 'step_simulation', self._on_step,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+                            callback_group=ReentrantCallbackGroup())
         node.create_service(GetSimulationState, 'get_simulation_state', self._on_get_state,
                             callback_group=group)
         node.create_service(SetSimulationState, 'set_simulation_state', self._on_set_state,
