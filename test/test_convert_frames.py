@@ -16,6 +16,7 @@ from gripper_sim.convert.frames import (JOINT_NAMES, WORLD_FRAME, FrameError,
                                         joint_positions, static_transforms)
 from gripper_sim.convert.urdf import gripper_urdf
 from gripper_sim.core.simulation import Simulation
+from gripper_sim.errors import CommandError
 
 
 @pytest.fixture(scope='module')
@@ -97,6 +98,26 @@ def test_urdf_parses_and_its_kinematics_equal_the_tf_tree(moved):
             assert tuple(placed[:3, 3]) == pytest.approx(frame_position(tree, frame),
                                                          abs=1e-12)
             assert placed[:3, :3].ravel().tolist() == pytest.approx([1, 0, 0, 0, 1, 0, 0, 0, 1])
+
+
+@pytest.mark.parametrize('overrides', [[], ['world.table=false'],
+                                       ['world.walls=true', 'world.wall_half_width=0.3']])
+def test_urdf_joint_limits_are_the_commands_the_simulation_accepts(overrides):
+    """A planner reading the URDF plans only lifts and transports the node accepts: each
+    limit is accepted, a millimetre beyond it refused."""
+    config = load_config(overrides=overrides)
+    model = yourdfpy.URDF.load(io.StringIO(gripper_urdf(GripperFrames.from_config(config))),
+                               build_collision_scene_graph=False, load_meshes=False)
+    sim = Simulation(config)
+    for joint, command in (('lift_joint', sim.command_lift),
+                           ('transport_joint', sim.command_transport)):
+        limit = model.joint_map[joint].limit
+        assert limit.lower < limit.upper
+        for value in (limit.lower, limit.upper):
+            command(value)
+        for value in (limit.lower - 1e-3, limit.upper + 1e-3):
+            with pytest.raises(CommandError):
+                command(value)
 
 
 def test_the_conversion_imports_no_ros():

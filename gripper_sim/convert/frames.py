@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping
 
+from gripper_sim.core.gripper import FREE_TRAVEL, lift_range, transport_range
 from gripper_sim.errors import GripperSimError
 
 WORLD_FRAME = 'world'
@@ -56,6 +57,9 @@ class GripperFrames:
         jaw_height, jaw_width, jaw_thickness: m, jaw plate size along z, y and x.
         max_gap: m, largest jaw gap (the jaw joints' upper limit is half of it).
         table_height: m, height of the table surface; None = no table.
+        lift_range, transport_range: m, (lowest, highest) lift height and transport x
+            the simulation accepts (``core.gripper.lift_range``, ``transport_range``):
+            the URDF's joint limits.
     """
 
     prefix: str = ''
@@ -65,6 +69,8 @@ class GripperFrames:
     jaw_thickness: float = 0.01
     max_gap: float = 0.2
     table_height: float | None = 0.0
+    lift_range: tuple[float, float] = (-FREE_TRAVEL, FREE_TRAVEL)
+    transport_range: tuple[float, float] = (-FREE_TRAVEL, FREE_TRAVEL)
 
     def __post_init__(self) -> None:
         check_prefix(self.prefix)
@@ -81,7 +87,8 @@ class GripperFrames:
                    jaw_thickness=float(config['gripper.jaw_thickness']),
                    max_gap=float(config['gripper.max_gap']),
                    table_height=float(config['world.table_height'])
-                   if config['world.table'] else None)
+                   if config['world.table'] else None,
+                   lift_range=lift_range(config), transport_range=transport_range(config))
 
     def name(self, frame: str) -> str:
         """The full name of a gripper frame, e.g. ``g1/left_jaw``."""

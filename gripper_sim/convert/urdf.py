@@ -15,10 +15,9 @@ import xml.etree.ElementTree as ET
 
 from gripper_sim.convert.frames import WORLD_FRAME, GripperFrames
 
-#: Limits of the joints URDF requires (effort N, velocity m/s; the simulation's own
-#: limits are enforced by the simulation, these only describe the model).
-TRANSPORT_RANGE = (-5.0, 5.0)   # m, the scenarios' transport range
-LIFT_RANGE = (-10.0, 10.0)      # m
+#: Limits of the joints URDF requires besides their travel (effort N, velocity m/s;
+#: the travel is what the simulation accepts, ``GripperFrames.lift_range`` and
+#: ``transport_range``).
 EFFORT_LIMIT = 1.0e5            # N
 VELOCITY_LIMIT = 2.0            # m/s
 BASE_SIZE = (0.02, 0.02, 0.02)  # m, a small block to show the gripper centre
@@ -64,8 +63,9 @@ def gripper_urdf(frames: GripperFrames) -> str:
                            (frames.right_jaw, -frames.left_outward)):
         _box_link(robot, frame, plate, (outward * frames.jaw_thickness / 2.0, 0.0, 0.0))
     left, right, lift, transport = frames.joint_names
-    _prismatic(robot, transport, WORLD_FRAME, frames.carriage, (1, 0, 0), *TRANSPORT_RANGE)
-    _prismatic(robot, lift, frames.carriage, frames.base, (0, 0, 1), *LIFT_RANGE)
+    _prismatic(robot, transport, WORLD_FRAME, frames.carriage, (1, 0, 0),
+               *frames.transport_range)
+    _prismatic(robot, lift, frames.carriage, frames.base, (0, 0, 1), *frames.lift_range)
     half_gap = frames.max_gap / 2.0
     _prismatic(robot, left, frames.base, frames.left_jaw, (frames.left_outward, 0, 0),
                0.0, half_gap)

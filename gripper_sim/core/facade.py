@@ -47,7 +47,7 @@ from gripper_sim.core.contact_passes import ContactSettings, contact_step
 from gripper_sim.core.deferred import build
 from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import PatternCachingSolver
-from gripper_sim.core.gripper import GripperState
+from gripper_sim.core.gripper import GripperState, lift_range, transport_range
 from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
 from gripper_sim.core.measures import jaw_normal_forces
 from gripper_sim.core.results import Energies, JawWrench, StepResult
@@ -246,21 +246,21 @@ class SimulationFacade:
     def command_lift(self, height: float, speed: float | None = None) -> None:
         """Move the gripper (jaw centre) to height ``height`` (m)."""
         height = finite('lift height', height)
-        low = (self.config['world.table_height'] + 0.5 * self.config['gripper.jaw_height']
-               if self.config['world.table'] else -10.0)
-        high = low + 10.0 if not self.config['world.table'] else low + 2.0
+        low, high = lift_range(self.config)
         if height < low - 1e-12 or height > high:
+            below = (' (the jaws may not go below the table)'
+                     if self.config['world.table'] else '')
             raise CommandError(f'lift height {height} m is out of range [{low:.4g}, '
-                               f'{high:.4g}] m (the jaws may not go below the table)')
+                               f'{high:.4g}] m{below}')
         speed = self._speed(speed, self.config['gripper.lift_speed'])
         self._grip = replace(self._grip, target_lift=height, lift_speed=speed)
 
     def command_transport(self, x: float, speed: float | None = None) -> None:
         """Move the gripper centre (both jaws) sideways to ``x`` (m) at ``speed`` (m/s)."""
         x = finite('transport x', x)
-        limit = (self.config['world.wall_half_width'] if self.config['world.walls'] else 10.0)
-        if abs(x) > limit:
-            raise CommandError(f'transport x {x} m is out of range [-{limit:g}, {limit:g}] m')
+        low, high = transport_range(self.config)
+        if not low <= x <= high:
+            raise CommandError(f'transport x {x} m is out of range [{low:g}, {high:g}] m')
         speed = self._speed(speed, self.config['gripper.transport_speed'])
         self._grip = replace(self._grip, target_x=x, x_speed=speed)
 

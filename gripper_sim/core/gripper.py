@@ -21,6 +21,29 @@ from dataclasses import dataclass
 from gripper_sim.core import jaw_drive
 
 
+#: m, how far the lift and the transport may move where no table or wall bounds them
+FREE_TRAVEL = 10.0
+#: m, how far above its lowest height (jaws on the table) the lift may go
+LIFT_TRAVEL = 2.0
+
+
+def lift_range(config) -> tuple[float, float]:
+    """(lowest, highest) jaw centre height (m) a lift command may ask for, from the flat
+    configuration: from the jaws' lower edge on the table to ``LIFT_TRAVEL`` above it,
+    or +-``FREE_TRAVEL`` without a table."""
+    if not config['world.table']:
+        return -FREE_TRAVEL, FREE_TRAVEL
+    low = config['world.table_height'] + 0.5 * config['gripper.jaw_height']
+    return low, low + LIFT_TRAVEL
+
+
+def transport_range(config) -> tuple[float, float]:
+    """(lowest, highest) gripper centre x (m) a transport command may ask for: between
+    the walls, or +-``FREE_TRAVEL`` without them."""
+    limit = config['world.wall_half_width'] if config['world.walls'] else FREE_TRAVEL
+    return -limit, limit
+
+
 @dataclass(slots=True)
 class GripperState:
     """The gripper's kinematic state; treated as immutable (new states come from
