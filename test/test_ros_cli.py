@@ -155,6 +155,28 @@ def test_ctrl_c_cancels_the_grasp(client, running):
         node_process.log()[-3000:]
 
 
+def test_step_waits_for_its_answer_however_long_the_steps_take(client):
+    """``--timeout`` bounds finding the node; the steps' answer is awaited: here the
+    ~/pause that ends a million steps, well after the 2 s timeout."""
+    client.pause(True)
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'gripper_sim.cli.main', 'step', '1000000', '--timeout', '2'],
+        env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        start = client.sim_time()
+        client.spin_until(lambda: client.sim_time() > start, 120, 'the steps to start')
+        later = time.monotonic() + 4.0
+        client.spin_until(lambda: time.monotonic() > later, 10, 'the timeout to pass')
+        assert process.poll() is None, process.communicate()
+        client.pause(True)
+        out, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 1, out + err
+    assert 'stopped after' in err and 'Traceback' not in err, err
+
+
 def test_status_prints_the_fruit_state(client):
     run = cli('status')
     assert run.returncode == 0, run.stderr

@@ -326,18 +326,21 @@ def _steps(text: str) -> int:
     return value
 
 
-def _call(args, srv_type, service: str, request):
+def _call(args, srv_type, service: str, request, answer_timeout: float | None = None):
     """Call the node's ``service`` (relative to ``--node``) with ``request``; (exit code,
-    response): exit 1 with a hint if no node serves it or answers in ``--timeout`` s."""
+    response): exit 1 with a hint if no node serves it in ``--timeout`` s or answers in
+    ``answer_timeout`` s (default ``--timeout``; ``math.inf``: until it answers)."""
     node_path = args.node.rstrip('/')
     name = f'{node_path}/{service}'
+    answer_timeout = args.timeout if answer_timeout is None else answer_timeout
     with _Session('gripper_sim_cli') as session:
         client = session.node.create_client(srv_type, name)
         if not session.spin_until(client.service_is_ready, args.timeout):
             return _no_node(f'service {name}', node_path, args.timeout), None
         future = client.call_async(request)
-        if not session.spin_until(future.done, args.timeout):
-            return _error(f'the node did not answer {name} within {args.timeout:g} s'), None
+        if not session.spin_until(future.done, answer_timeout):
+            return _error(f'the node did not answer {name} within '
+                          f'{answer_timeout:g} s'), None
         return 0, future.result()
 
 
@@ -360,8 +363,16 @@ def _service(args) -> int:
 
 
 def _step(args) -> int:
+    """``~/step``: the node answers once it has taken the steps, however long they take,
+    so the answer is awaited without a limit (Ctrl-C leaves the node stepping)."""
     from gripper_sim_interfaces.srv import Step
-    code, response = _call(args, Step, 'step', Step.Request(steps=args.steps))
+    try:
+        code, response = _call(args, Step, 'step', Step.Request(steps=args.steps),
+                               answer_timeout=math.inf)
+    except KeyboardInterrupt:
+        print('interrupted: the node goes on with the steps; `gripper-sim pause` ends them',
+              file=sys.stderr)
+        raise
     if response is None:
         return code
     if response.success:
