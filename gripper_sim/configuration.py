@@ -178,10 +178,13 @@ SCHEMA: dict[str, Key] = {
                                 'on the table (or 0 without a table)', low=-10.0,
                                 high=10.0, nullable=True),
     # --- gripper
-    'gripper.initial_gap': Key(None, 'm', 'jaw gap at start; null = diameter + 10 mm',
+    'gripper.initial_gap': Key(None, 'm', 'jaw gap at start (deformable fingers: between '
+                               'their backings); not less than the gap at which the fingers '
+                               "touch the fruit (rigid faces, pads: the fruit's width across "
+                               'them); null = that gap + 10 mm, at most gripper.max_gap',
                                low=0.0, high=1.0, nullable=True),
-    'gripper.max_gap': Key(0.2, 'm', 'largest gap the jaws can open to', low=0.001,
-                           high=2.0),
+    'gripper.max_gap': Key(0.2, 'm', 'largest gap the jaws can open to (the fruit must fit '
+                           'between the fingers there)', low=0.001, high=2.0),
     'gripper.jaw_height': Key(0.04, 'm', 'length of the jaw face along z', low=1e-3,
                               high=1.0),
     'gripper.jaw_width': Key(0.04, 'm', '3D: width of the jaw face along y', low=1e-3,
@@ -456,15 +459,24 @@ def defaults() -> dict:
     return unflatten({key: copy.deepcopy(spec.default) for key, spec in SCHEMA.items()})
 
 
-def flatten(tree: Mapping, prefix: str = '') -> dict[str, Any]:
-    """Nested mapping to ``{'a.b.c': value}``."""
+def flatten(tree: Mapping, prefix: str = '', source: str = '') -> dict[str, Any]:
+    """Nested mapping to ``{'a.b.c': value}``.
+
+    Raises:
+        ConfigError: a key given twice, dotted and nested (``sim.dt: 0.001`` beside
+            ``sim: {dt: 0.002}``), naming it and ``source`` (e.g. "config file 'x.yaml'").
+    """
     flat: dict[str, Any] = {}
     for key, value in tree.items():
         dotted = f'{prefix}{key}'
-        if isinstance(value, Mapping):
-            flat.update(flatten(value, dotted + '.'))
-        else:
-            flat[dotted] = value
+        leaves = (flatten(value, dotted + '.', source) if isinstance(value, Mapping)
+                  else {dotted: value})
+        for name, leaf in leaves.items():
+            if name in flat:
+                where = f' in {source}' if source else ''
+                raise ConfigError(f"key '{name}' is given twice{where} (once dotted, once "
+                                  'nested): keep one')
+            flat[name] = leaf
     return flat
 
 
@@ -539,10 +551,7 @@ def parse_override(text: str) -> tuple[str, Any]:
     key = key.strip()
     if key not in SCHEMA and key not in SELECTORS:
         raise ConfigError(f"unknown config key '{key}'{key_suggestion(key)}")
-    try:
-        value = yaml.safe_load(raw) if raw.strip() else None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"override '{text}': value is not valid YAML") from err
+    value = parse_yaml(raw, f"override '{text}': value") if raw.strip() else None
     if key in SELECTORS and not isinstance(value, str):
         raise ConfigError(f"override '{text}': {key} must be a {key} preset name")
     return key, value
@@ -557,20 +566,70 @@ def key_suggestion(key: str) -> str:
 
 
 def read_yaml(path: str | os.PathLike) -> dict:
-    """Read a YAML mapping, turning every failure into a ConfigError."""
+    """Read a YAML mapping (UTF-8 text), turning every failure into a ConfigError."""
+    source = f"config file '{path}'"
     try:
-        text = Path(path).read_text(encoding='utf-8')
+        raw = Path(path).read_bytes()
     except OSError as err:
-        raise ConfigError(f"cannot read config file '{path}': {err.strerror}") from err
+        raise ConfigError(f"cannot read {source}: {err.strerror}") from err
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ConfigError(f"config file '{path}' is not valid YAML: {err}") from err
+        text = raw.decode('utf-8')
+    except UnicodeDecodeError as err:
+        raise ConfigError(f'{source} is not UTF-8 text (byte 0x{raw[err.start]:02x} at '
+                          f'offset {err.start}): save it as UTF-8') from None
+    data = parse_yaml(text, source)
     if data is None:
         return {}
     if not isinstance(data, Mapping):
-        raise ConfigError(f"config file '{path}' must hold a mapping of keys")
+        raise ConfigError(f"{source} must hold a mapping of keys")
     return dict(data)
+
+
+class UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader refusing a mapping key given twice (``SafeLoader`` keeps the
+    last one silently); a merge (``<<: *base``) may still be overridden."""
+
+    def construct_mapping(self, node, deep=False):
+        first_marks: dict = {}
+        for key_node, _ in node.value:
+            if key_node.tag == 'tag:yaml.org,2002:merge':
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = first_marks.setdefault(key, key_node.start_mark)
+            except TypeError:   # an unhashable key: the base class says so
+                continue
+            if first is not key_node.start_mark:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key '{key}' is given twice (first on line "
+                    f'{first.line + 1}): keep one', key_node.start_mark)
+        return super().construct_mapping(node, deep)
+
+
+def parse_yaml(text: str, source: str) -> Any:
+    """The YAML document ``text`` (``UniqueKeyLoader``); ConfigError with a one-line
+    reason (line and column of the problem) naming ``source``."""
+    try:
+        return yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a safe loader
+    except yaml.YAMLError as err:
+        raise ConfigError(f'{source} is not valid YAML: {yaml_problem(err)}') from None
+    except RecursionError:
+        raise ConfigError(f'{source} is not valid YAML: it nests too deeply') from None
+
+
+def yaml_problem(err: yaml.YAMLError) -> str:
+    """A PyYAML error on one line: where (line, column) and what."""
+    mark = getattr(err, 'problem_mark', None)
+    if isinstance(err, yaml.MarkedYAMLError) and mark is not None:
+        context = ''
+        if err.context and err.context_mark is not None:
+            context = (f' ({err.context} from line {err.context_mark.line + 1}, column '
+                       f'{err.context_mark.column + 1})')
+        return f'line {mark.line + 1}, column {mark.column + 1}: {err.problem}{context}'
+    if isinstance(err, yaml.reader.ReaderError):   # (``character``: the code point)
+        return (f'character #x{err.character:04x} at offset {err.position} is not '
+                f'allowed ({err.reason})')
+    return ' '.join(str(err).split())
 
 
 def available_fingers() -> list[str]:
@@ -708,7 +767,7 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
         chosen.update(_finger_preset(finger_name))
     user: dict[str, Any] = {}
     if config_file is not None:
-        user.update(_checked_flatten(data, str(config_file)))
+        user.update(_checked_flatten(data, f"config file '{config_file}'"))
     for key, value in items:
         if key in SELECTORS:
             continue
@@ -848,7 +907,7 @@ def _finger_preset(name: str) -> dict[str, Any]:
 
 
 def _checked_flatten(data: Mapping, source: str) -> dict[str, Any]:
-    flat = flatten(data)
+    flat = flatten(data, source=source)
     for key in flat:
         if key not in SCHEMA:
             raise ConfigError(f"unknown config key '{key}' in {source}{key_suggestion(key)}")

@@ -11,6 +11,7 @@ import os
 import sys
 import tempfile
 from contextlib import ExitStack
+from pathlib import Path
 
 import numpy as np
 
@@ -229,6 +230,48 @@ def _damage_note(dimension: int) -> tuple[str, str]:
     return ('resolved', 'surface area') if dimension == 3 else ('Hertz', 'outline')
 
 
+def check_outputs(args) -> None:
+    """GripperSimError unless every output file the verb's options name can be written
+    (``check_output_file``): ``--out`` (a new recording) and ``--html`` (a report,
+    replaced if it exists). Called before the simulation, which must not run for minutes
+    to fail at its end."""
+    if getattr(args, 'out', None):
+        check_output_file(args.out, '--out', replace=False)
+    if getattr(args, 'html', None):
+        check_output_file(args.html, '--html', replace=True)
+
+
+def check_output_file(path: str, option: str, *, replace: bool) -> None:
+    """GripperSimError unless a file can be written at ``path`` (the value of ``option``):
+    not a directory, in an existing folder that takes a new file; an existing file only
+    where ``replace`` (recordings are never written over) and if it can be written.
+
+    The folder is tried by creating the file and removing it again: ``os.access`` says
+    yes to root on a read-only or virtual file system (/sys)."""
+    target = Path(path).expanduser()
+    if target.is_dir():
+        raise GripperSimError(f'cannot write {option} {path}: it is a directory; give a '
+                              'file name')
+    if target.exists():
+        if not replace:
+            raise GripperSimError(f'cannot write {option} {path}: it already exists; choose '
+                                  'another name or remove it (recordings are never '
+                                  'overwritten)')
+        mode = 'ab'   # opened, not written: its contents stay
+    elif not target.parent.is_dir():
+        raise GripperSimError(f"cannot write {option} {path}: there is no directory "
+                              f"'{target.parent}'")
+    else:
+        mode = 'xb'
+    try:
+        with open(target, mode):
+            pass
+    except OSError as err:
+        raise GripperSimError(f'cannot write {option} {path}: {err.strerror}') from None
+    if mode == 'xb':
+        target.unlink()
+
+
 def _dimension(sim) -> int:
     return int(getattr(sim, 'dimension', 2))
 
@@ -272,6 +315,7 @@ def run_squeeze(args) -> int:
     from gripper_sim.workflows.factory import make_simulation as Simulation
     from gripper_sim.workflows.squeeze import (SQUEEZE_DEFAULTS, check_squeeze, squeeze,
                                               stopped_at_max_effort)
+    check_outputs(args)
     config = config_from_args(args, SQUEEZE_DEFAULTS)
     check_squeeze(config, args.speed, args.to_force)
     sim = Simulation(config)
@@ -304,6 +348,7 @@ def run_squeeze(args) -> int:
 def run_pick(args) -> int:
     from gripper_sim.workflows.grasp import GraspSequence, run_grasp
     from gripper_sim.workflows.factory import make_simulation as Simulation
+    check_outputs(args)
     config = config_from_args(args)
     if config['gripper.initial_lift'] is None and config['world.table']:
         # the jaws start at the grasp height: the fruit's centre, or higher where a small
@@ -377,6 +422,7 @@ def run_fruits(args) -> int:
 def run_scenario_verb(args) -> int:
     from gripper_sim.workflows.scenario import load_scenario, run_scenario, scenario_config
     from gripper_sim.workflows.factory import make_simulation as Simulation
+    check_outputs(args)
     scenario = load_scenario(args.scenario)
     if args.force is not None:
         scenario = scenario.with_values(close__mode='force', close__force=args.force)
@@ -420,6 +466,7 @@ def run_window(args) -> int:
     from gripper_sim.workflows.scenario import load_scenario, scenario_config
     from gripper_sim.workflows.window import (TOLERANCE, bruise_trial_above, grasp_window,
                                               reach_bracket)
+    check_outputs(args)
     scenario = load_scenario(args.scenario)
     config = scenario_config(scenario, fruit=args.fruit, finger=args.finger,
                              config_file=args.config, overrides=args.overrides)

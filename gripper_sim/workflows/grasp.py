@@ -31,6 +31,11 @@ CLOSING, SQUEEZING, LIFTING, HOLDING, RELEASING, DONE = (
 FORCE_REACHED = 0.97
 #: time (s) the grip force is held on the table before lifting
 SETTLE_TIME = 0.2
+#: s of simulation a grasp may take beyond its phases' planned durations
+#: (``GraspSequence.time_needed``) before ``evaluate`` stops it
+TIME_MARGIN = 10.0
+#: s, ``evaluate``'s time limit for a machine that does not say how long it needs
+DEFAULT_TIME_LIMIT = 120.0
 
 
 class GraspSequence:
@@ -77,6 +82,21 @@ class GraspSequence:
     @property
     def done(self) -> bool:
         return self.phase == DONE
+
+    def time_needed(self) -> float:
+        """s of simulation the whole sequence may take from now: the close (up to its
+        deadline), the settling, the lift, the hold and, with ``release``, the lowering
+        and opening, each at its commanded or configured speed; plus ``TIME_MARGIN``."""
+        sim, grip = self.sim, self.sim.gripper_state
+        lift = 0.0
+        if self.lift_height > 0:
+            speed = grip.lift_speed
+            lift = self.lift_height / speed + speed / sim.config['gripper.lift_acceleration']
+        release = 0.0
+        if self.release:
+            release = lift + sim.initial_gap / sim.config['gripper.close_speed']
+        return (max(self.closing_deadline - sim.time, 0.0) + SETTLE_TIME + lift
+                + self.hold_time + release + TIME_MARGIN)
 
     def _enter(self, phase: str) -> None:
         self.phase = phase
@@ -216,7 +236,7 @@ class GraspMachine(Protocol):
     A machine that also has ``stop_rules(end)`` (``core.multistep.StopRules`` or None)
     and ``include(skipped)`` (``core.multistep.Skipped``) lets ``evaluate`` run the steps
     at which it decides nothing in one compiled call (``Simulation.advance``) when nothing
-    watches every step.
+    watches every step; one that has ``time_needed()`` (s) sets ``evaluate``'s time limit.
     """
 
     phase: str
@@ -314,8 +334,10 @@ class GraspEvaluation:
 
 def evaluate(sim, machine: GraspMachine, force: float,
              on_step: Callable[[StepResult, str], None] | None = None,
-             time_limit: float = 120.0) -> GraspEvaluation:
-    """Step ``sim`` until ``machine`` is done (or ``time_limit`` s of simulation).
+             time_limit: float | None = None) -> GraspEvaluation:
+    """Step ``sim`` until ``machine`` is done (or ``time_limit`` s of simulation; None:
+    what the machine says it needs, ``time_needed()``, else ``DEFAULT_TIME_LIMIT``). A
+    machine stopped at the limit keeps its outcome ('running') with a message saying so.
 
     A ``ConvergenceError`` of the solver ends the run: the evaluation then has outcome
     'solver failed', ``error`` set and counts as neither held nor undamaged (dropped
@@ -327,6 +349,9 @@ def evaluate(sim, machine: GraspMachine, force: float,
     """
     peaks = RunPeaks()
     start_step = sim.last.step
+    if time_limit is None:
+        time_needed = getattr(machine, 'time_needed', None)
+        time_limit = time_needed() if time_needed is not None else DEFAULT_TIME_LIMIT
     end = sim.time + time_limit
     try:
         while not machine.done and sim.time < end:
@@ -352,6 +377,10 @@ def evaluate(sim, machine: GraspMachine, force: float,
             sim_time=float(sim.time), steps=int(sim.last.step - start_step),
             message=str(err), failure=err)
     summary = machine.summary()
+    if not machine.done:
+        stopped = (f'stopped at the time limit ({time_limit:.4g} s simulated) while '
+                   f'{machine.phase}')
+        summary['message'] = '; '.join(filter(None, (summary.get('message'), stopped)))
     damage = sim.last.damage
     outcome = str(summary['outcome'])
     dropped = bool(summary.get('dropped', outcome == 'dropped'))
@@ -373,8 +402,9 @@ def evaluate(sim, machine: GraspMachine, force: float,
 
 
 def run_grasp(sim: Simulation, sequence: GraspSequence, on_step=None,
-              time_limit: float = 120.0) -> dict:
-    """Step until the sequence is done (or ``time_limit`` s of simulation); its summary.
+              time_limit: float | None = None) -> dict:
+    """Step until the sequence is done (or ``time_limit`` s of simulation; None: the
+    sequence's ``time_needed``); its summary.
 
     Raises:
         ConvergenceError: the solver failed (``evaluate``'s failure, raised again).
