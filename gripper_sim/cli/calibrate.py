@@ -49,8 +49,9 @@ def register(subparsers) -> None:
     parser.add_argument('--model', choices=('shell', 'solid'),
                         help='fruit model to calibrate (default: the preset\'s)')
     parser.add_argument('--fit', metavar='KEY,KEY',
-                        help='keys to fit (default: flesh.youngs_modulus,pressure.turgor for '
-                             'a shell, flesh.youngs_modulus for a solid)')
+                        help='keys to fit, each with an effect in the set-up (default: '
+                             'flesh.youngs_modulus,pressure.turgor for a shell, '
+                             'flesh.youngs_modulus for a solid)')
     parser.add_argument('--speed', type=_quantity(SPEED_UNITS, 'm/s', '--speed'),
                         metavar='SPEED', help='plate speed: m/s, or with a unit (20mm/min); '
                         'default: the file\'s plate_speed, else 0.005 m/s')
@@ -105,7 +106,8 @@ def run_calibrate(args) -> int:
     # this parser, and scipy.optimize, matplotlib and plotly take seconds to import
     from gripper_sim.workflows.calibrate_bruise import calibrate_bruise
     from gripper_sim.workflows.calibrate_fit import fit
-    from gripper_sim.workflows.calibrate_model import CompressionTest, fit_keys
+    from gripper_sim.workflows.calibrate_model import (CompressionTest, check_fit_keys,
+                                                       fit_keys)
     from gripper_sim.workflows.calibrate_plots import plot_html, plot_png
     from gripper_sim.workflows.calibrate_preset import preset_text, write_preset
     paths = _outputs(args)
@@ -114,6 +116,7 @@ def run_calibrate(args) -> int:
     test = CompressionTest(curve, fruit=args.fruit, overrides=_overrides(args),
                            config_file=args.config)
     keys = fit_keys(args.fit, test.model)
+    check_fit_keys(keys, test.base)
     text = not args.json
     if text:
         print(f'calibrating {", ".join(k.removeprefix("fruit.") for k in keys)} of the '
@@ -127,7 +130,7 @@ def run_calibrate(args) -> int:
         bruise = calibrate_bruise(test, result.config, result.fitted, args.bruise_force,
                                   args.bruise_deformation)
     cpu = time.process_time() - cpu
-    write_preset(paths[0], preset_text(test, result, name, bruise))
+    write_preset(paths[0], preset_text(test, result, name, bruise), test.dimension)
     if not args.no_plots:
         plot_png(result, paths[1], name, bruise)
         plot_html(result, paths[2], name, bruise)

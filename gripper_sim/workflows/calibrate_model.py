@@ -20,7 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
-from gripper_sim.configuration import SCHEMA, load_config
+from gripper_sim.configuration import SCHEMA, load_config, no_effect_reason
 from gripper_sim.workflows.calibrate_data import CalibrationError, CompressionCurve
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.squeeze import SQUEEZE_DEFAULTS, check_squeeze, squeeze
@@ -69,14 +69,18 @@ class SimulatedCurve:
 
 def fit_keys(names: str | None, model: str) -> tuple[str, ...]:
     """The keys to fit: ``'flesh.youngs_modulus,pressure.turgor'`` (``fruit.`` may be
-    left out) or the model's default; CalibrationError for a key that cannot be fitted."""
-    if not names:
+    left out) or, for None, the model's default; CalibrationError for a key that cannot
+    be fitted, and for no key or an empty one ('', 'a,,b')."""
+    if names is None:
         if model not in DEFAULT_FIT:
             raise CalibrationError(f"the {model} model cannot be calibrated (use --model "
                                    'shell or solid)')
         return DEFAULT_FIT[model]
     keys = []
     for name in (n.strip() for n in names.split(',')):
+        if not name:
+            raise CalibrationError(f"--fit '{names}' names an empty key: give KEY,KEY, or "
+                                   "leave --fit out for the model's default keys")
         key = name if name.startswith('fruit.') else f'fruit.{name}'
         if key not in FITTABLE_KEYS:
             known = ', '.join(k.removeprefix('fruit.') for k in FITTABLE_KEYS)
@@ -85,6 +89,20 @@ def fit_keys(names: str | None, model: str) -> tuple[str, ...]:
             raise CalibrationError(f"--fit: '{name}' is named twice")
         keys.append(key)
     return tuple(keys)
+
+
+def check_fit_keys(keys: tuple[str, ...], config: Mapping) -> None:
+    """Refuse to fit a key that has no effect in ``config``'s set-up
+    (``configuration.no_effect_reason``: e.g. the turgor of a solid): the fit could not
+    move the force with it, and the preset would record a meaningless value.
+
+    Raises:
+        CalibrationError: naming the key and why it has no effect.
+    """
+    for key in keys:
+        reason = no_effect_reason(key, config)
+        if reason is not None:
+            raise CalibrationError(f"--fit: '{key}' has no effect in this set-up: {reason}")
 
 
 class CompressionTest:

@@ -93,8 +93,10 @@ def preset_text(test: CompressionTest, result: FitResult, name: str,
     return '\n'.join(header) + '\n' + body + tail
 
 
-def write_preset(path: str | Path, text: str) -> None:
-    """Write the preset and check that it loads as a fruit (strict validation).
+def write_preset(path: str | Path, text: str, dimension: int) -> None:
+    """Write the preset and check that it loads as a fruit (strict validation) in the
+    ``dimension`` it was calibrated in (as its header says to use it: in another one its
+    ``calibration:`` record would make loading it warn).
 
     Raises:
         CalibrationError: the file cannot be written.
@@ -105,4 +107,4 @@ def write_preset(path: str | Path, text: str) -> None:
         path.write_text(text, encoding='utf-8')
     except OSError as err:
         raise CalibrationError(f"cannot write the preset '{path}': {err.strerror}") from err
-    load_config(fruit=str(path))
+    load_config(fruit=str(path), overrides={'dimension': dimension})

@@ -119,11 +119,11 @@ def parse_population(data: Any, where: str = 'population') -> Population:
 
 
 def _integer(value: Any, where: str, low: int, high: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not float(value).is_integer() or not low <= value <= high:
+    number = as_number(value)
+    if not math.isfinite(number) or not number.is_integer() or not low <= number <= high:
         raise ConfigError(f"study key '{where}' must be an integer in [{low}, {high}], "
                           f'got {value!r}')
-    return int(value)
+    return int(number)
 
 
 def _distribution(key: str, spec: Any, where: str) -> Distribution:
@@ -168,14 +168,22 @@ def _distribution(key: str, spec: Any, where: str) -> Distribution:
     return Distribution(key=key, kind=kind, params=params)
 
 
-def _number(value: Any, where: str) -> float:
-    """A finite float; text such as '1.5e6' (YAML 1.1 reads it as a string) too."""
+def as_number(value: Any) -> float:
+    """``value`` as a float, NaN if it is no number: the one reading of every numeric
+    field of a study file. Text such as '1e6' or '1.5e6' is a number (YAML 1.1 reads a
+    number written without a dot, or without a sign after the 'e', as a string), as
+    the configuration keys take it; true and false are not."""
+    if isinstance(value, bool):
+        return math.nan
     try:
-        if isinstance(value, bool):
-            raise ValueError
-        number = float(value)
+        return float(value)
     except (TypeError, ValueError):
-        number = math.nan
+        return math.nan
+
+
+def _number(value: Any, where: str) -> float:
+    """A finite float (``as_number``), else ConfigError naming ``where``."""
+    number = as_number(value)
     if not math.isfinite(number):
         raise ConfigError(f"study key '{where}' must be a finite number, got {value!r}")
     return number

@@ -7,7 +7,9 @@ force. All fruits of all design points run in parallel over the cluster; each
 fruit's evaluations become rows as its task returns. A task is given the rows already
 stored for its fruit (same effective configuration, scenario, force, kind and code
 version: ``case_key``) and does not compute them again: a study run again computes only
-what is missing.
+what is missing. A results directory holds one study (``check_results_directory``):
+another study, or a changed definition of this one, is refused before anything is
+written, so that no rows are mixed.
 
 The cluster: a local one on this machine's cores by default (worker processes on
 127.0.0.1, one thread each), or an existing one (``scheduler='tcp://HOST:8786'``).
@@ -37,7 +39,7 @@ from gripper_sim.errors import GripperSimError
 from gripper_sim.workflows.grasp import GraspEvaluation
 from gripper_sim.workflows.population_window import (SampleWindow, grid_curve,
                                                      population_window)
-from gripper_sim.workflows.study_results import RowStore
+from gripper_sim.workflows.study_results import RowStore, held_study
 from gripper_sim.workflows.study_spec import Study
 from gripper_sim.workflows.study_spec import FruitSetup
 from gripper_sim.workflows.study_tasks import (answer_key, code_version, evaluation_of,
@@ -258,16 +260,22 @@ class _Runner:
 def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = None,
               workers: int | None = None, progress: bool = True) -> StudyRun:
     """Run ``study``, its rows in ``out/rows`` (resuming what is there), then its summary.
+    Nothing is written before the cluster is reached.
 
     Raises:
-        StudyError: the cluster cannot be reached, or runs other code.
+        StudyError: ``out`` holds another study's results or those of a changed
+            definition of this one (``check_results_directory``), the cluster cannot be
+            reached, or runs other code.
         ConfigError: a sample of the population is invalid.
     """
     samples = study.population.draw()
-    store = RowStore(out)
+    identity = dict(study=study.name, definition=study.definition_hash())
+    check_results_directory(out, identity)
     start = time.perf_counter()
     with open_client(scheduler, workers) as client:
         started = time.perf_counter()
+        store = RowStore(out)
+        store.claim(identity)
         runner = _Runner(study, store, client, progress)
         try:
             runner.start(samples)
@@ -283,6 +291,30 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
     return StudyRun(computed=runner.computed, reused=runner.reused,
                     interrupted=not complete, summary=summary, rows=store.sorted_rows(),
                     startup_time=started - start, run_time=finished - started)
+
+
+def check_results_directory(out: str | os.PathLike, identity: dict[str, str]) -> None:
+    """Refuse to run the study of ``identity`` ({'study': name, 'definition': hash})
+    into ``out`` when ``out`` holds the results of another study, or of another
+    definition of it: its rows would be mixed with the new ones. Resuming the same
+    study (same name and definition) passes; so do results written before directories
+    recorded their definition, if they are of the same study.
+
+    Raises:
+        StudyError: ``out`` holds other results (the message says what to do).
+    """
+    held = held_study(out)
+    if held is None:
+        return
+    if held['study'] != identity['study']:
+        raise StudyError(f"{out} holds study '{held['study']}' (its rows would be mixed "
+                         f"with those of '{identity['study']}'): give another --out, or "
+                         f'remove {out}')
+    if held.get('definition') not in (None, identity['definition']):
+        raise StudyError(f"{out} holds study '{held['study']}' run from another definition "
+                         '(its base, axes, population or tolerance changed since; the rows '
+                         'would be mixed): give another --out, or remove '
+                         f'{out} to run it anew')
 
 
 def summarise(study: Study, chains: list[_Chain], store: RowStore, complete: bool) -> dict:

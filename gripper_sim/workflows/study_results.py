@@ -8,10 +8,16 @@ killed study loses at most the last buffer and never leaves a half-written file.
 ``compact`` rewrites all parts as one, sorted. Each row is keyed by ``case_key`` (the
 case's effective configuration, scenario, force, kind and code version): a row already
 stored is never computed again.
+
+``DIR/study.json`` names the study whose rows the directory holds (``identity``: its
+name and ``definition`` hash), so that a run of another study, or of a changed
+definition, into the directory is refused instead of mixing its rows in
+(``held_study``; ``workflows.study.run_study`` checks it).
 """
 from __future__ import annotations
 
 import csv
+import json
 import os
 import time
 from pathlib import Path
@@ -26,6 +32,8 @@ FLUSH_SECONDS = 2.0
 FLUSH_ROWS = 200
 #: the order rows are sorted in (then by case_key)
 SORT_KEYS = ('point', 'sample', 'kind', 'force')
+#: the file in a results directory naming the study it holds (see the module docstring)
+IDENTITY_FILE = 'study.json'
 
 
 class StudyResultsError(GripperSimError):
@@ -97,6 +105,17 @@ class RowStore:
         for part in old:
             part.unlink()
 
+    def claim(self, identity: dict[str, str]) -> None:
+        """Write ``identity`` ({'study': name, 'definition': hash}) as the directory's
+        ``IDENTITY_FILE``."""
+        path = self.directory / IDENTITY_FILE
+        tmp = self.directory / f'.{IDENTITY_FILE}.tmp'
+        try:
+            tmp.write_text(json.dumps(identity, indent=1) + '\n', encoding='utf-8')
+            os.replace(tmp, path)
+        except OSError as err:
+            raise StudyResultsError(f"cannot write '{path}': {err.strerror}") from err
+
     def write_csv(self, path: str | os.PathLike) -> None:
         """Every row as CSV (columns in the order of the first row)."""
         rows = self.sorted_rows()
@@ -116,6 +135,35 @@ class RowStore:
         except OSError as err:
             raise StudyResultsError(f"cannot write '{self.parts / name}': "
                                     f'{err.strerror}') from err
+
+
+def held_study(directory: str | os.PathLike) -> dict[str, str | None] | None:
+    """The identity of the study whose results ``directory`` holds, without changing
+    it: its ``IDENTITY_FILE``, else (results written before there was one) the
+    ``study`` names of its rows with ``definition`` None; None if it holds no results.
+
+    Raises:
+        StudyResultsError: the identity file or a part cannot be read.
+    """
+    directory = Path(directory)
+    path = directory / IDENTITY_FILE
+    if path.is_file():
+        try:
+            identity = json.loads(path.read_text(encoding='utf-8'))
+        except (OSError, ValueError) as err:
+            raise StudyResultsError(f"cannot read '{path}': {err}") from err
+        if not isinstance(identity, dict) or not isinstance(identity.get('study'), str):
+            raise StudyResultsError(f"'{path}' does not name a study")
+        return identity
+    names: set[str] = set()
+    for part in sorted((directory / 'rows').glob('part-*.parquet')):
+        try:
+            names.update(pq.read_table(part, columns=['study']).column('study').to_pylist())
+        except (OSError, KeyError, pa.ArrowException) as err:
+            raise StudyResultsError(f"cannot read '{part}': {err}") from err
+    if not names:
+        return None
+    return dict(study=', '.join(sorted(map(str, names))), definition=None)
 
 
 def _columns(rows: Iterable[dict[str, Any]]) -> list[str]:

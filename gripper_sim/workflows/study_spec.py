@@ -21,7 +21,9 @@ naming the key.
 """
 from __future__ import annotations
 
+import hashlib
 import itertools
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +32,7 @@ from typing import Any, Mapping
 from gripper_sim.configuration import (SCHEMA, key_suggestion, load_config, package_config_dir,
                                        read_yaml)
 from gripper_sim.errors import ConfigError
-from gripper_sim.workflows.population import Population, parse_population
+from gripper_sim.workflows.population import Population, as_number, parse_population
 from gripper_sim.workflows.scenario import (SCENARIO_SCHEMA, Scenario, load_scenario,
                                             scenario_config)
 from gripper_sim.workflows.window import TOLERANCE, estimates, trial_setup
@@ -90,6 +92,23 @@ class Study:
     @property
     def method(self) -> str:
         return 'grid' if self.forces else 'bisection'
+
+    def definition_hash(self) -> str:
+        """16 hex digits of what decides the study's rows: its name, base set-up (the
+        scenario's values), axes, population and tolerance. Not its description, file
+        path, fraction or confidence (they change the summary, not the rows)."""
+        scenario = self.base['scenario']
+        definition = dict(
+            name=self.name,
+            base=dict(self.base, scenario=dict(values=dict(scenario.values),
+                                               overrides=dict(scenario.overrides))),
+            axes={key: list(values) for key, values in self.axes.items()},
+            population=dict(samples=self.population.samples, seed=self.population.seed,
+                            distributions=[[d.key, d.kind, dict(d.params)]
+                                           for d in self.population.distributions]),
+            tolerance=self.tolerance)
+        text = json.dumps(definition, sort_keys=True, default=repr)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def trial(self, point: DesignPoint, sample: int,
               drawn: Mapping[str, float]) -> FruitSetup:
@@ -200,8 +219,9 @@ def _base(data: Mapping) -> dict[str, Any]:
         if key not in SCHEMA:
             raise ConfigError(f"unknown config key '{key}' in base.set{key_suggestion(key)}")
     return dict(fruit=data.get('fruit') or scenario['fruit'],
-                finger=data.get('finger') or scenario['finger'],
-                scenario=scenario, set=dict(overrides))
+                finger=data.get('finger') or scenario['finger'], scenario=scenario,
+                set={key: _read_number(value, SCHEMA[key].kind)
+                     for key, value in overrides.items()})
 
 
 def _axes(data: Mapping, scenario: Scenario) -> dict[str, tuple]:
@@ -215,19 +235,22 @@ def _axes(data: Mapping, scenario: Scenario) -> dict[str, tuple]:
         if not values:
             raise ConfigError(f"axis '{key}' is empty: give it at least one value")
         if key == FORCE_AXIS:
-            for value in values:
-                if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                        or not math.isfinite(value) or value <= 0:
+            forces = [as_number(value) for value in values]
+            for value, force in zip(values, forces):
+                if not math.isfinite(force) or force <= 0:
                     raise ConfigError(f"axis 'force' values must be positive grip forces "
                                       f'(N), got {value!r}')
-            values = sorted(float(v) for v in values)
+            values = sorted(forces)
         elif key.startswith(SCENARIO_PREFIX):
             name = key[len(SCENARIO_PREFIX):]
             if name not in SCENARIO_SCHEMA:
                 raise ConfigError(f"unknown scenario key '{name}' in axis '{key}'")
+            values = [_read_number(value, SCENARIO_SCHEMA[name].kind) for value in values]
             for value in values:  # validates each value
                 scenario.with_values(**{name.replace('.', '__'): value})
-        elif key not in PRESET_AXES and key not in SCHEMA:
+        elif key in SCHEMA:
+            values = [_read_number(value, SCHEMA[key].kind) for value in values]
+        elif key not in PRESET_AXES:
             raise ConfigError(f"unknown axis key '{key}'{key_suggestion(key)} (an axis is "
                               "'fruit', 'finger', 'force', 'scenario.KEY' or a configuration "
                               'key)')
@@ -237,7 +260,23 @@ def _axes(data: Mapping, scenario: Scenario) -> dict[str, tuple]:
     return axes
 
 
+def _read_number(value: Any, kind: str) -> Any:
+    """An axis or ``base.set`` value of a key of ``kind`` ('float', 'int', ...): text
+    that is a number (``as_number``: '1e6') as that number, so that rows, labels and
+    the definition's hash hold numbers; any other value as given (the key's validation
+    judges it)."""
+    number = as_number(value)
+    if not isinstance(value, str) or not math.isfinite(number):
+        return value
+    if kind == 'float':
+        return number
+    if kind == 'int' and number.is_integer():
+        return int(number)
+    return value
+
+
 def _fraction(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1:
+    number = as_number(value)
+    if not 0 < number < 1:
         raise ConfigError(f"study key '{where}' must be a number in (0, 1), got {value!r}")
-    return float(value)
+    return number
