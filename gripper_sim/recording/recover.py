@@ -188,7 +188,10 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
     dst_dir = dst.parent if str(dst.parent) else Path('.')
     if not dst_dir.is_dir():
         raise RecordingError(f'{dst}: directory {dst_dir} does not exist')
-    fd, tmp_name = tempfile.mkstemp(prefix=f'.{dst.name}.', suffix='.part', dir=dst_dir)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f'.{dst.name}.', suffix='.part', dir=dst_dir)
+    except OSError as err:
+        raise RecordingError(f'cannot create {dst}: {err.strerror}') from err
     os.close(fd)
     tmp = Path(tmp_name)
     header = result.header
@@ -218,7 +221,10 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
         if report.messages == 0:
             why = f' ({report.reason})' if report.reason else ''
             raise RecordingError(f'{src} holds no whole message{why}: nothing to recover')
-        os.replace(tmp, dst)
+        try:
+            os.replace(tmp, dst)
+        except OSError as err:
+            raise RecordingError(f'cannot create {dst}: {err.strerror}') from err
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
