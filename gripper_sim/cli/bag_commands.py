@@ -112,7 +112,11 @@ def register(subparsers) -> None:
                     'report (report.html, opens offline), for each run of the recording.')
     p.add_argument('file', metavar='BAG', help='bag folder or .mcap file')
     p.add_argument('-o', '--output-dir', default=None, metavar='DIR',
-                   help='where to write (default: BAG without .mcap, plus _analysis)')
+                   help='new folder to write to (default: BAG without .mcap, plus '
+                        '_analysis); an existing one is refused without --force')
+    p.add_argument('-f', '--force', action='store_true',
+                   help='write into DIR even if it exists (files of the same names are '
+                        'replaced)')
     p.add_argument('--namespace', default=None,
                    help='topic prefix of the sim node, e.g. /gripper_sim (default: found)')
     p.add_argument('--no-figures', action='store_true', help='write CSV and JSON only')
@@ -299,7 +303,7 @@ def _analyze(args: argparse.Namespace) -> int:
     with StageProgress('analyze', quiet=args.quiet) as progress:
         result = analyze(args.file, out_dir, namespace=args.namespace,
                          figures=not args.no_figures, html=not args.no_html,
-                         progress=progress)
+                         progress=progress, overwrite=args.force)
     for line in result.describe():
         print(line)
     return 0

@@ -22,7 +22,7 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from gripper_sim.recording.analysis.events import Events
 from gripper_sim.recording.analysis.frames import Frame, jaw_contact_nodes, patch_outline
 from gripper_sim.recording.analysis.series import TimeSeries
-from gripper_sim.recording.analysis.summary import StiffnessFit
+from gripper_sim.recording.analysis.summary import StiffnessFit, grasp_outcome
 from gripper_sim.recording.errors import RecordingError
 
 #: the colour map of contact pressure in every figure and in the HTML report
@@ -114,8 +114,8 @@ def force_vs_time(series: TimeSeries, summary: dict, events: Events) -> Figure:
     for ax in axes:
         ax.grid(alpha=0.3)
     _mark_phases(list(axes), series, events)
-    held = 'slipped' if summary['slipped'] else 'held' if summary['held'] else 'not gripped'
-    fig.suptitle(f'Grip force, jaw gap, compression and slip ({held})', fontsize=11)
+    fig.suptitle(f'Grip force, jaw gap, compression and slip ({grasp_outcome(summary)})',
+                 fontsize=11)
     return fig
 
 

@@ -59,9 +59,21 @@ class AnalysisResult:
 
 def _mkdir(path: Path) -> None:
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        path.mkdir(exist_ok=True)
     except OSError as err:
         raise RecordingError(f'cannot create {path}: {err.strerror}') from err
+
+
+def check_output_dir(path: Path, *, overwrite: bool = False) -> None:
+    """Raise RecordingError unless ``path`` can be the analysis' output folder: a new
+    folder in an existing one (as every output of the CLI), or, with ``overwrite``, an
+    existing folder to write into (its files of the same names are replaced)."""
+    if path.exists() and not overwrite:
+        raise RecordingError(f'{path} already exists; choose another output folder or '
+                             'remove it (--force writes into it)')
+    parent = path.absolute().parent
+    if not parent.is_dir():
+        raise RecordingError(f'{path}: directory {parent} does not exist')
 
 
 def run_frames(bag: BagReader, topic: str | None, series: TimeSeries,
@@ -143,7 +155,8 @@ def _write_json(path: Path, data: dict) -> None:
 
 def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
             namespace: str | None = None, figures: bool = True, html: bool = True,
-            frames_in_html: int = 60, progress: Progress | None = None) -> AnalysisResult:
+            frames_in_html: int = 60, progress: Progress | None = None,
+            overwrite: bool = False) -> AnalysisResult:
     """Analyse the grasp(s) recorded in ``path``; write CSV, JSON, PNGs and the HTML
     report (``report.html``) to ``output_dir``, one set per run.
 
@@ -152,13 +165,16 @@ def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
         html: write ``report.html`` (needs ``figures``).
         frames_in_html: about how many moments the report's animation shows per run.
         progress: told how far the reading and the runs are.
+        overwrite: write into ``output_dir`` if it exists (else refused).
 
     Raises:
-        RecordingError: bad file, no FruitState topic, or the output cannot be written.
+        RecordingError: bad file, no FruitState topic, ``output_dir`` exists (without
+            ``overwrite``) or its parent does not, or the output cannot be written.
     """
     out = Path(output_dir)
     with BagReader(path) as bag:
         topics = find_topics(bag, namespace)
+        check_output_dir(out, overwrite=overwrite)   # after the input's own errors
         config = read_config(bag)
         bruise = float(config.get('fruit.bruise_pressure', DEFAULT_BRUISE_PRESSURE))
         reading = None if progress is None else \

@@ -28,7 +28,7 @@ from gripper_sim.recording.analysis.figures import (PRESSURE_COLOURS, contact_st
                                                     pressure_name, pressure_scale)
 from gripper_sim.recording.analysis.frames import Box, Frame
 from gripper_sim.recording.analysis.series import TimeSeries
-from gripper_sim.recording.analysis.summary import fit_stiffness
+from gripper_sim.recording.analysis.summary import fit_stiffness, grasp_outcome
 from gripper_sim.recording.errors import RecordingError
 
 #: the element id of the fruit animation's plot, for scripts and tests
@@ -113,6 +113,11 @@ def _number(value: Any, unit: str, scale: float = 1.0, digits: int = 3) -> str:
     return f'{value * scale:.{digits}g} {unit}'
 
 
+def _yes_no(value: bool | None) -> str:
+    """A flag of the summary: True, False, or n/a when it was not judged (None)."""
+    return 'n/a' if value is None else str(value)
+
+
 def summary_rows(summary: dict) -> list[tuple[str, str]]:
     """The key numbers of a run's summary as (name, value) rows."""
     three_d = summary.get('dimension') == 3
@@ -122,8 +127,11 @@ def summary_rows(summary: dict) -> list[tuple[str, str]]:
         ('model', f"{summary.get('dimension', 2)}D"),
         ('sim time', f"{summary['start_time_s']:.3f} to "
                      f"{summary['start_time_s'] + summary['duration_s']:.3f} s"),
-        ('held / slipped / dropped', f"{summary['held']} / {summary['slipped']} / "
-                                     f"{summary.get('dropped', False)}"),
+        ('held / slipped / dropped', f"{_yes_no(summary['held'])} / "
+                                     f"{_yes_no(summary['slipped'])} / "
+                                     f"{summary.get('dropped', False)}"
+                                     + ('' if summary['held'] is not None
+                                        else f' ({grasp_outcome(summary)})')),
         ('slip at the end of the hold', _number(summary['held_slip_distance_m'], 'mm', 1e3)),
         ('peak grip force', _number(summary['peak_grip_force_n'], 'N')),
         ('peak compression', _number(summary['peak_compression_m'], 'mm', 1e3)),
@@ -369,8 +377,7 @@ def write_grasp_report(series: TimeSeries, summary: dict, frames: list[Frame],
                  f"{summary['bruise_threshold_pa'] / 1e3:.0f} kPa. Grey: the jaw plates; "
                  'brown: the table; blue: deformable fingers. Move the slider or press play.'))
     title = (f"Grasp of {summary.get('fruit') or 'a fruit'} ({dimension}D): "
-             + ('slipped' if summary['slipped'] else 'held' if summary['held']
-                else 'not gripped'))
+             + grasp_outcome(summary))
     return write_html_report(path, title, blocks)
 
 

@@ -11,6 +11,8 @@ ranges used are in the summary.
 
 Held and slipped use ``gripper_sim.core.slip.grasp_slipped``, the definition of the
 node's Grasp result: the slip at the end of the hold (before the release), or a drop.
+They judge a lifted fruit: a run without a lift-off (a squeeze, or a recording without
+``/joint_states``) has no hold, and both are None (n/a, 'not lifted').
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -106,6 +108,16 @@ def _time_at(series: TimeSeries, row: int | None) -> float | None:
     return None if row is None else float(series['time_s'][row])
 
 
+def grasp_outcome(summary: dict) -> str:
+    """The run's grasp in words: 'held', 'slipped', 'not lifted' (gripped, no lift-off
+    recorded: held and slipped are None) or 'not gripped'."""
+    if not summary['gripped']:
+        return 'not gripped'
+    if summary['held'] is None:
+        return 'not lifted'
+    return 'slipped' if summary['slipped'] else 'held'
+
+
 def summarize(series: TimeSeries, *, bruise_pressure: float) -> dict[str, Any]:
     """The numbers a person looks at first, from the time series of one run."""
     t = series['time_s']
@@ -122,9 +134,10 @@ def summarize(series: TimeSeries, *, bruise_pressure: float) -> dict[str, Any]:
     both = both_jaws(series)
     slip = np.abs(series['slip_distance_m'])
     judged = events.held_until(len(series))
-    held_slip = float(slip[judged])
     dropped = events.drop is not None
-    slipped = events.grip is not None and grasp_slipped(held_slip, dropped)
+    lifted = events.grip is not None and events.lift_off is not None
+    held_slip = float(slip[judged]) if lifted else None
+    slipped = grasp_slipped(held_slip, dropped) if lifted else None
     window = np.zeros(len(series), dtype=bool)
     if events.grip is not None:
         window[events.grip:judged + 1] = True
@@ -167,8 +180,8 @@ def summarize(series: TimeSeries, *, bruise_pressure: float) -> dict[str, Any]:
         'peak_max_skin_strain': float(series['max_skin_strain'][
             int(np.argmax(np.abs(series['max_skin_strain'])))]),
         'gripped': events.grip is not None,
-        'held': bool(events.grip is not None and not slipped),
-        'slipped': bool(slipped),
+        'held': None if slipped is None else not slipped,
+        'slipped': slipped,
         'dropped': dropped,
         'held_slip_distance_m': held_slip,
         'max_slip_distance_m': float(np.max(slip)),
@@ -192,6 +205,17 @@ def summarize(series: TimeSeries, *, bruise_pressure: float) -> dict[str, Any]:
         'event_times_s': {label: float(t[row]) for label, row in events.marked()},
         'slip_threshold_m': SLIP_TOLERANCE,
     }
+
+
+def held_line(s: dict, fmt: Callable[..., str]) -> str:
+    """The printed line on held and slipped: n/a, with the reason, for a run not lifted."""
+    largest = fmt(s['max_slip_distance_m'], 'mm', 1e3)
+    dropped = ', dropped' if s.get('dropped') else ''
+    if s.get('held') is None:
+        return (f"held: n/a   slipped: n/a ({grasp_outcome(s)}: no lift-off in the "
+                f"recording; largest slip {largest}{dropped})")
+    return (f"held: {s['held']}   slipped: {s['slipped']} (slip at the end of the hold "
+            f"{fmt(s['held_slip_distance_m'], 'mm', 1e3)}, largest {largest}{dropped})")
 
 
 def describe(summary: dict) -> list[str]:
@@ -235,10 +259,7 @@ def describe(summary: dict) -> list[str]:
         f"stiffness:             {fmt(s['stiffness_n_per_m'], 'N/mm', 1e-3)} (tangent), "
         f"{fmt(s['secant_stiffness_n_per_m'], 'N/mm', 1e-3)} (secant){fitted}",
         f"peak contact pressure: {fmt(s['peak_contact_pressure_pa'], 'kPa', 1e-3, 1)}",
-        f"held: {s['held']}   slipped: {s['slipped']} (slip at the end of the hold "
-        f"{fmt(s['held_slip_distance_m'], 'mm', 1e3)}, largest "
-        f"{fmt(s['max_slip_distance_m'], 'mm', 1e3)}"
-        + (', dropped' if s.get('dropped') else '') + ')',
+        held_line(s, fmt),
         contact,
         damage,
         f"time above bruise threshold (damage pressure): "
