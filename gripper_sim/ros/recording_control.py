@@ -1,9 +1,12 @@
 """Recording control of the node: the ``record_path`` parameter and ``~/record``.
 
 In-node recording writes every physics step to MCAP (``NodeRecording``). Setting
-``record_path`` starts (or switches) the recording, ``''`` stops it; ``~/record``
-(std_srvs/SetBool) starts (to ``record_path`` or a timestamped file) and stops it, and
-keeps the parameter saying what is being recorded.
+``record_path`` starts the recording, ``''`` stops it; ``~/record`` (std_srvs/SetBool)
+starts (to ``record_path`` or a timestamped file) and stops it, and keeps the parameter
+saying what is being recorded. One recording at a time, however it was started: while
+one runs, a start by either way is refused (``record_path`` set to another path too,
+rather than switching recordings unasked); setting it to the path being recorded is
+accepted and changes nothing.
 """
 from __future__ import annotations
 
@@ -91,7 +94,8 @@ class RecordingControl:
                 self._param_internal = False
 
     def _check_record_path(self, parameters) -> SetParametersResult:
-        """Start, switch or stop the recording when ``record_path`` changes."""
+        """Start or stop the recording when ``record_path`` changes; another path while
+        a recording runs is refused (``_busy_reason``)."""
         value = next((p.value for p in parameters if p.name == 'record_path'), None)
         if value is None:
             return SetParametersResult(successful=True)
@@ -109,11 +113,8 @@ class RecordingControl:
             if active and recording is not None and recording.path is not None and \
                     recording.path.resolve() == self._target(value).resolve():
                 return SetParametersResult(successful=True)   # already recording there
-            problem = self._path_problem(value)
+            problem = self._busy_reason() if active else self._path_problem(value)
             if problem is None:
-                if active:
-                    _, message = self._stop()
-                    logger.info(f'recording stopped: {message}')
                 ok, message = self._start(value)
                 if ok:
                     logger.info(message)
@@ -122,6 +123,12 @@ class RecordingControl:
             reason = f"parameter 'record_path' = '{value}' refused: {problem}"
             logger.warning(f'parameter change rejected: {reason}')
             return SetParametersResult(successful=False, reason=reason)
+
+    def _busy_reason(self) -> str:
+        """Why a second recording cannot start: the one running, and how to stop it."""
+        return (f'already recording to {self.recording.path}; stop it first (set '
+                "record_path to '', call ~/record with false, or run gripper-sim "
+                'record-node stop)')
 
     def _on_record(self, request, response):
         """``~/record``: true = start (to ``record_path`` or a timestamped file), false = stop."""
@@ -132,8 +139,7 @@ class RecordingControl:
                     response.success, response.message = False, RECORDING_UNAVAILABLE
                 elif self.recording.active:
                     response.success = False
-                    response.message = (f'already recording to {self.recording.path}; '
-                                        'stop it first')
+                    response.message = self._busy_reason()
                 else:
                     path = str(node.params.get('record_path')) or \
                         str(default_path(Path.cwd()))
