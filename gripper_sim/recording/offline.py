@@ -7,7 +7,9 @@ conversion), serializes the messages and writes them under the node's topic name
 in integer ns, the same as the messages' header stamps and ``/clock`` (after a reset of
 the simulation, shifted so that log times keep increasing). The
 configuration used is stored as a Metadata record ``gripper_sim_config`` (key ``yaml``)
-when the file is opened, so a run can be reproduced from its recording.
+when the file is opened, so a run can be reproduced from its recording. With ``/tf``
+the node's latched topics ``/tf_static`` and ``robot_description`` are recorded too,
+once, at the start (``recording.latched``), so the TF tree of a replay is whole.
 
 Offline (``squeeze``/``pick --out FILE.mcap``)::
 
@@ -32,6 +34,8 @@ from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.lifecycle import OpenClose
 from gripper_sim.recording.bag_folder import open_bag_writer
 from gripper_sim.recording.cdr import CdrTrimmer
+from gripper_sim.recording.latched import (LATCHED_PROFILE, LATCHED_TOPICS, latched_messages,
+                                           latched_topic)
 from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
 
 CONFIG_METADATA = 'gripper_sim_config'
@@ -48,7 +52,9 @@ class SimRecorder(OpenClose):
             written as the first sample and used for the jaw joint origin.
         context: a ``MessageContext`` to share (the node's); default: a new one.
         node_name, namespace: give the topic names, as the node's would be.
-        topics: topic suffixes to write (``messages.TOPICS`` keys); None = all.
+        topics: topic suffixes to write (``messages.TOPICS`` keys); None = all. With
+            'tf', the latched ``/tf_static`` and ``robot_description`` are written
+            once, before the first sample.
         every: write every n-th step (1 = every step, full physics rate).
         source: 'offline' or 'node', stored with the configuration.
         overwrite, flush_interval: passed to ``BagWriter``.
@@ -76,6 +82,9 @@ class SimRecorder(OpenClose):
             messages.MessageContext.from_config(self.config, initial=initial)
         self.topic_names = {s: messages.resolved_topic(s, node_name, namespace)
                             for s in self.suffixes}
+        self.latched_names = {s: latched_topic(s, namespace) for s in LATCHED_TOPICS} \
+            if 'tf' in self.suffixes else {}
+        self._latched_due = bool(self.latched_names)
         self.initial = initial
         self.source = source
         self._trimmer = CdrTrimmer()
@@ -105,6 +114,9 @@ class SimRecorder(OpenClose):
                 for suffix in self.suffixes:
                     self.writer.add_topic(self.topic_names[suffix],
                                           self._messages.TOPICS[suffix][1])
+                for suffix, name in self.latched_names.items():
+                    self.writer.add_topic(name, LATCHED_TOPICS[suffix][1],
+                                          offered_qos_profiles=[LATCHED_PROFILE])
                 try:
                     text = to_yaml(self.config)
                 except Exception as err:  # noqa: BLE001 - keep recording without it
@@ -154,8 +166,6 @@ class SimRecorder(OpenClose):
 
     def write_batch(self, batch: Mapping[str, Any], stamp_ns: int) -> None:
         """Write already-built messages ``{suffix: msg}`` stamped ``stamp_ns`` (sim time)."""
-        from rclpy.serialization import serialize_message
-
         with self._lock:
             if not self.writer.is_open:
                 return
@@ -164,17 +174,31 @@ class SimRecorder(OpenClose):
                 # time went back (a reset): keep the log in order, 1 ms after the last sample
                 self._offset = self._last_time_ns + 1_000_000 - stamp_ns
             log_time = stamp_ns + self._offset
+            if self._latched_due:
+                self._write_latched(log_time)
             for suffix, msg in batch.items():
                 topic = self.topic_names.get(suffix)
                 if topic is None:
                     continue
-                data = self._trimmer.trim(self._messages.TOPICS[suffix][1],
-                                          serialize_message(msg))
-                self.writer.write(topic, data, log_time=log_time,
-                                  publish_time=log_time)
+                self._write(topic, self._messages.TOPICS[suffix][1], msg, log_time)
             self.samples += 1
             self._last_time_ns = log_time
             self.writer.flush_if_due()
+
+    def _write(self, topic: str, type_name: str, msg: Any, log_time: int) -> None:
+        """Serialize ``msg`` to exact CDR and write it (the lock held)."""
+        from rclpy.serialization import serialize_message
+
+        data = self._trimmer.trim(type_name, serialize_message(msg))
+        self.writer.write(topic, data, log_time=log_time, publish_time=log_time)
+
+    def _write_latched(self, log_time: int) -> None:
+        """The latched topics' one message each, as the node published them (the lock
+        held; before the first sample, at its log time)."""
+        for suffix, msg in latched_messages(self.context.frames).items():
+            self._write(self.latched_names[suffix], LATCHED_TOPICS[suffix][1], msg,
+                        log_time)
+        self._latched_due = False
 
     def describe(self) -> str:
         return (f'wrote {self.samples} samples ({self.writer.message_count} messages) to '

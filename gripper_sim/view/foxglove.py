@@ -6,6 +6,10 @@
   message encoding ``cdr``, schema encoding ``ros2msg`` with the type's full message
   definition (``recording.schemas.message_definition``: the .msg text and every nested
   definition, as rosbag2 stores it), so Foxglove decodes them like a ROS 2 bag;
+- the node's latched topics ``/tf_static`` and ``robot_description`` (the static frames,
+  e.g. ``table``, and the URDF for Foxglove's 3D panel; ``recording.latched``): a
+  latched channel keeps its last message and sends it to every client that subscribes
+  (and again after a reset), as a transient-local publisher does;
 - ``<node>/scene`` (e.g. ``/gripper_sim/scene``): a ``foxglove.SceneUpdate`` (protobuf)
   built from the node's markers (``view.scene``), for Foxglove's 3D panel without RViz
   or a URDF.
@@ -21,15 +25,17 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import foxglove
 from foxglove.channels import SceneUpdateChannel
 from rclpy.serialization import deserialize_message, serialize_message
 
 from gripper_sim.convert import messages
+from gripper_sim.recording import qos
 from gripper_sim.recording.analysis import read_config
 from gripper_sim.recording.errors import RecordingError
+from gripper_sim.recording.latched import LATCHED_TOPICS, latched_messages, latched_topic
 from gripper_sim.recording.recorder import import_message_class
 from gripper_sim.recording.schemas import message_definition
 from gripper_sim.view.errors import ViewError
@@ -71,6 +77,8 @@ class FoxgloveView:
         on_watched: called with True when a client subscribes to the first channel and
             with False when the last subscription ends (from the server's thread): the
             node builds its messages for the view only while someone watches.
+        latched: topics of ``topics`` served as latched (``latch``, or every message of
+            ``log_cdr``, is kept and sent to each new subscriber).
 
     The scene is served when exactly one topic is a ``MarkerArray`` (its markers) and
     drawn with the ``FruitState`` of the same step when there is such a topic.
@@ -82,7 +90,8 @@ class FoxgloveView:
 
     def __init__(self, topics: Mapping[str, str], *, legend: PressureLegend | None = None,
                  host: str = DEFAULT_ADDRESS, port: int = DEFAULT_PORT,
-                 name: str = 'gripper_sim', on_watched: Callable[[bool], None] | None = None):
+                 name: str = 'gripper_sim', on_watched: Callable[[bool], None] | None = None,
+                 latched: Iterable[str] = ()):
         self.host = host
         self.legend = legend
         self._types = dict(topics)
@@ -92,6 +101,9 @@ class FoxgloveView:
         self._last_state: Any = None
         self._last_time: int | None = None
         self._time_sent: float | None = None   # monotonic s of the last time broadcast
+        self._latched_topics = set(latched) & set(self._types)
+        self._latched: dict[str, bytes] = {}      # topic -> its last message (CDR)
+        self.channels: dict[str, Any] = {}        # filled once the server listens
         # Kept: the server and the channels are bound to it only while it lives.
         self._context = context = foxglove.Context()
         try:
@@ -104,15 +116,16 @@ class FoxgloveView:
             self.server = foxglove.start_server(
                 name=name, host=host, port=int(port), context=context,
                 capabilities=[foxglove.Capability.Time],
-                server_listener=_SubscriptionCounter(on_watched))
+                server_listener=_SubscriptionCounter(on_watched, self._on_subscribe))
         except RuntimeError as err:   # foxglove-sdk's FoxgloveError, e.g. port taken
             reason = str(err).removeprefix('FoxgloveError: ')
             msg = (f'cannot serve the Foxglove live view on {host}:{port}: {reason}; choose '
                    'a free port or an address of this machine')
             raise ViewError(msg) from err
-        self.channels = {topic: foxglove.Channel(topic, schema=schema, message_encoding='cdr',
-                                                 context=context)
-                         for topic, schema in schemas.items()}
+        self.channels.update({topic: foxglove.Channel(topic, schema=schema,
+                                                      message_encoding='cdr',
+                                                      context=context)
+                              for topic, schema in schemas.items()})
         self.scene_topic = (scene_topic(self._markers_topic)
                             if self._markers_topic is not None else None)
         self.scene_channel = (SceneUpdateChannel(self.scene_topic, context=context)
@@ -137,10 +150,33 @@ class FoxgloveView:
             self.server.clear_session()   # a reset: clients drop the old run
             self._last_state = None
             self._time_sent = None
+            self._last_time = stamp_ns
+            for topic in self._latched:   # ... and get the latched messages again
+                self._send_latched(topic)
         self._last_time = stamp_ns
         if self._time_sent is None or now - self._time_sent >= TIME_PERIOD:
             self.server.broadcast_time(stamp_ns)
             self._time_sent = now
+
+    def latch(self, topic: str, data: bytes) -> None:
+        """Serve ``data`` (CDR) as the latched message of ``topic``: now to its
+        subscribers, later to each client that subscribes."""
+        if topic in self._latched_topics:
+            self._latched[topic] = data
+            self._send_latched(topic)
+
+    def _send_latched(self, topic: str) -> None:
+        channel = self.channels.get(topic)
+        data = self._latched.get(topic)
+        if channel is not None and data is not None and channel.has_sinks():
+            channel.log(data, log_time=self._last_time or 0)
+
+    def _on_subscribe(self, topic: str) -> None:
+        """A client subscribed to ``topic`` (server thread): a latched one gets its
+        message (every subscriber of the channel does; a latched message is the same
+        whenever it arrives)."""
+        if topic in self._latched_topics:
+            self._send_latched(topic)
 
     def _scene_wanted(self) -> bool:
         return self.scene_channel is not None and self.scene_channel.has_sinks()
@@ -176,6 +212,8 @@ class FoxgloveView:
         if channel is None:
             return
         self._advance_time(stamp_ns)
+        if topic in self._latched_topics:
+            self._latched[topic] = data
         if channel.has_sinks():
             channel.log(data, log_time=stamp_ns)
         if not self._scene_wanted():
@@ -198,8 +236,10 @@ class _SubscriptionCounter:
     """A ``foxglove.websocket.ServerListener`` that counts subscriptions (all clients)
     and reports when the count leaves or returns to zero."""
 
-    def __init__(self, on_watched: Callable[[bool], None] | None):
+    def __init__(self, on_watched: Callable[[bool], None] | None,
+                 on_channel: Callable[[str], None] | None = None):
         self._on_watched = on_watched
+        self._on_channel = on_channel
         self._lock = threading.Lock()
         self.count = 0
 
@@ -209,6 +249,8 @@ class _SubscriptionCounter:
             first = self.count == 1
         if first and self._on_watched is not None:
             self._on_watched(True)
+        if self._on_channel is not None:
+            self._on_channel(channel.topic)
 
     def on_unsubscribe(self, client: Any, channel: Any) -> None:
         with self._lock:
@@ -219,9 +261,23 @@ class _SubscriptionCounter:
 
 
 def node_topics(node_name: str, namespace: str) -> dict[str, tuple[str, str]]:
-    """``{topic suffix: (topic name, ROS type)}`` of a node named so."""
+    """``{topic suffix: (topic name, ROS type)}`` of a node named so: the topics it
+    publishes with every state batch."""
     return {suffix: (messages.resolved_topic(suffix, node_name, namespace), kind)
             for suffix, (_, kind) in messages.TOPICS.items()}
+
+
+def node_latched_topics(namespace: str) -> dict[str, str]:
+    """``{topic name: ROS type}`` of the latched topics of a node in ``namespace``."""
+    return {latched_topic(suffix, namespace): kind
+            for suffix, (_, kind) in LATCHED_TOPICS.items()}
+
+
+def latch_node_description(view: FoxgloveView, frames: Any, namespace: str) -> None:
+    """Serve the node's ``/tf_static`` and ``robot_description`` of ``frames``
+    (``GripperFrames``) on ``view``, latched: the messages the node publishes."""
+    for suffix, msg in latched_messages(frames).items():
+        view.latch(latched_topic(suffix, namespace), serialize_message(msg))
 
 
 def start_node_view(node: Any) -> FoxgloveView | None:
@@ -238,18 +294,22 @@ def start_node_view(node: Any) -> FoxgloveView | None:
     logger = node.get_logger()
     if port == 0:
         return None
-    topics = node_topics(node.get_name(), node.get_namespace())
+    namespace = node.get_namespace()
+    topics = node_topics(node.get_name(), namespace)
+    latched = node_latched_topics(namespace)
     feed = NodeFeed(node, {suffix: name for suffix, (name, _) in topics.items()})
     try:
-        feed.view = FoxgloveView({name: kind for name, kind in topics.values()},
+        feed.view = FoxgloveView({**{name: kind for name, kind in topics.values()},
+                                  **latched},
                                  legend=PressureLegend.beside(node.message_context),
                                  host=host, port=port, name=node.get_fully_qualified_name(),
-                                 on_watched=feed.watched)
+                                 on_watched=feed.watched, latched=latched)
     except ViewError as err:
         logger.warning(f'{err} (parameters foxglove_port, 0 = off, and foxglove_address); '
                        'running without the live view')
         return None
     view = feed.view
+    latch_node_description(view, node.message_context.frames, namespace)
     logger.info(f'Foxglove live view on {view.url} (in Foxglove: Open connection > '
                 'Foxglove WebSocket; layout config/foxglove/gripper_sim_layout.json)')
     return view
@@ -295,10 +355,14 @@ class NodeFeed:
 def recording_view(bag: Any, *, host: str = DEFAULT_ADDRESS, port: int = DEFAULT_PORT,
                    topics: list[str] | None = None) -> FoxgloveView:
     """The view of an open ``BagReader`` for ``replay``: its CDR topics (``topics`` =
-    only these), the legend from the configuration stored in it (if any)."""
+    only these; latched those whose recorded publishers offered transient local, as
+    ``replay`` publishes them), the legend from the configuration stored in it (if
+    any)."""
     wanted = set(topics) if topics is not None else None
     served = {name: info.type for name, info in bag.topics.items()
               if info.message_encoding == 'cdr' and (wanted is None or name in wanted)}
+    latched = [name for name in served if qos.adapt_for_replay(
+        bag.topics[name].offered_qos_profiles)['durability'] == 'transient_local']
     legend = PressureLegend.beside(messages.MessageContext.from_config(read_config(bag)))
     return FoxgloveView(served, legend=legend, host=host, port=port,
-                        name=f'gripper_sim replay {bag.path}')
+                        name=f'gripper_sim replay {bag.path}', latched=latched)
