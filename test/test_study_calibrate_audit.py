@@ -5,12 +5,14 @@ every numeric field of a study file, a 3D calibration's preset is checked in 3D 
 wrong warning), and a fitted key without effect or an empty --fit is an error."""
 from __future__ import annotations
 
+import json
 import shutil
 import socket
 import textwrap
 import warnings
 from pathlib import Path
 
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 import yaml
@@ -115,6 +117,25 @@ def test_the_same_study_resumes_into_its_directory(tiny_results, tmp_path):
     assert resumed.returncode == 0, resumed.stderr
     assert {r['study'] for r in pq.read_table(out / 'rows').to_pylist()} == {'tiny'}
     assert run(study, out).returncode == 0
+
+
+def test_a_complete_run_drops_the_rows_of_earlier_code(tiny_results, tmp_path):
+    """A row of earlier code (another code version in its case_key) is never reused: a
+    complete run leaves only its own rows, so the dataset has one row per evaluation."""
+    _, out = tiny_results
+    study = write_study(tmp_path, 'tiny')
+    copy = tmp_path / 'copy'
+    shutil.copytree(out, copy)
+    rows = pq.read_table(copy / 'rows').to_pylist()
+    stale = dict(rows[0], case_key='earlier-code-' + rows[0]['case_key'])
+    pq.write_table(pa.Table.from_pylist([stale]), copy / 'rows' / 'part-0-old.parquet')
+    assert len(pq.read_table(copy / 'rows')) == len(rows) + 1
+    again = run(study, copy)
+    assert again.returncode == 0, again.stderr
+    assert '1 rows of earlier code dropped' in again.stdout
+    kept = pq.read_table(copy / 'rows').to_pylist()
+    assert sorted(r['case_key'] for r in kept) == sorted(r['case_key'] for r in rows)
+    assert json.loads((copy / 'summary.json').read_text())['rows'] == len(rows)
 
 
 def test_a_study_that_cannot_reach_its_scheduler_creates_nothing(tmp_path):

@@ -52,6 +52,9 @@ def run_study_verb(args) -> int:
     print(f"study {summary['study']}: {len(summary['points'])} design points x "
           f"{summary['population']['samples']} fruits, {summary['rows']} evaluations "
           f"({run.computed} computed, {run.reused} reused, {summary['errors']} with errors)")
+    if summary['superseded']:
+        print(f"  {summary['superseded']} rows of earlier code dropped (changed code computes "
+              'its own)')
     percent = f"{summary['fraction'] * 100:g} %"
     for point in summary['points']:
         print(f"  {point['label']}: {describe_window(point.get('population'), percent)}")

@@ -150,6 +150,8 @@ class _Runner:
         self.code = code_version()
         self.computed = 0
         self.reused = 0
+        #: the case_keys of the rows this run's evaluations are: reused or computed
+        self.used: set[str] = set()
         self.waiting: dict[str, tuple[Any, list[_Chain]]] = {}
         self.chains: list[_Chain] = []
         self.bar = tqdm(total=0, unit='eval', file=sys.stderr, disable=not progress,
@@ -170,6 +172,7 @@ class _Runner:
                 self.chains.append(chain)
                 known = self._known(setup)
                 self.reused += len(known)
+                self.used.update(row['case_key'] for row in known.values())
                 args = (dict(setup.config), setup.scenario, study.tolerance, study.forces)
                 key = 'fruit-' + hashlib.sha256(json.dumps(
                     [config_hash(setup.config), dict(setup.scenario.values), study.tolerance,
@@ -226,6 +229,7 @@ class _Runner:
                                  f'than this client ({self.code}): install the same '
                                  'gripper_sim on every worker')
             key = case_key(setup, kind, force, self.code)
+            self.used.add(key)
             if key not in self.store:
                 self.store.add(self._row(setup, kind, force, key, outputs))
                 self.computed += 1
@@ -283,11 +287,10 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
         finally:
             store.flush()
         finished = time.perf_counter()
+    superseded = store.compact(keep=runner.used) if complete else 0
     summary = summarise(study, runner.chains, store, complete)
-    summary.update(computed=runner.computed, reused=runner.reused,
+    summary.update(computed=runner.computed, reused=runner.reused, superseded=superseded,
                    scheduler=scheduler or f'local ({workers or os.cpu_count()} workers)')
-    if complete:
-        store.compact()
     return StudyRun(computed=runner.computed, reused=runner.reused,
                     interrupted=not complete, summary=summary, rows=store.sorted_rows(),
                     startup_time=started - start, run_time=finished - started)

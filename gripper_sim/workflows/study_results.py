@@ -5,7 +5,8 @@ The rows live in ``DIR/rows/`` as ``part-*.parquet`` files (one Parquet dataset:
 Rows are buffered and written as a new part at least every ``FLUSH_SECONDS`` or
 ``FLUSH_ROWS`` rows, each part written to a temporary name and renamed, so that a
 killed study loses at most the last buffer and never leaves a half-written file.
-``compact`` rewrites all parts as one, sorted. Each row is keyed by ``case_key`` (the
+``compact`` rewrites all parts as one, sorted, and drops the rows a complete run did
+not use (those of earlier code: changed code computes its own). Each row is keyed by ``case_key`` (the
 case's effective configuration, scenario, force, kind and code version): a row already
 stored is never computed again.
 
@@ -94,16 +95,22 @@ class RowStore:
         return sorted(self.rows.values(),
                       key=lambda r: tuple(r[k] for k in SORT_KEYS) + (r['case_key'],))
 
-    def compact(self) -> None:
-        """Rewrite all parts as one sorted part (the old parts removed after)."""
+    def compact(self, keep: set[str] | None = None) -> int:
+        """Rewrite all parts as one sorted part (the old parts removed after), with only
+        the rows whose ``case_key`` is in ``keep`` if given (a complete run's: rows of
+        earlier code are superseded); how many rows were dropped."""
         self.flush()
+        dropped = [key for key in self.rows if keep is not None and key not in keep]
+        for key in dropped:
+            del self.rows[key]
         old = sorted(self.parts.glob('part-*.parquet'))
-        if len(old) <= 1:
-            return
+        if len(old) <= 1 and not dropped:
+            return 0
         name = f'part-{time.time_ns():020d}-{os.getpid()}-compact.parquet'
         self._write(self.sorted_rows(), name)
         for part in old:
             part.unlink()
+        return len(dropped)
 
     def claim(self, identity: dict[str, str]) -> None:
         """Write ``identity`` ({'study': name, 'definition': hash}) as the directory's
