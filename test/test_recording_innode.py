@@ -22,6 +22,9 @@ from gripper_sim.ros.process import free_domain_id, ros_environment  # noqa: E40
 
 pytestmark = pytest.mark.ros
 
+#: the latched topics a recording holds once (``recording.latched``)
+LATCHED = {'/tf_static', '/robot_description'}
+
 _ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',
              'FASTRTPS_DEFAULT_PROFILES_FILE')
 
@@ -76,7 +79,7 @@ def test_every_physics_step_is_recorded_and_recording_restarts(sim_node, tmp_pat
     with BagReader(tmp_path / 'first.mcap') as bag:
         assert set(bag.topics) == {messages.resolved_topic(s, sim_node.get_name(),
                                                            sim_node.get_namespace())
-                                   for s in messages.TOPICS}
+                                   for s in messages.TOPICS} | LATCHED
         states = [m for _, m in bag.decoded_messages([state_topic])]
         config = yaml.safe_load(bag.metadata_named(CONFIG_METADATA)['yaml'])
         assert bag.metadata_named(CONFIG_METADATA)['source'] == 'node'
@@ -136,8 +139,10 @@ def test_record_path_names_the_bag_folder_and_an_existing_directory_is_refused(
         counts = {c.topic: c.msgcount for c in reader.connections}
     assert set(counts) == {messages.resolved_topic(s, sim_node.get_name(),
                                                    sim_node.get_namespace())
-                           for s in messages.TOPICS}
-    assert set(counts.values()) == {11}             # the start state, then 10 steps
+                           for s in messages.TOPICS} | LATCHED
+    # the start state, then 10 steps; the latched topics once
+    assert {n for t, n in counts.items() if t not in LATCHED} == {11}
+    assert {counts[t] for t in LATCHED} == {1}
 
 
 def test_record_service_without_record_path_reports_the_folder_it_writes(
@@ -153,4 +158,4 @@ def test_record_service_without_record_path_reports_the_folder_it_writes(
     stopped = sim_node.recording_control._on_record(SetBool.Request(data=False), SetBool.Response())
     assert stopped.success and str(folder) in stopped.message
     with BagReader(folder) as bag:
-        assert bag.is_folder and bag.message_count == 2 * len(messages.TOPICS)
+        assert bag.is_folder and bag.message_count == 2 * len(messages.TOPICS) + len(LATCHED)

@@ -89,7 +89,9 @@ def test_the_node_serves_every_topic_and_the_scene_decodable_by_schema(node_view
     process, port = node_view
     seen = capture(f'ws://127.0.0.1:{port}', NODE_TOPICS | {SCENE}, per_topic=3)
     assert 'time' in seen.server_info['capabilities']
-    assert {c['topic'] for c in seen.channels.values()} == NODE_TOPICS | {SCENE}
+    # and the latched /tf_static and robot_description (test_recording_audit.py)
+    assert {c['topic'] for c in seen.channels.values()} == \
+        NODE_TOPICS | {SCENE} | {'/tf_static', '/robot_description'}
     decoded = decode_all(seen)
     states = decoded['/gripper_sim/fruit/state']
     assert all(s.dimension == 2 and s.node_count > 10 for s in states)

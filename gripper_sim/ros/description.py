@@ -2,7 +2,8 @@
 
 Both go out once, transient local (keep-last 1, reliable), as tf2's static broadcaster
 and robot_state_publisher publish them: a subscriber that joins later still gets them.
-The moving edges of the same tree go out on ``/tf`` with every state batch
+The messages are ``recording.latched``'s, the very ones the recordings and the live view
+hold. The moving edges of the same tree go out on ``/tf`` with every state batch
 (``messages.build_messages``).
 """
 from __future__ import annotations
@@ -11,14 +12,13 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
-from gripper_sim.convert.frames import GripperFrames, static_transforms
-from gripper_sim.convert.messages import time_msg, transform_message
-from gripper_sim.convert.urdf import gripper_urdf
+from gripper_sim.convert.frames import GripperFrames
+from gripper_sim.recording.latched import LATCHED_TOPICS, latched_messages
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-STATIC_TF_TOPIC = '/tf_static'
-DESCRIPTION_TOPIC = 'robot_description'   # in the node's namespace
+STATIC_TF_TOPIC = LATCHED_TOPICS['tf_static'][0]
+DESCRIPTION_TOPIC = LATCHED_TOPICS['robot_description'][0]   # in the node's namespace
 
 
 class RobotDescription:
@@ -29,8 +29,9 @@ class RobotDescription:
     """
 
     def __init__(self, node, frames: GripperFrames):
-        self.urdf = gripper_urdf(frames)
+        messages = latched_messages(frames)
+        self.urdf = messages['robot_description'].data
         self._static = node.create_publisher(TFMessage, STATIC_TF_TOPIC, LATCHED)
         self._description = node.create_publisher(String, DESCRIPTION_TOPIC, LATCHED)
-        self._static.publish(transform_message(static_transforms(frames), time_msg(0)))
-        self._description.publish(String(data=self.urdf))
+        self._static.publish(messages['tf_static'])
+        self._description.publish(messages['robot_description'])
