@@ -6,6 +6,7 @@ process and none disturbs another's shutdown.
 """
 from __future__ import annotations
 
+import contextlib
 import time
 from collections import deque
 from typing import Any, Callable
@@ -282,3 +283,16 @@ class SimClient:
 def param_value(msg: ParameterMsg) -> Any:
     """The Python value of an ``rcl_interfaces/Parameter`` message."""
     return Parameter.from_parameter_msg(msg).value
+
+
+@contextlib.contextmanager
+def ros_context(domain_id: int):
+    """An rclpy context of this process on ``domain_id``, the ROS environment set for it
+    (``apply_ros_environment``); shut down afterwards."""
+    apply_ros_environment(domain_id)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -5,7 +5,6 @@ that cannot be written, and a ``pick --hold`` longer than the old fixed time lim
 Every bad input is one ``error: ...`` line and exit 2, found before a simulation runs.
 """
 import pytest
-import rclpy
 from rclpy.parameter import Parameter
 
 from gripper_sim.cli.main import main
@@ -152,13 +151,10 @@ def test_the_verbs_refuse_jaws_in_the_fruit_before_they_run(verb, capsys, monkey
 
 @pytest.fixture
 def context():
-    from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
-    domain = pick_domain_id(60)
-    apply_ros_environment(domain)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    yield context
-    rclpy.try_shutdown(context=context)
+    from gripper_sim.ros.process import pick_domain_id
+    from ros_client import ros_context
+    with ros_context(pick_domain_id(60)) as context:
+        yield context
 
 
 @pytest.mark.ros

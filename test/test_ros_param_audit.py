@@ -10,7 +10,6 @@
   type the parameter must have and how to write it.
 """
 import pytest
-import rclpy
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters
 from rclpy.parameter import Parameter, parameter_value_to_python
@@ -18,8 +17,8 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConfigError
 from gripper_sim.ros.node import SimNode
-from gripper_sim.ros.process import (apply_ros_environment, node_process, pick_domain_id,
-                                     ros_environment)
+from gripper_sim.ros.process import node_process, pick_domain_id, ros_environment
+from ros_client import ros_context
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -107,11 +106,8 @@ def test_a_wrong_type_at_start_up_names_the_type_it_must_have(tmp_path):
 # ------------------------------------------------------------- in this process
 @pytest.fixture
 def context():
-    apply_ros_environment(IN_PROCESS_DOMAIN)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=IN_PROCESS_DOMAIN)
-    yield context
-    rclpy.try_shutdown(context=context)
+    with ros_context(IN_PROCESS_DOMAIN) as context:
+        yield context
 
 
 def make_node(context, **parameters):

@@ -14,8 +14,9 @@ from gripper_sim.convert import messages
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConvergenceError
 from gripper_sim.ros.node import SimNode
-from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
+from gripper_sim.ros.process import pick_domain_id
 from gripper_sim.ros.sync import JawOwner
+from ros_client import ros_context
 
 pytestmark = pytest.mark.ros
 
@@ -55,12 +56,8 @@ class Owner(JawOwner):
 
 @pytest.fixture
 def context():
-    domain = pick_domain_id(30)
-    apply_ros_environment(domain)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    yield context
-    rclpy.try_shutdown(context=context)
+    with ros_context(pick_domain_id(30)) as context:
+        yield context
 
 
 @pytest.mark.parametrize('mode', ['converge', 'nan'])

@@ -23,6 +23,7 @@ from gripper_sim.ros.namesakes import NameInUseError
 from gripper_sim.ros.node import SimNode
 from gripper_sim.ros.physics_thread import MAX_WAIT, pacing_delay
 from gripper_sim.ros.process import apply_ros_environment, pick_domain_id
+from ros_client import ros_context
 from gripper_sim.ros.sync import JawOwner, JawOwnership
 
 pytestmark = [pytest.mark.ros]
@@ -43,11 +44,8 @@ def wait_for(condition, timeout=60.0, what='condition'):
 
 @pytest.fixture
 def context():
-    apply_ros_environment(DOMAIN)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN)
-    yield context
-    rclpy.try_shutdown(context=context)
+    with ros_context(DOMAIN) as context:
+        yield context
 
 
 def make_node(context, factory=Simulation, start=True, **parameters):
