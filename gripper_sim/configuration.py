@@ -782,6 +782,10 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
                      if spec.default_3d is not None})
     baseline = {**flat, **presets}
     flat.update(chosen)
+    if ('gripper.finger.type' in user and 'gripper.finger.name' not in user
+            and flat['gripper.finger.type'] != baseline['gripper.finger.type']):
+        # the outputs name the finger: a type chosen by key, not by preset, is its name
+        flat['gripper.finger.name'] = flat['gripper.finger.type']
     config = validate(flat)
     # a key restated at the value it has anyway (a saved or recorded full configuration
     # loaded again) is no choice of the user's: only changed keys are warned about
@@ -817,6 +821,9 @@ JAW_FRICTION_KEYS = ('contact.jaw.static_friction', 'contact.jaw.kinetic_frictio
 def no_effect_reason(key: str, config: Mapping[str, Any]) -> str | None:
     """Why ``key`` has no effect in ``config``'s set-up, naming what does; None if it has."""
     pad = config['gripper.finger.pad.enabled']
+    finger = config['gripper.finger.type']
+    if key in PAD_KEYS and finger not in RIGID_FINGERS:
+        return f'the {finger} finger is itself soft: a pad layer on it is not modelled'
     if key in JAW_FRICTION_KEYS and pad:
         return ("a soft pad covers the jaws ('gripper.finger.pad.enabled'): the friction "
                 "there is 'contact.pad.friction'")
@@ -825,13 +832,15 @@ def no_effect_reason(key: str, config: Mapping[str, Any]) -> str | None:
                 "friction is 'contact.jaw.static_friction' and 'contact.jaw.kinetic_friction'")
     if key in PAD_KEYS and not pad:
         return "there is no pad: set 'gripper.finger.pad.enabled' = true"
-    finger = config['gripper.finger.type']
     if key in ('gripper.finger.radius', 'gripper.finger.segments') and finger != 'arc':
         return f"the finger is {finger}, not an arc: set 'gripper.finger.type' = arc"
     if key == 'gripper.finger.groove_angle' and finger != 'vgroove':
         return f"the finger is {finger}, not a V-groove: set 'gripper.finger.type' = vgroove"
     if key.startswith('gripper.finger.fin_ray.') and finger != 'fin_ray':
         return f"the finger is {finger}, not a Fin Ray: set 'gripper.finger.type' = fin_ray"
+    if (key in ('gripper.finger.fin_ray.rib_count', 'gripper.finger.fin_ray.rib_angle')
+            and config['gripper.finger.fin_ray.rib_ends'] is not None):
+        return "'gripper.finger.fin_ray.rib_ends' places the ribs"
     if key == 'gripper.finger.fin_ray.contact_dhat' and config['dimension'] != 3:
         return "in 2D the Fin Ray's fruit contact is 'contact.ipc.dhat'"
     if key == 'gripper.finger.fin_ray.section' and config['dimension'] == 3:
@@ -844,6 +853,10 @@ def no_effect_reason(key: str, config: Mapping[str, Any]) -> str | None:
                 "'gripper.finger.fin_ray.material' = custom")
     if key.startswith('gripper.finger.solid_pad.') and finger != 'solid_pad':
         return f"the finger is {finger}, not a solid pad: set 'gripper.finger.type' = solid_pad"
+    if (key.startswith('contact.ipc.') and finger in RIGID_FINGERS
+            and config['contact.model'] == 'mmm'):
+        return ("the contact with the rigid fingers is the modified mass method: the "
+                "barrier's keys apply with 'contact.model' = ipc or a deformable finger")
     if key == 'contact.model' and finger not in RIGID_FINGERS:
         return (f'the finger is the deformable {finger}: every contact is the barrier '
                 "(the 'contact.ipc.*' keys)")

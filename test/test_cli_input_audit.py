@@ -4,12 +4,14 @@ that cannot be written, and a ``pick --hold`` longer than the old fixed time lim
 
 Every bad input is one ``error: ...`` line and exit 2, found before a simulation runs.
 """
+import warnings
+
 import pytest
 from rclpy.parameter import Parameter
 
 from gripper_sim.cli.main import main
 from gripper_sim.configuration import load_config, read_yaml
-from gripper_sim.errors import ConfigError
+from gripper_sim.errors import ConfigError, ConfigWarning
 from gripper_sim.workflows.factory import make_simulation
 from gripper_sim.workflows.grasp import GraspSequence, evaluate, run_grasp
 
@@ -239,3 +241,40 @@ def test_an_existing_report_may_be_replaced_and_is_not_touched_by_the_check(tmp_
     assert report.read_text() == 'old'
     check_output_file(str(tmp_path / 'new.html'), '--html', replace=True)
     assert not (tmp_path / 'new.html').exists()
+
+
+# ----------------------------------------------------- soft-finger audit: keys and names
+@pytest.mark.parametrize('finger, overrides, warned', [
+    ('fin_ray', ['gripper.finger.fin_ray.rib_ends=[[0.01,0.02],[0.03,0.04]]',
+                 'gripper.finger.fin_ray.rib_count=3'],
+     "'gripper.finger.fin_ray.rib_count' has no effect: 'gripper.finger.fin_ray.rib_ends' "
+     'places the ribs'),
+    ('flat', ['contact.ipc.dhat=1e-5'],
+     "'contact.ipc.dhat' has no effect: the contact with the rigid fingers is the "
+     'modified mass method'),
+    ('solid_pad', ['gripper.finger.pad.thickness=0.002'],
+     "'gripper.finger.pad.thickness' has no effect: the solid_pad finger is itself soft"),
+])
+def test_keys_without_effect_on_soft_fingers_and_rigid_contact_are_warned(
+        finger, overrides, warned):
+    with pytest.warns(ConfigWarning) as caught:
+        load_config(finger=finger, overrides=overrides)
+    assert any(warned in str(w.message) for w in caught), [str(w.message) for w in caught]
+
+
+def test_the_barrier_keys_count_with_the_barrier():
+    with warnings.catch_warnings():
+        warnings.simplefilter('error', ConfigWarning)
+        load_config(overrides=['contact.model=ipc', 'contact.ipc.dhat=1e-5'])
+        load_config(finger='fin_ray', overrides=['contact.ipc.stiffness=1'])
+
+
+@pytest.mark.parametrize('overrides, name', [
+    (['gripper.finger.type=fin_ray'], 'fin_ray'),
+    (['gripper.finger.type=solid_pad'], 'solid_pad'),
+    (['gripper.finger.type=fin_ray', 'gripper.finger.name=my_ray'], 'my_ray'),
+    (['finger=soft_pad'], 'soft_pad'),
+])
+def test_the_finger_shown_in_outputs_is_the_type_chosen_by_key(overrides, name):
+    assert load_config(overrides=overrides)['gripper.finger.name'] == name
+

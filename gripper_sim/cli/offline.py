@@ -17,7 +17,8 @@ import numpy as np
 
 from gripper_sim.cli.arguments import non_negative_float, positive_float, positive_int
 from gripper_sim.cli.progress import StepProgress
-from gripper_sim.configuration import available_fruits, load_config, parse_override
+from gripper_sim.configuration import (RIGID_FINGERS, available_fruits, load_config,
+                                       parse_override)
 from gripper_sim.errors import GripperSimError
 
 
@@ -525,7 +526,10 @@ def run_window(args) -> int:
           f'mu = {window.friction:g})')
     print(f'  bruises above   {high}')
     sites = sorted({t.bruised_at for t in window.trials if t.bruised and t.bruised_at})
-    print(f'                  (Hertz estimate at the jaws {window.max_estimate:.3g} N'
+    finger = config['gripper.finger.type']
+    rigid = ('' if finger in RIGID_FINGERS
+             else f" for rigid jaws, the search's start: the {finger} finger is softer")
+    print(f'                  (Hertz estimate at the jaws {window.max_estimate:.3g} N{rigid}'
           + (', 3D: resolved pressure' if int(config['dimension']) == 3 else '')
           + (f'; on the table once it carries {window.table_bruise_estimate:.3g} N'
              if window.table_bruise_estimate else '')
