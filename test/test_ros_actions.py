@@ -108,12 +108,14 @@ def test_a_new_goal_preempts_the_active_grasp_and_cancel_holds_the_jaws(client):
     assert first.accepted
     client.spin_until(lambda: any(f.phase in ('lifting', 'holding') for f in feedback), 120,
                       'the first grasp to lift')
-    # a new Grasp goal takes over: the first one ends aborted, with the reason
+    # a new Grasp goal takes over: the first one ends canceled (as ros2_controllers'
+    # gripper controllers end a preempted goal), with the reason
     feedback = []
     second = client.send_goal(client.grasp, grasp_goal(6.0, hold=3000.0), feedback)
     assert second.accepted
     status, result = client.result(first)
-    assert status == GoalStatus.STATUS_ABORTED and not result.success
+    assert status == GoalStatus.STATUS_CANCELED and not result.success
+    assert result.outcome == 'canceled'
     assert 'preempted by a new Grasp goal' in result.message
     client.spin_until(lambda: any(f.phase == 'holding' for f in feedback), 120,
                       'the second grasp to hold')
@@ -142,7 +144,7 @@ def test_a_new_goal_preempts_the_active_grasp_and_cancel_holds_the_jaws(client):
     fourth = client.send_goal(client.gripper_cmd, gripper_goal(0.070, 10.0))
     assert fourth.accepted
     status, result = client.result(third)
-    assert status == GoalStatus.STATUS_ABORTED
+    assert status == GoalStatus.STATUS_CANCELED
     assert 'preempted by a new GripperCommand goal' in result.message
     status, result = client.result(fourth)
     assert status == GoalStatus.STATUS_SUCCEEDED and result.reached_goal, result
@@ -289,7 +291,7 @@ def test_a_new_gripper_goal_preempts_the_active_one(client, server, first_goal, 
     second = client.send_goal(getattr(client, server), second_goal)
     assert second.accepted
     status, result = client.result(first)
-    assert status == GoalStatus.STATUS_ABORTED and not result.reached_goal
+    assert status == GoalStatus.STATUS_CANCELED and not result.reached_goal
     client.pause(False)
     status, result = client.result(second)
     assert status == GoalStatus.STATUS_SUCCEEDED and result.reached_goal

@@ -20,6 +20,7 @@ from gripper_sim_interfaces.action import Grasp
 
 from gripper_sim.errors import GripperSimError
 from gripper_sim.ros.grasp_goal import GoalRun, goal_problem
+from gripper_sim.ros.goal_end import end_stopped_goal
 from gripper_sim.ros.jaw_goals import FEEDBACK_PERIOD, FEEDBACK_QOS, JawGoals
 from gripper_sim.ros.sync import ActiveGoal
 
@@ -125,11 +126,12 @@ class GraspServer:
             result = run.sequence.result(summary)
         if run.abort_reason or run.error:
             why = run.abort_reason or f'grasp sequence failed: {run.error}'
+            preempted = run.preempted and not run.error
             result.success = False
-            result.outcome = 'failed'
-            result.message = f'aborted during {phase}: {why}'
+            result.outcome = 'canceled' if preempted else 'failed'
+            result.message = f"{'canceled' if preempted else 'aborted'} during {phase}: {why}"
             node.get_logger().warning(f'Grasp goal {result.message}')
-            goal_handle.abort()
+            end_stopped_goal(goal_handle, preempted)
         elif canceled:
             result.success = False
             result.outcome = 'canceled'

@@ -33,6 +33,7 @@ from rclpy.action import ActionServer, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 
 from gripper_sim.errors import CommandError
+from gripper_sim.ros.goal_end import end_stopped_goal
 from gripper_sim.ros.jaw_goals import FEEDBACK_PERIOD, FEEDBACK_QOS, JawGoals
 from gripper_sim.ros.sync import ActiveGoal
 
@@ -210,8 +211,8 @@ class GripperCommandServer:
         state = f'gap {last.gap:.4f} m, effort {last.grip_force:.2f} N'
         if run.abort_reason or run.error:
             why = run.abort_reason or run.error
-            node.get_logger().warning(f'{self.kind} goal aborted ({why}); {state}')
-            goal_handle.abort()
+            ended = end_stopped_goal(goal_handle, run.preempted and not run.error)
+            node.get_logger().warning(f'{self.kind} goal {ended} ({why}); {state}')
         elif run.reached:
             node.get_logger().info(f'{self.kind} goal reached; {state}')
             goal_handle.succeed()

@@ -82,6 +82,11 @@ class JawOwner:
     def abort(self, reason: str) -> None:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def preempt(self, reason: str) -> None:
+        """Stop it for a newer goal (``JawOwnership.claim``); an abort unless the owner
+        tells the two apart."""
+        self.abort(reason)
+
 
 class ActiveGoal(JawOwner):
     """An executing action goal that drives the jaws.
@@ -91,6 +96,7 @@ class ActiveGoal(JawOwner):
         finished: set when the goal should stop waiting (done, canceled, aborted).
         abort_reason: why it was stopped from outside (reset, failure, shutdown,
             preemption), or None.
+        preempted: whether that was a newer goal (``preempt``).
         error: why its own motion failed, or None.
         last_feedback: (sim time, wall time) of the last feedback sent, s.
         ticket: ``JawOwnership.ticket()`` of its acceptance.
@@ -103,6 +109,7 @@ class ActiveGoal(JawOwner):
         self.abort_reason: str | None = None
         self.error: str | None = None
         self.last_feedback = (-math.inf, -math.inf)
+        self.preempted = False
         self._cancel_requested = False
 
     def abort(self, reason: str) -> None:
@@ -110,6 +117,12 @@ class ActiveGoal(JawOwner):
         if self.abort_reason is None:
             self.abort_reason = reason
         self.finished.set()
+
+    def preempt(self, reason: str) -> None:
+        """Stop for a newer goal: as ``abort``, and the goal ends canceled."""
+        if self.abort_reason is None:
+            self.preempted = True
+        self.abort(reason)
 
     def cancel(self) -> None:
         """The client asked to cancel (from the cancel callback, before rclpy marks the
@@ -159,7 +172,8 @@ class JawOwnership:
         """Make ``owner`` (accepted with ``ticket``) the only driver of the jaws; the
         reason it cannot, or None.
 
-        An active owner is aborted (preempted by ``owner``): the newest goal always
+        An active owner is preempted by ``owner`` (its goal ends canceled, see
+        ``ros.goal_end``): the newest goal always
         wins, as in ros2_controllers' gripper action controller, so a goal whose client
         has gone (killed, disconnected) never blocks the jaws. A goal that starts after
         a newer one was accepted never drives them.
@@ -171,7 +185,7 @@ class JawOwnership:
                 return 'preempted by a newer goal before it started'
             current = self._owner
             if current is not None:
-                current.abort(f'preempted by a new {owner.kind} goal')
+                current.preempt(f'preempted by a new {owner.kind} goal')
             self._owner = owner
             return None
 
