@@ -370,11 +370,13 @@ def test_parallel_gripper_command_stalls_on_the_fruit_at_its_effort_limit(client
     (parallel_goal(0.03, name=('elbow',)), 'command.name'),
     (parallel_goal(()), 'command.position must hold one value'),
     (parallel_goal(float('nan')), 'must be finite'),
-    (parallel_goal(-0.01), 'position (gap)'),
-    (parallel_goal(0.03, (-1.0,)), 'max_effort'),
-    (parallel_goal(0.03, velocity=(0.0,)), 'command.velocity must be > 0'),
-], ids=['two-joints', 'unknown-joint', 'no-position', 'nan', 'negative', 'negative-effort',
-        'zero-velocity'])
+    (parallel_goal(-0.01), 'command.position[0] must be in [0, 0.1] m, got -0.01 m'),
+    (parallel_goal(0.15), 'command.position[0] must be in [0, 0.1] m, got 0.15 m'),
+    (parallel_goal(0.03, (-1.0,)), 'command.effort[0] must be in [0, '),
+    (parallel_goal(0.03, velocity=(0.0,)), 'command.velocity[0] must be in (0, 0.1] m/s'),
+    (parallel_goal(0.03, velocity=(1e9,)), 'command.velocity[0] must be in (0, 0.1] m/s'),
+], ids=['two-joints', 'unknown-joint', 'no-position', 'nan', 'negative', 'too-open',
+        'negative-effort', 'zero-velocity', 'too-fast'])
 def test_bad_parallel_gripper_commands_are_rejected_with_the_reason(client, goal, reason):
     assert_rejected(client, client.parallel_gripper_cmd, goal, 'ParallelGripperCommand', reason)
 

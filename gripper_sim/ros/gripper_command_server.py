@@ -132,26 +132,27 @@ class GripperCommandServer:
             goal_callback=self._on_goal, cancel_callback=self._goals.cancel,
             callback_group=ReentrantCallbackGroup(), feedback_pub_qos_profile=FEEDBACK_QOS)
 
-    def target(self, goal) -> JawTarget:
-        """The jaw target of a goal request; GoalProblem if it is unusable."""
+    def target(self, goal, config) -> JawTarget:
+        """The jaw target of a goal request in the flat ``config``; GoalProblem, in the
+        goal's own terms, if it is unusable."""
         command = goal.command
+        problem = goal_problem(command.position, command.max_effort, config)
+        if problem:
+            raise GoalProblem(problem)
         return JawTarget(gap=command.position, max_effort=command.max_effort)
 
     def _on_goal(self, goal) -> GoalResponse:
         try:
-            target = self.target(goal)
-            problem = goal_problem(target.gap, target.max_effort, self._node.params.config)
+            self.target(goal, self._node.params.config)
         except GoalProblem as err:
-            problem = str(err)
-        if problem:
-            self._node.get_logger().warning(f'{self.kind} goal rejected: {problem}')
+            self._node.get_logger().warning(f'{self.kind} goal rejected: {err}')
             return GoalResponse.REJECT
         return self._goals.accept(goal)
 
     def _execute(self, goal_handle):
         node = self._node
         params = node.params
-        target = self.target(goal_handle.request)
+        target = self.target(goal_handle.request, params.config)
         max_effort = target.max_effort or float(params.get('max_effort'))
         run = _CommandRun(goal_handle, self._goals.ticket(goal_handle), self.kind, target,
                           max_effort, float(params.get('goal_tolerance')),

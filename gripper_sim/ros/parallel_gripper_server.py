@@ -42,6 +42,14 @@ def _single(values, what: str, required: bool) -> float | None:
     return value
 
 
+def _in_range(what: str, value: float, low: float, high: float, unit: str,
+              open_low: bool = False, note: str = '') -> None:
+    """GoalProblem unless low <= value <= high (low < value if ``open_low``)."""
+    if value > high or value < low or (open_low and value == low):
+        bounds = f"{'(' if open_low else '['}{low:g}, {high:g}]"
+        raise GoalProblem(f'{what} must be in {bounds} {unit}{note}, got {value:g} {unit}')
+
+
 class ParallelGripperCommandServer(GripperCommandServer):
     """Serves ``~/parallel_gripper_cmd`` for a ``SimNode``."""
 
@@ -49,7 +57,9 @@ class ParallelGripperCommandServer(GripperCommandServer):
     action_type = ParallelGripperCommand
     action_name = '~/parallel_gripper_cmd'
 
-    def target(self, goal) -> JawTarget:
+    def target(self, goal, config) -> JawTarget:
+        """The jaw target of a goal on one jaw joint; GoalProblem, in the joint's terms
+        (its position and speed are half the gap's), if it is unusable."""
         command = goal.command
         names = list(command.name)
         if names and (len(names) != 1 or names[0] not in JAW_JOINTS):
@@ -58,8 +68,13 @@ class ParallelGripperCommandServer(GripperCommandServer):
         position = _single(command.position, 'position', required=True)
         velocity = _single(command.velocity, 'velocity', required=False)
         effort = _single(command.effort, 'effort', required=False)
-        if velocity is not None and velocity <= 0.0:
-            raise GoalProblem(f'command.velocity must be > 0 m/s, got {velocity:g}')
+        _in_range('command.position[0]', position, 0.0, 0.5 * config['gripper.max_gap'], 'm')
+        if velocity is not None:
+            _in_range('command.velocity[0]', velocity, 0.0, 0.5 * config['gripper.max_speed'],
+                      'm/s', open_low=True)
+        if effort is not None:
+            _in_range('command.effort[0]', effort, 0.0, config['gripper.max_force'], 'N',
+                      note=' (0 = parameter max_effort)')
         return JawTarget(gap=2.0 * position, max_effort=effort or 0.0,
                          speed=None if velocity is None else 2.0 * velocity,
                          tolerance_scale=2.0)
