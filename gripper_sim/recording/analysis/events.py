@@ -98,6 +98,15 @@ def find_events(series: TimeSeries) -> Events:
     return Events(grip, lift_off, hold, release, let_go, drop)
 
 
+def lift_never_moved(series: TimeSeries) -> bool:
+    """Whether the run recorded its lift joint and the gripper never rose or sank (by
+    more than ``LIFT_MOVE``): a squeeze, not a grasp (a run without the joint: False)."""
+    if not series.has_lift:
+        return False
+    lift = series['lift_m'][np.isfinite(series['lift_m'])]
+    return bool(np.ptp(lift) <= LIFT_MOVE)
+
+
 def key_moments(series: TimeSeries, events: Events) -> list[tuple[str, int]]:
     """(label, row) of the snapshots: start, grip, peak force, and then the hold's end
     (or the drop) and the end of the run; no row twice."""

@@ -182,7 +182,8 @@ def analyze(path: str | os.PathLike, output_dir: str | os.PathLike, *,
         runs = split_runs(read_time_series(bag, topics, reading))
         header = {'file': str(Path(path)), 'fruit_state_topic': topics['state'],
                   'left_wrench_topic': topics['left'], 'right_wrench_topic': topics['right'],
-                  'fruit': config.get('fruit.name')}
+                  'fruit': config.get('fruit.name'),
+                  'finger': config.get('gripper.finger.name')}
         summaries: list[dict] = []
         files: list[Path] = []
         _mkdir(out)
@@ -236,6 +237,7 @@ def write_recording_report(path: str | os.PathLike, html_path: str | os.PathLike
         series = split_runs(read_time_series(bag, topics))[-1]
         summary = {'file': str(Path(path)), 'fruit_state_topic': topics['state'],
                    'fruit': config.get('fruit.name'),
+                   'finger': config.get('gripper.finger.name'),
                    **summarize(series, bruise_pressure=bruise)}
         frames = run_frames(bag, topics['markers'], series,
                             animation_rows(series, frames_in_html), bruise)

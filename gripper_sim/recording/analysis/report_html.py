@@ -23,7 +23,8 @@ import plotly.graph_objects as go
 import plotly.io as pio
 from plotly.subplots import make_subplots
 
-from gripper_sim.recording.analysis.events import Events, find_events, phase_at
+from gripper_sim.recording.analysis.events import (Events, find_events, lift_never_moved,
+                                                   phase_at)
 from gripper_sim.recording.analysis.figures import (PRESSURE_COLOURS, contact_state,
                                                     pressure_name, pressure_scale)
 from gripper_sim.recording.analysis.frames import Box, Frame
@@ -122,15 +123,18 @@ def summary_rows(summary: dict) -> list[tuple[str, str]]:
     """The key numbers of a run's summary as (name, value) rows."""
     three_d = summary.get('dimension') == 3
     fit = summary.get('stiffness_fit_force_range_n')
+    lifted = summary['held'] is not None
+    dropped = summary.get('dropped', False) if lifted else None   # judged over the lift
     rows = [
         ('fruit', str(summary.get('fruit'))),
+        *([('finger', str(summary['finger']))] if summary.get('finger') else []),
         ('model', f"{summary.get('dimension', 2)}D"),
         ('sim time', f"{summary['start_time_s']:.3f} to "
                      f"{summary['start_time_s'] + summary['duration_s']:.3f} s"),
         ('held / slipped / dropped', f"{_yes_no(summary['held'])} / "
                                      f"{_yes_no(summary['slipped'])} / "
-                                     f"{summary.get('dropped', False)}"
-                                     + ('' if summary['held'] is not None
+                                     f"{_yes_no(dropped)}"
+                                     + ('' if lifted
                                         else f' ({grasp_outcome(summary)})')),
         ('slip at the end of the hold', _number(summary['held_slip_distance_m'], 'mm', 1e3)),
         ('peak grip force', _number(summary['peak_grip_force_n'], 'N')),
@@ -154,20 +158,30 @@ def summary_rows(summary: dict) -> list[tuple[str, str]]:
     return rows
 
 
+#: px above the plot area of the time figure, where the phases are named
+PHASE_LABEL_MARGIN = 70
+
+
 def _phase_lines(fig: go.Figure, series: TimeSeries, events: Events) -> None:
+    """A dashed line at each phase, its name written upwards above the plot area (clear
+    of the curves, which may reach the top of the axes)."""
     t = series['time_s']
     for label, row in events.marked():
         fig.add_vline(x=float(t[row]), line_dash='dash', line_color='grey', line_width=1)
         fig.add_annotation(x=float(t[row]), y=1.0, yref='paper', text=label,
-                           showarrow=False, textangle=-90, xanchor='left', yanchor='top',
-                           font={'size': 10, 'color': 'grey'})
+                           showarrow=False, textangle=-90, xanchor='center',
+                           yanchor='bottom', yshift=2, font={'size': 10, 'color': 'grey'},
+                           name='phase')
 
 
 def time_figure(series: TimeSeries, summary: dict, events: Events) -> go.Figure:
-    """Grip force (and per jaw), gap, compression and slip, each on its own axis."""
+    """Grip force (and per jaw), gap, compression and (for a lifted run) slip, each on its
+    own axis; a run that never lifted has no slip panel (slip is judged over the lift)."""
     t = series['time_s']
-    fig = make_subplots(rows=4, cols=1, shared_xaxes=True, vertical_spacing=0.03,
-                        row_heights=(0.34, 0.22, 0.22, 0.22))
+    lifted = summary['held'] is not None
+    rows = 4 if lifted else 3
+    fig = make_subplots(rows=rows, cols=1, shared_xaxes=True, vertical_spacing=0.03,
+                        row_heights=(0.34, 0.22, 0.22, 0.22)[:rows])
     fig.add_trace(go.Scatter(x=t, y=series['grip_force_n'], name='grip force (mean)',
                              line={'color': 'black'}), row=1, col=1)
     for side in ('left', 'right'):
@@ -178,17 +192,18 @@ def time_figure(series: TimeSeries, summary: dict, events: Events) -> go.Figure:
     fig.add_trace(go.Scatter(x=t, y=1e3 * series['gap_m'], name='jaw gap (mm)'), row=2, col=1)
     fig.add_trace(go.Scatter(x=t, y=1e3 * series['compression_m'], name='compression (mm)'),
                   row=3, col=1)
-    fig.add_trace(go.Scatter(x=t, y=1e3 * series['slip_distance_m'],
-                             name='slip in the jaws (mm)'), row=4, col=1)
-    tolerance = 1e3 * summary['slip_threshold_m']
-    fig.add_hline(y=tolerance, line_dash='dot', line_color='red', row=4, col=1,
-                  annotation_text=f'slip tolerance {tolerance:g} mm')
+    if lifted:
+        fig.add_trace(go.Scatter(x=t, y=1e3 * series['slip_distance_m'],
+                                 name='slip in the jaws (mm)'), row=4, col=1)
+        tolerance = 1e3 * summary['slip_threshold_m']
+        fig.add_hline(y=tolerance, line_dash='dot', line_color='red', row=4, col=1,
+                      annotation_text=f'slip tolerance {tolerance:g} mm')
     for row, label in enumerate(('normal force (N)', 'jaw gap (mm)', 'compression (mm)',
-                                 'slip (mm)'), start=1):
+                                 'slip (mm)')[:rows], start=1):
         fig.update_yaxes(title_text=label, row=row, col=1)
-    fig.update_xaxes(title_text='sim time (s)', row=4, col=1)
+    fig.update_xaxes(title_text='sim time (s)', row=rows, col=1)
     _phase_lines(fig, series, events)
-    fig.update_layout(height=820, margin={'t': 40})
+    fig.update_layout(height=820 if lifted else 640, margin={'t': PHASE_LABEL_MARGIN})
     return fig
 
 
@@ -208,6 +223,14 @@ def compression_figure(series: TimeSeries, summary: dict, events: Events) -> go.
                                  mode='lines', line={'color': 'red'},
                                  name=f'tangent {fit.tangent / 1e3:.2f} N/mm '
                                       f'(loading, {lo:.2f}-{hi:.2f} N)'))
+    if fit.secant is not None and fit.start is not None and fit.end is not None:
+        ends = [fit.start, fit.end]
+        fig.add_trace(go.Scatter(x=c_mm[ends], y=series['grip_force_n'][ends],
+                                 mode='lines+markers', uid='secant',
+                                 line={'color': 'purple', 'dash': 'dot'},
+                                 marker={'symbol': 'diamond', 'size': 8},
+                                 name=f'grip to end of loading: secant '
+                                      f'{fit.secant / 1e3:.2f} N/mm'))
     fig.update_layout(xaxis_title='compression (mm)', yaxis_title='grip force (N)',
                       height=480, legend={'x': 0.01, 'y': 0.99})
     return fig
@@ -361,10 +384,14 @@ def write_grasp_report(series: TimeSeries, summary: dict, frames: list[Frame],
     (when the recording has markers) the fruit animation."""
     events = find_events(series)
     dimension = series.dimension
+    lifted = summary['held'] is not None
     blocks = [Block('Summary', rows=summary_rows(summary)),
-              Block('Force, gap, compression and slip over time', time_figure(
+              Block('Force, gap, compression and slip over time' if lifted else
+                    'Force, gap and compression over time', time_figure(
                   series, summary, events), text='Dashed lines: the phases found in the '
-                  'recording (grip, lift-off, hold, release, let go).'),
+                  'recording (grip, lift-off, hold, release, let go).' + (
+                      '' if lifted else ' No slip panel: the fruit was not lifted, and '
+                      'slip is judged over the lift and hold.')),
               Block('Force vs compression', compression_figure(series, summary, events),
                     text='The stiffness is fitted on the loading part only, from the grip '
                          'to the force reached before the lift.')]
@@ -376,9 +403,20 @@ def write_grasp_report(series: TimeSeries, summary: dict, frames: list[Frame],
                  f'shown; the bruise threshold is '
                  f"{summary['bruise_threshold_pa'] / 1e3:.0f} kPa. Grey: the jaw plates; "
                  'brown: the table; blue: deformable fingers. Move the slider or press play.'))
-    title = (f"Grasp of {summary.get('fruit') or 'a fruit'} ({dimension}D): "
-             + grasp_outcome(summary))
-    return write_html_report(path, title, blocks)
+    return write_html_report(path, grasp_report_title(series, summary), blocks)
+
+
+def grasp_report_title(series: TimeSeries, summary: dict) -> str:
+    """'Grasp of apple (2D) with the fin_ray finger: held', or for a run whose gripper
+    never rose (a squeeze) 'Squeeze of apple (2D) with the flat finger to 10 N'; the
+    finger is named when the recording stored its configuration (``summary['finger']``)."""
+    finger = summary.get('finger')
+    scene = (f"{summary.get('fruit') or 'a fruit'} ({series.dimension}D)"
+             + (f' with the {finger} finger' if finger else ''))
+    if lift_never_moved(series):
+        return f"Squeeze of {scene} to {_number(summary['peak_grip_force_n'], 'N')}"
+    return f'Grasp of {scene}: {grasp_outcome(summary)}'
+
 
 
 def write_runs_index(summaries: Sequence[dict], run_dirs: Sequence[str],

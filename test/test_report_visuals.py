@@ -1,0 +1,127 @@
+"""What the figures and HTML reports show: titles, panels, lines, labels, page settings.
+
+Asserts on the figures' data (plotly JSON, page text), not on pixels. The runs are made
+up (a ramped grip, then a lift or none), so no simulation is needed.
+"""
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from gripper_sim.recording.analysis.events import find_events
+from gripper_sim.recording.analysis.report_html import (compression_figure,
+                                                        summary_rows, time_figure,
+                                                        write_grasp_report)
+from gripper_sim.recording.analysis.series import COLUMNS, TimeSeries
+from gripper_sim.recording.analysis.summary import summarize
+
+BRUISE = 260e3
+
+
+def made_run(lifted: bool, n: int = 300) -> TimeSeries:
+    """A 2D run: the jaws close, touch at row 60, squeeze to 10 N by row 150, then (when
+    ``lifted``) the gripper rises 20 mm over rows 180-240 and holds."""
+    rows = np.arange(n)
+    columns = {name: np.zeros(n) for name in COLUMNS}
+    columns['time_s'] = 0.01 * rows
+    columns['dimension'][:] = 2
+    touching = rows >= 60
+    loading = np.clip((rows - 60) / 90.0, 0.0, 1.0)
+    force = 10.0 * loading ** 1.3
+    columns['grip_force_n'] = force
+    columns['left_force_n'] = force
+    columns['right_force_n'] = force
+    columns['compression_m'] = 4e-3 * loading
+    columns['gap_m'] = 0.08 - 0.02 * np.clip(rows / 60.0, 0, 1) - 4e-3 * loading
+    columns['left_jaw_contact'] = touching.astype(float)
+    columns['right_jaw_contact'] = touching.astype(float)
+    columns['slip_distance_m'] = 1e-5 * loading
+    columns['lift_m'] = (0.02 * np.clip((rows - 180) / 60.0, 0, 1) if lifted
+                         else np.zeros(n)) + 0.03
+    return TimeSeries(columns=columns, log_times=rows * 10_000_000,
+                      stamps=rows * 10_000_000)
+
+
+def report_summary(series: TimeSeries, finger: str | None = 'fin_ray') -> dict:
+    """The summary ``analyze`` gives the report: the file's header and the numbers."""
+    return {'file': 'run.mcap', 'fruit': 'apple', 'finger': finger,
+            **summarize(series, bruise_pressure=BRUISE)}
+
+
+def page_title(path) -> str:
+    return re.search(r'<title>([^<]*)</title>', path.read_text()).group(1)
+
+
+def page_figures(path) -> list[dict]:
+    """The plotly figures of a page (the JSON of each ``Plotly.newPlot`` call)."""
+    text = path.read_text()
+    figures = []
+    for match in re.finditer(r'Plotly\.newPlot\(\s*"[^"]+",\s*', text):
+        data, end = json.JSONDecoder().raw_decode(text, match.end())
+        layout, _ = json.JSONDecoder().raw_decode(text, end + text[end:].index('{'))
+        figures.append({'data': data, 'layout': layout})
+    return figures
+
+
+# ---------------------------------------------------------------- grasp report
+@pytest.mark.parametrize('finger', ['fin_ray', 'solid_pad'])
+def test_the_grasp_report_names_the_finger(tmp_path, finger):
+    series = made_run(lifted=True)
+    path = write_grasp_report(series, report_summary(series, finger), [],
+                              tmp_path / 'r.html')
+    assert page_title(path) == f'Grasp of apple (2D) with the {finger} finger: held'
+    assert ('finger', finger) in summary_rows(report_summary(series, finger))
+
+
+def test_a_squeeze_report_is_titled_a_squeeze_and_has_no_slip_panel(tmp_path):
+    series = made_run(lifted=False)
+    summary = report_summary(series, 'flat')
+    path = write_grasp_report(series, summary, [], tmp_path / 'r.html')
+    assert page_title(path) == 'Squeeze of apple (2D) with the flat finger to 10 N'
+    assert dict(summary_rows(summary))['held / slipped / dropped'].startswith(
+        'n/a / n/a / n/a')
+    fig = time_figure(series, summary, find_events(series))
+    axis_titles = [fig.layout[name].title.text for name in fig.layout
+                   if name.startswith('yaxis')]
+    assert 'slip (mm)' not in axis_titles
+    assert not any('slip' in (trace.name or '') for trace in fig.data)
+    assert not any('slip tolerance' in (a.text or '') for a in fig.layout.annotations)
+    assert 'No slip panel' in path.read_text()
+
+
+def test_a_lifted_run_keeps_its_slip_panel_and_its_dropped_flag():
+    series = made_run(lifted=True)
+    summary = report_summary(series)
+    fig = time_figure(series, summary, find_events(series))
+    assert any(fig.layout[name].title.text == 'slip (mm)' for name in fig.layout
+               if name.startswith('yaxis'))
+    assert dict(summary_rows(summary))['held / slipped / dropped'] == \
+        'True / False / False'
+
+
+def test_phase_labels_sit_above_the_plot_area():
+    series = made_run(lifted=True)
+    summary = report_summary(series)
+    fig = time_figure(series, summary, find_events(series))
+    labels = [a for a in fig.layout.annotations if a.name == 'phase']
+    assert [a.text for a in labels] == ['grip', 'lift-off', 'hold']
+    for label in labels:
+        # anchored by its bottom at the top of the plot area: it rises into the margin
+        assert (label.yref, label.y, label.yanchor) == ('paper', 1.0, 'bottom')
+    assert fig.layout.margin.t >= 60
+
+
+def test_the_force_compression_plot_draws_the_secant():
+    series = made_run(lifted=True)
+    summary = report_summary(series)
+    fig = compression_figure(series, summary, find_events(series))
+    secant = [trace for trace in fig.data if trace.uid == 'secant']
+    assert len(secant) == 1
+    f_start, f_end = secant[0].y
+    c_start, c_end = secant[0].x
+    assert (f_end - f_start) / (c_end - c_start) * 1e3 == pytest.approx(
+        summary['secant_stiffness_n_per_m'])
+    assert f"{summary['secant_stiffness_n_per_m'] / 1e3:.2f} N/mm" in secant[0].name
