@@ -13,6 +13,7 @@ import pytest
 
 from gripper_sim.recording.analysis.events import find_events
 from gripper_sim.recording.analysis.report_html import (compression_figure,
+                                                        write_window_report,
                                                         summary_rows, time_figure,
                                                         write_grasp_report)
 from gripper_sim.recording.analysis.series import COLUMNS, TimeSeries
@@ -125,3 +126,39 @@ def test_the_force_compression_plot_draws_the_secant():
     assert (f_end - f_start) / (c_end - c_start) * 1e3 == pytest.approx(
         summary['secant_stiffness_n_per_m'])
     assert f"{summary['secant_stiffness_n_per_m'] / 1e3:.2f} N/mm" in secant[0].name
+
+
+# ---------------------------------------------------------------- window report
+def made_window_dict() -> dict:
+    """A window's ``as_dict`` with hold trials (dropped, held) and bruise trials (safe,
+    bruised), not simulated: the report's input."""
+    from gripper_sim.workflows.window import GraspWindow, Trial
+    forces = [0.5, 1.0, 2.0, 4.0, 8.0]
+    trials = [Trial(force=f, kind='bruise' if f >= 4.0 else 'hold', held=f >= 1.0,
+                    slipped=f < 1.0, bruised=f >= 8.0,
+                    outcome='dropped' if f < 1.0 else 'bruised' if f >= 8.0 else 'held',
+                    slip_distance=0.01 / f, peak_grip_force=1.01 * f,
+                    peak_jaw_pressure=1e4 * f, peak_table_pressure=2e3,
+                    peak_damage_pressure=4e4 * f,
+                    bruised_at='jaws' if f >= 8.0 else None, wall_time=1.0)
+              for f in forces]
+    return GraspWindow(fruit='apple', finger='flat', min_force=1.0, max_force=4.0,
+                       min_estimate=0.9, max_estimate=5.0, mass=0.2, friction=0.5,
+                       tolerance=0.03, trials=trials, max_slip=1e-3).as_dict()
+
+
+def test_the_window_report_says_safe_draws_its_limits_and_names_the_commanded_force(
+        tmp_path):
+    path = write_window_report(made_window_dict(), tmp_path / 'w.html',
+                               bruise_pressure=260e3)
+    fig = page_figures(path)[0]
+    slip, damage = fig['data']
+    words = dict(zip(damage['x'], damage['text']))
+    assert words[4.0] == 'safe' and words[8.0] == 'bruised'
+    assert words[1.0] == 'not bruised'             # a hold trial: its damage, not 'held'
+    assert dict(zip(slip['x'], slip['text']))[1.0] == 'held'
+    lines = {(shape['yref'], shape['y0']) for shape in fig['layout']['shapes']
+             if shape['y0'] == shape['y1']}
+    assert ('y', 1.0) in lines and ('y2', 260.0) in lines
+    assert fig['layout']['xaxis2']['title']['text'] == 'commanded grip force (N)'
+    assert slip['customdata'] == pytest.approx([1.01 * f for f in slip['x']])

@@ -469,23 +469,50 @@ _BOUND_ROWS = {
 }
 
 
-def write_window_report(window: dict, path: str | Path, title: str = 'Grasp window') -> Path:
+def _damage_word(trial: dict) -> str:
+    """A trial's word in the damage panel: a 'bruise' trial's verdict (bruised, safe,
+    pinched, solver failed, not reached); a 'hold' trial's damage (bruised or not)."""
+    if trial['kind'] == 'bruise' and 'verdict' in trial:
+        return trial['verdict']
+    if trial['outcome'] == 'solver failed':
+        return trial['outcome']
+    return 'bruised' if trial['bruised'] else 'not bruised'
+
+
+def write_window_report(window: dict, path: str | Path, title: str = 'Grasp window',
+                        bruise_pressure: float | None = None) -> Path:
     """``window``'s report: every trial's outcome, slip and peak damage pressure over its
-    grip force, with the bounds found. ``window``: ``GraspWindow.as_dict()``."""
+    commanded grip force, with the bounds found and the two limits (``window.max_slip``,
+    the bruise pressure). ``window``: ``GraspWindow.as_dict()``; ``bruise_pressure``: Pa,
+    the fruit's (``fruit.bruise_pressure``; None: that line is not drawn)."""
     trials = sorted(window.get('trials', []), key=lambda t: t['force'])
     force = [t['force'] for t in trials]
+    measured = [t.get('peak_grip_force', math.nan) for t in trials]
     fig = make_subplots(rows=2, cols=1, shared_xaxes=True, vertical_spacing=0.06)
     fig.add_trace(go.Scatter(
         x=force, y=[1e3 * t['slip_distance'] for t in trials], mode='markers',
-        text=[t.get('verdict', t['outcome']) for t in trials], name='slip (mm)',
+        text=[t.get('verdict', t['outcome']) for t in trials], customdata=measured,
+        name='slip (mm)',
         marker={'size': 10, 'color': [_trial_colour(t, t['held']) for t in trials]},
-        hovertemplate='%{x:.3g} N: %{text}, slip %{y:.3f} mm<extra></extra>'), row=1, col=1)
+        hovertemplate='%{x:.3g} N commanded (%{customdata:.3g} N measured): %{text}, '
+                      'slip %{y:.3f} mm<extra></extra>'), row=1, col=1)
     fig.add_trace(go.Scatter(
         x=force, y=[_trial_pressure(t) / 1e3 for t in trials], mode='markers',
-        text=[t['outcome'] for t in trials], name='peak damage pressure (kPa)',
+        text=[_damage_word(t) for t in trials], customdata=measured,
+        name='peak damage pressure (kPa)',
         marker={'size': 10, 'symbol': 'diamond',
                 'color': [_trial_colour(t, not t['bruised']) for t in trials]},
-        hovertemplate='%{x:.3g} N: %{text}, %{y:.1f} kPa<extra></extra>'), row=2, col=1)
+        hovertemplate='%{x:.3g} N commanded (%{customdata:.3g} N measured): %{text}, '
+                      '%{y:.1f} kPa<extra></extra>'), row=2, col=1)
+    if window.get('max_slip'):
+        limit = 1e3 * float(window['max_slip'])
+        fig.add_hline(y=limit, line_dash='dot', line_color='red', row=1, col=1,
+                      annotation_text=f'slip limit (window.max_slip) {limit:g} mm',
+                      annotation_position='top right')
+    if bruise_pressure is not None:
+        fig.add_hline(y=bruise_pressure / 1e3, line_dash='dot', line_color='red', row=2,
+                      col=1, annotation_text=f'bruise pressure {bruise_pressure / 1e3:.0f}'
+                                             ' kPa', annotation_position='bottom left')
     low, high = _force_value(window.get('min_force')), _force_value(window.get('max_force'))
     limited_by = window.get('max_force_limited_by')
     high_label = {'solver failure': 'safe up to (solver failure above)',
@@ -498,7 +525,7 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
                                showarrow=False, xanchor='left')
     fig.update_yaxes(title_text='slip (mm)', row=1, col=1)
     fig.update_yaxes(title_text='peak damage pressure (kPa)', row=2, col=1)
-    fig.update_xaxes(title_text='grip force (N)', row=2, col=1)
+    fig.update_xaxes(title_text='commanded grip force (N)', row=2, col=1)
     fig.update_layout(height=640, showlegend=False)
     rows = [(f"{t['force']:.4g} N", f"{t['kind']}: {t.get('verdict', t['outcome'])}, slip "
              f"{1e3 * t['slip_distance']:.3f} "
@@ -520,4 +547,6 @@ def write_window_report(window: dict, path: str | Path, title: str = 'Grasp wind
               text='Green: held (top) or not bruised (bottom); red: not held, or bruised '
                    '(pinched: the fingers closed on each other over the fruit, crushing it '
                    'between them); grey: the solver failed (neither); orange: the grip '
-                   'did not reach its command (not bruised, but not in the window).')])
+                   'did not reach its command (not bruised, but not in the window). '
+                   'Dotted red: the slip limit (top) and the bruise pressure (bottom). '
+                   'Hover: the commanded and the measured grip force.')])
