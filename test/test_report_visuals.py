@@ -162,3 +162,71 @@ def test_the_window_report_says_safe_draws_its_limits_and_names_the_commanded_fo
     assert ('y', 1.0) in lines and ('y2', 260.0) in lines
     assert fig['layout']['xaxis2']['title']['text'] == 'commanded grip force (N)'
     assert slip['customdata'] == pytest.approx([1.01 * f for f in slip['x']])
+
+
+# ---------------------------------------------------------------- study report
+def made_study() -> tuple[dict, list[dict]]:
+    """A study's summary and rows (two design points of four fruits), not computed."""
+    axis = 'contact.jaw.static_friction'
+    forces = [0.6, 1.0, 1.6, 2.2, 12.0, 18.0, 30.0]
+    points = []
+    for k, friction in enumerate((0.5, 0.8)):
+        curve = dict(force=forces, p=[0, .25, .75, 1, 1, .5, 0],
+                     lower=[0, 0, .2, .4, .4, 0, 0], upper=[.6, .8, 1, 1, 1, .9, .6])
+        points.append(dict(index=k, label=f'{axis}={friction}', values={axis: friction},
+                           population=dict(window=dict(low=2.1, high=13.0),
+                                           ci=dict(low=[1.6, 2.5], high=[11.0, 18.0]),
+                                           curve=curve)))
+    rows = [dict(point=k, sample=s, kind='hold', outcome='held' if f > 1 else 'dropped',
+                 force=f, **{axis: friction})
+            for k, friction in enumerate((0.5, 0.8)) for s in range(4) for f in forces]
+    summary = dict(study='small', axes=[axis, 'force'], population=dict(samples=4),
+                   points=points, method='bisection', rows=len(rows), fraction=0.99,
+                   confidence=0.9)
+    return summary, rows
+
+
+def test_the_study_report_reads_in_newtons_and_gives_each_panel_room(tmp_path):
+    from gripper_sim.workflows.study_report import write_report
+    summary, rows = made_study()
+    write_report(summary, rows, tmp_path)
+    path = tmp_path / 'report.html'
+    assert page_title(path) == 'Study small'
+    assert '"displaylogo": false' in path.read_text()
+    layout = page_figures(path)[0]['layout']
+    force_axes = [layout['yaxis'], layout['xaxis2'], layout['xaxis3']]
+    for axis in force_axes:
+        assert axis['type'] == 'log'
+        assert set(axis['ticktext']) <= {'0.2', '0.5', '1', '2', '5', '10', '20', '50',
+                                         '100'}
+        assert len(axis['ticktext']) >= 3 and '10' in axis['ticktext']
+    low, high = (10 ** v for v in layout['xaxis3']['range'])
+    assert low < 0.9 * 1.6 and high > 1.1 * 18.0        # past the whiskers
+    plot_height = layout['height'] - 160                  # less the margins, roughly
+    for axis in ('yaxis', 'yaxis2', 'yaxis3'):
+        span = layout[axis]['domain'][1] - layout[axis]['domain'][0]
+        assert span * plot_height >= 250, axis
+
+
+# ---------------------------------------------------------------- calibration
+def made_fit():
+    from gripper_sim.workflows.calibrate_data import CompressionCurve
+    from gripper_sim.workflows.calibrate_fit import FitResult, FittedKey
+    from gripper_sim.workflows.calibrate_model import SimulatedCurve
+    d = np.linspace(0.0, 6e-3, 13)
+    measured = CompressionCurve(d, 1.5e6 * d ** 1.5, 5e-3, None, '')
+    simulated = SimulatedCurve(d, 1.45e6 * d ** 1.5, np.zeros(13), np.zeros(13, bool))
+    key = FittedKey('fruit.flesh.youngs_modulus', 9.971e5, 0.015 * 9.971e5, 8.9e5, False)
+    return FitResult((key,), {}, simulated, simulated, measured, 1.7, 3.4, np.eye(1), (),
+                     9)
+
+
+def test_the_calibration_figures_give_the_unit_and_the_standard_error(tmp_path):
+    from gripper_sim.workflows.calibrate_plots import _title, plot_html
+    result = made_fit()
+    assert 'flesh.youngs_modulus = 9.971e+05 Pa +/- 1.5%' in _title(result, 'my_peach')
+    plot_html(result, tmp_path / 'my_peach.html', 'my_peach')
+    path = tmp_path / 'my_peach.html'
+    assert page_title(path) == 'Calibration of my_peach'
+    assert '"displaylogo": false' in path.read_text()
+    assert 'Pa +/- 1.5%' in page_figures(path)[0]['layout']['title']['text']

@@ -17,11 +17,28 @@ from matplotlib.figure import Figure
 from plotly.subplots import make_subplots
 
 from gripper_sim.workflows.calibrate_bruise import BruiseCalibration
-from gripper_sim.workflows.calibrate_fit import FitResult
+from gripper_sim.configuration import SCHEMA
+from gripper_sim.recording.analysis.report_html import write_figure_page
+from gripper_sim.workflows.calibrate_fit import FitResult, FittedKey
+
+
+#: relative standard error above which a fitted value is called undetermined (as the
+#: calibrate command prints it)
+UNDETERMINED = 10.0
+
+
+def _fitted_value(key: FittedKey) -> str:
+    """'flesh.youngs_modulus = 9.971e+05 Pa +/- 1.5 %': the value with its SI unit (the
+    configuration's) and its relative standard error."""
+    unit = SCHEMA[key.key].unit if key.key in SCHEMA else ''
+    unit = f' {unit}' if unit not in ('', '-') else ''
+    spread = (f'+/- {key.relative_error:.1%}' if key.relative_error < UNDETERMINED
+              else '(undetermined)')
+    return f'{key.key.removeprefix("fruit.")} = {key.value:.4g}{unit} {spread}'
 
 
 def _title(result: FitResult, name: str) -> str:
-    fitted = ', '.join(f'{k.key.removeprefix("fruit.")} = {k.value:.4g}' for k in result.keys)
+    fitted = ', '.join(_fitted_value(k) for k in result.keys)
     return (f'{name}: {fitted}; RMS error {result.rms_error:.3g} N '
             f'({result.relative_rms_error:.1%} of peak)')
 
@@ -102,4 +119,4 @@ def plot_html(result: FitResult, path: str | Path, name: str,
     figure.update_xaxes(title_text='deformation (plate travel since first contact, mm)',
                         row=2, col=1)
     figure.update_layout(title=_title(result, name), template='plotly_white')
-    figure.write_html(str(path), include_plotlyjs=True, full_html=True)
+    write_figure_page(path, f'Calibration of {name}', figure)

@@ -7,6 +7,7 @@
 """
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Sequence
@@ -18,6 +19,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker as ticker  # noqa: E402
 import plotly.graph_objects as go  # noqa: E402
 from plotly.subplots import make_subplots  # noqa: E402
+
+from gripper_sim.recording.analysis.report_html import write_figure_page  # noqa: E402
 
 OUTCOME_COLOURS = {'held': '#2ca02c', 'placed': '#2ca02c', 'slipped': '#bcbd22',
                    'dropped': '#1f77b4', 'bruised': '#ff7f0e', 'crushed': '#d62728',
@@ -55,6 +58,37 @@ def _force_axis(ax) -> None:
         lambda v, _: f'{v:g}' if str(f'{v:g}')[0] in '235' else ''))
 
 
+#: px of the HTML report's panels: a window map, the success curves, and the population
+#: window (its base, and per design point)
+MAP_HEIGHT, CURVE_HEIGHT = 380, 420
+WINDOW_BASE_HEIGHT, WINDOW_ROW_HEIGHT = 160, 70
+#: how far (a factor) the population window's force axis reaches past its outermost ends
+WINDOW_MARGIN = 1.3
+
+
+def log_ticks(low: float, high: float) -> tuple[list[float], list[str]]:
+    """Tick values (N) 1, 2, 5 per decade from ``low`` to ``high`` (N, > 0) and their
+    labels as plain numbers ('0.5', '1', '20'), for a plotly log axis."""
+    first, last = math.floor(math.log10(low)), math.ceil(math.log10(high))
+    values = [m * 10.0 ** e for e in range(first, last + 1) for m in (1, 2, 5)]
+    values = [v for v in values if low <= v * (1 + 1e-9) and v <= high * (1 + 1e-9)]
+    return values, [f'{v:g}' for v in values]
+
+
+def _log_axis(values: Sequence[float], margin: float = 1.0) -> dict:
+    """A plotly log axis over the positive ``values`` (N), ``margin`` (a factor) past
+    either end, ticked 1, 2, 5 per decade with plain numbers; {} without values."""
+    positive = [float(v) for v in values if v is not None and math.isfinite(v) and v > 0]
+    if not positive:
+        return {}
+    low, high = min(positive) / margin, max(positive) * margin
+    if high <= low * 1.5:
+        low, high = low / 1.5, high * 1.5
+    ticks, labels = log_ticks(low, high)
+    return dict(type='log', range=[math.log10(low), math.log10(high)], tickmode='array',
+                tickvals=ticks, ticktext=labels)
+
+
 def _window_ends(point: dict) -> tuple[float, float] | None:
     population = point.get('population') or {}
     window = population.get('window')
@@ -71,8 +105,12 @@ def _title(summary: dict) -> str:
 def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> None:
     titles = [f'window map: grip force vs {axis}' for axis in axes] + [
         'success probability vs grip force', 'population window per design point']
+    heights = ([MAP_HEIGHT] * len(axes) + [CURVE_HEIGHT, WINDOW_BASE_HEIGHT
+                                           + WINDOW_ROW_HEIGHT * len(summary['points'])])
+    gap = 110   # px between panels: the axis title and the next panel's title
     fig = make_subplots(rows=len(titles), cols=1, subplot_titles=titles,
-                        vertical_spacing=0.3 / len(titles))
+                        row_heights=heights, vertical_spacing=gap / (sum(heights)
+                                                                     + gap * len(titles)))
     for i, axis in enumerate(axes, start=1):
         for outcome, colour in OUTCOME_COLOURS.items():
             picked = [r for r in rows if r['outcome'] == outcome]
@@ -84,7 +122,8 @@ def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> N
                 marker=dict(color=colour, size=6, opacity=0.6),
                 text=[f"point {r['point']}, sample {r['sample']}, {r['kind']}"
                       for r in picked]), row=i, col=1)
-        fig.update_yaxes(type='log', title_text='grip force (N)', row=i, col=1)
+        fig.update_yaxes(title_text='grip force (N)', row=i, col=1,
+                         **_log_axis([r['force'] for r in rows], margin=1.2))
         fig.update_xaxes(type='category', title_text=axis, row=i, col=1,
                          categoryorder='array', categoryarray=_categories(rows, axis))
     curve_row, window_row = len(axes) + 1, len(axes) + 2
@@ -101,9 +140,14 @@ def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> N
                                  name=point['label'], line=dict(color=colour, shape='hv')),
                       row=curve_row, col=1)
     fig.add_hline(y=summary['fraction'], line_dash='dot', row=curve_row, col=1)
-    fig.update_xaxes(type='log', title_text='grip force (N)', row=curve_row, col=1)
+    curve_forces = [f for point in summary['points']
+                    for f in ((point.get('population') or {}).get('curve') or {}).get(
+                        'force', [])]
+    fig.update_xaxes(title_text='grip force (N)', row=curve_row, col=1,
+                     **_log_axis(curve_forces))
     fig.update_yaxes(title_text='fruits succeeding', range=[0, 1.02], row=curve_row, col=1)
     labels = [p['label'] for p in summary['points']]
+    window_forces: list[float] = []
     for point in summary['points']:
         ends = _window_ends(point)
         if ends is None:
@@ -112,6 +156,8 @@ def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> N
                                showarrow=False)
             continue
         ci = point['population']['ci']
+        window_forces += list(ends) + ([f for pair in (ci['low'], ci['high']) for f in pair]
+                                       if ci else [])
         fig.add_trace(go.Scatter(x=list(ends), y=[point['label']] * 2, mode='lines+markers',
                                  line=dict(width=8, color='#2ca02c'), showlegend=False,
                                  name=point['label']), row=window_row, col=1)
@@ -121,10 +167,12 @@ def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> N
                                          line=dict(width=2, color='#333333'),
                                          showlegend=False, hoverinfo='x'),
                               row=window_row, col=1)
-    fig.update_xaxes(type='log', title_text='grip force (N)', row=window_row, col=1)
+    fig.update_xaxes(title_text='grip force (N)', row=window_row, col=1,
+                     **(_log_axis(window_forces, WINDOW_MARGIN) or {'type': 'log'}))
     fig.update_yaxes(type='category', categoryarray=labels, row=window_row, col=1)
-    fig.update_layout(title=_title(summary), height=380 * len(titles), template='plotly_white')
-    fig.write_html(path, include_plotlyjs=True, full_html=True)
+    fig.update_layout(title=_title(summary), height=sum(heights) + gap * len(titles) + 60,
+                      template='plotly_white')
+    write_figure_page(path, f"Study {summary['study']}", fig)
 
 
 def _png(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> None:

@@ -34,6 +34,8 @@ from gripper_sim.recording.errors import RecordingError
 
 #: the element id of the fruit animation's plot, for scripts and tests
 ANIMATION_ID = 'fruit-animation'
+#: every report's plotly settings: no plotly logo (a link off the page) in the mode bar
+PLOTLY_CONFIG = {'displaylogo': False}
 
 
 @dataclass(frozen=True)
@@ -88,7 +90,7 @@ def write_html_report(path: str | Path, title: str, blocks: Sequence[Block]) -> 
         if block.figure is not None:
             parts.append(pio.to_html(block.figure, full_html=False, auto_play=False,
                                      include_plotlyjs=not script_done, div_id=block.div_id,
-                                     config={'displaylogo': False}))
+                                     config=PLOTLY_CONFIG))
             script_done = True
         if block.rows:
             cells = ''.join(f'<tr><td>{html.escape(name)}</td><td>{html.escape(value)}'
@@ -99,6 +101,24 @@ def write_html_report(path: str | Path, title: str, blocks: Sequence[Block]) -> 
                             for label, href in block.links)
             parts.append(f'<ul>{items}</ul>')
     page = _PAGE.format(title=html.escape(title), body='\n'.join(parts))
+    target = Path(path)
+    try:
+        target.write_text(page, encoding='utf-8')
+    except OSError as err:
+        raise RecordingError(f'cannot write {target}: {err.strerror}') from err
+    return target
+
+
+def write_figure_page(path: str | Path, title: str, figure: go.Figure) -> Path:
+    """Write one figure as a self-contained page (plotly's JavaScript embedded) named
+    ``title`` in the browser tab, with the reports' plotly settings.
+
+    Raises:
+        RecordingError: the file cannot be written.
+    """
+    page = figure.to_html(include_plotlyjs=True, full_html=True, config=PLOTLY_CONFIG)
+    page = page.replace('<head>', f'<head><meta charset="utf-8">'
+                                  f'<title>{html.escape(title)}</title>', 1)
     target = Path(path)
     try:
         target.write_text(page, encoding='utf-8')
