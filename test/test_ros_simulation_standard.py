@@ -24,8 +24,8 @@ IMPLEMENTED = {SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_
                SimulatorFeatures.STEP_SIMULATION_SINGLE,
                SimulatorFeatures.STEP_SIMULATION_MULTIPLE,
                SimulatorFeatures.STEP_SIMULATION_ACTION,
-               SimulatorFeatures.ENTITY_STATE_GETTING, SimulatorFeatures.SPAWNABLES,
-               SimulatorFeatures.SPAWNING}
+               SimulatorFeatures.ENTITY_STATE_GETTING, SimulatorFeatures.ENTITY_CATEGORIES,
+               SimulatorFeatures.SPAWNABLES, SimulatorFeatures.SPAWNING}
 APPLE_RADIUS, PLUM_RADIUS = 0.0635 / 2, 0.045 / 2   # m, config/fruits
 
 

@@ -7,10 +7,14 @@ when the world has one, ``table`` (a static object). There is always exactly one
 ``spawn_entity`` replaces it by another preset (it keeps the name ``fruit`` and starts at
 rest on the table, as after a reset), and ``delete_entity`` refuses every entity, the
 fruit included (a gripper simulation without a fruit has nothing to simulate).
+
+``filters.filter`` is a POSIX extended regular expression (as the standard says),
+translated to Python's ``re`` by ``posix_ere_to_python``.
 """
 from __future__ import annotations
 
 import re
+import string
 from typing import Callable
 
 import numpy as np
@@ -43,22 +47,144 @@ DELETE_REFUSALS = {
            "false for a world without it"}
 
 
+#: the POSIX character classes (C locale) as the contents of a Python ``re`` set
+POSIX_CLASSES = {
+    'alpha': 'A-Za-z', 'digit': '0-9', 'alnum': '0-9A-Za-z', 'upper': 'A-Z',
+    'lower': 'a-z', 'xdigit': '0-9A-Fa-f', 'space': r' \t\n\r\f\v', 'blank': r' \t',
+    'punct': ''.join(f'\\x{ord(c):02x}' for c in string.punctuation),
+    'cntrl': r'\x00-\x1f\x7f', 'print': r'\x20-\x7e', 'graph': r'\x21-\x7e'}
+
+
+class PatternError(ValueError):
+    """A filter that is not a valid POSIX extended regular expression (the reason)."""
+
+
 def entity_names(has_table: bool) -> list[str]:
     """The entities of a world with or without a table, in a fixed order."""
     return [FRUIT, LEFT_JAW, RIGHT_JAW] + ([TABLE] if has_table else [])
 
 
+def literal(char: str) -> str:
+    """``char`` as a literal in a Python ``re`` pattern, in a set or out of one (a hex
+    escape unless alphanumeric)."""
+    if char.isascii() and char.isalnum():
+        return char
+    return f'\\x{ord(char):02x}' if ord(char) < 0x100 else f'\\U{ord(char):08x}'
+
+
+def bracket_element(pattern: str, at: int) -> tuple[str, str | None, int]:
+    """The element of a bracket expression at ``pattern[at]``: (a Python set fragment,
+    its character, or None for a character class, the index after it)."""
+    for opener, closer in (('[:', ':]'), ('[=', '=]'), ('[.', '.]')):
+        if pattern.startswith(opener, at):
+            end = pattern.find(closer, at + 2)
+            if end < 0:
+                raise PatternError(f"'{opener}' at position {at} is not closed by "
+                                   f"'{closer}'")
+            name = pattern[at + 2:end]
+            if opener == '[:':
+                if name not in POSIX_CLASSES:
+                    raise PatternError(f"unknown character class '[:{name}:]' (known: "
+                                       f"{', '.join(sorted(POSIX_CLASSES))})")
+                return POSIX_CLASSES[name], None, end + 2
+            if len(name) != 1:
+                raise PatternError(f"'{opener}{name}{closer}': only single-character "
+                                   'collating elements are supported')
+            return literal(name), name, end + 2
+    return literal(pattern[at]), pattern[at], at + 1
+
+
+def bracket_to_python(pattern: str, at: int) -> tuple[str, int]:
+    """The POSIX bracket expression opening at ``pattern[at]`` (``[``) as a Python set,
+    and the index after its closing ``]`` (a ``]`` first is a literal, as a ``-`` first
+    or last is)."""
+    start, at = at, at + 1
+    negated = pattern.startswith('^', at)
+    at += negated
+    parts: list[str] = []
+    while True:
+        if at >= len(pattern):
+            raise PatternError(f"the bracket expression at position {start} is not closed "
+                               "by ']'")
+        if pattern[at] == ']' and parts:
+            return '[' + '^' * negated + ''.join(parts) + ']', at + 1
+        low, low_char, at = bracket_element(pattern, at)
+        if (low_char is None or not pattern.startswith('-', at) or at + 1 >= len(pattern)
+                or pattern[at + 1] == ']'):
+            parts.append(low)
+            continue
+        high, high_char, at = bracket_element(pattern, at + 1)
+        if high_char is None:
+            raise PatternError(f"the range starting '{low_char}-' ends in a character "
+                               'class')
+        if high_char < low_char:
+            raise PatternError(f"the range '{low_char}-{high_char}' is reversed")
+        parts.append(f'{low}-{high}')
+
+
+def posix_ere_to_python(pattern: str) -> str:
+    """The POSIX extended regular expression ``pattern`` (EntityFilters.filter) as a Python
+    ``re`` pattern of the same meaning: bracket expressions with the character classes
+    (``[[:alpha:]]`` ...) and single-character ``[=c=]``/``[.c.]``, a backslash quoting a
+    special character; backreferences and Python's own escapes and ``(?`` groups, which
+    ERE does not have, raise a PatternError."""
+    translated: list[str] = []
+    at = 0
+    while at < len(pattern):
+        char = pattern[at]
+        if char == '[':
+            text, at = bracket_to_python(pattern, at)
+            translated.append(text)
+            continue
+        if char == '\\':
+            if at + 1 >= len(pattern):
+                raise PatternError('a trailing backslash quotes nothing')
+            quoted = pattern[at + 1]
+            if quoted.isdigit():
+                raise PatternError(f"'\\{quoted}' is a backreference, which POSIX extended "
+                                   'regular expressions do not have')
+            if quoted.isalnum():
+                raise PatternError(f"'\\{quoted}' is not a POSIX extended regular "
+                                   'expression escape: use a bracket expression such as '
+                                   '[[:digit:]], [[:alpha:]] or [[:space:]]')
+            translated.append(literal(quoted))
+            at += 2
+            continue
+        if pattern.startswith('(?', at):
+            raise PatternError(f"'(?' at position {at}: a group cannot start with a "
+                               "repetition ('(?...)' is Python's syntax, not POSIX)")
+        translated.append(char)
+        at += 1
+    return ''.join(translated)
+
+
+def compile_filter(text: str) -> re.Pattern | None:
+    """The ``EntityFilters.filter`` ``text`` compiled (None when empty: every name).
+
+    Raises:
+        PatternError: it is not a valid POSIX extended regular expression (the reason).
+    """
+    if not text:
+        return None
+    try:
+        return re.compile(posix_ere_to_python(text))
+    except re.error as error:
+        raise PatternError(str(error)) from None
+
+
 def filtered(names: list[str], filters) -> tuple[list[str], Result]:
-    """``names`` matching the ``EntityFilters`` ``filters`` (regex searched in the name,
-    categories, tags: none of our entities has a tag), and the ``Result``: a bad regex
-    or a bounds filter (not supported) match nothing."""
+    """``names`` matching the ``EntityFilters`` ``filters`` (a POSIX extended regular
+    expression searched in the name, categories, tags: none of our entities has a tag),
+    and the ``Result``: a bad pattern or a bounds filter (not supported) match nothing,
+    with the reason."""
     if filters.bounds.type != Bounds.TYPE_EMPTY:
         return [], outcome(Result.RESULT_FEATURE_UNSUPPORTED, 'bounds filters are not supported')
     try:
-        pattern = re.compile(filters.filter) if filters.filter else None
-    except re.error as error:
+        pattern = compile_filter(filters.filter)
+    except PatternError as error:
         return [], outcome(Result.RESULT_OPERATION_FAILED,
-                           f"invalid filter regex '{filters.filter}': {error}")
+                           f"invalid filter regex '{filters.filter}': {error} (filters "
+                           'are POSIX extended regular expressions)')
     categories = {c.category for c in filters.categories}
     return [name for name in names
             if (pattern is None or pattern.search(name))

@@ -25,8 +25,8 @@ FEATURES = (SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_STA
             SimulatorFeatures.STEP_SIMULATION_SINGLE,
             SimulatorFeatures.STEP_SIMULATION_MULTIPLE,
             SimulatorFeatures.STEP_SIMULATION_ACTION,
-            SimulatorFeatures.ENTITY_STATE_GETTING, SimulatorFeatures.SPAWNABLES,
-            SimulatorFeatures.SPAWNING)
+            SimulatorFeatures.ENTITY_STATE_GETTING, SimulatorFeatures.ENTITY_CATEGORIES,
+            SimulatorFeatures.SPAWNABLES, SimulatorFeatures.SPAWNING)
 #: spawn_entity takes a fruit preset name or a preset file of this format
 SPAWN_FORMATS = ('yaml',)
 FEEDBACK_PERIOD = 0.05   # wall s, SimulateSteps progress
