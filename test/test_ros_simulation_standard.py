@@ -1,7 +1,8 @@
 """A generic simulator client drives the node through simulation_interfaces only: the
 features it lists, pause, step N (time advances by exactly N dt), SimulateSteps with
 feedback and cancel, reset, stop, play; the entities, their states, the spawnable fruits,
-replacing the fruit by another and the spawns and deletes refused."""
+replacing the fruit by another and the spawns and deletes refused (the standard's
+finer points: test_ros_sim_standard_audit)."""
 import pytest
 from action_msgs.msg import GoalStatus
 from simulation_interfaces.action import SimulateSteps
@@ -204,11 +205,11 @@ def test_entities_their_states_and_replacing_the_fruit(standard, tmp_path):
     by_uri = {s.uri: s.description for s in spawnables.spawnables}
     assert {'apple', 'plum'} <= set(by_uri) and '45.0 mm' in by_uri['plum']
 
-    plum = call(standard.spawn, uri='plum')
+    plum = call(standard.spawn, uri='plum')   # named by the preset
     assert plum.result.result == Result.RESULT_OK, plum.result.error_message
-    assert plum.entity_name == 'fruit'
+    assert plum.entity_name == 'plum'
     standard.wait_clock(0)
-    replaced = standard.entity('fruit')
+    replaced = standard.entity('plum')
     assert (replaced.header.stamp.sec, replaced.header.stamp.nanosec) == (0, 0)
     plum_height = replaced.pose.position.z - standard.entity('table').pose.position.z
     assert plum_height == pytest.approx(PLUM_RADIUS, rel=0.1)
@@ -216,30 +217,31 @@ def test_entities_their_states_and_replacing_the_fruit(standard, tmp_path):
     standard.wait_clock(3 * DT_NS)   # the plum runs
 
     refusals = {
-        'second': (dict(name='second_fruit', uri='plum'), SpawnEntity.Response.NAME_NOT_UNIQUE,
-                   'exactly one fruit'),
+        'taken': (dict(name='plum', uri='plum'), SpawnEntity.Response.NAME_NOT_UNIQUE,
+                  "the name 'plum' is taken"),
         'unknown': (dict(uri='banana'), Result.RESULT_NOT_FOUND, "unknown fruit 'banana'"),
         'no uri': (dict(), SpawnEntity.Response.NO_RESOURCE, 'no uri'),
         'missing file': (dict(uri=str(tmp_path / 'none.yaml')), Result.RESULT_NOT_FOUND,
                          'not found')}
     broken = tmp_path / 'broken.yaml'
     broken.write_text('fruit:\n  density: -5.0\n')
-    refusals['bad file'] = (dict(uri=str(broken)), SpawnEntity.Response.RESOURCE_PARSE_ERROR,
-                            'density')
+    refusals['bad file'] = (dict(name='broken', uri=str(broken)),
+                            SpawnEntity.Response.RESOURCE_PARSE_ERROR, 'density')
     for label, (fields, code, text) in refusals.items():
         refused = call(standard.spawn, **fields)
         assert refused.result.result == code, label
         assert text in refused.result.error_message, (label, refused.result.error_message)
     assert standard.clock_ns() == 3 * DT_NS   # a refused spawn leaves the plum running
 
-    for name in ('fruit', 'left_jaw', 'table'):
+    for name in ('plum', 'left_jaw', 'table'):
         refused = call(standard.delete, entity=name)
         assert refused.result.result == Result.RESULT_OPERATION_FAILED
         assert 'cannot be deleted' in refused.result.error_message or 'world' in \
             refused.result.error_message
     assert call(standard.delete, entity='pear').result.result == Result.RESULT_NOT_FOUND
 
-    assert call(standard.spawn, name='fruit', uri='apple').result.result == Result.RESULT_OK
+    back = call(standard.spawn, name='fruit', uri='apple')   # 'fruit' is free again
+    assert (back.result.result, back.entity_name) == (Result.RESULT_OK, 'fruit')
     standard.wait_clock(0)
     apple_height = standard.entity('fruit').pose.position.z - table.pose.position.z
     assert apple_height == pytest.approx(APPLE_RADIUS, rel=0.1)

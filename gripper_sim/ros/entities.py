@@ -2,11 +2,14 @@
 ``get_entities``, ``get_entity_state``, ``get_spawnables``, ``spawn_entity`` and
 ``delete_entity``, named in the node's namespace.
 
-Entities: ``fruit`` (a dynamic object), ``left_jaw`` and ``right_jaw`` (the robot) and,
-when the world has one, ``table`` (a static object). There is always exactly one fruit:
-``spawn_entity`` replaces it by another preset (it keeps the name ``fruit`` and starts at
-rest on the table, as after a reset), and ``delete_entity`` refuses every entity, the
-fruit included (a gripper simulation without a fruit has nothing to simulate).
+Entities: the fruit (a dynamic object; ``fruit`` at start-up), ``left_jaw`` and
+``right_jaw`` (the robot) and, when the world has one, ``table`` (a static object). There
+is always exactly one fruit: ``spawn_entity`` replaces it by another preset, under the
+name the standard gives it (the request's, else the preset's ``fruit.name``; a taken or
+missing one is refused unless ``allow_renaming``); the new fruit starts at rest on the
+table, as after a reset. A reset whose scope includes ``SCOPE_SPAWNED`` brings the
+start-up fruit back (``restore_startup_fruit``). ``delete_entity`` refuses every entity,
+the fruit included (a gripper simulation without a fruit has nothing to simulate).
 
 ``filters.filter`` is a POSIX extended regular expression (as the standard says),
 translated to Python's ``re`` by ``posix_ere_to_python``.
@@ -15,9 +18,13 @@ from __future__ import annotations
 
 import re
 import string
+import tempfile
+from pathlib import Path
 from typing import Callable
+from urllib.parse import unquote, urlsplit
 
 import numpy as np
+import yaml
 
 from geometry_msgs.msg import Point, Pose, Quaternion, Twist, Vector3
 from simulation_interfaces.msg import (Bounds, EntityCategory, EntityState, Result,
@@ -33,7 +40,10 @@ from gripper_sim.core.results import StepResult
 from gripper_sim.errors import ConfigError
 from gripper_sim.ros.simulation_standard import outcome
 
+#: entity roles; each is also its entity's name, but the fruit's name changes with a spawn
 FRUIT, LEFT_JAW, RIGHT_JAW, TABLE = 'fruit', 'left_jaw', 'right_jaw', 'table'
+#: an entity name: a ROS name token (letters, digits, underscores; no leading digit)
+ENTITY_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 CATEGORIES = {FRUIT: EntityCategory.CATEGORY_DYNAMIC_OBJECT,
               LEFT_JAW: EntityCategory.CATEGORY_ROBOT,
               RIGHT_JAW: EntityCategory.CATEGORY_ROBOT,
@@ -59,9 +69,11 @@ class PatternError(ValueError):
     """A filter that is not a valid POSIX extended regular expression (the reason)."""
 
 
-def entity_names(has_table: bool) -> list[str]:
-    """The entities of a world with or without a table, in a fixed order."""
-    return [FRUIT, LEFT_JAW, RIGHT_JAW] + ([TABLE] if has_table else [])
+def entity_names(fruit_name: str, has_table: bool) -> dict[str, str]:
+    """The entities of a world with or without a table, in a fixed order: ``{name: role}``
+    (the fruit is named ``fruit_name``, the others by their role)."""
+    return {fruit_name: FRUIT, LEFT_JAW: LEFT_JAW, RIGHT_JAW: RIGHT_JAW,
+            **({TABLE: TABLE} if has_table else {})}
 
 
 def literal(char: str) -> str:
@@ -172,11 +184,11 @@ def compile_filter(text: str) -> re.Pattern | None:
         raise PatternError(str(error)) from None
 
 
-def filtered(names: list[str], filters) -> tuple[list[str], Result]:
-    """``names`` matching the ``EntityFilters`` ``filters`` (a POSIX extended regular
-    expression searched in the name, categories, tags: none of our entities has a tag),
-    and the ``Result``: a bad pattern or a bounds filter (not supported) match nothing,
-    with the reason."""
+def filtered(entities: dict[str, str], filters) -> tuple[list[str], Result]:
+    """The names of ``entities`` (``{name: role}``) matching the ``EntityFilters``
+    ``filters`` (a POSIX extended regular expression searched in the name, categories,
+    tags: none of our entities has a tag), and the ``Result``: a bad pattern or a bounds
+    filter (not supported) match nothing, with the reason."""
     if filters.bounds.type != Bounds.TYPE_EMPTY:
         return [], outcome(Result.RESULT_FEATURE_UNSUPPORTED, 'bounds filters are not supported')
     try:
@@ -186,9 +198,9 @@ def filtered(names: list[str], filters) -> tuple[list[str], Result]:
                            f"invalid filter regex '{filters.filter}': {error} (filters "
                            'are POSIX extended regular expressions)')
     categories = {c.category for c in filters.categories}
-    return [name for name in names
+    return [name for name, role in entities.items()
             if (pattern is None or pattern.search(name))
-            and (not categories or CATEGORIES[name] in categories)
+            and (not categories or CATEGORIES[role] in categories)
             and not filters.tags.tags], outcome()
 
 
@@ -224,6 +236,83 @@ def entity_pose_twist(result: StepResult, entity: str, frames, table_height: flo
     return tuple(position), velocity
 
 
+class SpawnRefusal(Exception):
+    """A refused spawn: its ``Result`` code and message."""
+
+    def __init__(self, code: int, message: str):
+        super().__init__(message)
+        self.result = outcome(code, message)
+
+
+def preset_source(uri: str) -> str:
+    """The fruit preset ``uri`` names, as ``configuration.fruit_preset_path`` takes it: a
+    preset name or a preset file path as they are, a ``file://`` URI as its path.
+
+    Raises:
+        SpawnRefusal: another URI scheme, or a file of another format than yaml.
+    """
+    parts = urlsplit(uri)
+    if parts.scheme == 'file':
+        if parts.netloc not in ('', 'localhost'):
+            raise SpawnRefusal(SpawnEntity.Response.UNSUPPORTED_FORMAT,
+                               f"'{uri}': only local file:// URIs are supported")
+        source = unquote(parts.path)
+    elif '://' in uri:
+        raise SpawnRefusal(SpawnEntity.Response.UNSUPPORTED_FORMAT,
+                           f"'{uri}': the URI scheme '{parts.scheme}' is not supported; "
+                           'give a fruit preset name, a preset file path or a file:// URI')
+    else:
+        source = uri
+    suffix = Path(source).suffix
+    if suffix and not configuration.is_preset_file(source):
+        raise SpawnRefusal(SpawnEntity.Response.UNSUPPORTED_FORMAT,
+                           f"'{uri}': the format '{suffix}' is not supported; spawn a fruit "
+                           f"preset ({', '.join(configuration.PRESET_SUFFIXES)})")
+    return source
+
+
+def unique_name(base: str, taken) -> str:
+    """``base`` if it is not ``taken``, else ``base`` with the smallest suffix ``_<n>``
+    (n >= 1) that is not."""
+    name, number = base, 0
+    while name in taken:
+        number += 1
+        name = f'{base}_{number}'
+    return name
+
+
+def spawn_name(request, preset_name: str, taken) -> str:
+    """The name SpawnEntity gives the new fruit: the request's, else ``preset_name`` (the
+    preset's ``fruit.name``, when it is a valid entity name); a missing or ``taken`` one
+    generated from it (or from ``fruit``) when ``allow_renaming``.
+
+    Raises:
+        SpawnRefusal: ``NAME_INVALID`` or ``NAME_NOT_UNIQUE``, as SpawnEntity.srv says.
+    """
+    name = request.name or (preset_name if ENTITY_NAME.fullmatch(preset_name) else '')
+    if not name:
+        if request.allow_renaming:
+            return unique_name(FRUIT, taken)
+        raise SpawnRefusal(SpawnEntity.Response.NAME_INVALID,
+                           'no name (and the preset names none): give one, or set '
+                           'allow_renaming for a generated one')
+    if name not in taken:
+        return name
+    if request.allow_renaming:
+        return unique_name(name, taken)
+    raise SpawnRefusal(SpawnEntity.Response.NAME_NOT_UNIQUE,
+                       f"the name '{name}' is taken (entities: {', '.join(taken)}): give "
+                       'another (the new fruit replaces the current one, whatever its '
+                       'name) or set allow_renaming')
+
+
+def restoring_preset(startup: dict, keys) -> dict:
+    """A fruit preset (nested) of the ``startup`` configuration's values of ``keys``."""
+    def plain(value):
+        return list(value) if isinstance(value, tuple) else value
+    return configuration.unflatten({key: plain(startup[key]) for key in sorted(keys)})
+
+
 class EntityServices:
     """Serves the entity services of ``node`` (a ``SimNode``) in ``group``;
     ``replace_fruit(name_or_path) -> str | None`` swaps the fruit (an error message, or
@@ -232,6 +321,11 @@ class EntityServices:
     def __init__(self, node, group, replace_fruit: Callable[[str], str | None]):
         self._node = node
         self._replace_fruit = replace_fruit
+        self._fruit_name = FRUIT
+        self._startup_config = dict(node.params.config)
+        self._spawned = False   # a spawned fruit replaced the start-up one
+        #: configuration keys spawned presets set since then
+        self._spawned_keys: set[str] = set()
         for srv, name, callback in (
                 (GetEntities, 'get_entities', self._on_entities),
                 (GetEntityState, 'get_entity_state', self._on_entity_state),
@@ -240,25 +334,51 @@ class EntityServices:
                 (DeleteEntity, 'delete_entity', self._on_delete)):
             node.create_service(srv, name, callback, callback_group=group)
 
-    def _names(self) -> list[str]:
-        return entity_names(bool(self._node.params.config['world.table']))
+    def _entities(self) -> dict[str, str]:
+        return entity_names(self._fruit_name, bool(self._node.params.config['world.table']))
+
+    def restore_startup_fruit(self) -> Result | None:
+        """Bring back the start-up fruit (its configuration values and the name
+        ``fruit``) if a spawn replaced it: the outcome (the replacement resets the
+        simulation to t = 0), or None when no spawned fruit is in place."""
+        if not self._spawned:
+            return None
+        problem = self._recording_problem()
+        if problem:
+            return problem
+        keys = self._spawned_keys | {key for key in self._startup_config
+                                     if key.startswith('fruit.')}
+        name = self._startup_config['fruit.name']
+        with tempfile.TemporaryDirectory(prefix='gripper_sim_') as folder:
+            path = Path(folder) / f'start-up {name}.yaml'
+            path.write_text(yaml.safe_dump(restoring_preset(self._startup_config, keys)),
+                            encoding='utf-8')
+            error = self._replace_fruit(str(path))
+        if error:
+            return outcome(Result.RESULT_OPERATION_FAILED,
+                           f'the start-up fruit could not be restored: {error}')
+        self._fruit_name = FRUIT
+        self._spawned, self._spawned_keys = False, set()
+        return outcome()
 
     def _on_entities(self, request, response):
-        response.entities, response.result = filtered(self._names(), request.filters)
+        response.entities, response.result = filtered(self._entities(), request.filters)
         return response
 
     def _on_entity_state(self, request, response):
         node = self._node
-        if request.entity not in self._names():
+        entities = self._entities()
+        if request.entity not in entities:
             response.result = outcome(Result.RESULT_NOT_FOUND,
                                       f"no entity '{request.entity}' (entities: "
-                                      f"{', '.join(self._names())})")
+                                      f"{', '.join(entities)})")
             return response
         with node.lock:
             result = node.sim.last
             frames = node.message_context.frames
             table_height = float(node.params.config['world.table_height'])
-        position, velocity = entity_pose_twist(result, request.entity, frames, table_height)
+        position, velocity = entity_pose_twist(result, entities[request.entity], frames,
+                                               table_height)
         response.state = EntityState(
             header=Header(stamp=time_msg(result.time), frame_id=frames.scene),
             pose=Pose(position=Point(x=position[0], y=position[1], z=position[2]),
@@ -268,62 +388,80 @@ class EntityServices:
         return response
 
     def _on_spawnables(self, request, response):
-        if request.sources:
-            response.result = outcome(
-                Result.RESULT_NOT_FOUND, 'only the built-in fruit presets are listed; '
-                'leave sources empty (a preset file path can still be spawned)')
-            return response
         response.spawnables = [Spawnable(uri=name, description=spawnable_description(name))
                                for name in configuration.available_fruits()]
-        response.result = outcome()
+        response.result = outcome(message='' if not request.sources else (
+            f"sources not searched: {', '.join(request.sources)} (only the built-in fruit "
+            'presets are listed; a preset file path can still be spawned)'))
         return response
 
     def _on_spawn(self, request, response):
-        response.result = self._spawn_problem(request) or outcome()
-        if response.result.result == Result.RESULT_OK:
-            response.entity_name = FRUIT
+        try:
+            response.entity_name = self._spawn(request)
+            response.result = outcome()
+        except SpawnRefusal as refusal:
+            response.result = refusal.result
         return response
 
-    def _spawn_problem(self, request) -> Result | None:
-        if request.name not in ('', FRUIT):
-            return outcome(SpawnEntity.Response.NAME_NOT_UNIQUE,
-                           f"cannot spawn '{request.name}': the simulation holds exactly "
-                           f"one fruit; spawn under the name '{FRUIT}' (or no name) to "
-                           'replace it')
+    def _spawn(self, request) -> str:
+        """Replace the fruit as ``request`` asks; the new fruit's entity name.
+
+        Raises:
+            SpawnRefusal: the request is refused (nothing changed).
+        """
+        if request.name and not ENTITY_NAME.fullmatch(request.name):
+            raise SpawnRefusal(SpawnEntity.Response.NAME_INVALID,
+                               f"invalid name '{request.name}': entity names are letters, "
+                               'digits and underscores, not starting with a digit')
         if request.entity_namespace:
-            return outcome(SpawnEntity.Response.NAMESPACE_INVALID,
-                           'entity namespaces are not supported')
-        if request.resource_string:
-            return outcome(SpawnEntity.Response.UNSUPPORTED_FORMAT,
-                           'spawn by uri: a fruit preset name or a preset file path')
+            raise SpawnRefusal(SpawnEntity.Response.NAMESPACE_INVALID,
+                               'entity namespaces are not supported')
         if not request.uri:
-            return outcome(SpawnEntity.Response.NO_RESOURCE,
-                           'no uri: give a fruit preset name (get_spawnables) or a preset '
-                           'file path')
+            if request.resource_string:
+                raise SpawnRefusal(Result.RESULT_FEATURE_UNSUPPORTED,
+                                   'resource_string is not supported (no '
+                                   'SPAWNING_RESOURCE_STRING feature): give a uri')
+            raise SpawnRefusal(SpawnEntity.Response.NO_RESOURCE,
+                               'no uri: give a fruit preset name (get_spawnables), a preset '
+                               'file path or a file:// URI')
         pose = request.initial_pose.pose
         if (pose.position.x, pose.position.y, pose.position.z) != (0.0, 0.0, 0.0) or \
                 (pose.orientation.x, pose.orientation.y, pose.orientation.z,
                  pose.orientation.w) != (0.0, 0.0, 0.0, 1.0):
-            return outcome(SpawnEntity.Response.INVALID_POSE,
-                           'the fruit always starts at rest on the table; leave '
-                           'initial_pose at its default')
+            raise SpawnRefusal(SpawnEntity.Response.INVALID_POSE,
+                               'the fruit always starts at rest on the table; leave '
+                               'initial_pose at its default')
+        source = preset_source(request.uri)
         try:
-            configuration.fruit_preset_path(request.uri)
+            path = configuration.fruit_preset_path(source)
         except ConfigError as error:
-            return outcome(Result.RESULT_NOT_FOUND, f'{error}')
+            raise SpawnRefusal(Result.RESULT_NOT_FOUND, f'{error}') from None
+        try:
+            keys = configuration.flatten(configuration.read_yaml(path))
+        except ConfigError as error:
+            raise SpawnRefusal(SpawnEntity.Response.RESOURCE_PARSE_ERROR, f'{error}') from None
+        name = spawn_name(request, str(keys.get('fruit.name') or ''), list(self._entities()))
+        problem = self._recording_problem()
+        if problem:
+            raise SpawnRefusal(problem.result, problem.error_message)
+        error = self._replace_fruit(source)
+        if error:
+            raise SpawnRefusal(SpawnEntity.Response.RESOURCE_PARSE_ERROR, error)
+        self._fruit_name, self._spawned = name, True
+        self._spawned_keys |= {key for key in keys if key in configuration.SCHEMA}
+        return name
+
+    def _recording_problem(self) -> Result | None:
         recording = self._node.recording_control.recording
         if recording is not None and recording.active:
             return outcome(Result.RESULT_INCORRECT_STATE,
                            'a recording is running and names the current fruit; stop it '
                            '(~/record false) before replacing the fruit')
-        error = self._replace_fruit(request.uri)
-        if error:
-            return outcome(SpawnEntity.Response.RESOURCE_PARSE_ERROR, error)
         return None
 
     def _on_delete(self, request, response):
-        reason = DELETE_REFUSALS.get(request.entity)
-        response.result = (outcome(Result.RESULT_OPERATION_FAILED, reason) if reason else
-                           outcome(Result.RESULT_NOT_FOUND,
-                                   f"no entity '{request.entity}'"))
+        role = self._entities().get(request.entity)
+        response.result = (outcome(Result.RESULT_OPERATION_FAILED, DELETE_REFUSALS[role])
+                           if role else outcome(Result.RESULT_NOT_FOUND,
+                                                f"no entity '{request.entity}'"))
         return response

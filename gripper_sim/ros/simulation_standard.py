@@ -8,6 +8,10 @@ The entity services are in ``entities``.
 
 Simulation states: PLAYING (running), PAUSED, and STOPPED (set_simulation_state
 STOPPED: reset to t = 0 and paused, until it is played, paused or stepped).
+
+Reset scopes: time and state go together; a scope with ``SCOPE_SPAWNED`` (``SCOPE_ALL``,
+``SCOPE_DEFAULT``) also brings back the start-up fruit if a spawn replaced it, as the
+standard's "dynamically spawned objects are de-spawned" (``~/reset`` keeps it).
 """
 from __future__ import annotations
 
@@ -30,9 +34,12 @@ FEATURES = (SimulatorFeatures.SIMULATION_RESET, SimulatorFeatures.SIMULATION_STA
 #: spawn_entity takes a fruit preset name or a preset file of this format
 SPAWN_FORMATS = ('yaml',)
 FEEDBACK_PERIOD = 0.05   # wall s, SimulateSteps progress
-#: reset scopes our reset covers: time and state together (a spawned fruit stays)
-RESET_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Request.SCOPE_ALL,
-                ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE)
+_TIME_AND_STATE = ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE
+#: reset scopes that also de-spawn: the start-up fruit replaces a spawned one
+DESPAWNING_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Request.SCOPE_ALL,
+                     _TIME_AND_STATE | ResetSimulation.Request.SCOPE_SPAWNED)
+#: reset scopes our reset covers: time and state together, with or without de-spawning
+RESET_SCOPES = DESPAWNING_SCOPES + (_TIME_AND_STATE,)
 STATE_NAMES = {SimulationState.STATE_STOPPED: 'STOPPED', SimulationState.STATE_PLAYING:
                'PLAYING', SimulationState.STATE_PAUSED: 'PAUSED',
                SimulationState.STATE_QUITTING: 'QUITTING',
@@ -80,8 +87,10 @@ class SimulationStandard:
         response.features = SimulatorFeatures(
             features=list(FEATURES), spawn_formats=list(SPAWN_FORMATS),
             custom_info='gripper_sim: a parallel-jaw gripper and one deformable fruit; '
-                        'a reset restores t = 0 and the initial commands; spawn_entity '
-                        'replaces the fruit (a preset name or file), nothing is deleted')
+                        'a reset restores t = 0 and the initial commands (time and state '
+                        'together; with SCOPE_SPAWNED also the start-up fruit); '
+                        'spawn_entity replaces the fruit (a preset name, file or file:// '
+                        'URI), nothing is deleted')
         return response
 
     def _on_reset(self, request, response):
@@ -89,8 +98,14 @@ class SimulationStandard:
             response.result = outcome(
                 Result.RESULT_FEATURE_UNSUPPORTED,
                 f'reset scope {request.scope} is not supported: time and state are reset '
-                'together (SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME | SCOPE_STATE)')
+                'together (SCOPE_TIME | SCOPE_STATE, with SCOPE_SPAWNED also the start-up '
+                'fruit; SCOPE_DEFAULT and SCOPE_ALL are all three)')
             return response
+        if request.scope in DESPAWNING_SCOPES:
+            restored = self._node.entities.restore_startup_fruit()
+            if restored is not None:   # the replacement reset the simulation
+                response.result = restored
+                return response
         self._node.reset_simulation('the simulation was reset (reset_simulation)')
         response.result = outcome()
         return response
