@@ -495,14 +495,16 @@ def fruit_marker(result: StepResult, context: MessageContext, header: Header) ->
 
 
 def soft_finger_marker(result: StepResult, header: Header) -> Marker:
-    """ns ``soft_fingers`` id 0, LINE_LIST: the deformable fingers' outlines that touch
-    the fruit (``StepResult.fingers``), as they deform, in the plane y = 0 (3D: the edges
-    of their surface triangles)."""
+    """ns ``soft_fingers`` id 0, LINE_LIST: the deformable fingers whole
+    (``StepResult.fingers``: ``drawn_edges``, a Fin Ray's beams and ribs, a solid pad's
+    outline), as they deform, in the plane y = 0 (3D: the edges of their surface
+    triangles)."""
     fingers = result.fingers
+    edges = fingers.surface_edges if fingers.drawn_edges is None else fingers.drawn_edges
     lines = base_marker(header, 'soft_fingers', 0, Marker.LINE_LIST)
     lines.scale.x = OUTLINE_WIDTH
     lines.color = ColorRGBA(r=0.15, g=0.35, b=0.75, a=1.0)
-    lines.points = _points(world_xyz(fingers.positions)[fingers.surface_edges.ravel()])
+    lines.points = _points(world_xyz(fingers.positions)[edges.ravel()])
     return lines
 
 

@@ -12,6 +12,7 @@ the fruit through ``surface_edges``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -70,6 +71,14 @@ class FingerBody:
     @property
     def n_nodes(self) -> int:
         return len(self.masses)
+
+    @cached_property
+    def drawn_edges(self) -> np.ndarray:
+        """(k, 2) the edges that draw the whole body: its rod segments and the boundary
+        of its triangles (the edges of one triangle only)."""
+        sides = np.sort(self.triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        unique, counts = np.unique(sides, axis=0, return_counts=True)
+        return np.vstack([self.rod_edges, unique[counts == 1]]).astype(np.int64)
 
     def rod_energies(self, copies: tuple[np.ndarray, ...] | None = None,
                      rest_positions: np.ndarray | None = None) -> list[Energy]:

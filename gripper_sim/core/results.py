@@ -82,6 +82,9 @@ class FingerResult:
             (indices into ``positions``; 3D: the edges of their surface triangles).
         contact_area: (2,) m^2, 3D: each finger's surface area touching the fruit; None
             in 2D.
+        drawn_edges: (k, 2) the edges that draw the whole fingers (indices into
+            ``positions``; 2D: their rods and their solids' boundaries); None: the
+            ``surface_edges`` (3D: the whole surface).
 
     In 3D the (.., 2) arrays are (.., 3) (x, y, z).
     """
@@ -92,6 +95,7 @@ class FingerResult:
     contact_length: np.ndarray
     surface_edges: np.ndarray
     contact_area: np.ndarray | None = None
+    drawn_edges: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -161,6 +161,7 @@ class SoftFingers:
         #: right; ``FingerResult.surface_edges``, read-only: every result shares it),
         #: built by the first ``result``
         self._surface_edges = None
+        self._drawn_edges = None   # likewise, ``FingerResult.drawn_edges``
 
     def _soft_bodies(self, static_friction: float, kinetic_friction: float) -> tuple:
         """The two fingers' outlines in the barrier (``SoftBody``), left then right."""
@@ -303,6 +304,9 @@ class SoftFingers:
             edges = np.vstack([self.body.surface_edges, m + self.body.surface_edges])
             edges.flags.writeable = False
             self._surface_edges = edges
+            drawn = self.body.drawn_edges
+            self._drawn_edges = np.vstack([drawn, m + drawn])
+            self._drawn_edges.flags.writeable = False
         if np.any(touching):
             half = edges.shape[0] // 2
             lengths = [touching_length(x, side_edges, touching)
@@ -311,4 +315,5 @@ class SoftFingers:
             lengths = [0.0, 0.0]
         return FingerResult(positions=x.copy(), contact_forces=forces.copy(),
                             tip_displacement=tip_displacement,
-                            contact_length=np.array(lengths), surface_edges=edges)
+                            contact_length=np.array(lengths), surface_edges=edges,
+                            drawn_edges=self._drawn_edges)
