@@ -12,6 +12,7 @@ a key set by the user that has no effect in the set-up (``NO_EFFECT``) is a
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import math
 import os
@@ -452,6 +453,15 @@ def package_config_dir() -> Path:
 def available_fruits() -> list[str]:
     """Names of the fruit presets in ``config/fruits``."""
     return sorted(p.stem for p in (package_config_dir() / 'fruits').glob('*.yaml'))
+
+
+@functools.cache
+def fruit_property_keys() -> frozenset[str]:
+    """The keys some fruit preset of ``config/fruits`` sets: a fruit's properties (its
+    shape, flesh, skin, friction, ...), as against the modelling choices no preset makes
+    (e.g. ``fruit.nodes``)."""
+    return frozenset(key for name in available_fruits()
+                     for key in flatten(read_yaml(fruit_preset_path(name))))
 
 
 def defaults() -> dict:

@@ -17,6 +17,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from gripper_sim_interfaces.srv import Step
+from gripper_sim.configuration import fruit_property_keys, load_config
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import ConfigError
 from gripper_sim.ros.namesakes import NameInUseError
@@ -392,3 +393,21 @@ def test_the_clock_goes_out_at_every_step_when_a_step_is_longer_than_its_period(
     assert {s for s, topics in seen.items() if 'fruit/state' in topics} == {5, 10}
     assert not any('markers' in topics for topics in seen.values())   # every 50 steps
     assert set(later) == {15, 20} and not any('clock' in topics for topics in later.values())
+
+
+def test_a_spawned_fruit_takes_no_property_of_the_fruit_it_replaces(context):
+    """Strawberry, then apple: the apple's shape, skin and friction, not the strawberry's
+    (a key the apple's preset leaves out takes its default)."""
+    node = make_node(context, start=False, foxglove_port=0)
+    try:
+        assert node.replace_fruit('strawberry') is None
+        assert node.params.config['fruit.name'] == 'strawberry'
+        assert node.replace_fruit('apple') is None
+        apple = load_config(fruit='apple')
+        config = node.params.config
+        assert {key: config[key] for key in fruit_property_keys()} == \
+            {key: apple[key] for key in fruit_property_keys()}
+        assert node.sim.last.positions.shape == Simulation(apple).last.positions.shape
+    finally:
+        node.destroy_node()
+

@@ -18,13 +18,11 @@ from __future__ import annotations
 
 import re
 import string
-import tempfile
 from pathlib import Path
 from typing import Callable
 from urllib.parse import unquote, urlsplit
 
 import numpy as np
-import yaml
 
 from geometry_msgs.msg import Point, Pose, Quaternion, Twist, Vector3
 from simulation_interfaces.msg import (Bounds, EntityCategory, EntityState, Result,
@@ -306,13 +304,6 @@ def spawn_name(request, preset_name: str, taken) -> str:
                        'name) or set allow_renaming')
 
 
-def restoring_preset(startup: dict, keys) -> dict:
-    """A fruit preset (nested) of the ``startup`` configuration's values of ``keys``."""
-    def plain(value):
-        return list(value) if isinstance(value, tuple) else value
-    return configuration.unflatten({key: plain(startup[key]) for key in sorted(keys)})
-
-
 class EntityServices:
     """Serves the entity services of ``node`` (a ``SimNode``) in ``group``;
     ``replace_fruit(name_or_path) -> str | None`` swaps the fruit (an error message, or
@@ -346,14 +337,11 @@ class EntityServices:
         problem = self._recording_problem()
         if problem:
             return problem
-        keys = self._spawned_keys | {key for key in self._startup_config
-                                     if key.startswith('fruit.')}
-        name = self._startup_config['fruit.name']
-        with tempfile.TemporaryDirectory(prefix='gripper_sim_') as folder:
-            path = Path(folder) / f'start-up {name}.yaml'
-            path.write_text(yaml.safe_dump(restoring_preset(self._startup_config, keys)),
-                            encoding='utf-8')
-            error = self._replace_fruit(str(path))
+        keys = (self._spawned_keys | configuration.fruit_property_keys()
+                | {key for key in self._startup_config if key.startswith('fruit.')})
+        error = self._node.set_fruit(
+            {key: self._startup_config[key] for key in keys},
+            'the start-up fruit was restored (reset_simulation with SCOPE_SPAWNED)')
         if error:
             return outcome(Result.RESULT_OPERATION_FAILED,
                            f'the start-up fruit could not be restored: {error}')

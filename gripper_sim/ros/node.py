@@ -22,7 +22,7 @@ import signal
 import sys
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -323,27 +323,39 @@ class SimNode(Node):
 
     def replace_fruit(self, fruit: str) -> str | None:
         """Swap the fruit for the preset ``fruit`` (a name or a preset file path): the
-        keys the preset sets replace the current ones, everything else stays; the new
-        fruit starts at rest at t = 0, as after a reset. Returns an error message, or
-        None when the fruit was replaced."""
-        config = dict(self.params.config)
+        keys the preset sets, and every fruit property another preset could set
+        (``configuration.fruit_property_keys``: a key the preset leaves out takes its
+        default, not the former fruit's, e.g. a strawberry's shape), take the preset's
+        values; everything else stays. The new fruit starts at rest at t = 0, as after a
+        reset. Returns an error message, or None when the fruit was replaced."""
+        dimension = self.params.config['dimension']
         try:
             keys = configuration.flatten(configuration.read_yaml(
                 configuration.fruit_preset_path(fruit)))
-            preset = configuration.load_config(fruit=fruit,
-                                               overrides={'dimension': config['dimension']})
-            config.update({key: preset[key] for key in keys if key in preset})
+            preset = configuration.load_config(fruit=fruit, overrides={'dimension': dimension})
+        except (GripperSimError, ValueError) as error:
+            return f"fruit '{fruit}' not loaded: {error}"
+        changed = (set(keys) | configuration.fruit_property_keys()) & set(preset)
+        return self.set_fruit({key: preset[key] for key in changed},
+                              f"the fruit was replaced by '{fruit}' (spawn_entity)")
+
+    def set_fruit(self, values: Mapping[str, Any], reason: str) -> str | None:
+        """Put the flat configuration ``values`` (a fruit's keys) in place and restart the
+        simulation with them at t = 0 (``reason``: for the log and an interrupted goal).
+        Returns an error message, or None when the fruit was replaced."""
+        config = dict(self.params.config)
+        config.update(values)
+        try:
             config = configuration.validate(config)
             sim = self._simulation_factory(dict(config))
             warm_kernels(config)   # a new fruit model's kernels: compiled before it steps
             context = MessageContext.from_config(
                 config, initial=sim.last, frame_prefix=str(self.params.get('frame_prefix')))
         except (GripperSimError, ValueError) as error:
-            return f"fruit '{fruit}' not loaded: {error}"
+            return f"fruit '{values.get('fruit.name', '?')}' not loaded: {error}"
         self.params.fruit = str(config['fruit.name'])
-        self.reset_simulation(f"the fruit was replaced by '{fruit}' (spawn_entity)",
-                              (sim, config, context))
-        self.get_logger().info(f"fruit replaced by '{config['fruit.name']}' (spawn_entity)")
+        self.reset_simulation(reason, (sim, config, context))
+        self.get_logger().info(f"fruit '{config['fruit.name']}' in place: {reason}")
         return None
 
     # ------------------------------------------------------------ parameters
