@@ -249,6 +249,12 @@ def test_window_verb_writes_its_report(monkeypatch, tmp_path, capsys):
     page = path.read_text()
     assert 'Grasp window of apple with the flat finger (pick_and_place)' in page
     assert '1 N .. 4 N' in page
+    # the fruit's bruise pressure is drawn on the damage panel (kPa)
+    from test_report_visuals import page_figures
+    bruise = load_config()['fruit.bruise_pressure'] * 1e-3
+    shapes = page_figures(path)[0]['layout']['shapes']
+    assert any(shape['yref'] == 'y2' and shape['y0'] == shape['y1'] == pytest.approx(bruise)
+               for shape in shapes), shapes
 
 
 class Terminal(io.StringIO):

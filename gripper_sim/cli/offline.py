@@ -491,7 +491,8 @@ def run_window(args) -> int:
         try:
             write_window_report(window.as_dict(), args.html, title=(
                 f"Grasp window of {config['fruit.name']} with the "
-                f"{config['gripper.finger.name']} finger ({scenario['name']})"))
+                f"{config['gripper.finger.name']} finger ({scenario['name']})"),
+                bruise_pressure=float(config['fruit.bruise_pressure']))
         except RecordingError as err:
             raise GripperSimError(str(err)) from err
         print(f'wrote {args.html}', file=sys.stderr)
