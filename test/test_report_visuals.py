@@ -132,19 +132,10 @@ def test_the_force_compression_plot_draws_the_secant():
 def made_window_dict() -> dict:
     """A window's ``as_dict`` with hold trials (dropped, held) and bruise trials (safe,
     bruised), not simulated: the report's input."""
-    from gripper_sim.workflows.window import GraspWindow, Trial
-    forces = [0.5, 1.0, 2.0, 4.0, 8.0]
-    trials = [Trial(force=f, kind='bruise' if f >= 4.0 else 'hold', held=f >= 1.0,
-                    slipped=f < 1.0, bruised=f >= 8.0,
-                    outcome='dropped' if f < 1.0 else 'bruised' if f >= 8.0 else 'held',
-                    slip_distance=0.01 / f, peak_grip_force=1.01 * f,
-                    peak_jaw_pressure=1e4 * f, peak_table_pressure=2e3,
-                    peak_damage_pressure=4e4 * f,
-                    bruised_at='jaws' if f >= 8.0 else None, wall_time=1.0)
-              for f in forces]
-    return GraspWindow(fruit='apple', finger='flat', min_force=1.0, max_force=4.0,
-                       min_estimate=0.9, max_estimate=5.0, mass=0.2, friction=0.5,
-                       tolerance=0.03, trials=trials, max_slip=1e-3).as_dict()
+    from dataclasses import replace
+
+    from test_analysis_html import made_window
+    return replace(made_window(), max_slip=1e-3).as_dict()
 
 
 def test_the_window_report_says_safe_draws_its_limits_and_names_the_commanded_force(

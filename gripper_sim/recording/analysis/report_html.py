@@ -100,13 +100,7 @@ def write_html_report(path: str | Path, title: str, blocks: Sequence[Block]) -> 
             items = ''.join(f'<li><a href="{html.escape(href)}">{html.escape(label)}</a></li>'
                             for label, href in block.links)
             parts.append(f'<ul>{items}</ul>')
-    page = _PAGE.format(title=html.escape(title), body='\n'.join(parts))
-    target = Path(path)
-    try:
-        target.write_text(page, encoding='utf-8')
-    except OSError as err:
-        raise RecordingError(f'cannot write {target}: {err.strerror}') from err
-    return target
+    return _write_page(path, _PAGE.format(title=html.escape(title), body='\n'.join(parts)))
 
 
 def write_figure_page(path: str | Path, title: str, figure: go.Figure) -> Path:
@@ -119,6 +113,11 @@ def write_figure_page(path: str | Path, title: str, figure: go.Figure) -> Path:
     page = figure.to_html(include_plotlyjs=True, full_html=True, config=PLOTLY_CONFIG)
     page = page.replace('<head>', f'<head><meta charset="utf-8">'
                                   f'<title>{html.escape(title)}</title>', 1)
+    return _write_page(path, page)
+
+
+def _write_page(path: str | Path, page: str) -> Path:
+    """Write the HTML ``page`` to ``path``; RecordingError if it cannot be written."""
     target = Path(path)
     try:
         target.write_text(page, encoding='utf-8')
