@@ -5,6 +5,7 @@ every numeric field of a study file, a 3D calibration's preset is checked in 3D 
 wrong warning), and a fitted key without effect or an empty --fit is an error."""
 from __future__ import annotations
 
+import io
 import json
 import shutil
 import socket
@@ -17,8 +18,9 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
+from gripper_sim.cli.main import main
 from gripper_sim.configuration import package_config_dir
-from gripper_sim.errors import ConfigWarning
+from gripper_sim.errors import ConfigWarning, GripperSimError
 from gripper_sim.workflows.calibrate_preset import write_preset
 from gripper_sim.workflows.study_spec import load_study
 from test_cli_offline import ROOT, gripper_sim
@@ -221,3 +223,23 @@ def test_an_empty_fit_is_an_error(curve, tmp_path, names):
     assert refused.returncode == 2
     assert refused.stderr.startswith(f"error: --fit '{names}' names an empty key")
     assert list(tmp_path.glob('c.*')) == []
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize('stderr, shown', [(io.StringIO, False), (_Terminal, True)])
+def test_the_study_shows_its_progress_bar_on_a_terminal_only(monkeypatch, tmp_path,
+                                                             stderr, shown):
+    asked = []
+
+    def run_study(study, out, *, scheduler=None, workers=None, progress=True):
+        asked.append(progress)
+        raise GripperSimError('stopped here: the progress setting is what is tested')
+    monkeypatch.setattr('gripper_sim.workflows.study.run_study', run_study)
+    monkeypatch.setattr('sys.stderr', stderr())
+    study = write_study(tmp_path, 'tiny')
+    assert main(['study', str(study), '--out', str(tmp_path / 'out')]) == 2
+    assert asked == [shown]

@@ -5,6 +5,7 @@ import math
 import sys
 from pathlib import Path
 
+from gripper_sim.cli import progress
 from gripper_sim.cli.arguments import positive_int
 
 
@@ -37,7 +38,7 @@ def run_study_verb(args) -> int:
     study = load_study(args.study)
     out = Path(args.out or Path('study-results') / study.name)
     run = run_study(study, out, scheduler=args.scheduler, workers=args.workers,
-                    progress=not args.no_progress)
+                    progress=progress.wanted(args.no_progress))
     write_summary(run.summary, out / 'summary.json')
     if args.csv:
         from gripper_sim.workflows.study_results import RowStore
