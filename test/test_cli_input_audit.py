@@ -7,7 +7,6 @@ Every bad input is one ``error: ...`` line and exit 2, found before a simulation
 import warnings
 
 import pytest
-from rclpy.parameter import Parameter
 
 from gripper_sim.cli.main import main
 from gripper_sim.configuration import load_config, read_yaml
@@ -149,35 +148,6 @@ def test_the_verbs_refuse_jaws_in_the_fruit_before_they_run(verb, capsys, monkey
     no_simulation(monkeypatch)
     assert main(verb) == 2
     assert 'gripper.' in one_error_line(capsys)
-
-
-@pytest.fixture
-def context():
-    from gripper_sim.ros.process import pick_domain_id
-    from ros_client import ros_context
-    with ros_context(pick_domain_id(60)) as context:
-        yield context
-
-
-@pytest.mark.ros
-def test_the_node_does_not_start_with_its_jaws_in_the_fruit_nor_moves_them_there(context):
-    from gripper_sim.ros.node import SimNode
-
-    def node(**parameters):
-        return SimNode(context=context, start=False, watchdog_period=0.0,
-                       parameter_overrides=[Parameter(name, value=value)
-                                            for name, value in parameters.items()])
-
-    with pytest.raises(ConfigError, match='inside the fruit'):
-        node(**{'physics.gripper.initial_gap': 0.01})
-    running = node()
-    try:
-        result, = running.set_parameters([Parameter('physics.gripper.initial_gap',
-                                                    value=0.01)])
-        assert not result.successful and result.reason
-        assert running.sim.initial_gap > running.sim.touching_gap
-    finally:
-        running.destroy_node()
 
 
 # ------------------------------------------------------------ item 4: a long pick hold

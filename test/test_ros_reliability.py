@@ -411,3 +411,42 @@ def test_a_spawned_fruit_takes_no_property_of_the_fruit_it_replaces(context):
     finally:
         node.destroy_node()
 
+
+def test_a_node_that_fails_to_build_leaves_the_logs_of_the_next_one_alone(context):
+    """rcl keeps one rosout publisher per node name: a SimNode whose construction failed
+    and was not destroyed carried the next SimNode's logs to a dead end (a test module
+    then waited in vain for a node's warnings)."""
+    from rcl_interfaces.msg import Log
+    with pytest.raises(ConfigError):
+        make_node(context, start=False, **{'physics.gripper.initial_gap': 0.01})
+    node = make_node(context, start=False, foxglove_port=0)
+    probe = rclpy.create_node('rosout_probe', context=context)
+    seen = []
+    probe.create_subscription(Log, '/rosout', lambda msg: seen.append(msg.msg), 100)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
+    try:
+        deadline = time.monotonic() + 30
+        while 'the next node speaks' not in seen and time.monotonic() < deadline:
+            node.get_logger().warning('the next node speaks')
+            executor.spin_once(timeout_sec=0.2)
+        assert 'the next node speaks' in seen
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
+def test_the_node_does_not_start_with_its_jaws_in_the_fruit_nor_moves_them_there(context):
+    """The start gap check (``factory.check_start_gap``) at start-up and for a change."""
+    with pytest.raises(ConfigError, match='inside the fruit'):
+        make_node(context, start=False, **{'physics.gripper.initial_gap': 0.01})
+    running = make_node(context, start=False, foxglove_port=0)
+    try:
+        result, = running.set_parameters([Parameter('physics.gripper.initial_gap',
+                                                    value=0.01)])
+        assert not result.successful and result.reason
+        assert running.sim.initial_gap > running.sim.touching_gap
+    finally:
+        running.destroy_node()
+

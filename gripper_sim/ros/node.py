@@ -102,6 +102,19 @@ class SimNode(Node):
                  namesake_wait: float | None = None, **kwargs):
         created, started = time.monotonic(), time.time()
         super().__init__(NODE_NAME, **kwargs)
+        try:
+            self._build(fruit, config_file, simulation_factory, start, physics_stall_timeout,
+                        watchdog_period, namesake_wait, created, started)
+        except BaseException:
+            # rcl keeps one rosout publisher per logger name: a node left undestroyed
+            # would carry the logs of every later node of its name to a dead end
+            Node.destroy_node(self)
+            raise
+
+    def _build(self, fruit, config_file, simulation_factory, start, physics_stall_timeout,
+               watchdog_period, namesake_wait, created, started) -> None:
+        """The constructor's work after rclpy's ``Node`` (its arguments, and the monotonic
+        and wall times it began)."""
         self.params = SimParameters(self, fruit=fruit, config_file=config_file)
         self.lock = SimLock()
         self.jaws = JawOwnership()

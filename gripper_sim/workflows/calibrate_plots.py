@@ -18,7 +18,7 @@ from plotly.subplots import make_subplots
 
 from gripper_sim.workflows.calibrate_bruise import BruiseCalibration
 from gripper_sim.configuration import SCHEMA
-from gripper_sim.recording.analysis.report_html import write_figure_page
+from gripper_sim.workflows.html_page import write_figure_page
 from gripper_sim.workflows.calibrate_fit import FitResult, FittedKey
 
 

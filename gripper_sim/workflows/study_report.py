@@ -20,7 +20,7 @@ import matplotlib.ticker as ticker  # noqa: E402
 import plotly.graph_objects as go  # noqa: E402
 from plotly.subplots import make_subplots  # noqa: E402
 
-from gripper_sim.recording.analysis.report_html import write_figure_page  # noqa: E402
+from gripper_sim.workflows.html_page import write_figure_page  # noqa: E402
 
 OUTCOME_COLOURS = {'held': '#2ca02c', 'placed': '#2ca02c', 'slipped': '#bcbd22',
                    'dropped': '#1f77b4', 'bruised': '#ff7f0e', 'crushed': '#d62728',

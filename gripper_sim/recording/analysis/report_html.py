@@ -31,11 +31,10 @@ from gripper_sim.recording.analysis.frames import Box, Frame
 from gripper_sim.recording.analysis.series import TimeSeries
 from gripper_sim.recording.analysis.summary import fit_stiffness, grasp_outcome
 from gripper_sim.recording.errors import RecordingError
+from gripper_sim.workflows.html_page import PLOTLY_CONFIG, PageWriteError, write_page
 
 #: the element id of the fruit animation's plot, for scripts and tests
 ANIMATION_ID = 'fruit-animation'
-#: every report's plotly settings: no plotly logo (a link off the page) in the mode bar
-PLOTLY_CONFIG = {'displaylogo': False}
 
 
 @dataclass(frozen=True)
@@ -103,27 +102,12 @@ def write_html_report(path: str | Path, title: str, blocks: Sequence[Block]) -> 
     return _write_page(path, _PAGE.format(title=html.escape(title), body='\n'.join(parts)))
 
 
-def write_figure_page(path: str | Path, title: str, figure: go.Figure) -> Path:
-    """Write one figure as a self-contained page (plotly's JavaScript embedded) named
-    ``title`` in the browser tab, with the reports' plotly settings.
-
-    Raises:
-        RecordingError: the file cannot be written.
-    """
-    page = figure.to_html(include_plotlyjs=True, full_html=True, config=PLOTLY_CONFIG)
-    page = page.replace('<head>', f'<head><meta charset="utf-8">'
-                                  f'<title>{html.escape(title)}</title>', 1)
-    return _write_page(path, page)
-
-
 def _write_page(path: str | Path, page: str) -> Path:
     """Write the HTML ``page`` to ``path``; RecordingError if it cannot be written."""
-    target = Path(path)
     try:
-        target.write_text(page, encoding='utf-8')
-    except OSError as err:
-        raise RecordingError(f'cannot write {target}: {err.strerror}') from err
-    return target
+        return write_page(path, page)
+    except PageWriteError as err:
+        raise RecordingError(str(err)) from err
 
 
 # ---------------------------------------------------------------------- grasp report
