@@ -11,7 +11,7 @@ from simulation_interfaces.srv import ResetSimulation, SetSimulationState, Spawn
 from gripper_sim import configuration
 from gripper_sim.ros.entities import PatternError, compile_filter
 from gripper_sim.ros.process import pick_domain_id
-from test_ros_simulation_standard import APPLE_RADIUS, PLUM_RADIUS, Standard
+from test_ros_simulation_standard import APPLE_RADIUS, NODE_PARAMETERS, PLUM_RADIUS, Standard
 
 DOMAIN = pick_domain_id(14)
 NAMES = ['fruit', 'left_jaw', 'right_jaw', 'table', 'a.b', 'x-y', 'a\\b']
@@ -21,9 +21,8 @@ SCOPE = ResetSimulation.Request
 @pytest.fixture(scope='module')
 def standard(tmp_path_factory, node_and_client):
     log = tmp_path_factory.mktemp('audit') / 'node.log'
-    parameters = {'physics.sim.dt': 0.001, 'publish_rate': 1000.0, 'clock_rate': 1000.0,
-                  'real_time_factor': 0.0}
-    with node_and_client(parameters, DOMAIN, log, client_name='audit_client') as (_, client):
+    with node_and_client(NODE_PARAMETERS, DOMAIN, log,
+                         client_name='audit_client') as (_, client):
         standard = Standard(client)
         assert standard.go(SimulationState.STATE_PAUSED).result == Result.RESULT_OK
         yield standard

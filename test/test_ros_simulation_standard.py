@@ -79,12 +79,16 @@ class Standard:
                                60, f'/clock at {ns} ns')
 
 
+#: the node of these tests: 1 ms steps, every step published, as fast as it can
+NODE_PARAMETERS = {'physics.sim.dt': 0.001, 'publish_rate': 1000.0, 'clock_rate': 1000.0,
+                   'real_time_factor': 0.0}
+
+
 @pytest.fixture(scope='module')
 def standard(tmp_path_factory, node_and_client):
     log = tmp_path_factory.mktemp('standard') / 'node.log'
-    parameters = {'physics.sim.dt': 0.001, 'publish_rate': 1000.0, 'clock_rate': 1000.0,
-                  'real_time_factor': 0.0}
-    with node_and_client(parameters, DOMAIN, log, client_name='standard_client') as (_, client):
+    with node_and_client(NODE_PARAMETERS, DOMAIN, log,
+                         client_name='standard_client') as (_, client):
         yield Standard(client)
 
 
