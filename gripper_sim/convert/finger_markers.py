@@ -15,7 +15,13 @@ Per jaw (id 0 left, 1 right), frame ``world``:
   section the planar model simulates; ``fingers.finger_outline`` moved to the jaw).
 - ``pads``: id 0/1, TRIANGLE_LIST, the pad layer extruded likewise.
 
-Nothing is drawn for a flat finger without a pad (the ``jaws`` cubes show it).
+Nothing is drawn for a flat finger without a pad (the ``jaws`` cubes show it), nor for a
+deformable finger (``soft_fingers`` draws its body, the ``jaws`` cube its backing).
+
+The jaw plate (``JawPlate``, the ``jaws`` cube) is where the finger is held: behind the
+face of a rigid finger and of a solid pad (whose base nodes are on the backing x = 0 over
+the jaw height); on the base of a Fin Ray, which lies along the top of the finger
+(``geometry.fin_ray``), so that the nodes held to the jaw lie on the plate's face.
 """
 from __future__ import annotations
 
@@ -29,6 +35,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker
 
 from gripper_sim.geometry import fingers
+from gripper_sim.geometry.fin_ray import FinRayGeometry, layout
 
 FINGER_COLOUR = ColorRGBA(r=0.45, g=0.45, b=0.5, a=0.9)
 PAD_COLOUR = ColorRGBA(r=0.15, g=0.35, b=0.75, a=0.9)
@@ -79,11 +86,16 @@ class FingerGeometry:
                                            [self.back, self.body_face[0, 1]]]])
 
 
+#: the finger types whose body is deformable (drawn by the ``soft_fingers`` marker)
+DEFORMABLE = ('solid_pad', 'fin_ray')
+
+
 def finger_geometry(config: Mapping[str, Any]) -> FingerGeometry | None:
-    """The finger of a flat configuration; None for a flat finger without a pad."""
+    """The finger of a flat configuration; None for a flat finger without a pad and for
+    a deformable finger."""
     kind = config.get('gripper.finger.type', 'flat')
     padded = bool(config.get('gripper.finger.pad.enabled', False))
-    if kind == 'flat' and not padded:
+    if (kind == 'flat' and not padded) or kind in DEFORMABLE:
         return None
     face = fingers.profile(config)
     t = float(config['gripper.finger.pad.thickness']) if padded else 0.0
@@ -91,6 +103,40 @@ def finger_geometry(config: Mapping[str, Any]) -> FingerGeometry | None:
     outline = fingers.finger_outline(config, 'left')
     back = float(outline[-1, 0]) - t
     return FingerGeometry(face, body_face, back, t)
+
+
+@dataclass(frozen=True)
+class JawPlate:
+    """The left jaw's plate in its jaw frame (x towards the fruit, z up, origin at the
+    centre of the jaw's front plane; the right jaw's is its mirror image).
+
+    Attributes:
+        centre: (2,) m, (x, z) of the plate's centre.
+        size: (2,) m, its full size along x and along z (along y it is the jaw's width).
+    """
+
+    centre: tuple[float, float]
+    size: tuple[float, float]
+
+
+def rigid_jaw_plate(finger: FingerGeometry | None, thickness: float,
+                    height: float) -> JawPlate:
+    """The plate of a rigid finger (or a solid pad): ``thickness`` (m) along x behind the
+    deepest point of the finger's face (``FingerGeometry.recess``; the front plane
+    without one), ``height`` (m) along z about the jaw centre."""
+    recess = finger.recess if finger is not None else 0.0
+    return JawPlate((-(recess + 0.5 * thickness), 0.0), (thickness, height))
+
+
+def fin_ray_jaw_plate(config: Mapping[str, Any], thickness: float) -> JawPlate:
+    """The plate a Fin Ray's base is held on: along x over its base nodes (x from 0 to
+    ``base_width``), ``thickness`` (m) along z above them (the base is the top of the
+    finger, its tip below), so that the base nodes lie on the plate's lower face."""
+    plan = layout(FinRayGeometry.from_config(config))
+    base = plan.positions[plan.base_nodes]
+    low, high = base.min(axis=0), base.max(axis=0)
+    return JawPlate((float(0.5 * (low[0] + high[0])), float(high[1] + 0.5 * thickness)),
+                    (float(high[0] - low[0]), float(thickness)))
 
 
 def _vertex_normals(curve: np.ndarray) -> np.ndarray:

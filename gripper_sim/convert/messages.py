@@ -38,8 +38,9 @@ from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from gripper_sim.convert import frames as frame_tree
-from gripper_sim.convert.finger_markers import (FingerGeometry, base_marker, finger_geometry,
-                                            finger_markers)
+from gripper_sim.convert.finger_markers import (FingerGeometry, JawPlate, base_marker,
+                                            fin_ray_jaw_plate, finger_geometry,
+                                            finger_markers, rigid_jaw_plate)
 from gripper_sim.convert.frames import FrameTransform, GripperFrames
 from gripper_sim.core.results import StepResult
 
@@ -155,7 +156,11 @@ class MessageContext:
         table: whether there is a table, at ``table_height`` (m).
         gripper_centre_x: m, x of the gripper centre the jaw joints are measured from.
         finger: the shaped finger / pad to draw (``finger_markers.finger_geometry``);
-            None for flat jaws without pads.
+            None for flat jaws without pads and for deformable fingers.
+        plate: the jaw plate (``finger_markers.JawPlate``) where it is not the rigid
+            finger's: a Fin Ray's, on its base (``finger_markers.fin_ray_jaw_plate``);
+            None: the rigid finger's (``finger_markers.rigid_jaw_plate``; ``jaw_plate``
+            gives the one drawn).
         frames: the TF frame names (``frame_prefix``) and the jaw joints' directions.
     """
 
@@ -171,6 +176,7 @@ class MessageContext:
     table_height: float = 0.0
     gripper_centre_x: float = 0.0
     finger: FingerGeometry | None = None
+    plate: JawPlate | None = None
     frames: GripperFrames = field(default_factory=GripperFrames)
     bruised: bool = field(default=False, init=False)
     crushed: bool = field(default=False, init=False)
@@ -199,6 +205,7 @@ class MessageContext:
             centre = 0.5 * (float(initial.left_jaw_x) + float(initial.right_jaw_x))
             left_outward = -1.0 if _left_is_negative(initial) else 1.0
         table = bool(config.get('world.table', True))
+        jaw_thickness = float(config.get('gripper.jaw_thickness', cls.jaw_thickness))
         table_height = float(config.get('world.table_height', 0.0))
         frames = GripperFrames(
             prefix=frame_prefix, left_outward=left_outward,
@@ -214,14 +221,23 @@ class MessageContext:
             bruise_pressure=float(config.get('fruit.bruise_pressure', cls.bruise_pressure)),
             failure_stress=float(config.get('fruit.failure_stress', cls.failure_stress)),
             jaw_height=float(config.get('gripper.jaw_height', cls.jaw_height)),
-            jaw_thickness=float(config.get('gripper.jaw_thickness', cls.jaw_thickness)),
+            jaw_thickness=jaw_thickness,
             jaw_width=float(config.get('gripper.jaw_width', cls.jaw_width)),
             table=table,
             table_height=table_height,
             gripper_centre_x=centre,
             finger=finger_geometry(config),
+            plate=(fin_ray_jaw_plate(config, jaw_thickness)
+                   if config.get('gripper.finger.type') == 'fin_ray' else None),
             frames=frames,
         )
+
+    @property
+    def jaw_plate(self) -> JawPlate:
+        """The left jaw's plate in its jaw frame (``plate``, else the rigid finger's)."""
+        if self.plate is not None:
+            return self.plate
+        return rigid_jaw_plate(self.finger, self.jaw_thickness, self.jaw_height)
 
     def reset(self) -> None:
         """Forget the run history (after a simulation reset)."""
@@ -520,15 +536,15 @@ def markers(result: StepResult, context: MessageContext, header: Header) -> Mark
     width = context.jaw_width if is_3d(result) else depth
     jaws = (('left', result.left_jaw_x, outward_left, result.left_wrench),
             ('right', result.right_jaw_x, -outward_left, result.right_wrench))
-    # the jaw plate sits behind a recessed face and a pad
-    recess = context.finger.recess if context.finger is not None else 0.0
+    # behind a recessed face and a pad, on a Fin Ray's base (``JawPlate``)
+    plate = context.jaw_plate
     for marker_id, (_, face_x, outward, wrench) in enumerate(jaws):
         jaw = base_marker(header, 'jaws', marker_id, Marker.CUBE)
-        jaw.pose.position.x = float(face_x + outward * (recess + context.jaw_thickness / 2.0))
-        jaw.pose.position.z = float(result.lift)
-        jaw.scale.x = context.jaw_thickness
+        jaw.pose.position.x = float(face_x - outward * plate.centre[0])
+        jaw.pose.position.z = float(result.lift + plate.centre[1])
+        jaw.scale.x = plate.size[0]
         jaw.scale.y = width
-        jaw.scale.z = context.jaw_height
+        jaw.scale.z = plate.size[1]
         jaw.color = ColorRGBA(r=0.45, g=0.45, b=0.5, a=0.8)
         array.markers.append(jaw)
 

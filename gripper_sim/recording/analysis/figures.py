@@ -3,6 +3,7 @@
 
 Every title and colour bar names the quantity it shows (``pressure_name``); the phases
 (``events.Events``) are marked on the time plots; the fruit pictures draw the jaw plates
+(as the ``jaws`` markers place them: a Fin Ray's on its base), the deformable fingers
 and the table, with a colour scale from 0 to the largest pressure shown and the bruise
 threshold marked on the colour bar.
 """
@@ -17,7 +18,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
-from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
 from gripper_sim.recording.analysis.events import Events
 from gripper_sim.recording.analysis.frames import Frame, jaw_contact_nodes, patch_outline
@@ -263,7 +264,7 @@ def _box_faces(box) -> list[np.ndarray]:
 def mesh_snapshots(series: TimeSeries, frames: list[Frame], summary: dict) -> Figure:
     """3D: the skin at the key moments, each triangle coloured by the largest contact
     pressure of its corners on a scale up to the largest pressure shown; the jaw plates
-    (see-through) and the table top."""
+    (see-through), the deformable fingers' edges and the table top."""
     bruise = summary['bruise_threshold_pa']
     top = pressure_scale(frames, bruise)
     name = pressure_name(3)
@@ -291,6 +292,10 @@ def mesh_snapshots(series: TimeSeries, frames: list[Frame], summary: dict) -> Fi
                                                                               0.18),
                                                  edgecolors=(0.2, 0.2, 0.3, 0.7),
                                                  linewidths=0.6, gid='jaw'))
+        if len(frame.finger_lines):
+            ax.add_collection3d(Line3DCollection(list(1e3 * frame.finger_lines),
+                                                 colors=[(0.15, 0.35, 0.75, 0.5)],
+                                                 linewidths=0.4, gid='finger'))
         if frame.table is not None:
             z = 1e3 * frame.table.bounds()[1][2]
             x0, x1, y0, y1 = centre[0] - half, centre[0] + half, centre[1] - half, \
