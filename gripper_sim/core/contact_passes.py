@@ -39,8 +39,9 @@ from numba import njit
 
 from gripper_sim.core import contact as cm
 from gripper_sim.core import contact_kernels as ck
-from gripper_sim.core.newton import OK
-from gripper_sim.core.stepper import StepConstraints, StepSolution
+from gripper_sim.core.newton import CONTACTS_UNSETTLED, OK
+from gripper_sim.core.stepper import (NEWTON_FAILURES, NewtonFailure, StepConstraints,
+                                      StepSolution)
 
 
 @dataclass(frozen=True)
@@ -129,8 +130,12 @@ def contact_passes(problem, state, faces, x_n, v_n, x_pred, surface, masses, dt,
     """The predictor-corrector passes of one step (see the module's docstring): per pass
     the constraints (``contact_kernels.constraints``), the solve (hook ``solve``), the
     contact set's correction (``contact_kernels.update``) and, with ``extrapolate``, the
-    sliding nodes' lag extrapolation, until the set stops changing or ``max_passes``;
-    then the end velocities and contact forces (``contact_kernels.finish``).
+    sliding nodes' lag extrapolation, until the set stops changing; then the end
+    velocities and contact forces (``contact_kernels.finish``). A set still changing
+    after ``max_passes`` fails the step (``CONTACTS_UNSETTLED``; the caller halves it):
+    the last solve's reactions belong to a set the step would not keep (a large step
+    onto the table flattens the fruit, and the passes then release one pulling node a
+    side at a time).
 
     Args:
         problem: what is solved (a tuple for the compiled hooks, an object for the
@@ -147,7 +152,8 @@ def contact_passes(problem, state, faces, x_n, v_n, x_pred, surface, masses, dt,
         Outputs: v_out (n, d) m/s, forces_out (n, d) N.
 
     Returns:
-        (status, Newton iterations); a failed solve's status ends the step (no outputs).
+        (status, Newton iterations); a failed solve's status, or ``CONTACTS_UNSETTLED``,
+        ends the step (no outputs).
     """
     max_passes, v_corr, threshold, v_min, deepest_first, extrapolate = rules
     n = x_n.shape[0]
@@ -156,6 +162,7 @@ def contact_passes(problem, state, faces, x_n, v_n, x_pred, surface, masses, dt,
     lagged = n if extrapolate else 0
     lag_history = (np.zeros(lagged), np.zeros(lagged), np.zeros(lagged, np.bool_))
     iterations = 0
+    settled = False
     for pass_ in range(max_passes):
         start, filters, fr_nodes, fr_tangents, fr_bound, fr_speed = pass_arrays(problem)
         k = ck.constraints(state, faces, x_n, x_pred, dt, v_corr, start, filters, fr_nodes,
@@ -170,9 +177,12 @@ def contact_passes(problem, state, faces, x_n, v_n, x_pred, surface, masses, dt,
         before = _copy_state(state) if extrapolate else state
         if not ck.update(state, faces, x, x_n, v_n, reaction, surface, dt, threshold, v_min,
                          deepest_first, released, slipped):
+            settled = True
             break
         if extrapolate and pass_ < max_passes - 1:
             ck.extrapolate_lag(state, before, lag_history)
+    if not settled:
+        return CONTACTS_UNSETTLED, iterations
     x, reaction = solution(problem)
     ck.finish(state, faces, x, x_n, v_n, reaction, masses, dt, v_out, forces_out)
     return OK, iterations
@@ -220,7 +230,8 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
     run by Python.
 
     Raises:
-        NewtonFailure: from the solver (the caller halves the step).
+        NewtonFailure: from the solver, or the contact set not settled in
+            ``settings.max_passes`` passes (the caller halves the step).
     """
     n, d = x_n.shape
     x_n = np.ascontiguousarray(x_n, dtype=float)
@@ -235,9 +246,12 @@ def contact_step(solver, surface: np.ndarray, contacts: cm.ContactState, x_n: np
              v_min, settings.deepest_first, settings.extrapolate_lag)
     problem = _SolverPasses(solver, x_n.ravel(), v_n, dt)
     v, forces = np.empty((n, d)), np.empty((n, d))
-    _, iterations = contact_passes.py_func(problem, contacts.arrays(), faces, x_n, v_n,
-                                           x_pred, surface, masses, dt, rules,
-                                           np.zeros(n, bool), np.zeros(n, bool), v, forces)
+    status, iterations = contact_passes.py_func(problem, contacts.arrays(), faces, x_n, v_n,
+                                                x_pred, surface, masses, dt, rules,
+                                                np.zeros(n, bool), np.zeros(n, bool), v,
+                                                forces)
+    if status != OK:
+        raise NewtonFailure(NEWTON_FAILURES[status], [])
     x, _ = problem.solution()
     return StepOutcome(x, v, forces, contacts, iterations)
 

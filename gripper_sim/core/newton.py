@@ -77,6 +77,9 @@ NO_DESCENT = 2
 LINE_SEARCH_FAILED = 3
 NO_CONVERGENCE = 4
 UNSUPPORTED = 5  # a non-symmetric contact filter (oblique faces): use the reference path
+#: the contact passes' last pass still changed the contact set (``contact_passes``): its
+#: forces would belong to another set than the one the step keeps
+CONTACTS_UNSETTLED = 6
 
 #: work counters (int64 array) ``newton_iteration`` adds to: Newton solves (contact
 #: passes), energy evaluations with and without the Hessian, Newton matrix

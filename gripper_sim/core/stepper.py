@@ -93,7 +93,9 @@ class StepSolution:
 NEWTON_FAILURES = {newton.INFEASIBLE_START: 'start of step is infeasible (inverted element)',
                    newton.NO_DESCENT: 'no descent direction found',
                    newton.LINE_SEARCH_FAILED: 'line search failed',
-                   newton.NO_CONVERGENCE: 'no convergence in {} iterations'}
+                   newton.NO_CONVERGENCE: 'no convergence in {} iterations',
+                   newton.CONTACTS_UNSETTLED: 'the contact set still changed after the last '
+                   'predictor-corrector pass (sim.max_contact_passes)'}
 
 
 class StepProblem:
