@@ -86,6 +86,20 @@ def case_key(setup: FruitSetup, kind: str, force: float, code: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
+def _connect_failure(err: Exception) -> str:
+    """Why a Dask client could not connect, in one line.
+
+    Refused, timed out, unknown host (``OSError``) or a malformed address
+    (``ValueError``) say so themselves; anything else came from reading the answer of
+    a server that is not a Dask scheduler (an HTTP server's reply read as a frame
+    length makes numpy allocate exabytes: a ``MemoryError``).
+    """
+    if isinstance(err, (OSError, ValueError)) and str(err):
+        return str(err).splitlines()[0]
+    return (f'something answers there, but not as a Dask scheduler: '
+            f'{type(err).__name__} reading its reply')
+
+
 @contextmanager
 def open_client(scheduler: str | None = None, workers: int | None = None) -> Iterator:
     """A Dask client: on ``scheduler`` (an address), or on a new local cluster of
@@ -99,8 +113,8 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         try:
             client = Client(scheduler, timeout=f'{CONNECT_TIMEOUT}s')
         except Exception as err:  # noqa: BLE001 - refused, timed out, not a Dask server...
-            reason = str(err).splitlines()[0] if str(err) else type(err).__name__
-            raise StudyError(f'cannot reach the Dask scheduler at {scheduler} ({reason}); '
+            raise StudyError(f'cannot reach the Dask scheduler at {scheduler} '
+                             f'({_connect_failure(err)}); '
                              'start one with `dask scheduler`, or leave --scheduler out '
                              'for a local cluster') from err
         try:
