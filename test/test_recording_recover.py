@@ -9,6 +9,7 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import String
 
 from gripper_sim.cli.main import main
+from gripper_sim.recording.bag_folder import BagFolderWriter
 from gripper_sim.recording.reader import BagReader
 from gripper_sim.recording.recover import recover
 from gripper_sim.recording.writer import BagWriter
@@ -92,3 +93,15 @@ def test_a_file_with_a_cut_tail_is_recovered_not_complete(tmp_path, capsys):
     assert main(['recover', str(cut), str(tmp_path / 'again.mcap')]) == 0
     out = capsys.readouterr().out
     assert 'cut short' in out and 'complete' not in out.split('\n')[0]
+
+
+def test_recovering_a_bag_folder_names_the_metadata_file_it_wrote(tmp_path, capsys):
+    src = tmp_path / 'killed'
+    with BagFolderWriter(src) as bag:
+        bag.add_topic('/chatter', 'std_msgs/msg/String')
+        for i in range(5):
+            bag.write('/chatter', serialize_message(String(data=str(i))), log_time=10 + i)
+    (src / 'metadata.yaml').unlink()   # as after a SIGKILL
+    assert main(['recover', str(src), str(tmp_path / 'fixed')]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[-1] == f"wrote:  {tmp_path / 'fixed' / 'metadata.yaml'}"

@@ -331,4 +331,4 @@ def iter_bag_report_lines(report: BagRecoverReport, src: Path, dst: Path) -> Ite
             yield f'input:  {path}: skipped ({file_report})'
         else:
             yield from iter_report_lines(file_report, path, out)
-    yield f'        {report.metadata_file}'
+    yield f'wrote:  {report.metadata_file}'
