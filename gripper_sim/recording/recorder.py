@@ -104,6 +104,12 @@ def is_hidden(topic: str) -> bool:
     return any(part.startswith('_') for part in topic.split('/') if part)
 
 
+def counted(count: int, noun: str) -> str:
+    """``count`` and ``noun``, the noun plural unless the count is one: '1 topic',
+    '12 topics'."""
+    return f'{count} {noun}' if count == 1 else f'{count} {noun}s'
+
+
 @dataclass
 class RecorderStats:
     """Counts kept while recording."""
@@ -350,9 +356,18 @@ def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = Fa
     stats = recorder.stats if recorder is not None else RecorderStats()
     missing = sorted({('/' + t.lstrip('/')) for t in topics} - set(stats.per_topic))
     files = getattr(writer, 'files', [writer.path])
-    where = f'{output} ({len(files)} files)' if len(files) > 1 else str(output)
-    text = (f'recorded {stats.messages} messages on {len(stats.per_topic)} topics to '
-            f'{where} in {stats.elapsed():.1f} s')
+    return record_summary(stats, output, files=len(files), missing=missing)
+
+
+def record_summary(stats: RecorderStats, output: str, *, files: int = 1,
+                   missing: Iterable[str] = ()) -> str:
+    """The line ``gripper-sim record`` ends with: messages, topics, where (with the
+    number of files when split), elapsed wall time (s) and the named topics that sent
+    nothing."""
+    where = f'{output} ({files} files)' if files > 1 else str(output)
+    text = (f"recorded {counted(stats.messages, 'message')} on "
+            f"{counted(len(stats.per_topic), 'topic')} to {where} in {stats.elapsed():.1f} s")
+    missing = list(missing)
     if missing:
         text += f" (no messages on: {', '.join(missing)})"
     return text

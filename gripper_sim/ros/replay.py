@@ -24,7 +24,7 @@ from rosgraph_msgs.msg import Clock
 from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.reader import BagReader
-from gripper_sim.recording.recorder import import_message_class
+from gripper_sim.recording.recorder import counted, import_message_class
 from gripper_sim.view.foxglove import recording_view
 
 CLOCK_TOPIC = '/clock'
@@ -239,10 +239,18 @@ def run_replay(path: str, *, rate: float = 1.0, loop: bool = False,
             rclpy.try_shutdown()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
-    text = (f'replayed {stats.messages} messages on {len(stats.per_topic)} topics in '
-            f'{stats.wall_time:.2f} s')
+    return replay_summary(stats, loop=loop,
+                          skipped=player.skipped if player is not None else ())
+
+
+def replay_summary(stats: ReplayStats, *, loop: bool, skipped: Iterable[str] = ()) -> str:
+    """The line ``gripper-sim replay`` ends with: messages, topics, wall time (s), the
+    loops when looping and the topics it skipped."""
+    text = (f"replayed {counted(stats.messages, 'message')} on "
+            f"{counted(len(stats.per_topic), 'topic')} in {stats.wall_time:.2f} s")
     if loop:
-        text += f' ({stats.loops} loops)'
-    if player is not None and player.skipped:
-        text += f" (skipped: {', '.join(player.skipped)})"
+        text += f" ({counted(stats.loops, 'loop')})"
+    skipped = list(skipped)
+    if skipped:
+        text += f" (skipped: {', '.join(skipped)})"
     return text
