@@ -155,3 +155,15 @@ def test_a_fruit_preset_file_is_a_study_fruit(tmp_path):
     study = load_study(study_file)
     config = study.trial(study.points[0], 0, {}).config
     assert config['fruit.name'] == 'my_plum' and config['fruit.density'] == 987.0
+
+
+def test_an_unknown_study_name_lists_the_installed_studies():
+    """A misspelt study name says it is neither a file nor an installed study, and names
+    the installed ones (as an unknown scenario does)."""
+    with pytest.raises(ConfigError) as error:
+        load_study('apple_frictio')
+    message = str(error.value)
+    installed = sorted(p.stem for p in (package_config_dir() / 'studies').glob('*.yaml'))
+    assert 'apple_friction' in installed
+    assert "no study file 'apple_frictio'" in message
+    assert all(name in message for name in installed), message

@@ -164,7 +164,9 @@ def load_study(path: str | Path) -> Study:
         if candidate.is_file():
             file = candidate
     if not file.is_file():
-        raise ConfigError(f"no study file '{path}'")
+        installed = sorted(p.stem for p in (package_config_dir() / 'studies').glob('*.yaml'))
+        raise ConfigError(f"no study file '{path}': no such file, and not one of the "
+                          f"installed studies ({', '.join(installed) or 'none installed'})")
     data = read_yaml(file)
     _known(data, TOP_KEYS, '')
     base = _base(data.get('base') or {})
