@@ -168,3 +168,15 @@ def test_a_preset_calibrated_in_3d_warns_when_run_in_2d(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter('error', ConfigWarning)
         load_config(fruit=str(plain))
+
+
+def test_squeeze_and_pick_headers_name_the_finger(capsys):
+    """The squeeze's and the pick's first lines name the finger, as run's and window's do."""
+    assert main(['squeeze', '--finger', 'vgroove', '--to-force', '0.5', '--quiet',
+                 *SMALL]) == 0
+    assert capsys.readouterr().out.startswith(
+        'squeeze of apple (shell model, 2D) with the vgroove finger, ')
+    main(['pick', '--finger', 'vgroove', '--force', '3', '--lift', '0.005', '--hold', '0.05',
+          '--quiet', *SMALL])
+    assert capsys.readouterr().out.startswith('pick of apple (2D) with the vgroove finger '
+                                              'at 3 N: ')

@@ -335,8 +335,9 @@ def run_squeeze(args) -> int:
         sys.stdout.write('\n')
     else:
         dim = series.dimension
-        print(f"squeeze of {config['fruit.name']} ({config['fruit.model']} model, {dim}D), "
-              f'{sim.time:.3f} s simulated in {sim.last.step} steps')
+        print(f"squeeze of {config['fruit.name']} ({config['fruit.model']} model, {dim}D) "
+              f"with the {config['gripper.finger.name']} finger, {sim.time:.3f} s simulated "
+              f'in {sim.last.step} steps')
         for line in _measure_lines(summary, dim, 21) + series.contact_lines(21):
             print(f'  {line}')
         print(f"  {'final gap':21s} {summary['final_gap'] * 1e3:.4g} mm")
@@ -372,7 +373,8 @@ def run_pick(args) -> int:
         sys.stdout.write('\n')
     else:
         dim = series.dimension
-        print(f"pick of {config['fruit.name']} ({dim}D) at {args.force:g} N: "
+        print(f"pick of {config['fruit.name']} ({dim}D) with the "
+              f"{config['gripper.finger.name']} finger at {args.force:g} N: "
               f"{summary['outcome']}")
         print(f"  {summary['message']}")
         print(f"  {'slip in the jaws':26s} {summary['slip_distance'] * 1e3:.3f} mm")
