@@ -115,3 +115,14 @@ def test_an_existing_output_is_not_overwritten(tmp_path, capsys):
     assert main(['calibrate', '--data', str(data), '-o', str(output)]) == 2
     assert 'exists (use --force' in capsys.readouterr().err
     assert output.read_text() == 'keep me'
+
+
+def test_a_data_error_is_reported_before_an_existing_output(tmp_path, capsys):
+    """With bad data and an existing preset, the error is the data's: the output check
+    comes after the inputs' (else fixing one reveals the other)."""
+    data = write(tmp_path, 'deformation_mm,force_N\n0.5,1.0\n')
+    output = write(tmp_path, 'keep me', 'fruit.yaml')
+    assert main(['calibrate', '--data', str(data), '-o', str(output)]) == 2
+    err = capsys.readouterr().err
+    assert 'exists (use --force' not in err and err.startswith('error: '), err
+    assert output.read_text() == 'keep me'

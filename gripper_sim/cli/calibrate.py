@@ -110,13 +110,14 @@ def run_calibrate(args) -> int:
                                                        fit_keys)
     from gripper_sim.workflows.calibrate_plots import plot_html, plot_png
     from gripper_sim.workflows.calibrate_preset import preset_text, write_preset
-    paths = _outputs(args)
-    name = args.name or paths[0].stem
+    # the inputs first: an existing output is not the error to hide a data error behind
     curve = read_curve(args.data, args.deformation_unit, args.force_unit, args.speed)
     test = CompressionTest(curve, fruit=args.fruit, overrides=_overrides(args),
                            config_file=args.config)
     keys = fit_keys(args.fit, test.model)
     check_fit_keys(keys, test.base)
+    paths = _outputs(args)
+    name = args.name or paths[0].stem
     text = not args.json
     if text:
         print(f'calibrating {", ".join(k.removeprefix("fruit.") for k in keys)} of the '
