@@ -4,6 +4,7 @@ survives and is watched, ``~/step`` that other services interrupt, set-point com
 
 Every wait is a condition with a generous deadline, never a fixed sleep.
 """
+import gc
 import math
 import threading
 import time
@@ -417,9 +418,19 @@ def test_a_node_that_fails_to_build_leaves_the_logs_of_the_next_one_alone(contex
     and was not destroyed carried the next SimNode's logs to a dead end (a test module
     then waited in vain for a node's warnings)."""
     from rcl_interfaces.msg import Log
+    # both nodes under a name of their own: a SimNode of the usual name that an earlier
+    # test left to the garbage collector would, when collected, end the rosout publisher
+    # its namesakes share (rcl's rule), whenever that happens
+    renamed = dict(cli_args=['--ros-args', '-r', '__node:=rosout_namesake_check'])
+    overrides = [Parameter('physics.gripper.initial_gap', value=0.01)]
     with pytest.raises(ConfigError):
-        make_node(context, start=False, **{'physics.gripper.initial_gap': 0.01})
-    node = make_node(context, start=False, foxglove_port=0)
+        SimNode(context=context, simulation_factory=Simulation, start=False,
+                parameter_overrides=overrides, watchdog_period=0.0, **renamed)
+    node = SimNode(context=context, simulation_factory=Simulation, start=False,
+                   parameter_overrides=[Parameter('foxglove_port', value=0)],
+                   watchdog_period=0.0, **renamed)
+    assert node.get_name() == 'rosout_namesake_check'
+    gc.collect()  # what is left of the failed node goes now, not at some later time
     probe = rclpy.create_node('rosout_probe', context=context)
     seen = []
     probe.create_subscription(Log, '/rosout', lambda msg: seen.append(msg.msg), 100)
