@@ -60,6 +60,11 @@ class GripperFrames:
         lift_range, transport_range: m, (lowest, highest) lift height and transport x
             the simulation accepts (``core.gripper.lift_range``, ``transport_range``):
             the URDF's joint limits.
+        plate: the left jaw's plate in its jaw frame, ((x, z) of its centre, (x, z)
+            size), m, x towards the fruit (the URDF's jaw box;
+            ``finger_markers.JawPlate``, which ``MessageContext.from_config`` gives:
+            a Fin Ray's lies on its base, above the finger). None: ``jaw_thickness``
+            behind the jaw face over ``jaw_height``, a flat finger's.
     """
 
     prefix: str = ''
@@ -71,6 +76,7 @@ class GripperFrames:
     table_height: float | None = 0.0
     lift_range: tuple[float, float] = (-FREE_TRAVEL, FREE_TRAVEL)
     transport_range: tuple[float, float] = (-FREE_TRAVEL, FREE_TRAVEL)
+    plate: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     def __post_init__(self) -> None:
         check_prefix(self.prefix)

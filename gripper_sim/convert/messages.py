@@ -206,29 +206,34 @@ class MessageContext:
             left_outward = -1.0 if _left_is_negative(initial) else 1.0
         table = bool(config.get('world.table', True))
         jaw_thickness = float(config.get('gripper.jaw_thickness', cls.jaw_thickness))
+        jaw_height = float(config.get('gripper.jaw_height', cls.jaw_height))
         table_height = float(config.get('world.table_height', 0.0))
+        finger = finger_geometry(config)
+        plate = (fin_ray_jaw_plate(config, jaw_thickness)
+                 if config.get('gripper.finger.type') == 'fin_ray' else None)
+        jaw_plate = plate or rigid_jaw_plate(finger, jaw_thickness, jaw_height)
         frames = GripperFrames(
             prefix=frame_prefix, left_outward=left_outward,
-            jaw_height=float(config.get('gripper.jaw_height', cls.jaw_height)),
+            jaw_height=jaw_height,
             jaw_width=float(config.get('gripper.jaw_width', cls.jaw_width)),
-            jaw_thickness=float(config.get('gripper.jaw_thickness', cls.jaw_thickness)),
+            jaw_thickness=jaw_thickness,
             max_gap=float(config.get('gripper.max_gap', GripperFrames.max_gap)),
-            table_height=table_height if table else None)
+            table_height=table_height if table else None,
+            plate=(jaw_plate.centre, jaw_plate.size))
         return cls(
             dimension=int(config.get('dimension', 2)),
             rest_width=diameter,
             depth=float(depth) if depth is not None else diameter * 2.0 / 3.0,
             bruise_pressure=float(config.get('fruit.bruise_pressure', cls.bruise_pressure)),
             failure_stress=float(config.get('fruit.failure_stress', cls.failure_stress)),
-            jaw_height=float(config.get('gripper.jaw_height', cls.jaw_height)),
+            jaw_height=jaw_height,
             jaw_thickness=jaw_thickness,
             jaw_width=float(config.get('gripper.jaw_width', cls.jaw_width)),
             table=table,
             table_height=table_height,
             gripper_centre_x=centre,
-            finger=finger_geometry(config),
-            plate=(fin_ray_jaw_plate(config, jaw_thickness)
-                   if config.get('gripper.finger.type') == 'fin_ray' else None),
+            finger=finger,
+            plate=plate,
             frames=frames,
         )
 

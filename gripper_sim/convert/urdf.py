@@ -5,7 +5,10 @@ Links: ``world`` (the shared root), ``<p>carriage``, ``<p>gripper_base``,
 ``<p>left_jaw``, ``<p>right_jaw``; prismatic joints ``transport_joint`` (x),
 ``lift_joint`` (z), ``left_jaw_joint`` and ``right_jaw_joint`` (outwards, 0 = jaw face
 on the centre line, up to half ``max_gap``). Each jaw link carries a box visual and
-collision of the jaw plate, behind its face. Published on ``/robot_description``
+collision of the jaw plate where the finger is held (``GripperFrames.plate``, as the
+``jaws`` markers draw it): behind the jaw face of a flat finger and a solid pad, behind
+the deepest point of a shaped finger's face, on top of a Fin Ray's base (the finger
+hangs below it). Published on ``/robot_description``
 (transient local), a robot_state_publisher or RViz's RobotModel display places it from
 ``/joint_states`` or ``/tf``.
 """
@@ -50,6 +53,15 @@ def _prismatic(robot: ET.Element, name: str, parent: str, child: str, axis, lowe
                   effort=_xyz([EFFORT_LIMIT]), velocity=_xyz([VELOCITY_LIMIT]))
 
 
+def jaw_box(frames: GripperFrames, outward: float) -> tuple[tuple, tuple]:
+    """(size, offset) of a jaw's plate box in its jaw link (m, x y z): the plate of
+    ``frames.plate`` (x towards the fruit, mirrored for the jaw that opens towards
+    ``outward``, +1 or -1 along x), over the jaw width along y."""
+    (x, z), (size_x, size_z) = frames.plate or (
+        (-0.5 * frames.jaw_thickness, 0.0), (frames.jaw_thickness, frames.jaw_height))
+    return (size_x, frames.jaw_width, size_z), (-outward * x, 0.0, z)
+
+
 def gripper_urdf(frames: GripperFrames) -> str:
     """The URDF XML text of the gripper described by ``frames``."""
     robot = ET.Element('robot', name=f'{frames.prefix}gripper_sim')
@@ -58,10 +70,9 @@ def gripper_urdf(frames: GripperFrames) -> str:
     ET.SubElement(robot, 'link', name=WORLD_FRAME)
     ET.SubElement(robot, 'link', name=frames.carriage)
     _box_link(robot, frames.base, BASE_SIZE, (0.0, 0.0, 0.0))
-    plate = (frames.jaw_thickness, frames.jaw_width, frames.jaw_height)
     for frame, outward in ((frames.left_jaw, frames.left_outward),
                            (frames.right_jaw, -frames.left_outward)):
-        _box_link(robot, frame, plate, (outward * frames.jaw_thickness / 2.0, 0.0, 0.0))
+        _box_link(robot, frame, *jaw_box(frames, outward))
     left, right, lift, transport = frames.joint_names
     _prismatic(robot, transport, WORLD_FRAME, frames.carriage, (1, 0, 0),
                *frames.transport_range)
