@@ -175,29 +175,28 @@ class _Runner:
         for row in store.rows.values():
             self.by_config.setdefault(row['config_hash'], []).append(row)
 
-    def start(self, samples: list[dict[str, float]]) -> None:
-        """Submit one task per (design point, fruit), with the rows already stored."""
+    def start(self, setups: list[FruitSetup]) -> None:
+        """Submit one task per (design point, fruit) set-up, with the rows already
+        stored."""
         study = self.study
         per_fruit = len(study.forces) or EXPECTED_PER_CHAIN
-        for point in study.points:
-            for index, drawn in enumerate(samples):
-                setup = study.trial(point, index, drawn)
-                chain = _Chain(setup)
-                self.chains.append(chain)
-                known = self._known(setup)
-                self.reused += len(known)
-                self.used.update(row['case_key'] for row in known.values())
-                args = (dict(setup.config), setup.scenario, study.tolerance, study.forces)
-                key = 'fruit-' + hashlib.sha256(json.dumps(
-                    [config_hash(setup.config), dict(setup.scenario.values), study.tolerance,
-                     study.forces, self.code, sorted(known)], default=repr).encode()
-                ).hexdigest()[:24]
-                future = self.client.submit(run_fruit, *args, known, key=key, retries=2)
-                if future.key not in self.waiting:
-                    self.waiting[future.key] = (future, [])
-                    self.queue.add(future)
-                self.waiting[future.key][1].append(chain)
-                self.bar.total += max(per_fruit - len(known), 0)
+        for setup in setups:
+            chain = _Chain(setup)
+            self.chains.append(chain)
+            known = self._known(setup)
+            self.reused += len(known)
+            self.used.update(row['case_key'] for row in known.values())
+            args = (dict(setup.config), setup.scenario, study.tolerance, study.forces)
+            key = 'fruit-' + hashlib.sha256(json.dumps(
+                [config_hash(setup.config), dict(setup.scenario.values), study.tolerance,
+                 study.forces, self.code, sorted(known)], default=repr).encode()
+            ).hexdigest()[:24]
+            future = self.client.submit(run_fruit, *args, known, key=key, retries=2)
+            if future.key not in self.waiting:
+                self.waiting[future.key] = (future, [])
+                self.queue.add(future)
+            self.waiting[future.key][1].append(chain)
+            self.bar.total += max(per_fruit - len(known), 0)
         self.bar.refresh()
 
     def _known(self, setup: FruitSetup) -> dict:
@@ -278,15 +277,17 @@ class _Runner:
 def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = None,
               workers: int | None = None, progress: bool = True) -> StudyRun:
     """Run ``study``, its rows in ``out/rows`` (resuming what is there), then its summary.
-    Nothing is written before the cluster is reached.
+    Every (design point, fruit) set-up is built before the cluster starts, and nothing
+    is written before the cluster is reached.
 
     Raises:
         StudyError: ``out`` holds another study's results or those of a changed
             definition of this one (``check_results_directory``), the cluster cannot be
             reached, or runs other code.
-        ConfigError: a sample of the population is invalid.
+        ConfigError: a sample of the population is invalid at a design point (before
+            the cluster starts).
     """
-    samples = study.population.draw()
+    setups = study.setups(study.population.draw())
     identity = dict(study=study.name, definition=study.definition_hash())
     check_results_directory(out, identity)
     start = time.perf_counter()
@@ -296,7 +297,7 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
         store.claim(identity)
         runner = _Runner(study, store, client, progress)
         try:
-            runner.start(samples)
+            runner.start(setups)
             complete = runner.run()
         finally:
             store.flush()

@@ -138,18 +138,29 @@ class Study:
         if 'mass' in drawn:
             mass = estimates(config)[2]
             overrides['fruit.density'] = config['fruit.density'] * drawn['mass'] / mass
-            config = _config(scenario, fruit, finger, overrides, point, sample)
+            config = _config(scenario, fruit, finger, overrides, point, sample,
+                             f"population key 'mass' = {drawn['mass']:.4g} kg sets "
+                             f'fruit.density: ')
         trial_config, trial_scenario = trial_setup(config, scenario)
         return FruitSetup(point=point.index, sample=sample, config=trial_config,
-                     scenario=trial_scenario, drawn=dict(drawn))
+                          scenario=trial_scenario, drawn=dict(drawn))
+
+    def setups(self, samples: list[Mapping[str, float]]) -> list[FruitSetup]:
+        """The set-up of every (design point, fruit) of ``samples`` (``Population.draw``),
+        point by point: all of them built, so that a sample no configuration takes is
+        a ConfigError before any cluster starts or any file is written."""
+        return [self.trial(point, index, drawn) for point in self.points
+                for index, drawn in enumerate(samples)]
 
 
-def _config(scenario, fruit, finger, overrides, point, sample) -> dict:
+def _config(scenario, fruit, finger, overrides, point, sample, cause: str = '') -> dict:
+    """The scenario's configuration; a ConfigError names the design point, the sample
+    and ``cause`` (what set the offending key, if not the study file itself)."""
     try:
         return scenario_config(scenario, fruit=fruit, finger=finger, overrides=overrides)
     except ConfigError as err:
         raise ConfigError(f'design point {point.index} ({point.label()}), sample {sample}: '
-                          f'{err}') from err
+                          f'{cause}{err}') from err
 
 
 def load_study(path: str | Path) -> Study:
