@@ -57,3 +57,66 @@ def test_a_sample_no_configuration_takes_is_refused_before_anything_is_written(t
     assert "kg sets fruit.density: config key 'fruit.density'" in refused.stderr
     assert 'Traceback' not in refused.stderr
     assert not out.exists()
+
+
+def test_a_fruit_whose_search_raises_returns_its_error(tmp_path):
+    """Without friction nothing holds the fruit and its window search cannot start: the
+    task returns the error (Dask neither logs a traceback nor retries it) instead of
+    raising."""
+    from gripper_sim.workflows.study_spec import load_study
+    from gripper_sim.workflows.study_tasks import run_fruit
+    study = load_study(write_study(tmp_path, 'small'))
+    setup = study.trial(study.points[0], 0, {})
+    config = dict(setup.config, **{'contact.jaw.static_friction': 0.0,
+                                   'contact.jaw.kinetic_friction': 0.0})
+    value = run_fruit(config, setup.scenario, study.tolerance, study.forces, {})
+    assert value['result'] is None and value['new'] == []
+    assert value['error'].startswith('GripperSimError: the grasp window needs a positive, '
+                                     'finite force estimate (window.py:')
+
+
+def failed_study_summary(tmp_path: Path) -> dict:
+    """The summary of SMALL's two fruits at window fraction 0.5: the first with a
+    window of 2-15 N, the second's task failed."""
+    from gripper_sim.workflows.study import _Chain, summarise
+    from gripper_sim.workflows.study_results import RowStore
+    from gripper_sim.workflows.study_spec import load_study
+    study = load_study(write_study(tmp_path, 'small'))
+    chains = [_Chain(setup) for setup in study.setups(study.population.draw())]
+    for chain in chains:
+        chain.done = True
+    chains[0].result = (2.0, 15.0, 'bruise', None)
+    chains[1].result = (None, None, None, None)
+    chains[1].error = 'KilledWorker: the fruit killed its workers'
+    return summarise(study, chains, RowStore(tmp_path / 'out'), True)
+
+
+def test_a_failed_fruit_is_not_counted_as_a_fruit_without_a_window(tmp_path):
+    """At fraction 0.5 the one fruit with a window would make a population window of its
+    own if the failed one counted as a fruit that holds nowhere: no window is claimed,
+    the failure is listed and the study's line says so."""
+    from gripper_sim.cli.study import describe_point
+    point = failed_study_summary(tmp_path)['points'][0]
+    assert 'population' not in point
+    assert point['failed'] == [dict(sample=1,
+                                    error='KilledWorker: the fruit killed its workers')]
+    assert [s['sample'] for s in point['samples']] == [0]
+    assert describe_point(point, '50 %') == (
+        '1 of 2 fruits failed (KilledWorker: the fruit killed its workers): no population '
+        'window (run the study again to retry them)')
+
+
+def test_the_study_command_exits_2_when_a_fruit_failed(tmp_path, monkeypatch, capsys):
+    from gripper_sim.cli.main import main
+    from gripper_sim.workflows import study as study_module
+    summary = failed_study_summary(tmp_path)
+    summary.update(computed=1, reused=0, superseded=0)
+    monkeypatch.setattr(study_module, 'run_study', lambda *args, **kwargs: (
+        study_module.StudyRun(computed=1, reused=0, interrupted=False, summary=summary)))
+    code = main(['study', str(write_study(tmp_path, 'small')), '--out',
+                 str(tmp_path / 'out'), '--no-report', '--no-progress'])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert 'contact.jaw.static_friction=0.5: 1 of 2 fruits failed (KilledWorker' in out
+    assert err.strip() == ('error: 1 fruit task failed (see above and summary.json): their '
+                           'design points have no population window')

@@ -58,11 +58,28 @@ def run_study_verb(args) -> int:
               'its own)')
     percent = f"{summary['fraction'] * 100:g} %"
     for point in summary['points']:
-        print(f"  {point['label']}: {describe_window(point.get('population'), percent)}")
+        print(f"  {point['label']}: {describe_point(point, percent)}")
     print(f'  results in {out}/ (rows/*.parquet, summary.json'
           + (', rows.csv' if args.csv else '') + ('' if args.no_report else
                                                    ', report.html, report.png') + ')')
+    failed = sum(len(point['failed']) for point in summary['points'])
+    if failed:
+        print(f"error: {failed} fruit task{'s' if failed > 1 else ''} failed (see above "
+              'and summary.json): their design points have no population window',
+              file=sys.stderr)
+        return 2
     return 0
+
+
+def describe_point(point: dict, percent: str) -> str:
+    """A design point's line: its population window, or how many of its fruits failed
+    (and the first failure) when any did."""
+    failed = point['failed']
+    if not failed:
+        return describe_window(point.get('population'), percent)
+    fruits = len(failed) + len(point['samples'])
+    return (f'{len(failed)} of {fruits} fruits failed ({failed[0]["error"]}): no population '
+            'window (run the study again to retry them)')
 
 
 def describe_window(population: dict | None, percent: str) -> str:

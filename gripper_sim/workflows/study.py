@@ -218,6 +218,8 @@ class _Runner:
                 except Exception as err:  # noqa: BLE001 - a lost task: the fruit's error
                     value, failure = None, f'{type(err).__name__}: {err}'
                 new = self._keep(chains[0].setup, value['new'] if value else [])
+                if value is not None and value['error']:
+                    value, failure = None, value['error']
                 for chain in chains:
                     self._finish(chain, value, failure)
                 finished.append(new)
@@ -342,11 +344,13 @@ def summarise(study: Study, chains: list[_Chain], store: RowStore, complete: boo
     for point in study.points:
         own = [c for c in chains if c.setup.point == point.index]
         limit = float(own[0].setup.config['gripper.max_force']) if own else math.inf
-        windows = _sample_windows(study, own)
+        # a failed fruit has no window: not one that holds nowhere, nor one to leave out
+        failed = [c for c in own if c.error]
+        windows = _sample_windows(study, [c for c in own if not c.error])
         entry: dict[str, Any] = dict(index=point.index, label=point.label(),
                                      values=dict(point.values), max_force=limit,
                                      complete=all(c.done for c in own))
-        if entry['complete'] and windows:
+        if entry['complete'] and windows and not failed:
             entry['population'] = population_window(
                 windows, limit, study.fraction, study.confidence,
                 seed=study.population.seed)
@@ -357,7 +361,7 @@ def summarise(study: Study, chains: list[_Chain], store: RowStore, complete: boo
                                  max_force_limited_by=w.max_force_limited_by,
                                  min_force_limited_by=w.min_force_limited_by)
                             for w in windows]
-        entry['failed'] = [dict(sample=c.setup.sample, error=c.error) for c in own if c.error]
+        entry['failed'] = [dict(sample=c.setup.sample, error=c.error) for c in failed]
         points.append(entry)
     rows = store.rows.values()
     return dict(study=study.name, description=study.description, source=study.source,

@@ -51,20 +51,22 @@ def run_case(config: Mapping[str, Any], scenario: Scenario, force: float,
     try:
         outputs = evaluate_grasp(config, scenario, force, kind).row()
     except Exception as err:  # noqa: BLE001 - a case's failure is a row, not a failed study
-        where = traceback.extract_tb(err.__traceback__)[-1]
         outputs = dict(force=float(force), outcome='error', held=False, dropped=True,
                        slipped=False, bruised=True, crushed=True, slip_distance=0.0,
                        peak_grip_force=0.0, peak_compression=0.0,
                        peak_jaw_pressure=0.0, peak_table_pressure=0.0,
                        peak_damage_pressure=0.0, bruised_at='',
-                       bruised_fraction=0.0,
-                       error=f'{type(err).__name__}: {err} ({Path(where.filename).name}:'
-                             f'{where.lineno})',
+                       bruised_fraction=0.0, error=error_text(err),
                        sim_time=0.0, steps=0, message='')
     outputs.update(cpu_time=time.process_time() - start, worker=os.getpid(),
                    code_version=code_version())
     return outputs
 
+
+def error_text(err: Exception) -> str:
+    """'Type: message (file.py:line)': an exception and where it was raised."""
+    where = traceback.extract_tb(err.__traceback__)[-1]
+    return f'{type(err).__name__}: {err} ({Path(where.filename).name}:{where.lineno})'
 
 
 def evaluation_of(outputs: Mapping[str, Any]) -> GraspEvaluation:
@@ -87,9 +89,13 @@ def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
     ``window.lower_bound_limited_by``). With ``forces``:
     one 'hold' evaluation per force, ``result`` None. An evaluation already in
     ``known`` (outputs by ``answer_key``, from a previous run) is not computed again.
+    An exception of the search itself (not of a case: that is the case's row) is the
+    fruit's ``error``, returned rather than raised: the task does not fail, so Dask
+    neither logs its traceback nor runs it again, and the evaluations before it are kept.
 
     Returns:
-        {'result': ..., 'new': [(kind, force, outputs), ...] the evaluations computed}.
+        {'result': ... (None after an error), 'new': [(kind, force, outputs), ...] the
+        evaluations computed, 'error': '' or ``error_text`` of the search's exception}.
     """
     answers = dict(known)
     new: list[tuple[str, float, dict]] = []
@@ -102,10 +108,20 @@ def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
             new.append((kind, float(force), answers[key]))
         return evaluation_of(answers[key])
 
+    try:
+        result = _fruit_result(config, tolerance, forces, evaluation)
+    except Exception as err:  # noqa: BLE001 - the fruit's failure, reported by the client
+        return dict(result=None, new=new, error=error_text(err))
+    return dict(result=result, new=new, error='')
+
+
+def _fruit_result(config: Mapping[str, Any], tolerance: float, forces: Sequence[float],
+                  evaluation) -> tuple | None:
+    """``run_fruit``'s ``result``, its evaluations asked of ``evaluation``."""
     if forces:
         for force in forces:
             evaluation(('hold', force))
-        return dict(result=None, new=new)
+        return None
     hold, bruise, _ = estimates(config)
     trials = []
 
@@ -114,5 +130,5 @@ def run_fruit(config: Mapping[str, Any], scenario: Scenario, tolerance: float,
         return trials[-1]
 
     low, high = run_search(window_search(config, hold, bruise, tolerance), trial)
-    return dict(result=(low, high, upper_bound_limited_by(high, trials),
-                        lower_bound_limited_by(low, trials)), new=new)
+    return (low, high, upper_bound_limited_by(high, trials),
+            lower_bound_limited_by(low, trials))
