@@ -170,7 +170,8 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
 
     Raises:
         RecordingError: ``src`` is missing, empty or not MCAP; ``dst`` is ``src``, exists
-            (without ``overwrite``) or cannot be written; nothing could be recovered.
+            (without ``overwrite``; with it, is not a regular file: a device or FIFO is
+            never replaced) or cannot be written; nothing could be recovered.
     """
     src, dst = Path(src), Path(dst)
     check_mcap_start(src)
@@ -179,6 +180,9 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
                              'is never modified)')
     if dst.exists() and not overwrite:
         raise RecordingError(f'{dst} already exists; choose another name or remove it')
+    if dst.exists() and not dst.is_file():
+        raise RecordingError(f'{dst} is not a regular file; --force replaces only a file '
+                             '(give the name of a new .mcap file)')
     result = scan(src)
     report = result.report
     if result.header is None:

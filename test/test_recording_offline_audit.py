@@ -1,0 +1,57 @@
+"""Fixes from the offline-tools audit (info, recover, analyze, replay, bag folders): each
+test fails without its fix."""
+from __future__ import annotations
+
+import hashlib
+import os
+import stat
+from pathlib import Path
+
+import pytest
+from rclpy.serialization import serialize_message
+from std_msgs.msg import String
+
+from gripper_sim.cli.main import main
+from gripper_sim.recording.writer import BagWriter
+
+
+def chatter_file(path: Path, n: int = 5, step_ns: int = 10_000_000) -> Path:
+    """A small closed MCAP file of ``n`` ``/chatter`` Strings, ``step_ns`` apart."""
+    with BagWriter(path) as bag:
+        bag.add_topic('/chatter', 'std_msgs/msg/String')
+        for i in range(n):
+            bag.write('/chatter', serialize_message(String(data=f'hi {i}')),
+                      log_time=1_000_000_000 + i * step_ns)
+    return path
+
+
+def sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def one_line_error(capsys) -> str:
+    """The stderr of a verb that failed: one ``error: ...`` line, no traceback."""
+    err = capsys.readouterr().err
+    assert err.startswith('error: ') and err.count('\n') == 1 and 'Traceback' not in err, err
+    return err
+
+
+# ------------------------------------------------------------------ recover
+def test_recover_force_never_replaces_a_device_or_fifo(tmp_path, capsys):
+    """``--force`` replaced whatever was at OUT with os.replace: ``recover x.mcap /dev/null
+    --force`` turned /dev/null into a regular file. Only a regular file is replaced."""
+    source = chatter_file(tmp_path / 'in.mcap')
+    before = sha256(source)
+    fifo = tmp_path / 'pipe.mcap'
+    os.mkfifo(fifo)
+    capsys.readouterr()
+    assert main(['recover', str(source), str(fifo), '--force']) == 2
+    assert 'not a regular file' in one_line_error(capsys)
+    assert stat.S_ISFIFO(fifo.lstat().st_mode)
+    assert sha256(source) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['in.mcap', 'pipe.mcap']
+    # a regular file is still replaced with --force
+    existing = tmp_path / 'old.mcap'
+    existing.write_bytes(b'old')
+    assert main(['recover', str(source), str(existing), '--force']) == 0
+    assert existing.read_bytes() != b'old' and sha256(source) == before
