@@ -120,3 +120,26 @@ def test_the_study_command_exits_2_when_a_fruit_failed(tmp_path, monkeypatch, ca
     assert 'contact.jaw.static_friction=0.5: 1 of 2 fruits failed (KilledWorker' in out
     assert err.strip() == ('error: 1 fruit task failed (see above and summary.json): their '
                            'design points have no population window')
+
+
+def test_a_window_search_without_friction_is_refused_before_the_cluster(tmp_path):
+    """A frictionless design point has no hold estimate to start its search from: the
+    study says so and writes nothing, instead of failing every fruit on the cluster."""
+    data = yaml.safe_load(textwrap.dedent(SMALL))
+    data['axes']['contact.jaw.static_friction'] = [0.0, 0.5]
+    study = tmp_path / 'dry.yaml'
+    study.write_text(yaml.safe_dump(data))
+    out = tmp_path / 'out'
+    refused = run(study, out)
+    assert refused.returncode == 2, refused.stderr
+    assert refused.stderr.strip() == (
+        'error: design point 0 (contact.jaw.static_friction=0.0), sample 0: '
+        'contact.jaw.static_friction is 0, so no grip force holds the fruit and its window '
+        "search cannot start; give a 'force' axis to evaluate grip forces without friction")
+    assert not out.exists()
+    # a force grid evaluates the frictionless point: nothing to refuse
+    from gripper_sim.workflows.study_spec import load_study
+    data['axes']['force'] = [2.0, 5.0]
+    study.write_text(yaml.safe_dump(data))
+    grid = load_study(study)
+    assert len(grid.setups(grid.population.draw())) == 4

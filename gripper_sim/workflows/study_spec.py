@@ -147,10 +147,32 @@ class Study:
 
     def setups(self, samples: list[Mapping[str, float]]) -> list[FruitSetup]:
         """The set-up of every (design point, fruit) of ``samples`` (``Population.draw``),
-        point by point: all of them built, so that a sample no configuration takes is
-        a ConfigError before any cluster starts or any file is written."""
-        return [self.trial(point, index, drawn) for point in self.points
-                for index, drawn in enumerate(samples)]
+        point by point: all of them built, so that a sample no configuration takes, or
+        a window search that cannot start, is a ConfigError before any cluster starts
+        or any file is written."""
+        setups = [self.trial(point, index, drawn) for point in self.points
+                  for index, drawn in enumerate(samples)]
+        if not self.forces:
+            for setup in setups:
+                _check_searchable(setup, self.points[setup.point])
+        return setups
+
+
+def _check_searchable(setup: FruitSetup, point: DesignPoint) -> None:
+    """A window search starts from the force that holds the fruit by friction, m g /
+    (2 mu): without friction (mu = 0, of the jaws or of the pads) there is none.
+
+    Raises:
+        ConfigError: naming the design point, the sample and the friction key.
+    """
+    config = setup.config
+    key = ('contact.pad.friction' if config['gripper.finger.pad.enabled']
+           else 'contact.jaw.static_friction')
+    if config[key] <= 0:
+        raise ConfigError(f'design point {point.index} ({point.label()}), sample '
+                          f"{setup.sample}: {key} is 0, so no grip force holds the fruit "
+                          "and its window search cannot start; give a 'force' axis to "
+                          'evaluate grip forces without friction')
 
 
 def _config(scenario, fruit, finger, overrides, point, sample, cause: str = '') -> dict:
