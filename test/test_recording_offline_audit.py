@@ -55,3 +55,40 @@ def test_recover_force_never_replaces_a_device_or_fifo(tmp_path, capsys):
     existing.write_bytes(b'old')
     assert main(['recover', str(source), str(existing), '--force']) == 0
     assert existing.read_bytes() != b'old' and sha256(source) == before
+
+
+# ------------------------------------------------------------------ analyze
+@pytest.fixture(scope='module')
+def dotted_bag(tmp_path_factory) -> Path:
+    """A small squeeze recorded to the bag folder ``grasp.v2`` (a dot in its name)."""
+    bag = tmp_path_factory.mktemp('dotted') / 'grasp.v2'
+    assert main(['squeeze', '--to-force', '1', '--out', str(bag), '--set', 'fruit.nodes=16',
+                 '--quiet']) == 0
+    return bag
+
+
+def _hashes(folder: Path) -> dict[str, str]:
+    return {p.name: sha256(p) for p in sorted(folder.iterdir())}
+
+
+@pytest.mark.parametrize('given', ['.', './', 'sub/..'])
+def test_analyze_of_the_folder_one_stands_in_writes_beside_it(dotted_bag, given, tmp_path,
+                                                            monkeypatch, capsys):
+    """``analyze .`` inside a bag folder was a ValueError traceback (a path with an empty
+    name), ``analyze bag/..`` wrote into the bag folder, and a bag folder with a dot in
+    its name lost its tail (``grasp.v2`` -> ``grasp_analysis``). The default output is
+    ``NAME_analysis`` beside the folder, the recording is left as it was."""
+    bag = tmp_path / 'grasp.v2'
+    bag.mkdir()
+    for f in dotted_bag.iterdir():
+        (bag / f.name).write_bytes(f.read_bytes())
+    before = _hashes(bag)
+    if given == 'sub/..':
+        (bag / 'sub').mkdir()
+        before['sub'] = None
+    monkeypatch.chdir(bag)
+    capsys.readouterr()
+    assert main(['analyze', given, '--no-figures', '--no-html', '--quiet']) == 0
+    assert (tmp_path / 'grasp.v2_analysis' / 'summary.json').is_file()
+    after = {p.name: (None if p.is_dir() else sha256(p)) for p in sorted(bag.iterdir())}
+    assert after == before

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
@@ -292,14 +293,24 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def default_analysis_dir(bag: str) -> Path:
+    """``NAME_analysis`` beside the bag folder ``NAME``, ``FILE_analysis`` beside
+    ``FILE.mcap``; a path such as ``.`` or ``bag/..`` names the folder it stands for, so
+    the output never lands inside the recording."""
+    path = Path(os.path.normpath(bag))
+    if path.name in ('', '.', '..'):
+        path = Path(os.path.abspath(bag))
+    name = path.stem if path.suffix == '.mcap' and not path.is_dir() else path.name
+    return path.parent / f'{name or "recording"}_analysis'
+
+
 def _analyze(args: argparse.Namespace) -> int:
     from gripper_sim.cli.progress import StageProgress
     from gripper_sim.recording.analysis import analyze
 
     out_dir = args.output_dir
     if out_dir is None:
-        path = Path(args.file)
-        out_dir = str(path.with_name(path.stem + '_analysis'))
+        out_dir = str(default_analysis_dir(args.file))
     with StageProgress('analyze', quiet=args.quiet) as progress:
         result = analyze(args.file, out_dir, namespace=args.namespace,
                          figures=not args.no_figures, html=not args.no_html,
