@@ -92,3 +92,46 @@ def test_analyze_of_the_folder_one_stands_in_writes_beside_it(dotted_bag, given,
     assert (tmp_path / 'grasp.v2_analysis' / 'summary.json').is_file()
     after = {p.name: (None if p.is_dir() else sha256(p)) for p in sorted(bag.iterdir())}
     assert after == before
+
+
+# ------------------------------------------------------------------ bag folders
+def _killed_bag(folder: Path, *names: str) -> Path:
+    """A bag folder as a killed recorder leaves it (no metadata.yaml), its files named."""
+    folder.mkdir()
+    for name in names:
+        chatter_file(folder / name)
+    return folder
+
+
+def test_a_folder_of_several_recordings_is_not_merged(tmp_path, capsys):
+    """Without metadata.yaml every .mcap file of the folder was read as one bag: a copy
+    or another recording beside the files doubled the messages that info counted and
+    analyze analysed. Only one file or one split series NAME_0, NAME_1, ... is a bag."""
+    mixed = _killed_bag(tmp_path / 'mixed', 'run_0.mcap', 'copy.mcap')
+    before = _hashes(mixed)
+    capsys.readouterr()
+    for verb in (['info'], ['analyze', '--quiet'], ['replay']):
+        assert main([*verb, str(mixed)]) == 2
+        assert 'more than one recording (copy.mcap, run_0.mcap)' in one_line_error(capsys)
+    assert main(['recover', str(mixed), str(tmp_path / 'fixed')]) == 2
+    one_line_error(capsys)
+    assert not (tmp_path / 'fixed').exists() and _hashes(mixed) == before
+    two_runs = _killed_bag(tmp_path / 'two_runs', 'a_0.mcap', 'b_0.mcap')
+    assert main(['info', str(two_runs)]) == 2
+    one_line_error(capsys)
+    # one split series, also in a renamed folder, and a lone file are bags
+    for folder in (_killed_bag(tmp_path / 'renamed', 'run_0.mcap', 'run_1.mcap'),
+                   _killed_bag(tmp_path / 'lone', 'whatever.mcap')):
+        assert main(['info', '--json', str(folder)]) == 0
+        assert f'"messages": {5 * len(list(folder.iterdir()))}' in capsys.readouterr().out
+
+
+def test_a_file_listed_twice_in_metadata_yaml_is_refused(tmp_path, capsys):
+    """relative_file_paths naming a file twice had its messages read twice."""
+    folder = _killed_bag(tmp_path / 'bag', 'bag_0.mcap')
+    (folder / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n'
+        '  relative_file_paths:\n    - bag_0.mcap\n    - bag_0.mcap\n')
+    capsys.readouterr()
+    assert main(['info', str(folder)]) == 2
+    assert 'lists bag_0.mcap more than once' in one_line_error(capsys)

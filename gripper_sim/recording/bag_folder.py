@@ -330,8 +330,9 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], dict[str, Any] | Non
     folder's ``*.mcap`` files by their split index.
 
     Raises:
-        RecordingError: missing path, broken metadata, a listed file missing, or a folder
-            with no MCAP file.
+        RecordingError: missing path, broken metadata, a listed file missing or listed
+            twice, a folder with no MCAP file, or (without metadata) with the files of
+            several recordings.
     """
     path = Path(path)
     if not path.exists():
@@ -341,6 +342,10 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], dict[str, Any] | Non
     if (path / METADATA_FILE).exists():
         info = read_metadata_file(path)
         files = [path / Path(name).name for name in info['relative_file_paths']]
+        twice = sorted({f.name for f in files if files.count(f) > 1})
+        if twice:
+            raise RecordingError(f"{path / METADATA_FILE} lists {', '.join(twice)} more than "
+                                 'once: its messages would be read twice')
         missing = [str(f) for f in files if not f.exists()]
         if missing:
             raise RecordingError(f"{path}: files listed in {METADATA_FILE} are missing: "
@@ -357,4 +362,20 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], dict[str, Any] | Non
     if not files:
         raise RecordingError(f'{path} is a directory with neither {METADATA_FILE} nor .mcap '
                              'files: not a recording')
+    check_one_series(path, files)
     return files, None
+
+
+def check_one_series(folder: Path, files: list[Path]) -> None:
+    """Raise RecordingError unless ``files`` (a folder's ``.mcap`` files, no
+    ``metadata.yaml``) are one file or the split files ``NAME_0.mcap``, ``NAME_1.mcap``,
+    ... of one recording: files of several recordings would be merged into one."""
+    if len(files) < 2:
+        return
+    names = {_INDEX.sub('', file.name) if _INDEX.search(file.name) else None
+             for file in files}
+    if len(names) == 1 and None not in names:
+        return
+    listed = ', '.join(file.name for file in files)
+    raise RecordingError(f'{folder} has no {METADATA_FILE} and holds .mcap files of more than '
+                         f'one recording ({listed}): give one file, or move the others out')
