@@ -135,3 +135,44 @@ def test_a_file_listed_twice_in_metadata_yaml_is_refused(tmp_path, capsys):
     capsys.readouterr()
     assert main(['info', str(folder)]) == 2
     assert 'lists bag_0.mcap more than once' in one_line_error(capsys)
+
+
+def _foreign_file(path: Path, *, rosbag2_yaml: str | None = None,
+                  qos_yaml: str | None = None) -> Path:
+    """One /chatter message in a file written by the plain mcap writer, with the given
+    rosbag2 metadata record and channel QoS text."""
+    from mcap.writer import Writer
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data\n')
+        metadata = {} if qos_yaml is None else {'offered_qos_profiles': qos_yaml}
+        channel = writer.register_channel('/chatter', 'cdr', schema, metadata)
+        writer.add_message(channel, log_time=1, publish_time=1,
+                           data=serialize_message(String(data='hi')))
+        if rosbag2_yaml is not None:
+            writer.add_metadata('rosbag2', {'serialized_metadata': rosbag2_yaml})
+        writer.finish()
+    return path
+
+
+def test_broken_yaml_is_a_one_line_error(tmp_path, capsys):
+    """A metadata.yaml that is not YAML printed PyYAML's five-line report; one nested too
+    deeply (a metadata.yaml, a rosbag2 record, a channel's QoS) was a RecursionError
+    traceback."""
+    bag = _killed_bag(tmp_path / 'bag', 'bag_0.mcap')
+    meta = bag / 'metadata.yaml'
+    capsys.readouterr()
+    meta.write_text('rosbag2_bagfile_information: [unclosed\n  : : :\n')
+    assert main(['info', str(bag)]) == 2
+    assert 'is not valid YAML: line 2, column 3: ' in one_line_error(capsys)
+    meta.write_text('rosbag2_bagfile_information: ' + '[' * 5000 + ']' * 5000 + '\n')
+    assert main(['info', str(bag)]) == 2
+    assert 'nests too deeply' in one_line_error(capsys)
+    deep = _foreign_file(tmp_path / 'deep.mcap', rosbag2_yaml='[' * 5000)
+    assert main(['info', str(deep)]) == 2
+    assert "deep.mcap's rosbag2 metadata is not valid YAML" in one_line_error(capsys)
+    # a channel's unreadable QoS is no QoS (as an absent one), not a failure
+    deep_qos = _foreign_file(tmp_path / 'qos.mcap', qos_yaml='[' * 5000)
+    assert main(['info', '--json', str(deep_qos)]) == 0
+    assert '"qos": []' in capsys.readouterr().out

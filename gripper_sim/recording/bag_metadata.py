@@ -23,6 +23,7 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 
+from gripper_sim.configuration import yaml_problem
 from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording.errors import RecordingError
 
@@ -172,6 +173,17 @@ def write_metadata_file(folder: Path, document: str) -> Path:
     return target
 
 
+def load_yaml(text: str, source: str) -> Any:
+    """The YAML document ``text``; RecordingError with a one-line reason (line and column
+    of the problem) naming ``source``."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise RecordingError(f'{source} is not valid YAML: {yaml_problem(err)}') from None
+    except RecursionError:
+        raise RecordingError(f'{source} is not valid YAML: it nests too deeply') from None
+
+
 def read_metadata_file(folder: Path) -> dict[str, Any]:
     """The BagMetadata mapping of ``folder/metadata.yaml``.
 
@@ -185,10 +197,7 @@ def read_metadata_file(folder: Path) -> dict[str, Any]:
         raise RecordingError(f'{folder} has no {METADATA_FILE}: not a bag folder') from None
     except (OSError, UnicodeDecodeError) as err:
         raise RecordingError(f'cannot read {path}: {err}') from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise RecordingError(f'{path} is not valid YAML: {err}') from err
+    data = load_yaml(text, str(path))
     info = data.get(TOP_KEY) if isinstance(data, dict) else None
     if not isinstance(info, dict):
         raise RecordingError(f'{path} has no {TOP_KEY} mapping: not rosbag2 metadata')

@@ -21,6 +21,7 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 
+from gripper_sim.configuration import yaml_problem
 from gripper_sim.recording.errors import RecordingError
 
 INFINITE_NS = 9223372036854775807  # RMW_DURATION_INFINITE, what Fast DDS reports
@@ -110,7 +111,11 @@ def from_yaml(text: str) -> list[dict[str, Any]]:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise RecordingError(f'offered_qos_profiles is not valid YAML: {err}') from err
+        raise RecordingError(f'offered_qos_profiles is not valid YAML: '
+                             f'{yaml_problem(err)}') from None
+    except RecursionError:
+        raise RecordingError('offered_qos_profiles is not valid YAML: it nests too '
+                             'deeply') from None
     if data is None:
         return []
     if not isinstance(data, list) or not all(isinstance(p, Mapping) for p in data):

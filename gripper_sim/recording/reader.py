@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
-import yaml
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Schema
@@ -28,6 +27,7 @@ from mcap.stream_reader import MAGIC_SIZE, CRCValidationError
 
 from gripper_sim.recording import qos as qos_mod
 from gripper_sim.recording.bag_folder import bag_files
+from gripper_sim.recording.bag_metadata import load_yaml
 from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.lifecycle import OpenClose
 
@@ -449,11 +449,7 @@ class BagReader(_Summary):
         rec = self.metadata_named('rosbag2')
         if not rec or 'serialized_metadata' not in rec:
             return None
-        try:
-            data = yaml.safe_load(rec['serialized_metadata'])
-        except yaml.YAMLError as err:
-            raise RecordingError(f'{self.path}: rosbag2 metadata is not valid YAML: '
-                                 f'{err}') from err
+        data = load_yaml(rec['serialized_metadata'], f"{self.path}'s rosbag2 metadata")
         return data if isinstance(data, dict) else None
 
     def check_topics(self, topics: Iterable[str] | None) -> list[str] | None:
