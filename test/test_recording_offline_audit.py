@@ -176,3 +176,31 @@ def test_broken_yaml_is_a_one_line_error(tmp_path, capsys):
     deep_qos = _foreign_file(tmp_path / 'qos.mcap', qos_yaml='[' * 5000)
     assert main(['info', '--json', str(deep_qos)]) == 0
     assert '"qos": []' in capsys.readouterr().out
+
+
+@pytest.mark.parametrize('version, problem', [
+    (None, 'has no version'), ("'nine'", "version 'nine' is not a BagMetadata version"),
+    ('0', 'version 0 is not'), ('true', 'version True is not')])
+def test_metadata_yaml_without_a_whole_number_version_is_refused(tmp_path, version,
+                                                                 problem, capsys):
+    """A metadata.yaml without a version, or with one that is not a whole number, was
+    read as if it were rosbag2's (rosbag2 and rosbags refuse it); older and newer whole
+    numbers are read, as rosbag2 reads them."""
+    bag = _killed_bag(tmp_path / 'bag', 'bag_0.mcap')
+    line = '' if version is None else f'  version: {version}\n'
+    (bag / 'metadata.yaml').write_text(
+        f'rosbag2_bagfile_information:\n{line}  storage_identifier: mcap\n'
+        '  relative_file_paths:\n    - bag_0.mcap\n')
+    capsys.readouterr()
+    assert main(['info', str(bag)]) == 2
+    assert problem in one_line_error(capsys)
+
+
+@pytest.mark.parametrize('version', [5, 9, 10])
+def test_metadata_yaml_of_another_rosbag2_version_is_read(tmp_path, version, capsys):
+    bag = _killed_bag(tmp_path / 'bag', 'bag_0.mcap')
+    (bag / 'metadata.yaml').write_text(
+        f'rosbag2_bagfile_information:\n  version: {version}\n  storage_identifier: mcap\n'
+        '  relative_file_paths:\n    - bag/bag_0.mcap\n')
+    assert main(['info', '--json', str(bag)]) == 0
+    assert '"messages": 5' in capsys.readouterr().out

@@ -187,8 +187,12 @@ def load_yaml(text: str, source: str) -> Any:
 def read_metadata_file(folder: Path) -> dict[str, Any]:
     """The BagMetadata mapping of ``folder/metadata.yaml``.
 
+    Any version is read (as rosbag2 reads older and newer ones): only the storage and
+    the file list are used.
+
     Raises:
-        RecordingError: missing, not YAML, not a rosbag2 metadata file, or not MCAP.
+        RecordingError: missing, not YAML, not a rosbag2 metadata file (no whole-number
+            version), or not MCAP.
     """
     path = folder / METADATA_FILE
     try:
@@ -201,6 +205,12 @@ def read_metadata_file(folder: Path) -> dict[str, Any]:
     info = data.get(TOP_KEY) if isinstance(data, dict) else None
     if not isinstance(info, dict):
         raise RecordingError(f'{path} has no {TOP_KEY} mapping: not rosbag2 metadata')
+    version = info.get('version')
+    if version is None:
+        raise RecordingError(f'{path} has no version: not rosbag2 metadata')
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise RecordingError(f'{path}: version {version!r} is not a BagMetadata version (a '
+                             f'whole number, {BAG_METADATA_VERSION} for Jazzy)')
     storage = info.get('storage_identifier')
     if storage != 'mcap':
         raise RecordingError(f"{path}: storage '{storage}' is not supported (only mcap)")
