@@ -169,6 +169,8 @@ KEYS: dict[str, Term] = {
     'stiffness_fit_force_range': Term('N', 'force range the stiffness is fitted on'),
     'stiffness_fit_compression_range': Term('m', 'compression range of the fit'),
     'stiffness_fit_time_range': Term('s', 'time range of the fit'),
+    'stiffness_note': Term('-', 'why the tangent or secant stiffness is missing (too few '
+                                'samples of the loading, no grip)'),
     'peak_contact_pressure': Term('Pa', 'largest contact pressure at any node, jaws or '
                                         'table, as recorded (FruitState.'
                                         'peak_contact_pressure)'),

@@ -145,7 +145,8 @@ def summary_rows(summary: dict) -> list[tuple[str, str]]:
         ('stiffness (tangent, secant)',
          f"{_number(summary['stiffness_n_per_m'], 'N/mm', 1e-3)}, "
          f"{_number(summary['secant_stiffness_n_per_m'], 'N/mm', 1e-3)}"
-         + (f' (fitted on the loading only, {fit[0]:.2f}-{fit[1]:.2f} N)' if fit else '')),
+         + (f' (fitted on the loading only, {fit[0]:.2f}-{fit[1]:.2f} N)' if fit else '')
+         + (f" ({summary['stiffness_note']})" if summary.get('stiffness_note') else '')),
         ('peak damage pressure', _number(summary['peak_damage_pressure_pa'], 'kPa', 1e-3)),
         ('bruise threshold', _number(summary['bruise_threshold_pa'], 'kPa', 1e-3)),
         ('bruised / crushed', f"{summary['bruised']} / {summary['crushed']}"),

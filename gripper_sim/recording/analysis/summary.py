@@ -7,7 +7,14 @@ at lift-off and any unloading stay out of the fit. Tangent: least-squares slope 
 the loading rows above ``FIT_FROM`` of that force; secant: the chord of the loading
 curve, from the grip to the end of loading (compression is measured from the rest
 width, and a fruit sagging on the table starts the grip below zero). The rows and
-ranges used are in the summary.
+ranges used are in the summary. A stiffness that cannot be estimated is None, and
+``stiffness_note`` says why in words. Both need a loading recorded in ``FIT_MIN_ROWS``
+samples or more, and the tangent as many above ``FIT_FROM`` of its end force. A
+force-mode close (a Grasp goal's) loads the apple within ~8 ms, one or two samples at
+the node's default 100 Hz publish_rate; the first sample at ``FORCE_REACHED`` then lies
+up to a sample interval after the loading, in the fruit's ringing, and a secant to it
+varies with the sampling phase (1.35-2.61 N/mm over the ten phases of one 100 Hz
+pick, 2.15 N/mm at 1 kHz): neither is given.
 
 Held and slipped use ``gripper_sim.core.slip.grasp_slipped``, the definition of the
 node's Grasp result: the slip at the end of the hold (before the release), or a drop.
@@ -18,6 +25,7 @@ from __future__ import annotations
 
 import csv
 import math
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -34,6 +42,10 @@ from gripper_sim.recording.errors import RecordingError
 FORCE_REACHED = 0.97
 #: the tangent fit starts at this fraction of the loading's end force
 FIT_FROM = 0.2
+#: samples a tangent fit needs (a least-squares line through two would be a chord)
+FIT_MIN_ROWS = 3
+#: the indent of a printed line's continuation lines (under its value)
+NOTE_INDENT = ' ' * 23
 
 
 @dataclass(frozen=True)
@@ -41,13 +53,16 @@ class StiffnessFit:
     """The stiffness fit of the loading part.
 
     Attributes:
-        tangent: N/m, least-squares slope of force over compression (None: < 3 rows).
+        tangent: N/m, least-squares slope of force over compression (None: fewer than
+            ``FIT_MIN_ROWS`` rows, or no compression change over them).
         secant: N/m, (force, compression) chord from the grip to the end of loading
-            (None: no grip, or no compression gained).
+            (None: no grip, a loading of fewer than ``FIT_MIN_ROWS`` rows, or no
+            compression gained).
         intercept: N, of the tangent line.
-        rows: (k,) row indices of the series used by the tangent fit.
+        rows: (k,) row indices of the series used by the tangent fit (none without one).
         start, end: rows of the grip and of the end of loading (None: the jaws never
             both touched).
+        note: why the tangent or the secant is None, in words (None: both estimated).
     """
 
     tangent: float | None
@@ -56,6 +71,7 @@ class StiffnessFit:
     rows: np.ndarray
     start: int | None
     end: int | None
+    note: str | None = None
 
     def ranges(self, series: TimeSeries) -> dict[str, list[float] | None]:
         """[low, high] of force (N), compression (m) and time (s) over the fitted rows."""
@@ -86,17 +102,45 @@ def fit_stiffness(series: TimeSeries, events: Events | None = None) -> Stiffness
     end = loading_end(series, events)
     empty = np.zeros(0, dtype=int)
     if end is None:
-        return StiffnessFit(None, None, 0.0, empty, None, None)
+        return StiffnessFit(None, None, 0.0, empty, None, None,
+                            'no stiffness: the jaws never both touched the fruit')
+    grip = events.grip
+    if end - grip + 1 < FIT_MIN_ROWS:
+        return StiffnessFit(None, None, 0.0, empty, grip, end,
+                            _unresolved_note(series, grip, end))
     force = series['grip_force_n']
     compression = series['compression_m']
-    gained = float(compression[end] - compression[events.grip])
-    secant = float(force[end] - force[events.grip]) / gained if gained > 0 else None
-    span = np.arange(events.grip, end + 1)
+    gained = float(compression[end] - compression[grip])
+    secant = float(force[end] - force[grip]) / gained if gained > 0 else None
+    secant_note = None if secant is not None else \
+        'no secant: the fruit gained no compression from the grip to the end of loading'
+    span = np.arange(grip, end + 1)
     span = span[both_jaws(series)[span] & (force[span] >= FIT_FROM * force[end])]
-    if span.size < 3 or float(np.ptp(compression[span])) <= 0:
-        return StiffnessFit(None, secant, 0.0, span, events.grip, end)
+    tangent_note = None
+    if span.size < FIT_MIN_ROWS:
+        tangent_note = (f'no tangent: {span.size} sample(s) of the loading above '
+                        f'{FIT_FROM * 100:g} % of its end force, {FIT_MIN_ROWS} needed')
+    elif float(np.ptp(compression[span])) <= 0:
+        tangent_note = 'no tangent: the compression did not change over the loading'
+    note = '; '.join(n for n in (tangent_note, secant_note) if n) or None
+    if tangent_note is not None:
+        return StiffnessFit(None, secant, 0.0, empty, grip, end, note)
     slope, intercept = np.polyfit(compression[span], force[span], 1)
-    return StiffnessFit(float(slope), secant, float(intercept), span, events.grip, end)
+    return StiffnessFit(float(slope), secant, float(intercept), span, grip, end, note)
+
+
+def _unresolved_note(series: TimeSeries, grip: int, end: int) -> str:
+    """Why a loading recorded in fewer than ``FIT_MIN_ROWS`` samples, rows ``grip`` to
+    ``end``, gives no stiffness: it was over within about a sample interval."""
+    t = series['time_s']
+    interval = float(np.median(np.diff(t))) if len(t) > 1 else float('nan')
+    count = end - grip + 1
+    when = f't = {t[grip]:.3f} s' if count == 1 else f't = {t[grip]:.3f}-{t[end]:.3f} s'
+    return (f'no stiffness: the loading (grip to {FORCE_REACHED * 100:g} % of its force) '
+            f'spans {count} sample{"" if count == 1 else "s"}, {when}, one every '
+            f'{interval * 1e3:.3g} ms; {FIT_MIN_ROWS} needed, and a loading over within a '
+            "sample interval ends in the fruit's ringing: record at a higher publish_rate "
+            'or in-node, or load in position mode (a gap command)')
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -176,6 +220,7 @@ def summarize(series: TimeSeries, *, bruise_pressure: float) -> dict[str, Any]:
         'stiffness_fit_force_range_n': ranges['force_n'],
         'stiffness_fit_compression_range_m': ranges['compression_m'],
         'stiffness_fit_time_range_s': ranges['time_s'],
+        'stiffness_note': fit.note,
         'peak_contact_pressure_pa': float(np.max(series['peak_contact_pressure_pa'])),
         'peak_max_skin_strain': float(series['max_skin_strain'][
             int(np.argmax(np.abs(series['max_skin_strain'])))]),
@@ -247,6 +292,9 @@ def describe(summary: dict) -> list[str]:
         fitted = (f'\n                       fitted on the loading only: {fit_range[0]:.2f}-'
                   f'{fit_range[1]:.2f} N, {c_lo * 1e3:.2f}-{c_hi * 1e3:.2f} mm, '
                   f't = {t_lo:.3f}-{t_hi:.3f} s')
+    if s.get('stiffness_note'):
+        fitted += ''.join(f'\n{NOTE_INDENT}{line}'
+                          for line in textwrap.wrap(s['stiffness_note'], 66))
     events = ', '.join(f'{label} {time:.3f}' for label, time in
                        s.get('event_times_s', {}).items()) or 'no grip'
     return [
