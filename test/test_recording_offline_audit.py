@@ -204,3 +204,61 @@ def test_metadata_yaml_of_another_rosbag2_version_is_read(tmp_path, version, cap
         '  relative_file_paths:\n    - bag/bag_0.mcap\n')
     assert main(['info', '--json', str(bag)]) == 0
     assert '"messages": 5' in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------ replay
+class Sink:
+    """A publisher stand-in that keeps what it is given; with ``stop_after`` it stops
+    the player after that many messages (so a replay that would never end does)."""
+
+    def __init__(self):
+        self.sent: list = []
+        self.player = None
+        self.limit = 0
+
+    def stop_after(self, player, limit: int) -> None:
+        self.player, self.limit = player, limit
+
+    def publish(self, msg) -> None:
+        self.sent.append(msg)
+        if self.limit and len(self.sent) >= self.limit:
+            self.player.stop.set()
+
+    def get_subscription_count(self) -> int:
+        return 1
+
+
+class FakeNode:
+    """The part of an rclpy node ``Player`` uses; its publishers are ``Sink``s."""
+
+    def __init__(self):
+        self.created: dict[str, Sink] = {}
+
+    def create_publisher(self, _msg_class, topic: str, _qos) -> Sink:
+        self.created[topic] = Sink()
+        return self.created[topic]
+
+    def get_logger(self):
+        import logging
+        return logging.getLogger('fake_replay_node')
+
+
+def _stamps_ns(sink: Sink) -> list[int]:
+    return [m.clock.sec * 1_000_000_000 + m.clock.nanosec for m in sink.sent]
+
+
+@pytest.mark.parametrize('rate', [1e12, 1e300])
+def test_the_replay_clock_never_passes_the_recordings_end(tmp_path, rate):
+    """``replay --clock`` at a large rate published the wall time scaled by the rate:
+    at 1e12 /clock wrapped round int32 seconds (negative times), at 1e300 it was an
+    OverflowError traceback. The clock stops at the recording's last message."""
+    from gripper_sim.recording.reader import BagReader
+    from gripper_sim.ros.replay import Player
+    with BagReader(chatter_file(tmp_path / 'c.mcap', n=50)) as bag:
+        node = FakeNode()
+        player = Player(node, bag, rate=rate, clock_hz=1000.0)
+        player.play_once()
+        stamps = _stamps_ns(node.created['/clock'])
+        assert stamps and all(bag.start_time <= t <= bag.end_time for t in stamps)
+        assert len(node.created['/chatter'].sent) == 50
+

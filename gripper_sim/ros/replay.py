@@ -137,6 +137,12 @@ class Player:
         self.clock_publisher.publish(msg)
         self.stats.clock_messages += 1
 
+    def _clock_time(self, now: float, wall0: float) -> int:
+        """The recording's time (ns) at the wall time ``now`` (monotonic s) of a play that
+        began at ``wall0``: never past the recording's end, however large the rate."""
+        elapsed_ns = (now - wall0) * self.rate * 1e9
+        return self.t0 + int(min(elapsed_ns, max(self.bag.end_time - self.t0, 0)))
+
     def _wait_until(self, wall_target: float, wall0: float) -> None:
         """Sleep until ``wall_target`` (monotonic s), publishing /clock ticks meanwhile."""
         while not self.stop.is_set():
@@ -144,7 +150,7 @@ class Player:
             if self.clock_publisher is not None and self.clock_hz is not None:
                 due = self._next_clock
                 if due <= now:
-                    self._publish_clock(self.t0 + int((now - wall0) * self.rate * 1e9))
+                    self._publish_clock(self._clock_time(now, wall0))
                     self._next_clock = max(due + 1.0 / self.clock_hz, now)
                     continue
             if now >= wall_target:
