@@ -262,3 +262,18 @@ def test_the_replay_clock_never_passes_the_recordings_end(tmp_path, rate):
         assert stamps and all(bag.start_time <= t <= bag.end_time for t in stamps)
         assert len(node.created['/chatter'].sent) == 50
 
+
+def test_a_clock_faster_than_publishing_does_not_hold_the_messages(tmp_path):
+    """A /clock tick that came due while the last one was published was published
+    before the message waiting: at ``--clock 1e9`` (or any rate a loaded machine cannot
+    publish at) the replay sent /clock only, forever."""
+    from gripper_sim.recording.reader import BagReader
+    from gripper_sim.ros.replay import Player
+    with BagReader(chatter_file(tmp_path / 'c.mcap', n=20)) as bag:
+        node = FakeNode()
+        player = Player(node, bag, rate=1000.0, clock_hz=1e9)
+        node.created['/clock'].stop_after(player, 100_000)
+        player.play_once()
+        assert len(node.created['/chatter'].sent) == 20
+        stamps = _stamps_ns(node.created['/clock'])
+        assert stamps == sorted(stamps) and stamps[-1] <= bag.end_time

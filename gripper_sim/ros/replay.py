@@ -144,7 +144,8 @@ class Player:
         return self.t0 + int(min(elapsed_ns, max(self.bag.end_time - self.t0, 0)))
 
     def _wait_until(self, wall_target: float, wall0: float) -> None:
-        """Sleep until ``wall_target`` (monotonic s), publishing /clock ticks meanwhile."""
+        """Sleep until ``wall_target`` (monotonic s), publishing /clock ticks meanwhile
+        (at most one a turn: a clock rate faster than publishing never holds messages)."""
         while not self.stop.is_set():
             now = time.monotonic()
             if self.clock_publisher is not None and self.clock_hz is not None:
@@ -152,7 +153,6 @@ class Player:
                 if due <= now:
                     self._publish_clock(self._clock_time(now, wall0))
                     self._next_clock = max(due + 1.0 / self.clock_hz, now)
-                    continue
             if now >= wall_target:
                 return
             wake = wall_target
