@@ -277,3 +277,29 @@ def test_a_clock_faster_than_publishing_does_not_hold_the_messages(tmp_path):
         assert len(node.created['/chatter'].sent) == 20
         stamps = _stamps_ns(node.created['/clock'])
         assert stamps == sorted(stamps) and stamps[-1] <= bag.end_time
+
+
+def test_replay_refuses_an_invalid_topic_name_in_one_line(tmp_path, capsys):
+    """``--remap /chatter:=bad//name`` was rclpy's InvalidTopicNameException traceback
+    (exit 1); a recorded topic whose name ROS 2 does not allow (a foreign MCAP file) is
+    skipped like a topic of an unknown type, unless asked for."""
+    source = chatter_file(tmp_path / 'in.mcap')
+    capsys.readouterr()
+    assert main(['replay', str(source), '--remap', '/chatter:=bad//name']) == 2
+    assert "cannot replay '/chatter' as 'bad//name': Invalid topic name: topic name must " \
+        "not contain repeated '/'" in one_line_error(capsys)
+    foreign = tmp_path / 'foreign.mcap'
+    from mcap.writer import Writer
+    with open(foreign, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data\n')
+        for topic in ('/chatter', 'my topic'):
+            channel = writer.register_channel(topic, 'cdr', schema, {})
+            writer.add_message(channel, log_time=1, publish_time=1,
+                               data=serialize_message(String(data='hi')))
+        writer.finish()
+    assert main(['replay', str(foreign), '--topics', 'my topic']) == 2
+    assert "cannot replay 'my topic' as 'my topic'" in one_line_error(capsys)
+    assert main(['replay', str(foreign)]) == 0
+    assert 'replayed 1 message on 1 topic' in capsys.readouterr().err

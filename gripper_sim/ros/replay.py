@@ -17,6 +17,7 @@ from typing import Any, Iterable, Mapping
 
 import rclpy
 from rclpy.duration import Duration
+from rclpy.exceptions import NameValidationException
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
@@ -104,8 +105,16 @@ class Player:
             if offer['durability'] != 'transient_local':
                 offer['depth'] = max(offer['depth'], PUBLISHER_DEPTH)  # no loss in bursts
             profile = qos_mod.to_rclpy(offer)
-            self.publishers[topic] = node.create_publisher(
-                msg_class, remaps.get(topic, topic), profile)
+            name = remaps.get(topic, topic)
+            try:
+                self.publishers[topic] = node.create_publisher(msg_class, name, profile)
+            except (NameValidationException, ValueError) as err:
+                reason = str(err).splitlines()[0].rstrip(':')
+                if explicit or topic in remaps:
+                    raise RecordingError(f"cannot replay '{topic}' as '{name}': "
+                                         f'{reason}') from None
+                node.get_logger().warning(f"skipping '{topic}': {reason}")
+                self.skipped.append(topic)
         if not self.publishers:
             raise RecordingError(f'{bag.path}: nothing to replay')
         self.clock_publisher = None
