@@ -303,3 +303,29 @@ def test_replay_refuses_an_invalid_topic_name_in_one_line(tmp_path, capsys):
     assert "cannot replay 'my topic' as 'my topic'" in one_line_error(capsys)
     assert main(['replay', str(foreign)]) == 0
     assert 'replayed 1 message on 1 topic' in capsys.readouterr().err
+
+
+def test_replay_with_nothing_to_replay_is_refused(tmp_path):
+    """A recording without messages on the replayed topics (from ``--start`` on) played
+    nothing and, with ``--loop``, spun at full CPU without end (39,000 empty loops in
+    15 s). It is 'nothing to replay' instead."""
+    from gripper_sim.recording.errors import RecordingError
+    from gripper_sim.recording.reader import BagReader
+    from gripper_sim.ros.replay import Player
+    empty = tmp_path / 'empty.mcap'
+    with BagWriter(empty) as bag:
+        bag.add_topic('/chatter', 'std_msgs/msg/String')
+    mixed = tmp_path / 'mixed.mcap'
+    with BagWriter(mixed) as bag:
+        bag.add_topic('/chatter', 'std_msgs/msg/String')
+        bag.add_topic('/late', 'std_msgs/msg/String')
+        bag.write('/chatter', serialize_message(String(data='early')), log_time=0)
+        bag.write('/late', serialize_message(String(data='late')), log_time=2_000_000_000)
+    for path, options in ((empty, {}), (mixed, {'topics': ['/chatter'], 'start': 1.0})):
+        with BagReader(path) as bag:
+            with pytest.raises(RecordingError, match='nothing to replay'):
+                Player(FakeNode(), bag, **options)
+    with BagReader(mixed) as bag:
+        node = FakeNode()
+        Player(node, bag, start=1.0).play_once()
+        assert node.created['/late'].sent and not node.created['/chatter'].sent

@@ -127,6 +127,19 @@ class Player:
         if bag.message_count and self.t0 > bag.end_time:
             raise RecordingError(f'--start {start} s is past the end of {bag.path} '
                                  f'({bag.duration_ns / 1e9:.3f} s long)')
+        if not self._has_messages():
+            after = f' from --start {start} s on' if start else ''
+            raise RecordingError(f'{bag.path}: nothing to replay (no message on '
+                                 f"{', '.join(self.publishers)}{after})")
+
+    def _has_messages(self) -> bool:
+        """Whether a message of a replayed topic is logged at or after ``t0`` (a play of
+        none would end at once, and a --loop of it spin without end)."""
+        stream = self.bag.messages(list(self.publishers), start=self.t0)
+        try:
+            return next(stream, None) is not None
+        finally:
+            stream.close()
 
     def wait_for_subscribers(self, timeout: float) -> bool:
         """Wait (up to ``timeout`` s) until every publisher has a subscriber."""
