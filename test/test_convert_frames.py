@@ -14,6 +14,7 @@ from gripper_sim.configuration import load_config
 from gripper_sim.convert.frames import (JOINT_NAMES, WORLD_FRAME, FrameError,
                                         GripperFrames, dynamic_transforms, frame_position,
                                         joint_positions, static_transforms)
+from gripper_sim.convert.messages import MessageContext
 from gripper_sim.convert.urdf import gripper_urdf
 from gripper_sim.core.simulation import Simulation
 from gripper_sim.errors import CommandError
@@ -106,7 +107,14 @@ def test_urdf_joint_limits_are_the_commands_the_simulation_accepts(overrides):
     """A planner reading the URDF plans only lifts and transports the node accepts: each
     limit is accepted, a millimetre beyond it refused."""
     config = load_config(overrides=overrides)
-    model = yourdfpy.URDF.load(io.StringIO(gripper_urdf(GripperFrames.from_config(config))),
+    # the frames of the configuration, and those the node, the recorders and the live
+    # view publish robot_description from (``MessageContext.from_config``)
+    for frames in (GripperFrames.from_config(config), MessageContext.from_config(config).frames):
+        _check_limits(config, frames)
+
+
+def _check_limits(config, frames):
+    model = yourdfpy.URDF.load(io.StringIO(gripper_urdf(frames)),
                                build_collision_scene_graph=False, load_meshes=False)
     sim = Simulation(config)
     for joint, command in (('lift_joint', sim.command_lift),

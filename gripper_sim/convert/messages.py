@@ -42,6 +42,7 @@ from gripper_sim.convert.finger_markers import (FingerGeometry, JawPlate, base_m
                                             fin_ray_jaw_plate, finger_geometry,
                                             finger_markers, rigid_jaw_plate)
 from gripper_sim.convert.frames import FrameTransform, GripperFrames
+from gripper_sim.core.gripper import lift_range, transport_range
 from gripper_sim.core.results import StepResult
 
 JOINT_NAMES = frame_tree.JOINT_NAMES
@@ -219,7 +220,7 @@ class MessageContext:
             jaw_thickness=jaw_thickness,
             max_gap=float(config.get('gripper.max_gap', GripperFrames.max_gap)),
             table_height=table_height if table else None,
-            plate=(jaw_plate.centre, jaw_plate.size))
+            plate=(jaw_plate.centre, jaw_plate.size), **_travel_ranges(config))
         return cls(
             dimension=int(config.get('dimension', 2)),
             rest_width=diameter,
@@ -315,6 +316,20 @@ def node_pressure(result: StepResult) -> np.ndarray:
     if surface_pressure.shape == surface.shape:
         full[surface] = surface_pressure
     return full
+
+
+#: the configuration keys the lift and transport ranges are made of
+_TRAVEL_KEYS = ('world.table', 'world.table_height', 'gripper.jaw_height', 'world.walls',
+                'world.wall_half_width')
+
+
+def _travel_ranges(config: Mapping[str, Any]) -> dict:
+    """``GripperFrames``' ``lift_range`` and ``transport_range`` (m) of ``config``: what
+    the simulation accepts (``core.gripper``); its defaults where ``config`` lacks a key
+    they are made of (a partial mapping)."""
+    if not all(key in config for key in _TRAVEL_KEYS):
+        return {}
+    return dict(lift_range=lift_range(config), transport_range=transport_range(config))
 
 
 def _left_is_negative(result: StepResult) -> bool:
