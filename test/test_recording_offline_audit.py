@@ -329,3 +329,12 @@ def test_replay_with_nothing_to_replay_is_refused(tmp_path):
         node = FakeNode()
         Player(node, bag, start=1.0).play_once()
         assert node.created['/late'].sent and not node.created['/chatter'].sent
+
+
+def test_a_topic_remapped_twice_is_refused(tmp_path, capsys):
+    """``--remap /chatter:=/x --remap /chatter:=/y`` published on /y only, silently."""
+    source = chatter_file(tmp_path / 'in.mcap')
+    capsys.readouterr()
+    assert main(['replay', str(source), '--remap', '/chatter:=/x',
+                 '--remap', '/chatter:=/y']) == 2
+    assert '--remap gives /chatter two names (/x and /y)' in one_line_error(capsys)

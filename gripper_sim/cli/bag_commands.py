@@ -281,12 +281,30 @@ def _record(args: argparse.Namespace) -> int:
     return 0
 
 
+def remap_table(pairs: list[tuple[str, str]]) -> dict[str, str]:
+    """``{recorded topic: published topic}`` from ``--remap OLD:=NEW`` pairs.
+
+    Raises:
+        RecordingError: a topic remapped twice (the last would win unseen).
+    """
+    from gripper_sim.recording.errors import RecordingError
+
+    table: dict[str, str] = {}
+    for old, new in pairs:
+        if old in table and table[old] != new:
+            raise RecordingError(f'--remap gives {old} two names ({table[old]} and {new}); '
+                                 'give one')
+        table[old] = new
+    return table
+
+
 def _replay(args: argparse.Namespace) -> int:
     _require_rclpy('replay')
     from gripper_sim.ros.replay import run_replay
 
     summary = run_replay(args.file, rate=args.rate, loop=args.loop, topics=args.topics,
-                         start=args.start, clock_hz=args.clock, remaps=dict(args.remap),
+                         start=args.start, clock_hz=args.clock,
+                         remaps=remap_table(args.remap),
                          wait_for_subscribers=args.wait_for_subscribers,
                          foxglove_port=args.foxglove)
     print(summary, file=sys.stderr)
