@@ -338,3 +338,25 @@ def test_a_topic_remapped_twice_is_refused(tmp_path, capsys):
     assert main(['replay', str(source), '--remap', '/chatter:=/x',
                  '--remap', '/chatter:=/y']) == 2
     assert '--remap gives /chatter two names (/x and /y)' in one_line_error(capsys)
+
+
+def test_a_file_being_recorded_is_refused_and_left_alone(tmp_path, capsys):
+    """A file still being written has no footer yet: info, analyze and replay refuse it
+    with a line that says it may still be recorded (it said 'the recorder was probably
+    killed') and how to read what it holds; recover reads it without touching it."""
+    path = tmp_path / 'live.mcap'
+    with BagWriter(path) as bag:
+        bag.add_topic('/chatter', 'std_msgs/msg/String')
+        for i in range(3):
+            bag.write('/chatter', serialize_message(String(data=f'hi {i}')), log_time=i)
+        bag.flush()
+        before = sha256(path)
+        capsys.readouterr()
+        for verb in (['info'], ['analyze', '--quiet'], ['replay']):
+            assert main([*verb, str(path)]) == 2
+            err = one_line_error(capsys)
+            assert 'still being recorded, or its recorder was killed' in err
+            assert f'gripper-sim recover {path} FIXED.mcap' in err
+        assert main(['recover', str(path), str(tmp_path / 'so_far.mcap')]) == 0
+        assert 'so_far.mcap: 3 messages' in capsys.readouterr().out
+        assert sha256(path) == before

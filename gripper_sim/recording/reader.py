@@ -165,9 +165,9 @@ class McapFile(_Summary):
             raise RecordingError(f'{self.path}: reader is already open')
         check_mcap_start(self.path)
         if not has_footer(self.path):
-            msg = (f'{self.path} is truncated or was not closed (no MCAP footer): the '
-                   'recorder was probably killed; rebuild a readable file with '
-                   f"'gripper-sim recover {self.path} FIXED.mcap'")
+            msg = (f'{self.path} is truncated or not closed (no MCAP footer): it is still '
+                   'being recorded, or its recorder was killed; read what it holds so far '
+                   f"with 'gripper-sim recover {self.path} FIXED.mcap'")
             raise RecordingError(msg)
         try:
             self._file = open(self.path, 'rb')  # noqa: SIM115 - closed in close()
