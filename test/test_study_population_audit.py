@@ -143,3 +143,54 @@ def test_a_window_search_without_friction_is_refused_before_the_cluster(tmp_path
     study.write_text(yaml.safe_dump(data))
     grid = load_study(study)
     assert len(grid.setups(grid.population.draw())) == 4
+
+
+#: opens a local cluster of one worker as a study does, with a Ctrl-C (SIGINT to the
+#: process) arriving while the cluster starts; prints what happened and whether the
+#: worker process is still alive afterwards
+CTRL_C_DURING_START = '''
+import os, signal, sys
+import distributed, psutil
+from gripper_sim.workflows.study import open_client
+real, pids = distributed.LocalCluster, []
+def starting(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGINT)
+    cluster = real(*args, **kwargs)
+    pids.extend(nanny.pid for nanny in cluster.workers.values())
+    return cluster
+distributed.LocalCluster = starting
+try:
+    with open_client(None, 1):
+        print('ran the study')
+except KeyboardInterrupt:
+    print('interrupted')
+alive = [pid for pid in pids if psutil.pid_exists(pid)
+         and psutil.Process(pid).status() != psutil.STATUS_ZOMBIE]
+print('workers started', len(pids), 'alive', len(alive))
+'''
+
+
+def test_ctrl_c_while_the_local_cluster_starts_stops_the_study():
+    """The local cluster's start is no longer deaf to Ctrl-C (it ignored SIGINT, so a
+    study interrupted in its first tens of seconds ran to the end): the interrupt is
+    held back until the cluster can be closed, then raised, and no worker is left."""
+    import subprocess
+    import sys
+    done = subprocess.run([sys.executable, '-c', CTRL_C_DURING_START], capture_output=True,
+                          text=True, timeout=600)
+    assert done.stdout.split('\n')[:2] == ['interrupted', 'workers started 1 alive 0'], (
+        done.stdout + done.stderr)
+
+
+def test_the_local_workers_ignore_ctrl_c():
+    """A terminal's Ctrl-C reaches the whole process group: the workers ignore it (the
+    client stops the study), now from their preload rather than by inheriting an
+    ignored SIGINT from a client deaf to it while the cluster started."""
+    from gripper_sim.workflows.study import open_client
+    with open_client(None, 1) as client:
+        pids = [nanny.pid for nanny in client.cluster.workers.values()]
+        masks = [next(line for line in Path(f'/proc/{pid}/status').read_text().splitlines()
+                      if line.startswith('SigIgn:')) for pid in pids]
+    assert len(pids) == 1
+    sigint = 1 << (2 - 1)
+    assert all(int(mask.split()[1], 16) & sigint for mask in masks), masks

@@ -123,23 +123,49 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             client.close()
         return
     count = workers or os.cpu_count() or 1
-    # the worker processes start with Ctrl-C ignored: a terminal's SIGINT reaches the
-    # whole process group, and this client, not the workers, stops the study cleanly
-    main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+    cluster = None
     try:
-        cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                               host='127.0.0.1', dashboard_address=None,
-                               silence_logs=logging.ERROR)
+        with _interrupt_recorded() as interrupted:
+            cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
+                                   host='127.0.0.1', dashboard_address=None,
+                                   silence_logs=logging.ERROR, preload=[IGNORE_CTRL_C])
+        if interrupted:
+            raise KeyboardInterrupt
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
     finally:
-        if main_thread:
-            signal.signal(signal.SIGINT, previous)
-    client = Client(cluster)
+        if cluster is not None:
+            cluster.close()
+
+
+#: the local workers' preload (Python source, run as each worker starts): a terminal's
+#: Ctrl-C reaches the whole process group, and the client, not the workers, stops the
+#: study (cancels its tasks, keeps its rows, closes the cluster)
+IGNORE_CTRL_C = '''import signal, threading
+if threading.current_thread() is threading.main_thread():
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+'''
+
+
+@contextmanager
+def _interrupt_recorded() -> Iterator[list[int]]:
+    """Record Ctrl-C instead of raising it while a local cluster starts (a
+    KeyboardInterrupt inside ``LocalCluster`` could leave worker processes behind);
+    yields a list that holds SIGINT once one arrived, for the caller to raise once it
+    can close the cluster. Outside the main thread (no signals there) nothing changes.
+    """
+    held: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield held
+        return
+    handler = signal.signal(signal.SIGINT, lambda number, _frame: held.append(number))
     try:
-        yield client
+        yield held
     finally:
-        client.close()
-        cluster.close()
+        signal.signal(signal.SIGINT, handler)
 
 
 class _Chain:
