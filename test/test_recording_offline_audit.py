@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import stat
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -360,3 +363,37 @@ def test_a_file_being_recorded_is_refused_and_left_alone(tmp_path, capsys):
         assert main(['recover', str(path), str(tmp_path / 'so_far.mcap')]) == 0
         assert 'so_far.mcap: 3 messages' in capsys.readouterr().out
         assert sha256(path) == before
+
+
+def _run_without_root_rights(*argv: str) -> subprocess.CompletedProcess:
+    """``gripper-sim ARGV`` in a process that file permissions apply to: as root, one
+    without the capabilities that override them."""
+    command = [sys.executable, '-c', 'import sys; from gripper_sim.cli.main import main; '
+               'sys.exit(main(sys.argv[1:]))', *argv]
+    if os.geteuid() == 0:
+        if shutil.which('setpriv') is None:
+            pytest.skip('running as root without setpriv: permissions cannot be tested')
+        command = ['setpriv', '--bounding-set=-dac_override,-dac_read_search', *command]
+    return subprocess.run(command, capture_output=True, text=True, timeout=300,
+                          check=False)
+
+
+@pytest.mark.parametrize('verb', [['info'], ['analyze', '--quiet'], ['recover']])
+def test_a_bag_folder_that_cannot_be_read_is_a_one_line_error(tmp_path, verb):
+    """A bag folder without read or search permission was a PermissionError traceback
+    (exit 1) from looking for its metadata.yaml; a file in it that cannot be read no
+    longer suggests 'recover', which cannot read it either."""
+    bag = _killed_bag(tmp_path / 'bag', 'bag_0.mcap')
+    extra = [str(tmp_path / 'fixed')] if verb == ['recover'] else []
+    bag.chmod(0o444)
+    try:
+        done = _run_without_root_rights(*verb, str(bag), *extra)
+    finally:
+        bag.chmod(0o755)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == f'error: cannot read {bag}/metadata.yaml: Permission denied\n'
+    (bag / 'bag_0.mcap').chmod(0)
+    done = _run_without_root_rights(*verb, str(bag), *extra)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == f'error: cannot read {bag}/bag_0.mcap: Permission denied\n'
+    assert not (tmp_path / 'fixed').exists()

@@ -332,9 +332,17 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], dict[str, Any] | Non
     Raises:
         RecordingError: missing path, broken metadata, a listed file missing or listed
             twice, a folder with no MCAP file, or (without metadata) with the files of
-            several recordings.
+            several recordings; a folder that cannot be read (permissions).
     """
     path = Path(path)
+    try:
+        return _list_bag_files(path)
+    except OSError as err:   # e.g. a folder without read or search permission
+        raise RecordingError(f'cannot read {err.filename or path}: {err.strerror}') from None
+
+
+def _list_bag_files(path: Path) -> tuple[list[Path], dict[str, Any] | None]:
+    """``bag_files`` of ``path``, letting the operating system's errors through."""
     if not path.exists():
         raise RecordingError(f'{path}: no such file or bag folder')
     if not path.is_dir():

@@ -199,8 +199,10 @@ def read_metadata_file(folder: Path) -> dict[str, Any]:
         text = path.read_text(encoding='utf-8')
     except FileNotFoundError:
         raise RecordingError(f'{folder} has no {METADATA_FILE}: not a bag folder') from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise RecordingError(f'cannot read {path}: {err}') from err
+    except OSError as err:
+        raise RecordingError(f'cannot read {path}: {err.strerror}') from None
+    except UnicodeDecodeError as err:
+        raise RecordingError(f'cannot read {path}: {err}') from None
     data = load_yaml(text, str(path))
     info = data.get(TOP_KEY) if isinstance(data, dict) else None
     if not isinstance(info, dict):

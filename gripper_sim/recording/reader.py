@@ -397,7 +397,7 @@ class BagReader(_Summary):
                 self._parts.append(part)
         except RecordingError as err:
             self.close()
-            if not self.path.is_dir():
+            if not self.path.is_dir() or str(err).startswith('cannot read'):
                 raise
             raise RecordingError(f'{err} (for the whole bag: gripper-sim recover '
                                  f'{self.path} FIXED)') from err

@@ -289,6 +289,15 @@ def _folder_metadata(files: list[Path]) -> str:
     return bag_metadata_yaml(topics=list(topics.values()), files=entries)
 
 
+def _check_readable(path: Path) -> None:
+    """Raise RecordingError if ``path`` cannot be opened for reading (permissions)."""
+    try:
+        with open(path, 'rb'):
+            pass
+    except OSError as err:
+        raise RecordingError(f'cannot read {path}: {err.strerror}') from None
+
+
 def recover_bag(src: str | os.PathLike, dst: str | os.PathLike) -> BagRecoverReport:
     """Recover every file of the bag folder ``src`` into the new bag folder ``dst``.
 
@@ -297,11 +306,13 @@ def recover_bag(src: str | os.PathLike, dst: str | os.PathLike) -> BagRecoverRep
     whole is left out; ``dst/metadata.yaml`` describes what was kept.
 
     Raises:
-        RecordingError: ``src`` is not a recording folder; ``dst`` exists or cannot be
-            created; no file held a whole message.
+        RecordingError: ``src`` is not a recording folder or a file of it cannot be
+            read; ``dst`` exists or cannot be created; no file held a whole message.
     """
     src, dst = Path(src), Path(dst)
     files, _ = bag_files(src)
+    for path in files:   # a file that cannot be read is an error, not a file skipped
+        _check_readable(path)
     target = check_new_bag_path(dst)
     if is_single_file(target):
         raise RecordingError(f'{dst}: a bag folder is recovered into a new bag folder; give '
