@@ -397,3 +397,19 @@ def test_a_bag_folder_that_cannot_be_read_is_a_one_line_error(tmp_path, verb):
     assert done.returncode == 2, done.stderr
     assert done.stderr == f'error: cannot read {bag}/bag_0.mcap: Permission denied\n'
     assert not (tmp_path / 'fixed').exists()
+
+
+def test_recover_never_writes_into_the_bag_folder_it_reads(tmp_path, capsys):
+    """``recover bag bag/fixed`` created its output folder inside the input bag folder."""
+    bag = _killed_bag(tmp_path / 'bag', 'bag_0.mcap', 'bag_1.mcap')
+    before = _hashes(bag)
+    capsys.readouterr()
+    for inside in (bag / 'fixed', bag / 'sub' / '..' / 'fixed'):
+        if inside.parent != bag:
+            (bag / 'sub').mkdir()
+            before['sub'] = _hashes(bag / 'sub')
+        assert main(['recover', str(bag), str(inside)]) == 2
+        assert 'is inside the bag folder' in one_line_error(capsys)
+        assert {p.name: (_hashes(p) if p.is_dir() else sha256(p))
+                for p in bag.iterdir()} == before
+    assert main(['recover', str(bag), str(tmp_path / 'fixed')]) == 0

@@ -307,7 +307,8 @@ def recover_bag(src: str | os.PathLike, dst: str | os.PathLike) -> BagRecoverRep
 
     Raises:
         RecordingError: ``src`` is not a recording folder or a file of it cannot be
-            read; ``dst`` exists or cannot be created; no file held a whole message.
+            read; ``dst`` exists, is inside ``src`` or cannot be created; no file held a
+            whole message.
     """
     src, dst = Path(src), Path(dst)
     files, _ = bag_files(src)
@@ -317,6 +318,9 @@ def recover_bag(src: str | os.PathLike, dst: str | os.PathLike) -> BagRecoverRep
     if is_single_file(target):
         raise RecordingError(f'{dst}: a bag folder is recovered into a new bag folder; give '
                              'a name without .mcap')
+    if target.resolve().is_relative_to(src.resolve()):
+        raise RecordingError(f'{dst} is inside the bag folder {src}, which recover never '
+                             'modifies: give a folder outside it')
     try:
         target.mkdir()
     except OSError as err:
