@@ -413,3 +413,18 @@ def test_recover_never_writes_into_the_bag_folder_it_reads(tmp_path, capsys):
         assert {p.name: (_hashes(p) if p.is_dir() else sha256(p))
                 for p in bag.iterdir()} == before
     assert main(['recover', str(bag), str(tmp_path / 'fixed')]) == 0
+
+
+def test_a_listed_storage_file_that_is_a_folder_is_named_as_such(tmp_path, capsys):
+    """A folder where metadata.yaml lists a storage file was 'is a directory; give the
+    .mcap file inside it (for the whole bag: gripper-sim recover ...)', advice that
+    cannot work (recover fails the same way)."""
+    bag = _killed_bag(tmp_path / 'bag')
+    (bag / 'bag_0.mcap').mkdir()
+    (bag / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n'
+        '  relative_file_paths:\n    - bag_0.mcap\n')
+    capsys.readouterr()
+    assert main(['info', str(bag)]) == 2
+    err = one_line_error(capsys)
+    assert 'bag_0.mcap, listed in metadata.yaml, is not a file' in err and 'recover' not in err

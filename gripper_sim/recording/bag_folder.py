@@ -358,6 +358,10 @@ def _list_bag_files(path: Path) -> tuple[list[Path], dict[str, Any] | None]:
         if missing:
             raise RecordingError(f"{path}: files listed in {METADATA_FILE} are missing: "
                                  f"{', '.join(missing)}")
+        not_files = [str(f) for f in files if not f.is_file()]
+        if not_files:
+            raise RecordingError(f"{path}: {', '.join(not_files)}, listed in {METADATA_FILE}, "
+                                 'is not a file')
         if not files:
             raise RecordingError(f'{path}: {METADATA_FILE} lists no storage file')
         return files, info
