@@ -428,3 +428,11 @@ def test_a_listed_storage_file_that_is_a_folder_is_named_as_such(tmp_path, capsy
     assert main(['info', str(bag)]) == 2
     err = one_line_error(capsys)
     assert 'bag_0.mcap, listed in metadata.yaml, is not a file' in err and 'recover' not in err
+
+
+def test_recover_counts_in_english(tmp_path, capsys):
+    """recover said '1 messages from 1 chunks, 1 damaged chunks skipped'."""
+    source = chatter_file(tmp_path / 'one.mcap', n=1)
+    capsys.readouterr()
+    assert main(['recover', str(source), str(tmp_path / 'fixed.mcap')]) == 0
+    assert 'fixed.mcap: 1 message from 1 chunk\n' in capsys.readouterr().out

@@ -235,14 +235,20 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
     return report
 
 
+def _counted(count: int, noun: str) -> str:
+    """``count`` and ``noun``, the noun plural unless the count is one: '1 chunk'."""
+    return f'{count} {noun}' if count == 1 else f'{count} {noun}s'
+
+
 def iter_report_lines(report: RecoverReport, src: Path, dst: Path) -> Iterator[str]:
     """Human-readable lines describing a recovery."""
     state = 'complete' if report.complete else 'cut short'
     yield f'input:  {src} ({report.input_size} bytes, {state})'
     if report.reason:
         yield f'        stopped at byte {report.stopped_at}: {report.reason}'
-    yield (f'output: {dst}: {report.messages} messages from {report.chunks} chunks'
-           + (f', {report.damaged_chunks} damaged chunks skipped'
+    yield (f"output: {dst}: {_counted(report.messages, 'message')} from "
+           f"{_counted(report.chunks, 'chunk')}"
+           + (f", {_counted(report.damaged_chunks, 'damaged chunk')} skipped"
               if report.damaged_chunks else ''))
     if report.messages:
         span = (report.end_time - report.start_time) / 1e9
