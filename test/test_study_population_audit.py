@@ -194,3 +194,51 @@ def test_the_local_workers_ignore_ctrl_c():
     assert len(pids) == 1
     sigint = 1 << (2 - 1)
     assert all(int(mask.split()[1], 16) & sigint for mask in masks), masks
+
+
+def test_a_scheduler_without_workers_is_said_and_ctrl_c_stops_the_wait(tmp_path):
+    """On a scheduler with no workers the study waited without a word (no progress bar
+    off a terminal): it now says it waits for them, and Ctrl-C ends the wait."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import threading
+    from test_study_dask import DaskCluster, env
+
+    class Scheduler(DaskCluster):
+        """A `dask scheduler` alone."""
+
+        def wait_for_workers(self, count: int) -> None:
+            assert count == 0
+
+    cluster, process = Scheduler(tmp_path, workers=0), None
+    try:
+        study = write_study(tmp_path, 'small')
+        process = subprocess.Popen(
+            [sys.executable, '-m', 'gripper_sim.cli.main', 'study', str(study), '--out',
+             str(tmp_path / 'out'), '--scheduler', cluster.address, '--no-progress',
+             '--no-report'], env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            text=True)
+        noted = threading.Event()
+        lines: list[str] = []
+
+        def read() -> None:
+            for line in process.stderr:
+                lines.append(line)
+                if line.startswith('note: '):
+                    noted.set()
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        assert noted.wait(timeout=300), ''.join(lines)
+        process.send_signal(signal.SIGINT)
+        assert process.wait(timeout=300) == 130
+        reader.join(timeout=30)
+    finally:
+        if process is not None and process.poll() is None:
+            process.kill()
+        cluster.close()
+    assert lines[0] == (f'note: the Dask scheduler at {cluster.address} has no workers yet; '
+                        'the study waits for them (start some with `dask worker '
+                        f'{cluster.address}`; Ctrl-C stops)\n')
+    assert lines[-1].startswith('interrupted: 0 rows kept in ')

@@ -150,6 +150,15 @@ if threading.current_thread() is threading.main_thread():
 '''
 
 
+def _note_missing_workers(client, scheduler: str) -> None:
+    """Say on stderr when the scheduler has no workers yet: the study waits for them
+    (workers may be jobs still queued), and should not look hung while it does."""
+    if not client.scheduler_info().get('workers'):
+        print(f'note: the Dask scheduler at {scheduler} has no workers yet; the study '
+              f'waits for them (start some with `dask worker {scheduler}`; Ctrl-C stops)',
+              file=sys.stderr, flush=True)
+
+
 @contextmanager
 def _interrupt_recorded() -> Iterator[list[int]]:
     """Record Ctrl-C instead of raising it while a local cluster starts (a
@@ -233,8 +242,8 @@ class _Runner:
                 known[answer_key(row['kind'], row['force'])] = row
         return known
 
-    def run(self) -> bool:
-        """Until every fruit is done; False if interrupted (Ctrl-C)."""
+    def run(self) -> None:
+        """Until every fruit is done (KeyboardInterrupt on Ctrl-C)."""
         finished = []
         try:
             for future in self.queue:
@@ -253,14 +262,15 @@ class _Runner:
                 left = sum(1 for c in self.chains if not c.done) * mean
                 self.bar.total = int(self.computed + math.ceil(left))
                 self.bar.update(new)
-        except KeyboardInterrupt:
-            for future, _ in self.waiting.values():
-                future.cancel()
-            return False
         finally:
             self.store.flush()
             self.bar.close()
-        return True
+
+    def cancel(self) -> None:
+        """Cancel every task not yet back (Ctrl-C)."""
+        for future, _ in self.waiting.values():
+            future.cancel()
+        self.bar.close()
 
     def _keep(self, setup: FruitSetup, new: list) -> int:
         """Store the fruit's new evaluations as rows; how many."""
@@ -326,7 +336,13 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
         runner = _Runner(study, store, client, progress)
         try:
             runner.start(setups)
-            complete = runner.run()
+            if scheduler:
+                _note_missing_workers(client, scheduler)
+            runner.run()
+            complete = True
+        except KeyboardInterrupt:  # while submitting, waiting for workers, or running
+            runner.cancel()
+            complete = False
         finally:
             store.flush()
         finished = time.perf_counter()
