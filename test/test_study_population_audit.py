@@ -242,3 +242,14 @@ def test_a_scheduler_without_workers_is_said_and_ctrl_c_stops_the_wait(tmp_path)
                         'the study waits for them (start some with `dask worker '
                         f'{cluster.address}`; Ctrl-C stops)\n')
     assert lines[-1].startswith('interrupted: 0 rows kept in ')
+
+
+def test_workers_with_a_scheduler_is_an_error_not_ignored(tmp_path):
+    refused = gripper_sim('study', str(write_study(tmp_path, 'small')), '--out',
+                          str(tmp_path / 'out'), '--scheduler', 'tcp://127.0.0.1:1',
+                          '--workers', '3')
+    assert refused.returncode == 2
+    assert refused.stderr == ("error: --workers sizes the local cluster: with --scheduler "
+                              "the cluster's own workers run the study (start them with "
+                              '`dask worker`)\n')
+    assert not (tmp_path / 'out').exists()

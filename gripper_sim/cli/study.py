@@ -35,6 +35,11 @@ def run_study_verb(args) -> int:
     from gripper_sim.workflows.study import run_study, write_summary
     from gripper_sim.workflows.study_report import write_report
     from gripper_sim.workflows.study_spec import load_study
+    if args.scheduler and args.workers is not None:
+        from gripper_sim.workflows.study import StudyError
+        raise StudyError('--workers sizes the local cluster: with --scheduler the '
+                         "cluster's own workers run the study (start them with `dask "
+                         'worker`)')
     study = load_study(args.study)
     out = Path(args.out or Path('study-results') / study.name)
     run = run_study(study, out, scheduler=args.scheduler, workers=args.workers,
