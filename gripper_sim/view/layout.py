@@ -8,6 +8,10 @@
 Panels: the 3D scene (``/gripper_sim/scene``; the ROS markers, which draw the same,
 hidden), plots of grip force (N), compression (m) and slip distance (m) on their own
 axes, and the fruit state message.
+
+The 3D panel's camera states every field Foxglove would otherwise fill from its own
+defaults: those (a near plane 0.5 m from the camera, the orbit centred on the frame's
+origin), made for scenes metres across, hid the whole gripper scene.
 """
 from __future__ import annotations
 
@@ -19,12 +23,32 @@ import foxglove.layouts as fl
 
 from gripper_sim.view.foxglove import node_topics, scene_topic
 
+#: m, the point of frame ``world`` the 3D panel's camera orbits and looks at: between
+#: the pressure colour bar (about 0.17 m to the -x side of the fruit) and the jaws, a
+#: little above the table
+CAMERA_TARGET = (-0.06, 0.0, 0.05)
+CAMERA_DISTANCE = 0.45   # m from the target: the bar, its labels and the jaws in view
+CAMERA_PHI = 70.0        # degrees from the vertical: 20 degrees down onto the x-z plane
+CAMERA_FOVY = 45.0       # degrees, vertical field of view
+#: m, the near and far clipping planes: everything from 1 cm to 10 m of the camera
+CAMERA_NEAR, CAMERA_FAR = 0.01, 10.0
+
 
 def _plot(title: str, path: str, label: str) -> fl.SplitItem:
     return fl.SplitItem(content=fl.PlotPanel(
         title=title,
         config=fl.PlotConfig(paths=[fl.PlotSeries(value=path, label=label)],
                              show_legend=True, y_axis_label=label)))
+
+
+def camera_state() -> fl.ThreeDeeCameraState:
+    """The 3D panel's camera: looking at ``CAMERA_TARGET`` from the -y side (theta 0),
+    every field given (Foxglove's own defaults clip a scene this small)."""
+    return fl.ThreeDeeCameraState(
+        distance=CAMERA_DISTANCE, phi=CAMERA_PHI, theta_offset=0.0,
+        target=(0.0, 0.0, 0.0), target_offset=CAMERA_TARGET,
+        target_orientation=(0.0, 0.0, 0.0, 1.0), perspective=True, fovy=CAMERA_FOVY,
+        near=CAMERA_NEAR, far=CAMERA_FAR)
 
 
 def build_layout(node_name: str = 'gripper_sim', namespace: str = '/') -> fl.Layout:
@@ -34,8 +58,7 @@ def build_layout(node_name: str = 'gripper_sim', namespace: str = '/') -> fl.Lay
     scene = fl.ThreeDeePanel(title='grasp (contact pressure colour scale beside the fruit)',
                              config=fl.ThreeDeeConfig(
         follow_tf='world',
-        camera_state=fl.ThreeDeeCameraState(distance=0.35, phi=70.0, theta_offset=0.0,
-                                            target=(0.0, 0.0, 0.05), perspective=True),
+        camera_state=camera_state(),
         topics={scene_topic(topics['markers']): fl.BaseRendererSceneUpdateTopicSettings(
                     visible=True),
                 topics['markers']: fl.BaseRendererRosMarkerTopicSettings(visible=False)}))
