@@ -7,10 +7,19 @@ every publisher is), and the offered profiles are stored in the channel metadata
 
 ``log_time`` is the receive time and ``publish_time`` the source timestamp the
 middleware reports, both integer ns of the system clock.
+
+Lost messages are counted, never dropped silently (``LossTracker``): a gap in the
+publication sequence numbers of a topic's one publisher (lost anywhere: overwritten in
+the publisher's history before it was resent, or in this subscription's queue), and the
+samples the middleware reports lost (``message_lost`` event; the only count on a topic
+with several publishers, whose numbers interleave). Each loss is logged as a warning, and
+the totals end up in the closing summary and in the recording's ``custom_data``
+(``lost_messages``: JSON ``{topic: count}``).
 """
 from __future__ import annotations
 
 import importlib
+import json
 import os
 import re
 import signal
@@ -32,6 +41,10 @@ SUBSCRIPTION_DEPTH = 1000  # deep enough that bursts at full physics rate are no
 STOP_QUIET = 0.25
 #: s: the longest a stop waits for messages published before it to arrive
 STOP_CEILING = 5.0
+#: the recording's ``custom_data`` key of the lost-message counts (JSON ``{topic: n}``)
+LOST_KEY = 'lost_messages'
+#: s: the shortest time between two warnings of lost messages on one topic
+LOSS_WARNING_PERIOD = 1.0
 
 
 def import_message_class(type_name: str) -> Any:
@@ -112,15 +125,55 @@ def counted(count: int, noun: str) -> str:
 
 @dataclass
 class RecorderStats:
-    """Counts kept while recording."""
+    """Counts kept while recording; ``lost``: messages known lost per topic."""
 
     messages: int = 0
     bytes: int = 0
     per_topic: dict = field(default_factory=dict)
     started: float = field(default_factory=time.monotonic)
+    lost: dict = field(default_factory=dict)
 
     def elapsed(self) -> float:
         return time.monotonic() - self.started
+
+
+class LossTracker:
+    """Messages of one topic that never reached the recorder.
+
+    ``sequence_gaps``: numbers skipped by the publication sequence number (one per
+    sample the publisher wrote), counted while the topic has one publisher. A number
+    lower than the last (a new publisher, or several interleaving) starts over without
+    counting. ``reported``: the middleware's ``message_lost`` total. Both count a sample
+    a publisher dropped before resending it, so ``lost`` is the larger, not the sum.
+    """
+
+    def __init__(self, publisher_count: Callable[[], int]):
+        self.publisher_count = publisher_count
+        self.sequence_gaps = 0
+        self.reported = 0
+        self._last: int | None = None
+
+    @property
+    def lost(self) -> int:
+        return max(self.sequence_gaps, self.reported)
+
+    def on_sequence(self, number: int | None) -> int:
+        """Note a message's publication sequence number; the messages it shows lost."""
+        if not number:
+            return 0
+        last, self._last = self._last, number
+        if last is None or number <= last + 1:
+            return 0
+        if self.publisher_count() != 1:
+            return 0  # several publishers: their numbers interleave, no gap to read
+        self.sequence_gaps += number - last - 1
+        return number - last - 1
+
+    def on_reported(self, total: int) -> int:
+        """Note the middleware's running total of lost samples; the increase."""
+        increase = max(0, total - self.reported)
+        self.reported = max(self.reported, total)
+        return increase
 
 
 class Recorder:
@@ -151,6 +204,8 @@ class Recorder:
         self.latest_publish: dict[str, int] = {}
         self.latest_arrival: dict[str, float] = {}
         self._subscriptions: dict[str, Any] = {}
+        self._losses: dict[str, LossTracker] = {}
+        self._warned: dict[str, tuple[int, float]] = {}  # total warned of, when (monotonic s)
         self._skipped: set[str] = set()
         self._lock = threading.Lock()
         self._discovery_timer = node.create_timer(discovery_period, self.discover)
@@ -195,9 +250,41 @@ class Recorder:
         type_hash = hashes.pop() if len(hashes) == 1 else schemas.type_hash(type_name)
         self.writer.add_topic(topic, type_name, offered_qos_profiles=profiles,
                               type_hash=type_hash or '', definition=definition)
+        self._losses[topic] = LossTracker(lambda: self.node.count_publishers(topic))
         self._subscriptions[topic] = self.node.create_subscription(
-            msg_class, topic, self._callback(topic), self._request_qos(profiles), raw=True)
+            msg_class, topic, self._callback(topic), self._request_qos(profiles), raw=True,
+            event_callbacks=self._event_callbacks(topic))
         logger.info(f"recording '{topic}' ({type_name})")
+
+    def _event_callbacks(self, topic: str) -> Any:
+        """The subscription's events: ``message_lost`` counted as lost on ``topic``."""
+        from rclpy.event_handler import SubscriptionEventCallbacks
+
+        def message_lost(status: Any) -> None:
+            self._losses[topic].on_reported(status.total_count)
+            self._note_lost(topic, 'the middleware reports them lost')
+        return SubscriptionEventCallbacks(message_lost=message_lost)
+
+    def _note_lost(self, topic: str, how: str) -> None:
+        """Take ``topic``'s lost count from its tracker; warn if it grew (at most every
+        ``LOSS_WARNING_PERIOD`` s a topic, with what was lost since the last warning)."""
+        total = self._losses[topic].lost
+        if total <= self.stats.lost.get(topic, 0):
+            return
+        self.stats.lost[topic] = total
+        warned, warned_at = self._warned.get(topic, (0, -LOSS_WARNING_PERIOD))
+        now = time.monotonic()
+        if now - warned_at < LOSS_WARNING_PERIOD:
+            return
+        self._warned[topic] = (total, now)
+        self.node.get_logger().warning(
+            f"lost {counted(total - warned, 'message')} on '{topic}' ({how}; "
+            f'{total} so far)')
+
+    @property
+    def lost(self) -> dict[str, int]:
+        """Messages known lost, per topic (topics without losses left out)."""
+        return {topic: n for topic, n in sorted(self.stats.lost.items()) if n}
 
     @staticmethod
     def _request_qos(profiles: list[dict]) -> Any:
@@ -239,6 +326,9 @@ class Recorder:
             sent = int(info.get('source_timestamp') or 0)
         log_time = received if received > 0 else time.time_ns()
         publish_time = sent if sent > 0 else log_time
+        if isinstance(info, dict):
+            if self._losses[topic].on_sequence(info.get('publication_sequence_number')):
+                self._note_lost(topic, 'a gap in the publication sequence numbers')
         self.writer.write(topic, data, log_time=log_time, publish_time=publish_time)
         self.stats.messages += 1
         self.stats.bytes += len(data)
@@ -347,6 +437,8 @@ def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = Fa
     finally:
         if recorder is not None:
             recorder.destroy()
+            if recorder.lost:
+                writer.set_custom_data(LOST_KEY, json.dumps(recorder.lost))
         writer.close()
         if node is not None:
             node.destroy_node()
@@ -362,12 +454,16 @@ def run_record(output: str, *, topics: Iterable[str] = (), all_topics: bool = Fa
 def record_summary(stats: RecorderStats, output: str, *, files: int = 1,
                    missing: Iterable[str] = ()) -> str:
     """The line ``gripper-sim record`` ends with: messages, topics, where (with the
-    number of files when split), elapsed wall time (s) and the named topics that sent
-    nothing."""
+    number of files when split), elapsed wall time (s), the named topics that sent
+    nothing and the messages lost, per topic."""
     where = f'{output} ({files} files)' if files > 1 else str(output)
     text = (f"recorded {counted(stats.messages, 'message')} on "
             f"{counted(len(stats.per_topic), 'topic')} to {where} in {stats.elapsed():.1f} s")
     missing = list(missing)
     if missing:
         text += f" (no messages on: {', '.join(missing)})"
+    lost = {topic: n for topic, n in sorted(stats.lost.items()) if n}
+    if lost:
+        text += (f"; LOST {counted(sum(lost.values()), 'message')}: "
+                 + ', '.join(f'{n} on {topic}' for topic, n in lost.items()))
     return text
