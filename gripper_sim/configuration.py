@@ -25,6 +25,7 @@ import yaml
 
 from gripper_sim.errors import ConfigError, ConfigWarning
 from gripper_sim.geometry.fin_ray import check_fin_ray
+from gripper_sim.geometry.fin_ray import resolution_warning as fin_ray_resolution_warning
 from gripper_sim.geometry.finger_materials import MATERIAL_NAMES, SECTIONS as FIN_RAY_SECTIONS
 from gripper_sim.geometry.fingers import check_finger
 from gripper_sim.geometry.shapes import outline_from_config
@@ -803,9 +804,10 @@ def load_config(fruit: str | None = None, config_file: str | os.PathLike | None 
                if key not in baseline or config[key] != _coerce(key, baseline[key])}
     for message in no_effect_warnings(config, changed, fruit_name):
         warnings.warn(message, ConfigWarning, stacklevel=2)
-    mismatch = calibration_warning(fruit_name, provenance, config['dimension'])
-    if mismatch:
-        warnings.warn(mismatch, ConfigWarning, stacklevel=2)
+    for warning in (calibration_warning(fruit_name, provenance, config['dimension']),
+                    fin_ray_resolution_warning(config)):
+        if warning:
+            warnings.warn(warning, ConfigWarning, stacklevel=2)
     return config
 
 

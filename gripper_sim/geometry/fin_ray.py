@@ -28,13 +28,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gripper_sim.errors import ConfigError
-from gripper_sim.geometry.shapes import parse_points
+from gripper_sim.geometry.shapes import outline_from_config, parse_points
 
 PREFIX = 'gripper.finger.fin_ray.'
 #: nodes a finger's section may have at most (its member lengths over element_length,
 #: about; the default finger has 104, the 3D finger each node in every slice): finer,
 #: and the matrices of its contact pairs outgrow any memory
 MAX_SECTION_NODES = 1000
+#: the longest element (in fruit outline node spacings) that keeps a jaw's contact one
+#: patch (docs/fin_ray_convergence.md: 1.3 does, 1.9 does not)
+COARSEST_ELEMENT = 1.5
 #: how a rib joins the beams: welded (rest angle kept) or hinged
 RIB_JOINTS = ('rigid', 'pinned')
 
@@ -248,6 +251,29 @@ def check_fin_ray(config) -> None:
                           'material')
     geometry = FinRayGeometry.from_config(config)
     check_geometry(geometry)
+
+
+def resolution_warning(config) -> str | None:
+    """A line saying that the 2D Fin Ray of a flat configuration is too coarse for its
+    fruit, or None. Elements longer than ``COARSEST_ELEMENT`` times the fruit outline's
+    node spacing touch the fruit at separate nodes: each jaw's contact breaks into
+    patches and the damage estimate, which takes each patch as a contact of its own,
+    overstates the pressure (docs/fin_ray_convergence.md: 112 kPa instead of 67 at
+    2.6 times, the apple's outline of 256 nodes)."""
+    if config.get('gripper.finger.type') != 'fin_ray' or config.get('dimension') != 2:
+        return None
+    outline = outline_from_config(config)
+    spacing = float(np.median(np.linalg.norm(np.roll(outline, -1, axis=0) - outline,
+                                             axis=1)))
+    element = float(config[PREFIX + 'element_length'])
+    if element <= COARSEST_ELEMENT * spacing:
+        return None
+    return (f"config key '{PREFIX}element_length' = {element * 1e3:.3g} mm is "
+            f"{element / spacing:.2g} times the fruit outline's node spacing "
+            f"({spacing * 1e3:.3g} mm, fruit.nodes = {config['fruit.nodes']}): the fruit "
+            "touches the finger at separate nodes, each jaw's contact breaks into patches "
+            "and the bruise estimate overstates the contact pressure; set it to at most "
+            f"{COARSEST_ELEMENT * spacing * 1e3:.3g} mm")
 
 
 def check_geometry(geometry: FinRayGeometry) -> None:
