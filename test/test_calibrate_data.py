@@ -126,3 +126,15 @@ def test_a_data_error_is_reported_before_an_existing_output(tmp_path, capsys):
     err = capsys.readouterr().err
     assert 'exists (use --force' not in err and err.startswith('error: '), err
     assert output.read_text() == 'keep me'
+
+
+def test_an_unwritable_output_directory_is_refused_before_the_fit(tmp_path, capsys):
+    """/proc takes no new file: that is said before the fit (which may take minutes in
+    3D), not after it when the preset is written."""
+    data = write(tmp_path, 'deformation_mm,force_N\n' + GOOD_ROWS)
+    preset = '/proc/gripper_sim_preset.yaml'
+    assert main(['calibrate', '--data', str(data), '-o', preset, '--no-plots',
+                 '--set', 'fruit.nodes=16']) == 2
+    out, err = capsys.readouterr()
+    assert out == ''   # no 'calibrating ...' line: nothing was simulated
+    assert err == f"error: cannot write '{preset}': No such file or directory\n"

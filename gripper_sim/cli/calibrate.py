@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -88,7 +89,20 @@ def _outputs(args) -> list[Path]:
             raise CalibrationError(f"'{path}' exists (use --force to overwrite it)")
         if not path.parent.is_dir():
             raise CalibrationError(f"cannot write '{path}': no directory '{path.parent}'")
+    refused = _unwritable(preset.parent)
+    if refused:
+        raise CalibrationError(f"cannot write '{preset}': {refused}")
     return paths
+
+
+def _unwritable(directory: Path) -> str | None:
+    """Why no file can be created in ``directory`` (None if one can): tried with a
+    temporary file, before a fit that may take minutes."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=directory, prefix='.gripper-sim-calibrate-'):
+            return None
+    except OSError as err:
+        return err.strerror or str(err)
 
 
 def _overrides(args) -> dict:
