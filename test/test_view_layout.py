@@ -104,6 +104,22 @@ def text_anchors(entity: dict) -> list[np.ndarray]:
     return [_at(text['pose'], [0, 0, 0]) for text in entity['texts']]
 
 
+#: Foxglove draws a text's font_size as its line height, monospace, a character at most
+#: this fraction of the line height wide, centred on its pose (a billboard: facing the
+#: camera) over an opaque box
+CHARACTER_WIDTH = 0.55
+
+
+def text_corners(text: dict, camera: Camera, lift) -> list[np.ndarray]:
+    """The corners (frame world) of a billboard text's box seen by ``camera``."""
+    lines = text['text'].split('\n')
+    half_width = 0.5 * CHARACTER_WIDTH * text['font_size'] * max(len(s) for s in lines)
+    half_height = 0.5 * text['font_size'] * len(lines)
+    centre = _at(text['pose'], [0, 0, 0]) + lift
+    return [centre + a * half_width * camera.right + b * half_height * camera.up
+            for a in (-1, 1) for b in (-1, 1)]
+
+
 @pytest.fixture(scope='module')
 def scenes():
     """The decoded scenes of a 2D and a 3D squeeze at 8 N (the README's grasp force)."""
@@ -150,3 +166,24 @@ def test_the_layout_camera_sees_the_whole_scene(scenes, dimension, lift):
     fruit = next(e for name, e in entities.items() if name.startswith('fruit_'))
     xs = [camera.project(p + raised)[0] for p in geometry_points(fruit)]
     assert max(xs) - min(xs) > 0.2   # of the view's width 2
+
+
+@pytest.mark.parametrize('dimension', [2, 3])
+@pytest.mark.parametrize('lift', [0.0, LIFT])
+def test_every_label_is_in_view_and_clear_of_the_others(scenes, dimension, lift):
+    """The legend's labels and the state text lie wholly inside the layout's view,
+    and no two overlap (each is drawn on an opaque box)."""
+    camera = shipped_camera()
+    boxes = []
+    for entity in scenes[dimension]['entities']:
+        moved = np.zeros(3) if entity['id'] == 'legend/pressure' else np.array([0, 0, lift])
+        for text in entity['texts']:
+            corners = text_corners(text, camera, moved)
+            assert all(camera.sees(c) for c in corners), \
+                (text['text'], [camera.project(c) for c in corners])
+            xs, ys, _ = zip(*(camera.project(c) for c in corners))
+            boxes.append((text['text'], min(xs), max(xs), min(ys), max(ys)))
+    assert len(boxes) >= 5
+    for k, (a, ax0, ax1, ay0, ay1) in enumerate(boxes):
+        for b, bx0, bx1, by0, by1 in boxes[k + 1:]:
+            assert ax1 < bx0 or bx1 < ax0 or ay1 < by0 or by1 < ay0, (a, b)

@@ -13,7 +13,11 @@ and the same from a recording (its ``markers`` topic). It adds two entities:
   cubes coloured by ``pressure_colour`` from 0 to the bruise pressure, with labels
   (``0 kPa``, half and full bruise pressure, "contact pressure (damage estimate)").
 - ``legend/state``: grip force, compression, slip and peak contact pressure of the
-  step, from its ``FruitState``, above the fruit.
+  step, from its ``FruitState``, one per line above the fruit.
+
+Foxglove draws a text's ``font_size`` as its line height (m) in a monospace font, a
+character about half as wide, and centres the text on its pose; it breaks lines at
+``\\n``.
 
 Pure functions of message objects (read by attribute, never imported from rclpy);
 the Foxglove classes come from ``foxglove.messages``. Units: m, N, Pa; times in ns.
@@ -38,9 +42,15 @@ TEXT_VIEW_FACING, TRIANGLE_LIST = 9, 11
 ADD, DELETE, DELETEALL = 0, 2, 3   # MODIFY is ADD
 
 LEGEND_STEPS = 10          # cubes in the colour bar
-LEGEND_TEXT_SIZE = 0.006   # m, font size of the legend labels
-LEGEND_LABEL_OFFSET = 0.04   # m from the bar to the centre of its labels (text is centred)
-STATE_TEXT_SIZE = 0.007    # m
+LEGEND_TEXT_SIZE = 0.008   # m, line height of the legend labels
+LEGEND_LABEL_OFFSET = 0.04   # m of room for the labels beside the bar (``beside``)
+LEGEND_LABEL_GAP = 0.004   # m from the bar to the left end of its labels
+STATE_TEXT_SIZE = 0.009    # m, line height of the state text
+#: width of a character of Foxglove's (monospace) labels, in line heights
+CHARACTER_WIDTH = 0.5
+#: the colour bar's title, in two lines above the bar and its labels (one line,
+#: centred on the bar, reached out of the layout's view)
+LEGEND_TITLE = 'contact pressure\n(damage estimate)'
 
 
 @dataclass(frozen=True)
@@ -201,6 +211,12 @@ def _text(text: str, x: float, y: float, z: float, size: float) -> TextPrimitive
                          color=Color(r=0.1, g=0.1, b=0.1, a=1.0), text=text)
 
 
+def _left_text(text: str, left: float, y: float, z: float, size: float) -> TextPrimitive:
+    """``text`` starting at x = ``left`` (m): Foxglove centres a text on its pose."""
+    half = 0.5 * CHARACTER_WIDTH * size * max(len(line) for line in text.split('\n'))
+    return _text(text, left + half, y, z, size)
+
+
 def legend_entity(legend: PressureLegend, stamp_ns: int) -> SceneEntity:
     """The colour bar of the fruit's contact pressure with its labels (``legend/pressure``).
 
@@ -219,26 +235,27 @@ def legend_entity(legend: PressureLegend, stamp_ns: int) -> SceneEntity:
             pose=Pose(position=centre, orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
             size=Vector3(x=width, y=width, z=step), color=_colour(colour)))
     kpa = legend.bruise_pressure / 1e3
-    label_x = legend.x + 0.5 * width + LEGEND_LABEL_OFFSET
-    texts = [
-        _text('0 kPa', label_x, legend.y, legend.z, LEGEND_TEXT_SIZE),
-        _text(f'{0.5 * kpa:.0f} kPa', label_x, legend.y, legend.z + 0.5 * legend.height,
-              LEGEND_TEXT_SIZE),
-        _text(f'>= {kpa:.0f} kPa (bruise)', label_x, legend.y, legend.z + legend.height,
-              LEGEND_TEXT_SIZE),
-        _text('contact pressure (damage estimate)', legend.x,
-              legend.y, legend.z + legend.height + 2.5 * LEGEND_TEXT_SIZE, LEGEND_TEXT_SIZE),
-    ]
+    label_left = legend.x + 0.5 * width + LEGEND_LABEL_GAP
+    labels = [('0 kPa', legend.z), (f'{0.5 * kpa:.0f} kPa', legend.z + 0.5 * legend.height),
+              (f'>= {kpa:.0f} kPa (bruise)', legend.z + legend.height)]
+    texts = [_left_text(text, label_left, legend.y, z, LEGEND_TEXT_SIZE)
+             for text, z in labels]
+    texts.append(_left_text(LEGEND_TITLE, legend.x - 0.5 * width, legend.y,
+                            legend.z + legend.height + 2.5 * LEGEND_TEXT_SIZE,
+                            LEGEND_TEXT_SIZE))
     return SceneEntity(timestamp=timestamp(stamp_ns), frame_id=legend.frame_id,
                        id='legend/pressure', cubes=cubes, texts=texts)
 
 
 def state_text(state: Any) -> str:
-    """One line of a ``FruitState``: grip force, compression, slip, peak pressure."""
-    return (f'grip {state.grip_force:.2f} N   compression {1e3 * state.compression:.2f} mm   '
-            f'slip {1e3 * state.slip_distance:.2f} mm   '
-            f'peak pressure {state.damage_pressure / 1e3:.0f} kPa'
-            + ('   SLIPPING' if state.slipping else ''))
+    """A ``FruitState`` in short lines: grip force, compression, slip, peak pressure (and
+    SLIPPING while it slips). In one line it was about four fruit widths long and ran
+    out of the layout's view."""
+    lines = [f'grip {state.grip_force:.2f} N',
+             f'compression {1e3 * state.compression:.2f} mm',
+             f'slip {1e3 * state.slip_distance:.2f} mm',
+             f'peak pressure {state.damage_pressure / 1e3:.0f} kPa']
+    return '\n'.join(lines + (['SLIPPING'] if state.slipping else []))
 
 
 def state_entity(state: Any, legend: PressureLegend) -> SceneEntity:
