@@ -138,3 +138,19 @@ def test_an_unwritable_output_directory_is_refused_before_the_fit(tmp_path, caps
     out, err = capsys.readouterr()
     assert out == ''   # no 'calibrating ...' line: nothing was simulated
     assert err == f"error: cannot write '{preset}': No such file or directory\n"
+
+
+def test_a_deformation_in_m_under_a_mm_header_is_named_as_a_unit_mistake(tmp_path, capsys):
+    """Metres under a 'deformation_mm' header make a test of 2.5 um: the fit ran, ended at
+    the ends of the keys' ranges with a 50 % force error and wrote a preset."""
+    metres = ''.join(f'{float(d) * 1e-3:g},{f}' + '\n' for d, f in
+                     (row.split(',') for row in GOOD_ROWS.split()))
+    data = write(tmp_path, 'deformation_mm,force_N\n' + metres)
+    preset = tmp_path / 'fruit.yaml'
+    assert main(['calibrate', '--data', str(data), '-o', str(preset), '--no-plots',
+                 '--fruit', 'peach']) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('error: the largest deformation 0.0025 mm is 0.00% of the '
+                          "fruit's width (")
+    assert err.endswith('is the deformation column in m rather than mm?\n')
+    assert not preset.exists()

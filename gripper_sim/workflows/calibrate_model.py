@@ -33,6 +33,10 @@ CLEARANCE_RATIO = 0.02
 MIN_CLEARANCE = 1e-5
 #: the model's range: largest deformation over the fruit's rest width
 MAX_DEFORMATION_RATIO = 0.3
+#: the smallest largest deformation a fit is attempted on, over the fruit's rest width
+#: (0.13 mm of a 63.5 mm apple): below it the curve is a deformation column in m read
+#: as mm, not a test a fruit model can be fitted to
+MIN_DEFORMATION_RATIO = 0.002
 #: m/s, plate speed when neither the file nor the command line gives one (squeeze's)
 DEFAULT_SPEED = 0.005
 
@@ -116,7 +120,8 @@ class CompressionTest:
         speed: m/s, plate speed; None = the curve's, else ``DEFAULT_SPEED``.
 
     Raises:
-        CalibrationError: the deformation is beyond the model's range, the speed beyond
+        CalibrationError: the deformation is beyond the model's range or too small to
+            fit (a unit mistake), the speed beyond
             the gripper's, or the fruit model cannot be calibrated.
         ConfigError: a bad fruit or override.
     """
@@ -146,6 +151,13 @@ class CompressionTest:
                 f'model\'s range: at most {MAX_DEFORMATION_RATIO:.0%} of the fruit\'s width '
                 f'({self.rest_width * 1e3:.4g} mm), i.e. {limit * 1e3:.4g} mm; set '
                 "fruit.shape.diameter to the tested fruit's size")
+        smallest = MIN_DEFORMATION_RATIO * self.rest_width
+        if curve.max_deformation < smallest:
+            raise CalibrationError(
+                f'the largest deformation {curve.max_deformation * 1e3:.4g} mm is '
+                f"{curve.max_deformation / self.rest_width:.2%} of the fruit's width "
+                f'({self.rest_width * 1e3:.4g} mm), below the {smallest * 1e3:.2g} mm a fit '
+                'needs: is the deformation column in m rather than mm?')
         self.clearance = max(CLEARANCE_RATIO * curve.max_deformation, MIN_CLEARANCE)
         duration = (self.clearance + curve.max_deformation) / self.speed
         settings = {'gripper.initial_gap': self.rest_width + self.clearance,
