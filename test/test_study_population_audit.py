@@ -253,3 +253,27 @@ def test_workers_with_a_scheduler_is_an_error_not_ignored(tmp_path):
                               "the cluster's own workers run the study (start them with "
                               '`dask worker`)\n')
     assert not (tmp_path / 'out').exists()
+
+
+def test_the_local_cluster_takes_a_free_loopback_port_for_its_http_server():
+    """Dask's scheduler serves HTTP on 8787 unless told otherwise: with 8787 taken (a
+    second study, any Dask cluster) every study warned 'Port 8787 is already in use'."""
+    import socket
+    import warnings
+    from gripper_sim.workflows.study import open_client
+    blocker = socket.socket()
+    try:
+        try:
+            blocker.bind(('127.0.0.1', 8787))
+            blocker.listen()
+        except OSError:
+            pass   # already taken: as good
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always')
+            with open_client(None, 1) as client:
+                http = client.cluster.scheduler.http_server
+                hosts = {sock.getsockname()[0] for sock in http._sockets.values()}
+    finally:
+        blocker.close()
+    assert [str(w.message) for w in caught if '8787' in str(w.message)] == []
+    assert hosts == {'127.0.0.1'}

@@ -126,8 +126,12 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     cluster = None
     try:
         with _interrupt_recorded() as interrupted:
+            # the scheduler's HTTP server (health and metrics; no dashboard: dashboard
+            # False) on a free loopback port: on 8787, its default, a second study or
+            # any other cluster made it warn 'Port 8787 is already in use'
             cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                                   host='127.0.0.1', dashboard_address=None,
+                                   host='127.0.0.1', dashboard_address='127.0.0.1:0',
+                                   scheduler_kwargs=dict(dashboard=False),
                                    silence_logs=logging.ERROR, preload=[IGNORE_CTRL_C])
         if interrupted:
             raise KeyboardInterrupt
