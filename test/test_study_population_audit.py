@@ -277,3 +277,21 @@ def test_the_local_cluster_takes_a_free_loopback_port_for_its_http_server():
         blocker.close()
     assert [str(w.message) for w in caught if '8787' in str(w.message)] == []
     assert hosts == {'127.0.0.1'}
+
+
+def test_a_local_worker_on_changed_sources_is_named_as_such(tmp_path):
+    """On the local cluster, other code in a worker means the checkout's sources were
+    edited while the study started (the workers read them after the client): 'install
+    the same gripper_sim on every worker' sent the user after the wrong problem."""
+    import pytest
+    from gripper_sim.workflows.study import StudyError, _Runner
+    from gripper_sim.workflows.study_spec import load_study
+    from gripper_sim.workflows.study_tasks import code_version
+    study = load_study(write_study(tmp_path, 'small'))
+    setup = study.setups(study.population.draw())[0]
+    for local, message in ((True, "gripper_sim's sources changed while the study started"),
+                           (False, 'install the same gripper_sim on every worker')):
+        runner = object.__new__(_Runner)   # its checks only: no client, no store
+        runner.code, runner.local = code_version(), local
+        with pytest.raises(StudyError, match=message):
+            runner._keep(setup, [('hold', 2.0, {'code_version': '0.0.0+other'})])

@@ -195,9 +195,12 @@ class _Chain:
 class _Runner:
     """The client side of a study run (see the module docstring)."""
 
-    def __init__(self, study: Study, store: RowStore, client, progress: bool):
+    def __init__(self, study: Study, store: RowStore, client, progress: bool,
+                 local: bool = False):
         from distributed import as_completed
         self.study = study
+        #: the workers are this machine's local cluster (they import the same files)
+        self.local = local
         self.store = store
         self.client = client
         self.code = code_version()
@@ -280,15 +283,23 @@ class _Runner:
         """Store the fruit's new evaluations as rows; how many."""
         for kind, force, outputs in new:
             if outputs['code_version'] != self.code:
-                raise StudyError(f"a worker runs other code ({outputs['code_version']}) "
-                                 f'than this client ({self.code}): install the same '
-                                 'gripper_sim on every worker')
+                raise StudyError(self._other_code(outputs['code_version']))
             key = case_key(setup, kind, force, self.code)
             self.used.add(key)
             if key not in self.store:
                 self.store.add(self._row(setup, kind, force, key, outputs))
                 self.computed += 1
         return len(new)
+
+    def _other_code(self, version: str) -> str:
+        """Why a worker's code ``version`` is not this client's: on the local cluster the
+        same files changed after the client read them, else another installation."""
+        if self.local:
+            return (f"gripper_sim's sources changed while the study started (this client "
+                    f'read {self.code}, a worker {version}): run it again once they are '
+                    'no longer being edited')
+        return (f'a worker runs other code ({version}) than this client ({self.code}): '
+                'install the same gripper_sim on every worker')
 
     def _finish(self, chain: _Chain, value: dict | None, failure: str) -> None:
         chain.done = True
@@ -337,7 +348,7 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
         started = time.perf_counter()
         store = RowStore(out)
         store.claim(identity)
-        runner = _Runner(study, store, client, progress)
+        runner = _Runner(study, store, client, progress, local=not scheduler)
         try:
             runner.start(setups)
             if scheduler:
