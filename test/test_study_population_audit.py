@@ -295,3 +295,18 @@ def test_a_local_worker_on_changed_sources_is_named_as_such(tmp_path):
         runner.code, runner.local = code_version(), local
         with pytest.raises(StudyError, match=message):
             runner._keep(setup, [('hold', 2.0, {'code_version': '0.0.0+other'})])
+
+
+def test_a_results_directory_that_cannot_be_written_is_refused_before_the_cluster(
+        tmp_path):
+    study = write_study(tmp_path, 'small')
+    a_file = tmp_path / 'a_file'
+    a_file.write_text('not a directory')
+    for out, reason in ((a_file, f"'{a_file}' is not a directory"),
+                        (a_file / 'sub', f"'{a_file}' is not a directory"),
+                        (Path('/proc/gripper_sim_study'),
+                         "'/proc' takes no file (No such file or directory)")):
+        refused = run(study, out)
+        assert refused.returncode == 2
+        assert refused.stderr == f"error: cannot write results in '{out}': {reason}\n"
+    assert a_file.read_text() == 'not a directory'

@@ -25,6 +25,7 @@ import math
 import os
 import signal
 import sys
+import tempfile
 import threading
 import time
 from contextlib import contextmanager
@@ -343,6 +344,7 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
     setups = study.setups(study.population.draw())
     identity = dict(study=study.name, definition=study.definition_hash())
     check_results_directory(out, identity)
+    check_writable(out)
     start = time.perf_counter()
     with open_client(scheduler, workers) as client:
         started = time.perf_counter()
@@ -368,6 +370,28 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
     return StudyRun(computed=runner.computed, reused=runner.reused,
                     interrupted=not complete, summary=summary, rows=store.sorted_rows(),
                     startup_time=started - start, run_time=finished - started)
+
+
+def check_writable(out: str | os.PathLike) -> None:
+    """Refuse a results directory that cannot be made or written, before the cluster
+    starts (it took tens of seconds to find out): a file, or a directory (``out``, else
+    its nearest existing parent) that takes no file, tried with a temporary file that
+    leaves nothing behind.
+
+    Raises:
+        StudyError: naming the path and why.
+    """
+    path = Path(out)
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise StudyError(f"cannot write results in '{out}': '{existing}' is not a directory")
+    try:
+        tempfile.TemporaryFile(dir=existing).close()
+    except OSError as err:
+        raise StudyError(f"cannot write results in '{out}': '{existing}' takes no file "
+                         f'({err.strerror or err})') from err
 
 
 def check_results_directory(out: str | os.PathLike, identity: dict[str, str]) -> None:
