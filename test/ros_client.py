@@ -7,6 +7,7 @@ process and none disturbs another's shutdown.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections import deque
 from typing import Any, Callable
@@ -32,7 +33,7 @@ from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
-from gripper_sim.ros.process import apply_ros_environment
+from gripper_sim.ros.process import apply_ros_environment, ros_environment
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 # Action feedback: as deep as the servers' history, so a slow client misses no phase.
@@ -296,3 +297,53 @@ def ros_context(domain_id: int):
         yield context
     finally:
         rclpy.try_shutdown(context=context)
+
+
+#: the variables ``ros_process.ros_environment`` sets that an in-process context reads
+_ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',
+             'FASTRTPS_DEFAULT_PROFILES_FILE')
+
+
+@contextlib.contextmanager
+def isolated_context(domain_id: int):
+    """An rclpy context of this process on ``domain_id``, this process's ROS environment
+    set for it meanwhile and restored afterwards; shut down afterwards."""
+    env = ros_environment(domain_id)
+    saved = {key: os.environ.get(key) for key in _ENV_KEYS}
+    os.environ.update({key: env[key] for key in _ENV_KEYS})
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+@contextlib.contextmanager
+def ros_node(domain_id: int, name: str):
+    """(node, its single-threaded executor) named ``name`` on ``domain_id``, in an
+    ``isolated_context``; destroyed afterwards."""
+    with isolated_context(domain_id) as context:
+        node = rclpy.create_node(name, context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        try:
+            yield node, executor
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+
+
+def spin_until(executor, condition: Callable[[], Any], timeout: float = 120.0,
+               what: str = 'the condition') -> None:
+    """Spin ``executor`` until ``condition()`` holds; AssertionError after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+        executor.spin_once(timeout_sec=0.05)

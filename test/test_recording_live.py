@@ -5,7 +5,6 @@ own test; waits are on matching and on conditions, with generous timeouts.
 """
 from __future__ import annotations
 
-import contextlib
 import os
 import signal
 import time
@@ -28,6 +27,7 @@ from gripper_sim.recording.reader import BagReader  # noqa: E402
 from gripper_sim.recording.recover import recover  # noqa: E402
 from gripper_sim.recording.writer import BagWriter  # noqa: E402
 from gripper_sim.ros.process import RosProcess, free_domain_id, ros_environment  # noqa: E402
+from ros_client import ros_node  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -37,32 +37,6 @@ TIMEOUT = 60.0  # s: generous, for a slow busy machine
 def _domain() -> int:
     """A domain no process on this machine uses and no test of this session got before."""
     return free_domain_id(os.getpid())
-
-
-_ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',
-             'FASTRTPS_DEFAULT_PROFILES_FILE')
-
-
-@contextlib.contextmanager
-def ros_node(domain: int, name: str = 'recording_test'):
-    """An rclpy node in this process on ``domain`` (environment restored afterwards)."""
-    env = ros_environment(domain)
-    saved = {k: os.environ.get(k) for k in _ENV_KEYS}
-    for key in _ENV_KEYS:
-        os.environ[key] = env[key]
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = rclpy.create_node(name, context=context)
-    try:
-        yield node
-    finally:
-        node.destroy_node()
-        rclpy.shutdown(context=context)
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
 
 
 def cli(domain: int, tmp_path: Path, *args: str, name: str = 'cli') -> RosProcess:
@@ -105,7 +79,7 @@ def make_cloud(i: int) -> PointCloud2:
 def test_recorded_messages_equal_what_was_published(tmp_path):
     domain = _domain()
     out = tmp_path / 'live.mcap'
-    with ros_node(domain, 'talker') as node:
+    with ros_node(domain, 'talker') as (node, _):
         qos_profile = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         pubs = {
             '/chatter': node.create_publisher(String, '/chatter', qos_profile),
@@ -160,7 +134,7 @@ def test_ctrl_c_right_after_a_burst_still_writes_every_message_of_it(tmp_path):
     domain = _domain()
     out = tmp_path / 'burst.mcap'
     count = 300  # below the recorder's keep-last depth (1000)
-    with ros_node(domain, 'burst_talker') as node:
+    with ros_node(domain, 'burst_talker') as (node, _):
         pub = node.create_publisher(
             String, '/burst', QoSProfile(depth=count, reliability=ReliabilityPolicy.RELIABLE))
         recorder = cli(domain, tmp_path, 'record', '-o', str(out), '/burst', name='record')
@@ -178,7 +152,7 @@ def test_ctrl_c_right_after_a_burst_still_writes_every_message_of_it(tmp_path):
 def test_all_picks_up_topics_that_appear_later_and_duration_ends_it(tmp_path):
     domain = _domain()
     out = tmp_path / 'all.mcap'
-    with ros_node(domain, 'late_talker') as node:
+    with ros_node(domain, 'late_talker') as (node, _):
         recorder = cli(domain, tmp_path, 'record', '--all', '--duration', '30', '-o',
                        str(out), name='record_all')
         with recorder:
@@ -211,7 +185,7 @@ def test_all_picks_up_topics_that_appear_later_and_duration_ends_it(tmp_path):
 def test_sigkill_loses_at_most_about_a_second(tmp_path):
     domain = _domain()
     out = tmp_path / 'killed.mcap'
-    with ros_node(domain, 'steady_talker') as node:
+    with ros_node(domain, 'steady_talker') as (node, _):
         pub = node.create_publisher(String, '/steady', QoSProfile(depth=100))
         recorder = cli(domain, tmp_path, 'record', '/steady', '--flush-interval', '0.5',
                        '-o', str(out), name='record_kill').start()
@@ -362,7 +336,7 @@ def test_replay_loop_repeats_until_interrupted(tmp_path):
         for k in range(5):
             bag.write('/tick', serialize_message(String(data=f't{k}')),
                       log_time=1_000_000_000 + k * 20_000_000)
-    with ros_node(domain, 'loop_listener') as node:
+    with ros_node(domain, 'loop_listener') as (node, _):
         got: list[str] = []
         node.create_subscription(String, '/tick', lambda m: got.append(m.data), 100)
         executor = SingleThreadedExecutor(context=node.context)
@@ -386,7 +360,7 @@ def test_replay_clock_drives_a_use_sim_time_node(tmp_path):
     src = tmp_path / 'original.mcap'
     _synthetic_bag(src)
     t0 = 1_700_000_000_000_000_000
-    with ros_node(domain, 'sim_time_listener') as node:
+    with ros_node(domain, 'sim_time_listener') as (node, _):
         node.set_parameters([rclpy.parameter.Parameter('use_sim_time', value=True)])
         executor = SingleThreadedExecutor(context=node.context)
         executor.add_node(node)
@@ -412,7 +386,7 @@ def test_record_a_split_bag_folder_by_pattern_and_replay_it(tmp_path):
 
     domain = _domain()
     out = tmp_path / 'patterns'
-    with ros_node(domain, 'pattern_talker') as node:
+    with ros_node(domain, 'pattern_talker') as (node, _):
         qos_profile = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         pubs = {t: node.create_publisher(String, t, qos_profile)
                 for t in ('/sim/a', '/sim/b', '/other')}

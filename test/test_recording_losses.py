@@ -10,7 +10,6 @@ machine would.
 """
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
@@ -32,13 +31,10 @@ from gripper_sim.recording.recorder import (  # noqa: E402
     LOST_KEY, SUBSCRIPTION_DEPTH, LossTracker, Recorder, RecorderStats, record_summary)
 from gripper_sim.recording.writer import BagWriter  # noqa: E402
 from gripper_sim.ros.process import RosProcess, free_domain_id, ros_environment  # noqa: E402
+from ros_client import isolated_context, spin_until  # noqa: E402
 
 TIMEOUT = 60.0  # s: generous, for a slow busy machine
 TOPIC = '/loss_test'
-_ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',
-             'FASTRTPS_DEFAULT_PROFILES_FILE')
-
-
 # ---------------------------------------------------------------- counting, no ROS graph
 def test_a_gap_in_the_sequence_numbers_of_one_publisher_counts_the_numbers_skipped():
     tracker = LossTracker(lambda: 1)
@@ -77,26 +73,6 @@ def test_the_closing_line_names_the_lost_messages_per_topic():
 
 
 # ---------------------------------------------------------------- ROS
-@contextlib.contextmanager
-def ros_context(domain: int):
-    """An rclpy context of this process on ``domain`` (environment restored afterwards)."""
-    env = ros_environment(domain)
-    saved = {k: os.environ.get(k) for k in _ENV_KEYS}
-    for key in _ENV_KEYS:
-        os.environ[key] = env[key]
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    try:
-        yield context
-    finally:
-        rclpy.shutdown(context=context)
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
-
-
 def header(number: int, size: int = 0) -> Header:
     """Message ``number`` (its stamp's seconds), ``size`` bytes of frame id."""
     msg = Header()
@@ -105,18 +81,10 @@ def header(number: int, size: int = 0) -> Header:
     return msg
 
 
-def spin_until(executor, condition, what: str) -> None:
-    deadline = time.monotonic() + TIMEOUT
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f'timed out after {TIMEOUT} s waiting for {what}')
-        executor.spin_once(timeout_sec=0.05)
-
-
 @pytest.mark.ros
 def test_an_overflowing_subscription_queue_is_counted_from_the_sequence_numbers(tmp_path):
     behind = 500
-    with ros_context(free_domain_id(os.getpid())) as context:
+    with isolated_context(free_domain_id(os.getpid())) as context:
         node = rclpy.create_node('loss_recorder', context=context)
         talker = rclpy.create_node('loss_talker', context=context)
         pub = talker.create_publisher(
@@ -129,15 +97,15 @@ def test_an_overflowing_subscription_queue_is_counted_from_the_sequence_numbers(
         recorder = Recorder(node, writer, topics=[TOPIC])
         try:
             spin_until(executor, lambda: recorder.subscribed == [TOPIC]
-                       and pub.get_subscription_count() == 1, 'the recorder to subscribe')
+                       and pub.get_subscription_count() == 1, what='the recorder to subscribe')
             pub.publish(header(0))
-            spin_until(executor, lambda: recorder.stats.messages == 1, 'the first message')
+            spin_until(executor, lambda: recorder.stats.messages == 1, what='the first message')
             # the recorder takes nothing meanwhile: its queue keeps the newest DEPTH
             for number in range(1, SUBSCRIPTION_DEPTH + behind + 1):
                 pub.publish(header(number))
             assert pub.wait_for_all_acked(Duration(seconds=TIMEOUT))
             spin_until(executor, lambda: recorder.stats.messages == SUBSCRIPTION_DEPTH + 1,
-                       'the queued messages')
+                       what='the queued messages')
             assert recorder.lost == {TOPIC: behind}
             assert recorder.stats.lost == {TOPIC: behind}
         finally:
@@ -181,7 +149,7 @@ def test_record_names_messages_a_held_up_recorder_lost_in_its_summary_and_metada
     flood, size = 300, 100_000
     domain = free_domain_id(os.getpid())
     out = tmp_path / 'held_up'
-    with ros_context(domain) as context:
+    with isolated_context(domain) as context:
         node = rclpy.create_node('loss_publisher', context=context)
         pub = node.create_publisher(
             Header, TOPIC, QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))

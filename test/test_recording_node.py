@@ -12,17 +12,13 @@ all the same would be in record's closing line (``LOST``), which is checked firs
 """
 from __future__ import annotations
 
-import contextlib
 import os
-import time
 
 import pytest
 
-import rclpy
 import gripper_sim_interfaces.msg  # noqa: F401
 
 from gripper_sim_interfaces.msg import FruitState  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from rclpy.serialization import deserialize_message  # noqa: E402
@@ -33,48 +29,12 @@ from gripper_sim.recording.analysis import analyze  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
 from gripper_sim.ros.process import (  # noqa: E402
     RosProcess, free_domain_id, node_process, ros_environment)
+from ros_client import ros_node, spin_until  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 TIMEOUT = 120.0
 STATE = '/gripper_sim/fruit/state'
-_ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',
-             'FASTRTPS_DEFAULT_PROFILES_FILE')
-
-
-@contextlib.contextmanager
-def ros_node(domain: int, name: str):
-    env = ros_environment(domain)
-    saved = {k: os.environ.get(k) for k in _ENV_KEYS}
-    for key in _ENV_KEYS:
-        os.environ[key] = env[key]
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = rclpy.create_node(name, context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    try:
-        yield node, executor
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
-
-
-def spin_until(executor, condition, timeout: float = TIMEOUT, what: str = '') -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return
-        executor.spin_once(timeout_sec=0.05)
-    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
-
-
 def stamp(message) -> int:
     """ns, a message's header stamp."""
     return message.header.stamp.sec * 10**9 + message.header.stamp.nanosec

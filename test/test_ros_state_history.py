@@ -8,18 +8,15 @@ a stopped process, fewer than the node's history keeps.
 """
 from __future__ import annotations
 
-import contextlib
 import os
 import signal
 import time
 
 import pytest
 
-import rclpy
 
 from gripper_sim_interfaces.msg import FruitState  # noqa: E402
 from gripper_sim_interfaces.srv import Step  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.serialization import deserialize_message  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
@@ -30,15 +27,12 @@ from gripper_sim.ros.process import (  # noqa: E402
     RosProcess, free_domain_id, node_process, ros_environment)
 from gripper_sim.ros.publishing import (  # noqa: E402
     HISTORY_DEPTHS, QOS_DEPTHS, STATE_DEPTH, topic_qos)
+from ros_client import ros_node  # noqa: E402
 
 TIMEOUT = 120.0  # s: generous, for a slow busy machine
 STATE = '/gripper_sim/fruit/state'
 EVERY = 5        # steps a state: publish_rate 200 Hz at the default dt of 1 ms
 HELD = 600       # states published while the recorder is stopped
-_ENV_KEYS = ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID', 'RMW_IMPLEMENTATION',
-             'FASTRTPS_DEFAULT_PROFILES_FILE')
-
-
 def test_state_topics_keep_a_deep_history_clock_and_tf_their_own():
     qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
     for suffix in ('fruit/state', 'fruit/nodes', 'left_jaw/wrench', 'joint_states'):
@@ -49,31 +43,6 @@ def test_state_topics_keep_a_deep_history_clock_and_tf_their_own():
     assert topic_qos('clock', qos) == QOS_DEPTHS['clock'] == 1
     assert topic_qos('tf', qos) == QOS_DEPTHS['tf'] == 100
     assert topic_qos('fruit/state', QoSProfile(depth=5000)).depth == 5000
-
-
-@contextlib.contextmanager
-def ros_node(domain: int, name: str):
-    """An rclpy node and its executor in this process on ``domain``."""
-    env = ros_environment(domain)
-    saved = {k: os.environ.get(k) for k in _ENV_KEYS}
-    for key in _ENV_KEYS:
-        os.environ[key] = env[key]
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = rclpy.create_node(name, context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    try:
-        yield node, executor
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
 
 
 def call(executor, client, request):
