@@ -310,3 +310,15 @@ def test_a_results_directory_that_cannot_be_written_is_refused_before_the_cluste
         assert refused.returncode == 2
         assert refused.stderr == f"error: cannot write results in '{out}': {reason}\n"
     assert a_file.read_text() == 'not a directory'
+
+
+def test_the_html_success_band_is_drawn_in_steps_like_its_curve():
+    from gripper_sim.workflows.study_report import band_traces
+    curve = dict(force=[1.0, 2.0, 4.0], p=[0.0, 0.5, 1.0], lower=[0.0, 0.2, 0.7],
+                 upper=[0.3, 0.8, 1.0])
+    lower, upper = band_traces(curve, '#1f77b4')
+    assert [list(t.x) for t in (lower, upper)] == [curve['force']] * 2
+    assert (list(lower.y), list(upper.y)) == (curve['lower'], curve['upper'])
+    assert lower.line.shape == upper.line.shape == 'hv'
+    assert upper.fill == 'tonexty' and lower.fill is None
+    assert upper.fillcolor == 'rgba(31, 119, 180, 0.15)'

@@ -132,10 +132,8 @@ def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> N
         if not curve:
             continue
         colour = PALETTE[k % len(PALETTE)]
-        fig.add_trace(go.Scatter(x=curve['force'] + curve['force'][::-1],
-                                 y=curve['upper'] + curve['lower'][::-1], fill='toself',
-                                 line=dict(width=0), fillcolor=colour, opacity=0.15,
-                                 hoverinfo='skip', showlegend=False), row=curve_row, col=1)
+        for trace in band_traces(curve, colour):
+            fig.add_trace(trace, row=curve_row, col=1)
         fig.add_trace(go.Scatter(x=curve['force'], y=curve['p'], mode='lines',
                                  name=point['label'], line=dict(color=colour, shape='hv')),
                       row=curve_row, col=1)
@@ -173,6 +171,19 @@ def _html(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> N
     fig.update_layout(title=_title(summary), height=sum(heights) + gap * len(titles) + 60,
                       template='plotly_white')
     write_figure_page(path, f"Study {summary['study']}", fig)
+
+
+def band_traces(curve: dict, colour: str) -> list:
+    """The interval band of a success curve ({force, p, lower, upper}) as plotly traces:
+    its lower and upper bounds as steps (``hv``, as the curve and the PNG draw them), the
+    space between filled. A polygon through the bounds drew straight slopes between the
+    forces, a band that was not the interval between them."""
+    edge = dict(x=curve['force'], mode='lines', line=dict(width=0, shape='hv'),
+                hoverinfo='skip', showlegend=False)
+    red, green, blue = (int(colour[i:i + 2], 16) for i in (1, 3, 5))
+    return [go.Scatter(y=curve['lower'], **edge),
+            go.Scatter(y=curve['upper'], fill='tonexty',
+                       fillcolor=f'rgba({red}, {green}, {blue}, 0.15)', **edge)]
 
 
 def _png(summary: dict, rows: Sequence[dict], axes: list[str], path: Path) -> None:
