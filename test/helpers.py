@@ -132,7 +132,8 @@ def hold_threshold(config, low, high, lift=0.02, hold=0.2, tolerance=0.005):
 
 def traced_pick(config, force, lift=0.05, hold=1.0):
     """Pick at ``force`` (N): close, lift ``lift`` m, hold ``hold`` s. Returns a dict:
-    outcome, slip (m), peak (N, peak grip force), lift_min (N, the lowest grip force
+    outcome, slip (m, the contacts' slide), drop (m, the centroid's largest drop relative
+    to the jaws), peak (N, peak grip force), lift_min (N, the lowest grip force
     from the start of the lift to the end of the hold), solves (mean solves per step) and
     cpu (s, process time)."""
     start = time.process_time()
@@ -142,7 +143,7 @@ def traced_pick(config, force, lift=0.05, hold=1.0):
     summary = run_grasp(sim, sequence, on_step=lambda r, phase: lifted.append(r.grip_force)
                         if phase in ('lifting', 'holding') else None)
     return dict(outcome=summary['outcome'], slip=summary['slip_distance'],
-                peak=summary['peak_grip_force'], lift_min=min(lifted, default=0.0),
+                drop=summary['centroid_drop'], peak=summary['peak_grip_force'], lift_min=min(lifted, default=0.0),
                 solves=sim.gap_solves / max(sim.last.step, 1),
                 cpu=time.process_time() - start)
 

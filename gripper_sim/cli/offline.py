@@ -67,7 +67,9 @@ def register(subparsers) -> None:
     pick = subparsers.add_parser(
         'pick', help='close to a grip force, lift and hold the fruit',
         description='Close the jaws on the fruit resting on the table to a grip force, '
-                    'lift it and hold it; reports held, slipped or dropped.')
+                    'lift it and hold it; reports held, slipped (slid more than 1 mm down '
+                    'the jaws at its contacts) or dropped (lost from the jaws, or its '
+                    'centroid more than 10 mm behind them).')
     _add_fruit_finger_arguments(pick)
     pick.add_argument('--force', type=positive_float, required=True, metavar='N',
                       help='grip force (mean jaw normal force), N')
@@ -378,6 +380,8 @@ def run_pick(args) -> int:
               f"{summary['outcome']}")
         print(f"  {summary['message']}")
         print(f"  {'slip in the jaws':26s} {summary['slip_distance'] * 1e3:.3f} mm")
+        print(f"  {'centroid drop':26s} {summary['centroid_drop'] * 1e3:.3f} mm "
+              '(relative to the jaws, elastic sag included)')
         for line in _measure_lines(summary, dim, 26) + series.contact_lines(26):
             print(f'  {line}')
     return 0 if summary['outcome'] == 'held' else 1

@@ -51,7 +51,7 @@ class StopRules:
         end: s; the time reached it.
         max_steps: steps run.
         slide: integrate the fruit's slide along the jaws from ``slide_from`` (m: slide,
-            largest slide, largest slip distance; ``scenario.PickAndPlace._slide``);
+            largest slide, largest slip distance: ``core.slip.ContactSlide.state``);
             stop when the largest slide exceeds ``slide_limit`` (m).
     """
 

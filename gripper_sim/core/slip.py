@@ -1,9 +1,13 @@
-"""When a grasp slipped, and when the fruit is slipping: the one definition of each.
+"""When a grasp slipped, how far the fruit slid, and when it is slipping: the one
+definition of each.
 
-``grasp_slipped`` (the outcome) is shared by the grasp state machine (the node's Grasp
-action result, ``pick``) and the analysis of a recording (``analyze``);
-``jaw_contacts_sliding`` (``StepResult.slipping``, ``FruitState.slipping``) by both
-simulation facades and the 2D fast path.
+``ContactSlide`` (how far the fruit slid down the jaws at its contacts) is the slip
+measure of both grasp workflows, the pick (``workflows.grasp.GraspSequence``: ``pick``,
+the node's Grasp action) and the pick-and-place (``workflows.scenario.PickAndPlace``:
+``run``, ``window``, studies); ``grasp_slipped`` (the outcome) is shared by the pick and
+the analysis of a recording (``analyze``); ``jaw_contacts_sliding``
+(``StepResult.slipping``, ``FruitState.slipping``) by both simulation facades and the 2D
+fast path.
 """
 from __future__ import annotations
 
@@ -21,10 +25,12 @@ def grasp_slipped(held_slip: float, dropped: bool = False) -> bool:
     """Whether a grasp slipped.
 
     Args:
-        held_slip: m, the fruit's slip relative to the jaws (``StepResult.slip_distance``,
-            ``FruitState.slip_distance``) at the end of the hold: measured from the
-            lift-off, or from the grip when there is no lift. Pushes of one jaw before
-            the grip and the fruit's motion during a release do not count.
+        held_slip: m, the fruit's slip relative to the jaws from the lift-off (from the
+            grip when there is no lift) to the end of the hold: for a pick the largest
+            ``ContactSlide``; for a recording (``analyze``, which has no contact nodes)
+            the centroid's drop at the end of the hold (``FruitState.slip_distance``).
+            Pushes of one jaw before the grip and the fruit's motion during a release
+            do not count.
         dropped: no jaw touched the fruit at some time between the lift-off (or the
             grip) and the end of the hold.
     """
@@ -62,3 +68,68 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
         if 2 * np.count_nonzero(sliding & mine) > np.count_nonzero(mine):
             return True
     return False
+
+
+class ContactSlide:
+    """How far the fruit slid down the jaws at its contacts (m), fed every step result.
+
+    The slide is the mean vertical velocity of the nodes a jaw holds, relative to the
+    jaws, integrated over the steps fed with ``sliding`` (never below 0: a fruit pushed
+    back up has not slid). A node stuck to its jaw moves with it, so only sliding
+    counts, not the fruit's elastic sag or its relaxation once lifted off the table,
+    which move its centroid: ``centroid_drop``, the largest
+    ``StepResult.slip_distance`` of those steps, is that separate measure.
+
+    The compiled multi-step advance (``core.advance_kernels``, ``StopRules.slide``)
+    integrates the same sum over the steps it runs unseen: ``state`` is what it starts
+    from, ``include`` takes what it leaves. Works for 2D and 3D results: the last
+    coordinate column is the height.
+
+    Args:
+        time: s, the time of the last step before the first one fed.
+    """
+
+    def __init__(self, time: float):
+        #: m, the slide now
+        self.slide = 0.0
+        #: m, the largest slide so far (what a grasp's slip is)
+        self.largest = 0.0
+        #: m, the largest drop of the centroid relative to the jaws so far
+        self.centroid_drop = 0.0
+        #: s, the time of the step before the next one fed (its time step)
+        self.previous_time = float(time)
+        self._jaw_faces = None
+
+    def state(self) -> tuple[float, float, float]:
+        """(slide, largest slide, centroid drop), m: ``StopRules.slide_from``."""
+        return self.slide, self.largest, self.centroid_drop
+
+    def update(self, result, sliding: bool = True) -> None:
+        """Take a step's result; integrate it when ``sliding`` (the machine's phase is
+        one in which the slide counts), else only note its time."""
+        if sliding:
+            self._integrate(result)
+            self.centroid_drop = max(self.centroid_drop, float(result.slip_distance))
+        self.previous_time = float(result.time)
+
+    def include(self, skipped, sliding: bool = True) -> None:
+        """Take what the steps a ``Simulation.advance`` ran unseen leave
+        (``core.multistep.Skipped``), the last step excluded: their slide when they
+        integrated it (``sliding``, as ``StopRules.slide`` was), the time before it."""
+        if sliding:
+            self.slide, self.largest, self.centroid_drop = skipped.slide
+        self.previous_time = float(skipped.previous_time)
+
+    def _integrate(self, result) -> None:
+        if self._jaw_faces is None:
+            # whether obstacle k is a jaw's face, at k + 1 (-1: no obstacle): a table
+            # look-up instead of np.isin, which costs tens of us a step
+            jaws = [name.split('.')[0] in ('left_jaw', 'right_jaw')
+                    for name in result.obstacle_names]
+            self._jaw_faces = np.array([False, *jaws])
+        dt = result.time - self.previous_time
+        nodes = self._jaw_faces[result.contact_obstacle + 1]
+        if dt > 0 and np.any(nodes):
+            relative = float(np.mean(result.velocities[nodes, -1])) - result.lift_velocity
+            self.slide = max(0.0, self.slide - relative * dt)
+            self.largest = max(self.largest, self.slide)

@@ -20,7 +20,7 @@ from gripper_sim.core.multistep import Skipped, StopRules, next_result
 from gripper_sim.core.peaks import RunPeaks
 from gripper_sim.core.results import StepResult
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core.slip import grasp_slipped
+from gripper_sim.core.slip import ContactSlide, grasp_slipped
 from gripper_sim.core.vocabulary import DROP_SLIP, damage_fields
 from gripper_sim.errors import CommandError, ConvergenceError, FingersClosed
 
@@ -38,8 +38,21 @@ TIME_MARGIN = 10.0
 DEFAULT_TIME_LIMIT = 120.0
 
 
+#: the phases in which the fruit's slide along the jaws is integrated (``contact``)
+SLIDING_PHASES = (LIFTING, HOLDING)
+
+
 class GraspSequence:
-    """Args:
+    """Close, settle, lift, hold (and release) the fruit.
+
+    It slipped when it slid more than ``core.slip.SLIP_TOLERANCE`` down the jaws at its
+    contacts between the lift-off (the grip when there is no lift) and the end of the
+    hold (``core.slip.ContactSlide``, the pick-and-place's measure too). The drop of its
+    centroid relative to the jaws, which also grows as a squeezed fruit relaxes once
+    lifted off the table, is reported apart (``centroid_drop``) and decides only a drop
+    (more than ``DROP_SLIP``), as in the pick-and-place.
+
+    Args:
         sim: the simulation to drive.
         target_force: N, grip force to close to (> 0).
         close_speed: m/s gap closing rate (None or 0 = configured default).
@@ -74,7 +87,8 @@ class GraspSequence:
         self.message = ''
         self.dropped_at: float | None = None
         self.peaks = RunPeaks()
-        self.slip_distance = 0.0
+        #: the fruit's slide along the jaws and its centroid's drop, from the lift-off
+        self.contact = ContactSlide(sim.last.time)
         self.bruised = False
         self.damage = sim.last.damage
         self.final_gap = sim.gripper_state.gap
@@ -115,6 +129,7 @@ class GraspSequence:
     def update(self, result: StepResult) -> str:
         """Advance the state machine after a step; returns the phase."""
         sim = self.sim
+        self.contact.update(result, self.phase in SLIDING_PHASES)
         self.peaks(result)
         if result.damage is not None:  # the Hertz estimate of gripper_sim.core.damage
             self.damage = result.damage
@@ -124,12 +139,11 @@ class GraspSequence:
         self.final_gap = result.gap
         elapsed = sim.time - self.phase_start
         gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
-        if self.phase in (LIFTING, HOLDING):
-            self.slip_distance = result.slip_distance
+        if self.phase in SLIDING_PHASES:
             if not gripped or result.slip_distance > DROP_SLIP:
                 self.dropped_at = sim.time
-                why = ('' if not gripped else f' (it slid {result.slip_distance * 1e3:.1f} '
-                       'mm behind the jaws)')
+                why = ('' if not gripped else ' (its centroid fell '
+                       f'{result.slip_distance * 1e3:.1f} mm behind the jaws)')
                 self._finish('dropped', f'the fruit dropped at t = {sim.time:.3f} s{why}')
                 return self.phase
         if self.phase == CLOSING:
@@ -156,9 +170,9 @@ class GraspSequence:
                 self._enter(HOLDING)
         elif self.phase == HOLDING:
             if elapsed >= self.hold_time - 0.5 * sim.dt:
-                if grasp_slipped(self.slip_distance):
-                    self._finish('slipped', f'the fruit slipped {self.slip_distance * 1e3:.2f}'
-                                 ' mm relative to the jaws')
+                if grasp_slipped(self.contact.largest):
+                    self._finish('slipped', 'the fruit slipped '
+                                 f'{self.contact.largest * 1e3:.2f} mm in the jaws')
                 else:
                     self._finish('held', 'the fruit was held')
         elif self.phase == RELEASING:
@@ -176,8 +190,9 @@ class GraspSequence:
         s); None when every step must be seen (releasing at the lift's end, done)."""
         sim = self.sim
         rules = StopRules(bruise=self.peaks.bruised_at is None, end=end)
-        if self.phase in (LIFTING, HOLDING):
+        if self.phase in SLIDING_PHASES:
             rules.drop, rules.drop_slip = True, DROP_SLIP
+            rules.slide, rules.slide_from = True, self.contact.state()
         if self.phase == CLOSING:
             rules.grip_force = FORCE_REACHED * self.target_force
             rules.deadline, rules.gap_closed = self.closing_deadline, True
@@ -198,8 +213,9 @@ class GraspSequence:
 
     def include(self, skipped: Skipped) -> None:
         """What the steps ``Simulation.advance`` ran without showing them leave: their
-        peaks."""
+        peaks, the slide along the jaws, the time of the step before the last."""
         self.peaks.include(skipped.peaks)
+        self.contact.include(skipped, self.phase in SLIDING_PHASES)
 
     def summary(self) -> dict:
         """The grasp's result under the vocabulary's keys (``core.vocabulary``; the
@@ -223,10 +239,11 @@ class GraspSequence:
             message += '; crushed: the flesh failed'
         return dict(success=success, outcome=self.outcome or 'running',
                     slipped=self.outcome is not None and grasp_slipped(
-                        self.slip_distance, self.dropped_at is not None),
+                        self.contact.largest, self.dropped_at is not None),
                     dropped=self.dropped_at is not None,
                     message=message, final_gap=self.final_gap,
-                    slip_distance=self.slip_distance, dropped_at=self.dropped_at,
+                    slip_distance=self.contact.largest,
+                    centroid_drop=self.contact.centroid_drop, dropped_at=self.dropped_at,
                     **self.peaks.as_dict(), **damage_keys)
 
 
@@ -284,7 +301,8 @@ class GraspEvaluation:
         held: the fruit was carried to the end, not dropped, and slid less than
             ``window.max_slip`` in the jaws.
         dropped, slipped, bruised, crushed: the run's flags.
-        slip_distance: m, slip of the fruit in the jaws (``StepResult.slip_distance``).
+        slip_distance: m, how far the fruit slid in the jaws at its contacts (the
+            largest ``core.slip.ContactSlide``; not the centroid's drop).
         peak_grip_force: N, largest measured grip force (mean jaw normal force).
         peak_compression: m, largest loss of width along the closing axis.
         peak_jaw_pressure, peak_table_pressure: Pa, largest contact pressure at the jaws,

@@ -17,9 +17,9 @@ Outcomes: ``placed`` (on the table, clear of the jaws, within a quarter of its w
 the target, at rest), ``dropped`` (the fruit left both jaws or fell more than
 ``DROP_SLIP`` behind them between lift and open; ``dropped_at`` says when, the run then
 ends), ``slipped`` (placed, but it slid more than ``SLIP_TOLERANCE`` at its contacts
-with the jaws: ``slip_distance``, the jaw-contact nodes' downward velocity relative to
-the jaws integrated, which leaves out the fruit's elastic sag; the centroid's drop
-relative to the jaws is ``centroid_drop``),
+with the jaws: ``slip_distance``, the largest ``core.slip.ContactSlide``, the jaw-contact
+nodes' downward velocity relative to the jaws integrated, which leaves out the fruit's
+elastic sag; the centroid's largest drop relative to the jaws is ``centroid_drop``),
 ``bruised``, ``crushed`` (``gripper_sim.core.damage``), or ``failed`` (the grip never
 reached its target, or the fruit was not found on the table at the end). One word
 summarises a run, in this order of precedence: crushed, dropped, bruised, slipped,
@@ -47,7 +47,7 @@ from gripper_sim.configuration import (Key, flatten, load_config, package_config
 from gripper_sim.core.fruit import build_fruit
 from gripper_sim.core.multistep import Skipped, StopRules, next_result
 from gripper_sim.core.peaks import RunPeaks
-from gripper_sim.core.slip import SLIP_TOLERANCE
+from gripper_sim.core.slip import SLIP_TOLERANCE, ContactSlide
 from gripper_sim.core.vocabulary import DROP_SLIP, damage_fields
 from gripper_sim.core3d.fruit import build_fruit3d
 from gripper_sim.errors import ConfigError
@@ -58,7 +58,7 @@ PLACE_CLEARANCE = 5e-4
 
 PHASES = ('approach', 'close', 'squeeze', 'lift', 'transport', 'lower', 'open', 'retreat',
           'settle', 'done')
-#: the phases in which the fruit's slide along the jaws is integrated (``_slide``)
+#: the phases in which the fruit's slide along the jaws is integrated (``contact``)
 SLIDING_PHASES = ('lift', 'transport', 'lower', 'hold')
 
 #: every scenario key: unit, range, meaning (Key of gripper_sim.configuration)
@@ -288,16 +288,12 @@ class PickAndPlace:
         self.message = ''
         self.dropped_at: float | None = None
         self.dropped_phase: str | None = None
-        self.max_slip = 0.0
-        self.slide = 0.0
-        self.max_drop = 0.0
-        self._jaw_faces = None
+        #: the fruit's slide along the jaws and its centroid's drop, from the lift-off
+        self.contact = ContactSlide(sim.last.time)
         self.peaks = RunPeaks()
         self.placed = False
         self.reached_grip = False
         self.last = sim.last
-        #: s, the time of the step before the one ``update`` sees (the slide's time step)
-        self._previous_time = sim.last.time
         self.closing_deadline = math.inf
         sim.command_lift(self.grasp_lift, scenario['approach.speed'])
         if self.start_x != sim.gripper_state.x:
@@ -342,44 +338,23 @@ class PickAndPlace:
     def _past_until(self, phase: str) -> bool:
         return PHASES.index(phase) > PHASES.index(self.until)
 
-    def _slide(self, result) -> None:
-        """Accumulate how far the fruit slid down the jaws at its contacts (m): the mean
-        vertical velocity of the jaw-contact nodes relative to the jaws, integrated. A
-        stuck node moves with its jaw, so only sliding counts, not the fruit's own sag."""
-        if self._jaw_faces is None:
-            # whether obstacle k is a jaw's face, at k + 1 (-1: no obstacle): a table
-            # look-up instead of np.isin, which costs tens of us a step
-            jaws = [name.split('.')[0] in ('left_jaw', 'right_jaw')
-                    for name in result.obstacle_names]
-            self._jaw_faces = np.array([False, *jaws])
-        dt = result.time - self._previous_time
-        nodes = self._jaw_faces[result.contact_obstacle + 1]
-        if dt > 0 and np.any(nodes):
-            # the last column is the height: z of (x, z) in 2D, of (x, y, z) in 3D
-            relative = float(np.mean(result.velocities[nodes, -1])) - result.lift_velocity
-            self.slide = max(0.0, self.slide - relative * dt)
-            self.max_slip = max(self.max_slip, self.slide)
-
     def update(self, result) -> str:
         """Advance after a step; returns the phase."""
         sim, sc = self.sim, self.scenario
-        if self.phase in SLIDING_PHASES:
-            self._slide(result)
+        self.contact.update(result, self.phase in SLIDING_PHASES)
         self.last = result
-        self._previous_time = result.time
         self.peaks(result)
         elapsed = sim.time - self.phase_start
         gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
         if self.phase in ('lift', 'transport', 'lower'):
-            self.max_drop = max(self.max_drop, result.slip_distance)
             if not gripped or result.slip_distance > DROP_SLIP:
                 self.dropped_at = sim.time
                 self.dropped_phase = self.phase
                 self._end('dropped', f'the fruit dropped at t = {sim.time:.3f} s during '
                           f'the {self.phase}')
                 return self.phase
-            if self.stop_on_slip and self.max_slip > SLIP_TOLERANCE:
-                self._end('slipped', f'the fruit slipped {self.max_slip * 1e3:.2f} '
+            if self.stop_on_slip and self.contact.largest > SLIP_TOLERANCE:
+                self._end('slipped', f'the fruit slipped {self.contact.largest * 1e3:.2f} '
                           f'mm in the jaws during the {self.phase}')
                 return self.phase
         if self.stop_on_bruise and result.damage is not None and (
@@ -433,7 +408,6 @@ class PickAndPlace:
                                      sc['lower.speed'])
                     self._enter('lower')
         elif self.phase == 'hold':
-            self.max_drop = max(self.max_drop, result.slip_distance)
             if not gripped or result.slip_distance > DROP_SLIP:
                 self.dropped_at = sim.time
                 self.dropped_phase = 'hold'
@@ -466,7 +440,7 @@ class PickAndPlace:
         rules = StopRules(bruise=self.peaks.bruised_at is None, damaged=self.stop_on_bruise,
                           end=end)
         if phase in SLIDING_PHASES:
-            rules.slide, rules.slide_from = True, (self.slide, self.max_slip, self.max_drop)
+            rules.slide, rules.slide_from = True, self.contact.state()
             rules.drop, rules.drop_slip = True, DROP_SLIP
             if self.stop_on_slip and phase != 'hold':
                 rules.slide_limit = SLIP_TOLERANCE
@@ -496,9 +470,7 @@ class PickAndPlace:
         """What the steps ``Simulation.advance`` ran without showing them leave: their
         peaks, the slide along the jaws, the time of the step before the last."""
         self.peaks.include(skipped.peaks)
-        if self.phase in SLIDING_PHASES:
-            self.slide, self.max_slip, self.max_drop = skipped.slide
-        self._previous_time = skipped.previous_time
+        self.contact.include(skipped, self.phase in SLIDING_PHASES)
 
     def _judge_placement(self, result) -> None:
         sc = self.scenario
@@ -524,7 +496,7 @@ class PickAndPlace:
         damage = self.last.damage
         bruised = bool(damage is not None and damage.bruised)
         crushed = bool(damage is not None and damage.crushed)
-        slipped = self.max_slip > SLIP_TOLERANCE
+        slipped = self.contact.largest > SLIP_TOLERANCE
         dropped = self.dropped_at is not None
         if crushed:
             outcome = 'crushed'
@@ -554,8 +526,8 @@ class PickAndPlace:
         summary = dict(outcome=outcome, placed=bool(self.placed), dropped=dropped,
                        dropped_at=None if self.dropped_at is None else float(self.dropped_at),
                        dropped_phase=self.dropped_phase, slipped=bool(slipped),
-                       slip_distance=float(self.max_slip),
-                       centroid_drop=float(self.max_drop),
+                       slip_distance=float(self.contact.largest),
+                       centroid_drop=float(self.contact.centroid_drop),
                        message='; '.join(messages), sliding=bool(self.last.slipping),
                        **self.peaks.as_dict())
         if damage is not None:
