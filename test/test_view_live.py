@@ -349,3 +349,44 @@ def test_a_failing_view_stops_feeding_and_never_raises_into_the_physics():
     assert node.observers == [] and feed.view is None
     assert node.logger.errors == ['Foxglove live view stopped: RuntimeError: the server '
                                   'went away']
+
+
+def test_a_damaged_recorded_message_leaves_the_scene_and_the_replay_running(caplog):
+    """``replay --foxglove`` hands every recorded message to the view; one whose bytes
+    are not its type (a damaged recording) raised rclpy's RMWError out of the replay
+    (a traceback, the replay ended) while a client watched the scene."""
+    from visualization_msgs.msg import MarkerArray
+    from rclpy.serialization import serialize_message
+
+    markers, state = '/gripper_sim/markers', '/gripper_sim/fruit/state'
+    view = FoxgloveView({markers: 'visualization_msgs/msg/MarkerArray',
+                         state: 'gripper_sim_interfaces/msg/FruitState'}, port=0)
+
+    async def watch_the_scene() -> None:
+        async with websockets.connect(view.url, subprotocols=SUBPROTOCOLS,
+                                      proxy=None) as socket:
+            channels = []
+            while view.scene_topic not in [c['topic'] for c in channels]:
+                message = json.loads(await socket.recv())
+                channels += message.get('channels', [])
+            scene = next(c['id'] for c in channels if c['topic'] == view.scene_topic)
+            await socket.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+                {'id': 0, 'channelId': scene}]}))
+            while not view.scene_channel.has_sinks():
+                await asyncio.sleep(0.01)
+            damaged = b'\x00\x01\x00\x00\xff\xff\xff\x7f'
+            view.log_cdr(state, damaged, 10)
+            view.log_cdr(markers, damaged, 20)
+            view.log_cdr(markers, damaged, 30)
+            view.log_cdr(markers, serialize_message(MarkerArray()), 40)
+
+    try:
+        with caplog.at_level('WARNING', logger='gripper_sim.view.foxglove'):
+            asyncio.run(asyncio.wait_for(watch_the_scene(), 120))
+    finally:
+        view.close()
+    assert view.undecodable == 3 and view.scenes == 1
+    warnings = [r.getMessage() for r in caplog.records]
+    assert len(warnings) == 2   # once per topic
+    assert warnings[1].startswith(f'live view: a {markers} message at 0.000 s is not a '
+                                  'visualization_msgs/msg/MarkerArray (')

@@ -23,6 +23,7 @@ The node starts its view with ``start_node_view(node)`` (parameters ``foxglove_p
 """
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from typing import Any, Callable, Iterable, Mapping
@@ -41,6 +42,7 @@ from gripper_sim.recording.schemas import message_definition
 from gripper_sim.view.errors import ViewError
 from gripper_sim.view.scene import PressureLegend, scene_update
 
+_LOG = logging.getLogger(__name__)
 DEFAULT_PORT = 8765
 DEFAULT_ADDRESS = '127.0.0.1'
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
@@ -131,6 +133,8 @@ class FoxgloveView:
         self.scene_channel = (SceneUpdateChannel(self.scene_topic, context=context)
                               if self.scene_topic is not None else None)
         self.scenes = 0
+        self.undecodable = 0   # recorded messages the scene could not read (log_cdr)
+        self._undecodable_topics: set[str] = set()
 
     @property
     def port(self) -> int:
@@ -199,11 +203,23 @@ class FoxgloveView:
             self._log_scene(batch[self._markers_topic], batch.get(self._state_topic),
                             stamp_ns)
 
-    def _decode(self, topic: str, data: bytes) -> Any:
+    def _decode(self, topic: str, data: bytes, stamp_ns: int) -> Any:
+        """The message of ``data`` (CDR), or None if it is not one of ``topic``'s type (a
+        damaged recording): that is logged once per topic and the scene goes without
+        it, while the bytes are still served as recorded (``replay`` publishes them)."""
         cls = self._classes.get(topic)
         if cls is None:
             cls = self._classes[topic] = import_message_class(self._types[topic])
-        return deserialize_message(data, cls)
+        try:
+            return deserialize_message(data, cls)
+        except Exception as err:  # noqa: BLE001 - rclpy raises its RMWError, not exported
+            self.undecodable += 1
+            if topic not in self._undecodable_topics:
+                self._undecodable_topics.add(topic)
+                _LOG.warning(f'live view: a {topic} message at {stamp_ns / 1e9:.3f} s is not '
+                             f'a {self._types[topic]} ({err}); the scene goes without it '
+                             '(and without any later one that cannot be read)')
+            return None
 
     def log_cdr(self, topic: str, data: bytes, stamp_ns: int) -> None:
         """Serve one recorded message (CDR bytes) of ``topic`` (replay); the scene is
@@ -218,10 +234,15 @@ class FoxgloveView:
             channel.log(data, log_time=stamp_ns)
         if not self._scene_wanted():
             return
+        if topic not in (self._state_topic, self._markers_topic):
+            return
+        message = self._decode(topic, data, stamp_ns)
+        if message is None:
+            return
         if topic == self._state_topic:
-            self._last_state = self._decode(topic, data)
-        elif topic == self._markers_topic:
-            self._log_scene(self._decode(topic, data), self._last_state, stamp_ns)
+            self._last_state = message
+        else:
+            self._log_scene(message, self._last_state, stamp_ns)
 
     def close(self) -> None:
         """Stop the server (clients are disconnected)."""
