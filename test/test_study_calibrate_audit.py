@@ -146,7 +146,8 @@ def test_a_study_that_cannot_reach_its_scheduler_creates_nothing(tmp_path):
         port = probe.getsockname()[1]
     study = write_study(tmp_path, 'tiny')
     out = tmp_path / 'never'
-    failed = run(study, out, '--scheduler', f'tcp://127.0.0.1:{port}')
+    failed = gripper_sim('study', str(study), '--out', str(out), '--no-progress',
+                         '--no-report', '--scheduler', f'tcp://127.0.0.1:{port}')
     assert failed.returncode == 2
     assert failed.stderr.startswith('error: cannot reach the Dask scheduler')
     assert not out.exists()

@@ -91,13 +91,15 @@ def wait_for(condition, what, timeout=300.0):
 
 class DaskCluster:
     """A `dask scheduler` and `dask worker` processes (no nanny: a SIGKILL kills the
-    worker itself) on 127.0.0.1 with free ports and no dashboard."""
+    worker itself) on 127.0.0.1 with free ports and no dashboard (the scheduler's HTTP
+    server too: with --no-dashboard alone it listens on 0.0.0.0:8787)."""
 
     def __init__(self, directory: Path, workers: int = 2):
         self.file = directory / 'scheduler.json'
         self.scheduler = subprocess.Popen(
             [sys.executable, '-m', 'distributed.cli.dask_scheduler', '--host', '127.0.0.1',
-             '--port', '0', '--no-dashboard', '--scheduler-file', str(self.file)],
+             '--port', '0', '--no-dashboard', '--dashboard-address', '127.0.0.1:0',
+             '--scheduler-file', str(self.file)],
             env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         wait_for(self.file.exists, 'the scheduler file')
         wait_for(lambda: self.file.stat().st_size > 0, 'the scheduler address')
