@@ -87,8 +87,8 @@ def test_a_squeeze_report_is_titled_a_squeeze_and_has_no_slip_panel(tmp_path):
     fig = time_figure(series, summary, find_events(series))
     axis_titles = [fig.layout[name].title.text for name in fig.layout
                    if name.startswith('yaxis')]
-    assert 'slip (mm)' not in axis_titles
-    assert not any('slip' in (trace.name or '') for trace in fig.data)
+    assert 'centroid drop (mm)' not in axis_titles
+    assert not any('drop' in (trace.name or '') for trace in fig.data)
     assert not any('slip tolerance' in (a.text or '') for a in fig.layout.annotations)
     assert 'No slip panel' in path.read_text()
 
@@ -97,7 +97,7 @@ def test_a_lifted_run_keeps_its_slip_panel_and_its_dropped_flag():
     series = made_run(lifted=True)
     summary = report_summary(series)
     fig = time_figure(series, summary, find_events(series))
-    assert any(fig.layout[name].title.text == 'slip (mm)' for name in fig.layout
+    assert any(fig.layout[name].title.text == 'centroid drop (mm)' for name in fig.layout
                if name.startswith('yaxis'))
     assert dict(summary_rows(summary))['held / slipped / dropped'] == \
         'True / False / False'

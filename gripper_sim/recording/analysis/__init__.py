@@ -6,8 +6,9 @@ and writes per run:
 
 - ``timeseries.csv``: one row per FruitState message (``series.COLUMNS``);
 - ``summary.json``: peaks, the stiffness of the loading part and the range it was
-  fitted on, held/slipped (the node's own definition, ``gripper_sim.core.slip``), the
-  phases found, contact size, damage;
+  fitted on, held/slipped (the node's rule, ``gripper_sim.core.slip.grasp_slipped``,
+  on the centroid's drop: a recording has no contact slide), the phases found, contact
+  size, damage;
 - ``force_vs_time.png``, ``force_vs_compression.png``; ``outline_snapshots.png`` (2D)
   or ``mesh_snapshots.png`` and ``contact_patch.png`` (3D);
 - ``report.html``: the same as an interactive page with an animation of the fruit.

@@ -109,7 +109,7 @@ def force_vs_time(series: TimeSeries, summary: dict, events: Events) -> Figure:
                     label=f'slip tolerance {tolerance:g} mm')
     slip_top = float(np.nanmax(np.abs(series['slip_distance_m']))) * 1e3
     ax_slip.set_ylim(-0.05 * max(slip_top, 1e-3), 1.15 * max(slip_top, tolerance))
-    ax_slip.set_ylabel('slip in the jaws (mm)')
+    ax_slip.set_ylabel('centroid drop (mm)')
     ax_slip.legend(loc='upper left', fontsize=8)
     ax_slip.set_xlabel('sim time (s)')
     for ax in axes:

@@ -139,7 +139,8 @@ def summary_rows(summary: dict) -> list[tuple[str, str]]:
                                      f"{_yes_no(dropped)}"
                                      + ('' if lifted
                                         else f' ({grasp_outcome(summary)})')),
-        ('slip at the end of the hold', _number(summary['held_slip_distance_m'], 'mm', 1e3)),
+        ('centroid drop at the end of the hold (what held is judged on; no contact slide '
+         'in a recording)', _number(summary['held_slip_distance_m'], 'mm', 1e3)),
         ('peak grip force', _number(summary['peak_grip_force_n'], 'N')),
         ('peak compression', _number(summary['peak_compression_m'], 'mm', 1e3)),
         ('stiffness (tangent, secant)',
@@ -198,12 +199,12 @@ def time_figure(series: TimeSeries, summary: dict, events: Events) -> go.Figure:
                   row=3, col=1)
     if lifted:
         fig.add_trace(go.Scatter(x=t, y=1e3 * series['slip_distance_m'],
-                                 name='slip in the jaws (mm)'), row=4, col=1)
+                                 name='centroid drop in the jaws (mm)'), row=4, col=1)
         tolerance = 1e3 * summary['slip_threshold_m']
         fig.add_hline(y=tolerance, line_dash='dot', line_color='red', row=4, col=1,
                       annotation_text=f'slip tolerance {tolerance:g} mm')
     for row, label in enumerate(('normal force (N)', 'jaw gap (mm)', 'compression (mm)',
-                                 'slip (mm)')[:rows], start=1):
+                                 'centroid drop (mm)')[:rows], start=1):
         fig.update_yaxes(title_text=label, row=row, col=1)
     fig.update_xaxes(title_text='sim time (s)', row=rows, col=1)
     _phase_lines(fig, series, events)

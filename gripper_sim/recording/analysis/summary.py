@@ -16,9 +16,12 @@ up to a sample interval after the loading, in the fruit's ringing, and a secant 
 varies with the sampling phase (1.35-2.61 N/mm over the ten phases of one 100 Hz
 pick, 2.15 N/mm at 1 kHz): neither is given.
 
-Held and slipped use ``gripper_sim.core.slip.grasp_slipped``, the definition of the
-node's Grasp result: the slip at the end of the hold (before the release), or a drop.
-They judge a lifted fruit: a run without a lift-off (a squeeze, or a recording without
+Held and slipped use ``gripper_sim.core.slip.grasp_slipped``, the rule of the node's
+Grasp result, but on another measure: a recording has no contact slide (how far the
+jaw-contact nodes slid, ``core.slip.ContactSlide``, what ``pick``, ``run`` and the
+Grasp action judge on), so a recording is judged on the centroid's drop relative to the
+jaws at the end of the hold (``FruitState.slip_distance``, before the release; its
+elastic sag included), or a drop. They judge a lifted fruit: a run without a lift-off (a squeeze, or a recording without
 ``/joint_states``) has no hold, and both are None (n/a, 'not lifted').
 """
 from __future__ import annotations
@@ -253,14 +256,18 @@ def summarize(series: TimeSeries, *, bruise_pressure: float) -> dict[str, Any]:
 
 
 def held_line(s: dict, fmt: Callable[..., str]) -> str:
-    """The printed line on held and slipped: n/a, with the reason, for a run not lifted."""
+    """The printed line on held and slipped, judged on the centroid drop (module
+    docstring): n/a, with the reason, for a run not lifted."""
     largest = fmt(s['max_slip_distance_m'], 'mm', 1e3)
     dropped = ', dropped' if s.get('dropped') else ''
     if s.get('held') is None:
         return (f"held: n/a   slipped: n/a ({grasp_outcome(s)}: no lift-off in the "
-                f"recording; largest slip {largest}{dropped})")
-    return (f"held: {s['held']}   slipped: {s['slipped']} (slip at the end of the hold "
-            f"{fmt(s['held_slip_distance_m'], 'mm', 1e3)}, largest {largest}{dropped})")
+                f"recording; largest centroid drop {largest}{dropped})")
+    return (f"held: {s['held']}   slipped: {s['slipped']} (centroid drop at the end of "
+            f"the hold {fmt(s['held_slip_distance_m'], 'mm', 1e3)}, largest {largest}"
+            f"{dropped})\n{NOTE_INDENT}judged on the centroid's drop relative to the jaws "
+            f"(elastic sag\n{NOTE_INDENT}included): a recording has no contact slide, which "
+            f"pick and run judge on")
 
 
 def describe(summary: dict) -> list[str]:
