@@ -390,3 +390,15 @@ def test_a_damaged_recorded_message_leaves_the_scene_and_the_replay_running(capl
     assert len(warnings) == 2   # once per topic
     assert warnings[1].startswith(f'live view: a {markers} message at 0.000 s is not a '
                                   'visualization_msgs/msg/MarkerArray (')
+
+
+@pytest.mark.parametrize('host, shown', [('127.0.0.1\n', "'127.0.0.1\\n'"), ('', "''"),
+                                         ('a b', "'a b'")])
+def test_a_bad_address_is_named_in_one_line(host, shown):
+    """``foxglove_address`` with a newline gave a two-line warning; an empty one read
+    'on :8765'."""
+    with pytest.raises(ViewError) as caught:
+        FoxgloveView({'/clock': 'rosgraph_msgs/msg/Clock'}, host=host, port=0)
+    message = str(caught.value)
+    assert '\n' not in message
+    assert message.startswith(f'cannot serve the Foxglove live view on {shown}:0: ')

@@ -62,6 +62,13 @@ def scene_topic(markers_topic: str) -> str:
     return f'{parent}/{SCENE_NAME}'
 
 
+def shown_address(host: str) -> str:
+    """``host`` as an error message shows it: quoted when empty or holding spaces or
+    control characters (a newline in ``foxglove_address`` split the message)."""
+    plain = host and host.isprintable() and not any(c.isspace() for c in host)
+    return host if plain else repr(host)
+
+
 def _only_topic_of(topics: Mapping[str, str], type_name: str) -> str | None:
     found = [name for name, kind in topics.items() if kind == type_name]
     return found[0] if len(found) == 1 else None
@@ -121,7 +128,8 @@ class FoxgloveView:
                 server_listener=_SubscriptionCounter(on_watched, self._on_subscribe))
         except RuntimeError as err:   # foxglove-sdk's FoxgloveError, e.g. port taken
             reason = str(err).removeprefix('FoxgloveError: ')
-            msg = (f'cannot serve the Foxglove live view on {host}:{port}: {reason}; choose '
+            msg = (f'cannot serve the Foxglove live view on {shown_address(host)}:{port}: '
+                   f'{reason}; choose '
                    'a free port or an address of this machine')
             raise ViewError(msg) from err
         self.channels.update({topic: foxglove.Channel(topic, schema=schema,
