@@ -176,10 +176,13 @@ KEYS: dict[str, Term] = {
                                         'peak_contact_pressure)'),
     'peak_max_skin_strain': Term('', 'largest skin strain (signed)'),
     'gripped': Term('-', 'both jaws touched the fruit'),
-    'held_slip_distance': Term('m', 'slip at the end of the hold (what held and slipped '
-                                    'are judged on)'),
-    'max_slip_distance': Term('m', 'largest slip over the recording'),
-    'final_slip_distance': Term('m', 'slip at the last message'),
+    'held_slip_distance': Term('m', 'centroid drop relative to the jaws at the end of the '
+                                    'hold (what analyze judges held and slipped on: a '
+                                    'recording has no contact slide)'),
+    'max_slip_distance': Term('m', 'largest centroid drop relative to the jaws over the '
+                                   'recording'),
+    'final_slip_distance': Term('m', 'centroid drop relative to the jaws at the last '
+                                     'message'),
     'slipping_time': Term('s', 'time the fruit slid while gripped'),
     'final_bruised_fraction': Term('', 'bruised fraction at the last message'),
     'damage_note': Term('-', 'why a damage value is missing (old recordings)'),
