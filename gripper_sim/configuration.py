@@ -164,10 +164,12 @@ SCHEMA: dict[str, Key] = {
                                    'in dt; 0: elastic, it rings as long as the integrator '
                                    'lets it (README, Jaws)',
                                    low=0.0, high=1.0),
+    # from 1 kPa: a figure in MPa (0.26) is refused, not taken as a fruit that bruises
+    # at any touch
     'fruit.bruise_pressure': Key(0.26e6, 'Pa', 'contact pressure above which the '
-                                 'fruit bruises', low=0.0, high=1e9),
+                                 'fruit bruises', low=1e3, high=1e9),
     'fruit.failure_stress': Key(0.29e6, 'Pa', 'flesh failure stress (crushing)',
-                                low=0.0, high=1e9),
+                                low=1e3, high=1e9),
     'fruit.failure_strain': Key(None, '', 'whole-fruit compression (width loss over the '
                                 'rest width) at which the flesh fails (crushing); null = '
                                 'not checked', low=0.0, high=1.0, nullable=True,

@@ -180,3 +180,14 @@ def test_squeeze_and_pick_headers_name_the_finger(capsys):
           '--quiet', *SMALL])
     assert capsys.readouterr().out.startswith('pick of apple (2D) with the vgroove finger '
                                               'at 3 N: ')
+
+
+@pytest.mark.parametrize('key', ['fruit.bruise_pressure', 'fruit.failure_stress'])
+def test_a_damage_threshold_given_in_mpa_is_refused_with_its_unit(key, capsys):
+    """0.26 (MPa written where the key is in Pa) would make every touch bruise or crush."""
+    with pytest.raises(ConfigError, match=rf"'{key}' = 0.26 Pa is out of range: it must "
+                                          r'be >= 1000.0 Pa'):
+        load_config(overrides=[f'{key}=0.26'])
+    assert load_config(overrides=[f'{key}=0.26e6'])[key] == 0.26e6
+    assert main(['squeeze', '--to-force', '1', '--set', f'{key}=0.26', *SMALL]) == 2
+    assert 'out of range' in capsys.readouterr().err
