@@ -50,11 +50,11 @@ def smallest_gap(x: np.ndarray, edges: np.ndarray) -> float:
     return float(np.min(np.where(own, np.inf, gap)))
 
 
-def _fold(self_contact):
-    """(crossings at each increment, the smallest gap at the end m) of the pressed
-    finger."""
-    body = fin_ray_body(_geometry(depth=0.01), MATERIALS['tpu'])
-    forces, _ = _press(body, GRIP, 0.01)
+def _fold(self_contact, element: float = 0.002, grip: float = GRIP):
+    """(crossings at each increment, the smallest gap at the end m) of the finger with
+    rod elements ``element`` m long pressed to ``grip`` N."""
+    body = fin_ray_body(_geometry(depth=0.01, element_length=element), MATERIALS['tpu'])
+    forces, _ = _press(body, grip, 0.01)
     counts = []
     final = static_equilibrium(body, forces, increments=100, hold=100, step=1e-3,
                                tolerance=1e-6, self_contact=self_contact,
@@ -68,8 +68,12 @@ def test_without_self_contact_the_pressed_beams_cross():
     assert counts[0] == 0 and max(counts) > 0
 
 
-def test_with_self_contact_the_beams_touch_and_never_cross():
-    counts, gap = _fold(SETTINGS)
+@pytest.mark.parametrize('element, grip', [(0.002, GRIP), (0.004, GRIP), (0.002, 16.0)])
+def test_with_self_contact_the_beams_touch_and_never_cross(element, grip):
+    """Also where the last Newton step of an increment, below the tolerance (1 um), is
+    longer than the gap the barrier keeps (0.2-0.5 um): 4 mm elements at 12 N and 2 mm
+    at 16 N crossed when such a step was taken whole, past the step bound."""
+    counts, gap = _fold(SETTINGS, element, grip)
     assert len(counts) == 200
     assert max(counts) == 0
     assert 0 < gap < 1e-5, 'folded onto the members behind it, not through them'
@@ -105,7 +109,7 @@ def test_a_finger_without_rods_has_no_self_contact(finger):
 
 
 def test_a_folding_finger_grows_its_self_contact_pattern():
-    """The tomato squeezed to 43.8 N (the Fin Ray's window trial): each finger's front
+    """The tomato squeezed to 43.8 N (the 2 mm Fin Ray's window trial): each finger's front
     beam lands on members whose nodes lay apart at rest, outside its self-contact's
     Hessian pattern; their couplings were left out of the Newton matrix (5 times too
     stiff along the nodes' joint motion: ``bench/newton_matrix_check.py --pick``), Newton
@@ -119,7 +123,9 @@ def test_a_folding_finger_grows_its_self_contact_pattern():
     scenario = load_scenario('pick_and_place')
     config, base = trial_setup(scenario_config(scenario, fruit='tomato', finger='fin_ray'),
                                scenario)
-    sim = make_simulation(config)
+    # the window's finger of 2 mm elements (the tomato's default is 4 mm now, whose
+    # fingers deliver at most 42.1 N)
+    sim = make_simulation({**config, 'gripper.finger.fin_ray.element_length': 0.002})
     barrier = sim._soft.self_contact
     given = barrier.pattern_pairs
     machine = PickAndPlace(sim, base.with_values(close__mode='force', close__force=43.804),

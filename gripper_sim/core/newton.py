@@ -230,8 +230,9 @@ def newton_iteration(problem, q, dt, tol, max_it, history, counts):
             found = finite and slope <= 0
         residual = max_abs(g_f)
         dq_max = max_abs(dq)
-        # a step below the tolerance is taken whole, without a line search (the first
-        # trial below, accepted as it is): q + dq, then the reaction there
+        # a step below the tolerance is taken without a line search (the first trial
+        # below, accepted as it is): q + dq, or as far as the step bound lets it go (a
+        # barrier's gap can be smaller than the tolerance: a whole step crossed it)
         small = dq_max / dt < tol
         accepted = False
         phi_trial = 0.0
@@ -239,7 +240,7 @@ def newton_iteration(problem, q, dt, tol, max_it, history, counts):
         step = 1.0
         # a step with the kept matrix is tried whole only
         tries = HALVINGS if fresh else (1 if found else 0)
-        if tries > 0 and not small:
+        if tries > 0:
             step = step_bound(problem, q, dq)
         limit = keep_limit(problem)
         hessian_at_trial = False
