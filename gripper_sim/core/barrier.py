@@ -137,6 +137,8 @@ _NO_VALUES, _NO_SLOTS = np.zeros(0), np.zeros(0, np.int64)
 _NO_STEP = np.zeros(0)  # ``quiet`` at q only
 #: the compiled solve's empty (k, 2) corners or anchors and candidates
 _NO_CORNERS, _NO_PAIRS = np.zeros((0, 2)), np.zeros((0, 2), np.int64)
+#: no faces (a self-contact's step, ``soft_body_step``)
+_NO_FACES = ()
 #: no prescribed nodes (``set_up_starts``)
 _NO_NODES = np.zeros(0, np.int64)
 _NO_FRICTION = (np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0),
@@ -230,6 +232,8 @@ def _same_faces(faces, kept_faces: tuple, kept_origins: tuple) -> bool:
 
 
 _origin = operator.attrgetter('origin')
+#: a face's (static, kinetic) friction coefficients
+_friction_of = operator.attrgetter('static_friction', 'kinetic_friction')
 
 
 def _shape_key(face) -> tuple:
@@ -486,8 +490,10 @@ class BarrierContact(Energy):
 
     def begin_step(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> None:
         """Set up a step of ``dt`` (s) from positions ``x_n`` (n, d) m with the faces moving
-        from ``old_faces`` to ``new_faces``: the lagged friction of the start state."""
-        old, new = self._corners(old_faces), self._corners(new_faces)
+        from ``old_faces`` to ``new_faces`` (the same object: faces that stand still): the
+        lagged friction of the start state."""
+        old = self._corners(old_faces)
+        new = old if new_faces is old_faces else self._corners(new_faces)
         mu_s, mu_k, rubbing = self._begin_faces(x_n, old, new, new_faces, dt)
         start = self.vertices(x_n, old)
         self._start = start
@@ -596,7 +602,7 @@ class BarrierContact(Energy):
         with the ``faces`` (a pair takes the larger one: the face's or the soft body's,
         the fruit's being 0), and whether any is positive; kept while the faces'
         coefficients stay."""
-        key = tuple((f.static_friction, f.kinetic_friction) for f in faces)
+        key = tuple(map(_friction_of, faces))
         if self._friction_coefficients is None or self._friction_coefficients[0] != key:
             body_mu_s = np.array([0.0] + [b.static_friction for b in self.bodies])
             body_mu_k = np.array([0.0] + [b.kinetic_friction for b in self.bodies])
@@ -1304,7 +1310,8 @@ def _free(n: int, d: int) -> StepConstraints:
     return _kept_free[1]
 
 
-#: the last ``_prescribed`` constraints: ((n, d, the fixed nodes' array), them), or None
+#: the last ``_prescribed`` answer: ((n, d, the fixed nodes' array), (the constraints,
+#: the fixed nodes' dofs)), or None
 _kept_constraints: tuple | None = None
 
 
@@ -1358,17 +1365,19 @@ def _carried_starts(barrier: BarrierContact, x_n: np.ndarray, pushed: np.ndarray
     raise NoCollisionFreeStart()
 
 
-def _prescribed(n: int, d: int, fixed: np.ndarray) -> StepConstraints:
-    """The constraints of a step of n nodes in d dimensions with nodes ``fixed`` (k,)
-    prescribed (zero filters), the rest free; read only, kept for the same fixed array
-    (a soft body step's are the same every step)."""
+def _prescribed(n: int, d: int, fixed: np.ndarray) -> tuple[StepConstraints, np.ndarray]:
+    """(the constraints of a step of n nodes in d dimensions with nodes ``fixed`` (k,)
+    prescribed (zero filters), the rest free, the fixed nodes' dofs (k d,)); read only,
+    kept for the same fixed array (a soft body step's are the same every step)."""
     global _kept_constraints
     kept = _kept_constraints
     if kept is None or kept[0][:2] != (n, d) or kept[0][2] is not fixed:
         constraints = StepConstraints.free(n, dim=d)
         constraints.filters[fixed] = 0.0
         constraints.filters.flags.writeable = False
-        kept = _kept_constraints = ((n, d, fixed), constraints)
+        dofs = element_dofs(fixed[:, None], d).ravel()
+        dofs.flags.writeable = False
+        kept = _kept_constraints = ((n, d, fixed), (constraints, dofs))
     return kept[1]
 
 
@@ -1413,7 +1422,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         pushed, start = barrier.pushed_starts(x_n, old_faces, new_faces, x_n + dt * v_n)
         clear = pushed_clear = None
     if self_contact is not None:
-        self_contact.begin_step(x_n, [], [], dt)
+        self_contact.begin_step(x_n, _NO_FACES, _NO_FACES, dt)
 
     def reachable(start: np.ndarray, compiled_clear: bool | None = None) -> bool:
         """Whether the way to ``start`` (its fixed nodes set) crosses nothing, the
@@ -1432,11 +1441,12 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         # is not clear)
         if not reachable(start, pushed_clear if not clear else None):
             start = _carried_starts(barrier, x_n, pushed, carried, reachable)
-    constraints = _prescribed(n, d, fixed)
+    constraints, fixed_dofs = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
     x = solution.q.reshape(-1, d)
-    reaction = np.zeros((n, d))
-    reaction[fixed] = solution.reaction.reshape(-1, d)[fixed]
+    reaction = np.zeros(n * d)
+    reaction[fixed_dofs] = solution.reaction[fixed_dofs]
+    reaction = reaction.reshape(n, d)
     contacts = cm.ContactState.held_by(barrier.partners(solution.q))
     return StepOutcome(x, (x - x_n) / dt, barrier.contact_forces(solution.q), contacts,
                        solution.iterations, reaction)

@@ -84,9 +84,16 @@ class CompiledSolve:
                      for x in (barrier, scatter, barrier.compiled_part(scatter)))
 
     def fits(self, barriers: list) -> bool:
-        """Whether this was made for ``barriers`` [(barrier, scatter)] as they are."""
-        key = self.key_of(barriers)
-        return len(key) == len(self.key) and all(a is b for a, b in zip(key, self.key))
+        """Whether this was made for ``barriers`` [(barrier, scatter)] as they are
+        (``key_of``, compared item by item: a solve asks before every run)."""
+        key = self.key
+        if 3 * len(barriers) != len(key):
+            return False
+        for k, (barrier, scatter) in enumerate(barriers):
+            if (key[3 * k] is not barrier or key[3 * k + 1] is not scatter
+                    or key[3 * k + 2] is not barrier.compiled_part(scatter)):
+                return False
+        return True
 
     def run(self, q_n, v_n, dt, con, stiffness, q, alternative, history, max_iterations,
             counts):

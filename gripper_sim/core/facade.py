@@ -850,9 +850,10 @@ class SimulationFacade:
         soft, n, finger = self._soft, self.fruit.n_nodes, self._finger
         targets = soft.base_targets(self._jaw_origin(grip_new, LEFT),
                                     self._jaw_origin(grip_new, RIGHT))
-        m = soft.n_nodes // 2
+        m_both = soft.n_nodes
 
         def carried():  # each finger's nodes and its base's shift (``soft_body_step``)
+            m = m_both // 2
             return [(n + side * m + np.arange(m),
                      self._jaw_origin(grip_new, side) - self._jaw_origin(self._grip, side))
                     for side in (LEFT, RIGHT)]
@@ -864,9 +865,14 @@ class SimulationFacade:
         v = outcome.v[:n]
         # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
         # right_jaw (the fingers), then the faces
-        obstacle, touching = np.empty(n, np.int64), np.empty(soft.n_nodes, bool)
+        obstacle, touching = np.empty(n, np.int64), np.empty(m_both, bool)
         split_partners(outcome.contacts.obstacle, obstacle, touching)
-        contacts = cm.ContactState.held_by(obstacle)
+        # held by ``obstacle``, the rest of the outcome's fresh contact set (all FREE, no
+        # forces, no second obstacle: ``ContactState.held_by``) cut to the fruit's nodes
+        _, mode, normal_force, bounce_speed, secondary, secondary_bounce = (
+            outcome.contacts.arrays())
+        contacts = cm.ContactState(obstacle, mode[:n], normal_force[:n], bounce_speed[:n],
+                                   secondary[:n], secondary_bounce[:n])
         self._mark_sticking(contacts, v, grip_new)
         self._finger = build(FingerState, dict(
             positions=outcome.x[n:], velocities=outcome.v[n:], contact_forces=outcome.forces[n:],

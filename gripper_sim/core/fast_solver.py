@@ -52,6 +52,7 @@ import scipy.sparse as sp
 
 from gripper_sim.core import barrier_solve, linear_solve, newton, sparse_ldl
 from gripper_sim.core import solver_kernels as kernels
+from gripper_sim.core.barrier_kernels import same_values
 from gripper_sim.core.energies.base import Energy
 from gripper_sim.core.energy_table import EnergyTable
 from gripper_sim.core.pattern_keys import sorted_unique
@@ -425,7 +426,7 @@ class PatternCachingSolver:
         history = np.zeros(self.max_iterations)
         warm = self._warm
         status = newton.INFEASIBLE_START
-        if warm is not None and warm[1] == dt and np.array_equal(warm[0], q_n):
+        if warm is not None and warm[1] == dt and same_values(warm[0], q_n):
             q = q_start + problem.filtered(warm[2] - q_start)
             status, iterations, n_hist = self._iterate(problem, q, history)
         if status == newton.INFEASIBLE_START:
