@@ -274,10 +274,15 @@ SCHEMA: dict[str, Key] = {
                                              'beam runs along the jaw; near base_width: the '
                                              'front beam nearly parallel to the jaw)',
                                              low=0.0, high=0.2),
-    'gripper.finger.fin_ray.element_length': Key(0.002, 'm', 'fin_ray: rod element length '
+    'gripper.finger.fin_ray.element_length': Key(None, 'm', 'fin_ray: rod element length '
                                                  'of the discretisation (at most 1000 nodes '
-                                                 'in a finger: finer is refused)', low=0.0,
-                                                 high=0.05,
+                                                 'in a finger: finer is refused); null = '
+                                                 'follow the fruit: in 2D the coarsest of '
+                                                 '4, 2, 1, 0.5 mm no longer than 1.5 times '
+                                                 "the fruit outline's node spacing and a "
+                                                 "quarter of the finger's length (4 mm for "
+                                                 'the default apple), in 3D 2 mm',
+                                                 low=0.0, high=0.05, nullable=True,
                                                  open_low=True),
     'gripper.finger.fin_ray.material': Key('tpu', '-', 'fin_ray: tpu (printed TPU, E = 100 '
                                            'MPa); silicone (Dragon Skin 30, E = 0.59 MPa); '

@@ -45,7 +45,7 @@ def test_a_setting_reaches_the_fin_ray_grasp_only(monkeypatch, capsys):
     assert bench_fin_ray.main(['--plain', '--set', f'{ELEMENT}=0.006']) == 0
     rows = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     lengths = {(config['gripper.finger.type'], config[ELEMENT]) for config in built}
-    assert lengths == {('flat', 0.002), ('fin_ray', 0.006)}
+    assert lengths == {('flat', None), ('fin_ray', 0.006)}   # the flat finger's is the default
     assert rows['fin_ray']['outcome'] == rows['flat']['outcome'] == 'held'
     # the contact on the apple is its outline nodes' (3.9 mm apart), not the finger's
     assert rows['fin_ray']['contact'] == pytest.approx(0.0187, abs=2e-4)

@@ -30,9 +30,15 @@ def _config(*overrides):
     return load_config(overrides=[FIN_RAY, *overrides])
 
 
+#: the rod element length the finger's structure is checked at (the default follows the
+#: fruit: 4 mm on the default apple, ``test_small_loads_give_the_linear_frame_displacements``)
+STRUCTURE_ELEMENT = 'gripper.finger.fin_ray.element_length=0.002'
+
+
 def _geometry(**changes) -> FinRayGeometry:
-    """The default Fin Ray, 20 mm deep, with ``changes``."""
-    return dataclasses.replace(FinRayGeometry.from_config(_config(), 0.02), **changes)
+    """The default Fin Ray with 2 mm elements, 20 mm deep, with ``changes``."""
+    return dataclasses.replace(FinRayGeometry.from_config(_config(STRUCTURE_ELEMENT), 0.02),
+                               **changes)
 
 
 def _front_normal(body: FingerBody) -> np.ndarray:
@@ -153,7 +159,7 @@ def test_the_simulation_puts_a_fin_ray_on_each_jaw():
 
 
 def test_members_carry_ea_and_ei_of_their_sections():
-    config = _config('gripper.finger.fin_ray.material=custom',
+    config = _config(STRUCTURE_ELEMENT, 'gripper.finger.fin_ray.material=custom',
                      'gripper.finger.fin_ray.youngs_modulus=5e7',
                      'gripper.finger.fin_ray.density=1000')
     body = fin_ray_from_config(config, 0.042)
@@ -219,12 +225,15 @@ def test_the_rest_shape_is_in_equilibrium():
 # --- the structure
 
 
-@pytest.mark.parametrize('rib_count', [0, 4, 6])
-def test_small_loads_give_the_linear_frame_displacements(rib_count):
+@pytest.mark.parametrize('rib_count, element, within', [
+    (0, 0.002, 0.02), (4, 0.002, 0.02), (6, 0.002, 0.02), (0, 0.004, 0.04),
+    (4, 0.004, 0.04), (6, 0.004, 0.04)])
+def test_small_loads_give_the_linear_frame_displacements(rib_count, element, within):
     """A 10 mN press at mid-height: the rod model's displacements (the loaded node and the
     tip) are those of the linear Euler-Bernoulli frame of the same members with rigid
-    joints, within 2 % of the loaded node's displacement."""
-    g = _geometry(rib_count=rib_count)
+    joints, within 2 % of the loaded node's displacement with 2 mm elements, 4 % with the
+    default apple's 4 mm (2.0-3.5 %: the rods bend at their nodes)."""
+    g = _geometry(rib_count=rib_count, element_length=element)
     material = MATERIALS['tpu']
     body = fin_ray_body(g, material)
     plan = layout(g)
@@ -237,8 +246,8 @@ def test_small_loads_give_the_linear_frame_displacements(rib_count):
                                 plan.base_nodes, forces)
     scale = np.linalg.norm(frame[mid])
     assert scale > 1e-6
-    assert np.linalg.norm(moved[mid] - frame[mid]) < 0.02 * scale
-    assert np.linalg.norm(moved[body.tip_node] - frame[body.tip_node]) < 0.02 * scale
+    assert np.linalg.norm(moved[mid] - frame[mid]) < within * scale
+    assert np.linalg.norm(moved[body.tip_node] - frame[body.tip_node]) < within * scale
 
 
 def test_ribs_stiffen_the_finger_and_the_load_grows_with_the_press():

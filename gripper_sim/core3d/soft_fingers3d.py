@@ -42,6 +42,7 @@ from gripper_sim.core3d.layered_mesher import vertex_edge_lengths
 from gripper_sim.core3d.rod_extrusion import extruded_rod_body
 from gripper_sim.core3d.mesh_geometry import surface_edges
 from gripper_sim.errors import ConfigError
+from gripper_sim.geometry.fin_ray import element_length
 
 #: the right finger is the left one mirrored in x
 MIRROR = np.array([-1.0, 1.0, 1.0])
@@ -80,7 +81,7 @@ def fin_ray_body3d(config) -> FingerBody3D:
     """The 3D Fin Ray of ``config`` (see the module docstring)."""
     depth = config['gripper.finger.fin_ray.depth']
     width = float(config['gripper.jaw_width'] if depth is None else depth)
-    cell = WIDTH_CELL_RATIO * float(config['gripper.finger.fin_ray.element_length'])
+    cell = WIDTH_CELL_RATIO * element_length(config)
     slices = min(MAX_IN_PLANE_CELLS, max(2, int(round(width / cell))))
     # the section as beams: the shells add the plates' 1 / (1 - nu^2) themselves
     section = fin_ray_from_config(config, width, 'beam')

@@ -38,6 +38,14 @@ MAX_SECTION_NODES = 1000
 #: the longest element (in fruit outline node spacings) that keeps a jaw's contact one
 #: patch (docs/fin_ray_convergence.md: 1.3 does, 1.9 does not)
 COARSEST_ELEMENT = 1.5
+#: m, a null ``element_length`` in 2D: the first of these no longer than
+#: ``COARSEST_ELEMENT`` outline spacings (the last if none is): 4 mm gives the 1 mm
+#: finger's grasp figures within about 2 % on the default apple, in about 70 % of the
+#: 2 mm finger's CPU time (docs/fin_ray_convergence.md)
+FOLLOWED_ELEMENTS = (0.004, 0.002, 0.001, 0.0005)
+#: m, a null ``element_length`` in 3D: its slices across the width scale with it too
+#: (``core3d.soft_fingers3d.WIDTH_CELL_RATIO``), and the 3D figures were measured at it
+ELEMENT_3D = 0.002
 #: how a rib joins the beams: welded (rest angle kept) or hinged
 RIB_JOINTS = ('rigid', 'pinned')
 
@@ -85,6 +93,7 @@ class FinRayGeometry:
         depth is ``fruit_depth`` (m)."""
         values = {name: config[PREFIX + name] for name in cls.__dataclass_fields__
                   if name != 'rib_angle_given'}
+        values['element_length'] = element_length(config)
         values['rib_ends'] = parse_rib_ends(values['rib_ends'])
         if values['rib_ends'] is not None:
             values['rib_count'] = len(values['rib_ends'])
@@ -253,6 +262,30 @@ def check_fin_ray(config) -> None:
     check_geometry(geometry)
 
 
+def outline_spacing(config) -> float:
+    """m, the median distance between neighbouring nodes of the 2D fruit outline of a
+    flat configuration."""
+    outline = outline_from_config(config)
+    return float(np.median(np.linalg.norm(np.roll(outline, -1, axis=0) - outline, axis=1)))
+
+
+def element_length(config) -> float:
+    """m, the Fin Ray's rod element length of a flat configuration: the key's value, or
+    where it is null the fruit's (``FOLLOWED_ELEMENTS`` in 2D, no longer than a quarter
+    of the finger's length either; ``ELEMENT_3D`` in 3D)."""
+    value = config[PREFIX + 'element_length']
+    if value is not None:
+        return float(value)
+    if config.get('dimension') == 3:
+        return ELEMENT_3D
+    longest = COARSEST_ELEMENT * outline_spacing(config)
+    finger = config[PREFIX + 'length']
+    if math.isfinite(finger) and finger > 0:   # as ``check_geometry`` allows
+        longest = min(longest, 0.25 * finger)
+    return next((length for length in FOLLOWED_ELEMENTS if length <= longest),
+                FOLLOWED_ELEMENTS[-1])
+
+
 def resolution_warning(config) -> str | None:
     """A line saying that the 2D Fin Ray of a flat configuration is too coarse for its
     fruit, or None. Elements longer than ``COARSEST_ELEMENT`` times the fruit outline's
@@ -262,13 +295,12 @@ def resolution_warning(config) -> str | None:
     2.6 times, the apple's outline of 256 nodes)."""
     if config.get('gripper.finger.type') != 'fin_ray' or config.get('dimension') != 2:
         return None
-    outline = outline_from_config(config)
-    spacing = float(np.median(np.linalg.norm(np.roll(outline, -1, axis=0) - outline,
-                                             axis=1)))
-    element = float(config[PREFIX + 'element_length'])
+    spacing = outline_spacing(config)
+    element = element_length(config)
     if element <= COARSEST_ELEMENT * spacing:
         return None
-    return (f"config key '{PREFIX}element_length' = {element * 1e3:.3g} mm is "
+    given = 'null: ' if config[PREFIX + 'element_length'] is None else ''
+    return (f"config key '{PREFIX}element_length' = {given}{element * 1e3:.3g} mm is "
             f"{element / spacing:.2g} times the fruit outline's node spacing "
             f"({spacing * 1e3:.3g} mm, fruit.nodes = {config['fruit.nodes']}): the fruit "
             "touches the finger at separate nodes, each jaw's contact breaks into patches "
