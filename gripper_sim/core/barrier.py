@@ -1425,10 +1425,11 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
         self_contact.begin_step(x_n, _NO_FACES, _NO_FACES, dt)
 
     def reachable(start: np.ndarray, compiled_clear: bool | None = None) -> bool:
-        """Whether the way to ``start`` (its fixed nodes set) crosses nothing, the
-        barrier's compiled check (2D) already made if ``compiled_clear`` is given."""
-        start[fixed] = fixed_targets
+        """Whether the way to ``start`` (its fixed nodes set here, or by the compiled
+        set-up (2D), which made the barrier's check if ``compiled_clear`` is given)
+        crosses nothing."""
         if compiled_clear is None:
+            start[fixed] = fixed_targets
             crosses_nothing = barrier.reachable(start)
         else:
             crosses_nothing = compiled_clear or barrier.exactly_reachable(start)

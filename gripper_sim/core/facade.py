@@ -104,6 +104,9 @@ class SimulationFacade:
     _names_kept: tuple | None = None
     #: ``_total_mass``: (the masses array, their sum kg), or None
     _mass_kept: tuple | None = None
+    #: ``_joined``'s arrays of the last deformable fingers' solve: per quantity (the
+    #: positions, the velocities) (the fruit's rows, the fingers' rows, the whole array)
+    _joined_kept: tuple = ()
 
     # ------------------------------------------------------------------ construction
     def _place_fruit(self) -> None:
@@ -723,7 +726,7 @@ class SimulationFacade:
         if soft is not None:  # the barrier's force is normal to the finger's outline
             normal = np.empty(len(obstacle))
             held_normal_forces(self._barrier.normal_forces(
-                np.concatenate([x, finger.positions]).ravel()), obstacle, normal)
+                self._joined(x, finger.positions).ravel()), obstacle, normal)
             sides = (np.empty(len(obstacle), bool), np.empty(len(obstacle), bool))
             on_left, on_right = cm.jaw_sides(obstacle, self._obstacles_kept[-1], *sides)
         else:
@@ -858,11 +861,11 @@ class SimulationFacade:
                      self._jaw_origin(grip_new, side) - self._jaw_origin(self._grip, side))
                     for side in (LEFT, RIGHT)]
         outcome = soft_body_step(self.solver, self._barrier,
-                                 np.concatenate([self.q, finger.positions]),
-                                 np.concatenate([self.v, finger.velocities]), soft.base, targets,
+                                 self._joined(self.q, finger.positions),
+                                 self._joined(self.v, finger.velocities), soft.base, targets,
                                  self.faces_at(self._grip), new_faces, dt,
                                  self_contact=soft.self_contact, carried=carried)
-        v = outcome.v[:n]
+        x, v = outcome.x[:n], outcome.v[:n]
         # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
         # right_jaw (the fingers), then the faces
         obstacle, touching = np.empty(n, np.int64), np.empty(m_both, bool)
@@ -874,12 +877,23 @@ class SimulationFacade:
         contacts = cm.ContactState(obstacle, mode[:n], normal_force[:n], bounce_speed[:n],
                                    secondary[:n], secondary_bounce[:n])
         self._mark_sticking(contacts, v, grip_new)
-        self._finger = build(FingerState, dict(
+        self._finger = finger = build(FingerState, dict(
             positions=outcome.x[n:], velocities=outcome.v[n:], contact_forces=outcome.forces[n:],
             reaction=outcome.reaction[n:], touching=touching))
-        self.commit_step(outcome.x[:n], v, contacts, outcome.forces[:n], grip_new,
+        self._joined_kept = ((x, finger.positions, outcome.x),
+                             (v, finger.velocities, outcome.v))
+        self.commit_step(x, v, contacts, outcome.forces[:n], grip_new,
                          self._finger_jaw_forces(), dt)
         return outcome.iterations
+
+    def _joined(self, fruit: np.ndarray, fingers: np.ndarray) -> np.ndarray:
+        """``np.concatenate([fruit, fingers])``: the fruit's rows (n, d) of a quantity
+        and the deformable fingers' (m, d) as one array (n + m, d); where both are the
+        views of one array a solve gave (``_substep_soft``), that array (read only)."""
+        for fruit_rows, finger_rows, whole in self._joined_kept:
+            if fruit_rows is fruit and finger_rows is fingers:
+                return whole
+        return np.concatenate([fruit, fingers])
 
     def _mark_sticking(self, contacts: cm.ContactState, v: np.ndarray,
                        grip: GripperState) -> None:
@@ -948,7 +962,7 @@ class SimulationFacade:
         between them."""
         if not isinstance(failure, NoCollisionFreeStart):
             return
-        gap = self._barrier.bodies_gap(np.concatenate([self.q, self._finger.positions]))
+        gap = self._barrier.bodies_gap(self._joined(self.q, self._finger.positions))
         if gap < FINGERS_MEET:
             raise FingersClosed(
                 f'the fingers closed on each other over the fruit at t = {self._time:.6g} s '
@@ -965,7 +979,7 @@ class SimulationFacade:
         over it."""
         if self._soft is None:
             return False
-        x = np.concatenate([self.q, self._finger.positions])
+        x = self._joined(self.q, self._finger.positions)
         grown = [barrier.grow_pattern(x) for barrier in self._patterned_barriers()]
         if not any(grown):
             return False

@@ -130,7 +130,7 @@ class ContactSlide:
         dt = result.time - self.previous_time
         nodes = self._jaw_faces[result.contact_obstacle + 1]
         if dt > 0 and nodes.any():
-            rising = result.velocities[nodes, -1]
+            rising = result.velocities[:, -1][nodes]
             # their mean (``np.mean``'s sum and division, without its overhead)
             relative = float(rising.sum() / rising.size) - result.lift_velocity
             self.slide = max(0.0, self.slide - relative * dt)
