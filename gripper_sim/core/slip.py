@@ -129,7 +129,7 @@ class ContactSlide:
             self._jaw_faces = np.array([False, *jaws])
         dt = result.time - self.previous_time
         nodes = self._jaw_faces[result.contact_obstacle + 1]
-        if dt > 0 and nodes.any():
+        if dt > 0 and np.count_nonzero(nodes):
             rising = result.velocities[:, -1][nodes]
             # their mean (``np.mean``'s sum and division, without its overhead)
             relative = float(rising.sum() / rising.size) - result.lift_velocity

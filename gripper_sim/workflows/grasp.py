@@ -138,8 +138,8 @@ class GraspSequence:
             self.bruised = self.peaks.jaw_pressure > sim.config['fruit.bruise_pressure']
         self.final_gap = result.gap
         elapsed = sim.time - self.phase_start
-        gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
         if self.phase in SLIDING_PHASES:
+            gripped = result.in_contact_with('left_jaw') or result.in_contact_with('right_jaw')
             if not gripped or result.slip_distance > DROP_SLIP:
                 self.dropped_at = sim.time
                 why = ('' if not gripped else ' (its centroid fell '
