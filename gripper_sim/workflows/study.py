@@ -48,8 +48,10 @@ from gripper_sim.workflows.study_tasks import (answer_key, code_version, evaluat
 from gripper_sim.workflows.window import (lower_bound_limited_by, trial_of,
                                           upper_bound_limited_by)
 
-#: seconds to wait for an existing scheduler before giving up
-CONNECT_TIMEOUT = 3.0
+#: seconds to wait for an existing scheduler before giving up (a refused or unknown
+#: address fails at once; at 3 s a scheduler on a loaded 2-core machine sometimes had not
+#: finished its handshake, which read as 'not a Dask scheduler')
+CONNECT_TIMEOUT = 10.0
 #: evaluations a fruit's window search takes, until measured in the run
 EXPECTED_PER_CHAIN = 13
 
@@ -97,8 +99,8 @@ def _connect_failure(err: Exception) -> str:
     """
     if isinstance(err, (OSError, ValueError)) and str(err):
         return str(err).splitlines()[0]
-    return (f'something answers there, but not as a Dask scheduler: '
-            f'{type(err).__name__} reading its reply')
+    return (f'something answers there, but not as a Dask scheduler, or not within '
+            f'{CONNECT_TIMEOUT:g} s: {type(err).__name__} reading its reply')
 
 
 @contextmanager
