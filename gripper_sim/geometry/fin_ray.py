@@ -46,6 +46,8 @@ FOLLOWED_ELEMENTS = (0.004, 0.002, 0.001, 0.0005)
 #: m, a null ``element_length`` in 3D: its slices across the width scale with it too
 #: (``core3d.soft_fingers3d.WIDTH_CELL_RATIO``), and the 3D figures were measured at it
 ELEMENT_3D = 0.002
+#: the longest element, as a fraction of the finger's length
+LONGEST_ELEMENT = 0.25
 #: how a rib joins the beams: welded (rest angle kept) or hinged
 RIB_JOINTS = ('rigid', 'pinned')
 
@@ -269,19 +271,22 @@ def outline_spacing(config) -> float:
     return float(np.median(np.linalg.norm(np.roll(outline, -1, axis=0) - outline, axis=1)))
 
 
-def element_length(config) -> float:
+def element_length(config, spacing: float | None = None) -> float:
     """m, the Fin Ray's rod element length of a flat configuration: the key's value, or
-    where it is null the fruit's (``FOLLOWED_ELEMENTS`` in 2D, no longer than a quarter
-    of the finger's length either; ``ELEMENT_3D`` in 3D)."""
+    where it is null the fruit's (``FOLLOWED_ELEMENTS`` in 2D, no longer than
+    ``LONGEST_ELEMENT`` of the finger's length either; ``ELEMENT_3D`` in 3D); ``spacing``
+    (m) the fruit's ``outline_spacing`` if already known."""
     value = config[PREFIX + 'element_length']
     if value is not None:
         return float(value)
     if config.get('dimension') == 3:
         return ELEMENT_3D
-    longest = COARSEST_ELEMENT * outline_spacing(config)
+    if spacing is None:
+        spacing = outline_spacing(config)
+    longest = COARSEST_ELEMENT * spacing
     finger = config[PREFIX + 'length']
     if math.isfinite(finger) and finger > 0:   # as ``check_geometry`` allows
-        longest = min(longest, 0.25 * finger)
+        longest = min(longest, LONGEST_ELEMENT * finger)
     return next((length for length in FOLLOWED_ELEMENTS if length <= longest),
                 FOLLOWED_ELEMENTS[-1])
 
@@ -296,7 +301,7 @@ def resolution_warning(config) -> str | None:
     if config.get('gripper.finger.type') != 'fin_ray' or config.get('dimension') != 2:
         return None
     spacing = outline_spacing(config)
-    element = element_length(config)
+    element = element_length(config, spacing)
     if element <= COARSEST_ELEMENT * spacing:
         return None
     given = 'null: ' if config[PREFIX + 'element_length'] is None else ''
@@ -332,7 +337,7 @@ def check_geometry(geometry: FinRayGeometry) -> None:
         raise _error('tip_offset', g.tip_offset,
                      'the tip must lie between the backing and the front corner: 0 to '
                      f'base_width - 2 beam_thickness ({front_most:g} m)')
-    if g.element_length > 0.25 * g.length:
+    if g.element_length > LONGEST_ELEMENT * g.length:
         raise _error('element_length', g.element_length,
                      f'too coarse: at most a quarter of the length ({g.length:g} m)')
     backs, fronts = rib_points(g)
