@@ -10,6 +10,12 @@ caches loaded); with the CPU time inside the barrier model's compiled Newton sol
 (``in solves``, ``solve_timer``: what compiling the Python around them would leave), the
 outcome, steps, solves, Newton iterations, and at the end the grip force, the contact
 length (both jaws) and the peak damage pressure (Hertz estimate).
+Each finger's grasp runs on two routes: ``watched``, a callback seeing every step (as the
+ROS node and the recorders step: every step's result is built), and ``unwatched``,
+``run_grasp`` without a callback (as ``pick``, ``window`` and studies run it: the flat
+finger's steps at which the grasp decides nothing run many at a time in one compiled
+call, ``Simulation.advance``; a deformable finger has no such route and steps one at a
+time either way). The ratios are printed for both routes.
 The flat finger takes its usual route (the modified mass method, the compiled whole
 step); the solid pad two meshed blocks in the state and the barrier contact on the
 Newton solver (its compiled energies on a fixed pattern).
@@ -67,10 +73,15 @@ def checked_config(parser, finger: str, settings: list):
         parser.error(f'--set: {error}')
 
 
-def grasp(finger: str, force: float, overrides: tuple = ()) -> dict:
+#: the routes a grasp is run on (see the module doc)
+ROUTES = ('watched', 'unwatched')
+
+
+def grasp(finger: str, force: float, overrides: tuple = (), watched: bool = True) -> dict:
     """One grasp-and-lift, the jaws starting 1 mm wider than where the fingers touch the
-    apple, the configuration keys ``overrides`` ('KEY=VALUE') set; its CPU time (s), of it
-    inside the compiled barrier Newton solves (s, ``solve_timer``), and counts."""
+    apple, the configuration keys ``overrides`` ('KEY=VALUE') set, ``watched`` by a
+    per-step callback or not; its CPU time (s), of it inside the compiled barrier Newton
+    solves (s, ``solve_timer``), and counts (Newton iterations only when watched: -1)."""
     with solves_timed() as inside:
         start = time.process_time()
         config = load_config(overrides=[f'gripper.finger.type={finger}', *overrides])
@@ -79,12 +90,13 @@ def grasp(finger: str, force: float, overrides: tuple = ()) -> dict:
         sim = Simulation(config)
         iterations = []
         summary = run_grasp(sim, GraspSequence(sim, force, lift_height=0.01, hold_time=0.2),
-                            on_step=lambda result, phase: iterations.append(
-                                result.newton_iterations))
+                            on_step=(lambda result, phase: iterations.append(
+                                result.newton_iterations)) if watched else None)
         cpu = time.process_time() - start
     return dict(cpu=cpu, solve_cpu=inside[0], outcome=summary['outcome'],
                 steps=int(sim.last.step), solves=int(sim.gap_solves),
-                newton=int(sum(iterations)), force=float(sim.last.grip_force),
+                newton=int(sum(iterations)) if watched else -1,
+                force=float(sim.last.grip_force),
                 contact=float(sim.last.deformation.contact_length),
                 pressure=float(sim.last.damage.peak_pressure))
 
@@ -99,21 +111,39 @@ def _baseline_rows(script: Path, baseline: Path, fingers: tuple, force: float,
     return {label: best_by_key(runs, lambda row: row['cpu']) for label, runs in outputs.items()}
 
 
+def row_key(finger: str, route: str) -> str:
+    """The key of a grasp's row: the finger's name for the watched route (as before the
+    routes), '<finger> unwatched' for the other."""
+    return finger if route == 'watched' else f'{finger} {route}'
+
+
 def _print_rows(rows: dict, fingers: tuple) -> None:
-    print(f"{'finger':10s} {'CPU s':>8s} {'in solves':>9s} {'outcome':>8s} {'steps':>6s} "
-          f"{'solves':>7s} {'Newton':>7s} {'force N':>8s} {'contact mm':>10s} "
+    print(f"{'finger':10s} {'route':>9s} {'CPU s':>8s} {'in solves':>9s} {'outcome':>8s} "
+          f"{'steps':>6s} {'solves':>7s} {'Newton':>7s} {'force N':>8s} {'contact mm':>10s} "
           f"{'Hertz kPa':>9s}")
-    for finger, r in rows.items():
-        inside = f"{r['solve_cpu']:9.3f}" if r['solve_cpu'] else f"{'-':>9s}"
-        print(f"{finger:10s} {r['cpu']:8.3f} {inside} {r['outcome']:>8s} {r['steps']:6d} "
-              f"{r['solves']:7d} {r['newton']:7d} {r['force']:8.3f} "
-              f"{r['contact'] * 1e3:10.1f} {r['pressure'] * 1e-3:9.0f}")
+    for finger in fingers:
+        for route in ROUTES:
+            r = rows[row_key(finger, route)]
+            inside = f"{r['solve_cpu']:9.3f}" if r['solve_cpu'] else f"{'-':>9s}"
+            newton = f"{r['newton']:7d}" if r['newton'] >= 0 else f"{'-':>7s}"
+            print(f"{finger:10s} {route:>9s} {r['cpu']:8.3f} {inside} {r['outcome']:>8s} "
+                  f"{r['steps']:6d} {r['solves']:7d} {newton} {r['force']:8.3f} "
+                  f"{r['contact'] * 1e3:10.1f} {r['pressure'] * 1e-3:9.0f}")
     reference, other = fingers
-    ratio = rows[other]['cpu'] / rows[reference]['cpu']
-    solves_alone = rows[other]['solve_cpu'] / rows[reference]['cpu']
-    print(f"{other} / {reference}: {ratio:.1f}x" + (
-        f"; {other}'s compiled solves alone / {reference}: {solves_alone:.1f}x"
-        if solves_alone else ''))
+    for route in ROUTES:
+        mine, theirs = rows[row_key(other, route)], rows[row_key(reference, route)]
+        ratio = mine['cpu'] / theirs['cpu']
+        solves_alone = mine['solve_cpu'] / theirs['cpu']
+        print(f"{route}: {other} / {reference}: {ratio:.1f}x" + (
+            f"; {other}'s compiled solves alone / {reference}: {solves_alone:.1f}x"
+            if solves_alone else ''))
+
+
+def _runs(fingers: tuple, force: float, overrides: dict) -> dict:
+    """Each finger's grasp on each route once ({row_key: row})."""
+    return {row_key(finger, route): grasp(finger, force, overrides[finger],
+                                          route == 'watched')
+            for finger in fingers for route in ROUTES}
 
 
 def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
@@ -130,10 +160,8 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
     checked_config(parser, deformable, args.set)
     overrides = {reference: (), deformable: tuple(args.set)}
     if args.plain:
-        for finger in fingers:
-            grasp(finger, args.force, overrides[finger])
-        print(json.dumps({finger: grasp(finger, args.force, overrides[finger])
-                          for finger in fingers}))
+        _runs(fingers, args.force, overrides)  # untimed: numba's caches loaded
+        print(json.dumps(_runs(fingers, args.force, overrides)))
         return 0
     if args.baseline is not None:
         script = Path(sys.modules['__main__'].__file__).resolve()
@@ -148,12 +176,10 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
         return 0
     print(f'load average {os.getloadavg()[0]:.2f}; CPU time (time.process_time), best of '
           f'{args.repeat}' + ''.join(f'; {deformable}: {item}' for item in args.set))
-    rows = {}
-    for finger in fingers:
-        grasp(finger, args.force, overrides[finger])  # untimed: numba's caches loaded
-        runs = [grasp(finger, args.force, overrides[finger]) for _ in range(args.repeat)]
-        rows[finger] = min(runs, key=lambda r: r['cpu'])
-    _print_rows(rows, fingers)
+    _runs(fingers, args.force, overrides)  # untimed: numba's caches loaded
+    runs = [_runs(fingers, args.force, overrides) for _ in range(args.repeat)]
+    _print_rows({key: min((run[key] for run in runs), key=lambda r: r['cpu'])
+                 for key in runs[0]}, fingers)
     return 0
 
 
