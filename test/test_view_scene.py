@@ -1,6 +1,7 @@
 """The live view's 3D scene: the node's markers as a Foxglove SceneUpdate (no server)."""
 from __future__ import annotations
 
+import copy
 import math
 import subprocess
 import sys
@@ -14,7 +15,8 @@ from visualization_msgs.msg import Marker
 from gripper_sim.configuration import load_config
 from gripper_sim.convert import messages
 from gripper_sim.convert.finger_markers import base_marker
-from gripper_sim.view.scene import (LEGEND_STEPS, PressureLegend, legend_entity,
+from gripper_sim.view.scene import (ARROW_CAP, CHARACTER_WIDTH, LEGEND_STEPS,
+                                    PressureLegend, jaw_arrow_length, legend_entity,
                                     rotation_from_x, scene_of_batch, scene_update)
 from gripper_sim.workflows.factory import make_simulation
 from view_client import decode_foxglove
@@ -35,10 +37,9 @@ def rg(colour):
     return (colour['r'], colour['g'])
 
 
-@pytest.fixture(scope='module')
-def squeezed():
+def squeeze(fruit=None, finger=None):
     """A 2D grasp a few steps in (the jaws pressing), its context and message batch."""
-    config = load_config(overrides=['fruit.nodes=32'])
+    config = load_config(fruit=fruit, finger=finger, overrides=['fruit.nodes=32'])
     sim = make_simulation(config)
     context = messages.MessageContext.from_config(config, initial=sim.last)
     sim.command_force(5.0)
@@ -50,6 +51,11 @@ def squeezed():
             break
     assert result.grip_force > 1.0, 'the jaws never pressed the fruit'
     return context, messages.build_messages(result, context)
+
+
+@pytest.fixture(scope='module')
+def squeezed():
+    return squeeze()
 
 
 def test_every_marker_becomes_an_entity_with_its_points_and_colours(squeezed):
@@ -82,9 +88,10 @@ def test_every_marker_becomes_an_entity_with_its_points_and_colours(squeezed):
     assert f'compression {1e3 * state.compression:.2f} mm' in text
 
 
-def test_a_force_arrow_runs_from_its_first_to_its_second_point():
+def test_an_arrow_runs_from_its_first_to_its_second_point():
+    """(But a jaw force arrow: ``test_jaw_force_arrows_stay_clear_...``.)"""
     header = Header(frame_id='world')
-    marker = base_marker(header, 'jaw_forces', 0, Marker.ARROW)
+    marker = base_marker(header, 'arrows', 0, Marker.ARROW)
     marker.points = [Point(x=0.01, y=0.0, z=0.02), Point(x=0.01, y=0.0, z=0.12)]
     marker.scale.x, marker.scale.y, marker.scale.z = 0.002, 0.004, 0.02
     marker.color = ColorRGBA(r=1.0, a=1.0)
@@ -165,3 +172,98 @@ def test_a_3d_fruit_is_drawn_as_its_skin_coloured_by_pressure():
     assert len(triangles['colors']) == len(triangles['points'])
     assert [xyz(p) for p in triangles['points'][:6]] == \
         [(p.x, p.y, p.z) for p in mesh.points[:6]]
+
+
+# ---------------------------------------------------------------- jaw force arrows
+#: N: a light grip, the pick's (config/scenarios) and GripperCommand's default
+#: (max_effort), gripper.max_force's default and the largest it may be set to
+FORCES = (0.5, 5.0, 10.0, 200.0, 1e5)
+
+
+def text_box(text):
+    """(x min, x max, z min, z max) of a label as Foxglove draws it: centred on its
+    pose, a line height per line, characters CHARACTER_WIDTH line heights wide."""
+    size = text['font_size']
+    lines = text['text'].split('\n')
+    half_width = 0.5 * CHARACTER_WIDTH * size * max(len(line) for line in lines)
+    half_height = 0.5 * size * len(lines)
+    x, z = text['pose']['position']['x'], text['pose']['position']['z']
+    return x - half_width, x + half_width, z - half_height, z + half_height
+
+
+def arrow_box(arrow):
+    """(x min, x max, z min, z max) of an arrow: its start to its tip, widened by half
+    its head's diameter."""
+    start = np.array(xyz(arrow['pose']['position']))
+    tip = start + (arrow['shaft_length'] + arrow['head_length']) * \
+        rotate(arrow['pose']['orientation'], [1, 0, 0])
+    pad = 0.5 * max(arrow['head_diameter'], arrow['shaft_diameter'])
+    return (min(start[0], tip[0]) - pad, max(start[0], tip[0]) + pad,
+            min(start[2], tip[2]) - pad, max(start[2], tip[2]) + pad)
+
+
+def with_jaw_force(batch, force):
+    """``batch`` with both jaw force markers ``force`` (N) long in the markers'
+    ARROW_SCALE (their directions kept) and the fruit state's grip force ``force``."""
+    batch = dict(batch)
+    array = copy.deepcopy(batch['markers'])
+    for marker in array.markers:
+        if marker.ns == 'jaw_forces' and marker.action == Marker.ADD:
+            start, end = marker.points
+            d = np.array([end.x - start.x, end.y - start.y, end.z - start.z])
+            end.x, end.y, end.z = (np.array([start.x, start.y, start.z])
+                                   + messages.ARROW_SCALE * force * d / np.linalg.norm(d))
+    batch['markers'] = array
+    state = copy.deepcopy(batch['fruit/state'])
+    state.grip_force = force
+    batch['fruit/state'] = state
+    return batch
+
+
+@pytest.fixture(scope='module', params=[(None, None), ('strawberry', None),
+                                        (None, 'fin_ray')],
+            ids=['apple', 'strawberry', 'fin_ray'])
+def grasp(request, squeezed):
+    """The default grasp, a small fruit's (the labels sit closer), a Fin Ray's (the
+    arrows start at its base, behind the fruit's side)."""
+    return squeezed if request.param == (None, None) else squeeze(*request.param)
+
+
+def overlapping(a, b):
+    return a[0] < b[1] and b[0] < a[1] and a[2] < b[3] and b[2] < a[3]
+
+
+def test_jaw_force_arrows_stay_clear_of_the_labels_at_any_force(grasp):
+    """At a light, the default and the largest grip force (and beyond) the jaw force
+    arrows reach neither the colour bar's labels (at any lift: their x ranges are apart)
+    nor the state text above the fruit; a larger force draws a longer arrow and the
+    state text gives the force exactly. At ARROW_SCALE's 5 mm per N the arrows ran
+    into the labels from about 12 N on and were 1 m long at 200 N."""
+    context, batch = grasp
+    legend = PressureLegend.beside(context)
+    lengths = []
+    for force in FORCES:
+        update = decode_foxglove(scene_of_batch(with_jaw_force(batch, force), legend, 0))
+        entities = {e['id']: e for e in update['entities']}
+        arrows = [e['arrows'][0] for e in update['entities']
+                  if e['id'].startswith('jaw_forces/')]
+        assert len(arrows) == 2
+        labels = [text_box(t) for t in entities['legend/pressure']['texts']]
+        state = entities['legend/state']['texts'][0]
+        assert f'grip {force:.2f} N' in state['text']
+        for arrow in arrows:
+            box = arrow_box(arrow)
+            for label in labels:   # the fruit and the jaws rise, the colour bar stays
+                assert box[1] < label[0] or label[1] < box[0], (force, box, label)
+            assert not overlapping(box, text_box(state)), (force, box, text_box(state))
+        lengths.append(max(a['shaft_length'] + a['head_length'] for a in arrows))
+    assert all(a < b for a, b in zip(lengths, lengths[1:])), lengths
+    assert lengths[-1] < ARROW_CAP
+
+
+def test_a_jaw_force_arrow_is_5_mm_per_newton_when_small_and_saturates():
+    assert jaw_arrow_length(0.0) == 0.0
+    assert jaw_arrow_length(0.01) == pytest.approx(0.01 * messages.ARROW_SCALE, rel=1e-2)
+    assert jaw_arrow_length(5.0) == pytest.approx(0.5 * ARROW_CAP)
+    lengths = [jaw_arrow_length(f) for f in (1.0, 12.0, 200.0, 1e4, 1e5)]
+    assert all(a < b < ARROW_CAP for a, b in zip(lengths, lengths[1:]))

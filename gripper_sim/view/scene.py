@@ -7,7 +7,12 @@ jaws, shaped fingers and pads, the table, the jaw force arrows and the contact f
 lines. Foxglove's 3D panel shows that array only through its ROS marker support;
 this module turns it into Foxglove's own ``foxglove.SceneUpdate`` (one entity per
 marker, id ``<ns>/<id>``) so that any Foxglove client shows it, live from the node
-and the same from a recording (its ``markers`` topic). It adds two entities:
+and the same from a recording (its ``markers`` topic). One change: the jaw force
+arrows (ns ``jaw_forces``, ``ARROW_SCALE`` m per N in the markers: 1 m at the
+200 N of ``gripper.max_force``) are drawn ``jaw_arrow_length`` long, 5 mm per N at
+small forces and never as long as ``ARROW_CAP``, so that they stay clear of the labels
+at any force; the grip force is written exactly in ``legend/state``. It adds two
+entities:
 
 - ``legend/pressure``: the colour scale of the fruit, a bar of ``LEGEND_STEPS``
   cubes coloured by ``pressure_colour`` from 0 to the bruise pressure, with labels
@@ -34,7 +39,7 @@ from foxglove.messages import (ArrowPrimitive, Color, CubePrimitive, CylinderPri
                                SceneEntityDeletionType, SceneUpdate, SpherePrimitive,
                                TextPrimitive, Timestamp, TriangleListPrimitive, Vector3)
 
-from gripper_sim.convert.messages import pressure_colour
+from gripper_sim.convert.messages import ARROW_SCALE, pressure_colour
 
 # visualization_msgs/Marker type and action constants (fixed by its .msg definition).
 ARROW, CUBE, SPHERE, CYLINDER, LINE_STRIP, LINE_LIST = 0, 1, 2, 3, 4, 5
@@ -42,6 +47,7 @@ TEXT_VIEW_FACING, TRIANGLE_LIST = 9, 11
 ADD, DELETE, DELETEALL = 0, 2, 3   # MODIFY is ADD
 
 LEGEND_STEPS = 10          # cubes in the colour bar
+LEGEND_BAR_WIDTH = 0.25    # of its height, the colour bar's width (and depth)
 LEGEND_TEXT_SIZE = 0.008   # m, line height of the legend labels
 LEGEND_LABEL_OFFSET = 0.04   # m of room for the labels beside the bar (``beside``)
 LEGEND_LABEL_GAP = 0.004   # m from the bar to the left end of its labels
@@ -51,6 +57,31 @@ CHARACTER_WIDTH = 0.5
 #: the colour bar's title, in two lines above the bar and its labels (one line,
 #: centred on the bar, reached out of the layout's view)
 LEGEND_TITLE = 'contact pressure\n(damage estimate)'
+#: the marker namespace of the jaw force arrows (``convert.messages.markers``)
+JAW_FORCE_NS = 'jaw_forces'
+#: m, the length a jaw force arrow approaches at large forces and never reaches
+#: (``jaw_arrow_length``); at ``ARROW_SCALE`` (5 mm per N) a force of 10-12 N ran the
+#: apple's arrow into the colour bar's labels beside a lifted fruit (a strawberry's at
+#: 5 N), and 200 N made it 1 m long
+ARROW_CAP = 0.025
+#: m, the least room between a jaw force arrow at ``ARROW_CAP`` and a label
+ARROW_CLEARANCE = 0.01
+
+
+def jaw_arrow_length(force: float) -> float:
+    """m, the drawn length of a jaw force arrow of ``force`` (N, >= 0): ``ARROW_SCALE``
+    per N at small forces, saturating towards ``ARROW_CAP``:
+    cap F / (F + cap / ARROW_SCALE) (half the cap at 5 N, 80 % at 20 N, 97.6 % at
+    200 N), longer for every larger force and shorter than the cap at any."""
+    force = max(float(force), 0.0)
+    return ARROW_CAP * force / (force + ARROW_CAP / ARROW_SCALE)
+
+
+def text_extent(text: str, size: float) -> tuple[float, float]:
+    """m, (width, height) of a label ``text`` of line height ``size`` as Foxglove
+    draws it (``CHARACTER_WIDTH``; one line height per line)."""
+    lines = text.split('\n')
+    return CHARACTER_WIDTH * size * max(len(line) for line in lines), size * len(lines)
 
 
 @dataclass(frozen=True)
@@ -74,13 +105,34 @@ class PressureLegend:
     @classmethod
     def beside(cls, context: Any) -> 'PressureLegend':
         """A legend beside the fruit for a ``MessageContext`` (its rest width, gripper
-        centre, table height and bruise pressure): two fruit widths and the labels'
-        room to the -x side, clear of the open jaws."""
+        centre, table height, bruise pressure and jaw plate) to the -x side: two fruit
+        widths and the labels' room from the centre, and further out where its labels
+        would reach the longest jaw force arrow (``ARROW_CAP``, from a jaw face
+        holding the fruit, ``ARROW_CLEARANCE`` from it; a small fruit's)."""
         width = float(context.rest_width)
-        return cls(bruise_pressure=float(context.bruise_pressure),
-                   x=float(context.gripper_centre_x) - 2.0 * width - LEGEND_LABEL_OFFSET,
-                   y=0.0,
-                   z=float(context.table_height), height=width)
+        centre = float(context.gripper_centre_x)
+        plate = getattr(context, 'jaw_plate', None)
+        # how far a jaw's face can stand behind the fruit's side: a Fin Ray's base
+        # plate reaches from the face towards the fruit
+        behind = (max(0.0, float(plate.centre[0]) + 0.5 * float(plate.size[0]))
+                  if plate is not None else 0.0)
+        arrow_end = centre - (0.5 * width + behind + ARROW_CAP + ARROW_CLEARANCE)
+        legend = cls(bruise_pressure=float(context.bruise_pressure),
+                     x=centre - 2.0 * width - LEGEND_LABEL_OFFSET, y=0.0,
+                     z=float(context.table_height), height=width)
+        overlap = legend.right_edge() - arrow_end
+        if overlap > 0.0:
+            legend = cls(bruise_pressure=legend.bruise_pressure, x=legend.x - overlap,
+                         y=0.0, z=legend.z, height=width)
+        return legend
+
+    def right_edge(self) -> float:
+        """m, the largest x of the bar and its labels (``legend_entity``)."""
+        half_bar = 0.5 * LEGEND_BAR_WIDTH * self.height
+        labels = max(text_extent(text, LEGEND_TEXT_SIZE)[0] for text, _ in _labels(self))
+        title = text_extent(LEGEND_TITLE, LEGEND_TEXT_SIZE)[0]
+        return max(self.x + half_bar + LEGEND_LABEL_GAP + labels,
+                   self.x - half_bar + title)
 
 
 def timestamp(stamp_ns: int) -> Timestamp:
@@ -124,7 +176,9 @@ def rotation_from_x(direction: tuple[float, float, float]) -> Quaternion:
 
 def _arrow(marker: Any) -> ArrowPrimitive | None:
     """An ARROW marker: from its two points (scale: shaft and head diameter, head length)
-    or, without points, along the pose's x axis (scale: length, width, height)."""
+    or, without points, along the pose's x axis (scale: length, width, height). A jaw
+    force arrow (ns ``JAW_FORCE_NS``, two points ``ARROW_SCALE`` m per N apart) is
+    drawn ``jaw_arrow_length`` of its force long."""
     colour = _colour(marker.color)
     scale = marker.scale
     if len(marker.points) >= 2:
@@ -133,6 +187,8 @@ def _arrow(marker: Any) -> ArrowPrimitive | None:
         length = math.sqrt(sum(c * c for c in direction))
         if length <= 0.0:
             return None
+        if marker.ns == JAW_FORCE_NS:
+            length = jaw_arrow_length(length / ARROW_SCALE)
         head = min(float(scale.z), length) if scale.z > 0 else 0.23 * length
         pose = Pose(position=Vector3(x=float(start.x), y=float(start.y), z=float(start.z)),
                     orientation=rotation_from_x(direction))
@@ -213,8 +269,14 @@ def _text(text: str, x: float, y: float, z: float, size: float) -> TextPrimitive
 
 def _left_text(text: str, left: float, y: float, z: float, size: float) -> TextPrimitive:
     """``text`` starting at x = ``left`` (m): Foxglove centres a text on its pose."""
-    half = 0.5 * CHARACTER_WIDTH * size * max(len(line) for line in text.split('\n'))
-    return _text(text, left + half, y, z, size)
+    return _text(text, left + 0.5 * text_extent(text, size)[0], y, z, size)
+
+
+def _labels(legend: PressureLegend) -> list[tuple[str, float]]:
+    """(text, z) of the colour bar's value labels."""
+    kpa = legend.bruise_pressure / 1e3
+    return [('0 kPa', legend.z), (f'{0.5 * kpa:.0f} kPa', legend.z + 0.5 * legend.height),
+            (f'>= {kpa:.0f} kPa (bruise)', legend.z + legend.height)]
 
 
 def legend_entity(legend: PressureLegend, stamp_ns: int) -> SceneEntity:
@@ -225,7 +287,7 @@ def legend_entity(legend: PressureLegend, stamp_ns: int) -> SceneEntity:
     pressure and above.
     """
     step = legend.height / LEGEND_STEPS
-    width = 0.25 * legend.height
+    width = LEGEND_BAR_WIDTH * legend.height
     cubes = []
     for k in range(LEGEND_STEPS):
         colour = pressure_colour((k + 0.5) / LEGEND_STEPS * legend.bruise_pressure,
@@ -234,12 +296,9 @@ def legend_entity(legend: PressureLegend, stamp_ns: int) -> SceneEntity:
         cubes.append(CubePrimitive(
             pose=Pose(position=centre, orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
             size=Vector3(x=width, y=width, z=step), color=_colour(colour)))
-    kpa = legend.bruise_pressure / 1e3
     label_left = legend.x + 0.5 * width + LEGEND_LABEL_GAP
-    labels = [('0 kPa', legend.z), (f'{0.5 * kpa:.0f} kPa', legend.z + 0.5 * legend.height),
-              (f'>= {kpa:.0f} kPa (bruise)', legend.z + legend.height)]
     texts = [_left_text(text, label_left, legend.y, z, LEGEND_TEXT_SIZE)
-             for text, z in labels]
+             for text, z in _labels(legend)]
     texts.append(_left_text(LEGEND_TITLE, legend.x - 0.5 * width, legend.y,
                             legend.z + legend.height + 2.5 * LEGEND_TEXT_SIZE,
                             LEGEND_TEXT_SIZE))
@@ -259,13 +318,18 @@ def state_text(state: Any) -> str:
 
 
 def state_entity(state: Any, legend: PressureLegend) -> SceneEntity:
-    """``legend/state``: ``state_text`` above the fruit's centroid."""
+    """``legend/state``: ``state_text`` above the fruit's centroid, a fruit width up
+    and at least so far that its lowest line clears a jaw force arrow at the centroid's
+    height pointing up (``ARROW_CAP`` and ``ARROW_CLEARANCE``: a small fruit's)."""
     centroid = state.centroid
+    text = state_text(state)
+    half_height = 0.5 * text_extent(text, STATE_TEXT_SIZE)[1]
+    above = max(legend.height, ARROW_CAP + ARROW_CLEARANCE + half_height)
     return SceneEntity(
         timestamp=timestamp(_stamp_ns(state.header)), frame_id=legend.frame_id,
         id='legend/state',
-        texts=[_text(state_text(state), float(centroid.x), float(centroid.y),
-                     float(centroid.z) + legend.height, STATE_TEXT_SIZE)])
+        texts=[_text(text, float(centroid.x), float(centroid.y),
+                     float(centroid.z) + above, STATE_TEXT_SIZE)])
 
 
 def scene_update(markers: Iterable[Any], *, legend: PressureLegend | None = None,
