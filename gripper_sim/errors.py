@@ -45,3 +45,8 @@ class ConfigWarning(UserWarning):
     """A configuration key that is valid but has no effect in the set-up (or a choice
     that overrides another), issued with ``warnings.warn``; the CLI prints it as
     ``warning: ...``."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a batch system's time limit) stopping a verb that handles it as
+    Ctrl-C: the verb cleans up the same way, and the CLI exits 143 (128 + SIGTERM)."""

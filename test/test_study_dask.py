@@ -39,8 +39,8 @@ population:
 window: {tolerance: 0.1}
 '''
 #: runs the CLI with a row buffer of one row (a part file per finished row); with
-#: STUDY_HOOK=interrupt it sends itself SIGINT (Ctrl-C) when the STUDY_HOOK_ROWS-th row
-#: is stored; with STUDY_HOOK=pause it then writes STUDY_HOOK_FILE + '.paused' and waits
+#: STUDY_HOOK=interrupt it sends itself SIGINT (Ctrl-C), with STUDY_HOOK=terminate SIGTERM
+#: (kill), when the STUDY_HOOK_ROWS-th row is stored; with STUDY_HOOK=pause it then writes STUDY_HOOK_FILE + '.paused' and waits
 #: for STUDY_HOOK_FILE, so a test acts while the study is surely still running
 CHILD = textwrap.dedent('''
     import os, signal, sys, time
@@ -64,6 +64,8 @@ CHILD = textwrap.dedent('''
             return
         if action == 'interrupt':
             os.kill(os.getpid(), signal.SIGINT)
+        elif action == 'terminate':
+            os.kill(os.getpid(), signal.SIGTERM)
         elif action == 'pause':
             Path(str(go) + '.paused').touch()
             end = time.monotonic() + 300
@@ -215,18 +217,23 @@ def test_a_worker_killed_mid_study_loses_no_row(study_file, reference, cluster, 
     cluster.wait_for_workers(2)
 
 
+@pytest.mark.parametrize('hook, code, word', [('interrupt', 130, 'interrupted'),
+                                               ('terminate', 143, 'terminated')])
 def test_an_interrupted_study_resumes_without_recomputing(study_file, reference, cluster,
-                                                         tmp_path):
+                                                         tmp_path, hook, code, word):
+    """Ctrl-C, or SIGTERM as ``kill`` and batch systems send it, keeps every finished
+    row (the row buffer flushed, not lost with the process) and says so."""
     _, local = reference
     out = tmp_path / 'interrupted'
     args = ['study', str(study_file), '--out', str(out), '--no-progress',
             '--scheduler', cluster.address, '--no-report']
     study = subprocess.Popen([sys.executable, '-c', CHILD, *args],
-                             env=env(STUDY_HOOK='interrupt', STUDY_HOOK_ROWS='3'),
+                             env=env(STUDY_HOOK=hook, STUDY_HOOK_ROWS='3'),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _, stderr = study.communicate(timeout=120)
-    assert study.returncode == 130, stderr
-    assert 'interrupted' in stderr and 'Traceback' not in stderr
+    assert study.returncode == code, stderr
+    assert f'{word}: ' in stderr and 'Traceback' not in stderr
+    assert json.loads((out / 'summary.json').read_text())['complete'] is False
     kept = RowStore(out).rows
     assert 3 <= len(kept) < len(local)
     for key, row in kept.items():  # what was kept is finished and right

@@ -13,9 +13,10 @@ import sys
 import warnings
 
 from gripper_sim import __version__
-from gripper_sim.errors import ConfigWarning, GripperSimError
+from gripper_sim.errors import ConfigWarning, GripperSimError, Terminated
 
 SIGPIPE_EXIT = 141   # 128 + SIGPIPE: what a shell reports for a tool a closed pipe ended
+TERMINATED = 143     # 128 + SIGTERM: what a shell reports for a tool SIGTERM ended
 VERB_MODULES = (
     'gripper_sim.cli.offline',
     'gripper_sim.cli.ros_commands',
@@ -44,13 +45,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one verb: its exit code; 2 for a gripper_sim error (``error: ...``), 130 on
-    Ctrl-C, 141 when the reader of stdout has gone."""
+    Ctrl-C, 143 on a SIGTERM a verb handles (``errors.Terminated``), 141 when the reader
+    of stdout has gone."""
     try:
         code = _run(argv)
         sys.stdout.flush()   # here, not at exit: a closed pipe is then ours to handle
         return code
     except BrokenPipeError:
         return _reader_gone()
+    except Terminated:
+        return TERMINATED
     except KeyboardInterrupt:   # anywhere, the verbs' imports too
         return 130
 

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from gripper_sim.cli import progress
+from gripper_sim.cli.main import TERMINATED
 from gripper_sim.cli.arguments import positive_int
 
 
@@ -49,9 +50,10 @@ def run_study_verb(args) -> int:
         from gripper_sim.workflows.study_results import RowStore
         RowStore(out).write_csv(out / 'rows.csv')
     if run.interrupted:
-        print(f'interrupted: {len(run.rows)} rows kept in {out}/rows ({run.computed} '
-              'computed now); run the same command again to resume', file=sys.stderr)
-        return 130
+        print(f"{'terminated' if run.terminated else 'interrupted'}: {len(run.rows)} rows "
+              f'kept in {out}/rows ({run.computed} computed now); run the same command '
+              'again to resume', file=sys.stderr)
+        return TERMINATED if run.terminated else 130
     if not args.no_report:
         write_report(run.summary, run.rows, out)
     summary = run.summary

@@ -14,7 +14,8 @@ written, so that no rows are mixed.
 The cluster: a local one on this machine's cores by default (worker processes on
 127.0.0.1, one thread each), or an existing one (``scheduler='tcp://HOST:8786'``).
 A worker that dies mid-task has its task run again elsewhere (Dask reschedules it);
-Ctrl-C cancels what is running and keeps every finished row.
+Ctrl-C, or SIGTERM (``kill``, a batch system's time limit), cancels what is running
+and keeps every finished row.
 """
 from __future__ import annotations
 
@@ -36,7 +37,7 @@ from typing import Any, Iterator
 import numpy as np
 from tqdm import tqdm
 
-from gripper_sim.errors import GripperSimError
+from gripper_sim.errors import GripperSimError, Terminated
 from gripper_sim.workflows.grasp import GraspEvaluation
 from gripper_sim.workflows.population_window import (SampleWindow, grid_curve,
                                                      population_window)
@@ -67,12 +68,15 @@ class StudyRun:
 
     computed: int
     reused: int
+    #: stopped by Ctrl-C or SIGTERM (then ``terminated`` too) before every row was done
     interrupted: bool
     summary: dict
     rows: list = field(default_factory=list)
     #: s of wall time: starting the cluster, and running the evaluations
     startup_time: float = 0.0
     run_time: float = 0.0
+    #: the stop was a SIGTERM
+    terminated: bool = False
 
 
 def config_hash(config) -> str:
@@ -137,7 +141,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
                                    scheduler_kwargs=dict(dashboard=False),
                                    silence_logs=logging.ERROR, preload=[IGNORE_CTRL_C])
         if interrupted:
-            raise KeyboardInterrupt
+            raise _stop_error(interrupted)
         client = Client(cluster)
         try:
             yield client
@@ -166,22 +170,50 @@ def _note_missing_workers(client, scheduler: str) -> None:
               file=sys.stderr, flush=True)
 
 
+#: the signals that stop a study, each as Ctrl-C does (cancel, keep the finished rows)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _stop_error(held: list[int]) -> KeyboardInterrupt:
+    """The exception of the stop signals ``held``: ``Terminated`` for a SIGTERM."""
+    return Terminated() if signal.SIGTERM in held else KeyboardInterrupt()
+
+
+@contextmanager
+def _handled(handler) -> Iterator[None]:
+    """``handler(number, frame)`` on the ``STOP_SIGNALS`` within the block, the previous
+    handlers after it. Outside the main thread (no signals there) nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = [signal.signal(number, handler) for number in STOP_SIGNALS]
+    try:
+        yield
+    finally:
+        for number, handler_before in zip(STOP_SIGNALS, previous):
+            signal.signal(number, handler_before)
+
+
 @contextmanager
 def _interrupt_recorded() -> Iterator[list[int]]:
-    """Record Ctrl-C instead of raising it while a local cluster starts (a
+    """Record Ctrl-C or SIGTERM instead of raising it while a local cluster starts (a
     KeyboardInterrupt inside ``LocalCluster`` could leave worker processes behind);
-    yields a list that holds SIGINT once one arrived, for the caller to raise once it
-    can close the cluster. Outside the main thread (no signals there) nothing changes.
-    """
+    yields a list that holds the signal once one arrived, for the caller to raise
+    (``_stop_error``) once it can close the cluster."""
     held: list[int] = []
-    if threading.current_thread() is not threading.main_thread():
+    with _handled(lambda number, _frame: held.append(number)):
         yield held
-        return
-    handler = signal.signal(signal.SIGINT, lambda number, _frame: held.append(number))
-    try:
-        yield held
-    finally:
-        signal.signal(signal.SIGINT, handler)
+
+
+@contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM (``kill``, a batch system's time limit) stops the study as Ctrl-C does,
+    raising ``Terminated`` (a KeyboardInterrupt), instead of ending the process at once
+    with finished rows still in the row buffer."""
+    def stop(number, _frame):
+        raise _stop_error([number])
+    with _handled(stop):
+        yield
 
 
 class _Chain:
@@ -348,7 +380,8 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
     check_results_directory(out, identity)
     check_writable(out)
     start = time.perf_counter()
-    with open_client(scheduler, workers) as client:
+    terminated = False
+    with _terminate_as_interrupt(), open_client(scheduler, workers) as client:
         started = time.perf_counter()
         store = RowStore(out)
         store.claim(identity)
@@ -359,9 +392,9 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
                 _note_missing_workers(client, scheduler)
             runner.run()
             complete = True
-        except KeyboardInterrupt:  # while submitting, waiting for workers, or running
+        except KeyboardInterrupt as stop:  # while submitting, waiting for workers, running
             runner.cancel()
-            complete = False
+            complete, terminated = False, isinstance(stop, Terminated)
         finally:
             store.flush()
         finished = time.perf_counter()
@@ -371,7 +404,8 @@ def run_study(study: Study, out: str | os.PathLike, *, scheduler: str | None = N
                    scheduler=scheduler or f'local ({workers or os.cpu_count()} workers)')
     return StudyRun(computed=runner.computed, reused=runner.reused,
                     interrupted=not complete, summary=summary, rows=store.sorted_rows(),
-                    startup_time=started - start, run_time=finished - started)
+                    startup_time=started - start, run_time=finished - started,
+                    terminated=terminated)
 
 
 def check_writable(out: str | os.PathLike) -> None:
