@@ -26,10 +26,10 @@ from gripper_sim.recording.recorder import import_message_class
 from gripper_sim.recording.schemas import message_definition
 from gripper_sim.ros.process import RosProcess, node_process, ros_environment
 from gripper_sim.view import ViewError
-from gripper_sim.view.foxglove import FoxgloveView, NodeFeed, node_topics
+from gripper_sim.view.foxglove import MESSAGE_BACKLOG, FoxgloveView, NodeFeed, node_topics
 from gripper_sim.view.layout import layout_json
 from gripper_sim.workflows.factory import make_simulation
-from view_client import SUBPROTOCOLS, capture, protobuf_decoder
+from view_client import SUBPROTOCOLS, capture, protobuf_decoder, stall
 
 pytestmark = [pytest.mark.ros]
 
@@ -402,3 +402,67 @@ def test_a_bad_address_is_named_in_one_line(host, shown):
     message = str(caught.value)
     assert '\n' not in message
     assert message.startswith(f'cannot serve the Foxglove live view on {shown}:0: ')
+
+
+def drop_warnings(caplog) -> list[str]:
+    return [r.getMessage() for r in caplog.records
+            if r.name == 'gripper_sim.view.foxglove' and 'dropped Foxglove client' in
+            r.getMessage()]
+
+
+def test_a_client_that_stops_reading_is_dropped_with_one_warning_naming_it(caplog):
+    """The server disconnects a client that stopped reading once its queue of control
+    messages (time, session) is full; that used to leave no trace in the log, so a
+    user whose Foxglove froze could not tell why. One warning names the client and the
+    queue; a client that closes, or one still there when the view stops, is no drop."""
+    view = FoxgloveView({'/big': 'std_msgs/msg/String'}, host='127.0.0.1', port=0)
+    url = view.url
+    subscribed, release = threading.Event(), threading.Event()
+    seen = {}
+    closing = False
+    client = threading.Thread(target=lambda: seen.update(
+        stalled=stall(view.url, '/big', subscribed, release)))
+    try:
+        with caplog.at_level('WARNING', logger='gripper_sim.view.foxglove'):
+            client.start()
+            assert subscribed.wait(120)
+            while not view.channels['/big'].has_sinks():
+                time.sleep(0.01)
+            # fill the socket's buffers with data (32 MB; queued data is dropped, the
+            # oldest first), then its queue of time messages, 8 times over
+            payload = bytes(32_000)
+            for stamp in range(1, 8 * MESSAGE_BACKLOG + 1):
+                view.log_cdr('/big', payload, stamp)
+                view.server.broadcast_time(stamp)
+            # the server lets the connection go once the client reads again (it
+            # finds itself disconnected) or the connection breaks
+            release.set()
+            client.join(120)
+            deadline = time.monotonic() + 60.0
+            while not drop_warnings(caplog) and time.monotonic() < deadline:
+                time.sleep(0.01)
+            # a client that closes its connection, and one still there at close()
+            capture(view.url, {'/big'}, per_topic=0)
+            there, go_on = threading.Event(), threading.Event()
+            kept = threading.Thread(target=lambda: seen.update(
+                kept=stall(view.url, '/big', there, go_on)))
+            kept.start()
+            assert there.wait(120)
+            closing = True
+            view.close()
+            go_on.set()
+            kept.join(120)
+    finally:
+        release.set()
+        if not closing:
+            view.close()
+    assert seen['kept'].closed
+    stalled = seen['stalled']
+    assert stalled.closed
+    assert any('message backlog on the server is full' in text for text in stalled.texts)
+    warnings = drop_warnings(caplog)
+    assert len(warnings) == 1, warnings
+    assert warnings[0].startswith(f'live view on {url}: dropped Foxglove client '
+                                  f'{stalled.address}: it fell more than '
+                                  f'{MESSAGE_BACKLOG} messages behind (')
+    assert '\n' not in warnings[0]

@@ -14,6 +14,7 @@ import asyncio
 import base64
 import json
 import struct
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -72,6 +73,54 @@ def capture(url: str, topics: set[str], *, per_topic: int = 2, timeout: float = 
     nothing for ``stall`` s (a busy client), and collect until each of ``topics`` brought
     ``per_topic`` messages (or ``timeout`` s)."""
     return asyncio.run(_capture(url, set(topics), per_topic, timeout, stall))
+
+
+@dataclass
+class Stalled:
+    """What a client that stopped reading saw: its own address (``host:port``, as the
+    server names it) and the text messages it read once it read again, up to the
+    server closing the connection (``closed``)."""
+
+    address: str = ''
+    texts: list[str] = field(default_factory=list)
+    closed: bool = False
+
+
+async def _stall(url: str, topic: str, stalled: Stalled, subscribed: threading.Event,
+                 release: threading.Event, timeout: float) -> None:
+    async with asyncio.timeout(timeout):
+        async with websockets.connect(url, subprotocols=SUBPROTOCOLS, proxy=None,
+                                      compression=None, max_size=None) as socket:
+            host, port = socket.local_address[:2]
+            stalled.address = f'{host}:{port}'
+            await socket.recv()   # serverInfo
+            channel = None
+            while channel is None:
+                message = await socket.recv()
+                if isinstance(message, str) and json.loads(message)['op'] == 'advertise':
+                    channel = next((c for c in json.loads(message)['channels']
+                                    if c['topic'] == topic), None)
+            await socket.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+                {'id': 0, 'channelId': int(channel['id'])}]}))
+            subscribed.set()
+            release.wait(timeout)   # its event loop blocked: nothing read
+            try:
+                while True:
+                    message = await socket.recv()
+                    if isinstance(message, str):
+                        stalled.texts.append(message)
+            except websockets.ConnectionClosed:
+                stalled.closed = True
+
+
+def stall(url: str, topic: str, subscribed: threading.Event, release: threading.Event,
+          timeout: float = 120.0) -> Stalled:
+    """Connect, subscribe to ``topic``, set ``subscribed``, read nothing until
+    ``release`` is set (a client that stopped reading), then read until the server
+    closes the connection (or ``timeout`` s in all)."""
+    stalled = Stalled()
+    asyncio.run(_stall(url, topic, stalled, subscribed, release, timeout))
+    return stalled
 
 
 # ---------------------------------------------------------------- protobuf

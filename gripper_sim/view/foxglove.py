@@ -18,6 +18,11 @@ Messages carry the sim time of their step as log time, and the server announces 
 (capability ``time``); when the time goes back (a reset) the session is cleared so
 clients drop the old run. Work is done only for channels a client subscribed to.
 
+A client that stops reading (busy, or on a slow link) loses data messages, the oldest
+first, and once ``MESSAGE_BACKLOG`` control messages (time, session) wait for it the
+server disconnects it; that is logged as one warning naming the client and the queue
+(``_DropWatcher``), so that a user whose Foxglove froze can tell why.
+
 The node starts its view with ``start_node_view(node)`` (parameters ``foxglove_port``,
 0 = off, and ``foxglove_address``); ``replay`` with ``FoxgloveView.for_recording``.
 """
@@ -26,6 +31,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+import weakref
 from typing import Any, Callable, Iterable, Mapping
 
 import foxglove
@@ -53,6 +59,10 @@ SCENE_NAME = 'scene'
 #: per message of a fast replay filled a briefly busy client's queue (1024) within a
 #: second or two and the server disconnected it
 TIME_PERIOD = 0.02
+#: messages of each kind (data, control) the server queues for a client; the oldest
+#: data is dropped when more wait, and a client with this many control messages
+#: waiting is disconnected (foxglove-sdk's ``message_backlog_size``, its default)
+MESSAGE_BACKLOG = 1024
 
 
 def scene_topic(markers_topic: str) -> str:
@@ -72,6 +82,98 @@ def shown_address(host: str) -> str:
 def _only_topic_of(topics: Mapping[str, str], type_name: str) -> str | None:
     found = [name for name, kind in topics.items() if kind == type_name]
     return found[0] if len(found) == 1 else None
+
+
+class _DropWatcher(logging.Filter):
+    """Logs a warning when the server drops a client that fell behind.
+
+    foxglove-sdk disconnects a client whose control queue is full without telling the
+    program (``ServerListener`` has no reason, ``Client`` no address); its Rust log,
+    forwarded to Python's logging (``pyo3-log``, logger = Rust module), says
+    ``Connection closed by client <address>`` (INFO, ``POLLER``) when the client
+    closed the connection and ``Unregistered client <address>`` (INFO, ``SERVER``)
+    whenever a client is gone. A client gone without closing, while no view is
+    stopping its server, was dropped for its full queue (the SDK's only other reason).
+    The SDK lets a dropped connection go (and the warning comes) once it has sent the
+    client its last status, i.e. when the client reads again (Foxglove, no longer
+    busy, finds itself disconnected) or its connection breaks.
+
+    ``install`` (before the first server starts: pyo3-log reads a logger's level on
+    its first record) lowers those two loggers to INFO and filters them: records at
+    the level they passed before (their own, else their parent's) go on, the INFO ones
+    below it are only read here. With ``FOXGLOVE_LOG_LEVEL`` above info (or
+    ``foxglove.set_log_level`` called first) the SDK never sends them and a drop is not
+    logged.
+    """
+
+    SERVER = 'foxglove.websocket.server'
+    POLLER = 'foxglove.websocket.connected_client.poller'
+    CLOSED = 'Connection closed by client '
+    GONE = 'Unregistered client '
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._lock = threading.Lock()
+        self._installed = False
+        self._own_levels: dict[str, int] = {}
+        self._closed: set[str] = set()   # addresses that closed their connection
+        self._stopping = 0               # views stopping their server now
+        self._views: weakref.WeakSet[FoxgloveView] = weakref.WeakSet()
+
+    def install(self) -> None:
+        with self._lock:
+            if self._installed:
+                return
+            self._installed = True
+            for name in (self.SERVER, self.POLLER):
+                logger = logging.getLogger(name)
+                self._own_levels[name] = logger.level
+                if logger.level == logging.NOTSET or logger.level > logging.INFO:
+                    logger.setLevel(logging.INFO)
+                logger.addFilter(self)
+
+    def add(self, view: 'FoxgloveView') -> None:
+        with self._lock:
+            self._views.add(view)
+
+    def stop(self, view: 'FoxgloveView') -> None:
+        """Stop ``view``'s server: the clients it disconnects were not dropped."""
+        with self._lock:
+            self._stopping += 1
+            self._views.discard(view)
+        try:
+            view.server.stop()
+        finally:
+            with self._lock:
+                self._stopping -= 1
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if record.name == self.POLLER and message.startswith(self.CLOSED):
+            with self._lock:
+                self._closed.add(message.removeprefix(self.CLOSED))
+        elif record.name == self.SERVER and message.startswith(self.GONE):
+            address = message.removeprefix(self.GONE)
+            with self._lock:
+                closed = address in self._closed
+                self._closed.discard(address)
+                dropped = not closed and self._stopping == 0
+                views = list(self._views)
+            if dropped:
+                where = f'live view on {views[0].url}' if len(views) == 1 else 'live view'
+                _LOG.warning(
+                    f'{where}: dropped Foxglove client {address}: it fell more than '
+                    f'{MESSAGE_BACKLOG} messages behind (its queue of time and session '
+                    'updates on the server was full: it stopped reading, busy or on a '
+                    'slow link); it gets nothing more until it reconnects')
+        own = self._own_levels.get(record.name, logging.NOTSET)
+        if own == logging.NOTSET:
+            parent = record.name.rpartition('.')[0]
+            own = logging.getLogger(parent).getEffectiveLevel()
+        return record.levelno >= own
+
+
+_DROPS = _DropWatcher()
 
 
 class FoxgloveView:
@@ -121,17 +223,20 @@ class FoxgloveView:
                        for topic, kind in self._types.items()}
         except RecordingError as err:
             raise ViewError(f'cannot serve the live view: {err}') from err
+        _DROPS.install()
         try:
             self.server = foxglove.start_server(
                 name=name, host=host, port=int(port), context=context,
                 capabilities=[foxglove.Capability.Time],
-                server_listener=_SubscriptionCounter(on_watched, self._on_subscribe))
+                server_listener=_SubscriptionCounter(on_watched, self._on_subscribe),
+                message_backlog_size=MESSAGE_BACKLOG)
         except RuntimeError as err:   # foxglove-sdk's FoxgloveError, e.g. port taken
             reason = str(err).removeprefix('FoxgloveError: ')
             msg = (f'cannot serve the Foxglove live view on {shown_address(host)}:{port}: '
                    f'{reason}; choose '
                    'a free port or an address of this machine')
             raise ViewError(msg) from err
+        _DROPS.add(self)
         self.channels.update({topic: foxglove.Channel(topic, schema=schema,
                                                       message_encoding='cdr',
                                                       context=context)
@@ -258,7 +363,7 @@ class FoxgloveView:
             channel.close()
         if self.scene_channel is not None:
             self.scene_channel.close()
-        self.server.stop()
+        _DROPS.stop(self)
 
 
 class _SubscriptionCounter:
