@@ -26,6 +26,7 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable
 
@@ -36,9 +37,19 @@ from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
 
 SUBSCRIPTION_DEPTH = 1000  # deep enough that bursts at full physics rate are not dropped
-#: s: on a stop, a topic is finished once it has been silent this long (or delivered a
-#: message published after the stop)
+# On a stop (``Recorder.caught_up``): a topic publishing steadily is finished only by a
+# message published after the stop; any other once it has been silent for its quiet
+# time: STOP_QUIET_PERIODS of its typical gaps, within [STOP_QUIET, STOP_QUIET_MAX].
+#: s: the shortest quiet time (and every topic's before it has STEADY_MESSAGES messages)
 STOP_QUIET = 0.25
+#: s: the longest quiet time; a topic whose typical gap is longer is never steady
+STOP_QUIET_MAX = 1.0
+#: a topic's quiet time in its typical gaps between messages
+STOP_QUIET_PERIODS = 4
+#: messages a topic must have delivered before it can count as steady
+STEADY_MESSAGES = 5
+#: the gaps between publish times a topic's typical gap is the median of (the latest)
+GAP_HISTORY = 31
 #: s: the longest a stop waits for messages published before it to arrive
 STOP_CEILING = 5.0
 #: the recording's ``custom_data`` key of the lost-message counts (JSON ``{topic: n}``)
@@ -200,9 +211,13 @@ class Recorder:
                                               all_topics=all_topics)
         self.on_message = on_message
         self.stats = RecorderStats()
-        #: per topic: the latest publish time written (ns) and when it arrived (monotonic s)
+        #: per topic: the latest publish time written (ns), when the latest message
+        #: arrived (monotonic s) and the gaps between the publish times of the last
+        #: messages (ns; ``typical_gap``)
         self.latest_publish: dict[str, int] = {}
         self.latest_arrival: dict[str, float] = {}
+        self.publish_gaps: dict[str, deque] = {}
+        self._previous_publish: dict[str, int] = {}
         self._subscriptions: dict[str, Any] = {}
         self._losses: dict[str, LossTracker] = {}
         self._warned: dict[str, tuple[int, float]] = {}  # total warned of, when (monotonic s)
@@ -333,23 +348,81 @@ class Recorder:
         self.stats.messages += 1
         self.stats.bytes += len(data)
         self.stats.per_topic[topic] = self.stats.per_topic.get(topic, 0) + 1
-        self.latest_publish[topic] = publish_time
+        previous = self._previous_publish.get(topic)
+        if previous is not None:
+            gaps = self.publish_gaps.get(topic)
+            if gaps is None:
+                gaps = self.publish_gaps[topic] = deque(maxlen=GAP_HISTORY)
+            gaps.append(max(0, publish_time - previous))
+        self._previous_publish[topic] = publish_time
+        self.latest_publish[topic] = max(publish_time, self.latest_publish.get(topic, 0))
         self.latest_arrival[topic] = time.monotonic()
         if self.on_message is not None:
             self.on_message(topic, log_time)
 
-    def caught_up(self, stopped_at_ns: int, stopped_at: float, quiet: float) -> bool:
+    def typical_gap(self, topic: str) -> float | None:
+        """s: the median gap between the publish times (source timestamps) of the
+        topic's last messages; None before it delivered ``STEADY_MESSAGES``.
+
+        Publish times, not arrival times: the recorder takes what queued up in bursts
+        (and not at all while the machine is too busy), the publisher's rhythm shows
+        in its timestamps.
+        """
+        gaps = self.publish_gaps.get(topic)
+        if gaps is None or len(gaps) < STEADY_MESSAGES - 1:
+            return None
+        ordered = sorted(gaps)
+        return ordered[len(ordered) // 2] * 1e-9
+
+    def quiet_time(self, topic: str, quiet: float = STOP_QUIET) -> float:
+        """s: how long a silence of ``topic`` means it has stopped publishing:
+        ``STOP_QUIET_PERIODS`` of its typical gaps, at least ``quiet``, at most
+        ``STOP_QUIET_MAX`` (``quiet`` while its gap is unknown)."""
+        gap = self.typical_gap(topic)
+        if gap is None:
+            return quiet
+        return min(max(quiet, STOP_QUIET_MAX), max(quiet, STOP_QUIET_PERIODS * gap))
+
+    def steady(self, topic: str, stopped_at: float, quiet: float = STOP_QUIET) -> bool:
+        """Whether ``topic`` was publishing steadily at a stop at ``stopped_at``
+        (monotonic s): it delivered ``STEADY_MESSAGES`` messages at least, its typical
+        gap is at most ``STOP_QUIET_MAX``, its latest message arrived less than its
+        quiet time before the stop (or after it), and it still has a publisher (one
+        that left the graph, e.g. stopped by the same Ctrl-C, publishes nothing more)."""
+        gap = self.typical_gap(topic)
+        if gap is None or gap > STOP_QUIET_MAX:
+            return False
+        arrival = self.latest_arrival.get(topic)
+        if arrival is None or stopped_at - arrival >= self.quiet_time(topic, quiet):
+            return False
+        return self.node.count_publishers(topic) > 0
+
+    def caught_up(self, stopped_at_ns: int, stopped_at: float,
+                  quiet: float = STOP_QUIET) -> bool:
         """Whether every subscribed topic has delivered what was published before a stop.
 
         A topic has once it delivered a message published at or after ``stopped_at_ns``
-        (system clock, ns) or has been silent for ``quiet`` s since the later of its last
-        message and ``stopped_at`` (monotonic s).
+        (system clock, ns). Short of that:
+
+        * a topic publishing steadily at the stop (``steady``) has not: more of its
+          messages published before the stop may still be on their way, however long
+          it or the recorder stalls (``finish_after_stop``'s ceiling ends the wait);
+        * any other topic (latched, event-like, slow, few messages so far, or silent for
+          its quiet time already at the stop) has once it has been silent for its
+          ``quiet_time`` (at least ``quiet`` s, more on a topic with longer gaps) since
+          the later of its last message and ``stopped_at`` (monotonic s).
+
+        Judged afresh at each call: a topic that delivers a message after the stop
+        (what queued while the recorder was held up) counts as steady from then on.
         """
         now = time.monotonic()
         for topic in self._subscriptions:
             if self.latest_publish.get(topic, 0) >= stopped_at_ns:
                 continue
-            if now - max(self.latest_arrival.get(topic, stopped_at), stopped_at) < quiet:
+            if self.steady(topic, stopped_at, quiet):
+                return False
+            since = max(self.latest_arrival.get(topic, stopped_at), stopped_at)
+            if now - since < self.quiet_time(topic, quiet):
                 return False
         return True
 
@@ -366,8 +439,12 @@ def finish_after_stop(executor: Any, recorder: Recorder, *, quiet: float = STOP_
     """Keep recording until every topic has delivered what was published before now.
 
     Messages already acknowledged to the recorder but not yet taken, and those still on
-    their way from a busy publisher, would otherwise be lost on Ctrl-C. Waits at most
-    ``ceiling`` s (a warning on stderr if messages may still have been in flight).
+    their way from a busy publisher, would otherwise be lost on Ctrl-C. A topic
+    publishing steadily is waited for until it delivers a message published after the
+    stop, a sparse or silent one until it has been quiet for its quiet time
+    (``Recorder.caught_up``; ``quiet``: the shortest). Waits at most ``ceiling`` s (a
+    warning on stderr if messages may still have been in flight: a steady topic whose
+    publisher stopped publishing at the stop but is still on the graph).
     """
     stopped_at_ns = time.time_ns()
     stopped_at = time.monotonic()
