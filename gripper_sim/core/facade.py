@@ -770,8 +770,9 @@ class SimulationFacade:
             jaws = wrenches if wrenches is not None else jaw_wrenches(origins)
             return dict(
                 left_wrench=jaws[LEFT], right_wrench=jaws[RIGHT],
-                slipping=jaw_contacts_sliding(v, obstacle, face_sides, normals,
-                                              face_velocities),
+                slipping=jaw_contacts_sliding(  # 3D: the patches' rigid motion
+                    v, obstacle, face_sides, normals, face_velocities,
+                    x if self.dimension == 3 else None),
                 energies=Energies(
                     kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
                     elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),

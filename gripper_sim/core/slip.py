@@ -38,12 +38,23 @@ def grasp_slipped(held_slip: float, dropped: bool = False) -> bool:
 
 
 def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face: np.ndarray,
-                         face_normals: np.ndarray, face_velocities: np.ndarray) -> bool:
+                         face_normals: np.ndarray, face_velocities: np.ndarray,
+                         positions: np.ndarray | None = None) -> bool:
     """Whether the fruit is slipping in the jaws: on either jaw, more than half of the nodes
     it holds move along its faces faster than ``SLIDING_SPEED`` relative to them.
 
     Only the motion at the contacts counts: a fruit that deforms while every contact node
     sticks (it sags under its weight, bulges in a squeeze) is not slipping.
+
+    With ``positions`` a node moves at the contact patch's rigid motion relative to its
+    jaw, not at its own: the translation along the faces and the spin about the closing
+    axis (x) fitted (least squares) to the tangential relative velocities of the nodes the
+    jaw holds. The rest is the patch's deformation, no sliding of the fruit: while a 3D
+    patch grows in a squeeze its outer rings slip radially towards its centre and the
+    centre sticks (partial slip, as of an elastic sphere pressed on a rigid flat with
+    finite friction); on a 20 ms step those rings, new ones each step, are most of the
+    patch's nodes, but their slip has no mean and no spin. A fruit that slides (down the
+    jaws, or turning about the grip axis) moves its patches as a whole.
 
     Args:
         velocities: (n_nodes, d) m/s, node velocities.
@@ -51,6 +62,8 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
         jaw_of_face: (n_faces,) int, the jaw (0 left, 1 right) of each face, -1 for the
             faces of no jaw (table, walls).
         face_normals: (n_faces, d) unit normals.  face_velocities: (n_faces, d) m/s.
+        positions: (n_nodes, 3) m, node positions (the 3D facade's); None (2D): each node
+            at its own velocity, as the 2D fast path's ``kernels.jaw_sliding``.
     """
     held = np.flatnonzero(holder >= 0)
     face = holder[held]
@@ -62,12 +75,31 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
     relative = velocities[held] - face_velocities[face]  # (k, d)
     normals = face_normals[face]
     along = relative - np.sum(relative * normals, axis=1)[:, None] * normals
-    sliding = np.sum(along * along, axis=1) > SLIDING_SPEED ** 2
     for side in (0, 1):
         mine = jaw == side
-        if 2 * np.count_nonzero(sliding & mine) > np.count_nonzero(mine):
+        if not np.any(mine):
+            continue
+        moving = along[mine]
+        if positions is not None:
+            moving = _patch_motion(positions[held[mine]], normals[mine], moving)
+        sliding = np.sum(moving * moving, axis=1) > SLIDING_SPEED ** 2
+        if 2 * np.count_nonzero(sliding) > len(sliding):
             return True
     return False
+
+
+def _patch_motion(x: np.ndarray, normals: np.ndarray, along: np.ndarray) -> np.ndarray:
+    """(k, 3) m/s, the rigid motion of a jaw's contact patch at its k nodes: the velocity
+    t + w (e_x cross r) (r from the patch's centroid) projected on each node's face,
+    fitted by least squares to their tangential relative velocities ``along`` (k, 3) m/s;
+    ``x`` (k, 3) m the nodes, ``normals`` (k, 3) their faces' unit normals."""
+    r = x - x.mean(axis=0)
+    spin = np.zeros_like(r)  # e_x cross r
+    spin[:, 1], spin[:, 2] = -r[:, 2], r[:, 1]
+    tangential = np.eye(3) - normals[:, :, None] * normals[:, None, :]  # (k, 3, 3)
+    columns = np.concatenate([tangential, (tangential @ spin[:, :, None])], axis=2)
+    fit = np.linalg.lstsq(columns.reshape(-1, 4), along.ravel(), rcond=None)[0]
+    return columns @ fit
 
 
 class ContactSlide:
