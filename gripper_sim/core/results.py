@@ -123,8 +123,10 @@ class StepResult:
         slip_distance: m, vertical motion of the fruit centroid relative to the jaws
             since both jaws first gripped it (0 before that).
         slipping: fruit slides in the jaws in this step: on a jaw, most of the contact
-            nodes move along the face relative to it (``slip.jaw_contacts_sliding``);
-            elastic deformation with the contacts stuck is not slipping.
+            nodes move along the face relative to it (``slip.jaw_contacts_sliding``;
+            in 3D each node at its contact patch's fitted rigid motion, so a growing
+            patch's rim slipping inwards is not slipping); elastic deformation with
+            the contacts stuck is not slipping.
         centroid: (2,) m, mass-weighted centroid of the fruit.
         energies: kinetic, elastic and gravitational energy.
         deformation: compression, strain and contact measures.
