@@ -26,7 +26,7 @@ from std_msgs.msg import Header  # noqa: E402
 from gripper_sim.recording import recorder as recorder_mod  # noqa: E402
 from gripper_sim.recording.reader import BagReader  # noqa: E402
 from gripper_sim.recording.recorder import (  # noqa: E402
-    STOP_CEILING, STOP_QUIET, STOP_QUIET_MAX, Recorder, finish_after_stop)
+    STEADY_QUIET, STOP_CEILING, STOP_QUIET, STOP_QUIET_MAX, Recorder, finish_after_stop)
 from gripper_sim.recording.writer import BagWriter  # noqa: E402
 from gripper_sim.ros.process import free_domain_id  # noqa: E402
 from ros_client import isolated_context, spin_until  # noqa: E402
@@ -231,13 +231,26 @@ def test_a_topic_silent_long_before_the_stop_holds_it_only_its_short_quiet_time(
     assert finish(clock, executor, rec) <= STOP_QUIET + 0.05 + 1e-9
 
 
-def test_a_steady_topic_whose_publisher_died_at_the_stop_ends_at_the_ceiling_warned(
+def test_a_steady_topic_whose_publisher_paused_at_the_stop_holds_it_its_steady_quiet(
         world, capsys):
+    # e.g. the node paused just before the recorder is stopped: nothing more comes, and
+    # nothing was lost, so no warning
     clock, _node, executor, rec, writer = world('/joint_states')
     sent = steady(executor, '/joint_states', 0, 1000)           # the last at 990 ms
     executor.run_until(1000)
     took = finish(clock, executor, rec)
     assert writer.numbers('/joint_states') == sent
+    assert STEADY_QUIET <= took < STEADY_QUIET + 0.2
+    assert 'some may not have arrived' not in capsys.readouterr().err
+
+
+def test_a_topic_still_delivering_old_messages_at_the_ceiling_is_warned_of(world, capsys):
+    # messages published before the stop keep arriving, late, for longer than the ceiling
+    clock, _node, executor, rec, writer = world('/joint_states')
+    steady(executor, '/joint_states', 0, 1000,
+           stall=lambda published: None if published < 900 else 1000 + 60 * (published - 900))
+    executor.run_until(1000)
+    took = finish(clock, executor, rec)
     assert STOP_CEILING <= took < STOP_CEILING + 0.2
     assert 'some may not have arrived' in capsys.readouterr().err
 

@@ -37,15 +37,19 @@ from gripper_sim.recording.errors import RecordingError
 from gripper_sim.recording.writer import DEFAULT_FLUSH_INTERVAL
 
 SUBSCRIPTION_DEPTH = 1000  # deep enough that bursts at full physics rate are not dropped
-# On a stop (``Recorder.caught_up``): a topic publishing steadily is finished only by a
-# message published after the stop; any other once it has been silent for its quiet
-# time: STOP_QUIET_PERIODS of its typical gaps, within [STOP_QUIET, STOP_QUIET_MAX].
+# On a stop (``Recorder.caught_up``): a topic publishing steadily is finished by a
+# message published after the stop, or by STEADY_QUIET of silence; any other once it
+# has been silent for its quiet time: STOP_QUIET_PERIODS of its typical gaps, within
+# [STOP_QUIET, STOP_QUIET_MAX].
 #: s: the shortest quiet time (and every topic's before it has STEADY_MESSAGES messages)
 STOP_QUIET = 0.25
 #: s: the longest quiet time; a topic whose typical gap is longer is never steady
 STOP_QUIET_MAX = 1.0
 #: a topic's quiet time in its typical gaps between messages
 STOP_QUIET_PERIODS = 4
+#: s: the silence that finishes a steady topic with no message published after the stop
+#: (its publisher paused just before it, or the recorder or the machine stalled this long)
+STEADY_QUIET = 2.0
 #: messages a topic must have delivered before it can count as steady
 STEADY_MESSAGES = 5
 #: the gaps between publish times a topic's typical gap is the median of (the latest)
@@ -404,9 +408,11 @@ class Recorder:
         A topic has once it delivered a message published at or after ``stopped_at_ns``
         (system clock, ns). Short of that:
 
-        * a topic publishing steadily at the stop (``steady``) has not: more of its
-          messages published before the stop may still be on their way, however long
-          it or the recorder stalls (``finish_after_stop``'s ceiling ends the wait);
+        * a topic publishing steadily at the stop (``steady``) has once it has been
+          silent for ``STEADY_QUIET`` since the later of its last message and the stop:
+          more of its messages published before the stop may be on their way while the
+          recorder or the machine stalls (a publisher paused just before the stop sends
+          nothing more, and is not waited for longer);
         * any other topic (latched, event-like, slow, few messages so far, or silent for
           its quiet time already at the stop) has once it has been silent for its
           ``quiet_time`` (at least ``quiet`` s, more on a topic with longer gaps) since
@@ -419,10 +425,10 @@ class Recorder:
         for topic in self._subscriptions:
             if self.latest_publish.get(topic, 0) >= stopped_at_ns:
                 continue
-            if self.steady(topic, stopped_at, quiet):
-                return False
             since = max(self.latest_arrival.get(topic, stopped_at), stopped_at)
-            if now - since < self.quiet_time(topic, quiet):
+            limit = (STEADY_QUIET if self.steady(topic, stopped_at, quiet)
+                     else self.quiet_time(topic, quiet))
+            if now - since < limit:
                 return False
         return True
 
@@ -441,10 +447,10 @@ def finish_after_stop(executor: Any, recorder: Recorder, *, quiet: float = STOP_
     Messages already acknowledged to the recorder but not yet taken, and those still on
     their way from a busy publisher, would otherwise be lost on Ctrl-C. A topic
     publishing steadily is waited for until it delivers a message published after the
-    stop, a sparse or silent one until it has been quiet for its quiet time
-    (``Recorder.caught_up``; ``quiet``: the shortest). Waits at most ``ceiling`` s (a
-    warning on stderr if messages may still have been in flight: a steady topic whose
-    publisher stopped publishing at the stop but is still on the graph).
+    stop or has been silent for ``STEADY_QUIET``, a sparse or silent one until it has
+    been quiet for its quiet time (``Recorder.caught_up``; ``quiet``: the shortest).
+    Waits at most ``ceiling`` s (a warning on stderr if messages may still have been in
+    flight: a topic still delivering what was published before the stop).
     """
     stopped_at_ns = time.time_ns()
     stopped_at = time.monotonic()
