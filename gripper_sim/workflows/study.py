@@ -49,9 +49,9 @@ from gripper_sim.workflows.study_tasks import (answer_key, code_version, evaluat
 from gripper_sim.workflows.window import (lower_bound_limited_by, trial_of,
                                           upper_bound_limited_by)
 
-#: seconds to wait for an existing scheduler before giving up (a refused or unknown
-#: address fails at once; at 3 s a scheduler on a loaded 2-core machine sometimes had not
-#: finished its handshake, which read as 'not a Dask scheduler')
+#: seconds to wait for an existing scheduler before giving up (a refused address too:
+#: distributed retries it until then; at 3 s a scheduler on a loaded 2-core machine
+#: sometimes had not finished its handshake, which read as 'not a Dask scheduler')
 CONNECT_TIMEOUT = 10.0
 #: evaluations a fruit's window search takes, until measured in the run
 EXPECTED_PER_CHAIN = 13
@@ -180,17 +180,18 @@ def _stop_error(held: list[int]) -> KeyboardInterrupt:
 
 
 @contextmanager
-def _handled(handler) -> Iterator[None]:
-    """``handler(number, frame)`` on the ``STOP_SIGNALS`` within the block, the previous
-    handlers after it. Outside the main thread (no signals there) nothing changes."""
+def _handled(handler, numbers: tuple = STOP_SIGNALS) -> Iterator[None]:
+    """``handler(number, frame)`` on the signals ``numbers`` within the block, the
+    previous handlers after it. Outside the main thread (no signals there) nothing
+    changes."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = [signal.signal(number, handler) for number in STOP_SIGNALS]
+    previous = [signal.signal(number, handler) for number in numbers]
     try:
         yield
     finally:
-        for number, handler_before in zip(STOP_SIGNALS, previous):
+        for number, handler_before in zip(numbers, previous):
             signal.signal(number, handler_before)
 
 
@@ -209,10 +210,12 @@ def _interrupt_recorded() -> Iterator[list[int]]:
 def _terminate_as_interrupt() -> Iterator[None]:
     """SIGTERM (``kill``, a batch system's time limit) stops the study as Ctrl-C does,
     raising ``Terminated`` (a KeyboardInterrupt), instead of ending the process at once
-    with finished rows still in the row buffer."""
-    def stop(number, _frame):
-        raise _stop_error([number])
-    with _handled(stop):
+    with finished rows still in the row buffer. Ctrl-C keeps Python's own handling (or
+    none, where the study was started with SIGINT ignored, as a script's background
+    job)."""
+    def stop(_number, _frame):
+        raise Terminated()
+    with _handled(stop, (signal.SIGTERM,)):
         yield
 
 
