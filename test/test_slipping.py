@@ -4,7 +4,7 @@ import pytest
 
 from gripper_sim.configuration import load_config
 from gripper_sim.core.simulation import Simulation
-from gripper_sim.core.slip import SLIDING_SPEED, jaw_contacts_sliding
+from gripper_sim.core.slip import SLIDING_SPEED, jaw_contacts_sliding, surface_motion
 from gripper_sim.workflows.grasp import GraspSequence
 
 MU = 0.5
@@ -66,3 +66,74 @@ def test_slipping_needs_most_of_a_jaws_contact_nodes_to_slide_along_it():
     assert jaw_contacts_sliding(two, holder, jaw_of_face, normals, face_velocities)
     assert not jaw_contacts_sliding(two, -np.ones(6, int), jaw_of_face, normals,
                                     face_velocities)
+
+
+def _squeezed_on_the_table(overrides: list, force: float, steps: int):
+    """The jaws 1 mm from the apple resting on the table, closed to ``force`` N in force
+    mode: (each step's result while both jaws hold it, the last result)."""
+    config = load_config(overrides=overrides)
+    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
+    sim = Simulation(config)
+    sim.command_force(force)
+    held = []
+    for _ in range(steps):
+        result = sim.step()
+        if result.in_contact_with('left_jaw') and result.in_contact_with('right_jaw'):
+            held.append(result)
+    return held, result
+
+
+@pytest.mark.parametrize('finger', ['fin_ray', 'solid_pad'])
+def test_a_deformable_finger_carries_the_nodes_stuck_to_it(finger):
+    """Squeezed to 20 N, the apple's contact nodes move along the fingers' backings as the
+    fingers bend and their fronts wrap the fruit. Read against the backing (before
+    2026-12-06) the squeeze was slipping on 126 of these 300 steps with the Fin Ray and 54
+    with the solid pads, though the nodes are stuck to the finger's surface. Against the
+    surface only the first touches remain (7 steps each: a node sliding as a finger's
+    front rolls onto the fruit)."""
+    held, last = _squeezed_on_the_table([f'gripper.finger.type={finger}'], 20.0, 300)
+    slipping = [result.step for result in held if result.slipping]
+    assert len(held) > 200 and len(slipping) <= 10, slipping
+    assert last.grip_force == pytest.approx(20.0, rel=0.01)
+
+
+def test_a_fin_ray_pick_below_the_hold_minimum_is_slipping():
+    """The Fin Ray's fingers hold the apple at 2 mu N = 0.8 m g: it slides down them while
+    they rise (read against the fingers' surface)."""
+    config = load_config(overrides=['gripper.finger.type=fin_ray',
+                                    f'contact.jaw.static_friction={MU}',
+                                    f'contact.jaw.kinetic_friction={MU}'])
+    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
+    sim = Simulation(config)
+    force = 0.8 * sim.fruit.total_mass * config['world.gravity'] / (2 * MU)
+    sequence = GraspSequence(sim, force, lift_height=0.02, hold_time=0.1)
+    lifting = []
+    while sequence.phase != 'done':
+        result = sim.step()
+        sequence.update(result)
+        if sequence.phase == 'lifting':
+            lifting.append(result.slipping)
+    assert np.mean(lifting) > 0.8, lifting
+
+
+def test_surface_motion_is_the_nearest_surface_points_motion():
+    # 2D: an outline of two edges (a corner at the origin), its nodes moving apart
+    positions = np.array([[0.0, 1.0], [0.0, 0.0], [1.0, 0.0]])
+    velocities = np.array([[0.0, 2.0], [0.0, 0.0], [4.0, 0.0]])
+    edges = np.array([[0, 1], [1, 2]])
+    points = np.array([[0.001, 0.25], [0.5, -0.001], [2.0, 0.0]])
+    velocity, normal = surface_motion(points, edges, positions, velocities)
+    np.testing.assert_allclose(velocity, [[0.0, 0.5], [2.0, 0.0], [4.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(np.abs(normal), [[1.0, 0.0], [0.0, 1.0], [0.0, 1.0]])
+    # 3D: a unit square of two triangles in the plane x = 0, its far corner moving
+    positions = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 1.0],
+                          [0.0, 0.0, 1.0]])
+    velocities = np.zeros((4, 3))
+    velocities[2] = [0.0, 0.0, 3.0]
+    triangles = np.array([[0, 1, 2], [0, 2, 3]])
+    points = np.array([[1e-4, 0.75, 0.25], [-1e-4, 0.25, 0.75], [0.0, 0.5, 0.0]])
+    velocity, normal = surface_motion(points, triangles, positions, velocities)
+    # the weights of the far corner (2): 0.25 (in triangle 0), 0.25 (in 1), 0 (on 0-1)
+    np.testing.assert_allclose(velocity, [[0.0, 0.0, 0.75], [0.0, 0.0, 0.75], [0.0, 0.0, 0.0]],
+                               atol=1e-12)
+    np.testing.assert_allclose(np.abs(normal), np.tile([1.0, 0.0, 0.0], (3, 1)), atol=1e-12)

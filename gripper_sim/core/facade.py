@@ -52,7 +52,7 @@ from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
 from gripper_sim.core.measures import jaw_normal_forces
 from gripper_sim.core.results import Energies, JawWrench, StepResult
 from gripper_sim.core.soft_fingers import FingerState, SoftFingers, base_pushes
-from gripper_sim.core.slip import jaw_contacts_sliding
+from gripper_sim.core.slip import jaw_contacts_sliding, patches_sliding, surface_motion
 from gripper_sim.core.stepper import NewtonFailure
 from gripper_sim.errors import (CommandError, ConfigError, ConvergenceError,
                                 FingersClosed)
@@ -770,15 +770,37 @@ class SimulationFacade:
             jaws = wrenches if wrenches is not None else jaw_wrenches(origins)
             return dict(
                 left_wrench=jaws[LEFT], right_wrench=jaws[RIGHT],
-                slipping=jaw_contacts_sliding(  # 3D: the patches' rigid motion
-                    v, obstacle, face_sides, normals, face_velocities,
-                    x if self.dimension == 3 else None),
+                slipping=(self._fingers_sliding(x, v, obstacle, finger) if soft is not None
+                          else jaw_contacts_sliding(  # 3D: the patches' rigid motion
+                              v, obstacle, face_sides, normals, face_velocities,
+                              x if self.dimension == 3 else None)),
                 energies=Energies(
                     kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
                     elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
                     gravitational=float(self.gravity.value(x.ravel()))),
                 fingers=soft.result(finger, *origins) if soft is not None else None)
         return fields, rarely_read, normal, sides
+
+    def _fingers_sliding(self, x: np.ndarray, v: np.ndarray, obstacle: np.ndarray,
+                         finger: FingerState) -> bool:
+        """``StepResult.slipping`` with deformable fingers (``slip.patches_sliding``): the
+        fruit's nodes at positions ``x`` and velocities ``v`` (n, d) held by a finger
+        (``obstacle`` (n,) 0 left, 1 right) against the finger's surface where they lie
+        on it (``slip.surface_motion``), in the fingers' state ``finger``; not against its
+        backing: a finger that bends under the fruit carries the nodes stuck to it."""
+        soft = self._soft
+        held = [np.flatnonzero(obstacle == side) for side in (LEFT, RIGHT)]
+        relative, normals = [], []
+        for side, nodes in zip((LEFT, RIGHT), held):
+            body = soft.soft_bodies[side]
+            elements = body.edges if body.triangles is None else body.triangles
+            velocity, normal = surface_motion(x[nodes], elements - soft.first,
+                                              finger.positions, finger.velocities)
+            relative.append(v[nodes] - velocity)
+            normals.append(normal)
+        jaw = np.repeat([LEFT, RIGHT], [held[LEFT].size, held[RIGHT].size])
+        return patches_sliding(np.concatenate(relative), np.concatenate(normals), jaw,
+                               x[np.concatenate(held)] if self.dimension == 3 else None)
 
     def _jaw_normal_forces(self, forces: np.ndarray, obstacle: np.ndarray) -> tuple:
         """(whether the left jaw holds any node, whether the right does, (the left jaw's

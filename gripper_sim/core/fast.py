@@ -49,7 +49,7 @@ from gripper_sim.core.energies import (EnclosedAreaPressure, NeoHookeanTriangles
                                        Stretching)
 from gripper_sim.core.measures import tributary_lengths
 from gripper_sim.core.results import Deformation, Energies, JawWrench, StepResult
-from gripper_sim.core.slip import SLIDING_SPEED
+from gripper_sim.core.slip import jaw_contacts_sliding
 from gripper_sim.core.stepper import NEWTON_FAILURES, NewtonFailure
 
 from gripper_sim.core import kernels, sparse_ldl
@@ -515,14 +515,17 @@ class FastPath:
 
     def _sliding(self, v: np.ndarray, obstacle: np.ndarray, grip,
                  face_par: np.ndarray) -> bool:
-        """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) on the kernels' faces
-        ``face_par`` with the gripper state ``grip``: 0 and 1 the jaws, moving with the
-        gripper."""
+        """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) of the nodes at velocities
+        ``v`` (n, 2) on the kernels' faces ``face_par`` with the gripper state ``grip``: 0
+        and 1 the jaws, moving with the gripper."""
         half = 0.5 * grip.gap_rate
-        jaw_velocities = np.array([[grip.x_rate - half, grip.lift_rate],
-                                   [grip.x_rate + half, grip.lift_rate]])
-        return bool(kernels.jaw_sliding(v, obstacle, face_par, jaw_velocities,
-                                        SLIDING_SPEED))
+        jaw_of_face = face_par[:, kernels.FP_JAW].astype(np.int64)
+        face_velocities = np.zeros((len(face_par), 2))
+        on_jaw = jaw_of_face >= 0
+        face_velocities[on_jaw, 0] = grip.x_rate + half * (2 * jaw_of_face[on_jaw] - 1)
+        face_velocities[on_jaw, 1] = grip.lift_rate
+        return jaw_contacts_sliding(v, obstacle, jaw_of_face, face_par[:, :2],
+                                    face_velocities)
 
     def obstacle_names(self) -> tuple:
         """``Simulation.obstacle_names``, kept per face set."""

@@ -17,7 +17,7 @@ where it matters:
   the overloads after the Newton section's;
 - ``step_measures``: the numbers ``Simulation._measure`` reports, the outline's by
   ``measures.outline_measures`` and ``measures.face_contact_length_of`` (as
-  ``measures.deformation``); ``jaw_sliding``: ``slip.jaw_contacts_sliding``;
+  ``measures.deformation``);
 - ``damage_update``: ``damage.damage_patches`` (the rule ``DamageTracker.update`` calls)
   on this module's faces; ``_pad_rows``, ``_pad_forces``, ``_pad_blocks``: the soft pad's
   ``pad.pad_rows``, ``pad.pad_forces``, ``pad.pad_blocks`` on them.
@@ -1539,34 +1539,6 @@ def substep(x_n, v_n, obstacle, mode, normal_force, bounce_speed, secondary, sec
 (M_LEFT_FX, M_LEFT_FZ, M_LEFT_TY, M_RIGHT_FX, M_RIGHT_FZ, M_RIGHT_TY, M_LEFT_N, M_RIGHT_N,
  M_CX, M_CZ, M_CVX, M_CVZ, M_ANY_LEFT, M_ANY_RIGHT, M_KINETIC, M_ELASTIC, M_GRAVITY,
  M_WIDTH, M_MAX_STRAIN, M_CONTACT_LENGTH, M_PEAK_PRESSURE, M_SIZE) = range(22)
-
-
-@njit(cache=True, error_model='numpy')
-def jaw_sliding(v, obstacle, face_par, jaw_velocities, speed):
-    """Whether the fruit slides in the jaws, as ``slip.jaw_contacts_sliding``: on either
-    jaw, more than half of the nodes its faces hold move along them faster than ``speed``
-    (m/s) relative to them.
-
-    Args:
-        v: (n, 2) m/s.  obstacle: (n,) holding face per node.  face_par: see the module
-        doc.  jaw_velocities: (2, 2) m/s, left and right jaw.
-    """
-    held = np.zeros(2, np.int64)
-    sliding = np.zeros(2, np.int64)
-    for i in range(v.shape[0]):
-        f = obstacle[i]
-        if f < 0 or face_par[f, FP_JAW] < 0:
-            continue
-        side = np.int64(face_par[f, FP_JAW])
-        rx = v[i, 0] - jaw_velocities[side, 0]
-        rz = v[i, 1] - jaw_velocities[side, 1]
-        nx, nz = face_par[f, 0], face_par[f, 1]
-        r_n = rx * nx + rz * nz
-        ax, az = rx - r_n * nx, rz - r_n * nz
-        held[side] += 1
-        if ax * ax + az * az > speed * speed:
-            sliding[side] += 1
-    return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
 
 
 @njit(cache=True, error_model='numpy', inline='always')

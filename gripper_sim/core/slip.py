@@ -5,9 +5,9 @@ definition of each.
 measure of both grasp workflows, the pick (``workflows.grasp.GraspSequence``: ``pick``,
 the node's Grasp action) and the pick-and-place (``workflows.scenario.PickAndPlace``:
 ``run``, ``window``, studies); ``grasp_slipped`` (the outcome) is shared by the pick and
-the analysis of a recording (``analyze``); ``jaw_contacts_sliding``
-(``StepResult.slipping``, ``FruitState.slipping``) by both simulation facades and the 2D
-fast path.
+the analysis of a recording (``analyze``); ``patches_sliding`` (``StepResult.slipping``,
+``FruitState.slipping``) by both simulation facades and the 2D fast path, through
+``jaw_contacts_sliding`` with rigid jaws and ``surface_motion`` with deformable fingers.
 """
 from __future__ import annotations
 
@@ -40,21 +40,7 @@ def grasp_slipped(held_slip: float, dropped: bool = False) -> bool:
 def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face: np.ndarray,
                          face_normals: np.ndarray, face_velocities: np.ndarray,
                          positions: np.ndarray | None = None) -> bool:
-    """Whether the fruit is slipping in the jaws: on either jaw, more than half of the nodes
-    it holds move along its faces faster than ``SLIDING_SPEED`` relative to them.
-
-    Only the motion at the contacts counts: a fruit that deforms while every contact node
-    sticks (it sags under its weight, bulges in a squeeze) is not slipping.
-
-    With ``positions`` a node moves at the contact patch's rigid motion relative to its
-    jaw, not at its own: the translation along the faces and the spin about the closing
-    axis (x) fitted (least squares) to the tangential relative velocities of the nodes the
-    jaw holds. The rest is the patch's deformation, no sliding of the fruit: while a 3D
-    patch grows in a squeeze its outer rings slip radially towards its centre and the
-    centre sticks (partial slip, as of an elastic sphere pressed on a rigid flat with
-    finite friction); on a 20 ms step those rings, new ones each step, are most of the
-    patch's nodes, but their slip has no mean and no spin. A fruit that slides (down the
-    jaws, or turning about the grip axis) moves its patches as a whole.
+    """Whether the fruit is slipping in jaws of rigid faces (``patches_sliding``).
 
     Args:
         velocities: (n_nodes, d) m/s, node velocities.
@@ -62,8 +48,7 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
         jaw_of_face: (n_faces,) int, the jaw (0 left, 1 right) of each face, -1 for the
             faces of no jaw (table, walls).
         face_normals: (n_faces, d) unit normals.  face_velocities: (n_faces, d) m/s.
-        positions: (n_nodes, 3) m, node positions (the 3D facade's); None (2D): each node
-            at its own velocity, as the 2D fast path's ``kernels.jaw_sliding``.
+        positions: (n_nodes, 3) m, node positions (3D); None (2D).
     """
     held = np.flatnonzero(holder >= 0)
     face = holder[held]
@@ -71,9 +56,36 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
     on_jaw = jaw >= 0
     if not np.any(on_jaw):
         return False
-    held, face, jaw = held[on_jaw], face[on_jaw], jaw[on_jaw]
-    relative = velocities[held] - face_velocities[face]  # (k, d)
-    normals = face_normals[face]
+    held, face = held[on_jaw], face[on_jaw]
+    return patches_sliding(velocities[held] - face_velocities[face], face_normals[face],
+                           jaw[on_jaw], None if positions is None else positions[held])
+
+
+def patches_sliding(relative: np.ndarray, normals: np.ndarray, jaw: np.ndarray,
+                    positions: np.ndarray | None = None) -> bool:
+    """Whether the fruit is slipping in the jaws: on either jaw, more than half of the
+    nodes it holds move along its surface faster than ``SLIDING_SPEED`` relative to it.
+
+    Only the motion at the contacts counts: a fruit that deforms while every contact node
+    sticks (it sags under its weight, bulges in a squeeze) is not slipping.
+
+    With ``positions`` (3D) a node moves at the contact patch's rigid motion relative to
+    its jaw, not at its own: the translation along the surface and the spin about the
+    closing axis (x) fitted (least squares) to the tangential relative velocities of the
+    nodes the jaw holds. The rest is the patch's deformation, no sliding of the fruit:
+    while a 3D patch grows in a squeeze its outer rings slip radially towards its centre
+    and the centre sticks (partial slip, as of an elastic sphere pressed on a rigid flat
+    with finite friction); on a 20 ms step those rings, new ones each step, are most of
+    the patch's nodes, but their slip has no mean and no spin. A fruit that slides (down
+    the jaws, or turning about the grip axis) moves its patches as a whole.
+
+    Args:
+        relative: (k, d) m/s, each held node's velocity relative to the surface holding
+            it: a rigid face, or a deformable finger's surface where the node lies on it
+            (``surface_motion``).
+        normals: (k, d) unit normals of that surface.  jaw: (k,) 0 left, 1 right.
+        positions: (k, 3) m, the nodes (3D); None (2D): each node at its own velocity.
+    """
     along = relative - np.sum(relative * normals, axis=1)[:, None] * normals
     for side in (0, 1):
         mine = jaw == side
@@ -81,7 +93,7 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
             continue
         moving = along[mine]
         if positions is not None:
-            moving = _patch_motion(positions[held[mine]], normals[mine], moving)
+            moving = _patch_motion(positions[mine], normals[mine], moving)
         sliding = np.sum(moving * moving, axis=1) > SLIDING_SPEED ** 2
         if 2 * np.count_nonzero(sliding) > len(sliding):
             return True
@@ -90,9 +102,9 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
 
 def _patch_motion(x: np.ndarray, normals: np.ndarray, along: np.ndarray) -> np.ndarray:
     """(k, 3) m/s, the rigid motion of a jaw's contact patch at its k nodes: the velocity
-    t + w (e_x cross r) (r from the patch's centroid) projected on each node's face,
+    t + w (e_x cross r) (r from the patch's centroid) projected on each node's surface,
     fitted by least squares to their tangential relative velocities ``along`` (k, 3) m/s;
-    ``x`` (k, 3) m the nodes, ``normals`` (k, 3) their faces' unit normals."""
+    ``x`` (k, 3) m the nodes, ``normals`` (k, 3) their surfaces' unit normals."""
     r = x - x.mean(axis=0)
     spin = np.zeros_like(r)  # e_x cross r
     spin[:, 1], spin[:, 2] = -r[:, 2], r[:, 1]
@@ -100,6 +112,56 @@ def _patch_motion(x: np.ndarray, normals: np.ndarray, along: np.ndarray) -> np.n
     columns = np.concatenate([tangential, (tangential @ spin[:, :, None])], axis=2)
     fit = np.linalg.lstsq(columns.reshape(-1, 4), along.ravel(), rcond=None)[0]
     return columns @ fit
+
+
+def surface_motion(points: np.ndarray, elements: np.ndarray, positions: np.ndarray,
+                   velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The motion of a deformable surface where k ``points`` (k, d) m lie on it: at each
+    point's nearest point of the surface, its velocity (k, d) m/s (linear over the element)
+    and the element's unit normal (k, d) (either sign).
+
+    Args:
+        elements: the surface's (e, d) node indices into ``positions`` (N, d) m and
+            ``velocities`` (N, d) m/s: edges in 2D, triangles in 3D.
+    """
+    corners = positions[elements]  # (e, d, d)
+    if elements.shape[1] == 2:
+        weights, normals = _segment_weights(points, corners)
+    else:
+        weights, normals = _triangle_weights(points, corners)
+    off = np.einsum('kec,ecd->ked', weights, corners) - points[:, None, :]
+    nearest = np.argmin(np.sum(off * off, axis=2), axis=1)
+    mine = weights[np.arange(len(points)), nearest]  # (k, c)
+    velocity = np.einsum('kc,kcd->kd', mine, velocities[elements[nearest]])
+    return velocity, normals[nearest]
+
+
+def _segment_weights(points: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, e, 2) the weights of each of the e segments' ``ends`` (e, 2, 2) m giving its
+    point nearest each of the k ``points`` (k, 2) m, and the segments' unit normals (e, 2)."""
+    a, ab = ends[:, 0], ends[:, 1] - ends[:, 0]
+    t = np.clip(np.sum((points[:, None, :] - a) * ab, axis=2) / np.sum(ab * ab, axis=1),
+                0.0, 1.0)
+    tangent = ab / np.linalg.norm(ab, axis=1)[:, None]
+    return np.stack([1.0 - t, t], axis=2), np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+
+
+def _triangle_weights(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, e, 3) barycentric weights on each of the e triangles ``corners`` (e, 3, 3) m of
+    the projection of each of the k ``points`` (k, 3) m on its plane, clipped to the
+    triangle (negative weights dropped, the rest scaled to sum 1: the nearest point where
+    the projection falls inside, near it elsewhere), and the triangles' unit normals
+    (e, 3)."""
+    a, u, w = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    normals = np.cross(u, w)
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    uu, uw, ww = np.sum(u * u, 1), np.sum(u * w, 1), np.sum(w * w, 1)
+    r = points[:, None, :] - a  # (k, e, 3)
+    ru, rw = np.sum(r * u, axis=2), np.sum(r * w, axis=2)
+    det = uu * ww - uw * uw
+    s, t = (ww * ru - uw * rw) / det, (uu * rw - uw * ru) / det
+    weights = np.clip(np.stack([1.0 - s - t, s, t], axis=2), 0.0, None)
+    return weights / weights.sum(axis=2, keepdims=True), normals
 
 
 class ContactSlide:
