@@ -12,6 +12,7 @@ the analysis of a recording (``analyze``); ``patches_sliding`` (``StepResult.sli
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 #: slip (m) of the fruit relative to the jaws beyond which the grasp slipped
 SLIP_TOLERANCE = 1e-3
@@ -114,54 +115,85 @@ def _patch_motion(x: np.ndarray, normals: np.ndarray, along: np.ndarray) -> np.n
     return columns @ fit
 
 
-def surface_motion(points: np.ndarray, elements: np.ndarray, positions: np.ndarray,
-                   velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+@njit(cache=True)
+def surface_motion(points, elements, positions, velocities):
     """The motion of a deformable surface where k ``points`` (k, d) m lie on it: at each
-    point's nearest point of the surface, its velocity (k, d) m/s (linear over the element)
-    and the element's unit normal (k, d) (either sign).
+    point's nearest point of the surface, its velocity (k, d) m/s (linear over the
+    element) and the element's unit normal (k, d) (either sign).
 
     Args:
         elements: the surface's (e, d) node indices into ``positions`` (N, d) m and
             ``velocities`` (N, d) m/s: edges in 2D, triangles in 3D.
     """
-    corners = positions[elements]  # (e, d, d)
-    if elements.shape[1] == 2:
-        weights, normals = _segment_weights(points, corners)
-    else:
-        weights, normals = _triangle_weights(points, corners)
-    off = np.einsum('kec,ecd->ked', weights, corners) - points[:, None, :]
-    nearest = np.argmin(np.sum(off * off, axis=2), axis=1)
-    mine = weights[np.arange(len(points)), nearest]  # (k, c)
-    velocity = np.einsum('kc,kcd->kd', mine, velocities[elements[nearest]])
-    return velocity, normals[nearest]
+    k, d = points.shape
+    velocity, normal = np.zeros((k, d)), np.zeros((k, d))
+    weights, kept = np.empty(d), np.empty(d)
+    for i in range(k):
+        best, nearest = np.inf, -1
+        for e in range(elements.shape[0]):
+            if d == 2:
+                _segment_weights(points[i], positions, elements[e], weights)
+            else:
+                _triangle_weights(points[i], positions, elements[e], weights)
+            squared = 0.0
+            for axis in range(d):
+                at = 0.0
+                for corner in range(d):
+                    at += weights[corner] * positions[elements[e, corner], axis]
+                squared += (at - points[i, axis]) ** 2
+            if squared < best:
+                best, nearest = squared, e
+                kept[:] = weights
+        for corner in range(d):
+            velocity[i] += kept[corner] * velocities[elements[nearest, corner]]
+        _unit_normal(positions, elements[nearest], normal[i])
+    return velocity, normal
 
 
-def _segment_weights(points: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(k, e, 2) the weights of each of the e segments' ``ends`` (e, 2, 2) m giving its
-    point nearest each of the k ``points`` (k, 2) m, and the segments' unit normals (e, 2)."""
-    a, ab = ends[:, 0], ends[:, 1] - ends[:, 0]
-    t = np.clip(np.sum((points[:, None, :] - a) * ab, axis=2) / np.sum(ab * ab, axis=1),
-                0.0, 1.0)
-    tangent = ab / np.linalg.norm(ab, axis=1)[:, None]
-    return np.stack([1.0 - t, t], axis=2), np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+@njit(cache=True, inline='always')
+def _segment_weights(p, positions, ends, weights):
+    """``weights`` (2,) of the segment's ``ends`` giving its point nearest ``p`` (2,) m."""
+    a, b = positions[ends[0]], positions[ends[1]]
+    ex, ey = b[0] - a[0], b[1] - a[1]
+    t = min(max(((p[0] - a[0]) * ex + (p[1] - a[1]) * ey) / (ex * ex + ey * ey), 0.0), 1.0)
+    weights[0], weights[1] = 1.0 - t, t
 
 
-def _triangle_weights(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(k, e, 3) barycentric weights on each of the e triangles ``corners`` (e, 3, 3) m of
-    the projection of each of the k ``points`` (k, 3) m on its plane, clipped to the
-    triangle (negative weights dropped, the rest scaled to sum 1: the nearest point where
-    the projection falls inside, near it elsewhere), and the triangles' unit normals
-    (e, 3)."""
-    a, u, w = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    normals = np.cross(u, w)
-    normals /= np.linalg.norm(normals, axis=1)[:, None]
-    uu, uw, ww = np.sum(u * u, 1), np.sum(u * w, 1), np.sum(w * w, 1)
-    r = points[:, None, :] - a  # (k, e, 3)
-    ru, rw = np.sum(r * u, axis=2), np.sum(r * w, axis=2)
+@njit(cache=True, inline='always')
+def _triangle_weights(p, positions, corners, weights):
+    """``weights`` (3,): the barycentric coordinates on the triangle ``corners`` of the
+    projection of ``p`` (3,) m on its plane, clipped to the triangle (negative ones
+    dropped, the rest scaled to sum 1: the nearest point where the projection falls
+    inside, near it elsewhere)."""
+    a, b, c = positions[corners[0]], positions[corners[1]], positions[corners[2]]
+    uu = uw = ww = ru = rw = 0.0
+    for axis in range(3):
+        u, w, r = b[axis] - a[axis], c[axis] - a[axis], p[axis] - a[axis]
+        uu += u * u
+        uw += u * w
+        ww += w * w
+        ru += r * u
+        rw += r * w
     det = uu * ww - uw * uw
     s, t = (ww * ru - uw * rw) / det, (uu * rw - uw * ru) / det
-    weights = np.clip(np.stack([1.0 - s - t, s, t], axis=2), 0.0, None)
-    return weights / weights.sum(axis=2, keepdims=True), normals
+    weights[0], weights[1], weights[2] = max(1.0 - s - t, 0.0), max(s, 0.0), max(t, 0.0)
+    total = weights[0] + weights[1] + weights[2]
+    for corner in range(3):
+        weights[corner] /= total
+
+
+@njit(cache=True, inline='always')
+def _unit_normal(positions, element, out):
+    """``out`` (d,): the unit normal of the edge (2D) or triangle (3D) ``element``."""
+    a, b = positions[element[0]], positions[element[1]]
+    if out.shape[0] == 2:
+        out[0], out[1] = a[1] - b[1], b[0] - a[0]
+    else:
+        c = positions[element[2]]
+        u0, u1, u2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        w0, w1, w2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+        out[0], out[1], out[2] = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+    out /= np.sqrt(np.sum(out * out))
 
 
 class ContactSlide:

@@ -64,7 +64,9 @@ def close_on_fruit(sim, speed: float) -> None:
     touched = None
     try:
         for step in range(MAX_STEPS):
-            if sim.step().grip_force > 0.0 and touched is None:
+            result = sim.step()
+            result.slipping  # read, as the node reads it: slip.surface_motion compiled too
+            if result.grip_force > 0.0 and touched is None:
                 touched = step
             if touched is not None and step >= touched + STEPS_IN_CONTACT:
                 return
