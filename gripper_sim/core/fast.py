@@ -229,6 +229,8 @@ class FastPath:
                            np.zeros(0), np.zeros(0), np.zeros((0, kernels.P_SIZE)),
                            np.zeros(3))
         self._names_of = None
+        #: (face_par, each face's jaw (k,), normals (k, 2)) for ``_sliding``
+        self._jaw_faces_kept = None
         self._names_cache: tuple = ()
         self._applies = False
         self.face_par = np.zeros((0, kernels.FP_SIZE))
@@ -517,15 +519,19 @@ class FastPath:
                  face_par: np.ndarray) -> bool:
         """``StepResult.slipping`` (``slip.jaw_contacts_sliding``) of the nodes at velocities
         ``v`` (n, 2) on the kernels' faces ``face_par`` with the gripper state ``grip``: 0
-        and 1 the jaws, moving with the gripper."""
+        and 1 the jaws, moving with the gripper (each face's jaw and normal kept per
+        ``face_par``)."""
+        kept = self._jaw_faces_kept
+        if kept is None or kept[0] is not face_par:
+            kept = self._jaw_faces_kept = (face_par,
+                                           face_par[:, kernels.FP_JAW].astype(np.int64),
+                                           np.ascontiguousarray(face_par[:, :2]))
+        _, jaw_of_face, normals = kept
         half = 0.5 * grip.gap_rate
-        jaw_of_face = face_par[:, kernels.FP_JAW].astype(np.int64)
-        face_velocities = np.zeros((len(face_par), 2))
-        on_jaw = jaw_of_face >= 0
-        face_velocities[on_jaw, 0] = grip.x_rate + half * (2 * jaw_of_face[on_jaw] - 1)
-        face_velocities[on_jaw, 1] = grip.lift_rate
-        return jaw_contacts_sliding(v, obstacle, jaw_of_face, face_par[:, :2],
-                                    face_velocities)
+        jaw_velocities = np.array([[grip.x_rate - half, grip.lift_rate],
+                                   [grip.x_rate + half, grip.lift_rate]])
+        return jaw_contacts_sliding(v, obstacle, jaw_of_face, normals,
+                                    jaw_velocities[jaw_of_face])
 
     def obstacle_names(self) -> tuple:
         """``Simulation.obstacle_names``, kept per face set."""

@@ -51,6 +51,9 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
         face_normals: (n_faces, d) unit normals.  face_velocities: (n_faces, d) m/s.
         positions: (n_nodes, 3) m, node positions (3D); None (2D).
     """
+    if positions is None:
+        return bool(_faces_nodes_sliding(velocities, holder, jaw_of_face, face_normals,
+                                         face_velocities))
     held = np.flatnonzero(holder >= 0)
     face = holder[held]
     jaw = jaw_of_face[face]
@@ -87,18 +90,62 @@ def patches_sliding(relative: np.ndarray, normals: np.ndarray, jaw: np.ndarray,
         normals: (k, d) unit normals of that surface.  jaw: (k,) 0 left, 1 right.
         positions: (k, 3) m, the nodes (3D); None (2D): each node at its own velocity.
     """
+    if positions is None:
+        return bool(_nodes_sliding(relative, normals, jaw))
     along = relative - np.sum(relative * normals, axis=1)[:, None] * normals
     for side in (0, 1):
         mine = jaw == side
         if not np.any(mine):
             continue
-        moving = along[mine]
-        if positions is not None:
-            moving = _patch_motion(positions[mine], normals[mine], moving)
+        moving = _patch_motion(positions[mine], normals[mine], along[mine])
         sliding = np.sum(moving * moving, axis=1) > SLIDING_SPEED ** 2
         if 2 * np.count_nonzero(sliding) > len(sliding):
             return True
     return False
+
+
+@njit(cache=True)
+def _nodes_sliding(relative, normals, jaw):
+    """``patches_sliding`` of each node at its own motion: ``relative``, ``normals``
+    (k, d), ``jaw`` (k,)."""
+    held, sliding = np.zeros(2, np.int64), np.zeros(2, np.int64)
+    for i in range(jaw.shape[0]):
+        held[jaw[i]] += 1
+        sliding[jaw[i]] += _slides(relative[i], normals[i])
+    return _most_slide(held, sliding)
+
+
+@njit(cache=True)
+def _faces_nodes_sliding(velocities, holder, jaw_of_face, face_normals, face_velocities):
+    """``_nodes_sliding`` of the nodes held by jaw faces (``jaw_contacts_sliding``'s
+    arguments), the nodes gathered here."""
+    held, sliding = np.zeros(2, np.int64), np.zeros(2, np.int64)
+    relative = np.empty(velocities.shape[1])
+    for i in range(holder.shape[0]):
+        face = holder[i]
+        if face < 0 or jaw_of_face[face] < 0:
+            continue
+        relative[:] = velocities[i] - face_velocities[face]
+        held[jaw_of_face[face]] += 1
+        sliding[jaw_of_face[face]] += _slides(relative, face_normals[face])
+    return _most_slide(held, sliding)
+
+
+@njit(cache=True, inline='always')
+def _slides(relative, normal):
+    """1 if ``relative`` (d,) m/s has a part along the surface of unit ``normal`` (d,)
+    faster than ``SLIDING_SPEED``, else 0."""
+    along_normal = np.sum(relative * normal)
+    tangential = 0.0
+    for axis in range(relative.shape[0]):
+        tangential += (relative[axis] - along_normal * normal[axis]) ** 2
+    return 1 if tangential > SLIDING_SPEED ** 2 else 0
+
+
+@njit(cache=True, inline='always')
+def _most_slide(held, sliding):
+    """Whether on either jaw more than half of the ``held`` (2,) nodes are ``sliding``."""
+    return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
 
 
 def _patch_motion(x: np.ndarray, normals: np.ndarray, along: np.ndarray) -> np.ndarray:
