@@ -122,11 +122,12 @@ class StepResult:
         grip_force: N, mean contact normal force of the two jaws.
         slip_distance: m, vertical motion of the fruit centroid relative to the jaws
             since both jaws first gripped it (0 before that).
-        slipping: fruit slides in the jaws in this step: on a jaw, most of the contact
-            nodes move along the face relative to it (``slip.jaw_contacts_sliding``;
-            in 3D each node at its contact patch's fitted rigid motion, so a growing
-            patch's rim slipping inwards is not slipping); elastic deformation with
-            the contacts stuck is not slipping.
+        slipping: fruit slides in the jaws in this step: on a jaw, nearly all of the
+            contact nodes (``slip.SLIDING_FRACTION``) move along its surface relative to
+            it (``slip.patches_sliding``; in 3D each node at its contact patch's fitted
+            rigid motion, so a growing patch's rim slipping inwards is not slipping; a
+            deformable finger's surface where the node lies on it); elastic deformation
+            with the contacts stuck, or stuck in part, is not slipping.
         centroid: (2,) m, mass-weighted centroid of the fruit.
         energies: kinetic, elastic and gravitational energy.
         deformation: compression, strain and contact measures.

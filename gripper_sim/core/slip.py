@@ -20,6 +20,11 @@ SLIP_TOLERANCE = 1e-3
 #: m/s, speed along a jaw face, relative to it, above which a contact node slides (a
 #: stuck node moves with its jaw; a soft pad's friction creeps below 1e-4 m/s)
 SLIDING_SPEED = 1e-3
+#: the fraction of a jaw's contact nodes that slide when the fruit slides in the jaws (all
+#: of them, in gross slip): a patch a quarter or more of which sticks slips only partly
+#: and holds (its rim in a squeeze, the upper part of a fruit that bulges up the jaws
+#: squeezed on the table: half of the patch and more in 2D)
+SLIDING_FRACTION = 0.75
 
 
 def grasp_slipped(held_slip: float, dropped: bool = False) -> bool:
@@ -67,11 +72,14 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
 
 def patches_sliding(relative: np.ndarray, normals: np.ndarray, jaw: np.ndarray,
                     positions: np.ndarray | None = None) -> bool:
-    """Whether the fruit is slipping in the jaws: on either jaw, more than half of the
-    nodes it holds move along its surface faster than ``SLIDING_SPEED`` relative to it.
+    """Whether the fruit is slipping in the jaws: on either jaw, more than
+    ``SLIDING_FRACTION`` of the nodes it holds move along its surface faster than
+    ``SLIDING_SPEED`` relative to it.
 
     Only the motion at the contacts counts: a fruit that deforms while every contact node
-    sticks (it sags under its weight, bulges in a squeeze) is not slipping.
+    sticks (it sags under its weight, bulges in a squeeze) is not slipping, nor one whose
+    patches slip only partly: squeezed on the table, a 2D fruit bulges up the jaws, the
+    upper half of each patch and more sliding up while the rest sticks.
 
     With ``positions`` (3D) a node moves at the contact patch's rigid motion relative to
     its jaw, not at its own: the translation along the surface and the spin about the
@@ -99,7 +107,7 @@ def patches_sliding(relative: np.ndarray, normals: np.ndarray, jaw: np.ndarray,
             continue
         moving = _patch_motion(positions[mine], normals[mine], along[mine])
         sliding = np.sum(moving * moving, axis=1) > SLIDING_SPEED ** 2
-        if 2 * np.count_nonzero(sliding) > len(sliding):
+        if np.count_nonzero(sliding) > SLIDING_FRACTION * len(sliding):
             return True
     return False
 
@@ -144,8 +152,10 @@ def _slides(relative, normal):
 
 @njit(cache=True, inline='always')
 def _most_slide(held, sliding):
-    """Whether on either jaw more than half of the ``held`` (2,) nodes are ``sliding``."""
-    return 2 * sliding[0] > held[0] or 2 * sliding[1] > held[1]
+    """Whether on either jaw more than ``SLIDING_FRACTION`` of the ``held`` (2,) nodes are
+    ``sliding``."""
+    return (sliding[0] > SLIDING_FRACTION * held[0]
+            or sliding[1] > SLIDING_FRACTION * held[1])
 
 
 def _patch_motion(x: np.ndarray, normals: np.ndarray, along: np.ndarray) -> np.ndarray:
