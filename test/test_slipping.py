@@ -11,10 +11,12 @@ from gripper_sim.workflows.grasp import GraspSequence
 MU = 0.5
 
 
-def _pick(ratio: float, fast: bool):
-    """Grip so that 2 mu N = ratio m g, lift 2 cm and hold 0.3 s; every step's result."""
+def _pick(ratio: float, fast: bool | None, overrides: tuple = ()):
+    """Grip so that 2 mu N = ratio m g, lift 2 cm and hold 0.3 s, the configuration keys
+    ``overrides`` ('KEY=VALUE') set, on the fast path or not (``fast``: None, where it
+    applies); every step's result."""
     config = load_config(overrides=[f'contact.jaw.static_friction={MU}',
-                                    f'contact.jaw.kinetic_friction={MU}'])
+                                    f'contact.jaw.kinetic_friction={MU}', *overrides])
     sim = Simulation(config, fast=fast)
     force = ratio * sim.fruit.total_mass * config['world.gravity'] / (2 * MU)
     sequence = GraspSequence(sim, force, lift_height=0.02, hold_time=0.3)
@@ -118,40 +120,6 @@ def test_a_deformable_finger_carries_the_nodes_stuck_to_it(finger):
 def test_a_fin_ray_pick_below_the_hold_minimum_is_slipping():
     """The Fin Ray's fingers hold the apple at 2 mu N = 0.8 m g: it slides down them while
     they rise (read against the fingers' surface)."""
-    config = load_config(overrides=['gripper.finger.type=fin_ray',
-                                    f'contact.jaw.static_friction={MU}',
-                                    f'contact.jaw.kinetic_friction={MU}'])
-    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
-    sim = Simulation(config)
-    force = 0.8 * sim.fruit.total_mass * config['world.gravity'] / (2 * MU)
-    sequence = GraspSequence(sim, force, lift_height=0.02, hold_time=0.1)
-    lifting = []
-    while sequence.phase != 'done':
-        result = sim.step()
-        sequence.update(result)
-        if sequence.phase == 'lifting':
-            lifting.append(result.slipping)
+    _, steps = _pick(0.8, fast=None, overrides=('gripper.finger.type=fin_ray',))
+    lifting = [result.slipping for phase, result in steps if phase == 'lifting']
     assert np.mean(lifting) > 0.8, lifting
-
-
-def test_surface_motion_is_the_nearest_surface_points_motion():
-    # 2D: an outline of two edges (a corner at the origin), its nodes moving apart
-    positions = np.array([[0.0, 1.0], [0.0, 0.0], [1.0, 0.0]])
-    velocities = np.array([[0.0, 2.0], [0.0, 0.0], [4.0, 0.0]])
-    edges = np.array([[0, 1], [1, 2]])
-    points = np.array([[0.001, 0.25], [0.5, -0.001], [2.0, 0.0]])
-    velocity, normal = surface_motion(points, edges, positions, velocities)
-    np.testing.assert_allclose(velocity, [[0.0, 0.5], [2.0, 0.0], [4.0, 0.0]], atol=1e-12)
-    np.testing.assert_allclose(np.abs(normal), [[1.0, 0.0], [0.0, 1.0], [0.0, 1.0]])
-    # 3D: a unit square of two triangles in the plane x = 0, its far corner moving
-    positions = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 1.0],
-                          [0.0, 0.0, 1.0]])
-    velocities = np.zeros((4, 3))
-    velocities[2] = [0.0, 0.0, 3.0]
-    triangles = np.array([[0, 1, 2], [0, 2, 3]])
-    points = np.array([[1e-4, 0.75, 0.25], [-1e-4, 0.25, 0.75], [0.0, 0.5, 0.0]])
-    velocity, normal = surface_motion(points, triangles, positions, velocities)
-    # the weights of the far corner (2): 0.25 (in triangle 0), 0.25 (in 1), 0 (on 0-1)
-    np.testing.assert_allclose(velocity, [[0.0, 0.0, 0.75], [0.0, 0.0, 0.75], [0.0, 0.0, 0.0]],
-                               atol=1e-12)
-    np.testing.assert_allclose(np.abs(normal), np.tile([1.0, 0.0, 0.0], (3, 1)), atol=1e-12)
