@@ -327,14 +327,25 @@ def largest_relative_move(q, dofs, start, body, n_bodies):
     """m, the largest distance of a vertex at positions ``q`` (n_dof,) from ``start``
     (k, d), its coordinates at ``dofs`` (k, d), once its body's mean move is taken off
     (``body`` (k,) each vertex's body in 0 .. ``n_bodies`` - 1): a bound on how far a
-    body's own primitives came closer to each other, whatever the bodies' translations."""
-    d = dofs.shape[1]
+    body's own primitives came closer to each other, whatever the bodies' translations.
+    The loops run with d = 2 a constant for 2D (unrolled)."""
+    if dofs.shape[1] == 2:
+        return _largest_relative_move(q, q, False, dofs, start, body, n_bodies, 2)
+    return _largest_relative_move(q, q, False, dofs, start, body, n_bodies, dofs.shape[1])
+
+
+@njit(cache=True, inline='always')
+def _largest_relative_move(q, dq, shifted, dofs, start, body, n_bodies, d):
+    """``largest_relative_move`` at positions q, or (``shifted``) q + dq (n_dof,) m, each
+    coordinate's sum formed where it is read (no q + dq array; the same sums)."""
     mean = np.zeros((n_bodies, d))
     count = np.zeros(n_bodies)
     for i in range(dofs.shape[0]):
         b = body[i]
         for a in range(d):
-            mean[b, a] += q[dofs[i, a]] - start[i, a]
+            m = dofs[i, a]
+            x = q[m] + dq[m] if shifted else q[m]
+            mean[b, a] += x - start[i, a]
         count[b] += 1.0
     for b in range(n_bodies):
         if count[b] > 0.0:
@@ -345,7 +356,9 @@ def largest_relative_move(q, dofs, start, body, n_bodies):
         b = body[i]
         squared = 0.0
         for a in range(d):
-            r = q[dofs[i, a]] - start[i, a] - mean[b, a]
+            m = dofs[i, a]
+            x = q[m] + dq[m] if shifted else q[m]
+            r = x - start[i, a] - mean[b, a]
             squared += r * r
         largest = max(largest, squared)
     return np.sqrt(largest)
@@ -357,8 +370,12 @@ def relative_moves_within(q, dq, dofs, start, body, n_bodies, reach):
     ``dq`` (n_dof,) m is not empty, is at most ``reach`` m."""
     if largest_relative_move(q, dofs, start, body, n_bodies) > reach:
         return False
-    return dq.shape[0] == 0 or largest_relative_move(q + dq, dofs, start, body,
-                                                     n_bodies) <= reach
+    if dq.shape[0] == 0:
+        return True
+    if dofs.shape[1] == 2:
+        return _largest_relative_move(q, dq, True, dofs, start, body, n_bodies, 2) <= reach
+    return _largest_relative_move(q, dq, True, dofs, start, body, n_bodies,
+                                  dofs.shape[1]) <= reach
 
 
 @njit(cache=True)
