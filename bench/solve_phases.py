@@ -157,47 +157,9 @@ def probe(problem, flags, q):
     rows['step bound'] = timed(t_step_bound, problem, x, dq * 1e-3)
     rows.update(probe_more(problem, q))
     rows.update(probe_parts(problem, q))
-    print('parts (candidates, project, friction, friction pairs, keys, n_v, self):', part_info(problem))
+    print('parts (candidates, project, friction, friction pairs, keys, n_v, self):',
+          part_info(problem))
     return rows, None
-
-
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    wanted = {int(a) for a in argv} or {300, 600}
-    from bench_soft_fingers import grasp
-
-    run = barrier_solve.CompiledSolve.run
-    seen = [0]
-    results = {}
-
-    totals = np.zeros(newton.C_SIZE, np.int64)
-
-    def probing_run(self, *args, **kwargs):
-        counts = args[-1]
-        before = counts.copy()
-        out = run(self, *args, **kwargs)
-        totals[:] += counts - before
-        seen[0] += 1
-        if seen[0] in wanted:
-            q = args[5]
-            results[seen[0]] = probe(self.problem, self.flags, q)
-        return out
-    grasp('fin_ray', 4.0, (), False)  # warm-up
-    barrier_solve.CompiledSolve.run = probing_run
-    try:
-        grasp('fin_ray', 4.0, (), False)
-    finally:
-        barrier_solve.CompiledSolve.run = run
-    for index, (rows, stats) in sorted(results.items()):
-        print(f'-- solve {index}')
-        for label, us in rows.items():
-            print(f'{label:45s} {us:8.2f} us')
-    per = totals / max(totals[newton.C_SOLVES], 1)
-    print(f"per solve ({totals[newton.C_SOLVES]} solves): {per[newton.C_HESSIAN_EVALS]:.2f} "
-          f"evaluations with the Hessian, {per[newton.C_EVALS]:.2f} without, "
-          f"{per[newton.C_FACTORS]:.2f} factorise calls, {per[newton.C_DIRECTIONS]:.2f} "
-          f"directions")
-    return 0
 
 
 @njit
@@ -226,7 +188,8 @@ def probe_more(problem, q):
     y = np.ones(q.size) * 1e-3
     out = np.empty(q.size)
     return {'LDL^T solve, all blocks': timed(t_ldl_solve, problem, y),
-            'LDL^T solve, nonzero blocks (kept)': timed(t_ldl_solve_kept, problem, y), 'CSC matvec': timed(t_matvec, problem, y, out)}
+            'LDL^T solve, nonzero blocks (kept)': timed(t_ldl_solve_kept, problem, y),
+            'CSC matvec': timed(t_matvec, problem, y, out)}
 
 
 @njit
@@ -309,6 +272,45 @@ def probe_parts(problem, q):
         rows[f'part 1 terms hessian={h} project={proj} friction={fr}'] = timed(
             t_part_terms, problem, q, 1, h, proj, fr, grad)
     return rows
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    wanted = {int(a) for a in argv} or {300, 600}
+    from bench_soft_fingers import grasp
+
+    run = barrier_solve.CompiledSolve.run
+    seen = [0]
+    results = {}
+
+    totals = np.zeros(newton.C_SIZE, np.int64)
+
+    def probing_run(self, *args, **kwargs):
+        counts = args[-1]
+        before = counts.copy()
+        out = run(self, *args, **kwargs)
+        totals[:] += counts - before
+        seen[0] += 1
+        if seen[0] in wanted:
+            q = args[5]
+            results[seen[0]] = probe(self.problem, self.flags, q)
+        return out
+    grasp('fin_ray', 4.0, (), False)  # warm-up
+    barrier_solve.CompiledSolve.run = probing_run
+    try:
+        grasp('fin_ray', 4.0, (), False)
+    finally:
+        barrier_solve.CompiledSolve.run = run
+    for index, (rows, stats) in sorted(results.items()):
+        print(f'-- solve {index}')
+        for label, us in rows.items():
+            print(f'{label:45s} {us:8.2f} us')
+    per = totals / max(totals[newton.C_SOLVES], 1)
+    print(f"per solve ({totals[newton.C_SOLVES]} solves): {per[newton.C_HESSIAN_EVALS]:.2f} "
+          f"evaluations with the Hessian, {per[newton.C_EVALS]:.2f} without, "
+          f"{per[newton.C_FACTORS]:.2f} factorise calls, {per[newton.C_DIRECTIONS]:.2f} "
+          f"directions")
+    return 0
 
 
 if __name__ == '__main__':

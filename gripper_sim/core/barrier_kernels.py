@@ -491,9 +491,9 @@ def add_local_hessian(local, ids, m, vertex_dofs, n_dof, pattern_keys, slots,
         hessian_values: the CSC values, added into.
 
     A vertex's y dof follows its x dof (row + 1): its key then follows the x key's in
-    the sorted keys, so one binary search (``lower_bound``) serves both (each entry adds to its own slot,
-    so the order of the adds is free). The slots are read as unsigned (no negative-index
-    wraparound).
+    the sorted keys, so one binary search (``lower_bound``) serves both (each entry adds
+    to its own slot, so the order of the adds is free). The slots are read as unsigned
+    (no negative-index wraparound).
     """
     outside = 0
     size = pattern_keys.size

@@ -12,9 +12,10 @@ factorisation is made when the kept one is stale (CG took more than its stale
 iterations last time), when asked (``fresh``), or when CG fails on the kept one; if CG
 fails even on a fresh one (an indefinite matrix), the factor's own solution refined
 against the matrix (``REFINEMENT_SWEEPS``) is the answer. The factor's solves skip
-its blocks that are all zero (``_compact``; a contact pair's blocks while it is apart). A system solved with a new
-factorisation also counts its matrix's negative eigenvalues (``F_NEGATIVE``), for the
-Newton iteration's rule that a shifted matrix be positive definite (``core.newton``):
+its blocks that are all zero (``_compact``; a contact pair's blocks while it is apart).
+A system solved with a new factorisation also counts its matrix's negative eigenvalues
+(``F_NEGATIVE``), for the Newton iteration's rule that a shifted matrix be positive
+definite (``core.newton``):
 D's blocks carry A's inertia (Sylvester's law of inertia; the factorisation has no
 pivoting across blocks), and the rank-one terms change it by the capacitance matrix's
 (Haynsworth's inertia additivity: In(A + u C u^T) = In(A) + In(C^-1 + u^T A^-1 u) -
@@ -274,7 +275,8 @@ def _pcg(state, values, rhs, u, c, u_t, filters, relative, error_limit, floor, x
     max_iterations, stale_iterations = state.cg_iterations
     status, iterations = preconditioned_cg(
         state.indptr, state.indices, values, u, u_t, c, filters, state.perm,
-        state.solve_arrays, state.l_solve, state.d_inv, np.ascontiguousarray(u_w.T), a_inv_u, small_inv, rhs,
+        state.solve_arrays, state.l_solve, state.d_inv, np.ascontiguousarray(u_w.T),
+        a_inv_u, small_inv, rhs,
         relative, error_limit, floor, max_iterations, stale_iterations, x)
     state.stats[S_CG] += iterations
     if status != CONVERGED:
