@@ -67,7 +67,7 @@ def jaw_contacts_sliding(velocities: np.ndarray, holder: np.ndarray, jaw_of_face
         return False
     held, face = held[on_jaw], face[on_jaw]
     return patches_sliding(velocities[held] - face_velocities[face], face_normals[face],
-                           jaw[on_jaw], None if positions is None else positions[held])
+                           jaw[on_jaw], positions[held])
 
 
 def patches_sliding(relative: np.ndarray, normals: np.ndarray, jaw: np.ndarray,
