@@ -788,14 +788,11 @@ class SimulationFacade:
         (``obstacle`` (n,) 0 left, 1 right) against the finger's surface where they lie
         on it (``slip.surface_motion``), in the fingers' state ``finger``; not against its
         backing: a finger that bends under the fruit carries the nodes stuck to it."""
-        soft = self._soft
         held = [np.flatnonzero(obstacle == side) for side in (LEFT, RIGHT)]
         relative, normals = [], []
-        for side, nodes in zip((LEFT, RIGHT), held):
-            body = soft.soft_bodies[side]
-            elements = body.edges if body.triangles is None else body.triangles
-            velocity, normal = surface_motion(x[nodes], elements - soft.first,
-                                              finger.positions, finger.velocities)
+        for nodes, elements in zip(held, self._soft.surface_elements):
+            velocity, normal = surface_motion(x[nodes], elements, finger.positions,
+                                              finger.velocities)
             relative.append(v[nodes] - velocity)
             normals.append(normal)
         jaw = np.repeat([LEFT, RIGHT], [held[LEFT].size, held[RIGHT].size])

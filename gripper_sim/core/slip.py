@@ -101,15 +101,15 @@ def patches_sliding(relative: np.ndarray, normals: np.ndarray, jaw: np.ndarray,
     if positions is None:
         return bool(_nodes_sliding(relative, normals, jaw))
     along = relative - np.sum(relative * normals, axis=1)[:, None] * normals
+    held, sliding = np.zeros(2, np.int64), np.zeros(2, np.int64)
     for side in (0, 1):
         mine = jaw == side
-        if not np.any(mine):
-            continue
-        moving = _patch_motion(positions[mine], normals[mine], along[mine])
-        sliding = np.sum(moving * moving, axis=1) > SLIDING_SPEED ** 2
-        if np.count_nonzero(sliding) > SLIDING_FRACTION * len(sliding):
-            return True
-    return False
+        if np.any(mine):
+            moving = _patch_motion(positions[mine], normals[mine], along[mine])
+            held[side] = len(moving)
+            sliding[side] = np.count_nonzero(np.sum(moving * moving, axis=1)
+                                             > SLIDING_SPEED ** 2)
+    return bool(_most_slide(held, sliding))
 
 
 @njit(cache=True)

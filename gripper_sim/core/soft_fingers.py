@@ -157,6 +157,11 @@ class SoftFingers:
             if self_contact is not None else None)
         self.energies = self._energies() + ([self.self_contact] if self.self_contact else [])
         self.soft_bodies = self._soft_bodies(static_friction, kinetic_friction)
+        #: per finger (left, right), its surface's elements as indices into both fingers'
+        #: nodes: its outline's edges (2D) or triangles (3D) (``slip.surface_motion``)
+        self.surface_elements = tuple(
+            (body.edges if body.triangles is None else body.triangles) - self.first
+            for body in self.soft_bodies)
         #: (2 e, 2) both fingers' outline edges (indices into their nodes, left then
         #: right; ``FingerResult.surface_edges``, read-only: every result shares it),
         #: built by the first ``result``
