@@ -17,6 +17,7 @@ import pytest
 from helpers import kernel_evaluation, pick, quasi_static_sim
 
 from gripper_sim.configuration import load_config
+from gripper_sim.core import barrier as barrier_module
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
 from gripper_sim.core.contact import STICK
@@ -486,3 +487,24 @@ def test_a_barrier_set_up_again_follows_moved_faces_as_a_new_one():
     kept.begin_step(x, end, end, 1e-3)
     fresh.begin_step(x, end, end, 1e-3)
     assert np.array_equal(kept.contact_forces(x.ravel()), fresh.contact_forces(x.ravel()))
+
+
+def test_ipc_holds_an_apple_squeezed_flat_along_the_jaws(monkeypatch):
+    """At 150 N (within gripper.max_force) the apple lies flat along the whole of each
+    jaw and wraps round its corners; the jaw's corner moving in crossed an outline edge
+    from every pushed start, and the step failed with 'no collision-free start' even in
+    sub-steps (t = 0.58 s). The fruit nodes near the jaws carried with them are a start
+    that crosses nothing: the pick holds, and no node enters a jaw at any step."""
+    carried = []
+    original = barrier_module._carried_by_faces
+    monkeypatch.setattr(barrier_module, '_carried_by_faces',
+                        lambda *args: carried.append(1) or original(*args))
+    sim = Simulation(load_config(overrides=['contact.model=ipc']))
+    deepest = []
+    summary = run_grasp(sim, GraspSequence(sim, 150.0, lift_height=0.005, hold_time=0.05),
+                        on_step=lambda result, phase: deepest.append(
+                            _no_penetration(result, sim.config['gripper.jaw_height'])))
+    assert summary['outcome'] == 'held'
+    assert carried   # the fallback was needed
+    assert min(deepest) > 0.0
+    assert sim.last.grip_force > 100.0
