@@ -62,11 +62,11 @@ from scipy.spatial import cKDTree
 
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
-from gripper_sim.core.barrier_kernels import (largest_move, largest_relative_move,
-                                              mark_sticking, mean_gap, mesh_vertices,
-                                              nearest_faces, normal_components,
-                                              push_ahead, relative_moves_within,
-                                              same_values)
+from gripper_sim.core.barrier_kernels import (balance_forces, largest_move,
+                                              largest_relative_move, mark_sticking,
+                                              mean_gap, mesh_vertices, nearest_faces,
+                                              normal_components, push_ahead,
+                                              relative_moves_within, same_values)
 from gripper_sim.core.barrier_search import edge_vertex_candidates, smallest_distance
 from gripper_sim.core.contact_passes import StepOutcome
 from gripper_sim.core.energies.base import Energy, Evaluation, element_dofs
@@ -1126,24 +1126,26 @@ class BarrierContact(Energy):
                       *self._face_geometry(faces)[:4], self.settings.dhat, holder)
         return holder
 
-    def step_outputs(self, q: np.ndarray, x_n: np.ndarray, dt: float,
-                     faces) -> tuple[np.ndarray, np.ndarray, cm.ContactState]:
+    def step_outputs(self, q: np.ndarray, x_n: np.ndarray, dt: float, faces,
+                     residual: np.ndarray) -> tuple[np.ndarray, np.ndarray, cm.ContactState]:
         """A step's outputs at its solution ``q`` (d n,) m from positions ``x_n`` (n, d) m over
         ``dt`` (s), ``faces`` (rigid) at its end: (the velocities (x - x_n) / dt (n, d)
-        m/s, ``contact_forces`` (n, d) N, ``held_contacts``); in 2D in one compiled call
-        (``barrier_part.step_outputs``) where the last evaluation was made at q."""
+        m/s, ``contact_forces`` (n, d) N balanced by the solve's ``residual`` (d n,) N
+        (``barrier_kernels.balance_forces``), ``held_contacts``); in 2D in one compiled
+        call (``barrier_part.step_outputs``) where the last evaluation was made at q."""
         n, d = x_n.shape
         if d == 2:
             forces, v, holder = np.empty(2 * n), np.empty((n, 2)), np.empty(n, np.int64)
             contacts = cm.ContactState.held_by(holder)
             origins, normals, tangents, half_extents, velocities, _, _ = (
                 self._face_geometry(faces))
-            if bp.step_outputs(self._part, q, x_n, dt, origins, normals, tangents,
+            if bp.step_outputs(self._part, q, x_n, dt, residual, origins, normals, tangents,
                                half_extents, velocities, self.settings.friction_smoothing,
                                cm.STICK, cm.SLIP, forces, v, holder, contacts.normal_force,
                                contacts.mode):
                 return v, forces.reshape(n, 2), contacts
         forces = self.contact_forces(q)
+        balance_forces(forces, residual.reshape(n, d))
         x = q.reshape(-1, d)
         v = (x - x_n) / dt
         return v, forces, self.held_contacts(x, v, faces, forces)
@@ -1319,7 +1321,8 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
                                 solver.tolerance * dt)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), _free(n, d),
                             alternative)
-    v, forces, contacts = barrier.step_outputs(solution.q, x_n, dt, new_faces)
+    v, forces, contacts = barrier.step_outputs(solution.q, x_n, dt, new_faces,
+                                               solution.reaction)
     return StepOutcome(solution.q.reshape(-1, d), v, forces, contacts, solution.iterations)
 
 

@@ -717,6 +717,27 @@ def mean_gap(x, holder, face, origin, normal):
 
 
 @njit(cache=True)
+def balance_forces(forces, residual):
+    """Add to the contact force (``forces`` (n, d) N) of each node that the contact pushes
+    (a nonzero row) the Newton solution's ``residual`` (n, d) N: the gradient of the
+    step's incremental potential there. The contact's part of that gradient is stiff (a
+    barrier's force changes by newtons with nanometres of gap), so a force read from it
+    carries the whole residual of a solve stopped at ``sim.newton_tolerance``, while the
+    node's other forces (inertia, elasticity, gravity, damping) are smooth: the contact
+    force that balances them, ``forces + residual``, is the converged one to within
+    their change over the solution's error (the 2D solid apple held at 40 N with
+    ``ipc``: 35 to 49 N read from the barrier, 40.00 N balanced)."""
+    d = forces.shape[1]
+    for i in range(forces.shape[0]):
+        pushed = False
+        for c in range(d):
+            pushed = pushed or forces[i, c] != 0.0
+        if pushed:
+            for c in range(d):
+                forces[i, c] += residual[i, c]
+
+
+@njit(cache=True)
 def normal_components(holder, forces, normals, normal_force):
     """Set ``normal_force`` (n,) N of each node held by a face (``holder`` (n,) >= 0, the
     face's index) to its force (``forces`` (n, d) N) along the face's unit normal

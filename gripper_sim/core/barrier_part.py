@@ -31,10 +31,11 @@ import numpy as np
 from numba import njit, types
 from numba.experimental import structref
 
-from gripper_sim.core.barrier_kernels import (kept_step_bound, largest_move, mark_sticking,
-                                              mesh_vertices, nearest_faces, nearest_partners,
-                                              normal_components, push_ahead,
-                                              relative_moves_within, same_values)
+from gripper_sim.core.barrier_kernels import (balance_forces, kept_step_bound, largest_move,
+                                              mark_sticking, mesh_vertices, nearest_faces,
+                                              nearest_partners, normal_components,
+                                              push_ahead, relative_moves_within,
+                                              same_values)
 from gripper_sim.core.barrier_search import (collision_free_step, edge_vertex_candidates,
                                              paths_clear)
 from gripper_sim.core.barrier_terms import barrier_terms
@@ -260,8 +261,8 @@ def begin_with_starts(part, x_n, v_n, dt, old_corners, new_corners, rubbing, mu_
 
 
 @njit(cache=True)
-def step_outputs(part, q, x_n, dt, origins, normals, tangents, half_extents, velocities,
-                 smoothing, stick, slip, forces, v, holder, normal_force, mode):
+def step_outputs(part, q, x_n, dt, residual, origins, normals, tangents, half_extents,
+                 velocities, smoothing, stick, slip, forces, v, holder, normal_force, mode):
     """A barrier step's outputs at its solution q (2 n,) m against rigid faces, in one call:
     what ``BarrierContact.contact_forces`` and ``held_contacts`` compute one by one, in
     their arithmetic, where the last evaluation was made at q (``kept_forces``); False
@@ -269,10 +270,12 @@ def step_outputs(part, q, x_n, dt, origins, normals, tangents, half_extents, vel
 
     Args:
         x_n: (n, 2) m at the step's start.  dt: s.
+        residual: (2 n,) N, the potential's gradient at q (``balance_forces``).
         origins, normals, tangents, half_extents, velocities: the faces at the step's
             end (``barrier_kernels.nearest_faces``' and ``mark_sticking``'s).
         smoothing: m/s, the friction smoothing speed.  stick, slip: the mode codes.
-        forces: (2 n,) N, the barrier's and friction's force on each node (written).
+        forces: (2 n,) N, the barrier's and friction's force on each node, balanced
+            (written; where False, not balanced).
         v: (n, 2) m/s, (x - x_n) / dt (written).
         holder: (n,) the face holding each node, -1 none (written); normal_force: (n,) N
             along its normal, mode: (n,) stick or slip, where held (zeros on entry).
@@ -281,6 +284,7 @@ def step_outputs(part, q, x_n, dt, origins, normals, tangents, half_extents, vel
         return False
     x = q.reshape(x_n.shape)
     on_nodes = forces.reshape(x_n.shape)
+    balance_forces(on_nodes, residual.reshape(x_n.shape))
     for i in range(x_n.shape[0]):
         for c in range(2):
             v[i, c] = (x[i, c] - x_n[i, c]) / dt
