@@ -705,7 +705,8 @@ class SimulationFacade:
         return fields, normal, sides
 
     #: the StepResult fields ``_step_measures`` leaves to first read
-    DEFERRED_MEASURES = ('left_wrench', 'right_wrench', 'slipping', 'energies', 'fingers')
+    DEFERRED_MEASURES = ('left_wrench', 'right_wrench', 'slipping', 'contact_sticking',
+                         'energies', 'fingers')
 
     def _step_measures(self, x: np.ndarray, v: np.ndarray, forces: np.ndarray,
                        obstacle: np.ndarray, iterations: int, substeps: int):
@@ -754,10 +755,10 @@ class SimulationFacade:
         slip = self.measure_slip(float(centroid[-1] - grip.lift), on_left and on_right,
                                  on_left or on_right)
         x, v, forces, obstacle = x.copy(), v.copy(), forces.copy(), obstacle.copy()
+        sticking = self.contacts.mode == cm.STICK if soft is None else None
         fields = dict(
             time=self._time, step=self._step, positions=x, velocities=v,
             contact_forces=forces, contact_obstacle=obstacle,
-            contact_sticking=self.contacts.mode == cm.STICK,
             obstacle_names=self.obstacle_names, surface=fruit.surface,
             left_jaw_x=grip.x - 0.5 * grip.gap, right_jaw_x=grip.x + 0.5 * grip.gap,
             jaw_velocity=-0.5 * grip.gap_rate, lift=grip.lift, lift_velocity=grip.lift_rate,
@@ -774,6 +775,8 @@ class SimulationFacade:
                           else jaw_contacts_sliding(  # 3D: the patches' rigid motion
                               v, obstacle, face_sides, normals, face_velocities,
                               x if self.dimension == 3 else None)),
+                contact_sticking=(sticking if soft is None else self._fingers_sticking(
+                    x, v, obstacle, finger, normals, face_velocities)),
                 energies=Energies(
                     kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
                     elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
@@ -786,8 +789,39 @@ class SimulationFacade:
         """``StepResult.slipping`` with deformable fingers (``slip.patches_sliding``): the
         fruit's nodes at positions ``x`` and velocities ``v`` (n, d) held by a finger
         (``obstacle`` (n,) 0 left, 1 right) against the finger's surface where they lie
-        on it (``slip.surface_motion``), in the fingers' state ``finger``; not against its
-        backing: a finger that bends under the fruit carries the nodes stuck to it."""
+        on it (``_on_fingers``), in the fingers' state ``finger``."""
+        held, relative, normals = self._on_fingers(x, v, obstacle, finger)
+        jaw = np.repeat([LEFT, RIGHT], [held[LEFT].size, held[RIGHT].size])
+        return patches_sliding(relative, normals, jaw,
+                               x[np.concatenate(held)] if self.dimension == 3 else None)
+
+    def _fingers_sticking(self, x: np.ndarray, v: np.ndarray, obstacle: np.ndarray,
+                          finger: FingerState, normals: np.ndarray,
+                          velocities: np.ndarray) -> np.ndarray:
+        """``StepResult.contact_sticking`` (n,) bool with deformable fingers: a node held
+        by a finger (``obstacle`` 0 left, 1 right) sticks where it moves along the finger's
+        surface (``_on_fingers``) slower than the barrier's friction smoothing speed, one
+        held by a face (the table) where it moves along that face (``normals``,
+        ``velocities`` (k, d) of the obstacles) so; positions ``x``, velocities ``v``
+        (n, d), the fingers' state ``finger``."""
+        mode = np.zeros(len(obstacle), np.int64)
+        faces = np.where(obstacle >= 2, obstacle, -1)
+        mark_sticking(v, faces, normals, velocities,
+                      self._barrier.settings.friction_smoothing, cm.STICK, cm.SLIP, mode)
+        held, relative, surface_normals = self._on_fingers(x, v, obstacle, finger)
+        along = relative - np.sum(relative * surface_normals, axis=1)[:, None] * surface_normals
+        slow = np.linalg.norm(along, axis=1) < self._barrier.settings.friction_smoothing
+        mode[np.concatenate(held)] = np.where(slow, cm.STICK, cm.SLIP)
+        return mode == cm.STICK
+
+    def _on_fingers(self, x: np.ndarray, v: np.ndarray, obstacle: np.ndarray,
+                    finger: FingerState) -> tuple:
+        """The fruit's nodes held by each finger (``obstacle`` (n,) 0 left, 1 right) and
+        their motion against the finger's surface where they lie on it
+        (``slip.surface_motion``), not against its backing (a finger that bends under the
+        fruit carries the nodes stuck to it): ((the left finger's nodes, the right's),
+        their velocities relative to the surface (k, d) m/s, its unit normals there (k,
+        d)); positions ``x``, velocities ``v`` (n, d), the fingers' state ``finger``."""
         held = [np.flatnonzero(obstacle == side) for side in (LEFT, RIGHT)]
         relative, normals = [], []
         for nodes, elements in zip(held, self._soft.surface_elements):
@@ -795,9 +829,7 @@ class SimulationFacade:
                                               finger.velocities)
             relative.append(v[nodes] - velocity)
             normals.append(normal)
-        jaw = np.repeat([LEFT, RIGHT], [held[LEFT].size, held[RIGHT].size])
-        return patches_sliding(np.concatenate(relative), np.concatenate(normals), jaw,
-                               x[np.concatenate(held)] if self.dimension == 3 else None)
+        return held, np.concatenate(relative), np.concatenate(normals)
 
     def _jaw_normal_forces(self, forces: np.ndarray, obstacle: np.ndarray) -> tuple:
         """(whether the left jaw holds any node, whether the right does, (the left jaw's
@@ -896,7 +928,6 @@ class SimulationFacade:
             outcome.contacts.arrays())
         contacts = cm.ContactState(obstacle, mode[:n], normal_force[:n], bounce_speed[:n],
                                    secondary[:n], secondary_bounce[:n])
-        self._mark_sticking(contacts, v, grip_new)
         self._finger = finger = build(FingerState, dict(
             positions=outcome.x[n:], velocities=outcome.v[n:], contact_forces=outcome.forces[n:],
             reaction=outcome.reaction[n:], touching=touching))
@@ -914,17 +945,6 @@ class SimulationFacade:
             if fruit_rows is fruit and finger_rows is fingers:
                 return whole
         return np.concatenate([fruit, fingers])
-
-    def _mark_sticking(self, contacts: cm.ContactState, v: np.ndarray,
-                       grip: GripperState) -> None:
-        """The modes (``contacts.mode``) of the fruit's contacts with deformable fingers
-        and faces, the fruit's nodes at velocities ``v`` (n, d) m/s: STICK where a node
-        moves along its obstacle (a finger: along its backing) slower than the barrier's
-        friction smoothing speed, else SLIP."""
-        normals, _, velocities = self._obstacles(grip)
-        mark_sticking(v, contacts.obstacle, normals, velocities,
-                      self._barrier.settings.friction_smoothing, cm.STICK, cm.SLIP,
-                      contacts.mode)
 
     def _finger_wrenches(self, finger: FingerState, origins: tuple) -> list[JawWrench]:
         """What each jaw feels at its deformable finger's base nodes (the reaction that

@@ -110,7 +110,9 @@ class StepResult:
         contact_forces: (n_nodes, 2) N, force each obstacle exerts on each node.
         contact_obstacle: (n_nodes,) int, index into ``obstacle_names`` of the obstacle
             a node touches, -1 for none.
-        contact_sticking: (n_nodes,) bool, node in static (stuck) contact.
+        contact_sticking: (n_nodes,) bool, node in static (stuck) contact: with the
+            barrier model slower along its obstacle than the friction smoothing speed,
+            along a deformable finger's surface where it lies on it (not its backing).
         obstacle_names: names of the obstacles, e.g. ('left_jaw', 'right_jaw', 'table').
         surface: (n_surface,) int, indices of the surface (skin) nodes in outline order.
         left_wrench, right_wrench: net wrench the fruit exerts on each jaw.
