@@ -71,7 +71,7 @@ PARTS = (
     ('      barrier partners', barrier.BarrierContact, 'partners'),
     ('      barrier contact_forces', barrier.BarrierContact, 'contact_forces'),
     ('      barrier holders', barrier.BarrierContact, 'holders'),
-    ('    fingers: sticking marks', simulation.Simulation, '_mark_sticking'),
+    ('  fingers: contact sticking (on read)', simulation.Simulation, '_fingers_sticking'),
     ('    fingers: jaw forces', simulation.Simulation, '_finger_jaw_forces'),
     ('  fingers: jaw wrenches', simulation.Simulation, '_finger_wrenches'),
     ('  fingers: result', soft_fingers.SoftFingers, 'result'),
