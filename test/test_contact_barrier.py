@@ -17,7 +17,6 @@ import pytest
 from helpers import kernel_evaluation, pick, quasi_static_sim
 
 from gripper_sim.configuration import load_config
-from gripper_sim.core import barrier as barrier_module
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
 from gripper_sim.core.barrier_kernels import balance_forces
@@ -499,8 +498,8 @@ def test_ipc_holds_an_apple_squeezed_flat_along_the_jaws(monkeypatch):
     sub-steps (t = 0.58 s). The fruit nodes near the jaws carried with them are a start
     that crosses nothing: the pick holds, and no node enters a jaw at any step."""
     carried = []
-    original = barrier_module._carried_by_faces
-    monkeypatch.setattr(barrier_module, '_carried_by_faces',
+    original = BarrierContact.carried_by_faces
+    monkeypatch.setattr(BarrierContact, 'carried_by_faces',
                         lambda *args: carried.append(1) or original(*args))
     sim = Simulation(load_config(overrides=['contact.model=ipc']))
     deepest = []

@@ -1069,6 +1069,30 @@ class BarrierContact(Energy):
             return True
         return self.exactly_reachable(start)
 
+    def carried_by_faces(self, x_n: np.ndarray, old_faces: list,
+                         new_faces: list) -> np.ndarray | None:
+        """(n, d) m, x_n with each fruit surface node within ``CARRY_REACH_EDGES`` of the
+        outline's longest edges of a moving face (of its extent, not its plane) moved by
+        that face's shift (the nearest one's): a fallback start for a step whose pushed
+        starts cross something (``_begin``), as where a fruit squeezed flat along a jaw
+        wraps round its corner and the corner would cross an outline edge that no single
+        node's push keeps ahead of it; None if no face moves."""
+        origins, _, tangents, half_extents, _, _, _ = self._face_geometry(old_faces)
+        shifts = self._face_geometry(new_faces)[0] - origins
+        moving = np.flatnonzero(np.any(shifts != 0.0, axis=1))
+        if not moving.size:
+            return None
+        nodes = self.surface
+        offsets = x_n[nodes][None, :, :] - origins[moving][:, None, :]   # (m, s, d)
+        distances = np.empty((moving.size, nodes.size))
+        for row, k in enumerate(moving):
+            along = np.clip(offsets[row] @ tangents[k].T, -half_extents[k], half_extents[k])
+            distances[row] = np.linalg.norm(offsets[row] - along @ tangents[k], axis=1)
+        near = distances.min(axis=0) <= CARRY_REACH_EDGES * self.longest_edge(x_n)
+        start = x_n.copy()
+        start[nodes[near]] += shifts[moving[distances.argmin(axis=0)[near]]]
+        return start
+
     def exactly_reachable(self, start: np.ndarray) -> bool:
         """``reachable``'s exact check (ipctk's CCD, then the ends' distance) of the paths
         to ``start`` (n, d) m."""
@@ -1273,38 +1297,13 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces:
                   if start is not None and barrier.reachable(start)]
         difference = np.abs(starts[0] - starts[1]).max() if len(starts) == 2 else 0.0
     if not starts:
-        carried = _carried_by_faces(barrier, x_n, old_faces, new_faces)
+        carried = barrier.carried_by_faces(x_n, old_faces, new_faces)
         if carried is None or not barrier.exactly_reachable(carried):
             raise NewtonFailure('no collision-free start for the barrier step', [])
         starts = [carried]
     if len(starts) == 1 or difference < resolution:
         return starts[0], None
     return starts[0], starts[1].ravel()
-
-
-def _carried_by_faces(barrier: BarrierContact, x_n: np.ndarray, old_faces: list,
-                      new_faces: list) -> np.ndarray | None:
-    """(n, d) m, x_n with each fruit surface node within ``CARRY_REACH_EDGES`` of the
-    outline's longest edges of a moving face (of its extent, not its plane) moved by
-    that face's shift (the nearest one's): a fallback start for a step whose pushed
-    starts cross something (``_begin``), as where a fruit squeezed flat along a jaw
-    wraps round its corner and the corner would cross an outline edge that no single
-    node's push keeps ahead of it; None if no face moves."""
-    origins, _, tangents, half_extents, _, _, _ = barrier._face_geometry(old_faces)
-    shifts = barrier._face_geometry(new_faces)[0] - origins
-    moving = np.flatnonzero(np.any(shifts != 0.0, axis=1))
-    if not moving.size:
-        return None
-    nodes = barrier.surface
-    offsets = x_n[nodes][None, :, :] - origins[moving][:, None, :]   # (m, s, d)
-    distances = np.empty((moving.size, nodes.size))
-    for row, k in enumerate(moving):
-        along = np.clip(offsets[row] @ tangents[k].T, -half_extents[k], half_extents[k])
-        distances[row] = np.linalg.norm(offsets[row] - along @ tangents[k], axis=1)
-    near = distances.min(axis=0) <= CARRY_REACH_EDGES * barrier.longest_edge(x_n)
-    start = x_n.copy()
-    start[nodes[near]] += shifts[moving[distances.argmin(axis=0)[near]]]
-    return start
 
 
 def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
