@@ -769,14 +769,15 @@ class SimulationFacade:
         def rarely_read() -> dict:
             origins = jaw_origins()
             jaws = wrenches if wrenches is not None else jaw_wrenches(origins)
+            on_fingers = self._on_fingers(x, v, obstacle, finger) if soft is not None else None
             return dict(
                 left_wrench=jaws[LEFT], right_wrench=jaws[RIGHT],
-                slipping=(self._fingers_sliding(x, v, obstacle, finger) if soft is not None
+                slipping=(self._fingers_sliding(x, on_fingers) if soft is not None
                           else jaw_contacts_sliding(  # 3D: the patches' rigid motion
                               v, obstacle, face_sides, normals, face_velocities,
                               x if self.dimension == 3 else None)),
                 contact_sticking=(sticking if soft is None else self._fingers_sticking(
-                    x, v, obstacle, finger, normals, face_velocities)),
+                    v, obstacle, on_fingers, normals, face_velocities)),
                 energies=Energies(
                     kinetic=float(0.5 * np.sum(masses * np.sum(v * v, axis=1))),
                     elastic=float(sum(e.value(x.ravel()) for e in fruit.energies)),
@@ -784,34 +785,33 @@ class SimulationFacade:
                 fingers=soft.result(finger, *origins) if soft is not None else None)
         return fields, rarely_read, normal, sides
 
-    def _fingers_sliding(self, x: np.ndarray, v: np.ndarray, obstacle: np.ndarray,
-                         finger: FingerState) -> bool:
+    def _fingers_sliding(self, x: np.ndarray, on_fingers: tuple) -> bool:
         """``StepResult.slipping`` with deformable fingers (``slip.patches_sliding``): the
-        fruit's nodes at positions ``x`` and velocities ``v`` (n, d) held by a finger
-        (``obstacle`` (n,) 0 left, 1 right) against the finger's surface where they lie
-        on it (``_on_fingers``), in the fingers' state ``finger``."""
-        held, relative, normals = self._on_fingers(x, v, obstacle, finger)
+        fruit's nodes held by a finger, at positions ``x`` (n, d) m, moving against the
+        finger's surface where they lie on it as ``on_fingers`` (``_on_fingers``) gives."""
+        held, relative, normals = on_fingers
         jaw = np.repeat([LEFT, RIGHT], [held[LEFT].size, held[RIGHT].size])
         return patches_sliding(relative, normals, jaw,
                                x[np.concatenate(held)] if self.dimension == 3 else None)
 
-    def _fingers_sticking(self, x: np.ndarray, v: np.ndarray, obstacle: np.ndarray,
-                          finger: FingerState, normals: np.ndarray,
-                          velocities: np.ndarray) -> np.ndarray:
-        """``StepResult.contact_sticking`` (n,) bool with deformable fingers: a node held
-        by a finger (``obstacle`` 0 left, 1 right) sticks where it moves along the finger's
-        surface (``_on_fingers``) slower than the barrier's friction smoothing speed, one
-        held by a face (the table) where it moves along that face (``normals``,
-        ``velocities`` (k, d) of the obstacles) so; positions ``x``, velocities ``v``
-        (n, d), the fingers' state ``finger``."""
+    def _fingers_sticking(self, v: np.ndarray, obstacle: np.ndarray, on_fingers: tuple,
+                          normals: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+        """``StepResult.contact_sticking`` (n,) bool with deformable fingers: each node
+        sticks where it moves along its obstacle slower than the barrier's friction
+        smoothing speed (``barrier_kernels.mark_sticking``): one held by a finger
+        (``obstacle`` (n,) 0 left, 1 right) along the finger's surface where it lies on it
+        (``on_fingers``, ``_on_fingers``), one held by a face (the table) along that face
+        (the obstacles' ``normals`` and ``velocities`` (k, d)); velocities ``v`` (n, d)."""
+        smoothing = self._barrier.settings.friction_smoothing
         mode = np.zeros(len(obstacle), np.int64)
-        faces = np.where(obstacle >= 2, obstacle, -1)
-        mark_sticking(v, faces, normals, velocities,
-                      self._barrier.settings.friction_smoothing, cm.STICK, cm.SLIP, mode)
-        held, relative, surface_normals = self._on_fingers(x, v, obstacle, finger)
-        along = relative - np.sum(relative * surface_normals, axis=1)[:, None] * surface_normals
-        slow = np.linalg.norm(along, axis=1) < self._barrier.settings.friction_smoothing
-        mode[np.concatenate(held)] = np.where(slow, cm.STICK, cm.SLIP)
+        mark_sticking(v, np.where(obstacle >= 2, obstacle, -1), normals, velocities,
+                      smoothing, cm.STICK, cm.SLIP, mode)
+        held, relative, surface_normals = on_fingers
+        held = np.concatenate(held)
+        on_surface = np.zeros(held.size, np.int64)   # each against its own surface point
+        mark_sticking(relative, np.arange(held.size), surface_normals,
+                      np.zeros_like(relative), smoothing, cm.STICK, cm.SLIP, on_surface)
+        mode[held] = on_surface
         return mode == cm.STICK
 
     def _on_fingers(self, x: np.ndarray, v: np.ndarray, obstacle: np.ndarray,
