@@ -193,3 +193,19 @@ def test_a_vertex_behind_the_table_leaves_the_table_to_the_ccd():
     assert bound == 1.0
     assert len(others.fv_candidates) == len(candidates.fv_candidates)
     assert len(others.ee_candidates) == len(candidates.ee_candidates)
+
+
+def test_ipc_force_drive_holds_its_command_on_the_3d_solid_apple():
+    """A barrier step is solved once, at the gap the drive predicts from its stiffness.
+    The 3D solid apple's first guess was 0.1 E R, a third of its contact's stiffness at
+    40 N: each step passed the goal by more than it aimed to change, and the grip force
+    alternated between 0.5 and 69 N for as long as it was held. The guess is now Hertz's
+    at the commanded force, and a step that overshoots raises it
+    (``jaw_drive.overshoot_stiffness``): the drive holds 40 N."""
+    sim = Simulation3D(load_config(overrides=['dimension=3', 'fruit.model=solid',
+                                              'contact.model=ipc']))
+    sim.command_force(40.0)
+    while sim.step().grip_force < 0.99 * 40.0:
+        assert sim.last.time < 1.0
+    forces = np.array([sim.step().grip_force for _ in range(12)])
+    assert np.all(np.abs(forces - 40.0) < 0.01 * 40.0), forces

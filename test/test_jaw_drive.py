@@ -125,3 +125,47 @@ def test_a_bad_max_effort_is_refused(effort):
     with pytest.raises(CommandError, match='max_effort'):
         sim.command_gap(0.0, max_effort=effort)
     assert sim.gripper_state == before
+
+
+def test_a_step_that_passes_its_goal_by_more_than_half_its_aim_raises_the_stiffness():
+    """``overshoot_stiffness`` (the barrier model's steps, solved once at the predicted
+    gap): from 2 N aiming at 40 N a step that ends at 66 N, 3.7 mm narrower, passed the
+    goal by 26 N, more than half the 38 N it aimed at: the stiffness becomes the F^(2/3)
+    secant at 40 N. A step that lands within that, or whose force moved the way it should
+    without passing the goal, or with a jaw off the fruit, keeps it; it is never
+    lowered."""
+    from gripper_sim.core.jaw_drive import contact_measure, overshoot_stiffness
+    raised = overshoot_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0594, 66.0)
+    slope = (contact_measure(66.0) - contact_measure(2.0)) / (0.0631 - 0.0594)
+    assert raised == pytest.approx(1.5 * 40.0 ** (1.0 / 3.0) * slope)
+    assert raised > 3 * 6350.0
+    assert overshoot_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0594, 55.0) == 6350.0
+    assert overshoot_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0600, 39.0) == 6350.0
+    assert overshoot_stiffness(6350.0, 40.0, 0.0631, 0.0, 0.0594, 66.0) == 6350.0
+    assert overshoot_stiffness(6350.0, 40.0, 0.0594, 66.0, 0.0631, 0.0) == 6350.0
+    # noise around the goal is not an overshoot (FORCE_TOLERANCE)
+    assert overshoot_stiffness(6350.0, 40.0, 0.06057, 39.99, 0.06057, 40.01) == 6350.0
+    assert overshoot_stiffness(9e4, 40.0, 0.0631, 2.0, 0.0594, 66.0) == 9e4
+
+
+def test_the_first_stiffness_guess_of_a_solid_3d_fruit_is_hertz_at_the_command():
+    """Two Hertz contacts in series, each F = K delta^(3/2): -dF/d gap = 3/4 K^(2/3)
+    F^(1/3), checked against the law's finite difference; the 3D solid apple's drive
+    starts from it at the commanded force, the shell's from its constant guess."""
+    from gripper_sim.core.jaw_drive import hertz_stiffness
+    modulus, force = 5.6e5, 40.0
+
+    def grip(gap_closed):   # N, both jaws at an approach of half the closed gap each
+        return modulus * (0.5 * gap_closed) ** 1.5
+
+    closed = 2.0 * (force / modulus) ** (2.0 / 3.0)
+    h = 1e-9
+    assert hertz_stiffness(modulus, force) == pytest.approx(
+        (grip(closed + h) - grip(closed - h)) / (2 * h), rel=1e-6)
+    for model, hertz in (('solid', True), ('shell', False)):
+        sim = make_simulation(load_config(overrides=COARSE_3D + [f'fruit.model={model}']))
+        sim.command_force(force)
+        expected = (hertz_stiffness(sim.kinematics.hertz_modulus, force) if hertz
+                    else sim.kinematics.initial_stiffness)
+        assert sim.gripper_state.stiffness == expected
+        assert (sim.kinematics.hertz_modulus > 0) == hertz

@@ -233,13 +233,17 @@ class SimulationFacade:
         return 2.0 * self._soft.thickness if self._soft is not None else 0.0
 
     def command_force(self, force: float, speed: float | None = None) -> None:
-        """Force mode: close until the mean jaw normal force is ``force`` (N), hold it."""
+        """Force mode: close until the mean jaw normal force is ``force`` (N), hold it. Not
+        yet gripping, the drive starts from its first stiffness guess at that force."""
         force = finite('force', force)
         limit = self.config['gripper.max_force']
         if force <= 0 or force > limit:
             raise CommandError(f'force {force} N is out of range (0, {limit}] N')
         speed = self._speed(speed, self.config['gripper.close_speed'])
-        self._grip = replace(self._grip, mode='force', target_force=force, speed=speed)
+        stiffness = (self._grip.stiffness if self._grip_force() > 0.0
+                     else self.kinematics.first_stiffness(force))
+        self._grip = replace(self._grip, mode='force', target_force=force, speed=speed,
+                             stiffness=stiffness)
 
     def command_open(self, speed: float | None = None) -> None:
         """Position mode back to the initial gap."""
@@ -498,8 +502,13 @@ class SimulationFacade:
         if self._barrier is not None and self._soft is None:
             # the barrier's contact force is not monotone in the gap within a step (the
             # solve starts from a feasible, pushed-ahead outline): the prediction only
+            goal = self._grip_force_goal(self._grip, dt)[0]
+            gap, force = self._grip.gap, self._grip_force()
             self.gap_solves += 1
-            return self._substep(dt)
+            iterations = self._substep(dt)
+            return self._kept_stiffness(jaw_drive.overshoot_stiffness(
+                self._grip.stiffness, goal, gap, force, self._grip.gap, self._grip_force()),
+                iterations)
         saved = self._saved_state()
         goal, lo, hi = self._grip_force_goal(self._grip, dt)
         start_gap = self._grip.gap
@@ -548,6 +557,11 @@ class SimulationFacade:
             self._gap_override = None
         return self._kept_stiffness(
             jaw_drive.contact_stiffness(stiffness, damped, self._grip.stiffness), iterations)
+
+    def _grip_force(self) -> float:
+        """N, the mean of the jaws' forces if both touch the fruit, else 0."""
+        left_n, right_n = self._jaw_force
+        return 0.5 * (left_n + right_n) if left_n > 0 and right_n > 0 else 0.0
 
     def _kept_stiffness(self, stiffness: float, iterations: int) -> int:
         """Keep ``stiffness`` (N/m, the contact's) in the gripper state for the next

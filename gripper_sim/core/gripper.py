@@ -90,6 +90,9 @@ class GripperKinematics:
     Args:
         max_gap: m.  lift_acceleration: m/s^2.
         initial_stiffness: N/m, first guess of -d grip force / d gap.
+        hertz_modulus: N/m^1.5, K of Hertz's law F = K delta^(3/2) at each jaw
+            (``jaw_drive.hertz_stiffness``) where the fruit's contact follows it (a solid
+            3D fruit), else 0: the first guess at a force (``first_stiffness``).
         transport_acceleration: m/s^2, of the sideways transport.
         max_speed: m/s, the drive's top gap rate (see ``gap_bounds``).
         damping: N s/m, the force-mode drive's damping (``jaw_drive.damping_rate``).
@@ -99,14 +102,23 @@ class GripperKinematics:
 
     def __init__(self, max_gap: float, lift_acceleration: float, initial_stiffness: float,
                  transport_acceleration: float = 1.0, max_speed: float = math.inf,
-                 damping: float = 0.0, min_gap: float = 0.0):
+                 damping: float = 0.0, min_gap: float = 0.0, hertz_modulus: float = 0.0):
         self.max_gap = max_gap
+        self.hertz_modulus = hertz_modulus
         self.min_gap = min_gap
         self.max_speed = max_speed
         self.damping = damping
         self.lift_acceleration = lift_acceleration
         self.initial_stiffness = initial_stiffness
         self.transport_acceleration = transport_acceleration
+
+    def first_stiffness(self, force: float) -> float:
+        """N/m, the first guess of -d grip force / d gap for a grip at ``force`` (N): the
+        Hertz law's tangent there (``hertz_modulus``) if there is one, else
+        ``initial_stiffness``."""
+        if self.hertz_modulus > 0.0:
+            return jaw_drive.hertz_stiffness(self.hertz_modulus, force)
+        return self.initial_stiffness
 
     def advance(self, state: GripperState, dt: float, grip_force: float,
                 both_in_contact: bool, clearance: float = math.inf) -> GripperState:

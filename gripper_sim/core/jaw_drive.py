@@ -7,6 +7,7 @@ grasp driven either way moves its jaws by the same arithmetic:
 - ``trapezoid``, ``moved``: one step of the lift and the transport at their speed and
   acceleration limits;
 - ``servo_gap``, ``gap_bounds``, ``predicted_gap``: the gap a step starts its solve at;
+  ``hertz_stiffness``: the first guess of the stiffness it predicts with (a solid 3D fruit);
 - ``damping_rate``, ``grip_miss``, ``contact_stiffness``: the force-mode drive's damping
   (grip force - command = damping x gap rate) in the equation a step's gap meets;
 - the gap search when a solved step misses its force goal: ``record_solve`` (keep a
@@ -14,7 +15,8 @@ grasp driven either way moves its jaws by the same arithmetic:
   ``contact_measure``, ``secant_stiffness``), ``nearest_solve`` (whose end contact set a
   solve starts from), ``halfway`` (after a failed solve) and ``settle_on`` (which solve
   stands when none met the goal), ``clearance`` (how far a jaw that does not touch is
-  from the fruit). Both loops that run the search -
+  from the fruit), ``overshoot_stiffness`` (the barrier model's steps, which have no
+  search). Both loops that run the search -
   ``core.facade.SimulationFacade._drive_jaws`` and ``core.advance_kernels._drive_jaws`` -
   only solve and call these.
 
@@ -35,6 +37,10 @@ MAX_GAP_SOLVES = 8
 #: what the gap search does after a solve (``record_solve``): solve again at
 #: ``next_gap``; the solve met the goal; no gap of this step does better (``settle_on``)
 SEARCH, DONE, SETTLE = 0, 1, 2
+#: a step solved once at its predicted gap (the barrier model's) whose grip force passes
+#: its goal by more than this share of what the step aimed to change raises the drive's
+#: stiffness (``overshoot_stiffness``)
+OVERSHOOT_SHARE = 0.5
 
 
 @njit(cache=True)
@@ -151,6 +157,15 @@ def predicted_gap(force_mode, gap, target_gap, target_force, speed, stiffness, m
 
 
 @njit(cache=True)
+def hertz_stiffness(modulus, force):
+    """N/m, -d grip force / d gap of a fruit held at ``force`` (N) between two flat jaws,
+    each contact Hertz's F = K delta^(3/2) with K = ``modulus`` (N/m^1.5; a sphere of
+    radius R: 4/3 E / (1 - nu^2) sqrt(R), Johnson 1985, Contact Mechanics, eq. 4.22) and
+    the gap closing by twice delta: 3/4 K^(2/3) F^(1/3)."""
+    return 0.75 * modulus ** (2.0 / 3.0) * max(force, 0.0) ** (1.0 / 3.0)
+
+
+@njit(cache=True)
 def contact_measure(force):
     """N^(2/3), the grip force in the variable that the jaw search treats as linear in
     the gap: Hertz's law F ~ delta^(3/2) (Johnson 1985, Contact Mechanics, eq. 4.22)
@@ -180,6 +195,31 @@ def secant_stiffness(tried, count, stiffness, goal):
         return stiffness
     slope = (contact_measure(goal + m1) - contact_measure(goal + m2)) / (g2 - g1)
     return 1.5 * goal ** (1.0 / 3.0) * slope if slope > 0 else stiffness
+
+
+@njit(cache=True)
+def overshoot_stiffness(stiffness, goal, gap_before, force_before, gap_after, force_after):
+    """N/m, the drive's stiffness after a step solved once at its predicted gap (the
+    barrier model's: no gap search corrects it within the step, ``predicted_gap``).
+
+    A prediction at less than half the contact's stiffness passes the goal by more than
+    the step aimed to change and swings wider at every step; a stiffness that is too high
+    only closes the remaining miss over more steps. So the stiffness is raised, never
+    lowered, to the secant of F^(2/3) (``contact_measure``, at the force ``goal`` N)
+    between the step's start and end (gap m, grip force N, 0 unless both jaws touched)
+    where the force passed the goal by more than ``OVERSHOOT_SHARE`` of the aim
+    ``goal - force_before`` and by more than the drive's ``FORCE_TOLERANCE``. A step's force changes with the fruit's own motion as well,
+    so a secant of every step would follow the fruit's ringing instead of the contact.
+    """
+    aim = goal - force_before
+    over = force_after - goal
+    if (force_before <= 0.0 or force_after <= 0.0 or aim * over <= 0.0
+            or abs(over) <= max(OVERSHOOT_SHARE * abs(aim), FORCE_TOLERANCE * goal)
+            or gap_after == gap_before):
+        return stiffness
+    slope = ((contact_measure(force_after) - contact_measure(force_before))
+             / (gap_before - gap_after))
+    return max(stiffness, 1.5 * goal ** (1.0 / 3.0) * slope)
 
 
 @njit(cache=True)

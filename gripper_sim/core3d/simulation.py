@@ -144,14 +144,17 @@ class Simulation3D(SimulationFacade):
             # (the pads and barriers are set up for a step only by reset())
             self.solver.load_kernels(self.initial_positions.ravel(), self.dt)
         # first guess of d force / d gap for the force regulator (it adapts): a Hertz
-        # contact of the flesh at a 1 % approach
+        # contact of the flesh at a 1 % approach; a solid fruit's at the commanded force
         radius = 0.5 * self.fruit.rest_width
+        modulus = c['fruit.flesh.youngs_modulus'] / (1.0 - c['fruit.flesh.poisson_ratio'] ** 2)
         self.kinematics = GripperKinematics(
             c['gripper.max_gap'], c['gripper.lift_acceleration'],
             initial_stiffness=0.1 * c['fruit.flesh.youngs_modulus'] * radius,
             transport_acceleration=c['gripper.transport_acceleration'],
             max_speed=c['gripper.max_speed'], damping=c['gripper.force_damping'],
-            min_gap=self.smallest_gap)
+            min_gap=self.smallest_gap,
+            hertz_modulus=(4.0 / 3.0 * modulus * math.sqrt(radius)
+                           if c['fruit.model'] == 'solid' else 0.0))
         self._observers: list[Callable[[StepResult3D], None]] = []
         self.reset()
         if self._soft is None and self._barrier is None:
