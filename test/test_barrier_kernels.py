@@ -255,7 +255,8 @@ def _pushed_reference(x_n, surface, origin, normal, tangents, half, thickness, s
                       fraction, predicted=None):
     """The start pushed ahead of a face moving by ``shift`` in numpy (as
     ``BarrierContact.pushed_start`` computed it before the kernel), from ``predicted``
-    (none: x_n, the touching nodes carried along with the face)."""
+    (none: x_n, the touching nodes moved with the face, their gap kept, where it recedes
+    too)."""
     start = (x_n if predicted is None else predicted).copy()
     rel = x_n[surface] - origin
     covered = (np.all(np.abs(rel @ tangents.T) <= half, axis=1) & (rel @ normal > -thickness))
@@ -267,9 +268,10 @@ def _pushed_reference(x_n, surface, origin, normal, tangents, half, thickness, s
     push = np.maximum(advance - gap - move + target, 0.0)
     front = gap >= 0
     touching = front & (gap < dhat)
-    start[nodes[front]] += push[front, None] * normal
+    pushed = front if predicted is not None else front & ~touching
+    start[nodes[pushed]] += push[pushed, None] * normal
     if predicted is None:
-        start[nodes[touching]] += shift - advance * normal
+        start[nodes[touching]] += shift
     return start
 
 
@@ -310,6 +312,33 @@ def test_the_start_pushed_ahead_of_a_moving_face_is_the_reference(d):
     moved = np.any(expected != x_n, axis=1)
     assert 10 < np.count_nonzero(moved) < len(surface)
     np.testing.assert_allclose(start, expected, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize('d', [2, 3])
+def test_the_nodes_touching_a_receding_face_start_where_it_takes_them(d):
+    """A face moving away (a jaw opening on a fruit squeezed past its command) takes the
+    nodes within dhat of it along, their gap kept: left behind, they started beyond the
+    barrier's reach and Newton's first step, with no barrier in its model, went through
+    the face (the 3D solid apple at 120 N: no convergence). Nodes further off, behind
+    the face or beside it stay at x_n."""
+    rng = np.random.default_rng(30 + d)
+    x_n, surface, origin, normal, tangents, half, shift = _random_start(rng, d)
+    shift = shift - 8e-4 * normal   # receding
+    assert shift @ normal < 0
+    start, _ = _pushed(x_n, surface, origin, normal, tangents, half, shift)
+    rel = x_n[surface] - origin
+    gap = rel @ normal
+    covered = np.all(np.abs(rel @ tangents.T) <= half, axis=1)
+    touching = surface[covered & (gap >= 0) & (gap < DHAT)]
+    assert len(touching) > 10
+    np.testing.assert_allclose(start[touching], x_n[touching] + shift, rtol=0, atol=1e-15)
+    np.testing.assert_allclose((start[touching] - origin - shift) @ normal,
+                               (x_n[touching] - origin) @ normal, rtol=0, atol=1e-15)
+    others = np.setdiff1d(np.arange(len(x_n)), touching)
+    np.testing.assert_array_equal(start[others], x_n[others])
+    np.testing.assert_allclose(start, _pushed_reference(
+        x_n, surface, origin, normal, tangents, half, 1e-3, shift, DHAT, 0.5),
+        rtol=0, atol=1e-15)
 
 
 @pytest.mark.parametrize('d', [2, 3])

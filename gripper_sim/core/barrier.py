@@ -1041,8 +1041,8 @@ class BarrierContact(Energy):
                       predicted: np.ndarray | None = None) -> tuple:
         """The step's starts, not checked for crossings (``reachable``): (n, d) m x_n with
         the outline nodes that a moving face covers at x_n and would come closer than
-        dhat / 2 to pushed ahead of it (one already within dhat of it no closer than it
-        was, and moved along with it), and ``predicted`` (n, d) m (the predictor
+        dhat / 2 to pushed ahead of it (one already within dhat of it moved with it, its
+        gap kept, where the face recedes too), and ``predicted`` (n, d) m (the predictor
         x_n + dt v_n; None: none) with them pushed ahead of it as far as their own moves
         leave that to do (None if none)."""
         plain = x_n.copy()
