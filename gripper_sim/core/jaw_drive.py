@@ -208,8 +208,9 @@ def overshoot_stiffness(stiffness, goal, gap_before, force_before, gap_after, fo
     lowered, to the secant of F^(2/3) (``contact_measure``, at the force ``goal`` N)
     between the step's start and end (gap m, grip force N, 0 unless both jaws touched)
     where the force passed the goal by more than ``OVERSHOOT_SHARE`` of the aim
-    ``goal - force_before`` and by more than the drive's ``FORCE_TOLERANCE``. A step's force changes with the fruit's own motion as well,
-    so a secant of every step would follow the fruit's ringing instead of the contact.
+    ``goal - force_before`` and by more than the drive's ``FORCE_TOLERANCE``. A step's
+    force changes with the fruit's own motion as well, so a secant of every step would
+    follow the fruit's ringing instead of the contact.
     """
     aim = goal - force_before
     over = force_after - goal
