@@ -12,11 +12,11 @@ grasp driven either way moves its jaws by the same arithmetic:
   (grip force - command = damping x gap rate) in the equation a step's gap meets;
 - the gap search when a solved step misses its force goal: ``record_solve`` (keep a
   solve, update the stiffness, decide: done, settle, or search on), ``next_gap`` (with
-  ``contact_measure``, ``secant_stiffness``), ``nearest_solve`` (whose end contact set a
-  solve starts from), ``halfway`` (after a failed solve) and ``settle_on`` (which solve
-  stands when none met the goal), ``clearance`` (how far a jaw that does not touch is
-  from the fruit), ``overshoot_stiffness`` (the barrier model's steps, which have no
-  search). Both loops that run the search -
+  ``contact_measure``, ``secant_stiffness``, ``chord_stiffness``), ``nearest_solve``
+  (whose end contact set a solve starts from), ``halfway`` (after a failed solve) and
+  ``settle_on`` (which solve stands when none met the goal), ``clearance`` (how far a
+  jaw that does not touch is from the fruit), ``overshoot_stiffness`` (the barrier
+  model's steps, which have no search). Both loops that run the search -
   ``core.facade.SimulationFacade._drive_jaws`` and ``core.advance_kernels._drive_jaws`` -
   only solve and call these.
 
@@ -193,8 +193,16 @@ def secant_stiffness(tried, count, stiffness, goal):
     g2, m2, both2 = tried[count - 1, 0], tried[count - 1, 1], tried[count - 1, 2]
     if not (both1 > 0 and both2 > 0 and g1 != g2):
         return stiffness
-    slope = (contact_measure(goal + m1) - contact_measure(goal + m2)) / (g2 - g1)
-    return 1.5 * goal ** (1.0 / 3.0) * slope if slope > 0 else stiffness
+    return chord_stiffness(g1, goal + m1, g2, goal + m2, goal, stiffness)
+
+
+@njit(cache=True)
+def chord_stiffness(gap_a, force_a, gap_b, force_b, goal, otherwise):
+    """N/m, -d force / d gap at the force ``goal`` (N) from the chord of F^(2/3)
+    (``contact_measure``) between two solves (gap m, grip force N, gaps unequal);
+    ``otherwise`` where the force does not fall as the gap grows."""
+    slope = (contact_measure(force_a) - contact_measure(force_b)) / (gap_b - gap_a)
+    return 1.5 * goal ** (1.0 / 3.0) * slope if slope > 0 else otherwise
 
 
 @njit(cache=True)
@@ -218,9 +226,8 @@ def overshoot_stiffness(stiffness, goal, gap_before, force_before, gap_after, fo
             or abs(over) <= max(OVERSHOOT_SHARE * abs(aim), FORCE_TOLERANCE * goal)
             or gap_after == gap_before):
         return stiffness
-    slope = ((contact_measure(force_after) - contact_measure(force_before))
-             / (gap_before - gap_after))
-    return max(stiffness, 1.5 * goal ** (1.0 / 3.0) * slope)
+    return max(stiffness, chord_stiffness(gap_before, force_before, gap_after, force_after,
+                                          goal, stiffness))
 
 
 @njit(cache=True)
