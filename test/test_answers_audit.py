@@ -133,10 +133,13 @@ def test_a_firmer_grip_whose_contacts_stick_does_not_slip_more():
     assert very_firm['centroid_drop'] > 10 * very_firm['slip_distance']
 
 
-@pytest.mark.xfail(strict=True, reason='the fruit "resting on the table" starts undeformed '
-                   'and weightless: it lands with up to 1.65 m g at dt 1 ms (1.75 at 0.5 ms), '
-                   'which is the peak damage and table pressure of every gentle grasp')
-def test_a_fruit_resting_on_the_table_is_not_dropped_onto_it():
-    _, mass, rows = traced_pick(0.5, hold=0.2)
+@pytest.mark.parametrize('dt', ['0.001', '0.0005'])
+def test_a_fruit_resting_on_the_table_is_not_dropped_onto_it(dt):
+    _, mass, rows = traced_pick(0.5, f'sim.dt={dt}', hold=0.2)
     closing = [table for phase, _, _, table, _ in rows if phase == 'closing']
+    untouched = [table for phase, left, right, table, _ in rows
+                 if phase == 'closing' and not left.any() and not right.any()]
+    assert len(untouched) > 10
+    assert max(untouched) == pytest.approx(mass * GRAVITY, rel=1e-4)
+    assert min(untouched) == pytest.approx(mass * GRAVITY, rel=1e-4)
     assert max(closing) < 1.1 * mass * GRAVITY

@@ -375,15 +375,17 @@ SETUPS = [
 @pytest.mark.parametrize('overrides', SETUPS, ids=[' '.join(o) or 'default' for o in SETUPS])
 def test_every_setup_takes_the_whole_step_kernel(overrides):
     """Every 2D set-up - shell, point and solid fruits; flat, arc and V-groove fingers;
-    soft pads - steps in the whole-step kernel, not on the generic solver."""
+    soft pads - steps in the whole-step kernel, not on the generic solver (which settled
+    the fruit on the table before the first step, as in every route)."""
     sim = Simulation(load_config(overrides=overrides + ['fruit.nodes=32']))
+    settling_passes = sim.solver.stats['passes']
     sim.command_force(1.0)
     for _ in range(5):
         sim.step()
     assert sim._fast is not None and sim._fast.applies()
     assert sim._fast.counts[kernels.C_SUBSTEPS] >= 5
     assert sim._fast.fallbacks == 0
-    assert sim.solver.stats['passes'] == 0
+    assert sim.solver.stats['passes'] == settling_passes
     Simulation(load_config(overrides=overrides), fast=True)  # no error: the kernel covers it
 
 

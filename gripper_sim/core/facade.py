@@ -68,6 +68,15 @@ DYNAMIC_KEYS = RUNTIME_KEYS
 #: less than any fruit's skin is thick (tens of um and more)
 FINGERS_MEET = 1e-5
 
+#: the settle on the table (``_settle``): its first step is the simulation's time step and
+#: each next one this factor longer, up to ``SETTLE_LONGEST_STEP`` s; it ends at the first
+#: step in which no node of the fruit moves further than ``SETTLE_TOLERANCE`` m, and fails
+#: after ``SETTLE_MAX_STEPS`` steps
+SETTLE_GROWTH = 2.0
+SETTLE_LONGEST_STEP = 0.04
+SETTLE_TOLERANCE = 1e-7
+SETTLE_MAX_STEPS = 60
+
 
 def finite(name: str, value: Any) -> float:
     """``value`` as a finite float, else CommandError naming ``name``."""
@@ -104,6 +113,9 @@ class SimulationFacade:
     _names_kept: tuple | None = None
     #: ``_total_mass``: (the masses array, their sum kg), or None
     _mass_kept: tuple | None = None
+    #: whether ``_settle`` steps: a subclass's compiled routes stand aside, so that every
+    #: route of a configuration starts from the same settled state
+    _settling = False
     #: ``_joined``'s arrays of the last deformable fingers' solve: per quantity (the
     #: positions, the velocities) (the fruit's rows, the fingers' rows, the whole array)
     _joined_kept: tuple = ()
@@ -134,6 +146,68 @@ class SimulationFacade:
                                      c['gripper.max_gap']))
         if self.initial_gap > c['gripper.max_gap']:
             raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
+
+    def _rests_on_table(self) -> bool:
+        """Whether the fruit starts on the table (no ``fruit.initial_height``)."""
+        return self.config['fruit.initial_height'] is None and bool(self.config['world.table'])
+
+    def _settle(self) -> None:
+        """Let the fruit that ``_place_fruit`` put undeformed on the table come to rest on
+        it under its weight, then ``reset``: ``initial_positions`` (n, d) m become its
+        resting positions. Without this it would start weightless and land on the table
+        with up to 1.7 times its weight, the peak pressure of every gentle grasp.
+
+        Implicit Euler steps from rest (each starts with every velocity 0; the jaws, open,
+        stand still) have the static equilibrium as their fixed point, and longer steps
+        reach it in fewer (``SETTLE_GROWTH``, ``SETTLE_LONGEST_STEP``): 9 steps for the
+        default 2D apple. A step that fails is tried again shorter (not below the time
+        step). A round fruit's rest on a flat table is neutral in rolling: a step that
+        moves it more than the one before of the same length rolls it, and it stays where
+        that step started. Deformable fingers take part and start again at rest.
+
+        Raises:
+            ConfigError: a step of the time step's length failed, or the fruit still moved
+                more than ``SETTLE_TOLERANCE`` in its ``SETTLE_MAX_STEPS``-th step.
+        """
+        self._settling = True
+        try:
+            self._settle_steps()
+        finally:
+            self._settling = False
+        self.initial_positions = self.q.copy()
+        self.reset()
+
+    def _settle_steps(self) -> None:
+        """``_settle``'s steps: the fruit at rest (``q``) at their end."""
+        dt, last_dt, moved = self.dt, math.nan, math.inf
+        for _ in range(SETTLE_MAX_STEPS):
+            saved = self._saved_state()
+            try:
+                self._advance(dt, 0)
+            except ConvergenceError as failure:
+                self._restore(saved)
+                if dt <= self.dt:
+                    raise ConfigError(
+                        f'the fruit does not come to rest on the table under its weight '
+                        f"({failure}); set 'fruit.initial_height' to start it above the "
+                        f'table') from failure
+                last_dt, dt = math.nan, max(dt / SETTLE_GROWTH, self.dt)
+                continue
+            self.v = np.zeros_like(self.v)
+            last, moved = moved, float(np.abs(self.q - saved[0]).max())
+            if moved <= SETTLE_TOLERANCE:
+                break
+            if moved >= last and dt == last_dt:
+                # a round fruit on a flat table rolls (its rest is neutral or unstable):
+                # the step before came nearest to rest
+                self.q = saved[0]
+                break
+            last_dt, dt = dt, min(SETTLE_GROWTH * dt, SETTLE_LONGEST_STEP)
+        else:
+            raise ConfigError(
+                f'the fruit does not come to rest on the table under its weight: it still '
+                f'moved {moved:.3g} m in its {SETTLE_MAX_STEPS}th settling step; set '
+                f"'fruit.initial_height' to start it above the table")
 
     def _make_solver(self) -> PatternCachingSolver:
         """The Newton solver of the fruit's energies, gravity, the pads and the

@@ -105,6 +105,8 @@ class Simulation(SimulationFacade):
             raise ConfigError('fast=True: the whole-step kernel needs the default contact model '
                               'and rigid fingers')
         self.reset()
+        if self._rests_on_table():
+            self._settle()
 
     def _make_damage(self) -> DamageTracker:
         if self._soft is not None:  # the obstacles: the two fingers, then the faces
@@ -190,8 +192,8 @@ class Simulation(SimulationFacade):
     # ------------------------------------------------------------------ stepping
     def _substep(self, dt: float) -> int:
         """``SimulationFacade._substep`` on the fast path where it applies, else (and for
-        a step its kernel cannot do) on the generic path."""
-        if self._fast is not None and self._fast.applies():
+        a step its kernel cannot do) on the generic path (every step of ``_settle``)."""
+        if self._fast is not None and not self._settling and self._fast.applies():
             iterations = self._fast.substep(dt)
             if iterations is not None:
                 return iterations
