@@ -159,7 +159,7 @@ class SimulationFacade:
 
         Implicit Euler steps from rest (each starts with every velocity 0; the jaws, open,
         stand still) have the static equilibrium as their fixed point, and longer steps
-        reach it in fewer (``SETTLE_GROWTH``, ``SETTLE_LONGEST_STEP``): 9 steps for the
+        reach it in fewer (``SETTLE_GROWTH``, ``SETTLE_LONGEST_STEP``): 8 steps for the
         default 2D apple. A step that fails is tried again shorter (not below the time
         step). A round fruit's rest on a flat table is neutral in rolling: a step that
         moves it more than the one before of the same length rolls it, and it stays where

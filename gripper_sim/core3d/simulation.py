@@ -156,9 +156,10 @@ class Simulation3D(SimulationFacade):
             hertz_modulus=(4.0 / 3.0 * modulus * math.sqrt(radius)
                            if c['fruit.model'] == 'solid' else 0.0))
         self._observers: list[Callable[[StepResult3D], None]] = []
-        # not settled on the table (``_settle``, 2D) yet: from the settled start a contact
-        # pass left a node 10 um inside a closing jaw (test_contact_barrier_3d's friction
-        # hold); the fruit lands on the table in its first steps
+        # not settled on the table (``_settle``, 2D) yet: from the settled start a node
+        # released as pulling in a step's contact pass ended 10 um inside a closing jaw
+        # (``contact_kernels.update`` holds no released node again within the step;
+        # test_contact_barrier_3d's friction hold); the fruit lands in its first steps
         self.reset()
         if self._soft is None and self._barrier is None:
             load_contact_kernels(self.solver.m, self.fruit.surface, self.q,
