@@ -68,6 +68,10 @@ DYNAMIC_KEYS = RUNTIME_KEYS
 #: less than any fruit's skin is thick (tens of um and more)
 FINGERS_MEET = 1e-5
 
+#: m, how far a starting gap may lie below the fruit's width across the jaws and still
+#: count as touching it (a mesh's width differs from its diameter by rounding)
+TOUCHING_TOLERANCE = 1e-9
+
 #: the settle on the table (``_settle``): its first step is the simulation's time step and
 #: each next one this factor longer, up to ``SETTLE_LONGEST_STEP`` s; it ends at the first
 #: step in which no node of the fruit moves further than ``SETTLE_TOLERANCE`` m, and fails
@@ -147,9 +151,17 @@ class SimulationFacade:
         if self.initial_gap > c['gripper.max_gap']:
             raise ConfigError("config key 'gripper.initial_gap' exceeds 'gripper.max_gap'")
 
-    def _rests_on_table(self) -> bool:
-        """Whether the fruit starts on the table (no ``fruit.initial_height``)."""
-        return self.config['fruit.initial_height'] is None and bool(self.config['world.table'])
+    def jaws_start_inside(self) -> bool:
+        """Whether the jaws start inside the fruit: ``initial_gap`` narrower than
+        ``touching_gap`` (by more than ``TOUCHING_TOLERANCE``)."""
+        return self.initial_gap < self.touching_gap - TOUCHING_TOLERANCE
+
+    def _settles(self) -> bool:
+        """Whether the fruit settles on the table before t = 0 (``_settle``): it starts on
+        the table (no ``fruit.initial_height``), between the jaws (a simulation whose jaws
+        start inside it is refused, ``workflows.factory.check_start_gap``)."""
+        return (self.config['fruit.initial_height'] is None and bool(self.config['world.table'])
+                and not self.jaws_start_inside())
 
     def _settle(self) -> None:
         """Let the fruit that ``_place_fruit`` put undeformed on the table come to rest on

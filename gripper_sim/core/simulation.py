@@ -105,7 +105,7 @@ class Simulation(SimulationFacade):
             raise ConfigError('fast=True: the whole-step kernel needs the default contact model '
                               'and rigid fingers')
         self.reset()
-        if self._rests_on_table():
+        if self._settles():
             self._settle()
 
     def _make_damage(self) -> DamageTracker:

@@ -7,10 +7,6 @@ from gripper_sim.core.simulation import Simulation
 from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
 
-#: m, how far a starting gap may lie below the fruit's width across the jaws and still
-#: count as touching it (a mesh's width differs from its diameter by rounding)
-TOUCHING_TOLERANCE = 1e-9
-
 
 def make_simulation(config: Mapping[str, Any], **kwargs) -> Simulation | Simulation3D:
     """The simulation the configuration asks for: 2D (``Simulation``) or, with
@@ -40,7 +36,7 @@ def check_start_gap(sim: Simulation | Simulation3D) -> None:
     their jaws)."""
     config = sim.config
     touching, gap = sim.touching_gap, sim.initial_gap
-    if gap >= touching - TOUCHING_TOLERANCE:
+    if not sim.jaws_start_inside():
         return
     max_gap = config['gripper.max_gap']
     if touching > max_gap:
