@@ -156,12 +156,16 @@ class SimulationFacade:
         ``touching_gap`` (by more than ``TOUCHING_TOLERANCE``)."""
         return self.initial_gap < self.touching_gap - TOUCHING_TOLERANCE
 
+    def _starts_on_table(self) -> bool:
+        """Whether ``_place_fruit`` put the fruit on the table (no ``fruit.initial_height``,
+        a table)."""
+        return self.config['fruit.initial_height'] is None and bool(self.config['world.table'])
+
     def _settles(self) -> bool:
         """Whether the fruit settles on the table before t = 0 (``_settle``): it starts on
-        the table (no ``fruit.initial_height``), between the jaws (a simulation whose jaws
-        start inside it is refused, ``workflows.factory.check_start_gap``)."""
-        return (self.config['fruit.initial_height'] is None and bool(self.config['world.table'])
-                and not self.jaws_start_inside())
+        the table, between the jaws (a simulation whose jaws start inside it is refused,
+        ``workflows.factory.check_start_gap``)."""
+        return self._starts_on_table() and not self.jaws_start_inside()
 
     def _settle(self) -> None:
         """Let the fruit that ``_place_fruit`` put undeformed on the table come to rest on

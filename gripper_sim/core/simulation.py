@@ -87,7 +87,7 @@ class Simulation(SimulationFacade):
                 self.fruit.skin_edges, barrier.BarrierSettings.from_config(c),
                 bodies=soft.soft_bodies if soft else (),
                 pairs=soft.contact_pairs(self.fruit.surface, outline) if soft else None)
-            if c['fruit.initial_height'] is None and c['world.table']:
+            if self._starts_on_table():
                 # a barrier needs a positive gap: the fruit starts just above the table
                 self.initial_positions[:, 1] += barrier.START_GAP_FRACTION * c['contact.ipc.dhat']
         self.solver = self._make_solver()

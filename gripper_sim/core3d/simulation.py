@@ -132,8 +132,7 @@ class Simulation3D(SimulationFacade):
             self._barrier = BarrierContact(
                 self.fruit.n_nodes, self.fruit.surface, self.fruit.skin_edges,
                 BarrierSettings.from_config(c), dimension=3, triangles=self.fruit.triangles)
-        if (self._barrier is not None and c['fruit.initial_height'] is None
-                and c['world.table']):
+        if self._barrier is not None and self._starts_on_table():
             # a barrier needs a positive gap: the fruit starts just above the table
             self.initial_positions[:, 2] += START_GAP_FRACTION * self._barrier.settings.dhat
         self._plain_jaws = (c['gripper.finger.type'] == 'flat'
