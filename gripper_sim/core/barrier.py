@@ -1274,7 +1274,8 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces:
            new_faces: list, dt: float,
            resolution: float) -> tuple[np.ndarray, np.ndarray | None]:
     """Set up the barrier's step; its starts (n, d) m: x_n pushed ahead of moving faces
-    (``pushed_starts``), and in 2D the predictor x_n + dt v_n pushed ahead of them too,
+    (``pushed_starts``), and in 2D the predictor x_n + dt v_n pushed ahead of them too
+    (``v_n`` (n, d) m/s: the velocities it predicts with, ``barrier_step``'s),
     those the way to which crosses nothing: (the start, the other start or None; the
     solve takes the one of lower incremental potential, ``newton.lower_start``). Two
     starts no coordinate of which differs by ``resolution`` m (the Newton tolerance's
@@ -1307,17 +1308,20 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces:
 
 
 def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray,
-                 old_faces: list, new_faces: list, dt: float) -> StepOutcome:
+                 old_faces: list, new_faces: list, dt: float,
+                 v_predicted: np.ndarray | None = None) -> StepOutcome:
     """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) with the barrier model: one
     Newton solve of the incremental potential with the barrier among its energies (the
-    solver holds ``barrier``), no contact passes.
+    solver holds ``barrier``), no contact passes. The predicted start (2D, ``_begin``)
+    is x_n + dt ``v_predicted`` (n, d) m/s (default v_n); it sets only where Newton
+    starts.
 
     Raises:
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
     n, d = x_n.shape
-    start, alternative = _begin(barrier, x_n, v_n, old_faces, new_faces, dt,
-                                solver.tolerance * dt)
+    start, alternative = _begin(barrier, x_n, v_n if v_predicted is None else v_predicted,
+                                old_faces, new_faces, dt, solver.tolerance * dt)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), _free(n, d),
                             alternative)
     v, forces, contacts = barrier.step_outputs(solution.q, x_n, dt, new_faces,
