@@ -26,12 +26,14 @@ the other tree, through the GRIPPER_SIM_TREE environment variable; each finger's
 run once untimed first, numba's caches loaded), and the table gives both (best of
 ``--repeat`` each). ``--set KEY=VALUE`` (repeatable) overrides a configuration key in
 the deformable finger's grasp, the reference's left as it is (e.g.
-``gripper.finger.fin_ray.element_length=0.004``); a bad key or value is a usage error.
+``gripper.finger.fin_ray.element_length=0.004``), and ``--reference-set KEY=VALUE`` one
+in the rigid finger's (e.g. ``contact.model=ipc``: the same contact model as the
+deformable finger's); a bad key or value is a usage error.
 
 Usage::
 
     nice python bench/bench_soft_fingers.py [--repeat N] [--force N] [--set KEY=VALUE]
-        [--baseline DIR]
+        [--reference-set KEY=VALUE] [--baseline DIR]
 """
 from __future__ import annotations
 
@@ -64,13 +66,13 @@ def add_set_argument(parser, help_text: str) -> None:
                         help=help_text)
 
 
-def checked_config(parser, finger: str, settings: list):
-    """The configuration of ``finger`` with the ``--set`` ``settings`` ('KEY=VALUE'); a
+def checked_config(parser, finger: str, settings: list, option: str = '--set'):
+    """The configuration of ``finger`` with the ``option`` ``settings`` ('KEY=VALUE'); a
     bad key or value is the parser's usage error (exit 2)."""
     try:
         return load_config(overrides=[f'gripper.finger.type={finger}', *settings])
     except ConfigError as error:
-        parser.error(f'--set: {error}')
+        parser.error(f'{option}: {error}')
 
 
 #: the routes a grasp is run on (see the module doc)
@@ -102,10 +104,12 @@ def grasp(finger: str, force: float, overrides: tuple = (), watched: bool = True
 
 
 def _baseline_rows(script: Path, baseline: Path, fingers: tuple, force: float,
-                   overrides: list, repeat: int) -> dict:
+                   overrides: list, reference_overrides: list, repeat: int) -> dict:
     """{'this': rows, 'baseline': rows}, rows the best grasp per finger of each tree, runs
     alternated in fresh processes (see the module doc)."""
-    settings = [word for item in overrides for word in ('--set', item)]
+    settings = [word for option, items in (('--set', overrides),
+                                           ('--reference-set', reference_overrides))
+                for item in items for word in (option, item)]
     outputs = alternated(script, baseline, ['--plain', '--force', str(force), *settings],
                          repeat)
     return {label: best_by_key(runs, lambda row: row['cpu']) for label, runs in outputs.items()}
@@ -154,11 +158,15 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
     parser.add_argument('--force', type=float, default=4.0, help='grip force, N')
     add_set_argument(parser, "override a configuration key in the deformable finger's "
                      'grasp (repeatable)')
+    parser.add_argument('--reference-set', action='append', default=[], metavar='KEY=VALUE',
+                        help="override a configuration key in the rigid finger's grasp "
+                        '(repeatable; e.g. contact.model=ipc)')
     add_arguments(parser, 'each grasp once after a warm-up, as JSON (what --baseline runs)')
     args = parse_checked(parser, argv)
     reference, deformable = fingers
     checked_config(parser, deformable, args.set)
-    overrides = {reference: (), deformable: tuple(args.set)}
+    checked_config(parser, reference, args.reference_set, '--reference-set')
+    overrides = {reference: tuple(args.reference_set), deformable: tuple(args.set)}
     if args.plain:
         _runs(fingers, args.force, overrides)  # untimed: numba's caches loaded
         print(json.dumps(_runs(fingers, args.force, overrides)))
@@ -166,7 +174,7 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
     if args.baseline is not None:
         script = Path(sys.modules['__main__'].__file__).resolve()
         tables = _baseline_rows(script, args.baseline, fingers, args.force, args.set,
-                                args.repeat)
+                                args.reference_set, args.repeat)
         print(f'load average {os.getloadavg()[0]:.2f} at the end; CPU time '
               f'(time.process_time), best of {args.repeat} runs each, alternated: this tree '
               f'and baseline ({args.baseline.resolve()})')
@@ -175,7 +183,8 @@ def compare(fingers: tuple[str, str], description: str, argv=None) -> int:
             _print_rows(rows, fingers)
         return 0
     print(f'load average {os.getloadavg()[0]:.2f}; CPU time (time.process_time), best of '
-          f'{args.repeat}' + ''.join(f'; {deformable}: {item}' for item in args.set))
+          f'{args.repeat}' + ''.join(f'; {deformable}: {item}' for item in args.set)
+          + ''.join(f'; {reference}: {item}' for item in args.reference_set))
     _runs(fingers, args.force, overrides)  # untimed: numba's caches loaded
     runs = [_runs(fingers, args.force, overrides) for _ in range(args.repeat)]
     _print_rows({key: min((run[key] for run in runs), key=lambda r: r['cpu'])
