@@ -247,7 +247,7 @@ def _lift_iterations(carried: bool, monkeypatch) -> tuple:
     from the fruit's velocities alone."""
     if not carried:
         monkeypatch.setattr(SimulationFacade, '_predicted_velocities',
-                            lambda self, grip_new: self.v)
+                            lambda self, grip_new: None)
     sim = Simulation(load_config(overrides=['contact.model=ipc']))
     lift = []
     run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.01, hold_time=0.0),

@@ -1271,11 +1271,12 @@ def _no_triplets():
 
 
 def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces: list,
-           new_faces: list, dt: float,
-           resolution: float) -> tuple[np.ndarray, np.ndarray | None]:
+           new_faces: list, dt: float, resolution: float,
+           carried: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Set up the barrier's step; its starts (n, d) m: x_n pushed ahead of moving faces
     (``pushed_starts``), and in 2D the predictor x_n + dt v_n pushed ahead of them too
-    (``v_n`` (n, d) m/s: the velocities it predicts with, ``barrier_step``'s),
+    (``v_n`` (n, d) m/s: the velocities it predicts with, ``barrier_step``'s; in 3D
+    only where the jaws hold the fruit, ``carried``, and then alone where it is reached),
     those the way to which crosses nothing: (the start, the other start or None; the
     solve takes the one of lower incremental potential, ``newton.lower_start``). Two
     starts no coordinate of which differs by ``resolution`` m (the Newton tolerance's
@@ -1293,9 +1294,12 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces:
     else:
         barrier.begin_step(x_n, old_faces, new_faces, dt)
         plain, predicted = barrier.pushed_starts(
-            x_n, old_faces, new_faces, x_n + dt * v_n if barrier.dimension == 2 else None)
+            x_n, old_faces, new_faces,
+            x_n + dt * v_n if barrier.dimension == 2 or carried else None)
         starts = [start for start in (predicted, plain)
                   if start is not None and barrier.reachable(start)]
+        if barrier.dimension == 3 and carried:
+            starts = starts[:1]  # the carried predictor alone where it is reached
         difference = np.abs(starts[0] - starts[1]).max() if len(starts) == 2 else 0.0
     if not starts:
         carried = barrier.carried_by_faces(x_n, old_faces, new_faces)
@@ -1312,16 +1316,17 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
                  v_predicted: np.ndarray | None = None) -> StepOutcome:
     """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) with the barrier model: one
     Newton solve of the incremental potential with the barrier among its energies (the
-    solver holds ``barrier``), no contact passes. The predicted start (2D, ``_begin``)
-    is x_n + dt ``v_predicted`` (n, d) m/s (default v_n); it sets only where Newton
-    starts.
+    solver holds ``barrier``), no contact passes. The predicted start (``_begin``) is
+    x_n + dt ``v_predicted`` (n, d) m/s, given where the jaws hold the fruit (in 2D,
+    else x_n + dt v_n; in 3D, else none); it sets only where Newton starts.
 
     Raises:
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
     n, d = x_n.shape
     start, alternative = _begin(barrier, x_n, v_n if v_predicted is None else v_predicted,
-                                old_faces, new_faces, dt, solver.tolerance * dt)
+                                old_faces, new_faces, dt, solver.tolerance * dt,
+                                v_predicted is not None)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), _free(n, d),
                             alternative)
     v, forces, contacts = barrier.step_outputs(solution.q, x_n, dt, new_faces,

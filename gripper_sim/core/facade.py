@@ -1004,21 +1004,23 @@ class SimulationFacade:
                          self._closing_forces(outcome.forces, outcome.contacts.obstacle), dt)
         return outcome.iterations
 
-    def _predicted_velocities(self, grip_new: GripperState) -> np.ndarray:
-        """(n, d) m/s, the velocities of a barrier step's predicted start (``barrier_step``):
-        the fruit's, and where both jaws held it in the last step, each plus the change of
-        the gripper's own velocity (transport and lift, not the jaws' closing) in the step
-        to ``grip_new``: a held fruit is carried. From the velocities alone, a lift's or a
+    def _predicted_velocities(self, grip_new: GripperState) -> np.ndarray | None:
+        """(n, d) m/s, where both jaws held the fruit in the last step and the gripper
+        moves (lifts or transports) in the step to ``grip_new``, the velocities of a
+        barrier step's predicted start (``barrier_step``): the fruit's, each plus the
+        change of the gripper's own velocity (not the jaws' closing): a held fruit is
+        carried. None elsewhere. From its velocities alone (2D), a lift's or a
         transport's start and stop left every node of a held fruit 5 times the friction
         smoothing speed behind its jaws, and Newton crossed the friction law's kink: 6 to
-        8 iterations a step instead of 3 (``docs/performance.md``)."""
+        10 iterations a step instead of 3; from x_n (3D), 9 a step while lifting
+        (``docs/performance.md``)."""
         left, right = self._jaw_force
         grip = self._grip
-        change = self._in_plane(grip_new.x_rate - grip.x_rate,
-                                grip_new.lift_rate - grip.lift_rate)
-        if left <= 0.0 or right <= 0.0 or not change.any():
-            return self.v
-        return self.v + change
+        if (left <= 0.0 or right <= 0.0
+                or not (grip.x_rate or grip.lift_rate or grip_new.x_rate or grip_new.lift_rate)):
+            return None
+        return self.v + self._in_plane(grip_new.x_rate - grip.x_rate,
+                                       grip_new.lift_rate - grip.lift_rate)
 
     def _substep_soft(self, dt: float, grip_new: GripperState, new_faces: list) -> int:
         """One step of the fruit and the deformable fingers (``barrier.soft_body_step``),
