@@ -1272,11 +1272,11 @@ def _no_triplets():
 
 def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces: list,
            new_faces: list, dt: float, resolution: float,
-           carried: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+           held: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Set up the barrier's step; its starts (n, d) m: x_n pushed ahead of moving faces
-    (``pushed_starts``), and in 2D the predictor x_n + dt v_n pushed ahead of them too
-    (``v_n`` (n, d) m/s: the velocities it predicts with, ``barrier_step``'s; in 3D
-    only where the jaws hold the fruit, ``carried``, and then alone where it is reached),
+    (``pushed_starts``), and the predictor x_n + dt v_n pushed ahead of them too (``v_n``
+    (n, d) m/s: the velocities it predicts with, ``barrier_step``'s): in 2D always, in 3D
+    only where the jaws carry the fruit (``held``), and then alone where it is reached;
     those the way to which crosses nothing: (the start, the other start or None; the
     solve takes the one of lower incremental potential, ``newton.lower_start``). Two
     starts no coordinate of which differs by ``resolution`` m (the Newton tolerance's
@@ -1295,11 +1295,12 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces:
         barrier.begin_step(x_n, old_faces, new_faces, dt)
         plain, predicted = barrier.pushed_starts(
             x_n, old_faces, new_faces,
-            x_n + dt * v_n if barrier.dimension == 2 or carried else None)
-        starts = [start for start in (predicted, plain)
-                  if start is not None and barrier.reachable(start)]
-        if barrier.dimension == 3 and carried:
-            starts = starts[:1]  # the carried predictor alone where it is reached
+            x_n + dt * v_n if barrier.dimension == 2 or held else None)
+        candidates = [start for start in (predicted, plain) if start is not None]
+        if barrier.dimension == 3:  # one start, the first reached (its CCD is ipctk's)
+            starts = next(([start] for start in candidates if barrier.reachable(start)), [])
+        else:
+            starts = [start for start in candidates if barrier.reachable(start)]
         difference = np.abs(starts[0] - starts[1]).max() if len(starts) == 2 else 0.0
     if not starts:
         carried = barrier.carried_by_faces(x_n, old_faces, new_faces)
