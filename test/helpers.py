@@ -95,6 +95,24 @@ def pick(ratio, mu=0.5, lift=0.02, hold=1.0, overrides=()):
     return sim, run_grasp(sim, sequence)
 
 
+def lift_newton_iterations(config, carried: bool, monkeypatch):
+    """(Newton iterations of the lift, the simulation after it) of the fruit of
+    ``config`` gripped at 4 N and lifted 1 cm, its barrier steps predicted carried with
+    the gripper where the jaws hold it (``carried``: the build's) or not
+    (``SimulationFacade._predicted_velocities`` patched to None)."""
+    from gripper_sim.core.facade import SimulationFacade
+    if not carried:
+        monkeypatch.setattr(SimulationFacade, '_predicted_velocities',
+                            lambda self, grip_new: None)
+    sim = make_simulation(config)
+    lift = []
+    run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.01, hold_time=0.0),
+              on_step=lambda result, phase: lift.append(result.newton_iterations)
+              if phase == 'lifting' else None)
+    monkeypatch.undo()
+    return sum(lift), sim
+
+
 def hold_minimum(config) -> float:
     """N, the grip force m g / (2 mu_s) at which jaw friction just carries the fruit."""
     sim = make_simulation(config)

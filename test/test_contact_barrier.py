@@ -14,14 +14,13 @@ import numba
 import numpy as np
 import pytest
 
-from helpers import kernel_evaluation, pick, quasi_static_sim
+from helpers import kernel_evaluation, lift_newton_iterations, pick, quasi_static_sim
 
 from gripper_sim.configuration import load_config
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core.barrier import BarrierContact, BarrierSettings
 from gripper_sim.core.barrier_kernels import balance_forces
 from gripper_sim.core.contact import STICK
-from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core.measures import face_contact_length, faces_contact_length
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.obstacles import Plate
@@ -242,20 +241,11 @@ def test_a_squeeze_starts_its_barrier_steps_from_the_predictor(monkeypatch):
 
 def _lift_iterations(carried: bool, monkeypatch) -> tuple:
     """(Newton iterations of the lift, grip force N, slip distance m, fruit height m at the
-    end) of the default apple gripped at 4 N by flat fingers with the barrier and lifted
-    1 cm, its predicted starts carried with the gripper (``carried``: the build's) or
-    from the fruit's velocities alone."""
-    if not carried:
-        monkeypatch.setattr(SimulationFacade, '_predicted_velocities',
-                            lambda self, grip_new: None)
-    sim = Simulation(load_config(overrides=['contact.model=ipc']))
-    lift = []
-    run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.01, hold_time=0.0),
-              on_step=lambda result, phase: lift.append(result.newton_iterations)
-              if phase == 'lifting' else None)
-    monkeypatch.undo()
+    end) of the default apple on flat fingers with the barrier (``lift_newton_iterations``)."""
+    iterations, sim = lift_newton_iterations(load_config(overrides=['contact.model=ipc']),
+                                             carried, monkeypatch)
     last = sim.last
-    return sum(lift), last.grip_force, last.slip_distance, last.centroid[-1]
+    return iterations, last.grip_force, last.slip_distance, last.centroid[-1]
 
 
 def test_a_held_fruits_predicted_start_moves_with_the_gripper(monkeypatch):

@@ -11,8 +11,9 @@ import ipctk
 import numpy as np
 import pytest
 
+from helpers import lift_newton_iterations
+
 from gripper_sim.configuration import load_config
-from gripper_sim.core.facade import SimulationFacade
 from gripper_sim.core3d.simulation import Simulation3D
 from gripper_sim.errors import ConfigError
 from gripper_sim.workflows.factory import make_simulation
@@ -132,19 +133,11 @@ def test_friction_hold_and_slip_agree_between_the_contact_models(ratio, outcome)
 
 def _lift_iterations_3d(carried: bool, monkeypatch) -> tuple:
     """(Newton iterations of the lift, grip force N, the fruit's rise m) of the default 3D
-    apple gripped at 4 N with the barrier and lifted 1 cm, its steps started from the
-    predictor carried with the gripper (``carried``: the build's) or from x_n."""
-    if not carried:
-        monkeypatch.setattr(SimulationFacade, '_predicted_velocities',
-                            lambda self, grip_new: None)
-    sim = Simulation3D(load_config(overrides=['dimension=3', 'contact.model=ipc']))
-    lift = []
-    run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.01, hold_time=0.0),
-              on_step=lambda result, phase: lift.append(result.newton_iterations)
-              if phase == 'lifting' else None)
-    monkeypatch.undo()
-    last = sim.last
-    return sum(lift), last.grip_force, last.centroid[2] - sim.initial_positions[:, 2].mean()
+    apple with the barrier (``lift_newton_iterations``)."""
+    iterations, sim = lift_newton_iterations(
+        load_config(overrides=['dimension=3', 'contact.model=ipc']), carried, monkeypatch)
+    return (iterations, sim.last.grip_force,
+            sim.last.centroid[2] - sim.initial_positions[:, 2].mean())
 
 
 @pytest.mark.slow

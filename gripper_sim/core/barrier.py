@@ -1272,11 +1272,12 @@ def _no_triplets():
 
 def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces: list,
            new_faces: list, dt: float, resolution: float,
-           held: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+           v_predicted: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Set up the barrier's step; its starts (n, d) m: x_n pushed ahead of moving faces
-    (``pushed_starts``), and the predictor x_n + dt v_n pushed ahead of them too (``v_n``
-    (n, d) m/s: the velocities it predicts with, ``barrier_step``'s): in 2D always, in 3D
-    only where the jaws carry the fruit (``held``), and then alone where it is reached;
+    (``pushed_starts``), and the predictor x_n + dt v pushed ahead of them too (v:
+    ``v_predicted`` (n, d) m/s where given, ``barrier_step``'s, else v_n): in 2D always,
+    in 3D only with ``v_predicted`` (the jaws carry the fruit), and then alone where it
+    is reached;
     those the way to which crosses nothing: (the start, the other start or None; the
     solve takes the one of lower incremental potential, ``newton.lower_start``). Two
     starts no coordinate of which differs by ``resolution`` m (the Newton tolerance's
@@ -1289,13 +1290,14 @@ def _begin(barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarray, old_faces:
     load: 250 iterations, 362 from x_n, 300 from the predictor). In 3D the check of a
     second start (ipctk's CCD) and the two potentials cost more than the iterations they
     save (the Hertz sphere: 35 against 38 iterations, 0.75 against 0.67 s)."""
+    v = v_n if v_predicted is None else v_predicted
     if barrier.dimension == 2 and not barrier.self_contact:
-        starts, difference = barrier.begin_with_starts(x_n, v_n, old_faces, new_faces, dt)
+        starts, difference = barrier.begin_with_starts(x_n, v, old_faces, new_faces, dt)
     else:
         barrier.begin_step(x_n, old_faces, new_faces, dt)
         plain, predicted = barrier.pushed_starts(
             x_n, old_faces, new_faces,
-            x_n + dt * v_n if barrier.dimension == 2 or held else None)
+            x_n + dt * v if barrier.dimension == 2 or v_predicted is not None else None)
         candidates = [start for start in (predicted, plain) if start is not None]
         if barrier.dimension == 3:  # one start, the first reached (its CCD is ipctk's)
             starts = next(([start] for start in candidates if barrier.reachable(start)), [])
@@ -1325,9 +1327,8 @@ def barrier_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.ndarr
         NewtonFailure: no feasible start or no convergence (the caller halves the step).
     """
     n, d = x_n.shape
-    start, alternative = _begin(barrier, x_n, v_n if v_predicted is None else v_predicted,
-                                old_faces, new_faces, dt, solver.tolerance * dt,
-                                v_predicted is not None)
+    start, alternative = _begin(barrier, x_n, v_n, old_faces, new_faces, dt,
+                                solver.tolerance * dt, v_predicted)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), _free(n, d),
                             alternative)
     v, forces, contacts = barrier.step_outputs(solution.q, x_n, dt, new_faces,
