@@ -240,3 +240,32 @@ def test_new_domain_ids_are_distinct_and_unused(new_domain_id):
     ids = [new_domain_id() for _ in range(3)]
     assert len(set(ids + [int(os.environ['ROS_DOMAIN_ID'])])) == 4
     assert all(1 <= i <= 101 and not domain_in_use(i) for i in ids)
+
+
+def _free_domain_id_in_new_process(first: int, hold: bool) -> subprocess.Popen:
+    """A process that prints ``free_domain_id`` searched from domain ``first`` and, with
+    ``hold``, keeps running until its standard input closes."""
+    code = ('import sys; from gripper_sim.ros.process import free_domain_id; '
+            'print(free_domain_id(int(sys.argv[1])), flush=True)'
+            + ('; sys.stdin.read()' if hold else ''))
+    return subprocess.Popen([sys.executable, '-c', code, str(first - 1)], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
+
+
+def test_a_domain_another_run_picked_is_not_picked_again():
+    """Two runs of ours at once (a test session beside the demo or another session) must
+    not share a domain: between a pick and its node's first port the domain looks free."""
+    holder = _free_domain_id_in_new_process(os.getpid() % 101 + 1, hold=True)
+    try:
+        taken = int(holder.stdout.readline())
+        assert not domain_in_use(taken)  # no node holds it: only the claim keeps it
+        second = _free_domain_id_in_new_process(taken, hold=False)
+        picked, _ = second.communicate(timeout=60)
+        assert second.returncode == 0 and int(picked) != taken
+    finally:
+        holder.stdin.close()
+        holder.wait(timeout=30)
+    assert holder.returncode == 0
+    again = _free_domain_id_in_new_process(taken, hold=False)
+    assert int(again.communicate(timeout=60)[0]) == taken  # the claim ends with its process

@@ -7,6 +7,7 @@ No rclpy import here.
 """
 from __future__ import annotations
 
+import fcntl
 import os
 import signal
 import socket
@@ -48,6 +49,8 @@ def fastdds_profile() -> str:
 
 DOMAIN_IDS = range(1, 102)
 _handed_out: set[int] = set()
+#: the lock files this process holds, one per domain it handed out (``_claim``)
+_claims: dict[int, int] = {}
 
 
 def domain_in_use(domain_id: int, participants: int = 4) -> bool:
@@ -65,12 +68,38 @@ def domain_in_use(domain_id: int, participants: int = 4) -> bool:
     return False
 
 
+def _claims_folder() -> Path:
+    folder = Path(tempfile.gettempdir()) / f'gripper_sim_domains_{os.getuid()}'
+    folder.mkdir(mode=0o700, exist_ok=True)
+    return folder
+
+
+def _claim(domain_id: int) -> bool:
+    """Take ``domain_id`` for this process until it exits: an exclusive lock on its file
+    in ``_claims_folder``, which another process of ours handing out domains (a test
+    session, the demo, the benchmark) then skips. Between its pick and its node's first
+    port a domain shows no use, so two concurrent runs could otherwise pick the same
+    one. False if another process holds it."""
+    if domain_id in _claims:
+        return True
+    handle = os.open(_claims_folder() / f'{domain_id}.lock', os.O_RDWR | os.O_CREAT, 0o600)
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(handle)
+        return False
+    _claims[domain_id] = handle
+    return True
+
+
 def free_domain_id(start: int) -> int:
-    """A domain id in 1..101 that no process on this machine uses and that this process
-    has not handed out before, searched from ``start`` (modulo 101)."""
+    """A domain id in 1..101 that no process on this machine uses, that no other process
+    of ours has claimed (``_claim``) and that this process has not handed out before,
+    searched from ``start`` (modulo 101)."""
     for offset in range(len(DOMAIN_IDS)):
         candidate = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
-        if candidate not in _handed_out and not domain_in_use(candidate):
+        if (candidate not in _handed_out and not domain_in_use(candidate)
+                and _claim(candidate)):
             break
     else:
         candidate = DOMAIN_IDS[start % len(DOMAIN_IDS)]
