@@ -15,7 +15,9 @@ ROS node and the recorders step: every step's result is built), and ``unwatched`
 ``run_grasp`` without a callback (as ``pick``, ``window`` and studies run it: the flat
 finger's steps at which the grasp decides nothing run many at a time in one compiled
 call, ``Simulation.advance``; a deformable finger has no such route and steps one at a
-time either way). The ratios are printed for both routes.
+time either way). The ratios are printed for both routes, and the two grasps' sizes'
+(unknowns times Newton iterations, the deformable finger's over the flat finger's): the
+CPU ratio at which both cost the same per unknown and iteration.
 The flat finger takes its usual route (the modified mass method, the compiled whole
 step); the solid pad two meshed blocks in the state and the barrier contact on the
 Newton solver (its compiled energies on a fixed pattern).
@@ -83,7 +85,8 @@ def grasp(finger: str, force: float, overrides: tuple = (), watched: bool = True
     """One grasp-and-lift, the jaws starting 1 mm wider than where the fingers touch the
     apple, the configuration keys ``overrides`` ('KEY=VALUE') set, ``watched`` by a
     per-step callback or not; its CPU time (s), of it inside the compiled barrier Newton
-    solves (s, ``solve_timer``), and counts (Newton iterations only when watched: -1)."""
+    solves (s, ``solve_timer``), and counts (Newton iterations only when watched: -1;
+    ``unknowns`` the Newton solver's, the fruit's and any deformable finger's dofs)."""
     with solves_timed() as inside:
         start = time.process_time()
         config = load_config(overrides=[f'gripper.finger.type={finger}', *overrides])
@@ -98,6 +101,7 @@ def grasp(finger: str, force: float, overrides: tuple = (), watched: bool = True
     return dict(cpu=cpu, solve_cpu=inside[0], outcome=summary['outcome'],
                 steps=int(sim.last.step), solves=int(sim.gap_solves),
                 newton=int(sum(iterations)) if watched else -1,
+                unknowns=int(sim.solver.m.size),
                 force=float(sim.last.grip_force),
                 contact=float(sim.last.deformation.contact_length),
                 pressure=float(sim.last.damage.peak_pressure))
@@ -141,6 +145,12 @@ def _print_rows(rows: dict, fingers: tuple) -> None:
         print(f"{route}: {other} / {reference}: {ratio:.1f}x" + (
             f"; {other}'s compiled solves alone / {reference}: {solves_alone:.1f}x"
             if solves_alone else ''))
+    mine, theirs = rows[other], rows[reference]
+    if 'unknowns' in mine and 'unknowns' in theirs and min(mine['newton'], theirs['newton']) > 0:
+        work = mine['unknowns'] * mine['newton'] / (theirs['unknowns'] * theirs['newton'])
+        print(f"size: {other} {mine['unknowns']} unknowns x {mine['newton']} Newton "
+              f"iterations / {reference} {theirs['unknowns']} x {theirs['newton']}: "
+              f'{work:.1f}x (the CPU ratio at equal cost per unknown and iteration)')
 
 
 def _runs(fingers: tuple, force: float, overrides: dict) -> dict:

@@ -47,8 +47,26 @@ def test_a_setting_reaches_the_fin_ray_grasp_only(monkeypatch, capsys):
     lengths = {(config['gripper.finger.type'], config[ELEMENT]) for config in built}
     assert lengths == {('flat', None), ('fin_ray', 0.006)}   # the flat finger's is the default
     assert rows['fin_ray']['outcome'] == rows['flat']['outcome'] == 'held'
+    assert rows['flat']['unknowns'] == 2 * 64  # the apple's outline nodes in the plane
+    assert rows['fin_ray']['unknowns'] > rows['flat']['unknowns']
     # the contact on the apple is its outline nodes' (3.9 mm apart), not the finger's
     assert rows['fin_ray']['contact'] == pytest.approx(0.0187, abs=2e-4)
+
+
+def test_the_table_gives_the_size_ratio_of_the_two_grasps(capsys):
+    """Unknowns times Newton iterations, the deformable finger's over the rigid one's:
+    the CPU ratio at which both would cost the same per unknown and iteration."""
+    def row(cpu, newton, unknowns):
+        return dict(cpu=cpu, solve_cpu=0.0, outcome='held', steps=10, solves=10,
+                    newton=newton, unknowns=unknowns, force=4.0, contact=0.01,
+                    pressure=1e5)
+    rows = {'flat': row(0.1, 300, 100), 'flat unwatched': row(0.05, -1, 100),
+            'fin_ray': row(0.4, 400, 300), 'fin_ray unwatched': row(0.4, -1, 300)}
+    bench_soft_fingers._print_rows(rows, ('flat', 'fin_ray'))
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[-3:-1] == ['watched: fin_ray / flat: 4.0x', 'unwatched: fin_ray / flat: 8.0x']
+    assert lines[-1].startswith('size: fin_ray 300 unknowns x 400 Newton iterations / flat '
+                                '100 x 300: 4.0x')
 
 
 def test_a_bad_force_is_a_usage_error(capsys):
