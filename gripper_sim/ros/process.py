@@ -79,9 +79,8 @@ def _claim(domain_id: int) -> bool:
     in ``_claims_folder``, which another process of ours handing out domains (a test
     session, the demo, the benchmark) then skips. Between its pick and its node's first
     port a domain shows no use, so two concurrent runs could otherwise pick the same
-    one. False if another process holds it."""
-    if domain_id in _claims:
-        return True
+    one. False if another process holds it (``free_domain_id`` never asks twice: a
+    claimed domain is handed out)."""
     handle = os.open(_claims_folder() / f'{domain_id}.lock', os.O_RDWR | os.O_CREAT, 0o600)
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
