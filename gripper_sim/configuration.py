@@ -179,8 +179,8 @@ SCHEMA: dict[str, Key] = {
     'fruit.initial_velocity.z': Key(0.0, 'm/s', 'initial velocity of every node, z',
                                     low=-100.0, high=100.0),
     'fruit.initial_height': Key(None, 'm', 'height of the fruit centre; null = resting '
-                                'on the table (2D: settled under its weight before t = 0; or '
-                                '0 without a table)', low=-10.0, high=10.0, nullable=True),
+                                'on the table (settled under its weight before t = 0; or 0 '
+                                'without a table)', low=-10.0, high=10.0, nullable=True),
     # --- gripper
     'gripper.initial_gap': Key(None, 'm', 'jaw gap at start (deformable fingers: between '
                                'their backings); not less than the gap at which the fingers '

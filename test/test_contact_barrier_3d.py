@@ -227,7 +227,7 @@ def test_ipc_force_drive_holds_its_command_on_the_3d_solid_apple(force):
     40 N: each step passed the goal by more than it aimed to change, and the grip force
     alternated between 0.5 and 69 N for as long as it was held. The guess is now Hertz's
     at the commanded force, and a step that overshoots raises it
-    (``jaw_drive.overshoot_stiffness``). At 120 N the first overshoot (129 N) is taken
+    (``jaw_drive.adapted_stiffness``). At 120 N the first overshoot (129 N) is taken
     back by a step opening the jaws on the squeezed fruit, which converges now that the
     nodes touching them start where they take them (``barrier_kernels.push_ahead``)."""
     sim = Simulation3D(load_config(overrides=['dimension=3', 'fruit.model=solid',

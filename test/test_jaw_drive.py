@@ -128,24 +128,43 @@ def test_a_bad_max_effort_is_refused(effort):
 
 
 def test_a_step_that_passes_its_goal_by_more_than_half_its_aim_raises_the_stiffness():
-    """``overshoot_stiffness`` (the barrier model's steps, solved once at the predicted
+    """``adapted_stiffness`` (the barrier model's steps, solved once at the predicted
     gap): from 2 N aiming at 40 N a step that ends at 66 N, 3.7 mm narrower, passed the
     goal by 26 N, more than half the 38 N it aimed at: the stiffness becomes the F^(2/3)
-    secant at 40 N. A step that lands within that, or whose force moved the way it should
-    without passing the goal, or with a jaw off the fruit, keeps it; it is never
-    lowered."""
-    from gripper_sim.core.jaw_drive import contact_measure, overshoot_stiffness
-    raised = overshoot_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0594, 66.0)
+    secant at 40 N (never lower than it was). A step that lands within half its aim of
+    the goal, or with a jaw off the fruit, or aiming at less than the drive's tolerance,
+    keeps it."""
+    from gripper_sim.core.jaw_drive import adapted_stiffness, contact_measure
+    raised = adapted_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0594, 66.0)
     slope = (contact_measure(66.0) - contact_measure(2.0)) / (0.0631 - 0.0594)
     assert raised == pytest.approx(1.5 * 40.0 ** (1.0 / 3.0) * slope)
     assert raised > 3 * 6350.0
-    assert overshoot_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0594, 55.0) == 6350.0
-    assert overshoot_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0600, 39.0) == 6350.0
-    assert overshoot_stiffness(6350.0, 40.0, 0.0631, 0.0, 0.0594, 66.0) == 6350.0
-    assert overshoot_stiffness(6350.0, 40.0, 0.0594, 66.0, 0.0631, 0.0) == 6350.0
-    # noise around the goal is not an overshoot (FORCE_TOLERANCE)
-    assert overshoot_stiffness(6350.0, 40.0, 0.06057, 39.99, 0.06057, 40.01) == 6350.0
-    assert overshoot_stiffness(9e4, 40.0, 0.0631, 2.0, 0.0594, 66.0) == 9e4
+    assert adapted_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0594, 55.0) == 6350.0
+    assert adapted_stiffness(6350.0, 40.0, 0.0631, 2.0, 0.0600, 39.0) == 6350.0
+    assert adapted_stiffness(6350.0, 40.0, 0.0631, 0.0, 0.0594, 66.0) == 6350.0
+    assert adapted_stiffness(6350.0, 40.0, 0.0594, 66.0, 0.0631, 0.0) == 6350.0
+    # noise around the goal teaches nothing (FORCE_TOLERANCE)
+    assert adapted_stiffness(6350.0, 40.0, 0.06057, 39.99, 0.06056, 40.3) == 6350.0
+    assert adapted_stiffness(9e4, 40.0, 0.0631, 2.0, 0.0594, 66.0) == 9e4
+
+
+def test_a_step_whose_force_barely_moves_with_its_gap_lowers_the_stiffness():
+    """A step from 38 N aiming at 40 N that closed the gap by 10 um and ended at 38.05 N
+    (or lower, or from 42 N at 41.95 N) has a secant of F^(2/3) at 40 N of about 5e3
+    N/m, less than ``STIFF_SHARE`` of 9e4: the stiffness falls by
+    ``UNDERSHOOT_FACTOR``, never below ``LOWEST_STIFFNESS``. Ending at 38.3 N (3e4 N/m,
+    a third of it: a fruit still settling into the jaws answers so) keeps it, as does a
+    step whose gap moved less (1 um)."""
+    from gripper_sim.core.jaw_drive import (LOWEST_STIFFNESS, STIFF_SHARE,
+                                            UNDERSHOOT_FACTOR, adapted_stiffness)
+    lowered = UNDERSHOOT_FACTOR * 9e4
+    assert 0.0 < UNDERSHOOT_FACTOR < 1.0 and STIFF_SHARE < 0.5
+    assert adapted_stiffness(9e4, 40.0, 0.0600, 38.0, 0.05999, 38.05) == lowered
+    assert adapted_stiffness(9e4, 40.0, 0.0600, 38.0, 0.05999, 37.0) == lowered
+    assert adapted_stiffness(9e4, 40.0, 0.0600, 42.0, 0.06001, 41.95) == lowered
+    assert adapted_stiffness(9e4, 40.0, 0.0600, 38.0, 0.05999, 38.3) == 9e4
+    assert adapted_stiffness(9e4, 40.0, 0.0600, 38.0, 0.059999, 38.05) == 9e4
+    assert adapted_stiffness(1.2, 40.0, 0.0600, 38.0, 0.05, 38.0001) == LOWEST_STIFFNESS
 
 
 def test_the_first_stiffness_guess_of_a_solid_3d_fruit_is_hertz_at_the_command():

@@ -220,11 +220,21 @@ def _rebound_speed(faces, f, x_n, v_n, x, i, dt, v_min):
     return e * approach if approach > v_min else 0.0
 
 
+#: m, how deep inside a face a node released earlier in the step (or in this same
+#: ``update``, where it still lies on the face that held it) must be to be held again:
+#: at the face it lies within round-off of it, on either side, and the routes of a step
+#: (the compiled whole step, the generic one) must not tell those apart
+RELEASED_DEPTH = 1e-9
+
+
 @njit(cache=True, error_model='numpy', inline='always')
 def update(state, faces, x, x_n, v_n, reaction, surface, dt, threshold, v_min,
            deepest_first, released, slipped):
     """Correct the contact set after a solve: pulling nodes are released (not IMPACT
-    ones), stuck nodes whose tangential reaction leaves the Coulomb cone slip, slipping
+    ones, and once per step: a node released in an earlier pass and found inside a face
+    again is held again and stays held to the step's end, its pull read as no normal
+    force, so that the passes cannot cycle and none ends with it inside), stuck nodes
+    whose tangential reaction leaves the Coulomb cone slip, slipping
     nodes that stopped stick (unless they slipped in this step), pulling corner holds
     end, held nodes pushed into a second face get it as a frictionless corner hold, free
     surface nodes inside a face are held by the deepest one (IMPACT if they arrive fast
@@ -261,10 +271,12 @@ def update(state, faces, x, x_n, v_n, reaction, surface, dt, threshold, v_min,
                 r_n += reaction[i, c] * normal[f, c]
             md = mode[i]
             if r_n < -threshold and md != IMPACT:
-                release(state, i)
-                released[i] = True
-                changed = True
-                continue
+                if not released[i]:
+                    release(state, i)
+                    released[i] = True
+                    changed = True
+                    continue
+                r_n = 0.0   # held again after its release: held to the step's end, no friction
             if md == STICK:
                 r_t = 0.0
                 for a in range(d - 1):
@@ -319,10 +331,10 @@ def update(state, faces, x, x_n, v_n, reaction, surface, dt, threshold, v_min,
     for sweep in range(sweeps):
         for s in range(surface.shape[0]):
             i = surface[s]
-            if obstacle[i] >= 0 or released[i]:
+            if obstacle[i] >= 0:
                 continue
             chosen = np.int64(-1)
-            depth = 0.0
+            depth = RELEASED_DEPTH if released[i] else 0.0
             for f in range(n_faces):
                 gap = _gap(origin_end, normal, f, x, i)
                 if gap < 0 and -gap > depth and _covers(faces, f, x, i):

@@ -73,7 +73,8 @@ FINGERS_MEET = 1e-5
 TOUCHING_TOLERANCE = 1e-9
 
 #: the settle on the table (``_settle``): its first step is the simulation's time step and
-#: each next one this factor longer, up to ``SETTLE_LONGEST_STEP`` s; it ends at the first
+#: each next one this factor longer, up to ``settle_longest_step`` s (the facade's
+#: ``SETTLE_LONGEST_STEP``); it ends at the first
 #: step in which no node of the fruit moves further than ``SETTLE_TOLERANCE`` m, and fails
 #: after ``SETTLE_MAX_STEPS`` steps
 SETTLE_GROWTH = 2.0
@@ -120,6 +121,8 @@ class SimulationFacade:
     #: whether ``_settle`` steps: a subclass's compiled routes stand aside, so that every
     #: route of a configuration starts from the same settled state
     _settling = False
+    #: s, the settle's longest step (``_settle``)
+    settle_longest_step = SETTLE_LONGEST_STEP
     #: ``_joined``'s arrays of the last deformable fingers' solve: per quantity (the
     #: positions, the velocities) (the fruit's rows, the fingers' rows, the whole array)
     _joined_kept: tuple = ()
@@ -175,7 +178,7 @@ class SimulationFacade:
 
         Implicit Euler steps from rest (each starts with every velocity 0; the jaws, open,
         stand still) have the static equilibrium as their fixed point, and longer steps
-        reach it in fewer (``SETTLE_GROWTH``, ``SETTLE_LONGEST_STEP``): 8 steps for the
+        reach it in fewer (``SETTLE_GROWTH``, ``settle_longest_step``): 8 steps for the
         default 2D apple. A step that fails is tried again shorter (not below the time
         step). A round fruit's rest on a flat table is neutral in rolling: a step that
         moves it more than the one before of the same length rolls it, and it stays where
@@ -190,6 +193,7 @@ class SimulationFacade:
             self._settle_steps()
         finally:
             self._settling = False
+            self._hold_rolling(None, 0.0)
         self.initial_positions = self.q.copy()
         self.reset()
 
@@ -198,6 +202,7 @@ class SimulationFacade:
         dt, last_dt, moved = self.dt, math.nan, math.inf
         for _ in range(SETTLE_MAX_STEPS):
             saved = self._saved_state()
+            self._hold_rolling(self.q, dt)
             try:
                 self._advance(dt, 0)
             except ConvergenceError as failure:
@@ -218,12 +223,21 @@ class SimulationFacade:
                 # the step before came nearest to rest
                 self.q = saved[0]
                 break
-            last_dt, dt = dt, min(SETTLE_GROWTH * dt, SETTLE_LONGEST_STEP)
+            last_dt, dt = dt, min(SETTLE_GROWTH * dt, self.settle_longest_step)
         else:
             raise ConfigError(
                 f'the fruit does not come to rest on the table under its weight: it still '
                 f'moved {moved:.3g} m in its {SETTLE_MAX_STEPS}th settling step; set '
                 f"'fruit.initial_height' to start it above the table")
+
+    def _hold_rolling(self, start: np.ndarray | None, dt: float) -> None:
+        """Hold the fruit's rolling in the settling step of ``dt`` s from its positions
+        ``start`` (n, d) m (None: the settle ended). The 2D fruit rolls or tips to its
+        rest (see ``_settle``); ``Simulation3D`` holds it."""
+
+    def _settle_energies(self) -> list:
+        """Energies of the solver that act only while the fruit settles (none here)."""
+        return []
 
     def _make_solver(self) -> PatternCachingSolver:
         """The Newton solver of the fruit's energies, gravity, the pads and the
@@ -235,7 +249,7 @@ class SimulationFacade:
             gravity = Gravity(masses, c['world.gravity'], self.dimension)
             fingers = self._soft.energies
         solver = PatternCachingSolver(
-            masses, list(self.fruit.energies) + [gravity] + fingers
+            masses, list(self.fruit.energies) + [gravity] + fingers + self._settle_energies()
             + ([self._pad] if self._pad is not None else [])
             + ([self._barrier] if self._barrier is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
@@ -596,7 +610,7 @@ class SimulationFacade:
             gap, force = self._grip.gap, self._grip_force()
             self.gap_solves += 1
             iterations = self._substep(dt)
-            return self._kept_stiffness(jaw_drive.overshoot_stiffness(
+            return self._kept_stiffness(jaw_drive.adapted_stiffness(
                 self._grip.stiffness, goal, gap, force, self._grip.gap, self._grip_force()),
                 iterations)
         saved = self._saved_state()

@@ -15,7 +15,7 @@ grasp driven either way moves its jaws by the same arithmetic:
   ``contact_measure``, ``secant_stiffness``, ``chord_stiffness``), ``nearest_solve``
   (whose end contact set a solve starts from), ``halfway`` (after a failed solve) and
   ``settle_on`` (which solve stands when none met the goal), ``clearance`` (how far a
-  jaw that does not touch is from the fruit), ``overshoot_stiffness`` (the barrier
+  jaw that does not touch is from the fruit), ``adapted_stiffness`` (the barrier
   model's steps, which have no search). Both loops that run the search -
   ``core.facade.SimulationFacade._drive_jaws`` and ``core.advance_kernels._drive_jaws`` -
   only solve and call these.
@@ -39,8 +39,16 @@ MAX_GAP_SOLVES = 8
 SEARCH, DONE, SETTLE = 0, 1, 2
 #: a step solved once at its predicted gap (the barrier model's) whose grip force passes
 #: its goal by more than this share of what the step aimed to change raises the drive's
-#: stiffness (``overshoot_stiffness``)
+#: stiffness (``adapted_stiffness``)
 OVERSHOOT_SHARE = 0.5
+#: a step whose grip force changed by less than this share of what the drive's
+#: stiffness predicts for its gap change lowers the stiffness by ``UNDERSHOOT_FACTOR``
+#: (``adapted_stiffness``)
+STIFF_SHARE = 0.1
+UNDERSHOOT_FACTOR = 0.5
+#: N/m, the least stiffness the drive lowers to (a newton over a metre of gap: far below
+#: any fruit's contact; it keeps the predicted gap finite)
+LOWEST_STIFFNESS = 1.0
 
 
 @njit(cache=True)
@@ -206,28 +214,41 @@ def chord_stiffness(gap_a, force_a, gap_b, force_b, goal, otherwise):
 
 
 @njit(cache=True)
-def overshoot_stiffness(stiffness, goal, gap_before, force_before, gap_after, force_after):
+def adapted_stiffness(stiffness, goal, gap_before, force_before, gap_after, force_after):
     """N/m, the drive's stiffness after a step solved once at its predicted gap (the
-    barrier model's: no gap search corrects it within the step, ``predicted_gap``).
+    barrier model's: no gap search corrects it within the step, ``predicted_gap``), from
+    the step's start and end (gap m, grip force N, 0 unless both jaws touched) and its
+    force ``goal`` (N). Only steps that aimed to change the force by more than the
+    drive's ``FORCE_TOLERANCE`` of the goal teach it anything (smaller aims are the size
+    of the fruit's own ringing):
 
-    A prediction at less than half the contact's stiffness passes the goal by more than
-    the step aimed to change and swings wider at every step; a stiffness that is too high
-    only closes the remaining miss over more steps. So the stiffness is raised, never
-    lowered, to the secant of F^(2/3) (``contact_measure``, at the force ``goal`` N)
-    between the step's start and end (gap m, grip force N, 0 unless both jaws touched)
-    where the force passed the goal by more than ``OVERSHOOT_SHARE`` of the aim
-    ``goal - force_before`` and by more than the drive's ``FORCE_TOLERANCE``. A step's
-    force changes with the fruit's own motion as well, so a secant of every step would
-    follow the fruit's ringing instead of the contact.
+    - a step that passed the goal by more than ``OVERSHOOT_SHARE`` of its aim (``goal -
+      force_before``) raises it to the secant of F^(2/3) (``contact_measure``) between the
+      step's start and end: a prediction at less than half the contact's stiffness swings
+      wider at every step;
+    - a step whose secant of F^(2/3) at the goal (``chord_stiffness``'s) is less than
+      ``STIFF_SHARE`` of the stiffness (or negative: the force moved the other way)
+      lowers it by ``UNDERSHOOT_FACTOR``. A stiffness too high only closes a miss over
+      more steps, but one many times too high barely moves the jaws: single steps in
+      which the fruit's own motion, not the gap, changed the force by more than the
+      step aimed at raised the 3D apple's to 2500 times its contact's and left its grip
+      5 % low for seconds. Only a far miss lowers it: closed towards 60 N, the 2D apple
+      answers at a third of its stiffness at 60 N while the jaws still move in, and
+      lowered there its drive passed 63 N.
     """
     aim = goal - force_before
-    over = force_after - goal
-    if (force_before <= 0.0 or force_after <= 0.0 or aim * over <= 0.0
-            or abs(over) <= max(OVERSHOOT_SHARE * abs(aim), FORCE_TOLERANCE * goal)
-            or gap_after == gap_before):
+    if (force_before <= 0.0 or force_after <= 0.0 or gap_after == gap_before
+            or abs(aim) <= FORCE_TOLERANCE * goal):
         return stiffness
-    return max(stiffness, chord_stiffness(gap_before, force_before, gap_after, force_after,
-                                          goal, stiffness))
+    over = force_after - goal
+    if aim * over > 0.0 and abs(over) > OVERSHOOT_SHARE * abs(aim):
+        return max(stiffness, chord_stiffness(gap_before, force_before, gap_after,
+                                              force_after, goal, stiffness))
+    slope = (contact_measure(force_after) - contact_measure(force_before)) / (gap_before
+                                                                             - gap_after)
+    if 1.5 * goal ** (1.0 / 3.0) * slope < STIFF_SHARE * stiffness:
+        return max(UNDERSHOOT_FACTOR * stiffness, LOWEST_STIFFNESS)
+    return stiffness
 
 
 @njit(cache=True)

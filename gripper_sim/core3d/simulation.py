@@ -44,6 +44,7 @@ from gripper_sim.core3d.damage import DamageTracker3D
 from gripper_sim.core3d.fingers_pad import PadLayer3D
 from gripper_sim.core3d.fruit import FruitModel3D, build_fruit3d
 from gripper_sim.core3d.layered_mesher import vertex_edge_lengths
+from gripper_sim.core3d.rolling_hold import RollingHold
 from gripper_sim.core.obstacles import Plate
 from gripper_sim.core3d.soft_barrier import SoftBarrier3D
 from gripper_sim.core3d.soft_fingers3d import (SoftFingers3D, finger_body3d,
@@ -109,6 +110,12 @@ class Simulation3D(SimulationFacade):
     #: resting fruit's whole cap after its first 20 ms step) and releasing the pulling
     #: ones ring by ring took twice the passes and Newton iterations
     deepest_first = 0.7
+    #: the settle's rolling hold (``_settle_energies``)
+    _rolling_hold: RollingHold | None = None
+    #: s, 40 of the default 3D time step, as the 2D settle's 40 ms are of the 2D one: with
+    #: the barrier model the resting patch spreads at the friction's creep speed, and in
+    #: 40 ms steps the coarse apple still sank 0.2 um a step after 60 of them
+    settle_longest_step = 0.8
 
     def __init__(self, config: Mapping[str, Any]):
         self.config = validate(config)
@@ -155,15 +162,30 @@ class Simulation3D(SimulationFacade):
             hertz_modulus=(4.0 / 3.0 * modulus * math.sqrt(radius)
                            if c['fruit.model'] == 'solid' else 0.0))
         self._observers: list[Callable[[StepResult3D], None]] = []
-        # not settled on the table (``_settle``, 2D) yet: from the settled start a node
-        # released as pulling in a step's contact pass ended 10 um inside a closing jaw
-        # (``contact_kernels.update`` holds no released node again within the step;
-        # test_contact_barrier_3d's friction hold); the fruit lands in its first steps
         self.reset()
         if self._soft is None and self._barrier is None:
             load_contact_kernels(self.solver.m, self.fruit.surface, self.q,
                                  self.faces_at(self._grip), self.dt,
                                  ContactSettings.from_config(self.config, self.deepest_first))
+        if self._settles():
+            self._settle()
+
+    def _settle_energies(self) -> list:
+        """The rolling hold of the settle (``core3d.rolling_hold``), made once."""
+        n_dof = 3 * (self.fruit.n_nodes + (self._soft.n_nodes if self._soft else 0))
+        if self._rolling_hold is None or self._rolling_hold.n_dof != n_dof:
+            self._rolling_hold = RollingHold(self.fruit.masses, n_dof)
+        return [self._rolling_hold]
+
+    def _hold_rolling(self, start: np.ndarray | None, dt: float) -> None:
+        """The settle holds a 3D fruit's rolling (``core3d.rolling_hold``): a coarse skin
+        would roll onto a facet, aside of the jaws and turned from them."""
+        if start is None:
+            self._rolling_hold.hold(None)
+            return
+        q_ref = np.zeros(self._rolling_hold.n_dof)
+        q_ref[:start.size] = start.ravel()
+        self._rolling_hold.hold(q_ref, dt)
 
     def _make_damage(self) -> DamageTracker3D:
         return DamageTracker3D(self.fruit, self.config)
