@@ -73,10 +73,9 @@ FINGERS_MEET = 1e-5
 TOUCHING_TOLERANCE = 1e-9
 
 #: the settle on the table (``_settle``): its first step is the simulation's time step and
-#: each next one this factor longer, up to ``settle_longest_step`` s (the facade's
-#: ``SETTLE_LONGEST_STEP``); it ends at the first
-#: step in which no node of the fruit moves further than ``SETTLE_TOLERANCE`` m, and fails
-#: after ``SETTLE_MAX_STEPS`` steps
+#: each next one this factor longer, up to ``settle_longest_step`` s (here
+#: ``SETTLE_LONGEST_STEP``); it ends at the first step in which no node of the fruit moves
+#: further than ``SETTLE_TOLERANCE`` m, and fails after ``SETTLE_MAX_STEPS`` steps
 SETTLE_GROWTH = 2.0
 SETTLE_LONGEST_STEP = 0.04
 SETTLE_TOLERANCE = 1e-7
