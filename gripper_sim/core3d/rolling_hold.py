@@ -1,8 +1,10 @@
 """An energy that holds a 3D fruit's rolling while it settles on the table
 (``SimulationFacade._settle``): a round fruit's rest on a flat table is neutral in
-rolling, and a coarse skin rolls slowly onto a facet as it settles (the default shell
-0.11 mm aside, the 362-node apple with ``contact.model: ipc`` 0.54 mm and still creeping
-after 60 settling steps), which turns a mesh refined where the jaws grip away from them.
+rolling, and a faceted skin rolls slowly onto a facet as it settles (the default shell
+0.11 mm aside, the solid apple 3 mm, the 362-node apple with ``contact.model: ipc`` 0.54
+mm and still creeping after 60 settling steps, so that its settle never ends). Held, the
+settle ends where the fruit was placed; the roll onto the facet happens in the run's
+first second, as it did before the fruit started settled.
 
 E = 1/2 sum_a K_a g_a(q)^2 with g_a = w_a . (q - q_ref), the amplitude of rigid mode a
 of the fruit's move from the step's start q_ref: the shifts along x and y and the small
