@@ -120,6 +120,8 @@ class SimulationFacade:
     #: whether ``_settle`` steps: a subclass's compiled routes stand aside, so that every
     #: route of a configuration starts from the same settled state
     _settling = False
+    #: the solver's energies that act only in the settle (``_settle_energies``)
+    _settle_terms: tuple = ()
     #: s, the settle's longest step (``_settle``)
     settle_longest_step = SETTLE_LONGEST_STEP
     #: ``_joined``'s arrays of the last deformable fingers' solve: per quantity (the
@@ -192,7 +194,8 @@ class SimulationFacade:
             self._settle_steps()
         finally:
             self._settling = False
-            self._hold_rolling(None, 0.0)
+            for energy in self._settle_terms:
+                energy.hold(None)
         self.initial_positions = self.q.copy()
         self.reset()
 
@@ -201,7 +204,8 @@ class SimulationFacade:
         dt, last_dt, moved = self.dt, math.nan, math.inf
         for _ in range(SETTLE_MAX_STEPS):
             saved = self._saved_state()
-            self._hold_rolling(self.q, dt)
+            for energy in self._settle_terms:
+                energy.hold(self.q, dt)
             try:
                 self._advance(dt, 0)
             except ConvergenceError as failure:
@@ -229,13 +233,11 @@ class SimulationFacade:
                 f'moved {moved:.3g} m in its {SETTLE_MAX_STEPS}th settling step; set '
                 f"'fruit.initial_height' to start it above the table")
 
-    def _hold_rolling(self, start: np.ndarray | None, dt: float) -> None:
-        """Hold the fruit's rolling in the settling step of ``dt`` s from its positions
-        ``start`` (n, d) m (None: the settle ended). The 2D fruit rolls or tips to its
-        rest (see ``_settle``); ``Simulation3D`` holds it."""
-
     def _settle_energies(self) -> list:
-        """Energies of the solver that act only while the fruit settles (none here)."""
+        """Energies of the solver that act only while the fruit settles, each with
+        ``hold(start, dt)``: active in the settling step of ``dt`` s from the fruit's
+        positions ``start`` (n, d) m, inactive after ``hold(None)``. None here: the 2D
+        fruit rolls or tips to its rest (see ``_settle``); ``Simulation3D`` holds it."""
         return []
 
     def _make_solver(self) -> PatternCachingSolver:
@@ -247,8 +249,9 @@ class SimulationFacade:
             masses = np.concatenate([masses, self._soft.masses])
             gravity = Gravity(masses, c['world.gravity'], self.dimension)
             fingers = self._soft.energies
+        self._settle_terms = tuple(self._settle_energies())
         solver = PatternCachingSolver(
-            masses, list(self.fruit.energies) + [gravity] + fingers + self._settle_energies()
+            masses, list(self.fruit.energies) + [gravity] + fingers + list(self._settle_terms)
             + ([self._pad] if self._pad is not None else [])
             + ([self._barrier] if self._barrier is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],

@@ -7,13 +7,14 @@ settle ends where the fruit was placed; the roll onto the facet happens in the r
 first second, as it did before the fruit started settled.
 
 E = 1/2 sum_a K_a g_a(q)^2 with g_a = w_a . (q - q_ref), the amplitude of rigid mode a
-of the fruit's move from the step's start q_ref: the shifts along x and y and the small
-rotations about the horizontal axes through its centroid (u_a (n_dof,), w_a = M u_a /
-(u_a^T M u_a), M the lumped masses). K_a = HOLD x (u_a^T M u_a) / dt^2 makes each mode
-HOLD times as stiff as its inertia over the step. The Hessian is the four rank-one terms
-K_a w_a w_a^T, so the step's solve itself keeps the fruit from rolling, its contact with
-the table included (taking the rolling off each step's result instead pushed nodes of
-the contact patch into the table). Inactive (no value, no terms) outside the settle.
+of the fruit's move from the step's start q_ref (its nodes' rows; w_a is 0 elsewhere):
+the shifts along x and y and the small rotations about the horizontal axes through its
+centroid (u_a (n_dof,), w_a = M u_a / (u_a^T M u_a), M the lumped masses). K_a = HOLD x
+(u_a^T M u_a) / dt^2 makes each mode HOLD times as stiff as its inertia over the step.
+The Hessian is the four rank-one terms K_a w_a w_a^T, so the step's solve itself keeps
+the fruit from rolling, its contact with the table included (taking the rolling off each
+step's result instead pushed nodes of the contact patch into the table). Inactive (no
+value, no terms) outside the settle.
 """
 from __future__ import annotations
 
@@ -40,14 +41,14 @@ class RollingHold(KernelEnergy):
         self.n_dof = int(n_dof)
         self._held: tuple | None = None
 
-    def hold(self, q_ref: np.ndarray | None, dt: float = 0.0) -> None:
-        """Hold the rolling of the move from ``q_ref`` (n_dof,) m over a step of ``dt``
-        s; None: inactive."""
-        if q_ref is None:
+    def hold(self, start: np.ndarray | None, dt: float = 0.0) -> None:
+        """Hold the rolling of the fruit's move from its positions ``start`` (n, 3) m
+        over a step of ``dt`` s; None: inactive."""
+        if start is None:
             self._held = None
             return
         m, n = self.masses, self.masses.size
-        x = q_ref[:3 * n].reshape(n, 3)
+        x = np.array(start, dtype=float).reshape(n, 3)
         r = x - (m @ x) / m.sum()
         modes = np.zeros((4, n, 3))
         modes[0, :, 0] = 1.0
@@ -57,7 +58,7 @@ class RollingHold(KernelEnergy):
         modal_masses = np.einsum('anc,n,anc->a', modes, m, modes)
         weights = np.zeros((4, self.n_dof))
         weights[:, :3 * n] = (modes * m[None, :, None]).reshape(4, -1) / modal_masses[:, None]
-        self._held = (np.array(q_ref, dtype=float), weights, HOLD * modal_masses / dt ** 2)
+        self._held = (x.ravel(), weights, HOLD * modal_masses / dt ** 2)
 
     def evaluate_into(self, q: np.ndarray, grad: np.ndarray, data: np.ndarray,
                       scatter, hessian: bool = True):
@@ -65,8 +66,8 @@ class RollingHold(KernelEnergy):
         [(K_a N/m, w_a)] with ``hessian``)."""
         if self._held is None:
             return 0.0, []
-        q_ref, weights, stiffness = self._held
-        amplitudes = weights @ (q - q_ref)
+        x_ref, weights, stiffness = self._held
+        amplitudes = weights[:, :x_ref.size] @ (q[:x_ref.size] - x_ref)
         grad += (stiffness * amplitudes) @ weights
         terms = [(float(k), w) for k, w in zip(stiffness, weights)] if hessian else []
         return 0.5 * float(stiffness @ amplitudes ** 2), terms

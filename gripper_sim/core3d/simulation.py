@@ -110,8 +110,6 @@ class Simulation3D(SimulationFacade):
     #: resting fruit's whole cap after its first 20 ms step) and releasing the pulling
     #: ones ring by ring took twice the passes and Newton iterations
     deepest_first = 0.7
-    #: the settle's rolling hold (``_settle_energies``)
-    _rolling_hold: RollingHold | None = None
     #: s, 40 of the default 3D time step, as the 2D settle's 40 ms are of the 2D one: with
     #: the barrier model the resting patch spreads at the friction's creep speed, and in
     #: 40 ms steps the coarse apple still sank 0.2 um a step after 60 of them
@@ -171,21 +169,10 @@ class Simulation3D(SimulationFacade):
             self._settle()
 
     def _settle_energies(self) -> list:
-        """The rolling hold of the settle (``core3d.rolling_hold``), made once."""
+        """The settle holds a 3D fruit's rolling (``core3d.rolling_hold``): a faceted skin
+        would roll onto a facet, and with ``contact.model: ipc`` creep without end."""
         n_dof = 3 * (self.fruit.n_nodes + (self._soft.n_nodes if self._soft else 0))
-        if self._rolling_hold is None or self._rolling_hold.n_dof != n_dof:
-            self._rolling_hold = RollingHold(self.fruit.masses, n_dof)
-        return [self._rolling_hold]
-
-    def _hold_rolling(self, start: np.ndarray | None, dt: float) -> None:
-        """The settle holds a 3D fruit's rolling (``core3d.rolling_hold``): a coarse skin
-        would roll onto a facet, aside of the jaws and turned from them."""
-        if start is None:
-            self._rolling_hold.hold(None)
-            return
-        q_ref = np.zeros(self._rolling_hold.n_dof)
-        q_ref[:start.size] = start.ravel()
-        self._rolling_hold.hold(q_ref, dt)
+        return [RollingHold(self.fruit.masses, n_dof)]
 
     def _make_damage(self) -> DamageTracker3D:
         return DamageTracker3D(self.fruit, self.config)
