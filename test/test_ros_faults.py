@@ -151,3 +151,42 @@ def test_a_node_that_hears_of_an_earlier_namesake_after_its_start_up_stops(tmp_p
     text = node.log()
     assert node.process.returncode == 2, text
     assert 'cannot start: another node named /gripper_sim' in text and 'Traceback' not in text
+
+
+def test_an_earlier_namesake_is_heard_even_when_a_later_announcement_follows_at_once(
+        new_domain_id):
+    # On a loaded machine a node's executor may take its announcements only after
+    # several have arrived (its own, an earlier namesake's, a third node's): the
+    # earlier one must not be displaced by those that follow it.
+    import time
+
+    import rclpy
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from gripper_sim.ros.namesakes import NamesakeWatch
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=new_domain_id())
+    try:
+        node = rclpy.create_node('gripper_sim', context=context)
+        watch = NamesakeWatch(node, started=time.time(), period=3600.0)
+        others = rclpy.create_node('others', context=context)
+        kept = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        earlier = others.create_publisher(String, '/gripper_sim/_instance', kept)
+        later = others.create_publisher(String, '/gripper_sim/_instance', kept)
+        earlier.publish(String(data=f'{time.time() - 3600.0!r} feedfacefeedface'))
+        later.publish(String(data=f'{time.time() + 3600.0!r} 0123456789abcdef'))
+        deadline = time.monotonic() + 60.0
+        while earlier.get_subscription_count() < 1 or later.get_subscription_count() < 1:
+            assert time.monotonic() < deadline, 'the watch never matched the publishers'
+            time.sleep(0.05)
+        time.sleep(1.0)       # both announcements delivered, none taken yet
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + 10.0
+        while not watch.later.is_set() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        assert watch.later.is_set()
+        assert 'another node named /gripper_sim' in watch.reason
+    finally:
+        rclpy.try_shutdown(context=context)

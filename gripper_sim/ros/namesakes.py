@@ -31,9 +31,13 @@ CHECK_PERIOD = 1.0     # s between checks while running
 POLL = 0.05            # s between looks at start-up
 #: where each simulator says when it started: "<wall clock s> <token>"
 INSTANCE_TOPIC = '~/_instance'
-#: kept for a namesake that joins later
+#: each node's announcement, kept for a namesake that joins later
 INSTANCE_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: what a node hears: its own announcement and its namesakes', which may all arrive before
+#: its executor takes the first (one kept would let a later one displace an earlier one)
+HEARD_QOS = QoSProfile(depth=32, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class NameInUseError(GripperSimError):
@@ -87,7 +91,7 @@ class NamesakeWatch:
         self.reason = ''
         group = MutuallyExclusiveCallbackGroup()
         node.create_timer(period, self.check, callback_group=group)
-        node.create_subscription(String, INSTANCE_TOPIC, self._on_instance, INSTANCE_QOS,
+        node.create_subscription(String, INSTANCE_TOPIC, self._on_instance, HEARD_QOS,
                                  callback_group=group)
         self._publisher = node.create_publisher(String, INSTANCE_TOPIC, INSTANCE_QOS)
         self._publisher.publish(String(data=f'{self._me[0]!r} {self._me[1]}'))
