@@ -190,3 +190,11 @@ def test_the_first_stiffness_guess_of_a_solid_3d_fruit_is_hertz_at_the_command()
                     else sim.kinematics.initial_stiffness)
         assert sim.gripper_state.stiffness == expected
         assert (sim.kinematics.hertz_modulus > 0) == hertz
+
+
+def test_a_grip_within_half_the_force_tolerance_is_steady():
+    from gripper_sim.core.jaw_drive import STEADY_SHARE, steady
+    band = STEADY_SHARE * FORCE_TOLERANCE * 4.0
+    assert steady(4.0, 4.0) and steady(4.0 + 0.99 * band, 4.0) and steady(4.0 - 0.99 * band, 4.0)
+    assert not steady(4.0 + 1.01 * band, 4.0) and not steady(4.0 - 1.01 * band, 4.0)
+    assert not steady(0.0, 0.0)   # no grip: nothing to hold
