@@ -23,11 +23,12 @@ within ``FORCE_TOLERANCE``, unless the speed limit keeps the jaws from getting t
 position mode the servo moves the gap towards its target but stops where the grip force
 reaches the maximum effort. After a step is solved at the gap ``GripperKinematics``
 predicts (with deformable fingers, at the gap it starts from while the grip is steady:
-``jaw_drive.steady``), a force that misses its goal restores the step's start and solves it again at
-a gap corrected by secant steps on force(gap) (bracketed, at most ``MAX_GAP_SOLVES``
-solves), so the force does not depend on dt. The drive's rules (prediction, bounds,
-secant and bracket steps) are the compiled functions of ``core.jaw_drive``; the 2D
-multi-step advance (``core.advance_kernels``) runs this same loop on them in numba.
+``jaw_drive.steady``), a force that misses its goal restores the step's start and
+solves it again at a gap corrected by secant steps on force(gap) (bracketed, at most
+``MAX_GAP_SOLVES`` solves), so the force does not depend on dt. The drive's rules
+(prediction, bounds, secant and bracket steps) are the compiled functions of
+``core.jaw_drive``; the 2D multi-step advance (``core.advance_kernels``) runs this same
+loop on them in numba.
 """
 from __future__ import annotations
 
@@ -628,7 +629,7 @@ class SimulationFacade:
         gap = math.nan    # the first solve: at the predicted gap
         if (self._soft is not None and self._grip.mode == 'force' and lo <= start_gap <= hi
                 and jaw_drive.steady(self._grip_force(), goal)):
-            gap = start_gap   # or where the jaws are (``jaw_drive.steady``)
+            gap = start_gap   # a steady grip: the jaws stay where they are
         try:
             for _ in range(MAX_GAP_SOLVES):
                 near = jaw_drive.nearest_solve(tried, count, gap)
