@@ -225,6 +225,33 @@ def test_ctrl_c_while_the_node_starts_stops_it_at_once(tmp_path):
     assert 'Traceback' not in log, log
 
 
+#: the same, the signal arriving in an extension module's import, which turns the
+#: KeyboardInterrupt into its own ImportError (pymetis' pybind11 init did, in CI)
+INTERRUPTED_IMPORT = """
+import os, signal, sys, time
+from gripper_sim.ros import node
+real = node.SimParameters
+def interrupted(*args, **kwargs):
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(20)
+    except KeyboardInterrupt as interrupt:
+        raise ImportError('initialization failed') from interrupt
+    return real(*args, **kwargs)
+node.SimParameters = interrupted
+sys.exit(node.main(['sim_node', '--ros-args', '-p', 'foxglove_port:=0']))
+"""
+
+
+def test_ctrl_c_that_an_import_turns_into_its_own_error_still_stops_the_node_cleanly():
+    run = subprocess.run([sys.executable, '-c', INTERRUPTED_IMPORT],
+                         env=ros_environment(pick_domain_id(44)), capture_output=True,
+                         text=True, timeout=120)
+    log = run.stdout + run.stderr
+    assert run.returncode == 0, log
+    assert 'ready' not in log and 'Traceback' not in log, log
+
+
 def test_status_follow_prints_lines_until_ctrl_c(client):
     process = subprocess.Popen(
         [sys.executable, '-m', 'gripper_sim.cli.main', 'status', '--follow', '--rate', '5'],

@@ -396,6 +396,20 @@ class SimNode(Node):
         return super().destroy_node()
 
 
+def interrupted(error: BaseException) -> bool:
+    """Whether ``error`` came of a KeyboardInterrupt (one in its chain of causes): the one
+    ``main``'s signal handler raises while the node is built may come out as the error of
+    whatever it interrupted (an extension module's import: ImportError 'initialization
+    failed')."""
+    seen: set[int] = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return False
+
+
 def main(args: list[str] | None = None) -> int:
     """Run the node: console script ``sim_node``, ``gripper-sim node``, ``python -m``.
 
@@ -450,7 +464,12 @@ def main(args: list[str] | None = None) -> int:
         try:
             node = SimNode(fruit=options.fruit, config_file=options.config,
                            namesake_wait=NAMESAKE_WAIT)
-        except GripperSimError as err:   # a configuration, parameter or name problem
+        except Exception as err:
+            if interrupted(err):   # a stop while it was built: no error of its own
+                return 0
+            if not isinstance(err, GripperSimError):
+                raise
+            # a configuration, parameter or name problem
             rclpy.logging.get_logger(NODE_NAME).error(f'cannot start: {err}')
             return 2
         finally:
