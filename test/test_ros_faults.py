@@ -161,8 +161,7 @@ def test_an_earlier_namesake_is_heard_even_when_a_later_announcement_follows_at_
     import time
 
     import rclpy
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from gripper_sim.ros.namesakes import NamesakeWatch
+    from gripper_sim.ros.namesakes import INSTANCE_QOS, NamesakeWatch
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=new_domain_id())
@@ -170,10 +169,8 @@ def test_an_earlier_namesake_is_heard_even_when_a_later_announcement_follows_at_
         node = rclpy.create_node('gripper_sim', context=context)
         watch = NamesakeWatch(node, started=time.time(), period=3600.0)
         others = rclpy.create_node('others', context=context)
-        kept = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        earlier = others.create_publisher(String, '/gripper_sim/_instance', kept)
-        later = others.create_publisher(String, '/gripper_sim/_instance', kept)
+        earlier = others.create_publisher(String, '/gripper_sim/_instance', INSTANCE_QOS)
+        later = others.create_publisher(String, '/gripper_sim/_instance', INSTANCE_QOS)
         earlier.publish(String(data=f'{time.time() - 3600.0!r} feedfacefeedface'))
         later.publish(String(data=f'{time.time() + 3600.0!r} 0123456789abcdef'))
         deadline = time.monotonic() + 60.0
