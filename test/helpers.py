@@ -103,7 +103,7 @@ def lift_newton_iterations(config, carried: bool, monkeypatch):
     from gripper_sim.core.facade import SimulationFacade
     if not carried:
         monkeypatch.setattr(SimulationFacade, '_predicted_velocities',
-                            lambda self, grip_new: None)
+                            lambda self, *args, **kwargs: None)
     sim = make_simulation(config)
     lift = []
     run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.01, hold_time=0.0),

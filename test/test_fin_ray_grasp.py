@@ -206,3 +206,22 @@ def test_a_steady_grip_keeps_the_jaws_still_and_within_the_force_tolerance():
     turns = np.count_nonzero(np.sign(moves[1:]) * np.sign(moves[:-1]) < 0)
     assert turns < 0.1 * len(hold)
     assert np.mean([iterations for *_, iterations in hold]) < 2.0
+
+
+def test_a_lift_carries_the_fruit_and_the_fingers_once_the_table_lets_go(monkeypatch):
+    """Lifting the apple held at 4 N, each step's predicted start moves the fingers and
+    the fruit with the gripper's change of speed once no face (the table) touches the
+    fruit (``SimulationFacade._predicted_velocities``): the lift takes fewer Newton
+    iterations (2.10 a step against 2.55 from the nodes' own velocities), to the same
+    answer."""
+    from helpers import lift_newton_iterations
+    config = load_config(overrides=['gripper.finger.type=fin_ray'])
+    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
+    carried, sim = lift_newton_iterations(config, True, monkeypatch)
+    plain, plain_sim = lift_newton_iterations(config, False, monkeypatch)
+    print(f'  Fin Ray lift, Newton iterations: {carried} (from the velocities alone {plain})')
+    assert carried < 0.9 * plain
+    end, plain_end = sim.last, plain_sim.last
+    assert end.grip_force == pytest.approx(plain_end.grip_force, rel=1e-6)
+    assert end.slip_distance == pytest.approx(plain_end.slip_distance, abs=1e-9)
+    assert np.abs(end.positions - plain_end.positions).max() < 1e-9

@@ -1426,15 +1426,16 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
                    fixed: np.ndarray, fixed_targets: np.ndarray, old_faces: list,
                    new_faces: list, dt: float,
                    self_contact: BarrierContact | None = None,
-                   carried: Callable[[], list] | None = None) -> StepOutcome:
+                   carried: Callable[[], list] | None = None,
+                   v_predicted: np.ndarray | None = None) -> StepOutcome:
     """One implicit step of ``dt`` (s) from (x_n, v_n) (n, d) of the fruit and the soft
     bodies in the barrier (``barrier.bodies``), nodes ``fixed`` (k,) prescribed at
     ``fixed_targets`` (k, d) m (a finger's base on its jaw: zero filters, the modified
     mass method), the faces moving from ``old_faces`` to ``new_faces``; with the soft
     bodies' ``self_contact`` barrier (among the solver's energies too) if given.
 
-    The Newton solve starts from the predictor x_n + dt v_n if the way there crosses
-    nothing, else from x_n (each with the fixed nodes at their targets and the outline
+    The Newton solve starts from the predictor x_n + dt v (v: ``v_predicted`` (n, d) m/s
+    where given, else v_n) if the way there crosses nothing, else from x_n (each with the fixed nodes at their targets and the outline
     pushed ahead of moving faces, ``pushed_starts``), else, with ``carried`` (a function
     giving per soft body in ``barrier.bodies`` order (its nodes (k,), the shift (d,) m
     its base makes in the step); called only then), from x_n with each soft body moved
@@ -1455,12 +1456,13 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
             the step).
     """
     n, d = x_n.shape
+    v = v_n if v_predicted is None else v_predicted
     if d == 2:
         pushed, start, clear, pushed_clear, _ = barrier.set_up_starts(
-            x_n, v_n, old_faces, new_faces, dt, fixed, fixed_targets, False)
+            x_n, v, old_faces, new_faces, dt, fixed, fixed_targets, False)
     else:
         barrier.begin_step(x_n, old_faces, new_faces, dt)
-        pushed, start = barrier.pushed_starts(x_n, old_faces, new_faces, x_n + dt * v_n)
+        pushed, start = barrier.pushed_starts(x_n, old_faces, new_faces, x_n + dt * v)
         clear = pushed_clear = None
     if self_contact is not None:
         self_contact.begin_step(x_n, _NO_FACES, _NO_FACES, dt)

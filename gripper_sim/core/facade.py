@@ -70,6 +70,10 @@ DYNAMIC_KEYS = RUNTIME_KEYS
 #: less than any fruit's skin is thick (tens of um and more)
 FINGERS_MEET = 1e-5
 
+#: with deformable fingers, the first of the faces' obstacle indices (0 and 1 are the
+#: fingers, ``obstacle_names``: left_jaw, right_jaw)
+FIRST_FACE = 2
+
 #: m, how far a starting gap may lie below the fruit's width across the jaws and still
 #: count as touching it (a mesh's width differs from its diameter by rounding)
 TOUCHING_TOLERANCE = 1e-9
@@ -929,7 +933,7 @@ class SimulationFacade:
         (the obstacles' ``normals`` and ``velocities`` (k, d)); velocities ``v`` (n, d)."""
         smoothing = self._barrier.settings.friction_smoothing
         mode = np.zeros(len(obstacle), np.int64)
-        mark_sticking(v, np.where(obstacle >= 2, obstacle, -1), normals, velocities,
+        mark_sticking(v, np.where(obstacle >= FIRST_FACE, obstacle, -1), normals, velocities,
                       smoothing, cm.STICK, cm.SLIP, mode)
         held, relative, surface_normals = on_fingers
         held = np.concatenate(held)
@@ -1015,7 +1019,7 @@ class SimulationFacade:
         if self._barrier is not None:
             outcome = barrier_step(self.solver, self._barrier, self.q, self.v,
                                    self.faces_at(self._grip), new_faces, dt,
-                                   self._predicted_velocities(grip_new))
+                                   self._predicted_velocities(grip_new, self.v))
         else:
             outcome = contact_step(self.solver, self.fruit.surface, self.contacts, self.q,
                                    self.v, self.faces_at(self._grip), new_faces, dt,
@@ -1025,23 +1029,34 @@ class SimulationFacade:
                          self._closing_forces(outcome.forces, outcome.contacts.obstacle), dt)
         return outcome.iterations
 
-    def _predicted_velocities(self, grip_new: GripperState) -> np.ndarray | None:
-        """(n, d) m/s, where both jaws held the fruit in the last step and the gripper
+    def _predicted_velocities(self, grip_new: GripperState, v: np.ndarray,
+                              while_on_faces: bool = True) -> np.ndarray | None:
+        """(k, d) m/s, where both jaws held the fruit in the last step and the gripper
         moves (lifts or transports) in the step to ``grip_new``, the velocities of a
-        barrier step's predicted start (``barrier_step``): the fruit's, each plus the
-        change of the gripper's own velocity (not the jaws' closing): a held fruit is
-        carried. None elsewhere. From its velocities alone (2D), a lift's or a
-        transport's start and stop left every node of a held fruit 5 times the friction
-        smoothing speed behind its jaws, and Newton crossed the friction law's kink: 6 to
-        10 iterations a step instead of 3; from x_n (3D), 9 a step while lifting
-        (``docs/performance.md``)."""
+        barrier step's predicted start (``barrier_step``, ``soft_body_step``): ``v``
+        (k, d) m/s (the fruit's, then any deformable fingers'), each plus the change of
+        the gripper's own velocity (not the jaws' closing): a held fruit, and the fingers
+        holding it, are carried. None elsewhere, and, unless ``while_on_faces``, where a
+        face (the table) touches the fruit.
+
+        With rigid fingers, from its velocities alone (2D), a lift's or a transport's
+        start and stop left every node of a held fruit 5 times the friction smoothing
+        speed behind its jaws, and Newton crossed the friction law's kink: 6 to 10
+        iterations a step instead of 3; from x_n (3D), 9 a step while lifting
+        (``docs/performance.md``). A Fin Ray finger bends under the fruit's weight while
+        the table still bears it: the fruit is not carried yet. Its grasp's lift took
+        2.55 Newton iterations a step from v_n, 2.10 carried once off the table; 3 carried
+        from the lift's start on, 6 with the fingers carried alone.
+        """
         left, right = self._jaw_force
         grip = self._grip
         if (left <= 0.0 or right <= 0.0
                 or not (grip.x_rate or grip.lift_rate or grip_new.x_rate or grip_new.lift_rate)):
             return None
-        return self.v + self._in_plane(grip_new.x_rate - grip.x_rate,
-                                       grip_new.lift_rate - grip.lift_rate)
+        if not while_on_faces and bool((self.contacts.obstacle >= FIRST_FACE).any()):
+            return None
+        return v + self._in_plane(grip_new.x_rate - grip.x_rate,
+                                  grip_new.lift_rate - grip.lift_rate)
 
     def _substep_soft(self, dt: float, grip_new: GripperState, new_faces: list) -> int:
         """One step of the fruit and the deformable fingers (``barrier.soft_body_step``),
@@ -1056,11 +1071,13 @@ class SimulationFacade:
             return [(n + side * m + np.arange(m),
                      self._jaw_origin(grip_new, side) - self._jaw_origin(self._grip, side))
                     for side in (LEFT, RIGHT)]
+        v_n = self._joined(self.v, finger.velocities)
         outcome = soft_body_step(self.solver, self._barrier,
-                                 self._joined(self.q, finger.positions),
-                                 self._joined(self.v, finger.velocities), soft.base, targets,
-                                 self.faces_at(self._grip), new_faces, dt,
-                                 self_contact=soft.self_contact, carried=carried)
+                                 self._joined(self.q, finger.positions), v_n, soft.base,
+                                 targets, self.faces_at(self._grip), new_faces, dt,
+                                 self_contact=soft.self_contact, carried=carried,
+                                 v_predicted=self._predicted_velocities(grip_new, v_n,
+                                                                         while_on_faces=False))
         x, v = outcome.x[:n], outcome.v[:n]
         # the fruit's partners 1 + finger, 1 + 2 + face: the obstacles left_jaw,
         # right_jaw (the fingers), then the faces
