@@ -198,3 +198,26 @@ def test_a_grip_within_half_the_force_tolerance_is_steady():
     assert steady(4.0, 4.0) and steady(4.0 + 0.99 * band, 4.0) and steady(4.0 - 0.99 * band, 4.0)
     assert not steady(4.0 + 1.01 * band, 4.0) and not steady(4.0 - 1.01 * band, 4.0)
     assert not steady(0.0, 0.0)   # no grip: nothing to hold
+
+
+def test_a_moving_grip_is_first_solved_where_its_gap_moves_on():
+    """``first_gap``: a steady grip whose gap stood still stays; one whose gap moved by
+    more than the steady band's worth of force, or whose force misses, is first solved
+    at the gap moved on at its last rate and corrected by the miss, within [lo, hi]."""
+    from gripper_sim.core.jaw_drive import STEADY_SHARE, first_gap
+    goal, stiffness, dt = 4.0, 4000.0, 1e-3
+    band = STEADY_SHARE * FORCE_TOLERANCE * goal          # 0.01 N: 2.5 um at 4000 N/m
+    lo, hi = 0.09, 0.11
+    still = 0.5 * band / stiffness / dt                   # m/s: half the band a step
+    assert first_gap(0.1, still, goal, goal, stiffness, lo, hi, dt) == 0.1
+    assert first_gap(0.1, -still, goal + 0.5 * band, goal, stiffness, lo, hi, dt) == 0.1
+    moving = 4.0 * band / stiffness / dt
+    assert first_gap(0.1, moving, goal, goal, stiffness, lo, hi, dt) == pytest.approx(
+        0.1 + moving * dt, abs=1e-15)
+    # too much force: the gap opens by the miss over the stiffness, on top of its move
+    assert first_gap(0.1, moving, goal + 0.4, goal, stiffness, lo, hi, dt) == pytest.approx(
+        0.1 + moving * dt + 0.4 / stiffness, abs=1e-15)
+    assert first_gap(0.1, 0.0, goal - 0.4, goal, stiffness, lo, hi, dt) == pytest.approx(
+        0.1 - 0.4 / stiffness, abs=1e-15)
+    assert first_gap(0.1, 0.0, goal + 400.0, goal, stiffness, lo, hi, dt) == hi
+    assert first_gap(0.1, -50.0, goal, goal, stiffness, lo, hi, dt) == lo

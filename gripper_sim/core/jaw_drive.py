@@ -16,8 +16,9 @@ grasp driven either way moves its jaws by the same arithmetic:
   (whose end contact set a solve starts from), ``halfway`` (after a failed solve) and
   ``settle_on`` (which solve stands when none met the goal), ``clearance`` (how far a
   jaw that does not touch is from the fruit), ``adapted_stiffness`` (the barrier
-  model's steps, which have no search), ``steady`` (with deformable fingers, a grip
-  whose first solve keeps the jaws where they are). Both loops that run the search -
+  model's steps, which have no search), ``first_gap`` and ``steady`` (with deformable
+  fingers, where a step is first solved: the jaws kept where a grip holds still, else
+  moved on at their last rate). Both loops that run the search -
   ``core.facade.SimulationFacade._drive_jaws`` and ``core.advance_kernels._drive_jaws`` -
   only solve and call these.
 
@@ -150,6 +151,30 @@ def steady(force, goal):
     at 4 N: 140 of 199 steps, 0.9 um a step) and each solve starts from a worse
     prediction (2.6 Newton iterations a step instead of 1.3)."""
     return force > 0.0 and abs(force - goal) <= STEADY_SHARE * FORCE_TOLERANCE * goal
+
+
+@njit(cache=True)
+def first_gap(start_gap, gap_rate, force, goal, stiffness, lo, hi, dt):
+    """m, the gap a force-mode step with deformable fingers is first solved at, from
+    the gap it starts at ``start_gap`` (m), the last step's gap rate ``gap_rate`` (m/s),
+    the grip force ``force`` (N, > 0: both jaws touch) and its ``goal`` (N), the slope
+    of the force's miss in the gap ``stiffness`` (N/m, the drive's damping included),
+    within [lo, hi] (m) and a step ``dt`` (s):
+
+    - ``start_gap`` where the grip holds still: its force ``steady`` and the last step's
+      gap change worth no more than that same band of force at ``stiffness``;
+    - else the gap moved on at the last step's rate, corrected by the force's miss at
+      ``stiffness``: where the fruit and the fingers ring (a squeeze, the start of a
+      lift), the force at a fixed gap moves from step to step, and the gap a search
+      settled on moves smoothly with it (the 2D Fin Ray at 4 N: a search of two solves at
+      nearly every squeeze step before, from the gap where it started or predicted from
+      the force alone).
+    """
+    band = STEADY_SHARE * FORCE_TOLERANCE * goal
+    move = gap_rate * dt
+    if steady(force, goal) and abs(move) * stiffness <= band:
+        return start_gap
+    return min(max(start_gap + move + (force - goal) / stiffness, lo), hi)
 
 
 @njit(cache=True)
