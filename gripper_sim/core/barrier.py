@@ -1435,14 +1435,15 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     bodies' ``self_contact`` barrier (among the solver's energies too) if given.
 
     The Newton solve starts from the predictor x_n + dt v (v: ``v_predicted`` (n, d) m/s
-    where given, else v_n) if the way there crosses nothing, else from x_n (each with the fixed nodes at their targets and the outline
-    pushed ahead of moving faces, ``pushed_starts``), else, with ``carried`` (a function
-    giving per soft body in ``barrier.bodies`` order (its nodes (k,), the shift (d,) m
-    its base makes in the step); called only then), from x_n with each soft body moved
-    by its base's shift and the fruit's nodes near it moved along with it (within dhat,
-    else within ``CARRY_REACH_EDGES`` longest edges: ``_carried_starts``): where a fruit
-    pressed hard on a finger lies closer to it than the base's move, moving the base
-    alone would cross the fruit.
+    where given, else v_n) if the way there crosses nothing, else from x_n (each with
+    the fixed nodes at their targets and the outline pushed ahead of moving faces,
+    ``pushed_starts``), else, with ``carried`` (a function giving per soft body in
+    ``barrier.bodies`` order (its nodes (k,), the shift (d,) m its base makes in the
+    step); called only then), from x_n with each soft body moved by its base's shift and
+    the fruit's nodes near it moved along with it (within dhat, else within
+    ``CARRY_REACH_EDGES`` longest edges: ``_carried_starts``): where a fruit pressed hard
+    on a finger lies closer to it than the base's move, moving the base alone would
+    cross the fruit.
 
     Returns:
         The outcome; ``forces`` (n, d) N the barrier's and friction's force on every node
