@@ -129,3 +129,38 @@ def test_force_grasp_closes_at_full_speed_while_one_jaw_pushes_the_fruit():
     # closing took about the time to close the free gap at full speed
     free_gap = sim.initial_gap - sim.fruit.rest_width
     assert t_reached < 1.5 * free_gap / speed + 0.2
+
+
+#: ``gripper-sim pick`` interrupted (SIGINT) while numba loads one of its kernels from
+#: the cache, inside the Python that LLVM's object cache calls back through ctypes: a
+#: KeyboardInterrupt raised there is swallowed by ctypes and LLVM goes on broken (the
+#: node segfaulted so in CI); ``gripper_sim.interrupts`` raises it once out of there
+PICK_INTERRUPTED_IN_CACHE_LOAD = """
+import os, signal, sys, time
+from llvmlite.binding.executionengine import ExecutionEngine
+from gripper_sim.cli import main
+real = ExecutionEngine._find_module_ptr
+calls = []
+def find_module_ptr(self, module_ptr):
+    if not calls:
+        calls.append(1)
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)
+    return real(self, module_ptr)
+ExecutionEngine._find_module_ptr = find_module_ptr
+code = main.main(['pick', '--force', '4'])
+print('interrupted in a cache load:', bool(calls))
+sys.exit(code)
+"""
+
+
+def test_ctrl_c_while_a_kernel_loads_from_the_cache_exits_130_cleanly():
+    env = dict(os.environ)
+    env['PYTHONPATH'] = str(ROOT) + os.pathsep + env.get('PYTHONPATH', '')
+    run = subprocess.run([sys.executable, '-c', PICK_INTERRUPTED_IN_CACHE_LOAD],
+                         capture_output=True, text=True, timeout=300, env=env,
+                         stdin=subprocess.DEVNULL)
+    log = run.stdout + run.stderr
+    assert run.returncode == 130, log
+    assert 'interrupted in a cache load: True' in log, log
+    assert 'Traceback' not in log and 'Exception ignored' not in log, log

@@ -9,10 +9,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 import warnings
 
-from gripper_sim import __version__
+from gripper_sim import __version__, interrupts
 from gripper_sim.errors import ConfigWarning, GripperSimError, Terminated
 
 SIGPIPE_EXIT = 141   # 128 + SIGPIPE: what a shell reports for a tool a closed pipe ended
@@ -46,7 +48,13 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run one verb: its exit code; 2 for a gripper_sim error (``error: ...``), 130 on
     Ctrl-C, 143 on a SIGTERM a verb handles (``errors.Terminated``), 141 when the reader
-    of stdout has gone."""
+    of stdout has gone. Ctrl-C's KeyboardInterrupt comes where it breaks nothing
+    (``gripper_sim.interrupts``: not inside numba's loading of a kernel, nor an import)
+    unless a verb handles SIGINT itself."""
+    previous = None
+    if (threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+        previous = interrupts.install(lambda signum, frame: interrupts.interrupt(frame))
     try:
         code = _run(argv)
         sys.stdout.flush()   # here, not at exit: a closed pipe is then ours to handle
@@ -57,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
         return TERMINATED
     except KeyboardInterrupt:   # anywhere, the verbs' imports too
         return 130
+    finally:
+        if previous is not None:
+            interrupts.restore(previous)
 
 
 def _run(argv: list[str] | None) -> int:

@@ -33,7 +33,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.utilities import remove_ros_args
 
-from gripper_sim import configuration
+from gripper_sim import configuration, interrupts
 from gripper_sim.convert import messages
 from gripper_sim.convert.messages import MessageContext
 from gripper_sim.core.results import StepResult
@@ -72,15 +72,6 @@ RESULT_DELIVERY = 1.0   # s
 # recording, the live view's server; ``SimNode.__init__`` clears it): a SIGINT or
 # SIGTERM then stops it at once, the kernels' warm-up (minutes when it compiles) too.
 STARTING = threading.Event()
-# Where a stop's KeyboardInterrupt must not be raised while the node is built: Python
-# frames of these (their files' paths contain them). numba's and llvmlite's compiling
-# and cache loading run Python as ctypes callbacks of LLVM, which swallow the exception
-# and go on with broken state (a segmentation fault, in CI); an extension module's
-# import turns it into its own ImportError (pymetis' pybind11 init did, in CI).
-UNINTERRUPTIBLE = ('/numba/', '/llvmlite/', 'importlib', '/ctypes/')
-# A stop that arrives in such a frame is raised at the first signal-timer tick (SIGALRM,
-# every this long) that finds the node's start-up in a frame of its own.
-INTERRUPT_RETRY = 0.02   # s
 
 
 class SimNode(Node):
@@ -405,18 +396,6 @@ class SimNode(Node):
         return super().destroy_node()
 
 
-def interruptible(frame) -> bool:
-    """Whether a KeyboardInterrupt may be raised in ``frame`` (a signal handler's: the
-    main thread's frame the signal came in): none of its frames runs code of
-    ``UNINTERRUPTIBLE``."""
-    while frame is not None:
-        name = frame.f_code.co_filename
-        if any(part in name for part in UNINTERRUPTIBLE):
-            return False
-        frame = frame.f_back
-    return True
-
-
 def interrupted(error: BaseException) -> bool:
     """Whether ``error`` came of a KeyboardInterrupt (one in its chain of causes): the one
     ``main``'s signal handler raises while the node is built may come out as the error of
@@ -446,9 +425,8 @@ def main(args: list[str] | None = None) -> int:
     The Jazzy main idiom, with one change: SIGINT/SIGTERM set a flag instead of
     shutting the context down at once, so an active goal is aborted and its result
     delivered before the node goes. While the node is built (its kernels' warm-up too),
-    before it has started anything, they stop it at once; a signal that comes in Python
-    code of ``UNINTERRUPTIBLE`` stops it at the first tick of a timer (every
-    ``INTERRUPT_RETRY``) that finds the start-up out of it.
+    before it has started anything, they stop it at once, where the start-up can take a
+    KeyboardInterrupt (``gripper_sim.interrupts``).
     """
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     argv = list(sys.argv if args is None else args)
@@ -474,15 +452,10 @@ def main(args: list[str] | None = None) -> int:
         # minutes): stop it now, unless the signal came where an exception breaks what
         # it interrupts (then at a timer's tick that finds it elsewhere); once it has
         # started, it is stopped as a built node
-        if not (STARTING.is_set() and stopping.is_set()):
-            return
-        if interruptible(frame):
-            signal.setitimer(signal.ITIMER_REAL, 0.0)
-            raise KeyboardInterrupt
-        signal.setitimer(signal.ITIMER_REAL, INTERRUPT_RETRY)
+        if STARTING.is_set() and stopping.is_set():
+            interrupts.interrupt(frame)
 
-    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGALRM):
-        signal.signal(signum, on_signal)
+    interrupts.install(on_signal, (signal.SIGINT, signal.SIGTERM))
     code = 0
     # Threads: a running goal (Grasp, GripperCommand, ParallelGripperCommand; one
     # drives, a preempted one finishes) and a step request (~/step, step_simulation,
@@ -504,7 +477,7 @@ def main(args: list[str] | None = None) -> int:
             return 2
         finally:
             STARTING.clear()
-            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            interrupts.cancel()
         executor.add_node(node)
         while not stopping.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
