@@ -38,10 +38,9 @@ def free_domain_id() -> int:
 def pick_domain_id() -> int:
     """The session's domain: GRIPPER_SIM_TEST_DOMAIN_ID if set, else a free one."""
     requested = os.environ.get('GRIPPER_SIM_TEST_DOMAIN_ID')
-    if requested:
-        ros_process.reserve_domain_id(int(requested))
-        return int(requested)
-    return free_domain_id()
+    domain = int(requested) if requested else free_domain_id()
+    ros_process.reserve_domain_id(domain)   # the session's throughout: never recycled
+    return domain
 
 
 def env_sh(domain_id: int) -> dict[str, str]:

@@ -137,6 +137,8 @@ def test_force_grasp_closes_at_full_speed_while_one_jaw_pushes_the_fruit():
 #: node segfaulted so in CI); ``gripper_sim.interrupts`` raises it once out of there
 PICK_INTERRUPTED_IN_CACHE_LOAD = """
 import os, signal, sys, time
+# as from a terminal: a shell's background job (CI's) starts with SIGINT ignored
+signal.signal(signal.SIGINT, signal.default_int_handler)
 from llvmlite.binding.executionengine import ExecutionEngine
 from gripper_sim.cli import main
 real = ExecutionEngine._find_module_ptr

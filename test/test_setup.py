@@ -269,3 +269,27 @@ def test_a_domain_another_run_picked_is_not_picked_again():
     assert holder.returncode == 0
     again = _free_domain_id_in_new_process(taken, hold=False)
     assert int(again.communicate(timeout=60)[0]) == taken  # the claim ends with its process
+
+
+def test_a_session_that_handed_out_every_domain_recycles_the_oldest_free_one(tmp_path,
+                                                                           monkeypatch):
+    """A test session hands out about as many domains as there are: it keeps claims on
+    its last ``KEPT_CLAIMS`` only, and once it has handed out every domain it takes
+    again the one it handed out longest ago (free, unclaimed), never a reserved one."""
+    from gripper_sim.ros import process
+    monkeypatch.setattr(process, '_handed_out', {})
+    monkeypatch.setattr(process, '_reserved', {7})
+    monkeypatch.setattr(process, '_claims', {})
+    monkeypatch.setattr(process, '_claims_folder', lambda: tmp_path)
+    monkeypatch.setattr(process, 'domain_in_use', lambda domain, participants=4: False)
+    try:
+        first = [process.free_domain_id(1) for _ in range(100)]
+        assert len(set(first)) == 100 and 7 not in first
+        assert len(process._claims) == process.KEPT_CLAIMS
+        recycled = [process.free_domain_id(1) for _ in range(3)]
+        assert recycled == first[:3]   # the oldest, their claims long released
+        assert 7 not in [process.free_domain_id(1) for _ in range(200)]
+        assert len(process._claims) == process.KEPT_CLAIMS
+    finally:
+        for handle in process._claims.values():
+            os.close(handle)

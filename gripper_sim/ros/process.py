@@ -48,9 +48,18 @@ def fastdds_profile() -> str:
 
 
 DOMAIN_IDS = range(1, 102)
-_handed_out: set[int] = set()
-#: the lock files this process holds, one per domain it handed out (``_claim``)
+#: the domains this process handed out, the oldest first (``free_domain_id``)
+_handed_out: dict[int, None] = {}
+#: domains this process never hands out (``reserve_domain_id``)
+_reserved: set[int] = set()
+#: the lock files this process holds, one per domain among the last it handed out
+#: (``_claim``), the oldest first
 _claims: dict[int, int] = {}
+#: how many of the domains it handed out last a process keeps claimed: a claim guards a
+#: domain between its pick and its node's first port; a test session hands out about as
+#: many domains as there are, and claims it kept on all of them would leave none to
+#: another run of ours (the demo, another session) nor to its own next pick
+KEPT_CLAIMS = 8
 
 
 def domain_in_use(domain_id: int, participants: int = 4) -> bool:
@@ -88,27 +97,42 @@ def _claim(domain_id: int) -> bool:
         os.close(handle)
         return False
     _claims[domain_id] = handle
+    while len(_claims) > KEPT_CLAIMS:
+        os.close(_claims.pop(next(iter(_claims))))
     return True
 
 
 def free_domain_id(start: int) -> int:
     """A domain id in 1..101 that no process on this machine uses, that no other process
     of ours has claimed (``_claim``) and that this process has not handed out before,
-    searched from ``start`` (modulo 101)."""
+    searched from ``start`` (modulo 101); once this process has handed out every free
+    one, the one it handed out longest ago that is free again (``_recycled``)."""
     for offset in range(len(DOMAIN_IDS)):
         candidate = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
-        if (candidate not in _handed_out and not domain_in_use(candidate)
-                and _claim(candidate)):
+        if (candidate not in _handed_out and candidate not in _reserved
+                and not domain_in_use(candidate) and _claim(candidate)):
             break
     else:
-        candidate = DOMAIN_IDS[start % len(DOMAIN_IDS)]
-    _handed_out.add(candidate)
+        candidate = _recycled(start)
+    _handed_out.pop(candidate, None)
+    _handed_out[candidate] = None
     return candidate
+
+
+def _recycled(start: int) -> int:
+    """The domain this process handed out longest ago that no process uses now and no
+    process of ours claims (``free_domain_id`` found none it had not handed out), claimed
+    again; ``DOMAIN_IDS[start % 101]`` if there is none."""
+    for candidate in list(_handed_out):
+        if (candidate not in _claims and candidate not in _reserved
+                and not domain_in_use(candidate) and _claim(candidate)):
+            return candidate
+    return DOMAIN_IDS[start % len(DOMAIN_IDS)]
 
 
 def reserve_domain_id(domain_id: int) -> None:
     """Never hand out ``domain_id`` (it is taken, e.g. by a session set by hand)."""
-    _handed_out.add(domain_id)
+    _reserved.add(domain_id)
 
 
 def pick_domain_id(offset: int = 0) -> int:
