@@ -26,10 +26,9 @@ predicts (with deformable fingers in force mode, at ``jaw_drive.first_gap``: the
 starts from while the grip holds still, else moved on at its last rate), a force that
 misses its goal restores the step's start and solves it again at a gap corrected by
 secant steps on force(gap) (bracketed, at most ``MAX_GAP_SOLVES`` solves), so the force
-does not depend on dt. The drive's rules
-(prediction, bounds, secant and bracket steps) are the compiled functions of
-``core.jaw_drive``; the 2D multi-step advance (``core.advance_kernels``) runs this same
-loop on them in numba.
+does not depend on dt. The drive's rules (prediction, bounds, secant and bracket steps)
+are the compiled functions of ``core.jaw_drive``; the 2D multi-step advance
+(``core.advance_kernels``) runs this same loop on them in numba.
 """
 from __future__ import annotations
 

@@ -109,8 +109,7 @@ def free_domain_id(start: int) -> int:
     one, the one it handed out longest ago that is free again (``_recycled``)."""
     for offset in range(len(DOMAIN_IDS)):
         candidate = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
-        if (candidate not in _handed_out and candidate not in _reserved
-                and not domain_in_use(candidate) and _claim(candidate)):
+        if candidate not in _handed_out and _taken_now(candidate):
             break
     else:
         candidate = _recycled(start)
@@ -124,10 +123,16 @@ def _recycled(start: int) -> int:
     process of ours claims (``free_domain_id`` found none it had not handed out), claimed
     again; ``DOMAIN_IDS[start % 101]`` if there is none."""
     for candidate in list(_handed_out):
-        if (candidate not in _claims and candidate not in _reserved
-                and not domain_in_use(candidate) and _claim(candidate)):
+        if candidate not in _claims and _taken_now(candidate):
             return candidate
     return DOMAIN_IDS[start % len(DOMAIN_IDS)]
+
+
+def _taken_now(domain_id: int) -> bool:
+    """Whether ``domain_id`` is not reserved, no process uses it, and this process has
+    just claimed it (``_claim``)."""
+    return (domain_id not in _reserved and not domain_in_use(domain_id)
+            and _claim(domain_id))
 
 
 def reserve_domain_id(domain_id: int) -> None:
