@@ -62,6 +62,7 @@ from scipy.spatial import cKDTree
 
 from gripper_sim.core import barrier_part as bp
 from gripper_sim.core import contact as cm
+from gripper_sim.core import soft_step_kernels as ssk
 from gripper_sim.core.barrier_kernels import (balance_forces, largest_move,
                                               largest_relative_move, mark_sticking,
                                               mean_gap, mesh_vertices, nearest_faces,
@@ -564,19 +565,87 @@ class BarrierContact(Energy):
             way to the predictor's, to x_n's (False where not checked), the largest
             coordinate difference m between them).
         """
+        faces = self._starts_arguments(x_n, old_faces, new_faces, dt)  # (makes the part)
+        (has_friction, start, faces_shift, plain, predicted, predicted_clear, plain_clear,
+         difference) = bp.begin_with_starts(self._part, x_n, v_n, dt, *faces,
+                                            START_GAP_FRACTION, fixed, targets, both)
+        self._took_starts(has_friction, start, faces_shift)
+        return plain, predicted, bool(predicted_clear), bool(plain_clear), float(difference)
+
+    def _starts_arguments(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> tuple:
+        """The faces set up for a step of ``dt`` s from positions ``x_n`` (n, 2) m
+        (``_begin_faces``): ``barrier_part.begin_with_starts``' arguments from
+        ``old_corners`` to ``shifts``."""
         origins, normals, tangents, half_extents, _, thickness, old = self._face_geometry(
             old_faces)
         new_geometry = self._face_geometry(new_faces)
         new_origins, new = new_geometry[0], new_geometry[6]
         mu_s, mu_k, rubbing = self._begin_faces(x_n, old, new, new_faces, dt)
-        shifts = new_origins - origins
-        (has_friction, self._start, self._faces_shift, plain, predicted, predicted_clear,
-         plain_clear, difference) = bp.begin_with_starts(
-            self._part, x_n, v_n, dt, old, new, rubbing, mu_s, mu_k, self.surface, origins,
-            normals, tangents, half_extents, thickness, shifts, START_GAP_FRACTION, fixed,
-            targets, both)
+        return (old, new, rubbing, mu_s, mu_k, self.surface, origins, normals, tangents,
+                half_extents, thickness, new_origins - origins)
+
+    def _took_starts(self, has_friction: bool, start: np.ndarray, faces_shift: float) -> None:
+        """What ``barrier_part.begin_with_starts`` (or ``soft_step_kernels.begin``) set
+        up in the part, as this barrier keeps it: whether there is lagged friction, the
+        collision mesh's start (n_m, 2) m, the faces' largest shift m."""
+        self._start, self._faces_shift = start, faces_shift
         self._has_friction = bool(has_friction)
-        return plain, predicted, bool(predicted_clear), bool(plain_clear), float(difference)
+
+    def begin_soft_step(self, x_n: np.ndarray, v_start: np.ndarray, old_faces, new_faces,
+                        dt: float, fixed: np.ndarray, targets: np.ndarray,
+                        self_contact: 'BarrierContact | None') -> tuple | None:
+        """``set_up_starts`` (nodes ``fixed`` (k,) at ``targets`` (k, 2) m, the predictor
+        x_n + dt v_start) and the ``self_contact``'s ``begin_step`` (if given; no faces)
+        in one compiled call (``soft_step_kernels.begin``), where the self-contact keeps
+        its quiet region: 2D, this barrier not a self-contact.
+
+        Returns:
+            (x_n's start, the predictor's (n, 2) m, whether the compiled check clears the
+            way to the predictor's, to x_n's (False where not checked), whether the way
+            to the predictor's is clear of the self-contact too), or None where the
+            self-contact's quiet region must be sought again (nothing set up: the
+            caller's ``set_up_starts`` and ``begin_step`` do it).
+        """
+        faces = self._starts_arguments(x_n, old_faces, new_faces, dt)  # (makes the part)
+        has_self = self_contact is not None
+        if has_self:
+            self_rubbing, self_mu_s, self_mu_k = self_contact._quiet_step_arguments(x_n, dt)
+            self_part = self_contact._part
+        else:
+            self_rubbing, self_mu_s, self_mu_k = False, _NO_VALUES, _NO_VALUES
+            self_part = self._part
+        (status, has_friction, start, faces_shift, plain, predicted, predicted_clear,
+         plain_clear, self_start, self_friction, clear) = ssk.begin(
+            self._part, x_n, v_start, dt, *faces, START_GAP_FRACTION, fixed, targets,
+            self_part, has_self, QUIET_KEEP, self_rubbing, self_mu_s, self_mu_k)
+        if status == ssk.SEEK_QUIET:
+            return None
+        self._took_starts(has_friction, start, faces_shift)
+        if has_self:
+            self_contact._took_starts(self_friction, self_start, 0.0)
+        return plain, predicted, bool(predicted_clear), bool(plain_clear), bool(clear)
+
+    def _quiet_step_arguments(self, x_n: np.ndarray, dt: float) -> tuple:
+        """A self-contact's faces (none) set up for a step of ``dt`` s from positions
+        ``x_n`` (n, 2) m, as ``begin_step`` sets them up: (whether a friction coefficient
+        is positive, the static and kinetic ones (n_m,))."""
+        none = self._corners(_NO_FACES)
+        mu_s, mu_k, rubbing = self._begin_faces(x_n, none, none, _NO_FACES, dt)
+        return rubbing, mu_s, mu_k
+
+    def soft_outputs(self, q: np.ndarray, x_n: np.ndarray, dt: float,
+                     solved_reaction: np.ndarray, fixed_dofs: np.ndarray) -> tuple:
+        """A soft-body step's outputs at its solution ``q`` (2 n,) m from positions ``x_n``
+        (n, 2) m over ``dt`` s (``soft_step_kernels.outputs``): (the velocities (n, 2)
+        m/s, the solve's reaction ``solved_reaction`` (2 n,) N on ``fixed_dofs`` (n, 2)
+        (0 elsewhere), ``partners`` (n,), ``contact_forces`` (n, 2) N). 2D."""
+        size = q.shape[0]
+        v, reaction, forces = np.empty(size), np.empty(size), np.empty(size)
+        partner = np.empty(size // 2, np.int64)
+        if not ssk.outputs(self._part, q, x_n, dt, solved_reaction, fixed_dofs,
+                           self.vertex_nodes, self._owner(), v, reaction, partner, forces):
+            forces = self.contact_forces(q)
+        return v.reshape(-1, 2), reaction.reshape(-1, 2), partner, forces.reshape(-1, 2)
 
     def _begin_part(self, x_n: np.ndarray, start: np.ndarray, new: np.ndarray,
                     mu_s: np.ndarray, mu_k: np.ndarray, rubbing: bool) -> None:
@@ -1130,17 +1199,21 @@ class BarrierContact(Energy):
         """(n,) int, for every node of an outline the body its nearest pair within dhat
         at ``q`` (2 n,) m touches: 0 the fruit, 1 + b soft body b, 1 + B + k face k (B
         soft bodies); -1 for the nodes in no pair. 2D."""
+        partner = np.empty(self.n_dof // 2, np.int64)
+        bp.partners(self._part, q, self.vertex_nodes, self._owner(), partner)
+        return partner
+
+    def _owner(self) -> np.ndarray:
+        """(n_m,) the body of every collision-mesh vertex (``partners``' numbers: the
+        outlines', then the faces' end points'), kept."""
         n_v = self.vertex_nodes.size
         n_m = n_v + self._obstacles_end.shape[0]
         owner = self._owners
         if owner is None or owner.size != n_m:
-            # the body of every collision-mesh vertex: outlines, then the faces' end points
             owner = self._owners = np.concatenate(
                 [self.vertex_body, 1 + len(self.bodies)
                  + np.arange(n_m - n_v) // self.corners_per_face])
-        partner = np.empty(self.n_dof // 2, np.int64)
-        bp.partners(self._part, q, self.vertex_nodes, owner, partner)
-        return partner
+        return owner
 
     def holders(self, x: np.ndarray, faces, forces: np.ndarray) -> np.ndarray:
         """(n,) the face (index) each node with a contact force touches (its nearest face
@@ -1458,15 +1531,23 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     """
     n, d = x_n.shape
     v = v_n if v_predicted is None else v_predicted
+    set_up = None
     if d == 2:
-        pushed, start, clear, pushed_clear, _ = barrier.set_up_starts(
-            x_n, v, old_faces, new_faces, dt, fixed, fixed_targets, False)
+        set_up = barrier.begin_soft_step(x_n, v, old_faces, new_faces, dt, fixed,
+                                         fixed_targets, self_contact)
+    if set_up is not None:
+        pushed, start, clear, pushed_clear, chosen = set_up
     else:
-        barrier.begin_step(x_n, old_faces, new_faces, dt)
-        pushed, start = barrier.pushed_starts(x_n, old_faces, new_faces, x_n + dt * v)
-        clear = pushed_clear = None
-    if self_contact is not None:
-        self_contact.begin_step(x_n, _NO_FACES, _NO_FACES, dt)
+        chosen = False
+        if d == 2:
+            pushed, start, clear, pushed_clear, _ = barrier.set_up_starts(
+                x_n, v, old_faces, new_faces, dt, fixed, fixed_targets, False)
+        else:
+            barrier.begin_step(x_n, old_faces, new_faces, dt)
+            pushed, start = barrier.pushed_starts(x_n, old_faces, new_faces, x_n + dt * v)
+            clear = pushed_clear = None
+        if self_contact is not None:
+            self_contact.begin_step(x_n, _NO_FACES, _NO_FACES, dt)
 
     def reachable(start: np.ndarray, compiled_clear: bool | None = None) -> bool:
         """Whether the way to ``start`` (its fixed nodes set here, or by the compiled
@@ -1479,7 +1560,7 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
             crosses_nothing = compiled_clear or barrier.exactly_reachable(start)
         return crosses_nothing and (self_contact is None or self_contact.reachable(start))
 
-    if not reachable(start, clear):
+    if not chosen and not reachable(start, clear):
         start = pushed  # its own array
         # the predictor's way may be clear of the fruit and not of the self-contact: then
         # x_n's was not checked (the compiled call checks it only where the predictor's
@@ -1488,6 +1569,11 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
             start = _carried_starts(barrier, x_n, pushed, carried, reachable)
     constraints, fixed_dofs = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
+    if d == 2:
+        v, reaction, partner, forces = barrier.soft_outputs(solution.q, x_n, dt,
+                                                            solution.reaction, fixed_dofs)
+        return StepOutcome(solution.q.reshape(-1, 2), v, forces,
+                           cm.ContactState.held_by(partner), solution.iterations, reaction)
     x = solution.q.reshape(-1, d)
     reaction = np.zeros(n * d)
     reaction[fixed_dofs] = solution.reaction[fixed_dofs]

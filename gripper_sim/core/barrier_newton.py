@@ -45,6 +45,7 @@ from numba.experimental import structref
 from numba.extending import overload
 
 from gripper_sim.core import linear_solve, newton
+from gripper_sim.core.barrier_kernels import same_values
 from gripper_sim.core.barrier_part import barrier_value, max_step
 from gripper_sim.core.energy_table import inertia_and_energies
 from gripper_sim.core.solver_kernels import add_step_terms, apply_filters, filter_blocks, max_abs
@@ -306,3 +307,63 @@ def solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit,
     if alternative.shape[0]:
         newton.lower_start(problem, q, alternative, counts)
     return newton.newton_iteration(problem, q, dt, tol, max_it, history, counts)
+
+
+@njit(cache=True)
+def _solve_appended(problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, q,
+                    alternative, history, counts, done, n_done):
+    """One ``solve`` from q (the flags of its kept matrices reset first, as
+    ``barrier_solve.CompiledSolve.run`` does), its steps appended to ``done`` after the
+    first ``n_done``: (status, iterations, the steps now in ``done``)."""
+    problem.flags[F_KEPT] = -1
+    problem.flags[F_LAST] = -1
+    status, iterations, n_hist = solve(problem, q_n, v_n, dt, dt2, stiffness, filters,
+                                       cg[0], cg[1], cg[2], q, alternative, tol, max_it,
+                                       history, counts)
+    for k in range(n_hist):
+        done[n_done + k] = history[k]
+    return status, iterations, n_done + n_hist
+
+
+@njit(cache=True)
+def _still_converging(done, n_done, progress):
+    """``fast_solver.still_converging`` of the first ``n_done`` steps of ``done``,
+    ``progress`` (span, factor, limit) its constants."""
+    span = int(progress[0])
+    return n_done > span and done[n_done - 1] <= progress[1] * done[n_done - 1 - span]
+
+
+@njit(cache=True)
+def solve_from(problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, warm,
+               warm_q_n, warm_q, history, counts, done, progress, q_start, alternative, q):
+    """``fast_solver.PatternCachingSolver.solve`` on the compiled route, in one call:
+    from the last solve's solution ``warm_q`` in the free directions (if ``warm``, made
+    with the same dt, and its start ``warm_q_n`` is q_n), else (or if that start is
+    infeasible) from ``q_start`` (n_dof,) m, or ``alternative`` (if not empty) where the
+    potential is lower there (dt2: dt^2 s^2); a solve still converging at ``max_it`` goes on
+    (``progress``: (span, factor, limit), ``fast_solver.PROGRESS_SPAN``,
+    ``PROGRESS_FACTOR``, ``EXTENDED_LIMIT``). ``cg``: (relative, error limit, floor) as
+    ``solve`` takes them. Writes the solution into ``q`` (n_dof,) m, the steps (m/s)
+    into ``done`` (progress limit + 1 times max_it,); the reaction is ``work[4]``.
+    Returns (status, iterations, the steps in ``done``)."""
+    status = newton.INFEASIBLE_START
+    iterations = n_done = 0
+    if warm and same_values(warm_q_n, q_n):
+        difference = np.ascontiguousarray(warm_q - q_start)
+        apply_filters(filters, difference, q)
+        q += q_start
+        status, iterations, n_done = _solve_appended(
+            problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, q, np.zeros(0),
+            history, counts, done, 0)
+    if status == newton.INFEASIBLE_START:
+        q[:] = q_start
+        status, iterations, n_done = _solve_appended(
+            problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, q, alternative,
+            history, counts, done, 0)
+    while (status == newton.NO_CONVERGENCE and _still_converging(done, n_done, progress)
+           and iterations < progress[2] * max_it):
+        status, more, n_done = _solve_appended(
+            problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, q, np.zeros(0),
+            history, counts, done, n_done)
+        iterations += more
+    return status, iterations, n_done

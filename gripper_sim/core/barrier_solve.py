@@ -1,8 +1,11 @@
 """The compiled barrier solve (``core.barrier_newton``) run from Python: which solvers it
 covers (``supports``), the problem and its barriers' parts made once per solver
 (``CompiledSolve``; it holds the solver's ``linear_solve.LinearSolveState``, so the kept
-preconditioner and the work counters are the solver's own), and one solve
-(``CompiledSolve.run``): the compiled ``newton.newton_iteration`` called on it. Each
+preconditioner and the work counters are the solver's own), and a solve's arguments
+(``CompiledSolve.arguments``) for ``barrier_newton.solve_from``, the compiled
+``newton.newton_iteration`` on it with the warm start and the solve that goes on past
+its limit (``fast_solver.PatternCachingSolver.solve``'s, and a soft-body step's,
+``core.soft_step_kernels``). Each
 barrier's ``barrier_part.BarrierPart`` is the barrier's own (its step state, kept
 candidates and last evaluation), so nothing is handed in or back.
 """
@@ -14,6 +17,10 @@ import numpy as np
 
 from gripper_sim.core import barrier_newton as bn
 from gripper_sim.core import newton
+
+
+#: no warm start
+_NONE = np.zeros(0)
 
 
 @dataclass(frozen=True)
@@ -67,6 +74,8 @@ class CompiledSolve:
         #: reaction
         self.work = (np.empty((5, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
         self.flags = np.zeros(bn.F_SIZE, np.int64)
+        #: the Newton steps (m/s) of a call and of a solve (``arguments``)
+        self.steps = (np.zeros(0), np.zeros(0))
         self.problem = bn.new_problem((
             masses, alpha, beta, FRICTION_SMOOTHING, settings.keep_below * tolerance,
             (np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 1))),
@@ -95,27 +104,36 @@ class CompiledSolve:
                 return False
         return True
 
-    def run(self, q_n, v_n, dt, con, stiffness, q, alternative, history, max_iterations,
-            counts):
-        """One Newton solve: (status, iterations, len(history), reaction (n_dof,) N or
-        None); ``q`` (n_dof,) m, the start, overwritten with the solution (``alternative``
-        (n_dof,) m, if not empty, the start where the potential is lower); ``con`` as
-        ``fast_solver.as_cone`` makes it, no sliding nodes; ``stiffness`` K_n's CSC values
-        (or empty); ``counts`` the solver's work counters (added to). Raises
-        AssertionError where a barrier's Hessian falls outside its pattern (as the
-        interpreted route does)."""
-        flags, settings, tol = self.flags, self.settings, self.tolerance
-        flags[bn.F_KEPT] = flags[bn.F_LAST] = -1
+    def arguments(self, q_n, v_n, dt, con, stiffness, max_iterations, counts, warm,
+                  progress) -> tuple:
+        """``barrier_newton.solve_from``'s arguments up to its ``progress`` (the start, the
+        alternative and the solution's array follow) for a solve from positions ``q_n``,
+        velocities ``v_n`` (n_dof,) over dt s: ``con`` as ``fast_solver.as_cone`` makes it,
+        no sliding nodes; ``stiffness`` K_n's CSC values (or empty); ``counts`` the
+        solver's work counters (added to); ``warm`` the last solve's (q_n, dt, q) if made
+        with this dt, else None; ``progress`` (span, factor, limit) of a solve that goes
+        on past ``max_iterations``. After the call, ``finished``."""
+        settings, tol = self.settings, self.tolerance
         filters = con.filters
         if not filters.flags.writeable:  # a read-only array is typed apart: a copy, kept
             if self.filters[0] is not filters:
                 self.filters = (filters, filters.copy())
             filters = self.filters[1]
-        status, iterations, n_hist = bn.solve(
-            self.problem, q_n, v_n, dt, dt ** 2, stiffness, filters, settings.cg_tolerance,
-            settings.cg_error_fraction * tol * dt, settings.cg_relative_floor * tol * dt,
-            q, alternative, tol, max_iterations, history, counts)
+        history, done = self.steps
+        if history.size != max_iterations or done.size < (progress[2] + 1) * max_iterations:
+            self.steps = history, done = (np.zeros(max_iterations),
+                                          np.zeros((progress[2] + 1) * max_iterations))
+        warm_q_n, warm_q = (warm[0], warm[2]) if warm is not None else (_NONE, _NONE)
+        return (self.problem, q_n, v_n, dt, dt ** 2, stiffness, filters,
+                (settings.cg_tolerance, settings.cg_error_fraction * tol * dt,
+                 settings.cg_relative_floor * tol * dt),
+                tol, max_iterations, warm is not None, warm_q_n, warm_q, history, counts, done,
+                (float(progress[0]), float(progress[1]), float(progress[2])))
+
+    def finished(self) -> np.ndarray:
+        """After a ``barrier_newton.solve_from`` call: AssertionError where a barrier's
+        Hessian fell outside its pattern (as the interpreted route raises it); the
+        reaction (n_dof,) N of its solution (valid until the next solve)."""
         for barrier in self.barriers:
             barrier.check_compiled()
-        reaction = self.work[4].copy() if status == newton.OK else None
-        return status, iterations, n_hist, reaction
+        return self.work[4]

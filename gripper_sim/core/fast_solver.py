@@ -50,7 +50,7 @@ import operator
 import numpy as np
 import scipy.sparse as sp
 
-from gripper_sim.core import barrier_solve, linear_solve, newton, sparse_ldl
+from gripper_sim.core import barrier_newton, barrier_solve, linear_solve, newton, sparse_ldl
 from gripper_sim.core import solver_kernels as kernels
 from gripper_sim.core.barrier_kernels import same_values
 from gripper_sim.core.energies.base import Energy
@@ -171,7 +171,7 @@ class PatternCachingSolver:
         self.counts = np.zeros(newton.C_SIZE, np.int64)
         self._warm = None  # (q_n, dt, q) of the last solution, to start the next pass
         self._stiffness = None  # (q_n, K_n CSC values) of the stiffness damping
-        self._compiled = None  # the compiled barrier solve (``_iterate_compiled``)
+        self._compiled = None  # the compiled barrier solve (``compiled_arguments``)
         #: (constraints, their arrays, their ``as_cone``) of the last solve
         self._cone_kept = None
         self._build_fast_pattern()
@@ -410,7 +410,8 @@ class PatternCachingSolver:
     def solve(self, q_n: np.ndarray, v_n: np.ndarray, dt: float, q_start: np.ndarray,
               con: StepConstraints, alternative: np.ndarray | None = None) -> StepSolution:
         """One implicit Euler step: ``newton.newton_iteration`` on this solver's pattern
-        (``_NewtonProblem``, or compiled: ``_iterate``), from ``q_start`` (n_dof,) m or,
+        (interpreted on a ``_NewtonProblem``, or compiled where ``compiled_arguments``
+        covers the step: ``barrier_newton.solve_from``), from ``q_start`` (n_dof,) m or,
         where the incremental potential is lower there, ``alternative`` (n_dof,) m
         (``newton.lower_start``). A later contact pass of the same step starts from the
         last pass's solution in the directions the new filter leaves free. A solve still
@@ -421,8 +422,15 @@ class PatternCachingSolver:
         """
         con = self._cone(con)
         self._passes += 1
-        compiled = COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(con)
-        problem = (_CompiledStep if compiled else _NewtonProblem)(self, q_n, v_n, dt, con)
+        arguments = self.compiled_arguments(q_n, v_n, dt, con)
+        if arguments is not None:
+            q = np.empty(self.n)
+            status, iterations, n_done = barrier_newton.solve_from(
+                *arguments, q_start, _NO_START if alternative is None else alternative, q)
+            reaction = self.compiled_finished(q_n, dt, q, status, iterations,
+                                              arguments[-2][:n_done])
+            return StepSolution(q, reaction.copy(), iterations, arguments[-2][:n_done].tolist())
+        problem = _NewtonProblem(self, q_n, v_n, dt, con)
         history = np.zeros(self.max_iterations)
         warm = self._warm
         status = newton.INFEASIBLE_START
@@ -443,6 +451,47 @@ class PatternCachingSolver:
         self._warm = (q_n.copy(), dt, q)
         return StepSolution(q, problem.reaction, iterations, done)
 
+    def compiled_arguments(self, q_n: np.ndarray, v_n: np.ndarray, dt: float,
+                           con: StepConstraints) -> tuple | None:
+        """Where the compiled barrier solve covers this solver and the step's constraints
+        ``con`` (``as_cone``'s; ``compiled_solve_covers``): ``barrier_newton.solve_from``'s
+        arguments up to its ``progress`` for a solve from positions ``q_n``, velocities
+        ``v_n`` (n_dof,) over dt s (``barrier_solve.CompiledSolve.arguments``); after
+        the call, ``compiled_finished``. Else None."""
+        if not (COMPILED_BARRIER_SOLVE and self.compiled_solve_covers(con)):
+            return None
+        compiled = self._compiled
+        if compiled is None or not compiled.fits(self._untabled):
+            pattern = (self._matvec_indptr, self._matvec_indices, self._hessian_values,
+                       self._no_values, self._k_dq, np.empty((0, 2, 2)), self._diag_pos,
+                       self._diag_block_pos, self._block_pos, self._block_nodes,
+                       self._node_block_ptr, self._node_blocks, self._diag_blocks)
+            compiled = self._compiled = barrier_solve.CompiledSolve(
+                _COMPILED_SETTINGS, self.m, self.alpha, self.beta, self.tolerance,
+                self._table, pattern, self.linear, self._untabled)
+        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
+        warm = self._warm
+        return compiled.arguments(q_n, v_n, dt, con, stiffness, self.max_iterations,
+                                  self.counts, warm if warm is not None and warm[1] == dt
+                                  else None, (PROGRESS_SPAN, PROGRESS_FACTOR, EXTENDED_LIMIT))
+
+    def compiled_finished(self, q_n: np.ndarray, dt: float, q: np.ndarray, status: int,
+                          iterations: int, done: np.ndarray) -> np.ndarray:
+        """After a ``barrier_newton.solve_from`` call from ``q_n`` over dt s with the
+        ``compiled_arguments``, which wrote the solution ``q`` (n_dof,) m and returned
+        ``status`` and ``iterations`` and the steps ``done`` (m/s): the solve's reaction
+        (n_dof,) N (valid until the next solve), ``q`` the next solve's warm start.
+
+        Raises:
+            NewtonFailure: the status is not ``newton.OK``.
+            AssertionError: a barrier's Hessian fell outside its pattern.
+        """
+        reaction = self._compiled.finished()
+        if status != newton.OK:
+            raise NewtonFailure(NEWTON_FAILURES[status].format(iterations), done.tolist())
+        self._warm = (q_n.copy(), dt, q)
+        return reaction
+
     def _cone(self, con: StepConstraints) -> StepConstraints:
         """``as_cone(con)``, kept while the same constraints come with the same arrays (a
         barrier step's are the same every step: ``barrier._free``, ``_prescribed``)."""
@@ -459,36 +508,11 @@ class PatternCachingSolver:
         problems (and the step's constraints ``con``: no sliding nodes)."""
         return self._compiled_covers and (con is None or not con.friction_nodes.size)
 
-    def _iterate_compiled(self, problem: '_CompiledStep', q: np.ndarray,
-                          history: np.ndarray, alternative: np.ndarray | None):
-        """``_iterate`` by ``barrier_solve.CompiledSolve`` (made once, kept)."""
-        compiled = self._compiled
-        if compiled is None or not compiled.fits(self._untabled):
-            pattern = (self._matvec_indptr, self._matvec_indices, self._hessian_values,
-                       self._no_values, self._k_dq, np.empty((0, 2, 2)), self._diag_pos,
-                       self._diag_block_pos, self._block_pos, self._block_nodes,
-                       self._node_block_ptr, self._node_blocks, self._diag_blocks)
-            compiled = self._compiled = barrier_solve.CompiledSolve(
-                _COMPILED_SETTINGS, self.m, self.alpha, self.beta, self.tolerance,
-                self._table, pattern, self.linear, self._untabled)
-        q_n = problem.q_n
-        stiffness = self.step_stiffness(q_n) if self.beta > 0 else _NO_STIFFNESS
-        status, iterations, n_hist, reaction = compiled.run(
-            q_n, problem.v_n, problem.dt, problem.con, stiffness, q,
-            _NO_START if alternative is None else alternative, history,
-            self.max_iterations, self.counts)
-        problem.reaction = reaction
-        return status, iterations, n_hist
-
     def _iterate(self, problem, q: np.ndarray, history: np.ndarray,
                  alternative: np.ndarray | None = None):
-        """``newton.newton_iteration`` on ``problem`` from ``q`` (overwritten; first set to
-        ``alternative`` where the potential is lower, ``newton.lower_start``):
-        interpreted on a ``_NewtonProblem``, compiled on a ``_CompiledStep`` (``solve``
-        makes one where ``COMPILED_BARRIER_SOLVE`` is set and ``barrier_solve`` covers
-        the solver; the reaction then set on it). (status, iterations, n_hist)."""
-        if isinstance(problem, _CompiledStep):
-            return self._iterate_compiled(problem, q, history, alternative)
+        """``newton.newton_iteration`` interpreted on the ``_NewtonProblem`` ``problem``
+        from ``q`` (overwritten; first set to ``alternative`` where the potential is
+        lower, ``newton.lower_start``). (status, iterations, n_hist)."""
         if alternative is not None:
             newton.lower_start.py_func(problem, q, alternative, self.counts)
         return newton.newton_iteration_interpreted(problem, q, problem.dt, self.tolerance,
@@ -500,24 +524,6 @@ def _filtered(filters: np.ndarray, vec: np.ndarray) -> np.ndarray:
     out = np.empty(vec.size)
     kernels.apply_filters(filters, np.ascontiguousarray(vec), out)
     return out
-
-
-class _CompiledStep:
-    """One ``PatternCachingSolver.solve``'s data on the compiled route
-    (``_iterate_compiled``, which keeps its own work vectors): the step's start q_n,
-    v_n (n_dof,) m, m/s, dt s, its constraints (``as_cone``) and, once solved, the
-    reaction (n_dof,) N. Made as ``_NewtonProblem`` is (its ``solver`` argument unused)."""
-
-    __slots__ = ('q_n', 'v_n', 'dt', 'con', 'reaction')
-
-    def __init__(self, solver: PatternCachingSolver, q_n: np.ndarray, v_n: np.ndarray,
-                 dt: float, con: StepConstraints):
-        self.q_n, self.v_n, self.dt, self.con = q_n, v_n, dt, con
-        self.reaction = None
-
-    def filtered(self, vec: np.ndarray) -> np.ndarray:
-        """S vec (n_dof,)."""
-        return _filtered(self.con.filters, vec)
 
 
 class _NewtonProblem(StepProblem):
