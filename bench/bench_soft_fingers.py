@@ -1,8 +1,10 @@
 """Benchmark of the deformable solid pad finger against the rigid flat finger: a 2D
 grasp-and-lift of the default apple. Prints figures; asserts nothing.
 
-CPU time of this process (``time.process_time``, the best of ``--repeat`` runs; the
-machine's load average is printed), side by side for ``gripper.finger.type`` flat and
+CPU time of this process (``time.process_time``, the best of ``--repeat`` runs, of the
+simulation's construction and the grasp: the configuration's loading and the probe
+that finds where the fingers touch are left out; the machine's load average is
+printed), side by side for ``gripper.finger.type`` flat and
 solid_pad: the apple (shell model, 64 nodes) on the table, the jaws starting 1 mm from
 it (from the fingers' fronts for the pad), closed in force mode to ``--force`` N, lifted
 1 cm and held 0.2 s at dt = 1 ms (each finger's grasp run once untimed first, numba's
@@ -84,14 +86,15 @@ ROUTES = ('watched', 'unwatched')
 def grasp(finger: str, force: float, overrides: tuple = (), watched: bool = True) -> dict:
     """One grasp-and-lift, the jaws starting 1 mm wider than where the fingers touch the
     apple, the configuration keys ``overrides`` ('KEY=VALUE') set, ``watched`` by a
-    per-step callback or not; its CPU time (s), of it inside the compiled barrier Newton
-    solves (s, ``solve_timer``), and counts (Newton iterations only when watched: -1;
+    per-step callback or not; its CPU time (s: the simulation's construction and the
+    grasp, not the configuration's loading nor the probe that finds where the fingers
+    touch), of it inside the compiled barrier Newton solves (s, ``solve_timer``), and
+    counts (Newton iterations only when watched: -1;
     ``unknowns`` the Newton solver's, the fruit's and any deformable finger's dofs)."""
+    config = load_config(overrides=[f'gripper.finger.type={finger}', *overrides])
+    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
     with solves_timed() as inside:
         start = time.process_time()
-        config = load_config(overrides=[f'gripper.finger.type={finger}', *overrides])
-        config = config.replaced(
-            {'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
         sim = Simulation(config)
         iterations = []
         summary = run_grasp(sim, GraspSequence(sim, force, lift_height=0.01, hold_time=0.2),

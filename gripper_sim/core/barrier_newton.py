@@ -56,6 +56,9 @@ OUTSIDE_PATTERN = 100
 #: flags (int64 array): the slot of the kept Newton matrix (-1: none), of the last
 #: factorised one
 F_KEPT, F_LAST, F_SIZE = range(3)
+#: ``solve_from``'s ``kept`` (float array): whether a solve may start with the last
+#: solve's kept Newton matrix (1/0), the dt (s) it was made for, its age in solves
+K_CARRY, K_DT, K_AGE, K_SIZE = range(4)
 
 
 @structref.register
@@ -137,7 +140,7 @@ def _vectors_hook(problem):
 def _kept_fits_hook(problem):
     if _is_problem(problem):
         def impl(problem):
-            return False  # a new solve: nothing kept
+            return problem.flags[F_KEPT] >= 0  # what ``solve_from`` left kept fits
         return impl
 
 
@@ -311,12 +314,13 @@ def solve(problem, q_n, v_n, dt, dt2, stiffness, filters, relative, error_limit,
 
 @njit(cache=True)
 def _solve_appended(problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, q,
-                    alternative, history, counts, done, n_done):
-    """One ``solve`` from q (the flags of its kept matrices reset first, as
-    ``barrier_solve.CompiledSolve.run`` does), its steps appended to ``done`` after the
-    first ``n_done``: (status, iterations, the steps now in ``done``)."""
-    problem.flags[F_KEPT] = -1
-    problem.flags[F_LAST] = -1
+                    alternative, history, counts, done, n_done, carried):
+    """One ``solve`` from q, its steps appended to ``done`` after the first ``n_done``:
+    (status, iterations, the steps now in ``done``). Without ``carried`` nothing is kept
+    from before (the flags of the kept matrices reset)."""
+    if not carried:
+        problem.flags[F_KEPT] = -1
+        problem.flags[F_LAST] = -1
     status, iterations, n_hist = solve(problem, q_n, v_n, dt, dt2, stiffness, filters,
                                        cg[0], cg[1], cg[2], q, alternative, tol, max_it,
                                        history, counts)
@@ -334,36 +338,65 @@ def _still_converging(done, n_done, progress):
 
 
 @njit(cache=True)
+def _kept_fits(problem, kept, kept_filters, filters, dt):
+    """Whether the Newton matrix the last solve kept serves this one (``kept``
+    (K_SIZE,)): carrying it is on, it was made for this dt and these ``filters`` (their
+    values, ``kept_filters``), and it is younger than ``newton.MAX_FACTOR_AGE`` solves."""
+    if (kept[K_CARRY] == 0.0 or problem.flags[F_KEPT] < 0 or kept[K_DT] != dt
+            or kept[K_AGE] >= newton.MAX_FACTOR_AGE):
+        return False
+    flat, kept_flat = filters.ravel(), kept_filters.ravel()
+    for k in range(flat.shape[0]):
+        if flat[k] != kept_flat[k]:
+            return False
+    return True
+
+
+@njit(cache=True)
 def solve_from(problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, warm,
-               warm_q_n, warm_q, history, counts, done, progress, q_start, alternative, q):
+               warm_q_n, warm_q, history, counts, done, progress, kept, kept_filters,
+               q_start, alternative, q):
     """``fast_solver.PatternCachingSolver.solve`` on the compiled route, in one call:
     from the last solve's solution ``warm_q`` in the free directions (if ``warm``, made
     with the same dt, and its start ``warm_q_n`` is q_n), else (or if that start is
     infeasible) from ``q_start`` (n_dof,) m, or ``alternative`` (if not empty) where the
-    potential is lower there (dt2: dt^2 s^2); a solve still converging at ``max_it`` goes on
-    (``progress``: (span, factor, limit), ``fast_solver.PROGRESS_SPAN``,
+    potential is lower there (dt2: dt^2 s^2); a solve still converging at ``max_it``
+    goes on (``progress``: (span, factor, limit), ``fast_solver.PROGRESS_SPAN``,
     ``PROGRESS_FACTOR``, ``EXTENDED_LIMIT``). ``cg``: (relative, error limit, floor) as
-    ``solve`` takes them. Writes the solution into ``q`` (n_dof,) m, the steps (m/s)
-    into ``done`` (progress limit + 1 times max_it,); the reaction is ``work[4]``.
-    Returns (status, iterations, the steps in ``done``)."""
+    ``solve`` takes them. The Newton matrix kept at the last solve's end starts this
+    one where it fits (``_kept_fits``; ``kept`` (K_SIZE,) and ``kept_filters`` (n_nodes,
+    2, 2) updated for the next solve): its first step a chord step, taken where it cuts
+    the potential, else made again with a new matrix (``newton.newton_iteration``).
+    Writes the solution into ``q`` (n_dof,) m, the steps (m/s) into ``done`` (progress
+    limit + 1 times max_it,); the reaction is ``work[4]``. Returns (status, iterations,
+    the steps in ``done``)."""
     status = newton.INFEASIBLE_START
     iterations = n_done = 0
+    carried = _kept_fits(problem, kept, kept_filters, filters, dt)
+    factors = counts[newton.C_FACTORS]
     if warm and same_values(warm_q_n, q_n):
         difference = np.ascontiguousarray(warm_q - q_start)
         apply_filters(filters, difference, q)
         q += q_start
         status, iterations, n_done = _solve_appended(
             problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, q, np.zeros(0),
-            history, counts, done, 0)
+            history, counts, done, 0, carried)
     if status == newton.INFEASIBLE_START:
         q[:] = q_start
         status, iterations, n_done = _solve_appended(
             problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, q, alternative,
-            history, counts, done, 0)
+            history, counts, done, 0, carried)
+    carry = kept[K_CARRY] != 0.0
     while (status == newton.NO_CONVERGENCE and _still_converging(done, n_done, progress)
            and iterations < progress[2] * max_it):
         status, more, n_done = _solve_appended(
             problem, q_n, v_n, dt, dt2, stiffness, filters, cg, tol, max_it, q, np.zeros(0),
-            history, counts, done, n_done)
+            history, counts, done, n_done, carry)
         iterations += more
+    if counts[newton.C_FACTORS] != factors:  # a new matrix: made for this step
+        kept[K_DT] = dt
+        kept[K_AGE] = 0.0
+        kept_filters[:] = filters
+    else:
+        kept[K_AGE] += 1.0
     return status, iterations, n_done

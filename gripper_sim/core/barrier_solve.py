@@ -76,6 +76,10 @@ class CompiledSolve:
         self.flags = np.zeros(bn.F_SIZE, np.int64)
         #: the Newton steps (m/s) of a call and of a solve (``arguments``)
         self.steps = (np.zeros(0), np.zeros(0))
+        #: what the Newton matrix kept at a solve's end was made for (``solve_from``'s
+        #: ``kept``, ``kept_filters``)
+        self.kept = np.zeros(bn.K_SIZE)
+        self.kept_filters = np.zeros((n // 2, 2, 2))
         self.problem = bn.new_problem((
             masses, alpha, beta, FRICTION_SMOOTHING, settings.keep_below * tolerance,
             (np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 1))),
@@ -105,14 +109,15 @@ class CompiledSolve:
         return True
 
     def arguments(self, q_n, v_n, dt, con, stiffness, max_iterations, counts, warm,
-                  progress) -> tuple:
+                  progress, carry) -> tuple:
         """``barrier_newton.solve_from``'s arguments up to its ``progress`` (the start, the
         alternative and the solution's array follow) for a solve from positions ``q_n``,
         velocities ``v_n`` (n_dof,) over dt s: ``con`` as ``fast_solver.as_cone`` makes it,
         no sliding nodes; ``stiffness`` K_n's CSC values (or empty); ``counts`` the
         solver's work counters (added to); ``warm`` the last solve's (q_n, dt, q) if made
         with this dt, else None; ``progress`` (span, factor, limit) of a solve that goes
-        on past ``max_iterations``. After the call, ``finished``."""
+        on past ``max_iterations``; ``carry``: a solve may start with the Newton matrix
+        the last one kept (``barrier_newton.solve_from``). After the call, ``finished``."""
         settings, tol = self.settings, self.tolerance
         filters = con.filters
         if not filters.flags.writeable:  # a read-only array is typed apart: a copy, kept
@@ -128,7 +133,17 @@ class CompiledSolve:
                 (settings.cg_tolerance, settings.cg_error_fraction * tol * dt,
                  settings.cg_relative_floor * tol * dt),
                 tol, max_iterations, warm is not None, warm_q_n, warm_q, history, counts, done,
-                (float(progress[0]), float(progress[1]), float(progress[2])))
+                (float(progress[0]), float(progress[1]), float(progress[2])),
+                self._kept(carry), self.kept_filters)
+
+    def _kept(self, carry: bool) -> np.ndarray:
+        """``solve_from``'s ``kept`` (``barrier_newton.K_SIZE``,), carrying set."""
+        self.kept[bn.K_CARRY] = 1.0 if carry else 0.0
+        return self.kept
+
+    def forget(self) -> None:
+        """Keep no Newton matrix for the next solve (the solver's ``reset``)."""
+        self.flags[bn.F_KEPT] = -1
 
     def finished(self) -> np.ndarray:
         """After a ``barrier_newton.solve_from`` call: AssertionError where a barrier's

@@ -262,7 +262,7 @@ class SimulationFacade:
             + ([self._barrier] if self._barrier is not None else []),
             damping_mass=c['fruit.damping.mass'], damping_stiffness=c['fruit.damping.stiffness'],
             tolerance=c['sim.newton_tolerance'], max_iterations=c['sim.max_newton_iterations'],
-            dim=self.dimension)
+            dim=self.dimension, carry_newton_matrix=self._soft is not None)
         return solver
 
     def _forget_factor(self) -> None:
