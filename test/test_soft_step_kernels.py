@@ -80,3 +80,40 @@ def test_the_compiled_outputs_are_the_barriers_own():
         _grasp('fin_ray', False, monkeypatch, differences)
     assert len(differences) > 100
     assert all(not names for names in differences), next(n for n in differences if n)
+
+
+def _measured(held: bool, monkeypatch) -> list:
+    """Every step's measures of a short Fin Ray grasp (deformation, damage, grip, slip,
+    centroid), with the fruit's measures from ``soft_step_kernels.held_measures`` or, if
+    not ``held``, from the Python route's calls one by one."""
+    from gripper_sim.core.facade import SimulationFacade
+    if not held:
+        monkeypatch.setattr(SimulationFacade, '_held_measures', lambda self, x, obstacle: None)
+    config = load_config(overrides=['gripper.finger.type=fin_ray'])
+    config = config.replaced({'gripper.initial_gap': Simulation(config).touching_gap + 0.001})
+    sim = Simulation(config)
+    rows = []
+
+    def on_step(result, phase):
+        shape, damage = result.deformation, result.damage
+        rows.append((shape.compression, shape.compression_ratio, shape.max_skin_strain,
+                     shape.contact_length, shape.peak_contact_pressure,
+                     shape.node_pressure.tobytes(), damage.pressure, damage.peak_pressure,
+                     damage.bruised_length, damage.node_pressure.tobytes(), result.grip_force,
+                     result.slip_distance, result.centroid.tobytes()))
+    run_grasp(sim, GraspSequence(sim, 4.0, lift_height=0.005, hold_time=0.05),
+              on_step=on_step)
+    return rows
+
+
+def test_the_compiled_fruit_measures_are_the_python_routes(monkeypatch):
+    """The fruit's measures after a soft-body step in one compiled call (normal forces,
+    jaw sides, held length, outline measures) give every step's deformation, damage,
+    grip and slip to the bit of the calls one by one."""
+    compiled = _measured(True, monkeypatch)
+    with pytest.MonkeyPatch.context() as patched:
+        own = _measured(False, patched)
+    assert len(compiled) == len(own) > 100
+    for step, (a, b) in enumerate(zip(compiled, own)):
+        assert a == b, f'step {step}'
+    assert max(row[3] for row in compiled) > 0.01  # the fingers held the fruit

@@ -938,6 +938,12 @@ class BarrierContact(Energy):
         into = (data, self.pattern_slots(scatter)) if hessian else None
         return self._terms(q, grad, into), []
 
+    @property
+    def part(self):
+        """The 2D barrier's ``barrier_part.BarrierPart`` (its step state and last
+        evaluation), for compiled readers of its forces (``soft_step_kernels``)."""
+        return self._part
+
     def compiled_part(self, scatter: np.ndarray):
         """The 2D barrier's ``barrier_part.BarrierPart`` (a new one when the collision
         mesh is built anew), its Hessian going into the solver's CSC values at

@@ -41,6 +41,7 @@ import numpy as np
 from gripper_sim.configuration import RUNTIME_KEYS
 from gripper_sim.core import contact as cm
 from gripper_sim.core import jaw_drive
+from gripper_sim.core import soft_step_kernels as ssk
 from gripper_sim.core.barrier import (BarrierContact, NoCollisionFreeStart, barrier_step,
                                       soft_body_step)
 from gripper_sim.core.barrier_kernels import (held_normal_forces, mark_sticking,
@@ -51,7 +52,7 @@ from gripper_sim.core.energies import Gravity
 from gripper_sim.core.fast_solver import PatternCachingSolver
 from gripper_sim.core.gripper import GripperState, lift_range, transport_range
 from gripper_sim.core.jaw_drive import FORCE_TOLERANCE, MAX_GAP_SOLVES
-from gripper_sim.core.measures import jaw_normal_forces
+from gripper_sim.core.measures import jaw_normal_forces, outline_at_rest
 from gripper_sim.core.results import Energies, JawWrench, StepResult
 from gripper_sim.core.soft_fingers import FingerState, SoftFingers, base_pushes
 from gripper_sim.core.slip import jaw_contacts_sliding, patches_sliding, surface_motion
@@ -776,6 +777,29 @@ class SimulationFacade:
             kept = self._names_kept = (self._faces_template, names)
         return kept[1]
 
+    def _held_measures(self, x: np.ndarray, obstacle: np.ndarray) -> tuple | None:
+        """With deformable fingers, where the fruit's barrier kept its forces at the
+        present state, the fruit's positions ``x`` (n, 2) m and the body holding each node
+        ``obstacle`` (n,): (each node's normal force (n,) N, the nodes each jaw holds
+        (left, right) (n,) bool, whether the left and the right jaw hold any, the held
+        outline's length m, (the width m, the largest skin strain, the peak line
+        pressure Pa, each outline node's pressure (n_s,) Pa)), in one compiled call
+        (``soft_step_kernels.held_measures``); else None."""
+        n = len(obstacle)
+        surface, skin, rest_segments = outline_at_rest(self.fruit)
+        self._obstacles(self._grip)  # (keeps each obstacle's jaw side)
+        side_of_obstacle = self._obstacles_kept[-1]
+        normal, lengths, pressure = np.empty(n), np.empty(len(surface)), np.empty(len(surface))
+        left, right, held = np.empty(n, bool), np.empty(n, bool), np.empty(n, bool)
+        kept, any_left, any_right, length, width, max_strain, peak = ssk.held_measures(
+            self._barrier.part, self._joined(x, self._finger.positions).ravel(), x, obstacle,
+            side_of_obstacle, surface, skin, rest_segments, float(self.fruit.depth), normal,
+            left, right, held, lengths, pressure)
+        if not kept:
+            return None
+        return (normal, (left, right), bool(any_left), bool(any_right), float(length),
+                (float(width), float(max_strain), float(peak), pressure))
+
     def _obstacles(self, grip: GripperState):
         """(normals (k, d), jaw side (k,) or -1, velocities (k, d) m/s) of the k obstacles
         (``obstacle_names``) where ``grip`` puts them; a deformable finger counts as a face
@@ -840,13 +864,15 @@ class SimulationFacade:
                          'energies', 'fingers')
 
     def _step_measures(self, x: np.ndarray, v: np.ndarray, forces: np.ndarray,
-                       obstacle: np.ndarray, iterations: int, substeps: int):
+                       obstacle: np.ndarray, iterations: int, substeps: int,
+                       held: tuple | None = None):
         """What the 2D and 3D step results share, at the present gripper state.
 
         Args:
             x, v: (n, d) positions (m) and velocities (m/s).  forces: (n, d) N, every
             contact force on the fruit (pads included).  obstacle: (n,) the obstacle
-            holding each node (pads included), -1 if none.
+            holding each node (pads included), -1 if none.  held: the deformable
+            fingers' ``_held_measures`` of this state, if made.
 
         Returns:
             (StepResult fields (dict) but ``DEFERRED_MEASURES``, a callable giving those
@@ -855,7 +881,9 @@ class SimulationFacade:
         """
         grip, fruit, finger, soft = self._grip, self.fruit, self._finger, self._soft
         normals, face_sides, face_velocities = self._obstacles(grip)
-        if soft is not None:  # the barrier's force is normal to the finger's outline
+        if held is not None:
+            normal, sides, on_left, on_right = held[:4]
+        elif soft is not None:  # the barrier's force is normal to the finger's outline
             normal = np.empty(len(obstacle))
             held_normal_forces(self._barrier.normal_forces(
                 self._joined(x, finger.positions).ravel()), obstacle, normal)

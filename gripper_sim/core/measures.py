@@ -299,11 +299,11 @@ def _skin(fruit: FruitModel) -> np.ndarray:
 
 
 #: the last fruit's (fruit, surface (n_s,), skin edges (n_e, 2), their rest lengths (n_e,)
-#: m), ``_outline_at_rest``'s
+#: m), ``outline_at_rest``'s
 _kept_outline: tuple | None = None
 
 
-def _outline_at_rest(fruit: FruitModel) -> tuple:
+def outline_at_rest(fruit: FruitModel) -> tuple:
     """(surface (n_s,) int64, skin edges (n_e, 2) int64, their rest lengths (n_e,) m) of
     ``fruit`` as the compiled measures take them; kept for the last fruit asked."""
     global _kept_outline
@@ -319,7 +319,7 @@ def _outline_at_rest(fruit: FruitModel) -> tuple:
 
 def tributary_lengths(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
     """(n_surface,) m, half the length of the two skin segments at each surface node."""
-    surface, skin, _ = _outline_at_rest(fruit)
+    surface, skin, _ = outline_at_rest(fruit)
     out = np.empty(len(surface))
     tributary_lengths_of(np.ascontiguousarray(x, dtype=float), skin, len(out), out)
     return out
@@ -328,7 +328,7 @@ def tributary_lengths(fruit: FruitModel, x: np.ndarray) -> np.ndarray:
 def held_length(fruit: FruitModel, x: np.ndarray, held: np.ndarray) -> float:
     """m, the summed tributary lengths (``tributary_lengths``) of the surface nodes held
     (``held`` (n_nodes,) bool) at positions ``x`` (n_nodes, 2) m."""
-    surface, skin, _ = _outline_at_rest(fruit)
+    surface, skin, _ = outline_at_rest(fruit)
     return float(held_length_of(np.ascontiguousarray(x, dtype=float), skin, surface, held,
                                 np.empty(len(surface))))
 
@@ -351,7 +351,7 @@ def face_contact_length(fruit: FruitModel, x: np.ndarray, face, holder: np.ndarr
     """
     nx, nz = float(face.normal[0]), float(face.normal[1])
     return face_contact_length_of(
-        np.ascontiguousarray(x, dtype=float), _outline_at_rest(fruit)[0],
+        np.ascontiguousarray(x, dtype=float), outline_at_rest(fruit)[0],
         np.ascontiguousarray(holder, np.int64), index, nx, nz,
         float(face.origin[0]) + offset * nx, float(face.origin[1]) + offset * nz)
 
@@ -364,7 +364,7 @@ def faces_contact_length(fruit: FruitModel, x: np.ndarray, faces: list, holder: 
     origins = np.array([face.origin for face in faces], dtype=float).reshape(-1, 2)
     normals = np.array([face.normal for face in faces], dtype=float).reshape(-1, 2)
     return float(faces_contact_length_of(
-        np.ascontiguousarray(x, dtype=float), _outline_at_rest(fruit)[0],
+        np.ascontiguousarray(x, dtype=float), outline_at_rest(fruit)[0],
         np.ascontiguousarray(holder, np.int64), origins, normals, lifted))
 
 
@@ -379,16 +379,24 @@ def deformation(fruit: FruitModel, x: np.ndarray, normal_force: np.ndarray,
             outline nodes the jaws hold.
     """
     x = np.ascontiguousarray(x, dtype=float)
-    surface, skin, rest_segments = _outline_at_rest(fruit)
+    surface, skin, rest_segments = outline_at_rest(fruit)
     pressure = np.empty(len(surface))
     width, max_strain, peak = outline_measures(
         x, surface, skin, rest_segments,
         np.ascontiguousarray(normal_force, dtype=float), float(fruit.depth), pressure)
-    compression = fruit.rest_width - width
-    ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
     if jaw_contact_length is None:
         jaw_contact_length = held_length(fruit, x, jaw_contact)
+    return deformation_of(fruit, width, max_strain, peak, pressure, jaw_contact_length)
+
+
+def deformation_of(fruit: FruitModel, width: float, max_strain: float, peak: float,
+                   pressure: np.ndarray, contact_length: float) -> Deformation:
+    """The ``Deformation`` of ``fruit`` from its outline's measures (``outline_measures``:
+    the width m, the largest skin strain, the peak line pressure Pa, each outline node's
+    pressure (n_s,) Pa) and the jaws' contact length m."""
+    compression = fruit.rest_width - width
+    ratio = compression / fruit.rest_width if fruit.rest_width > 0 else 0.0
     return build(Deformation, dict(compression=compression, compression_ratio=ratio,
                                    max_skin_strain=max_strain,
-                                   contact_length=jaw_contact_length,
+                                   contact_length=contact_length,
                                    peak_contact_pressure=peak, node_pressure=pressure))

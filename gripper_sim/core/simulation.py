@@ -21,8 +21,8 @@ from gripper_sim.core.finger_body import FingerBody
 from gripper_sim.core.fast import FastPath
 from gripper_sim.core.fruit import FruitModel, build_fruit
 from gripper_sim.core.gripper import GripperKinematics
-from gripper_sim.core.measures import (deformation, faces_contact_length, held_length,
-                                       tributary_lengths)
+from gripper_sim.core.measures import (deformation, deformation_of, faces_contact_length,
+                                       held_length, tributary_lengths)
 from gripper_sim.core.multistep import MultiStep
 from gripper_sim.core.obstacles import FlatFace
 from gripper_sim.core.pad import PadLayer
@@ -214,9 +214,15 @@ class Simulation(SimulationFacade):
             return self._fast.measure(iterations, substeps)
         x = self.q
         forces, obstacle = self.contact_forces_and_holders()
+        held = self._held_measures(x, obstacle) if self._soft is not None else None
         fields, rarely_read, normal, (on_left, on_right) = self._step_measures(
-            x, self.v, forces, obstacle, iterations, substeps)
+            x, self.v, forces, obstacle, iterations, substeps, held)
         fruit = self.fruit
+        if held is not None:  # the fruit's outline in pairs with the fingers, its measures
+            shape = deformation_of(fruit, *held[5], held[4])
+            fields.update(deformation=shape, damage=self.assess_damage(
+                x, normal, obstacle, shape.compression_ratio))
+            return build_deferred(StepResult, fields, self.DEFERRED_MEASURES, rarely_read)
         on_jaws = on_left | on_right
         if self._soft is not None:  # the fruit's outline in pairs with the fingers
             length = held_length(fruit, x, on_jaws)

@@ -1,5 +1,5 @@
-"""The 2D soft-body step's (``barrier.soft_body_step``) set-up and outputs, each one
-compiled call.
+"""The 2D soft-body step's (``barrier.soft_body_step``) set-up and outputs, and the
+fruit's measures after it, each one compiled call.
 
 ``begin`` sets up the step of the fruit's barrier (``barrier_part.begin_with_starts``:
 the starts pushed ahead of the faces, the predictor's checked) and of the soft bodies'
@@ -12,16 +12,22 @@ dofs, each outline node's partner and the contact forces. They do what
 every number is theirs (``test/test_soft_step_kernels.py``); what needs Python (a quiet
 region sought again, a start that is not the predictor's, the exact CCD, forces the
 last evaluation did not leave) the caller does. The Newton solve between them is
-``barrier_newton.solve_from`` (``fast_solver.PatternCachingSolver.solve``).
+``barrier_newton.solve_from`` (``fast_solver.PatternCachingSolver.solve``). After the
+step, ``held_measures`` gives the fruit's measures its barrier's forces make (normal
+forces, the nodes each jaw holds, the held length, the outline's measures) for
+``Simulation._measure``.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from gripper_sim.core.barrier_kernels import largest_relative_move, mesh_vertices
+from gripper_sim.core.barrier_kernels import (held_normal_forces, largest_relative_move,
+                                              mesh_vertices)
 from gripper_sim.core.barrier_part import (begin_with_starts, kept_forces, partners, quiet,
                                            set_step, start_clear)
+from gripper_sim.core.contact import jaw_sides
+from gripper_sim.core.measures import held_length_of, outline_measures
 
 #: ``begin``'s statuses: the self-contact's quiet region must be sought again (nothing
 #: set up); the step is set up
@@ -102,3 +108,36 @@ def outputs(part, q, x_n, dt, solved_reaction, fixed_dofs, vertex_nodes, owner, 
         reaction[fixed_dofs[k]] = solved_reaction[fixed_dofs[k]]
     partners(part, q, vertex_nodes, owner, partner)
     return kept_forces(part, q, True, forces)
+
+
+@njit(cache=True)
+def held_measures(part, q, x, obstacle, side_of_obstacle, surface, skin, rest_segments,
+                  depth, normal, on_left, on_right, held, lengths, pressure):
+    """The fruit's measures that its barrier's forces give after a soft-body step, where
+    its last evaluation was at the positions q (2 n,) m of the fruit and the soft bodies
+    (``barrier_part.kept_forces``): each of the fruit's nodes' normal force ``normal``
+    (n_f,) N (``held_normal_forces``, ``obstacle`` (n_f,) the body holding each node),
+    the nodes each jaw holds ``on_left``, ``on_right`` and either ``held`` (n_f,) bool
+    (``contact.jaw_sides``, ``side_of_obstacle`` as it takes it), and at the fruit's
+    positions ``x`` (n_f, 2) m the held outline's length (``measures.held_length_of``,
+    ``lengths`` (n_s,) scratch) and the outline's measures (``measures.outline_measures``
+    of ``surface``, ``skin``, ``rest_segments``, ``depth`` m; each outline node's
+    pressure into ``pressure`` (n_s,) Pa): what ``SimulationFacade._step_measures`` and
+    ``Simulation._measure`` read one by one, in their order and arithmetic.
+
+    Returns:
+        (whether the forces were kept (else nothing is written), whether the left and
+        the right jaw hold any node, the held length m, the width m, the largest skin
+        strain, the peak line pressure Pa).
+    """
+    forces = np.empty(q.shape[0])
+    if not kept_forces(part, q, False, forces):
+        return False, False, False, 0.0, 0.0, 0.0, 0.0
+    held_normal_forces(forces.reshape((-1, 2)), obstacle, normal)
+    any_left, any_right = jaw_sides(obstacle, side_of_obstacle, on_left, on_right)
+    for i in range(held.shape[0]):
+        held[i] = on_left[i] | on_right[i]
+    length = held_length_of(x, skin, surface, held, lengths)
+    width, max_strain, peak = outline_measures(x, surface, skin, rest_segments, normal,
+                                               depth, pressure)
+    return True, any_left, any_right, length, width, max_strain, peak
