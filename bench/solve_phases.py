@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'bench'))
 
 from gripper_sim.core import barrier_newton as bn  # noqa: E402
-from gripper_sim.core import barrier_solve, linear_solve, newton  # noqa: E402
+from gripper_sim.core import linear_solve, newton  # noqa: E402
 from gripper_sim.core import energy_table as et  # noqa: E402
 from gripper_sim.core.barrier_part import barrier_value, candidates, quiet  # noqa: E402
 from gripper_sim.core.barrier_terms import barrier_terms  # noqa: E402
@@ -274,33 +274,38 @@ def probe_parts(problem, q):
     return rows
 
 
+@njit
+def _flags(problem):
+    """The problem's flags (``barrier_newton.F_*``), the array it shares."""
+    return problem.flags
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     wanted = {int(a) for a in argv} or {300, 600}
     from bench_soft_fingers import grasp
 
-    run = barrier_solve.CompiledSolve.run
+    run = bn.solve_from
     seen = [0]
     results = {}
 
     totals = np.zeros(newton.C_SIZE, np.int64)
 
-    def probing_run(self, *args, **kwargs):
-        counts = args[-1]
+    def probing_run(*args):
+        problem, counts, q = args[0], args[14], args[-1]
         before = counts.copy()
-        out = run(self, *args, **kwargs)
+        out = run(*args)
         totals[:] += counts - before
         seen[0] += 1
         if seen[0] in wanted:
-            q = args[5]
-            results[seen[0]] = probe(self.problem, self.flags, q)
+            results[seen[0]] = probe(problem, _flags(problem), q)
         return out
     grasp('fin_ray', 4.0, (), False)  # warm-up
-    barrier_solve.CompiledSolve.run = probing_run
+    bn.solve_from = probing_run
     try:
         grasp('fin_ray', 4.0, (), False)
     finally:
-        barrier_solve.CompiledSolve.run = run
+        bn.solve_from = run
     for index, (rows, stats) in sorted(results.items()):
         print(f'-- solve {index}')
         for label, us in rows.items():
