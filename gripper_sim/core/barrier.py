@@ -569,7 +569,7 @@ class BarrierContact(Energy):
         (has_friction, start, faces_shift, plain, predicted, predicted_clear, plain_clear,
          difference) = bp.begin_with_starts(self._part, x_n, v_n, dt, *faces,
                                             START_GAP_FRACTION, fixed, targets, both)
-        self._took_starts(has_friction, start, faces_shift)
+        self.took_starts(has_friction, start, faces_shift)
         return plain, predicted, bool(predicted_clear), bool(plain_clear), float(difference)
 
     def _starts_arguments(self, x_n: np.ndarray, old_faces, new_faces, dt: float) -> tuple:
@@ -584,7 +584,7 @@ class BarrierContact(Energy):
         return (old, new, rubbing, mu_s, mu_k, self.surface, origins, normals, tangents,
                 half_extents, thickness, new_origins - origins)
 
-    def _took_starts(self, has_friction: bool, start: np.ndarray, faces_shift: float) -> None:
+    def took_starts(self, has_friction: bool, start: np.ndarray, faces_shift: float) -> None:
         """What ``barrier_part.begin_with_starts`` (or ``soft_step_kernels.begin``) set
         up in the part, as this barrier keeps it: whether there is lagged friction, the
         collision mesh's start (n_m, 2) m, the faces' largest shift m."""
@@ -609,8 +609,8 @@ class BarrierContact(Energy):
         faces = self._starts_arguments(x_n, old_faces, new_faces, dt)  # (makes the part)
         has_self = self_contact is not None
         if has_self:
-            self_rubbing, self_mu_s, self_mu_k = self_contact._quiet_step_arguments(x_n, dt)
-            self_part = self_contact._part
+            self_rubbing, self_mu_s, self_mu_k = self_contact.quiet_step_arguments(x_n, dt)
+            self_part = self_contact.part
         else:
             self_rubbing, self_mu_s, self_mu_k = False, _NO_VALUES, _NO_VALUES
             self_part = self._part
@@ -620,12 +620,12 @@ class BarrierContact(Energy):
             self_part, has_self, QUIET_KEEP, self_rubbing, self_mu_s, self_mu_k)
         if status == ssk.SEEK_QUIET:
             return None
-        self._took_starts(has_friction, start, faces_shift)
+        self.took_starts(has_friction, start, faces_shift)
         if has_self:
-            self_contact._took_starts(self_friction, self_start, 0.0)
+            self_contact.took_starts(self_friction, self_start, 0.0)
         return plain, predicted, bool(predicted_clear), bool(plain_clear), bool(clear)
 
-    def _quiet_step_arguments(self, x_n: np.ndarray, dt: float) -> tuple:
+    def quiet_step_arguments(self, x_n: np.ndarray, dt: float) -> tuple:
         """A self-contact's faces (none) set up for a step of ``dt`` s from positions
         ``x_n`` (n, 2) m, as ``begin_step`` sets them up: (whether a friction coefficient
         is positive, the static and kinetic ones (n_m,))."""
