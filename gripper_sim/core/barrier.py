@@ -637,8 +637,8 @@ class BarrierContact(Energy):
                      solved_reaction: np.ndarray, fixed_dofs: np.ndarray) -> tuple:
         """A soft-body step's outputs at its solution ``q`` (2 n,) m from positions ``x_n``
         (n, 2) m over ``dt`` s (``soft_step_kernels.outputs``): (the velocities (n, 2)
-        m/s, the solve's reaction ``solved_reaction`` (2 n,) N on ``fixed_dofs`` (n, 2)
-        (0 elsewhere), ``partners`` (n,), ``contact_forces`` (n, 2) N). 2D."""
+        m/s, the solve's reaction ``solved_reaction`` (2 n,) N on ``fixed_dofs`` (k,), 0
+        elsewhere, (n, 2), ``partners`` (n,), ``contact_forces`` (n, 2) N). 2D."""
         size = q.shape[0]
         v, reaction, forces = np.empty(size), np.empty(size), np.empty(size)
         partner = np.empty(size // 2, np.int64)
@@ -1576,9 +1576,9 @@ def soft_body_step(solver, barrier: BarrierContact, x_n: np.ndarray, v_n: np.nda
     constraints, fixed_dofs = _prescribed(n, d, fixed)
     solution = solver.solve(x_n.ravel(), v_n.ravel(), dt, start.ravel(), constraints)
     if d == 2:
-        v, reaction, partner, forces = barrier.soft_outputs(solution.q, x_n, dt,
-                                                            solution.reaction, fixed_dofs)
-        return StepOutcome(solution.q.reshape(-1, 2), v, forces,
+        velocities, reaction, partner, forces = barrier.soft_outputs(
+            solution.q, x_n, dt, solution.reaction, fixed_dofs)
+        return StepOutcome(solution.q.reshape(-1, 2), velocities, forces,
                            cm.ContactState.held_by(partner), solution.iterations, reaction)
     x = solution.q.reshape(-1, d)
     reaction = np.zeros(n * d)
