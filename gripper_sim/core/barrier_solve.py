@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from gripper_sim.core import barrier_newton as bn
-from gripper_sim.core import newton
 
 
 #: no warm start
