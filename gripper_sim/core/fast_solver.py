@@ -110,7 +110,7 @@ COMPILED_BARRIER_SOLVE = True
 CARRY_NEWTON_MATRIX = True
 #: the stiffness damping's K_n without stiffness damping (beta = 0)
 _NO_STIFFNESS = np.zeros(0)
-#: no alternative start (``barrier_solve.CompiledSolve.run``)
+#: no alternative start (``barrier_newton.solve_from``)
 _NO_START = np.zeros(0)
 #: the constants above as the compiled barrier solve takes them
 _COMPILED_SETTINGS = barrier_solve.SolveSettings(
