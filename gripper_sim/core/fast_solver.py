@@ -445,9 +445,9 @@ class PatternCachingSolver:
             q = np.empty(self.n)
             status, iterations, n_done = barrier_newton.solve_from(
                 *arguments, q_start, _NO_START if alternative is None else alternative, q)
-            reaction = self.compiled_finished(q_n, dt, q, status, iterations,
-                                              arguments[-2][:n_done])
-            return StepSolution(q, reaction.copy(), iterations, arguments[-2][:n_done].tolist())
+            done = arguments[-2][:n_done]  # (``solve_from``'s steps)
+            reaction = self.compiled_finished(q_n, dt, q, status, iterations, done)
+            return StepSolution(q, reaction.copy(), iterations, done.tolist())
         problem = _NewtonProblem(self, q_n, v_n, dt, con)
         history = np.zeros(self.max_iterations)
         warm = self._warm

@@ -220,24 +220,29 @@ class Simulation(SimulationFacade):
         fruit = self.fruit
         if held is not None:  # the fruit's outline in pairs with the fingers, its measures
             shape = deformation_of(fruit, *held[5], held[4])
-            fields.update(deformation=shape, damage=self.assess_damage(
-                x, normal, obstacle, shape.compression_ratio))
-            return build_deferred(StepResult, fields, self.DEFERRED_MEASURES, rarely_read)
-        on_jaws = on_left | on_right
-        if self._soft is not None:  # the fruit's outline in pairs with the fingers
+        else:
+            on_jaws = on_left | on_right
+            shape = deformation(fruit, x, normal, on_jaws, self._contact_length(x, on_jaws))
+        fields.update(deformation=shape, damage=self.assess_damage(
+            x, normal, obstacle, shape.compression_ratio))
+        return build_deferred(StepResult, fields, self.DEFERRED_MEASURES, rarely_read)
+
+    def _contact_length(self, x: np.ndarray, on_jaws: np.ndarray) -> float:
+        """m, the fruit's outline in contact with the jaws at positions ``x`` (n, 2) m,
+        ``on_jaws`` (n,) the nodes they hold: with deformable fingers its nodes in pairs
+        with them, else along the jaws' faces (a gap off them with the barrier); plus
+        the pads' (if any)."""
+        fruit = self.fruit
+        if self._soft is not None:
             length = held_length(fruit, x, on_jaws)
         else:
-            # with the barrier the outline lies a gap off the faces
             jaws = self.faces_at(self._grip)[:len(self._face_side)]
             length = faces_contact_length(fruit, x, jaws, self.contacts.obstacle,
                                           self._barrier is not None)
         if self._pad is not None:
             on_pad = (self.contacts.obstacle < 0) & (self._pad.holder >= 0)
             length += held_length(fruit, x, on_pad)
-        shape = deformation(fruit, x, normal, on_jaws, length)
-        fields.update(deformation=shape, damage=self.assess_damage(
-            x, normal, obstacle, shape.compression_ratio))
-        return build_deferred(StepResult, fields, self.DEFERRED_MEASURES, rarely_read)
+        return length
 
     def assess_damage(self, positions, normal, obstacle, compression_ratio: float):
         """Bruising and crushing after this step (``gripper_sim.core.damage``) from
